@@ -1,0 +1,89 @@
+"""``lfmbench flicker-report``: the paper's Fig. 3 experiment (temporal flicker at 30 fps) with the exact model.
+
+Prints the radiant exposure per frame of a PWM LED for a short (5 ms) and a long (11.11 ms) exposure and the
+flicker severity of each, and optionally plots Phi[n] (ISET-LFM, Fig. 3).
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from lfmbench.flicker import flicker_severity, frame_phase, pwm_exposure
+
+#: Exposure times of the split-pixel sensor used throughout (s): LPD short, SPD long (1/90 s).
+FIG3_EXPOSURES_S = (5e-3, 1 / 90)
+
+
+def fig3_series(freq_hz: float = 95.0, duty: float = 0.2, fps: float = 30.0, frames: int = 30,
+                phase0_s: float = 0.0, exposures_s=FIG3_EXPOSURES_S) -> dict:
+    """Per-frame radiant exposure (s of ON time, amplitude 1) for each exposure; eq. 3 phases.
+
+    Returns:
+        dict with ``frame`` (N,), ``phase_s`` (N,), and for each exposure te (s) the key ``te`` -> Phi (N,) (s)
+        and ``("fsi", te)`` -> FSI.
+    """
+    period = 1.0 / freq_hz
+    n = np.arange(frames)
+    ts = frame_phase(phase0_s, n, 1.0 / fps, period)
+    out: dict = {"frame": n, "phase_s": ts}
+    for te in exposures_s:
+        phi = pwm_exposure(ts, te, period, duty)
+        out[te] = phi
+        out[("fsi", te)] = float(flicker_severity(phi))
+    return out
+
+
+def plot_fig3(path: str | Path, **kw) -> Path:
+    """Write the Fig. 3 plot (Phi[n] for both exposures) to ``path`` (PNG)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    s = fig3_series(**kw)
+    fig, axes = plt.subplots(2, 1, figsize=(7, 4.5), sharex=True)
+    for ax, te in zip(axes, FIG3_EXPOSURES_S):
+        ax.stem(s["frame"], s[te] * 1e3, basefmt=" ")
+        ax.set_ylabel("Phi [ms of ON time]")
+        ax.set_title(f"te = {te * 1e3:.2f} ms: FSI = {s[('fsi', te)]:.3f}", fontsize=9)
+        ax.set_ylim(bottom=0)
+    axes[-1].set_xlabel("frame n (30 fps)")
+    fig.suptitle(f"Temporal flicker, f = {kw.get('freq_hz', 95.0):g} Hz, D = {kw.get('duty', 0.2):g}")
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.stem + ".tmp" + path.suffix)
+    fig.savefig(tmp, dpi=110)
+    plt.close(fig)
+    tmp.replace(path)
+    return path
+
+
+def register(app) -> None:
+    import typer
+
+    @app.command("flicker-report")
+    def flicker_report(freq_hz: float = typer.Option(95.0, help="PWM frequency (Hz)"),
+                       duty: float = typer.Option(0.2, help="duty cycle (0..1)"),
+                       fps: float = typer.Option(30.0, help="frame rate (1/s)"),
+                       frames: int = typer.Option(12, help="number of frames"),
+                       plot: Path = typer.Option(None, help="write the Fig. 3 plot to this PNG")) -> None:
+        """Reproduce the paper's Fig. 3: Phi[n] of a PWM LED for 5 ms and 11.11 ms exposures."""
+        from rich.console import Console
+        from rich.table import Table
+
+        try:
+            s = fig3_series(freq_hz, duty, fps, frames)
+        except ValueError as exc:
+            raise typer.BadParameter(str(exc)) from None
+        t = Table(title=f"PWM flicker: f = {freq_hz:g} Hz, D = {duty:g}, {fps:g} fps (exact model)")
+        t.add_column("frame")
+        t.add_column("phase [ms]")
+        for te in FIG3_EXPOSURES_S:
+            t.add_column(f"Phi, te={te * 1e3:.2f} ms [ms ON]")
+        for i in range(frames):
+            t.add_row(str(i), f"{s['phase_s'][i] * 1e3:.3f}", *(f"{s[te][i] * 1e3:.3f}" for te in FIG3_EXPOSURES_S))
+        t.add_row("FSI", "", *(f"{s[('fsi', te)]:.3f}" for te in FIG3_EXPOSURES_S))
+        Console().print(t)
+        if plot:
+            typer.echo(f"wrote {plot_fig3(plot, freq_hz=freq_hz, duty=duty, fps=fps, frames=frames)}")
