@@ -13,6 +13,14 @@ import typer
 app = typer.Typer(help="LED-flicker datasets and flicker-mitigation benchmark.", no_args_is_help=True,
                   add_completion=False)
 
+
+
+@app.callback()
+def _root() -> None:
+    """LED-flicker datasets and flicker-mitigation benchmark."""
+    # a callback keeps ``lfmbench`` a command group even while only one command is registered
+
+
 #: Modules that contribute sub-commands, in the order they appear in ``--help``.
 COMMAND_MODULES = (
     "lfmbench.flicker_report",
