@@ -1,0 +1,82 @@
+"""Fusion baselines for split-pixel LED-flicker mitigation, registered by snake_case name.
+
+A fusion method is any callable ``method(batch: dict) -> Tensor (B, F, 1, H, W)`` in the ``gt`` units
+(``docs/contracts.md`` section 3). :data:`REGISTRY` maps the built-in names to callables;
+:func:`get_method` also resolves ``package.module:function``. See ``docs/baselines.md``.
+"""
+from __future__ import annotations
+
+import importlib
+from collections.abc import Callable
+
+from lfmbench.baselines.classic import (flicker_aware, flicker_aware_two_sided, lpd_only, saturated_exposure_corrected,
+                                        spd_only, temporal, upstream_saturated)
+
+Method = Callable[[dict], "object"]
+
+
+def _learned_lazy(batch: dict):
+    """The learned baseline (:func:`lfmbench.baselines.learned.learned`), imported on first use so that
+    ``python -m lfmbench.baselines.learned`` (the training script) runs without a pre-imported copy."""
+    from lfmbench.baselines.learned import learned as _fn
+
+    return _fn(batch)
+
+
+def _learned_module():
+    from lfmbench.baselines.learned import _model
+
+    return _model()
+
+
+_learned_lazy.torch_module = _learned_module  # type: ignore[attr-defined]
+
+#: Registered baselines, in leaderboard order.
+REGISTRY: dict[str, Method] = {
+    "lpd_only": lpd_only,
+    "spd_only": spd_only,
+    "upstream_saturated": upstream_saturated,
+    "saturated_exposure_corrected": saturated_exposure_corrected,
+    "flicker_aware": flicker_aware,
+    "flicker_aware_two_sided": flicker_aware_two_sided,
+    "temporal": temporal,
+    "learned": _learned_lazy,
+}
+
+
+class MethodNotFoundError(ValueError):
+    """A method spec names no registered baseline and no importable ``module:function``."""
+
+
+def get_method(spec: str | Method) -> Method:
+    """Resolve a method spec: a callable, a registered name, or ``package.module:function``.
+
+    Raises:
+        MethodNotFoundError: naming the spec and the registered names.
+    """
+    if callable(spec):
+        return spec
+    if not isinstance(spec, str) or not spec:
+        raise MethodNotFoundError(f"method must be a name or 'package.module:function', got {spec!r}")
+    if spec in REGISTRY:
+        return REGISTRY[spec]
+    if ":" in spec:
+        mod_name, _, attr = spec.partition(":")
+        try:
+            mod = importlib.import_module(mod_name)
+        except ImportError as exc:
+            raise MethodNotFoundError(f"method {spec!r}: cannot import module {mod_name!r}: {exc}") from exc
+        obj = mod
+        for part in attr.split("."):
+            if not hasattr(obj, part):
+                raise MethodNotFoundError(f"method {spec!r}: {mod_name!r} has no attribute {attr!r}")
+            obj = getattr(obj, part)
+        if not callable(obj):
+            raise MethodNotFoundError(f"method {spec!r} is not callable")
+        return obj
+    raise MethodNotFoundError(f"unknown method {spec!r}; registered: {', '.join(REGISTRY)}; "
+                              "or give 'package.module:function'")
+
+
+__all__ = ["REGISTRY", "get_method", "MethodNotFoundError", "lpd_only", "spd_only", "upstream_saturated",
+           "saturated_exposure_corrected", "flicker_aware", "flicker_aware_two_sided", "temporal"]

@@ -1,0 +1,1286 @@
+"""The lfmbench radiance corpus: OpenEXR files + JSON metadata + a SHA-256 manifest.
+
+This module defines the on-disk format specified in ``docs/corpus-format.md`` (and summarised in
+``docs/contracts.md`` section 2) and everything that touches it:
+
+* low-level EXR encoding / decoding through the OpenEXR 3.x Python API (``OpenEXR.File`` / ``OpenEXR.Part``):
+  :func:`encode_static_exr`, :func:`encode_lights_exr`, :func:`encode_aux_exr`, :func:`read_exr`;
+* :class:`CorpusWriter`: atomic writes (temporary name in the same directory, then :func:`os.replace`), a
+  manifest that is rewritten atomically after each finished scene, resume support (:meth:`is_complete`);
+* :class:`Corpus`: the reader (lazy: one file per frame and light group is decoded only when asked for, with
+  a small cache so that reading ``short`` then ``long`` decodes the file once);
+* :func:`validate_corpus`: a full check of a corpus (missing files, checksums, channels, NaN/inf/negative
+  radiance, metadata consistency), used by ``lfmbench validate``;
+* :func:`validate_meta`: consistency checks of a scene's ``meta.json`` (timing, bands, groups, camera).
+
+Units: spectral radiance in W sr^-1 m^-2 nm^-1, wavelengths in nm, times in s, depth in m, bounding boxes in
+pixels as half-open ``(y0, x0, y1, x1)`` (rows y0..y1-1, columns x0..x1-1).
+
+Timing convention (``docs/contracts.md`` section 1): frame n starts at n / fps; the long window is
+``[t_n, t_n + T_L)``, the short window is centred in it, and flickering groups are stored in K equal bins over
+the capture window ``[t_n, t_n + T_L + readout_s)``.
+
+References: OpenEXR file layout and multi-part files, https://openexr.com/en/latest/TechnicalIntroduction.html
+(data window / display window, part names); SHA-256, FIPS PUB 180-4.
+"""
+from __future__ import annotations
+
+import contextlib
+import errno
+import hashlib
+import io
+import json
+import logging
+import math
+import os
+import re
+import tempfile
+from collections import OrderedDict
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Iterable, Iterator, Mapping, Sequence
+
+import numpy as np
+
+__all__ = [
+    "FORMAT_NAME", "FORMAT_VERSION", "STATIC_WINDOWS", "AUX_CHANNELS", "HALF_MAX", "RADIANCE_UNIT",
+    "CorpusError", "CorpusNotFoundError", "CorpusFileError", "CorpusChannelError", "CorpusValueError",
+    "CorpusWriteError", "band_channel", "bin_prefix", "static_channels", "bin_channels", "frame_dir",
+    "group_storage", "encode_static_exr", "encode_lights_exr", "encode_aux_exr", "read_exr", "sha256_file",
+    "atomic_write_bytes", "atomic_write_json", "make_splits", "validate_meta", "Corpus", "CorpusWriter",
+    "ValidationReport", "validate_corpus", "encode_scene", "write_files", "prune_scene_dir", "ExrPart", "check_scene_id",
+]
+
+log = logging.getLogger(__name__)
+
+#: ``manifest.json`` "format" value and format version written by this module.
+FORMAT_NAME = "lfmbench-corpus"
+FORMAT_VERSION = 1
+MANIFEST_NAME = "manifest.json"
+SPLITS_NAME = "splits.json"
+SCENES_DIR = "scenes"
+#: Exposure windows stored for static (non-flickering) groups, in this channel-prefix order.
+STATIC_WINDOWS = ("short", "long")
+#: Channels of ``aux.exr``: z-depth and range (m) and instance / light ids (float32, -1 = none).
+AUX_CHANNELS = ("depth.Z", "depth.R", "mask.instance", "mask.light")
+#: Largest finite IEEE 754 binary16 value; radiance above it cannot be stored as HALF (IEEE 754-2008).
+HALF_MAX = 65504.0
+RADIANCE_UNIT = "W sr^-1 m^-2 nm^-1"
+#: Name and channel of the placeholder part of a flickering-group EXR in which no light is visible.
+EMPTY_PART = "empty"
+#: Prefix of temporary files; stray ones (after a crash) are removed by :class:`CorpusWriter`.
+TMP_PREFIX = ".lfmtmp-"
+#: Relative tolerance of the timing consistency checks (s / s).
+TIMING_RTOL = 1e-6
+#: Header attribute names (all prefixed ``lfmbench_``).
+ATTR = {
+    "kind": "lfmbench_kind", "scene": "lfmbench_scene_id", "frame": "lfmbench_frame",
+    "group": "lfmbench_group", "units": "lfmbench_units", "light": "lfmbench_light_id",
+    "nparts": "lfmbench_nparts", "bins": "lfmbench_bins", "stored": "lfmbench_stored_as",
+}
+
+
+# --------------------------------------------------------------------------------------------------- errors
+class CorpusError(ValueError):
+    """Base class of every corpus problem; the message names the file or argument at fault."""
+
+
+class CorpusNotFoundError(CorpusError):
+    """The corpus root or its ``manifest.json`` does not exist (tells the user how to make one)."""
+
+
+class CorpusFileError(CorpusError):
+    """A corpus file is missing, unreadable, truncated or has a bad checksum."""
+
+
+class CorpusChannelError(CorpusError):
+    """An EXR lacks expected channels / parts or has channels the metadata does not announce."""
+
+
+class CorpusValueError(CorpusError):
+    """Radiance (or aux data) that is NaN, infinite or negative."""
+
+
+class CorpusWriteError(OSError):
+    """Writing the corpus failed (e.g. disk full, ``errno.ENOSPC``); no partial file was left behind."""
+
+
+# ---------------------------------------------------------------------------------------- channel naming
+def _fmt_nm(wl: float) -> str:
+    """Wavelength (nm) as written in channel names: ``400`` -> ``"400"``, ``402.5`` -> ``"402.5"``."""
+    wl = float(wl)
+    if not math.isfinite(wl) or wl <= 0:
+        raise ValueError(f"wavelength must be a positive number of nm, got {wl!r}")
+    return f"{wl:.6g}"
+
+
+def band_channel(prefix: str, wl_nm: float) -> str:
+    """Channel name of one band: ``band_channel("short", 400) == "short.400nm"``.
+
+    Args:
+        prefix: ``"short"``, ``"long"`` or a bin prefix from :func:`bin_prefix`.
+        wl_nm: band centre wavelength (nm).
+    """
+    return f"{prefix}.{_fmt_nm(wl_nm)}nm"
+
+
+def bin_prefix(k: int, bins: int) -> str:
+    """Prefix of time bin ``k`` of ``bins``: ``bin00`` .. ``bin{K-1}``, zero-padded to max(2, digits(K-1))."""
+    width = max(2, len(str(max(bins - 1, 0))))
+    return f"bin{k:0{width}d}"
+
+
+def static_channels(window: str, bands_nm: Sequence[float]) -> list[str]:
+    """Channel names of one exposure window (``short`` / ``long``) of a static group, band order."""
+    if window not in STATIC_WINDOWS:
+        raise ValueError(f"window must be one of {STATIC_WINDOWS}, got {window!r}")
+    return [band_channel(window, wl) for wl in bands_nm]
+
+
+def bin_channels(bins: int, bands_nm: Sequence[float]) -> list[list[str]]:
+    """Channel names of a per-light part: ``[k][c]`` -> ``bin{k}.{wl_c}nm``."""
+    return [[band_channel(bin_prefix(k, bins), wl) for wl in bands_nm] for k in range(bins)]
+
+
+def frame_dir(frame: int) -> str:
+    """Directory name of frame ``frame``: ``f000``, ``f001``, ..."""
+    return f"f{int(frame):03d}"
+
+
+def group_storage(meta: Mapping[str, Any], group: str) -> str:
+    """How ``group`` is stored: ``"lights"`` (per-light sparse time bins) or ``"static"`` (short/long).
+
+    A group is stored per light when its meta entry is ``"flicker": true`` and its ``bins`` (default: the
+    scene's ``timing.bins``) is > 0. Imported ISET-LFM groups use ``"flicker": true, "bins": 0``: flickering,
+    but stored as exposure windows only (one PWM weight per frame).
+    """
+    groups = meta.get("groups", {})
+    if group not in groups:
+        raise ValueError(f"group {group!r} is not in this scene's meta.json groups {sorted(groups)}")
+    g = groups[group]
+    if not g.get("flicker", False):
+        return "static"
+    bins = int(g.get("bins", meta.get("timing", {}).get("bins", 0)))
+    return "lights" if bins > 0 else "static"
+
+
+def _group_bins(meta: Mapping[str, Any], group: str) -> int:
+    g = meta["groups"][group]
+    return int(g.get("bins", meta.get("timing", {}).get("bins", 0)))
+
+
+# ------------------------------------------------------------------------------------------- atomic I/O
+def _file_mode() -> int:
+    """Permission bits of a new file under the current umask (mkstemp alone would give 0600)."""
+    mask = os.umask(0)
+    os.umask(mask)
+    return 0o666 & ~mask
+
+
+def _tmp_path(path: Path) -> Path:
+    fd, name = tempfile.mkstemp(prefix=TMP_PREFIX + path.name + ".", dir=path.parent)
+    try:
+        os.fchmod(fd, _file_mode())
+    finally:
+        os.close(fd)
+    return Path(name)
+
+
+def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> str:
+    """Write ``data`` to ``path`` atomically and return its SHA-256 hex digest.
+
+    The bytes go to a temporary file in the same directory, are flushed and fsync'ed, then the file is renamed
+    over ``path`` with :func:`os.replace` (atomic on POSIX). On any error the temporary file is removed and a
+    :class:`CorpusWriteError` naming ``path`` is raised (``errno.ENOSPC``: "disk full").
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = None
+    try:
+        tmp = _tmp_path(path)
+        with open(tmp, "wb") as fh:
+            fh.write(data)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+        tmp = None
+    except OSError as exc:
+        why = "disk full" if exc.errno == errno.ENOSPC else (exc.strerror or str(exc))
+        raise CorpusWriteError(exc.errno, f"could not write {path}: {why}; nothing was changed") from exc
+    finally:
+        if tmp is not None:
+            with contextlib.suppress(OSError):
+                os.unlink(tmp)
+    return hashlib.sha256(data).hexdigest()
+
+
+def atomic_write_json(path: str | os.PathLike, obj: Any) -> str:
+    """Write ``obj`` as indented JSON atomically (see :func:`atomic_write_bytes`); returns its SHA-256."""
+    text = json.dumps(obj, indent=1, sort_keys=False, allow_nan=False, default=_json_default) + "\n"
+    return atomic_write_bytes(path, text.encode("utf-8"))
+
+
+def _json_default(o: Any) -> Any:
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, Path):
+        return str(o)
+    raise TypeError(f"not JSON serialisable: {type(o).__name__}")
+
+
+def sha256_file(path: str | os.PathLike, chunk: int = 1 << 20) -> str:
+    """SHA-256 hex digest (FIPS 180-4) of a file, read in 1 MiB chunks."""
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        while True:
+            b = fh.read(chunk)
+            if not b:
+                break
+            h.update(b)
+    return h.hexdigest()
+
+
+def _load_json(path: Path, what: str) -> Any:
+    try:
+        with open(path, encoding="utf-8") as fh:
+            return json.load(fh)
+    except FileNotFoundError:
+        raise CorpusFileError(f"{what} is missing: {path}") from None
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise CorpusFileError(f"{what} {path} is not valid JSON: {exc}") from exc
+
+
+# ------------------------------------------------------------------------------------------ EXR encoding
+def _exr():
+    try:
+        import OpenEXR  # noqa: PLC0415
+    except ImportError as exc:  # pragma: no cover - a declared dependency
+        raise ImportError("lfmbench.corpus needs the OpenEXR 3.x Python bindings: pip install 'OpenEXR>=3.2'") \
+            from exc
+    return OpenEXR
+
+
+def _check_dtype(dtype: str) -> str:
+    if dtype not in ("float32", "float16"):
+        raise ValueError(f"dtype must be 'float32' (EXR FLOAT) or 'float16' (EXR HALF), got {dtype!r}")
+    return dtype
+
+
+def _check_radiance(arr: np.ndarray, what: str) -> np.ndarray:
+    arr = np.asarray(arr)
+    if not np.issubdtype(arr.dtype, np.floating):
+        raise ValueError(f"{what}: radiance must be a floating-point array, got dtype {arr.dtype}")
+    if arr.size and not np.isfinite(arr).all():
+        raise CorpusValueError(f"{what}: radiance contains NaN or inf")
+    if arr.size and float(arr.min()) < 0:
+        raise CorpusValueError(f"{what}: radiance contains negative values (min {float(arr.min()):.3g})")
+    return arr
+
+
+def _store(arr: np.ndarray, dtype: str, what: str, notes: list[str]) -> tuple[np.ndarray, str]:
+    """Array to store and its EXR pixel type; HALF falls back to FLOAT above :data:`HALF_MAX`."""
+    if dtype == "float16":
+        peak = float(np.max(arr)) if arr.size else 0.0
+        if peak > HALF_MAX:
+            msg = f"{what}: peak {peak:.4g} > {HALF_MAX} (HALF maximum): stored as FLOAT"
+            log.warning(msg)
+            notes.append(msg)
+            return np.ascontiguousarray(arr, dtype=np.float32), "float32"
+        return np.ascontiguousarray(arr, dtype=np.float16), "float16"
+    return np.ascontiguousarray(arr, dtype=np.float32), "float32"
+
+
+def _base_header(width: int, height: int, data_window: tuple[int, int, int, int] | None = None) -> dict:
+    """EXR header: ZIP compression, scanlines, display window = full image, data window (y0,x0,y1,x1) half-open."""
+    exr = _exr()
+    if data_window is None:
+        data_window = (0, 0, height, width)
+    y0, x0, y1, x1 = data_window
+    return {
+        "compression": exr.ZIP_COMPRESSION,
+        "type": exr.scanlineimage,
+        "displayWindow": ((0, 0), (width - 1, height - 1)),
+        "dataWindow": ((x0, y0), (x1 - 1, y1 - 1)),
+    }
+
+
+def _encode(parts: list, what: str) -> bytes:
+    exr = _exr()
+    buf = io.BytesIO()
+    try:
+        exr.File(parts).write(buf)
+    except Exception as exc:  # OpenEXR raises RuntimeError / ValueError from C++
+        raise ValueError(f"{what}: OpenEXR could not encode the image: {exc}") from exc
+    return buf.getvalue()
+
+
+def encode_static_exr(windows: Mapping[str, np.ndarray], bands_nm: Sequence[float], *, dtype: str = "float32",
+                      attrs: Mapping[str, Any] | None = None, what: str = "static group",
+                      notes: list[str] | None = None) -> bytes:
+    """Encode a static group (one part, channels ``short.<wl>nm`` / ``long.<wl>nm``) as EXR bytes.
+
+    Args:
+        windows: ``{"short": (C, H, W), "long": (C, H, W)}`` time-averaged spectral radiance over each exposure
+            window, W sr^-1 m^-2 nm^-1, finite and >= 0.
+        bands_nm: the C band centres (nm).
+        dtype: ``"float32"`` (FLOAT) or ``"float16"`` (HALF; falls back to FLOAT above 65504).
+        attrs: extra header attributes (str / int / float values).
+        what: the file's name for error messages.
+        notes: list that receives overflow messages.
+    """
+    _check_dtype(dtype)
+    notes = [] if notes is None else notes
+    if set(windows) != set(STATIC_WINDOWS):
+        raise ValueError(f"{what}: static windows must be exactly {STATIC_WINDOWS}, got {sorted(windows)}")
+    shape = None
+    for w in STATIC_WINDOWS:
+        a = _check_radiance(windows[w], f"{what} [{w}]")
+        if a.ndim != 3 or a.shape[0] != len(bands_nm):
+            raise ValueError(f"{what} [{w}]: expected shape (C={len(bands_nm)}, H, W), got {a.shape}")
+        if shape is not None and a.shape != shape:
+            raise ValueError(f"{what}: short {shape} and long {a.shape} shapes differ")
+        shape = a.shape
+    _, height, width = shape
+    channels = {}
+    stored = set()
+    for w in STATIC_WINDOWS:
+        arr, st = _store(windows[w], dtype, f"{what} [{w}]", notes)
+        stored.add(st)
+        for c, name in enumerate(static_channels(w, bands_nm)):
+            channels[name] = arr[c]
+    header = _base_header(width, height)
+    header.update(attrs or {})
+    header[ATTR["kind"]] = "static"
+    header[ATTR["units"]] = RADIANCE_UNIT
+    header[ATTR["stored"]] = "float32" if "float32" in stored else "float16"
+    exr = _exr()
+    return _encode([exr.Part(header, channels, "static")], what)
+
+
+def _clip_box(box: Sequence[int], height: int, width: int, what: str) -> tuple[int, int, int, int]:
+    if len(box) != 4:
+        raise ValueError(f"{what}: bbox must be (y0, x0, y1, x1), got {box!r}")
+    y0, x0, y1, x1 = (int(v) for v in box)
+    if not (0 <= y0 < y1 <= height and 0 <= x0 < x1 <= width):
+        raise ValueError(f"{what}: bbox {box} is empty or outside the {height}x{width} image")
+    return y0, x0, y1, x1
+
+
+def encode_lights_exr(lights: Sequence[tuple[int, Sequence[int], np.ndarray]], bands_nm: Sequence[float],
+                      bins: int, height: int, width: int, *, dtype: str = "float32",
+                      attrs: Mapping[str, Any] | None = None, what: str = "flickering group",
+                      notes: list[str] | None = None) -> bytes:
+    """Encode a flickering group as a multi-part EXR: one part ``light<id>`` per light, sparse data windows.
+
+    Args:
+        lights: ``[(light_id, (y0, x0, y1, x1), bins_array)]`` with ``bins_array`` of shape (K, C, h, w),
+            h = y1 - y0, w = x1 - x0, spectral radiance W sr^-1 m^-2 nm^-1 time-averaged over each bin with the
+            light at PWM level 1. Boxes are half-open pixel ranges inside the H x W image.
+        bands_nm: the C band centres (nm).
+        bins: K, the number of time bins.
+        height, width: full image size H, W (the display window).
+        dtype: ``"float32"`` or ``"float16"`` (per-part FLOAT fallback above 65504).
+
+    A group with no visible light is stored as one placeholder part named ``empty`` (1x1, channel ``empty``,
+    attribute ``lfmbench_nparts = 0``) because an EXR file needs at least one part.
+    """
+    _check_dtype(dtype)
+    notes = [] if notes is None else notes
+    if bins < 1:
+        raise ValueError(f"{what}: bins must be >= 1, got {bins}")
+    exr = _exr()
+    names = bin_channels(bins, bands_nm)
+    parts = []
+    seen = set()
+    for light_id, box, arr in lights:
+        lid = int(light_id)
+        if lid < 0 or lid in seen:
+            raise ValueError(f"{what}: light ids must be unique and >= 0, got {light_id!r}")
+        seen.add(lid)
+        pw = f"{what} light{lid}"
+        y0, x0, y1, x1 = _clip_box(box, height, width, pw)
+        a = _check_radiance(arr, pw)
+        if a.shape != (bins, len(bands_nm), y1 - y0, x1 - x0):
+            raise ValueError(f"{pw}: expected shape (K={bins}, C={len(bands_nm)}, {y1 - y0}, {x1 - x0}) "
+                             f"for bbox {(y0, x0, y1, x1)}, got {a.shape}")
+        a, st = _store(a, dtype, pw, notes)
+        channels = {names[k][c]: a[k, c] for k in range(bins) for c in range(len(bands_nm))}
+        header = _base_header(width, height, (y0, x0, y1, x1))
+        header.update(attrs or {})
+        header.update({ATTR["kind"]: "lights", ATTR["light"]: lid, ATTR["bins"]: int(bins),
+                       ATTR["units"]: RADIANCE_UNIT, ATTR["stored"]: st})
+        parts.append((lid, header, channels))
+    if not parts:
+        header = _base_header(width, height, (0, 0, 1, 1))
+        header.update(attrs or {})
+        header.update({ATTR["kind"]: "lights", ATTR["nparts"]: 0, ATTR["bins"]: int(bins)})
+        return _encode([exr.Part(header, {EMPTY_PART: np.zeros((1, 1), np.float32)}, EMPTY_PART)], what)
+    out = []
+    for lid, header, channels in sorted(parts, key=lambda p: p[0]):
+        header[ATTR["nparts"]] = len(parts)
+        out.append(exr.Part(header, channels, f"light{lid}"))
+    return _encode(out, what)
+
+
+def encode_aux_exr(aux: Mapping[str, np.ndarray], height: int, width: int, *,
+                   attrs: Mapping[str, Any] | None = None, what: str = "aux") -> bytes:
+    """Encode ``aux.exr``: FLOAT channels ``depth.Z``, ``depth.R`` (m; +inf where no surface) and
+    ``mask.instance``, ``mask.light`` (integer ids stored as float32, -1 = none), each (H, W)."""
+    if set(aux) != set(AUX_CHANNELS):
+        raise ValueError(f"{what}: aux channels must be exactly {AUX_CHANNELS}, got {sorted(aux)}")
+    channels = {}
+    for name in AUX_CHANNELS:
+        a = np.asarray(aux[name])
+        if a.shape != (height, width):
+            raise ValueError(f"{what} [{name}]: expected shape ({height}, {width}), got {a.shape}")
+        a = np.ascontiguousarray(a, dtype=np.float32)
+        _check_aux(name, a, what)
+        channels[name] = a
+    header = _base_header(width, height)
+    header.update(attrs or {})
+    header[ATTR["kind"]] = "aux"
+    return _encode([_exr().Part(header, channels, "aux")], what)
+
+
+def _check_aux(name: str, a: np.ndarray, what: str) -> None:
+    if np.isnan(a).any():
+        raise CorpusValueError(f"{what} [{name}]: contains NaN")
+    if name.startswith("depth."):
+        if (a < 0).any():
+            raise CorpusValueError(f"{what} [{name}]: negative depth")
+    else:
+        if not np.isfinite(a).all() or (a < -1).any() or (a != np.round(a)).any():
+            raise CorpusValueError(f"{what} [{name}]: ids must be integers >= -1")
+
+
+# ------------------------------------------------------------------------------------------ EXR decoding
+@dataclass
+class ExrPart:
+    """One decoded EXR part: name, header dict, data window ``(y0, x0, y1, x1)`` (half-open), display size
+    ``(H, W)`` and channels ``{name: (h, w) ndarray}`` (None when read header-only)."""
+
+    name: str
+    header: dict
+    window: tuple[int, int, int, int]
+    size: tuple[int, int]
+    channel_names: list[str]
+    channels: dict[str, np.ndarray] | None = None
+
+
+def read_exr(path: str | os.PathLike, *, header_only: bool = False) -> list[ExrPart]:
+    """Decode every part of an EXR file (OpenEXR 3.x reads whole files: all parts, all channels).
+
+    Raises :class:`CorpusFileError` naming ``path`` when it is missing, not an EXR, or truncated (a part whose
+    pixels cannot be read, detected by comparing with the part count of the header).
+    """
+    exr = _exr()
+    path = Path(path)
+    if not path.is_file():
+        raise CorpusFileError(f"EXR file is missing: {path}")
+    try:
+        hdr = exr.File(str(path), header_only=True)
+        n_parts = len(hdr.parts)
+        f = hdr if header_only else exr.File(str(path), separate_channels=True)
+    except Exception as exc:  # RuntimeError from the C++ library
+        raise CorpusFileError(f"cannot read EXR file {path}: {exc}") from exc
+    if len(f.parts) != n_parts:
+        raise CorpusFileError(f"EXR file {path} is truncated or corrupt: {len(f.parts)} of {n_parts} parts "
+                              "could be read")
+    out = []
+    for p in f.parts:
+        h = p.header
+        (dx0, dy0), (dx1, dy1) = (tuple(int(v) for v in c) for c in h["dataWindow"])
+        (wx0, wy0), (wx1, wy1) = (tuple(int(v) for v in c) for c in h["displayWindow"])
+        names = [c.name for c in h.get("channels", [])] if header_only else list(p.channels)
+        chans = None
+        if not header_only:
+            chans = {}
+            for k, ch in p.channels.items():
+                px = ch.pixels
+                if px is None or px.shape != (dy1 - dy0 + 1, dx1 - dx0 + 1):
+                    raise CorpusFileError(f"EXR file {path} part {p.name()!r}: channel {k!r} could not be read")
+                chans[k] = px
+        out.append(ExrPart(name=p.name(), header=dict(h), window=(dy0, dx0, dy1 + 1, dx1 + 1),
+                           size=(wy1 - wy0 + 1, wx1 - wx0 + 1), channel_names=names, channels=chans))
+    return out
+
+
+def _stack(part: ExrPart, names: Sequence[str], path: Path) -> np.ndarray:
+    missing = [n for n in names if n not in part.channels]
+    if missing:
+        raise CorpusChannelError(f"EXR file {path} part {part.name!r} lacks channels {missing[:4]}"
+                                 f"{' ...' if len(missing) > 4 else ''}")
+    return np.stack([np.asarray(part.channels[n], dtype=np.float32) for n in names])
+
+
+def _check_values(arr: np.ndarray, path: Path, what: str) -> None:
+    if arr.size == 0:
+        return
+    lo = float(arr.min())
+    if not math.isfinite(lo) or not math.isfinite(float(arr.max())):
+        raise CorpusValueError(f"EXR file {path} {what}: radiance contains NaN or inf")
+    if lo < 0:
+        raise CorpusValueError(f"EXR file {path} {what}: radiance contains negative values (min {lo:.3g})")
+
+
+# ------------------------------------------------------------------------------------------------ splits
+def make_splits(scene_ids: Iterable[str], seed: int,
+                fractions: Sequence[float] = (0.6, 0.2, 0.2)) -> dict[str, list[str]]:
+    """Deterministic train / val / test split of scene ids.
+
+    The sorted ids are shuffled with ``numpy.random.default_rng(seed)``; test gets ``round(f_test * n)``
+    scenes but at least one, val ``round(f_val * n)`` (only while train keeps >= 1 scene), train the rest.
+
+    Args:
+        scene_ids: the ids (order does not matter).
+        seed: integer seed.
+        fractions: (train, val, test), each >= 0, summing to 1.
+    """
+    fr = [float(f) for f in fractions]
+    if len(fr) != 3 or any(f < 0 for f in fr) or abs(sum(fr) - 1) > 1e-9:
+        raise ValueError(f"fractions must be three numbers >= 0 summing to 1, got {fractions!r}")
+    ids = sorted(set(scene_ids))
+    n = len(ids)
+    order = np.random.default_rng(seed).permutation(n)
+    ids = [ids[i] for i in order]
+    n_test = min(n, max(1, round(fr[2] * n))) if n else 0
+    n_val = min(round(fr[1] * n), max(0, n - n_test - 1))
+    test, val, train = ids[:n_test], ids[n_test:n_test + n_val], ids[n_test + n_val:]
+    return {"train": sorted(train), "val": sorted(val), "test": sorted(test)}
+
+
+# ------------------------------------------------------------------------------------------------- meta
+_META_REQUIRED = ("scene_id", "width", "height", "bands_nm", "fps", "frames", "timing", "groups")
+_TIMING_REQUIRED = ("short_exposure_s", "long_exposure_s", "capture_window_s")
+
+
+def _num(d: Mapping, key: str, where: str, *, positive: bool = False, nonneg: bool = False) -> float:
+    if key not in d:
+        raise ValueError(f"{where}: missing field {key!r}")
+    v = d[key]
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(float(v)):
+        raise ValueError(f"{where}: field {key!r} must be a finite number, got {v!r}")
+    if positive and v <= 0:
+        raise ValueError(f"{where}: field {key!r} must be > 0, got {v!r}")
+    if nonneg and v < 0:
+        raise ValueError(f"{where}: field {key!r} must be >= 0, got {v!r}")
+    return float(v)
+
+
+def validate_meta(meta: Mapping[str, Any], where: str = "meta.json") -> None:
+    """Check a scene's ``meta.json`` content; raise ``ValueError`` naming ``where`` and the field.
+
+    Checks: required fields; image size > 0; bands strictly increasing and positive (nm); fps > 0; frames >= 1;
+    ``0 < short_exposure_s <= long_exposure_s <= 1/fps`` (an exposure cannot be longer than the frame time);
+    ``capture_window_s == long_exposure_s + readout_s`` (the bins must cover both windows; the capture window
+    may exceed 1/fps with a rolling shutter, since row i of frame n+1 starts at t_(n+1) + i * line_time); bins >= 1 for per-light groups; camera ``speed_mps >= 0``; groups known by name with a boolean
+    ``flicker``; lights with unique integer ids >= 0 whose group exists.
+    """
+    if not isinstance(meta, Mapping):
+        raise ValueError(f"{where}: must be a JSON object")
+    for k in _META_REQUIRED:
+        if k not in meta:
+            raise ValueError(f"{where}: missing field {k!r}")
+    for k in ("width", "height", "frames"):
+        v = meta[k]
+        if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+            raise ValueError(f"{where}: field {k!r} must be an integer >= 1, got {v!r}")
+    bands = meta["bands_nm"]
+    if not isinstance(bands, list) or not bands:
+        raise ValueError(f"{where}: field 'bands_nm' must be a non-empty list of wavelengths (nm)")
+    try:
+        b = np.asarray(bands, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"{where}: field 'bands_nm' must hold numbers (nm), got {bands!r}") from None
+    if not np.isfinite(b).all() or (b <= 0).any() or (np.diff(b) <= 0).any():
+        raise ValueError(f"{where}: field 'bands_nm' must be positive and strictly increasing, got {bands!r}")
+    fps = _num(meta, "fps", where, positive=True)
+    frame_time = 1.0 / fps
+    t = meta["timing"]
+    if not isinstance(t, Mapping):
+        raise ValueError(f"{where}: field 'timing' must be an object")
+    tw = f"{where} timing"
+    for k in _TIMING_REQUIRED:
+        _num(t, k, tw, positive=True)
+    ts, tl, cw = t["short_exposure_s"], t["long_exposure_s"], t["capture_window_s"]
+    readout = _num(t, "readout_s", tw, nonneg=True) if "readout_s" in t else 0.0
+    tol = TIMING_RTOL * frame_time
+    if tl > frame_time + tol:
+        raise ValueError(f"{tw}: long_exposure_s = {tl} s is longer than the frame time 1/fps = {frame_time:.6g} s")
+    if ts > tl + tol:
+        raise ValueError(f"{tw}: short_exposure_s = {ts} s is longer than long_exposure_s = {tl} s")
+    if abs(cw - (tl + readout)) > tol:
+        raise ValueError(f"{tw}: capture_window_s = {cw} s must equal long_exposure_s + readout_s = "
+                         f"{tl + readout} s so that the time bins cover the exposure windows")
+    if "alignment" in t and t["alignment"] != "center":
+        raise ValueError(f"{tw}: alignment must be 'center', got {t['alignment']!r}")
+    groups = meta["groups"]
+    if not isinstance(groups, Mapping) or not groups:
+        raise ValueError(f"{where}: field 'groups' must be a non-empty object")
+    for name, g in groups.items():
+        if not re.fullmatch(r"[A-Za-z][A-Za-z0-9_]*", str(name)) or name == "aux":
+            raise ValueError(f"{where}: group name {name!r} must be an identifier other than 'aux'")
+        if not isinstance(g, Mapping) or not isinstance(g.get("flicker"), bool):
+            raise ValueError(f"{where}: groups[{name!r}] must be an object with a boolean 'flicker'")
+        if "bins" in g and (isinstance(g["bins"], bool) or not isinstance(g["bins"], int) or g["bins"] < 0):
+            raise ValueError(f"{where}: groups[{name!r}].bins must be an integer >= 0, got {g['bins']!r}")
+        if g["flicker"] and "bins" not in g:
+            kb = t.get("bins")
+            if isinstance(kb, bool) or not isinstance(kb, int) or kb < 1:
+                raise ValueError(f"{tw}: field 'bins' must be an integer >= 1 for flickering group {name!r}, "
+                                 f"got {kb!r}")
+    cam = meta.get("camera", {}) or {}
+    if cam.get("speed_mps") is not None:
+        _num(cam, "speed_mps", f"{where} camera", nonneg=True)
+    ids = set()
+    for i, light in enumerate(meta.get("lights", [])):
+        lid = light.get("id")
+        if isinstance(lid, bool) or not isinstance(lid, int) or lid < 0 or lid in ids:
+            raise ValueError(f"{where}: lights[{i}].id must be a unique integer >= 0, got {lid!r}")
+        ids.add(lid)
+        if light.get("group") not in groups:
+            raise ValueError(f"{where}: lights[{i}].group {light.get('group')!r} is not in groups")
+
+
+# ----------------------------------------------------------------------------------------------- reader
+def _empty_manifest() -> dict:
+    return {"format": FORMAT_NAME, "version": FORMAT_VERSION, "scenes": [], "files": {}}
+
+
+def _check_manifest(man: Any, path: Path) -> dict:
+    if not isinstance(man, dict) or man.get("format") != FORMAT_NAME:
+        raise CorpusFileError(f"{path}: not an lfmbench corpus manifest (format must be {FORMAT_NAME!r})")
+    if man.get("version") != FORMAT_VERSION:
+        raise CorpusFileError(f"{path}: unsupported corpus version {man.get('version')!r} "
+                              f"(this lfmbench reads version {FORMAT_VERSION})")
+    if not isinstance(man.get("scenes"), list) or not isinstance(man.get("files"), dict):
+        raise CorpusFileError(f"{path}: 'scenes' must be a list and 'files' an object")
+    return man
+
+
+class Corpus:
+    """Read an lfmbench corpus (see ``docs/corpus-format.md``).
+
+    Files are decoded only when a method asks for them; the last ``cache_size`` decoded EXR files are kept in
+    memory (so ``read_static(..., "short")`` then ``(..., "long")`` decodes once). OpenEXR 3.x decodes whole
+    files, so a call reads every channel of that one frame/group file, never other groups or frames.
+
+    Args:
+        root: corpus directory (holds ``manifest.json``).
+        check_values: check every array returned for NaN / inf / negative radiance (cheap min/max).
+        cache_size: number of decoded EXR files kept (>= 0).
+
+    Example:
+        >>> c = Corpus("demo_out/corpus")                                        # doctest: +SKIP
+        >>> L = c.read_static(c.scenes[0], 0, "headlights", "short")             # doctest: +SKIP
+        >>> L.shape                                                              # (C, H, W) doctest: +SKIP
+    """
+
+    def __init__(self, root: str | os.PathLike, *, check_values: bool = True, cache_size: int = 4) -> None:
+        self.root = Path(root)
+        mpath = self.root / MANIFEST_NAME
+        if not mpath.is_file():
+            raise CorpusNotFoundError(f"no lfmbench corpus at {self.root} ({MANIFEST_NAME} missing): make one with "
+                                      "`lfmbench render --out DIR` or `lfmbench import-isetlfm SRC DIR`")
+        self.manifest = _check_manifest(_load_json(mpath, "manifest"), mpath)
+        self.check_values = bool(check_values)
+        if cache_size < 0:
+            raise ValueError(f"cache_size must be >= 0, got {cache_size}")
+        self._cache_size = int(cache_size)
+        self._cache: OrderedDict[Path, list[ExrPart]] = OrderedDict()
+        self._meta: dict[str, dict] = {}
+
+    # -- index
+    @property
+    def scenes(self) -> list[str]:
+        """Scene ids recorded as complete in the manifest (sorted)."""
+        return sorted(self.manifest["scenes"])
+
+    @property
+    def splits(self) -> dict[str, list[str]]:
+        """``splits.json`` content ``{"train": [...], "val": [...], "test": [...]}``."""
+        return _load_json(self.root / SPLITS_NAME, "splits file")
+
+    def _scene_dir(self, scene_id: str) -> Path:
+        if scene_id not in self.manifest["scenes"]:
+            raise KeyError(f"scene {scene_id!r} is not in corpus {self.root} (see Corpus.scenes)")
+        return self.root / SCENES_DIR / scene_id
+
+    def meta(self, scene_id: str) -> dict:
+        """The scene's ``meta.json`` (camera, timing, bands, groups, lights)."""
+        if scene_id not in self._meta:
+            p = self._scene_dir(scene_id) / "meta.json"
+            m = _load_json(p, "scene metadata")
+            validate_meta(m, str(p))
+            self._meta[scene_id] = m
+        return self._meta[scene_id]
+
+    def scene(self, scene_id: str) -> dict:
+        """The editable scene description ``scene.json`` the scene was rendered from."""
+        return _load_json(self._scene_dir(scene_id) / "scene.json", "scene description")
+
+    def path(self, scene_id: str, frame: int, group: str) -> Path:
+        """Path of the EXR of ``group`` (or ``"aux"``) in frame ``frame``."""
+        return self._scene_dir(scene_id) / frame_dir(frame) / f"{group}.exr"
+
+    def groups(self, scene_id: str) -> dict[str, dict]:
+        """``meta.json`` groups: ``{name: {"flicker": bool, ...}}``."""
+        return self.meta(scene_id)["groups"]
+
+    # -- decoding
+    def _parts(self, path: Path) -> list[ExrPart]:
+        if path in self._cache:
+            self._cache.move_to_end(path)
+            return self._cache[path]
+        parts = read_exr(path)
+        if self._cache_size:
+            self._cache[path] = parts
+            while len(self._cache) > self._cache_size:
+                self._cache.popitem(last=False)
+        return parts
+
+    def _frame_group(self, scene_id: str, frame: int, group: str) -> tuple[dict, Path]:
+        m = self.meta(scene_id)
+        if isinstance(frame, bool) or not isinstance(frame, (int, np.integer)) or not 0 <= frame < m["frames"]:
+            raise ValueError(f"frame must be an integer in [0, {m['frames']}) for scene {scene_id!r}, got {frame!r}")
+        if group not in m["groups"]:
+            raise ValueError(f"group {group!r} is not in scene {scene_id!r} (groups: {sorted(m['groups'])})")
+        return m, self.path(scene_id, frame, group)
+
+    @staticmethod
+    def _band_list(m: dict, bands: Sequence[float] | None) -> list[float]:
+        all_b = [float(b) for b in m["bands_nm"]]
+        if bands is None:
+            return all_b
+        out = []
+        for b in bands:
+            if not any(abs(float(b) - a) < 1e-6 for a in all_b):
+                raise ValueError(f"bands: {b!r} nm is not a band of this scene ({all_b[0]:g}..{all_b[-1]:g} nm)")
+            out.append(float(b))
+        return out
+
+    def read_static(self, scene_id: str, frame: int, group: str, window: str,
+                    bands: Sequence[float] | None = None) -> np.ndarray:
+        """Time-averaged spectral radiance of a statically stored group over one exposure window.
+
+        Args:
+            scene_id, frame, group: which file.
+            window: ``"short"`` (LPD) or ``"long"`` (SPD) exposure window.
+            bands: band centres (nm) to return, default all of ``meta["bands_nm"]``.
+
+        Returns:
+            ndarray (C, H, W) float32, W sr^-1 m^-2 nm^-1.
+        """
+        m, path = self._frame_group(scene_id, frame, group)
+        if group_storage(m, group) != "static":
+            raise ValueError(f"group {group!r} of scene {scene_id!r} is stored per light in time bins: use "
+                             "read_light_bins")
+        names = static_channels(window, self._band_list(m, bands))
+        parts = self._parts(path)
+        arr = _stack(parts[0], names, path)
+        if arr.shape[1:] != (m["height"], m["width"]):
+            raise CorpusChannelError(f"EXR file {path}: image is {arr.shape[1:]}, meta.json says "
+                                     f"({m['height']}, {m['width']})")
+        if self.check_values:
+            _check_values(arr, path, f"[{window}]")
+        return arr
+
+    def read_light_bins(self, scene_id: str, frame: int, group: str, bands: Sequence[float] | None = None
+                        ) -> list[tuple[int, tuple[int, int, int, int], np.ndarray]]:
+        """Per-light time bins of a flickering group.
+
+        Returns:
+            ``[(light_id, (y0, x0, y1, x1), ndarray (K, C, h, w) float32)]`` sorted by light id; boxes are
+            half-open pixel ranges; values are spectral radiance (W sr^-1 m^-2 nm^-1) averaged over each of the
+            K bins of the capture window with the light at PWM level 1. Empty list when no light is visible.
+        """
+        m, path = self._frame_group(scene_id, frame, group)
+        if group_storage(m, group) != "lights":
+            raise ValueError(f"group {group!r} of scene {scene_id!r} is stored as short/long windows "
+                             f"(bins 0): use read_static")
+        k = _group_bins(m, group)
+        bl = self._band_list(m, bands)
+        names = [n for row in bin_channels(k, bl) for n in row]
+        out = []
+        for p in self._parts(path):
+            if p.name == EMPTY_PART:
+                continue
+            mt = re.fullmatch(r"light(\d+)", p.name)
+            if mt is None:
+                raise CorpusChannelError(f"EXR file {path}: unexpected part {p.name!r} (want light<id>)")
+            arr = _stack(p, names, path).reshape(k, len(bl), p.window[2] - p.window[0], p.window[3] - p.window[1])
+            if self.check_values:
+                _check_values(arr, path, f"part {p.name!r}")
+            out.append((int(mt.group(1)), p.window, arr))
+        return sorted(out, key=lambda t: t[0])
+
+    def read_aux(self, scene_id: str, frame: int, names: Sequence[str] | None = None) -> dict[str, np.ndarray]:
+        """Aux channels of a frame: ``{name: (H, W) float32}``; depth in m (+inf: no surface), ids -1 = none.
+
+        Args:
+            names: subset of :data:`AUX_CHANNELS` (default all).
+        """
+        m = self.meta(scene_id)
+        if not 0 <= int(frame) < m["frames"]:
+            raise ValueError(f"frame must be in [0, {m['frames']}) for scene {scene_id!r}, got {frame!r}")
+        names = list(AUX_CHANNELS if names is None else names)
+        bad = [n for n in names if n not in AUX_CHANNELS]
+        if bad:
+            raise ValueError(f"names: unknown aux channels {bad} (known: {AUX_CHANNELS})")
+        path = self.path(scene_id, frame, "aux")
+        part = self._parts(path)[0]
+        arr = _stack(part, names, path)
+        if self.check_values:
+            for n, a in zip(names, arr):
+                _check_aux(n, a, f"EXR file {path}")
+        return {n: a for n, a in zip(names, arr)}
+
+
+# ----------------------------------------------------------------------------------------------- writer
+class CorpusWriter:
+    """Write an lfmbench corpus atomically, scene by scene.
+
+    Every file goes through :func:`atomic_write_bytes` (temp file in the same directory + :func:`os.replace`);
+    a scene enters ``manifest.json`` (rewritten atomically) only after all its files are on disk, so a crash or
+    Ctrl-C leaves the corpus valid: the unfinished scene is simply absent and is redone on resume. Stray
+    temporary files of a killed run are removed when a writer opens the corpus.
+
+    Args:
+        root: corpus directory (created if needed).
+        dtype: ``"float32"`` (EXR FLOAT, default) or ``"float16"`` (HALF, with FLOAT fallback above 65504;
+            HALF has 11 significant bits and flushes values below ~6e-8 to 0).
+        render: optional dict of the options the corpus is rendered with, stored in the manifest as
+            ``"render"``; re-opening with different options raises ``ValueError`` (resume safety).
+    """
+
+    def __init__(self, root: str | os.PathLike, *, dtype: str = "float32",
+                 render: Mapping[str, Any] | None = None) -> None:
+        self.root = Path(root)
+        self.dtype = _check_dtype(dtype)
+        if self.root.exists() and not self.root.is_dir():
+            raise ValueError(f"corpus root {self.root} exists and is not a directory")
+        self.root.mkdir(parents=True, exist_ok=True)
+        mpath = self.root / MANIFEST_NAME
+        if mpath.exists():
+            self.manifest = _check_manifest(_load_json(mpath, "manifest"), mpath)
+        else:
+            self.manifest = _empty_manifest()
+            self.write_manifest()  # an empty corpus is a valid corpus
+        if render is not None:
+            render = json.loads(json.dumps(dict(render), default=_json_default))
+            old = self.manifest.get("render")
+            if old is not None and old != render:
+                diff = sorted(k for k in set(old) | set(render) if old.get(k) != render.get(k))
+                raise ValueError(f"corpus {self.root} was rendered with different options ({', '.join(diff)}); "
+                                 "use a new --out directory or the original options to resume")
+            if old is None:
+                self.manifest["render"] = render
+                self.write_manifest()
+        self.notes: list[str] = []
+        self.cleanup_temp()
+
+    def cleanup_temp(self) -> int:
+        """Remove temporary files left by an interrupted run; returns how many were removed."""
+        n = 0
+        for p in self.root.rglob(TMP_PREFIX + "*"):
+            with contextlib.suppress(OSError):
+                p.unlink()
+                n += 1
+        return n
+
+    @property
+    def scenes(self) -> list[str]:
+        return sorted(self.manifest["scenes"])
+
+    def _rel(self, path: Path) -> str:
+        return path.relative_to(self.root).as_posix()
+
+    def is_complete(self, scene_id: str, *, verify: bool = True) -> bool:
+        """True when the scene is in the manifest and (``verify``) all its files exist with their SHA-256."""
+        if scene_id not in self.manifest["scenes"]:
+            return False
+        prefix = f"{SCENES_DIR}/{scene_id}/"
+        files = {k: v for k, v in self.manifest["files"].items() if k.startswith(prefix)}
+        if not files:
+            return False
+        if not verify:
+            return True
+        for rel, digest in files.items():
+            p = self.root / rel
+            if not p.is_file() or sha256_file(p) != digest:
+                return False
+        return True
+
+    def write_manifest(self) -> None:
+        """Rewrite ``manifest.json`` atomically (scenes and files sorted)."""
+        self.manifest["scenes"] = sorted(set(self.manifest["scenes"]))
+        self.manifest["files"] = dict(sorted(self.manifest["files"].items()))
+        atomic_write_json(self.root / MANIFEST_NAME, self.manifest)
+
+    def encode_scene(self, scene_id: str, scene: Mapping[str, Any], meta: Mapping[str, Any],
+                     frames: Iterable[Mapping[str, Any]]) -> Iterator[tuple[str, bytes]]:
+        """:func:`encode_scene` with this writer's dtype (HALF-overflow notes go to ``self.notes``)."""
+        return encode_scene(scene_id, scene, meta, frames, dtype=self.dtype, notes=self.notes)
+
+    def write_files(self, files: Iterable[tuple[str, bytes]]) -> dict[str, str]:
+        """:func:`write_files` under this corpus root."""
+        return write_files(self.root, files)
+
+    def commit_scene(self, scene_id: str, hashes: Mapping[str, str]) -> None:
+        """Record a finished scene and its files' SHA-256 in the manifest (written atomically)."""
+        check_scene_id(scene_id)
+        prefix = f"{SCENES_DIR}/{scene_id}/"
+        if not hashes or any(not k.startswith(prefix) for k in hashes):
+            raise ValueError(f"commit_scene: file paths must lie under {prefix}")
+        self.manifest["files"] = {k: v for k, v in self.manifest["files"].items() if not k.startswith(prefix)}
+        self.manifest["files"].update(hashes)
+        self.manifest["scenes"] = sorted(set(self.manifest["scenes"]) | {scene_id})
+        self.write_manifest()
+
+    def forget_scene(self, scene_id: str) -> None:
+        """Drop a scene from the manifest (before re-rendering it); its files stay until overwritten."""
+        prefix = f"{SCENES_DIR}/{scene_id}/"
+        if scene_id in self.manifest["scenes"]:
+            self.manifest["scenes"].remove(scene_id)
+            self.manifest["files"] = {k: v for k, v in self.manifest["files"].items() if not k.startswith(prefix)}
+            self.write_manifest()
+
+    def write_scene(self, scene_id: str, scene: Mapping[str, Any], meta: Mapping[str, Any],
+                    frames: Iterable[Mapping[str, Any]]) -> dict[str, str]:
+        """Encode, write and commit one scene (files as they are rendered, manifest last); returns the hashes.
+
+        Removes files of the scene that a previous, different run left and that this run did not write
+        (:func:`prune_scene_dir`).
+        """
+        self.forget_scene(scene_id)
+        hashes = self.write_files(self.encode_scene(scene_id, scene, meta, frames))
+        prune_scene_dir(self.root, scene_id, hashes)
+        self.commit_scene(scene_id, hashes)
+        return hashes
+
+    def write_splits(self, seed: int, fractions: Sequence[float] = (0.6, 0.2, 0.2)) -> dict[str, list[str]]:
+        """Write ``splits.json`` from the manifest's scenes (see :func:`make_splits`)."""
+        splits = make_splits(self.manifest["scenes"], seed, fractions)
+        atomic_write_json(self.root / SPLITS_NAME, splits)
+        return splits
+
+
+def prune_scene_dir(root: str | os.PathLike, scene_id: str, keep: Iterable[str]) -> list[str]:
+    """Delete files under ``scenes/<scene_id>/`` whose relpath is not in ``keep`` (stale files of an earlier,
+    different render of the scene); returns the removed relpaths. Empty frame directories are removed too."""
+    root = Path(root)
+    sdir = root / SCENES_DIR / scene_id
+    keep = set(keep)
+    removed = []
+    if sdir.is_dir():
+        for p in sorted(sdir.rglob("*"), reverse=True):
+            rel = p.relative_to(root).as_posix()
+            if p.is_file() and rel not in keep and not p.name.startswith(TMP_PREFIX):
+                p.unlink()
+                removed.append(rel)
+            elif p.is_dir() and not any(p.iterdir()):
+                p.rmdir()
+    return removed
+
+
+def check_scene_id(scene_id: str) -> None:
+    """Raise ``ValueError`` unless ``scene_id`` is a safe directory name (letters, digits, ``_ - .``)."""
+    if not isinstance(scene_id, str) or not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9_.-]*", scene_id):
+        raise ValueError(f"scene_id must be letters, digits, '_', '-', '.', got {scene_id!r}")
+
+
+def _json_bytes(obj: Any) -> bytes:
+    return (json.dumps(obj, indent=1, allow_nan=False, default=_json_default) + "\n").encode("utf-8")
+
+
+def _attrs(scene_id: str, frame: int, group: str) -> dict:
+    return {ATTR["scene"]: scene_id, ATTR["frame"]: int(frame), ATTR["group"]: group}
+
+
+def encode_scene(scene_id: str, scene: Mapping[str, Any], meta: Mapping[str, Any],
+                 frames: Iterable[Mapping[str, Any]], *, dtype: str = "float32",
+             notes: list[str] | None = None) -> Iterator[tuple[str, bytes]]:
+    """Yield ``(relpath, bytes)`` for every file of a scene, frame by frame (checks shapes vs ``meta``).
+
+    Pure encoding (no disk access), so that render workers can call it; ``dtype`` as in
+    :class:`CorpusWriter`, ``notes`` receives HALF-overflow messages.
+
+    ``frames`` yields the renderer's frame dicts (``render_tools.render.render_frames``)::
+
+        {"frame": n, "static": {group: {"short": (C,H,W), "long": (C,H,W)}},
+         "lights": {group: [(light_id, (y0,x0,y1,x1), (K,C,h,w))]},
+         "aux": {"depth.Z": (H,W), "depth.R": (H,W), "mask.instance": (H,W), "mask.light": (H,W)}}
+    """
+    check_scene_id(scene_id)
+    meta = dict(meta)
+    if meta.get("scene_id") != scene_id:
+        raise ValueError(f"meta.json scene_id {meta.get('scene_id')!r} != scene id {scene_id!r}")
+    validate_meta(meta, f"meta.json of scene {scene_id}")
+    sdir = f"{SCENES_DIR}/{scene_id}"
+    yield f"{sdir}/scene.json", _json_bytes(scene)
+    yield f"{sdir}/meta.json", _json_bytes(meta)
+    bands = meta["bands_nm"]
+    H, W = meta["height"], meta["width"]
+    seen = []
+    for fr in frames:
+        n = fr.get("frame")
+        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or not 0 <= n < meta["frames"] \
+                or n in seen:
+            raise ValueError(f"scene {scene_id}: frame index {n!r} is invalid or repeated "
+                             f"(meta.json frames = {meta['frames']})")
+        seen.append(int(n))
+        fdir = f"{sdir}/{frame_dir(n)}"
+        static = fr.get("static", {}) or {}
+        lights = fr.get("lights", {}) or {}
+        got = set(static) | set(lights)
+        if got != set(meta["groups"]) or set(static) & set(lights):
+            raise ValueError(f"scene {scene_id} frame {n}: groups rendered {sorted(got)} do not match "
+                             f"meta.json groups {sorted(meta['groups'])}")
+        for g, wins in static.items():
+            what = f"{fdir}/{g}.exr"
+            if group_storage(meta, g) != "static":
+                raise ValueError(f"{what}: group {g!r} is flickering with bins > 0 in meta.json but was "
+                                 "rendered as static windows")
+            data = encode_static_exr(wins, bands, dtype=dtype, what=what, notes=notes,
+                                     attrs=_attrs(scene_id, n, g))
+            if (H, W) != tuple(np.asarray(wins["short"]).shape[1:]):
+                raise ValueError(f"{what}: image size {np.asarray(wins['short']).shape[1:]} != meta.json "
+                                 f"({H}, {W})")
+            yield what, data
+        for g, ls in lights.items():
+            what = f"{fdir}/{g}.exr"
+            if group_storage(meta, g) != "lights":
+                raise ValueError(f"{what}: group {g!r} is static in meta.json but was rendered per light")
+            known = {lt["id"] for lt in meta.get("lights", []) if lt.get("group") == g}
+            bad = [lid for lid, _, _ in ls if int(lid) not in known]
+            if bad:
+                raise ValueError(f"{what}: light ids {bad} are not lights of group {g!r} in meta.json")
+            yield what, encode_lights_exr(ls, bands, _group_bins(meta, g), H, W, dtype=dtype,
+                                          what=what, notes=notes, attrs=_attrs(scene_id, n, g))
+        if fr.get("aux") is not None:
+            yield f"{fdir}/aux.exr", encode_aux_exr(fr["aux"], H, W, what=f"{fdir}/aux.exr",
+                                                    attrs=_attrs(scene_id, n, "aux"))
+    if sorted(seen) != list(range(meta["frames"])):
+        raise ValueError(f"scene {scene_id}: got frames {sorted(seen)}, meta.json announces "
+                         f"{meta['frames']}")
+
+def write_files(root: str | os.PathLike, files: Iterable[tuple[str, bytes]]) -> dict[str, str]:
+    """Write ``(relpath, bytes)`` pairs under ``root`` atomically (safe in parallel workers); returns ``{relpath: sha256}`` (manifest not touched)."""
+    root = Path(root)
+    out = {}
+    for rel, data in files:
+        p = (root / rel).resolve()
+        if root.resolve() not in p.parents:
+            raise ValueError(f"file path {rel!r} escapes the corpus root")
+        out[rel] = atomic_write_bytes(p, data)
+    return out
+
+
+# ------------------------------------------------------------------------------------------- validation
+@dataclass
+class ValidationReport:
+    """Result of :func:`validate_corpus`: ``errors`` (each names a file), ``warnings``, counters."""
+
+    root: str
+    errors: list[str] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+    n_scenes: int = 0
+    n_files: int = 0
+
+    @property
+    def ok(self) -> bool:
+        return not self.errors
+
+    def to_dict(self) -> dict:
+        return {"root": self.root, "ok": self.ok, "n_scenes": self.n_scenes, "n_files": self.n_files,
+                "errors": self.errors, "warnings": self.warnings}
+
+
+def validate_corpus(root: str | os.PathLike, *, check_pixels: bool = True,
+                    progress: Any = None) -> ValidationReport:
+    """Check a whole corpus; never raises for corpus problems, collects them in the report.
+
+    Checks: manifest format; ``splits.json`` (ids known, disjoint); per scene ``scene.json`` / ``meta.json``
+    (:func:`validate_meta`); every expected EXR present (each frame x group, ``aux.exr`` all or none) and in
+    the manifest; every manifest file present with the right SHA-256; files on disk not in the manifest
+    (warning); per EXR: display window = meta size, parts / channels exactly as meta.json announces
+    (``short``/``long`` x bands, or ``light<id>`` parts with K bins x bands, data windows inside the image,
+    ids of that group), and (``check_pixels``) NaN / inf / negative radiance and invalid aux values.
+
+    Args:
+        root: corpus directory.
+        check_pixels: decode pixel data (slow for big corpora) in addition to headers.
+        progress: optional callable ``progress(done, total)`` called after each scene.
+    """
+    root = Path(root)
+    rep = ValidationReport(str(root))
+    err = rep.errors.append
+    mpath = root / MANIFEST_NAME
+    if not mpath.is_file():
+        err(f"{mpath}: manifest missing (not an lfmbench corpus)")
+        return rep
+    try:
+        man = _check_manifest(_load_json(mpath, "manifest"), mpath)
+    except CorpusError as exc:
+        err(str(exc))
+        return rep
+    scenes = man["scenes"]
+    rep.n_scenes = len(scenes)
+    files: dict[str, str] = man["files"]
+    rep.n_files = len(files)
+    # checksums and presence of every listed file
+    for rel, digest in files.items():
+        p = root / rel
+        if not p.is_file():
+            err(f"{p}: missing (listed in manifest)")
+        elif sha256_file(p) != digest:
+            err(f"{p}: bad checksum (SHA-256 differs from manifest)")
+    # splits
+    spath = root / SPLITS_NAME
+    if not spath.is_file():
+        err(f"{spath}: missing")
+    else:
+        try:
+            sp = _load_json(spath, "splits file")
+            ids = [s for k in ("train", "val", "test") for s in sp.get(k, [])]
+            if set(sp) != {"train", "val", "test"}:
+                err(f"{spath}: keys must be train, val, test; got {sorted(sp)}")
+            if len(ids) != len(set(ids)):
+                err(f"{spath}: a scene appears in more than one split")
+            unknown = sorted(set(ids) - set(scenes))
+            if unknown:
+                err(f"{spath}: scenes not in the manifest: {unknown[:5]}")
+            unsplit = sorted(set(scenes) - set(ids))
+            if unsplit:
+                rep.warnings.append(f"{spath}: scenes in no split: {unsplit[:5]}")
+        except CorpusError as exc:
+            err(str(exc))
+    # files on disk not in the manifest
+    sroot = root / SCENES_DIR
+    if sroot.is_dir():
+        for p in sorted(sroot.rglob("*")):
+            if p.is_file():
+                rel = p.relative_to(root).as_posix()
+                if p.name.startswith(TMP_PREFIX):
+                    rep.warnings.append(f"{p}: temporary file of an interrupted run")
+                elif rel not in files and rel.split("/")[1] in scenes:
+                    rep.warnings.append(f"{p}: not in manifest")
+        for d in sorted(sroot.iterdir()):
+            if d.is_dir() and d.name not in scenes:
+                rep.warnings.append(f"{d}: incomplete scene (not in manifest; re-run the render to finish it)")
+    for i, sid in enumerate(sorted(scenes)):
+        _validate_scene(root, sid, files, rep, check_pixels)
+        if progress is not None:
+            progress(i + 1, len(scenes))
+    return rep
+
+
+def _validate_scene(root: Path, sid: str, files: Mapping[str, str], rep: ValidationReport,
+                    check_pixels: bool) -> None:
+    err = rep.errors.append
+    sdir = root / SCENES_DIR / sid
+    rel0 = f"{SCENES_DIR}/{sid}"
+    for name in ("scene.json", "meta.json"):
+        if f"{rel0}/{name}" not in files:
+            err(f"{sdir / name}: not in manifest")
+    if not (sdir / "scene.json").is_file():
+        err(f"{sdir / 'scene.json'}: missing")
+    mp = sdir / "meta.json"
+    try:
+        meta = _load_json(mp, "scene metadata")
+        validate_meta(meta, str(mp))
+    except (CorpusError, ValueError) as exc:
+        err(str(exc))
+        return
+    if meta["scene_id"] != sid:
+        err(f"{mp}: scene_id {meta['scene_id']!r} != directory name {sid!r}")
+    H, W, bands = meta["height"], meta["width"], meta["bands_nm"]
+    aux_frames = [n for n in range(meta["frames"]) if f"{rel0}/{frame_dir(n)}/aux.exr" in files
+                  or (sdir / frame_dir(n) / "aux.exr").is_file()]
+    if aux_frames and len(aux_frames) != meta["frames"]:
+        miss = sorted(set(range(meta["frames"])) - set(aux_frames))
+        err(f"{sdir}: aux.exr missing for frames {miss}")
+    light_ids = {}
+    for lt in meta.get("lights", []):
+        light_ids.setdefault(lt["group"], set()).add(lt["id"])
+    for n in range(meta["frames"]):
+        for g in list(meta["groups"]) + (["aux"] if n in aux_frames else []):
+            p = sdir / frame_dir(n) / f"{g}.exr"
+            rel = p.relative_to(root).as_posix()
+            if not p.is_file():
+                if rel not in files:  # listed-but-missing files were already reported
+                    err(f"{p}: missing")
+                continue
+            if rel not in files:
+                err(f"{p}: not in manifest")
+            try:
+                parts = read_exr(p, header_only=not check_pixels)
+            except CorpusError as exc:
+                err(str(exc))
+                continue
+            for part in parts:
+                if part.size != (H, W):
+                    err(f"{p} part {part.name!r}: display window {part.size} != meta.json ({H}, {W})")
+            if g == "aux":
+                _validate_channels(p, parts[0], set(AUX_CHANNELS), rep)
+                if check_pixels and parts[0].channels is not None:
+                    for name in AUX_CHANNELS:
+                        if name in parts[0].channels:
+                            try:
+                                _check_aux(name, np.asarray(parts[0].channels[name]), str(p))
+                            except CorpusValueError as exc:
+                                err(str(exc))
+                continue
+            if group_storage(meta, g) == "static":
+                if len(parts) != 1:
+                    err(f"{p}: static group must have exactly one part, has {len(parts)}")
+                want = {c for w in STATIC_WINDOWS for c in static_channels(w, bands)}
+                _validate_channels(p, parts[0], want, rep)
+                if parts[0].window != (0, 0, H, W):
+                    err(f"{p}: data window {parts[0].window} must cover the whole image")
+                _validate_pixels(p, parts[0], rep, check_pixels)
+            else:
+                K = _group_bins(meta, g)
+                want = {c for row in bin_channels(K, bands) for c in row}
+                ids = light_ids.get(g, set())
+                if len(parts) == 1 and parts[0].name == EMPTY_PART:
+                    continue
+                for part in parts:
+                    mt = re.fullmatch(r"light(\d+)", part.name)
+                    if mt is None:
+                        err(f"{p}: unexpected part name {part.name!r} (want light<id>)")
+                        continue
+                    if int(mt.group(1)) not in ids:
+                        err(f"{p}: part {part.name!r} is not a light of group {g!r} in meta.json")
+                    y0, x0, y1, x1 = part.window
+                    if not (0 <= y0 < y1 <= H and 0 <= x0 < x1 <= W):
+                        err(f"{p}: part {part.name!r} data window {part.window} outside the {H}x{W} image")
+                    _validate_channels(p, part, want, rep)
+                    _validate_pixels(p, part, rep, check_pixels)
+
+
+def _validate_channels(p: Path, part: ExrPart, want: set[str], rep: ValidationReport) -> None:
+    have = set(part.channel_names)
+    missing, extra = sorted(want - have), sorted(have - want)
+    if missing:
+        rep.errors.append(f"{p} part {part.name!r}: missing channels {missing[:4]}"
+                          f"{' ...' if len(missing) > 4 else ''} ({len(missing)} in all)")
+    if extra:
+        rep.errors.append(f"{p} part {part.name!r}: unexpected channels {extra[:4]}"
+                          f"{' ...' if len(extra) > 4 else ''} ({len(extra)} in all)")
+
+
+def _validate_pixels(p: Path, part: ExrPart, rep: ValidationReport, check_pixels: bool) -> None:
+    if not check_pixels or part.channels is None:
+        return
+    n_nan = n_inf = n_neg = 0
+    for a in part.channels.values():
+        a = np.asarray(a, dtype=np.float32)
+        n_nan += int(np.isnan(a).sum())
+        n_inf += int(np.isinf(a).sum())
+        n_neg += int((a < 0).sum())
+    for n, what in ((n_nan, "NaN"), (n_inf, "inf"), (n_neg, "negative")):
+        if n:
+            rep.errors.append(f"{p} part {part.name!r}: {n} {what} radiance values")

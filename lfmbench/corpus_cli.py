@@ -1,0 +1,86 @@
+"""Corpus commands of the ``lfmbench`` CLI: ``validate`` and ``import-isetlfm``.
+
+``register(app)`` adds them to the typer app of :mod:`lfmbench.cli`; heavy work is imported in the bodies.
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import List, Optional
+
+import typer
+
+__all__ = ["register"]
+
+
+def validate_cmd(
+    corpus: Path = typer.Argument(..., help="Corpus directory (holds manifest.json)."),
+    headers_only: bool = typer.Option(False, "--headers-only",
+                                      help="Check checksums, files and channels but do not decode pixels."),
+    as_json: bool = typer.Option(False, "--json", help="Print the report as JSON."),
+    max_errors: int = typer.Option(50, "--max-errors", min=1, help="Errors printed (all are counted)."),
+) -> None:
+    """Check a corpus: missing files, bad SHA-256, wrong/missing channels vs meta.json, NaN/inf/negative
+    radiance. Exit status 1 when anything is wrong."""
+    from rich.console import Console
+    from rich.progress import Progress
+
+    from lfmbench.corpus import validate_corpus
+
+    console = Console(stderr=True, soft_wrap=True)
+    with Progress(console=console, transient=True, disable=as_json) as prog:
+        task = prog.add_task("validating", total=None)
+        rep = validate_corpus(corpus, check_pixels=not headers_only,
+                              progress=lambda d, t: prog.update(task, completed=d, total=t))
+    if as_json:
+        typer.echo(json.dumps(rep.to_dict(), indent=1))
+    else:
+        for w in rep.warnings[:max_errors]:
+            console.print(f"[yellow]warning[/]: {w}", highlight=False)
+        for e in rep.errors[:max_errors]:
+            console.print(f"[red]error[/]: {e}", highlight=False)
+        if len(rep.errors) > max_errors:
+            console.print(f"... and {len(rep.errors) - max_errors} more errors")
+        status = "OK" if rep.ok else f"{len(rep.errors)} error(s)"
+        typer.echo(f"{corpus}: {rep.n_scenes} scenes, {rep.n_files} files, {len(rep.warnings)} warning(s): {status}")
+    raise typer.Exit(0 if rep.ok else 1)
+
+
+def import_isetlfm_cmd(
+    src: Path = typer.Argument(..., help="ISET-LFM dataset folder holding <SceneID>/ folders."),
+    out: Path = typer.Argument(..., help="Corpus directory to create or extend."),
+    scene: Optional[List[str]] = typer.Option(None, "--scene", help="Scene id to import (repeatable; default all)."),
+    seed: int = typer.Option(0, "--seed", help="Seed of the train/val/test split."),
+    half: bool = typer.Option(False, "--half", help="Store EXR HALF (FLOAT where a value exceeds 65504)."),
+    repair: bool = typer.Option(False, "--repair", help="Set NaN/inf/negative radiance to 0 instead of failing."),
+    no_resume: bool = typer.Option(False, "--no-resume", help="Re-import scenes that are already complete."),
+) -> None:
+    """Import the released ISET-LFM dataset (PBRT light-group EXRs + _lf.mat) into the lfmbench corpus format."""
+    from rich.console import Console
+    from rich.progress import Progress
+
+    from lfmbench.corpus import CorpusError, CorpusWriteError
+    from lfmbench.isetlfm import find_scenes, import_isetlfm
+
+    console = Console(stderr=True, soft_wrap=True)
+    try:
+        n = len(scene) if scene else len(find_scenes(src))
+        with Progress(console=console) as prog:
+            task = prog.add_task("importing", total=n)
+            rep = import_isetlfm(src, out, scenes=list(scene) if scene else None, seed=seed,
+                                 dtype="float16" if half else "float32", repair=repair, resume=not no_resume,
+                                 progress=lambda sid: prog.advance(task))
+    except (ValueError, CorpusError, CorpusWriteError) as exc:
+        console.print(f"[red]error[/]: {exc}", highlight=False)
+        raise typer.Exit(2) from None
+    for w in rep.warnings:
+        console.print(f"[yellow]warning[/]: {w}", highlight=False)
+    if rep.repaired:
+        console.print(f"repaired {sum(rep.repaired.values())} values in {len(rep.repaired)} files")
+    typer.echo(f"{out}: imported {len(rep.imported)} scenes, skipped {len(rep.skipped)} complete ones")
+
+
+def register(app: typer.Typer) -> None:
+    """Add ``validate`` and ``import-isetlfm`` to the ``lfmbench`` app."""
+    app.command("validate")(validate_cmd)
+    app.command("import-isetlfm")(import_isetlfm_cmd)

@@ -1,0 +1,439 @@
+r"""Split-pixel captures simulated on the fly: :class:`LFMCaptureDataset`.
+
+For every sample the dataset draws PWM parameters (per light or per group, :mod:`lfmbench.datasets.pwm`), a
+crop and a noise seed from ``(seed, epoch, index)``, composes the mean photo-electrons of each capture from the
+scene's camera-projected layers (:mod:`lfmbench.datasets.projection`) and runs the split-pixel sensor model.
+
+Exposure composition (timing of ``docs/contracts.md``; frame n starts at :math:`t_n = n/\text{fps}`):
+
+.. math:: \bar e_{pd}(y,x) = R^{static}_{pd}(y,x)\,t_{pd}
+          + \sum_j \sum_k R^{j}_{pd,k}(y,x)\;\Phi_j\big([t_k, t_{k+1}) \cap [a_{pd}(y), a_{pd}(y) + t_{pd})\big)
+
+with :math:`R` the projected rates (e-/s), :math:`t_k` the K bin edges of the frame's capture window, and
+:math:`\Phi_j` the exact PWM exposure of light j (:func:`lfmbench.flicker.pwm_exposure`) over the overlap. The
+LPD window is the short exposure :math:`[t_n + (T_L - T_S)/2, +T_S)`, the SPD window the long one
+:math:`[t_n, t_n + T_L)`; under a rolling shutter row y starts ``y * line_time`` later (flickering layers
+only; static layers keep their global-shutter motion, a documented approximation).
+
+Ground truth ``gt`` (docs/datasets.md): the mean LPD electrons of the short exposure with every LED at its
+time-averaged level (duty cycle x ON level), noise-free and unclipped, in the input-referred units of the
+``*_e`` outputs (LPD-equivalent e- over the short exposure).
+"""
+from __future__ import annotations
+
+import json
+import os
+from collections import OrderedDict
+from pathlib import Path
+from typing import Any, Callable, Mapping, Sequence
+
+import numpy as np
+import torch
+from torch.utils.data import Dataset
+
+from lfmbench import sensor as _sensor
+from lfmbench.corpus import Corpus
+from lfmbench.datasets.projection import PHOTODIODES, SceneLayers, load_or_build
+from lfmbench.datasets.pwm import PWMConfig, draw_pwm, load_pwm_config
+from lfmbench.flicker import pwm_exposure
+
+OUTPUTS = ("raw", "input_referred", "saturated", "gt", "light_index", "depth", "rgb")
+DEFAULT_OUTPUTS = ("raw", "input_referred", "saturated", "gt", "light_index", "depth")
+TEST_PARAMS_NAME = "test_params.json"
+SPLITS = ("train", "val", "test", "all")
+
+
+class DatasetNotFoundError(FileNotFoundError):
+    """The corpus directory holds no (complete) lfmbench corpus."""
+
+
+# ----------------------------------------------------------------------------------------------------------
+# functional core
+# ----------------------------------------------------------------------------------------------------------
+def window_bin_exposure(edges: np.ndarray, start: np.ndarray, length: float, period: float, duty: float,
+                        led_phase: float, rise: float = 0.0, fall: float = 0.0, level: str = "pwm") -> np.ndarray:
+    r"""Time (s) at PWM level 1 that each bin contributes to an exposure window.
+
+    Args:
+        edges: (K+1,) bin edges (s). start: (R,) window start per row (s). length: window length (s).
+        period, duty, led_phase, rise, fall: PWM parameters of the light (s, 1, s, s, s).
+        level: ``"pwm"`` (the modulated source) or ``"mean"`` (constant at its duty cycle: ground truth).
+
+    Returns:
+        (R, K) float64: :math:`\int_{[t_k, t_{k+1}) \cap [a, a + t_e)} s(t)\,dt` in s.
+    """
+    lo = np.maximum(edges[None, :-1], start[:, None])
+    hi = np.minimum(edges[None, 1:], start[:, None] + length)
+    dur = np.maximum(hi - lo, 0.0)
+    if level == "mean":
+        return dur * duty
+    return pwm_exposure(lo - led_phase, dur, period, duty, rise_time=rise, fall_time=fall)
+
+
+def _window_starts(meta: dict, frame: int, rows: np.ndarray, shutter: str) -> dict[str, np.ndarray]:
+    """Window start times (s) per row for the LPD (short) and SPD (long) windows of ``frame``."""
+    tm = meta["timing"]
+    t0 = frame / float(meta["fps"])
+    ts, tl = float(tm["short_exposure_s"]), float(tm["long_exposure_s"])
+    shift = rows * float(tm.get("line_time_s", 0.0)) if shutter == "rolling" else np.zeros(len(rows))
+    return {"lpd": t0 + (tl - ts) / 2.0 + shift, "spd": t0 + shift}
+
+
+def compose_frame(layers: SceneLayers, meta: dict, frame: int, crop: tuple[int, int, int, int],
+                  params: dict[int, dict], group_params: dict[str, dict], shutter: str = "global") -> dict:
+    """Mean photo-electrons of one frame in a crop, and the ground truth.
+
+    Args:
+        layers: projected scene layers. meta: the scene's meta.json. frame: frame index.
+        crop: (y0, x0, h, w) in pixels. params: light_id -> PWM dict (period_s, duty, phase_s, rise_s, fall_s);
+            lights without an entry are left out.
+        group_params: group -> PWM dict, for flickering groups stored without time bins.
+        shutter: ``"global"`` or ``"rolling"``.
+
+    Returns:
+        ``{"lpd": (h, w), "spd": (h, w), "gt": (h, w)}`` float32 tensors in e- (mean, noise-free, unclipped).
+    """
+    tm = meta["timing"]
+    t_len = {"lpd": float(tm["short_exposure_s"]), "spd": float(tm["long_exposure_s"])}
+    y0, x0, h, w = crop
+    rows = np.arange(y0, y0 + h, dtype=np.float64)
+    starts = _window_starts(meta, frame, rows, shutter)
+    out = {pd: layers.static[pd][frame, y0:y0 + h, x0:x0 + w] * t_len[pd] for pd in PHOTODIODES}
+    out["gt"] = out["lpd"].clone()
+    # flickering groups without time bins: one weight per frame (per row for a rolling shutter)
+    for g, rates in layers.group_static.items():
+        p = group_params[g]
+        for pd in PHOTODIODES:
+            wgt = pwm_exposure(starts[pd] - p["phase_s"], t_len[pd], p["period_s"], p["duty"],
+                               rise_time=p["rise_s"], fall_time=p["fall_s"])
+            out[pd] = out[pd] + rates[pd][frame, y0:y0 + h, x0:x0 + w] * torch.from_numpy(wgt).float()[:, None]
+        out["gt"] = out["gt"] + rates["lpd"][frame, y0:y0 + h, x0:x0 + w] * float(p["duty"] * t_len["lpd"])
+    # flickering lights stored per light in K time bins
+    K = int(tm["bins"])
+    edges = frame / float(meta["fps"]) + np.linspace(0.0, float(tm["capture_window_s"]), K + 1)
+    for light_id, _g, (by0, bx0, by1, bx1), rates in layers.lights[frame]:
+        iy0, iy1 = max(by0, y0), min(by1, y0 + h)
+        ix0, ix1 = max(bx0, x0), min(bx1, x0 + w)
+        p = params.get(light_id)
+        if p is None or iy0 >= iy1 or ix0 >= ix1:  # light left out, or outside the crop
+            continue
+        r = slice(iy0 - y0, iy1 - y0)
+        for key, pd, level in (("lpd", "lpd", "pwm"), ("spd", "spd", "pwm"), ("gt", "lpd", "mean")):
+            st = starts[pd][r]
+            if shutter != "rolling":
+                st = st[:1]
+            wk = window_bin_exposure(edges, st, t_len[pd], p["period_s"], p["duty"], p["phase_s"], p["rise_s"],
+                                     p["fall_s"], level)                                   # (rows or 1, K) s
+            sub = rates[pd][:, iy0 - by0:iy1 - by0, ix0 - bx0:ix1 - bx0]                   # (K, hh, ww) e-/s
+            contrib = torch.einsum("kyx,yk->yx", sub, torch.from_numpy(wk).float().expand(iy1 - iy0, K))
+            out[key][r, ix0 - x0:ix1 - x0] += contrib
+    return out
+
+
+# ----------------------------------------------------------------------------------------------------------
+# dataset
+# ----------------------------------------------------------------------------------------------------------
+class LFMCaptureDataset(Dataset):
+    r"""Split-pixel HDR captures of an lfmbench corpus with random LED PWM, and flicker-free ground truth.
+
+    Args:
+        root: corpus directory (``lfmbench render --out DIR`` or ``lfmbench import-isetlfm``).
+        split: ``"train"``, ``"val"``, ``"test"`` (PWM draws frozen in ``<root>/test_params.json``) or ``"all"``.
+        sensor: preset name (``"ovt"``, ``"imx490"``), YAML path or :class:`lfmbench.sensor.SensorPreset`.
+        frames: number of consecutive frames F per sample (<= the corpus frames).
+        crop: ``None`` (full frame), ``int`` or ``(h, w)`` in pixels (even offsets keep the Bayer phase);
+            random for train/val/all, centred for test.
+        pwm: PWM distributions: ``None`` (``lfmbench/configs/pwm.yaml``), a mapping of overrides or a YAML path.
+        shutter: ``"global"`` or ``"rolling"`` (row y starts ``y * line_time`` later; line time from meta).
+        seed: base seed; sample randomness comes from ``(seed, epoch, index)`` only, so results do not depend
+            on ``num_workers`` or the sampler (``DistributedSampler`` just selects indices).
+        outputs: subset of :data:`OUTPUTS`; only what is asked for is read and simulated.
+        groups: light groups to include (None = all the scene has); others are never read.
+        samples_per_scene: samples per scene per epoch (each its own PWM draw and crop).
+        noise: simulate temporal noise (False: mean electrons through clipping and quantisation).
+        optics: apply the lens PSF.
+        max_lights: length of the padded per-light metadata arrays.
+        cache_dir: directory of the per-sensor projected-radiance cache (default ``<root>/.cache``; ``False``
+            keeps it in memory only). cache_scenes: scenes kept in memory per worker.
+        transforms: callable applied to the sample dict.
+
+    Sample (F frames, crop h x w; batches add a leading B; see docs/contracts.md):
+        ``lpd_hcg``, ``lpd_lcg``, ``spd``: (F, 1, h, w) DN; ``lpd_hcg_e``, ``lpd_lcg_e``, ``spd_e``: (F, 1, h, w)
+        input-referred LPD-equivalent e- over the short exposure; ``saturated``: (F, 3, h, w) bool;
+        ``gt``: (F, 1, h, w) e-; ``light_index``: (F, 1, h, w) int64 (index into the ``meta`` light arrays,
+        -1 none); ``depth``: (F, 1, h, w) m; ``rgb`` (on request): ``lpd_lcg_rgb``, ``spd_rgb``, ``gt_rgb``
+        (F, 3, h, w) demosaiced (kornia bilinear); ``meta``: scene_id, index, epoch, num_lights, light_id,
+        flicker, freq_hz, duty, phase_s (L,) padded, exposure_short_s, exposure_long_s (s), crop (y0, x0, h, w),
+        sensor, shutter, flicker_mode ("bins" or "per_frame_weight").
+    """
+
+    def __init__(self, root: str | os.PathLike, split: str = "train", sensor: Any = "ovt", frames: int = 3,
+                 crop: int | tuple[int, int] | None = None, pwm: Any = None, shutter: str = "global", seed: int = 0,
+                 outputs: Sequence[str] = DEFAULT_OUTPUTS, groups: Sequence[str] | None = None,
+                 samples_per_scene: int = 1, noise: bool = True, optics: bool = True, max_lights: int = 64,
+                 cache_dir: str | os.PathLike | bool | None = None, cache_scenes: int = 8,
+                 transforms: Callable[[dict], dict] | None = None) -> None:
+        self.root = Path(root)
+        if not (self.root / "manifest.json").is_file():
+            raise DatasetNotFoundError(
+                f"root: no lfmbench corpus at {self.root} (manifest.json missing). Render one with "
+                f"`lfmbench render --out {self.root}` or import ISET-LFM data with `lfmbench import-isetlfm`.")
+        self.corpus = Corpus(self.root)
+        if split not in SPLITS:
+            raise ValueError(f"split must be one of {SPLITS}, got {split!r}")
+        if shutter not in ("global", "rolling"):
+            raise ValueError(f"shutter must be 'global' or 'rolling', got {shutter!r}")
+        bad = [o for o in outputs if o not in OUTPUTS]
+        if bad:
+            raise ValueError(f"outputs: unknown {bad} (known: {OUTPUTS})")
+        if not isinstance(frames, int) or frames < 1:
+            raise ValueError(f"frames must be a positive integer, got {frames!r}")
+        if samples_per_scene < 1:
+            raise ValueError(f"samples_per_scene must be >= 1, got {samples_per_scene!r}")
+        self.split, self.shutter, self.seed = split, shutter, int(seed)
+        self.frames, self.outputs = frames, tuple(outputs)
+        self.groups = None if groups is None else list(groups)
+        self.samples_per_scene, self.noise, self.optics = int(samples_per_scene), bool(noise), bool(optics)
+        self.max_lights, self.transforms = int(max_lights), transforms
+        self.preset = _sensor.load_preset(sensor)
+        self.sensor_name = self.preset.name
+        self.pwm: PWMConfig = load_pwm_config(pwm)
+        self.crop = (crop, crop) if isinstance(crop, int) else (None if crop is None else tuple(int(c) for c in crop))
+        if self.crop is not None and (len(self.crop) != 2 or min(self.crop) < 2):
+            raise ValueError(f"crop must be None, an int or (h, w) with sides >= 2, got {crop!r}")
+        self.scene_ids = self._split_scenes()
+        if not self.scene_ids:
+            raise DatasetNotFoundError(f"root: corpus {self.root} has no scenes in split {split!r}")
+        for sid in self.scene_ids:
+            m = self.corpus.meta(sid)
+            if frames > m["frames"]:
+                raise ValueError(f"frames={frames} but scene {sid!r} of {self.root} has only {m['frames']} frames")
+            if self.crop is not None and (self.crop[0] > m["height"] or self.crop[1] > m["width"]):
+                raise ValueError(f"crop {self.crop} is larger than scene {sid!r} ({m['height']}x{m['width']})")
+        if cache_dir is None:
+            cache_dir = self.root / ".cache"
+        self.cache_dir = None if cache_dir is False else Path(cache_dir)
+        self._cache: OrderedDict[str, SceneLayers] = OrderedDict()
+        self._cache_scenes = int(cache_scenes)
+        self._fpn: dict | None = None
+        self.epoch = 0
+        self._frozen = self._load_or_freeze_test_params() if split == "test" else None
+
+    # -- bookkeeping
+    def _split_scenes(self) -> list[str]:
+        if self.split == "all":
+            return list(self.corpus.scenes)
+        splits = self.corpus.splits
+        if self.split not in splits:
+            raise ValueError(f"split {self.split!r} is not in {self.root / 'splits.json'} ({sorted(splits)})")
+        complete = set(self.corpus.scenes)
+        return [s for s in splits[self.split] if s in complete]
+
+    def set_epoch(self, epoch: int) -> None:
+        """Select the epoch whose draws ``__getitem__`` makes (call before iterating, like DistributedSampler)."""
+        self.epoch = int(epoch)
+
+    def __len__(self) -> int:
+        return len(self.scene_ids) * self.samples_per_scene
+
+    def _lights(self, sid: str) -> list[dict]:
+        m = self.corpus.meta(sid)
+        use = set(m["groups"]) if self.groups is None else set(self.groups)
+        return sorted((lt for lt in m.get("lights", []) if lt["group"] in use), key=lambda lt: int(lt["id"]))
+
+    def _flicker_groups(self, sid: str) -> list[str]:
+        m = self.corpus.meta(sid)
+        return sorted(g for g, d in m["groups"].items() if d.get("flicker") and (self.groups is None or g in self.groups))
+
+    def _draw(self, sid: str, rng: np.random.Generator) -> tuple[dict, dict]:
+        """PWM parameters for the scene's flickering lights (by id) and flickering groups (by name)."""
+        fl = self._flicker_groups(sid)
+        lights = [lt for lt in self._lights(sid) if lt["group"] in fl]
+        # one entry per light, plus one per flickering group (used by groups stored without bins)
+        names = [lt["group"] for lt in lights] + fl
+        d = draw_pwm(self.pwm, rng, names)
+        keys = ("period_s", "duty", "phase_s", "rise_s", "fall_s", "freq_hz")
+        per_light = {int(lt["id"]): {k: float(d[k][i]) for k in keys} for i, lt in enumerate(lights)}
+        n = len(lights)
+        per_group = {g: {k: float(d[k][n + i]) for k in keys} for i, g in enumerate(fl)}
+        if self.pwm.sync == "group":
+            for lt in lights:  # lights of a group share the group's draw
+                per_light[int(lt["id"])] = per_group[lt["group"]]
+        return per_light, per_group
+
+    def _load_or_freeze_test_params(self) -> dict:
+        """Frozen PWM draws and noise seeds of the test split (``<root>/test_params.json``), made once."""
+        path = self.root / TEST_PARAMS_NAME
+        if path.is_file():
+            try:
+                data = json.loads(path.read_text())
+                samples = data["samples"]
+            except (ValueError, KeyError) as exc:
+                raise ValueError(f"{path}: not a valid test-parameter file ({exc}); delete it to re-freeze") from None
+            return samples
+        samples = {}
+        for sid in self.scene_ids:
+            for s in range(self.samples_per_scene):
+                rng = np.random.default_rng([20261121, s, int.from_bytes(sid.encode()[:8].ljust(8, b"\0"), "little")])
+                per_light, per_group = self._draw(sid, rng)
+                samples[f"{sid}/{s}"] = {"lights": {str(k): v for k, v in per_light.items()}, "groups": per_group,
+                                         "noise_seed": int(rng.integers(2**62))}
+        data = {"format": 1, "pwm": self.pwm.to_dict(), "samples": samples,
+                "note": "frozen PWM draws of the test split; delete to re-draw (changes every test score)"}
+        tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+        tmp.write_text(json.dumps(data, indent=1))
+        os.replace(tmp, path)
+        return samples
+
+    def _layers(self, sid: str) -> SceneLayers:
+        if sid in self._cache:
+            self._cache.move_to_end(sid)
+            return self._cache[sid]
+        layers = load_or_build(self.corpus, sid, self.preset, self.groups, self.frames, self.optics, self.cache_dir)
+        if self._cache_scenes:
+            self._cache[sid] = layers
+            while len(self._cache) > self._cache_scenes:
+                self._cache.popitem(last=False)
+        return layers
+
+    def _fixed_pattern(self, H: int, W: int) -> dict | None:
+        if not self.noise:
+            return None
+        if self._fpn is None or next(iter(self._fpn.values())).shape[-2:] != (H, W):
+            self._fpn = _sensor.fixed_pattern(self.preset, H, W)
+        return self._fpn
+
+    # -- sample
+    def __getitem__(self, index: int) -> dict:
+        if not 0 <= index < len(self):
+            raise IndexError(f"index {index} out of range for a dataset of {len(self)} samples")
+        sid = self.scene_ids[index // self.samples_per_scene]
+        sub = index % self.samples_per_scene
+        meta = self.corpus.meta(sid)
+        H, W = meta["height"], meta["width"]
+        rng = np.random.default_rng([self.seed, self.epoch, index])
+        if self._frozen is not None:
+            fr = self._frozen.get(f"{sid}/{sub}")
+            if fr is None:
+                raise ValueError(f"{self.root / TEST_PARAMS_NAME} has no entry for {sid}/{sub}; delete it to re-freeze")
+            per_light = {int(k): v for k, v in fr["lights"].items()}
+            per_group = fr["groups"]
+            noise_seed = int(fr["noise_seed"])
+        else:
+            per_light, per_group = self._draw(sid, rng)
+            noise_seed = int(rng.integers(2**62))
+        ch, cw = self.crop if self.crop is not None else (H, W)
+        if self.crop is None or self.split == "test":
+            y0, x0 = ((H - ch) // 2) & ~1, ((W - cw) // 2) & ~1
+        else:
+            y0 = 2 * int(rng.integers(0, (H - ch) // 2 + 1))
+            x0 = 2 * int(rng.integers(0, (W - cw) // 2 + 1))
+        crop = (y0, x0, ch, cw)
+        layers = self._layers(sid)
+        F = self.frames
+        frames = [compose_frame(layers, meta, f, crop, per_light, per_group, self.shutter) for f in range(F)]
+        lpd = torch.stack([fr_["lpd"] for fr_ in frames])[:, None]       # (F, 1, h, w) e-
+        spd = torch.stack([fr_["spd"] for fr_ in frames])[:, None]
+        tm = meta["timing"]
+        t_s, t_l = float(tm["short_exposure_s"]), float(tm["long_exposure_s"])
+        sample: dict[str, Any] = {}
+        want = set(self.outputs)
+        if want & {"raw", "input_referred", "saturated", "rgb"}:
+            fpn = self._fixed_pattern(H, W)
+            if fpn is not None:
+                fpn = {k: v[..., y0:y0 + ch, x0:x0 + cw] for k, v in fpn.items()}
+            gen = torch.Generator().manual_seed(noise_seed) if self.noise else None
+            cap = _sensor.simulate_split_pixel_electrons(lpd, spd, self.preset, t_s, t_l, generator=gen,
+                                                         noise=self.noise, fpn=fpn)
+            if "raw" in want:
+                sample.update({k: cap[k] for k in ("lpd_hcg", "lpd_lcg", "spd")})
+            if want & {"input_referred", "rgb"}:
+                sample.update({k: cap[k] for k in ("lpd_hcg_e", "lpd_lcg_e", "spd_e")})
+            if "saturated" in want:
+                sample["saturated"] = cap["saturated"]
+        gt = torch.stack([fr_["gt"] for fr_ in frames])[:, None]
+        if "gt" in want or "rgb" in want:
+            sample["gt"] = gt
+        lights = self._lights(sid)
+        if len(lights) > self.max_lights:
+            raise ValueError(f"max_lights={self.max_lights} but scene {sid!r} has {len(lights)} lights")
+        if "light_index" in want or "depth" in want:
+            aux = layers.aux
+            if "light_index" in want:
+                ids = aux["mask.light"][:F, y0:y0 + ch, x0:x0 + cw].round().long()
+                lut = torch.full((int(max([int(lt["id"]) for lt in lights] + [0])) + 2,), -1, dtype=torch.long)
+                for i, lt in enumerate(lights):
+                    lut[int(lt["id"])] = i
+                valid = (ids >= 0) & (ids < len(lut) - 1)
+                sample["light_index"] = torch.where(valid, lut[ids.clamp(0, len(lut) - 1)], -1)[:, None]
+            if "depth" in want:
+                sample["depth"] = aux["depth.Z"][:F, y0:y0 + ch, x0:x0 + cw][:, None]
+        if "rgb" in want:
+            from kornia.color import raw_to_rgb
+            cfa = self.preset.cfa.to_kornia()
+            # kornia's bilinear demosaic; crops start at even offsets, so the Bayer phase is the preset's
+            for src, dst in (("lpd_lcg_e", "lpd_lcg_rgb"), ("spd_e", "spd_rgb"), ("gt", "gt_rgb")):
+                sample[dst] = raw_to_rgb(sample[src].float(), cfa)
+            if "input_referred" not in want:
+                for k in ("lpd_hcg_e", "lpd_lcg_e", "spd_e"):
+                    del sample[k]
+            if "gt" not in want:
+                del sample["gt"]
+        sample["meta"] = self._meta(sid, index, lights, per_light, crop, t_s, t_l, layers)
+        return self.transforms(sample) if self.transforms else sample
+
+    def _meta(self, sid, index, lights, per_light, crop, t_s, t_l, layers) -> dict:
+        L = self.max_lights
+        arr = {k: torch.zeros(L, dtype=torch.float64) for k in ("freq_hz", "duty", "phase_s")}
+        light_id = torch.full((L,), -1, dtype=torch.long)
+        flick = torch.zeros(L, dtype=torch.bool)
+        for i, lt in enumerate(lights):
+            light_id[i] = int(lt["id"])
+            p = per_light.get(int(lt["id"]))
+            if p is not None:
+                flick[i] = True
+                arr["freq_hz"][i], arr["duty"][i], arr["phase_s"][i] = p["freq_hz"], p["duty"], p["phase_s"]
+            else:
+                arr["duty"][i] = 1.0
+        mode = "per_frame_weight" if layers.group_static else "bins"
+        return {"scene_id": sid, "index": index, "epoch": self.epoch, "num_lights": len(lights),
+                "light_id": light_id, "flicker": flick, **arr, "exposure_short_s": t_s, "exposure_long_s": t_l,
+                "crop": torch.tensor(crop), "sensor": self.sensor_name, "shutter": self.shutter,
+                "flicker_mode": mode}
+
+    # -- display
+    @staticmethod
+    def plot(sample: Mapping[str, Any], prediction: torch.Tensor | None = None, frame_axis: bool = True):
+        """Figure with one row per frame: LPD-LCG, SPD, ground truth (and ``prediction``), LED mask.
+
+        Values are input-referred e-; shown through log tone mapping with a shared scale per row.
+        ``prediction``: (F, 1, h, w) estimate in the ``gt`` units. Returns a matplotlib Figure.
+        """
+        import matplotlib
+        import matplotlib.pyplot as plt
+
+        cols = [("lpd_lcg_e", "LPD (short, LCG)"), ("spd_e", "SPD (long)"), ("gt", "ground truth")]
+        cols = [c for c in cols if c[0] in sample]
+        if prediction is not None:
+            cols.append(("__pred", "prediction"))
+        show_mask = "light_index" in sample
+        F = sample["gt"].shape[0] if "gt" in sample else sample[cols[0][0]].shape[0]
+        ncol = len(cols) + int(show_mask)
+        fig, axes = plt.subplots(F, ncol, figsize=(3.2 * ncol, 2.0 * F + 0.6), squeeze=False)
+        for f in range(F):
+            imgs = [(prediction if k == "__pred" else sample[k])[f, 0].float() for k, _ in cols]
+            vmax = max(float(torch.log1p(i.clamp_min(0)).max()) for i in imgs) or 1.0
+            for c, ((k, title), im) in enumerate(zip(cols, imgs)):
+                axes[f, c].imshow(torch.log1p(im.clamp_min(0)).numpy(), cmap="gray", vmin=0, vmax=vmax)
+                axes[f, c].set_title(f"{title}, frame {f}", fontsize=8)
+            if show_mask:
+                axes[f, -1].imshow(sample["light_index"][f, 0].numpy(), cmap="tab20", vmin=-1,
+                                   interpolation="nearest")
+                axes[f, -1].set_title("LED index", fontsize=8)
+        for ax in axes.flat:
+            ax.set_axis_off()
+        meta = sample.get("meta", {})
+        fig.suptitle(f"{meta.get('scene_id', '')}: log(1 + e-), sensor {meta.get('sensor', '')}", fontsize=9)
+        fig.tight_layout()
+        del matplotlib
+        return fig

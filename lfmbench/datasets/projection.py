@@ -1,0 +1,192 @@
+r"""Camera-projected radiance: the per-sensor cache behind :class:`~lfmbench.datasets.LFMCaptureDataset`.
+
+Everything from scene radiance to mean photo-electrons is linear: optics (camera equation, cos^4, Airy PSF),
+colour filters, QE and the spectral sum. Flicker only scales whole layers (a light's time bin, a window). So
+each stored layer is projected once per sensor into a **mosaic electron rate** (e-/s at every pixel, through
+that pixel's Bayer filter) for each photodiode:
+
+.. math:: R_{pd}(y, x) = \sum_\lambda w^{pd}_{c(y,x),\lambda}\; \big(\mathrm{PSF}_\lambda * E_\lambda\big)(y, x),
+          \qquad E_\lambda = \frac{\pi\,T_{lens}}{4N^2} L_\lambda
+
+with :math:`w` from :func:`lfmbench.sensor.electron_weights` (e- per J m^-2 nm^-1). A capture then needs only
+sums of these rates times PWM-weighted times (:mod:`lfmbench.datasets.capture`). This is exact (no
+approximation beyond those of the optics and sensor models): the PSF is applied per band before the
+spectral sum. Per-light layers are projected in their bounding box padded by the PSF radius (zero radiance
+outside the box, as stored).
+
+Layers of one scene: ``static[pd]`` (F, H, W) e-/s, sum of the static groups over the window that photodiode
+integrates (LPD: short, SPD: long); ``group_static[g][pd]`` (F, H, W) for flickering groups stored without time
+bins (imported ISET-LFM data); ``lights[f]`` list of ``(light_id, group, (y0, x0, y1, x1), {pd: (K, h, w)})``.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+import torch
+
+from lfmbench import optics as _optics
+from lfmbench import sensor as _sensor
+from lfmbench.corpus import Corpus, group_storage
+
+#: Version of the cached layout; bump when the projection changes so stale caches are not reused.
+CACHE_VERSION = 1
+PHOTODIODES = ("lpd", "spd")
+
+
+@dataclass
+class SceneLayers:
+    """Projected layers of one scene (see module docstring). Rates in e-/s, float32 tensors."""
+
+    scene_id: str
+    static: dict                      # pd -> (F, H, W)
+    group_static: dict                # group -> pd -> (F, H, W)   (flickering groups without bins)
+    lights: list                      # per frame: [(light_id, group, (y0, x0, y1, x1), {pd: (K, h, w)})]
+    aux: dict = field(default_factory=dict)   # name -> (F, H, W) float32 ("depth.Z", "mask.light")
+
+
+class Projector:
+    """Projects corpus radiance through the optics and split-pixel CFA of one sensor preset.
+
+    Args:
+        preset: :class:`lfmbench.sensor.SensorPreset`.
+        bands_nm: band centres (nm); band_width_nm: box width of each band (nm).
+        height, width: full image size (pixels).
+        optics: ``True`` applies the preset's lens (PSF per its config), ``False`` only the camera equation.
+    """
+
+    def __init__(self, preset, bands_nm: Sequence[float], band_width_nm: float, height: int, width: int,
+                 optics: bool = True) -> None:
+        self.preset = preset
+        self.bands = [float(b) for b in bands_nm]
+        self.H, self.W = int(height), int(width)
+        cfg = preset.optics
+        self.cfg = cfg
+        self.use_psf = bool(optics and cfg.psf and cfg.psf_radius_px > 0)
+        self.radius = cfg.psf_radius_px if self.use_psf else 0
+        self.weights = {pd: _sensor.electron_weights(preset, self.bands, pd, [band_width_nm] * len(self.bands),
+                                                     dtype=torch.float32) for pd in PHOTODIODES}   # (3, C)
+        self.kernel = None
+        if self.use_psf:
+            n_w = cfg.f_number * (1.0 + abs(cfg.magnification))
+            self.kernel = _optics.airy_kernel(self.bands, n_w, preset.pixel_pitch_m, cfg.psf_radius_px,
+                                              cfg.psf_oversample, dtype=torch.float32)
+        self.cfa = preset.cfa.index_map(self.H, self.W)                              # (H, W) 0 r, 1 g, 2 b
+        self.cos4 = (_optics.cos4_falloff(self.H, self.W, preset.pixel_pitch_m, cfg.focal_length_m)
+                     if (optics and cfg.cos4) else None)
+        self.factor = float(_optics.radiance_to_irradiance(torch.ones(1, 1, 1), cfg.f_number, cfg.transmittance,
+                                                           cfg.magnification)[0, 0, 0])
+
+    def project(self, radiance: np.ndarray, box: tuple[int, int, int, int] | None = None) -> dict:
+        """Project (N, C, h, w) spectral radiance (W sr^-1 m^-2 nm^-1) at ``box`` (None = full image).
+
+        Returns:
+            ``{pd: (N, h, w) float32 e-/s}`` on the same box (full image: replicate-padded PSF at the border;
+            boxes: zero radiance outside the box).
+        """
+        L = torch.from_numpy(np.ascontiguousarray(radiance, dtype=np.float32))
+        y0, x0 = (0, 0) if box is None else box[:2]
+        h, w = L.shape[-2:]
+        E = L * self.factor
+        if self.cos4 is not None:
+            E = E * self.cos4[y0:y0 + h, x0:x0 + w]
+        if self.use_psf:
+            E = _optics.apply_psf(E, self.kernel, padding="replicate" if box is None else "zeros")
+        idx = self.cfa[y0:y0 + h, x0:x0 + w]
+        out = {}
+        for pd in PHOTODIODES:
+            rgb = torch.einsum("nchw,kc->nkhw", E, self.weights[pd])                   # (N, 3, h, w)
+            out[pd] = torch.gather(rgb, 1, idx.expand(rgb.shape[0], 1, h, w))[:, 0].contiguous()
+        return out
+
+    def padded_box(self, box: tuple[int, int, int, int]) -> tuple[int, int, int, int]:
+        """``box`` grown by the PSF radius and clipped to the image (half-open y0, x0, y1, x1)."""
+        r = self.radius
+        y0, x0, y1, x1 = box
+        return max(0, y0 - r), max(0, x0 - r), min(self.H, y1 + r), min(self.W, x1 + r)
+
+    def project_box(self, bins: np.ndarray, box: tuple[int, int, int, int]) -> tuple[tuple, dict]:
+        """Project a per-light (K, C, h, w) layer; returns the padded box and ``{pd: (K, h', w')}``."""
+        pb = self.padded_box(box)
+        K, C = bins.shape[:2]
+        buf = np.zeros((K, C, pb[2] - pb[0], pb[3] - pb[1]), dtype=np.float32)
+        buf[:, :, box[0] - pb[0]:box[2] - pb[0], box[1] - pb[1]:box[3] - pb[1]] = bins
+        return pb, self.project(buf, pb)
+
+
+def cache_key(preset, meta: dict, groups: Sequence[str], frames: int, optics: bool) -> str:
+    """Hash of everything the projected layers depend on (preset, optics, bands, groups, frames)."""
+    desc = {"v": CACHE_VERSION, "preset": repr(preset), "optics": bool(optics), "groups": sorted(groups),
+            "frames": int(frames), "bands": meta["bands_nm"], "bw": meta.get("band_width_nm"),
+            "size": [meta["height"], meta["width"]]}
+    return hashlib.sha256(json.dumps(desc, sort_keys=True, default=str).encode()).hexdigest()[:16]
+
+
+def build_layers(corpus: Corpus, scene_id: str, preset, groups: Sequence[str] | None, frames: int,
+                 optics: bool = True, aux: Sequence[str] = ("depth.Z", "mask.light")) -> SceneLayers:
+    """Read the requested groups and frames of a scene (nothing else) and project them.
+
+    Args:
+        corpus: open corpus; scene_id: which scene.
+        preset: sensor preset; groups: groups to include (None = all the scene has); frames: first F frames.
+        optics: apply the lens PSF; aux: aux channels to keep ((F, H, W) each).
+    """
+    meta = corpus.meta(scene_id)
+    have = meta["groups"]
+    use = list(have) if groups is None else [g for g in groups if g in have]
+    proj = Projector(preset, meta["bands_nm"], float(meta.get("band_width_nm", 10.0)), meta["height"],
+                     meta["width"], optics)
+    H, W = meta["height"], meta["width"]
+    static = {pd: torch.zeros(frames, H, W) for pd in PHOTODIODES}
+    group_static: dict = {}
+    lights: list = []
+    window_of = {"lpd": "short", "spd": "long"}
+    for f in range(frames):
+        per_frame = []
+        for g in use:
+            flick = bool(have[g].get("flicker", False))
+            if group_storage(meta, g) == "static":
+                for pd in PHOTODIODES:
+                    L = corpus.read_static(scene_id, f, g, window_of[pd])
+                    rate = proj.project(L[None])[pd][0]
+                    if flick:
+                        group_static.setdefault(g, {p: torch.zeros(frames, H, W) for p in PHOTODIODES})[pd][f] = rate
+                    else:
+                        static[pd][f] += rate
+            else:
+                for light_id, box, bins in corpus.read_light_bins(scene_id, f, g):
+                    pb, rates = proj.project_box(bins, tuple(int(v) for v in box))
+                    per_frame.append((int(light_id), g, pb, rates))
+        lights.append(per_frame)
+    aux_out = {}
+    if aux:
+        arrs = [corpus.read_aux(scene_id, f, list(aux)) for f in range(frames)]
+        aux_out = {n: torch.from_numpy(np.stack([a[n] for a in arrs]).astype(np.float32)) for n in aux}
+    return SceneLayers(scene_id, static, group_static, lights, aux_out)
+
+
+def load_or_build(corpus: Corpus, scene_id: str, preset, groups, frames: int, optics: bool,
+                  cache_dir: Path | None) -> SceneLayers:
+    """:func:`build_layers` with an on-disk cache under ``cache_dir/<key>/<scene_id>.pt`` (atomic writes)."""
+    if cache_dir is None:
+        return build_layers(corpus, scene_id, preset, groups, frames, optics)
+    meta = corpus.meta(scene_id)
+    use = list(meta["groups"]) if groups is None else [g for g in groups if g in meta["groups"]]
+    path = Path(cache_dir) / cache_key(preset, meta, use, frames, optics) / f"{scene_id}.pt"
+    if path.is_file():
+        try:
+            d = torch.load(path, weights_only=False)
+            return SceneLayers(**d)
+        except Exception:  # a stale or damaged cache entry is rebuilt, never trusted
+            pass
+    layers = build_layers(corpus, scene_id, preset, use, frames, optics)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    torch.save(layers.__dict__, tmp)
+    os.replace(tmp, path)
+    return layers

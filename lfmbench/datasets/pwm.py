@@ -1,0 +1,158 @@
+"""PWM parameter distributions: load, validate and draw (the one place they are defined).
+
+The defaults live in ``lfmbench/configs/pwm.yaml`` (ISET-LFM: duty U[0.1, 0.5], frequency U[90, 120] Hz, phase
+U[0, period)); a user passes a mapping or the path of an edited copy.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+import yaml
+
+DEFAULT_PWM_PATH = Path(__file__).resolve().parents[1] / "configs" / "pwm.yaml"
+_DISTS = ("uniform", "loguniform", "constant", "choice")
+_KEYS = {"frequency_hz", "duty", "rise_time_s", "fall_time_s", "sync"}
+
+
+@dataclass(frozen=True)
+class Distribution:
+    """One scalar distribution: ``uniform``/``loguniform`` on [low, high], ``constant`` or ``choice``."""
+
+    dist: str
+    low: float = 0.0
+    high: float = 0.0
+    values: tuple = ()
+
+    def sample(self, rng: np.random.Generator, n: int) -> np.ndarray:
+        """Draw ``n`` values (float64)."""
+        if self.dist == "uniform":
+            return rng.uniform(self.low, self.high, n)
+        if self.dist == "loguniform":
+            return np.exp(rng.uniform(np.log(self.low), np.log(self.high), n))
+        if self.dist == "constant":
+            return np.full(n, self.low)
+        return rng.choice(np.asarray(self.values, dtype=np.float64), n)
+
+    def to_dict(self) -> dict:
+        if self.dist == "constant":
+            return {"dist": "constant", "value": self.low}
+        if self.dist == "choice":
+            return {"dist": "choice", "values": list(self.values)}
+        return {"dist": self.dist, "low": self.low, "high": self.high}
+
+
+def _dist(d: Any, key: str, source: str, lo: float, hi: float) -> Distribution:
+    if not isinstance(d, Mapping) or d.get("dist") not in _DISTS:
+        raise ValueError(f"{source}: field '{key}' must be a mapping with dist in {_DISTS}, got {d!r}")
+    kind = d["dist"]
+    try:
+        if kind == "constant":
+            vals = (float(d["value"]),)
+            out = Distribution("constant", low=vals[0], high=vals[0])
+        elif kind == "choice":
+            vals = tuple(float(v) for v in d["values"])
+            if not vals:
+                raise ValueError
+            out = Distribution("choice", values=vals)
+        else:
+            vals = (float(d["low"]), float(d["high"]))
+            if not vals[0] <= vals[1] or (kind == "loguniform" and vals[0] <= 0):
+                raise ValueError
+            out = Distribution(kind, low=vals[0], high=vals[1])
+    except (KeyError, TypeError, ValueError):
+        raise ValueError(f"{source}: field '{key}' has invalid parameters {d!r}") from None
+    if not all(np.isfinite(v) and lo <= v <= hi for v in vals):
+        raise ValueError(f"{source}: field '{key}' must stay within [{lo}, {hi}], got {d!r}")
+    return out
+
+
+@dataclass(frozen=True)
+class PWMConfig:
+    """PWM distributions. Frequencies in Hz, duty in [0, 1], rise/fall times in s; ``sync`` is ``"light"``
+    (every LED its own draw) or ``"group"`` (one draw per light group, as upstream's Option B)."""
+
+    frequency_hz: Distribution
+    duty: Distribution
+    rise_time_s: Distribution
+    fall_time_s: Distribution
+    sync: str = "light"
+
+    def to_dict(self) -> dict:
+        return {"frequency_hz": self.frequency_hz.to_dict(), "duty": self.duty.to_dict(),
+                "rise_time_s": self.rise_time_s.to_dict(), "fall_time_s": self.fall_time_s.to_dict(),
+                "sync": self.sync}
+
+
+def load_pwm_config(pwm: "PWMConfig | Mapping | str | Path | None" = None) -> PWMConfig:
+    """Load PWM distributions from a mapping, a YAML path, or the shipped defaults (``None``).
+
+    A mapping may override some fields only; the rest come from the defaults.
+
+    Raises:
+        ValueError: unknown field or invalid distribution; the message names the field and the source.
+    """
+    if isinstance(pwm, PWMConfig):
+        return pwm
+    base = yaml.safe_load(DEFAULT_PWM_PATH.read_text())
+    source = str(DEFAULT_PWM_PATH)
+    if isinstance(pwm, (str, Path)):
+        path = Path(pwm)
+        if not path.is_file():
+            raise ValueError(f"pwm: no PWM config file at {path}")
+        try:
+            user = yaml.safe_load(path.read_text())
+        except yaml.YAMLError as exc:
+            raise ValueError(f"pwm: {path} is not valid YAML: {exc}") from None
+        source = str(path)
+    elif pwm is None:
+        user = {}
+    elif isinstance(pwm, Mapping):
+        user, source = dict(pwm), "pwm"
+    else:
+        raise ValueError(f"pwm must be None, a mapping, a YAML path or a PWMConfig, got {type(pwm).__name__}")
+    if not isinstance(user, Mapping):
+        raise ValueError(f"{source}: must hold a mapping of fields")
+    unknown = set(user) - _KEYS
+    if unknown:
+        raise ValueError(f"{source}: unknown field(s) {sorted(unknown)} (known: {sorted(_KEYS)})")
+    cfg = {**base, **user}
+    sync = cfg.get("sync", "light")
+    if sync not in ("light", "group"):
+        raise ValueError(f"{source}: field 'sync' must be 'light' or 'group', got {sync!r}")
+    return PWMConfig(frequency_hz=_dist(cfg["frequency_hz"], "frequency_hz", source, 1.0, 1e6),
+                     duty=_dist(cfg["duty"], "duty", source, 0.0, 1.0),
+                     rise_time_s=_dist(cfg["rise_time_s"], "rise_time_s", source, 0.0, 1.0),
+                     fall_time_s=_dist(cfg["fall_time_s"], "fall_time_s", source, 0.0, 1.0),
+                     sync=sync)
+
+
+def draw_pwm(cfg: PWMConfig, rng: np.random.Generator, groups: list[str]) -> dict[str, np.ndarray]:
+    """Draw PWM parameters for lights belonging to ``groups`` (one entry per light, in order).
+
+    With ``sync == "group"`` lights of one group share a draw. Rise and fall times are clipped so the ramps
+    never overlap (``lfmbench.flicker`` requires (t_r + t_f)/2 <= min(D, 1 - D) T).
+
+    Returns:
+        ``{"freq_hz": (L,), "period_s": (L,), "duty": (L,), "phase_s": (L,), "rise_s": (L,), "fall_s": (L,)}``;
+        ``phase_s`` is the time (s) of a rising edge after the start of frame 0, in [0, period).
+    """
+    n = len(groups)
+    if cfg.sync == "group":
+        names = sorted(set(groups))
+        idx = np.array([names.index(g) for g in groups], dtype=np.int64)
+        m = len(names)
+    else:
+        idx, m = np.arange(n), n
+    f = cfg.frequency_hz.sample(rng, m)[idx]
+    d = cfg.duty.sample(rng, m)[idx]
+    u = rng.uniform(0.0, 1.0, m)[idx]
+    rise = cfg.rise_time_s.sample(rng, m)[idx]
+    fall = cfg.fall_time_s.sample(rng, m)[idx]
+    T = 1.0 / f
+    room = 2.0 * np.minimum(d, 1.0 - d) * T
+    total = rise + fall
+    scale = np.where(total > room, room / np.where(total > 0, total, 1.0), 1.0)
+    return {"freq_hz": f, "period_s": T, "duty": d, "phase_s": u * T, "rise_s": rise * scale, "fall_s": fall * scale}

@@ -1,0 +1,842 @@
+"""Split-pixel HDR image sensor: spectral radiant exposure -> photo-electrons -> noise -> volts -> DN.
+
+Functional core in torch (batched over any leading dimensions, CPU or CUDA, float32/float64 following the
+input, no per-pixel Python loops) with a thin :class:`SplitPixelSensor` module. Defines:
+
+- :class:`SensorPreset` (+ :class:`PhotodiodeSpec`, :class:`CaptureSpec`), loaded from YAML by
+  :func:`load_preset` (``"ovt"``, ``"imx490"`` or a file path); invalid fields raise ``ValueError`` naming the
+  field and file.
+- :class:`CFAPattern`: Bayer layouts by their top-left 2x2 cell (``GRBG`` default), with the kornia mapping.
+- :func:`spectral_qe`, :func:`electron_weights`, :func:`ideal_electrons`: mean photo-electrons,
+  n = sum_lambda H(lambda) dlambda A FF QE_c(lambda) lambda / (h c)  [Janesick2007]_ (photon energy h c / lambda).
+- :func:`shot_noise`, :func:`fixed_pattern`, :func:`read_capture`, :func:`simulate_split_pixel`: the
+  three-capture split pixel of ISET-LFM (LPD read at high and low conversion gain from the same electrons during
+  the short exposure, SPD at 1/100 sensitivity during the long exposure), with the EMVA 1288 linear noise model
+  [EMVA1288]_: Poisson shot noise of signal and dark current, DSNU/PRNU, Gaussian read noise, full-well and
+  voltage-swing clipping, uniform quantisation.
+- :func:`silicon_qe`: a documented internal-QE model of a silicon photodiode from Green's optical constants.
+
+Signal chain of one capture (per pixel, e- unless stated):
+
+1. mu = PRNU_gain * ideal electrons (photodiode's fill factor) + dark_current * T.
+2. n = Poisson(mu) (rounded Gaussian N(mu, mu) when mu >= ``shot_noise_gaussian_above_e``), clipped to
+   [0, full_well]. HCG and LCG read the same n.
+3. v = (n + DSNU offset + read noise N(0, sigma_r^2)) * conversion gain, in V, clipped at the voltage swing.
+4. DN = round(black_level + v * dn_per_volt), clipped to [0, 2^bits - 1]; dn_per_volt maps the voltage swing to
+   the top code, dn_per_volt = (2^bits - 1 - black_level) / swing. System gain K = conversion_gain * dn_per_volt
+   in DN/e-.
+5. saturated = v >= saturation_fraction * swing (upstream ISET-LFM rule, fraction 0.95).
+6. Input-referred: (DN - black_level) / K - dark_current * T in e- (the mean dark signal is removed, as optical-black
+   clamping does, so its expectation is :func:`ideal_electrons` below saturation); SPD additionally
+   x sensitivity_ratio x T_short / T_long, i.e. LPD-equivalent electrons over the short exposure
+   (docs/contracts.md, section 3).
+
+References
+----------
+.. [EMVA1288] EMVA Standard 1288, "Standard for Characterization of Image Sensors and Cameras", Release 4.0
+   Linear (2021), sections 2 (linear camera model, eqs. 1-10) and 6 (photon transfer method).
+.. [Janesick2007] J. R. Janesick, "Photon Transfer: DN -> lambda", SPIE Press (2007), ch. 2-5.
+.. [Solhusvik2019] J. Solhusvik et al., "A 1280x960 2.8 um HDR CIS with DCG and Split-Pixel Combined",
+   International Image Sensor Workshop (2019) - the 'ovt' preset, via ISETCam ``sensorCreate('ovt-large')``.
+.. [Green2008] M. A. Green, "Self-consistent optical parameters of intrinsic silicon at 300 K including
+   temperature coefficients", Sol. Energy Mater. Sol. Cells 92, 1305 (2008).
+.. [Hecht2017] E. Hecht, "Optics", 5th ed. (2017), sec. 4.6: normal-incidence reflectance
+   R = ((n - 1)^2 + k^2) / ((n + 1)^2 + k^2).
+"""
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import dataclass, field, fields
+from enum import Enum
+from pathlib import Path
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+import torch
+from torch import nn
+
+from lfmbench.constants import M_PER_NM, PLANCK_TIMES_C_J_M
+from lfmbench.optics import OpticsConfig, check_radiometric
+
+__all__ = [
+    "CAPTURES",
+    "PHOTODIODES",
+    "DATA_DIR",
+    "PRESET_DIR",
+    "CFAPattern",
+    "PhotodiodeSpec",
+    "CaptureSpec",
+    "SensorPreset",
+    "available_presets",
+    "load_preset",
+    "preset_from_dict",
+    "read_spectral_csv",
+    "band_widths_nm",
+    "spectral_qe",
+    "electron_weights",
+    "mosaic",
+    "ideal_electrons",
+    "fixed_pattern",
+    "shot_noise",
+    "read_capture",
+    "simulate_split_pixel",
+    "simulate_split_pixel_electrons",
+    "SplitPixelSensor",
+    "silicon_qe",
+]
+
+#: Capture names in the order of the ``saturated`` channels (docs/contracts.md).
+CAPTURES: tuple[str, ...] = ("lpd_hcg", "lpd_lcg", "spd")
+#: Photodiode names.
+PHOTODIODES: tuple[str, ...] = ("lpd", "spd")
+#: Shipped spectral data (CSV with a source header).
+DATA_DIR: Path = Path(__file__).resolve().parent / "data"
+#: Shipped sensor presets (YAML).
+PRESET_DIR: Path = Path(__file__).resolve().parent / "configs" / "sensors"
+#: Mean electrons are capped at this multiple of the full well before noise: everything above the full well
+#: clips anyway, and the cap keeps sun-in-view inputs finite in float32.
+_MEAN_CAP_FULL_WELLS: float = 100.0
+
+
+# ----------------------------------------------------------------------------------------------------------
+# colour filter array
+# ----------------------------------------------------------------------------------------------------------
+class CFAPattern(str, Enum):
+    """Bayer layout named by its top-left 2x2 cell read row by row (``GRBG``: G R / B G)."""
+
+    RGGB = "RGGB"
+    GRBG = "GRBG"
+    GBRG = "GBRG"
+    BGGR = "BGGR"
+
+    def cell(self) -> torch.Tensor:
+        """(2, 2) int64 channel indices (0 = r, 1 = g, 2 = b) of the top-left cell."""
+        lut = {"R": 0, "G": 1, "B": 2}
+        return torch.tensor([[lut[self.value[0]], lut[self.value[1]]], [lut[self.value[2]], lut[self.value[3]]]])
+
+    def index_map(self, height: int, width: int, device: torch.device | str | None = None) -> torch.Tensor:
+        """(H, W) int64 channel index (0 = r, 1 = g, 2 = b) of every pixel."""
+        cell = self.cell().to(device)
+        return cell.repeat((height + 1) // 2, (width + 1) // 2)[:height, :width]
+
+    def to_kornia(self):
+        """The equivalent ``kornia.color.CFA`` member (kornia uses OpenCV names read from pixel (1, 1))."""
+        from kornia.color import CFA  # lazy: kornia is only needed for demosaicing
+
+        return {"RGGB": CFA.BG, "GRBG": CFA.GB, "BGGR": CFA.RG, "GBRG": CFA.GR}[self.value]
+
+
+# ----------------------------------------------------------------------------------------------------------
+# presets
+# ----------------------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class PhotodiodeSpec:
+    """One photodiode of the split pixel.
+
+    Attributes:
+        fill_factor: effective light-collecting fraction of the pixel area (dimensionless, (0, 1]).
+        full_well_e: full-well capacity in e-.
+        dark_current_e_per_s: mean dark current in e-/s.
+        dsnu_e: dark-signal non-uniformity, standard deviation of a per-pixel offset in e-.
+        prnu: photo-response non-uniformity, standard deviation of the per-pixel gain (fraction, 0.01 = 1 %).
+    """
+
+    fill_factor: float
+    full_well_e: float
+    dark_current_e_per_s: float = 0.0
+    dsnu_e: float = 0.0
+    prnu: float = 0.0
+
+
+@dataclass(frozen=True)
+class CaptureSpec:
+    """One read-out of a photodiode.
+
+    Attributes:
+        photodiode: ``"lpd"`` or ``"spd"``.
+        conversion_gain_v_per_e: conversion gain in V/e-.
+        voltage_swing_v: voltage swing (ADC input range) in V.
+        read_noise_e: read noise standard deviation in e- (Gaussian).
+    """
+
+    photodiode: str
+    conversion_gain_v_per_e: float
+    voltage_swing_v: float
+    read_noise_e: float
+
+
+@dataclass(frozen=True)
+class SensorPreset:
+    """A split-pixel camera: pixel, CFA, photodiodes, captures, ADC and lens. Load with :func:`load_preset`.
+
+    Attributes:
+        name: preset name.
+        description: one line.
+        pixel_pitch_m: pixel pitch in m.
+        cfa: Bayer layout.
+        adc_bits: ADC resolution in bits.
+        black_level_dn: black level (pedestal) in DN.
+        saturation_fraction: a capture is flagged saturated at volts >= this fraction of its swing.
+        filters_path: CSV of relative spectral sensitivities (columns wavelength_nm, r, g, b).
+        peak_qe: scale of the relative curves to absolute QE (e- per photon).
+        shot_noise_gaussian_above_e: mean (e-) from which shot noise is drawn as a rounded Gaussian.
+        fpn_seed: seed of the fixed DSNU/PRNU pattern.
+        photodiodes: ``{"lpd": PhotodiodeSpec, "spd": PhotodiodeSpec}``.
+        captures: ``{"lpd_hcg": CaptureSpec, "lpd_lcg": ..., "spd": ...}``.
+        optics: lens of the camera.
+        source: file the preset was read from.
+    """
+
+    name: str
+    description: str
+    pixel_pitch_m: float
+    cfa: CFAPattern
+    adc_bits: int
+    black_level_dn: float
+    saturation_fraction: float
+    filters_path: Path
+    peak_qe: float
+    shot_noise_gaussian_above_e: float
+    fpn_seed: int
+    photodiodes: Mapping[str, PhotodiodeSpec]
+    captures: Mapping[str, CaptureSpec]
+    optics: OpticsConfig = field(default_factory=OpticsConfig)
+    source: str = "<dict>"
+
+    @property
+    def max_dn(self) -> int:
+        """Largest ADC code, 2^bits - 1 (DN)."""
+        return 2 ** self.adc_bits - 1
+
+    @property
+    def pixel_area_m2(self) -> float:
+        """Pixel area in m^2."""
+        return self.pixel_pitch_m ** 2
+
+    @property
+    def sensitivity_ratio(self) -> float:
+        """LPD / SPD sensitivity (dimensionless): ratio of the fill factors (both share the spectral curves)."""
+        return self.photodiodes["lpd"].fill_factor / self.photodiodes["spd"].fill_factor
+
+    def dn_per_volt(self, capture: str) -> float:
+        """ADC gain of ``capture`` in DN/V: (2^bits - 1 - black_level) / voltage_swing."""
+        return (self.max_dn - self.black_level_dn) / self.captures[capture].voltage_swing_v
+
+    def system_gain(self, capture: str) -> float:
+        """Overall system gain K of ``capture`` in DN/e- [EMVA1288]_ (conversion gain x ADC gain)."""
+        return self.captures[capture].conversion_gain_v_per_e * self.dn_per_volt(capture)
+
+    def saturation_capacity_e(self, capture: str) -> float:
+        """Electrons at which ``capture`` clips: min(full well, voltage swing / conversion gain), in e-."""
+        spec = self.captures[capture]
+        return min(self.photodiodes[spec.photodiode].full_well_e, spec.voltage_swing_v / spec.conversion_gain_v_per_e)
+
+
+def available_presets() -> list[str]:
+    """Names of the shipped presets (files ``lfmbench/configs/sensors/<name>.yaml``)."""
+    return sorted(p.stem for p in PRESET_DIR.glob("*.yaml"))
+
+
+def load_preset(preset: "str | Path | SensorPreset | Mapping[str, Any]") -> SensorPreset:
+    """Load a preset by name (``"ovt"``, ``"imx490"``), from a YAML file path, or from a mapping.
+
+    Raises:
+        ValueError: unknown name, missing/unreadable file, or an invalid field (the message names the field and
+            the file).
+    """
+    if isinstance(preset, SensorPreset):
+        return preset
+    if isinstance(preset, Mapping):
+        return preset_from_dict(preset, "<dict>")
+    if not isinstance(preset, (str, Path)):
+        raise ValueError(f"preset must be a name, a path or a mapping, got {type(preset).__name__}")
+    text = str(preset)
+    path = Path(text)
+    if path.suffix.lower() not in (".yaml", ".yml", ".json") and not path.exists():
+        candidate = PRESET_DIR / f"{text}.yaml"
+        if not candidate.exists():
+            raise ValueError(f"preset: unknown sensor preset {text!r}; shipped presets are {available_presets()} "
+                             "or give a path to a YAML file")
+        path = candidate
+    return _load_preset_file(str(path.resolve()))
+
+
+@functools.lru_cache(maxsize=32)
+def _load_preset_file(path: str) -> SensorPreset:
+    import yaml
+
+    p = Path(path)
+    if not p.is_file():
+        raise ValueError(f"preset: file {path} does not exist")
+    try:
+        data = yaml.safe_load(p.read_text())
+    except (OSError, yaml.YAMLError) as exc:
+        raise ValueError(f"preset: cannot read {path}: {exc}") from exc
+    return preset_from_dict(data, path)
+
+
+def _num(data: Mapping[str, Any], key: str, source: str, prefix: str = "", *, lo: float | None = None,
+         hi: float | None = None, lo_open: bool = False, default: Any = None, integer: bool = False) -> Any:
+    name = f"{prefix}{key}"
+    if key not in data:
+        if default is None:
+            raise ValueError(f"{source}: missing field '{name}'")
+        return default
+    v = data[key]
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or (integer and not float(v).is_integer()):
+        kind = "an integer" if integer else "a number"
+        raise ValueError(f"{source}: field '{name}' must be {kind}, got {v!r}")
+    if not math.isfinite(float(v)):
+        raise ValueError(f"{source}: field '{name}' must be finite, got {v!r}")
+    if lo is not None and (v <= lo if lo_open else v < lo):
+        raise ValueError(f"{source}: field '{name}' must be {'>' if lo_open else '>='} {lo}, got {v!r}")
+    if hi is not None and v > hi:
+        raise ValueError(f"{source}: field '{name}' must be <= {hi}, got {v!r}")
+    return int(v) if integer else float(v)
+
+
+def _check_keys(data: Any, allowed: set[str], source: str, where: str) -> None:
+    if not isinstance(data, Mapping):
+        raise ValueError(f"{source}: field '{where or 'preset'}' must be a mapping, got {type(data).__name__}")
+    unknown = set(data) - allowed
+    if unknown:
+        pre = f"{where}." if where else ""
+        raise ValueError(f"{source}: unknown field(s) {', '.join(pre + u for u in sorted(map(str, unknown)))}")
+
+
+def preset_from_dict(data: Mapping[str, Any], source: str = "<dict>") -> SensorPreset:
+    """Validate a plain mapping (the YAML structure of ``configs/sensors/ovt.yaml``) into a :class:`SensorPreset`.
+
+    Raises:
+        ValueError: naming the offending field and ``source``.
+    """
+    top = {"name", "description", "pixel_pitch_m", "cfa", "adc_bits", "black_level_dn", "saturation_fraction",
+           "spectral", "shot_noise_gaussian_above_e", "fpn_seed", "photodiodes", "captures", "optics"}
+    _check_keys(data, top, source, "")
+    name = data.get("name")
+    if not isinstance(name, str) or not name:
+        raise ValueError(f"{source}: field 'name' must be a non-empty string, got {name!r}")
+    description = data.get("description", "")
+    if not isinstance(description, str):
+        raise ValueError(f"{source}: field 'description' must be a string")
+    pitch = _num(data, "pixel_pitch_m", source, lo=0, lo_open=True, hi=1e-3)
+    try:
+        cfa = CFAPattern(str(data.get("cfa", "GRBG")).upper())
+    except ValueError:
+        raise ValueError(f"{source}: field 'cfa' must be one of {[c.value for c in CFAPattern]}, "
+                         f"got {data.get('cfa')!r}") from None
+    bits = _num(data, "adc_bits", source, lo=1, hi=24, integer=True)
+    black = _num(data, "black_level_dn", source, lo=0, hi=2 ** bits - 2, default=0.0)
+    sat_frac = _num(data, "saturation_fraction", source, lo=0, lo_open=True, hi=1.0, default=0.95)
+    gauss = _num(data, "shot_noise_gaussian_above_e", source, lo=0, default=1000.0)
+    seed = _num(data, "fpn_seed", source, lo=0, integer=True, default=0)
+
+    spectral = data.get("spectral")
+    if spectral is None:
+        raise ValueError(f"{source}: missing field 'spectral'")
+    _check_keys(spectral, {"filters", "peak_qe"}, source, "spectral")
+    peak_qe = _num(spectral, "peak_qe", source, "spectral.", lo=0, lo_open=True, hi=1.0)
+    filters = spectral.get("filters")
+    if not isinstance(filters, str) or not filters:
+        raise ValueError(f"{source}: field 'spectral.filters' must be a file name, got {filters!r}")
+    fpath = Path(filters)
+    if not fpath.is_absolute():
+        here = Path(source).parent if source != "<dict>" else None
+        cands = ([here / fpath] if here is not None else []) + [DATA_DIR / fpath]
+        fpath = next((c for c in cands if c.is_file()), cands[-1])
+    if not fpath.is_file():
+        raise ValueError(f"{source}: field 'spectral.filters': file {filters!r} not found (looked next to the "
+                         f"preset and in {DATA_DIR})")
+    try:
+        _, names, _ = read_spectral_csv(fpath)
+    except ValueError as exc:
+        raise ValueError(f"{source}: field 'spectral.filters': {exc}") from exc
+    if [n.lower() for n in names] != ["r", "g", "b"]:
+        raise ValueError(f"{source}: field 'spectral.filters': {fpath} must have columns wavelength_nm,r,g,b, "
+                         f"got {names}")
+
+    pds_raw = data.get("photodiodes")
+    if pds_raw is None:
+        raise ValueError(f"{source}: missing field 'photodiodes'")
+    _check_keys(pds_raw, set(PHOTODIODES), source, "photodiodes")
+    pds: dict[str, PhotodiodeSpec] = {}
+    for pd in PHOTODIODES:
+        if pd not in pds_raw:
+            raise ValueError(f"{source}: missing field 'photodiodes.{pd}'")
+        d = pds_raw[pd]
+        pre = f"photodiodes.{pd}."
+        _check_keys(d, {f.name for f in fields(PhotodiodeSpec)}, source, f"photodiodes.{pd}")
+        pds[pd] = PhotodiodeSpec(
+            fill_factor=_num(d, "fill_factor", source, pre, lo=0, lo_open=True, hi=1.0),
+            full_well_e=_num(d, "full_well_e", source, pre, lo=0, lo_open=True),
+            dark_current_e_per_s=_num(d, "dark_current_e_per_s", source, pre, lo=0, default=0.0),
+            dsnu_e=_num(d, "dsnu_e", source, pre, lo=0, default=0.0),
+            prnu=_num(d, "prnu", source, pre, lo=0, hi=0.5, default=0.0),
+        )
+
+    caps_raw = data.get("captures")
+    if caps_raw is None:
+        raise ValueError(f"{source}: missing field 'captures'")
+    _check_keys(caps_raw, set(CAPTURES), source, "captures")
+    caps: dict[str, CaptureSpec] = {}
+    for cap in CAPTURES:
+        if cap not in caps_raw:
+            raise ValueError(f"{source}: missing field 'captures.{cap}'")
+        d = caps_raw[cap]
+        pre = f"captures.{cap}."
+        _check_keys(d, {f.name for f in fields(CaptureSpec)}, source, f"captures.{cap}")
+        pd = d.get("photodiode")
+        if pd not in PHOTODIODES:
+            raise ValueError(f"{source}: field '{pre}photodiode' must be one of {list(PHOTODIODES)}, got {pd!r}")
+        caps[cap] = CaptureSpec(
+            photodiode=pd,
+            conversion_gain_v_per_e=_num(d, "conversion_gain_v_per_e", source, pre, lo=0, lo_open=True, hi=1e-2),
+            voltage_swing_v=_num(d, "voltage_swing_v", source, pre, lo=0, lo_open=True, hi=100.0),
+            read_noise_e=_num(d, "read_noise_e", source, pre, lo=0),
+        )
+    if caps["lpd_hcg"].photodiode != "lpd" or caps["lpd_lcg"].photodiode != "lpd" or caps["spd"].photodiode != "spd":
+        raise ValueError(f"{source}: field 'captures': lpd_hcg and lpd_lcg must read photodiode 'lpd' and spd "
+                         "must read photodiode 'spd'")
+    optics = OpticsConfig.from_mapping(data["optics"], source) if "optics" in data else OpticsConfig()
+    return SensorPreset(name=name, description=description, pixel_pitch_m=pitch, cfa=cfa, adc_bits=bits,
+                        black_level_dn=black, saturation_fraction=sat_frac, filters_path=fpath, peak_qe=peak_qe,
+                        shot_noise_gaussian_above_e=gauss, fpn_seed=seed, photodiodes=pds, captures=caps,
+                        optics=optics, source=source)
+
+
+# ----------------------------------------------------------------------------------------------------------
+# spectral response
+# ----------------------------------------------------------------------------------------------------------
+@functools.lru_cache(maxsize=16)
+def _read_csv_cached(path: str) -> tuple[np.ndarray, tuple[str, ...], np.ndarray]:
+    p = Path(path)
+    try:
+        lines = [ln.strip() for ln in p.read_text().splitlines()]
+    except OSError as exc:
+        raise ValueError(f"cannot read spectral file {path}: {exc}") from exc
+    lines = [ln for ln in lines if ln and not ln.startswith("#")]
+    if len(lines) < 3:
+        raise ValueError(f"spectral file {path} has no data rows")
+    header = [h.strip() for h in lines[0].split(",")]
+    if header[0] != "wavelength_nm" or len(header) < 2:
+        raise ValueError(f"spectral file {path}: first column must be 'wavelength_nm', got header {header}")
+    try:
+        arr = np.array([[float(v) for v in ln.split(",")] for ln in lines[1:]], dtype=np.float64)
+    except ValueError as exc:
+        raise ValueError(f"spectral file {path}: non-numeric data ({exc})") from exc
+    if arr.ndim != 2 or arr.shape[1] != len(header):
+        raise ValueError(f"spectral file {path}: every row must have {len(header)} values")
+    if not np.all(np.isfinite(arr)) or np.any(np.diff(arr[:, 0]) <= 0):
+        raise ValueError(f"spectral file {path}: values must be finite and wavelengths strictly increasing")
+    return arr[:, 0], tuple(header[1:]), arr[:, 1:]
+
+
+def read_spectral_csv(path: str | Path) -> tuple[np.ndarray, list[str], np.ndarray]:
+    """Read a spectral CSV (``#`` comment header with the source, then ``wavelength_nm,<names...>``).
+
+    Returns:
+        wavelengths in nm (N,), column names, values (N, K) (units as the file's header states).
+    """
+    wl, names, vals = _read_csv_cached(str(Path(path).resolve()))
+    return wl.copy(), list(names), vals.copy()
+
+
+def band_widths_nm(wavelengths_nm: Sequence[float] | torch.Tensor) -> np.ndarray:
+    """Width in nm of the band each spectral sample stands for: the local spacing (``numpy.gradient``).
+
+    On the corpus grid 400:10:700 every band is 10 nm wide (the renderer integrates 10 nm boxes). A single
+    wavelength has no spacing: pass ``bandwidths_nm`` explicitly then.
+    """
+    wl = np.asarray(torch.as_tensor(wavelengths_nm, dtype=torch.float64).cpu(), dtype=np.float64).reshape(-1)
+    if wl.size < 2:
+        raise ValueError("bandwidths_nm must be given for a single wavelength (no spacing to infer a width from)")
+    if np.any(np.diff(wl) <= 0):
+        raise ValueError("wavelengths_nm must be strictly increasing")
+    return np.gradient(wl)
+
+
+def _wavelengths(wavelengths_nm: Sequence[float] | torch.Tensor) -> np.ndarray:
+    wl = np.asarray(torch.as_tensor(wavelengths_nm, dtype=torch.float64).cpu(), dtype=np.float64).reshape(-1)
+    if wl.size == 0 or not np.all(np.isfinite(wl)) or np.any(wl <= 0):
+        raise ValueError("wavelengths_nm must be a non-empty sequence of finite values > 0 (nm)")
+    return wl
+
+
+def spectral_qe(preset: SensorPreset | str, wavelengths_nm: Sequence[float] | torch.Tensor) -> np.ndarray:
+    """Absolute spectral QE of the r, g, b pixels (e- per incident photon, colour filter included).
+
+    QE_c(lambda) = peak_qe x S_c(lambda), S_c the preset's relative sensitivity curves linearly interpolated to
+    ``wavelengths_nm`` (0 outside the measured range).
+
+    Returns:
+        (3, C) float64 array, dimensionless.
+    """
+    preset = load_preset(preset)
+    wl = _wavelengths(wavelengths_nm)
+    fwl, _, vals = read_spectral_csv(preset.filters_path)
+    rel = np.stack([np.interp(wl, fwl, vals[:, k], left=0.0, right=0.0) for k in range(3)])
+    return preset.peak_qe * np.clip(rel, 0.0, None)
+
+
+def electron_weights(preset: SensorPreset | str, wavelengths_nm: Sequence[float] | torch.Tensor,
+                     photodiode: str = "lpd", bandwidths_nm: Sequence[float] | None = None,
+                     dtype: torch.dtype = torch.float64, device: torch.device | str | None = None) -> torch.Tensor:
+    r"""Mean photo-electrons per unit spectral radiant exposure, per colour channel and band.
+
+    .. math:: w_{c,\lambda} = QE_c(\lambda)\, A\, FF\, \Delta\lambda\, \frac{\lambda}{h c}
+
+    (photon count = energy / (h c / lambda) [Janesick2007]_; A pixel area in m^2, FF fill factor, Delta lambda in
+    nm, lambda in m).
+
+    Returns:
+        (3, C) tensor in e- per (J m^-2 nm^-1).
+    """
+    preset = load_preset(preset)
+    if photodiode not in PHOTODIODES:
+        raise ValueError(f"photodiode must be one of {list(PHOTODIODES)}, got {photodiode!r}")
+    wl = _wavelengths(wavelengths_nm)
+    if bandwidths_nm is None:
+        dl = band_widths_nm(wl)
+    else:
+        dl = np.asarray(bandwidths_nm, dtype=np.float64).reshape(-1)
+        if dl.size == 1 and wl.size > 1:
+            dl = np.full(wl.size, float(dl[0]))
+        if dl.size != wl.size or not np.all(np.isfinite(dl)) or np.any(dl <= 0):
+            raise ValueError(f"bandwidths_nm must hold {wl.size} finite values > 0 (nm)")
+    qe = spectral_qe(preset, wl)
+    ff = preset.photodiodes[photodiode].fill_factor
+    w = qe * (preset.pixel_area_m2 * ff) * dl[None, :] * (wl[None, :] * M_PER_NM) / PLANCK_TIMES_C_J_M
+    return torch.as_tensor(w, dtype=dtype, device=device)
+
+
+def mosaic(channels: torch.Tensor, pattern: CFAPattern | str = CFAPattern.GRBG) -> torch.Tensor:
+    """Sample a (*, 3, H, W) r, g, b image through a Bayer CFA.
+
+    Returns:
+        (*, 1, H, W) mosaic, same dtype and device.
+    """
+    if channels.dim() < 3 or channels.shape[-3] != 3:
+        raise ValueError(f"channels must have shape (*, 3, H, W), got {tuple(channels.shape)}")
+    pattern = CFAPattern(str(pattern.value if isinstance(pattern, CFAPattern) else pattern).upper())
+    H, W = channels.shape[-2:]
+    idx = pattern.index_map(H, W, channels.device)
+    return torch.gather(channels, -3, idx.expand(*channels.shape[:-3], 1, H, W))
+
+
+def ideal_electrons(radiant_exposure: torch.Tensor, preset: SensorPreset | str,
+                    wavelengths_nm: Sequence[float] | torch.Tensor, photodiode: str = "lpd",
+                    bandwidths_nm: Sequence[float] | None = None, mosaic_output: bool = True,
+                    check: bool = True) -> torch.Tensor:
+    """Noise-free, unclipped mean photo-electrons (no dark current, no PRNU): the ground-truth signal.
+
+    Args:
+        radiant_exposure: (*, C, H, W) spectral radiant exposure at the pixel in J m^-2 nm^-1 (spectral irradiance
+            in W m^-2 nm^-1 integrated over the exposure in s).
+        preset: sensor preset or its name.
+        wavelengths_nm: C band centres in nm.
+        photodiode: ``"lpd"`` or ``"spd"``.
+        bandwidths_nm: band widths in nm (default: local spacing, see :func:`band_widths_nm`).
+        mosaic_output: ``True``: (*, 1, H, W) through the CFA; ``False``: (*, 3, H, W) r, g, b electrons.
+        check: validate the input (finite, >= 0).
+
+    Returns:
+        electrons in e-, dtype and device of ``radiant_exposure``.
+    """
+    if check:
+        check_radiometric(radiant_exposure, "radiant_exposure")
+    preset = load_preset(preset)
+    C = radiant_exposure.shape[-3]
+    w = electron_weights(preset, wavelengths_nm, photodiode, bandwidths_nm, radiant_exposure.dtype,
+                         radiant_exposure.device)
+    if w.shape[1] != C:
+        raise ValueError(f"wavelengths_nm has {w.shape[1]} values but radiant_exposure has C={C} bands")
+    rgb = torch.einsum("...chw,kc->...khw", radiant_exposure, w)
+    return mosaic(rgb, preset.cfa) if mosaic_output else rgb
+
+
+# ----------------------------------------------------------------------------------------------------------
+# noise
+# ----------------------------------------------------------------------------------------------------------
+@functools.lru_cache(maxsize=8)
+def _fixed_pattern_cpu(seed: int, height: int, width: int) -> tuple[torch.Tensor, ...]:
+    g = torch.Generator(device="cpu").manual_seed(int(seed))
+    # fixed draw order: lpd gain, lpd offset, spd gain, spd offset (standard normal, float64)
+    return tuple(torch.randn(height, width, generator=g, dtype=torch.float64) for _ in range(4))
+
+
+def fixed_pattern(preset: SensorPreset | str, height: int, width: int, device: torch.device | str | None = None,
+                  dtype: torch.dtype = torch.float32) -> dict[str, torch.Tensor]:
+    """Per-sensor fixed-pattern noise maps, identical on every call, device and dtype for the same preset and size.
+
+    Drawn from ``torch.Generator().manual_seed(preset.fpn_seed)`` on the CPU in float64 (so CPU and CUDA agree).
+    For crops of one sensor, build the full-frame pattern once and crop it.
+
+    Returns:
+        ``{"lpd_gain", "spd_gain"}``: PRNU gain maps 1 + prnu z (clipped >= 0), dimensionless;
+        ``{"lpd_offset_e", "spd_offset_e"}``: DSNU offset maps dsnu_e z in e-; each (H, W).
+    """
+    preset = load_preset(preset)
+    z = _fixed_pattern_cpu(preset.fpn_seed, int(height), int(width))
+    out = {}
+    for i, pd in enumerate(PHOTODIODES):
+        spec = preset.photodiodes[pd]
+        out[f"{pd}_gain"] = (1.0 + spec.prnu * z[2 * i]).clamp_min(0.0).to(device=device, dtype=dtype)
+        out[f"{pd}_offset_e"] = (spec.dsnu_e * z[2 * i + 1]).to(device=device, dtype=dtype)
+    return out
+
+
+def shot_noise(mean_e: torch.Tensor, generator: torch.Generator, gaussian_above_e: float = 1000.0) -> torch.Tensor:
+    """Photon (and dark-current) shot noise: a Poisson sample of the mean electron count.
+
+    Means >= ``gaussian_above_e`` use the normal approximation N(mu, mu) rounded to integers (Poisson's skewness
+    1/sqrt(mu) is < 3 % there; the distribution error is measured in ``benchmarks/bench_sensor.py``); smaller
+    means use ``torch.poisson``. ``gaussian_above_e = inf`` forces exact Poisson everywhere.
+
+    Args:
+        mean_e: (*) mean electrons, >= 0.
+        generator: random generator on the device of ``mean_e``.
+        gaussian_above_e: switch-over mean in e-.
+
+    Returns:
+        (*) integer-valued electron counts, dtype of ``mean_e``.
+    """
+    if not math.isfinite(gaussian_above_e):
+        return torch.poisson(mean_e, generator=generator)
+    small = mean_e < gaussian_above_e
+    z = torch.randn(mean_e.shape, generator=generator, device=mean_e.device, dtype=mean_e.dtype)
+    out = torch.round(mean_e + torch.sqrt(mean_e) * z).clamp_min(0.0)
+    # Poisson only where needed (torch.poisson costs ~15x a normal draw per element on the CPU)
+    out[small] = torch.poisson(mean_e[small], generator=generator)
+    return out
+
+
+def _exposure(value: float | torch.Tensor, name: str, lead: torch.Size, ref: torch.Tensor) -> torch.Tensor:
+    t = torch.as_tensor(value, dtype=ref.dtype, device=ref.device)
+    if not bool(torch.isfinite(t).all()) or bool((t <= 0).any()):
+        raise ValueError(f"{name} must be finite and > 0 (s), got {value!r}")
+    if t.dim() > len(lead):
+        raise ValueError(f"{name} must be a scalar or broadcastable to the leading shape {tuple(lead)}")
+    try:
+        t = t.reshape(*t.shape, 1, 1, 1).expand(*lead, 1, 1, 1) if t.dim() else t.reshape(1, 1, 1)
+    except RuntimeError:
+        raise ValueError(f"{name} with shape {tuple(t.shape)} does not broadcast to the leading shape "
+                         f"{tuple(lead)}") from None
+    return t
+
+
+def read_capture(electrons: torch.Tensor, preset: SensorPreset, capture: str, generator: torch.Generator | None,
+                 noise: bool = True, offset_e: torch.Tensor | None = None) -> dict[str, torch.Tensor]:
+    """Read one capture of collected photodiode electrons: offset, read noise, conversion gain, swing, ADC.
+
+    Args:
+        electrons: (*, 1, H, W) collected electrons (already clipped to the full well), e-.
+        preset: sensor preset.
+        capture: one of :data:`CAPTURES`.
+        generator: random generator for the read noise (needed when ``noise``).
+        noise: add Gaussian read noise.
+        offset_e: (H, W) DSNU offset map in e- (or ``None``).
+
+    Returns:
+        ``{"dn": (*, 1, H, W) DN, "volts": (*, 1, H, W) V (clipped at the swing), "saturated": bool (*, 1, H, W)}``.
+    """
+    spec = preset.captures[capture]
+    e = electrons if offset_e is None else electrons + offset_e
+    if noise and spec.read_noise_e > 0:
+        e = e + spec.read_noise_e * torch.randn(e.shape, generator=generator, device=e.device, dtype=e.dtype)
+    volts = (e * spec.conversion_gain_v_per_e).clamp_max(spec.voltage_swing_v)
+    dn = torch.round(preset.black_level_dn + volts * preset.dn_per_volt(capture)).clamp(0.0, float(preset.max_dn))
+    saturated = volts >= preset.saturation_fraction * spec.voltage_swing_v
+    return {"dn": dn, "volts": volts, "saturated": saturated}
+
+
+def simulate_split_pixel_electrons(lpd_electrons: torch.Tensor, spd_electrons: torch.Tensor,
+                                   preset: SensorPreset | str, exposure_short_s: float | torch.Tensor,
+                                   exposure_long_s: float | torch.Tensor, generator: torch.Generator | None = None,
+                                   noise: bool = True, fpn: Mapping[str, torch.Tensor] | None = None,
+                                   check: bool = True) -> dict[str, torch.Tensor]:
+    """The three captures from mean photo-electrons (the noise and read-out part of :func:`simulate_split_pixel`).
+
+    Use this when the spectral projection (:func:`ideal_electrons` or a cached equivalent) is done elsewhere.
+
+    Args:
+        lpd_electrons: (*, 1, H, W) mean photo-electrons of the LPD over the short exposure (CFA mosaic, LPD fill
+            factor included, no dark current, no PRNU), e-.
+        spd_electrons: (*, 1, H, W) the same for the SPD over the long exposure (SPD fill factor included), e-.
+        preset: sensor preset or name.
+        exposure_short_s, exposure_long_s: exposure times in s, scalars or shape (*).
+        generator: ``torch.Generator`` on the inputs' device; required when ``noise`` is true.
+        noise: ``False``: noise-free chain (dark current mean kept, no FPN, clipping and quantisation kept).
+        fpn: fixed-pattern maps (H, W) from :func:`fixed_pattern` (default: built for (H, W) from the preset).
+        check: validate the inputs (finite, >= 0, matching shapes).
+
+    Returns:
+        as :func:`simulate_split_pixel`.
+    """
+    if check:
+        check_radiometric(lpd_electrons, "lpd_electrons")
+        check_radiometric(spd_electrons, "spd_electrons")
+    if lpd_electrons.shape != spd_electrons.shape:
+        raise ValueError(f"spd_electrons shape {tuple(spd_electrons.shape)} differs from lpd_electrons shape "
+                         f"{tuple(lpd_electrons.shape)}")
+    if lpd_electrons.shape[-3] != 1:
+        raise ValueError(f"lpd_electrons must have shape (*, 1, H, W) (a CFA mosaic), got {tuple(lpd_electrons.shape)}")
+    if spd_electrons.dtype != lpd_electrons.dtype:
+        raise ValueError("spd_electrons and lpd_electrons must have the same dtype")
+    preset = load_preset(preset)
+    x = lpd_electrons
+    if noise:
+        if not isinstance(generator, torch.Generator):
+            raise ValueError("generator must be a torch.Generator when noise=True (no hidden global randomness)")
+        if generator.device.type != x.device.type:
+            raise ValueError(f"generator is on {generator.device} but the inputs are on {x.device}")
+    lead = x.shape[:-3]
+    H, W = x.shape[-2:]
+    t_s = _exposure(exposure_short_s, "exposure_short_s", lead, x)
+    t_l = _exposure(exposure_long_s, "exposure_long_s", lead, x)
+    if fpn is None and noise:
+        fpn = fixed_pattern(preset, H, W, device=x.device, dtype=x.dtype)
+    elif fpn is not None:
+        fpn = {k: v.to(device=x.device, dtype=x.dtype) for k, v in fpn.items()}
+        for k, v in fpn.items():
+            if v.shape[-2:] != (H, W):
+                raise ValueError(f"fpn[{k!r}] has shape {tuple(v.shape)}, expected (..., {H}, {W})")
+
+    pd_inputs = {"lpd": (lpd_electrons, t_s), "spd": (spd_electrons, t_l)}
+    collected: dict[str, torch.Tensor] = {}
+    for pd, (mu, t) in pd_inputs.items():
+        spec = preset.photodiodes[pd]
+        cap = _MEAN_CAP_FULL_WELLS * spec.full_well_e
+        mu = torch.nan_to_num(mu, nan=0.0, posinf=cap).clamp(0.0, cap)          # overflow-safe, exact after clip
+        if noise and fpn is not None and spec.prnu > 0:
+            mu = mu * fpn[f"{pd}_gain"]
+        mu = mu + spec.dark_current_e_per_s * t
+        n = shot_noise(mu, generator, preset.shot_noise_gaussian_above_e) if noise else mu
+        collected[pd] = n.clamp(0.0, spec.full_well_e)
+
+    out: dict[str, torch.Tensor] = {}
+    sats = []
+    for cap in CAPTURES:
+        pd = preset.captures[cap].photodiode
+        offset = fpn[f"{pd}_offset_e"] if (noise and fpn is not None and preset.photodiodes[pd].dsnu_e > 0) else None
+        r = read_capture(collected[pd], preset, cap, generator, noise, offset)
+        out[cap] = r["dn"]
+        # DN -> e-, minus the mean dark signal (what optical-black clamping removes), so that the expectation
+        # of the input-referred value equals ideal_electrons() below saturation
+        e_ref = (r["dn"] - preset.black_level_dn) / preset.system_gain(cap) \
+            - preset.photodiodes[pd].dark_current_e_per_s * pd_inputs[pd][1]
+        if pd == "spd":
+            e_ref = e_ref * (preset.sensitivity_ratio * t_s / t_l)
+        out[f"{cap}_e"] = e_ref
+        sats.append(r["saturated"])
+    out["saturated"] = torch.cat(sats, dim=-3)
+    return out
+
+
+def simulate_split_pixel(lpd_radiant_exposure: torch.Tensor, spd_radiant_exposure: torch.Tensor,
+                         preset: SensorPreset | str, wavelengths_nm: Sequence[float] | torch.Tensor,
+                         exposure_short_s: float | torch.Tensor, exposure_long_s: float | torch.Tensor,
+                         generator: torch.Generator | None = None, noise: bool = True,
+                         bandwidths_nm: Sequence[float] | None = None,
+                         fpn: Mapping[str, torch.Tensor] | None = None, check: bool = True) -> dict[str, torch.Tensor]:
+    """Simulate the three captures (LPD-HCG, LPD-LCG, SPD) of a split-pixel sensor.
+
+    Args:
+        lpd_radiant_exposure: (*, C, H, W) spectral radiant exposure at the pixel over the short (LPD) exposure,
+            J m^-2 nm^-1 (spectral irradiance W m^-2 nm^-1 x s, flicker weights included by the caller).
+        spd_radiant_exposure: (*, C, H, W) the same over the long (SPD) exposure, J m^-2 nm^-1.
+        preset: sensor preset or name (``"ovt"``, ``"imx490"``, a YAML path).
+        wavelengths_nm: C band centres in nm.
+        exposure_short_s: LPD exposure time in s, scalar or shape (*) (per sample); used for dark current.
+        exposure_long_s: SPD exposure time in s, scalar or shape (*); used for dark current and input referral.
+        generator: ``torch.Generator`` on the inputs' device; required when ``noise`` is true.
+        noise: ``False`` gives the noise-free chain (mean electrons incl. dark current, no FPN, clipping and
+            quantisation kept).
+        bandwidths_nm: band widths in nm (default: local spacing of ``wavelengths_nm``).
+        fpn: fixed-pattern maps from :func:`fixed_pattern` (default: built for (H, W) from the preset's seed).
+        check: validate the inputs (finite, >= 0, matching shapes).
+
+    Returns:
+        dict with ``lpd_hcg``, ``lpd_lcg``, ``spd``: (*, 1, H, W) raw DN (black level included);
+        ``lpd_hcg_e``, ``lpd_lcg_e``, ``spd_e``: (*, 1, H, W) input-referred LPD-equivalent e- over the short
+        exposure, mean dark signal removed (same units and expectation as :func:`ideal_electrons` of the LPD);
+        ``saturated``: (*, 3, H, W) bool (hcg, lcg, spd), volts >= saturation_fraction x swing.
+        Floating outputs have the dtype of the inputs.
+    """
+    if check:
+        check_radiometric(lpd_radiant_exposure, "lpd_radiant_exposure")
+        check_radiometric(spd_radiant_exposure, "spd_radiant_exposure")
+    if lpd_radiant_exposure.shape != spd_radiant_exposure.shape:
+        raise ValueError(f"spd_radiant_exposure shape {tuple(spd_radiant_exposure.shape)} differs from "
+                         f"lpd_radiant_exposure shape {tuple(lpd_radiant_exposure.shape)}")
+    if spd_radiant_exposure.dtype != lpd_radiant_exposure.dtype:
+        raise ValueError("spd_radiant_exposure and lpd_radiant_exposure must have the same dtype")
+    preset = load_preset(preset)
+    lpd_e = ideal_electrons(lpd_radiant_exposure, preset, wavelengths_nm, "lpd", bandwidths_nm, check=False)
+    spd_e = ideal_electrons(spd_radiant_exposure, preset, wavelengths_nm, "spd", bandwidths_nm, check=False)
+    return simulate_split_pixel_electrons(lpd_e, spd_e, preset, exposure_short_s, exposure_long_s, generator,
+                                          noise, fpn, check=False)
+
+
+class SplitPixelSensor(nn.Module):
+    """``nn.Module`` wrapper of :func:`simulate_split_pixel` holding the preset and the band grid.
+
+    Args:
+        preset: preset, name or YAML path.
+        wavelengths_nm: C band centres in nm (default 400:10:700).
+        noise: default for the ``noise`` argument.
+
+    Shape:
+        inputs (*, C, H, W) spectral radiant exposure in J m^-2 nm^-1; outputs as :func:`simulate_split_pixel`.
+    """
+
+    def __init__(self, preset: SensorPreset | str = "ovt", wavelengths_nm: Sequence[float] | None = None,
+                 noise: bool = True) -> None:
+        super().__init__()
+        self.preset = load_preset(preset)
+        self.wavelengths_nm = list(range(400, 701, 10)) if wavelengths_nm is None else [float(w) for w in wavelengths_nm]
+        self.noise = noise
+
+    def forward(self, lpd_radiant_exposure: torch.Tensor, spd_radiant_exposure: torch.Tensor,
+                exposure_short_s: float | torch.Tensor, exposure_long_s: float | torch.Tensor,
+                generator: torch.Generator | None = None, noise: bool | None = None) -> dict[str, torch.Tensor]:
+        return simulate_split_pixel(lpd_radiant_exposure, spd_radiant_exposure, self.preset, self.wavelengths_nm,
+                                    exposure_short_s, exposure_long_s, generator=generator,
+                                    noise=self.noise if noise is None else noise)
+
+
+# ----------------------------------------------------------------------------------------------------------
+# silicon photodiode model
+# ----------------------------------------------------------------------------------------------------------
+def silicon_qe(wavelengths_nm: Sequence[float] | np.ndarray, depth_m: float = 3e-6,
+               reflectance: float | None = None) -> np.ndarray:
+    r"""Internal quantum efficiency model of a silicon photodiode of collection depth ``depth_m`` (m).
+
+    .. math:: QE(\lambda) = (1 - R(\lambda))\,(1 - e^{-\alpha(\lambda) d})
+
+    with the absorption coefficient alpha and refractive index n of [Green2008]_ (shipped in
+    ``data/silicon_green2008.csv``, linearly interpolated, 380-780 nm), and R the normal-incidence Fresnel
+    reflectance of bare silicon R = ((n-1)^2 + k^2)/((n+1)^2 + k^2), k = alpha lambda / (4 pi) [Hecht2017]_, or a
+    fixed ``reflectance`` (e.g. 0.05 for an anti-reflection-coated sensor). Assumes every electron generated
+    within ``depth_m`` is collected and none deeper (a first-order model; no microlens, colour filter or
+    crosstalk).
+
+    Returns:
+        (C,) QE in e- per photon, dimensionless.
+    """
+    wl = _wavelengths(wavelengths_nm)
+    if not depth_m > 0:
+        raise ValueError(f"depth_m must be > 0 (m), got {depth_m!r}")
+    swl, _, vals = read_spectral_csv(DATA_DIR / "silicon_green2008.csv")
+    if wl.min() < swl[0] or wl.max() > swl[-1]:
+        raise ValueError(f"wavelengths_nm must lie in [{swl[0]:g}, {swl[-1]:g}] nm for the silicon model")
+    alpha_per_m = np.interp(wl, swl, vals[:, 0]) * 100.0
+    if reflectance is None:
+        n = np.interp(wl, swl, vals[:, 1])
+        k = alpha_per_m * wl * M_PER_NM / (4 * math.pi)
+        R = ((n - 1) ** 2 + k ** 2) / ((n + 1) ** 2 + k ** 2)
+    else:
+        if not 0 <= reflectance < 1:
+            raise ValueError(f"reflectance must be in [0, 1), got {reflectance!r}")
+        R = np.full_like(wl, float(reflectance))
+    return (1.0 - R) * (1.0 - np.exp(-alpha_per_m * depth_m))

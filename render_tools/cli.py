@@ -1,0 +1,151 @@
+"""``lfmbench render``: render procedural driving scenes into an lfmbench corpus (see docs/corpus-format.md).
+
+``register(app)`` adds the command to :mod:`lfmbench.cli`; Mitsuba and Ray are imported only when it runs.
+Exit status: 0 all scenes done, 1 some scenes failed (the others are in the corpus), 2 bad input or write
+error (e.g. disk full), 130 interrupted (Ctrl-C; re-run the same command to resume).
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import List, Optional
+
+import typer
+
+__all__ = ["register", "render_cmd"]
+
+def _split_groups(groups: Optional[List[str]]) -> list[str] | None:
+    if not groups:
+        return None
+    out = [g.strip() for item in groups for g in item.split(",") if g.strip()]
+    return out or None
+
+
+def render_cmd(
+    out: Path = typer.Option(..., "--out", help="Corpus directory (created, or resumed when it exists)."),
+    scenes: int = typer.Option(1, "--scenes", help="Number of procedural scenes to generate and render."),
+    width: Optional[int] = typer.Option(None, "--width", help="Image width, pixels (default: profile)."),
+    height: Optional[int] = typer.Option(None, "--height", help="Image height, pixels (default: profile)."),
+    spp: Optional[int] = typer.Option(None, "--spp", help="Samples per pixel (default: profile)."),
+    seed: int = typer.Option(0, "--seed", help="Run seed: scene i uses a seed derived from it (reproducible)."),
+    bins: Optional[int] = typer.Option(None, "--bins", help="Time bins K per capture window for flickering groups."),
+    frames: Optional[int] = typer.Option(None, "--frames", help="Frames per sequence (default: profile, 3)."),
+    groups: Optional[List[str]] = typer.Option(None, "--groups",
+                                               help="Light groups to render (repeatable or comma separated; "
+                                                    "default: all a scene has)."),
+    profile: str = typer.Option("default", "--profile", help="small | default | path to a YAML profile."),
+    workers: int = typer.Option(1, "--workers", help="Scenes rendered in parallel (local process pool)."),
+    ray_address: Optional[str] = typer.Option(None, "--ray-address",
+                                              help="Run on Ray: 'local', 'auto' or ray://host:port."),
+    scene_file: Optional[List[Path]] = typer.Option(None, "--scene",
+                                                    help="Render this scene JSON file instead of generating "
+                                                         "(repeatable; overrides --scenes)."),
+    variant: Optional[str] = typer.Option(None, "--variant", help="Mitsuba variant (default: auto)."),
+    half: bool = typer.Option(False, "--half", help="Store EXR HALF (FLOAT where a value exceeds 65504)."),
+    no_resume: bool = typer.Option(False, "--no-resume", help="Re-render scenes that are already complete."),
+) -> None:
+    """Render driving scenes (Mitsuba 3, spectral, light groups, time bins) into a corpus; resumable."""
+    from rich.console import Console
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    from lfmbench.corpus import CorpusError, CorpusWriteError, CorpusWriter
+    from render_tools import jobs as J
+
+    console = Console(stderr=True, soft_wrap=True)
+
+    def fail(msg: str, code: int = 2) -> None:
+        console.print(f"[red]error[/]: {msg}", highlight=False)
+        raise typer.Exit(code)
+
+    try:
+        options = J.load_profile(profile)
+        given = {"width": width, "height": height, "spp": spp, "bins": bins, "frames": frames, "variant": variant}
+        options.update({k: v for k, v in given.items() if v is not None})
+        gl = _split_groups(groups)
+        if gl is not None:
+            options["groups"] = gl
+        for k in ("width", "height", "spp", "bins", "frames"):
+            v = options.get(k)
+            if v is not None and (isinstance(v, bool) or not isinstance(v, int) or v < 1):
+                fail(f"--{k} must be an integer >= 1, got {v!r}")
+        if seed < 0:
+            fail(f"--seed must be >= 0, got {seed}")
+        if workers < 1:
+            fail(f"--workers must be >= 1, got {workers}")
+        scene_dicts = None
+        if scene_file:
+            scene_dicts = []
+            for p in scene_file:
+                try:
+                    sc = json.loads(Path(p).read_text())
+                except (OSError, json.JSONDecodeError) as exc:
+                    fail(f"--scene {p}: cannot read scene JSON: {exc}")
+                if not isinstance(sc, dict):
+                    fail(f"--scene {p}: a scene file must hold a JSON object")
+                scene_dicts.append(sc)
+        backend = J.default_backend()
+        # check options and scene files before anything is written (unknown fields, impossible values)
+        try:
+            backend.RenderOptions(**options, seed=0)
+        except TypeError as exc:  # an unknown field in the profile
+            fail(f"{profile if Path(profile).is_file() else J.PROFILES_FILE} (profile {profile!r}): {exc}")
+        if scene_dicts and backend.validate_scene is not None:
+            for p, sc in zip(scene_file, scene_dicts):
+                try:
+                    backend.validate_scene(sc)
+                except ValueError as exc:
+                    fail(f"--scene {p}: {exc}")
+        dtype = "float16" if half else "float32"
+        ids = [str(sc.get("scene_id") or Path(p).stem) for p, sc in zip(scene_file, scene_dicts)] \
+            if scene_dicts else None
+        job_list = J.make_jobs(out, n_scenes=scenes, seed=seed, options=options, scenes=scene_dicts,
+                               scene_ids=ids, dtype=dtype, backend=backend)
+        writer = CorpusWriter(out, dtype=dtype, render=J.render_record(seed, options, dtype, {}))
+    except typer.Exit:
+        raise
+    except (ValueError, CorpusError) as exc:
+        fail(str(exc))
+    except CorpusWriteError as exc:
+        fail(f"{exc.strerror or exc}")
+
+    with Progress(TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),
+                  TimeElapsedColumn(), console=console) as prog:
+        task = prog.add_task("rendering", total=len(job_list))
+
+        def on_start(n_todo: int, n_skip: int) -> None:
+            prog.update(task, completed=n_skip)
+            if n_skip:
+                prog.console.print(f"resuming: {n_skip} complete scene(s) skipped, {n_todo} to render")
+
+        def on_done(sid: str, status: str) -> None:
+            prog.advance(task)
+            if status != "rendered":
+                prog.console.print(f"[red]scene {sid} failed[/]")
+
+        try:
+            summary = J.run_jobs(job_list, writer, workers=workers, ray_address=ray_address, on_start=on_start,
+                                 on_done=on_done, resume=not no_resume)
+        except J.RenderInterrupted as exc:
+            s = exc.summary
+            console.print(f"[yellow]interrupted[/]: {len(s.rendered) + len(s.skipped)} complete scene(s) are in "
+                          f"{out}/manifest.json; no partial file was kept. Run the same command again to resume.")
+            raise typer.Exit(130) from None
+        except CorpusWriteError as exc:
+            fail(f"{exc.strerror or exc}; the corpus still holds only complete scenes (re-run to resume)")
+        except ValueError as exc:
+            fail(str(exc))
+    writer.write_splits(seed, J.SPLIT_FRACTIONS)
+    for n in summary.notes:
+        console.print(f"[yellow]note[/]: {n}", highlight=False)
+    for sid, msg in summary.failed.items():
+        console.print(f"[red]scene {sid} failed[/]: {msg}", highlight=False)
+    secs = sum(summary.seconds.values())
+    typer.echo(f"{out}: {len(summary.rendered)} rendered ({secs:.1f} s), {len(summary.skipped)} skipped, "
+               f"{len(summary.failed)} failed")
+    if summary.failed:
+        raise typer.Exit(1)
+
+
+def register(app: typer.Typer) -> None:
+    """Add ``render`` to the ``lfmbench`` app."""
+    app.command("render")(render_cmd)

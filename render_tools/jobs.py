@@ -1,0 +1,314 @@
+"""Render jobs for ``lfmbench render``: job list, local process pool or Ray cluster, resume, atomic corpus writes.
+
+One job = one scene: generate (or load) the scene, render every frame with
+``render_tools.render.render_frames``, encode the EXRs (:func:`lfmbench.corpus.encode_scene`) and write them
+atomically into the corpus (:func:`lfmbench.corpus.write_files`). Workers write the files themselves (the
+output directory must be visible to them: the local machine, or a shared file system on a Ray cluster) and
+return the files' SHA-256; only the driver touches ``manifest.json``, rewriting it atomically after each
+finished scene. So a crash or Ctrl-C leaves a valid corpus: finished scenes are in the manifest with their
+checksums, an unfinished one is not (its partial files are overwritten on resume, stray temporary files
+removed), and re-running the same command skips every scene whose files match the manifest.
+
+Seeds: scene i of a run with ``--seed K`` uses ``scene_seed(K, i)`` (a ``numpy.random.SeedSequence`` child),
+so scene i is the same whatever ``--scenes N`` is and a run can be extended by raising N.
+"""
+from __future__ import annotations
+
+import json
+import logging
+import multiprocessing
+import time
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Mapping, Sequence
+
+import numpy as np
+
+from lfmbench.corpus import (CorpusWriteError, CorpusWriter, check_scene_id, encode_scene, prune_scene_dir,
+                             write_files)
+
+__all__ = ["PROFILES_FILE", "Backend", "default_backend", "load_profile", "scene_seed", "scene_id_for",
+           "RenderJob", "make_jobs", "run_job", "RunSummary", "run_jobs", "RenderInterrupted"]
+
+log = logging.getLogger(__name__)
+
+#: Render profiles (``--profile small|default``): plain YAML, keys are RenderOptions fields.
+PROFILES_FILE = Path(__file__).with_name("configs") / "render_profiles.yaml"
+#: Fractions of the train / val / test split written to ``splits.json``.
+SPLIT_FRACTIONS = (0.6, 0.2, 0.2)
+
+
+@dataclass(frozen=True)
+class Backend:
+    """The renderer a job calls (``render_tools.scene`` + ``render_tools.render`` by default):
+    ``generate_scene(seed, scene_id=..., **kw) -> dict``, ``RenderOptions(**fields)``, ``scene_meta(scene, opts) -> dict``,
+    ``render_frames(scene, opts) -> Iterator[frame dict]``; optional ``validate_scene(scene) -> dict``."""
+
+    generate_scene: Callable[..., dict]
+    RenderOptions: Callable[..., Any]
+    scene_meta: Callable[[dict, Any], dict]
+    render_frames: Callable[[dict, Any], Any]
+    validate_scene: Callable[[dict], Any] | None = None
+
+
+def default_backend() -> Backend:
+    """Import the Mitsuba renderer (heavy: only inside jobs and commands)."""
+    from render_tools import render, scene  # noqa: PLC0415
+
+    validate = getattr(scene, "validate_scene", None)
+    return Backend(scene.generate_scene, render.RenderOptions, render.scene_meta, render.render_frames, validate)
+
+
+def load_profile(profile: str | Path) -> dict:
+    """RenderOptions overrides of a profile: a name in :data:`PROFILES_FILE` or a path to a YAML file.
+
+    Raises ``ValueError`` naming the file for an unknown profile or a value that is not a mapping.
+    """
+    import yaml  # noqa: PLC0415
+
+    p = Path(profile)
+    if p.suffix in (".yaml", ".yml", ".json") and p.is_file():
+        data = yaml.safe_load(p.read_text())
+        src = p
+    else:
+        with open(PROFILES_FILE) as fh:
+            table = yaml.safe_load(fh)
+        if str(profile) not in table:
+            raise ValueError(f"profile: {profile!r} is not in {PROFILES_FILE} (known: {sorted(table)}) "
+                             "and is not a YAML file")
+        data = table[str(profile)]
+        src = PROFILES_FILE
+    if not isinstance(data, dict):
+        raise ValueError(f"{src}: profile {profile!r} must be a mapping of RenderOptions fields")
+    return dict(data)
+
+
+def scene_seed(seed: int, index: int) -> int:
+    """Seed of scene ``index`` of a run seeded ``seed``: first word of ``SeedSequence(seed, spawn_key=(index,))``
+    (independent streams per scene, numpy's recommended way to derive child seeds)."""
+    if seed < 0 or index < 0:
+        raise ValueError(f"seed and index must be >= 0, got seed={seed}, index={index}")
+    return int(np.random.SeedSequence(seed, spawn_key=(index,)).generate_state(1, np.uint32)[0])
+
+
+def scene_id_for(index: int) -> str:
+    """Scene id of generated scene ``index``: ``scene00000``, ``scene00001``, ..."""
+    return f"scene{index:05d}"
+
+
+@dataclass
+class RenderJob:
+    """One scene to render into ``out``: id, seed, RenderOptions fields (without ``seed``), an explicit scene
+    dict (from a scene JSON file) or None to generate one with ``generate_scene(seed, **scene_kw)``."""
+
+    index: int
+    scene_id: str
+    seed: int
+    out: str
+    options: dict
+    scene: dict | None = None
+    scene_kw: dict = field(default_factory=dict)
+    dtype: str = "float32"
+    backend: Backend | None = None
+
+
+def make_jobs(out: str | Path, *, n_scenes: int, seed: int, options: Mapping[str, Any],
+              scenes: Sequence[dict] | None = None, scene_ids: Sequence[str] | None = None,
+              scene_kw: Mapping[str, Any] | None = None, dtype: str = "float32",
+              backend: Backend | None = None) -> list[RenderJob]:
+    """The job list: ``n_scenes`` generated scenes, or one job per explicit scene dict in ``scenes`` (id from
+    ``scene_ids``, else its ``scene_id`` field, else ``scene<i>``)."""
+    if "seed" in options:
+        raise ValueError("options: give the run seed as seed=, not inside the RenderOptions fields")
+    out = Path(out).resolve()  # workers (Ray) may run in another working directory
+    jobs = []
+    if scenes:
+        ids = set()
+        for i, sc in enumerate(scenes):
+            sid = str(scene_ids[i] if scene_ids else (sc.get("scene_id") or scene_id_for(i)))
+            check_scene_id(sid)
+            if sid in ids:
+                raise ValueError(f"scene files: duplicate scene_id {sid!r}")
+            ids.add(sid)
+            jobs.append(RenderJob(i, sid, scene_seed(seed, i), str(out), dict(options), dict(sc),
+                                  dict(scene_kw or {}), dtype, backend))
+        return jobs
+    if isinstance(n_scenes, bool) or not isinstance(n_scenes, int) or n_scenes < 1:
+        raise ValueError(f"scenes: number of scenes must be an integer >= 1, got {n_scenes!r}")
+    for i in range(n_scenes):
+        jobs.append(RenderJob(i, scene_id_for(i), scene_seed(seed, i), str(out), dict(options), None,
+                              dict(scene_kw or {}), dtype, backend))
+    return jobs
+
+
+def _prepare(job: RenderJob, be: Backend) -> tuple[dict, Any, dict]:
+    if job.scene is not None:
+        scene = dict(job.scene)
+        if be.validate_scene is not None:
+            scene = be.validate_scene(scene) or scene
+    else:
+        scene = be.generate_scene(job.seed, scene_id=job.scene_id, **job.scene_kw)
+    opts = be.RenderOptions(**job.options, seed=job.seed)
+    meta = dict(be.scene_meta(scene, opts))
+    meta["scene_id"] = job.scene_id
+    return scene, opts, meta
+
+
+def run_job(job: RenderJob | Mapping[str, Any]) -> dict:
+    """Render one scene and write its files (atomically) into ``job.out``; returns
+    ``{"scene_id", "hashes": {relpath: sha256}, "notes": [...], "seconds"}``. Does not touch the manifest."""
+    if not isinstance(job, RenderJob):
+        job = RenderJob(**job)
+    t0 = time.perf_counter()
+    be = job.backend or default_backend()
+    scene, opts, meta = _prepare(job, be)
+    notes: list[str] = []
+    files = encode_scene(job.scene_id, scene, meta, be.render_frames(scene, opts), dtype=job.dtype, notes=notes)
+    hashes = write_files(job.out, files)
+    prune_scene_dir(job.out, job.scene_id, hashes)
+    return {"scene_id": job.scene_id, "hashes": hashes, "notes": notes, "seconds": time.perf_counter() - t0}
+
+
+@dataclass
+class RunSummary:
+    """Outcome of :func:`run_jobs`: scene ids rendered, skipped (already complete), failed (id -> message),
+    and per-scene seconds."""
+
+    rendered: list[str] = field(default_factory=list)
+    skipped: list[str] = field(default_factory=list)
+    failed: dict[str, str] = field(default_factory=dict)
+    seconds: dict[str, float] = field(default_factory=dict)
+    notes: list[str] = field(default_factory=list)
+
+
+class RenderInterrupted(KeyboardInterrupt):
+    """Ctrl-C during ``run_jobs``; carries the :class:`RunSummary` of what was finished and recorded."""
+
+    def __init__(self, summary: RunSummary):
+        super().__init__("interrupted")
+        self.summary = summary
+
+
+def run_jobs(jobs: Sequence[RenderJob], writer: CorpusWriter, *, workers: int = 1, ray_address: str | None = None,
+             on_start: Callable[[int, int], None] | None = None,
+             on_done: Callable[[str, str], None] | None = None, resume: bool = True) -> RunSummary:
+    """Run the jobs not yet complete in ``writer``'s corpus; commit each finished scene to the manifest.
+
+    Args:
+        jobs: from :func:`make_jobs` (all with ``out == writer.root``).
+        writer: the corpus writer (only the driver writes the manifest).
+        workers: parallel scenes; 1 renders in this process, > 1 uses a spawn-context process pool (each
+            Mitsuba llvm render already uses every core, so 1 is usually fastest on a small machine).
+        ray_address: run on Ray instead: ``"local"`` (start or reuse a local instance with ``workers`` CPUs),
+            ``"auto"`` or ``"ray://host:port"``; the output directory must be visible to the Ray workers.
+        on_start: ``on_start(n_todo, n_skipped)`` once the resume check is done.
+        on_done: ``on_done(scene_id, status)`` with status ``rendered`` / ``failed`` after each job.
+        resume: skip scenes complete in the manifest (files present with matching SHA-256).
+
+    A :class:`lfmbench.corpus.CorpusWriteError` (e.g. disk full) stops the run and propagates; Ctrl-C raises
+    :class:`RenderInterrupted`; other job errors are collected in ``failed`` and the run continues.
+    """
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+        raise ValueError(f"workers must be an integer >= 1, got {workers!r}")
+    summary = RunSummary()
+    todo = []
+    for j in jobs:
+        if Path(j.out).resolve() != writer.root.resolve():
+            raise ValueError(f"job {j.scene_id}: out {j.out} is not the writer's corpus {writer.root}")
+        if resume and writer.is_complete(j.scene_id):
+            summary.skipped.append(j.scene_id)
+        else:
+            writer.forget_scene(j.scene_id)
+            todo.append(j)
+    if on_start is not None:
+        on_start(len(todo), len(summary.skipped))
+
+    def finished(job: RenderJob, res: dict | None, exc: BaseException | None) -> None:
+        if exc is not None:
+            if isinstance(exc, CorpusWriteError):
+                raise exc
+            summary.failed[job.scene_id] = f"{type(exc).__name__}: {exc}"
+            log.error("scene %s failed: %s", job.scene_id, exc)
+            if on_done is not None:
+                on_done(job.scene_id, "failed")
+            return
+        writer.commit_scene(job.scene_id, res["hashes"])
+        summary.rendered.append(job.scene_id)
+        summary.seconds[job.scene_id] = float(res["seconds"])
+        summary.notes.extend(res.get("notes", []))
+        if on_done is not None:
+            on_done(job.scene_id, "rendered")
+
+    try:
+        if ray_address:
+            _run_ray(todo, ray_address, workers, finished)
+        elif workers == 1:
+            for j in todo:
+                try:
+                    res = run_job(j)
+                except (KeyboardInterrupt, CorpusWriteError):
+                    raise
+                except Exception as exc:  # noqa: BLE001 - one bad scene must not stop the others
+                    finished(j, None, exc)
+                else:
+                    finished(j, res, None)
+        else:
+            _run_pool(todo, workers, finished)
+    except KeyboardInterrupt:
+        writer.cleanup_temp()
+        raise RenderInterrupted(summary) from None
+    return summary
+
+
+def _run_pool(todo: Sequence[RenderJob], workers: int, finished: Callable) -> None:
+    ctx = multiprocessing.get_context("spawn")  # no fork of a process that may hold drjit / LLVM state
+    ex = ProcessPoolExecutor(max_workers=min(workers, max(1, len(todo))), mp_context=ctx)
+    try:
+        pending = {ex.submit(run_job, j): j for j in todo}
+        while pending:
+            done, _ = wait(pending, return_when=FIRST_COMPLETED)
+            for fut in done:
+                job = pending.pop(fut)
+                exc = fut.exception()
+                finished(job, None if exc else fut.result(), exc)
+    finally:
+        ex.shutdown(wait=True, cancel_futures=True)
+
+
+def _run_ray(todo: Sequence[RenderJob], address: str, workers: int, finished: Callable) -> None:
+    try:
+        import ray  # noqa: PLC0415
+    except ImportError as exc:
+        raise ImportError("--ray-address needs Ray: pip install 'lfmbench[distributed]'") from exc
+    if not ray.is_initialized():
+        if address == "local":
+            ray.init(num_cpus=workers, include_dashboard=False, log_to_driver=False)
+        else:
+            ray.init(address=address, log_to_driver=False)
+    remote = ray.remote(num_cpus=1, max_retries=0)(run_job)
+    pending = {remote.remote(j): j for j in todo}
+    try:
+        while pending:
+            done, _ = ray.wait(list(pending), num_returns=1)
+            for ref in done:
+                job = pending.pop(ref)
+                try:
+                    res = ray.get(ref)
+                except Exception as exc:  # noqa: BLE001 - RayTaskError wraps the job's exception
+                    cause = getattr(exc, "cause", None)
+                    finished(job, None, cause if isinstance(cause, BaseException) else exc)
+                else:
+                    finished(job, res, None)
+    except KeyboardInterrupt:
+        for ref in pending:
+            ray.cancel(ref, force=True)
+        raise
+
+
+def render_record(seed: int, options: Mapping[str, Any], dtype: str, scene_kw: Mapping[str, Any]) -> dict:
+    """What the manifest records as ``"render"`` (a resume with different values is refused). The Mitsuba
+    ``variant`` is left out: it changes speed, not the radiance being estimated."""
+    opts = {k: v for k, v in options.items() if k != "variant"}
+    return json.loads(json.dumps({"seed": int(seed), "options": opts, "dtype": dtype,
+                                  "scene_kw": dict(scene_kw)}, default=str))

@@ -1,0 +1,95 @@
+"""sRGB PNG previews of rendered spectral frames (for looking at scenes, not for measurement).
+
+Pipeline: spectral radiance (C, H, W) W sr^-1 m^-2 nm^-1 -> CIE XYZ (Y in cd/m^2, 1931 2-degree observer,
+:func:`render_tools.spectra.spectral_to_xyz`) -> global photographic tone mapping on Y (Reinhard, Stark,
+Shirley, Ferwerda, "Photographic tone reproduction for digital images", SIGGRAPH 2002, eqs. 1-4 with white
+point) -> linear sRGB (IEC 61966-2-1, D65, ``colour.XYZ_to_sRGB`` without chromatic adaptation) -> clip ->
+sRGB transfer function -> 8-bit PNG, written atomically.
+"""
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from . import spectra
+
+#: Reinhard key value (middle grey) of the tone mapping.
+KEY_VALUE = 0.18
+#: Small luminance floor for the log-average, cd/m^2.
+LUM_EPS = 1e-6
+
+
+def compose_window(frame: dict, timing: dict, window: str = "short", shape=None) -> np.ndarray:
+    """Full-scene radiance (C, H, W) over ``window`` ("short" or "long") of a frame from
+    :func:`render_tools.render.render_frames`, every LED at its nominal (always-on) level.
+
+    Static groups add their window image; each flickering light adds its bins weighted by their overlap with
+    the window (``timing`` = :func:`render_tools.render.frame_timing` of that frame): the time average over
+    [a, b) is sum_k L_k |bin_k ∩ [a, b)| / (b - a).
+    """
+    if window not in ("short", "long"):
+        raise ValueError(f"window: {window!r} not 'short' or 'long'")
+    acc = None
+    for g, v in frame["static"].items():
+        acc = v[window].astype(np.float64) if acc is None else acc + v[window]
+    a, b = timing[window]
+    edges = np.asarray(timing["bin_edges"])
+    ov = np.clip(np.minimum(edges[1:], b) - np.maximum(edges[:-1], a), 0, None) / (b - a)
+    for items in frame["lights"].values():
+        for _, (y0, x0, y1, x1), bins in items:
+            if acc is None:
+                if shape is None:
+                    raise ValueError("shape: needed when the frame has no static group")
+                acc = np.zeros(shape)
+            acc[:, y0:y1, x0:x1] += np.tensordot(ov, bins, axes=(0, 0))
+    if acc is None:
+        raise ValueError("frame: has no groups to compose")
+    return acc
+
+
+def tonemap_srgb(img: np.ndarray, bands_nm, band_width_nm: float, key: float = KEY_VALUE) -> np.ndarray:
+    """Spectral radiance (C, H, W) -> display sRGB (H, W, 3) uint8 (see module docstring)."""
+    import colour  # noqa: PLC0415
+
+    xyz = spectra.spectral_to_xyz(img, bands_nm, band_width_nm)  # (3, H, W), Y in cd/m^2
+    y = np.maximum(xyz[1], 0.0)
+    lw = float(np.exp(np.mean(np.log(LUM_EPS + y))))
+    lm = key * y / lw
+    lwhite = max(float(np.percentile(lm, 99.9)), 1e-9)
+    ld = lm * (1 + lm / lwhite**2) / (1 + lm)
+    scale = np.where(y > 0, ld / np.maximum(y, 1e-30), 0.0)
+    xyz_d = (xyz * scale).transpose(1, 2, 0)
+    rgb = colour.XYZ_to_sRGB(xyz_d, apply_cctf_encoding=False, chromatic_adaptation_transform=None)
+    rgb = np.clip(rgb, 0.0, 1.0)
+    enc = colour.cctf_encoding(rgb, function="sRGB")
+    return np.clip(np.rint(enc * 255), 0, 255).astype(np.uint8)
+
+
+def write_png(rgb8: np.ndarray, path: str | os.PathLike) -> None:
+    """Write an (H, W, 3) uint8 image as PNG atomically (temp file in the same directory, then replace)."""
+    import matplotlib.image as mpimg  # noqa: PLC0415
+
+    rgb8 = np.asarray(rgb8)
+    if rgb8.ndim != 3 or rgb8.shape[2] != 3 or rgb8.dtype != np.uint8:
+        raise ValueError(f"rgb8: expected (H, W, 3) uint8, got {rgb8.shape} {rgb8.dtype}")
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".png")
+    os.close(fd)
+    try:
+        mpimg.imsave(tmp, rgb8, format="png")
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
+def preview_png(img: np.ndarray, bands_nm, band_width_nm: float, path: str | os.PathLike,
+                key: float = KEY_VALUE) -> np.ndarray:
+    """Tone-map a spectral image (C, H, W) and write it to ``path``; returns the (H, W, 3) uint8 image."""
+    rgb = tonemap_srgb(img, bands_nm, band_width_nm, key)
+    write_png(rgb, path)
+    return rgb

@@ -1,0 +1,664 @@
+"""Procedural driving scenes as plain, editable JSON, and their validation.
+
+A scene is a dict (saved as JSON) that fully describes what is rendered: geometry made of primitive parts
+(boxes, cylinders, rectangles, disks, spheres), materials, emitters (lights) with their group, spectrum
+model and luminance (cd/m^2), the sky, the ego camera and the short-exposure time. Re-rendering a scene file
+gives the same images (up to Monte Carlo noise with a different seed).
+
+World frame: ISO 8855, metres: x forward along the road, y left, z up; the road surface is z = 0. Traffic
+drives on the right: the ego direction uses lanes at y < 0.
+
+Functions
+- :func:`load_config` -> generator defaults (``render_tools/configs/scene_defaults.yaml``).
+- :func:`generate_scene` -> a validated scene dict from a seed (day / dusk / night).
+- :func:`validate_scene` -> the scene, or ``ValueError`` naming the offending field (``scene.lights[3].size``).
+- :func:`load_scene` / :func:`save_scene` -> JSON on disk (atomic write).
+
+Luminance ranges follow upstream (ISETHDR heuristic, ``upstream.md``): headlights 2e4-2e5 cd/m^2,
+streetlights 1e4-5e4 cd/m^2, other lights 4e-4..1e-2 of the scene's headlight peak.
+"""
+from __future__ import annotations
+
+import copy
+import json
+import math
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from . import spectra
+
+#: Scene file format name and version.
+SCENE_FORMAT = "lfmbench-scene"
+SCENE_VERSION = 1
+#: Light groups (upstream names + traffic signals).
+GROUPS = ("headlights", "streetlights", "otherlights", "skymap", "signals")
+#: Groups that hold emitters placed in the scene (skymap is the sky emitter).
+LIGHT_GROUPS = ("headlights", "streetlights", "otherlights", "signals")
+#: Light kinds and the group they belong to by default.
+LIGHT_KINDS = {"headlight": "headlights", "streetlight": "streetlights", "tail": "otherlights",
+               "brake": "otherlights", "indicator": "otherlights", "billboard": "otherlights",
+               "signal": "signals"}
+TIMES_OF_DAY = ("day", "dusk", "night")
+OBJECT_KINDS = ("ground", "road", "marking", "sidewalk", "building", "car", "truck", "motorcycle",
+                "streetlight_pole", "signal_pole")
+PART_SHAPES = ("box", "cylinder", "rect", "disk", "sphere")
+MATERIAL_TYPES = ("diffuse", "roughplastic", "roughconductor")
+#: Default generator configuration file.
+DEFAULT_CONFIG = Path(__file__).with_name("configs") / "scene_defaults.yaml"
+#: Largest coordinate magnitude accepted, m.
+MAX_COORD_M = 1.0e4
+
+
+# ----------------------------------------------------------------------------------------------- config
+def load_config(path: str | os.PathLike | None = None) -> dict:
+    """Generator defaults from YAML (default :data:`DEFAULT_CONFIG`); raises ``ValueError`` naming the file."""
+    import yaml  # noqa: PLC0415
+
+    p = Path(path) if path is not None else DEFAULT_CONFIG
+    try:
+        with open(p, encoding="utf-8") as fh:
+            cfg = yaml.safe_load(fh)
+    except (OSError, yaml.YAMLError) as exc:
+        raise ValueError(f"config file {p}: cannot read ({exc})") from exc
+    need = ("time_of_day_weights", "timing", "camera", "road", "buildings", "vehicles", "lights", "sky", "groups")
+    if not isinstance(cfg, dict):
+        raise ValueError(f"config file {p}: expected a mapping")
+    for k in need:
+        if k not in cfg:
+            raise ValueError(f"config file {p}: missing section {k!r}")
+    for g in cfg["groups"]:
+        if g not in GROUPS:
+            raise ValueError(f"config file {p}: groups.{g} is not one of {GROUPS}")
+    lo, hi = cfg["timing"]["short_exposure_s"]
+    if not 0 < lo <= hi:
+        raise ValueError(f"config file {p}: timing.short_exposure_s must be 0 < lo <= hi, got {[lo, hi]}")
+    if cfg["camera"]["speed_mps"][0] < 0:
+        raise ValueError(f"config file {p}: camera.speed_mps must be >= 0")
+    return cfg
+
+
+# ------------------------------------------------------------------------------------------- generator
+class _Builder:
+    """Accumulates objects, lights and materials while generating (internal)."""
+
+    def __init__(self, rng: np.random.Generator, cfg: dict, tod: str):
+        self.rng, self.cfg, self.tod = rng, cfg, tod
+        self.objects: list[dict] = []
+        self.lights: list[dict] = []
+        self.materials: dict = {
+            "asphalt": {"type": "diffuse", "rgb": [0.09, 0.09, 0.095]},
+            "marking": {"type": "diffuse", "rgb": [0.65, 0.65, 0.62]},
+            "concrete": {"type": "diffuse", "rgb": [0.32, 0.31, 0.29]},
+            "ground": {"type": "diffuse", "rgb": [0.12, 0.13, 0.09]},
+            "glass": {"type": "roughplastic", "rgb": [0.02, 0.025, 0.03], "alpha": 0.05},
+            "rubber": {"type": "diffuse", "rgb": [0.03, 0.03, 0.03]},
+            "metal": {"type": "roughconductor", "alpha": 0.3},
+            "lamp_off": {"type": "roughplastic", "rgb": [0.05, 0.05, 0.05], "alpha": 0.1},
+            "housing": {"type": "diffuse", "rgb": [0.04, 0.04, 0.04]},
+            "lens_red": {"type": "roughplastic", "rgb": [0.25, 0.02, 0.02], "alpha": 0.1},
+            "lens_clear": {"type": "roughplastic", "rgb": [0.5, 0.5, 0.5], "alpha": 0.1},
+        }
+        lc = cfg["lights"]
+        self.head_peak = self.u(lc["headlight_luminance_cd_m2"])
+
+    def u(self, r):
+        return float(self.rng.uniform(r[0], r[1]))
+
+    def ulog(self, r):
+        return float(math.exp(self.rng.uniform(math.log(r[0]), math.log(r[1]))))
+
+    def ui(self, r):
+        return int(self.rng.integers(r[0], r[1] + 1))
+
+    def obj(self, kind, parts, velocity=(0.0, 0.0, 0.0)) -> int:
+        oid = len(self.objects)
+        self.objects.append({"id": oid, "kind": kind, "velocity_mps": [float(v) for v in velocity], "parts": parts})
+        return oid
+
+    def light(self, kind, instance, shape, spectrum, luminance, spread=90.0, group=None) -> int:
+        lid = len(self.lights)
+        d = {"id": lid, "group": group or LIGHT_KINDS[kind], "kind": kind, "instance": instance}
+        d.update(shape)
+        d.update({"spread_deg": float(spread), "spectrum": copy.deepcopy(spectrum),
+                  "luminance_cd_m2": float(luminance)})
+        self.lights.append(d)
+        return lid
+
+    def other_luminance(self) -> float:
+        return self.head_peak * self.ulog(self.cfg["lights"]["other_ratio_log"])
+
+
+def _box(center, size, material, yaw_deg=0.0):
+    return {"shape": "box", "center": [float(c) for c in center], "size": [float(s) for s in size],
+            "yaw_deg": float(yaw_deg), "material": material}
+
+
+def _rect(center, size, normal, material):
+    return {"shape": "rect", "center": [float(c) for c in center], "size": [float(s) for s in size],
+            "normal": [float(n) for n in normal], "material": material}
+
+
+def _cyl(p0, p1, radius, material):
+    return {"shape": "cylinder", "p0": [float(c) for c in p0], "p1": [float(c) for c in p1],
+            "radius": float(radius), "material": material}
+
+
+def _local(x, y, heading):
+    """Vehicle-local (x fwd, y left) offset -> world xy offset for heading (rad)."""
+    c, s = math.cos(heading), math.sin(heading)
+    return c * x - s * y, s * x + c * y
+
+
+# Vehicle templates in the vehicle frame (x forward from the centre, y left, z up), metres.
+_TEMPLATES = {
+    "car": {"length": 4.4, "boxes": [((0.0, 0.0, 0.68), (4.4, 1.8, 0.66), "paint"),
+                                     ((-0.35, 0.0, 1.28), (2.3, 1.6, 0.56), "glass")],
+            "wheels": [(1.35, 0.33, 0.8), (-1.35, 0.33, 0.8)], "wheel_w": 0.22,
+            "tail": [((-2.205, 0.62, 0.86), (0.32, 0.12))], "head": [((2.205, 0.62, 0.72), (0.26, 0.11))],
+            "cbrake": (-1.52, 0.0, 1.54, 0.5, 0.06), "ind": [((-2.205, 0.82, 0.72), (0.1, 0.07))]},
+    "truck": {"length": 9.5, "boxes": [((3.55, 0.0, 1.85), (2.4, 2.4, 2.6), "paint"),
+                                       ((-1.2, 0.0, 2.35), (7.1, 2.5, 3.3), "cargo"),
+                                       ((4.56, 0.0, 2.35), (0.4, 2.2, 1.0), "glass")],
+              "wheels": [(3.4, 0.5, 1.0), (-2.5, 0.5, 1.0), (-3.8, 0.5, 1.0)], "wheel_w": 0.3,
+              "tail": [((-4.755, 1.0, 1.0), (0.3, 0.15))], "head": [((4.755, 0.9, 1.0), (0.3, 0.14))],
+              "cbrake": None, "ind": [((-4.755, 1.15, 1.25), (0.12, 0.1))]},
+    "motorcycle": {"length": 2.1, "boxes": [((0.0, 0.0, 0.72), (1.7, 0.35, 0.45), "paint"),
+                                           ((-0.2, 0.0, 1.3), (0.4, 0.45, 0.7), "rider")],
+                   "wheels": [(0.75, 0.32, 0.0), (-0.75, 0.32, 0.0)], "wheel_w": 0.12,
+                   "tail": [((-0.865, 0.0, 0.9), (0.14, 0.07))], "head": [((0.865, 0.0, 0.95), (0.16, 0.1))],
+                   "cbrake": None, "ind": []},
+}
+
+
+def _vehicle(b: _Builder, kind: str, x: float, y: float, heading: float, speed: float, lights_on: bool,
+             braking: bool, indicator: bool) -> None:
+    t = _TEMPLATES[kind]
+    rng = b.rng
+    paint = f"paint{len(b.objects)}"
+    col = rng.uniform(0.05, 0.75, 3) if rng.random() < 0.7 else np.full(3, rng.uniform(0.03, 0.8))
+    b.materials[paint] = {"type": "roughplastic", "rgb": [round(float(c), 4) for c in col], "alpha": 0.15}
+    if kind == "truck":
+        b.materials[paint + "c"] = {"type": "diffuse", "rgb": [round(float(c), 4) for c in rng.uniform(0.3, 0.8, 3)]}
+    deg = math.degrees(heading)
+    parts = []
+    for (cx, cy, cz), size, mat in t["boxes"]:
+        dx, dy = _local(cx, cy, heading)
+        m = {"paint": paint, "cargo": paint + "c", "glass": "glass", "rider": "rubber"}[mat]
+        parts.append(_box((x + dx, y + dy, cz), size, m, deg))
+    if kind == "motorcycle":
+        dx, dy = _local(-0.2, 0.0, heading)
+        parts.append({"shape": "sphere", "center": [x + dx, y + dy, 1.8], "radius": 0.15, "material": paint})
+    for wx, r, wy in t["wheels"]:
+        for side in ((1, -1) if wy > 0 else (0,)):
+            yy = side * wy
+            a0, b0 = _local(wx, yy - t["wheel_w"] / 2, heading)
+            a1, b1 = _local(wx, yy + t["wheel_w"] / 2, heading)
+            parts.append(_cyl((x + a0, y + b0, r), (x + a1, y + b1, r), r, "rubber"))
+    fwd = (math.cos(heading), math.sin(heading), 0.0)
+    back = (-fwd[0], -fwd[1], 0.0)
+    speed_v = (speed * fwd[0], speed * fwd[1], 0.0)
+    oid = b.obj(kind, parts, speed_v)
+    lc = b.cfg["lights"]
+
+    def lamps(spec, where, normal, lamp_kind, lum, spread):
+        for (lx, ly, lz), (w, h) in where:
+            for side in ((1, -1) if ly != 0 else (0,)):
+                dx, dy = _local(lx, side * ly, heading)
+                b.light(lamp_kind, oid, {"shape": "rect", "center": [x + dx, y + dy, lz], "normal": list(normal),
+                                         "size": [w, h]}, spec, lum, spread)
+
+    if lights_on:
+        lamps(lc["led_white"], t["head"], fwd, "headlight", b.u(lc["headlight_luminance_cd_m2"]),
+              b.u(lc["headlight_spread_deg"]))
+        lamps(lc["led_red"], t["tail"], back, "tail", b.other_luminance(), lc["tail_spread_deg"])
+    if braking:
+        lum = max(b.other_luminance(), b.other_luminance()) * 3.0
+        lum = min(lum, b.head_peak * lc["other_ratio_log"][1])
+        if t["cbrake"] is not None:
+            cx, cy, cz, w, h = t["cbrake"]
+            dx, dy = _local(cx, cy, heading)
+            b.light("brake", oid, {"shape": "rect", "center": [x + dx, y + dy, cz], "normal": list(back),
+                                   "size": [w, h]}, lc["led_red"], lum, lc["tail_spread_deg"])
+        lamps(lc["led_red"], [((p[0] - 0.003, p[1], p[2] + 0.1), (s[0], 0.06)) for p, s in t["tail"]], back,
+              "brake", lum, lc["tail_spread_deg"])
+    if indicator and t["ind"]:
+        (lx, ly, lz), (w, h) = t["ind"][0]
+        side = 1 if b.rng.random() < 0.5 else -1
+        dx, dy = _local(lx - 0.003, side * ly, heading)
+        b.light("indicator", oid, {"shape": "rect", "center": [x + dx, y + dy, lz], "normal": list(back),
+                                   "size": [w, h]}, lc["led_amber"], b.other_luminance(), lc["tail_spread_deg"])
+
+
+def generate_scene(seed: int, time_of_day: str | None = None, config: dict | str | None = None,
+                   scene_id: str | None = None) -> dict:
+    """Generate a driving scene.
+
+    Args:
+        seed: integer seed; every random draw of the scene comes from ``numpy.random.default_rng(seed)``.
+        time_of_day: ``"day"``, ``"dusk"``, ``"night"`` or None (drawn with the config's weights).
+        config: generator defaults (dict or YAML path); default :data:`DEFAULT_CONFIG`.
+        scene_id: identifier stored in the scene (default ``"scene_<seed>"``).
+    Returns:
+        A validated scene dict (see :func:`validate_scene` for the schema).
+    """
+    if not isinstance(seed, (int, np.integer)) or isinstance(seed, bool) or seed < 0:
+        raise ValueError(f"seed: must be a non-negative integer, got {seed!r}")
+    cfg = config if isinstance(config, dict) else load_config(config)
+    rng = np.random.default_rng(int(seed))
+    if time_of_day is None:
+        names = list(cfg["time_of_day_weights"])
+        p = np.array([cfg["time_of_day_weights"][n] for n in names], dtype=float)
+        time_of_day = names[int(rng.choice(len(names), p=p / p.sum()))]
+    if time_of_day not in TIMES_OF_DAY:
+        raise ValueError(f"time_of_day: {time_of_day!r} not one of {TIMES_OF_DAY}")
+    b = _Builder(rng, cfg, time_of_day)
+    rc, bc, vc, lc = cfg["road"], cfg["buildings"], cfg["vehicles"], cfg["lights"]
+    dark = time_of_day != "day"
+
+    # --- road, markings, sidewalks, ground
+    n = b.ui(rc["lanes_per_direction"])
+    lw = float(rc["lane_width_m"])
+    park = 2.2
+    half = n * lw + park
+    x0, x1 = -float(rc["behind_m"]), float(rc["length_m"])
+    xm, xl = (x0 + x1) / 2, x1 - x0
+    sw = b.u(rc["sidewalk_width_m"])
+    ch = float(rc["curb_height_m"])
+    b.obj("ground", [_rect((xm, 0.0, -0.02), (xl + 400.0, 600.0), (0, 0, 1), "ground")])
+    b.obj("road", [_box((xm, 0.0, -0.05), (xl, 2 * half, 0.1), "asphalt")])
+    mw = float(rc["marking_width_m"])
+    marks = [_rect((xm, 0.12, 0.003), (xl, mw), (0, 0, 1), "marking"),
+             _rect((xm, -0.12, 0.003), (xl, mw), (0, 0, 1), "marking"),
+             _rect((xm, n * lw, 0.003), (xl, mw), (0, 0, 1), "marking"),
+             _rect((xm, -n * lw, 0.003), (xl, mw), (0, 0, 1), "marking")]
+    dl, dg = float(rc["dash_length_m"]), float(rc["dash_gap_m"])
+    for k in range(1, n):
+        for side in (1, -1):
+            xx = x0 + rng.uniform(0, dl + dg)
+            while xx < x1:
+                marks.append(_rect((xx + dl / 2, side * k * lw, 0.003), (dl, mw), (0, 0, 1), "marking"))
+                xx += dl + dg
+    b.obj("marking", marks)
+    for side in (1, -1):
+        b.obj("sidewalk", [_box((xm, side * (half + sw / 2), ch / 2), (xl, sw, ch), "concrete")])
+
+    # --- buildings (with windows and, after dark, LED billboards)
+    n_board = b.ui(lc["billboards"]) if dark else 0
+    bi = 0
+    facades = []
+    for side in (1, -1):
+        xx = x0
+        while xx < float(bc["max_extent_m"]):
+            w, d, h = b.u(bc["width_m"]), b.u(bc["depth_m"]), b.u(bc["height_m"])
+            y_in = half + sw + b.u(bc["setback_m"])
+            yc = side * (y_in + d / 2)
+            mat = f"building{bi}"
+            bi += 1
+            g = rng.uniform(0.15, 0.55)
+            tint = rng.uniform(0.85, 1.15, 3) * g
+            b.materials[mat] = {"type": "diffuse", "rgb": [round(float(c), 4) for c in np.clip(tint, 0, 0.9)]}
+            parts = [_box((xx + w / 2, yc, h / 2), (w, d, h), mat)]
+            nwin = b.ui(bc["windows_per_row"])
+            floors = max(1, int((h - 1.5) // 3.2))
+            face_y = side * (y_in - 0.01)
+            for f in range(min(floors, 8)):
+                for k in range(nwin):
+                    cx = xx + (k + 0.5) * w / nwin
+                    parts.append(_rect((cx, face_y, 1.8 + 3.2 * f), (min(1.4, 0.6 * w / nwin), 1.5),
+                                       (0, -side, 0), "glass"))
+            oid = b.obj("building", parts)
+            facades.append((oid, xx, w, face_y, side, h))
+            xx += w + b.u(bc["gap_m"])
+    ahead = [f for f in facades if 15.0 < f[1] < 120.0 and f[2] > 7.0]
+    for j in rng.permutation(len(ahead))[:n_board]:
+        oid, xx, w, face_y, side, h = ahead[int(j)]
+        bw, bh = rng.uniform(3.0, min(6.0, w - 1.0)), rng.uniform(1.5, 3.0)
+        spec = [lc["led_white"], lc["led_red"], lc["led_green"], lc["led_amber"]][int(rng.integers(0, 4))]
+        b.light("billboard", oid, {"shape": "rect", "center": [xx + w / 2, face_y - side * 0.05, 3.0 + bh / 2 + 1.0],
+                                   "normal": [0.0, -side, 0.0], "size": [bw, bh]}, spec, b.other_luminance())
+
+    # --- camera
+    cam_lane = int(rng.integers(0, n))
+    cam_y = -(cam_lane + 0.5) * lw
+    speed = b.u(cfg["camera"]["speed_mps"])
+
+    # --- vehicles
+    r0, r1 = vc["range_m"]
+    kinds = list(vc["kind_weights"])
+    kp = np.array([vc["kind_weights"][k] for k in kinds], dtype=float)
+    kp /= kp.sum()
+    occupied: dict[float, list[tuple[float, float]]] = {}
+
+    def free(lane_y, x, length):
+        for (a, c) in occupied.get(lane_y, []):
+            if abs(x - a) < (length + c) / 2 + 4.0:
+                return False
+        return True
+
+    def place(lane_ys, count, heading, moving):
+        for _ in range(count):
+            for _try in range(20):
+                kind = kinds[int(rng.choice(len(kinds), p=kp))] if moving else "car"
+                ln = _TEMPLATES[kind]["length"]
+                ly = lane_ys[int(rng.integers(0, len(lane_ys)))]
+                x = rng.uniform(r0, r1)
+                if abs(ly - cam_y) < 0.1 and x < 12.0:
+                    continue
+                if free(ly, x, ln):
+                    occupied.setdefault(ly, []).append((x, ln))
+                    yy = ly + (rng.uniform(-0.25, 0.25) if moving else 0.0)
+                    sp = b.u(vc["speed_mps"]) if moving else 0.0
+                    _vehicle(b, kind, x, yy, heading, sp, lights_on=moving and (dark or kind == "motorcycle"),
+                             braking=moving and rng.random() < vc["brake_probability"],
+                             indicator=moving and rng.random() < vc["indicator_probability"])
+                    break
+
+    same = [-(k + 0.5) * lw for k in range(n)]
+    onc = [(k + 0.5) * lw for k in range(n)]
+    place(same, b.ui(vc["ahead_same_dir"]), 0.0, True)
+    place(onc, b.ui(vc["oncoming"]), math.pi, True)
+    place([-(n * lw + park / 2)], b.ui(vc["parked_per_side"]), 0.0, False)
+    place([n * lw + park / 2], b.ui(vc["parked_per_side"]), math.pi, False)
+
+    # --- streetlights (poles always, lamps after dark)
+    spacing = b.u(lc["streetlight_spacing_m"])
+    sl_spec = lc["streetlight_spectra"][int(rng.integers(0, len(lc["streetlight_spectra"])))]
+    sl_h = b.u(lc["streetlight_height_m"])
+    sl_lum = b.u(lc["streetlight_luminance_cd_m2"])
+    for side in (1, -1):
+        xx = x0 + rng.uniform(0, spacing)
+        while xx < 200.0:
+            py = side * (half + 0.5)
+            ay = side * (half - 1.5)
+            parts = [_cyl((xx, py, 0.0), (xx, py, sl_h + 0.1), 0.09, "metal"),
+                     _box((xx, (py + ay) / 2, sl_h), (0.12, abs(py - ay), 0.1), "metal"),
+                     _box((xx, ay, sl_h - 0.05), (0.7, 0.35, 0.15), "housing")]
+            oid = b.obj("streetlight_pole", parts)
+            if dark:
+                b.light("streetlight", oid, {"shape": "rect", "center": [xx, ay, sl_h - 0.13], "normal": [0, 0, -1],
+                                             "size": [0.6, 0.25]}, sl_spec, sl_lum, 90.0)
+            xx += spacing
+
+    # --- traffic signal ahead (over the ego lanes, facing the camera) and one on the pole
+    sx = b.u(lc["signal_distance_m"])
+    state = ["red", "amber", "green", "red_amber"][int(rng.integers(0, 4))]
+    py = -(half + 0.4)
+    arm_y = -max(0.0, (n - 0.5) * lw) * 0.5 - 0.5 * lw
+    ph = 5.6
+    parts = [_cyl((sx, py, 0.0), (sx, py, ph + 0.6), 0.12, "metal"),
+             _box((sx, (py + arm_y) / 2, ph + 0.5), (0.12, abs(py - arm_y) + 0.4, 0.12), "metal")]
+    heads = [(sx, arm_y, ph - 0.2), (sx - 0.15, py, 3.0)]
+    lamps = {"red": (0.33, lc["led_red"]), "amber": (0.0, lc["led_amber"]), "green": (-0.33, lc["led_green"])}
+    on = {"red": ["red"], "amber": ["amber"], "green": ["green"], "red_amber": ["red", "amber"]}[state]
+    off_parts = []
+    for hx, hy, hz in heads:
+        parts.append(_box((hx + 0.15, hy, hz), (0.3, 0.38, 1.05), "housing"))
+        for name, (dz, _) in lamps.items():
+            if name not in on:
+                off_parts.append({"shape": "disk", "center": [hx - 0.005, hy, hz + dz], "radius": 0.1,
+                                  "normal": [-1.0, 0.0, 0.0], "material": "lamp_off"})
+    oid = b.obj("signal_pole", parts + off_parts)
+    sig_lum = b.u(lc["signal_luminance_cd_m2"])
+    for hx, hy, hz in heads:
+        for name in on:
+            dz, spec = lamps[name]
+            b.light("signal", oid, {"shape": "disk", "center": [hx - 0.005, hy, hz + dz], "normal": [-1, 0, 0],
+                                    "radius": 0.1}, spec, sig_lum, 90.0)
+
+    # --- sky
+    sc = cfg["sky"][time_of_day]
+    if time_of_day == "night":
+        sky = {"model": "constant", "spectrum": copy.deepcopy(sc["spectrum"]),
+               "luminance_cd_m2": b.ulog(sc["luminance_cd_m2_log"])}
+    else:
+        sky = {"model": "sunsky", "sun_elevation_deg": b.u(sc["sun_elevation_deg"]),
+               "sun_azimuth_deg": float(rng.uniform(-150.0, 150.0)), "turbidity": b.u(sc["turbidity"]),
+               "scale": b.ulog(sc["scale_log"]) if "scale_log" in sc else b.u(sc["scale"])}
+
+    cc = cfg["camera"]
+    yaw_rate = b.u(cc["yaw_rate_rad_s"])
+    scene = {
+        "format": SCENE_FORMAT, "version": SCENE_VERSION,
+        "scene_id": scene_id or f"scene_{int(seed):06d}", "seed": int(seed), "time_of_day": time_of_day,
+        "timing": {"short_exposure_s": b.u(cfg["timing"]["short_exposure_s"])},
+        "camera": {"position_m": [0.0, cam_y, float(cc["height_m"])], "yaw_deg": 0.0,
+                   "pitch_deg": b.u(cc["pitch_deg"]), "fov_x_deg": float(cc["fov_x_deg"]), "speed_mps": speed,
+                   "yaw_rate_rad_s": yaw_rate},
+        "sky": sky,
+        "groups": copy.deepcopy(cfg["groups"]),
+        "materials": b.materials,
+        "objects": b.objects,
+        "lights": b.lights,
+    }
+    return validate_scene(json.loads(json.dumps(scene)))
+
+
+# ------------------------------------------------------------------------------------------- validation
+def _fail(path, msg):
+    raise ValueError(f"{path}: {msg}")
+
+
+def _keys(d, path, required, optional=()):
+    if not isinstance(d, dict):
+        _fail(path, f"expected an object, got {type(d).__name__}")
+    for k in d:
+        if k not in required and k not in optional:
+            _fail(f"{path}.{k}", f"unknown field (allowed: {sorted(set(required) | set(optional))})")
+    for k in required:
+        if k not in d:
+            _fail(f"{path}.{k}", "missing required field")
+
+
+def _num(v, path, lo=-math.inf, hi=math.inf, lo_open=False):
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+        _fail(path, f"expected a finite number, got {v!r}")
+    if v < lo or v > hi or (lo_open and v == lo):
+        _fail(path, f"{v!r} outside {'(' if lo_open else '['}{lo}, {hi}]")
+    return float(v)
+
+
+def _int(v, path, lo=0):
+    if isinstance(v, bool) or not isinstance(v, int) or v < lo:
+        _fail(path, f"expected an integer >= {lo}, got {v!r}")
+    return v
+
+
+def _vec(v, path, n=3, lo=-MAX_COORD_M, hi=MAX_COORD_M):
+    if not isinstance(v, (list, tuple)) or len(v) != n:
+        _fail(path, f"expected a list of {n} numbers, got {v!r}")
+    return [_num(x, f"{path}[{i}]", lo, hi) for i, x in enumerate(v)]
+
+
+def _unit(v, path):
+    x = np.array(_vec(v, path, 3, -1e3, 1e3))
+    if np.linalg.norm(x) < 1e-6:
+        _fail(path, "normal must be non-zero")
+    return x
+
+
+def _part_or_light_shape(p, path, extra_req, extra_opt, materials=None):
+    shape = p.get("shape") if isinstance(p, dict) else None
+    allowed = PART_SHAPES if materials is not None else ("rect", "disk")
+    if shape not in allowed:
+        _fail(f"{path}.shape", f"{shape!r} not one of {allowed}")
+    geo = {"box": (("center", "size"), ("yaw_deg",)), "cylinder": (("p0", "p1", "radius"), ()),
+           "rect": (("center", "size", "normal"), ()), "disk": (("center", "radius", "normal"), ()),
+           "sphere": (("center", "radius"), ())}[shape]
+    _keys(p, path, ("shape",) + geo[0] + extra_req, geo[1] + extra_opt)
+    for k in ("center", "p0", "p1"):
+        if k in p:
+            _vec(p[k], f"{path}.{k}")
+    if "size" in p:
+        _vec(p["size"], f"{path}.size", 3 if shape == "box" else 2, 0.0, MAX_COORD_M)
+        if min(p["size"]) <= 0:
+            _fail(f"{path}.size", f"all sizes must be > 0 m, got {p['size']}")
+    if "radius" in p:
+        _num(p["radius"], f"{path}.radius", 0.0, 1e3, lo_open=True)
+    if "normal" in p:
+        _unit(p["normal"], f"{path}.normal")
+    if "yaw_deg" in p:
+        _num(p["yaw_deg"], f"{path}.yaw_deg", -720.0, 720.0)
+    if shape == "cylinder" and np.allclose(p["p0"], p["p1"]):
+        _fail(f"{path}.p1", "cylinder end points coincide")
+    if materials is not None and p.get("material") not in materials:
+        _fail(f"{path}.material", f"{p.get('material')!r} is not defined in scene.materials")
+
+
+def validate_scene(scene: dict) -> dict:
+    """Validate a scene dict; returns it unchanged. Raises ``ValueError`` naming the first bad field.
+
+    Schema (all lengths m, times s, angles deg unless named ``_rad``):
+    ``format`` ("lfmbench-scene"), ``version`` (1), ``scene_id`` (str), ``seed`` (int >= 0),
+    ``time_of_day`` (day|dusk|night), ``timing.short_exposure_s`` (> 0),
+    ``camera`` {position_m [3], yaw_deg, pitch_deg (-89, 89), fov_x_deg (0, 180), speed_mps >= 0,
+    yaw_rate_rad_s}, ``sky`` {model: sunsky {sun_elevation_deg [-5, 90], sun_azimuth_deg, turbidity [1, 10],
+    scale > 0} | constant {spectrum, luminance_cd_m2 >= 0}}, ``groups`` {name in GROUPS: {flicker: bool}},
+    ``materials`` {name: {type: diffuse|roughplastic|roughconductor, rgb [3] in [0, 1], alpha (0, 1]}},
+    ``objects`` [{id (= index), kind, velocity_mps [3], parts [shape ...]}], ``lights`` [{id (= index),
+    group, kind, instance (object id), shape rect|disk, center, normal, size | radius, spread_deg (0, 90],
+    spectrum (see :mod:`render_tools.spectra`), luminance_cd_m2 >= 0}].
+    """
+    _keys(scene, "scene", ("format", "version", "scene_id", "seed", "time_of_day", "timing", "camera", "sky",
+                           "groups", "materials", "objects", "lights"))
+    if scene["format"] != SCENE_FORMAT:
+        _fail("scene.format", f"expected {SCENE_FORMAT!r}, got {scene['format']!r}")
+    if scene["version"] != SCENE_VERSION:
+        _fail("scene.version", f"unsupported version {scene['version']!r} (this reader: {SCENE_VERSION})")
+    if not isinstance(scene["scene_id"], str) or not scene["scene_id"] or any(c in scene["scene_id"] for c in "/\\ "):
+        _fail("scene.scene_id", f"must be a non-empty string without '/', '\\' or spaces, got {scene['scene_id']!r}")
+    _int(scene["seed"], "scene.seed")
+    if scene["time_of_day"] not in TIMES_OF_DAY:
+        _fail("scene.time_of_day", f"{scene['time_of_day']!r} not one of {TIMES_OF_DAY}")
+    _keys(scene["timing"], "scene.timing", ("short_exposure_s",))
+    _num(scene["timing"]["short_exposure_s"], "scene.timing.short_exposure_s", 0.0, 1.0, lo_open=True)
+    c = scene["camera"]
+    _keys(c, "scene.camera", ("position_m", "yaw_deg", "pitch_deg", "fov_x_deg", "speed_mps", "yaw_rate_rad_s"))
+    _vec(c["position_m"], "scene.camera.position_m")
+    _num(c["yaw_deg"], "scene.camera.yaw_deg", -720, 720)
+    _num(c["pitch_deg"], "scene.camera.pitch_deg", -89, 89)
+    _num(c["fov_x_deg"], "scene.camera.fov_x_deg", 0.0, 179.0, lo_open=True)
+    _num(c["speed_mps"], "scene.camera.speed_mps", 0.0, 200.0)
+    _num(c["yaw_rate_rad_s"], "scene.camera.yaw_rate_rad_s", -10.0, 10.0)
+    s = scene["sky"]
+    model = s.get("model") if isinstance(s, dict) else None
+    if model == "sunsky":
+        _keys(s, "scene.sky", ("model", "sun_elevation_deg", "sun_azimuth_deg", "turbidity", "scale"))
+        _num(s["sun_elevation_deg"], "scene.sky.sun_elevation_deg", -5.0, 90.0)
+        _num(s["sun_azimuth_deg"], "scene.sky.sun_azimuth_deg", -360.0, 360.0)
+        _num(s["turbidity"], "scene.sky.turbidity", 1.0, 10.0)
+        _num(s["scale"], "scene.sky.scale", 0.0, 1e3, lo_open=True)
+    elif model == "constant":
+        _keys(s, "scene.sky", ("model", "spectrum", "luminance_cd_m2"))
+        spectra.validate_spectrum(s["spectrum"], "scene.sky.spectrum")
+        _num(s["luminance_cd_m2"], "scene.sky.luminance_cd_m2", 0.0, 1e6)
+    else:
+        _fail("scene.sky.model", f"{model!r} not one of ('sunsky', 'constant')")
+    g = scene["groups"]
+    if not isinstance(g, dict):
+        _fail("scene.groups", "expected an object")
+    for name, v in g.items():
+        if name not in GROUPS:
+            _fail(f"scene.groups.{name}", f"unknown group (allowed: {GROUPS})")
+        _keys(v, f"scene.groups.{name}", ("flicker",))
+        if not isinstance(v["flicker"], bool):
+            _fail(f"scene.groups.{name}.flicker", f"expected true/false, got {v['flicker']!r}")
+    if g.get("skymap", {}).get("flicker"):
+        _fail("scene.groups.skymap.flicker", "the sky cannot flicker")
+    mats = scene["materials"]
+    if not isinstance(mats, dict):
+        _fail("scene.materials", "expected an object")
+    for name, m in mats.items():
+        p = f"scene.materials.{name}"
+        t = m.get("type") if isinstance(m, dict) else None
+        if t not in MATERIAL_TYPES:
+            _fail(f"{p}.type", f"{t!r} not one of {MATERIAL_TYPES}")
+        req = {"diffuse": ("type", "rgb"), "roughplastic": ("type", "rgb", "alpha"),
+               "roughconductor": ("type", "alpha")}[t]
+        _keys(m, p, req)
+        if "rgb" in m:
+            _vec(m["rgb"], f"{p}.rgb", 3, 0.0, 1.0)
+        if "alpha" in m:
+            _num(m["alpha"], f"{p}.alpha", 0.0, 1.0, lo_open=True)
+    objs = scene["objects"]
+    if not isinstance(objs, list):
+        _fail("scene.objects", "expected a list")
+    for i, o in enumerate(objs):
+        p = f"scene.objects[{i}]"
+        _keys(o, p, ("id", "kind", "velocity_mps", "parts"))
+        if _int(o["id"], f"{p}.id") != i:
+            _fail(f"{p}.id", f"must equal its index {i}, got {o['id']}")
+        if o["kind"] not in OBJECT_KINDS:
+            _fail(f"{p}.kind", f"{o['kind']!r} not one of {OBJECT_KINDS}")
+        _vec(o["velocity_mps"], f"{p}.velocity_mps", 3, -200.0, 200.0)
+        if not isinstance(o["parts"], list) or not o["parts"]:
+            _fail(f"{p}.parts", "expected a non-empty list")
+        for j, part in enumerate(o["parts"]):
+            _part_or_light_shape(part, f"{p}.parts[{j}]", ("material",), (), materials=mats)
+    lights = scene["lights"]
+    if not isinstance(lights, list):
+        _fail("scene.lights", "expected a list")
+    for i, lt in enumerate(lights):
+        p = f"scene.lights[{i}]"
+        _part_or_light_shape(lt, p, ("id", "group", "kind", "instance", "spread_deg", "spectrum",
+                                     "luminance_cd_m2"), ())
+        if _int(lt["id"], f"{p}.id") != i:
+            _fail(f"{p}.id", f"must equal its index {i}, got {lt['id']}")
+        if lt["group"] not in LIGHT_GROUPS:
+            _fail(f"{p}.group", f"{lt['group']!r} not one of {LIGHT_GROUPS}")
+        if lt["group"] not in g:
+            _fail(f"{p}.group", f"group {lt['group']!r} is not declared in scene.groups")
+        if lt["kind"] not in LIGHT_KINDS:
+            _fail(f"{p}.kind", f"{lt['kind']!r} not one of {sorted(LIGHT_KINDS)}")
+        if _int(lt["instance"], f"{p}.instance", -1) >= len(objs):
+            _fail(f"{p}.instance", f"object {lt['instance']} does not exist (-1 = none)")
+        _num(lt["spread_deg"], f"{p}.spread_deg", 0.0, 90.0, lo_open=True)
+        spectra.validate_spectrum(lt["spectrum"], f"{p}.spectrum")
+        _num(lt["luminance_cd_m2"], f"{p}.luminance_cd_m2", 0.0, 1e9)
+    return scene
+
+
+def scene_groups(scene: dict) -> dict:
+    """Groups the scene *has*: {name: {"flicker": bool}}; a light group with no lights and a sky of zero
+    luminance are left out."""
+    have = {lt["group"] for lt in scene["lights"]}
+    sky = scene["sky"]
+    sky_on = sky["model"] == "sunsky" or sky["luminance_cd_m2"] > 0
+    out = {}
+    for name in GROUPS:
+        if name not in scene["groups"]:
+            continue
+        if (name == "skymap" and sky_on) or name in have:
+            out[name] = dict(scene["groups"][name])
+    return out
+
+
+# -------------------------------------------------------------------------------------------------- I/O
+def load_scene(path: str | os.PathLike) -> dict:
+    """Read and validate a scene JSON file; errors name the file."""
+    try:
+        with open(path, encoding="utf-8") as fh:
+            scene = json.load(fh)
+    except (OSError, ValueError) as exc:
+        raise ValueError(f"scene file {path}: cannot read JSON ({exc})") from exc
+    try:
+        return validate_scene(scene)
+    except ValueError as exc:
+        raise ValueError(f"scene file {path}: {exc}") from exc
+
+
+def save_scene(scene: dict, path: str | os.PathLike) -> None:
+    """Validate and write ``scene`` as JSON atomically (temp file in the same directory, then ``os.replace``)."""
+    validate_scene(scene)
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            json.dump(scene, fh, indent=1)
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise

@@ -1,0 +1,273 @@
+"""LFMCaptureDataset on tiny generated corpora (no rendering, no network).
+
+Physics checks use an independent answer: brute-force time integration of the PWM waveform over the bins.
+"""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import torch
+from torch.utils.data import DataLoader, DistributedSampler
+
+from lfmbench import corpus as C
+from lfmbench.datasets import DatasetNotFoundError, LFMCaptureDataset, compose_frame
+from lfmbench.datasets.projection import build_layers
+from lfmbench.flicker import pwm_level
+from lfmbench.sensor import load_preset
+from tests.test_corpus_data import fake_frames, fake_meta, fake_scene
+
+H, W = 16, 24
+
+
+def make_corpus(root, n_scenes=3, frames=3, bins=4, scale=1e-3, static_camera=False, seed=0, groups=None):
+    """A corpus of ``n_scenes`` fake scenes; radiance scaled by ``scale`` (W sr^-1 m^-2 nm^-1) to stay unclipped."""
+    w = C.CorpusWriter(root)
+    for i in range(n_scenes):
+        meta = fake_meta(f"scene{i:05d}", width=W, height=H, frames=frames, bins=bins, groups=groups, n_lights=2)
+        fr = fake_frames(meta, seed=seed + i)
+        for f in fr:
+            for g in f["static"].values():
+                for k in g:
+                    g[k] *= scale
+            for g, ls in f["lights"].items():
+                new = []
+                for lid, box, arr in ls:
+                    arr = arr * scale
+                    if static_camera:
+                        arr[:] = arr[:1]  # every bin identical: a static scene
+                    new.append((lid, box, arr))
+                f["lights"][g] = new
+            f["aux"]["mask.light"][1:4, 4:6] = 1
+        w.write_scene(meta["scene_id"], fake_scene(meta["scene_id"]), meta, fr)
+    w.write_splits(0)
+    return root
+
+
+@pytest.fixture(scope="module")
+def corpus(tmp_path_factory):
+    return make_corpus(tmp_path_factory.mktemp("corpus"))
+
+
+def test_sample_keys_shapes_and_units(corpus):
+    ds = LFMCaptureDataset(corpus, split="all", frames=3, crop=(8, 12), cache_dir=False)
+    s = ds[0]
+    for k in ("lpd_hcg", "lpd_lcg", "spd", "lpd_hcg_e", "lpd_lcg_e", "spd_e", "gt", "depth"):
+        assert s[k].shape == (3, 1, 8, 12), k
+        assert torch.isfinite(s[k]).all(), k
+    assert s["saturated"].shape == (3, 3, 8, 12) and s["saturated"].dtype == torch.bool
+    assert s["light_index"].dtype == torch.int64
+    assert s["lpd_lcg"].max() <= 4095 and s["lpd_lcg"].min() >= 0  # 12-bit DN
+    m = s["meta"]
+    assert m["num_lights"] == 2 and m["flicker"][:2].all() and m["light_id"][2] == -1
+    assert ((m["freq_hz"][:2] >= 90) & (m["freq_hz"][:2] <= 120)).all()
+    assert ((m["duty"][:2] >= 0.1) & (m["duty"][:2] <= 0.5)).all()
+    assert (m["phase_s"][:2] < 1 / m["freq_hz"][:2]).all()
+    assert m["crop"][0] % 2 == 0 and m["crop"][1] % 2 == 0  # Bayer phase kept
+
+
+def test_only_requested_outputs(corpus):
+    ds = LFMCaptureDataset(corpus, split="all", outputs=("gt",), cache_dir=False)
+    assert set(ds[0]) == {"gt", "meta"}
+    ds = LFMCaptureDataset(corpus, split="all", outputs=("rgb",), frames=2, cache_dir=False)
+    s = ds[1]
+    assert {"lpd_lcg_rgb", "spd_rgb", "gt_rgb"} <= set(s) and "lpd_lcg_e" not in s and "gt" not in s
+    assert s["gt_rgb"].shape == (2, 3, H, W)
+
+
+def test_deterministic_per_seed_epoch_index_and_worker_independent(corpus):
+    ds = LFMCaptureDataset(corpus, split="all", crop=8, cache_dir=False)
+    a, b = ds[2], ds[2]
+    assert torch.equal(a["lpd_hcg"], b["lpd_hcg"]) and torch.equal(a["meta"]["duty"], b["meta"]["duty"])
+    ds.set_epoch(1)
+    c = ds[2]
+    assert not torch.equal(a["meta"]["duty"], c["meta"]["duty"])
+    ds.set_epoch(0)
+    serial = [ds[i] for i in range(len(ds))]
+    loader = DataLoader(ds, batch_size=1, num_workers=2, shuffle=False)
+    for ref, got in zip(serial, loader):
+        assert torch.equal(ref["lpd_lcg"], got["lpd_lcg"][0])
+        assert torch.equal(ref["gt"], got["gt"][0])
+
+
+def test_distributed_sampler_shards_give_the_same_samples(corpus):
+    ds = LFMCaptureDataset(corpus, split="all", samples_per_scene=2, crop=8, cache_dir=False)
+    seen = {}
+    for rank in range(2):
+        sampler = DistributedSampler(ds, num_replicas=2, rank=rank, shuffle=True, seed=3)
+        for i in sampler:
+            seen.setdefault(i, []).append(ds[i]["spd"])
+    assert sorted(seen) == list(range(len(ds)))
+    for i, samples in seen.items():
+        assert torch.equal(samples[0], ds[i]["spd"])
+
+
+def _brute_force_light(layers, meta, frame, light_id, p, window, rate_key, level="pwm", rows=None):
+    """Mean e- of one light over a window by dense sampling of the waveform (independent of pwm_exposure)."""
+    tm = meta["timing"]
+    K = tm["bins"]
+    t0 = frame / meta["fps"]
+    edges = t0 + np.linspace(0, tm["capture_window_s"], K + 1)
+    (lid, _g, box, rates), = [x for x in layers.lights[frame] if x[0] == light_id]
+    a, te = window
+    n = 400_000
+    t = a + (np.arange(n) + 0.5) * te / n
+    k = np.clip(np.searchsorted(edges, t, side="right") - 1, 0, K - 1)
+    s = pwm_level(t - p["phase_s"], p["period_s"], p["duty"]) if level == "pwm" else np.full(n, p["duty"])
+    wk = np.bincount(k, weights=s, minlength=K) * te / n                    # s at level 1 per bin
+    return box, torch.einsum("kyx,k->yx", rates[rate_key].double(), torch.from_numpy(wk))
+
+
+def test_composition_matches_brute_force_time_integration(corpus):
+    c = C.Corpus(corpus)
+    sid = c.scenes[0]
+    meta = c.meta(sid)
+    preset = load_preset("ovt")
+    layers = build_layers(c, sid, preset, None, 3, optics=True)
+    tm = meta["timing"]
+    params = {0: dict(period_s=1 / 97, duty=0.23, phase_s=0.0041, rise_s=0.0, fall_s=0.0),
+              1: dict(period_s=1 / 113, duty=0.41, phase_s=0.0007, rise_s=0.0, fall_s=0.0)}
+    for frame in (0, 2):
+        out = compose_frame(layers, meta, frame, (0, 0, H, W), params, {})
+        static_only = compose_frame(layers, meta, frame, (0, 0, H, W), {}, {})  # lights absent from params
+        t0 = frame / meta["fps"]
+        ts, tl = tm["short_exposure_s"], tm["long_exposure_s"]
+        for key, window, rk, level in (("lpd", (t0 + (tl - ts) / 2, ts), "lpd", "pwm"),
+                                       ("spd", (t0, tl), "spd", "pwm"), ("gt", (t0 + (tl - ts) / 2, ts), "lpd", "mean")):
+            expect = layers.static[rk][frame].double() * window[1]
+            for lid, p in params.items():
+                (y0, x0, y1, x1), e = _brute_force_light(layers, meta, frame, lid, p, window, rk, level)
+                expect[y0:y1, x0:x1] += e
+            err = (out[key].double() - expect).abs().max() / expect.abs().max()
+            assert err < 2e-4, (key, frame, float(err))  # dense sampling: ~1/400000 per edge
+        assert static_only["lpd"].sum() < out["lpd"].sum() or params[0]["duty"] == 0
+
+
+def test_whole_period_long_exposure_and_always_on_gt(tmp_path):
+    root = make_corpus(tmp_path / "c", n_scenes=1, static_camera=True)
+    c = C.Corpus(root)
+    sid = c.scenes[0]
+    meta = c.meta(sid)
+    layers = build_layers(c, sid, load_preset("ovt"), None, 3)
+    tl = meta["timing"]["long_exposure_s"]
+    # a 90 Hz LED and the 1/90 s SPD exposure: whole periods -> the SPD sees exactly duty x ON level
+    params = {i: dict(period_s=tl, duty=0.3, phase_s=0.002 * i, rise_s=0.0, fall_s=0.0) for i in (0, 1)}
+    on = {i: dict(period_s=tl, duty=1.0, phase_s=0.0, rise_s=0.0, fall_s=0.0) for i in (0, 1)}
+    for frame in range(3):
+        a = compose_frame(layers, meta, frame, (0, 0, H, W), params, {})
+        b = compose_frame(layers, meta, frame, (0, 0, H, W), on, {})
+        static = layers.static["spd"][frame] * tl
+        np.testing.assert_allclose((a["spd"] - static).numpy(), 0.3 * (b["spd"] - static).numpy(), rtol=2e-5, atol=1e-3)
+        # always ON: the flickering capture equals the flicker-free truth
+        np.testing.assert_allclose(b["lpd"].numpy(), b["gt"].numpy(), rtol=1e-6)
+
+
+def test_rolling_shutter_row_windows(corpus):
+    c = C.Corpus(corpus)
+    sid = c.scenes[1]
+    meta = c.meta(sid)
+    layers = build_layers(c, sid, load_preset("ovt"), None, 3)
+    params = {i: dict(period_s=1 / 105, duty=0.2, phase_s=0.001, rise_s=0.0, fall_s=0.0) for i in (0, 1)}
+    g = compose_frame(layers, meta, 1, (0, 0, H, W), params, {}, "global")
+    r = compose_frame(layers, meta, 1, (0, 0, H, W), params, {}, "rolling")
+    tm = meta["timing"]
+    ts, tl, td = tm["short_exposure_s"], tm["long_exposure_s"], tm["line_time_s"]
+    (y0, x0, y1, x1) = [x for x in layers.lights[1] if x[0] == 0][0][2]
+    for row in (y0, y1 - 1):
+        a = 1 / meta["fps"] + (tl - ts) / 2 + row * td
+        box, e = _brute_force_light(layers, meta, 1, 0, params[0], (a, ts), "lpd")
+        other = [x for x in layers.lights[1] if x[0] == 1][0][2]
+        if other[0] <= row < other[2]:
+            continue  # the second light overlaps this row
+        expect = layers.static["lpd"][1, row].double() * ts
+        expect[box[1]:box[3]] += e[row - box[0]]
+        assert (r["lpd"][row].double() - expect).abs().max() / expect.max() < 2e-4
+    assert torch.equal(g["lpd"][0], r["lpd"][0]) or y0 > 0
+
+
+def test_test_split_params_frozen_in_corpus(tmp_path):
+    root = make_corpus(tmp_path / "c", n_scenes=5)
+    a = LFMCaptureDataset(root, split="test", seed=1, cache_dir=False)
+    path = root / "test_params.json"
+    assert path.is_file()
+    b = LFMCaptureDataset(root, split="test", seed=99, cache_dir=False)
+    b.set_epoch(5)
+    assert torch.equal(a[0]["meta"]["duty"], b[0]["meta"]["duty"])
+    assert torch.equal(a[0]["lpd_lcg"], b[0]["lpd_lcg"])
+    json.loads(path.read_text())["samples"]
+
+
+def test_disk_cache_reused_and_equal(tmp_path):
+    root = make_corpus(tmp_path / "c", n_scenes=1)
+    ds = LFMCaptureDataset(root, split="all", noise=False)
+    a = ds[0]
+    files = list((root / ".cache").rglob("*.pt"))
+    assert len(files) == 1
+    ds2 = LFMCaptureDataset(root, split="all", noise=False)
+    assert torch.equal(ds2[0]["gt"], a["gt"])
+
+
+def test_imported_corpus_without_bins_uses_one_weight_per_frame(tmp_path):
+    groups = {"skymap": {"flicker": False}, "otherlights": {"flicker": True, "bins": 0}}
+    root = make_corpus(tmp_path / "c", n_scenes=1, groups=groups)
+    ds = LFMCaptureDataset(root, split="all", noise=False, cache_dir=False)
+    s = ds[0]
+    assert s["meta"]["flicker_mode"] == "per_frame_weight"
+    assert torch.isfinite(s["gt"]).all()
+
+
+@pytest.mark.parametrize("pwm", [{"duty": {"dist": "constant", "value": 0.0}},
+                                 {"duty": {"dist": "constant", "value": 1.0}}])
+def test_extreme_duty(corpus, pwm):
+    ds = LFMCaptureDataset(corpus, split="all", pwm=pwm, noise=False, cache_dir=False)
+    s = ds[0]
+    assert torch.isfinite(s["lpd_lcg_e"]).all() and torch.isfinite(s["gt"]).all()
+    if pwm["duty"]["value"] == 1.0:  # always ON: no flicker, the noise-free LPD equals the truth where unclipped
+        ok = ~s["saturated"][:, 1:2]
+        assert torch.allclose(s["lpd_lcg_e"][ok], s["gt"][ok], rtol=2e-3, atol=20.0)
+
+
+@pytest.mark.parametrize("scale", [0.0, 1e6])
+def test_all_dark_and_sun_in_view(tmp_path, scale):
+    root = make_corpus(tmp_path / "c", n_scenes=1, scale=scale)
+    s = LFMCaptureDataset(root, split="all", cache_dir=False)[0]
+    for k in ("lpd_hcg", "lpd_lcg", "spd", "lpd_lcg_e", "spd_e", "gt"):
+        assert torch.isfinite(s[k]).all(), k
+    if scale == 0.0:
+        assert s["gt"].abs().max() == 0 and not s["saturated"].any()
+    else:
+        assert s["saturated"].all() and s["lpd_lcg"].max() == 4095
+
+
+def test_bad_input_is_a_clear_error(tmp_path, corpus):
+    with pytest.raises(DatasetNotFoundError, match="root"):
+        LFMCaptureDataset(tmp_path / "nothing")
+    with pytest.raises(ValueError, match="split"):
+        LFMCaptureDataset(corpus, split="bogus")
+    with pytest.raises(ValueError, match="outputs"):
+        LFMCaptureDataset(corpus, outputs=("raw", "nope"))
+    with pytest.raises(ValueError, match="frames"):
+        LFMCaptureDataset(corpus, split="all", frames=9)
+    with pytest.raises(ValueError, match="crop"):
+        LFMCaptureDataset(corpus, split="all", crop=1000)
+    with pytest.raises(ValueError, match="duty"):
+        LFMCaptureDataset(corpus, split="all", pwm={"duty": {"dist": "uniform", "low": 0.2, "high": 1.5}})
+    with pytest.raises(ValueError, match="unknown field"):
+        LFMCaptureDataset(corpus, split="all", pwm={"dutty": {"dist": "constant", "value": 0.2}})
+
+
+def test_corrupt_exr_names_the_file(tmp_path):
+    root = make_corpus(tmp_path / "c", n_scenes=1)
+    sid = C.Corpus(root).scenes[0]
+    bad = root / "scenes" / sid / "f000" / "headlights.exr"
+    bad.write_bytes(b"not an exr")
+    with pytest.raises(Exception, match="headlights.exr"):
+        LFMCaptureDataset(root, split="all", cache_dir=False)[0]
+
+
+def test_plot_returns_figure(corpus):
+    ds = LFMCaptureDataset(corpus, split="all", frames=2, cache_dir=False)
+    s = ds[0]
+    fig = ds.plot(s, prediction=s["gt"])
+    assert len(fig.axes) == 2 * 5

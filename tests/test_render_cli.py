@@ -1,0 +1,308 @@
+"""``lfmbench render`` orchestration (render_tools.cli, render_tools.jobs): resume, atomicity, bad input, pool, Ray.
+
+Most tests use the real scene generator, scene validation, RenderOptions and ``scene_meta`` (no Mitsuba) with a
+fake ``render_frames`` that returns seeded random radiance of the right shapes, so the orchestration is tested
+in milliseconds; one end-to-end test renders a tiny scene with Mitsuba.
+"""
+from __future__ import annotations
+
+import errno
+import json
+import os
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from lfmbench import corpus as C
+from lfmbench.cli import app
+from render_tools import jobs as J
+
+CALLS: list[str] = []
+FAIL: dict[str, type] = {}  # scene_id -> exception type raised after its first frame
+
+
+def fake_render_frames(scene, opts):
+    """Frames with the shapes ``render_tools.render.render_frames`` yields, from the real ``scene_meta``."""
+    from render_tools.render import scene_meta
+
+    CALLS.append(scene["scene_id"])
+    meta = scene_meta(scene, opts)
+    rng = np.random.default_rng(opts.seed)
+    C_, H, W, K = len(opts.bands_nm), opts.height, opts.width, opts.bins
+    for n in range(opts.frames):
+        if n == 1 and scene["scene_id"] in FAIL:
+            raise FAIL[scene["scene_id"]]("simulated failure")
+        static, lights = {}, {}
+        for g, v in meta["groups"].items():
+            if v["flicker"]:
+                lights[g] = [(lt["id"], tuple(lt["bbox"][n]),
+                              rng.random((K, C_, lt["bbox"][n][2] - lt["bbox"][n][0],
+                                          lt["bbox"][n][3] - lt["bbox"][n][1])).astype(np.float32))
+                             for lt in meta["lights"] if lt["group"] == g and lt["bbox"][n] is not None]
+            else:
+                static[g] = {w: rng.random((C_, H, W)).astype(np.float32) for w in ("short", "long")}
+        aux = {k: np.full((H, W), -1.0 if k.startswith("mask") else 5.0, np.float32) for k in C.AUX_CHANNELS}
+        yield {"frame": n, "static": static, "lights": lights, "aux": aux}
+
+
+def fake_backend():
+    from render_tools import render, scene
+
+    return J.Backend(scene.generate_scene, render.RenderOptions, render.scene_meta, fake_render_frames,
+                     scene.validate_scene)
+
+
+@pytest.fixture
+def fake(monkeypatch):
+    CALLS.clear()
+    FAIL.clear()
+    monkeypatch.setattr(J, "default_backend", fake_backend)
+    yield CALLS
+    FAIL.clear()
+
+
+ARGS = ["--width", "24", "--height", "16", "--spp", "2", "--frames", "2", "--bins", "2", "--profile", "small"]
+
+
+def run(*args):
+    return CliRunner().invoke(app, ["render", *args])
+
+
+def _no_tmp(root):
+    return not list(root.rglob(C.TMP_PREFIX + "*"))
+
+
+# ------------------------------------------------------------------------------------------ resume
+def test_render_resume_and_extend(tmp_path, fake):
+    out = tmp_path / "c"
+    r = run("--out", str(out), "--scenes", "2", "--seed", "7", *ARGS)
+    assert r.exit_code == 0, r.output
+    assert fake == ["scene00000", "scene00001"]
+    rep = C.validate_corpus(out)
+    assert rep.ok, rep.errors
+    c = C.Corpus(out)
+    m = c.meta("scene00000")
+    assert (m["width"], m["height"], m["frames"], m["timing"]["bins"]) == (24, 16, 2, 2)
+    assert json.loads((out / "manifest.json").read_text())["render"]["seed"] == 7
+    splits = c.splits
+    assert sorted(sum(splits.values(), [])) == ["scene00000", "scene00001"] and len(splits["test"]) == 1
+    first = {p: p.read_bytes() for p in out.rglob("*.exr")}
+    # same command: everything skipped
+    r = run("--out", str(out), "--scenes", "2", "--seed", "7", *ARGS)
+    assert r.exit_code == 0 and "2 skipped" in r.output
+    assert fake == ["scene00000", "scene00001"]
+    # extend to 3 scenes: only the new one renders; scene 0 and 1 are untouched
+    r = run("--out", str(out), "--scenes", "3", "--seed", "7", *ARGS)
+    assert r.exit_code == 0 and "1 rendered" in r.output
+    assert fake[-1] == "scene00002" and len(fake) == 3
+    assert all(p.read_bytes() == b for p, b in first.items())
+    # a corrupted file: that scene (only) is rendered again
+    p = out / "scenes/scene00001/f001/aux.exr"
+    p.write_bytes(p.read_bytes()[:-10])
+    r = run("--out", str(out), "--scenes", "3", "--seed", "7", *ARGS)
+    assert r.exit_code == 0, r.output
+    assert fake[-1] == "scene00001" and len(fake) == 4
+    assert C.validate_corpus(out).ok
+
+
+def test_scene_seeds_independent_of_count():
+    assert J.scene_seed(7, 2) == J.scene_seed(7, 2)
+    assert len({J.scene_seed(7, i) for i in range(50)}) == 50
+    assert J.scene_seed(7, 0) != J.scene_seed(8, 0)
+    a = J.make_jobs("o", n_scenes=2, seed=3, options={})
+    b = J.make_jobs("o", n_scenes=5, seed=3, options={})
+    assert [j.seed for j in a] == [j.seed for j in b[:2]]
+
+
+# ------------------------------------------------------------------------------- crash / interrupt
+def test_crash_in_one_scene(tmp_path, fake):
+    out = tmp_path / "c"
+    FAIL["scene00001"] = RuntimeError
+    r = run("--out", str(out), "--scenes", "3", *ARGS)
+    assert r.exit_code == 1
+    assert "scene scene00001 failed" in r.output and "simulated failure" in r.output
+    assert C.Corpus(out).scenes == ["scene00000", "scene00002"]
+    assert C.validate_corpus(out).ok
+    FAIL.clear()
+    r = run("--out", str(out), "--scenes", "3", *ARGS)
+    assert r.exit_code == 0 and "1 rendered" in r.output and "2 skipped" in r.output
+    assert C.validate_corpus(out).ok
+
+
+def test_ctrl_c_leaves_valid_corpus_and_resumes(tmp_path, fake):
+    out = tmp_path / "c"
+    FAIL["scene00001"] = KeyboardInterrupt
+    r = run("--out", str(out), "--scenes", "3", *ARGS)
+    assert r.exit_code == 130
+    assert "interrupted" in r.output and "Run the same command again to resume" in r.output
+    assert fake == ["scene00000", "scene00001"]  # stopped at once
+    man = json.loads((out / "manifest.json").read_text())
+    assert man["scenes"] == ["scene00000"]
+    assert not any(k.startswith("scenes/scene00001") for k in man["files"])
+    assert _no_tmp(out)
+    FAIL.clear()
+    r = run("--out", str(out), "--scenes", "3", *ARGS)
+    assert r.exit_code == 0, r.output
+    assert fake[2:] == ["scene00001", "scene00002"]
+    rep = C.validate_corpus(out)
+    assert rep.ok and rep.warnings == [], (rep.errors, rep.warnings)
+
+
+def test_disk_full(tmp_path, fake, monkeypatch):
+    out = tmp_path / "c"
+    assert run("--out", str(out), "--scenes", "1", *ARGS).exit_code == 0
+    before = (out / "manifest.json").read_bytes()
+    real = os.fsync
+    n = {"i": 0}
+
+    def full(fd):
+        n["i"] += 1
+        if n["i"] > 2:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        real(fd)
+    monkeypatch.setattr(C.os, "fsync", full)
+    r = run("--out", str(out), "--scenes", "2", *ARGS)
+    monkeypatch.setattr(C.os, "fsync", real)
+    assert r.exit_code == 2
+    assert "disk full" in r.output and "re-run to resume" in r.output
+    assert (out / "manifest.json").read_bytes() == before
+    assert _no_tmp(out)
+    assert C.validate_corpus(out).ok
+    assert run("--out", str(out), "--scenes", "2", *ARGS).exit_code == 0
+    assert C.Corpus(out).scenes == ["scene00000", "scene00001"]
+
+
+# ---------------------------------------------------------------------------------------- bad input
+def test_bad_options(tmp_path, fake):
+    out = tmp_path / "c"
+    r = run("--out", str(out), "--width", "0", "--profile", "small")
+    assert r.exit_code == 2 and "--width must be an integer >= 1" in r.output
+    r = run("--out", str(out), "--bins", "0", "--profile", "small")  # no bins cannot cover the windows
+    assert r.exit_code == 2 and "--bins must be an integer >= 1" in r.output
+    r = run("--out", str(out), "--profile", "huge")
+    assert r.exit_code == 2 and "profile: 'huge'" in r.output
+    prof = tmp_path / "p.yaml"
+    prof.write_text("width: 16\nheight: 8\nspp: 1\nlong_exposure_s: 0.02\n")  # exposure > frame time 1/60 s
+    r = run("--out", str(out), "--profile", str(prof))
+    assert r.exit_code == 2 and "long_exposure_s" in r.output and "frame time" in r.output
+    prof.write_text("width: 16\nwarp: 9\n")
+    r = run("--out", str(out), "--profile", str(prof))
+    assert r.exit_code == 2 and "warp" in r.output
+    r = run("--out", str(out), "--groups", "headlights,moonlight", *ARGS)
+    assert r.exit_code == 2 and "moonlight" in r.output
+    assert fake == []
+    # resuming with different options is refused (the corpus would mix renders)
+    assert run("--out", str(out), "--scenes", "1", *ARGS).exit_code == 0
+    r = run("--out", str(out), "--scenes", "1", *ARGS[:-4], "--bins", "3", "--profile", "small")
+    assert r.exit_code == 2 and "different options" in r.output
+
+
+def test_scene_files(tmp_path, fake):
+    from render_tools.scene import generate_scene
+
+    sc = generate_scene(3, scene_id="my_street")
+    good = tmp_path / "good.json"
+    good.write_text(json.dumps(sc))
+    out = tmp_path / "c"
+    r = run("--out", str(out), "--scene", str(good), *ARGS)
+    assert r.exit_code == 0, r.output
+    c = C.Corpus(out)
+    assert c.scenes == ["my_street"] and c.scene("my_street") == sc
+    bad = dict(sc, colour="blue")  # unknown field
+    p = tmp_path / "bad.json"
+    p.write_text(json.dumps(bad))
+    r = run("--out", str(tmp_path / "d"), "--scene", str(p), *ARGS)
+    assert r.exit_code == 2 and "colour" in r.output and "bad.json" in r.output
+    neg = json.loads(json.dumps(sc))
+    neg["camera"]["speed_mps"] = -5.0
+    p.write_text(json.dumps(neg))
+    r = run("--out", str(tmp_path / "d"), "--scene", str(p), *ARGS)
+    assert r.exit_code == 2 and "speed_mps" in r.output
+    p.write_text("{not json")
+    r = run("--out", str(tmp_path / "d"), "--scene", str(p), *ARGS)
+    assert r.exit_code == 2 and "cannot read scene JSON" in r.output
+    assert fake == ["my_street"]
+
+
+# --------------------------------------------------------------------------------------- pool / Ray
+@pytest.mark.slow
+def test_process_pool(tmp_path):
+    """Two spawn workers write their scenes; the driver's manifest matches what a serial run gives."""
+    out = tmp_path / "c"
+    from render_tools import render
+
+    opts = {"width": 24, "height": 16, "spp": 2, "frames": 2, "bins": 2}
+    jobs = J.make_jobs(out, n_scenes=3, seed=1, options=opts, backend=fake_backend())
+    w = C.CorpusWriter(out)
+    s = J.run_jobs(jobs, w, workers=2)
+    assert sorted(s.rendered) == ["scene00000", "scene00001", "scene00002"] and not s.failed
+    w.write_splits(1)
+    assert C.validate_corpus(out).ok
+    out2 = tmp_path / "serial"
+    w2 = C.CorpusWriter(out2)
+    J.run_jobs(J.make_jobs(out2, n_scenes=3, seed=1, options=opts, backend=fake_backend()), w2, workers=1)
+    assert json.loads((out / "manifest.json").read_text())["files"] == \
+        json.loads((out2 / "manifest.json").read_text())["files"]  # deterministic, worker-independent
+    assert render.RenderOptions(**opts).bins == 2
+
+
+@pytest.mark.slow
+def test_ray_local(tmp_path):
+    ray = pytest.importorskip("ray")
+    from ray import cloudpickle
+
+    import test_render_cli
+
+    cloudpickle.register_pickle_by_value(test_render_cli)  # workers need not import the test module
+    ray.init(num_cpus=1, include_dashboard=False, log_to_driver=False, configure_logging=False)
+    try:
+        out = tmp_path / "c"
+        opts = {"width": 24, "height": 16, "spp": 2, "frames": 2, "bins": 2}
+        jobs = J.make_jobs(out, n_scenes=2, seed=4, options=opts, backend=fake_backend())
+        FAIL["scene00001"] = RuntimeError  # pickled by value with the function: fails on the worker
+        w = C.CorpusWriter(out)
+        s = J.run_jobs(jobs, w, ray_address="local")
+        assert s.rendered == ["scene00000"]
+        assert "simulated failure" in s.failed["scene00001"]
+        FAIL.clear()
+        jobs = J.make_jobs(out, n_scenes=2, seed=4, options=opts, backend=fake_backend())
+        s = J.run_jobs(jobs, w, ray_address="local")
+        assert s.rendered == ["scene00001"] and s.skipped == ["scene00000"]
+        w.write_splits(4)
+        assert C.validate_corpus(out).ok
+    finally:
+        ray.shutdown()
+        cloudpickle.unregister_pickle_by_value(test_render_cli)
+        FAIL.clear()
+
+
+# ----------------------------------------------------------------------------------------- end to end
+@pytest.mark.slow
+def test_render_end_to_end_mitsuba(tmp_path, monkeypatch):
+    """The real renderer: 32x18 px, 4 spp, 1 scene, 2 frames, through the CLI; then validate and read."""
+    llvm = "/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1"
+    if "DRJIT_LIBLLVM_PATH" not in os.environ and os.path.exists(llvm):
+        monkeypatch.setenv("DRJIT_LIBLLVM_PATH", llvm)  # fast path; render_tools.backend falls back otherwise
+    out = tmp_path / "c"
+    r = run("--out", str(out), "--scenes", "1", "--width", "32", "--height", "18", "--spp", "4", "--frames", "2",
+            "--bins", "2", "--seed", "1", "--profile", "small")
+    assert r.exit_code == 0, r.output
+    assert CliRunner().invoke(app, ["validate", str(out)]).exit_code == 0
+    c = C.Corpus(out)
+    sid = c.scenes[0]
+    m = c.meta(sid)
+    assert m["frames"] == 2 and m["bands_nm"][0] == 400.0 and len(m["bands_nm"]) == 31
+    total = 0.0
+    for g, v in m["groups"].items():
+        if C.group_storage(m, g) == "static":
+            a = c.read_static(sid, 1, g, "long")
+            assert a.shape == (31, 18, 32)
+            total += float(a.sum())
+        else:
+            for lid, (y0, x0, y1, x1), a in c.read_light_bins(sid, 1, g):
+                assert a.shape == (2, 31, y1 - y0, x1 - x0)
+                assert any(lt["id"] == lid and lt["group"] == g for lt in m["lights"])
+    assert total > 0  # something is lit
+    aux = c.read_aux(sid, 0)
+    assert aux["depth.Z"].shape == (18, 32) and np.nanmin(aux["depth.Z"]) > 0
