@@ -31,6 +31,10 @@ intervals :math:`[0, DT)` and :math:`[T, T + DT)`:
 
 .. math::  \Phi/A = nDT + \max(0, \min(r, DT - a)) + \max(0, \min(r - (T - a), DT)).
 
+``a`` is the exact ``fmod``, kept in :math:`(-T, T)`: for :math:`a < 0` the window meets
+:math:`[-T, -T + DT)` and :math:`[0, DT)` instead (mirrored formula), so a phase of -1e-164 s stays just before
+a rising edge rather than being rounded onto it.
+
 ``fmod`` is exact in floating point, and the products and differences near the pulse edges use error-free
 transformations (Dekker's TwoProduct, Knuth's TwoSum), so in float64 the result is within a few units in the
 last place of the exact value for the given (binary) inputs, also when it is tiny (an exposure of
@@ -54,6 +58,8 @@ References
 from __future__ import annotations
 
 import math
+import os
+import threading
 from typing import Any
 
 import numpy as np
@@ -191,16 +197,24 @@ def _ramp_integral(a, b, e, w, ops: _Ops):
 def _pulse_core(phase, exposure, period, duty, rise_time, fall_time, ops: _Ops, split: float, trapezoid: bool):
     """ON time (s, ideal pulse) or integral of the unit pulse (s, trapezoid) over the exposure."""
     T, D = period, duty
-    a = _mod_period(phase, T, ops)
     r = ops.fmod(exposure, T)                       # exact
     n = ops.round((exposure - r) / T)               # whole periods (an exact integer value)
     p, e = _two_prod(D, T, split)                   # D*T == p + e
     full = n * p + n * e
     if not trapezoid:
+        # a = phase mod T kept in (-T, T) (fmod is exact; adding T to a tiny negative a would round it away)
+        a = ops.fmod(phase, T)
+        zero = 0 * r
+        # a >= 0: the window [a, a + r) meets [0, DT) and [T, T + DT)
         s, se = _two_sum(T, -a)                     # T - a == s + se
-        o1 = ops.maximum(ops.minimum(r, (p - a) + e), 0 * r)
-        o2 = ops.maximum(ops.minimum((r - s) - se, p + e), 0 * r)
-        return full + (o1 + o2)
+        o1 = ops.maximum(ops.minimum(r, (p - a) + e), zero)
+        o2 = ops.maximum(ops.minimum((r - s) - se, p + e), zero)
+        # a < 0: the window meets [-T, -T + DT) and [0, DT)
+        q, qe = _two_sum(p, -T)                     # D*T - T == q + qe + e
+        m1 = ops.maximum(ops.minimum(r, (q - a) + (qe + e)), zero)
+        m2 = ops.maximum(ops.minimum(r + a, p + e), zero)
+        return full + ops.where(a < 0, m1 + m2, o1 + o2)
+    a = _mod_period(phase, T, ops)                  # the ramps are continuous: [0, T) reduction suffices
     b = a + r
     dt = p + e
     rising = sum(_ramp_integral(a, b, k * T, rise_time, ops) for k in (0, 1, 2))
@@ -211,58 +225,72 @@ def _pulse_core(phase, exposure, period, duty, rise_time, fall_time, ops: _Ops, 
 # ----------------------------------------------------------------------------------------------------------
 # numba kernel for float64 numpy inputs (ideal pulse): the same arithmetic as _pulse_core, fused and threaded
 # ----------------------------------------------------------------------------------------------------------
-_NUMBA_KERNEL = None
+_NUMBA_KERNELS: dict | None = None
+#: Process that imported this module: only there (and in its main thread) is the threaded kernel used.
+_IMPORT_PID = os.getpid()
 
 
-def _numba_kernel():
-    """Compile (once) a parallel numba ufunc of the ideal-pulse exposure; None when numba is unavailable."""
-    global _NUMBA_KERNEL
-    if _NUMBA_KERNEL is not None:
-        return _NUMBA_KERNEL or None
-    try:
-        import numba
-    except ImportError:  # pragma: no cover - numba is a dependency; the numpy path still works without it
-        _NUMBA_KERNEL = False
-        return None
-
-    @numba.vectorize(["float64(float64, float64, float64, float64, float64, float64)"],
-                     target="parallel", cache=True)
-    def kernel(phase, exposure, period, duty, amplitude, offset):  # pragma: no cover - compiled
-        T = period
-        D = duty
-        if not (T > 0.0 and exposure >= 0.0 and D >= 0.0 and D <= 1.0
-                and math.isfinite(phase) and math.isfinite(exposure) and math.isfinite(T)):
-            return math.nan  # the caller re-checks and names the argument
-        a = np.fmod(phase, T)
-        if a < 0.0:
-            a += T
-        if a >= T:
-            a -= T
-        r = np.fmod(exposure, T)
-        n = np.rint((exposure - r) / T)
-        # TwoProduct D*T = p + e
-        p = D * T
-        c = 134217729.0 * D
-        dh = c - (c - D)
-        dl = D - dh
-        c = 134217729.0 * T
-        th = c - (c - T)
-        tl = T - th
-        e = ((dh * th - p) + dh * tl + dl * th) + dl * tl
-        # TwoSum T - a = s + se
+def _kernel_scalar(phase, exposure, period, duty, amplitude, offset):  # pragma: no cover - compiled by numba
+    """Ideal-pulse exposure of one element: the arithmetic of :func:`_pulse_core`, for numba."""
+    T = period
+    D = duty
+    if not (T > 0.0 and exposure >= 0.0 and D >= 0.0 and D <= 1.0
+            and math.isfinite(phase) and math.isfinite(exposure) and math.isfinite(T)):
+        return math.nan  # the caller re-checks and names the argument
+    a = np.fmod(phase, T)  # in (-T, T), exact
+    r = np.fmod(exposure, T)
+    n = np.rint((exposure - r) / T)
+    # TwoProduct D*T = p + e
+    p = D * T
+    c = 134217729.0 * D
+    dh = c - (c - D)
+    dl = D - dh
+    c = 134217729.0 * T
+    th = c - (c - T)
+    tl = T - th
+    e = ((dh * th - p) + dh * tl + dl * th) + dl * tl
+    if a >= 0.0:
+        # TwoSum T - a = s + se; the window meets [0, DT) and [T, T + DT)
         s = T - a
         bb = s - T
         se = (T - (s - bb)) + (-a - bb)
         o1 = min(r, (p - a) + e)
-        if o1 < 0.0:
-            o1 = 0.0
         o2 = min((r - s) - se, p + e)
-        if o2 < 0.0:
-            o2 = 0.0
-        return amplitude * ((n * p + n * e) + (o1 + o2)) + offset * exposure
+    else:
+        # TwoSum p - T = q + qe; the window meets [-T, -T + DT) and [0, DT)
+        q = p - T
+        bb = q - p
+        qe = (p - (q - bb)) + (-T - bb)
+        o1 = min(r, (q - a) + (qe + e))
+        o2 = min(r + a, p + e)
+    if o1 < 0.0:
+        o1 = 0.0
+    if o2 < 0.0:
+        o2 = 0.0
+    return amplitude * ((n * p + n * e) + (o1 + o2)) + offset * exposure
 
-    _NUMBA_KERNEL = kernel
-    return kernel
+
+def _numba_kernel():
+    """The compiled ideal-pulse ufunc for this call site, or None when numba is unavailable.
+
+    Two builds of :func:`_kernel_scalar`: ``target="parallel"`` (both cores) in the importing process's main
+    thread, ``target="cpu"`` elsewhere. Numba's parallel layers are not fork-safe once the parent has used
+    OpenMP (torch does), so forked DataLoader workers get the serial build; their parallelism is the workers.
+    """
+    global _NUMBA_KERNELS
+    if _NUMBA_KERNELS is None:
+        try:
+            import numba
+        except ImportError:  # pragma: no cover - numba is a dependency; the numpy path still works without it
+            _NUMBA_KERNELS = {}
+            return None
+        sig = ["float64(float64, float64, float64, float64, float64, float64)"]
+        _NUMBA_KERNELS = {"parallel": numba.vectorize(sig, target="parallel")(_kernel_scalar),
+                          "cpu": numba.vectorize(sig, target="cpu", cache=True)(_kernel_scalar)}
+    if not _NUMBA_KERNELS:
+        return None
+    main = os.getpid() == _IMPORT_PID and threading.current_thread() is threading.main_thread()
+    return _NUMBA_KERNELS["parallel" if main else "cpu"]
 
 
 # ----------------------------------------------------------------------------------------------------------

@@ -271,3 +271,19 @@ def test_plot_returns_figure(corpus):
     s = ds[0]
     fig = ds.plot(s, prediction=s["gt"])
     assert len(fig.axes) == 2 * 5
+
+
+def test_training_example_in_docs_runs(tmp_path):
+    """The DataLoader training loop of docs/datasets.md runs (2 workers) and updates the network."""
+    import re
+    from pathlib import Path
+
+    root = make_corpus(tmp_path / "c", n_scenes=3)
+    text = (Path(__file__).resolve().parents[1] / "docs" / "datasets.md").read_text()
+    code = re.findall(r"```python\n(.*?)```", text, re.S)[-1]
+    code = (code.replace('"demo_out/corpus"', repr(str(root))).replace("crop=128", "crop=8")
+            .replace("range(3)", "range(2)").replace("split=\"train\"", "split=\"all\""))
+    ns: dict = {}
+    exec(compile(code, "docs/datasets.md", "exec"), ns)
+    assert torch.isfinite(ns["loss"]) and ns["loss"].requires_grad
+    assert ns["ds"].epoch == 1

@@ -376,3 +376,30 @@ def test_flicker_severity_conventions():
         flicker_severity(np.array([1.0, -1.0]))
     with pytest.raises(ValueError, match="phi"):
         flicker_severity(np.array([1.0, np.nan]))
+
+
+@pytest.mark.parametrize("backend", ["numba", "numpy"])
+def test_tiny_negative_phase_stays_before_the_rising_edge(backend):
+    # found by hypothesis: fmod(-1.6e-164, 1) + 1 rounds to 1, which moved the window onto the ON pulse
+    assert pwm_exposure(-1.5750754303861668e-164, 1.6570902878237335e-187, 1.0, 0.5, backend=backend) == 0.0
+    got = pwm_exposure(-1e-20, 1e-19, 1.0, 0.5, backend=backend)  # OFF for 1e-20 s, then ON
+    assert rel_err(got, exact_phi(-1e-20, 1e-19, 1.0, 0.5)) <= REL
+    t = pwm_exposure(torch.tensor(-1e-20, dtype=torch.float64), 1e-19, 1.0, 0.5)
+    assert rel_err(t, exact_phi(-1e-20, 1e-19, 1.0, 0.5)) <= REL
+
+
+def test_forked_worker_after_openmp_use_does_not_hang():
+    # numba's parallel layer is not fork-safe once the parent used OpenMP (torch does): workers use the serial build
+    import multiprocessing as mp
+    torch.randn(512, 512) @ torch.randn(512, 512)  # parent enters OpenMP
+    pwm_exposure(np.zeros(10_000), 0.004, 0.01, 0.3)
+    ctx = mp.get_context("fork")
+    with ctx.Pool(1) as pool:
+        res = pool.apply_async(float, (pwm_exposure(0.0, 0.005, 0.01, 0.2),))
+        assert res.get(timeout=60) == 0.002
+        res = pool.apply_async(_sum_in_child)
+        assert abs(res.get(timeout=60) - 10_000 * 0.003) < 1e-9
+
+
+def _sum_in_child():
+    return float(pwm_exposure(np.zeros(10_000), 0.004, 0.01, 0.3).sum())
