@@ -287,3 +287,10 @@ def test_training_example_in_docs_runs(tmp_path):
     exec(compile(code, "docs/datasets.md", "exec"), ns)
     assert torch.isfinite(ns["loss"]) and ns["loss"].requires_grad
     assert ns["ds"].epoch == 1
+
+
+def test_line_time_override_checked_against_rendered_bins(corpus):
+    ok = LFMCaptureDataset(corpus, split="all", shutter="rolling", line_time_s=5e-6, cache_dir=False)
+    assert torch.isfinite(ok[0]["gt"]).all()
+    with pytest.raises(ValueError, match="line_time_s"):
+        LFMCaptureDataset(corpus, split="all", shutter="rolling", line_time_s=1e-3, cache_dir=False)

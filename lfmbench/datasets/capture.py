@@ -70,17 +70,33 @@ def window_bin_exposure(edges: np.ndarray, start: np.ndarray, length: float, per
     return pwm_exposure(lo - led_phase, dur, period, duty, rise_time=rise, fall_time=fall)
 
 
-def _window_starts(meta: dict, frame: int, rows: np.ndarray, shutter: str) -> dict[str, np.ndarray]:
+def _window_starts(meta: dict, frame: int, rows: np.ndarray, shutter: str,
+                   line_time_s: float | None = None) -> dict[str, np.ndarray]:
     """Window start times (s) per row for the LPD (short) and SPD (long) windows of ``frame``."""
     tm = meta["timing"]
     t0 = frame / float(meta["fps"])
     ts, tl = float(tm["short_exposure_s"]), float(tm["long_exposure_s"])
-    shift = rows * float(tm.get("line_time_s", 0.0)) if shutter == "rolling" else np.zeros(len(rows))
+    td = float(tm.get("line_time_s", 0.0)) if line_time_s is None else float(line_time_s)
+    shift = rows * td if shutter == "rolling" else np.zeros(len(rows))
     return {"lpd": t0 + (tl - ts) / 2.0 + shift, "spd": t0 + shift}
 
 
+def check_line_time(meta: dict, line_time_s: float, rows: int) -> None:
+    """Raise ``ValueError`` (naming ``line_time_s``) if the last row's windows leave the rendered bins."""
+    tm = meta["timing"]
+    last = (rows - 1) * float(line_time_s)
+    if not (np.isfinite(line_time_s) and line_time_s >= 0):
+        raise ValueError(f"line_time_s must be finite and >= 0 (s), got {line_time_s!r}")
+    if float(tm["long_exposure_s"]) + last > float(tm["capture_window_s"]) * (1 + 1e-9):
+        raise ValueError(f"line_time_s = {line_time_s} s: row {rows - 1} ends at "
+                         f"{(float(tm['long_exposure_s']) + last) * 1e3:.3f} ms, after the rendered capture window "
+                         f"({float(tm['capture_window_s']) * 1e3:.3f} ms); at most "
+                         f"{(float(tm['capture_window_s']) - float(tm['long_exposure_s'])) / max(rows - 1, 1):.3g} s")
+
+
 def compose_frame(layers: SceneLayers, meta: dict, frame: int, crop: tuple[int, int, int, int],
-                  params: dict[int, dict], group_params: dict[str, dict], shutter: str = "global") -> dict:
+                  params: dict[int, dict], group_params: dict[str, dict], shutter: str = "global",
+                  line_time_s: float | None = None) -> dict:
     """Mean photo-electrons of one frame in a crop, and the ground truth.
 
     Args:
@@ -88,7 +104,7 @@ def compose_frame(layers: SceneLayers, meta: dict, frame: int, crop: tuple[int, 
         crop: (y0, x0, h, w) in pixels. params: light_id -> PWM dict (period_s, duty, phase_s, rise_s, fall_s);
             lights without an entry are left out.
         group_params: group -> PWM dict, for flickering groups stored without time bins.
-        shutter: ``"global"`` or ``"rolling"``.
+        shutter: ``"global"`` or ``"rolling"``. line_time_s: row delay (s), default ``meta["timing"]``.
 
     Returns:
         ``{"lpd": (h, w), "spd": (h, w), "gt": (h, w)}`` float32 tensors in e- (mean, noise-free, unclipped).
@@ -97,7 +113,7 @@ def compose_frame(layers: SceneLayers, meta: dict, frame: int, crop: tuple[int, 
     t_len = {"lpd": float(tm["short_exposure_s"]), "spd": float(tm["long_exposure_s"])}
     y0, x0, h, w = crop
     rows = np.arange(y0, y0 + h, dtype=np.float64)
-    starts = _window_starts(meta, frame, rows, shutter)
+    starts = _window_starts(meta, frame, rows, shutter, line_time_s)
     out = {pd: layers.static[pd][frame, y0:y0 + h, x0:x0 + w] * t_len[pd] for pd in PHOTODIODES}
     out["gt"] = out["lpd"].clone()
     # flickering groups without time bins: one weight per frame (per row for a rolling shutter)
@@ -153,6 +169,8 @@ class LFMCaptureDataset(Dataset):
         noise: simulate temporal noise (False: mean electrons through clipping and quantisation).
         optics: apply the lens PSF.
         max_lights: length of the padded per-light metadata arrays.
+        line_time_s: rolling-shutter row delay (s); default the corpus's. Must keep every row's windows inside
+            the rendered capture window (checked).
         cache_dir: directory of the per-sensor projected-radiance cache (default ``<root>/.cache``; ``False``
             keeps it in memory only). cache_scenes: scenes kept in memory per worker.
         transforms: callable applied to the sample dict.
@@ -172,7 +190,7 @@ class LFMCaptureDataset(Dataset):
                  outputs: Sequence[str] = DEFAULT_OUTPUTS, groups: Sequence[str] | None = None,
                  samples_per_scene: int = 1, noise: bool = True, optics: bool = True, max_lights: int = 64,
                  cache_dir: str | os.PathLike | bool | None = None, cache_scenes: int = 8,
-                 transforms: Callable[[dict], dict] | None = None) -> None:
+                 line_time_s: float | None = None, transforms: Callable[[dict], dict] | None = None) -> None:
         self.root = Path(root)
         if not (self.root / "manifest.json").is_file():
             raise DatasetNotFoundError(
@@ -210,6 +228,9 @@ class LFMCaptureDataset(Dataset):
                 raise ValueError(f"frames={frames} but scene {sid!r} of {self.root} has only {m['frames']} frames")
             if self.crop is not None and (self.crop[0] > m["height"] or self.crop[1] > m["width"]):
                 raise ValueError(f"crop {self.crop} is larger than scene {sid!r} ({m['height']}x{m['width']})")
+            if line_time_s is not None and shutter == "rolling":
+                check_line_time(m, line_time_s, m["height"])
+        self.line_time_s = line_time_s
         if cache_dir is None:
             cache_dir = self.root / ".cache"
         self.cache_dir = None if cache_dir is False else Path(cache_dir)
@@ -328,10 +349,34 @@ class LFMCaptureDataset(Dataset):
         else:
             y0 = 2 * int(rng.integers(0, (H - ch) // 2 + 1))
             x0 = 2 * int(rng.integers(0, (W - cw) // 2 + 1))
+        sample = self.simulate(sid, per_light, per_group, (y0, x0, ch, cw), noise_seed, index)
+        return self.transforms(sample) if self.transforms else sample
+
+    def simulate(self, scene_id: str, params: Mapping[int, Mapping], group_params: Mapping[str, Mapping] | None = None,
+                 crop: tuple[int, int, int, int] | None = None, noise_seed: int = 0, index: int = -1) -> dict:
+        """One sample with given PWM parameters (what ``__getitem__`` does after its draws).
+
+        Args:
+            scene_id: a scene of the corpus.
+            params: light id -> ``{"period_s", "duty", "phase_s", "rise_s", "fall_s", "freq_hz"}`` (s, 1, s, s, s,
+                Hz) for the flickering lights (``phase_s``: a rising edge after the start of frame 0).
+            group_params: the same per flickering group stored without bins (imported data).
+            crop: (y0, x0, h, w) in pixels, even offsets; None = full frame.
+            noise_seed: seed of the sensor noise. index: recorded in ``meta``.
+
+        Returns:
+            the sample dict (see the class docstring), without ``transforms``.
+        """
+        meta = self.corpus.meta(scene_id)
+        H, W = meta["height"], meta["width"]
+        y0, x0, ch, cw = (0, 0, H, W) if crop is None else crop
         crop = (y0, x0, ch, cw)
-        layers = self._layers(sid)
+        params = {int(k): v for k, v in params.items()}
+        group_params = dict(group_params or {})
+        layers = self._layers(scene_id)
         F = self.frames
-        frames = [compose_frame(layers, meta, f, crop, per_light, per_group, self.shutter) for f in range(F)]
+        frames = [compose_frame(layers, meta, f, crop, params, group_params, self.shutter, self.line_time_s)
+                  for f in range(F)]
         lpd = torch.stack([fr_["lpd"] for fr_ in frames])[:, None]       # (F, 1, h, w) e-
         spd = torch.stack([fr_["spd"] for fr_ in frames])[:, None]
         tm = meta["timing"]
@@ -342,7 +387,7 @@ class LFMCaptureDataset(Dataset):
             fpn = self._fixed_pattern(H, W)
             if fpn is not None:
                 fpn = {k: v[..., y0:y0 + ch, x0:x0 + cw] for k, v in fpn.items()}
-            gen = torch.Generator().manual_seed(noise_seed) if self.noise else None
+            gen = torch.Generator().manual_seed(int(noise_seed)) if self.noise else None
             cap = _sensor.simulate_split_pixel_electrons(lpd, spd, self.preset, t_s, t_l, generator=gen,
                                                          noise=self.noise, fpn=fpn)
             if "raw" in want:
@@ -351,12 +396,11 @@ class LFMCaptureDataset(Dataset):
                 sample.update({k: cap[k] for k in ("lpd_hcg_e", "lpd_lcg_e", "spd_e")})
             if "saturated" in want:
                 sample["saturated"] = cap["saturated"]
-        gt = torch.stack([fr_["gt"] for fr_ in frames])[:, None]
         if "gt" in want or "rgb" in want:
-            sample["gt"] = gt
-        lights = self._lights(sid)
+            sample["gt"] = torch.stack([fr_["gt"] for fr_ in frames])[:, None]
+        lights = self._lights(scene_id)
         if len(lights) > self.max_lights:
-            raise ValueError(f"max_lights={self.max_lights} but scene {sid!r} has {len(lights)} lights")
+            raise ValueError(f"max_lights={self.max_lights} but scene {scene_id!r} has {len(lights)} lights")
         if "light_index" in want or "depth" in want:
             aux = layers.aux
             if "light_index" in want:
@@ -379,8 +423,8 @@ class LFMCaptureDataset(Dataset):
                     del sample[k]
             if "gt" not in want:
                 del sample["gt"]
-        sample["meta"] = self._meta(sid, index, lights, per_light, crop, t_s, t_l, layers)
-        return self.transforms(sample) if self.transforms else sample
+        sample["meta"] = self._meta(scene_id, index, lights, params, crop, t_s, t_l, layers)
+        return sample
 
     def _meta(self, sid, index, lights, per_light, crop, t_s, t_l, layers) -> dict:
         L = self.max_lights
