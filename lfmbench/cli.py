@@ -24,6 +24,7 @@ def _root() -> None:
 #: Modules that contribute sub-commands, in the order they appear in ``--help``.
 COMMAND_MODULES = (
     "lfmbench.flicker_report",
+    "lfmbench.paper_figures",
     "render_tools.cli",
     "lfmbench.corpus_cli",
     "lfmbench.evaluate",

@@ -43,12 +43,14 @@ from typing import Any, Iterable, Iterator, Mapping, Sequence
 import numpy as np
 
 __all__ = [
-    "FORMAT_NAME", "FORMAT_VERSION", "STATIC_WINDOWS", "AUX_CHANNELS", "HALF_MAX", "RADIANCE_UNIT",
+    "FORMAT_NAME", "FORMAT_VERSION", "STATIC_WINDOWS", "AUX_CHANNELS", "HALF_MAX", "HALF_MAX_REL_ERROR",
+    "RADIANCE_UNIT",
     "CorpusError", "CorpusNotFoundError", "CorpusFileError", "CorpusChannelError", "CorpusValueError",
     "CorpusWriteError", "band_channel", "bin_prefix", "static_channels", "bin_channels", "frame_dir",
     "group_storage", "encode_static_exr", "encode_lights_exr", "encode_aux_exr", "read_exr", "sha256_file",
     "atomic_write_bytes", "atomic_write_json", "make_splits", "validate_meta", "Corpus", "CorpusWriter",
-    "ValidationReport", "validate_corpus", "encode_scene", "write_files", "prune_scene_dir", "ExrPart", "check_scene_id",
+    "ValidationReport", "validate_corpus", "encode_scene", "write_files", "prune_scene_dir", "ExrPart",
+    "check_scene_id",
 ]
 
 log = logging.getLogger(__name__)
@@ -65,6 +67,10 @@ STATIC_WINDOWS = ("short", "long")
 AUX_CHANNELS = ("depth.Z", "depth.R", "mask.instance", "mask.light")
 #: Largest finite IEEE 754 binary16 value; radiance above it cannot be stored as HALF (IEEE 754-2008).
 HALF_MAX = 65504.0
+#: Largest energy-weighted relative error sum|half(x) - x| / sum(x) accepted for HALF storage (else FLOAT).
+#: Round-to-nearest binary16 gives <= 2^-11 ~ 4.9e-4 in the normal range (IEEE 754-2008), so 1e-3 passes
+#: any normal-range data and catches underflow of dim radiance.
+HALF_MAX_REL_ERROR = 1e-3
 RADIANCE_UNIT = "W sr^-1 m^-2 nm^-1"
 #: Name and channel of the placeholder part of a flickering-group EXR in which no light is visible.
 EMPTY_PART = "empty"
@@ -280,7 +286,13 @@ def _check_radiance(arr: np.ndarray, what: str) -> np.ndarray:
 
 
 def _store(arr: np.ndarray, dtype: str, what: str, notes: list[str]) -> tuple[np.ndarray, str]:
-    """Array to store and its EXR pixel type; HALF falls back to FLOAT above :data:`HALF_MAX`."""
+    """Array to store and its EXR pixel type.
+
+    HALF (binary16) is used only when it is safe: a peak above :data:`HALF_MAX` (overflow to inf) or an
+    energy-weighted round-trip error ``sum|half(x) - x| / sum x`` above :data:`HALF_MAX_REL_ERROR` (values
+    below HALF's normal range, ~6.1e-5, keep few or no significant bits: dim absolute radiance underflows) make
+    the part FLOAT, and the reason is logged and appended to ``notes``.
+    """
     if dtype == "float16":
         peak = float(np.max(arr)) if arr.size else 0.0
         if peak > HALF_MAX:
@@ -288,7 +300,17 @@ def _store(arr: np.ndarray, dtype: str, what: str, notes: list[str]) -> tuple[np
             log.warning(msg)
             notes.append(msg)
             return np.ascontiguousarray(arr, dtype=np.float32), "float32"
-        return np.ascontiguousarray(arr, dtype=np.float16), "float16"
+        h = np.ascontiguousarray(arr, dtype=np.float16)
+        total = float(np.sum(arr, dtype=np.float64))
+        if total > 0:
+            err = float(np.sum(np.abs(h.astype(np.float64) - arr), dtype=np.float64)) / total
+            if err > HALF_MAX_REL_ERROR:
+                msg = (f"{what}: HALF would change the radiance by {err:.2g} (relative, energy-weighted; values "
+                       f"below HALF's normal range): stored as FLOAT")
+                log.warning(msg)
+                notes.append(msg)
+                return np.ascontiguousarray(arr, dtype=np.float32), "float32"
+        return h, "float16"
     return np.ascontiguousarray(arr, dtype=np.float32), "float32"
 
 
@@ -575,7 +597,8 @@ def validate_meta(meta: Mapping[str, Any], where: str = "meta.json") -> None:
     Checks: required fields; image size > 0; bands strictly increasing and positive (nm); fps > 0; frames >= 1;
     ``0 < short_exposure_s <= long_exposure_s <= 1/fps`` (an exposure cannot be longer than the frame time);
     ``capture_window_s == long_exposure_s + readout_s`` (the bins must cover both windows; the capture window
-    may exceed 1/fps with a rolling shutter, since row i of frame n+1 starts at t_(n+1) + i * line_time); bins >= 1 for per-light groups; camera ``speed_mps >= 0``; groups known by name with a boolean
+    may exceed 1/fps with a rolling shutter, since row i of frame n+1 starts at t_(n+1) + i * line_time);
+    bins >= 1 for per-light groups; camera ``speed_mps >= 0``; groups known by name with a boolean
     ``flicker``; lights with unique integer ids >= 0 whose group exists.
     """
     if not isinstance(meta, Mapping):
@@ -1001,11 +1024,11 @@ def _attrs(scene_id: str, frame: int, group: str) -> dict:
 
 def encode_scene(scene_id: str, scene: Mapping[str, Any], meta: Mapping[str, Any],
                  frames: Iterable[Mapping[str, Any]], *, dtype: str = "float32",
-             notes: list[str] | None = None) -> Iterator[tuple[str, bytes]]:
+                 notes: list[str] | None = None) -> Iterator[tuple[str, bytes]]:
     """Yield ``(relpath, bytes)`` for every file of a scene, frame by frame (checks shapes vs ``meta``).
 
     Pure encoding (no disk access), so that render workers can call it; ``dtype`` as in
-    :class:`CorpusWriter`, ``notes`` receives HALF-overflow messages.
+    :class:`CorpusWriter`, ``notes`` receives the HALF -> FLOAT fallback messages.
 
     ``frames`` yields the renderer's frame dicts (``render_tools.render.render_frames``)::
 
@@ -1023,7 +1046,8 @@ def encode_scene(scene_id: str, scene: Mapping[str, Any], meta: Mapping[str, Any
     yield f"{sdir}/meta.json", _json_bytes(meta)
     bands = meta["bands_nm"]
     H, W = meta["height"], meta["width"]
-    seen = []
+    seen: list[int] = []
+    with_aux: list[int] = []
     for fr in frames:
         n = fr.get("frame")
         if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or not 0 <= n < meta["frames"] \
@@ -1060,14 +1084,21 @@ def encode_scene(scene_id: str, scene: Mapping[str, Any], meta: Mapping[str, Any
             yield what, encode_lights_exr(ls, bands, _group_bins(meta, g), H, W, dtype=dtype,
                                           what=what, notes=notes, attrs=_attrs(scene_id, n, g))
         if fr.get("aux") is not None:
+            with_aux.append(int(n))
             yield f"{fdir}/aux.exr", encode_aux_exr(fr["aux"], H, W, what=f"{fdir}/aux.exr",
                                                     attrs=_attrs(scene_id, n, "aux"))
     if sorted(seen) != list(range(meta["frames"])):
         raise ValueError(f"scene {scene_id}: got frames {sorted(seen)}, meta.json announces "
                          f"{meta['frames']}")
+    if with_aux and len(with_aux) != len(seen):
+        raise ValueError(f"scene {scene_id}: aux given for frames {sorted(with_aux)} only (all frames or none)")
+
 
 def write_files(root: str | os.PathLike, files: Iterable[tuple[str, bytes]]) -> dict[str, str]:
-    """Write ``(relpath, bytes)`` pairs under ``root`` atomically (safe in parallel workers); returns ``{relpath: sha256}`` (manifest not touched)."""
+    """Write ``(relpath, bytes)`` pairs under ``root`` atomically (safe in parallel workers).
+
+    Returns ``{relpath: sha256}``; the manifest is not touched (see :meth:`CorpusWriter.commit_scene`).
+    """
     root = Path(root)
     out = {}
     for rel, data in files:

@@ -51,6 +51,10 @@ class EmptyDataError(ValueError):
     """The data source holds no scene."""
 
 
+class DataSourceError(RuntimeError):
+    """Reading a batch failed; the partial result (``status: failed``) has been written."""
+
+
 # ----------------------------------------------------------------------------------------------- provenance
 def _lfmbench_version() -> str:
     try:
@@ -157,12 +161,12 @@ def time_method(method: Callable, batch: dict, warmup: int = 1, repeats: int = 5
     dev = torch.device(device)
     with torch.no_grad():
         for _ in range(warmup):
-            method(batch)
+            method(dict(batch))
         _sync(dev)
         out = []
         for _ in range(repeats):
             t0 = time.perf_counter()
-            method(batch)
+            method(dict(batch))
             _sync(dev)
             out.append((time.perf_counter() - t0) * 1e3)
     return out
@@ -322,15 +326,29 @@ def evaluate(method: Callable | str, batches: Iterable[dict], *, method_spec: st
         it = tqdm(batches, total=total, desc=f"evaluate {spec}", unit="batch")
     timed = False
     n_batches = 0
-    for batch in it:
+    source = iter(it)
+    while True:
+        try:
+            batch = next(source)
+        except StopIteration:
+            break
+        except Exception as exc:  # the data source failed (corrupt file ...): save what we have, then stop
+            result["status"] = "failed"
+            result["notes"].append(f"data source failed after {n_batches} batches: {type(exc).__name__}: {exc}")
+            result["aggregate"] = _aggregate(result["scenes"])
+            if output is not None:
+                write_json_atomic(result, output)
+            raise DataSourceError(f"reading batch {n_batches} failed: {type(exc).__name__}: {exc}") from exc
         n_batches += 1
         batch = _to(batch, dev)
-        gt = batch["gt"]
+        if "gt" not in batch:
+            raise ValueError(f"batch {n_batches - 1} has no 'gt' key (keys: {sorted(batch)})")
+        gt = batch["gt"].clone()  # a method that edits its input in place must not change the reference
         ids = _scene_ids(batch)
         t0 = time.perf_counter()
         try:
             with torch.no_grad():
-                pred = fn(batch)
+                pred = fn(dict(batch))
             _sync(dev)
             call_ms = (time.perf_counter() - t0) * 1e3
             pred = check_output(pred, gt)
@@ -341,7 +359,7 @@ def evaluate(method: Callable | str, batches: Iterable[dict], *, method_spec: st
                                          "error": f"{type(exc).__name__}: {exc}"})
         else:
             try:
-                scores = score_batch(pred, batch, base_opts)
+                scores = score_batch(pred, dict(batch, gt=gt), base_opts)
             except Exception as exc:
                 scores = None
                 for i, sid in enumerate(ids):
@@ -373,7 +391,7 @@ def evaluate(method: Callable | str, batches: Iterable[dict], *, method_spec: st
                                                  ms_per_megapixel=med / mps)
                         module = method_module(fn)
                         if module is not None:
-                            params, macs = count_params_macs(module, lambda: fn(batch))
+                            params, macs = count_params_macs(module, lambda: fn(dict(batch)))
                             result["method"].update(params=params, macs_per_call=macs, macs_per_megapixel=macs / mps)
                     except Exception as exc:
                         result["notes"].append(f"timing failed: {type(exc).__name__}: {exc}")
@@ -433,7 +451,8 @@ def load_runs(paths: Iterable[str | Path]) -> list[dict]:
         except (OSError, json.JSONDecodeError) as exc:
             raise ValueError(f"run file {p}: cannot read JSON ({exc})") from exc
         if not isinstance(d, dict) or d.get("format") != RESULT_FORMAT:
-            raise ValueError(f"run file {p}: not an {RESULT_FORMAT} result (format={d.get('format') if isinstance(d, dict) else None!r})")
+            fmt = d.get("format") if isinstance(d, dict) else None
+            raise ValueError(f"run file {p}: not an {RESULT_FORMAT} result (format={fmt!r})")
         d["_path"] = str(p)
         runs.append(d)
     if not runs:
@@ -538,6 +557,61 @@ def plot_quality_vs_runtime(rows: list[dict], path: str | Path, metric: str = "p
     return path
 
 
+def print_leaderboard(rows: list[dict], sort_by: str = "psnr_mu", note: str = "") -> None:
+    """Print the ranked rows as a rich table (the main columns; the Markdown file has them all)."""
+    from rich.console import Console
+    from rich.table import Table
+
+    shown = ("psnr_mu", "ssim_mu", "cvvdp_jod", "mmp_pred", "dropout_rate", "ghost_mae_mu", sort_by)
+    cols = [(k, h) for k, h in _columns(rows) if k in shown]
+    console = Console()
+    if not console.is_terminal:
+        console = Console(width=160)
+    table = Table(title=f"lfmbench leaderboard (ranked by {sort_by}{'; ' + note if note else ''})")
+    for h in ["#", "method"] + [h for _, h in cols] + ["ms/MP", "params", "failed"]:
+        table.add_column(h, justify="left" if h == "method" else "right", no_wrap=h == "method")
+    for r in rows:
+        table.add_row(str(r["rank"]), r["method"], *[_fmt(r[k], 2 if k.startswith(("psnr", "pu21")) else 3)
+                                                     for k, _ in cols],
+                      _fmt(r["ms_per_megapixel"], 1), _fmt(r["params"]), f"{r['failed']}/{r['scenes']}")
+    console.print(table)
+
+
+def benchmark(corpus: str | Path, methods: Iterable[str] | None = None, runs_dir: str | Path = "runs",
+              split: str = "test", seed: int = 0, crop: int | None = None, max_scenes: int | None = None,
+              perceptual: bool = True, repeats: int = 5, device: str = "cpu", sort_by: str = "psnr_mu",
+              progress: bool = True) -> list[dict]:
+    """Evaluate several methods on one corpus split and build the leaderboard (what ``make demo`` needs).
+
+    Writes ``runs_dir/<method>.json`` per method, ``runs_dir/leaderboard.md`` and ``runs_dir/leaderboard.png``,
+    prints the table and returns the ranked rows. ``methods`` defaults to every registered baseline.
+    """
+    from itertools import islice
+
+    from torch.utils.data import DataLoader
+
+    from lfmbench.baselines import REGISTRY
+    from lfmbench.metrics import ScoreOptions
+
+    runs_dir = Path(runs_dir)
+    ds = make_dataset(corpus, split, seed=seed, crop=crop)
+    n = len(ds) if max_scenes is None else min(len(ds), max_scenes)
+    paths = []
+    for m in (list(methods) if methods is not None else list(REGISTRY)):
+        loader = DataLoader(ds, batch_size=1, shuffle=False, num_workers=0, collate_fn=collate_samples)
+        out = runs_dir / f"{_safe_name(m)}.json"
+        evaluate(m, islice(loader, n), method_spec=m, output=out, options=ScoreOptions(perceptual=perceptual),
+                 repeats=repeats, device=device, seeds={"dataset": seed},
+                 dataset={"corpus": str(corpus), "split": split, "scenes": n, "crop": crop}, progress=progress,
+                 total=n)
+        paths.append(out)
+    rows = leaderboard_rows(load_runs(paths), sort_by)
+    _write_text_atomic(leaderboard_markdown(rows, sort_by), runs_dir / "leaderboard.md")
+    plot_quality_vs_runtime(rows, runs_dir / "leaderboard.png", sort_by)
+    print_leaderboard(rows, sort_by, note=f"all columns in {runs_dir / 'leaderboard.md'}")
+    return rows
+
+
 def _write_text_atomic(text: str, path: str | Path) -> Path:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -558,7 +632,8 @@ def register(app) -> None:
 
     @app.command("evaluate")
     def evaluate_cmd(
-        method: str = typer.Option(..., "--method", "-m", help="registered name (e.g. lpd_only) or package.module:function"),
+        method: str = typer.Option(..., "--method", "-m",
+                                   help="registered name (e.g. lpd_only) or package.module:function"),
         corpus: Path = typer.Option(..., "--corpus", help="corpus root directory"),
         split: str = typer.Option("test", help="corpus split"),
         output: Path = typer.Option(None, "--output", "-o", help="result JSON (default runs/<method>.json)"),
@@ -593,9 +668,14 @@ def register(app) -> None:
         n = len(ds) if max_scenes is None else min(len(ds), max_scenes)
         loader = DataLoader(ds, batch_size=1, shuffle=False, num_workers=0, collate_fn=collate_samples)
         out = output or Path("runs") / f"{_safe_name(method)}.json"
-        res = evaluate(fn, islice(loader, n), method_spec=method, output=out, options=ScoreOptions(perceptual=perceptual),
-                       warmup=warmup, repeats=repeats, device=device, seeds={"dataset": seed},
-                       dataset={"corpus": str(corpus), "split": split, "scenes": n, "crop": crop}, total=n)
+        try:
+            res = evaluate(fn, islice(loader, n), method_spec=method, output=out,
+                           options=ScoreOptions(perceptual=perceptual), warmup=warmup, repeats=repeats, device=device,
+                           seeds={"dataset": seed}, dataset={"corpus": str(corpus), "split": split, "scenes": n,
+                                                             "crop": crop}, total=n)
+        except (DataSourceError, EmptyDataError) as exc:
+            typer.secho(f"error: {exc} (partial results in {out})", fg=typer.colors.RED, err=True)
+            raise typer.Exit(1) from exc
         agg = res["aggregate"]
         typer.echo(f"{method}: {agg.get('scenes_ok', 0)}/{agg.get('scenes', 0)} scenes ok, PSNR-mu "
                    f"{_fmt(agg.get('psnr_mu'), 2)} dB, MMP {_fmt(agg.get('mmp_pred'))}, "
@@ -609,27 +689,12 @@ def register(app) -> None:
         plot: Path = typer.Option(Path("runs/leaderboard.png"), help="quality-vs-run-time PNG output"),
     ) -> None:
         """Rank evaluation results; print a table, write Markdown and a quality-vs-run-time plot."""
-        from rich.console import Console
-        from rich.table import Table
-
         try:
             rows = leaderboard_rows(load_runs(p for p in runs if p.suffix == ".json"), sort_by)
         except ValueError as exc:
             typer.secho(f"error: {exc}", fg=typer.colors.RED, err=True)
             raise typer.Exit(2) from exc
-        shown = ("psnr_mu", "ssim_mu", "cvvdp_jod", "mmp_pred", "dropout_rate", "ghost_mae_mu", sort_by)
-        cols = [(k, h) for k, h in _columns(rows) if k in shown]
-        console = Console()
-        if not console.is_terminal:
-            console = Console(width=160)
-        table = Table(title=f"lfmbench leaderboard (ranked by {sort_by}; all columns in {markdown})")
-        for h in ["#", "method"] + [h for _, h in cols] + ["ms/MP", "params", "failed"]:
-            table.add_column(h, justify="left" if h == "method" else "right", no_wrap=h == "method")
-        for r in rows:
-            table.add_row(str(r["rank"]), r["method"], *[_fmt(r[k], 2 if k.startswith(("psnr", "pu21")) else 3)
-                                                         for k, _ in cols],
-                          _fmt(r["ms_per_megapixel"], 1), _fmt(r["params"]), f"{r['failed']}/{r['scenes']}")
-        console.print(table)
+        print_leaderboard(rows, sort_by, note=f"all columns in {markdown}")
         _write_text_atomic(leaderboard_markdown(rows, sort_by), markdown)
         plot_quality_vs_runtime(rows, plot, sort_by)
         typer.echo(f"wrote {markdown} and {plot}")

@@ -42,7 +42,8 @@ SPLIT_FRACTIONS = (0.6, 0.2, 0.2)
 @dataclass(frozen=True)
 class Backend:
     """The renderer a job calls (``render_tools.scene`` + ``render_tools.render`` by default):
-    ``generate_scene(seed, scene_id=..., **kw) -> dict``, ``RenderOptions(**fields)``, ``scene_meta(scene, opts) -> dict``,
+    ``generate_scene(seed, scene_id=..., **kw) -> dict``, ``RenderOptions(**fields)``,
+    ``scene_meta(scene, opts) -> dict``,
     ``render_frames(scene, opts) -> Iterator[frame dict]``; optional ``validate_scene(scene) -> dict``."""
 
     generate_scene: Callable[..., dict]

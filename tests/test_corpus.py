@@ -158,6 +158,21 @@ def test_half_storage_and_overflow_fallback(tmp_path):
         C.CorpusWriter(tmp_path / "x", dtype="float64")
 
 
+def test_half_underflow_falls_back_to_float():
+    """Dim absolute radiance (1e-7 W sr^-1 m^-2 nm^-1, night scene) is subnormal in HALF: stored FLOAT."""
+    rng = np.random.default_rng(1)
+    dim = (1e-7 * (1 + rng.random((3, 4, 5)))).astype(np.float32)
+    notes = []
+    data = C.encode_static_exr({"short": dim, "long": dim * 1e4}, BANDS, dtype="float16", notes=notes)
+    assert len(notes) == 1 and "[short]" in notes[0] and "FLOAT" in notes[0]
+    assert abs(np.float16(dim[0, 0, 0]).astype(np.float32) - dim[0, 0, 0]) / dim[0, 0, 0] > 1e-3  # premise
+    import io
+    f = OpenEXR.File(io.BytesIO(data), separate_channels=True)
+    assert f.parts[0].channels["short.400nm"].pixels.dtype == np.float32
+    np.testing.assert_array_equal(f.parts[0].channels["short.400nm"].pixels, dim[0])
+    assert f.parts[0].channels["long.400nm"].pixels.dtype == np.float16  # 1e-3: normal range, HALF is fine
+
+
 # ---------------------------------------------------------------------------------------- bad input
 def test_writer_rejects_bad_radiance(tmp_path):
     meta = fake_meta()

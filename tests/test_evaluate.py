@@ -191,3 +191,52 @@ def test_cli_evaluate_on_tiny_corpus(tmp_path):
     assert math.isfinite(d["aggregate"]["psnr_mu"]) and d["runtime"]["ms_per_megapixel"] > 0
     r = CliRunner().invoke(app, ["evaluate", "--method", "lpd_only", "--corpus", str(corpus), "--split", "nope"])
     assert r.exit_code == 2 and "split" in r.output
+
+
+def test_method_editing_its_input_cannot_change_the_reference():
+    def vandal(batch):
+        out = batch["gt"].clone()
+        batch["gt"].mul_(0)  # in place
+        batch["gt"] = None  # and replaced
+        return out
+
+    res = ev.evaluate(vandal, _batches(1), repeats=1, progress=False)
+    assert res["scenes"][0]["status"] == "ok" and math.isinf(res["scenes"][0]["metrics"]["psnr_mu"])
+
+
+def test_missing_cvvdp_is_a_note_not_a_crash(monkeypatch):
+    import sys
+
+    from lfmbench.metrics import hdr
+
+    monkeypatch.setitem(sys.modules, "pycvvdp", None)  # as if cvvdp were not installed
+    monkeypatch.setattr(hdr, "_PYCVVDP", None)
+    with pytest.raises(hdr.CvvdpUnavailableError, match="pip install"):
+        hdr.load_pycvvdp()
+    res = ev.evaluate("lpd_only", _batches(1), options=ScoreOptions(perceptual=True), repeats=1, progress=False)
+    assert res["scenes"][0]["status"] == "ok" and "cvvdp_jod" not in res["aggregate"]
+    assert any("perceptual metrics skipped" in n for n in res["notes"])
+
+
+def test_failing_data_source_saves_partial_result(tmp_path):
+    def source():
+        yield make_batch(seed=0)
+        raise OSError("corrupt EXR scenes/x/f000/otherlights.exr")
+
+    out = tmp_path / "partial.json"
+    with pytest.raises(ev.DataSourceError, match="corrupt EXR"):
+        ev.evaluate("lpd_only", source(), output=out, repeats=1, progress=False)
+    d = _strict_load(out)
+    assert d["status"] == "failed" and d["aggregate"]["scenes_ok"] == 1 and "corrupt EXR" in d["notes"][-1]
+
+
+def test_benchmark_runs_methods_and_writes_leaderboard(tmp_path, capsys):
+    from tests.test_datasets import make_corpus
+
+    corpus = make_corpus(tmp_path / "corpus", n_scenes=3)
+    rows = ev.benchmark(corpus, ["lpd_only", "spd_only"], tmp_path / "runs", split="all", perceptual=False,
+                        repeats=1, progress=False)
+    assert [r["rank"] for r in rows] == [1, 2] and {r["method"] for r in rows} == {"lpd_only", "spd_only"}
+    for f in ("lpd_only.json", "spd_only.json", "leaderboard.md", "leaderboard.png"):
+        assert (tmp_path / "runs" / f).is_file(), f
+    assert "lpd_only" in capsys.readouterr().out

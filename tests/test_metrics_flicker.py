@@ -128,3 +128,11 @@ def test_region_metrics_no_lights():
     li = torch.full_like(b["light_index"], -1)
     r = fm.region_flicker_metrics(b["gt"], b["gt"], li)[0]
     assert r["n_lights"] == 0 and math.isnan(r["dropout_rate"]) and math.isnan(r["fmi_pred"])
+
+
+def test_fdi_without_off_reference_is_nan():
+    b = make_batch()
+    li = b["light_index"].clone()
+    li[li < 0] = 1  # every pixel belongs to a light: no ring, no OFF reference
+    r = fm.region_flicker_metrics(b["gt"], b["gt"], li)[0]
+    assert all(math.isnan(x["fdi_pred"]) for x in r["lights"])

@@ -122,3 +122,11 @@ def test_cvvdp_and_pu21_offline_on_tensors():
     # the torchvision shim (if it was needed) must not leak into sys.modules
     tv = sys.modules.get("torchvision")
     assert tv is None or hasattr(tv, "__file__")
+
+
+def test_quantile_subsamples_beyond_torch_limit(monkeypatch):
+    x = torch.arange(1000, dtype=torch.float64)
+    monkeypatch.setattr(hdr, "_QUANTILE_MAX", 100)  # forces a stride of 10
+    assert float(hdr._quantile(x, 0.5)) == pytest.approx(495.0, abs=1.0)
+    q = hdr._quantile(torch.stack([x, 2 * x]), 0.99, dim=1)
+    assert q.shape == (2,) and float(q[1]) == pytest.approx(2 * float(q[0]))

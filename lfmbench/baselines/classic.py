@@ -93,7 +93,8 @@ def exposures_s(batch: dict) -> tuple[torch.Tensor, torch.Tensor]:
         s, l_ = _meta_value(meta, _SHORT_KEYS, i), _meta_value(meta, _LONG_KEYS, i)
         if s is None or l_ is None:
             raise BatchError("batch['meta'] must give the exposures in s (exposure_short_s / exposure_long_s or "
-                             f"exposures={{'short_s', 'long_s'}}), got meta keys {sorted(meta) if isinstance(meta, dict) else meta}")
+                             f"exposures={{'short_s', 'long_s'}}), got meta "
+                             f"{sorted(meta) if isinstance(meta, dict) else meta}")
         if not (float(s) > 0 and float(l_) > 0):
             raise BatchError(f"exposures must be > 0 s, got short={s}, long={l_}")
         ts.append(float(s))
@@ -246,8 +247,8 @@ def flicker_aware(batch: dict, k: float = NOISE_K, noise: NoiseModel | None = No
     Test: :math:`S - L > k \sqrt{\sigma_L^2 + \sigma_S^2}` with :math:`\sigma_L^2 = M + \sigma_{read}^2`
     (LPD electrons) and :math:`\sigma_S^2 = g M + (g \sigma_{read,SPD})^2`, :math:`M = \max(L, S)`, :math:`g` =
     sensitivity ratio x T_short / T_long (EMVA 1288 shot + read noise, input-referred; the shot noise is
-    evaluated at the larger reading so a noisy low SPD value does not shrink its own sigma). A light caught OFF by the short exposure
-    reads far below the SPD, which integrated at least one PWM period.
+    evaluated at the larger reading so a noisy low SPD value does not shrink its own sigma). A light caught
+    OFF by the short exposure reads far below the SPD, which integrated at least one PWM period.
 
     Args:
         batch: sample dict (B leading); noise taken from the preset in ``meta`` unless ``noise`` is given.

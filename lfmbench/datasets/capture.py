@@ -124,15 +124,18 @@ def compose_frame(layers: SceneLayers, meta: dict, frame: int, crop: tuple[int, 
                                rise_time=p["rise_s"], fall_time=p["fall_s"])
             out[pd] = out[pd] + rates[pd][frame, y0:y0 + h, x0:x0 + w] * torch.from_numpy(wgt).float()[:, None]
         out["gt"] = out["gt"] + rates["lpd"][frame, y0:y0 + h, x0:x0 + w] * float(p["duty"] * t_len["lpd"])
-    # flickering lights stored per light in K time bins
-    K = int(tm["bins"])
-    edges = frame / float(meta["fps"]) + np.linspace(0.0, float(tm["capture_window_s"]), K + 1)
+    # flickering lights stored per light in K time bins (K from the stored layer: a group may override it)
+    edges_of: dict[int, np.ndarray] = {}
     for light_id, _g, (by0, bx0, by1, bx1), rates in layers.lights[frame]:
         iy0, iy1 = max(by0, y0), min(by1, y0 + h)
         ix0, ix1 = max(bx0, x0), min(bx1, x0 + w)
         p = params.get(light_id)
         if p is None or iy0 >= iy1 or ix0 >= ix1:  # light left out, or outside the crop
             continue
+        K = int(rates["lpd"].shape[0])
+        if K not in edges_of:
+            edges_of[K] = frame / float(meta["fps"]) + np.linspace(0.0, float(tm["capture_window_s"]), K + 1)
+        edges = edges_of[K]
         r = slice(iy0 - y0, iy1 - y0)
         for key, pd, level in (("lpd", "lpd", "pwm"), ("spd", "spd", "pwm"), ("gt", "lpd", "mean")):
             st = starts[pd][r]

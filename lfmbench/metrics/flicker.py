@@ -29,7 +29,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import torch
-import torch.nn.functional as F
 
 #: P2020 reference defaults (CARpublic/P2020-flicker measure_flicker_demo.py / metrics/flicker.py).
 FDI_CONTRAST_THRESHOLD = 0.1
@@ -239,24 +238,30 @@ def region_series(images: torch.Tensor, light_index: torch.Tensor, num_lights: i
     return means[..., 1:].permute(0, 2, 1), cnts[..., 1:].permute(0, 2, 1)
 
 
-def _dilate(mask: torch.Tensor, px: int) -> torch.Tensor:
-    """Binary dilation of (N, 1, H, W) bool masks by a (2 px + 1)^2 square."""
-    if px <= 0:
-        return mask
-    return F.max_pool2d(mask.float(), 2 * px + 1, stride=1, padding=px) > 0
-
-
 def _ring_series(images: torch.Tensor, light_index: torch.Tensor, n: int, ring_px: int) -> torch.Tensor:
-    """Mean of ``images`` over a ring of ``ring_px`` around each light, off every light: (B, L, F)."""
+    """Mean of ``images`` over a ring of ``ring_px`` around each light, off every light: (B, L, F).
+
+    Each light is processed inside its bounding box (over all frames) grown by the ring, so the cost follows
+    the lights' size, not the image's.
+    """
+    from lfmbench.metrics.regions import dilate
+
     b, f, c, h, w = images.shape
-    idx = light_index.reshape(b * f, 1, h, w)
-    any_led = _dilate(idx >= 0, 1)
-    x = images.double().mean(dim=2).reshape(b * f, 1, h, w)
+    idx = light_index.reshape(b * f, h, w)
+    x = images.double().mean(dim=2).reshape(b * f, h, w)
     out = torch.full((b, n, f), float("nan"), dtype=torch.float64, device=images.device)
+    pad = ring_px + 2
     for j in range(n):
-        ring = _dilate(idx == j, ring_px) & ~any_led
-        cnt = ring.sum(dim=(1, 2, 3)).double()
-        s = (x * ring).sum(dim=(1, 2, 3))
+        hit = idx == j
+        rows, cols = hit.any(dim=(0, 2)).nonzero(), hit.any(dim=(0, 1)).nonzero()
+        if rows.numel() == 0:
+            continue
+        y0, y1 = max(int(rows[0]) - pad, 0), min(int(rows[-1]) + pad + 1, h)
+        x0, x1 = max(int(cols[0]) - pad, 0), min(int(cols[-1]) + pad + 1, w)
+        sub = idx[:, y0:y1, x0:x1]
+        ring = dilate(sub == j, ring_px) & ~dilate(sub >= 0, 1)
+        cnt = ring.sum(dim=(1, 2)).double()
+        s = (x[:, y0:y1, x0:x1] * ring).sum(dim=(1, 2))
         out[:, j, :] = torch.where(cnt > 0, s / cnt.clamp_min(1), torch.full_like(s, float("nan"))).reshape(b, f)
     return out
 
@@ -270,6 +275,14 @@ class RegionMetricOptions:
     dropout_fraction: float = DROPOUT_FRACTION
     ring_px: int = FDI_RING_PX
     min_region_px: int = MIN_REGION_PX
+
+
+def _fdi_ring(series: torch.Tensor, ring: torch.Tensor, threshold: float) -> float:
+    """FDI with the OFF level = mean of the ring means; NaN when no frame has a ring (no OFF reference)."""
+    x_off = torch.nanmean(ring)
+    if not bool(torch.isfinite(x_off)):
+        return float("nan")
+    return float(fdi(series, x_off, threshold))
 
 
 def _nanmean(v: list[float]) -> float:
@@ -343,8 +356,8 @@ def region_flicker_metrics(pred: torch.Tensor, gt: torch.Tensor, light_index: to
                 "series_gt": [float(v) for v in g],
                 "fmi_pred": float(fmi(p)), "fmi_gt": float(fmi(g)),
                 "mmp_pred": float(mmp(p, o.delta)), "mmp_gt": float(mmp(g, o.delta)),
-                "fdi_pred": float(fdi(p, torch.nanmean(p_off[b, j][valid]), o.contrast_threshold)),
-                "fdi_gt": float(fdi(g, torch.nanmean(g_off[b, j][valid]), o.contrast_threshold)),
+                "fdi_pred": _fdi_ring(p, p_off[b, j][valid], o.contrast_threshold),
+                "fdi_gt": _fdi_ring(g, g_off[b, j][valid], o.contrast_threshold),
                 "series_rel_rmse": float(series_rel_rmse(p, g)),
                 "dropout_frames": int(drop.sum()),
             }

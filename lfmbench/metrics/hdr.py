@@ -65,6 +65,19 @@ def _per_sample_amax(x: torch.Tensor) -> torch.Tensor:
     return x.reshape(x.shape[0], -1).amax(dim=1).reshape((x.shape[0],) + (1,) * (x.ndim - 1))
 
 
+#: torch.quantile's input limit (elements); larger inputs are subsampled with a regular stride.
+_QUANTILE_MAX = 16_000_000
+
+
+def _quantile(flat: torch.Tensor, q: float, dim: int = -1) -> torch.Tensor:
+    """``torch.quantile`` along the last dim (``dim=-1`` or 1 for (B, N)), subsampling the last dim with a
+    regular stride when the input exceeds torch's size limit."""
+    step = -(-flat.numel() // _QUANTILE_MAX)
+    if step > 1:
+        flat = flat[..., ::step]
+    return torch.quantile(flat.float(), q, dim=dim)
+
+
 def normalize_hdr(pred: torch.Tensor, gt: torch.Tensor, mode: Normalization = "max",
                   eps: float = 1e-12) -> tuple[torch.Tensor, torch.Tensor]:
     """Scale an HDR pair to the reference's range, per sample.
@@ -87,8 +100,7 @@ def normalize_hdr(pred: torch.Tensor, gt: torch.Tensor, mode: Normalization = "m
         scale = _per_sample_amax(gt).clamp_min(eps)
         return (pred / scale).clamp(0.0, 1.0), (gt / scale).clamp(0.0, 1.0)
     if mode == "p99_tanh":
-        flat = gt.reshape(gt.shape[0], -1).float()
-        q = torch.quantile(flat, 0.99, dim=1).to(gt.dtype)
+        q = _quantile(gt.reshape(gt.shape[0], -1), 0.99, dim=1).to(gt.dtype)
         scale = q.reshape((gt.shape[0],) + (1,) * (gt.ndim - 1)).clamp_min(eps)
         return torch.tanh((pred / scale).clamp_min(0.0)), torch.tanh((gt / scale).clamp_min(0.0))
     raise ValueError(f"mode must be 'max' or 'p99_tanh', got {mode!r}")
@@ -245,7 +257,7 @@ def to_display_luminance(x: torch.Tensor, reference: torch.Tensor, cd_per_unit: 
         (luminance in cd m^-2 clipped at >= 0, the scale used in cd m^-2 per unit).
     """
     if cd_per_unit is None:
-        q = float(torch.quantile(reference.detach().reshape(-1).float()[:16_000_000], 0.99))
+        q = float(_quantile(reference.detach().reshape(-1), 0.99))
         cd_per_unit = peak_cd_m2 / max(q, 1e-12)
     if not cd_per_unit > 0:
         raise ValueError(f"cd_per_unit must be > 0, got {cd_per_unit}")
@@ -321,17 +333,23 @@ def load_pycvvdp():
             raise CvvdpUnavailableError(
                 "ColorVideoVDP / PU21 need the optional package 'cvvdp': pip install -c constraints.txt 'cvvdp>=0.5' "
                 "(or pip install -e '.[eval]')") from exc
-        raise
-    except (RuntimeError, ImportError, OSError):
-        # torchvision present but broken (CUDA wheel next to CPU torch): retry with the shim.
-        for k in [k for k in sys.modules if k == "pycvvdp" or k.startswith("pycvvdp.")]:
-            del sys.modules[k]
-        try:
-            with _torchvision_shim():
-                _PYCVVDP = importlib.import_module("pycvvdp")
-        except Exception as exc:  # pragma: no cover - depends on the installed packages
+        if not (exc.name and exc.name.split(".")[0] == "torchvision"):
             raise CvvdpUnavailableError(f"pycvvdp could not be imported: {exc}") from exc
+        _PYCVVDP = _import_with_shim()
+    except Exception:  # noqa: BLE001 - torchvision present but broken (CUDA wheel next to CPU torch)
+        _PYCVVDP = _import_with_shim()
     return _PYCVVDP
+
+
+def _import_with_shim():
+    """Import pycvvdp with :func:`_torchvision_shim` in place; :class:`CvvdpUnavailableError` on failure."""
+    for k in [k for k in sys.modules if k == "pycvvdp" or k.startswith("pycvvdp.")]:
+        del sys.modules[k]
+    try:
+        with _torchvision_shim():
+            return importlib.import_module("pycvvdp")
+    except Exception as exc:  # pragma: no cover - depends on the installed packages
+        raise CvvdpUnavailableError(f"pycvvdp could not be imported: {exc}") from exc
 
 
 def cvvdp_version() -> str:

@@ -31,13 +31,23 @@ LED_MARGIN_PX = 2
 GHOST_RING_PX = 16
 
 
-def _dilate(mask: torch.Tensor, px: int) -> torch.Tensor:
-    """Binary dilation of (B, F, 1, H, W) bool masks by a (2 px + 1)^2 square (max pooling)."""
+def dilate(mask: torch.Tensor, px: int) -> torch.Tensor:
+    """Binary dilation by a (2 px + 1)^2 square, as two separable 1-D max-pools (rows, then columns).
+
+    Args:
+        mask: (*, H, W) bool.
+        px: radius in px (0: unchanged).
+
+    Returns:
+        (*, H, W) bool.
+    """
     if px <= 0:
         return mask
-    b, f, c, h, w = mask.shape
-    m = F.max_pool2d(mask.reshape(b * f * c, 1, h, w).float(), 2 * px + 1, stride=1, padding=px) > 0
-    return m.reshape(b, f, c, h, w)
+    shape = mask.shape
+    m = mask.reshape(-1, 1, shape[-2], shape[-1]).float()
+    m = F.max_pool2d(m, (1, 2 * px + 1), stride=1, padding=(0, px))
+    m = F.max_pool2d(m, (2 * px + 1, 1), stride=1, padding=(px, 0))
+    return (m > 0).reshape(shape)
 
 
 def _check_index(light_index: torch.Tensor) -> None:
@@ -56,7 +66,7 @@ def led_mask(light_index: torch.Tensor, margin_px: int = LED_MARGIN_PX) -> torch
         (B, F, 1, H, W) bool.
     """
     _check_index(light_index)
-    return _dilate(light_index >= 0, margin_px)
+    return dilate(light_index >= 0, margin_px)
 
 
 def ghost_zone(light_index: torch.Tensor, margin_px: int = LED_MARGIN_PX,
@@ -74,7 +84,7 @@ def ghost_zone(light_index: torch.Tensor, margin_px: int = LED_MARGIN_PX,
         raise ValueError(f"ring_px must exceed margin_px, got ring_px={ring_px}, margin_px={margin_px}")
     _check_index(light_index)
     base = light_index >= 0
-    return _dilate(base, ring_px) & ~_dilate(base, margin_px)
+    return dilate(base, ring_px) & ~dilate(base, margin_px)
 
 
 def _tone_mapped(pred: torch.Tensor, gt: torch.Tensor, mu: float) -> tuple[torch.Tensor, torch.Tensor]:
