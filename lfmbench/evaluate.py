@@ -413,11 +413,8 @@ def make_dataset(corpus: str | Path, split: str = "test", seed: int = 0, crop: i
     root = Path(corpus)
     if not root.is_dir():
         raise FileNotFoundError(f"corpus directory {root} does not exist; render one first (see README)")
-    try:
-        from lfmbench.datasets import LFMCaptureDataset
-    except ImportError as exc:
-        raise RuntimeError(f"lfmbench.datasets.LFMCaptureDataset is not available ({exc}); pass batches to "
-                           "lfmbench.evaluate.evaluate() directly") from exc
+    from lfmbench.datasets import LFMCaptureDataset
+
     if crop is not None:
         kwargs["crop"] = crop
     ds = LFMCaptureDataset(root, split=split, seed=seed, **kwargs)

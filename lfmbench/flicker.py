@@ -274,23 +274,29 @@ def _numba_kernel():
     """The compiled ideal-pulse ufunc for this call site, or None when numba is unavailable.
 
     Two builds of :func:`_kernel_scalar`: ``target="parallel"`` (both cores) in the importing process's main
-    thread, ``target="cpu"`` elsewhere. Numba's parallel layers are not fork-safe once the parent has used
-    OpenMP (torch does), so forked DataLoader workers get the serial build; their parallelism is the workers.
+    thread, ``target="cpu"`` elsewhere. Each is compiled only when first needed: building the parallel one loads
+    numba's threading layer, which sets the OpenMP thread count; in a forked DataLoader worker whose parent has
+    used OpenMP (torch does) that makes torch's next parallel region deadlock. So workers only ever build the
+    serial kernel; their parallelism is the workers.
     """
     global _NUMBA_KERNELS
     if _NUMBA_KERNELS is None:
         try:
-            import numba
+            import numba  # noqa: F401
         except ImportError:  # pragma: no cover - numba is a dependency; the numpy path still works without it
             _NUMBA_KERNELS = {}
             return None
-        sig = ["float64(float64, float64, float64, float64, float64, float64)"]
-        _NUMBA_KERNELS = {"parallel": numba.vectorize(sig, target="parallel")(_kernel_scalar),
-                          "cpu": numba.vectorize(sig, target="cpu", cache=True)(_kernel_scalar)}
+        _NUMBA_KERNELS = {"available": True}
     if not _NUMBA_KERNELS:
         return None
     main = os.getpid() == _IMPORT_PID and threading.current_thread() is threading.main_thread()
-    return _NUMBA_KERNELS["parallel" if main else "cpu"]
+    target = "parallel" if main else "cpu"
+    if target not in _NUMBA_KERNELS:
+        import numba
+
+        sig = ["float64(float64, float64, float64, float64, float64, float64)"]
+        _NUMBA_KERNELS[target] = numba.vectorize(sig, target=target, cache=target == "cpu")(_kernel_scalar)
+    return _NUMBA_KERNELS[target]
 
 
 # ----------------------------------------------------------------------------------------------------------

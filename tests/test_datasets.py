@@ -294,3 +294,32 @@ def test_line_time_override_checked_against_rendered_bins(corpus):
     assert torch.isfinite(ok[0]["gt"]).all()
     with pytest.raises(ValueError, match="line_time_s"):
         LFMCaptureDataset(corpus, split="all", shutter="rolling", line_time_s=1e-3, cache_dir=False)
+
+
+def test_workers_forked_after_parent_openmp_do_not_deadlock(tmp_path):
+    """Regression: workers forked after the parent ran OpenMP (training) hung in torch ops once numba's
+    parallel layer had been loaded in them. Run in a subprocess with a timeout so a hang fails, not blocks."""
+    import subprocess
+    import sys
+    import textwrap
+    from pathlib import Path
+
+    script = textwrap.dedent(f"""
+        import sys, torch
+        sys.path.insert(0, {str(Path(__file__).resolve().parents[1])!r})
+        import tests.test_datasets as T
+        from pathlib import Path
+        T.H, T.W = 96, 128   # 3 frames x 96 x 128 > torch's parallel grain size: workers would enter OpenMP
+        root = T.make_corpus(Path({str(tmp_path / 'c')!r}), n_scenes=2)
+        from lfmbench.datasets import LFMCaptureDataset
+        from torch.utils.data import DataLoader
+        ds = LFMCaptureDataset(root, split="all", samples_per_scene=2)
+        loader = DataLoader(ds, batch_size=2, num_workers=2)
+        for epoch in range(2):
+            ds.set_epoch(epoch)
+            for b in loader:
+                (torch.randn(768, 768) @ torch.randn(768, 768)).sum()   # the parent uses OpenMP
+        print("ok")
+    """)
+    res = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=240)
+    assert res.returncode == 0 and "ok" in res.stdout, res.stderr[-2000:]

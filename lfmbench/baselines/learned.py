@@ -143,6 +143,9 @@ def train(loader: Iterable[dict], checkpoint: str | Path | None = None, epochs: 
     step = 0
     for ep in range(epochs):
         t0 = time.perf_counter()
+        dataset = getattr(loader, "dataset", None)
+        if hasattr(dataset, "set_epoch"):
+            dataset.set_epoch(ep)  # fresh PWM draws, crops and noise every epoch
         it = loader
         if progress:
             from tqdm import tqdm
@@ -216,12 +219,14 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--max-steps", type=int, default=None)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--crop", type=int, default=None, help="square random crop in px (default: full frames)")
+    ap.add_argument("--samples-per-scene", type=int, default=16,
+                    help="samples (PWM draws, crops) per scene per epoch")
     a = ap.parse_args(argv)
     from torch.utils.data import DataLoader
 
     from lfmbench.evaluate import make_dataset, collate_samples
 
-    ds = make_dataset(a.corpus, a.split, seed=a.seed, crop=a.crop)
+    ds = make_dataset(a.corpus, a.split, seed=a.seed, crop=a.crop, samples_per_scene=a.samples_per_scene)
     loader = DataLoader(ds, batch_size=a.batch_size, shuffle=True, num_workers=a.workers,
                         collate_fn=collate_samples, generator=torch.Generator().manual_seed(a.seed))
     model, losses = train(loader, a.checkpoint, epochs=a.epochs, lr=a.lr, max_steps=a.max_steps, seed=a.seed,
