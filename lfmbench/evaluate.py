@@ -522,7 +522,7 @@ def leaderboard_markdown(rows: list[dict], sort_by: str = "psnr_mu") -> str:
 
 
 def plot_quality_vs_runtime(rows: list[dict], path: str | Path, metric: str = "psnr_mu") -> Path:
-    """Scatter of ``metric`` against run time (ms per megapixel, log axis), one labelled point per method."""
+    """Scatter of ``metric`` against run time (ms per megapixel, log axis), one point per method (legend)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -530,13 +530,15 @@ def plot_quality_vs_runtime(rows: list[dict], path: str | Path, metric: str = "p
 
     from lfmbench.metrics import REGISTRY
 
-    fig, ax = plt.subplots(figsize=(6.4, 4.4), dpi=120)
-    for r in rows:
+    fig, ax = plt.subplots(figsize=(7.6, 4.4), dpi=120)
+    markers = "osD^vP*Xh<>p"
+    for i, r in enumerate(rows):
         x, y = r["ms_per_megapixel"], r[metric]
         if math.isnan(x) or math.isnan(y) or x <= 0:
             continue
-        ax.scatter([x], [y], s=36)
-        ax.annotate(r["method"], (x, y), textcoords="offset points", xytext=(5, 4), fontsize=8)
+        # a legend rather than text labels: methods of similar cost and quality overlap
+        ax.scatter([x], [y], s=40, marker=markers[i % len(markers)], label=f"{r.get('rank', i + 1)}. {r['method']}")
+    ax.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5), frameon=False)
     ax.set_xscale("log")
     ax.margins(x=0.25, y=0.1)
     ax.set_xlabel("run time [ms per megapixel] (log)")
@@ -577,7 +579,7 @@ def print_leaderboard(rows: list[dict], sort_by: str = "psnr_mu", note: str = ""
 def benchmark(corpus: str | Path, methods: Iterable[str] | None = None, runs_dir: str | Path = "runs",
               split: str = "test", seed: int = 0, crop: int | None = None, max_scenes: int | None = None,
               perceptual: bool = True, repeats: int = 5, device: str = "cpu", sort_by: str = "psnr_mu",
-              progress: bool = True) -> list[dict]:
+              progress: bool = True, samples_per_scene: int = 1) -> list[dict]:
     """Evaluate several methods on one corpus split and build the leaderboard (what ``make demo`` needs).
 
     Writes ``runs_dir/<method>.json`` per method, ``runs_dir/leaderboard.md`` and ``runs_dir/leaderboard.png``,
@@ -591,7 +593,7 @@ def benchmark(corpus: str | Path, methods: Iterable[str] | None = None, runs_dir
     from lfmbench.metrics import ScoreOptions
 
     runs_dir = Path(runs_dir)
-    ds = make_dataset(corpus, split, seed=seed, crop=crop)
+    ds = make_dataset(corpus, split, seed=seed, crop=crop, samples_per_scene=samples_per_scene)
     n = len(ds) if max_scenes is None else min(len(ds), max_scenes)
     paths = []
     for m in (list(methods) if methods is not None else list(REGISTRY)):
@@ -599,7 +601,8 @@ def benchmark(corpus: str | Path, methods: Iterable[str] | None = None, runs_dir
         out = runs_dir / f"{_safe_name(m)}.json"
         evaluate(m, islice(loader, n), method_spec=m, output=out, options=ScoreOptions(perceptual=perceptual),
                  repeats=repeats, device=device, seeds={"dataset": seed},
-                 dataset={"corpus": str(corpus), "split": split, "scenes": n, "crop": crop}, progress=progress,
+                 dataset={"corpus": str(corpus), "split": split, "scenes": n, "crop": crop,
+                          "samples_per_scene": samples_per_scene}, progress=progress,
                  total=n)
         paths.append(out)
     rows = leaderboard_rows(load_runs(paths), sort_by)
@@ -637,6 +640,7 @@ def register(app) -> None:
         seed: int = typer.Option(0, help="dataset seed (PWM draws, noise)"),
         max_scenes: int = typer.Option(None, help="evaluate at most this many scenes"),
         crop: int = typer.Option(None, help="square crop in px passed to the dataset"),
+        samples_per_scene: int = typer.Option(1, help="PWM draws per scene (test draws frozen in the corpus)"),
         repeats: int = typer.Option(5, help="timed calls after warm-up"),
         warmup: int = typer.Option(1, help="untimed warm-up calls"),
         perceptual: bool = typer.Option(True, help="also PU21-PSNR and ColorVideoVDP (needs cvvdp)"),
@@ -658,7 +662,7 @@ def register(app) -> None:
 
         try:
             fn = get_method(method)
-            ds = make_dataset(corpus, split, seed=seed, crop=crop)
+            ds = make_dataset(corpus, split, seed=seed, crop=crop, samples_per_scene=samples_per_scene)
         except (MethodNotFoundError, FileNotFoundError, EmptyDataError, RuntimeError, ValueError) as exc:
             typer.secho(f"error: {exc}", fg=typer.colors.RED, err=True)
             raise typer.Exit(2) from exc

@@ -52,7 +52,7 @@ def run(out: str | Path | None = None, config: str | Path = CONFIG) -> dict:
     ev = cfg["evaluate"]
     t = _step(f"3. evaluate every baseline on the {ev['split']} split -> {runs}")
     rows = benchmark(corpus, runs_dir=runs, split=ev["split"], seed=ev["seed"], repeats=ev["repeats"],
-                     perceptual=ev["perceptual"])
+                     perceptual=ev["perceptual"], samples_per_scene=ev["samples_per_scene"])
     secs["evaluate"] = time.perf_counter() - t
 
     from lfmbench.paper_figures import make_all

@@ -323,3 +323,13 @@ def test_workers_forked_after_parent_openmp_do_not_deadlock(tmp_path):
     """)
     res = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=240)
     assert res.returncode == 0 and "ok" in res.stdout, res.stderr[-2000:]
+
+
+def test_frozen_test_params_grow_without_changing_existing_draws(tmp_path):
+    root = make_corpus(tmp_path / "c", n_scenes=5)
+    one = LFMCaptureDataset(root, split="test", cache_dir=False)
+    first = one[0]["meta"]["duty"].clone()
+    three = LFMCaptureDataset(root, split="test", samples_per_scene=3, cache_dir=False)
+    assert len(three) == 3 * len(one)
+    assert torch.equal(three[0]["meta"]["duty"], first)
+    assert len(json.loads((root / "test_params.json").read_text())["samples"]) == len(three)

@@ -286,27 +286,37 @@ class LFMCaptureDataset(Dataset):
         return per_light, per_group
 
     def _load_or_freeze_test_params(self) -> dict:
-        """Frozen PWM draws and noise seeds of the test split (``<root>/test_params.json``), made once."""
+        """Frozen PWM draws and noise seeds of the test split (``<root>/test_params.json``).
+
+        Entries are keyed ``"<scene_id>/<sample>"`` and never change once written, whatever the dataset's seed
+        or the code's later draw procedure; entries a larger ``samples_per_scene`` (or a new scene) needs are
+        drawn from the key alone and appended (atomic rewrite).
+        """
         path = self.root / TEST_PARAMS_NAME
+        data = {"format": 1, "pwm": self.pwm.to_dict(), "samples": {},
+                "note": "frozen PWM draws of the test split; delete to re-draw (changes every test score)"}
         if path.is_file():
             try:
                 data = json.loads(path.read_text())
-                samples = data["samples"]
-            except (ValueError, KeyError) as exc:
+                data["samples"]
+            except (ValueError, KeyError, TypeError) as exc:
                 raise ValueError(f"{path}: not a valid test-parameter file ({exc}); delete it to re-freeze") from None
-            return samples
-        samples = {}
+        samples = data["samples"]
+        added = False
         for sid in self.scene_ids:
             for s in range(self.samples_per_scene):
+                key = f"{sid}/{s}"
+                if key in samples:
+                    continue
                 rng = np.random.default_rng([20261121, s, int.from_bytes(sid.encode()[:8].ljust(8, b"\0"), "little")])
                 per_light, per_group = self._draw(sid, rng)
-                samples[f"{sid}/{s}"] = {"lights": {str(k): v for k, v in per_light.items()}, "groups": per_group,
-                                         "noise_seed": int(rng.integers(2**62))}
-        data = {"format": 1, "pwm": self.pwm.to_dict(), "samples": samples,
-                "note": "frozen PWM draws of the test split; delete to re-draw (changes every test score)"}
-        tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-        tmp.write_text(json.dumps(data, indent=1))
-        os.replace(tmp, path)
+                samples[key] = {"lights": {str(k): v for k, v in per_light.items()}, "groups": per_group,
+                                "noise_seed": int(rng.integers(2**62))}
+                added = True
+        if added:
+            tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+            tmp.write_text(json.dumps(data, indent=1))
+            os.replace(tmp, path)
         return samples
 
     def _layers(self, sid: str) -> SceneLayers:
