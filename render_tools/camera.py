@@ -18,7 +18,9 @@ written to ``meta.json`` use the OpenCV convention (x right, y down, z forward),
 :class:`MotionCamera` is a small ``mi.Sensor`` subclass wrapping a ``perspective`` sensor placed at the
 origin: each ray sampled at time ``t`` (drawn by the integrator uniformly in [shutter_open,
 shutter_open + shutter_open_time], s) is moved by the pose at ``t``, so one render integrates the blur over
-the shutter interval continuously instead of averaging sub-frames.
+the shutter interval continuously instead of averaging sub-frames. It renders an *atlas*: K time bins of a
+crop side by side along x and the ceil(C / 4) band passes along y; in pass p the 4 wavelengths of a sample
+lie one in each of bands p + j * ceil(C / 4) (no random band counts: see docs/rendering.md).
 """
 from __future__ import annotations
 
@@ -168,11 +170,12 @@ def _make_class(mi):
         def __init__(self, props):
             mi.Sensor.__init__(self, props)
             self.fov = props.get("fov", 40.0)
-            self.p0 = [props.get("px", 0.0), props.get("py", 0.0), props.get("pz", 0.0)]
-            self.yaw0 = props.get("yaw0", 0.0)
+            self.p0_scalar = [props.get("px", 0.0), props.get("py", 0.0), props.get("pz", 0.0)]
+            yaw0 = props.get("yaw0", 0.0)
             self.pitch = props.get("pitch", 0.0)
-            self.speed = props.get("speed", 0.0)
-            self.yaw_rate = props.get("yaw_rate", 0.0)
+            speed = props.get("speed", 0.0)
+            yaw_rate = props.get("yaw_rate", 0.0)
+            self.turning = yaw_rate != 0.0
             self.full_w = int(props.get("full_width", self.film().size()[0]))
             self.full_h = int(props.get("full_height", self.film().size()[1]))
             self.tiles_x = int(props.get("tiles_x", 1))
@@ -181,6 +184,12 @@ def _make_class(mi):
 
             def opaque(v, t=mi.Float):
                 return v if scalar else dr.opaque(t, v)
+
+            # Every scene-dependent number is an opaque JIT variable, so kernels are shared by all scenes
+            # with the same film size (drjit's kernel cache), not rebuilt per scene.
+            self.p0 = [opaque(v) for v in self.p0_scalar]
+            self.speed, self.yaw_rate = opaque(speed), opaque(yaw_rate if self.turning else 1.0)
+            self.yaw0, self.cos0, self.sin0 = opaque(yaw0), opaque(math.cos(yaw0)), opaque(math.sin(yaw0))
 
             # Opaque JIT variables: crop, window and band pass change per render without recompiling.
             self.t_start = opaque(props.get("t_start", 0.0))
@@ -205,7 +214,7 @@ def _make_class(mi):
                                        "sampler": self.sampler()})
             th = -self.pitch
             ry = np.array([[math.cos(th), 0, math.sin(th)], [0, 1, 0], [-math.sin(th), 0, math.cos(th)]])
-            self.m0 = (ry @ R_VEHICLE_FROM_MI).tolist()
+            self.m0 = [[opaque(float(x)) for x in row] for row in (ry @ R_VEHICLE_FROM_MI)]
 
         def _rot(self, v, c, s):
             m = self.m0
@@ -215,14 +224,14 @@ def _make_class(mi):
             return mi.Vector3f(c * x - s * y, s * x + c * y, z)
 
         def _frame(self, time):
-            psi = self.yaw0 + self.yaw_rate * time
-            c, s = dr.cos(psi), dr.sin(psi)
-            if self.yaw_rate == 0.0:
-                off = mi.Vector3f(self.speed * time * math.cos(self.yaw0),
-                                  self.speed * time * math.sin(self.yaw0), 0.0)
+            if not self.turning:
+                c, s = self.cos0, self.sin0
+                off = mi.Vector3f(self.speed * time * c, self.speed * time * s, 0.0)
             else:
+                psi = self.yaw0 + self.yaw_rate * time
+                c, s = dr.cos(psi), dr.sin(psi)
                 k = self.speed / self.yaw_rate
-                off = mi.Vector3f(k * (s - math.sin(self.yaw0)), k * (math.cos(self.yaw0) - c), 0.0)
+                off = mi.Vector3f(k * (s - self.sin0), k * (self.cos0 - c), 0.0)
             p = mi.Point3f(self.p0[0], self.p0[1], self.p0[2]) + off
             return p, c, s
 
@@ -284,7 +293,7 @@ def _make_class(mi):
             return ray, w
 
         def bbox(self):
-            return mi.ScalarBoundingBox3f(mi.ScalarPoint3f(self.p0))
+            return mi.ScalarBoundingBox3f(mi.ScalarPoint3f(self.p0_scalar))
 
         def traverse(self, callback):
             pass
@@ -293,7 +302,7 @@ def _make_class(mi):
             pass
 
         def to_string(self):
-            return (f"MotionCamera[fov={self.fov}, p0={self.p0}, speed={self.speed}, yaw_rate={self.yaw_rate}, "
+            return (f"MotionCamera[fov={self.fov}, p0={self.p0_scalar}, turning={self.turning}, "
                     f"shutter=[{self.shutter_open()}, +{self.shutter_open_time()}], bands={self.n_bands}]")
 
     return MotionCamera

@@ -35,13 +35,16 @@ MAX_DEPTH = 5
 BEAM_OFFSET_M = 0.02
 #: Fall-off start of a beam as a fraction of its cutoff (spread) angle.
 BEAM_WIDTH_FRACTION = 0.75
+#: Tessellation: segments of cylinders and disks, (longitude, latitude) segments of spheres.
+CIRCLE_SEGMENTS = 24
+SPHERE_SEGMENTS = (16, 8)
 #: Lens material of a lamp that is not emitting in the current render (dark, slightly glossy).
 OFF_LENS = {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.03, 0.03, 0.03]}}
 
 
-def shape_id(obj_id: int, part: int) -> str:
-    """Mitsuba id of part ``part`` of object ``obj_id``."""
-    return f"o{obj_id}_p{part}"
+def shape_id(obj_id: int, k: int) -> str:
+    """Mitsuba id of mesh ``k`` (one per material, sorted by name) of object ``obj_id``."""
+    return f"o{obj_id}_m{k}"
 
 
 def light_shape_id(light_id: int) -> str:
@@ -85,19 +88,96 @@ def plane_corners(shape: dict) -> np.ndarray:
 
 def plane_area(shape: dict) -> float:
     """Area of a rect/disk lamp face, m^2."""
-    return shape["size"][0] * shape["size"][1] if shape["shape"] == "rect" else math.pi * shape["radius"] ** 2
+    if shape["shape"] == "rect":
+        return shape["size"][0] * shape["size"][1]
+    n = CIRCLE_SEGMENTS  # area of the inscribed polygon the disk is tessellated into
+    return 0.5 * n * shape["radius"] ** 2 * math.sin(2 * math.pi / n)
 
 
-def _plane_transform(mi, shape, offset):
+def _plane_mesh(shape: dict, offset) -> tuple[np.ndarray, np.ndarray]:
+    """Triangles of a rect / disk (normal side counter-clockwise, i.e. emitting towards ``normal``)."""
     u, v, n = _frame(shape["normal"])
     c = np.asarray(shape["center"], dtype=float) + offset
     if shape["shape"] == "rect":
-        su, sv = shape["size"][0] / 2, shape["size"][1] / 2
-    else:
-        su = sv = shape["radius"]
-    m = np.eye(4)
-    m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = u * su, v * sv, n, c
-    return mi.ScalarTransform4f(m.tolist())
+        a, b = shape["size"][0] / 2, shape["size"][1] / 2
+        V = np.array([c - a * u - b * v, c + a * u - b * v, c + a * u + b * v, c - a * u + b * v])
+        return V, np.array([[0, 1, 2], [0, 2, 3]])
+    r, m = shape["radius"], CIRCLE_SEGMENTS
+    ang = 2 * math.pi * np.arange(m) / m
+    ring = c + r * (np.cos(ang)[:, None] * u + np.sin(ang)[:, None] * v)
+    V = np.vstack([c[None], ring])
+    F = np.array([[0, 1 + i, 1 + (i + 1) % m] for i in range(m)])
+    return V, F
+
+
+def part_mesh(part: dict, offset=np.zeros(3)) -> tuple[np.ndarray, np.ndarray]:
+    """Triangle mesh (V (n, 3) m, F (m, 3) int, outward counter-clockwise) of one primitive part, moved by
+    ``offset`` (3,) m. Analytic Mitsuba shapes are slow in the LLVM backend (Embree user geometry), so every
+    primitive is tessellated and the parts of one object and material are merged into one mesh."""
+    s = part["shape"]
+    if s in ("rect", "disk"):
+        return _plane_mesh(part, offset)
+    if s == "box":
+        c = np.asarray(part["center"], dtype=float) + offset
+        hx, hy, hz = (x / 2 for x in part["size"])
+        t = math.radians(part.get("yaw_deg", 0.0))
+        rz = np.array([[math.cos(t), -math.sin(t), 0], [math.sin(t), math.cos(t), 0], [0, 0, 1]])
+        corners = np.array([[sx * hx, sy * hy, sz * hz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
+        V = corners @ rz.T + c
+        # vertex index = 4*(sx>0) + 2*(sy>0) + (sz>0); faces wound outward
+        F = np.array([[0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5],      # -x, +x
+                      [0, 4, 5], [0, 5, 1], [2, 3, 7], [2, 7, 6],      # -y, +y
+                      [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]])     # -z, +z
+        return V, F
+    if s == "sphere":
+        c = np.asarray(part["center"], dtype=float) + offset
+        r = part["radius"]
+        nl, nt = SPHERE_SEGMENTS
+        V = [c + [0, 0, r]]
+        for i in range(1, nt):
+            th = math.pi * i / nt
+            for j in range(nl):
+                ph = 2 * math.pi * j / nl
+                V.append(c + r * np.array([math.sin(th) * math.cos(ph), math.sin(th) * math.sin(ph), math.cos(th)]))
+        V.append(c + [0, 0, -r])
+        F = [[0, 1 + j, 1 + (j + 1) % nl] for j in range(nl)]
+        for i in range(nt - 2):
+            b0, b1 = 1 + i * nl, 1 + (i + 1) * nl
+            for j in range(nl):
+                j1 = (j + 1) % nl
+                F += [[b0 + j, b1 + j, b1 + j1], [b0 + j, b1 + j1, b0 + j1]]
+        last = len(V) - 1
+        b0 = 1 + (nt - 2) * nl
+        F += [[last, b0 + (j + 1) % nl, b0 + j] for j in range(nl)]
+        return np.array(V), np.array(F)
+    # cylinder with caps
+    p0 = np.asarray(part["p0"], dtype=float) + offset
+    p1 = np.asarray(part["p1"], dtype=float) + offset
+    axis = p1 - p0
+    u, v, n = _frame(axis / np.linalg.norm(axis))
+    r, m = part["radius"], CIRCLE_SEGMENTS
+    ang = 2 * math.pi * np.arange(m) / m
+    ring = r * (np.cos(ang)[:, None] * u + np.sin(ang)[:, None] * v)
+    V = np.vstack([p0 + ring, p1 + ring, p0[None], p1[None]])
+    F = []
+    for i in range(m):
+        i1 = (i + 1) % m
+        F += [[i, i1, m + i1], [i, m + i1, m + i]]
+        F += [[2 * m, i1, i], [2 * m + 1, m + i, m + i1]]
+    return V, np.array(F)
+
+
+def _mesh(mi, name: str, V: np.ndarray, F: np.ndarray, bsdf, emitter=None):
+    props = mi.Properties()
+    props["bsdf"] = bsdf
+    if emitter is not None:
+        props["emitter"] = emitter
+    m = mi.Mesh(name, len(V), len(F), props=props)
+    p = mi.traverse(m)
+    p["vertex_positions"] = type(p["vertex_positions"])(np.asarray(V, dtype=np.float32).ravel())
+    p["faces"] = type(p["faces"])(np.asarray(F, dtype=np.uint32).ravel())
+    p.update()
+    return m
 
 
 def _bsdf(m: dict) -> dict:
@@ -108,24 +188,6 @@ def _bsdf(m: dict) -> dict:
         return {"type": "roughplastic", "distribution": "ggx", "alpha": float(m["alpha"]),
                 "diffuse_reflectance": {"type": "rgb", "value": list(m["rgb"])}}
     return {"type": "roughconductor", "material": "Al", "distribution": "ggx", "alpha": float(m["alpha"])}
-
-
-def _part_dict(mi, part: dict, offset: np.ndarray, bsdf: dict) -> dict:
-    s = part["shape"]
-    if s == "box":
-        c = np.asarray(part["center"], dtype=float) + offset
-        half = [x / 2 for x in part["size"]]
-        tf = (mi.ScalarTransform4f().translate(c.tolist()).rotate([0, 0, 1], part.get("yaw_deg", 0.0))
-              .scale(half))
-        return {"type": "cube", "to_world": tf, "bsdf": bsdf}
-    if s == "cylinder":
-        return {"type": "cylinder", "p0": (np.asarray(part["p0"]) + offset).tolist(),
-                "p1": (np.asarray(part["p1"]) + offset).tolist(), "radius": float(part["radius"]), "bsdf": bsdf}
-    if s == "sphere":
-        return {"type": "sphere", "center": (np.asarray(part["center"]) + offset).tolist(),
-                "radius": float(part["radius"]), "bsdf": bsdf}
-    return {"type": "rectangle" if s == "rect" else "disk", "to_world": _plane_transform(mi, part, offset),
-            "bsdf": bsdf}
 
 
 def object_offset(scene: dict, instance: int, t: float) -> np.ndarray:
@@ -158,7 +220,7 @@ def sky_dict(scene: dict) -> dict:
 
 
 def mitsuba_dict(scene: dict, t: float, emit: str | None = None, lights: list[int] | None = None,
-                 integrator: dict | None = None) -> dict:
+                 integrator: dict | None = None, cache: dict | None = None) -> dict:
     """Mitsuba scene dict (no sensor) of ``scene`` at time ``t`` (s, places moving objects).
 
     Args:
@@ -166,8 +228,10 @@ def mitsuba_dict(scene: dict, t: float, emit: str | None = None, lights: list[in
             (every light and the sky) or ``None`` (no emitter: geometry only, e.g. for AOVs).
         lights: optional subset of light ids of ``emit`` to include as emitters (default all of the group).
         integrator: Mitsuba integrator dict (default ``path`` with :data:`MAX_DEPTH`).
+        cache: optional dict reused across calls for the same scene and variant (keeps the loaded BSDFs).
     Returns:
-        dict for ``mi.load_dict``; shape ids follow :func:`shape_id`, :func:`light_shape_id`, :func:`beam_id`.
+        dict for ``mi.load_dict`` holding instantiated meshes (one per object and material, one per lamp
+        face); shape ids follow :func:`shape_id`, :func:`light_shape_id`, :func:`beam_id`.
     """
     import mitsuba as mi  # noqa: PLC0415
 
@@ -175,20 +239,39 @@ def mitsuba_dict(scene: dict, t: float, emit: str | None = None, lights: list[in
         raise ValueError(f"emit: {emit!r} not a light group, 'skymap', 'all' or None")
     d: dict = {"type": "scene",
                "integrator": integrator or {"type": "path", "max_depth": MAX_DEPTH, "hide_emitters": False}}
-    bsdfs = {name: _bsdf(m) for name, m in scene["materials"].items()}
+    cache = {} if cache is None else cache
+    if cache.get("variant") != mi.variant():
+        cache.clear()
+        cache["variant"] = mi.variant()
+        cache["bsdfs"] = {name: mi.load_dict(_bsdf(m)) for name, m in scene["materials"].items()}
+        cache["off_lens"] = mi.load_dict(OFF_LENS)
+    bsdfs, off_lens = cache["bsdfs"], cache["off_lens"]
     for o in scene["objects"]:
         off = object_offset(scene, o["id"], t)
-        for j, part in enumerate(o["parts"]):
-            d[shape_id(o["id"], j)] = _part_dict(mi, part, off, bsdfs[part["material"]])
+        by_mat: dict = {}
+        for part in o["parts"]:
+            by_mat.setdefault(part["material"], []).append(part_mesh(part, off))
+        for k, (mat, meshes) in enumerate(sorted(by_mat.items())):
+            Vs, Fs, base = [], [], 0
+            for V, F in meshes:
+                Vs.append(V)
+                Fs.append(F + base)
+                base += len(V)
+            name = shape_id(o["id"], k)
+            d[name] = _mesh(mi, name, np.vstack(Vs), np.vstack(Fs), bsdfs[mat])
     wanted = None if lights is None else set(int(i) for i in lights)
     for lt in scene["lights"]:
         off = object_offset(scene, lt["instance"], t)
         on = emit == "all" or (emit == lt["group"] and (wanted is None or lt["id"] in wanted))
-        face = {"type": "rectangle" if lt["shape"] == "rect" else "disk",
-                "to_world": _plane_transform(mi, lt, off), "bsdf": OFF_LENS}
+        V, F = _plane_mesh(lt, off)
+        emitter = None
         if on:
             rad = light_spectrum(lt)
-            face["emitter"] = {"type": "area", "radiance": spectra.mitsuba_spectrum(rad)}
+            # light sampling in proportion to luminous flux (pi * Lv * A for a Lambertian face) instead of
+            # uniformly over the emitters, so dim tail lamps do not take samples from bright headlights
+            flux = math.pi * float(lt["luminance_cd_m2"]) * plane_area(lt)
+            emitter = mi.load_dict({"type": "area", "radiance": spectra.mitsuba_spectrum(rad),
+                                    "sampling_weight": max(flux, 1e-12)})
             if lt["spread_deg"] < 90.0:
                 n = np.asarray(lt["normal"], dtype=float)
                 n /= np.linalg.norm(n)
@@ -198,8 +281,12 @@ def mitsuba_dict(scene: dict, t: float, emit: str | None = None, lights: list[in
                     "type": "spot", "to_world": mi.ScalarTransform4f().look_at(pos.tolist(), (pos + n).tolist(), up),
                     "intensity": spectra.mitsuba_spectrum(rad, scale=plane_area(lt)),
                     "cutoff_angle": float(lt["spread_deg"]),
+                    # flux of a cone of intensity I: ~ I * 2 pi (1 - cos cutoff)
+                    "sampling_weight": max(2 * math.pi * (1 - math.cos(math.radians(lt["spread_deg"])))
+                                           * float(lt["luminance_cd_m2"]) * plane_area(lt), 1e-12),
                     "beam_width": BEAM_WIDTH_FRACTION * float(lt["spread_deg"])}
-        d[light_shape_id(lt["id"])] = face
+        name = light_shape_id(lt["id"])
+        d[name] = _mesh(mi, name, V, F, off_lens, emitter)
     if emit in ("skymap", "all"):
         d["sky"] = sky_dict(scene)
     return d
@@ -233,6 +320,9 @@ def set_solo(params, scene: dict, group: str, light_id: int | None, radiance_cac
                 radiance_cache[key] = type(params[key])(params[key])
             params[key] = radiance_cache[key] if on else _off_values(radiance_cache[key])
         for key in (f"{light_shape_id(lt['id'])}.emitter.sampling_weight", f"{beam_id(lt['id'])}.sampling_weight"):
-            if key in params:
-                params[key] = 1.0 if on else 0.0
+            if key not in params:
+                continue
+            if key not in radiance_cache:
+                radiance_cache[key] = float(params[key])
+            params[key] = radiance_cache[key] if on else 0.0
     params.update()

@@ -80,6 +80,7 @@ def write_png(rgb8: np.ndarray, path: str | os.PathLike) -> None:
     os.close(fd)
     try:
         mpimg.imsave(tmp, rgb8, format="png")
+        os.chmod(tmp, 0o644)  # mkstemp creates 0600
         os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):
@@ -93,3 +94,40 @@ def preview_png(img: np.ndarray, bands_nm, band_width_nm: float, path: str | os.
     rgb = tonemap_srgb(img, bands_nm, band_width_nm, key)
     write_png(rgb, path)
     return rgb
+
+
+def render_previews(out_dir: str | os.PathLike, seed: int = 7, width: int = 640, height: int = 360,
+                    spp: int = 8, times=("day", "dusk", "night")) -> list[Path]:
+    """Render frame 0 of one generated scene per time of day and write ``preview_<tod>.png`` to ``out_dir``
+    (plus ``preview_<tod>_scene.json``, the scene it came from). Returns the PNG paths."""
+    from . import render as rnd  # noqa: PLC0415
+    from . import scene as scn  # noqa: PLC0415
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for tod in times:
+        sc = scn.generate_scene(seed, tod)
+        opts = rnd.RenderOptions(width=width, height=height, spp=spp, light_spp=max(spp, 16), frames=1, bins=4,
+                                 aux=False, seed=seed)
+        frame = next(rnd.render_frames(sc, opts))
+        img = compose_window(frame, rnd.frame_timing(sc, opts, 0), "short", shape=(len(opts.bands_nm), height, width))
+        p = out / f"preview_{tod}.png"
+        preview_png(img, opts.bands_nm, opts.band_width_nm, p)
+        scn.save_scene(sc, out / f"preview_{tod}_scene.json")
+        paths.append(p)
+    return paths
+
+
+if __name__ == "__main__":  # pragma: no cover - documentation helper
+    import argparse
+
+    ap = argparse.ArgumentParser(description="Render day/dusk/night preview PNGs of generated scenes.")
+    ap.add_argument("--out", default="docs/img")
+    ap.add_argument("--seed", type=int, default=7)
+    ap.add_argument("--width", type=int, default=640)
+    ap.add_argument("--height", type=int, default=360)
+    ap.add_argument("--spp", type=int, default=8)
+    a = ap.parse_args()
+    for path in render_previews(a.out, a.seed, a.width, a.height, a.spp):
+        print(path)

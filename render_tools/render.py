@@ -3,7 +3,8 @@
 :func:`render_frames` yields, for each frame n of a sequence (timing of ``docs/contracts.md`` section 1):
 
 - static groups (default headlights, streetlights, skymap): the time-averaged spectral radiance over the short
-  (LPD) and long (SPD) exposure windows, (C, H, W) float32, W sr^-1 m^-2 nm^-1;
+  (LPD) and long (SPD) exposure windows, (C, H, W) float32, W sr^-1 m^-2 nm^-1; the full frame is rendered at
+  ``spp`` and every lamp's own crop again at ``light_spp`` (the HDR peaks get the low-noise estimate);
 - flickering groups (default otherlights, signals): every light rendered alone, only inside its screen
   bounding box over the capture window (padded by :attr:`RenderOptions.pad_px`), in K time bins that tile
   the capture window [t_n, t_n + T_L + readout), each the time-averaged radiance over its bin with the light
@@ -25,7 +26,7 @@ from __future__ import annotations
 import math
 import zlib
 from collections.abc import Iterator
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 
 import numpy as np
 
@@ -39,6 +40,8 @@ DEFAULT_BANDS_NM = tuple(float(w) for w in range(400, 701, 10))
 LIGHT_MASK_PASSES = 4
 #: Screen-space sample times per capture window used to bound a light's motion, count.
 BBOX_TIME_SAMPLES = 17
+#: Light crops are grown to a multiple of this many px (each distinct film size compiles one kernel).
+CROP_QUANTUM_PX = 8
 #: Minimum depth of a projected point treated as in front of the camera, m.
 MIN_DEPTH_M = 0.05
 
@@ -47,7 +50,8 @@ MIN_DEPTH_M = 0.05
 class RenderOptions:
     """Render settings (SI units).
 
-    width, height: image size, px. spp: samples per pixel of every radiance render. bins: K time bins of the
+    width, height: image size, px. spp: samples per pixel *per band pass* of the full-frame renders (every band
+    gets spp wavelength samples per pixel; a pixel costs ceil(C / 4) * spp camera samples). bins: K time bins of the
     capture window for flickering groups. bands_nm: band centres, nm. band_width_nm: box width, nm.
     frames: frames per sequence. fps: frame rate, 1/s. long_exposure_s: SPD exposure T_L, s.
     line_time_s: rolling-shutter line time, s (readout margin = height * line_time_s).
@@ -72,7 +76,6 @@ class RenderOptions:
     aux: bool = True
     light_spp: int | None = None
     pad_px: int = 2
-    extra: dict = field(default_factory=dict)
 
     def __post_init__(self):
         self.bands_nm = tuple(float(b) for b in self.bands_nm)
@@ -233,11 +236,20 @@ class _Renderer:
         p = self.opts.pad_px
         x0, y0 = np.floor(uv.min(0)).astype(int) - p
         x1, y1 = np.ceil(uv.max(0)).astype(int) + p
-        x0, y0 = max(x0, 0), max(y0, 0)
-        x1, y1 = min(x1, self.opts.width), min(y1, self.opts.height)
-        if x1 <= x0 or y1 <= y0:
+        if x1 <= 0 or y1 <= 0 or x0 >= self.opts.width or y0 >= self.opts.height:
             return None
+        x0, x1 = _round_span(x0, x1, self.opts.width)
+        y0, y1 = _round_span(y0, y1, self.opts.height)
         return (int(y0), int(x0), int(y1), int(x1))
+
+
+def _round_span(a: int, b: int, n: int) -> tuple[int, int]:
+    """Grow [a, b) to a multiple of :data:`CROP_QUANTUM_PX` (fewer distinct film sizes = fewer JIT kernels),
+    kept inside [0, n)."""
+    a, b = max(a, 0), min(b, n)
+    size = min(-(-(b - a) // CROP_QUANTUM_PX) * CROP_QUANTUM_PX, n)
+    a = max(0, min(a - (size - (b - a)) // 2, n - size))
+    return a, a + size
 
 
 def _selected_groups(scene: dict, opts: RenderOptions) -> dict:
@@ -290,6 +302,13 @@ def scene_meta(scene: dict, opts: RenderOptions) -> dict:
     }
 
 
+def _lookup(keys: np.ndarray, table: dict) -> np.ndarray:
+    """Map integer ``keys`` (H, W) through ``table`` (missing -> -1) -> float32 (H, W)."""
+    uniq, inv = np.unique(keys, return_inverse=True)
+    vals = np.array([table.get(int(k), -1) for k in uniq], dtype=np.float32)
+    return vals[inv].reshape(keys.shape)
+
+
 def _aux(r: _Renderer, scene_geo, t_aux: float, visible_lights: set, frame: int) -> dict:
     """AOVs at time ``t_aux`` (s): depth.Z, depth.R (m, +inf = no hit), mask.instance, mask.light (-1 none)."""
     mi, dr = r.mi, r.dr
@@ -301,7 +320,7 @@ def _aux(r: _Renderer, scene_geo, t_aux: float, visible_lights: set, frame: int)
     else:
         ids = np.array(dr.reinterpret_array(mi.UInt32, scene_geo.shapes_dr()), dtype=np.int64)
     inst_of, light_of = {}, {}
-    for sid, sh in zip(ids, shapes):
+    for sid, sh in zip(ids.tolist(), shapes):
         name = sh.id()
         if name.startswith("light"):
             lid = int(name[5:])
@@ -328,8 +347,8 @@ def _aux(r: _Renderer, scene_geo, t_aux: float, visible_lights: set, frame: int)
             z = np.where(hit, (p - c) @ fwd, np.inf)
             out["depth.Z"] = z.astype(np.float32)
             out["depth.R"] = rng_m.astype(np.float32)
-            out["mask.instance"] = np.vectorize(lambda s: inst_of.get(s, -1), otypes=[np.float32])(sidx)
-        lm = np.vectorize(lambda s: light_of.get(s, -1), otypes=[np.float32])(sidx)
+            out["mask.instance"] = _lookup(sidx, inst_of)
+        lm = _lookup(sidx, light_of)
         light_mask = np.where((light_mask < 0) & (lm >= 0), lm, light_mask)
     out["mask.light"] = light_mask
     return out
@@ -353,20 +372,32 @@ def render_frames(scene: dict, opts: RenderOptions) -> Iterator[dict]:
     r = _Renderer(scene, opts)
     mi = r.mi
     light_spp = opts.light_spp or opts.spp
+    mcache: dict = {}  # BSDFs loaded once per scene
     for n, tm in enumerate(timings):
         t_obj = 0.5 * (tm["window"][0] + tm["window"][1])  # moving objects placed at mid capture window
         out = {"frame": n, "static": {}, "lights": {}, "aux": {}}
         visible: set = set()
         for g, info in groups.items():
-            sc = mi.load_dict(ms.mitsuba_dict(scene, t_obj, emit=g))
+            sc = mi.load_dict(ms.mitsuba_dict(scene, t_obj, emit=g, cache=mcache))
             if not info["flicker"]:
                 res = {}
+                lamps = [lt for lt in scene["lights"] if lt["group"] == g]
                 for win in ("short", "long"):
                     a, b = tm[win]
-                    res[win] = r.render(sc, a, b - a, opts.spp, _seed(opts.seed, n, g, win))[0]
+                    img = r.render(sc, a, b - a, opts.spp, _seed(opts.seed, n, g, win))[0]
+                    # LED refinement: the lamps' own pixels are re-rendered (whole group emitting, same window)
+                    # at light_spp and replace the full-frame estimate there: both are unbiased estimates of
+                    # the same pixels, the refined one with less variance where the HDR peaks are.
+                    for lt in lamps:
+                        bb = r.light_bbox(lt, t_obj, a, b)
+                        if bb is None or light_spp <= opts.spp:
+                            continue
+                        y0, x0, y1, x1 = bb
+                        img[:, y0:y1, x0:x1] = r.render(sc, a, b - a, light_spp,
+                                                        _seed(opts.seed, n, g, win, lt["id"]), crop=bb)[0]
+                    res[win] = img
                 out["static"][g] = res
-                visible |= {lt["id"] for lt in scene["lights"] if lt["group"] == g
-                            and r.light_bbox(lt, t_obj, *tm["window"]) is not None}
+                visible |= {lt["id"] for lt in lamps if r.light_bbox(lt, t_obj, *tm["window"]) is not None}
                 continue
             params = mi.traverse(sc)
             cache: dict = {}
@@ -390,6 +421,6 @@ def render_frames(scene: dict, opts: RenderOptions) -> Iterator[dict]:
                 items.append((lt["id"], bb, bins))
             out["lights"][g] = items
         if opts.aux:
-            geo = mi.load_dict(ms.mitsuba_dict(scene, t_obj, emit=None))
+            geo = mi.load_dict(ms.mitsuba_dict(scene, t_obj, emit=None, cache=mcache))
             out["aux"] = _aux(r, geo, tm["t_aux"], visible, n)
         yield out

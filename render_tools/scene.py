@@ -657,8 +657,26 @@ def save_scene(scene: dict, path: str | os.PathLike) -> None:
     try:
         with os.fdopen(fd, "w", encoding="utf-8") as fh:
             json.dump(scene, fh, indent=1)
+        os.chmod(tmp, 0o644)  # mkstemp creates 0600
         os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):
             os.unlink(tmp)
         raise
+
+
+def empty_scene(scene_id: str = "empty", short_exposure_s: float = 0.004, speed_mps: float = 0.0,
+                yaw_rate_rad_s: float = 0.0, position_m=(0.0, 0.0, 1.4), pitch_deg: float = 0.0,
+                fov_x_deg: float = 40.0, sky_luminance_cd_m2: float = 0.0) -> dict:
+    """A valid scene with no objects, no lights and a constant (CIE D65) sky of the given luminance: a start
+    for hand-made scenes and tests; append to ``objects``, ``lights`` and ``materials``."""
+    scene = {"format": SCENE_FORMAT, "version": SCENE_VERSION, "scene_id": scene_id, "seed": 0,
+             "time_of_day": "night", "timing": {"short_exposure_s": float(short_exposure_s)},
+             "camera": {"position_m": [float(v) for v in position_m], "yaw_deg": 0.0, "pitch_deg": float(pitch_deg),
+                        "fov_x_deg": float(fov_x_deg), "speed_mps": float(speed_mps),
+                        "yaw_rate_rad_s": float(yaw_rate_rad_s)},
+             "sky": {"model": "constant", "spectrum": {"model": "illuminant", "name": "D65"},
+                     "luminance_cd_m2": float(sky_luminance_cd_m2)},
+             "groups": {g: {"flicker": g in ("otherlights", "signals")} for g in GROUPS},
+             "materials": {}, "objects": [], "lights": []}
+    return validate_scene(scene)

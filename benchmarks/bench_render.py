@@ -1,0 +1,321 @@
+"""Render error against run time: writes docs/render-benchmark.md and docs/img/render-benchmark.png.
+
+Measures, on one generated night scene (the groups with the most lights) at 640x360, 31 bands:
+1. static groups: relative RMSE of the short-window composite against a high-spp reference, over all pixels
+   and over LED pixels, as a function of spp, with the run time per frame;
+2. per-light time bins: relative RMSE over LED pixels as a function of light_spp and of K;
+3. continuous-time blur (one render) against the average of M instantaneous sub-frame renders at equal
+   sample count (equal time);
+4. the share of each flickering light's energy that falls outside its crop;
+5. the target run: all groups, 3 frames, with the default benchmark settings, timed end to end.
+
+Errors are computed on luminance Y (cd/m^2, CIE 1931 ybar over the 31 bands). LED pixels: relative RMSE
+||Y - Yref||_2 / ||Yref||_2 over the pixels of the reference light mask (composite), or of a light's crop
+where the reference's bin-mean exceeds 5 % of the crop maximum (bins, all lights pooled). All pixels: the
+per-pixel relative RMSE sqrt(mean (Y - Yref)^2 / (Yref^2 + eps^2)), eps = 1 % of the mean reference
+luminance, and the median per-pixel |Y - Yref| / Yref. The reference has its own Monte Carlo noise; errors
+near its level are
+upper bounds. Usage: ``python benchmarks/bench_render.py [--quick]``.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from render_tools import preview, render, scene, spectra  # noqa: E402
+
+BANDS = render.DEFAULT_BANDS_NM
+
+#: Share of a crop's maximum above which a pixel counts as an LED pixel of that light.
+LED_THRESHOLD = 0.05
+
+
+def lum(x: np.ndarray) -> np.ndarray:
+    """Luminance (..., H, W) cd/m^2 of band images (..., C, H, W) (31 bands 400..700 nm, 10 nm)."""
+    return np.einsum("...chw,c->...hw", x, _ybar_weights())
+
+
+_W = None
+
+
+def _ybar_weights() -> np.ndarray:
+    global _W
+    if _W is None:
+        img = np.eye(31)[:, :, None]  # one pixel per band
+        _W = spectra.spectral_to_xyz(img, BANDS, 10.0)[1, :, 0]
+    return _W
+
+
+def rel_rmse(x: np.ndarray, ref: np.ndarray, sel: np.ndarray | None = None) -> float:
+    """Relative RMSE ||x - ref||_2 / ||ref||_2 of luminance over the selected pixels (x, ref: (..., C, H, W))."""
+    d, r = lum(x) - lum(ref), lum(ref)
+    if sel is not None:
+        d, r = d[..., sel], r[..., sel]
+    return float(np.sqrt(np.sum(d.astype(np.float64) ** 2)) / max(float(np.sqrt(np.sum(r.astype(np.float64) ** 2))),
+                                                                    1e-30))
+
+
+def rel_mse_pixels(x: np.ndarray, ref: np.ndarray) -> float:
+    """Per-pixel relative RMSE of luminance, sqrt(mean (Y - Yr)^2 / (Yr^2 + eps^2)), eps = 1 % of mean(Yr)
+    (the relMSE of Rousselle, Knaus, Zwicker, SIGGRAPH Asia 2011, with a scene-relative floor)."""
+    y, yr = lum(x), lum(ref)
+    eps = 0.01 * float(yr.mean())
+    return float(np.sqrt(np.mean((y - yr) ** 2 / (yr**2 + eps**2))))
+
+
+def median_rel_error(x: np.ndarray, ref: np.ndarray) -> float:
+    """Median over pixels of |Y - Yref| / Yref (pixels with Yref > 0): a robust all-pixel error."""
+    y, yr = lum(x), lum(ref)
+    ok = yr > 0
+    return float(np.median(np.abs(y[ok] - yr[ok]) / yr[ok]))
+
+
+def led_sel(ref_bins: np.ndarray) -> np.ndarray:
+    e = lum(ref_bins.mean(0))
+    return e > LED_THRESHOLD * e.max() if e.max() > 0 else np.zeros_like(e, bool)
+
+
+def bins_error(frame: dict, ref: dict, k_ref: int) -> float:
+    """Relative RMSE of luminance over LED pixels of all lights' bins (all lights pooled); reference bins
+    block-averaged to this frame's K."""
+    num, den = 0.0, 0.0
+    for g, items in frame["lights"].items():
+        refs = {lid: (bb, b) for lid, bb, b in ref["lights"][g]}
+        for lid, bb, b in items:
+            rbb, rb = refs[lid]
+            assert tuple(rbb) == tuple(bb)
+            k = b.shape[0]
+            rb = rb.reshape(k, k_ref // k, *rb.shape[1:]).mean(1)
+            sel = led_sel(rb)
+            num += float(np.sum((lum(b) - lum(rb))[:, sel].astype(np.float64) ** 2))
+            den += float(np.sum(lum(rb)[:, sel].astype(np.float64) ** 2))
+    return float(np.sqrt(num / den))
+
+
+def timed_frame(sc, opts):
+    t = time.perf_counter()
+    fr = next(render.render_frames(sc, opts))
+    return fr, time.perf_counter() - t
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--quick", action="store_true", help="smaller image, fewer settings (smoke run)")
+    ap.add_argument("--out", default=str(ROOT / "docs"))
+    ap.add_argument("--ref-cache", default=None, help="pickle file to keep / reuse the reference frame")
+    a = ap.parse_args()
+    W, H = (320, 180) if a.quick else (640, 360)
+    ref_spp, ref_light_spp, k_ref = (4, 64, 8) if a.quick else (16, 512, 16)
+    sc = scene.generate_scene(7, "night")
+    base = dict(width=W, height=H, frames=1, seed=11)
+    res: dict = {"width": W, "height": H, "scene": sc["scene_id"], "time_of_day": sc["time_of_day"]}
+
+    # warm-up (kernel compilation, cached on disk by drjit) so timings below are steady-state
+    timed_frame(sc, render.RenderOptions(spp=1, light_spp=4, bins=4, **{**base, "seed": 1}))
+
+    print("reference ...", flush=True)
+    import pickle
+
+    cache = Path(a.ref_cache) if a.ref_cache else None
+    if cache is not None and cache.exists():
+        with open(cache, "rb") as fh:
+            ref, t_ref = pickle.load(fh)
+    else:
+        ref, t_ref = timed_frame(sc, render.RenderOptions(spp=ref_spp, light_spp=ref_light_spp, bins=k_ref,
+                                                          **{**base, "seed": 999}))
+        if cache is not None:
+            with open(cache, "wb") as fh:
+                pickle.dump((ref, t_ref), fh)
+    res["reference"] = {"spp": ref_spp, "light_spp": ref_light_spp, "bins": k_ref, "seconds": t_ref}
+    tm = render.frame_timing(sc, render.RenderOptions(bins=k_ref, **base), 0)
+    shape = (31, H, W)
+    ref_img = preview.compose_window(ref, tm, "short", shape)
+    led_px = ref["aux"]["mask.light"] >= 0
+
+    # 1. static groups vs spp (light settings fixed)
+    rows = []
+    for spp in ([1, 2] if a.quick else [1, 2, 4, 8]):
+        fr, dt = timed_frame(sc, render.RenderOptions(spp=spp, light_spp=32, bins=8, aux=False, **base))
+        tm8 = render.frame_timing(sc, render.RenderOptions(bins=8, **base), 0)
+        img = preview.compose_window(fr, tm8, "short", shape)
+        rows.append({"spp": spp, "seconds": dt, "all": rel_mse_pixels(img, ref_img),
+                     "median": median_rel_error(img, ref_img), "led": rel_rmse(img, ref_img, led_px)})
+        print("spp", rows[-1], flush=True)
+    res["spp"] = rows
+
+    # 2. light bins vs light_spp and K (static groups at 1 spp; time is dominated by them: report both)
+    rows = []
+    for k in ([4, 8] if a.quick else [4, 8, 16]):
+        for lspp in ([8, 32] if a.quick else [8, 32, 128]):
+            opts = render.RenderOptions(spp=1, light_spp=lspp, bins=k, aux=False, groups=("otherlights", "signals"),
+                                        **base)
+            fr, dt = timed_frame(sc, opts)
+            rows.append({"bins": k, "light_spp": lspp, "seconds": dt, "led": bins_error(fr, ref, k_ref)})
+            print("bins", rows[-1], flush=True)
+    res["bins"] = rows
+
+    # 3. continuous blur vs M instantaneous sub-frames at equal sample count (one light, one bin = window)
+    import mitsuba as mi  # noqa: PLC0415
+
+    from render_tools import mitsuba_scene as ms  # noqa: PLC0415
+
+    opts = render.RenderOptions(spp=1, bins=1, **base)
+    r = render._Renderer(sc, opts)
+    tmw = render.frame_timing(sc, opts, 0)
+    g = "otherlights"
+    t_obj = 0.5 * (tmw["window"][0] + tmw["window"][1])
+    msc = mi.load_dict(ms.mitsuba_dict(sc, t_obj, emit=g))
+    params, cache = mi.traverse(msc), {}
+    lights = [lt for lt in sc["lights"] if lt["group"] == g]
+    lights = [(lt, r.light_bbox(lt, t_obj, *tmw["window"])) for lt in lights]
+    lights = [x for x in lights if x[1] is not None]
+    lights = sorted(lights, key=lambda x: -(x[1][2] - x[1][0]) * (x[1][3] - x[1][1]))[:4]  # 4 largest crops
+    a0, a1 = tmw["window"]
+    budget = 256
+    rows = []
+    for M in [1, 4, 16, 64]:
+        errs, secs = [], 0.0
+        for lt, bb in lights:
+            ms.set_solo(params, sc, g, lt["id"], cache)
+            truth = r.render(msc, a0, a1 - a0, 2048, 77, crop=bb)[0]
+            t = time.perf_counter()
+            if M == 1:
+                est = r.render(msc, a0, a1 - a0, budget, 5, crop=bb)[0]
+            else:
+                est = np.mean([r.render(msc, a0 + (i + 0.5) * (a1 - a0) / M, 0.0, budget // M, 5 + i, crop=bb)[0]
+                               for i in range(M)], axis=0)
+            secs += time.perf_counter() - t
+            errs.append(rel_rmse(est, truth, led_sel(truth[None])))
+        rows.append({"M": M, "seconds": secs, "led": float(np.mean(errs))})
+        print("blur", rows[-1], flush=True)
+    res["blur"] = rows
+
+    # 4. energy outside the crop (full-frame solo render over the capture window vs its crop)
+    fr_out = []
+    for lt, bb in lights:
+        ms.set_solo(params, sc, g, lt["id"], cache)
+        full = r.render(msc, a0, a1 - a0, 8, 3)[0]
+        y0, x0, y1, x1 = bb
+        tot = float(full.sum())
+        fr_out.append(1.0 - float(full[:, y0:y1, x0:x1].sum()) / tot if tot > 0 else 0.0)
+    res["outside_crop"] = {"lights": [lt["id"] for lt, _ in lights], "fraction": fr_out}
+    print("outside", res["outside_crop"], flush=True)
+
+    # 5. the target run: all groups, 3 frames
+    tgt = dict(spp=2, light_spp=32, bins=8)
+    opts = render.RenderOptions(width=W, height=H, frames=3, seed=11, **tgt)
+    t = time.perf_counter()
+    frames = list(render.render_frames(sc, opts))
+    dt = time.perf_counter() - t
+    img0 = preview.compose_window(frames[0], render.frame_timing(sc, opts, 0), "short", shape)
+    res["target"] = {**tgt, "frames": 3, "seconds": dt, "led_static_composite": rel_rmse(img0, ref_img, led_px),
+                     "all_static_composite": rel_mse_pixels(img0, ref_img),
+                     "median_static_composite": median_rel_error(img0, ref_img)}
+    fr1 = next(render.render_frames(sc, render.RenderOptions(width=W, height=H, frames=1, seed=11, aux=False,
+                                                             groups=("otherlights", "signals"), **tgt)))
+    res["target"]["led_bins"] = bins_error(fr1, ref, k_ref)
+    print("target", res["target"], flush=True)
+    write_report(res, Path(a.out))
+
+
+def write_report(res: dict, out: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    (out / "img").mkdir(parents=True, exist_ok=True)
+    fig, ax = plt.subplots(1, 3, figsize=(15, 4.2))
+    s = res["spp"]
+    ax[0].loglog([r["seconds"] for r in s], [r["all"] for r in s], "o-", label="all pixels (relMSE^0.5)")
+    ax[0].loglog([r["seconds"] for r in s], [r["median"] for r in s], "^-", label="all pixels (median rel.)")
+    ax[0].loglog([r["seconds"] for r in s], [r["led"] for r in s], "s-", label="LED pixels")
+    for r in s:
+        ax[0].annotate(f"spp {r['spp']}", (r["seconds"], r["all"]), fontsize=8)
+    ax[0].set(xlabel="s per frame (all groups)", ylabel="relative RMSE", title="short-window composite vs spp")
+    ax[0].legend()
+    for k in sorted({r["bins"] for r in res["bins"]}):
+        rr = [r for r in res["bins"] if r["bins"] == k]
+        ax[1].loglog([r["seconds"] for r in rr], [r["led"] for r in rr], "o-", label=f"K = {k}")
+        for r in rr:
+            ax[1].annotate(str(r["light_spp"]), (r["seconds"], r["led"]), fontsize=8)
+    ax[1].axhline(0.05, color="k", lw=0.8, ls="--")
+    ax[1].set(xlabel="s per frame (flickering groups)", ylabel="relative RMSE, LED pixels",
+              title="per-light bins vs light_spp (labels) and K")
+    ax[1].legend()
+    b = res["blur"]
+    ax[2].semilogx([r["M"] for r in b], [r["led"] for r in b], "o-")
+    ax[2].set(xlabel="M (1 = continuous blur, else M sub-frames)", ylabel="relative RMSE, LED pixels",
+              title="equal samples: continuous vs sub-frames")
+    fig.tight_layout()
+    fd, tmp = tempfile.mkstemp(dir=out / "img", suffix=".png")
+    os.close(fd)
+    fig.savefig(tmp, dpi=110)
+    os.chmod(tmp, 0o644)
+    os.replace(tmp, out / "img" / "render-benchmark.png")
+
+    t = res["target"]
+    lines = [
+        "# Render benchmark (error against run time)",
+        "",
+        f"Generated by `benchmarks/bench_render.py` on this 2-core machine (shared with other jobs, so times are "
+        f"upper bounds), scene `{res['scene']}` ({res['time_of_day']}), {res['width']}x{res['height']} px, 31 bands "
+        f"400-700 nm, llvm_ad_spectral. Reference: spp {res['reference']['spp']} (per band pass), light_spp "
+        f"{res['reference']['light_spp']}, K = {res['reference']['bins']} ({res['reference']['seconds']:.0f} s). "
+        "Errors on luminance Y: LED pixels ||Y - Yref|| / ||Yref||; all pixels per-pixel "
+        "sqrt(mean (Y - Yref)^2 / (Yref^2 + eps^2)), eps = 1 % of mean Yref (see the script's docstring).",
+        "",
+        "![benchmark](img/render-benchmark.png)",
+        "",
+        "## Target: all groups, 3 frames",
+        "",
+        "| setting | frames | run time (s) | rel. RMSE LED bins | rel. RMSE LED px (short composite) "
+        "| all px relMSE^0.5 | all px median rel. error |",
+        "|---|---|---|---|---|---|---|",
+        f"| spp {t['spp']}, light_spp {t['light_spp']}, K {t['bins']} | 3 | {t['seconds']:.1f} | {t['led_bins']:.3f} | "
+        f"{t['led_static_composite']:.3f} | {t['all_static_composite']:.3f} | {t['median_static_composite']:.3f} |",
+        "",
+        "## Short-window composite against spp (light_spp 32, K 8; one frame)",
+        "",
+        "| spp | s / frame | all px relMSE^0.5 | all px median rel. error | rel. RMSE LED px |",
+        "|---|---|---|---|---|",
+    ]
+    lines += [f"| {r['spp']} | {r['seconds']:.1f} | {r['all']:.3f} | {r['median']:.3f} | {r['led']:.3f} |"
+              for r in res["spp"]]
+    lines += ["", "## Per-light time bins against light_spp and K (flickering groups only; one frame)", "",
+              "| K | light_spp | s / frame | rel. RMSE LED px |", "|---|---|---|---|"]
+    lines += [f"| {r['bins']} | {r['light_spp']} | {r['seconds']:.1f} | {r['led']:.3f} |" for r in res["bins"]]
+    lines += ["", "## Continuous-time blur against M instantaneous sub-frames (same total samples, 4 lights)", "",
+              "| M | s | rel. RMSE LED px |", "|---|---|---|"]
+    lines += [f"| {'continuous' if r['M'] == 1 else r['M']} | {r['seconds']:.2f} | {r['led']:.3f} |"
+              for r in res["blur"]]
+    o = res["outside_crop"]
+    lines += ["", "## Energy outside a light's crop", "",
+              f"Full-frame solo renders of lights {o['lights']} over the capture window: share of their energy "
+              f"outside the stored crop = {', '.join(f'{x:.4f}' for x in o['fraction'])} "
+              "(light the lamp throws on the road and car bodies; it is lost from the flickering layer).", ""]
+    lines += ["## Reading the numbers", "",
+              "- LED pixels of static groups are re-rendered at light_spp inside each lamp's crop, so their error "
+              "does not depend on spp; spp buys the rest of the image.",
+              "- The all-pixel relMSE of a night scene is dominated by rare bright paths (light from small, very "
+              "bright lamps reaching dark pixels via glossy car paint and glass); the median per-pixel error is the "
+              "typical one. Neither is clamped: the estimates stay unbiased.",
+              "- Per-light bins: the error falls as light_spp^-1/2; at equal light_spp a larger K costs more time "
+              "(K times the pixels) for the same per-bin noise.",
+              "- Continuous blur: one render whatever the motion; M sub-frames need M renders (M kernel launches) for "
+              "the same samples and add a discretisation (strobing) error that grows with the blur length.",
+              ""]
+    (out / "render-benchmark.md").write_text("\n".join(lines))
+
+
+if __name__ == "__main__":
+    main()

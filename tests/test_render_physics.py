@@ -1,0 +1,183 @@
+"""Physics of the renderer on tiny hand-made scenes, checked against analytic answers.
+
+Runs with llvm_ad_spectral where a working libLLVM exists, else scalar_spectral; the direct-emitter test
+also runs explicitly with scalar_spectral.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from render_tools import camera, render, scene, spectra
+
+LED = {"model": "led", "peak_nm": 630.0, "fwhm_nm": 18.0}
+HPS = {"model": "light_source", "name": "HPS"}
+
+
+def _light(lid, group, center, normal, size, spec, lum, kind=None, instance=-1):
+    kind = kind or {"otherlights": "tail", "streetlights": "streetlight", "headlights": "headlight",
+                    "signals": "signal"}[group]
+    return {"id": lid, "group": group, "kind": kind, "instance": instance, "shape": "rect",
+            "center": list(center), "normal": list(normal), "size": list(size), "spread_deg": 90.0,
+            "spectrum": spec, "luminance_cd_m2": float(lum)}
+
+
+def _expected(spec, lum, opts):
+    return spectra.band_means(spectra.absolute_spectrum(spec, lum), opts.bands_nm, opts.band_width_nm)
+
+
+def _wall_scene(speed=0.0):
+    """A red-LED panel (otherlights) filling the left of the view and an HPS panel (streetlights) the right."""
+    s = scene.empty_scene(speed_mps=speed)
+    s["lights"].append(_light(0, "otherlights", (5.0, 2.0, 1.4), (-1, 0, 0), (4.0, 6.0), LED, 800.0))
+    s["lights"].append(_light(1, "streetlights", (5.0, -2.0, 1.4), (-1, 0, 0), (4.0, 6.0), HPS, 2e4))
+    return scene.validate_scene(s)
+
+
+@pytest.mark.parametrize("variant", [None, "scalar_spectral"])
+def test_directly_viewed_emitter_returns_its_spectral_radiance_per_nm(variant):
+    s = _wall_scene()
+    opts = render.RenderOptions(width=12, height=8, spp=16, bins=2, frames=1, aux=False, variant=variant)
+    fr = next(render.render_frames(s, opts))
+    (lid, bb, bins), = fr["lights"]["otherlights"]
+    assert lid == 0 and bins.shape[:2] == (2, 31)
+    left = bins[:, :, :, : 6 - bb[1] - 1]  # columns fully on the LED panel (x < 5 of 12)
+    exp = _expected(LED, 800.0, opts)
+    peak = exp > 0.05 * exp.max()
+    got = left.mean((0, 2, 3))
+    assert np.allclose(got[peak], exp[peak], rtol=0.02)
+    assert np.abs(got - exp).max() < 0.02 * exp.max()
+    st = fr["static"]["streetlights"]["short"][:, :, 7:]
+    exp1 = _expected(HPS, 2e4, opts)
+    assert np.allclose(st.mean((1, 2)), exp1, rtol=0.02, atol=0.01 * exp1.max())
+    assert "skymap" not in fr["static"]  # zero-luminance sky: the group is left out
+
+
+def test_lambertian_plane_under_uniform_sky():
+    rho, lsky = 0.5, 1000.0
+    s = scene.empty_scene(pitch_deg=-45.0, fov_x_deg=20.0, sky_luminance_cd_m2=lsky)
+    s["materials"]["grey"] = {"type": "diffuse", "rgb": [rho, rho, rho]}
+    s["objects"].append({"id": 0, "kind": "ground", "velocity_mps": [0, 0, 0],
+                         "parts": [{"shape": "rect", "center": [0, 0, 0], "size": [4000, 4000], "normal": [0, 0, 1],
+                                    "material": "grey"}]})
+    opts = render.RenderOptions(width=8, height=6, spp=64, frames=1, aux=False)
+    fr = next(render.render_frames(s, opts))
+    img = fr["static"]["skymap"]["long"]
+    # E = pi * L_sky on the plane; Lambertian radiance = rho * E / pi = rho * L_sky (per band)
+    exp = rho * _expected({"model": "illuminant", "name": "D65"}, lsky, opts)
+    assert np.allclose(img.mean((1, 2)), exp, rtol=0.04)
+
+
+def test_lambertian_plane_under_small_source():
+    rho, lum, a, h = 0.5, 3e4, 0.2, 3.0
+    s = scene.empty_scene(position_m=(3.0, 0.0, 2.0), pitch_deg=-89.0, fov_x_deg=4.0)
+    s["materials"]["grey"] = {"type": "diffuse", "rgb": [rho, rho, rho]}
+    s["objects"].append({"id": 0, "kind": "ground", "velocity_mps": [0, 0, 0],
+                         "parts": [{"shape": "rect", "center": [0, 0, 0], "size": [200, 200], "normal": [0, 0, 1],
+                                    "material": "grey"}]})
+    s["lights"].append(_light(0, "streetlights", (3.0, 0.0, h), (0, 0, -1), (a, a), HPS, lum))
+    opts = render.RenderOptions(width=6, height=4, spp=64, frames=1, aux=False)
+    fr = next(render.render_frames(s, opts))
+    img = fr["static"]["streetlights"]["short"]
+    # small Lambertian source straight above: E = L A / h^2, reflected radiance rho E / pi
+    exp = rho * _expected(HPS, lum, opts) * a * a / (math.pi * h * h)
+    assert np.allclose(img.mean((1, 2)), exp, rtol=0.04, atol=0.02 * exp.max())
+
+
+def test_static_camera_gives_identical_time_bins():
+    opts = render.RenderOptions(width=12, height=8, spp=4, bins=5, frames=2, aux=False, groups=("otherlights",))
+    for fr in render.render_frames(_wall_scene(), opts):
+        (_, _, bins), = fr["lights"]["otherlights"]
+        assert bins.shape[0] == 5 and bins.max() > 0
+        assert all(np.array_equal(bins[0], b) for b in bins[1:])
+
+
+def _lamp_scene(speed):
+    s = scene.empty_scene(speed_mps=speed)
+    s["lights"].append(_light(0, "otherlights", (12.0, 1.0, 1.6), (-1, 0, 0), (0.4, 0.3), LED, 800.0))
+    return scene.validate_scene(s)
+
+
+def test_bins_of_a_window_average_to_one_render_of_that_window():
+    s = _lamp_scene(40.0)
+    base = dict(width=48, height=32, spp=64, frames=1, aux=False, seed=3)
+    f4 = next(render.render_frames(s, render.RenderOptions(bins=4, **base)))
+    f1 = next(render.render_frames(s, render.RenderOptions(bins=1, **base)))
+    (_, bb4, b4), = f4["lights"]["otherlights"]
+    (_, bb1, b1), = f1["lights"]["otherlights"]
+    assert bb4 == bb1
+    assert not np.allclose(b4[0], b4[-1], rtol=0.2)  # the lamp moves across the bins
+    mean4 = b4.mean(0)
+    assert mean4.sum() == pytest.approx(b1[0].sum(), rel=0.02)  # Monte Carlo error of a 2 px lamp
+    assert np.abs(mean4 - b1[0]).sum() < 0.1 * b1[0].sum()
+
+
+def test_continuous_blur_matches_average_of_instantaneous_subframes():
+    s = _lamp_scene(40.0)
+    opts = render.RenderOptions(width=48, height=32, spp=16, frames=1, aux=False)
+    r = render._Renderer(s, opts)
+    import mitsuba as mi
+
+    from render_tools import mitsuba_scene as ms
+
+    sc = mi.load_dict(ms.mitsuba_dict(s, 0.0, emit="otherlights"))
+    t0, T, M = 0.0, opts.long_exposure_s, 24
+    blur = r.render(sc, t0, T, 256, 1)[0]
+    subs = np.mean([r.render(sc, t0 + (i + 0.5) * T / M, 0.0, 16, 10 + i)[0] for i in range(M)], axis=0)
+    assert blur.sum() == pytest.approx(subs.sum(), rel=0.02)  # Monte Carlo error of a 2 px lamp
+    assert np.abs(blur - subs).sum() < 0.12 * blur.sum()
+    streak = (blur[23] > 0.02 * blur[23].max()).sum()  # the blur covers several pixels along the motion
+    assert streak >= 3
+
+
+def test_group_left_out_changes_nothing_in_the_others():
+    s = _wall_scene()
+    base = dict(width=12, height=8, spp=4, bins=2, frames=1, aux=False, seed=5)
+    both = next(render.render_frames(s, render.RenderOptions(**base)))
+    one = next(render.render_frames(s, render.RenderOptions(groups=("streetlights",), **base)))
+    assert set(one["static"]) == {"streetlights"} and one["lights"] == {}
+    for w in ("short", "long"):
+        assert np.array_equal(both["static"]["streetlights"][w], one["static"]["streetlights"][w])
+
+
+def test_light_crop_and_projection_agree_with_render():
+    s = _lamp_scene(0.0)
+    opts = render.RenderOptions(width=64, height=40, spp=16, frames=1, bins=1, aux=True)
+    fr = next(render.render_frames(s, opts))
+    (_, (y0, x0, y1, x1), b), = fr["lights"]["otherlights"]
+    r = render._Renderer(s, opts)
+    import mitsuba as mi
+
+    from render_tools import mitsuba_scene as ms
+
+    sc = mi.load_dict(ms.mitsuba_dict(s, 0.0, emit="otherlights"))
+    full = r.render(sc, 0.0, opts.capture_window_s, 16, 9)[0]
+    inside = full[:, y0:y1, x0:x1].sum()
+    assert inside / full.sum() > 0.995  # no energy of a lone lamp falls outside its crop
+    e = full.sum(0)
+    ys, xs = np.mgrid[0:opts.height, 0:opts.width] + 0.5
+    uv, _ = camera.project(np.array([[12.0, 1.0, 1.6]]), camera.EgoMotion.from_scene(s).pose_cv(0.0),
+                           camera.intrinsics(64, 40, 40.0))
+    assert (e * xs).sum() / e.sum() == pytest.approx(uv[0, 0], abs=0.3)
+    assert (e * ys).sum() / e.sum() == pytest.approx(uv[0, 1], abs=0.3)
+    mask = fr["aux"]["mask.light"]
+    assert mask[int(uv[0, 1]), int(uv[0, 0])] == 0 and (mask == -1).mean() > 0.9
+
+
+def test_aux_depth_range_and_instance_mask():
+    d = 10.0
+    s = scene.empty_scene()
+    s["materials"]["grey"] = {"type": "diffuse", "rgb": [0.3, 0.3, 0.3]}
+    s["objects"].append({"id": 0, "kind": "building", "velocity_mps": [0, 0, 0],
+                         "parts": [{"shape": "box", "center": [d + 1.0, 0, 1.4], "size": [2.0, 6.0, 2.0],
+                                    "yaw_deg": 0.0, "material": "grey"}]})
+    opts = render.RenderOptions(width=20, height=12, spp=1, frames=1, aux=True)
+    aux = next(render.render_frames(s, opts))["aux"]
+    hit = aux["mask.instance"] == 0
+    assert hit[6, 10] and not hit[0, 0]
+    assert np.allclose(aux["depth.Z"][hit], d, atol=1e-3)
+    assert np.all(aux["depth.R"][hit] >= d - 1e-3) and aux["depth.R"][hit].max() > d
+    assert np.all(np.isinf(aux["depth.Z"][~hit])) and np.all(aux["mask.instance"][~hit] == -1)
+    assert np.all(aux["mask.light"] == -1)

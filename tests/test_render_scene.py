@@ -1,0 +1,250 @@
+"""Scene generator, scene schema, spectra, camera geometry, options and metadata (no rendering)."""
+from __future__ import annotations
+
+import copy
+import json
+import math
+import warnings
+
+import numpy as np
+import pytest
+
+from render_tools import backend, camera, mitsuba_scene, render, scene, spectra
+
+
+@pytest.fixture(scope="module")
+def night():
+    return scene.generate_scene(3, "night")
+
+
+# ------------------------------------------------------------------------------------------------ spectra
+@pytest.mark.parametrize("spec", [{"model": "led", "peak_nm": 630.0, "fwhm_nm": 18.0},
+                                  {"model": "light_source", "name": "HPS"},
+                                  {"model": "illuminant", "name": "LED-B3"},
+                                  {"model": "daylight", "cct_k": 6500.0}])
+def test_absolute_spectrum_has_target_luminance_per_colour_science(spec):
+    import colour
+
+    L = spectra.absolute_spectrum(spec, 1234.0)
+    # independent check: colour-science's own photometry (683 lm/W x sum L V dlambda) on the 1 nm grid
+    sd = colour.SpectralDistribution(dict(zip(spectra.wavelengths(), L)))
+    assert colour.luminous_flux(sd) == pytest.approx(1234.0, rel=2e-3)
+    assert np.all(L >= 0)
+
+
+def test_led_peak_and_band_means():
+    L = spectra.absolute_spectrum({"model": "led", "peak_nm": 590.0, "fwhm_nm": 15.0}, 100.0)
+    assert spectra.wavelengths()[np.argmax(L)] == pytest.approx(590.0)
+    bands = np.arange(400.0, 701.0, 10.0)
+    bm = spectra.band_means(L, bands, 10.0)
+    assert bands[np.argmax(bm)] == 590.0
+    # a flat spectrum has band means equal to its value
+    assert np.allclose(spectra.band_means(np.full(spectra.wavelengths().shape, 2.5), bands, 10.0), 2.5)
+
+
+def test_spectrum_validation_names_field():
+    with pytest.raises(ValueError, match=r"lamp\.peak_nm"):
+        spectra.validate_spectrum({"model": "led", "peak_nm": 100.0, "fwhm_nm": 10.0}, "lamp")
+    with pytest.raises(ValueError, match=r"x\.name"):
+        spectra.validate_spectrum({"model": "light_source", "name": "Candle of Doom"}, "x")
+    with pytest.raises(ValueError, match=r"luminance_cd_m2"):
+        spectra.absolute_spectrum({"model": "daylight", "cct_k": 6500.0}, -1.0)
+
+
+def test_xyz_of_flat_band_image_matches_cmf_integral():
+    bands = np.arange(400.0, 701.0, 10.0)
+    img = np.full((31, 2, 3), 0.01)
+    xyz = spectra.spectral_to_xyz(img, bands, 10.0)
+    # Y = 683 * 0.01 * integral of ybar over 395..705 nm (~106.8 nm for the CIE 1931 observer)
+    assert 683 * 0.01 * 100 < xyz[1, 0, 0] < 683 * 0.01 * 110
+    assert np.allclose(xyz[:, 0, 0], xyz[:, 1, 2])
+
+
+# ------------------------------------------------------------------------------------------------- scenes
+def test_generator_is_deterministic_and_json_roundtrips(tmp_path, night):
+    again = scene.generate_scene(3, "night")
+    assert json.dumps(night, sort_keys=True) == json.dumps(again, sort_keys=True)
+    p = tmp_path / "s.json"
+    scene.save_scene(night, p)
+    assert scene.load_scene(p) == night
+    assert scene.generate_scene(4, "night") != night
+
+
+@pytest.mark.parametrize("tod", scene.TIMES_OF_DAY)
+def test_generated_scene_has_a_street(tod):
+    s = scene.generate_scene(11, tod)
+    kinds = [o["kind"] for o in s["objects"]]
+    for k in ("road", "marking", "sidewalk", "building", "car", "signal_pole", "streetlight_pole"):
+        assert k in kinds, k
+    cars = [o for o in s["objects"] if o["kind"] in ("car", "truck", "motorcycle")]
+    assert all(len(o["parts"]) >= 4 for o in cars)  # bodies, cabins, wheels: not single boxes
+    groups = scene.scene_groups(s)
+    assert "signals" in groups and groups["signals"]["flicker"]
+    assert "skymap" in groups
+    if tod == "day":
+        assert "streetlights" not in groups  # streetlights off by day: group left out
+    else:
+        assert "streetlights" in groups and "otherlights" in groups
+        tails = [lt for lt in s["lights"] if lt["kind"] == "tail"]
+        assert tails and all(lt["spectrum"]["peak_nm"] == 630.0 for lt in tails)
+    heads = [lt for lt in s["lights"] if lt["group"] == "headlights"]
+    for lt in heads:
+        assert 2e4 <= lt["luminance_cd_m2"] <= 2e5 and 7.5 <= lt["spread_deg"] <= 22.5
+    assert 0.003 <= s["timing"]["short_exposure_s"] <= 0.005
+    assert 20.0 <= s["camera"]["speed_mps"] <= 50.0
+
+
+def test_other_lights_in_upstream_ratio_range():
+    s = scene.generate_scene(5, "night")
+    cfg = scene.load_config()
+    lo, hi = cfg["lights"]["headlight_luminance_cd_m2"]
+    for lt in s["lights"]:
+        if lt["group"] == "otherlights":
+            assert 4e-4 * lo * 0.999 <= lt["luminance_cd_m2"] <= 1e-2 * hi * 1.001
+
+
+@pytest.mark.parametrize("path,value,match", [
+    (("camera", "speed_mps"), -3.0, r"scene\.camera\.speed_mps"),
+    (("camera", "wings"), 2, r"scene\.camera\.wings: unknown field"),
+    (("timing", "short_exposure_s"), 0.0, r"scene\.timing\.short_exposure_s"),
+    (("lights", 0, "luminance_cd_m2"), float("nan"), r"scene\.lights\[0\]\.luminance_cd_m2"),
+    (("lights", 0, "group"), "disco", r"scene\.lights\[0\]\.group"),
+    (("objects", 2, "parts", 0, "material"), "unobtainium", r"scene\.objects\[2\]\.parts\[0\]\.material"),
+    (("objects", 2, "parts", 0, "size"), [1.0, -1.0, 1.0], r"scene\.objects\[2\]\.parts\[0\]\.size"),
+    (("groups", "skymap", "flicker"), True, r"scene\.groups\.skymap\.flicker"),
+    (("sky", "model"), "hdri", r"scene\.sky\.model"),
+])
+def test_bad_scene_fields_raise_naming_the_field(night, path, value, match):
+    s = copy.deepcopy(night)
+    d = s
+    for k in path[:-1]:
+        d = d[k]
+    d[path[-1]] = value
+    with pytest.raises(ValueError, match=match):
+        scene.validate_scene(s)
+
+
+def test_load_scene_error_names_file(tmp_path):
+    p = tmp_path / "broken.json"
+    p.write_text("{not json")
+    with pytest.raises(ValueError, match="broken.json"):
+        scene.load_scene(p)
+
+
+def test_config_and_seed_errors(tmp_path):
+    p = tmp_path / "cfg.yaml"
+    p.write_text("camera: {}\n")
+    with pytest.raises(ValueError, match="cfg.yaml"):
+        scene.load_config(p)
+    with pytest.raises(ValueError, match="seed"):
+        scene.generate_scene(-1)
+    with pytest.raises(ValueError, match="time_of_day"):
+        scene.generate_scene(1, "noon")
+
+
+def test_part_meshes_are_closed_and_outward():
+    parts = [{"shape": "box", "center": [1, 2, 3], "size": [2, 4, 6], "yaw_deg": 30.0, "material": "m"},
+             {"shape": "cylinder", "p0": [0, 0, 0], "p1": [0, 1, 0], "radius": 0.5, "material": "m"},
+             {"shape": "sphere", "center": [0, 0, 0], "radius": 2.0, "material": "m"}]
+    exact = [48.0, math.pi * 0.25, 4 / 3 * math.pi * 8]
+    for part, vol in zip(parts, exact):
+        V, F = mitsuba_scene.part_mesh(part)
+        tri = V[F]
+        # divergence theorem: signed volume > 0 iff faces wind outward; close to the analytic volume
+        signed = np.einsum("ij,ij->i", tri[:, 0], np.cross(tri[:, 1], tri[:, 2])).sum() / 6
+        assert signed == pytest.approx(vol, rel=0.1)
+    V, F = mitsuba_scene.part_mesh({"shape": "rect", "center": [0, 0, 0], "size": [2, 1], "normal": [-1, 0, 0]})
+    n = np.cross(V[F[0, 1]] - V[F[0, 0]], V[F[0, 2]] - V[F[0, 0]])
+    assert n @ np.array([-1, 0, 0]) > 0
+
+
+# -------------------------------------------------------------------------------------- camera and timing
+def test_ctrv_pose_is_the_integral_of_the_velocity():
+    ego = camera.EgoMotion(p0=(1.0, 2.0, 1.4), yaw0_rad=0.3, speed_mps=30.0, yaw_rate_rad_s=0.5)
+    t = np.linspace(0, 0.2, 20001)
+    psi = 0.3 + 0.5 * t
+    vel = 30.0 * np.stack([np.cos(psi), np.sin(psi)], -1)
+    steps = (vel[1:] + vel[:-1]) / 2 * np.diff(t)[:, None]  # trapezoid rule
+    num = np.array([1.0, 2.0]) + np.concatenate([[[0, 0]], np.cumsum(steps, 0)])
+    assert np.allclose(ego.position(t)[:, :2], num, atol=1e-6)
+    R = ego.pose_cv(0.1)[:3, :3]
+    assert np.allclose(R.T @ R, np.eye(3)) and np.linalg.det(R) == pytest.approx(1.0)
+    # optical axis (OpenCV +z) points along the heading
+    assert np.allclose(R[:, 2], [math.cos(0.35), math.sin(0.35), 0.0])
+
+
+def test_projection_of_a_point_on_the_axis_hits_the_principal_point():
+    ego = camera.EgoMotion(p0=(0.0, 0.0, 1.4))
+    K = camera.intrinsics(640, 360, 40.0)
+    uv, z = camera.project(np.array([[10.0, 0.0, 1.4], [10.0, 10 * math.tan(math.radians(20)), 1.4]]),
+                           ego.pose_cv(0.0), K)
+    assert np.allclose(uv[0], [320, 180]) and z[0] == pytest.approx(10.0)
+    assert uv[1, 0] == pytest.approx(0.0, abs=1e-9)  # a point 20 deg to the left lies on the left edge
+
+
+def test_options_and_timing_validation():
+    with pytest.raises(ValueError, match="long_exposure_s"):
+        render.RenderOptions(long_exposure_s=0.02)  # longer than 1/60 s
+    with pytest.raises(ValueError, match="bins"):
+        render.RenderOptions(bins=0)
+    with pytest.raises(ValueError, match="bands_nm"):
+        render.RenderOptions(bands_nm=(350.0, 360.0))
+    with pytest.raises(ValueError, match="groups"):
+        render.RenderOptions(groups=("partylights",))
+    s = scene.empty_scene(short_exposure_s=0.02)
+    with pytest.raises(ValueError, match="short_exposure_s"):
+        render.frame_timing(s, render.RenderOptions(), 0)
+    opts = render.RenderOptions(height=360, bins=8)
+    tm = render.frame_timing(scene.empty_scene(short_exposure_s=0.004), opts, 2)
+    t0 = 2 / 60
+    assert tm["long"] == pytest.approx((t0, t0 + 1 / 90))
+    assert np.mean(tm["short"]) == pytest.approx(np.mean(tm["long"]))  # centre-aligned
+    assert tm["bin_edges"][0] == pytest.approx(t0) and tm["bin_edges"][-1] == pytest.approx(t0 + 1 / 90 + 360e-5)
+
+
+def test_scene_meta_content(night):
+    opts = render.RenderOptions(width=320, height=180, frames=3)
+    meta = render.scene_meta(night, opts)
+    assert meta["timing"]["readout_s"] == pytest.approx(180 * 10e-6)
+    assert meta["timing"]["alignment"] == "center"
+    assert set(meta["groups"]) == set(scene.scene_groups(night))
+    assert len(meta["camera"]["poses"]) == 3 and np.array(meta["camera"]["poses"]).shape == (3, 2, 4, 4)
+    # the camera moves v * W forward during a capture window
+    p = np.array(meta["camera"]["poses"])
+    d = np.linalg.norm(p[0, 1, :3, 3] - p[0, 0, :3, 3])
+    assert d == pytest.approx(night["camera"]["speed_mps"] * opts.capture_window_s, rel=1e-6)
+    lt = meta["lights"][0]
+    assert {"id", "group", "kind", "instance", "luminance_cd_m2", "spectrum", "bbox"} <= set(lt)
+    assert len(lt["bbox"]) == 3
+    json.dumps(meta)  # plain data
+    only = render.scene_meta(night, render.RenderOptions(width=320, height=180, groups=("signals",)))
+    assert set(only["groups"]) == {"signals"} and {x["group"] for x in only["lights"]} == {"signals"}
+
+
+def test_backend_falls_back_to_scalar_with_warning(monkeypatch):
+    import mitsuba as mi
+
+    before = mi.variant()
+    monkeypatch.setattr(backend, "_chosen", None)
+    monkeypatch.setattr(backend, "find_libllvm", lambda: [])
+    monkeypatch.setattr(mi, "variant", lambda: None)
+    with warnings.catch_warnings(record=True) as w:
+        warnings.simplefilter("always")
+        v = backend.select_variant()
+    assert v == "scalar_spectral"
+    assert any(issubclass(x.category, RuntimeWarning) and "libLLVM" in str(x.message) for x in w)
+    monkeypatch.undo()
+    backend._chosen = None
+    if before:
+        mi.set_variant(before)
+    with pytest.raises(ValueError, match="variant"):
+        backend.select_variant("cuda_rgb")
+
+
+def test_llvm_library_discovery_skips_llvm15(monkeypatch, tmp_path):
+    for name in ("libLLVM-15.so.1", "libLLVM.so.19.1", "libLLVM-14.so.1"):
+        (tmp_path / name).write_bytes(b"")
+    monkeypatch.setattr(backend, "LLVM_SEARCH_DIRS", (str(tmp_path),))
+    monkeypatch.delenv("DRJIT_LIBLLVM_PATH", raising=False)
+    found = [p.split("/")[-1] for p in backend.find_libllvm()]
+    assert found == ["libLLVM.so.19.1", "libLLVM-14.so.1"]
