@@ -26,7 +26,6 @@ References: OpenEXR file layout and multi-part files, https://openexr.com/en/lat
 from __future__ import annotations
 
 import contextlib
-import errno
 import hashlib
 import io
 import json
@@ -34,13 +33,15 @@ import logging
 import math
 import os
 import re
-import tempfile
 from collections import OrderedDict
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterable, Iterator, Mapping, Sequence
 
 import numpy as np
+
+from lfmbench.fileio import (TMP_PREFIX, AtomicWriteError, atomic_write_bytes, atomic_write_json,
+                             json_default)
 
 __all__ = [
     "FORMAT_NAME", "FORMAT_VERSION", "STATIC_WINDOWS", "AUX_CHANNELS", "HALF_MAX", "HALF_MAX_REL_ERROR",
@@ -75,7 +76,6 @@ RADIANCE_UNIT = "W sr^-1 m^-2 nm^-1"
 #: Name and channel of the placeholder part of a flickering-group EXR in which no light is visible.
 EMPTY_PART = "empty"
 #: Prefix of temporary files; stray ones (after a crash) are removed by :class:`CorpusWriter`.
-TMP_PREFIX = ".lfmtmp-"
 #: Relative tolerance of the timing consistency checks (s / s).
 TIMING_RTOL = 1e-6
 #: Header attribute names (all prefixed ``lfmbench_``).
@@ -107,8 +107,9 @@ class CorpusValueError(CorpusError):
     """Radiance (or aux data) that is NaN, infinite or negative."""
 
 
-class CorpusWriteError(OSError):
-    """Writing the corpus failed (e.g. disk full, ``errno.ENOSPC``); no partial file was left behind."""
+#: Writing a corpus file failed (disk full, ...); the message names the file. Same class as
+#: :class:`lfmbench.fileio.AtomicWriteError`.
+CorpusWriteError = AtomicWriteError
 
 
 # ---------------------------------------------------------------------------------------- channel naming
@@ -176,64 +177,7 @@ def _group_bins(meta: Mapping[str, Any], group: str) -> int:
 
 
 # ------------------------------------------------------------------------------------------- atomic I/O
-def _file_mode() -> int:
-    """Permission bits of a new file under the current umask (mkstemp alone would give 0600)."""
-    mask = os.umask(0)
-    os.umask(mask)
-    return 0o666 & ~mask
-
-
-def _tmp_path(path: Path) -> Path:
-    fd, name = tempfile.mkstemp(prefix=TMP_PREFIX + path.name + ".", dir=path.parent)
-    try:
-        os.fchmod(fd, _file_mode())
-    finally:
-        os.close(fd)
-    return Path(name)
-
-
-def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> str:
-    """Write ``data`` to ``path`` atomically and return its SHA-256 hex digest.
-
-    The bytes go to a temporary file in the same directory, are flushed and fsync'ed, then the file is renamed
-    over ``path`` with :func:`os.replace` (atomic on POSIX). On any error the temporary file is removed and a
-    :class:`CorpusWriteError` naming ``path`` is raised (``errno.ENOSPC``: "disk full").
-    """
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = None
-    try:
-        tmp = _tmp_path(path)
-        with open(tmp, "wb") as fh:
-            fh.write(data)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-        tmp = None
-    except OSError as exc:
-        why = "disk full" if exc.errno == errno.ENOSPC else (exc.strerror or str(exc))
-        raise CorpusWriteError(exc.errno, f"could not write {path}: {why}; nothing was changed") from exc
-    finally:
-        if tmp is not None:
-            with contextlib.suppress(OSError):
-                os.unlink(tmp)
-    return hashlib.sha256(data).hexdigest()
-
-
-def atomic_write_json(path: str | os.PathLike, obj: Any) -> str:
-    """Write ``obj`` as indented JSON atomically (see :func:`atomic_write_bytes`); returns its SHA-256."""
-    text = json.dumps(obj, indent=1, sort_keys=False, allow_nan=False, default=_json_default) + "\n"
-    return atomic_write_bytes(path, text.encode("utf-8"))
-
-
-def _json_default(o: Any) -> Any:
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    if isinstance(o, np.generic):
-        return o.item()
-    if isinstance(o, Path):
-        return str(o)
-    raise TypeError(f"not JSON serialisable: {type(o).__name__}")
+# atomic_write_bytes / atomic_write_json live in lfmbench.fileio (one implementation for the package)
 
 
 def sha256_file(path: str | os.PathLike, chunk: int = 1 << 20) -> str:
@@ -892,7 +836,7 @@ class CorpusWriter:
             self.manifest = _empty_manifest()
             self.write_manifest()  # an empty corpus is a valid corpus
         if render is not None:
-            render = json.loads(json.dumps(dict(render), default=_json_default))
+            render = json.loads(json.dumps(dict(render), default=json_default))
             old = self.manifest.get("render")
             if old is not None and old != render:
                 diff = sorted(k for k in set(old) | set(render) if old.get(k) != render.get(k))
@@ -1015,7 +959,7 @@ def check_scene_id(scene_id: str) -> None:
 
 
 def _json_bytes(obj: Any) -> bytes:
-    return (json.dumps(obj, indent=1, allow_nan=False, default=_json_default) + "\n").encode("utf-8")
+    return (json.dumps(obj, indent=1, allow_nan=False, default=json_default) + "\n").encode("utf-8")
 
 
 def _attrs(scene_id: str, frame: int, group: str) -> dict:

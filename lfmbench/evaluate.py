@@ -32,6 +32,8 @@ from typing import Any
 
 import torch
 
+from lfmbench.fileio import atomic_save_figure, atomic_write_json, atomic_write_text
+
 RESULT_FORMAT = "lfmbench-eval"
 RESULT_VERSION = 1
 #: Metrics shown in the leaderboard, in column order (name, header).
@@ -235,10 +237,7 @@ def num(x: Any) -> float:
 def write_json_atomic(obj: dict, path: str | Path) -> Path:
     """Write JSON to ``path`` atomically (temporary file in the same directory, then ``os.replace``)."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
-    tmp.write_text(json.dumps(_jsonable(obj), indent=1, allow_nan=False))
-    os.replace(tmp, path)
+    atomic_write_json(path, _jsonable(obj))
     return path
 
 
@@ -547,12 +546,8 @@ def plot_quality_vs_runtime(rows: list[dict], path: str | Path, metric: str = "p
     ax.set_title(f"Quality vs run time ({'higher' if spec is None or spec.higher_is_better else 'lower'} is better)")
     ax.grid(True, which="both", alpha=0.3)
     fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.stem}.tmp{os.getpid()}{path.suffix}")
-    fig.savefig(tmp)
+    path = atomic_save_figure(fig, path)
     plt.close(fig)
-    os.replace(tmp, path)
     return path
 
 
@@ -613,12 +608,8 @@ def benchmark(corpus: str | Path, methods: Iterable[str] | None = None, runs_dir
 
 
 def _write_text_atomic(text: str, path: str | Path) -> Path:
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
-    tmp.write_text(text)
-    os.replace(tmp, path)
-    return path
+    atomic_write_text(path, text)
+    return Path(path)
 
 
 def _safe_name(spec: str) -> str:

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from lfmbench.fileio import atomic_save_figure
 from lfmbench.flicker import flicker_severity, frame_phase, pwm_exposure
 
 #: Exposure times of the split-pixel sensor used throughout (s): LPD short, SPD long (1/90 s).
@@ -50,12 +51,8 @@ def plot_fig3(path: str | Path, **kw) -> Path:
     axes[-1].set_xlabel("frame n (30 fps)")
     fig.suptitle(f"Temporal flicker, f = {kw.get('freq_hz', 95.0):g} Hz, D = {kw.get('duty', 0.2):g}")
     fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.stem + ".tmp" + path.suffix)
-    fig.savefig(tmp, dpi=110)
+    path = atomic_save_figure(fig, path, dpi=110)
     plt.close(fig)
-    tmp.replace(path)
     return path
 
 

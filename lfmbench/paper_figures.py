@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from lfmbench.fileio import atomic_save_figure
 from lfmbench.flicker_report import plot_fig3
 
 MU = 5000.0
@@ -208,11 +209,7 @@ def fig_rolling_shutter(corpus: str | Path, out_dir: str | Path, freq_hz: float 
 
 
 def _save(fig, path: Path) -> Path:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.stem}.tmp.png")
-    fig.savefig(tmp, dpi=110)
-    tmp.replace(path)
-    return path
+    return atomic_save_figure(fig, path, dpi=110)
 
 
 def make_all(corpus: str | Path, out_dir: str | Path) -> list[Path]:

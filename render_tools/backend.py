@@ -21,8 +21,9 @@ import os
 import re
 import subprocess
 import sys
-import tempfile
 import warnings
+
+from lfmbench.fileio import atomic_write_json
 
 #: Preferred spectral variants, fast first.
 LLVM_VARIANT = "llvm_ad_spectral"
@@ -125,11 +126,7 @@ def probe_llvm(lib: str, use_cache: bool = True) -> bool:
         ok = False
     if use_cache:
         cache[key] = ok
-        os.makedirs(os.path.dirname(cache_file), exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=os.path.dirname(cache_file), suffix=".tmp")
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            json.dump(cache, fh, indent=1)
-        os.replace(tmp, cache_file)
+        atomic_write_json(cache_file, cache)
     return ok
 
 

@@ -8,11 +8,13 @@ sRGB transfer function -> 8-bit PNG, written atomically.
 """
 from __future__ import annotations
 
+import io
 import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
+
+from lfmbench.fileio import atomic_write_bytes
 
 from . import spectra
 
@@ -75,17 +77,9 @@ def write_png(rgb8: np.ndarray, path: str | os.PathLike) -> None:
     rgb8 = np.asarray(rgb8)
     if rgb8.ndim != 3 or rgb8.shape[2] != 3 or rgb8.dtype != np.uint8:
         raise ValueError(f"rgb8: expected (H, W, 3) uint8, got {rgb8.shape} {rgb8.dtype}")
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".png")
-    os.close(fd)
-    try:
-        mpimg.imsave(tmp, rgb8, format="png")
-        os.chmod(tmp, 0o644)  # mkstemp creates 0600
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    buf = io.BytesIO()
+    mpimg.imsave(buf, rgb8, format="png")
+    atomic_write_bytes(path, buf.getvalue())
 
 
 def preview_png(img: np.ndarray, bands_nm, band_width_nm: float, path: str | os.PathLike,

@@ -23,10 +23,11 @@ import copy
 import json
 import math
 import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
+
+from lfmbench.fileio import atomic_write_json
 
 from . import spectra
 
@@ -652,17 +653,7 @@ def load_scene(path: str | os.PathLike) -> dict:
 def save_scene(scene: dict, path: str | os.PathLike) -> None:
     """Validate and write ``scene`` as JSON atomically (temp file in the same directory, then ``os.replace``)."""
     validate_scene(scene)
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            json.dump(scene, fh, indent=1)
-        os.chmod(tmp, 0o644)  # mkstemp creates 0600
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    atomic_write_json(path, scene)
 
 
 def empty_scene(scene_id: str = "empty", short_exposure_s: float = 0.004, speed_mps: float = 0.0,

@@ -28,6 +28,8 @@ from collections.abc import Callable, Iterable
 from pathlib import Path
 
 import torch
+
+from lfmbench.fileio import atomic_torch_save
 import torch.nn as nn
 
 from lfmbench.baselines.classic import saturated_fusion, _captures
@@ -93,13 +95,8 @@ def fusion_loss(pred: torch.Tensor, gt: torch.Tensor) -> torch.Tensor:
 
 def save_checkpoint(model: LearnedFusion, path: str | Path, extra: dict | None = None) -> Path:
     """Write ``{'format_version', 'width', 'state_dict', ...extra}`` atomically (temp file + ``os.replace``)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
-    torch.save({"format_version": FORMAT_VERSION, "width": model.width, "state_dict": model.state_dict(),
-                **(extra or {})}, tmp)
-    os.replace(tmp, path)
-    return path
+    return atomic_torch_save({"format_version": FORMAT_VERSION, "width": model.width,
+                              "state_dict": model.state_dict(), **(extra or {})}, path)
 
 
 def load_checkpoint(path: str | Path, map_location: str | torch.device = "cpu") -> LearnedFusion:

@@ -33,6 +33,7 @@ from torch.utils.data import Dataset
 
 from lfmbench import sensor as _sensor
 from lfmbench.corpus import Corpus
+from lfmbench.fileio import atomic_write_json
 from lfmbench.datasets.projection import PHOTODIODES, SceneLayers, load_or_build
 from lfmbench.datasets.pwm import PWMConfig, draw_pwm, load_pwm_config
 from lfmbench.flicker import pwm_exposure
@@ -314,9 +315,7 @@ class LFMCaptureDataset(Dataset):
                                 "noise_seed": int(rng.integers(2**62))}
                 added = True
         if added:
-            tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-            tmp.write_text(json.dumps(data, indent=1))
-            os.replace(tmp, path)
+            atomic_write_json(path, data)
         return samples
 
     def _layers(self, sid: str) -> SceneLayers:

@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Sequence
@@ -33,6 +32,7 @@ import torch
 from lfmbench import optics as _optics
 from lfmbench import sensor as _sensor
 from lfmbench.corpus import Corpus, group_storage
+from lfmbench.fileio import atomic_torch_save
 
 #: Version of the cached layout; bump when the projection changes so stale caches are not reused.
 CACHE_VERSION = 1
@@ -185,8 +185,5 @@ def load_or_build(corpus: Corpus, scene_id: str, preset, groups, frames: int, op
         except Exception:  # a stale or damaged cache entry is rebuilt, never trusted
             pass
     layers = build_layers(corpus, scene_id, preset, use, frames, optics)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    torch.save(layers.__dict__, tmp)
-    os.replace(tmp, path)
+    atomic_torch_save(layers.__dict__, path)
     return layers
