@@ -294,6 +294,11 @@ def _numba_kernel():
     if target not in _NUMBA_KERNELS:
         import numba
 
+        if target == "parallel" and "NUMBA_THREADING_LAYER" not in os.environ:
+            # numba's fork-safe layer: its OpenMP layer aborts or deadlocks forked children (DataLoader workers);
+            # the parallel kernel is only ever called from the main thread, so workqueue's lack of thread
+            # safety does not matter. A user's NUMBA_THREADING_LAYER wins.
+            numba.config.THREADING_LAYER = "workqueue"
         sig = ["float64(float64, float64, float64, float64, float64, float64)"]
         _NUMBA_KERNELS[target] = numba.vectorize(sig, target=target, cache=target == "cpu")(_kernel_scalar)
     return _NUMBA_KERNELS[target]

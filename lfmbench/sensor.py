@@ -34,7 +34,8 @@ Signal chain of one capture (per pixel, e- unless stated):
 References
 ----------
 .. [EMVA1288] EMVA Standard 1288, "Standard for Characterization of Image Sensors and Cameras", Release 4.0
-   Linear (2021), sections 2 (linear camera model, eqs. 1-10) and 6 (photon transfer method).
+   Linear (2021): the linear camera model (sec. 2) and the photon-transfer method of the sensitivity, linearity
+   and noise measurement.
 .. [Janesick2007] J. R. Janesick, "Photon Transfer: DN -> lambda", SPIE Press (2007), ch. 2-5.
 .. [Solhusvik2019] J. Solhusvik et al., "A 1280x960 2.8 um HDR CIS with DCG and Split-Pixel Combined",
    International Image Sensor Workshop (2019) - the 'ovt' preset, via ISETCam ``sensorCreate('ovt-large')``.
@@ -50,6 +51,7 @@ import math
 from dataclasses import dataclass, field, fields
 from enum import Enum
 from pathlib import Path
+from types import MappingProxyType
 from typing import Any, Mapping, Sequence
 
 import numpy as np
@@ -204,6 +206,17 @@ class SensorPreset:
     optics: OpticsConfig = field(default_factory=OpticsConfig)
     source: str = "<dict>"
 
+    def __hash__(self) -> int:
+        # equal presets have equal scalar fields; the mappings are left out (unhashable)
+        return hash((self.name, self.source, self.pixel_pitch_m, self.adc_bits, self.black_level_dn, self.fpn_seed,
+                     self.peak_qe, str(self.filters_path)))
+
+    def __reduce__(self):
+        # the read-only mapping proxies do not pickle: rebuild from plain dicts (DataLoader workers, spawn)
+        state = {f.name: getattr(self, f.name) for f in fields(self)}
+        state["photodiodes"], state["captures"] = dict(self.photodiodes), dict(self.captures)
+        return (_rebuild_preset, (state,))
+
     @property
     def max_dn(self) -> int:
         """Largest ADC code, 2^bits - 1 (DN)."""
@@ -233,6 +246,13 @@ class SensorPreset:
         return min(self.photodiodes[spec.photodiode].full_well_e, spec.voltage_swing_v / spec.conversion_gain_v_per_e)
 
 
+def _rebuild_preset(state: dict[str, Any]) -> SensorPreset:
+    state = dict(state)
+    state["photodiodes"] = MappingProxyType(dict(state["photodiodes"]))
+    state["captures"] = MappingProxyType(dict(state["captures"]))
+    return SensorPreset(**state)
+
+
 def available_presets() -> list[str]:
     """Names of the shipped presets (files ``lfmbench/configs/sensors/<name>.yaml``)."""
     return sorted(p.stem for p in PRESET_DIR.glob("*.yaml"))
@@ -259,11 +279,15 @@ def load_preset(preset: "str | Path | SensorPreset | Mapping[str, Any]") -> Sens
             raise ValueError(f"preset: unknown sensor preset {text!r}; shipped presets are {available_presets()} "
                              "or give a path to a YAML file")
         path = candidate
-    return _load_preset_file(str(path.resolve()))
+    resolved = path.resolve()
+    if not resolved.is_file():
+        raise ValueError(f"preset: file {resolved} does not exist")
+    return _load_preset_file(str(resolved), resolved.stat().st_mtime_ns)
 
 
 @functools.lru_cache(maxsize=32)
-def _load_preset_file(path: str) -> SensorPreset:
+def _load_preset_file(path: str, mtime_ns: int = 0) -> SensorPreset:
+    """Parse one preset file (cached per path and modification time, so edits are picked up)."""
     import yaml
 
     p = Path(path)
@@ -277,7 +301,8 @@ def _load_preset_file(path: str) -> SensorPreset:
 
 
 def _num(data: Mapping[str, Any], key: str, source: str, prefix: str = "", *, lo: float | None = None,
-         hi: float | None = None, lo_open: bool = False, default: Any = None, integer: bool = False) -> Any:
+         hi: float | None = None, lo_open: bool = False, default: Any = None, integer: bool = False,
+         allow_inf: bool = False) -> Any:
     name = f"{prefix}{key}"
     if key not in data:
         if default is None:
@@ -287,7 +312,7 @@ def _num(data: Mapping[str, Any], key: str, source: str, prefix: str = "", *, lo
     if isinstance(v, bool) or not isinstance(v, (int, float)) or (integer and not float(v).is_integer()):
         kind = "an integer" if integer else "a number"
         raise ValueError(f"{source}: field '{name}' must be {kind}, got {v!r}")
-    if not math.isfinite(float(v)):
+    if math.isnan(float(v)) or (math.isinf(float(v)) and not (allow_inf and float(v) > 0)):
         raise ValueError(f"{source}: field '{name}' must be finite, got {v!r}")
     if lo is not None and (v <= lo if lo_open else v < lo):
         raise ValueError(f"{source}: field '{name}' must be {'>' if lo_open else '>='} {lo}, got {v!r}")
@@ -329,7 +354,7 @@ def preset_from_dict(data: Mapping[str, Any], source: str = "<dict>") -> SensorP
     bits = _num(data, "adc_bits", source, lo=1, hi=24, integer=True)
     black = _num(data, "black_level_dn", source, lo=0, hi=2 ** bits - 2, default=0.0)
     sat_frac = _num(data, "saturation_fraction", source, lo=0, lo_open=True, hi=1.0, default=0.95)
-    gauss = _num(data, "shot_noise_gaussian_above_e", source, lo=0, default=1000.0)
+    gauss = _num(data, "shot_noise_gaussian_above_e", source, lo=0, default=1000.0, allow_inf=True)
     seed = _num(data, "fpn_seed", source, lo=0, integer=True, default=0)
 
     spectral = data.get("spectral")
@@ -401,7 +426,8 @@ def preset_from_dict(data: Mapping[str, Any], source: str = "<dict>") -> SensorP
     optics = OpticsConfig.from_mapping(data["optics"], source) if "optics" in data else OpticsConfig()
     return SensorPreset(name=name, description=description, pixel_pitch_m=pitch, cfa=cfa, adc_bits=bits,
                         black_level_dn=black, saturation_fraction=sat_frac, filters_path=fpath, peak_qe=peak_qe,
-                        shot_noise_gaussian_above_e=gauss, fpn_seed=seed, photodiodes=pds, captures=caps,
+                        shot_noise_gaussian_above_e=gauss, fpn_seed=seed, photodiodes=MappingProxyType(pds),
+                        captures=MappingProxyType(caps),
                         optics=optics, source=source)
 
 
@@ -604,10 +630,14 @@ def shot_noise(mean_e: torch.Tensor, generator: torch.Generator, gaussian_above_
     if not math.isfinite(gaussian_above_e):
         return torch.poisson(mean_e, generator=generator)
     small = mean_e < gaussian_above_e
+    n_small = int(small.sum())
+    if n_small == mean_e.numel():
+        return torch.poisson(mean_e, generator=generator)
     z = torch.randn(mean_e.shape, generator=generator, device=mean_e.device, dtype=mean_e.dtype)
     out = torch.round(mean_e + torch.sqrt(mean_e) * z).clamp_min(0.0)
-    # Poisson only where needed (torch.poisson costs ~15x a normal draw per element on the CPU)
-    out[small] = torch.poisson(mean_e[small], generator=generator)
+    if n_small:
+        # Poisson only where needed (torch.poisson costs 6-12x a normal draw per element on the CPU; benchmark)
+        out[small] = torch.poisson(mean_e[small], generator=generator)
     return out
 
 
@@ -794,7 +824,8 @@ class SplitPixelSensor(nn.Module):
                  noise: bool = True) -> None:
         super().__init__()
         self.preset = load_preset(preset)
-        self.wavelengths_nm = list(range(400, 701, 10)) if wavelengths_nm is None else [float(w) for w in wavelengths_nm]
+        wl = range(400, 701, 10) if wavelengths_nm is None else wavelengths_nm
+        self.wavelengths_nm = [float(w) for w in wl]
         self.noise = noise
 
     def forward(self, lpd_radiant_exposure: torch.Tensor, spd_radiant_exposure: torch.Tensor,

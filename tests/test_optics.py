@@ -193,3 +193,12 @@ def test_kernel_bad_arguments():
         airy_kernel([float("nan")], N, PITCH)
     with pytest.raises(ValueError, match="kernel"):
         apply_psf(torch.ones(1, 3, 4, 4), torch.ones(3, 4, 4))
+
+
+def test_fft_blur_of_nonnegative_image_has_no_negative_roundoff():
+    k = airy_kernel(WL, N, PITCH, radius_px=8)
+    x = torch.zeros(1, 3, 64, 64)
+    x[..., 30:33, 30:33] = 1e6                      # a bright LED on black: round-off would go below 0
+    y = apply_psf(x, k, method="fft")
+    assert float(y.min()) >= 0.0
+    assert float(y.sum()) == pytest.approx(float(x.sum()), rel=1e-4)

@@ -61,7 +61,8 @@ def test_shipped_presets_hold_upstream_values():
     q = load_preset("imx490")
     assert q.pixel_pitch_m == 3e-6 and q.photodiodes["lpd"].full_well_e == 120000
     assert q.photodiodes["spd"].full_well_e == 60000 and q.photodiodes["lpd"].prnu == 0.007
-    assert q.captures["lpd_hcg"].conversion_gain_v_per_e == pytest.approx(4 * q.captures["lpd_lcg"].conversion_gain_v_per_e, rel=1e-3)
+    cg = {c: q.captures[c].conversion_gain_v_per_e for c in CAPTURES}
+    assert cg["lpd_hcg"] == pytest.approx(4 * cg["lpd_lcg"], rel=1e-3)
     assert q.sensitivity_ratio == pytest.approx(9.0)
 
 
@@ -83,7 +84,8 @@ def test_user_preset_from_file(tmp_path):
 
 @pytest.mark.parametrize("mutate, field", [
     (lambda d: d["photodiodes"]["lpd"].__setitem__("full_well_e", -5), "photodiodes.lpd.full_well_e"),
-    (lambda d: d["captures"]["spd"].__setitem__("conversion_gain_v_per_e", "big"), "captures.spd.conversion_gain_v_per_e"),
+    (lambda d: d["captures"]["spd"].__setitem__("conversion_gain_v_per_e", "big"),
+     "captures.spd.conversion_gain_v_per_e"),
     (lambda d: d.__setitem__("cfa", "XYZW"), "cfa"),
     (lambda d: d.__setitem__("adc_bits", 12.5), "adc_bits"),
     (lambda d: d.__setitem__("colour", 1), "colour"),
@@ -363,3 +365,72 @@ def test_per_sample_exposure_and_module():
     out2 = m(x, x, t, 2 * t)
     for k in CAPTURES:
         assert torch.equal(out[k], out2[k])
+
+
+def test_electron_entry_point_matches_radiant_path():
+    from lfmbench.sensor import simulate_split_pixel_electrons
+
+    p = load_preset("imx490")
+    x = torch.rand(2, 31, 8, 8, dtype=torch.float64) * 1e-6
+    a = simulate_split_pixel(x, 2.7 * x, p, WL, T_S, T_L, _gen(4))
+    le = ideal_electrons(x, p, WL, "lpd")
+    se = ideal_electrons(2.7 * x, p, WL, "spd")
+    b = simulate_split_pixel_electrons(le, se, p, T_S, T_L, _gen(4))
+    for k in list(CAPTURES) + ["saturated"]:
+        assert torch.equal(a[k], b[k])
+    bad = le.clone()
+    bad[0, 0, 0, 0] = -1.0
+    with pytest.raises(ValueError, match="lpd_electrons"):
+        simulate_split_pixel_electrons(bad, se, p, T_S, T_L, _gen(4))
+    with pytest.raises(ValueError, match=r"\(\*, 1, H, W\)"):
+        simulate_split_pixel_electrons(x, x, p, T_S, T_L, _gen(4))
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")
+def test_cuda_matches_cpu():
+    from lfmbench.optics import airy_kernel, apply_psf
+
+    p = load_preset("imx490")
+    x = torch.rand(2, 31, 32, 32, dtype=torch.float64) * 1e-6
+    cpu = simulate_split_pixel(x, x, p, WL, T_S, T_L, noise=False)
+    gpu = simulate_split_pixel(x.cuda(), x.cuda(), p, WL, T_S, T_L, noise=False)
+    for k in CAPTURES:
+        assert gpu[k].device.type == "cuda"
+        assert (gpu[k].cpu() - cpu[k]).abs().max() <= 1.0
+    g = torch.Generator(device="cuda").manual_seed(0)
+    noisy = simulate_split_pixel(x.cuda().float(), x.cuda().float(), p, WL, T_S, T_L, generator=g)
+    assert all(torch.isfinite(noisy[k]).all() for k in CAPTURES)
+    with pytest.raises(ValueError, match="generator"):
+        simulate_split_pixel(x.cuda(), x.cuda(), p, WL, T_S, T_L, generator=_gen(0))
+    k = airy_kernel(WL, 5.73, 2.8e-6, 4, dtype=torch.float64)
+    assert torch.allclose(apply_psf(x.cuda(), k.cuda()).cpu(), apply_psf(x, k), atol=1e-12)
+    assert torch.allclose(airy_kernel(WL, 5.73, 2.8e-6, 4, dtype=torch.float64, device="cuda").cpu(), k, atol=1e-9)
+
+
+def test_preset_edits_are_picked_up_and_inf_switch_allowed(tmp_path):
+    d = _ovt_dict()
+    d["spectral"]["filters"] = str(load_preset("ovt").filters_path)
+    d["shot_noise_gaussian_above_e"] = float("inf")
+    f = tmp_path / "p.yaml"
+    f.write_text(yaml.safe_dump(d))
+    assert load_preset(f).shot_noise_gaussian_above_e == float("inf")
+    d["captures"]["spd"]["read_noise_e"] = 1.5
+    f.write_text(yaml.safe_dump(d))
+    import os
+    os.utime(f, ns=(f.stat().st_atime_ns, f.stat().st_mtime_ns + 10**9))
+    assert load_preset(f).captures["spd"].read_noise_e == 1.5
+    with pytest.raises(TypeError):
+        load_preset(f).captures["spd"] = None            # read-only mapping
+
+
+def test_preset_pickles_for_dataloader_workers():
+    import copy
+    import pickle
+
+    p = load_preset("imx490")
+    q = pickle.loads(pickle.dumps(p))
+    assert q == p and q.captures["spd"] == p.captures["spd"] and q.system_gain("lpd_hcg") == p.system_gain("lpd_hcg")
+    assert copy.deepcopy(p) == p
+    assert hash(q) == hash(p) and len({p, q, load_preset("ovt")}) == 2
+    m = pickle.loads(pickle.dumps(SplitPixelSensor("ovt", WL)))
+    assert m.preset.name == "ovt"
