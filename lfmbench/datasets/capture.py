@@ -51,24 +51,27 @@ class DatasetNotFoundError(FileNotFoundError):
 # ----------------------------------------------------------------------------------------------------------
 # functional core
 # ----------------------------------------------------------------------------------------------------------
-def window_bin_exposure(edges: np.ndarray, start: np.ndarray, length: float, period: float, duty: float,
-                        led_phase: float, rise: float = 0.0, fall: float = 0.0, level: str = "pwm") -> np.ndarray:
+def window_bin_exposure(edges: np.ndarray, start: np.ndarray, length: float, period, duty, led_phase,
+                        rise=0.0, fall=0.0, level: str = "pwm", check: bool = True) -> np.ndarray:
     r"""Time (s) at PWM level 1 that each bin contributes to an exposure window.
 
     Args:
         edges: (K+1,) bin edges (s). start: (R,) window start per row (s). length: window length (s).
-        period, duty, led_phase, rise, fall: PWM parameters of the light (s, 1, s, s, s).
+        period, duty, led_phase, rise, fall: PWM parameters (s, 1, s, s, s): scalars for one light, or arrays of
+            shape (L, 1, 1) for L lights at once.
         level: ``"pwm"`` (the modulated source) or ``"mean"`` (constant at its duty cycle: ground truth).
+        check: validate the PWM parameters (``False`` when they were validated when drawn).
 
     Returns:
-        (R, K) float64: :math:`\int_{[t_k, t_{k+1}) \cap [a, a + t_e)} s(t)\,dt` in s.
+        (R, K), or (L, R, K) for per-light arrays, float64:
+        :math:`\int_{[t_k, t_{k+1}) \cap [a, a + t_e)} s(t)\,dt` in s.
     """
     lo = np.maximum(edges[None, :-1], start[:, None])
     hi = np.minimum(edges[None, 1:], start[:, None] + length)
     dur = np.maximum(hi - lo, 0.0)
     if level == "mean":
-        return dur * duty
-    return pwm_exposure(lo - led_phase, dur, period, duty, rise_time=rise, fall_time=fall)
+        return dur * np.asarray(duty)
+    return pwm_exposure(lo - led_phase, dur, period, duty, rise_time=rise, fall_time=fall, check=check)
 
 
 def _window_starts(meta: dict, frame: int, rows: np.ndarray, shutter: str,
@@ -125,28 +128,30 @@ def compose_frame(layers: SceneLayers, meta: dict, frame: int, crop: tuple[int, 
                                rise_time=p["rise_s"], fall_time=p["fall_s"])
             out[pd] = out[pd] + rates[pd][frame, y0:y0 + h, x0:x0 + w] * torch.from_numpy(wgt).float()[:, None]
         out["gt"] = out["gt"] + rates["lpd"][frame, y0:y0 + h, x0:x0 + w] * float(p["duty"] * t_len["lpd"])
-    # flickering lights stored per light in K time bins (K from the stored layer: a group may override it)
-    edges_of: dict[int, np.ndarray] = {}
+    # flickering lights stored per light in K time bins (K from the stored layer: a group may override it).
+    # All visible lights with the same K share one pwm_exposure call per capture: (L, R, K) weights.
+    visible: dict[int, list] = {}
     for light_id, _g, (by0, bx0, by1, bx1), rates in layers.lights[frame]:
         iy0, iy1 = max(by0, y0), min(by1, y0 + h)
         ix0, ix1 = max(bx0, x0), min(bx1, x0 + w)
         p = params.get(light_id)
         if p is None or iy0 >= iy1 or ix0 >= ix1:  # light left out, or outside the crop
             continue
-        K = int(rates["lpd"].shape[0])
-        if K not in edges_of:
-            edges_of[K] = frame / float(meta["fps"]) + np.linspace(0.0, float(tm["capture_window_s"]), K + 1)
-        edges = edges_of[K]
-        r = slice(iy0 - y0, iy1 - y0)
+        visible.setdefault(int(rates["lpd"].shape[0]), []).append((p, (by0, bx0), (iy0, iy1, ix0, ix1), rates))
+    rolling = shutter == "rolling"
+    for K, group in visible.items():
+        edges = frame / float(meta["fps"]) + np.linspace(0.0, float(tm["capture_window_s"]), K + 1)
+        pa = {k: np.array([g[0][k] for g in group], dtype=np.float64)[:, None, None]
+              for k in ("period_s", "duty", "phase_s", "rise_s", "fall_s")}
         for key, pd, level in (("lpd", "lpd", "pwm"), ("spd", "spd", "pwm"), ("gt", "lpd", "mean")):
-            st = starts[pd][r]
-            if shutter != "rolling":
-                st = st[:1]
-            wk = window_bin_exposure(edges, st, t_len[pd], p["period_s"], p["duty"], p["phase_s"], p["rise_s"],
-                                     p["fall_s"], level)                                   # (rows or 1, K) s
-            sub = rates[pd][:, iy0 - by0:iy1 - by0, ix0 - bx0:ix1 - bx0]                   # (K, hh, ww) e-/s
-            contrib = torch.einsum("kyx,yk->yx", sub, torch.from_numpy(wk).float().expand(iy1 - iy0, K))
-            out[key][r, ix0 - x0:ix1 - x0] += contrib
+            st = starts[pd] if rolling else starts[pd][:1]
+            wts = window_bin_exposure(edges, st, t_len[pd], pa["period_s"], pa["duty"], pa["phase_s"],
+                                      pa["rise_s"], pa["fall_s"], level, check=False)      # (L, R, K) s
+            wts = torch.from_numpy(np.ascontiguousarray(wts)).float()
+            for i, (_p, (by0, bx0), (iy0, iy1, ix0, ix1), rates) in enumerate(group):
+                wk = wts[i, iy0 - y0:iy1 - y0] if rolling else wts[i, :1].expand(iy1 - iy0, K)
+                sub = rates[pd][:, iy0 - by0:iy1 - by0, ix0 - bx0:ix1 - bx0]               # (K, hh, ww) e-/s
+                out[key][iy0 - y0:iy1 - y0, ix0 - x0:ix1 - x0] += torch.einsum("kyx,yk->yx", sub, wk)
     return out
 
 
