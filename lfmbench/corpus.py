@@ -1027,7 +1027,7 @@ def encode_scene(scene_id: str, scene: Mapping[str, Any], meta: Mapping[str, Any
                 raise ValueError(f"{what}: light ids {bad} are not lights of group {g!r} in meta.json")
             yield what, encode_lights_exr(ls, bands, _group_bins(meta, g), H, W, dtype=dtype,
                                           what=what, notes=notes, attrs=_attrs(scene_id, n, g))
-        if fr.get("aux") is not None:
+        if fr.get("aux"):
             with_aux.append(int(n))
             yield f"{fdir}/aux.exr", encode_aux_exr(fr["aux"], H, W, what=f"{fdir}/aux.exr",
                                                     attrs=_attrs(scene_id, n, "aux"))

@@ -270,11 +270,15 @@ def _kernel_scalar(phase, exposure, period, duty, amplitude, offset):  # pragma:
     return amplitude * ((n * p + n * e) + (o1 + o2)) + offset * exposure
 
 
-def _numba_kernel():
+#: Elements from which the threaded kernel pays off (its launch costs far more than a small serial loop).
+PARALLEL_MIN_SIZE = 100_000
+
+
+def _numba_kernel(size: int = PARALLEL_MIN_SIZE):
     """The compiled ideal-pulse ufunc for this call site, or None when numba is unavailable.
 
-    Two builds of :func:`_kernel_scalar`: ``target="parallel"`` (both cores) in the importing process's main
-    thread, ``target="cpu"`` elsewhere. Each is compiled only when first needed: building the parallel one loads
+    Two builds of :func:`_kernel_scalar`: ``target="parallel"`` (both cores) for calls of at least
+    :data:`PARALLEL_MIN_SIZE` elements in the importing process's main thread, ``target="cpu"`` otherwise. Each is compiled only when first needed: building the parallel one loads
     numba's threading layer, which sets the OpenMP thread count; in a forked DataLoader worker whose parent has
     used OpenMP (torch does) that makes torch's next parallel region deadlock. So workers only ever build the
     serial kernel; their parallelism is the workers.
@@ -290,7 +294,7 @@ def _numba_kernel():
     if not _NUMBA_KERNELS:
         return None
     main = os.getpid() == _IMPORT_PID and threading.current_thread() is threading.main_thread()
-    target = "parallel" if main else "cpu"
+    target = "parallel" if (main and size >= PARALLEL_MIN_SIZE) else "cpu"
     if target not in _NUMBA_KERNELS:
         import numba
 
@@ -358,7 +362,9 @@ def pwm_exposure(phase: ArrayLike, exposure: ArrayLike, period: ArrayLike, duty:
         pulse = _pulse_core(ph, te, T, D, tr, tf, ops, _SPLIT[ph.dtype], trapezoid)
         return A * pulse + off * te
     if not trapezoid and backend != "numpy":
-        kernel = _numba_kernel()
+        size = int(np.prod(np.broadcast_shapes(*(np.shape(x) for x in (phase, exposure, period, duty, amplitude,
+                                                                        offset)))))
+        kernel = _numba_kernel(size)
         if kernel is None and backend == "numba":
             raise ValueError("backend='numba' needs the numba package")
         if kernel is not None:

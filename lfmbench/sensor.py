@@ -636,8 +636,10 @@ def shot_noise(mean_e: torch.Tensor, generator: torch.Generator, gaussian_above_
     z = torch.randn(mean_e.shape, generator=generator, device=mean_e.device, dtype=mean_e.dtype)
     out = torch.round(mean_e + torch.sqrt(mean_e) * z).clamp_min(0.0)
     if n_small:
-        # Poisson only where needed (torch.poisson costs 6-12x a normal draw per element on the CPU; benchmark)
-        out[small] = torch.poisson(mean_e[small], generator=generator)
+        # Poisson where the mean is small; a masked gather/scatter costs more than drawing Poisson(0) elsewhere
+        # (14.5 -> 10.5 ms for a 3-frame 256x256 split-pixel sample, docs/dataset-benchmark.md)
+        pois = torch.poisson(torch.where(small, mean_e, torch.zeros_like(mean_e)), generator=generator)
+        out = torch.where(small, pois, out)
     return out
 
 
