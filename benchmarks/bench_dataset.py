@@ -66,6 +66,7 @@ import numpy as np  # noqa: E402
 import torch  # noqa: E402
 from torch.utils.data import DataLoader, Dataset  # noqa: E402
 
+from lfmbench.fileio import atomic_save_figure, atomic_write_text  # noqa: E402
 from lfmbench import sensor as _sensor  # noqa: E402
 from lfmbench.corpus import Corpus, CorpusWriter, group_storage  # noqa: E402
 from lfmbench.datasets import LFMCaptureDataset  # noqa: E402
@@ -90,20 +91,12 @@ TARGET_SPS = 50.0
 # helpers
 # ----------------------------------------------------------------------------------------------------------
 def _atomic_write_text(path: Path, text: str) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
-    with os.fdopen(fd, "w") as f:
-        f.write(text)
-    os.replace(tmp, path)
+    atomic_write_text(path, text)
 
 
 def _atomic_savefig(fig, path: Path) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=".png")
-    os.close(fd)
-    fig.savefig(tmp, dpi=110)
+    atomic_save_figure(fig, path, dpi=110)
     plt.close(fig)
-    os.replace(tmp, path)
 
 
 def _median_time(fn, repeat: int, warmup: int = 1) -> float:

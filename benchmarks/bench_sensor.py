@@ -20,7 +20,6 @@ from __future__ import annotations
 import os
 import platform
 import statistics
-import tempfile
 import time
 from pathlib import Path
 
@@ -32,6 +31,7 @@ import numpy as np  # noqa: E402
 import scipy.stats as st  # noqa: E402
 import torch  # noqa: E402
 
+from lfmbench.fileio import atomic_save_figure, atomic_write_text  # noqa: E402
 from lfmbench.optics import airy_kernel, apply_psf, simulate_optics  # noqa: E402
 from lfmbench.sensor import (  # noqa: E402
     CAPTURES,
@@ -73,19 +73,11 @@ def _timed(fn, repeat: int = 15) -> tuple[float, float]:
 
 
 def _atomic_write_text(path: Path, text: str) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
-    with os.fdopen(fd, "w") as f:
-        f.write(text)
-    os.replace(tmp, path)
+    atomic_write_text(path, text)
 
 
 def _atomic_savefig(fig, path: Path) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".png")
-    os.close(fd)
-    fig.savefig(tmp, dpi=110, bbox_inches="tight")
-    os.replace(tmp, path)
+    atomic_save_figure(fig, path, dpi=110, bbox_inches="tight")
     plt.close(fig)
 
 
