@@ -464,13 +464,12 @@ class LFMCaptureDataset(Dataset):
 
     # -- display
     @staticmethod
-    def plot(sample: Mapping[str, Any], prediction: torch.Tensor | None = None, frame_axis: bool = True):
+    def plot(sample: Mapping[str, Any], prediction: torch.Tensor | None = None):
         """Figure with one row per frame: LPD-LCG, SPD, ground truth (and ``prediction``), LED mask.
 
         Values are input-referred e-; shown through log tone mapping with a shared scale per row.
         ``prediction``: (F, 1, h, w) estimate in the ``gt`` units. Returns a matplotlib Figure.
         """
-        import matplotlib
         import matplotlib.pyplot as plt
 
         cols = [("lpd_lcg_e", "LPD (short, LCG)"), ("spd_e", "SPD (long)"), ("gt", "ground truth")]
@@ -496,5 +495,4 @@ class LFMCaptureDataset(Dataset):
         meta = sample.get("meta", {})
         fig.suptitle(f"{meta.get('scene_id', '')}: log(1 + e-), sensor {meta.get('sensor', '')}", fontsize=9)
         fig.tight_layout()
-        del matplotlib
         return fig
