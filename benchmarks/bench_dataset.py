@@ -66,6 +66,7 @@ import numpy as np  # noqa: E402
 import torch  # noqa: E402
 from torch.utils.data import DataLoader, Dataset  # noqa: E402
 
+from _timing import median_time  # noqa: E402
 from lfmbench.fileio import atomic_save_figure, atomic_write_text  # noqa: E402
 from lfmbench import sensor as _sensor  # noqa: E402
 from lfmbench.corpus import Corpus, CorpusWriter, group_storage  # noqa: E402
@@ -101,14 +102,7 @@ def _atomic_savefig(fig, path: Path) -> None:
 
 def _median_time(fn, repeat: int, warmup: int = 1) -> float:
     """Median wall time (s) of ``repeat`` calls after ``warmup`` calls."""
-    for _ in range(warmup):
-        fn()
-    ts = []
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        fn()
-        ts.append(time.perf_counter() - t0)
-    return statistics.median(ts)
+    return median_time(fn, repeat, warmup)[0]
 
 
 def _log(msg: str) -> None:

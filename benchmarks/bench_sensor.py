@@ -19,8 +19,6 @@ from __future__ import annotations
 
 import os
 import platform
-import statistics
-import time
 from pathlib import Path
 
 import matplotlib
@@ -31,6 +29,7 @@ import numpy as np  # noqa: E402
 import scipy.stats as st  # noqa: E402
 import torch  # noqa: E402
 
+from _timing import median_time  # noqa: E402
 from lfmbench.fileio import atomic_save_figure, atomic_write_text  # noqa: E402
 from lfmbench.optics import airy_kernel, apply_psf, simulate_optics  # noqa: E402
 from lfmbench.sensor import (  # noqa: E402
@@ -56,15 +55,8 @@ _LAST_MIN: list[float] = [float("nan")]
 
 def _timeit(fn, repeat: int = 9, warmup: int = 2) -> float:
     """Median wall time of ``repeat`` calls after ``warmup`` calls, in s (the minimum goes to ``_LAST_MIN``)."""
-    for _ in range(warmup):
-        fn()
-    ts = []
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        fn()
-        ts.append(time.perf_counter() - t0)
-    _LAST_MIN[0] = min(ts)
-    return statistics.median(ts)
+    med, _LAST_MIN[0] = median_time(fn, repeat, warmup)
+    return med
 
 
 def _timed(fn, repeat: int = 15) -> tuple[float, float]:
