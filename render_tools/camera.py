@@ -268,28 +268,29 @@ def _make_class(mi):
                              (self.crop[1] + (Y - p) * self.crop[3]) / self.full_h)
             return pos, self.t_start + k * self.bin_len + time, mi.UInt32(p)
 
-        def sample_ray(self, time, sample1, sample2, sample3, active=True):
+        def _moved_ray(self, inner_sample, time, sample1, sample2, sample3, active):
+            """Sample the inner camera at the atlas position, set the spectral weights, and move the ray into the
+            camera frame at its absolute time. Returns (ray, weight, (position, cos yaw, sin yaw))."""
             pos, t_abs, band_pass = self._atlas(time, sample2)
-            ray, w = self.inner.sample_ray(time, sample1, pos, sample3, active)
+            ray, w = inner_sample(time, sample1, pos, sample3, active)
             w = self._wavelengths(ray, w, sample1, band_pass)
             p, c, s = self._frame(t_abs)
             ray.o = p + self._rot(ray.o, c, s)
             ray.d = self._rot(ray.d, c, s)
             ray.time = t_abs
+            return ray, w, (p, c, s)
+
+        def sample_ray(self, time, sample1, sample2, sample3, active=True):
+            ray, w, _ = self._moved_ray(self.inner.sample_ray, time, sample1, sample2, sample3, active)
             return ray, w
 
         def sample_ray_differential(self, time, sample1, sample2, sample3, active=True):
-            pos, t_abs, band_pass = self._atlas(time, sample2)
-            ray, w = self.inner.sample_ray_differential(time, sample1, pos, sample3, active)
-            w = self._wavelengths(ray, w, sample1, band_pass)
-            p, c, s = self._frame(t_abs)
-            ray.o = p + self._rot(ray.o, c, s)
-            ray.d = self._rot(ray.d, c, s)
+            ray, w, (p, c, s) = self._moved_ray(self.inner.sample_ray_differential, time, sample1, sample2,
+                                                sample3, active)
             ray.o_x = p + self._rot(ray.o_x, c, s)
             ray.o_y = p + self._rot(ray.o_y, c, s)
             ray.d_x = self._rot(ray.d_x, c, s)
             ray.d_y = self._rot(ray.d_y, c, s)
-            ray.time = t_abs
             return ray, w
 
         def bbox(self):
