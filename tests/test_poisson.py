@@ -1,0 +1,131 @@
+"""The compiled Poisson sampler (lfmbench.poisson) against the Poisson pmf, and its determinism contract."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import scipy.stats as st
+import torch
+
+from lfmbench import poisson as P
+from lfmbench.sensor import shot_noise
+
+pytestmark = pytest.mark.skipif(not P.available(), reason="numba not importable")
+
+
+def _gen(seed: int) -> torch.Generator:
+    return torch.Generator().manual_seed(seed)
+
+
+def _chi2_pvalue(x: np.ndarray, mu: float) -> float:
+    """Chi-square goodness of fit of integer draws to Poisson(mu); cells with expected count < 20 merged."""
+    n = x.size
+    lo, hi = int(st.poisson.ppf(1e-7, mu)), int(st.poisson.isf(1e-7, mu)) + 1
+    ks = np.arange(lo, hi + 1)
+    edges = [ks[0]]
+    acc = 0.0
+    for k in ks[:-1]:  # merge adjacent cells until each expects >= 20 draws
+        acc += st.poisson.pmf(k, mu) * n
+        if acc >= 20:
+            edges.append(k + 1)
+            acc = 0.0
+    edges[-1] = hi  # the last cell takes the remainder
+    cdf = lambda k: st.poisson.cdf(k - 1, mu)  # noqa: E731  P(X < k)
+    expected = [cdf(edges[1])] + [cdf(b) - cdf(a) for a, b in zip(edges[1:-1], edges[2:])]
+    expected.append(1.0 - sum(expected))
+    observed = [np.sum(x < edges[1])] + [np.sum((x >= a) & (x < b)) for a, b in zip(edges[1:-1], edges[2:])]
+    observed.append(np.sum(x >= edges[-1]))
+    expected = np.array(expected) * n
+    observed = np.array(observed)
+    if len(observed) < 2:
+        return 1.0 if observed[0] == n else 0.0
+    chi2 = float(((observed - expected) ** 2 / np.maximum(expected, 1e-300)).sum())
+    return float(st.chi2.sf(chi2, len(observed) - 1))
+
+
+@pytest.mark.parametrize("mu", [0.01, 0.5, 3.0, 9.999999, 10.0, 10.000001, 37.0, 999.0, 1e5])
+def test_distribution_matches_poisson_pmf(mu):
+    """Chi-square test against the pmf on both sides of each branch edge (inversion | PTRS at 10)."""
+    x = P.poisson(torch.full((200_000,), mu, dtype=torch.float64), _gen(int(mu * 1000) % 997)).numpy()
+    assert np.all(x == np.round(x)) and x.min() >= 0
+    assert _chi2_pvalue(x, mu) > 1e-4
+
+
+def test_mixed_means_moments_per_pixel():
+    """Heterogeneous means in one call (a per-pixel indexing or stream bug shows here): standardised sums."""
+    g = _gen(3)
+    mu = torch.from_numpy(np.random.default_rng(0).lognormal(0.0, 2.5, 400_000))  # 0.0003 .. 1e5 e-
+    x = P.poisson(mu, g)
+    z_mean = float((x - mu).sum() / mu.sum().sqrt())
+    # E[(x - mu)^2] = mu: standardise the sum of (x - mu)^2 - mu by its s.d. sqrt(sum(2 mu^2 + mu))
+    r = (x - mu) ** 2 - mu
+    z_var = float(r.sum() / (2 * mu ** 2 + mu).sum().sqrt())
+    assert abs(z_mean) < 5 and abs(z_var) < 5
+
+
+def test_tiny_zero_and_huge_means():
+    g = _gen(4)
+    mu = torch.tensor([0.0, 1e-300, 5e-324, 1e-12] * 1000, dtype=torch.float64)
+    assert torch.equal(P.poisson(mu, g), torch.zeros_like(mu))
+    big = torch.full((100_000,), 1e12, dtype=torch.float64)
+    x = P.poisson(big, g)
+    assert abs(float(x.mean()) - 1e12) < 5 * math.sqrt(1e12 / 1e5)
+    assert float(x.var()) == pytest.approx(1e12, rel=0.03)
+    assert torch.isfinite(x).all()
+
+
+def test_pixels_and_seeds_independent():
+    mu = torch.full((400_000,), 2.0, dtype=torch.float64)
+    a = P.poisson(mu, _gen(5)).numpy()
+    b = P.poisson(mu, _gen(6)).numpy()
+    tol = 5 / math.sqrt(a.size)
+    assert abs(np.corrcoef(a[:-1], a[1:])[0, 1]) < tol        # neighbouring pixels
+    assert abs(np.corrcoef(a, b)[0, 1]) < tol                 # two seeds
+    c = P.poisson(mu, _gen(5)).numpy()
+    assert np.array_equal(a, c)                               # same generator state -> same draws
+
+
+def test_counter_based_prefix_and_shape_invariance():
+    """A pixel's draw depends on (seed, flat index, mean) only: prefixes and reshapes agree."""
+    mu = torch.rand(64, 64, dtype=torch.float64, generator=_gen(7)) * 50
+    full = P.poisson(mu, _gen(8))
+    part = P.poisson(mu.reshape(-1)[:1000], _gen(8))
+    assert torch.equal(full.reshape(-1)[:1000], part)
+    assert torch.equal(P.poisson(mu.t(), _gen(8)), P.poisson(mu.t().contiguous(), _gen(8)))
+    g = _gen(8)
+    first, second = P.poisson(mu, g), P.poisson(mu, g)
+    assert not torch.equal(first, second)                     # the generator advances
+
+
+def test_gaussian_branch_and_dtype():
+    g = _gen(9)
+    mu = torch.full((100_000,), 5000.0, dtype=torch.float32)
+    x = P.poisson(mu, g, gaussian_above=1000.0)
+    assert x.dtype == torch.float32 and x.shape == mu.shape
+    assert float(x.double().mean()) == pytest.approx(5000.0, abs=5 * math.sqrt(5000 / 1e5))
+    assert float(x.double().var()) == pytest.approx(5000.0, rel=0.03)
+    # switch at 0: every positive mean is a clamped rounded normal; zero stays zero
+    y = P.poisson(torch.tensor([0.0] + [0.3] * 9999), g, gaussian_above=0.0)
+    assert y[0] == 0 and y.min() >= 0 and float(y[1:].mean()) > 0.3   # clamping at 0 lifts the mean
+
+
+def test_agrees_with_torch_backend():
+    """Two-sample chi-square between the numba and torch backends of shot_noise at a mid mean."""
+    mu = torch.full((200_000,), 6.5, dtype=torch.float64)
+    a = shot_noise(mu, _gen(10), backend="numba").numpy().astype(int)
+    b = shot_noise(mu, _gen(10), backend="torch").numpy().astype(int)
+    ks = np.arange(0, 16)
+    ca = np.array([np.sum(a == k) for k in ks[:-1]] + [np.sum(a >= ks[-1])])
+    cb = np.array([np.sum(b == k) for k in ks[:-1]] + [np.sum(b >= ks[-1])])
+    _, p, _, _ = st.chi2_contingency(np.stack([ca, cb]))
+    assert p > 1e-4
+
+
+def test_bad_input_named():
+    with pytest.raises(ValueError, match="CPU tensor"):
+        P.poisson(torch.ones(3, dtype=torch.int64), _gen(0))
+    with pytest.raises(ValueError, match="generator"):
+        P.poisson(torch.ones(3), None)
+    with pytest.raises(ValueError, match="backend"):
+        shot_noise(torch.ones(3), _gen(0), backend="cuda")
