@@ -143,15 +143,26 @@ def compose_frame(layers: SceneLayers, meta: dict, frame: int, crop: tuple[int, 
         edges = frame / float(meta["fps"]) + np.linspace(0.0, float(tm["capture_window_s"]), K + 1)
         pa = {k: np.array([g[0][k] for g in group], dtype=np.float64)[:, None, None]
               for k in ("period_s", "duty", "phase_s", "rise_s", "fall_s")}
+        wts = {}
         for key, pd, level in (("lpd", "lpd", "pwm"), ("spd", "spd", "pwm"), ("gt", "lpd", "mean")):
             st = starts[pd] if rolling else starts[pd][:1]
-            wts = window_bin_exposure(edges, st, t_len[pd], pa["period_s"], pa["duty"], pa["phase_s"],
-                                      pa["rise_s"], pa["fall_s"], level, check=False)      # (L, R, K) s
-            wts = torch.from_numpy(np.ascontiguousarray(wts)).float()
-            for i, (_p, (by0, bx0), (iy0, iy1, ix0, ix1), rates) in enumerate(group):
-                wk = wts[i, iy0 - y0:iy1 - y0] if rolling else wts[i, :1].expand(iy1 - iy0, K)
-                sub = rates[pd][:, iy0 - by0:iy1 - by0, ix0 - bx0:ix1 - bx0]               # (K, hh, ww) e-/s
-                out[key][iy0 - y0:iy1 - y0, ix0 - x0:ix1 - x0] += torch.einsum("kyx,yk->yx", sub, wk)
+            w = window_bin_exposure(edges, st, t_len[pd], pa["period_s"], pa["duty"], pa["phase_s"],
+                                    pa["rise_s"], pa["fall_s"], level, check=False)        # (L, R, K) s
+            wts[key] = torch.from_numpy(np.ascontiguousarray(w)).float()
+        if not rolling:
+            # one weight vector per light and window: LPD and gt share the LPD bins, one (2, K) x (K, hh, ww)
+            w_lpd_gt = torch.stack([wts["lpd"][:, 0], wts["gt"][:, 0]], dim=1)              # (L, 2, K) s
+        for i, (_p, (by0, bx0), (iy0, iy1, ix0, ix1), rates) in enumerate(group):
+            win = (slice(iy0 - y0, iy1 - y0), slice(ix0 - x0, ix1 - x0))
+            sub = {pd: rates[pd][:, iy0 - by0:iy1 - by0, ix0 - bx0:ix1 - bx0] for pd in PHOTODIODES}  # (K, hh, ww)
+            if rolling:
+                for key, pd in (("lpd", "lpd"), ("spd", "spd"), ("gt", "lpd")):
+                    out[key][win] += torch.einsum("kyx,yk->yx", sub[pd], wts[key][i, iy0 - y0:iy1 - y0])
+            else:
+                both = torch.tensordot(w_lpd_gt[i], sub["lpd"], dims=1)                     # (2, hh, ww) e-
+                out["lpd"][win] += both[0]
+                out["gt"][win] += both[1]
+                out["spd"][win] += torch.tensordot(wts["spd"][i, 0], sub["spd"], dims=1)
     return out
 
 
