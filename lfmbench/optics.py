@@ -380,7 +380,7 @@ def simulate_optics(radiance: torch.Tensor, wavelengths_nm: Sequence[float] | to
     if check:
         check_radiometric(radiance, "radiance")
     C = radiance.shape[-3]
-    wl = torch.as_tensor(wavelengths_nm, dtype=torch.float64).reshape(-1)
+    wl = torch.as_tensor(wavelengths_nm, dtype=torch.float64, device=radiance.device).reshape(-1)
     if wl.numel() != C:
         raise ValueError(f"wavelengths_nm has {wl.numel()} values but radiance has C={C} bands")
     E = radiance_to_irradiance(radiance, config.f_number, config.transmittance, config.magnification, check=False)

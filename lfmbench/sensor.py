@@ -113,14 +113,15 @@ class CFAPattern(str, Enum):
     GBRG = "GBRG"
     BGGR = "BGGR"
 
-    def cell(self) -> torch.Tensor:
-        """(2, 2) int64 channel indices (0 = r, 1 = g, 2 = b) of the top-left cell."""
+    def cell(self, device: torch.device | str | None = None) -> torch.Tensor:
+        """(2, 2) int64 channel indices (0 = r, 1 = g, 2 = b) of the top-left cell, on ``device``."""
         lut = {"R": 0, "G": 1, "B": 2}
-        return torch.tensor([[lut[self.value[0]], lut[self.value[1]]], [lut[self.value[2]], lut[self.value[3]]]])
+        return torch.tensor([[lut[self.value[0]], lut[self.value[1]]], [lut[self.value[2]], lut[self.value[3]]]],
+                            device=device)
 
     def index_map(self, height: int, width: int, device: torch.device | str | None = None) -> torch.Tensor:
         """(H, W) int64 channel index (0 = r, 1 = g, 2 = b) of every pixel."""
-        cell = self.cell().to(device)
+        cell = self.cell(device)
         return cell.repeat((height + 1) // 2, (width + 1) // 2)[:height, :width]
 
     def to_kornia(self):
@@ -475,7 +476,7 @@ def band_widths_nm(wavelengths_nm: Sequence[float] | torch.Tensor) -> np.ndarray
     On the corpus grid 400:10:700 every band is 10 nm wide (the renderer integrates 10 nm boxes). A single
     wavelength has no spacing: pass ``bandwidths_nm`` explicitly then.
     """
-    wl = np.asarray(torch.as_tensor(wavelengths_nm, dtype=torch.float64).cpu(), dtype=np.float64).reshape(-1)
+    wl = np.asarray(torch.as_tensor(wavelengths_nm, dtype=torch.float64, device="cpu"), dtype=np.float64).reshape(-1)
     if wl.size < 2:
         raise ValueError("bandwidths_nm must be given for a single wavelength (no spacing to infer a width from)")
     if np.any(np.diff(wl) <= 0):
@@ -484,7 +485,7 @@ def band_widths_nm(wavelengths_nm: Sequence[float] | torch.Tensor) -> np.ndarray
 
 
 def _wavelengths(wavelengths_nm: Sequence[float] | torch.Tensor) -> np.ndarray:
-    wl = np.asarray(torch.as_tensor(wavelengths_nm, dtype=torch.float64).cpu(), dtype=np.float64).reshape(-1)
+    wl = np.asarray(torch.as_tensor(wavelengths_nm, dtype=torch.float64, device="cpu"), dtype=np.float64).reshape(-1)
     if wl.size == 0 or not np.all(np.isfinite(wl)) or np.any(wl <= 0):
         raise ValueError("wavelengths_nm must be a non-empty sequence of finite values > 0 (nm)")
     return wl
@@ -622,7 +623,7 @@ def shot_noise(mean_e: torch.Tensor, generator: torch.Generator, gaussian_above_
     means are exact Poisson. ``gaussian_above_e = inf`` forces exact Poisson everywhere.
 
     Backends: ``"numba"`` (CPU only) is the compiled counter-based sampler of :mod:`lfmbench.poisson`
-    (inversion below 10 e-, PTRS above; about 2.5x faster than ``torch.poisson`` on one sample's means);
+    (inversion below 10 e-, PTRS above; 1.6-2.3x faster than ``torch.poisson`` on a sample's means);
     ``"torch"`` uses ``torch.poisson`` and ``torch.randn`` (any device); ``"auto"`` picks ``"numba"`` for CPU
     tensors when numba is importable, else ``"torch"``. Both draw the same distribution, not the same numbers.
 
