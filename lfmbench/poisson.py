@@ -59,7 +59,7 @@ def _build():
     stride = np.uint64(_STRIDE)
     inv_k = 1.0 / np.maximum(np.arange(64, dtype=np.float64), 1.0)  # 1/k, a multiply instead of a divide
     # log k! for k < 4096 (the PTRS draws below the 1000 e- switch-over), libm lgamma beyond: a table lookup
-    # instead of lgamma on the ~1 in 8 draws that leave the squeeze
+    # instead of lgamma on the draws that leave the squeeze
     log_factorial = np.array([math.lgamma(k + 1.0) for k in range(4096)])
     n_log_factorial = log_factorial.size
 
@@ -80,9 +80,13 @@ def _build():
         base = mix(seed)
         for i in range(mean.size):
             mu = np.float64(mean[i])
-            if not mu > 0.0:  # 0 (and NaN, rejected by the caller) -> 0
-                out[i] = 0.0
-                continue
+            if not mu > 0.0:
+                if mu == 0.0:
+                    out[i] = 0.0
+                    continue
+                return i  # negative or NaN: the caller raises, naming the element
+            if mu == math.inf:
+                return i
             st = base + u64(i) * stride
             if mu >= gaussian_above:
                 u1, st = uniform(st)
@@ -101,7 +105,7 @@ def _build():
                     f += p
                 out[i] = k
             else:
-                # PTRS; the logs of the exact test are only needed off the squeeze (about 1 draw in 8)
+                # PTRS; the logs of the exact test are only needed off the squeeze (24-65 % of first tries)
                 b = 0.931 + 2.53 * math.sqrt(mu)
                 a = -0.059 + 0.02483 * b
                 vr = 0.9277 - 3.6224 / (b - 2.0)
@@ -120,6 +124,7 @@ def _build():
                     if math.log(v * invalpha / (a / (us * us) + b)) <= -mu + k * math.log(mu) - logfact:
                         break
                 out[i] = k
+        return -1
 
     return kernel
 
@@ -145,7 +150,8 @@ def poisson(mean: torch.Tensor, generator: torch.Generator, gaussian_above: floa
         (*) integer-valued counts, dtype of ``mean``, a new tensor.
 
     Raises:
-        ValueError: ``mean`` not on the CPU or not floating point, or ``generator`` not a CPU generator.
+        ValueError: ``mean`` not on the CPU or not floating point, negative, NaN or infinite; ``generator`` not a
+            CPU generator.
         RuntimeError: numba is not available.
     """
     if not isinstance(mean, torch.Tensor) or mean.device.type != "cpu" or not mean.is_floating_point():
@@ -161,5 +167,7 @@ def poisson(mean: torch.Tensor, generator: torch.Generator, gaussian_above: floa
         m = m.to(torch.float32)
     m = m.contiguous()
     out = torch.empty_like(m)
-    _KERNEL(m.view(-1).numpy(), out.view(-1).numpy(), np.uint64(seed), float(gaussian_above))
+    bad = _KERNEL(m.view(-1).numpy(), out.view(-1).numpy(), np.uint64(seed), float(gaussian_above))
+    if bad >= 0:
+        raise ValueError(f"mean must be finite and >= 0, got {float(m.view(-1)[bad])!r} at flat index {bad}")
     return out.to(mean.dtype)

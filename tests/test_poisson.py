@@ -127,5 +127,8 @@ def test_bad_input_named():
         P.poisson(torch.ones(3, dtype=torch.int64), _gen(0))
     with pytest.raises(ValueError, match="generator"):
         P.poisson(torch.ones(3), None)
+    for bad in (-1e-9, float("nan"), float("inf")):
+        with pytest.raises(ValueError, match="finite and >= 0.*flat index 2"):
+            P.poisson(torch.tensor([1.0, 0.0, bad, 3.0]), _gen(0))
     with pytest.raises(ValueError, match="backend"):
         shot_noise(torch.ones(3), _gen(0), backend="cuda")
