@@ -42,90 +42,15 @@ __all__ = ["poisson", "available", "INVERSION_BELOW"]
 #: Means below this use inversion, at or above it PTRS (which [Hormann1993]_ derives for mu >= 10).
 INVERSION_BELOW: float = 10.0
 
-_GAMMA = 0x9E3779B97F4A7C15
-#: Distance between two pixels' stream starts: 2^20 SplitMix64 steps (a draw uses at most a few dozen).
-_STRIDE = (_GAMMA << 20) & 0xFFFFFFFFFFFFFFFF
 _KERNEL = None
 
 
 def _build():
-    """Compile the kernel (lazily: importing lfmbench must not need a compiler); None without numba."""
+    """Load the compiled kernel (lazily: importing lfmbench must not need numba); None without numba."""
     try:
-        import numba
+        from lfmbench._poisson_kernel import kernel
     except ImportError:  # pragma: no cover - numba is a dependency
         return None
-    u64 = numba.uint64
-    gamma = np.uint64(_GAMMA)
-    stride = np.uint64(_STRIDE)
-    inv_k = 1.0 / np.maximum(np.arange(64, dtype=np.float64), 1.0)  # 1/k, a multiply instead of a divide
-    # log k! for k < 4096 (the PTRS draws below the 1000 e- switch-over), libm lgamma beyond: a table lookup
-    # instead of lgamma on the draws that leave the squeeze
-    log_factorial = np.array([math.lgamma(k + 1.0) for k in range(4096)])
-    n_log_factorial = log_factorial.size
-
-    @numba.njit(inline="always")
-    def mix(z):
-        z = (z ^ (z >> u64(30))) * u64(0xBF58476D1CE4E5B9)
-        z = (z ^ (z >> u64(27))) * u64(0x94D049BB133111EB)
-        return z ^ (z >> u64(31))
-
-    @numba.njit(inline="always")
-    def uniform(state):
-        """(u in (0, 1) with 53 random bits, next state)."""
-        state = state + gamma
-        return (np.float64(mix(state) >> u64(11)) + 0.5) * (1.0 / 9007199254740992.0), state
-
-    @numba.njit(cache=True, nogil=True, error_model="numpy")
-    def kernel(mean, out, seed, gaussian_above):  # pragma: no cover - compiled by numba
-        base = mix(seed)
-        for i in range(mean.size):
-            mu = np.float64(mean[i])
-            if not mu > 0.0:
-                if mu == 0.0:
-                    out[i] = 0.0
-                    continue
-                return i  # negative or NaN: the caller raises, naming the element
-            if mu == math.inf:
-                return i
-            st = base + u64(i) * stride
-            if mu >= gaussian_above:
-                u1, st = uniform(st)
-                u2, st = uniform(st)
-                z = math.sqrt(-2.0 * math.log(u1)) * math.cos(2.0 * math.pi * u2)
-                out[i] = max(0.0, np.rint(mu + math.sqrt(mu) * z))
-            elif mu < 10.0:
-                u, st = uniform(st)
-                p = math.exp(-mu)
-                f = p
-                k = 0
-                # F(k) reaches 1 - 1e-16 by k ~ 40 for mu < 10; stop where p underflows or rounding stalls F
-                while u > f and p > 0.0:
-                    k += 1
-                    p *= mu * (inv_k[k] if k < 64 else 1.0 / k)
-                    f += p
-                out[i] = k
-            else:
-                # PTRS; the logs of the exact test are only needed off the squeeze (24-65 % of first tries)
-                b = 0.931 + 2.53 * math.sqrt(mu)
-                a = -0.059 + 0.02483 * b
-                vr = 0.9277 - 3.6224 / (b - 2.0)
-                while True:
-                    u, st = uniform(st)
-                    v, st = uniform(st)
-                    u -= 0.5
-                    us = 0.5 - abs(u)
-                    k = math.floor((2.0 * a / us + b) * u + mu + 0.43)
-                    if us >= 0.07 and v <= vr:
-                        break
-                    if k < 0.0 or (us < 0.013 and v > us):
-                        continue
-                    invalpha = 1.1239 + 1.1328 / (b - 3.4)
-                    logfact = log_factorial[k] if k < n_log_factorial else math.lgamma(k + 1.0)
-                    if math.log(v * invalpha / (a / (us * us) + b)) <= -mu + k * math.log(mu) - logfact:
-                        break
-                out[i] = k
-        return -1
-
     return kernel
 
 

@@ -298,7 +298,8 @@ def test_line_time_override_checked_against_rendered_bins(corpus):
 
 def test_workers_forked_after_parent_openmp_do_not_deadlock(tmp_path):
     """Regression: workers forked after the parent ran OpenMP (training) hung in torch ops once numba's
-    parallel layer had been loaded in them. Run in a subprocess with a timeout so a hang fails, not blocks."""
+    parallel layer had been loaded in them. Run in a subprocess with a timeout so a hang fails, not blocks.
+    Also checks that the constructor builds the serial CPU kernels in the parent (workers inherit them)."""
     import subprocess
     import sys
     import textwrap
@@ -312,8 +313,13 @@ def test_workers_forked_after_parent_openmp_do_not_deadlock(tmp_path):
         T.H, T.W = 96, 128   # 3 frames x 96 x 128 > torch's parallel grain size: workers would enter OpenMP
         root = T.make_corpus(Path({str(tmp_path / 'c')!r}), n_scenes=2)
         from lfmbench.datasets import LFMCaptureDataset
+        from lfmbench import flicker
+        from lfmbench._poisson_kernel import kernel
         from torch.utils.data import DataLoader
+        assert not kernel.signatures and "cpu" not in (flicker._NUMBA_KERNELS or {{}})
         ds = LFMCaptureDataset(root, split="all", samples_per_scene=2)
+        # the serial kernels are built in the parent, so forked workers inherit them instead of compiling
+        assert kernel.signatures and "cpu" in flicker._NUMBA_KERNELS, "kernels not built by the constructor"
         loader = DataLoader(ds, batch_size=2, num_workers=2)
         for epoch in range(2):
             ds.set_epoch(epoch)

@@ -166,6 +166,18 @@ def compose_frame(layers: SceneLayers, meta: dict, frame: int, crop: tuple[int, 
     return out
 
 
+def _warm_cpu_kernels(noise: bool) -> None:
+    """Compile (or load from numba's cache) the serial CPU kernels a sample uses, in this process.
+
+    DataLoader workers are forked from here and inherit them, instead of each worker loading them at its first
+    sample (0.3-0.8 s per worker and epoch with the default ``persistent_workers=False``). Only the serial
+    kernels: they start no threading layer, so forking after them is safe (docs/flicker.md).
+    """
+    pwm_exposure(np.zeros(1), 1e-3, 1e-2, 0.5, check=False)
+    if noise:
+        _sensor.shot_noise(torch.zeros(1), torch.Generator().manual_seed(0))
+
+
 # ----------------------------------------------------------------------------------------------------------
 # dataset
 # ----------------------------------------------------------------------------------------------------------
@@ -259,6 +271,7 @@ class LFMCaptureDataset(Dataset):
         self._fpn: dict | None = None
         self.epoch = 0
         self._frozen = self._load_or_freeze_test_params() if split == "test" else None
+        _warm_cpu_kernels(self.noise)
 
     # -- bookkeeping
     def _split_scenes(self) -> list[str]:
