@@ -166,10 +166,11 @@ def test_silicon_qe_model_hand_values():
 
 
 # ------------------------------------------------------------------------------------------------- noise
-def test_poisson_shot_noise_chi_square():
+@pytest.mark.parametrize("backend", ["numba", "torch"])
+def test_poisson_shot_noise_chi_square(backend):
     g = _gen(1)
     mu = torch.full((200000,), 4.0, dtype=torch.float64)
-    s = shot_noise(mu, g, 1000.0).numpy().astype(int)
+    s = shot_noise(mu, g, 1000.0, backend=backend).numpy().astype(int)
     ks = np.arange(0, 13)
     obs = np.array([(s == k).sum() for k in ks[:-1]] + [(s >= ks[-1]).sum()])
     pmf = st.poisson.pmf(ks[:-1], 4.0)
@@ -178,10 +179,11 @@ def test_poisson_shot_noise_chi_square():
     assert chi2 < st.chi2.ppf(0.999, len(ks) - 1)
 
 
-def test_gaussian_branch_moments_and_switch():
+@pytest.mark.parametrize("backend", ["numba", "torch"])
+def test_gaussian_branch_moments_and_switch(backend):
     g = _gen(2)
     mu = torch.cat([torch.full((100000,), 5000.0), torch.full((100000,), 50.0)]).double()
-    s = shot_noise(mu, g, 1000.0)
+    s = shot_noise(mu, g, 1000.0, backend=backend)
     big, small = s[:100000], s[100000:]
     assert torch.equal(s, s.round())
     assert float(big.mean()) == pytest.approx(5000.0, abs=4 * math.sqrt(5000 / 1e5))
