@@ -54,12 +54,17 @@ def _build():
     return kernel
 
 
-def available() -> bool:
-    """Whether the compiled sampler can be used (numba importable)."""
+def _kernel():
+    """The compiled kernel, loaded on first use; None without numba."""
     global _KERNEL
     if _KERNEL is None:
         _KERNEL = _build() or False
-    return _KERNEL is not False
+    return _KERNEL or None
+
+
+def available() -> bool:
+    """Whether the compiled sampler can be used (numba importable)."""
+    return _kernel() is not None
 
 
 def poisson(mean: torch.Tensor, generator: torch.Generator, gaussian_above: float = math.inf) -> torch.Tensor:
@@ -83,7 +88,8 @@ def poisson(mean: torch.Tensor, generator: torch.Generator, gaussian_above: floa
         raise ValueError("mean must be a floating-point CPU tensor (use torch.poisson on other devices)")
     if not isinstance(generator, torch.Generator) or generator.device.type != "cpu":
         raise ValueError("generator must be a CPU torch.Generator")
-    if not available():  # pragma: no cover - numba is a dependency
+    kernel = _kernel()
+    if kernel is None:  # pragma: no cover - numba is a dependency
         raise RuntimeError("numba is not available; use torch.poisson")
     seed = int(torch.randint(-(2 ** 63), 2 ** 63 - 1, (), generator=generator, dtype=torch.int64,
                              device="cpu")) & (2 ** 64 - 1)
@@ -92,7 +98,7 @@ def poisson(mean: torch.Tensor, generator: torch.Generator, gaussian_above: floa
         m = m.to(torch.float32)
     m = m.contiguous()
     out = torch.empty_like(m)
-    bad = _KERNEL(m.view(-1).numpy(), out.view(-1).numpy(), np.uint64(seed), float(gaussian_above))
+    bad = kernel(m.view(-1).numpy(), out.view(-1).numpy(), np.uint64(seed), float(gaussian_above))
     if bad >= 0:
         raise ValueError(f"mean must be finite and >= 0, got {float(m.view(-1)[bad])!r} at flat index {bad}")
     return out.to(mean.dtype)
