@@ -21,6 +21,9 @@ _INV_K = 1.0 / np.maximum(np.arange(64, dtype=np.float64), 1.0)
 #: log k! for k < 4096 (the PTRS draws below the 1000 e- switch-over), libm lgamma beyond: a table lookup
 #: instead of lgamma on the draws that leave the squeeze.
 _LOG_FACTORIAL = np.array([math.lgamma(k + 1.0) for k in range(4096)])
+#: Means from 2^52 on always take the rounded normal: float64 no longer holds every count exactly there, and
+#: PTRS's integer candidate (mu plus many standard deviations) would approach int64 overflow.
+_EXACT_LIMIT = 2.0 ** 52
 
 
 @numba.njit(inline="always", cache=True)
@@ -51,7 +54,7 @@ def kernel(mean, out, seed, gaussian_above):  # pragma: no cover - compiled by n
         if mu == math.inf:
             return i
         st = base + _u64(i) * _STRIDE
-        if mu >= gaussian_above:
+        if mu >= gaussian_above or mu >= _EXACT_LIMIT:
             u1, st = _uniform(st)
             u2, st = _uniform(st)
             z = math.sqrt(-2.0 * math.log(u1)) * math.cos(2.0 * math.pi * u2)

@@ -10,7 +10,8 @@
 - ``10 <= mu < gaussian_above``: **PTRS**, the transformed rejection with squeeze of [Hormann1993]_, the method
   of numpy's legacy ``random_poisson_ptrs`` (valid for mu >= 10, O(1) uniforms per draw, exact).
 - ``mu >= gaussian_above``: the rounded normal ``max(0, rint(mu + sqrt(mu) z))`` with ``z`` by Box-Muller,
-  the same approximation as :func:`lfmbench.sensor.shot_noise`'s torch path.
+  the same approximation as :func:`lfmbench.sensor.shot_noise`'s torch path; also for every mean >= 2^52
+  (4.5e15), where float64 cannot hold the counts exactly (relative s.d. < 2e-8 there).
 
 Randomness is **counter-based**: pixel ``i`` reads its own SplitMix64 stream [Steele2014]_ that starts at
 ``mix(seed) + i * 2^20 * gamma`` (gamma the golden-ratio increment), a disjoint 2^20-draw slice of one SplitMix64

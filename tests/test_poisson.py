@@ -73,6 +73,13 @@ def test_tiny_zero_and_huge_means():
     assert abs(float(x.mean()) - 1e12) < 5 * math.sqrt(1e12 / 1e5)
     assert float(x.var()) == pytest.approx(1e12, rel=0.03)
     assert torch.isfinite(x).all()
+    # beyond 2^52 the rounded normal takes over even with gaussian_above = inf (no int64 overflow in PTRS)
+    for mu in (2.0 ** 53, 1e20):
+        y = P.poisson(torch.full((20_000,), mu, dtype=torch.float64), g)
+        assert torch.isfinite(y).all() and abs(float(y.mean()) / mu - 1) < 5 / math.sqrt(mu * 2e4)
+        assert float(((y - mu) ** 2).mean()) / mu == pytest.approx(1.0, rel=0.06)
+    y = P.poisson(torch.full((100,), 1e300, dtype=torch.float64), g)   # sqrt(mu) is below float64's spacing
+    assert torch.isfinite(y).all() and float((y / 1e300 - 1).abs().max()) < 1e-12
 
 
 def test_pixels_and_seeds_independent():
