@@ -11,6 +11,8 @@ import math
 import numba
 import numpy as np
 
+from lfmbench.poisson import EXACT_LIMIT
+
 _u64 = numba.uint64
 #: SplitMix64 increment (the golden-ratio constant), [Steele2014]_.
 _GAMMA = np.uint64(0x9E3779B97F4A7C15)
@@ -21,9 +23,7 @@ _INV_K = 1.0 / np.maximum(np.arange(64, dtype=np.float64), 1.0)
 #: log k! for k < 4096 (the PTRS draws below the 1000 e- switch-over), libm lgamma beyond: a table lookup
 #: instead of lgamma on the draws that leave the squeeze.
 _LOG_FACTORIAL = np.array([math.lgamma(k + 1.0) for k in range(4096)])
-#: Means from 2^52 on always take the rounded normal: float64 no longer holds every count exactly there, and
-#: PTRS's integer candidate (mu plus many standard deviations) would approach int64 overflow.
-_EXACT_LIMIT = 2.0 ** 52
+_EXACT_LIMIT = EXACT_LIMIT
 
 
 @numba.njit(inline="always", cache=True)

@@ -620,7 +620,8 @@ def shot_noise(mean_e: torch.Tensor, generator: torch.Generator, gaussian_above_
 
     Means >= ``gaussian_above_e`` use the normal approximation N(mu, mu) rounded to integers (Poisson's skewness
     1/sqrt(mu) is < 3 % there; the distribution error is measured in ``benchmarks/bench_sensor.py``); smaller
-    means are exact Poisson. ``gaussian_above_e = inf`` forces exact Poisson everywhere.
+    means are exact Poisson. ``gaussian_above_e = inf`` forces exact Poisson everywhere below 2^52 e-
+    (:data:`lfmbench.poisson.EXACT_LIMIT`, where float64 stops holding counts exactly).
 
     Backends: ``"numba"`` (CPU only) is the compiled counter-based sampler of :mod:`lfmbench.poisson`
     (inversion below 10 e-, PTRS above; 1.6-2.3x faster than ``torch.poisson`` on a sample's means);
@@ -640,9 +641,8 @@ def shot_noise(mean_e: torch.Tensor, generator: torch.Generator, gaussian_above_
         raise ValueError(f"backend must be 'auto', 'numba' or 'torch', got {backend!r}")
     if backend == "numba" or (backend == "auto" and mean_e.device.type == "cpu" and _poisson.available()):
         return _poisson.poisson(mean_e, generator, gaussian_above_e)
-    if not math.isfinite(gaussian_above_e):
-        return torch.poisson(mean_e, generator=generator)
-    small = mean_e < gaussian_above_e
+    # torch.poisson overflows int64 for huge means (1e20 -> -2^63): those take the rounded normal too
+    small = mean_e < min(gaussian_above_e, _poisson.EXACT_LIMIT)
     n_small = int(small.sum())
     if n_small == mean_e.numel():
         return torch.poisson(mean_e, generator=generator)

@@ -80,6 +80,9 @@ def test_tiny_zero_and_huge_means():
         assert float(((y - mu) ** 2).mean()) / mu == pytest.approx(1.0, rel=0.06)
     y = P.poisson(torch.full((100,), 1e300, dtype=torch.float64), g)   # sqrt(mu) is below float64's spacing
     assert torch.isfinite(y).all() and float((y / 1e300 - 1).abs().max()) < 1e-12
+    for backend in ("numba", "torch"):                                 # torch.poisson alone gives -2^63 here
+        z = shot_noise(torch.full((1000,), 1e20, dtype=torch.float64), g, float("inf"), backend=backend)
+        assert float((z / 1e20 - 1).abs().max()) < 1e-8
 
 
 def test_pixels_and_seeds_independent():
