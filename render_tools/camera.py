@@ -164,7 +164,9 @@ def _make_class(mi):
         ``t_start`` (s, added to every ray time: the pose at ray time t is the pose at t_start + t),
         ``band_lo`` (comma-separated lower band edges, nm), ``band_width`` (nm), ``full_width`` /
         ``full_height`` (px), ``crop_x, crop_y, crop_w, crop_h`` (px), ``bin_len`` (s), ``tiles_x`` (bins),
-        ``tiles_y`` (band passes); see :func:`sensor_dict`.
+        ``tiles_y`` (band passes), ``obj_vx, obj_vy, obj_vz`` (m/s) and ``t_ref`` (s): the velocity of an
+        object placed at its ``t_ref`` position, whose own motion is rendered by moving the camera by
+        ``-v_obj (t - t_ref)`` (relative motion; default 0); see :func:`sensor_dict`.
         """
 
         def __init__(self, props):
@@ -190,6 +192,10 @@ def _make_class(mi):
             self.p0 = [opaque(v) for v in self.p0_scalar]
             self.speed, self.yaw_rate = opaque(speed), opaque(yaw_rate if self.turning else 1.0)
             self.yaw0, self.cos0, self.sin0 = opaque(yaw0), opaque(math.cos(yaw0)), opaque(math.sin(yaw0))
+            # relative motion of one object (per-light renders of lamps on moving vehicles): opaque, so a
+            # moving and a static lamp share one kernel
+            self.v_obj = [opaque(props.get(k, 0.0)) for k in ("obj_vx", "obj_vy", "obj_vz")]
+            self.t_ref = opaque(props.get("t_ref", 0.0))
 
             # Opaque JIT variables: crop, window and band pass change per render without recompiling.
             self.t_start = opaque(props.get("t_start", 0.0))
@@ -232,7 +238,9 @@ def _make_class(mi):
                 c, s = dr.cos(psi), dr.sin(psi)
                 k = self.speed / self.yaw_rate
                 off = mi.Vector3f(k * (s - self.sin0), k * (self.cos0 - c), 0.0)
-            p = mi.Point3f(self.p0[0], self.p0[1], self.p0[2]) + off
+            dt = time - self.t_ref
+            p = mi.Point3f(self.p0[0] - self.v_obj[0] * dt, self.p0[1] - self.v_obj[1] * dt,
+                           self.p0[2] - self.v_obj[2] * dt) + off
             return p, c, s
 
         def _wavelengths(self, ray, w, u, band_pass):
@@ -311,7 +319,7 @@ def _make_class(mi):
 
 def sensor_dict(ego: EgoMotion, fov_x_deg: float, film: dict, full_size: tuple[int, int], t_start: float,
                 bin_len: float, bins: int = 1, crop=None, band_lo_nm=None, band_width_nm: float = 10.0,
-                sampler: dict | None = None) -> dict:
+                sampler: dict | None = None, object_velocity_mps=(0.0, 0.0, 0.0), t_ref: float = 0.0) -> dict:
     """Mitsuba dict of the ego camera (:class:`MotionCamera`) rendering an *atlas*.
 
     The film (``film``, a dict) must be ``bins * w`` wide and ``n_passes * h`` high for a crop of w x h px
@@ -324,7 +332,14 @@ def sensor_dict(ego: EgoMotion, fov_x_deg: float, film: dict, full_size: tuple[i
         band_lo_nm: lower edges (nm) of the film's box bands; given, pass p samples one wavelength in each of
             bands ``p + j * n_pass`` (j = 0..3) and the tiles of all passes add up to every band. None:
             Mitsuba's own wavelength sampling (for AOVs with an RGB film).
+        object_velocity_mps: (3,) world velocity (m/s) of an object that the scene holds at its position at
+            ``t_ref`` (s): the camera then moves by ``-v (t - t_ref)`` on top of the ego motion, so the object
+            is seen with its true relative motion (and everything else as if it moved with the object).
     """
+    v_obj = [float(v) for v in object_velocity_mps]
+    if len(v_obj) != 3 or not all(math.isfinite(v) for v in v_obj) or not math.isfinite(float(t_ref)):
+        raise ValueError(f"object_velocity_mps: expected 3 finite values (m/s) and a finite t_ref (s), got "
+                         f"{object_velocity_mps!r}, {t_ref!r}")
     if not (math.isfinite(bin_len) and bin_len >= 0):
         raise ValueError(f"bin_len: shutter interval must be >= 0 s, got {bin_len}")
     if not isinstance(bins, (int, np.integer)) or bins < 1:
@@ -338,7 +353,8 @@ def sensor_dict(ego: EgoMotion, fov_x_deg: float, film: dict, full_size: tuple[i
          "sampler": sampler or {"type": DEFAULT_SAMPLER}, "shutter_open": 0.0, "shutter_close": float(bin_len),
          "t_start": float(t_start), "bin_len": float(bin_len), "full_width": W, "full_height": H,
          "crop_x": float(x0), "crop_y": float(y0), "crop_w": float(x1 - x0), "crop_h": float(y1 - y0),
-         "tiles_x": int(bins), "tiles_y": 1}
+         "tiles_x": int(bins), "tiles_y": 1, "obj_vx": v_obj[0], "obj_vy": v_obj[1], "obj_vz": v_obj[2],
+         "t_ref": float(t_ref)}
     if band_lo_nm is not None:
         d.update({"band_lo": ", ".join(repr(float(v)) for v in band_lo_nm), "band_width": float(band_width_nm),
                   "tiles_y": n_passes(len(band_lo_nm))})

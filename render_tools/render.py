@@ -18,8 +18,12 @@ Motion blur: the ego camera moves continuously during every shutter interval (:m
 One Mitsuba render per window or per light: the sensor renders an *atlas* (K time bins along x, the
 ceil(C / 4) band-stratified wavelength passes along y) of the crop, with crop, window start and bin length
 as opaque JIT variables, so the LLVM kernels are reused across lights and frames. Moving objects are placed
-at mid capture window, so with a static ego camera (speed 0, yaw rate 0) nothing changes inside a frame: the
-light is rendered once and its K bins are exact copies.
+at mid capture window. Full-frame (static-group) renders blur them with the ego motion only; a flickering
+light on a moving vehicle is rendered with its true relative motion: the camera additionally moves by
+``-v_vehicle (t - t_mid)``, which is exact for the lamp, its own vehicle and the light it throws on the road
+under it (they move together), while static surroundings in its crop move with it (they only occlude or
+reflect). With a static ego camera and a static lamp nothing changes inside a frame: the light is rendered
+once and its K bins are exact copies.
 """
 from __future__ import annotations
 
@@ -185,9 +189,11 @@ class _Renderer:
         self.fov = float(scene["camera"]["fov_x_deg"])
         self.K = cam_mod.intrinsics(opts.width, opts.height, self.fov)
 
-    def sensor(self, t_start: float, bin_len: float, bins: int = 1, crop=None, film=None, bands: bool = True):
+    def sensor(self, t_start: float, bin_len: float, bins: int = 1, crop=None, film=None, bands: bool = True,
+               velocity=(0.0, 0.0, 0.0), t_ref: float = 0.0):
         """Loaded atlas sensor (:func:`camera.sensor_dict`): ``bins`` bins of ``bin_len`` s from ``t_start``
-        over ``crop`` (y0, x0, y1, x1) px; ``bands``: band-stratified passes on a spectral film."""
+        over ``crop`` (y0, x0, y1, x1) px; ``bands``: band-stratified passes on a spectral film; ``velocity``
+        (m/s) and ``t_ref`` (s): an object's motion rendered as relative camera motion."""
         opts = self.opts
         y0, x0, y1, x1 = crop if crop is not None else (0, 0, opts.height, opts.width)
         w = opts.band_width_nm
@@ -195,36 +201,51 @@ class _Renderer:
         film = film or _film(opts, (x1 - x0) * bins, (y1 - y0) * passes)
         lo = [c - w / 2 for c in opts.bands_nm] if bands else None
         return self.mi.load_dict(cam_mod.sensor_dict(self.ego, self.fov, film, (opts.width, opts.height), t_start,
-                                                     bin_len, bins, (y0, x0, y1, x1), lo, w))
+                                                     bin_len, bins, (y0, x0, y1, x1), lo, w,
+                                                     object_velocity_mps=velocity, t_ref=t_ref))
 
-    def render(self, scene_obj, t_start, bin_len, spp, seed, crop=None, bins: int = 1) -> np.ndarray:
+    def render(self, scene_obj, t_start, bin_len, spp, seed, crop=None, bins: int = 1,
+               velocity=(0.0, 0.0, 0.0), t_ref: float = 0.0) -> np.ndarray:
         """Radiance W sr^-1 m^-2 nm^-1 of ``bins`` consecutive time bins -> (bins, C, h, w) float32, in one
-        Mitsuba render of an atlas (bins along x, band passes along y, summed here)."""
+        Mitsuba render of an atlas (bins along x, band passes along y, summed here). ``velocity`` (m/s) and
+        ``t_ref`` (s): render an object held at its ``t_ref`` position with its own motion (relative camera
+        motion, :func:`camera.sensor_dict`)."""
         opts = self.opts
         y0, x0, y1, x1 = crop if crop is not None else (0, 0, opts.height, opts.width)
         h, w = y1 - y0, x1 - x0
         P = cam_mod.n_passes(len(opts.bands_nm))
-        img = self.mi.render(scene_obj, sensor=self.sensor(t_start, bin_len, bins, crop), spp=int(spp),
-                             seed=int(seed))
+        img = self.mi.render(scene_obj, sensor=self.sensor(t_start, bin_len, bins, crop, velocity=velocity,
+                                                           t_ref=t_ref), spp=int(spp), seed=int(seed))
         a = np.array(img, dtype=np.float32).reshape(P, h, bins, w, len(opts.bands_nm)).sum(0)
         return np.ascontiguousarray(a.transpose(1, 3, 0, 2))
 
-    def facing(self, light: dict, t_obj: float, times) -> bool:
-        """Whether the lamp face points towards the camera at any of ``times`` (s)."""
+    def facing(self, light: dict, t_obj: float, times, moving: bool = False) -> bool:
+        """Whether the lamp face points towards the camera at any of ``times`` (s); ``moving``: the lamp moves
+        with its object (per-light renders), else it is held at its ``t_obj`` position."""
+        times = np.asarray(times, dtype=np.float64)
         c = np.asarray(light["center"], float) + ms.object_offset(self.scene, light["instance"], t_obj)
-        pos = self.ego.position(np.asarray(times))
+        pos = self.ego.position(times)
+        if moving:
+            pos = pos - np.outer(times - t_obj, self.object_velocity(light))
         return bool(np.any((pos - c) @ np.asarray(light["normal"], float) > 0))
 
-    def light_bbox(self, light: dict, t_obj: float, t_a: float, t_b: float):
+    def object_velocity(self, light: dict) -> np.ndarray:
+        """(3,) world velocity (m/s) of the object a light is mounted on (zeros for a static light)."""
+        return ms.object_offset(self.scene, light["instance"], 1.0)
+
+    def light_bbox(self, light: dict, t_obj: float, t_a: float, t_b: float, moving: bool = False):
         """Screen bbox (y0, x0, y1, x1) px (end exclusive) of a light's face over [t_a, t_b] s, padded and
-        clipped; None when not visible (behind the camera, outside the image or facing away)."""
+        clipped; None when not visible (behind the camera, outside the image or facing away). ``moving``: the
+        lamp moves with its object over the interval (as per-light renders show it), else it is held at its
+        ``t_obj`` position (as full-frame renders show it)."""
         times = np.linspace(t_a, t_b, BBOX_TIME_SAMPLES)
-        if not self.facing(light, t_obj, times):
+        if not self.facing(light, t_obj, times, moving):
             return None
         pts = ms.light_points(self.scene, light, t_obj)
+        v = self.object_velocity(light) if moving else np.zeros(3)
         uvs = []
         for t in times:
-            uv, z = cam_mod.project(pts, self.ego.pose_cv(t), self.K)
+            uv, z = cam_mod.project(pts + v * (t - t_obj), self.ego.pose_cv(t), self.K)
             if np.all(z <= MIN_DEPTH_M):
                 continue
             if np.any(z <= MIN_DEPTH_M):  # straddles the camera plane: take the whole image
@@ -279,7 +300,8 @@ def scene_meta(scene: dict, opts: RenderOptions) -> dict:
             continue
         bbs = []
         for tm in timings:
-            bb = helper.light_bbox(lt, 0.5 * (tm["window"][0] + tm["window"][1]), *tm["window"])
+            bb = helper.light_bbox(lt, 0.5 * (tm["window"][0] + tm["window"][1]), *tm["window"],
+                                   moving=groups[lt["group"]]["flicker"])  # as render_frames crops it
             bbs.append(None if bb is None else list(bb))
         lights.append({"id": lt["id"], "group": lt["group"], "kind": lt["kind"], "instance": lt["instance"],
                        "luminance_cd_m2": lt["luminance_cd_m2"], "spectrum": lt["spectrum"], "bbox": bbs})
@@ -406,16 +428,18 @@ def render_frames(scene: dict, opts: RenderOptions) -> Iterator[dict]:
             for lt in scene["lights"]:
                 if lt["group"] != g:
                     continue
-                bb = r.light_bbox(lt, t_obj, *tm["window"])
+                # the lamp moves with its vehicle inside the window: rendered as relative camera motion
+                v = r.object_velocity(lt)
+                bb = r.light_bbox(lt, t_obj, *tm["window"], moving=True)
                 if bb is None:
                     continue
                 visible.add(lt["id"])
                 ms.set_solo(params, scene, g, lt["id"], cache)
                 seed = _seed(opts.seed, n, g, lt["id"])
-                if r.ego.moving:
+                if r.ego.moving or np.any(v != 0.0):
                     bins = r.render(sc, edges[0], (edges[-1] - edges[0]) / opts.bins, light_spp, seed, crop=bb,
-                                    bins=opts.bins)
-                else:  # static camera and scene inside the frame: all bins are the same image
+                                    bins=opts.bins, velocity=v, t_ref=t_obj)
+                else:  # static camera and lamp inside the frame: all bins are the same image
                     one = r.render(sc, edges[0], edges[-1] - edges[0], light_spp, seed, crop=bb)
                     bins = np.repeat(one, opts.bins, axis=0)
                 items.append((lt["id"], bb, bins))
