@@ -35,12 +35,13 @@ llvm:
 demo: $(STAMP) llvm
 	DRJIT_LIBLLVM_PATH=$(wildcard /usr/lib/x86_64-linux-gnu/libLLVM.so.19.1) $(PY) -m lfmbench.demo
 
-# Every benchmark behind the tables and plots in docs/ (about 15 minutes on 2 cores; each script also runs alone).
+# Every benchmark behind the tables and plots in docs/ (about 25 minutes on 2 cores; each script also runs alone).
 bench: $(STAMP) llvm
 	$(PY) benchmarks/bench_flicker.py
 	$(PY) benchmarks/bench_sensor.py
 	DRJIT_LIBLLVM_PATH=$(wildcard $(LLVM)) $(PY) benchmarks/bench_dataset.py
 	DRJIT_LIBLLVM_PATH=$(wildcard $(LLVM)) $(PY) benchmarks/bench_render.py
+	DRJIT_LIBLLVM_PATH=$(wildcard $(LLVM)) $(PY) benchmarks/bench_crop_pad.py
 
 clean-venv:
 	rm -rf $(VENV)

@@ -302,7 +302,8 @@ def write_report(res: dict, out: Path) -> None:
     lines += ["", "## Energy outside a light's crop", "",
               f"Full-frame solo renders of lights {o['lights']} over the capture window: share of their energy "
               f"outside the stored crop = {', '.join(f'{x:.4f}' for x in o['fraction'])} "
-              "(light the lamp throws on the road and car bodies; it is lost from the flickering layer).", ""]
+              "(the light's illumination of the street; it is lost from the flickering layer; "
+              "docs/crop-pad-benchmark.md shows where it goes and that padding the crop does not recover it).", ""]
     lines += ["## Reading the numbers", "",
               "- LED pixels of static groups are re-rendered at light_spp inside each lamp's crop, so their error "
               "does not depend on spp; spp buys the rest of the image.",
