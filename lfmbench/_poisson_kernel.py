@@ -43,6 +43,12 @@ def _uniform(state):
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
 def kernel(mean, out, seed, gaussian_above):  # pragma: no cover - compiled by numba
+    """Draw ``out[i] ~ Poisson(mean[i])`` (rounded normal from ``gaussian_above`` or 2^52 on).
+
+    Args: ``mean`` (N,) float32/float64 means (e.g. e-), ``out`` (N,) array written in place (counts, same
+    unit), ``seed`` uint64, ``gaussian_above`` float switch-over mean. Returns -1, or the first index whose mean
+    is negative, NaN or infinite (``out`` is then incomplete and the caller raises).
+    """
     base = _mix(seed)
     for i in range(mean.size):
         mu = np.float64(mean[i])
