@@ -183,9 +183,9 @@ def test_aux_depth_range_and_instance_mask():
     assert np.all(aux["mask.light"] == -1)
 
 
-def _vehicle_lamp_scene(ego_speed, vehicle_velocity, lamp_center=(6.0, 2.0, 1.4)):
+def _vehicle_lamp_scene(ego_speed, vehicle_velocity, lamp_center=(6.0, 2.0, 1.4), yaw_rate=0.0):
     """A lamp (otherlights) on a small vehicle body with the given world velocity (m/s); ego heads +x."""
-    s = scene.empty_scene(speed_mps=ego_speed)
+    s = scene.empty_scene(speed_mps=ego_speed, yaw_rate_rad_s=yaw_rate)
     s["materials"]["body"] = {"type": "diffuse", "rgb": [0.2, 0.2, 0.2]}
     cx, cy, _ = lamp_center
     s["objects"].append({"id": 0, "kind": "car", "velocity_mps": [float(v) for v in vehicle_velocity],
@@ -218,14 +218,15 @@ def _expected_centroids(s, opts, velocity, lamp_center):
     return np.asarray(out), t_obj
 
 
-@pytest.mark.parametrize("ego_speed, velocity, lamp", [
-    (30.0, (30.0, 0.0, 0.0), (6.0, 2.0, 1.4)),      # car ahead at the ego's speed
-    (30.0, (-20.0, 0.0, 0.0), (10.0, 1.5, 1.4)),    # oncoming car
-    (0.0, (0.0, -15.0, 0.0), (8.0, 0.5, 1.4))])     # crossing car, ego stopped
-def test_lamp_on_a_moving_vehicle_moves_with_it_inside_the_exposure(ego_speed, velocity, lamp):
+@pytest.mark.parametrize("ego_speed, velocity, lamp, yaw_rate", [
+    (30.0, (30.0, 0.0, 0.0), (6.0, 2.0, 1.4), 0.0),      # car ahead at the ego's speed
+    (30.0, (-20.0, 0.0, 0.0), (10.0, 1.5, 1.4), 0.0),    # oncoming car
+    (0.0, (0.0, -15.0, 0.0), (8.0, 0.5, 1.4), 0.0),      # crossing car, ego stopped
+    (20.0, (10.0, -8.0, 0.0), (9.0, 0.5, 1.4), 0.6)])    # ego turning (0.6 rad/s), car drifting across
+def test_lamp_on_a_moving_vehicle_moves_with_it_inside_the_exposure(ego_speed, velocity, lamp, yaw_rate):
     """Per-light bins follow the lamp's true screen path (ego and vehicle motion), not the ego motion alone:
     bin centroids against the analytic projection of the moving lamp centre at each bin's mid-time."""
-    s = _vehicle_lamp_scene(ego_speed, velocity, lamp)
+    s = _vehicle_lamp_scene(ego_speed, velocity, lamp, yaw_rate)
     opts = render.RenderOptions(width=128, height=80, spp=64, bins=4, frames=1, aux=False, seed=2)
     fr = next(render.render_frames(s, opts))
     (_, bb, bins), = fr["lights"]["otherlights"]
