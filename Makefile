@@ -42,6 +42,7 @@ bench: $(STAMP) llvm
 	DRJIT_LIBLLVM_PATH=$(wildcard $(LLVM)) $(PY) benchmarks/bench_dataset.py
 	DRJIT_LIBLLVM_PATH=$(wildcard $(LLVM)) $(PY) benchmarks/bench_render.py
 	DRJIT_LIBLLVM_PATH=$(wildcard $(LLVM)) $(PY) benchmarks/bench_crop_pad.py
+	DRJIT_LIBLLVM_PATH=$(wildcard $(LLVM)) $(PY) benchmarks/bench_object_motion.py
 
 clean-venv:
 	rm -rf $(VENV)
