@@ -26,9 +26,7 @@ import sys
 import time
 from pathlib import Path
 
-LLVM19 = "/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1"
-if "DRJIT_LIBLLVM_PATH" not in os.environ and os.path.exists(LLVM19):
-    os.environ["DRJIT_LIBLLVM_PATH"] = LLVM19
+import _llvm  # noqa: E402,F401  (DRJIT_LIBLLVM_PATH before Mitsuba loads)
 
 import numpy as np  # noqa: E402
 
