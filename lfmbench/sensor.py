@@ -332,6 +332,20 @@ def _check_keys(data: Any, allowed: set[str], source: str, where: str) -> None:
         raise ValueError(f"{source}: unknown field(s) {', '.join(pre + u for u in sorted(map(str, unknown)))}")
 
 
+def _entries(data: Mapping[str, Any], section: str, names: Sequence[str], spec: type, source: str):
+    """Yield ``(name, fields, prefix)`` for each required entry ``name`` of ``data[section]``, after checking
+    that the section and every entry exist and hold only known keys (the fields of dataclass ``spec``)."""
+    raw = data.get(section)
+    if raw is None:
+        raise ValueError(f"{source}: missing field '{section}'")
+    _check_keys(raw, set(names), source, section)
+    for name in names:
+        if name not in raw:
+            raise ValueError(f"{source}: missing field '{section}.{name}'")
+        _check_keys(raw[name], {f.name for f in fields(spec)}, source, f"{section}.{name}")
+        yield name, raw[name], f"{section}.{name}."
+
+
 def preset_from_dict(data: Mapping[str, Any], source: str = "<dict>") -> SensorPreset:
     """Validate a plain mapping (the YAML structure of ``configs/sensors/ovt.yaml``) into a :class:`SensorPreset`.
 
@@ -383,17 +397,8 @@ def preset_from_dict(data: Mapping[str, Any], source: str = "<dict>") -> SensorP
         raise ValueError(f"{source}: field 'spectral.filters': {fpath} must have columns wavelength_nm,r,g,b, "
                          f"got {names}")
 
-    pds_raw = data.get("photodiodes")
-    if pds_raw is None:
-        raise ValueError(f"{source}: missing field 'photodiodes'")
-    _check_keys(pds_raw, set(PHOTODIODES), source, "photodiodes")
     pds: dict[str, PhotodiodeSpec] = {}
-    for pd in PHOTODIODES:
-        if pd not in pds_raw:
-            raise ValueError(f"{source}: missing field 'photodiodes.{pd}'")
-        d = pds_raw[pd]
-        pre = f"photodiodes.{pd}."
-        _check_keys(d, {f.name for f in fields(PhotodiodeSpec)}, source, f"photodiodes.{pd}")
+    for pd, d, pre in _entries(data, "photodiodes", PHOTODIODES, PhotodiodeSpec, source):
         pds[pd] = PhotodiodeSpec(
             fill_factor=_num(d, "fill_factor", source, pre, lo=0, lo_open=True, hi=1.0),
             full_well_e=_num(d, "full_well_e", source, pre, lo=0, lo_open=True),
@@ -402,17 +407,8 @@ def preset_from_dict(data: Mapping[str, Any], source: str = "<dict>") -> SensorP
             prnu=_num(d, "prnu", source, pre, lo=0, hi=0.5, default=0.0),
         )
 
-    caps_raw = data.get("captures")
-    if caps_raw is None:
-        raise ValueError(f"{source}: missing field 'captures'")
-    _check_keys(caps_raw, set(CAPTURES), source, "captures")
     caps: dict[str, CaptureSpec] = {}
-    for cap in CAPTURES:
-        if cap not in caps_raw:
-            raise ValueError(f"{source}: missing field 'captures.{cap}'")
-        d = caps_raw[cap]
-        pre = f"captures.{cap}."
-        _check_keys(d, {f.name for f in fields(CaptureSpec)}, source, f"captures.{cap}")
+    for cap, d, pre in _entries(data, "captures", CAPTURES, CaptureSpec, source):
         pd = d.get("photodiode")
         if pd not in PHOTODIODES:
             raise ValueError(f"{source}: field '{pre}photodiode' must be one of {list(PHOTODIODES)}, got {pd!r}")
@@ -700,6 +696,17 @@ def read_capture(electrons: torch.Tensor, preset: SensorPreset, capture: str, ge
     return {"dn": dn, "volts": volts, "saturated": saturated}
 
 
+def _check_pair(lpd: torch.Tensor, spd: torch.Tensor, lpd_name: str, spd_name: str, check: bool) -> None:
+    """The LPD and SPD inputs of a capture set: radiometric (if ``check``), same shape, same dtype."""
+    if check:
+        check_radiometric(lpd, lpd_name)
+        check_radiometric(spd, spd_name)
+    if lpd.shape != spd.shape:
+        raise ValueError(f"{spd_name} shape {tuple(spd.shape)} differs from {lpd_name} shape {tuple(lpd.shape)}")
+    if spd.dtype != lpd.dtype:
+        raise ValueError(f"{spd_name} and {lpd_name} must have the same dtype")
+
+
 def simulate_split_pixel_electrons(lpd_electrons: torch.Tensor, spd_electrons: torch.Tensor,
                                    preset: SensorPreset | str, exposure_short_s: float | torch.Tensor,
                                    exposure_long_s: float | torch.Tensor, generator: torch.Generator | None = None,
@@ -723,16 +730,9 @@ def simulate_split_pixel_electrons(lpd_electrons: torch.Tensor, spd_electrons: t
     Returns:
         as :func:`simulate_split_pixel`.
     """
-    if check:
-        check_radiometric(lpd_electrons, "lpd_electrons")
-        check_radiometric(spd_electrons, "spd_electrons")
-    if lpd_electrons.shape != spd_electrons.shape:
-        raise ValueError(f"spd_electrons shape {tuple(spd_electrons.shape)} differs from lpd_electrons shape "
-                         f"{tuple(lpd_electrons.shape)}")
+    _check_pair(lpd_electrons, spd_electrons, "lpd_electrons", "spd_electrons", check)
     if lpd_electrons.shape[-3] != 1:
         raise ValueError(f"lpd_electrons must have shape (*, 1, H, W) (a CFA mosaic), got {tuple(lpd_electrons.shape)}")
-    if spd_electrons.dtype != lpd_electrons.dtype:
-        raise ValueError("spd_electrons and lpd_electrons must have the same dtype")
     preset = load_preset(preset)
     x = lpd_electrons
     if noise:
@@ -813,14 +813,7 @@ def simulate_split_pixel(lpd_radiant_exposure: torch.Tensor, spd_radiant_exposur
         ``saturated``: (*, 3, H, W) bool (hcg, lcg, spd), volts >= saturation_fraction x swing.
         Floating outputs have the dtype of the inputs.
     """
-    if check:
-        check_radiometric(lpd_radiant_exposure, "lpd_radiant_exposure")
-        check_radiometric(spd_radiant_exposure, "spd_radiant_exposure")
-    if lpd_radiant_exposure.shape != spd_radiant_exposure.shape:
-        raise ValueError(f"spd_radiant_exposure shape {tuple(spd_radiant_exposure.shape)} differs from "
-                         f"lpd_radiant_exposure shape {tuple(lpd_radiant_exposure.shape)}")
-    if spd_radiant_exposure.dtype != lpd_radiant_exposure.dtype:
-        raise ValueError("spd_radiant_exposure and lpd_radiant_exposure must have the same dtype")
+    _check_pair(lpd_radiant_exposure, spd_radiant_exposure, "lpd_radiant_exposure", "spd_radiant_exposure", check)
     preset = load_preset(preset)
     lpd_e = ideal_electrons(lpd_radiant_exposure, preset, wavelengths_nm, "lpd", bandwidths_nm, check=False)
     spd_e = ideal_electrons(spd_radiant_exposure, preset, wavelengths_nm, "spd", bandwidths_nm, check=False)
