@@ -1,7 +1,7 @@
 """Exact Poisson sampling of shot noise on the CPU: a compiled, counter-based sampler (numba).
 
 ``torch.poisson`` costs about 13-60 ns a draw on this machine's CPU and was half of a dataset sample's time
-(docs/dataset-benchmark.md). This module draws the same distribution 1.2-1.7x faster at a fixed mean and
+(docs/dataset-benchmark.md). This module draws the same distribution 1.4-1.8x faster at a fixed mean and
 1.6-2.3x faster on a dataset sample's mixed means (docs/sensor.md), in one compiled loop:
 
 - mean ``mu < 10``: **inversion** by sequential search from ``k = 0`` [Devroye1986]_ (X.3.3): one uniform ``u``,
