@@ -39,7 +39,7 @@ sys.path.insert(0, str(ROOT))
 
 from bench_render import lum  # noqa: E402
 from lfmbench.fileio import atomic_save_figure, atomic_write_text  # noqa: E402
-from render_tools import render, scene  # noqa: E402
+from render_tools import reference, render, scene  # noqa: E402
 
 
 def main(argv=None) -> int:
@@ -56,7 +56,7 @@ def main(argv=None) -> int:
     sc = scene.generate_scene(7, "night")
     g = "otherlights"
     opts = render.RenderOptions(width=W, height=H, frames=1, spp=1, light_spp=32, bins=8, seed=11)
-    r = render._Renderer(sc, opts)
+    r = reference.ReferenceRenderer(sc, opts)
     tm = render.frame_timing(sc, opts, 0)
     a0, a1 = tm["window"]
     t_obj = 0.5 * (a0 + a1)
@@ -73,7 +73,7 @@ def main(argv=None) -> int:
         full[lt["id"]] = lum(r.render(msc, a0, a1 - a0, 16, 3, velocity=v, t_ref=t_obj)[0])
     rows = []
     for pad in pads:
-        rp = render._Renderer(sc, dataclasses.replace(opts, pad_px=pad))
+        rp = reference.ReferenceRenderer(sc, dataclasses.replace(opts, pad_px=pad))
         fracs, totals, area, boxes = [], [], 0, []
         for lt in lights:
             bb = rp.light_bbox(lt, t_obj, a0, a1, moving=True)

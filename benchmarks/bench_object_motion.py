@@ -35,7 +35,7 @@ sys.path.insert(0, str(ROOT))
 
 from bench_render import led_sel, lum  # noqa: E402
 from lfmbench.fileio import atomic_write_text  # noqa: E402
-from render_tools import render, scene  # noqa: E402
+from render_tools import reference, render, scene  # noqa: E402
 
 
 def _pooled(est: dict, ref: dict, sel: dict) -> float:
@@ -76,7 +76,7 @@ def measure(sc: dict, W: int, H: int, M: int, spp_sub: int, spp: int) -> dict:
 
     g = "otherlights"
     opts = render.RenderOptions(width=W, height=H, frames=1, spp=1, light_spp=32, bins=1, seed=11)
-    r = render._Renderer(sc, opts)
+    r = reference.ReferenceRenderer(sc, opts)
     tm = render.frame_timing(sc, opts, 0)
     a0, a1 = tm["window"]
     t_obj = 0.5 * (a0 + a1)

@@ -31,7 +31,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from render_tools import preview, render, scene, spectra  # noqa: E402
+from render_tools import preview, reference, render, scene, spectra  # noqa: E402
 
 BANDS = render.DEFAULT_BANDS_NM
 
@@ -169,7 +169,7 @@ def main() -> None:
     from render_tools import mitsuba_scene as ms  # noqa: PLC0415
 
     opts = render.RenderOptions(spp=1, bins=1, **base)
-    r = render._Renderer(sc, opts)
+    r = reference.ReferenceRenderer(sc, opts)
     tmw = render.frame_timing(sc, opts, 0)
     g = "otherlights"
     t_obj = 0.5 * (tmw["window"][0] + tmw["window"][1])

@@ -27,7 +27,7 @@ import math
 import numpy as np
 
 from . import spectra
-from .scene import LIGHT_GROUPS
+from .scene import LIGHT_GROUPS, scene_groups
 
 #: Path-tracing depth: Mitsuba ``max_depth`` 5 = 4 indirect bounces (upstream renders with 4 bounces).
 MAX_DEPTH = 5
@@ -225,7 +225,7 @@ def mitsuba_dict(scene: dict, t: float, emit: str | None = None, lights: list[in
 
     Args:
         emit: which emitters are on: a light group name (its lights), ``"skymap"`` (the sky), ``"all"``
-            (every light and the sky) or ``None`` (no emitter: geometry only, e.g. for AOVs).
+            (every light, and the sky unless it emits nothing) or ``None`` (no emitter: geometry only, e.g. for AOVs).
         lights: optional subset of light ids of ``emit`` to include as emitters (default all of the group).
         integrator: Mitsuba integrator dict (default ``path`` with :data:`MAX_DEPTH`).
         cache: optional dict reused across calls for the same scene and variant (keeps the loaded BSDFs).
@@ -287,8 +287,12 @@ def mitsuba_dict(scene: dict, t: float, emit: str | None = None, lights: list[in
                     "beam_width": BEAM_WIDTH_FRACTION * float(lt["spread_deg"])}
         name = light_shape_id(lt["id"])
         d[name] = _mesh(mi, name, V, F, off_lens, emitter)
-    if emit in ("skymap", "all"):
-        d["sky"] = sky_dict(scene)
+    if emit == "skymap" or (emit == "all" and "skymap" in scene_groups(scene)):
+        # one sky object per scene: Mitsuba bakes the environment emitter's registry id into kernels as a
+        # literal, so a new sky object per frame would force a recompile per frame
+        if "sky" not in cache:
+            cache["sky"] = mi.load_dict(sky_dict(scene))
+        d["sky"] = cache["sky"]
     return d
 
 

@@ -173,51 +173,14 @@ def _seed(*parts) -> int:
     return zlib.crc32(("/".join(str(p) for p in parts)).encode()) & 0x7FFFFFFF
 
 
-class _Renderer:
-    """Holds the Mitsuba module, the ego motion and helpers for one scene (internal)."""
+class SceneGeometry:
+    """Where a scene's lamps are on screen over time (no Mitsuba): ego motion, intrinsics, light bboxes."""
 
     def __init__(self, scene: dict, opts: RenderOptions):
-        from . import backend  # noqa: PLC0415
-
-        self.variant = backend.select_variant(opts.variant)
-        import drjit as dr  # noqa: PLC0415
-        import mitsuba as mi  # noqa: PLC0415
-
-        self.mi, self.dr = mi, dr
         self.scene, self.opts = scene, opts
         self.ego = cam_mod.EgoMotion.from_scene(scene)
         self.fov = float(scene["camera"]["fov_x_deg"])
         self.K = cam_mod.intrinsics(opts.width, opts.height, self.fov)
-
-    def sensor(self, t_start: float, bin_len: float, bins: int = 1, crop=None, film=None, bands: bool = True,
-               velocity=(0.0, 0.0, 0.0), t_ref: float = 0.0):
-        """Loaded atlas sensor (:func:`camera.sensor_dict`): ``bins`` bins of ``bin_len`` s from ``t_start``
-        over ``crop`` (y0, x0, y1, x1) px; ``bands``: band-stratified passes on a spectral film; ``velocity``
-        (m/s) and ``t_ref`` (s): an object's motion rendered as relative camera motion."""
-        opts = self.opts
-        y0, x0, y1, x1 = crop if crop is not None else (0, 0, opts.height, opts.width)
-        w = opts.band_width_nm
-        passes = cam_mod.n_passes(len(opts.bands_nm)) if bands else 1
-        film = film or _film(opts, (x1 - x0) * bins, (y1 - y0) * passes)
-        lo = [c - w / 2 for c in opts.bands_nm] if bands else None
-        return self.mi.load_dict(cam_mod.sensor_dict(self.ego, self.fov, film, (opts.width, opts.height), t_start,
-                                                     bin_len, bins, (y0, x0, y1, x1), lo, w,
-                                                     object_velocity_mps=velocity, t_ref=t_ref))
-
-    def render(self, scene_obj, t_start, bin_len, spp, seed, crop=None, bins: int = 1,
-               velocity=(0.0, 0.0, 0.0), t_ref: float = 0.0) -> np.ndarray:
-        """Radiance W sr^-1 m^-2 nm^-1 of ``bins`` consecutive time bins -> (bins, C, h, w) float32, in one
-        Mitsuba render of an atlas (bins along x, band passes along y, summed here). ``velocity`` (m/s) and
-        ``t_ref`` (s): render an object held at its ``t_ref`` position with its own motion (relative camera
-        motion, :func:`camera.sensor_dict`)."""
-        opts = self.opts
-        y0, x0, y1, x1 = crop if crop is not None else (0, 0, opts.height, opts.width)
-        h, w = y1 - y0, x1 - x0
-        P = cam_mod.n_passes(len(opts.bands_nm))
-        img = self.mi.render(scene_obj, sensor=self.sensor(t_start, bin_len, bins, crop, velocity=velocity,
-                                                           t_ref=t_ref), spp=int(spp), seed=int(seed))
-        a = np.array(img, dtype=np.float32).reshape(P, h, bins, w, len(opts.bands_nm)).sum(0)
-        return np.ascontiguousarray(a.transpose(1, 3, 0, 2))
 
     def facing(self, light: dict, t_obj: float, times, moving: bool = False) -> bool:
         """Whether the lamp face points towards the camera at any of ``times`` (s); ``moving``: the lamp moves
@@ -292,8 +255,7 @@ def scene_meta(scene: dict, opts: RenderOptions) -> dict:
     K = cam_mod.intrinsics(opts.width, opts.height, fov)
     groups = _selected_groups(scene, opts)
     timings = [frame_timing(scene, opts, n) for n in range(opts.frames)]
-    helper = _Renderer.__new__(_Renderer)
-    helper.scene, helper.opts, helper.ego, helper.K = scene, opts, ego, K
+    helper = SceneGeometry(scene, opts)
     lights = []
     for lt in scene["lights"]:
         if lt["group"] not in groups:
@@ -331,49 +293,89 @@ def _lookup(keys: np.ndarray, table: dict) -> np.ndarray:
     return vals[inv].reshape(keys.shape)
 
 
-def _aux(r: _Renderer, scene_geo, t_aux: float, visible_lights: set, frame: int) -> dict:
-    """AOVs at time ``t_aux`` (s): depth.Z, depth.R (m, +inf = no hit), mask.instance, mask.light (-1 none)."""
-    mi, dr = r.mi, r.dr
-    opts = r.opts
-    integ = mi.load_dict({"type": "aov", "aovs": "si:shape_index,pp:position"})
-    shapes = scene_geo.shapes()
-    if r.variant.startswith("scalar"):
-        ids = np.arange(1, len(shapes) + 1, dtype=np.int64)
-    else:
-        ids = np.array(dr.reinterpret_array(mi.UInt32, scene_geo.shapes_dr()), dtype=np.int64)
+def _aux_maps(loaded, scene: dict, shape_ids: np.ndarray, pos: np.ndarray, c: np.ndarray, fwd: np.ndarray,
+              visible_lights: set) -> dict:
+    """AOVs from camera-ray hits: ``shape_ids`` (N, H, W) registry ids of the first hit (0 = none) of N jittered
+    passes, ``pos`` (3, H, W) m hit points of pass 0, camera centre ``c`` (3,) m and forward axis ``fwd`` (3,).
+    Returns depth.Z, depth.R (m, +inf = no hit), mask.instance and mask.light (float32 (H, W), -1 = none; a
+    pixel belongs to a light if any pass hit its face)."""
+    import drjit as dr  # noqa: PLC0415
+    import mitsuba as mi  # noqa: PLC0415
+
     inst_of, light_of = {}, {}
-    for sid, sh in zip(ids.tolist(), shapes):
+    ids = np.array(dr.reinterpret_array(mi.UInt32, loaded.shapes_dr()), dtype=np.int64)
+    for sid, sh in zip(ids.tolist(), loaded.shapes()):
         name = sh.id()
         if name.startswith("light"):
             lid = int(name[5:])
-            inst_of[sid] = r.scene["lights"][lid]["instance"]
+            inst_of[sid] = scene["lights"][lid]["instance"]
             if lid in visible_lights:
                 light_of[sid] = lid
         elif name.startswith("o"):
             inst_of[sid] = int(name[1:].split("_")[0])
-    c = r.ego.position(t_aux)
-    fwd = r.ego.rotation_mi(t_aux)[:, 2]
-    film = {"type": "hdrfilm", "width": opts.width, "height": opts.height, "rfilter": {"type": "box"},
-            "pixel_format": "rgb"}
-    out = {}
-    light_mask = np.full((opts.height, opts.width), -1.0, np.float32)
-    for k in range(LIGHT_MASK_PASSES):
-        sensor = r.sensor(t_aux, 0.0, film=dict(film), bands=False)
-        img = np.array(mi.render(scene_geo, sensor=sensor, integrator=integ, spp=1,
-                                 seed=_seed(opts.seed, frame, "aux", k)), dtype=np.float64)
-        sidx = np.rint(img[..., -4]).astype(np.int64)
-        if k == 0:
-            hit = sidx != 0
-            p = img[..., -3:]
-            rng_m = np.where(hit, np.linalg.norm(p - c, axis=-1), np.inf)
-            z = np.where(hit, (p - c) @ fwd, np.inf)
-            out["depth.Z"] = z.astype(np.float32)
-            out["depth.R"] = rng_m.astype(np.float32)
-            out["mask.instance"] = _lookup(sidx, inst_of)
-        lm = _lookup(sidx, light_of)
+    hit = shape_ids[0] != 0
+    p = np.moveaxis(pos, 0, -1).astype(np.float64)
+    out = {"depth.Z": np.where(hit, (p - c) @ fwd, np.inf).astype(np.float32),
+           "depth.R": np.where(hit, np.linalg.norm(p - c, axis=-1), np.inf).astype(np.float32),
+           "mask.instance": _lookup(shape_ids[0], inst_of)}
+    light_mask = np.full(shape_ids.shape[1:], -1.0, np.float32)
+    for k in range(shape_ids.shape[0]):
+        lm = _lookup(shape_ids[k], light_of)
         light_mask = np.where((light_mask < 0) & (lm >= 0), lm, light_mask)
     out["mask.light"] = light_mask
     return out
+
+
+def plan_frame(scene: dict, opts: RenderOptions, n: int, sets, geo: SceneGeometry | None = None):
+    """The tiles of frame ``n`` (:class:`render_tools.tracer.Tile`) and how to assemble them.
+
+    Static groups: two full-frame tiles (short, long window) at ``spp``, plus, when ``light_spp > spp``, each of
+    the group's lamps in its own crop at ``light_spp`` (pasted over the full-frame estimate: both are unbiased
+    estimates of the same pixels, the crop one with less variance where the HDR peaks are). Flickering groups:
+    each visible light alone in its crop, K bins over the capture window, at ``light_spp`` (one bin repeated K
+    times when neither the camera nor the lamp moves). ``sets``: the frame's :class:`tracer.LightSets` (or any
+    mapping from set name to index). Returns (tiles, plan, visible light ids); plan entries are
+    (kind, group, window or light id, crop, tile index, repeat).
+    """
+    from .tracer import Tile  # noqa: PLC0415
+
+    geo = geo or SceneGeometry(scene, opts)
+    tm = frame_timing(scene, opts, n)
+    t_obj = 0.5 * (tm["window"][0] + tm["window"][1])  # moving objects placed at mid capture window
+    full = (0, 0, opts.height, opts.width)
+    light_spp = opts.light_spp or opts.spp
+    tiles, plan, visible = [], [], set()
+    for g, info in _selected_groups(scene, opts).items():
+        lamps = [lt for lt in scene["lights"] if lt["group"] == g]
+        if not info["flicker"]:
+            k = sets[f"group:{g}"]
+            for win in ("short", "long"):
+                a, b = tm[win]
+                plan.append(("static", g, win, full, len(tiles), 1))
+                tiles.append(Tile(full, 1, a, b - a, opts.spp, k, key=_seed("static", g, win)))
+                for lt in lamps if light_spp > opts.spp else ():
+                    bb = geo.light_bbox(lt, t_obj, a, b)
+                    if bb is not None:
+                        plan.append(("refine", g, win, bb, len(tiles), 1))
+                        tiles.append(Tile(bb, 1, a, b - a, light_spp, k, key=_seed("refine", g, win, lt["id"])))
+            visible |= {lt["id"] for lt in lamps if geo.light_bbox(lt, t_obj, *tm["window"]) is not None}
+            continue
+        edges = tm["bin_edges"]
+        for lt in lamps:
+            v = geo.object_velocity(lt)
+            bb = geo.light_bbox(lt, t_obj, *tm["window"], moving=True)
+            if bb is None:
+                continue
+            visible.add(lt["id"])
+            k = sets[f"light:{lt['id']}"]
+            if geo.ego.moving or np.any(v != 0.0):
+                plan.append(("light", g, lt["id"], bb, len(tiles), 1))
+                tiles.append(Tile(bb, opts.bins, edges[0], (edges[-1] - edges[0]) / opts.bins, light_spp, k,
+                                  tuple(float(x) for x in v), t_obj, key=_seed("light", lt["id"])))
+            else:  # static camera and lamp inside the frame: all bins are the same image
+                plan.append(("light", g, lt["id"], bb, len(tiles), opts.bins))
+                tiles.append(Tile(bb, 1, edges[0], edges[-1] - edges[0], light_spp, k, key=_seed("light", lt["id"])))
+    return tiles, plan, visible
 
 
 def render_frames(scene: dict, opts: RenderOptions) -> Iterator[dict]:
@@ -385,66 +387,57 @@ def render_frames(scene: dict, opts: RenderOptions) -> Iterator[dict]:
          "aux": {"depth.Z", "depth.R", "mask.instance", "mask.light": (H, W) float32}}
 
     Radiance in W sr^-1 m^-2 nm^-1, time-averaged over the window / bin; bboxes in px, end exclusive.
-    Raises ``ValueError`` for an invalid scene or options (e.g. short exposure longer than the long one).
+    Each frame: its Mitsuba scene is loaded once with every emitter on, and all of its tiles
+    (:func:`plan_frame`) are rendered by :class:`render_tools.tracer.Tracer` in one kernel launch (more when
+    it exceeds :data:`render_tools.tracer.MAX_LANES`), then the AOVs in a second, small one.
+    Raises ``ValueError`` for an invalid scene or options (e.g. short exposure longer than the long one),
+    ``RuntimeError`` when no JIT variant (LLVM or CUDA) of Mitsuba works.
     """
+    import gc  # noqa: PLC0415
+
     validate_scene(scene)
     opts.validate()
     timings = [frame_timing(scene, opts, n) for n in range(opts.frames)]  # validates exposures up front
     groups = _selected_groups(scene, opts)
-    r = _Renderer(scene, opts)
-    mi = r.mi
-    light_spp = opts.light_spp or opts.spp
+    from . import backend  # noqa: PLC0415
+
+    variant = backend.select_variant(opts.variant)
+    if variant.startswith("scalar"):
+        raise RuntimeError("variant: rendering needs a JIT variant of Mitsuba (llvm_ad_spectral or "
+                           f"cuda_ad_spectral), got {variant}: install libllvm19 and set DRJIT_LIBLLVM_PATH "
+                           "(docs/rendering.md)")
+    import drjit as dr  # noqa: PLC0415
+    import mitsuba as mi  # noqa: PLC0415
+
+    from . import tracer  # noqa: PLC0415
+
+    geo = SceneGeometry(scene, opts)
     mcache: dict = {}  # BSDFs loaded once per scene
     for n, tm in enumerate(timings):
-        t_obj = 0.5 * (tm["window"][0] + tm["window"][1])  # moving objects placed at mid capture window
+        t_obj = 0.5 * (tm["window"][0] + tm["window"][1])
+        loaded = mi.load_dict(ms.mitsuba_dict(scene, t_obj, emit="all", cache=mcache))
+        sets = tracer.LightSets(mi, dr, loaded, scene, list(groups))
+        tr = tracer.Tracer(mi, dr, loaded, sets, geo.ego, geo.fov, (opts.width, opts.height), opts.bands_nm,
+                           opts.band_width_nm)
+        tiles, plan, visible = plan_frame(scene, opts, n, sets, geo)
+        imgs = tr.render(tiles, _seed(opts.seed, n, "frame")) if tiles else []
         out = {"frame": n, "static": {}, "lights": {}, "aux": {}}
-        visible: set = set()
+        for kind, g, key, bb, ti, rep in plan:
+            img = imgs[ti]
+            if kind == "static":
+                out["static"].setdefault(g, {})[key] = img[0]
+            elif kind == "refine":
+                y0, x0, y1, x1 = bb
+                out["static"][g][key][:, y0:y1, x0:x1] = img[0]
+            else:
+                out["lights"].setdefault(g, []).append((key, bb, np.repeat(img, rep, axis=0) if rep > 1 else img))
         for g, info in groups.items():
-            sc = mi.load_dict(ms.mitsuba_dict(scene, t_obj, emit=g, cache=mcache))
-            if not info["flicker"]:
-                res = {}
-                lamps = [lt for lt in scene["lights"] if lt["group"] == g]
-                for win in ("short", "long"):
-                    a, b = tm[win]
-                    img = r.render(sc, a, b - a, opts.spp, _seed(opts.seed, n, g, win))[0]
-                    # LED refinement: the lamps' own pixels are re-rendered (whole group emitting, same window)
-                    # at light_spp and replace the full-frame estimate there: both are unbiased estimates of
-                    # the same pixels, the refined one with less variance where the HDR peaks are.
-                    for lt in lamps:
-                        bb = r.light_bbox(lt, t_obj, a, b)
-                        if bb is None or light_spp <= opts.spp:
-                            continue
-                        y0, x0, y1, x1 = bb
-                        img[:, y0:y1, x0:x1] = r.render(sc, a, b - a, light_spp,
-                                                        _seed(opts.seed, n, g, win, lt["id"]), crop=bb)[0]
-                    res[win] = img
-                out["static"][g] = res
-                visible |= {lt["id"] for lt in lamps if r.light_bbox(lt, t_obj, *tm["window"]) is not None}
-                continue
-            params = mi.traverse(sc)
-            cache: dict = {}
-            edges = tm["bin_edges"]
-            items = []
-            for lt in scene["lights"]:
-                if lt["group"] != g:
-                    continue
-                # the lamp moves with its vehicle inside the window: rendered as relative camera motion
-                v = r.object_velocity(lt)
-                bb = r.light_bbox(lt, t_obj, *tm["window"], moving=True)
-                if bb is None:
-                    continue
-                visible.add(lt["id"])
-                ms.set_solo(params, scene, g, lt["id"], cache)
-                seed = _seed(opts.seed, n, g, lt["id"])
-                if r.ego.moving or np.any(v != 0.0):
-                    bins = r.render(sc, edges[0], (edges[-1] - edges[0]) / opts.bins, light_spp, seed, crop=bb,
-                                    bins=opts.bins, velocity=v, t_ref=t_obj)
-                else:  # static camera and lamp inside the frame: all bins are the same image
-                    one = r.render(sc, edges[0], edges[-1] - edges[0], light_spp, seed, crop=bb)
-                    bins = np.repeat(one, opts.bins, axis=0)
-                items.append((lt["id"], bb, bins))
-            out["lights"][g] = items
+            if info["flicker"]:
+                out["lights"].setdefault(g, [])
         if opts.aux:
-            geo = mi.load_dict(ms.mitsuba_dict(scene, t_obj, emit=None, cache=mcache))
-            out["aux"] = _aux(r, geo, tm["t_aux"], visible, n)
+            ids, pos = tr.hits(tm["t_aux"], LIGHT_MASK_PASSES, _seed(opts.seed, n, "aux"))
+            out["aux"] = _aux_maps(loaded, scene, ids, pos, geo.ego.position(tm["t_aux"]),
+                                   geo.ego.rotation_mi(tm["t_aux"])[:, 2], visible)
+        del tr, sets, loaded  # free the frame's Mitsuba objects before the next frame is loaded
+        gc.collect()
         yield out

@@ -1,7 +1,7 @@
 """Physics of the renderer on tiny hand-made scenes, checked against analytic answers.
 
-Runs with llvm_ad_spectral where a working libLLVM exists, else scalar_spectral; the direct-emitter test
-also runs explicitly with scalar_spectral.
+Runs with the JIT variant :mod:`render_tools.backend` selects (llvm_ad_spectral here); the renderer
+(:mod:`render_tools.tracer`) refuses scalar_spectral with a clear error.
 """
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import math
 import numpy as np
 import pytest
 
-from render_tools import camera, render, scene, spectra
+from render_tools import camera, reference, render, scene, spectra
 
 LED = {"model": "led", "peak_nm": 630.0, "fwhm_nm": 18.0}
 HPS = {"model": "light_source", "name": "HPS"}
@@ -36,10 +36,15 @@ def _wall_scene(speed=0.0):
     return scene.validate_scene(s)
 
 
-@pytest.mark.parametrize("variant", [None, "scalar_spectral"])
-def test_directly_viewed_emitter_returns_its_spectral_radiance_per_nm(variant):
+def test_scalar_variant_is_refused_with_a_clear_error():
+    opts = render.RenderOptions(width=12, height=8, spp=1, bins=1, frames=1, aux=False, variant="scalar_spectral")
+    with pytest.raises(RuntimeError, match="variant: rendering needs a JIT variant"):
+        next(render.render_frames(_wall_scene(), opts))
+
+
+def test_directly_viewed_emitter_returns_its_spectral_radiance_per_nm():
     s = _wall_scene()
-    opts = render.RenderOptions(width=12, height=8, spp=16, bins=2, frames=1, aux=False, variant=variant)
+    opts = render.RenderOptions(width=12, height=8, spp=16, bins=2, frames=1, aux=False)
     fr = next(render.render_frames(s, opts))
     (lid, bb, bins), = fr["lights"]["otherlights"]
     assert lid == 0 and bins.shape[:2] == (2, 31)
@@ -117,7 +122,7 @@ def test_bins_of_a_window_average_to_one_render_of_that_window():
 def test_continuous_blur_matches_average_of_instantaneous_subframes():
     s = _lamp_scene(40.0)
     opts = render.RenderOptions(width=48, height=32, spp=16, frames=1, aux=False)
-    r = render._Renderer(s, opts)
+    r = reference.ReferenceRenderer(s, opts)
     import mitsuba as mi
 
     from render_tools import mitsuba_scene as ms
@@ -147,7 +152,7 @@ def test_light_crop_and_projection_agree_with_render():
     opts = render.RenderOptions(width=64, height=40, spp=16, frames=1, bins=1, aux=True)
     fr = next(render.render_frames(s, opts))
     (_, (y0, x0, y1, x1), b), = fr["lights"]["otherlights"]
-    r = render._Renderer(s, opts)
+    r = reference.ReferenceRenderer(s, opts)
     import mitsuba as mi
 
     from render_tools import mitsuba_scene as ms

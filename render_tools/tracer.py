@@ -1,0 +1,485 @@
+"""Batched light-set path tracing: every window, light group, light crop and time bin of a frame in few launches.
+
+Why (docs/render-benchmark.md, "Where the time goes"): with one ``mi.render`` per window, group and light, a
+new scene cost 44 renders per frame, each traced anew in Python and, whenever anything scene-dependent was a
+literal in the kernel (shutter length, film size, group layout), compiled anew by LLVM (3-5 s each). Here a
+frame is a list of :class:`Tile` s (a crop of the image, a time window split into K bins, a sample count and a
+*light set*: the emitters whose light this tile records) and one Dr.Jit kernel renders any list of tiles:
+everything that differs between tiles, frames and scenes is data (gathered from opaque arrays), so the kernel
+is traced once per launch and compiled once per (variant, spectral setup, scene layout).
+
+Light sets replace per-group and per-light Mitsuba scenes. The scene is loaded once per frame with every
+emitter on; a lane of set ``k`` counts only emission of the emitters in ``k`` (a light group, or one light's
+lamp face plus its beam) and samples next-event estimation only from them (alias table per set, in proportion
+to the emitters' sampling weights). By linearity of light transport in the emission this is exactly the image
+of the scene in which only set ``k`` emits (the previous per-group scenes; checked against Mitsuba's own
+``path`` integrator in tests/test_render_tracer.py).
+
+The path tracer follows Mitsuba 3's ``path`` integrator (and the primal loop of its Python ``prb``): unidirectional
+path tracing with next-event estimation for smooth BSDFs, multiple importance sampling with the balance
+heuristic (:func:`_mis_weight`, as Mitsuba's), emitters visible to camera rays, ``max_depth`` vertices, no Russian roulette
+(Mitsuba's ``rr_depth`` 5 is never reached at ``max_depth`` 5).
+
+Camera: the ego camera of :mod:`render_tools.camera` (CTRV pose at the ray's time; OpenCV intrinsics of
+:func:`camera.intrinsics`; pixel (i, j) covers [j, j + 1) x [i, i + 1)), generated here so that crop, time
+window and object velocity are per-tile data. Spectral sampling: band-stratified passes as in
+:mod:`render_tools.camera` (pass p carries one wavelength uniformly inside each of bands p + j * P, j = 0..3,
+P = ceil(C / 4)); each sample adds its radiance at lambda_j straight to band p + j * P (the band average of the
+radiance is the expectation of L at a uniform wavelength in the band), so no film or sensitivity function is
+involved. Sample dimensions of the camera (pixel x, y, time, wavelength) are stratified over a pixel's ``spp``
+samples (each dimension its own random rotation of the strata, so each is uniform and independent of the others
+in expectation).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from . import camera as cam_mod
+from . import mitsuba_scene as ms
+
+#: Wavelengths per Mitsuba spectral sample (MI_SPECTRUM_SAMPLES).
+N_LAMBDA = 4
+#: Most lanes in one kernel launch (bigger tile lists are split into several launches of the same kernel).
+MAX_LANES = 1 << 27
+#: Index value meaning "no set" in the per-emitter lookup tables.
+NO_SET = 0xFFFFFFFF
+
+
+@dataclass
+class Tile:
+    """One rectangle of the image to render.
+
+    crop: (y0, x0, y1, x1) px of the full image, end exclusive. bins: K time bins of ``bin_len`` s from
+    ``t_start`` s (absolute time). spp: samples per pixel per band pass and bin. light_set: index of the light
+    set (:class:`LightSets`). velocity: (3,) m/s world velocity of an object held at its ``t_ref`` (s) position,
+    rendered as relative camera motion (0 for none). key: 32-bit integer naming the tile; a lane's random
+    numbers depend only on (seed, key, its index in the tile), so a tile renders the same whatever else is in
+    the list (a group left out changes nothing in the others). The tile's output is (K, C, h, w) float32 radiance,
+    W sr^-1 m^-2 nm^-1, each bin the time average over its interval.
+    """
+
+    crop: tuple
+    bins: int
+    t_start: float
+    bin_len: float
+    spp: int
+    light_set: int
+    velocity: tuple = (0.0, 0.0, 0.0)
+    t_ref: float = 0.0
+    key: int = 0
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        y0, x0, y1, x1 = self.crop
+        return y1 - y0, x1 - x0
+
+
+def alias_table(weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Walker's alias table (Vose's construction) of a discrete distribution.
+
+    Args:
+        weights: (n,) non-negative weights with a positive sum.
+    Returns:
+        (q (n,) float64 acceptance probabilities, alias (n,) int64): draw i = floor(u n), keep it with
+        probability q[i], else take alias[i]; each i is drawn with probability weights[i] / sum(weights)
+        (M. D. Vose, "A linear algorithm for generating random numbers with a given distribution", IEEE TSE 1991).
+    """
+    w = np.asarray(weights, dtype=np.float64)
+    if w.ndim != 1 or w.size == 0 or np.any(~np.isfinite(w)) or np.any(w < 0) or w.sum() <= 0:
+        raise ValueError(f"weights: need a non-empty 1-D array of finite values >= 0 with a positive sum, got {w}")
+    n = w.size
+    p = w * (n / w.sum())
+    q = np.ones(n)
+    alias = np.arange(n)
+    small = [i for i in range(n) if p[i] < 1.0]
+    large = [i for i in range(n) if p[i] >= 1.0]
+    while small and large:
+        s, g = small.pop(), large.pop()
+        q[s], alias[s] = p[s], g
+        p[g] -= 1.0 - p[s]
+        (small if p[g] < 1.0 else large).append(g)
+    return q, alias
+
+
+class LightSets:
+    """The light sets of a loaded frame scene and their sampling tables.
+
+    Sets: one per light group present (``group:<name>``: every emitter of the group; ``skymap`` is the
+    environment emitter) and one per light (``light:<id>``: its lamp face and its beam, if any). Built from the
+    shape/emitter ids of :func:`render_tools.mitsuba_scene.mitsuba_dict` (scene loaded with ``emit="all"``).
+    """
+
+    def __init__(self, mi, dr, loaded, scene: dict, groups):
+        self.names: list[str] = []
+        members: list[list] = []  # per set: [(emitter, weight)]
+        by_light: dict[int, list] = {}
+        sky = []
+        shapes = {sh.id(): sh for sh in loaded.shapes()}
+        emitters = {em.id(): em for em in loaded.emitters()}
+        for lt in scene["lights"]:
+            sh = shapes.get(ms.light_shape_id(lt["id"]))
+            ems = []
+            if sh is not None and sh.emitter() is not None:
+                ems.append(sh.emitter())
+            b = emitters.get(ms.beam_id(lt["id"]))
+            if b is not None:
+                ems.append(b)
+            by_light[lt["id"]] = ems
+        for em in loaded.emitters():
+            if em.is_environment():
+                sky.append(em)
+        self.index: dict[str, int] = {}
+
+        def add(name, ems):
+            if not ems:
+                return
+            self.index[name] = len(self.names)
+            self.names.append(name)
+            members.append([(e, max(float(e.sampling_weight()), 0.0)) for e in ems])
+
+        for g in groups:
+            if g == "skymap":
+                add("group:skymap", sky)
+            else:
+                add(f"group:{g}", [e for lt in scene["lights"] if lt["group"] == g for e in by_light[lt["id"]]])
+        for lid, ems in by_light.items():
+            add(f"light:{lid}", ems)
+        # flat alias tables, and per-emitter (set, pmf) for the group set and the light set it belongs to
+        flat_em, flat_q, flat_alias, flat_pmf, start, count = [], [], [], [], [], []
+        ids_of = {}
+        group_of, light_of = {}, {}
+        for k, mem in enumerate(members):
+            w = np.array([wt for _, wt in mem])
+            if w.sum() <= 0:
+                w = np.ones_like(w)
+            q, al = alias_table(w)
+            start.append(len(flat_em))
+            count.append(len(mem))
+            pmf = w / w.sum()
+            for (e, _), qi, ai, pi in zip(mem, q, al, pmf):
+                eid = int(dr.reinterpret_array(mi.UInt32, mi.EmitterPtr(e))[0])
+                ids_of[eid] = e
+                (group_of if self.names[k].startswith("group:") else light_of)[eid] = (k, float(pi))
+                flat_em.append(e)
+                flat_q.append(qi)
+                flat_alias.append(start[-1] + ai)
+                flat_pmf.append(pi)
+        n_id = max(ids_of, default=0) + 1
+        gset = np.full(n_id, NO_SET, np.uint32)
+        lset = np.full(n_id, NO_SET, np.uint32)
+        gpmf = np.zeros(n_id, np.float32)
+        lpmf = np.zeros(n_id, np.float32)
+        for eid, (k, p) in group_of.items():
+            gset[eid], gpmf[eid] = k, p
+        for eid, (k, p) in light_of.items():
+            lset[eid], lpmf[eid] = k, p
+        self.emitters = mi.EmitterPtr(flat_em) if flat_em else None
+        self.q = mi.Float(np.asarray(flat_q, np.float32))
+        self.alias = mi.UInt32(np.asarray(flat_alias, np.uint32))
+        self.start = mi.UInt32(np.asarray(start, np.uint32))
+        self.count = mi.UInt32(np.asarray(count, np.uint32))
+        self.gset, self.lset = mi.UInt32(gset), mi.UInt32(lset)
+        self.gpmf, self.lpmf = mi.Float(gpmf), mi.Float(lpmf)
+        self.pmf = mi.Float(np.asarray(flat_pmf, np.float32))
+        self.n_id = dr.opaque(mi.UInt32, n_id)
+
+    def __contains__(self, name: str) -> bool:
+        return name in self.index
+
+    def __getitem__(self, name: str) -> int:
+        return self.index[name]
+
+
+def _mis_weight(pdf_a, pdf_b):
+    """Balance heuristic pdf_a / (pdf_a + pdf_b) (0 where both are 0), as Mitsuba's ``mis_weight``."""
+    w = pdf_a / (pdf_a + pdf_b)
+    return dr.detach(dr.select(dr.isfinite(w), w, 0))
+
+
+class Tracer:
+    """Renders lists of :class:`Tile` s of one loaded frame scene (see module docstring).
+
+    Args:
+        mi, dr: the Mitsuba and Dr.Jit modules (variant already set).
+        loaded: the ``mi.Scene`` of the frame (all emitters on).
+        sets: its :class:`LightSets`.
+        ego: :class:`camera.EgoMotion`; fov_x_deg: horizontal field of view, deg; size: (width, height) px.
+        bands_nm: (C,) band centres, nm; band_width_nm: band width, nm. max_depth: path vertices (Mitsuba's).
+    """
+
+    def __init__(self, mi, dr, loaded, sets: LightSets, ego, fov_x_deg: float, size, bands_nm, band_width_nm: float,
+                 max_depth: int = ms.MAX_DEPTH):
+        self.mi, self.dr, self.scene, self.sets = mi, dr, loaded, sets
+        self.W, self.H = int(size[0]), int(size[1])
+        self.C = len(bands_nm)
+        self.P = cam_mod.n_passes(self.C)
+        self.max_depth = int(max_depth)
+        K = cam_mod.intrinsics(self.W, self.H, fov_x_deg)
+        o = lambda v: dr.opaque(mi.Float, float(v))  # noqa: E731 - every scene number is kernel data
+        self.f, self.cx, self.cy = o(K[0, 0]), o(K[0, 2]), o(K[1, 2])
+        self.p0 = [o(v) for v in ego.p0]
+        self.yaw0, self.yaw_rate, self.speed = o(ego.yaw0_rad), o(ego.yaw_rate_rad_s), o(ego.speed_mps)
+        th = -ego.pitch_rad
+        ry = np.array([[math.cos(th), 0, math.sin(th)], [0, 1, 0], [-math.sin(th), 0, math.cos(th)]])
+        self.m0 = [[o(x) for x in row] for row in (ry @ cam_mod.R_VEHICLE_FROM_MI)]
+        lo = [c - band_width_nm / 2 for c in bands_nm] + [500.0] * (self.P * N_LAMBDA - self.C)
+        self.band_lo = mi.Float(np.asarray(lo, np.float32))
+        self.band_w = o(band_width_nm)
+        self.n_bands = dr.opaque(mi.UInt32, self.C)
+        self.n_pass = dr.opaque(mi.UInt32, self.P)
+
+    # ------------------------------------------------------------------ camera
+    def _pose(self, t):
+        """Camera centre (Point3f, m) and (cos, sin) of the yaw at absolute time ``t`` (s): CTRV written with
+        sinc so that it is exact and stable for any yaw rate, including 0."""
+        mi, dr = self.mi, self.dr
+        half = 0.5 * self.yaw_rate * t
+        sinc = dr.select(dr.abs(half) < 1e-4, 1.0 - half * half / 6.0, dr.sin(half) / dr.select(half == 0, 1.0, half))
+        dist = self.speed * t * sinc
+        mid = self.yaw0 + half
+        p = mi.Point3f(self.p0[0] + dist * dr.cos(mid), self.p0[1] + dist * dr.sin(mid), self.p0[2])
+        psi = self.yaw0 + 2.0 * half
+        return p, dr.cos(psi), dr.sin(psi)
+
+    def _rot(self, v, c, s):
+        m = self.m0
+        x = m[0][0] * v[0] + m[0][1] * v[1] + m[0][2] * v[2]
+        y = m[1][0] * v[0] + m[1][1] * v[1] + m[1][2] * v[2]
+        z = m[2][0] * v[0] + m[2][1] * v[1] + m[2][2] * v[2]
+        return self.mi.Vector3f(c * x - s * y, s * x + c * y, z)
+
+    def camera_ray(self, px, py, t, vel=None, t_ref=None):
+        """World ray (``mi.Ray3f``) through image position (px, py) (px, continuous, x right, y down) at time
+        ``t`` (s); ``vel`` (Vector3f, m/s) and ``t_ref`` (s): the camera also moves by ``-vel (t - t_ref)``."""
+        mi, dr = self.mi, self.dr
+        d_local = [-(px - self.cx) / self.f, -(py - self.cy) / self.f, mi.Float(1.0)]
+        p, c, s = self._pose(t)
+        if vel is not None:
+            p = p - vel * (t - t_ref)
+        d = dr.normalize(self._rot(d_local, c, s))
+        # near clip as Mitsuba's perspective camera: the ray starts on the plane z_cam = NEAR_CLIP_M
+        inv_z = dr.norm(mi.Vector3f(d_local[0], d_local[1], d_local[2]))
+        o = p + d * (cam_mod.NEAR_CLIP_M * inv_z)
+        ray = mi.Ray3f(o, d)
+        ray.time = t
+        return ray
+
+    # ------------------------------------------------------------------ tiles
+    def render(self, tiles: list, seed: int) -> list[np.ndarray]:
+        """Render ``tiles``; returns one (K, C, h, w) float32 array per tile (radiance, W sr^-1 m^-2 nm^-1).
+
+        Tiles are packed into launches of at most :data:`MAX_LANES` lanes (a tile larger than that is split by
+        samples); ``seed`` (int >= 0) seeds the launch's random numbers (each launch gets seed + its index).
+        """
+        mi, dr = self.mi, self.dr
+        C, P = self.C, self.P
+        outs, size = [], 0
+        parts = []  # (tile index, spp of this part, weight, out offset, part index)
+        for i, t in enumerate(tiles):
+            h, w = t.shape
+            if h <= 0 or w <= 0 or t.bins < 1 or t.spp < 1:
+                raise ValueError(f"tiles[{i}]: empty crop {t.crop}, bins {t.bins} or spp {t.spp}")
+            outs.append((size, (t.bins, C, h, w)))
+            per_sample = h * w * t.bins * P
+            n_split = max(1, -(-per_sample * t.spp // MAX_LANES))
+            base, extra = divmod(t.spp, n_split)
+            for j in range(n_split):
+                sp = base + (j < extra)
+                if sp:
+                    parts.append((i, sp, 1.0 / t.spp, size, j))
+            size += t.bins * C * h * w
+        buf = dr.zeros(mi.Float, max(size, 1))
+        batch, lanes = [], 0
+        launch = 0
+        for part in parts:
+            t = tiles[part[0]]
+            h, w = t.shape
+            n = h * w * t.bins * P * part[1]
+            if batch and lanes + n > MAX_LANES:
+                self._launch(buf, tiles, batch, seed + launch)
+                launch += 1
+                batch, lanes = [], 0
+            batch.append(part)
+            lanes += n
+        if batch:
+            self._launch(buf, tiles, batch, seed + launch)
+        host = np.asarray(buf, dtype=np.float32)
+        return [host[o:o + int(np.prod(shp))].reshape(shp) for o, shp in outs]
+
+    def _launch(self, buf, tiles, parts, seed: int) -> None:
+        mi, dr = self.mi, self.dr
+        rows = []
+        off = 0
+        for i, sp, wgt, out, j in parts:
+            t = tiles[i]
+            y0, x0, y1, x1 = t.crop
+            key = (int(t.key) * 0x9E3779B1 + j * 0x85EBCA77) & 0xFFFFFFFF
+            rows.append((off, y0, x0, y1 - y0, x1 - x0, t.bins, sp, t.light_set, out, t.t_start, t.bin_len, wgt,
+                         *[float(v) for v in t.velocity], t.t_ref, key))
+            off += (y1 - y0) * (x1 - x0) * t.bins * self.P * sp
+        # a dummy last row: no table has a single entry (Dr.Jit loads size-1 arrays as scalars with an alignment
+        # that depends on the allocation, which changes the kernel's hash and forces a recompile)
+        a = np.array(rows + [rows[-1]], dtype=np.float64)
+        U = lambda c: mi.UInt32(a[:, c].astype(np.uint32))  # noqa: E731
+        F = lambda c: mi.Float(a[:, c].astype(np.float32))  # noqa: E731
+        tab = {"off": mi.UInt32(np.append(a[:-1, 0], off).astype(np.uint32)), "y0": U(1), "x0": U(2), "h": U(3),
+               "w": U(4), "K": U(5), "spp": U(6), "set": U(7), "out": U(8), "t0": F(9), "dt": F(10), "wgt": F(11),
+               "vx": F(12), "vy": F(13), "vz": F(14), "tref": F(15), "key": U(16)}
+        n_tiles = dr.opaque(mi.UInt32, len(rows))
+        self._trace(buf, tab, n_tiles, off, seed)
+        dr.eval(buf)
+
+    def _trace(self, buf, tab, n_tiles, n_lanes: int, seed: int) -> None:
+        mi, dr = self.mi, self.dr
+        lane = dr.arange(mi.UInt32, n_lanes)
+        # tile of each lane: binary search over the lane offsets (fixed 20 steps: up to 2^20 tiles)
+        lo, hi = mi.UInt32(0), mi.UInt32(n_tiles)  # invariant off[lo] <= lane < off[hi]
+        for _ in range(20):
+            mid = (lo + hi) >> 1
+            go = dr.gather(mi.UInt32, tab["off"], mid) <= lane
+            lo = dr.select(go, mid, lo)
+            hi = dr.select(go, hi, mid)
+        ti = lo
+        g = lambda k, T=mi.UInt32: dr.gather(T, tab[k], ti)  # noqa: E731
+        w, h, K, spp = g("w"), g("h"), g("K"), g("spp")
+        local = lane - g("off")
+        x = local % w
+        r = local // w
+        y = r % h
+        r = r // h
+        s = r % spp
+        r = r // spp
+        k = r % K
+        p = r // K
+        seed_o = dr.opaque(mi.UInt32, seed)
+        tkey = mi.sample_tea_32(g("key"), seed_o)[0]
+        group_key = local - s * (w * h)  # same for the spp samples of one (pass, bin, pixel) of a tile
+        v0, v1 = mi.sample_tea_32(tkey, local)
+        sampler = mi.PCG32()
+        sampler.seed(mi.UInt64(v0) | (mi.UInt64(v1) << 32), mi.UInt64(tkey) | (mi.UInt64(local) << 32))
+        inv = dr.rcp(mi.Float(spp))
+
+        def strat(dim):
+            c = mi.sample_tea_32(group_key, tkey + ((dim * 0x9E3779B9) & 0xFFFFFFFF))[0] % spp
+            return (mi.Float((s + c) % spp) + sampler.next_float32()) * inv
+
+        px = mi.Float(g("x0") + x) + strat(1)
+        py = mi.Float(g("y0") + y) + strat(2)
+        t = g("t0", mi.Float) + (mi.Float(k) + strat(3)) * g("dt", mi.Float)
+        vel = mi.Vector3f(g("vx", mi.Float), g("vy", mi.Float), g("vz", mi.Float))
+        ray = self.camera_ray(px, py, t, vel, g("tref", mi.Float))
+        u_l = strat(4)
+        bands, wl = [], []
+        for j in range(N_LAMBDA):
+            b = p + j * self.n_pass
+            bands.append(b)
+            wl.append(dr.gather(mi.Float, self.band_lo, b) + u_l * self.band_w)
+        ray.wavelengths = mi.Spectrum(*wl)
+        L = self._radiance(sampler, ray, g("set"))
+        wgt = g("wgt", mi.Float)
+        out0 = g("out")
+        for j in range(N_LAMBDA):
+            v = L[j] * wgt
+            ok = (bands[j] < self.n_bands) & dr.isfinite(v)
+            idx = out0 + ((k * self.n_bands + bands[j]) * h + y) * w + x
+            dr.scatter_reduce(dr.ReduceOp.Add, buf, v, idx, ok)
+
+    def _set_pmf(self, em_ptr, lset):
+        """Probability with which lane set ``lset`` selects emitter ``em_ptr`` in next-event estimation
+        (0: the emitter is not in the set, its light is not recorded by this lane)."""
+        mi, dr = self.mi, self.dr
+        eid = dr.reinterpret_array(mi.UInt32, em_ptr)
+        S = self.sets
+        ok = eid < S.n_id
+        gs = dr.gather(mi.UInt32, S.gset, eid, ok)
+        ls = dr.gather(mi.UInt32, S.lset, eid, ok)
+        pg = dr.gather(mi.Float, S.gpmf, eid, ok)
+        pl = dr.gather(mi.Float, S.lpmf, eid, ok)
+        return dr.select(ok & (gs == lset), pg, dr.select(ok & (ls == lset), pl, 0.0))
+
+    @dr.syntax
+    def _radiance(self, sampler, ray, lset):
+        """Radiance (``mi.Spectrum``, W sr^-1 m^-2 nm^-1 at the ray's 4 wavelengths) arriving along ``ray`` from
+        the emitters of light set ``lset`` (UInt32 per lane): Mitsuba's ``path`` integrator restricted to a set.
+        ``sampler``: a ``mi.PCG32`` with one stream per lane."""
+        S = self.sets
+        ctx = mi.BSDFContext()
+        L = mi.Spectrum(0.0)
+        beta = mi.Spectrum(1.0)
+        depth = mi.UInt32(0)
+        active = mi.Bool(True)
+        si_prev = dr.zeros(mi.SurfaceInteraction3f)
+        pdf_prev = mi.Float(1.0)
+        delta_prev = mi.Bool(True)
+        cnt = dr.gather(mi.UInt32, S.count, lset)
+        start = dr.gather(mi.UInt32, S.start, lset)
+        while dr.hint(active, max_iterations=self.max_depth, label="lfm light-set path"):
+            si = self.scene.ray_intersect(ray, ray_flags=mi.RayFlags.All, coherent=depth == 0, active=active)
+            bsdf = si.bsdf(ray)
+            # emission hit by the camera ray or by BSDF sampling, if the emitter is in this lane's set
+            ds = mi.DirectionSample3f(self.scene, si=si, ref=si_prev)
+            pmf_hit = self._set_pmf(ds.emitter, lset)
+            em_pdf = dr.select(delta_prev, 0.0, pmf_hit * ds.emitter.pdf_direction(si_prev, ds, active & ~delta_prev))
+            hit_em = active & (pmf_hit > 0)
+            L += beta * _mis_weight(pdf_prev, em_pdf) * ds.emitter.eval(si, hit_em)
+
+            active_next = active & (depth + 1 < self.max_depth) & si.is_valid()
+            # next-event estimation from this lane's set (alias table)
+            active_em = active_next & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
+            u = sampler.next_float32() * mi.Float(cnt)
+            i0 = dr.minimum(mi.UInt32(u), cnt - 1)
+            idx = start + i0
+            keep = (u - mi.Float(i0)) < dr.gather(mi.Float, S.q, idx, active_em)
+            idx = dr.select(keep, idx, dr.gather(mi.UInt32, S.alias, idx, active_em))
+            em = dr.gather(mi.EmitterPtr, S.emitters, idx, active_em)
+            pmf_em = dr.gather(mi.Float, S.pmf, idx, active_em)
+            ds_em, w_em = em.sample_direction(si, mi.Point2f(sampler.next_float32(), sampler.next_float32()),
+                                              active_em)
+            active_em &= (ds_em.pdf != 0.0) & (pmf_em > 0)
+            occluded = self.scene.ray_test(si.spawn_ray_to(ds_em.p), active_em)
+            active_em &= ~occluded
+            wo = si.to_local(ds_em.d)
+            bsdf_val, bsdf_pdf = bsdf.eval_pdf(ctx, si, wo, active_em)
+            mis_em = dr.select(ds_em.delta, 1.0, _mis_weight(ds_em.pdf * pmf_em, bsdf_pdf))
+            L += dr.select(active_em, beta * mis_em * bsdf_val * w_em / pmf_em, 0.0)
+
+            # continue the path by BSDF sampling
+            u1 = sampler.next_float32()
+            bs, bsdf_w = bsdf.sample(ctx, si, u1, mi.Point2f(sampler.next_float32(), sampler.next_float32()),
+                                     active_next)
+            ray = si.spawn_ray(si.to_world(bs.wo))
+            beta *= bsdf_w
+            si_prev = dr.detach(si, True)
+            pdf_prev = bs.pdf
+            delta_prev = mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)
+            active = active_next & (dr.max(beta) != 0)
+            depth += 1
+        return L
+
+    def hits(self, t: float, passes: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+        """First hits of camera rays at time ``t`` (s), ``passes`` jittered rays per pixel.
+
+        Returns (registry ids of the hit shapes (passes, H, W) int64, 0 = no hit; hit points of pass 0
+        (3, H, W) float32, m, world frame).
+        """
+        W, H = self.W, self.H
+        n = W * H * passes
+        lane = dr.arange(mi.UInt32, n)
+        pix = lane % (W * H)
+        sampler = mi.load_dict({"type": "independent"})
+        sampler.seed(dr.opaque(mi.UInt32, seed), n)
+        px = mi.Float(pix % W) + sampler.next_1d()
+        py = mi.Float(pix // W) + sampler.next_1d()
+        ray = self.camera_ray(px, py, dr.opaque(mi.Float, float(t)))
+        ray.wavelengths = mi.Spectrum(550.0)
+        si = self.scene.ray_intersect(ray, ray_flags=mi.RayFlags.Minimal, coherent=True)
+        ids = dr.select(si.is_valid(), dr.reinterpret_array(mi.UInt32, si.shape), 0)
+        dr.eval(ids, si.p)
+        ids = np.asarray(ids, dtype=np.int64).reshape(passes, H, W)
+        p = np.stack([np.asarray(si.p[i], dtype=np.float32).reshape(passes, H, W)[0] for i in range(3)])
+        return ids, p
