@@ -59,8 +59,8 @@ class RenderOptions:
     capture window for flickering groups. bands_nm: band centres, nm. band_width_nm: box width, nm.
     frames: frames per sequence. fps: frame rate, 1/s. long_exposure_s: SPD exposure T_L, s.
     line_time_s: rolling-shutter line time, s (readout margin = height * line_time_s).
-    groups: groups to render (None = all the scene has). seed: Monte Carlo seed. variant: Mitsuba variant
-    (None = auto, see :mod:`render_tools.backend`). aux: render AOVs. light_spp: spp of the per-light crops
+    groups: groups to render (None = all the scene has). seed: Monte Carlo seed. variant: Mitsuba variant,
+    ``cuda_ad_spectral``, ``llvm_ad_spectral`` or ``scalar_spectral`` (None = auto, see :mod:`render_tools.backend`). aux: render AOVs. light_spp: spp of the per-light crops
     (None = spp). pad_px: padding of a light's crop around its moving screen bbox, px.
     """
 
@@ -122,6 +122,10 @@ class RenderOptions:
                     raise ValueError(f"groups: {g!r} not one of {GROUPS}")
         if not isinstance(self.seed, (int, np.integer)) or self.seed < 0:
             raise ValueError(f"seed: must be an integer >= 0, got {self.seed!r}")
+        from .backend import SUPPORTED_VARIANTS  # noqa: PLC0415 - no Mitsuba import
+
+        if self.variant is not None and self.variant not in SUPPORTED_VARIANTS:
+            raise ValueError(f"variant: must be None (auto) or one of {SUPPORTED_VARIANTS}, got {self.variant!r}")
 
     @property
     def readout_s(self) -> float:
