@@ -62,7 +62,8 @@ class RenderOptions:
     line_time_s: rolling-shutter line time, s (readout margin = height * line_time_s; the capture window
     T_L + readout may exceed 1/fps, e.g. 1080 rows x 10 us: windows of consecutive frames then overlap).
     groups: groups to render (None = all the scene has). seed: Monte Carlo seed. variant: Mitsuba variant,
-    ``cuda_ad_spectral``, ``llvm_ad_spectral`` or ``scalar_spectral`` (None = auto, see :mod:`render_tools.backend`). aux: render AOVs. light_spp: spp of the per-light crops
+    ``cuda_ad_spectral``, ``llvm_ad_spectral`` or ``scalar_spectral`` (None = auto, see
+    :mod:`render_tools.backend`). aux: render AOVs. light_spp: spp of the per-light crops
     (None = spp). pad_px: padding of a light's crop around its moving screen bbox, px.
     """
 
