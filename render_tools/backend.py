@@ -1,5 +1,5 @@
-"""Mitsuba 3 variant selection: the fast ``llvm_ad_spectral`` path where a working libLLVM exists, else
-``scalar_spectral`` with a warning.
+"""Mitsuba 3 variant selection: ``cuda_ad_spectral`` where a CUDA device works, else the fast
+``llvm_ad_spectral`` path where a working libLLVM exists, else ``scalar_spectral`` with a warning.
 
 Facts this relies on (``/work/shared/reference/environment.md``): drjit's LLVM backend loads the shared
 library named by ``DRJIT_LIBLLVM_PATH``; LLVM 15 crashes inside code generation on AVX-512 CPUs (a segfault
@@ -8,28 +8,54 @@ variant. A candidate library is therefore *probed in a child process* (render of
 parent process commits to it; the verdict is cached on disk keyed by library path, size and mtime and the
 Mitsuba version, so the probe costs a few seconds once per machine.
 
+CUDA is probed the same way (a child renders a tiny scene with ``cuda_ad_spectral``; verdict cached keyed by
+the CUDA driver library's path, size and mtime, the GPU models, ``CUDA_VISIBLE_DEVICES`` and the Mitsuba
+version). Without a CUDA driver library (``libcuda.so``; no GPU, as on a CPU-only machine) the answer is "no"
+at once, without a child process: drjit would only raise ``ImportError`` from ``mi.set_variant`` there
+("the CUDA backend hasn't been initialized").
+
+``LFMBENCH_VARIANT`` (environment) changes the automatic choice: ``auto`` (default: CUDA, LLVM, scalar),
+``cpu`` (never CUDA: LLVM, else scalar) or a variant name (used as if given explicitly).
+
 Functions
 - :func:`find_libllvm` -> candidate library paths, best first.
 - :func:`probe_llvm` -> whether a library renders in a child process.
+- :func:`find_libcuda`, :func:`probe_cuda` -> the CUDA driver library; whether ``cuda_ad_spectral`` renders.
 - :func:`select_variant` -> the variant name, set in Mitsuba (``mi.set_variant``).
+- :func:`check_variant` -> fail early (before a render job writes anything) for an unusable explicit variant.
+- :func:`clamp_roundoff` -> radiance with tiny negative round-off of the JIT back ends set to 0.
 """
 from __future__ import annotations
 
+import ctypes.util
 import glob
 import json
+import math
 import os
 import re
 import subprocess
 import sys
 import warnings
 
+import numpy as np
+
 from lfmbench.fileio import atomic_write_json
 
 #: Preferred spectral variants, fast first.
+CUDA_VARIANT = "cuda_ad_spectral"
 LLVM_VARIANT = "llvm_ad_spectral"
 SCALAR_VARIANT = "scalar_spectral"
 #: Variants :func:`select_variant` accepts when named explicitly.
-SUPPORTED_VARIANTS = (LLVM_VARIANT, SCALAR_VARIANT)
+SUPPORTED_VARIANTS = (CUDA_VARIANT, LLVM_VARIANT, SCALAR_VARIANT)
+#: Environment variable overriding the automatic choice: ``auto``, ``cpu`` (no CUDA) or a variant name.
+VARIANT_ENV = "LFMBENCH_VARIANT"
+#: Values of :data:`VARIANT_ENV` besides the variant names.
+VARIANT_MODES = ("auto", "cpu")
+#: Where drjit looks for the CUDA driver library (besides ``DRJIT_LIBCUDA_PATH`` and the loader's cache).
+CUDA_SEARCH_GLOBS = ("/usr/lib/x86_64-linux-gnu/libcuda.so*", "/usr/lib/aarch64-linux-gnu/libcuda.so*",
+                     "/usr/lib/wsl/lib/libcuda.so*", "/usr/lib64/libcuda.so*", "/usr/local/nvidia/lib64/libcuda.so*")
+#: Relative tolerance of :func:`clamp_roundoff`: negatives down to -ROUNDOFF_RTOL * (layer peak) become 0.
+ROUNDOFF_RTOL = 1e-6
 #: Major LLVM versions known to crash drjit on these CPUs (environment.md).
 BROKEN_LLVM_MAJORS = (15,)
 #: Directories searched for ``libLLVM*.so*``.
@@ -51,7 +77,33 @@ assert v == v and v > 0, v
 print('LLVM_PROBE_OK', v)
 """
 
+_CUDA_PROBE_SCRIPT = r"""
+import sys
+import mitsuba as mi, drjit as dr
+try:
+    mi.set_variant('cuda_ad_spectral')
+except Exception as exc:  # no driver / no device: drjit raises ImportError here
+    print('CUDA_PROBE_FAIL', type(exc).__name__, str(exc).splitlines()[0] if str(exc) else '')
+    sys.exit(3)
+s = mi.load_dict({'type': 'scene', 'integrator': {'type': 'path'},
+    'sensor': {'type': 'perspective', 'film': {'type': 'specfilm', 'width': 8, 'height': 8,
+               'b': {'type': 'regular', 'wavelength_min': 500, 'wavelength_max': 510, 'values': '1, 1'}}},
+    'e': {'type': 'constant', 'radiance': 1.0},
+    'r': {'type': 'sphere', 'center': [0, 0, 4], 'radius': 1.0}})
+img = mi.render(s, spp=4)
+v = float(dr.mean(mi.TensorXf(img)).array[0])
+assert v == v and v > 0, v
+print('CUDA_PROBE_OK', v)
+"""
+
 _chosen: str | None = None
+#: Why the last :func:`probe_cuda` said no (for error messages).
+_cuda_reason: str = ""
+
+
+class VariantUnavailableError(ValueError, RuntimeError):
+    """An explicitly requested Mitsuba variant cannot run on this machine (a ``ValueError`` naming ``variant``;
+    also a ``RuntimeError``, what an unusable ``llvm_ad_spectral`` raised before)."""
 
 
 def _llvm_major(path: str) -> int | None:
@@ -83,9 +135,20 @@ def find_libllvm() -> list[str]:
     return out
 
 
-def _cache_path() -> str:
+def _cache_path(name: str = "llvm_probe.json") -> str:
     root = os.environ.get("XDG_CACHE_HOME", os.path.join(os.path.expanduser("~"), ".cache"))
-    return os.path.join(root, "lfmbench", "llvm_probe.json")
+    return os.path.join(root, "lfmbench", name)
+
+
+def _read_cache(path: str) -> dict:
+    if not os.path.isfile(path):
+        return {}
+    try:
+        with open(path, encoding="utf-8") as fh:
+            data = json.load(fh)
+    except (OSError, ValueError):
+        return {}
+    return data if isinstance(data, dict) else {}
 
 
 def _cache_key(lib: str) -> str:
@@ -108,15 +171,9 @@ def probe_llvm(lib: str, use_cache: bool = True) -> bool:
         raise ValueError(f"lib: no such libLLVM file {lib!r}")
     key = _cache_key(lib)
     cache_file = _cache_path()
-    cache: dict = {}
-    if use_cache and os.path.isfile(cache_file):
-        try:
-            with open(cache_file, encoding="utf-8") as fh:
-                cache = json.load(fh)
-        except (OSError, ValueError):
-            cache = {}
-        if key in cache:
-            return bool(cache[key])
+    cache = _read_cache(cache_file) if use_cache else {}
+    if key in cache:
+        return bool(cache[key])
     env = dict(os.environ, DRJIT_LIBLLVM_PATH=lib)
     try:
         res = subprocess.run([sys.executable, "-c", _PROBE_SCRIPT], env=env, capture_output=True, text=True,
@@ -130,31 +187,153 @@ def probe_llvm(lib: str, use_cache: bool = True) -> bool:
     return ok
 
 
-def select_variant(variant: str | None = None) -> str:
-    """Choose and set the Mitsuba variant for rendering; returns its name.
+def find_libcuda() -> str | None:
+    """The CUDA driver library drjit would load, or None (no NVIDIA driver installed: no CUDA).
+
+    Order as drjit's: ``DRJIT_LIBCUDA_PATH`` (when set and existing), the dynamic loader's cache
+    (``libcuda.so``), then :data:`CUDA_SEARCH_GLOBS`. Only looks for the file; loads nothing.
+    """
+    env = os.environ.get("DRJIT_LIBCUDA_PATH")
+    if env:
+        return os.path.realpath(env) if os.path.isfile(env) else None
+    name = ctypes.util.find_library("cuda")
+    if name:
+        for d in ("/usr/lib/x86_64-linux-gnu", "/usr/lib64", "/usr/lib", "/usr/lib/wsl/lib"):
+            if os.path.isfile(os.path.join(d, name)):
+                return os.path.realpath(os.path.join(d, name))
+        return name  # found by the loader somewhere else
+    for pattern in CUDA_SEARCH_GLOBS:
+        hits = sorted(glob.glob(pattern))
+        if hits:
+            return os.path.realpath(hits[0])
+    return None
+
+
+def _gpu_models() -> list[str]:
+    """GPU model names from ``/proc/driver/nvidia/gpus/*/information`` (empty when unavailable)."""
+    out = []
+    for f in sorted(glob.glob("/proc/driver/nvidia/gpus/*/information")):
+        try:
+            with open(f, encoding="utf-8", errors="replace") as fh:
+                for line in fh:
+                    if line.startswith("Model:"):
+                        out.append(line.split(":", 1)[1].strip())
+        except OSError:
+            continue
+    return out
+
+
+def _cuda_cache_key(lib: str) -> str:
+    import mitsuba  # noqa: PLC0415
+
+    try:
+        st = os.stat(lib)
+        stamp = f"{st.st_size}|{int(st.st_mtime)}"
+    except OSError:
+        stamp = "?"
+    return (f"{lib}|{stamp}|gpus={','.join(_gpu_models())}|"
+            f"visible={os.environ.get('CUDA_VISIBLE_DEVICES', '*')}|mitsuba-{mitsuba.__version__}")
+
+
+def probe_cuda(use_cache: bool = True) -> bool:
+    """Whether ``cuda_ad_spectral`` renders on this machine, checked in a child process.
+
+    No CUDA driver library (:func:`find_libcuda`): False at once, no child process (a CPU-only machine answers
+    in about a millisecond). Otherwise a child renders an 8 x 8 px scene with ``cuda_ad_spectral`` (at most
+    :data:`PROBE_TIMEOUT_S` s; a crash or hang of a broken driver stays in the child); the verdict is cached
+    in ``~/.cache/lfmbench/cuda_probe.json`` keyed by driver library (path, size, mtime), GPU models,
+    ``CUDA_VISIBLE_DEVICES`` and Mitsuba version. The reason for a "no" is kept for error messages.
 
     Args:
-        variant: ``None`` (auto: ``llvm_ad_spectral`` when a probed libLLVM works, else ``scalar_spectral``
-            with a :class:`RuntimeWarning`), or one of :data:`SUPPORTED_VARIANTS` to force it
-            (``llvm_ad_spectral`` still requires a working libLLVM and raises ``RuntimeError`` otherwise).
-    Raises:
-        ValueError: ``variant`` is not supported.
+        use_cache: read/write the verdict cache.
+    Returns:
+        True when the child rendered the scene and exited cleanly.
     """
-    global _chosen
-    import mitsuba as mi  # noqa: PLC0415
+    global _cuda_reason
+    lib = find_libcuda()
+    if lib is None:
+        _cuda_reason = "no CUDA driver library (libcuda.so) found; set DRJIT_LIBCUDA_PATH if it is elsewhere"
+        return False
+    key = _cuda_cache_key(lib)
+    cache_file = _cache_path("cuda_probe.json")
+    cache = _read_cache(cache_file) if use_cache else {}
+    if key in cache:
+        entry = cache[key]
+        ok = bool(entry.get("ok")) if isinstance(entry, dict) else bool(entry)
+        _cuda_reason = "" if ok else (entry.get("reason", "") if isinstance(entry, dict) else "") + " (cached)"
+        return ok
+    ok, reason = _run_cuda_child(lib)
+    _cuda_reason = reason
+    if use_cache:
+        cache[key] = {"ok": ok, "reason": reason}
+        atomic_write_json(cache_file, cache)
+    return ok
 
-    if variant is not None and variant not in SUPPORTED_VARIANTS:
-        raise ValueError(f"variant: {variant!r} not in {SUPPORTED_VARIANTS}")
-    if variant == SCALAR_VARIANT:
-        mi.set_variant(SCALAR_VARIANT)
-        return SCALAR_VARIANT
-    if _chosen is not None and (variant is None or variant == _chosen):
-        mi.set_variant(_chosen)
-        return _chosen
-    # Once the LLVM backend was initialised in this process, its library is fixed: reuse it.
-    if mi.variant() == LLVM_VARIANT:
-        _chosen = LLVM_VARIANT
-        return _chosen
+
+def _run_cuda_child(lib: str | None = None) -> tuple[bool, str]:
+    """Run the CUDA probe script in a child process; returns (ok, reason for a failure)."""
+    env = dict(os.environ)
+    if lib is not None and os.path.isabs(lib):
+        env["DRJIT_LIBCUDA_PATH"] = lib
+    try:
+        res = subprocess.run([sys.executable, "-c", _CUDA_PROBE_SCRIPT], env=env, capture_output=True, text=True,
+                             timeout=PROBE_TIMEOUT_S)
+    except subprocess.TimeoutExpired:
+        return False, f"the CUDA probe did not finish in {PROBE_TIMEOUT_S:g} s"
+    if res.returncode == 0 and "CUDA_PROBE_OK" in res.stdout:
+        return True, ""
+    lines = [ln for ln in (res.stdout + "\n" + res.stderr).splitlines() if ln.strip()]
+    fail = [ln for ln in lines if ln.startswith("CUDA_PROBE_FAIL")]
+    why = fail[0][len("CUDA_PROBE_FAIL"):].strip() if fail else (lines[-1] if lines else "")
+    return False, f"probe render failed (exit {res.returncode}): {why[:200]}"
+
+
+def cuda_unavailable_reason() -> str:
+    """Why the last :func:`probe_cuda` answered no ("" after a yes or before any probe)."""
+    return _cuda_reason
+
+
+def requested_variant(variant: str | None = None) -> str | None:
+    """The variant a render must use: ``variant`` when given, else :data:`VARIANT_ENV` when it names one,
+    else None (automatic). Raises ``ValueError`` naming ``variant`` / ``LFMBENCH_VARIANT`` for unknown names."""
+    if variant is not None:
+        if variant not in SUPPORTED_VARIANTS:
+            raise ValueError(f"variant: {variant!r} not in {SUPPORTED_VARIANTS}")
+        return variant
+    env = os.environ.get(VARIANT_ENV, "").strip()
+    if not env or env in VARIANT_MODES:
+        return None
+    if env not in SUPPORTED_VARIANTS:
+        raise ValueError(f"{VARIANT_ENV}: {env!r} is not one of {VARIANT_MODES + SUPPORTED_VARIANTS}")
+    return env
+
+
+def _cuda_error() -> VariantUnavailableError:
+    return VariantUnavailableError(
+        f"variant: {CUDA_VARIANT} requested but no working CUDA device ({_cuda_reason or 'probe failed'}); "
+        f"use --variant {LLVM_VARIANT} or leave --variant out (auto) on this machine")
+
+
+def check_variant(variant: str | None = None) -> None:
+    """Fail early, before a render job writes anything, when the variant a render would be forced to use
+    (``variant``, else :data:`VARIANT_ENV`) cannot run here. Automatic choice always succeeds (it falls back).
+
+    Raises:
+        ValueError: unknown variant name.
+        VariantUnavailableError: ``cuda_ad_spectral`` without a working CUDA device, or ``llvm_ad_spectral``
+            without a working libLLVM (one line naming ``variant``).
+    """
+    v = requested_variant(variant)
+    if v == CUDA_VARIANT and not probe_cuda():
+        raise _cuda_error()
+    if v == LLVM_VARIANT and not any(probe_llvm(lib) for lib in find_libllvm()):
+        raise VariantUnavailableError(f"variant: {LLVM_VARIANT} requested but no working libLLVM was found "
+                                      "(install Debian's libllvm19 and set DRJIT_LIBLLVM_PATH; see "
+                                      "docs/rendering.md)")
+
+
+def _set_llvm(mi) -> bool:
+    """Probe the libLLVM candidates and set ``llvm_ad_spectral``; False when none works."""
     for lib in find_libllvm():
         if probe_llvm(lib):
             os.environ["DRJIT_LIBLLVM_PATH"] = lib
@@ -162,19 +341,109 @@ def select_variant(variant: str | None = None) -> str:
                 mi.set_variant(LLVM_VARIANT)
             except (ImportError, AttributeError, RuntimeError) as exc:  # variant not built
                 warnings.warn(f"llvm_ad_spectral unavailable ({exc}); using scalar_spectral", RuntimeWarning,
-                              stacklevel=2)
-                break
-            _chosen = LLVM_VARIANT
-            return _chosen
+                              stacklevel=3)
+                return False
+            return True
+    return False
+
+
+def _set_cuda(mi) -> bool:
+    """Probe CUDA and set ``cuda_ad_spectral``; False when it does not work (nothing changed then)."""
+    global _cuda_reason
+    if not probe_cuda():
+        return False
+    try:
+        mi.set_variant(CUDA_VARIANT)
+    except (ImportError, AttributeError, RuntimeError) as exc:  # probe passed in the child, not here
+        _cuda_reason = f"{type(exc).__name__}: {exc}"
+        return False
+    return True
+
+
+def select_variant(variant: str | None = None) -> str:
+    """Choose and set the Mitsuba variant for rendering; returns its name.
+
+    Args:
+        variant: ``None`` (auto: :data:`VARIANT_ENV` when it names a variant; else ``cuda_ad_spectral`` when a
+            CUDA device works (not with ``LFMBENCH_VARIANT=cpu``), else ``llvm_ad_spectral`` when a probed
+            libLLVM works, else ``scalar_spectral`` with a :class:`RuntimeWarning`), or one of
+            :data:`SUPPORTED_VARIANTS` to force it (``cuda_ad_spectral`` / ``llvm_ad_spectral`` raise
+            :class:`VariantUnavailableError` when they cannot run here).
+    Raises:
+        ValueError: ``variant`` is not supported.
+    """
+    global _chosen
+    import mitsuba as mi  # noqa: PLC0415
+
+    variant = requested_variant(variant)
+    if variant == SCALAR_VARIANT:
+        mi.set_variant(SCALAR_VARIANT)
+        return SCALAR_VARIANT
+    no_cuda = os.environ.get(VARIANT_ENV, "").strip() == "cpu"
+    if _chosen is not None and (variant is None or variant == _chosen) and not (no_cuda and _chosen == CUDA_VARIANT):
+        mi.set_variant(_chosen)
+        return _chosen
+    if variant == CUDA_VARIANT:
+        if not _set_cuda(mi):
+            raise _cuda_error()
+        _chosen = CUDA_VARIANT
+        return _chosen
+    # Once a JIT backend was initialised in this process (its libLLVM is fixed), reuse it in auto mode.
+    current = mi.variant()
+    if current == LLVM_VARIANT or (current == CUDA_VARIANT and variant is None and not no_cuda):
+        _chosen = current
+        return _chosen
+    if variant is None and not no_cuda and _set_cuda(mi):
+        _chosen = CUDA_VARIANT
+        return _chosen
+    if _set_llvm(mi):
+        _chosen = LLVM_VARIANT
+        return _chosen
     if variant == LLVM_VARIANT:
-        raise RuntimeError("variant: llvm_ad_spectral requested but no working libLLVM was found "
-                           "(install Debian's libllvm19 and set DRJIT_LIBLLVM_PATH; see docs/rendering.md)")
+        raise VariantUnavailableError("variant: llvm_ad_spectral requested but no working libLLVM was found "
+                                      "(install Debian's libllvm19 and set DRJIT_LIBLLVM_PATH; see "
+                                      "docs/rendering.md)")
     warnings.warn("no working libLLVM found (LLVM 15 crashes on these CPUs; install libllvm19 and set "
                   "DRJIT_LIBLLVM_PATH): rendering with the slow scalar_spectral variant", RuntimeWarning,
                   stacklevel=2)
     mi.set_variant(SCALAR_VARIANT)
     _chosen = SCALAR_VARIANT
     return _chosen
+
+
+def clamp_roundoff(radiance: np.ndarray, rel_tol: float = ROUNDOFF_RTOL, name: str = "radiance") -> np.ndarray:
+    """Set tiny negative round-off of a rendered radiance layer to 0; keep larger negatives an error.
+
+    The JIT back ends (notably ``cuda_ad_spectral``) return values like -1.25e-9 W sr^-1 m^-2 nm^-1 where the
+    exact answer is 0, which the corpus writer refuses. Values ``v`` with ``-rel_tol * peak <= v < 0`` (``peak``
+    = the layer's largest value, same units) become 0; anything more negative is a real bug and raises.
+
+    Args:
+        radiance: one layer as the renderer returns it, e.g. (C, H, W) or (K, C, h, w) float32,
+            W sr^-1 m^-2 nm^-1. NaN / inf are left as they are (the corpus writer reports them).
+        rel_tol: tolerance relative to the layer peak (dimensionless, >= 0).
+        name: what to call the layer in the error message.
+    Returns:
+        ``radiance`` itself when nothing is negative, else a copy (same shape and dtype) with the round-off
+        set to 0.
+    Raises:
+        ValueError: ``rel_tol`` is negative or not finite; ``radiance`` has a negative value below
+            ``-rel_tol * peak`` (message names ``name``, the minimum and the peak).
+    """
+    if not (isinstance(rel_tol, (int, float)) and math.isfinite(rel_tol) and rel_tol >= 0):
+        raise ValueError(f"rel_tol: must be a finite number >= 0, got {rel_tol!r}")
+    a = np.asarray(radiance)
+    if a.size == 0:
+        return radiance
+    lo = np.nanmin(a) if np.isnan(a).any() else a.min()
+    if not lo < 0:  # also all-NaN
+        return radiance
+    finite = a[np.isfinite(a)]
+    peak = max(float(finite.max()), 0.0) if finite.size else 0.0
+    if lo < -rel_tol * peak:
+        raise ValueError(f"{name}: negative value {float(lo):.3g} below the round-off tolerance "
+                         f"-{rel_tol:g} x peak ({peak:.3g}); not clamped")
+    return np.where(a < 0, np.zeros((), a.dtype), a)
 
 
 def is_llvm() -> bool:

@@ -40,7 +40,10 @@ def render_cmd(
     scene_file: Optional[List[Path]] = typer.Option(None, "--scene",
                                                     help="Render this scene JSON file instead of generating "
                                                          "(repeatable; overrides --scenes)."),
-    variant: Optional[str] = typer.Option(None, "--variant", help="Mitsuba variant (default: auto)."),
+    variant: Optional[str] = typer.Option(None, "--variant",
+                                          help="Mitsuba variant: cuda_ad_spectral, llvm_ad_spectral or "
+                                               "scalar_spectral (default: auto, CUDA > LLVM > scalar; "
+                                               "LFMBENCH_VARIANT=cpu skips CUDA)."),
     half: bool = typer.Option(False, "--half", help="Store EXR HALF (FLOAT where a value exceeds 65504)."),
     no_resume: bool = typer.Option(False, "--no-resume", help="Re-render scenes that are already complete."),
 ) -> None:
@@ -89,6 +92,10 @@ def render_cmd(
             backend.RenderOptions(**options, seed=0)
         except TypeError as exc:  # an unknown field in the profile
             fail(f"{profile if Path(profile).is_file() else J.PROFILES_FILE} (profile {profile!r}): {exc}")
+        # a forced variant (--variant, profile or LFMBENCH_VARIANT) that cannot run here: one line, exit 2
+        from render_tools.backend import check_variant  # noqa: PLC0415
+
+        check_variant(options.get("variant"))
         if scene_dicts and backend.validate_scene is not None:
             for p, sc in zip(scene_file, scene_dicts):
                 try:

@@ -57,10 +57,13 @@ class RenderOptions:
     width, height: image size, px. spp: samples per pixel *per band pass* of the full-frame renders (every band
     gets spp wavelength samples per pixel; a pixel costs ceil(C / 4) * spp camera samples). bins: K time bins of the
     capture window for flickering groups. bands_nm: band centres, nm. band_width_nm: box width, nm.
-    frames: frames per sequence. fps: frame rate, 1/s. long_exposure_s: SPD exposure T_L, s.
-    line_time_s: rolling-shutter line time, s (readout margin = height * line_time_s).
-    groups: groups to render (None = all the scene has). seed: Monte Carlo seed. variant: Mitsuba variant
-    (None = auto, see :mod:`render_tools.backend`). aux: render AOVs. light_spp: spp of the per-light crops
+    frames: frames per sequence (any count >= 1; frames are rendered and written one at a time).
+    fps: frame rate, 1/s. long_exposure_s: SPD exposure T_L, s (<= 1/fps).
+    line_time_s: rolling-shutter line time, s (readout margin = height * line_time_s; the capture window
+    T_L + readout may exceed 1/fps, e.g. 1080 rows x 10 us: windows of consecutive frames then overlap).
+    groups: groups to render (None = all the scene has). seed: Monte Carlo seed. variant: Mitsuba variant,
+    ``cuda_ad_spectral``, ``llvm_ad_spectral`` or ``scalar_spectral`` (None = auto, see
+    :mod:`render_tools.backend`). aux: render AOVs. light_spp: spp of the per-light crops
     (None = spp). pad_px: padding of a light's crop around its moving screen bbox, px.
     """
 
@@ -113,15 +116,21 @@ class RenderOptions:
             raise ValueError(f"long_exposure_s: must be > 0 s, got {self.long_exposure_s}")
         if not (math.isfinite(self.line_time_s) and self.line_time_s >= 0):
             raise ValueError(f"line_time_s: must be >= 0 s, got {self.line_time_s}")
-        if self.capture_window_s > 1.0 / self.fps + 1e-12:
-            raise ValueError(f"long_exposure_s: capture window T_L + readout = {self.capture_window_s:.6g} s is "
-                             f"longer than the frame time 1/fps = {1.0 / self.fps:.6g} s")
+        # an exposure cannot outlast the frame; the capture window T_L + readout may (rolling-shutter frames
+        # overlap in time: row y of frame n+1 starts at (n+1)/fps + y * line_time_s, docs/corpus-format.md)
+        if self.long_exposure_s > 1.0 / self.fps * (1 + 1e-9):
+            raise ValueError(f"long_exposure_s: {self.long_exposure_s:.6g} s is longer than the frame time "
+                             f"1/fps = {1.0 / self.fps:.6g} s")
         if self.groups is not None:
             for g in self.groups:
                 if g not in GROUPS:
                     raise ValueError(f"groups: {g!r} not one of {GROUPS}")
         if not isinstance(self.seed, (int, np.integer)) or self.seed < 0:
             raise ValueError(f"seed: must be an integer >= 0, got {self.seed!r}")
+        from .backend import SUPPORTED_VARIANTS  # noqa: PLC0415 - no Mitsuba import
+
+        if self.variant is not None and self.variant not in SUPPORTED_VARIANTS:
+            raise ValueError(f"variant: must be None (auto) or one of {SUPPORTED_VARIANTS}, got {self.variant!r}")
 
     @property
     def readout_s(self) -> float:

@@ -227,6 +227,7 @@ def test_backend_falls_back_to_scalar_with_warning(monkeypatch):
     before = mi.variant()
     monkeypatch.setattr(backend, "_chosen", None)
     monkeypatch.setattr(backend, "find_libllvm", lambda: [])
+    monkeypatch.setattr(backend, "probe_cuda", lambda use_cache=True: False)  # also on a GPU machine
     monkeypatch.setattr(mi, "variant", lambda: None)
     with warnings.catch_warnings(record=True) as w:
         warnings.simplefilter("always")

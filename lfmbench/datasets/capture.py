@@ -189,6 +189,12 @@ class LFMCaptureDataset(Dataset):
         split: ``"train"``, ``"val"``, ``"test"`` (PWM draws frozen in ``<root>/test_params.json``) or ``"all"``.
         sensor: preset name (``"ovt"``, ``"imx490"``), YAML path or :class:`lfmbench.sensor.SensorPreset`.
         frames: number of consecutive frames F per sample (<= the corpus frames).
+        frame_start: which F consecutive frames of a longer sequence a sample shows: an int s (frames
+            s .. s + F - 1 of every scene; default 0, the first F; only frames < s + F are read) or
+            ``"random"`` (a uniform start in [0, N - F] per sample, N the scene's frames; train/val/all draw it
+            after the other draws, so PWM, crop and noise are those of ``frame_start=0``; the test split
+            freezes it in ``test_params.json`` like its PWM draws). ``"random"`` keeps all N frames of a
+            cached scene in memory.
         crop: ``None`` (full frame), ``int`` or ``(h, w)`` in pixels (even offsets keep the Bayer phase);
             random for train/val/all, centred for test.
         pwm: PWM distributions: ``None`` (``lfmbench/configs/pwm.yaml``), a mapping of overrides or a YAML path.
@@ -214,7 +220,8 @@ class LFMCaptureDataset(Dataset):
         -1 none); ``depth``: (F, 1, h, w) m; ``rgb`` (on request): ``lpd_lcg_rgb``, ``spd_rgb``, ``gt_rgb``
         (F, 3, h, w) demosaiced (kornia bilinear); ``meta``: scene_id, index, epoch, num_lights, light_id,
         flicker, freq_hz, duty, phase_s (L,) padded, exposure_short_s, exposure_long_s (s), crop (y0, x0, h, w),
-        sensor, shutter, flicker_mode ("bins" or "per_frame_weight").
+        sensor, shutter, flicker_mode ("bins" or "per_frame_weight"), frame_start (index of the sample's first
+        frame in the scene's sequence).
     """
 
     def __init__(self, root: str | os.PathLike, split: str = "train", sensor: Any = "ovt", frames: int = 3,
@@ -222,7 +229,8 @@ class LFMCaptureDataset(Dataset):
                  outputs: Sequence[str] = DEFAULT_OUTPUTS, groups: Sequence[str] | None = None,
                  samples_per_scene: int = 1, noise: bool = True, optics: bool = True, max_lights: int = 64,
                  cache_dir: str | os.PathLike | bool | None = None, cache_scenes: int = 8,
-                 line_time_s: float | None = None, transforms: Callable[[dict], dict] | None = None) -> None:
+                 line_time_s: float | None = None, transforms: Callable[[dict], dict] | None = None,
+                 frame_start: int | str = 0) -> None:
         self.root = Path(root)
         if not (self.root / "manifest.json").is_file():
             raise DatasetNotFoundError(
@@ -236,8 +244,12 @@ class LFMCaptureDataset(Dataset):
         bad = [o for o in outputs if o not in OUTPUTS]
         if bad:
             raise ValueError(f"outputs: unknown {bad} (known: {OUTPUTS})")
-        if not isinstance(frames, int) or frames < 1:
+        if isinstance(frames, bool) or not isinstance(frames, int) or frames < 1:
             raise ValueError(f"frames must be a positive integer, got {frames!r}")
+        if frame_start != "random" and (isinstance(frame_start, bool) or not isinstance(frame_start, int)
+                                        or frame_start < 0):
+            raise ValueError(f"frame_start must be an integer >= 0 or 'random', got {frame_start!r}")
+        self.frame_start = frame_start
         if samples_per_scene < 1:
             raise ValueError(f"samples_per_scene must be >= 1, got {samples_per_scene!r}")
         self.split, self.shutter, self.seed = split, shutter, int(seed)
@@ -256,8 +268,10 @@ class LFMCaptureDataset(Dataset):
             raise DatasetNotFoundError(f"root: corpus {self.root} has no scenes in split {split!r}")
         for sid in self.scene_ids:
             m = self.corpus.meta(sid)
-            if frames > m["frames"]:
-                raise ValueError(f"frames={frames} but scene {sid!r} of {self.root} has only {m['frames']} frames")
+            first = 0 if frame_start == "random" else frame_start
+            if first + frames > m["frames"]:
+                raise ValueError(f"frames={frames}, frame_start={frame_start} but scene {sid!r} of {self.root} has "
+                                 f"only {m['frames']} frames")
             if self.crop is not None and (self.crop[0] > m["height"] or self.crop[1] > m["width"]):
                 raise ValueError(f"crop {self.crop} is larger than scene {sid!r} ({m['height']}x{m['width']})")
             if line_time_s is not None and shutter == "rolling":
@@ -336,13 +350,18 @@ class LFMCaptureDataset(Dataset):
         for sid in self.scene_ids:
             for s in range(self.samples_per_scene):
                 key = f"{sid}/{s}"
-                if key in samples:
-                    continue
-                rng = np.random.default_rng([20261121, s, int.from_bytes(sid.encode()[:8].ljust(8, b"\0"), "little")])
-                per_light, per_group = self._draw(sid, rng)
-                samples[key] = {"lights": {str(k): v for k, v in per_light.items()}, "groups": per_group,
-                                "noise_seed": int(rng.integers(2**62))}
-                added = True
+                sid_word = int.from_bytes(sid.encode()[:8].ljust(8, b"\0"), "little")
+                if key not in samples:
+                    rng = np.random.default_rng([20261121, s, sid_word])
+                    per_light, per_group = self._draw(sid, rng)
+                    samples[key] = {"lights": {str(k): v for k, v in per_light.items()}, "groups": per_group,
+                                    "noise_seed": int(rng.integers(2**62))}
+                    added = True
+                if self.frame_start == "random" and "frame_u" not in samples[key]:
+                    # the window start, as a fraction of the possible starts (any F), from its own stream:
+                    # added to older entries without changing their draws
+                    samples[key]["frame_u"] = float(np.random.default_rng([20261121, s, sid_word, 1]).random())
+                    added = True
         if added:
             atomic_write_json(path, data)
         return samples
@@ -351,12 +370,24 @@ class LFMCaptureDataset(Dataset):
         if sid in self._cache:
             self._cache.move_to_end(sid)
             return self._cache[sid]
-        layers = load_or_build(self.corpus, sid, self.preset, self.groups, self.frames, self.optics, self.cache_dir)
+        layers = load_or_build(self.corpus, sid, self.preset, self.groups, self._frames_to_load(sid), self.optics,
+                               self.cache_dir)
         if self._cache_scenes:
             self._cache[sid] = layers
             while len(self._cache) > self._cache_scenes:
                 self._cache.popitem(last=False)
         return layers
+
+    def _frames_to_load(self, sid: str) -> int:
+        """Leading frames of scene ``sid`` a sample can use: s + F for a fixed start s, all for ``"random"``."""
+        if self.frame_start == "random":
+            return int(self.corpus.meta(sid)["frames"])
+        return self.frame_start + self.frames
+
+    def _start(self, sid: str, u: float) -> int:
+        """First frame of a ``"random"`` window from ``u`` in [0, 1): uniform over the N - F + 1 starts."""
+        n_starts = int(self.corpus.meta(sid)["frames"]) - self.frames + 1
+        return min(int(u * n_starts), n_starts - 1)
 
     def _fixed_pattern(self, H: int, W: int) -> dict | None:
         if not self.noise:
@@ -381,20 +412,27 @@ class LFMCaptureDataset(Dataset):
             per_light = {int(k): v for k, v in fr["lights"].items()}
             per_group = fr["groups"]
             noise_seed = int(fr["noise_seed"])
+            u = float(fr.get("frame_u", 0.0))
         else:
             per_light, per_group = self._draw(sid, rng)
             noise_seed = int(rng.integers(2**62))
+            u = None
         ch, cw = self.crop if self.crop is not None else (H, W)
         if self.crop is None or self.split == "test":
             y0, x0 = ((H - ch) // 2) & ~1, ((W - cw) // 2) & ~1
         else:
             y0 = 2 * int(rng.integers(0, (H - ch) // 2 + 1))
             x0 = 2 * int(rng.integers(0, (W - cw) // 2 + 1))
-        sample = self.simulate(sid, per_light, per_group, (y0, x0, ch, cw), noise_seed, index)
+        if self.frame_start == "random":
+            start = self._start(sid, float(rng.random()) if u is None else u)  # drawn last: other draws unchanged
+        else:
+            start = self.frame_start
+        sample = self.simulate(sid, per_light, per_group, (y0, x0, ch, cw), noise_seed, index, start)
         return self.transforms(sample) if self.transforms else sample
 
     def simulate(self, scene_id: str, params: Mapping[int, Mapping], group_params: Mapping[str, Mapping] | None = None,
-                 crop: tuple[int, int, int, int] | None = None, noise_seed: int = 0, index: int = -1) -> dict:
+                 crop: tuple[int, int, int, int] | None = None, noise_seed: int = 0, index: int = -1,
+                 frame_start: int | None = None) -> dict:
         """One sample with given PWM parameters (what ``__getitem__`` does after its draws).
 
         Args:
@@ -404,6 +442,7 @@ class LFMCaptureDataset(Dataset):
             group_params: the same per flickering group stored without bins (imported data).
             crop: (y0, x0, h, w) in pixels, even offsets; None = full frame.
             noise_seed: seed of the sensor noise. index: recorded in ``meta``.
+            frame_start: first frame of the F frames (None: the dataset's ``frame_start``, 0 for ``"random"``).
 
         Returns:
             the sample dict (see the class docstring), without ``transforms``.
@@ -414,10 +453,16 @@ class LFMCaptureDataset(Dataset):
         crop = (y0, x0, ch, cw)
         params = {int(k): v for k, v in params.items()}
         group_params = dict(group_params or {})
-        layers = self._layers(scene_id)
         F = self.frames
+        if frame_start is None:
+            frame_start = 0 if self.frame_start == "random" else self.frame_start
+        s0 = int(frame_start)
+        if s0 < 0 or s0 + F > self._frames_to_load(scene_id):
+            raise ValueError(f"frame_start: frames {s0}..{s0 + F - 1} are not all available for scene {scene_id!r} "
+                             f"(dataset frame_start={self.frame_start!r}, frames={F}, scene frames {meta['frames']})")
+        layers = self._layers(scene_id)
         frames = [compose_frame(layers, meta, f, crop, params, group_params, self.shutter, self.line_time_s)
-                  for f in range(F)]
+                  for f in range(s0, s0 + F)]
         lpd = torch.stack([fr_["lpd"] for fr_ in frames])[:, None]       # (F, 1, h, w) e-
         spd = torch.stack([fr_["spd"] for fr_ in frames])[:, None]
         tm = meta["timing"]
@@ -445,14 +490,14 @@ class LFMCaptureDataset(Dataset):
         if "light_index" in want or "depth" in want:
             aux = layers.aux
             if "light_index" in want:
-                ids = aux["mask.light"][:F, y0:y0 + ch, x0:x0 + cw].round().long()
+                ids = aux["mask.light"][s0:s0 + F, y0:y0 + ch, x0:x0 + cw].round().long()
                 lut = torch.full((int(max([int(lt["id"]) for lt in lights] + [0])) + 2,), -1, dtype=torch.long)
                 for i, lt in enumerate(lights):
                     lut[int(lt["id"])] = i
                 valid = (ids >= 0) & (ids < len(lut) - 1)
                 sample["light_index"] = torch.where(valid, lut[ids.clamp(0, len(lut) - 1)], -1)[:, None]
             if "depth" in want:
-                sample["depth"] = aux["depth.Z"][:F, y0:y0 + ch, x0:x0 + cw][:, None]
+                sample["depth"] = aux["depth.Z"][s0:s0 + F, y0:y0 + ch, x0:x0 + cw][:, None]
         if "rgb" in want:
             from kornia.color import raw_to_rgb
             cfa = self.preset.cfa.to_kornia()
@@ -465,6 +510,7 @@ class LFMCaptureDataset(Dataset):
             if "gt" not in want:
                 del sample["gt"]
         sample["meta"] = self._meta(scene_id, index, lights, params, crop, t_s, t_l, layers)
+        sample["meta"]["frame_start"] = s0
         return sample
 
     def _meta(self, sid, index, lights, per_light, crop, t_s, t_l, layers) -> dict:
