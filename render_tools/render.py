@@ -44,8 +44,9 @@ DEFAULT_BANDS_NM = tuple(float(w) for w in range(400, 701, 10))
 LIGHT_MASK_PASSES = 4
 #: Screen-space sample times per capture window used to bound a light's motion, count.
 BBOX_TIME_SAMPLES = 17
-#: Light crops are grown to a multiple of this many px (each distinct film size compiles one kernel).
-CROP_QUANTUM_PX = 8
+#: Light crops are grown to a multiple of this many px. 1: tight crops (the tracer's kernel does not depend
+#: on crop sizes; with one ``mi.render`` per crop, 8 kept the number of compiled film sizes down).
+CROP_QUANTUM_PX = 1
 #: Minimum depth of a projected point treated as in front of the camera, m.
 MIN_DEPTH_M = 0.05
 
@@ -432,7 +433,7 @@ def render_frames(scene: dict, opts: RenderOptions) -> Iterator[dict]:
         imgs = tr.render(tiles, _seed(opts.seed, n, "frame")) if tiles else []
         out = {"frame": n, "static": {}, "lights": {}, "aux": {}}
         for kind, g, key, bb, ti, rep in plan:
-            img = imgs[ti]
+            img = backend.clamp_roundoff(imgs[ti], name=f"frame {n} {g} {kind} {key}")
             if kind == "static":
                 out["static"].setdefault(g, {})[key] = img[0]
             elif kind == "refine":
