@@ -44,8 +44,9 @@ from . import mitsuba_scene as ms
 
 #: Wavelengths per Mitsuba spectral sample (MI_SPECTRUM_SAMPLES).
 N_LAMBDA = 4
-#: Most lanes in one kernel launch (bigger tile lists are split into several launches of the same kernel).
-MAX_LANES = 1 << 27
+#: Most samples (lanes x samples per pixel) in one kernel launch (bigger tile lists are split into several launches
+#: of the same kernel; a tile with more is split by samples).
+MAX_LANES = 1 << 28
 #: Index value meaning "no set" in the per-emitter lookup tables.
 NO_SET = 0xFFFFFFFF
 
@@ -195,6 +196,21 @@ class LightSets:
         return self.index[name]
 
 
+def _permute(i, key, dim: int, mask):
+    """A keyed bijection of [0, mask] (mask = 2^k - 1; UInt32 arrays) built from steps that are bijective modulo
+    2^k: xor with a key, multiplication by an odd number, xor with a right shift of itself (a hash-based
+    permutation in the spirit of Kensler, "Correlated multi-jittered sampling", Pixar TM 13-01, 2013)."""
+    k = key * ((2 * dim + 1) * 0x9E3779B1 & 0xFFFFFFFF)
+    i = (i ^ k) & mask
+    i = (i * ((k >> 1) | 1)) & mask
+    i = i ^ ((i & mask) >> 1)
+    i = (i * 0x2C1B3C6D) & mask
+    i = i ^ (i >> 2)
+    i = (i ^ (k >> 7)) & mask
+    i = (i * 0x297A2D39) & mask
+    return i ^ (i >> 1)
+
+
 def _mis_weight(pdf_a, pdf_b):
     """Balance heuristic pdf_a / (pdf_a + pdf_b) (0 where both are 0), as Mitsuba's ``mis_weight``."""
     w = pdf_a / (pdf_a + pdf_b)
@@ -285,8 +301,7 @@ class Tracer:
             if h <= 0 or w <= 0 or t.bins < 1 or t.spp < 1:
                 raise ValueError(f"tiles[{i}]: empty crop {t.crop}, bins {t.bins} or spp {t.spp}")
             outs.append((size, (t.bins, C, h, w)))
-            per_sample = h * w * t.bins * P
-            n_split = max(1, -(-per_sample * t.spp // MAX_LANES))
+            n_split = max(1, -(-h * w * t.bins * P * t.spp // MAX_LANES))
             base, extra = divmod(t.spp, n_split)
             for j in range(n_split):
                 sp = base + (j < extra)
@@ -299,7 +314,7 @@ class Tracer:
         for part in parts:
             t = tiles[part[0]]
             h, w = t.shape
-            n = h * w * t.bins * P * part[1]
+            n = h * w * t.bins * P * part[1]  # samples (the launch's work), lanes = samples / spp
             if batch and lanes + n > MAX_LANES:
                 self._launch(buf, tiles, batch, seed + launch)
                 launch += 1
@@ -321,7 +336,7 @@ class Tracer:
             key = (int(t.key) * 0x9E3779B1 + j * 0x85EBCA77) & 0xFFFFFFFF
             rows.append((off, y0, x0, y1 - y0, x1 - x0, t.bins, sp, t.light_set, out, t.t_start, t.bin_len, wgt,
                          *[float(v) for v in t.velocity], t.t_ref, key))
-            off += (y1 - y0) * (x1 - x0) * t.bins * self.P * sp
+            off += (y1 - y0) * (x1 - x0) * t.bins * self.P
         # a dummy last row: no table has a single entry (Dr.Jit loads size-1 arrays as scalars with an alignment
         # that depends on the allocation, which changes the kernel's hash and forces a recompile)
         a = np.array(rows + [rows[-1]], dtype=np.float64)
@@ -335,6 +350,8 @@ class Tracer:
         dr.eval(buf)
 
     def _trace(self, buf, tab, n_tiles, n_lanes: int, seed: int) -> None:
+        """One lane per (tile, band pass, bin, pixel): it loops over the pixel's samples and writes its 4 bands
+        once, so no two lanes of a launch add to the same value (deterministic sums, no atomics)."""
         mi, dr = self.mi, self.dr
         lane = dr.arange(mi.UInt32, n_lanes)
         # tile of each lane: binary search over the lane offsets (fixed 20 steps: up to 2^20 tiles)
@@ -352,42 +369,57 @@ class Tracer:
         r = local // w
         y = r % h
         r = r // h
-        s = r % spp
-        r = r // spp
         k = r % K
         p = r // K
         seed_o = dr.opaque(mi.UInt32, seed)
         tkey = mi.sample_tea_32(g("key"), seed_o)[0]
-        group_key = local - s * (w * h)  # same for the spp samples of one (pass, bin, pixel) of a tile
         v0, v1 = mi.sample_tea_32(tkey, local)
         sampler = mi.PCG32()
         sampler.seed(mi.UInt64(v0) | (mi.UInt64(v1) << 32), mi.UInt64(tkey) | (mi.UInt64(local) << 32))
-        inv = dr.rcp(mi.Float(spp))
-
-        def strat(dim):
-            c = mi.sample_tea_32(group_key, tkey + ((dim * 0x9E3779B9) & 0xFFFFFFFF))[0] % spp
-            return (mi.Float((s + c) % spp) + sampler.next_float32()) * inv
-
-        px = mi.Float(g("x0") + x) + strat(1)
-        py = mi.Float(g("y0") + y) + strat(2)
-        t = g("t0", mi.Float) + (mi.Float(k) + strat(3)) * g("dt", mi.Float)
+        rot = mi.sample_tea_32(local, tkey + 0x9E3779B9)[0] % spp  # random rotation of the wavelength strata
+        bands = [p + j * self.n_pass for j in range(N_LAMBDA)]
+        lo_nm = [dr.gather(mi.Float, self.band_lo, b) for b in bands]
         vel = mi.Vector3f(g("vx", mi.Float), g("vy", mi.Float), g("vz", mi.Float))
-        ray = self.camera_ray(px, py, t, vel, g("tref", mi.Float))
-        u_l = strat(4)
-        bands, wl = [], []
-        for j in range(N_LAMBDA):
-            b = p + j * self.n_pass
-            bands.append(b)
-            wl.append(dr.gather(mi.Float, self.band_lo, b) + u_l * self.band_w)
-        ray.wavelengths = mi.Spectrum(*wl)
-        L = self._radiance(sampler, ray, g("set"))
+        L = self._pixel(sampler, spp, rot, mi.sample_tea_32(local, tkey + 0x3C6EF372)[0], mi.Float(g("x0") + x), mi.Float(g("y0") + y),
+                        g("t0", mi.Float) + mi.Float(k) * g("dt", mi.Float), g("dt", mi.Float), vel,
+                        g("tref", mi.Float), lo_nm, g("set"))
         wgt = g("wgt", mi.Float)
         out0 = g("out")
         for j in range(N_LAMBDA):
-            v = L[j] * wgt
-            ok = (bands[j] < self.n_bands) & dr.isfinite(v)
             idx = out0 + ((k * self.n_bands + bands[j]) * h + y) * w + x
-            dr.scatter_reduce(dr.ReduceOp.Add, buf, v, idx, ok)
+            dr.scatter_reduce(dr.ReduceOp.Add, buf, L[j] * wgt, idx, bands[j] < self.n_bands)
+
+    @dr.syntax
+    def _pixel(self, sampler, spp, rot, key, x0, y0, t0, dt, vel, t_ref, lo_nm, lset):
+        """Sum over ``spp`` samples (UInt32 per lane) of the radiance through pixel [x0, x0 + 1) x [y0, y0 + 1)
+        (px) at uniform times in [t0, t0 + dt) (s); wavelength j of a sample is uniform in [lo_nm[j],
+        lo_nm[j] + band width) (nm), stratified over the samples (stratum (s + rot) mod spp). Pixel x, y and
+        time are stratified too, each through its own permutation of the strata keyed by ``key`` (UInt32 per
+        lane; :func:`_permute`), so that the strata of different dimensions are paired at random: one rotation
+        per dimension would pair them along diagonals, which for a lamp moving across a pixel aliased and
+        raised the variance several times. Non-finite samples are dropped (counted as 0)."""
+        acc = mi.Spectrum(0.0)
+        s = mi.UInt32(0)
+        inv = dr.rcp(mi.Float(spp))
+        pow2 = (spp & (spp - 1)) == 0
+        mask = spp - 1
+        while s < spp:
+            # pixel x, y and time: each stratified over the samples by its own keyed permutation of the strata
+            # (a power of two spp; else independent uniform draws)
+            px = x0 + dr.select(pow2, (mi.Float(_permute(s, key, 1, mask)) + sampler.next_float32()) * inv,
+                                sampler.next_float32())
+            py = y0 + dr.select(pow2, (mi.Float(_permute(s, key, 2, mask)) + sampler.next_float32()) * inv,
+                                sampler.next_float32())
+            t = t0 + dt * dr.select(pow2, (mi.Float(_permute(s, key, 3, mask)) + sampler.next_float32()) * inv,
+                                    sampler.next_float32())
+            ray = self.camera_ray(px, py, t, vel, t_ref)
+            u = (mi.Float((s + rot) % spp) + sampler.next_float32()) * inv
+            ray.wavelengths = mi.Spectrum(lo_nm[0] + u * self.band_w, lo_nm[1] + u * self.band_w,
+                                          lo_nm[2] + u * self.band_w, lo_nm[3] + u * self.band_w)
+            L = self._radiance(sampler, ray, lset)
+            acc += mi.Spectrum(dr.select(dr.isfinite(L), L, 0.0))
+            s += 1
+        return acc
 
     def _set_pmf(self, em_ptr, lset):
         """Probability with which lane set ``lset`` selects emitter ``em_ptr`` in next-event estimation

@@ -1,0 +1,147 @@
+"""The light-set tracer (render_tools.tracer) against Mitsuba's own path integrator and against exact answers.
+
+The reference (render_tools.reference) is independent code: Mitsuba's C++ ``path`` integrator, its film and
+sampler, the MotionCamera plugin, one Mitsuba scene per group with only that group's emitters (or one light
+switched on by parameter updates). Both are unbiased estimates of the same image, so their means agree within
+Monte Carlo error.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from render_tools import reference, render, scene, tracer
+
+LED = {"model": "led", "peak_nm": 630.0, "fwhm_nm": 18.0}
+HPS = {"model": "light_source", "name": "HPS"}
+
+
+def test_alias_table_reproduces_the_distribution_exactly():
+    w = np.array([3.0, 0.0, 1.0, 5.5, 0.5])
+    q, alias = tracer.alias_table(w)
+    n = len(w)
+    # probability of i = (q[i] + sum over j with alias[j] == i of (1 - q[j])) / n
+    p = q / n
+    for j in range(n):
+        if q[j] < 1.0:
+            p[alias[j]] += (1.0 - q[j]) / n
+    assert np.allclose(p, w / w.sum(), atol=1e-12)
+    with pytest.raises(ValueError, match="weights"):
+        tracer.alias_table(np.array([0.0, 0.0]))
+
+
+def _street():
+    """A grey ground and wall lit by a tail lamp (otherlights, on a moving car) and an HPS streetlight."""
+    s = scene.empty_scene(speed_mps=10.0, fov_x_deg=50.0)
+    s["materials"]["grey"] = {"type": "diffuse", "rgb": [0.4, 0.4, 0.4]}
+    s["objects"].append({"id": 0, "kind": "ground", "velocity_mps": [0, 0, 0],
+                         "parts": [{"shape": "rect", "center": [10, 0, 0], "size": [60, 30], "normal": [0, 0, 1],
+                                    "material": "grey"},
+                                   {"shape": "rect", "center": [14, 0, 2], "size": [30, 6], "normal": [-1, 0, 0],
+                                    "material": "grey"}]})
+    s["objects"].append({"id": 1, "kind": "car", "velocity_mps": [8.0, 0, 0],
+                         "parts": [{"shape": "box", "center": [9.0, 0.8, 0.7], "size": [1.0, 1.6, 1.0],
+                                    "yaw_deg": 0.0, "material": "grey"}]})
+    base = {"shape": "rect", "normal": [-1, 0, 0], "spread_deg": 90.0}
+    s["lights"].append({**base, "id": 0, "group": "otherlights", "kind": "tail", "instance": 1,
+                        "center": [8.49, 0.4, 0.9], "size": [0.3, 0.2], "spectrum": LED, "luminance_cd_m2": 3e3})
+    s["lights"].append({**base, "id": 1, "group": "streetlights", "kind": "streetlight", "instance": -1,
+                        "center": [9.0, -2.0, 4.0], "normal": [0, 0, -1], "size": [0.4, 0.4], "spectrum": HPS,
+                        "luminance_cd_m2": 5e4})
+    return scene.validate_scene(s)
+
+
+@pytest.fixture(scope="module")
+def street():
+    s = _street()
+    opts = render.RenderOptions(width=48, height=32, spp=32, light_spp=64, bins=4, frames=1, aux=False, seed=3)
+    return s, opts, next(render.render_frames(s, opts))
+
+
+def test_static_group_matches_mitsuba_path_integrator(street):
+    import mitsuba as mi
+
+    from render_tools import mitsuba_scene as ms
+
+    s, opts, fr = street
+    ref = reference.ReferenceRenderer(s, opts)
+    tm = render.frame_timing(s, opts, 0)
+    t_obj = 0.5 * (tm["window"][0] + tm["window"][1])
+    sc = mi.load_dict(ms.mitsuba_dict(s, t_obj, emit="streetlights"))
+    for win in ("short", "long"):
+        a, b = tm[win]
+        want = ref.render(sc, a, b - a, 32, 11)[0]
+        got = fr["static"]["streetlights"][win]
+        # the directly seen lamp covers a few pixels partly (its pixel sums carry a few % of coverage noise);
+        # the ground and wall it lights are smooth: compare them tightly, per band (the HPS spectrum's shape)
+        lamp = want.sum(0) > 20 * np.median(want.sum(0))
+        lamp = np.pad(lamp, 1)[:-2, 1:-1] | np.pad(lamp, 1)[2:, 1:-1] | np.pad(lamp, 1)[1:-1, :-2] | \
+            np.pad(lamp, 1)[1:-1, 2:] | lamp
+        assert 0 < lamp.sum() < 40
+        gb, wb = got[:, ~lamp].sum(1), want[:, ~lamp].sum(1)
+        assert gb.sum() == pytest.approx(wb.sum(), rel=0.02)
+        big = wb > 0.05 * wb.max()
+        assert np.allclose(gb[big], wb[big], rtol=0.05)
+        assert got.sum() == pytest.approx(want.sum(), rel=0.1)
+
+
+def test_light_set_matches_solo_render_with_object_motion(street):
+    import mitsuba as mi
+
+    from render_tools import mitsuba_scene as ms
+
+    s, opts, fr = street
+    (lid, bb, bins), = fr["lights"]["otherlights"]
+    assert lid == 0 and bins.shape[0] == 4
+    ref = reference.ReferenceRenderer(s, opts)
+    tm = render.frame_timing(s, opts, 0)
+    t_obj = 0.5 * (tm["window"][0] + tm["window"][1])
+    sc = mi.load_dict(ms.mitsuba_dict(s, t_obj, emit="otherlights"))
+    ms.set_solo(mi.traverse(sc), s, "otherlights", 0, {})
+    e = tm["bin_edges"]
+    want = ref.render(sc, e[0], (e[-1] - e[0]) / 4, 64, 5, crop=bb, bins=4, velocity=ref.object_velocity(s["lights"][0]),
+                      t_ref=t_obj)
+    assert bins.sum() == pytest.approx(want.sum(), rel=0.03)
+    for k in range(4):  # every bin, and where its light is (the lamp moves across the bins)
+        assert bins[k].sum() == pytest.approx(want[k].sum(), rel=0.05)
+        ys, xs = np.mgrid[0:bins.shape[2], 0:bins.shape[3]]
+        g, w = bins[k].sum(0), want[k].sum(0)
+        assert (g * xs).sum() / g.sum() == pytest.approx((w * xs).sum() / w.sum(), abs=0.2)
+
+
+def test_tiles_are_independent_of_the_other_tiles_in_the_launch(street):
+    """A tile's random numbers depend on (seed, key, index in the tile) only: the same tile rendered alone, or
+    after other tiles, or with another MAX_LANES split of the launch, is bit-identical."""
+    import drjit as dr
+    import mitsuba as mi
+
+    from render_tools import mitsuba_scene as ms
+
+    s, opts, _ = street
+    geo = render.SceneGeometry(s, opts)
+    loaded = mi.load_dict(ms.mitsuba_dict(s, 0.0, emit="all"))
+    sets = tracer.LightSets(mi, dr, loaded, s, ["streetlights", "otherlights"])
+    tr = tracer.Tracer(mi, dr, loaded, sets, geo.ego, geo.fov, (opts.width, opts.height), opts.bands_nm,
+                       opts.band_width_nm)
+    a = tracer.Tile((4, 4, 20, 30), 2, 0.0, 0.004, 4, sets["group:streetlights"], key=7)
+    b = tracer.Tile((0, 0, 32, 48), 1, 0.0, 0.008, 2, sets["light:0"], key=9)
+    alone = tr.render([a], 5)[0]
+    both = tr.render([b, a], 5)[1]
+    assert np.array_equal(alone, both) and alone.sum() > 0
+    assert not np.array_equal(alone, tr.render([a], 6)[0])  # another seed, another estimate
+
+
+def test_bad_tile_is_refused_naming_it(street):
+    import drjit as dr
+    import mitsuba as mi
+
+    from render_tools import mitsuba_scene as ms
+
+    s, opts, _ = street
+    geo = render.SceneGeometry(s, opts)
+    loaded = mi.load_dict(ms.mitsuba_dict(s, 0.0, emit="all"))
+    sets = tracer.LightSets(mi, dr, loaded, s, ["streetlights"])
+    tr = tracer.Tracer(mi, dr, loaded, sets, geo.ego, geo.fov, (opts.width, opts.height), opts.bands_nm,
+                       opts.band_width_nm)
+    with pytest.raises(ValueError, match=r"tiles\[0\]"):
+        tr.render([tracer.Tile((4, 4, 4, 30), 1, 0.0, 0.004, 4, 0)], 1)
