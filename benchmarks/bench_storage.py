@@ -21,7 +21,7 @@ stay far below).
 
 Writes ``docs/storage-benchmark.md`` (whole file) and ``<out>/results.json``.
 
-Run: ``.venv/bin/python benchmarks/bench_storage.py --corpus DIR [--scene ID]`` (about 10 min for a 640x360
+Run: ``.venv/bin/python benchmarks/bench_storage.py --corpus DIR [--scene ID]`` (about 20 min for a 640x360
 scene on 2 shared cores) or ``--quick`` (renders a small 160x90 scene into ``<out>/corpus`` unless there, fewer
 options, one repeat: ~2 min).
 """
@@ -50,24 +50,16 @@ S = C.Storage
 FULL = [
     ("FLOAT zip (v1)", S("float32", "zip"), "format version 1, lossless"),
     ("FLOAT pxr24", S("float32", "pxr24"), "PXR24 rounds FLOAT to 24 bits"),
-    ("FLOAT m10 zip", S("float32", "zip", 10), "FLOAT, mantissa rounded to 10 bits, no scale needed"),
     ("HALF m10 zip", S("float16", "zip"), "scaled HALF (preset float16)"),
-    ("HALF m10 zips", S("float16", "zips"), ""),
     ("HALF m10 piz", S("float16", "piz"), ""),
-    ("HALF m10 pxr24", S("float16", "pxr24"), "PXR24 is lossless on HALF"),
-    ("HALF m10 dwaa", S("float16", "dwaa"), "DWA: lossless for these channel names"),
-    ("HALF m10 dwab", S("float16", "dwab"), ""),
+    ("HALF m10 dwab", S("float16", "dwab"), "DWAA/DWAB: lossless for these channel names (lossy only for R, G, B, Y, BY, RY)"),
     ("HALF m10 b44", S("float16", "b44", allow_lossy_codec=True), "lossy on every HALF channel; not allowed"),
     ("HALF m10 zstd", S("float16", "zstd", allow_lossy_codec=True), "needs OpenEXR >= 3.4; not allowed"),
-    ("HALF m10 htj2k32", S("float16", "htj2k32", allow_lossy_codec=True), "needs OpenEXR >= 3.4; not allowed"),
     ("HALF m8 zip", S("float16", "zip", 8), ""),
     ("HALF m8 piz", S("float16", "piz", 8), ""),
-    ("HALF m6 zip", S("float16", "zip", 6), ""),
     ("HALF m6 piz", S("float16", "piz", 6), ""),
     ("HALF m5 zip", S("float16", "zip", 5), ""),
     ("HALF m5 piz", S("float16", "piz", 5), ""),
-    ("HALF m5 dwab", S("float16", "dwab", 5), ""),
-    ("HALF m4 zip", S("float16", "zip", 4), ""),
     ("HALF m4 piz", S("float16", "piz", 4), ""),
 ]
 QUICK_LABELS = ("FLOAT zip (v1)", "HALF m10 zip", "HALF m8 piz", "HALF m5 zip", "HALF m5 piz")
@@ -134,17 +126,17 @@ def errors(orig: list[dict], back: list[dict]) -> dict:
     worst_name = ""
     for n, name, key, x in layers(orig):
         y = pick(back, n, key)
-        x64 = x.astype(np.float64)
-        d = np.abs(y.astype(np.float64) - x64)
-        tot = float(x64.sum())
-        num += float(d.sum())
+        d = np.abs(y - x)  # float32: exact for nearby values (Sterbenz); sums in float64
+        tot = float(x.sum(dtype=np.float64))
+        dsum = float(d.sum(dtype=np.float64))
+        num += dsum
         den += tot
         if tot > 0:
-            e = float(d.sum()) / tot
+            e = dsum / tot
             if e > worst_layer:
                 worst_layer, worst_name = e, name
-            sel = x64 >= float(x.max()) * PRECISION_FLOOR
-            worst_value = max(worst_value, float(np.max(d[sel] / x64[sel])))
+            sel = x >= float(x.max()) * PRECISION_FLOOR
+            worst_value = max(worst_value, float(np.max(d[sel] / x[sel])))
     return {"energy_error": num / max(den, 1e-300), "max_layer_energy_error": worst_layer,
             "worst_layer": worst_name, "max_value_error": worst_value}
 

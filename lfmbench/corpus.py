@@ -263,8 +263,7 @@ class Storage:
     Attributes:
         dtype: ``"float16"``: EXR HALF holding ``radiance * 2^e`` with one power-of-two scale per layer (peak
             in [2^(P-1), 2^P), see :func:`scale_exponent`), FLOAT fallback for a layer whose underflow error
-            would exceed
-            :data:`HALF_UNDERFLOW_ERROR_FRACTION`; ``"float32"``: EXR FLOAT, scale 1.
+            would exceed :attr:`max_underflow_error`; ``"float32"``: EXR FLOAT, scale 1.
         compression: a key of :data:`COMPRESSIONS`.
         mantissa_bits: round every stored value to this many explicit mantissa bits (round to nearest, ties to
             even) before compression, 1..10 for HALF, 1..23 for FLOAT; ``None`` keeps all. The relative
@@ -402,13 +401,15 @@ class StorageStats:
         return s
 
 
-def _energy_error(orig: np.ndarray, back: np.ndarray, total: float, mask: np.ndarray | None = None) -> float:
+def _energy_error(orig: np.ndarray, back: np.ndarray, total: float, mask: np.ndarray | None = None
+                  ) -> tuple[float, float]:
+    """``(sum|back - orig| / total, same sum over mask / total)``; float32 differences of nearby values are
+    exact (Sterbenz), sums in float64."""
     if total <= 0:
-        return 0.0
-    d = np.abs(back.astype(np.float64) - orig)
-    if mask is not None:
-        d = d[mask]
-    return float(np.sum(d, dtype=np.float64)) / total
+        return 0.0, 0.0
+    d = np.abs(back - orig)
+    under = float(np.sum(d[mask], dtype=np.float64)) / total if mask is not None else 0.0
+    return float(np.sum(d, dtype=np.float64)) / total, under
 
 
 def store_layer(arr: np.ndarray, storage: str | Storage, what: str = "layer") -> LayerStore:
@@ -437,8 +438,7 @@ def store_layer(arr: np.ndarray, storage: str | Storage, what: str = "layer") ->
             scaled = round_mantissa(scaled, st.bits)
         h = scaled.astype(np.float16)
         back = h.astype(np.float32) / np.float32(2.0 ** e)
-        under = _energy_error(x, back, total, scaled < HALF_MIN_NORMAL) if total > 0 else 0.0
-        err = _energy_error(x, back, total)
+        err, under = _energy_error(x, back, total, scaled < HALF_MIN_NORMAL)
         reason = None
         if peak > 0 and not HALF_MIN_NORMAL <= peak * 2.0 ** e <= HALF_MAX:
             reason = f"peak {peak:.3g} cannot be scaled into HALF's range by 2^{e}"
@@ -449,9 +449,9 @@ def store_layer(arr: np.ndarray, storage: str | Storage, what: str = "layer") ->
             return LayerStore(np.ascontiguousarray(h), "float16", float(2.0 ** e), err, under)
         log.debug("%s: %s: stored FLOAT", what, reason)
         fb = round_mantissa(x, st.bits) if st.mantissa_bits is not None else np.ascontiguousarray(x)
-        return LayerStore(fb, "float32", 1.0, _energy_error(x, fb, total), 0.0, reason)
+        return LayerStore(fb, "float32", 1.0, _energy_error(x, fb, total)[0], 0.0, reason)
     out = round_mantissa(x, st.bits) if st.mantissa_bits is not None else np.ascontiguousarray(x)
-    return LayerStore(out, "float32", 1.0, _energy_error(x, out, total) if st.mantissa_bits else 0.0, 0.0)
+    return LayerStore(out, "float32", 1.0, _energy_error(x, out, total)[0] if st.mantissa_bits else 0.0, 0.0)
 
 
 def scale_attr(window: str | None) -> str:
