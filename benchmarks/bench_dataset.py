@@ -116,8 +116,8 @@ def _render(out: Path, options: dict, seed: int, scenes: int = 1, scene: dict | 
 
     be = J.default_backend()
     jobs = J.make_jobs(out, n_scenes=scenes, seed=seed, options=options,
-                       scenes=[scene] if scene is not None else None, backend=be)
-    writer = CorpusWriter(out, render=J.render_record(seed, options, "float32", {}))
+                       scenes=[scene] if scene is not None else None, backend=be, dtype="float32")
+    writer = CorpusWriter(out, dtype="float32", render=J.render_record(seed, options, "float32", {}))
     c0 = time.process_time()
     summary = J.run_jobs(jobs, writer)
     cpu = time.process_time() - c0

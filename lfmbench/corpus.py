@@ -44,8 +44,10 @@ from lfmbench.fileio import (TMP_PREFIX, AtomicWriteError, atomic_write_bytes, a
                              json_default)
 
 __all__ = [
-    "FORMAT_NAME", "FORMAT_VERSION", "STATIC_WINDOWS", "AUX_CHANNELS", "HALF_MAX", "HALF_MAX_REL_ERROR",
-    "RADIANCE_UNIT",
+    "FORMAT_NAME", "FORMAT_VERSION", "READABLE_VERSIONS", "STATIC_WINDOWS", "AUX_CHANNELS", "HALF_MAX",
+    "HALF_MIN_NORMAL", "HALF_UNDERFLOW_ERROR_FRACTION", "RADIANCE_UNIT", "COMPRESSIONS", "STORAGES",
+    "DEFAULT_STORAGE", "Storage", "resolve_storage", "round_mantissa", "scale_exponent", "store_layer",
+    "scale_attr", "LayerStore", "StorageStats",
     "CorpusError", "CorpusNotFoundError", "CorpusFileError", "CorpusChannelError", "CorpusValueError",
     "CorpusWriteError", "band_channel", "bin_prefix", "static_channels", "bin_channels", "frame_dir",
     "group_storage", "encode_static_exr", "encode_lights_exr", "encode_aux_exr", "read_exr", "sha256_file",
@@ -56,9 +58,12 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
-#: ``manifest.json`` "format" value and format version written by this module.
+#: ``manifest.json`` "format" value and format version written by this module. Version 2 (HALF x 2^e layers,
+#: codecs and mantissa rounding, ``docs/corpus-format.md``) reads every version-1 file unchanged.
 FORMAT_NAME = "lfmbench-corpus"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
+#: Format versions this module reads.
+READABLE_VERSIONS = (1, 2)
 MANIFEST_NAME = "manifest.json"
 SPLITS_NAME = "splits.json"
 SCENES_DIR = "scenes"
@@ -68,10 +73,6 @@ STATIC_WINDOWS = ("short", "long")
 AUX_CHANNELS = ("depth.Z", "depth.R", "mask.instance", "mask.light")
 #: Largest finite IEEE 754 binary16 value; radiance above it cannot be stored as HALF (IEEE 754-2008).
 HALF_MAX = 65504.0
-#: Largest energy-weighted relative error sum|half(x) - x| / sum(x) accepted for HALF storage (else FLOAT).
-#: Round-to-nearest binary16 gives <= 2^-11 ~ 4.9e-4 in the normal range (IEEE 754-2008), so 1e-3 passes
-#: any normal-range data and catches underflow of dim radiance.
-HALF_MAX_REL_ERROR = 1e-3
 RADIANCE_UNIT = "W sr^-1 m^-2 nm^-1"
 #: Name and channel of the placeholder part of a flickering-group EXR in which no light is visible.
 EMPTY_PART = "empty"
@@ -83,6 +84,7 @@ ATTR = {
     "kind": "lfmbench_kind", "scene": "lfmbench_scene_id", "frame": "lfmbench_frame",
     "group": "lfmbench_group", "units": "lfmbench_units", "light": "lfmbench_light_id",
     "nparts": "lfmbench_nparts", "bins": "lfmbench_bins", "stored": "lfmbench_stored_as",
+    "version": "lfmbench_format_version", "mantissa": "lfmbench_mantissa_bits", "scale": "lfmbench_scale",
 }
 
 
@@ -212,12 +214,6 @@ def _exr():
     return OpenEXR
 
 
-def _check_dtype(dtype: str) -> str:
-    if dtype not in ("float32", "float16"):
-        raise ValueError(f"dtype must be 'float32' (EXR FLOAT) or 'float16' (EXR HALF), got {dtype!r}")
-    return dtype
-
-
 def _check_radiance(arr: np.ndarray, what: str) -> np.ndarray:
     arr = np.asarray(arr)
     if not np.issubdtype(arr.dtype, np.floating):
@@ -229,46 +225,266 @@ def _check_radiance(arr: np.ndarray, what: str) -> np.ndarray:
     return arr
 
 
-def _store(arr: np.ndarray, dtype: str, what: str, notes: list[str]) -> tuple[np.ndarray, str]:
-    """Array to store and its EXR pixel type.
+#: EXR compressions a corpus file may use, by name -> ``OpenEXR`` enum member. All are readable by OpenEXR 2.2
+#: and later; every one of them is lossless on the channels lfmbench writes except PXR24 on FLOAT channels
+#: (rounded to 24 bits, <= 2^-16 relative): DWAA/DWAB compress lossily only channels named R, G, B, Y, BY, RY
+#: (and ``*.R`` ...), never ``short.400nm`` (checked in ``docs/storage-benchmark.md``).
+COMPRESSIONS = {"none": "NO_COMPRESSION", "rle": "RLE_COMPRESSION", "zips": "ZIPS_COMPRESSION",
+                "zip": "ZIP_COMPRESSION", "piz": "PIZ_COMPRESSION", "pxr24": "PXR24_COMPRESSION",
+                "dwaa": "DWAA_COMPRESSION", "dwab": "DWAB_COMPRESSION"}
+#: Compressions accepted only with ``Storage(allow_lossy_codec=True)`` (benchmarks): B44/B44A quantise every
+#: HALF channel (up to ~12 % per value), an error the writer does not measure; ZSTD / HTJ2K need OpenEXR >= 3.4.
+EXTRA_COMPRESSIONS = {"b44": "B44_COMPRESSION", "b44a": "B44A_COMPRESSION", "zstd": "ZSTD_COMPRESSION",
+                      "htj2k32": "HTJ2K32_COMPRESSION", "htj2k256": "HTJ2K256_COMPRESSION"}
+#: Smallest positive normal binary16 value, 2^-14 ~ 6.1e-5 (IEEE 754-2008).
+HALF_MIN_NORMAL = 2.0 ** -14
+#: Octaves R below a HALF layer's peak in which every value keeps the full relative precision of the stored
+#: mantissa bits m (2^20 ~ 1.05e6, 120 dB, the range of an HDR automotive sensor). HALF's subnormals have an
+#: absolute step of 2^-24, i.e. m-bit relative precision down to 2^(m-24); so the layer is scaled by 2^e with
+#: its peak in [2^(P-1), 2^P), P = R - 23 + m (P = 2 for m = 5, 7 for m = 10), and values below peak * 2^-R
+#: keep an absolute error <= 2^-25 / 2^e (W sr^-1 m^-2 nm^-1), below 2^-(R+m+1) of the peak.
+HALF_PRECISION_RANGE_LOG2 = 20
+#: Allowed range of the scale exponent e (2^e must be a normal float32 for the float attribute).
+SCALE_EXP_RANGE = (-126, 127)
+#: Bound of the energy-weighted relative error ``sum_{x*s < 2^-14} |x' - x| / sum x`` caused by values that fall
+#: below HALF's normal range after scaling (x' the value read back, s = 2^e), as a multiple of the rounding
+#: bound 2^-(m+1) of m mantissa bits: a quarter, i.e. 2^-(m+3) (1.2e-4 for m = 10, 3.9e-3 for m = 5). A layer
+#: above it is stored FLOAT (with the same mantissa rounding). Subnormal HALF keeps an absolute step of 2^-24,
+#: so this error is <= n * 2^-(P+24) for a layer of n values whose peak is >= 2^(P-1).
+HALF_UNDERFLOW_ERROR_FRACTION = 0.25
+#: Explicit mantissa bits of the EXR pixel types.
+MANTISSA_BITS = {"float16": 10, "float32": 23}
 
-    HALF (binary16) is used only when it is safe: a peak above :data:`HALF_MAX` (overflow to inf) or an
-    energy-weighted round-trip error ``sum|half(x) - x| / sum x`` above :data:`HALF_MAX_REL_ERROR` (values
-    below HALF's normal range, ~6.1e-5, keep few or no significant bits: dim absolute radiance underflows) make
-    the part FLOAT, and the reason is logged and appended to ``notes``.
+
+@dataclass(frozen=True)
+class Storage:
+    """How radiance layers (a static group's window: C bands; a light: K bins x C bands) are stored.
+
+    Attributes:
+        dtype: ``"float16"``: EXR HALF holding ``radiance * 2^e`` with one power-of-two scale per layer (peak
+            in [2^(P-1), 2^P), see :func:`scale_exponent`), FLOAT fallback for a layer whose underflow error
+            would exceed :attr:`max_underflow_error`; ``"float32"``: EXR FLOAT, scale 1.
+        compression: a key of :data:`COMPRESSIONS`.
+        mantissa_bits: round every stored value to this many explicit mantissa bits (round to nearest, ties to
+            even) before compression, 1..10 for HALF, 1..23 for FLOAT; ``None`` keeps all. The relative
+            error of a value in the normal range is <= 2^-(mantissa_bits + 1).
+        allow_lossy_codec: accept :data:`EXTRA_COMPRESSIONS` (benchmarks only).
     """
-    if dtype == "float16":
-        peak = float(np.max(arr)) if arr.size else 0.0
-        if peak > HALF_MAX:
-            msg = f"{what}: peak {peak:.4g} > {HALF_MAX} (HALF maximum): stored as FLOAT"
-            log.warning(msg)
-            notes.append(msg)
-            return np.ascontiguousarray(arr, dtype=np.float32), "float32"
-        h = np.ascontiguousarray(arr, dtype=np.float16)
-        total = float(np.sum(arr, dtype=np.float64))
-        if total > 0:
-            err = float(np.sum(np.abs(h.astype(np.float64) - arr), dtype=np.float64)) / total
-            if err > HALF_MAX_REL_ERROR:
-                msg = (f"{what}: HALF would change the radiance by {err:.2g} (relative, energy-weighted; values "
-                       f"below HALF's normal range): stored as FLOAT")
-                log.warning(msg)
-                notes.append(msg)
-                return np.ascontiguousarray(arr, dtype=np.float32), "float32"
-        return h, "float16"
-    return np.ascontiguousarray(arr, dtype=np.float32), "float32"
+
+    dtype: str = "float16"
+    compression: str = "zip"
+    mantissa_bits: int | None = None
+    allow_lossy_codec: bool = False
+
+    def __post_init__(self) -> None:
+        if self.dtype not in MANTISSA_BITS:
+            raise ValueError(f"dtype must be 'float32' (EXR FLOAT) or 'float16' (EXR HALF x 2^e), got "
+                             f"{self.dtype!r}")
+        known = dict(COMPRESSIONS, **(EXTRA_COMPRESSIONS if self.allow_lossy_codec else {}))
+        if self.compression not in known:
+            raise ValueError(f"compression must be one of {sorted(known)}, got {self.compression!r}")
+        mb = self.mantissa_bits
+        top = MANTISSA_BITS[self.dtype]
+        if mb is not None and (isinstance(mb, bool) or not isinstance(mb, int) or not 1 <= mb <= top):
+            raise ValueError(f"mantissa_bits must be None or an integer in [1, {top}] for {self.dtype}, got {mb!r}")
+
+    @property
+    def bits(self) -> int:
+        """Explicit mantissa bits actually kept (10 for HALF, 23 for FLOAT when not rounded)."""
+        return MANTISSA_BITS[self.dtype] if self.mantissa_bits is None else int(self.mantissa_bits)
+
+    @property
+    def max_rel_rounding_error(self) -> float:
+        """Largest relative change of a value in HALF's normal range (or any FLOAT value): 2^-(bits+1)."""
+        return 2.0 ** -(self.bits + 1)
+
+    @property
+    def max_underflow_error(self) -> float:
+        """Largest energy-weighted error from values below HALF's normal range before a layer is stored FLOAT:
+        ``HALF_UNDERFLOW_ERROR_FRACTION * 2^-(bits+1)``."""
+        return HALF_UNDERFLOW_ERROR_FRACTION * self.max_rel_rounding_error
+
+    def to_dict(self) -> dict:
+        """``meta.json`` ``storage`` entry (without ``format_version``)."""
+        return {"dtype": self.dtype, "compression": self.compression, "mantissa_bits": self.bits}
 
 
-def _base_header(width: int, height: int, data_window: tuple[int, int, int, int] | None = None) -> dict:
-    """EXR header: ZIP compression, scanlines, display window = full image, data window (y0,x0,y1,x1) half-open."""
+#: Named storages (``lfmbench render --storage NAME``). ``compact`` is the default of new corpora (chosen in
+#: ``docs/storage-benchmark.md``); ``float32`` writes exactly what format version 1 wrote (lossless FLOAT, ZIP).
+STORAGES = {
+    "compact": Storage("float16", "piz", 5),
+    "float16": Storage("float16", "zip", None),
+    "float32": Storage("float32", "zip", None),
+}
+DEFAULT_STORAGE = "compact"
+
+
+def resolve_storage(storage: str | Storage, what: str = "dtype") -> Storage:
+    """A :class:`Storage` from a name of :data:`STORAGES` or a :class:`Storage`; ``ValueError`` naming ``what``."""
+    if isinstance(storage, Storage):
+        return storage
+    if isinstance(storage, str) and storage in STORAGES:
+        return STORAGES[storage]
+    raise ValueError(f"{what} must be one of {sorted(STORAGES)} or a corpus.Storage, got {storage!r}")
+
+
+def round_mantissa(arr: np.ndarray, bits: int) -> np.ndarray:
+    """``arr`` (finite, any float dtype) as float32 rounded to ``bits`` explicit mantissa bits (1..23).
+
+    Round to nearest, ties to even, on the float32 bit pattern (a carry into the exponent is the correct
+    result); relative change <= 2^-(bits+1) for normal float32 values. Returns a new float32 array.
+    """
+    a = np.array(arr, dtype=np.float32, copy=True)
+    if not 1 <= int(bits) <= 23:
+        raise ValueError(f"bits must be in [1, 23], got {bits!r}")
+    drop = 23 - int(bits)
+    if drop == 0:
+        return a
+    b = a.view(np.uint32)
+    lsb = (b >> np.uint32(drop)) & np.uint32(1)
+    b += np.uint32((1 << (drop - 1)) - 1) + lsb
+    b &= np.uint32(~((1 << drop) - 1) & 0xFFFFFFFF)
+    return a
+
+
+def scale_exponent(peak: float, bits: int = 10) -> int:
+    """Exponent e of the power-of-two scale of a HALF layer with maximum ``peak`` (W sr^-1 m^-2 nm^-1) whose
+    values keep ``bits`` mantissa bits: ``peak * 2^e`` lies in [2^(P-1), 2^P) with
+    ``P = HALF_PRECISION_RANGE_LOG2 - 23 + bits``; 0 for an all-zero layer; clipped to :data:`SCALE_EXP_RANGE`."""
+    if not peak > 0:
+        return 0
+    top = HALF_PRECISION_RANGE_LOG2 - 23 + int(bits)
+    _, q = math.frexp(float(peak))  # peak = f * 2^q, f in [0.5, 1)
+    return int(min(max(top - q, SCALE_EXP_RANGE[0]), SCALE_EXP_RANGE[1]))
+
+
+@dataclass
+class LayerStore:
+    """One stored layer: the array to write (float16 or float32), its EXR pixel type, the scale ``2^e`` the
+    radiance was multiplied by, and the measured energy-weighted relative errors (dimensionless) of the
+    values read back: ``error`` over the whole layer, ``underflow_error`` from values below HALF's normal range."""
+
+    data: np.ndarray
+    pixel_type: str
+    scale: float
+    error: float
+    underflow_error: float
+    fallback: str | None = None
+
+
+@dataclass
+class StorageStats:
+    """Aggregate of :class:`LayerStore` results (for one readable note per scene instead of one per layer)."""
+
+    layers: int = 0
+    half: int = 0
+    fallbacks: list[str] = field(default_factory=list)
+    max_error: float = 0.0
+    max_underflow_error: float = 0.0
+
+    def add(self, ls: LayerStore, what: str) -> None:
+        self.layers += 1
+        self.half += ls.pixel_type == "float16"
+        self.max_error = max(self.max_error, ls.error)
+        self.max_underflow_error = max(self.max_underflow_error, ls.underflow_error)
+        if ls.fallback:
+            self.fallbacks.append(f"{what}: {ls.fallback}")
+
+    def summary(self, what: str, storage: Storage) -> str:
+        """One line: layers, HALF share, largest errors, FLOAT fallbacks (the first three named)."""
+        s = (f"{what}: {self.layers} radiance layers, {self.half} HALF x 2^e ({storage.bits} mantissa bits, "
+             f"{storage.compression}); energy-weighted relative error max {self.max_error:.2g}, from values "
+             f"below HALF's normal range max {self.max_underflow_error:.2g}")
+        if self.fallbacks:
+            s += (f"; {len(self.fallbacks)} layer(s) stored FLOAT: " + "; ".join(self.fallbacks[:3])
+                  + (" ..." if len(self.fallbacks) > 3 else ""))
+        return s
+
+
+def _energy_error(orig: np.ndarray, back: np.ndarray, total: float, mask: np.ndarray | None = None
+                  ) -> tuple[float, float]:
+    """``(sum|back - orig| / total, same sum over mask / total)``; float32 differences of nearby values are
+    exact (Sterbenz), sums in float64."""
+    if total <= 0:
+        return 0.0, 0.0
+    d = np.abs(back - orig)
+    under = float(np.sum(d[mask], dtype=np.float64)) / total if mask is not None else 0.0
+    return float(np.sum(d, dtype=np.float64)) / total, under
+
+
+def store_layer(arr: np.ndarray, storage: str | Storage, what: str = "layer") -> LayerStore:
+    """Encode one radiance layer for storage (no I/O): the scale rule of ``docs/corpus-format.md`` section 6.
+
+    Args:
+        arr: radiance, any shape (e.g. (C, H, W) or (K, C, h, w)), W sr^-1 m^-2 nm^-1, finite and >= 0.
+        storage: a :class:`Storage` or a name of :data:`STORAGES`.
+        what: the layer's name for messages.
+
+    HALF: ``stored = half(round_m(arr * 2^e))`` with ``e = scale_exponent(max(arr), m)``; the reader computes
+    ``stored / 2^e``. The scale is a power of two, so it changes no mantissa bit: the only errors are the
+    rounding to ``bits`` mantissa bits (<= 2^-(bits+1) relative) and, for values below 2^-14 after scaling,
+    HALF's subnormal step (measured: ``underflow_error``). When that exceeds
+    :data:`HALF_UNDERFLOW_ERROR_FRACTION` (or the exponent had to be clipped) the layer is stored FLOAT with
+    scale 1 and the same mantissa rounding.
+    """
+    st = resolve_storage(storage, "storage")
+    x = np.asarray(arr, dtype=np.float32)
+    total = float(np.sum(x, dtype=np.float64))
+    if st.dtype == "float16":
+        peak = float(np.max(x)) if x.size else 0.0
+        e = scale_exponent(peak, st.bits)
+        scaled = x * np.float32(2.0 ** e)  # exact: power of two (unless float32 over/underflows, checked below)
+        if st.mantissa_bits is not None:
+            scaled = round_mantissa(scaled, st.bits)
+        h = scaled.astype(np.float16)
+        back = h.astype(np.float32) / np.float32(2.0 ** e)
+        err, under = _energy_error(x, back, total, scaled < HALF_MIN_NORMAL)
+        reason = None
+        if peak > 0 and not HALF_MIN_NORMAL <= peak * 2.0 ** e <= HALF_MAX:
+            reason = f"peak {peak:.3g} cannot be scaled into HALF's range by 2^{e}"
+        elif not math.isfinite(err) or under > st.max_underflow_error:
+            reason = (f"HALF x 2^{e} would change the radiance by {under:.2g} (energy-weighted, values below "
+                      f"HALF's normal range) > {st.max_underflow_error:.2g}")
+        if reason is None:
+            return LayerStore(np.ascontiguousarray(h), "float16", float(2.0 ** e), err, under)
+        log.debug("%s: %s: stored FLOAT", what, reason)
+        fb = round_mantissa(x, st.bits) if st.mantissa_bits is not None else np.ascontiguousarray(x)
+        return LayerStore(fb, "float32", 1.0, _energy_error(x, fb, total)[0], 0.0, reason)
+    out = round_mantissa(x, st.bits) if st.mantissa_bits is not None else np.ascontiguousarray(x)
+    return LayerStore(out, "float32", 1.0, _energy_error(x, out, total)[0] if st.mantissa_bits else 0.0, 0.0)
+
+
+def scale_attr(window: str | None) -> str:
+    """Header attribute holding a layer's scale 2^e: ``lfmbench_scale_short`` / ``lfmbench_scale_long`` for the
+    windows of a static part, ``lfmbench_scale`` (``window=None``) for a light part."""
+    if window is None:
+        return ATTR["scale"]
+    if window not in STATIC_WINDOWS:
+        raise ValueError(f"window must be one of {STATIC_WINDOWS} or None, got {window!r}")
+    return f"{ATTR['scale']}_{window}"
+
+
+def _note_layer(ls: LayerStore, what: str, notes: list[str], stats: StorageStats | None) -> None:
+    if stats is not None:
+        stats.add(ls, what)
+    elif ls.fallback:  # no aggregator: one note per fallback (rare: see HALF_UNDERFLOW_ERROR_FRACTION)
+        notes.append(f"{what}: {ls.fallback}: stored as FLOAT")
+
+
+def _base_header(width: int, height: int, data_window: tuple[int, int, int, int] | None = None,
+                 compression: str = "zip") -> dict:
+    """EXR header: ``compression`` (a key of :data:`COMPRESSIONS` / :data:`EXTRA_COMPRESSIONS`), scanlines,
+    display window = full image, data window (y0, x0, y1, x1) half-open, ``lfmbench_format_version``."""
     exr = _exr()
     if data_window is None:
         data_window = (0, 0, height, width)
     y0, x0, y1, x1 = data_window
     return {
-        "compression": exr.ZIP_COMPRESSION,
+        "compression": getattr(exr, {**COMPRESSIONS, **EXTRA_COMPRESSIONS}[compression]),
         "type": exr.scanlineimage,
         "displayWindow": ((0, 0), (width - 1, height - 1)),
         "dataWindow": ((x0, y0), (x1 - 1, y1 - 1)),
+        ATTR["version"]: FORMAT_VERSION,
     }
 
 
@@ -282,21 +498,25 @@ def _encode(parts: list, what: str) -> bytes:
     return buf.getvalue()
 
 
-def encode_static_exr(windows: Mapping[str, np.ndarray], bands_nm: Sequence[float], *, dtype: str = "float32",
-                      attrs: Mapping[str, Any] | None = None, what: str = "static group",
-                      notes: list[str] | None = None) -> bytes:
+def encode_static_exr(windows: Mapping[str, np.ndarray], bands_nm: Sequence[float], *,
+                      dtype: str | Storage = DEFAULT_STORAGE, attrs: Mapping[str, Any] | None = None,
+                      what: str = "static group", notes: list[str] | None = None,
+                      stats: StorageStats | None = None) -> bytes:
     """Encode a static group (one part, channels ``short.<wl>nm`` / ``long.<wl>nm``) as EXR bytes.
 
     Args:
         windows: ``{"short": (C, H, W), "long": (C, H, W)}`` time-averaged spectral radiance over each exposure
             window, W sr^-1 m^-2 nm^-1, finite and >= 0.
         bands_nm: the C band centres (nm).
-        dtype: ``"float32"`` (FLOAT) or ``"float16"`` (HALF; falls back to FLOAT above 65504).
+        dtype: storage, a name of :data:`STORAGES` (``"compact"``: HALF x 2^e with 8 mantissa bits, ZIP;
+            ``"float16"``; ``"float32"``: lossless FLOAT as in format version 1) or a :class:`Storage`. Each
+            window is one layer with its own scale, attribute ``lfmbench_scale_<window>``.
         attrs: extra header attributes (str / int / float values).
         what: the file's name for error messages.
-        notes: list that receives overflow messages.
+        notes: list that receives one message per layer stored FLOAT instead of HALF.
+        stats: optional accumulator of the layers' measured errors.
     """
-    _check_dtype(dtype)
+    st = resolve_storage(dtype)
     notes = [] if notes is None else notes
     if set(windows) != set(STATIC_WINDOWS):
         raise ValueError(f"{what}: static windows must be exactly {STATIC_WINDOWS}, got {sorted(windows)}")
@@ -311,16 +531,19 @@ def encode_static_exr(windows: Mapping[str, np.ndarray], bands_nm: Sequence[floa
     _, height, width = shape
     channels = {}
     stored = set()
-    for w in STATIC_WINDOWS:
-        arr, st = _store(windows[w], dtype, f"{what} [{w}]", notes)
-        stored.add(st)
-        for c, name in enumerate(static_channels(w, bands_nm)):
-            channels[name] = arr[c]
-    header = _base_header(width, height)
+    header = _base_header(width, height, compression=st.compression)
     header.update(attrs or {})
+    for w in STATIC_WINDOWS:
+        ls = store_layer(windows[w], st, f"{what} [{w}]")
+        _note_layer(ls, f"{what} [{w}]", notes, stats)
+        stored.add(ls.pixel_type)
+        header[scale_attr(w)] = ls.scale
+        for c, name in enumerate(static_channels(w, bands_nm)):
+            channels[name] = ls.data[c]
     header[ATTR["kind"]] = "static"
     header[ATTR["units"]] = RADIANCE_UNIT
     header[ATTR["stored"]] = "float32" if "float32" in stored else "float16"
+    header[ATTR["mantissa"]] = st.bits
     exr = _exr()
     return _encode([exr.Part(header, channels, "static")], what)
 
@@ -335,9 +558,9 @@ def _clip_box(box: Sequence[int], height: int, width: int, what: str) -> tuple[i
 
 
 def encode_lights_exr(lights: Sequence[tuple[int, Sequence[int], np.ndarray]], bands_nm: Sequence[float],
-                      bins: int, height: int, width: int, *, dtype: str = "float32",
+                      bins: int, height: int, width: int, *, dtype: str | Storage = DEFAULT_STORAGE,
                       attrs: Mapping[str, Any] | None = None, what: str = "flickering group",
-                      notes: list[str] | None = None) -> bytes:
+                      notes: list[str] | None = None, stats: StorageStats | None = None) -> bytes:
     """Encode a flickering group as a multi-part EXR: one part ``light<id>`` per light, sparse data windows.
 
     Args:
@@ -347,12 +570,14 @@ def encode_lights_exr(lights: Sequence[tuple[int, Sequence[int], np.ndarray]], b
         bands_nm: the C band centres (nm).
         bins: K, the number of time bins.
         height, width: full image size H, W (the display window).
-        dtype: ``"float32"`` or ``"float16"`` (per-part FLOAT fallback above 65504).
+        dtype: storage as in :func:`encode_static_exr`; each light (K x C bins) is one layer with its own
+            scale, attribute ``lfmbench_scale`` of its part.
+        notes, stats: as in :func:`encode_static_exr`.
 
     A group with no visible light is stored as one placeholder part named ``empty`` (1x1, channel ``empty``,
     attribute ``lfmbench_nparts = 0``) because an EXR file needs at least one part.
     """
-    _check_dtype(dtype)
+    st = resolve_storage(dtype)
     notes = [] if notes is None else notes
     if bins < 1:
         raise ValueError(f"{what}: bins must be >= 1, got {bins}")
@@ -371,15 +596,17 @@ def encode_lights_exr(lights: Sequence[tuple[int, Sequence[int], np.ndarray]], b
         if a.shape != (bins, len(bands_nm), y1 - y0, x1 - x0):
             raise ValueError(f"{pw}: expected shape (K={bins}, C={len(bands_nm)}, {y1 - y0}, {x1 - x0}) "
                              f"for bbox {(y0, x0, y1, x1)}, got {a.shape}")
-        a, st = _store(a, dtype, pw, notes)
-        channels = {names[k][c]: a[k, c] for k in range(bins) for c in range(len(bands_nm))}
-        header = _base_header(width, height, (y0, x0, y1, x1))
+        ls = store_layer(a, st, pw)
+        _note_layer(ls, pw, notes, stats)
+        channels = {names[k][c]: ls.data[k, c] for k in range(bins) for c in range(len(bands_nm))}
+        header = _base_header(width, height, (y0, x0, y1, x1), st.compression)
         header.update(attrs or {})
         header.update({ATTR["kind"]: "lights", ATTR["light"]: lid, ATTR["bins"]: int(bins),
-                       ATTR["units"]: RADIANCE_UNIT, ATTR["stored"]: st})
+                       ATTR["units"]: RADIANCE_UNIT, ATTR["stored"]: ls.pixel_type, scale_attr(None): ls.scale,
+                       ATTR["mantissa"]: st.bits})
         parts.append((lid, header, channels))
     if not parts:
-        header = _base_header(width, height, (0, 0, 1, 1))
+        header = _base_header(width, height, (0, 0, 1, 1), st.compression)
         header.update(attrs or {})
         header.update({ATTR["kind"]: "lights", ATTR["nparts"]: 0, ATTR["bins"]: int(bins)})
         return _encode([exr.Part(header, {EMPTY_PART: np.zeros((1, 1), np.float32)}, EMPTY_PART)], what)
@@ -457,6 +684,8 @@ def read_exr(path: str | os.PathLike, *, header_only: bool = False) -> list[ExrP
     out = []
     for p in f.parts:
         h = p.header
+        if ATTR["version"] in h:
+            _check_version(h[ATTR["version"]], f"EXR file {path} part {p.name()!r} ({ATTR['version']})")
         (dx0, dy0), (dx1, dy1) = (tuple(int(v) for v in c) for c in h["dataWindow"])
         (wx0, wy0), (wx1, wy1) = (tuple(int(v) for v in c) for c in h["displayWindow"])
         names = [c.name for c in h.get("channels", [])] if header_only else list(p.channels)
@@ -471,6 +700,23 @@ def read_exr(path: str | os.PathLike, *, header_only: bool = False) -> list[ExrP
         out.append(ExrPart(name=p.name(), header=dict(h), window=(dy0, dx0, dy1 + 1, dx1 + 1),
                            size=(wy1 - wy0 + 1, wx1 - wx0 + 1), channel_names=names, channels=chans))
     return out
+
+
+def layer_scale(part: ExrPart, window: str | None, path: str | os.PathLike) -> float:
+    """The scale 2^e by which a layer's stored values exceed the radiance (format version 2, section 6 of
+    ``docs/corpus-format.md``): header attribute :func:`scale_attr` of ``window`` (``None``: a light part),
+    1.0 when absent (version 1). ``CorpusFileError`` naming the file unless it is a power of two 2^e,
+    e in :data:`SCALE_EXP_RANGE`."""
+    key = scale_attr(window)
+    v = part.header.get(key, 1.0)
+    ok = isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v > 0
+    if ok:
+        f, q = math.frexp(float(v))
+        ok = f == 0.5 and SCALE_EXP_RANGE[0] <= q - 1 <= SCALE_EXP_RANGE[1]
+    if not ok:
+        raise CorpusFileError(f"EXR file {path} part {part.name!r}: attribute {key} = {v!r} must be a power of "
+                              f"two 2^e with e in [{SCALE_EXP_RANGE[0]}, {SCALE_EXP_RANGE[1]}]")
+    return float(v)
 
 
 def _stack(part: ExrPart, names: Sequence[str], path: Path) -> np.ndarray:
@@ -611,17 +857,36 @@ def validate_meta(meta: Mapping[str, Any], where: str = "meta.json") -> None:
             raise ValueError(f"{where}: lights[{i}].group {light.get('group')!r} is not in groups")
 
 
+def _check_meta_storage(meta: Mapping[str, Any], path: Path | str) -> None:
+    """Check the optional ``storage`` entry of a ``meta.json`` (format version 2); raise naming ``path``."""
+    sto = meta.get("storage")
+    if sto is None:
+        return
+    if not isinstance(sto, Mapping):
+        raise CorpusFileError(f"{path}: field 'storage' must be an object")
+    _check_version(sto.get("format_version"), f"{path} storage.format_version")
+
+
 # ----------------------------------------------------------------------------------------------- reader
 def _empty_manifest() -> dict:
     return {"format": FORMAT_NAME, "version": FORMAT_VERSION, "scenes": [], "files": {}}
 
 
+def _check_version(v: Any, where: str) -> int:
+    """``v`` as a readable format version; ``CorpusFileError`` naming ``where`` (and the version) otherwise."""
+    if isinstance(v, int) and not isinstance(v, bool) and v > FORMAT_VERSION:
+        raise CorpusFileError(f"{where}: corpus format version {v} is newer than this lfmbench reads "
+                              f"(versions {', '.join(map(str, READABLE_VERSIONS))}); upgrade lfmbench")
+    if v not in READABLE_VERSIONS or isinstance(v, bool):
+        raise CorpusFileError(f"{where}: unsupported corpus format version {v!r} (this lfmbench reads versions "
+                              f"{', '.join(map(str, READABLE_VERSIONS))})")
+    return int(v)
+
+
 def _check_manifest(man: Any, path: Path) -> dict:
     if not isinstance(man, dict) or man.get("format") != FORMAT_NAME:
         raise CorpusFileError(f"{path}: not an lfmbench corpus manifest (format must be {FORMAT_NAME!r})")
-    if man.get("version") != FORMAT_VERSION:
-        raise CorpusFileError(f"{path}: unsupported corpus version {man.get('version')!r} "
-                              f"(this lfmbench reads version {FORMAT_VERSION})")
+    _check_version(man.get("version"), str(path))
     if not isinstance(man.get("scenes"), list) or not isinstance(man.get("files"), dict):
         raise CorpusFileError(f"{path}: 'scenes' must be a list and 'files' an object")
     return man
@@ -681,6 +946,7 @@ class Corpus:
             p = self._scene_dir(scene_id) / "meta.json"
             m = _load_json(p, "scene metadata")
             validate_meta(m, str(p))
+            _check_meta_storage(m, p)
             self._meta[scene_id] = m
         return self._meta[scene_id]
 
@@ -747,6 +1013,9 @@ class Corpus:
         names = static_channels(window, self._band_list(m, bands))
         parts = self._parts(path)
         arr = _stack(parts[0], names, path)
+        scale = layer_scale(parts[0], window, path)
+        if scale != 1.0:
+            arr /= np.float32(scale)  # exact: a power of two
         if arr.shape[1:] != (m["height"], m["width"]):
             raise CorpusChannelError(f"EXR file {path}: image is {arr.shape[1:]}, meta.json says "
                                      f"({m['height']}, {m['width']})")
@@ -778,6 +1047,9 @@ class Corpus:
             if mt is None:
                 raise CorpusChannelError(f"EXR file {path}: unexpected part {p.name!r} (want light<id>)")
             arr = _stack(p, names, path).reshape(k, len(bl), p.window[2] - p.window[0], p.window[3] - p.window[1])
+            scale = layer_scale(p, None, path)
+            if scale != 1.0:
+                arr /= np.float32(scale)  # exact: a power of two
             if self.check_values:
                 _check_values(arr, path, f"part {p.name!r}")
             out.append((int(mt.group(1)), p.window, arr))
@@ -816,22 +1088,26 @@ class CorpusWriter:
 
     Args:
         root: corpus directory (created if needed).
-        dtype: ``"float32"`` (EXR FLOAT, default) or ``"float16"`` (HALF, with FLOAT fallback above 65504;
-            HALF has 11 significant bits and flushes values below ~6e-8 to 0).
+        dtype: storage of the radiance layers: a name of :data:`STORAGES` or a :class:`Storage`. Default
+            ``"compact"`` (HALF x per-layer 2^e, mantissas rounded to 8 bits: <= 2^-9 ~ 0.2 % relative per value,
+            ZIP); ``"float16"`` (HALF x 2^e, 10 bits, <= 2^-11); ``"float32"`` (lossless FLOAT, as version 1).
         render: optional dict of the options the corpus is rendered with, stored in the manifest as
             ``"render"``; re-opening with different options raises ``ValueError`` (resume safety).
     """
 
-    def __init__(self, root: str | os.PathLike, *, dtype: str = "float32",
+    def __init__(self, root: str | os.PathLike, *, dtype: str | Storage = DEFAULT_STORAGE,
                  render: Mapping[str, Any] | None = None) -> None:
         self.root = Path(root)
-        self.dtype = _check_dtype(dtype)
+        self.storage = resolve_storage(dtype)
+        self.dtype = dtype
         if self.root.exists() and not self.root.is_dir():
             raise ValueError(f"corpus root {self.root} exists and is not a directory")
         self.root.mkdir(parents=True, exist_ok=True)
         mpath = self.root / MANIFEST_NAME
         if mpath.exists():
             self.manifest = _check_manifest(_load_json(mpath, "manifest"), mpath)
+            # version-2 readers read version-1 files: new scenes may join an old corpus, which becomes version 2
+            self.manifest["version"] = FORMAT_VERSION
         else:
             self.manifest = _empty_manifest()
             self.write_manifest()  # an empty corpus is a valid corpus
@@ -888,8 +1164,8 @@ class CorpusWriter:
 
     def encode_scene(self, scene_id: str, scene: Mapping[str, Any], meta: Mapping[str, Any],
                      frames: Iterable[Mapping[str, Any]]) -> Iterator[tuple[str, bytes]]:
-        """:func:`encode_scene` with this writer's dtype (HALF-overflow notes go to ``self.notes``)."""
-        return encode_scene(scene_id, scene, meta, frames, dtype=self.dtype, notes=self.notes)
+        """:func:`encode_scene` with this writer's storage (HALF -> FLOAT fallback notes go to ``self.notes``)."""
+        return encode_scene(scene_id, scene, meta, frames, dtype=self.storage, notes=self.notes)
 
     def write_files(self, files: Iterable[tuple[str, bytes]]) -> dict[str, str]:
         """:func:`write_files` under this corpus root."""
@@ -967,12 +1243,14 @@ def _attrs(scene_id: str, frame: int, group: str) -> dict:
 
 
 def encode_scene(scene_id: str, scene: Mapping[str, Any], meta: Mapping[str, Any],
-                 frames: Iterable[Mapping[str, Any]], *, dtype: str = "float32",
+                 frames: Iterable[Mapping[str, Any]], *, dtype: str | Storage = DEFAULT_STORAGE,
                  notes: list[str] | None = None) -> Iterator[tuple[str, bytes]]:
     """Yield ``(relpath, bytes)`` for every file of a scene, frame by frame (checks shapes vs ``meta``).
 
-    Pure encoding (no disk access), so that render workers can call it; ``dtype`` as in
-    :class:`CorpusWriter`, ``notes`` receives the HALF -> FLOAT fallback messages.
+    Pure encoding (no disk access), so that render workers can call it; ``dtype`` (the storage) as in
+    :class:`CorpusWriter`. ``meta.json`` gets a ``storage`` entry (format version, pixel type, compression,
+    mantissa bits). ``notes`` receives at most one message per scene: the layers stored FLOAT instead of HALF
+    (if any) with the largest measured errors; the error summary of every scene is logged at INFO level.
 
     ``frames`` yields the renderer's frame dicts (``render_tools.render.render_frames``)::
 
@@ -981,10 +1259,13 @@ def encode_scene(scene_id: str, scene: Mapping[str, Any], meta: Mapping[str, Any
          "aux": {"depth.Z": (H,W), "depth.R": (H,W), "mask.instance": (H,W), "mask.light": (H,W)}}
     """
     check_scene_id(scene_id)
+    st = resolve_storage(dtype)
     meta = dict(meta)
     if meta.get("scene_id") != scene_id:
         raise ValueError(f"meta.json scene_id {meta.get('scene_id')!r} != scene id {scene_id!r}")
     validate_meta(meta, f"meta.json of scene {scene_id}")
+    meta["storage"] = {"format_version": FORMAT_VERSION, **st.to_dict()}
+    stats = StorageStats()
     sdir = f"{SCENES_DIR}/{scene_id}"
     yield f"{sdir}/scene.json", _json_bytes(scene)
     yield f"{sdir}/meta.json", _json_bytes(meta)
@@ -1011,7 +1292,7 @@ def encode_scene(scene_id: str, scene: Mapping[str, Any], meta: Mapping[str, Any
             if group_storage(meta, g) != "static":
                 raise ValueError(f"{what}: group {g!r} is flickering with bins > 0 in meta.json but was "
                                  "rendered as static windows")
-            data = encode_static_exr(wins, bands, dtype=dtype, what=what, notes=notes,
+            data = encode_static_exr(wins, bands, dtype=st, what=what, notes=notes, stats=stats,
                                      attrs=_attrs(scene_id, n, g))
             if (H, W) != tuple(np.asarray(wins["short"]).shape[1:]):
                 raise ValueError(f"{what}: image size {np.asarray(wins['short']).shape[1:]} != meta.json "
@@ -1025,8 +1306,8 @@ def encode_scene(scene_id: str, scene: Mapping[str, Any], meta: Mapping[str, Any
             bad = [lid for lid, _, _ in ls if int(lid) not in known]
             if bad:
                 raise ValueError(f"{what}: light ids {bad} are not lights of group {g!r} in meta.json")
-            yield what, encode_lights_exr(ls, bands, _group_bins(meta, g), H, W, dtype=dtype,
-                                          what=what, notes=notes, attrs=_attrs(scene_id, n, g))
+            yield what, encode_lights_exr(ls, bands, _group_bins(meta, g), H, W, dtype=st,
+                                          what=what, notes=notes, stats=stats, attrs=_attrs(scene_id, n, g))
         if fr.get("aux"):
             with_aux.append(int(n))
             yield f"{fdir}/aux.exr", encode_aux_exr(fr["aux"], H, W, what=f"{fdir}/aux.exr",
@@ -1036,6 +1317,10 @@ def encode_scene(scene_id: str, scene: Mapping[str, Any], meta: Mapping[str, Any
                          f"{meta['frames']}")
     if with_aux and len(with_aux) != len(seen):
         raise ValueError(f"scene {scene_id}: aux given for frames {sorted(with_aux)} only (all frames or none)")
+    summary = stats.summary(f"scene {scene_id}", st)
+    log.info("%s", summary)
+    if stats.fallbacks and notes is not None:
+        notes.append(summary)
 
 
 def write_files(root: str | os.PathLike, files: Iterable[tuple[str, bytes]]) -> dict[str, str]:
@@ -1166,6 +1451,7 @@ def _validate_scene(root: Path, sid: str, files: Mapping[str, str], rep: Validat
     try:
         meta = _load_json(mp, "scene metadata")
         validate_meta(meta, str(mp))
+        _check_meta_storage(meta, mp)
     except (CorpusError, ValueError) as exc:
         err(str(exc))
         return
@@ -1215,6 +1501,8 @@ def _validate_scene(root: Path, sid: str, files: Mapping[str, str], rep: Validat
                 _validate_channels(p, parts[0], want, rep)
                 if parts[0].window != (0, 0, H, W):
                     err(f"{p}: data window {parts[0].window} must cover the whole image")
+                for w in STATIC_WINDOWS:
+                    _validate_storage_attrs(p, parts[0], w, rep)
                 _validate_pixels(p, parts[0], rep, check_pixels)
             else:
                 K = _group_bins(meta, g)
@@ -1233,6 +1521,7 @@ def _validate_scene(root: Path, sid: str, files: Mapping[str, str], rep: Validat
                     if not (0 <= y0 < y1 <= H and 0 <= x0 < x1 <= W):
                         err(f"{p}: part {part.name!r} data window {part.window} outside the {H}x{W} image")
                     _validate_channels(p, part, want, rep)
+                    _validate_storage_attrs(p, part, None, rep)
                     _validate_pixels(p, part, rep, check_pixels)
 
 
@@ -1245,6 +1534,18 @@ def _validate_channels(p: Path, part: ExrPart, want: set[str], rep: ValidationRe
     if extra:
         rep.errors.append(f"{p} part {part.name!r}: unexpected channels {extra[:4]}"
                           f"{' ...' if len(extra) > 4 else ''} ({len(extra)} in all)")
+
+
+def _validate_storage_attrs(p: Path, part: ExrPart, window: str | None, rep: ValidationReport) -> None:
+    """Format-version-2 attributes: the layer's scale (a power of two) and ``lfmbench_mantissa_bits``."""
+    try:
+        layer_scale(part, window, p)
+    except CorpusFileError as exc:
+        rep.errors.append(str(exc))
+    mb = part.header.get(ATTR["mantissa"])
+    if mb is not None and (isinstance(mb, bool) or not isinstance(mb, int) or not 1 <= mb <= 23):
+        rep.errors.append(f"{p} part {part.name!r}: attribute {ATTR['mantissa']} = {mb!r} must be an integer "
+                          "in [1, 23]")
 
 
 def _validate_pixels(p: Path, part: ExrPart, rep: ValidationReport, check_pixels: bool) -> None:

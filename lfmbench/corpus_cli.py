@@ -51,7 +51,8 @@ def import_isetlfm_cmd(
     out: Path = typer.Argument(..., help="Corpus directory to create or extend."),
     scene: Optional[List[str]] = typer.Option(None, "--scene", help="Scene id to import (repeatable; default all)."),
     seed: int = typer.Option(0, "--seed", help="Seed of the train/val/test split."),
-    half: bool = typer.Option(False, "--half", help="Store EXR HALF (FLOAT where a value exceeds 65504)."),
+    half: bool = typer.Option(False, "--half", help="Store EXR HALF x per-layer 2^e (lossless ZIP; default: "
+                                                    "FLOAT, an exact copy; docs/corpus-format.md)."),
     repair: bool = typer.Option(False, "--repair", help="Set NaN/inf/negative radiance to 0 instead of failing."),
     no_resume: bool = typer.Option(False, "--no-resume", help="Re-import scenes that are already complete."),
 ) -> None:

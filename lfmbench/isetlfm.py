@@ -329,7 +329,8 @@ def import_isetlfm(src: str | Path, out: str | Path, *, scenes: list[str] | None
         out: corpus directory.
         scenes: scene ids to import (default all found).
         seed: split seed.
-        dtype: ``"float32"`` or ``"float16"`` storage.
+        dtype: storage (a name of :data:`lfmbench.corpus.STORAGES`): ``"float32"`` (exact copy, default) or
+            ``"float16"`` (HALF x per-layer 2^e), ``"compact"``.
         repair: replace NaN / inf / negative radiance by 0 (counted) instead of failing.
         resume: skip scenes already complete in ``out`` (checksums verified).
         progress: called with each scene id when it is done.

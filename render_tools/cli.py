@@ -44,14 +44,19 @@ def render_cmd(
                                           help="Mitsuba variant: cuda_ad_spectral, llvm_ad_spectral or "
                                                "scalar_spectral (default: auto, CUDA > LLVM > scalar; "
                                                "LFMBENCH_VARIANT=cpu skips CUDA)."),
-    half: bool = typer.Option(False, "--half", help="Store EXR HALF (FLOAT where a value exceeds 65504)."),
+    storage: Optional[str] = typer.Option(None, "--storage",
+                                          help="Radiance storage: compact (HALF x 2^e, 5 mantissa bits, PIZ; "
+                                               "default for a new corpus), float16 (HALF x 2^e, ZIP) or float32 "
+                                               "(lossless FLOAT, format version 1). Default on resume: the "
+                                               "corpus's own (docs/corpus-format.md, docs/storage-benchmark.md)."),
+    half: bool = typer.Option(False, "--half", help="Same as --storage float16."),
     no_resume: bool = typer.Option(False, "--no-resume", help="Re-render scenes that are already complete."),
 ) -> None:
     """Render driving scenes (Mitsuba 3, spectral, light groups, time bins) into a corpus; resumable."""
     from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-    from lfmbench.corpus import CorpusError, CorpusWriteError, CorpusWriter
+    from lfmbench.corpus import DEFAULT_STORAGE, STORAGES, CorpusError, CorpusWriteError, CorpusWriter
     from render_tools import jobs as J
 
     console = Console(stderr=True, soft_wrap=True)
@@ -102,7 +107,17 @@ def render_cmd(
                     backend.validate_scene(sc)
                 except ValueError as exc:
                     fail(f"--scene {p}: {exc}")
-        dtype = "float16" if half else "float32"
+        if half and storage not in (None, "float16"):
+            fail(f"--half means --storage float16, but --storage {storage} was given")
+        dtype = "float16" if half else storage
+        if dtype is None:  # resume with the corpus's own storage, else the default of new corpora
+            try:
+                old = json.loads((Path(out) / "manifest.json").read_text()).get("render") or {}
+            except (OSError, json.JSONDecodeError, AttributeError):
+                old = {}
+            dtype = old.get("dtype") if old.get("dtype") in STORAGES else DEFAULT_STORAGE
+        if dtype not in STORAGES:
+            fail(f"--storage must be one of {', '.join(sorted(STORAGES))}, got {dtype!r}")
         ids = [str(sc.get("scene_id") or Path(p).stem) for p, sc in zip(scene_file, scene_dicts)] \
             if scene_dicts else None
         job_list = J.make_jobs(out, n_scenes=scenes, seed=seed, options=options, scenes=scene_dicts,

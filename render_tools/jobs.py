@@ -25,8 +25,8 @@ from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
-from lfmbench.corpus import (CorpusWriteError, CorpusWriter, check_scene_id, encode_scene, prune_scene_dir,
-                             write_files)
+from lfmbench.corpus import (DEFAULT_STORAGE, CorpusWriteError, CorpusWriter, check_scene_id, encode_scene,
+                             prune_scene_dir, write_files)
 
 __all__ = ["PROFILES_FILE", "Backend", "default_backend", "load_profile", "scene_seed", "scene_id_for",
            "RenderJob", "make_jobs", "run_job", "RunSummary", "run_jobs", "RenderInterrupted"]
@@ -110,13 +110,13 @@ class RenderJob:
     options: dict
     scene: dict | None = None
     scene_kw: dict = field(default_factory=dict)
-    dtype: str = "float32"
+    dtype: str = DEFAULT_STORAGE
     backend: Backend | None = None
 
 
 def make_jobs(out: str | Path, *, n_scenes: int, seed: int, options: Mapping[str, Any],
               scenes: Sequence[dict] | None = None, scene_ids: Sequence[str] | None = None,
-              scene_kw: Mapping[str, Any] | None = None, dtype: str = "float32",
+              scene_kw: Mapping[str, Any] | None = None, dtype: str = DEFAULT_STORAGE,
               backend: Backend | None = None) -> list[RenderJob]:
     """The job list: ``n_scenes`` generated scenes, or one job per explicit scene dict in ``scenes`` (id from
     ``scene_ids``, else its ``scene_id`` field, else ``scene<i>``)."""
