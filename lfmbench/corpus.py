@@ -310,7 +310,7 @@ class Storage:
 
 
 #: Named storages (``lfmbench render --storage NAME``). ``compact`` is the default of new corpora (chosen in
-#: ``docs/storage-benchmark.md``); ``float32`` writes exactly what format version 1 wrote (lossless FLOAT, ZIP).
+#: ``docs/storage-benchmark.md``); ``float32`` stores the pixels as format version 1 did (lossless FLOAT, ZIP).
 STORAGES = {
     "compact": Storage("float16", "piz", 5),
     "float16": Storage("float16", "zip", None),
