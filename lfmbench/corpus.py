@@ -310,7 +310,7 @@ class Storage:
 
 
 #: Named storages (``lfmbench render --storage NAME``). ``compact`` is the default of new corpora (chosen in
-#: ``docs/storage-benchmark.md``); ``float32`` writes exactly what format version 1 wrote (lossless FLOAT, ZIP).
+#: ``docs/storage-benchmark.md``); ``float32`` stores the pixels as format version 1 did (lossless FLOAT, ZIP).
 STORAGES = {
     "compact": Storage("float16", "piz", 5),
     "float16": Storage("float16", "zip", None),
@@ -508,7 +508,7 @@ def encode_static_exr(windows: Mapping[str, np.ndarray], bands_nm: Sequence[floa
         windows: ``{"short": (C, H, W), "long": (C, H, W)}`` time-averaged spectral radiance over each exposure
             window, W sr^-1 m^-2 nm^-1, finite and >= 0.
         bands_nm: the C band centres (nm).
-        dtype: storage, a name of :data:`STORAGES` (``"compact"``: HALF x 2^e with 8 mantissa bits, ZIP;
+        dtype: storage, a name of :data:`STORAGES` (``"compact"``: HALF x 2^e with 5 mantissa bits, PIZ;
             ``"float16"``; ``"float32"``: lossless FLOAT as in format version 1) or a :class:`Storage`. Each
             window is one layer with its own scale, attribute ``lfmbench_scale_<window>``.
         attrs: extra header attributes (str / int / float values).
@@ -1089,8 +1089,8 @@ class CorpusWriter:
     Args:
         root: corpus directory (created if needed).
         dtype: storage of the radiance layers: a name of :data:`STORAGES` or a :class:`Storage`. Default
-            ``"compact"`` (HALF x per-layer 2^e, mantissas rounded to 8 bits: <= 2^-9 ~ 0.2 % relative per value,
-            ZIP); ``"float16"`` (HALF x 2^e, 10 bits, <= 2^-11); ``"float32"`` (lossless FLOAT, as version 1).
+            ``"compact"`` (HALF x per-layer 2^e, mantissas rounded to 5 bits: <= 2^-6 ~ 1.6 % relative per value,
+            PIZ); ``"float16"`` (HALF x 2^e, 10 bits, <= 2^-11); ``"float32"`` (lossless FLOAT, as version 1).
         render: optional dict of the options the corpus is rendered with, stored in the manifest as
             ``"render"``; re-opening with different options raises ``ValueError`` (resume safety).
     """

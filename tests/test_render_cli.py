@@ -306,3 +306,24 @@ def test_render_end_to_end_mitsuba(tmp_path, monkeypatch):
     assert total > 0  # something is lit
     aux = c.read_aux(sid, 0)
     assert aux["depth.Z"].shape == (18, 32) and np.nanmin(aux["depth.Z"]) > 0
+
+
+# ------------------------------------------------------------------------------------------ storage
+def test_render_storage_default_and_resume(tmp_path, fake):
+    """New corpora default to the compact storage; a resume without --storage keeps the corpus's own."""
+    out = tmp_path / "c"
+    r = run("--out", str(out), "--scenes", "1", *ARGS)
+    assert r.exit_code == 0, r.output
+    man = json.loads((out / "manifest.json").read_text())
+    assert man["render"]["dtype"] == C.DEFAULT_STORAGE and man["version"] == C.FORMAT_VERSION
+    assert C.Corpus(out).meta("scene00000")["storage"]["compression"] == C.STORAGES[C.DEFAULT_STORAGE].compression
+    # a float32 corpus (as rendered before format 2) resumes as float32 when --storage is not given
+    old = tmp_path / "old"
+    assert run("--out", str(old), "--scenes", "1", "--storage", "float32", *ARGS).exit_code == 0
+    r = run("--out", str(old), "--scenes", "2", *ARGS)
+    assert r.exit_code == 0 and "1 rendered" in r.output, r.output
+    assert C.Corpus(old).meta("scene00001")["storage"]["dtype"] == "float32"
+    r = run("--out", str(old), "--scenes", "2", "--storage", "compact", *ARGS)
+    assert r.exit_code == 2 and "dtype" in r.output  # different options on an existing corpus
+    r = run("--out", str(tmp_path / "x"), "--storage", "float64", *ARGS)
+    assert r.exit_code == 2 and "--storage must be one of" in r.output
