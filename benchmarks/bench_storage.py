@@ -69,18 +69,7 @@ TARGET_MB = 120.0
 def load_scene(corpus: C.Corpus, sid: str) -> tuple[dict, dict, list[dict]]:
     """scene.json, meta.json and the renderer-style frame dicts of ``sid`` (float32 radiance, W sr^-1 m^-2 nm^-1)."""
     meta = corpus.meta(sid)
-    frames = []
-    for n in range(meta["frames"]):
-        fr = {"frame": n, "static": {}, "lights": {}}
-        for g in meta["groups"]:
-            if C.group_storage(meta, g) == "static":
-                fr["static"][g] = {w: corpus.read_static(sid, n, g, w) for w in C.STATIC_WINDOWS}
-            else:
-                fr["lights"][g] = corpus.read_light_bins(sid, n, g)
-        if corpus.path(sid, n, "aux").is_file():
-            fr["aux"] = corpus.read_aux(sid, n)
-        frames.append(fr)
-    return corpus.scene(sid), meta, frames
+    return corpus.scene(sid), meta, read_back(corpus, sid, meta, range(meta["frames"]))
 
 
 def layers(frames: list[dict]):

@@ -63,38 +63,27 @@ LLVM_SEARCH_DIRS = ("/usr/lib/x86_64-linux-gnu", "/usr/lib64", "/usr/lib", "/usr
 #: Seconds allowed for the child-process probe.
 PROBE_TIMEOUT_S = 120.0
 
-_PROBE_SCRIPT = r"""
-import mitsuba as mi, drjit as dr
-mi.set_variant('llvm_ad_spectral')
-s = mi.load_dict({'type': 'scene', 'integrator': {'type': 'path'},
-    'sensor': {'type': 'perspective', 'film': {'type': 'specfilm', 'width': 8, 'height': 8,
-               'b': {'type': 'regular', 'wavelength_min': 500, 'wavelength_max': 510, 'values': '1, 1'}}},
-    'e': {'type': 'constant', 'radiance': 1.0},
-    'r': {'type': 'sphere', 'center': [0, 0, 4], 'radius': 1.0}})
-img = mi.render(s, spp=4)
-v = float(dr.mean(mi.TensorXf(img)).array[0])
-assert v == v and v > 0, v
-print('LLVM_PROBE_OK', v)
-"""
-
-_CUDA_PROBE_SCRIPT = r"""
+_PROBE_TEMPLATE = r"""
 import sys
 import mitsuba as mi, drjit as dr
 try:
-    mi.set_variant('cuda_ad_spectral')
-except Exception as exc:  # no driver / no device: drjit raises ImportError here
-    print('CUDA_PROBE_FAIL', type(exc).__name__, str(exc).splitlines()[0] if str(exc) else '')
+    mi.set_variant('{variant}')
+except Exception as exc:  # no driver / no device / no libLLVM: drjit raises ImportError here
+    print('{tag}_PROBE_FAIL', type(exc).__name__, str(exc).splitlines()[0] if str(exc) else '')
     sys.exit(3)
-s = mi.load_dict({'type': 'scene', 'integrator': {'type': 'path'},
-    'sensor': {'type': 'perspective', 'film': {'type': 'specfilm', 'width': 8, 'height': 8,
-               'b': {'type': 'regular', 'wavelength_min': 500, 'wavelength_max': 510, 'values': '1, 1'}}},
-    'e': {'type': 'constant', 'radiance': 1.0},
-    'r': {'type': 'sphere', 'center': [0, 0, 4], 'radius': 1.0}})
+s = mi.load_dict({{'type': 'scene', 'integrator': {{'type': 'path'}},
+    'sensor': {{'type': 'perspective', 'film': {{'type': 'specfilm', 'width': 8, 'height': 8,
+               'b': {{'type': 'regular', 'wavelength_min': 500, 'wavelength_max': 510, 'values': '1, 1'}}}}}},
+    'e': {{'type': 'constant', 'radiance': 1.0}},
+    'r': {{'type': 'sphere', 'center': [0, 0, 4], 'radius': 1.0}}}})
 img = mi.render(s, spp=4)
 v = float(dr.mean(mi.TensorXf(img)).array[0])
 assert v == v and v > 0, v
-print('CUDA_PROBE_OK', v)
+print('{tag}_PROBE_OK', v)
 """
+#: Child-process probes: render an 8x8 scene with the variant; print ``<TAG>_PROBE_OK`` or ``<TAG>_PROBE_FAIL``.
+_PROBE_SCRIPT = _PROBE_TEMPLATE.format(variant="llvm_ad_spectral", tag="LLVM")
+_CUDA_PROBE_SCRIPT = _PROBE_TEMPLATE.format(variant="cuda_ad_spectral", tag="CUDA")
 
 _chosen: str | None = None
 #: Why the last :func:`probe_cuda` said no (for error messages).

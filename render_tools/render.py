@@ -238,8 +238,7 @@ class SceneGeometry:
 
 
 def _round_span(a: int, b: int, n: int) -> tuple[int, int]:
-    """Grow [a, b) to a multiple of :data:`CROP_QUANTUM_PX` (fewer distinct film sizes = fewer JIT kernels),
-    kept inside [0, n)."""
+    """Grow [a, b) to a multiple of :data:`CROP_QUANTUM_PX`, kept inside [0, n)."""
     a, b = max(a, 0), min(b, n)
     size = min(-(-(b - a) // CROP_QUANTUM_PX) * CROP_QUANTUM_PX, n)
     a = max(0, min(a - (size - (b - a)) // 2, n - size))

@@ -229,11 +229,7 @@ def test_newer_version_refused_naming_file(tmp_path):
     mpath.write_text(json.dumps(man))
     # one EXR file of a newer version
     p = tmp_path / "scenes/scene00000/f001/skymap.exr"
-    f = OpenEXR.File(str(p), separate_channels=True)
-    part = f.parts[0]
-    hdr = {k: v for k, v in part.header.items() if k not in ("channels", "name")}
-    hdr["lfmbench_format_version"] = 7
-    OpenEXR.File([OpenEXR.Part(hdr, {k: np.array(v.pixels) for k, v in part.channels.items()}, "static")]).write(str(p))
+    _set_header(p, "lfmbench_format_version", 7)
     with pytest.raises(C.CorpusFileError, match=r"f001/skymap\.exr.*version 7 is newer"):
         C.Corpus(tmp_path).read_static(meta["scene_id"], 1, "skymap", "long")
     assert any("f001/skymap.exr" in e and "version 7" in e for e in C.validate_corpus(tmp_path).errors)
@@ -246,14 +242,18 @@ def test_newer_version_refused_naming_file(tmp_path):
         C.Corpus(tmp_path).meta(meta["scene_id"])
 
 
+def _set_header(p, key, value):
+    """Rewrite the static EXR file ``p`` with header attribute ``key`` set to ``value`` (pixels unchanged)."""
+    part = OpenEXR.File(str(p), separate_channels=True).parts[0]
+    hdr = {k: v for k, v in part.header.items() if k not in ("channels", "name")}
+    hdr[key] = value
+    OpenEXR.File([OpenEXR.Part(hdr, {k: np.array(v.pixels) for k, v in part.channels.items()}, "static")]).write(str(p))
+
+
 def test_bad_scale_attribute_is_reported(tmp_path):
     meta, _, _ = _write(tmp_path, "compact")
     p = tmp_path / "scenes/scene00000/f000/headlights.exr"
-    f = OpenEXR.File(str(p), separate_channels=True)
-    part = f.parts[0]
-    hdr = {k: v for k, v in part.header.items() if k not in ("channels", "name")}
-    hdr["lfmbench_scale_long"] = 3.0
-    OpenEXR.File([OpenEXR.Part(hdr, {k: np.array(v.pixels) for k, v in part.channels.items()}, "static")]).write(str(p))
+    _set_header(p, "lfmbench_scale_long", 3.0)
     with pytest.raises(C.CorpusFileError, match=r"f000/headlights\.exr.*lfmbench_scale_long = 3\.0.*power of two"):
         C.Corpus(tmp_path).read_static(meta["scene_id"], 0, "headlights", "long")
     errs = C.validate_corpus(tmp_path).errors
