@@ -1,6 +1,6 @@
 """Import the released ISET-LFM dataset (Jamdar et al., ISETAuto scenes rendered by PBRT) into an lfmbench corpus.
 
-Source layout (``/work/shared/reference/upstream.md``, "Released dataset layout")::
+Source layout (the upstream ISET-LFM repository, https://github.com/AyushJam/iset-lfm, its released dataset layout)::
 
     SRC/<SceneID>/<SceneID>_<group>/{lpd,spd}/01.exr .. 03.exr      group in headlights, streetlights,
                                                                     otherlights, skymap

@@ -1,7 +1,7 @@
 """Mitsuba 3 variant selection: ``cuda_ad_spectral`` where a CUDA device works, else the fast
 ``llvm_ad_spectral`` path where a working libLLVM exists, else ``scalar_spectral`` with a warning.
 
-Facts this relies on (``/work/shared/reference/environment.md``): drjit's LLVM backend loads the shared
+Facts this relies on (measured on this project's machines; docs/rendering.md): drjit's LLVM backend loads the shared
 library named by ``DRJIT_LIBLLVM_PATH``; LLVM 15 crashes inside code generation on AVX-512 CPUs (a segfault
 that cannot be caught in-process), while Debian's ``libllvm19`` works and is 5-10x faster than the scalar
 variant. A candidate library is therefore *probed in a child process* (render of a tiny scene) before the

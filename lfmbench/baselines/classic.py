@@ -14,7 +14,7 @@ Defines
 
 References
 ----------
-- ISET-LFM upstream fusion (``/work/shared/reference/upstream.md``, "Upstream baseline fusion"): saturated =
+- ISET-LFM upstream fusion (the upstream ISET-LFM repository, https://github.com/AyushJam/iset-lfm, its fusion step): saturated =
   volts >= 0.95 swing; both LPD unsaturated -> mean; only LCG unsaturated -> LCG; both saturated -> SPD x 100;
   else 0. No exposure-time correction.
 - J. Solhusvik et al., "A 1280x960 2.8 um HDR CIS with DCG and split-pixel combined", IISW 2019 (three captures).
