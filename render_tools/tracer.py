@@ -10,8 +10,10 @@ is traced once per launch and compiled once per (variant, spectral setup, scene 
 
 Light sets replace per-group and per-light Mitsuba scenes. The scene is loaded once per frame with every
 emitter on; a lane of set ``k`` counts only emission of the emitters in ``k`` (a light group, or one light's
-lamp face plus its beam) and samples next-event estimation only from them (alias table per set, in proportion
-to the emitters' sampling weights). By linearity of light transport in the emission this is exactly the image
+lamp face plus its beam) and samples next-event estimation only from them: at each path vertex one emitter of the
+set, drawn in proportion to an estimate of the light it brings to that point (intensity, beam cone or face
+cosine, receiver cosine, inverse square distance: :meth:`Tracer._light_weight`), so that of 40 streetlights the
+few near the point get the samples (uniform or flux-proportional choice spent most of them on far lamps). By linearity of light transport in the emission this is exactly the image
 of the scene in which only set ``k`` emits (the previous per-group scenes; checked against Mitsuba's own
 ``path`` integrator in tests/test_render_tracer.py).
 
@@ -49,6 +51,15 @@ N_LAMBDA = 4
 MAX_LANES = 1 << 28
 #: Index value meaning "no set" in the per-emitter lookup tables.
 NO_SET = 0xFFFFFFFF
+#: Emitter kinds in :class:`LightSets` (selection weight, :meth:`Tracer._light_weight`).
+KIND_FACE, KIND_SPOT, KIND_ENV = 0.0, 1.0, 2.0
+#: Added to a lamp's face area to bound the 1 / d^2 of its selection weight near the lamp, m^2.
+LIGHT_R2_M2 = 0.01
+#: Floor of a selection weight's angular factors (behind a face, outside a beam, grazing receiver): every emitter
+#: keeps a positive probability, so next-event estimation stays unbiased whatever the weights get wrong.
+WEIGHT_FLOOR = 1e-3
+#: Floor of the receiver cosine in the selection weight.
+RECEIVER_FLOOR = 0.1
 
 
 @dataclass
@@ -60,8 +71,10 @@ class Tile:
     set (:class:`LightSets`). velocity: (3,) m/s world velocity of an object held at its ``t_ref`` (s) position,
     rendered as relative camera motion (0 for none). key: 32-bit integer naming the tile; a lane's random
     numbers depend only on (seed, key, its index in the tile), so a tile renders the same whatever else is in
-    the list (a group left out changes nothing in the others). The tile's output is (K, C, h, w) float32 radiance,
-    W sr^-1 m^-2 nm^-1, each bin the time average over its interval.
+    the list (a group left out changes nothing in the others). gap_at, gap_len: a time interval [gap_at,
+    gap_at + gap_len) (s, absolute) cut out of a one-bin tile: its samples cover [t_start, t_start + bin_len +
+    gap_len) minus the gap (a long exposure without the short one inside it). The tile's output is (K, C, h, w)
+    float32 radiance, W sr^-1 m^-2 nm^-1, each bin the time average over its interval.
     """
 
     crop: tuple
@@ -73,6 +86,8 @@ class Tile:
     velocity: tuple = (0.0, 0.0, 0.0)
     t_ref: float = 0.0
     key: int = 0
+    gap_at: float = math.inf
+    gap_len: float = 0.0
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -80,60 +95,46 @@ class Tile:
         return y1 - y0, x1 - x0
 
 
-def alias_table(weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Walker's alias table (Vose's construction) of a discrete distribution.
-
-    Args:
-        weights: (n,) non-negative weights with a positive sum.
-    Returns:
-        (q (n,) float64 acceptance probabilities, alias (n,) int64): draw i = floor(u n), keep it with
-        probability q[i], else take alias[i]; each i is drawn with probability weights[i] / sum(weights)
-        (M. D. Vose, "A linear algorithm for generating random numbers with a given distribution", IEEE TSE 1991).
-    """
-    w = np.asarray(weights, dtype=np.float64)
-    if w.ndim != 1 or w.size == 0 or np.any(~np.isfinite(w)) or np.any(w < 0) or w.sum() <= 0:
-        raise ValueError(f"weights: need a non-empty 1-D array of finite values >= 0 with a positive sum, got {w}")
-    n = w.size
-    p = w * (n / w.sum())
-    q = np.ones(n)
-    alias = np.arange(n)
-    small = [i for i in range(n) if p[i] < 1.0]
-    large = [i for i in range(n) if p[i] >= 1.0]
-    while small and large:
-        s, g = small.pop(), large.pop()
-        q[s], alias[s] = p[s], g
-        p[g] -= 1.0 - p[s]
-        (small if p[g] < 1.0 else large).append(g)
-    return q, alias
-
-
 class LightSets:
-    """The light sets of a loaded frame scene and their sampling tables.
+    """The light sets of a loaded frame scene and what next-event estimation needs to pick a light in them.
 
     Sets: one per light group present (``group:<name>``: every emitter of the group; ``skymap`` is the
     environment emitter) and one per light (``light:<id>``: its lamp face and its beam, if any). Built from the
     shape/emitter ids of :func:`render_tools.mitsuba_scene.mitsuba_dict` (scene loaded with ``emit="all"``).
+
+    Per emitter (flat arrays, the members of set k at ``start[k]`` .. ``start[k] + count[k] - 1``): its position
+    (m, world), axis (unit), the cosine of its cut-off, a radius^2 (m^2) that bounds the distance term, its
+    intensity (cd: lamp luminance x face area) and whether it is a Lambertian face, a spot beam or the
+    environment; :meth:`Tracer._light_weight` turns them into the selection weight at a shading point.
     """
 
     def __init__(self, mi, dr, loaded, scene: dict, groups):
         self.names: list[str] = []
-        members: list[list] = []  # per set: [(emitter, weight)]
+        members: list[list] = []  # per set: [(emitter, geometry row)]
         by_light: dict[int, list] = {}
         sky = []
         shapes = {sh.id(): sh for sh in loaded.shapes()}
         emitters = {em.id(): em for em in loaded.emitters()}
         for lt in scene["lights"]:
             sh = shapes.get(ms.light_shape_id(lt["id"]))
+            n = np.asarray(lt["normal"], dtype=np.float64)
+            n = n / np.linalg.norm(n)
+            area = ms.plane_area(lt)
+            inten = max(float(lt["luminance_cd_m2"]) * area, 1e-12)
+            r2 = area + LIGHT_R2_M2
             ems = []
             if sh is not None and sh.emitter() is not None:
-                ems.append(sh.emitter())
-            b = emitters.get(ms.beam_id(lt["id"]))
-            if b is not None:
-                ems.append(b)
+                bb = sh.bbox()
+                c = 0.5 * (np.array(bb.min, dtype=np.float64) + np.array(bb.max, dtype=np.float64))
+                ems.append((sh.emitter(), (*c, *n, 0.0, r2, inten, KIND_FACE)))
+                b = emitters.get(ms.beam_id(lt["id"]))
+                if b is not None:
+                    p = c + ms.BEAM_OFFSET_M * n
+                    ems.append((b, (*p, *n, math.cos(math.radians(float(lt["spread_deg"]))), r2, inten, KIND_SPOT)))
             by_light[lt["id"]] = ems
         for em in loaded.emitters():
             if em.is_environment():
-                sky.append(em)
+                sky.append((em, (0.0, 0.0, 0.0, 0.0, 0.0, 1.0, -1.0, 1.0, 1.0, KIND_ENV)))
         self.index: dict[str, int] = {}
 
         def add(name, ems):
@@ -141,7 +142,7 @@ class LightSets:
                 return
             self.index[name] = len(self.names)
             self.names.append(name)
-            members.append([(e, max(float(e.sampling_weight()), 0.0)) for e in ems])
+            members.append(ems)
 
         for g in groups:
             if g == "skymap":
@@ -150,43 +151,30 @@ class LightSets:
                 add(f"group:{g}", [e for lt in scene["lights"] if lt["group"] == g for e in by_light[lt["id"]]])
         for lid, ems in by_light.items():
             add(f"light:{lid}", ems)
-        # flat alias tables, and per-emitter (set, pmf) for the group set and the light set it belongs to
-        flat_em, flat_q, flat_alias, flat_pmf, start, count = [], [], [], [], [], []
-        ids_of = {}
+        # flat per-emitter rows; per emitter registry id: its group set and light set, and its row in each
+        rows, start, count = [], [], []
+        flat_em = []
         group_of, light_of = {}, {}
         for k, mem in enumerate(members):
-            w = np.array([wt for _, wt in mem])
-            if w.sum() <= 0:
-                w = np.ones_like(w)
-            q, al = alias_table(w)
-            start.append(len(flat_em))
+            start.append(len(rows))
             count.append(len(mem))
-            pmf = w / w.sum()
-            for (e, _), qi, ai, pi in zip(mem, q, al, pmf):
+            for e, geo in mem:
                 eid = int(dr.reinterpret_array(mi.UInt32, mi.EmitterPtr(e))[0])
-                ids_of[eid] = e
-                (group_of if self.names[k].startswith("group:") else light_of)[eid] = (k, float(pi))
+                (group_of if self.names[k].startswith("group:") else light_of)[eid] = (k, len(rows))
                 flat_em.append(e)
-                flat_q.append(qi)
-                flat_alias.append(start[-1] + ai)
-                flat_pmf.append(pi)
-        n_id = max(ids_of, default=0) + 1
-        gset = np.full(n_id, NO_SET, np.uint32)
-        lset = np.full(n_id, NO_SET, np.uint32)
-        gpmf = np.zeros(n_id, np.float32)
-        lpmf = np.zeros(n_id, np.float32)
-        for eid, (k, p) in group_of.items():
-            gset[eid], gpmf[eid] = k, p
-        for eid, (k, p) in light_of.items():
-            lset[eid], lpmf[eid] = k, p
+                rows.append(geo)
+        n_id = max(list(group_of) + list(light_of), default=0) + 1
+        tab = np.full((4, n_id), NO_SET, np.uint32)  # group set, its row, light set, its row
+        for eid, (k, r) in group_of.items():
+            tab[0, eid], tab[1, eid] = k, r
+        for eid, (k, r) in light_of.items():
+            tab[2, eid], tab[3, eid] = k, r
         self.emitters = mi.EmitterPtr(flat_em) if flat_em else None
-        self.q = mi.Float(np.asarray(flat_q, np.float32))
-        self.alias = mi.UInt32(np.asarray(flat_alias, np.uint32))
-        self.start = mi.UInt32(np.asarray(start, np.uint32))
-        self.count = mi.UInt32(np.asarray(count, np.uint32))
-        self.gset, self.lset = mi.UInt32(gset), mi.UInt32(lset)
-        self.gpmf, self.lpmf = mi.Float(gpmf), mi.Float(lpmf)
-        self.pmf = mi.Float(np.asarray(flat_pmf, np.float32))
+        self.start = mi.UInt32(np.asarray(start + [0], np.uint32))
+        self.count = mi.UInt32(np.asarray(count + [0], np.uint32))
+        self.gset, self.grow, self.lset, self.lrow = (mi.UInt32(t) for t in tab)
+        geo = np.asarray(rows + [rows[-1]] if rows else [[0.0] * 10] * 2, dtype=np.float32).T
+        self.geo = [mi.Float(np.ascontiguousarray(c)) for c in geo]
         self.n_id = dr.opaque(mi.UInt32, n_id)
 
     def __contains__(self, name: str) -> bool:
@@ -300,6 +288,9 @@ class Tracer:
             h, w = t.shape
             if h <= 0 or w <= 0 or t.bins < 1 or t.spp < 1:
                 raise ValueError(f"tiles[{i}]: empty crop {t.crop}, bins {t.bins} or spp {t.spp}")
+            if t.gap_len < 0 or (t.gap_len > 0 and t.bins != 1):
+                raise ValueError(f"tiles[{i}]: a time gap needs gap_len >= 0 s and one bin, got {t.gap_len} s, "
+                                 f"{t.bins} bins")
             outs.append((size, (t.bins, C, h, w)))
             n_split = max(1, -(-h * w * t.bins * P * t.spp // MAX_LANES))
             base, extra = divmod(t.spp, n_split)
@@ -335,7 +326,7 @@ class Tracer:
             y0, x0, y1, x1 = t.crop
             key = (int(t.key) * 0x9E3779B1 + j * 0x85EBCA77) & 0xFFFFFFFF
             rows.append((off, y0, x0, y1 - y0, x1 - x0, t.bins, sp, t.light_set, out, t.t_start, t.bin_len, wgt,
-                         *[float(v) for v in t.velocity], t.t_ref, key))
+                         *[float(v) for v in t.velocity], t.t_ref, key, min(t.gap_at, 3e38), t.gap_len))
             off += (y1 - y0) * (x1 - x0) * t.bins * self.P
         # a dummy last row: no table has a single entry (Dr.Jit loads size-1 arrays as scalars with an alignment
         # that depends on the allocation, which changes the kernel's hash and forces a recompile)
@@ -344,7 +335,7 @@ class Tracer:
         F = lambda c: mi.Float(a[:, c].astype(np.float32))  # noqa: E731
         tab = {"off": mi.UInt32(np.append(a[:-1, 0], off).astype(np.uint32)), "y0": U(1), "x0": U(2), "h": U(3),
                "w": U(4), "K": U(5), "spp": U(6), "set": U(7), "out": U(8), "t0": F(9), "dt": F(10), "wgt": F(11),
-               "vx": F(12), "vy": F(13), "vz": F(14), "tref": F(15), "key": U(16)}
+               "vx": F(12), "vy": F(13), "vz": F(14), "tref": F(15), "key": U(16), "gap": F(17), "gap_len": F(18)}
         n_tiles = dr.opaque(mi.UInt32, len(rows))
         self._trace(buf, tab, n_tiles, off, seed)
         dr.eval(buf)
@@ -382,7 +373,7 @@ class Tracer:
         vel = mi.Vector3f(g("vx", mi.Float), g("vy", mi.Float), g("vz", mi.Float))
         L = self._pixel(sampler, spp, rot, mi.sample_tea_32(local, tkey + 0x3C6EF372)[0], mi.Float(g("x0") + x), mi.Float(g("y0") + y),
                         g("t0", mi.Float) + mi.Float(k) * g("dt", mi.Float), g("dt", mi.Float), vel,
-                        g("tref", mi.Float), lo_nm, g("set"))
+                        g("tref", mi.Float), lo_nm, g("set"), g("gap", mi.Float), g("gap_len", mi.Float))
         wgt = g("wgt", mi.Float)
         out0 = g("out")
         for j in range(N_LAMBDA):
@@ -390,9 +381,10 @@ class Tracer:
             dr.scatter_reduce(dr.ReduceOp.Add, buf, L[j] * wgt, idx, bands[j] < self.n_bands)
 
     @dr.syntax
-    def _pixel(self, sampler, spp, rot, key, x0, y0, t0, dt, vel, t_ref, lo_nm, lset):
+    def _pixel(self, sampler, spp, rot, key, x0, y0, t0, dt, vel, t_ref, lo_nm, lset, gap_at, gap_len):
         """Sum over ``spp`` samples (UInt32 per lane) of the radiance through pixel [x0, x0 + 1) x [y0, y0 + 1)
-        (px) at uniform times in [t0, t0 + dt) (s); wavelength j of a sample is uniform in [lo_nm[j],
+        (px) at uniform times in [t0, t0 + dt) (s), times at or after ``gap_at`` moved on by ``gap_len`` (s);
+        wavelength j of a sample is uniform in [lo_nm[j],
         lo_nm[j] + band width) (nm), stratified over the samples (stratum (s + rot) mod spp). Pixel x, y and
         time are stratified too, each through its own permutation of the strata keyed by ``key`` (UInt32 per
         lane; :func:`_permute`), so that the strata of different dimensions are paired at random: one rotation
@@ -412,6 +404,7 @@ class Tracer:
                                 sampler.next_float32())
             t = t0 + dt * dr.select(pow2, (mi.Float(_permute(s, key, 3, mask)) + sampler.next_float32()) * inv,
                                     sampler.next_float32())
+            t = dr.select(t >= gap_at, t + gap_len, t)
             ray = self.camera_ray(px, py, t, vel, t_ref)
             u = (mi.Float((s + rot) % spp) + sampler.next_float32()) * inv
             ray.wavelengths = mi.Spectrum(lo_nm[0] + u * self.band_w, lo_nm[1] + u * self.band_w,
@@ -421,18 +414,59 @@ class Tracer:
             s += 1
         return acc
 
-    def _set_pmf(self, em_ptr, lset):
-        """Probability with which lane set ``lset`` selects emitter ``em_ptr`` in next-event estimation
-        (0: the emitter is not in the set, its light is not recorded by this lane)."""
+    def _light_weight(self, row, p, n):
+        """Selection weight of emitter ``row`` (UInt32, a row of :class:`LightSets`) at a shading point ``p``
+        (Point3f, m) with normal ``n`` (Vector3f): an estimate of the light it brings there, intensity (cd) x
+        emission factor (the face's Lambertian cosine; 1 inside a beam's cone, else 0) x receiver |cosine|
+        (floored at :data:`RECEIVER_FLOOR`) / max(d^2, r^2) (m^2); the environment: its intensity entry (1).
+        Angular factors are floored at :data:`WEIGHT_FLOOR`, so no emitter's probability is ever 0 (the estimate
+        stays unbiased whatever the weight gets wrong: it only steers the samples). The point-light-style
+        estimate of an emitter's contribution used to choose lights in proportion to it (as in pbrt-v4's
+        power- and distance-aware light samplers, M. Pharr, W. Jakob, G. Humphreys, Physically Based Rendering,
+        4th ed., 2023, section 12.6)."""
+        mi, dr = self.mi, self.dr
+        G = [dr.gather(mi.Float, c, row) for c in self.sets.geo]
+        d = mi.Vector3f(p[0] - G[0], p[1] - G[1], p[2] - G[2])  # from the light to the point
+        d2 = dr.squared_norm(d)
+        inv = dr.rsqrt(dr.maximum(d2, 1e-12))
+        cos_e = (d[0] * G[3] + d[1] * G[4] + d[2] * G[5]) * inv
+        ang = dr.select(G[9] == KIND_FACE, cos_e, dr.select(cos_e >= G[6] - 1e-2, 1.0, 0.0))
+        rec = dr.maximum(dr.abs(dr.dot(n, d)) * inv, RECEIVER_FLOOR)
+        w = G[8] * dr.maximum(ang, WEIGHT_FLOOR) * rec / dr.maximum(d2, G[7])
+        return dr.select(G[9] == KIND_ENV, G[8], w)
+
+    @dr.syntax
+    def _choose_light(self, sampler, start, cnt, p, n, active):
+        """Draw one emitter of a lane's set (rows ``start`` .. ``start + cnt - 1``) with probability in proportion
+        to :meth:`_light_weight` at (``p``, ``n``), by weighted reservoir sampling (one pass, one uniform per
+        member: row r replaces the choice with probability w_r / (w_0 + ... + w_r); M. T. Chao, "A general
+        purpose unequal probability sampling plan", Biometrika 69, 1982). Returns (row, its probability, sum
+        of the weights)."""
+        i = mi.UInt32(0)
+        wsum = mi.Float(0.0)
+        row = mi.UInt32(start)
+        w_row = mi.Float(0.0)
+        while dr.hint(active & (i < cnt), label="lfm light choice"):
+            r = start + i
+            w = self._light_weight(r, p, n)
+            wsum += w
+            take = sampler.next_float32() * wsum < w
+            row = dr.select(take, r, row)
+            w_row = dr.select(take, w, w_row)
+            i += 1
+        return row, dr.select(wsum > 0, w_row / wsum, 0.0), wsum
+
+    def _set_row(self, em_ptr, lset):
+        """Row of emitter ``em_ptr`` in lane set ``lset`` (UInt32) and whether it is a member (its light is
+        recorded by this lane only then)."""
         mi, dr = self.mi, self.dr
         eid = dr.reinterpret_array(mi.UInt32, em_ptr)
         S = self.sets
         ok = eid < S.n_id
-        gs = dr.gather(mi.UInt32, S.gset, eid, ok)
-        ls = dr.gather(mi.UInt32, S.lset, eid, ok)
-        pg = dr.gather(mi.Float, S.gpmf, eid, ok)
-        pl = dr.gather(mi.Float, S.lpmf, eid, ok)
-        return dr.select(ok & (gs == lset), pg, dr.select(ok & (ls == lset), pl, 0.0))
+        in_g = ok & (dr.gather(mi.UInt32, S.gset, eid, ok) == lset)
+        in_l = ok & (dr.gather(mi.UInt32, S.lset, eid, ok) == lset)
+        row = dr.select(in_g, dr.gather(mi.UInt32, S.grow, eid, in_g), dr.gather(mi.UInt32, S.lrow, eid, in_l))
+        return row, in_g | in_l
 
     @dr.syntax
     def _radiance(self, sampler, ray, lset):
@@ -448,28 +482,28 @@ class Tracer:
         si_prev = dr.zeros(mi.SurfaceInteraction3f)
         pdf_prev = mi.Float(1.0)
         delta_prev = mi.Bool(True)
+        wsum_prev = mi.Float(0.0)
         cnt = dr.gather(mi.UInt32, S.count, lset)
         start = dr.gather(mi.UInt32, S.start, lset)
         while dr.hint(active, max_iterations=self.max_depth, label="lfm light-set path"):
             si = self.scene.ray_intersect(ray, ray_flags=mi.RayFlags.All, coherent=depth == 0, active=active)
             bsdf = si.bsdf(ray)
-            # emission hit by the camera ray or by BSDF sampling, if the emitter is in this lane's set
+            # emission hit by the camera ray or by BSDF sampling, if the emitter is in this lane's set; its MIS
+            # weight needs the probability with which the previous vertex's next-event estimation picks it
             ds = mi.DirectionSample3f(self.scene, si=si, ref=si_prev)
-            pmf_hit = self._set_pmf(ds.emitter, lset)
+            row_hit, in_set = self._set_row(ds.emitter, lset)
+            pmf_hit = dr.select(in_set & ~delta_prev, self._light_weight(row_hit, si_prev.p, si_prev.n), 0.0) \
+                / dr.select(wsum_prev > 0, wsum_prev, 1.0)
             em_pdf = dr.select(delta_prev, 0.0, pmf_hit * ds.emitter.pdf_direction(si_prev, ds, active & ~delta_prev))
-            hit_em = active & (pmf_hit > 0)
+            hit_em = active & in_set
             L += beta * _mis_weight(pdf_prev, em_pdf) * ds.emitter.eval(si, hit_em)
 
             active_next = active & (depth + 1 < self.max_depth) & si.is_valid()
-            # next-event estimation from this lane's set (alias table)
+            # next-event estimation: one emitter of this lane's set, chosen in proportion to its estimated light
+            # at this point (:meth:`_choose_light`)
             active_em = active_next & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
-            u = sampler.next_float32() * mi.Float(cnt)
-            i0 = dr.minimum(mi.UInt32(u), cnt - 1)
-            idx = start + i0
-            keep = (u - mi.Float(i0)) < dr.gather(mi.Float, S.q, idx, active_em)
-            idx = dr.select(keep, idx, dr.gather(mi.UInt32, S.alias, idx, active_em))
+            idx, pmf_em, wsum = self._choose_light(sampler, start, cnt, si.p, si.n, active_em)
             em = dr.gather(mi.EmitterPtr, S.emitters, idx, active_em)
-            pmf_em = dr.gather(mi.Float, S.pmf, idx, active_em)
             ds_em, w_em = em.sample_direction(si, mi.Point2f(sampler.next_float32(), sampler.next_float32()),
                                               active_em)
             active_em &= (ds_em.pdf != 0.0) & (pmf_em > 0)
@@ -489,6 +523,7 @@ class Tracer:
             si_prev = dr.detach(si, True)
             pdf_prev = bs.pdf
             delta_prev = mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)
+            wsum_prev = wsum
             active = active_next & (dr.max(beta) != 0)
             depth += 1
         return L

@@ -16,20 +16,6 @@ LED = {"model": "led", "peak_nm": 630.0, "fwhm_nm": 18.0}
 HPS = {"model": "light_source", "name": "HPS"}
 
 
-def test_alias_table_reproduces_the_distribution_exactly():
-    w = np.array([3.0, 0.0, 1.0, 5.5, 0.5])
-    q, alias = tracer.alias_table(w)
-    n = len(w)
-    # probability of i = (q[i] + sum over j with alias[j] == i of (1 - q[j])) / n
-    p = q / n
-    for j in range(n):
-        if q[j] < 1.0:
-            p[alias[j]] += (1.0 - q[j]) / n
-    assert np.allclose(p, w / w.sum(), atol=1e-12)
-    with pytest.raises(ValueError, match="weights"):
-        tracer.alias_table(np.array([0.0, 0.0]))
-
-
 def _street():
     """A grey ground and wall lit by a tail lamp (otherlights, on a moving car) and an HPS streetlight."""
     s = scene.empty_scene(speed_mps=10.0, fov_x_deg=50.0)
@@ -107,6 +93,60 @@ def test_light_set_matches_solo_render_with_object_motion(street):
         ys, xs = np.mgrid[0:bins.shape[2], 0:bins.shape[3]]
         g, w = bins[k].sum(0), want[k].sum(0)
         assert (g * xs).sum() / g.sum() == pytest.approx((w * xs).sum() / w.sum(), abs=0.2)
+
+
+def _many_streetlights():
+    """One group of six streetlights at 3-40 m, four with downward beams (spot cones of 50 deg), one facing
+    away from everything (its selection weight is floored, never 0), over a grey ground and a glossy wall."""
+    s = scene.empty_scene(speed_mps=0.0, fov_x_deg=60.0)
+    s["materials"]["grey"] = {"type": "diffuse", "rgb": [0.4, 0.4, 0.4]}
+    s["materials"]["gloss"] = {"type": "roughplastic", "rgb": [0.3, 0.3, 0.5], "alpha": 0.2}
+    s["objects"].append({"id": 0, "kind": "ground", "velocity_mps": [0, 0, 0],
+                         "parts": [{"shape": "rect", "center": [25, 0, 0], "size": [60, 30], "normal": [0, 0, 1],
+                                    "material": "grey"},
+                                   {"shape": "rect", "center": [20, -4, 2], "size": [40, 4], "normal": [0, 1, 0],
+                                    "material": "gloss"}]})
+    for i, (x, y, spread, normal) in enumerate([(3, 2, 50, [0, 0, -1]), (8, -2, 50, [0, 0, -1]), (15, 2, 90, [0, 0, -1]),
+                                               (25, -2, 50, [0, 0, -1]), (40, 2, 50, [0, 0, -1]),
+                                               (12, 3, 90, [0, 0, 1])]):
+        s["lights"].append({"shape": "rect", "id": i, "group": "streetlights", "kind": "streetlight", "instance": -1,
+                            "center": [x, y, 5.0], "normal": normal, "size": [0.4, 0.4], "spread_deg": float(spread),
+                            "spectrum": HPS, "luminance_cd_m2": 5e4})
+    return scene.validate_scene(s)
+
+
+def test_light_choice_by_estimated_contribution_is_unbiased():
+    """Next-event estimation picks among many lamps in proportion to an estimate of their light at the point
+    (distance, beam cone, face orientation): the image must equal Mitsuba's (uniform or flux-proportional
+    choice; its own C++ path integrator) within Monte Carlo error, on the ground and on a glossy wall."""
+    import mitsuba as mi
+
+    from render_tools import mitsuba_scene as ms
+
+    s = _many_streetlights()
+    opts = render.RenderOptions(width=48, height=32, spp=32, bins=1, frames=1, aux=False, seed=4,
+                                groups=("streetlights",))
+    fr = next(render.render_frames(s, opts))
+    ref = reference.ReferenceRenderer(s, opts)
+    tm = render.frame_timing(s, opts, 0)
+    sc = mi.load_dict(ms.mitsuba_dict(s, 0.5 * (tm["window"][0] + tm["window"][1]), emit="streetlights"))
+    a, b = tm["long"]
+    want = ref.render(sc, a, b - a, 64, 12)[0]
+    got = fr["static"]["streetlights"]["long"]
+    lamp = want.sum(0) > 20 * np.median(want.sum(0))  # lamp faces seen directly (pixel-coverage noise), grown
+    for _ in range(2):
+        lamp = lamp | np.pad(lamp, 1)[:-2, 1:-1] | np.pad(lamp, 1)[2:, 1:-1] | np.pad(lamp, 1)[1:-1, :-2] | \
+            np.pad(lamp, 1)[1:-1, 2:]
+    assert lamp.sum() < 150
+    g2, w2 = np.where(lamp, 0, got.sum(0)), np.where(lamp, 0, want.sum(0))
+    # the ground (lower half, lit by all six lamps at 3-40 m) tightly; the glossy wall's highlights of the lamps
+    # are rare bright paths (+-15 % between seeds of either renderer), so the whole image loosely
+    assert g2[16:].sum() == pytest.approx(w2[16:].sum(), rel=0.02)
+    assert g2.sum() == pytest.approx(w2.sum(), rel=0.06)
+    gblk, wblk = g2[16:].reshape(2, 8, 6, 8).sum((1, 3)), w2[16:].reshape(2, 8, 6, 8).sum((1, 3))
+    big = wblk > 0.05 * wblk.max()
+    assert big.sum() >= 8
+    assert np.allclose(gblk[big], wblk[big], rtol=0.06)
 
 
 def test_tiles_are_independent_of_the_other_tiles_in_the_launch(street):
