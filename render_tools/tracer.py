@@ -12,7 +12,7 @@ Light sets replace per-group and per-light Mitsuba scenes. The scene is loaded o
 emitter on; a lane of set ``k`` counts only emission of the emitters in ``k`` (a light group, or one light's
 lamp face plus its beam) and samples next-event estimation only from them: at each path vertex one emitter of the
 set, drawn in proportion to an estimate of the light it brings to that point (intensity, beam cone or face
-cosine, receiver cosine, inverse square distance: :meth:`Tracer._light_weight`), so that of 40 streetlights the
+cosine, receiver cosine, inverse square distance: :meth:`Tracer._lamp_weights`), so that of 40 streetlights the
 few near the point get the samples (uniform or flux-proportional choice spent most of them on far lamps). By linearity of light transport in the emission this is exactly the image
 of the scene in which only set ``k`` emits (the previous per-group scenes; checked against Mitsuba's own
 ``path`` integrator in tests/test_render_tracer.py).
@@ -51,10 +51,10 @@ N_LAMBDA = 4
 MAX_LANES = 1 << 28
 #: Index value meaning "no set" in the per-emitter lookup tables.
 NO_SET = 0xFFFFFFFF
-#: Emitter kinds in :class:`LightSets` (selection weight, :meth:`Tracer._light_weight`).
-KIND_FACE, KIND_SPOT, KIND_ENV = 0.0, 1.0, 2.0
-#: Added to a lamp's face area to bound the 1 / d^2 of its selection weight near the lamp, m^2.
-LIGHT_R2_M2 = 0.01
+#: Beam cut-off cosine entries of a :class:`LightSets` row meaning "a lamp without a beam" and "the environment".
+NO_BEAM, ENV_ROW = -2.0, -3.0
+#: Bound of the 1 / d^2 of a lamp's selection weight near the lamp: d^2 is taken as at least this, m^2.
+LIGHT_R2_M2 = 0.05
 #: Floor of a selection weight's angular factors (behind a face, outside a beam, grazing receiver): every emitter
 #: keeps a positive probability, so next-event estimation stays unbiased whatever the weights get wrong.
 WEIGHT_FLOOR = 1e-3
@@ -102,78 +102,82 @@ class LightSets:
     environment emitter) and one per light (``light:<id>``: its lamp face and its beam, if any). Built from the
     shape/emitter ids of :func:`render_tools.mitsuba_scene.mitsuba_dict` (scene loaded with ``emit="all"``).
 
-    Per emitter (flat arrays, the members of set k at ``start[k]`` .. ``start[k] + count[k] - 1``): its position
-    (m, world), axis (unit), the cosine of its cut-off, a radius^2 (m^2) that bounds the distance term, its
-    intensity (cd: lamp luminance x face area) and whether it is a Lambertian face, a spot beam or the
-    environment; :meth:`Tracer._light_weight` turns them into the selection weight at a shading point.
+    One row per lamp (the members of set k are rows ``start[k]`` .. ``start[k] + count[k] - 1``): its face
+    emitter and beam emitter (or none), position (m, world), axis (unit), the cosine of the beam's cut-off
+    (:data:`NO_BEAM` without one, :data:`ENV_ROW` for the environment) and intensity (cd: luminance x face
+    area); :meth:`Tracer._lamp_weights` turns them into selection weights at a shading point.
     """
 
     def __init__(self, mi, dr, loaded, scene: dict, groups):
         self.names: list[str] = []
-        members: list[list] = []  # per set: [(emitter, geometry row)]
-        by_light: dict[int, list] = {}
+        members: list[list] = []  # per set: [(face emitter, beam emitter or None, geometry row)]
+        by_light: dict[int, tuple] = {}
         sky = []
         shapes = {sh.id(): sh for sh in loaded.shapes()}
         emitters = {em.id(): em for em in loaded.emitters()}
         for lt in scene["lights"]:
             sh = shapes.get(ms.light_shape_id(lt["id"]))
+            if sh is None or sh.emitter() is None:
+                continue
             n = np.asarray(lt["normal"], dtype=np.float64)
             n = n / np.linalg.norm(n)
-            area = ms.plane_area(lt)
-            inten = max(float(lt["luminance_cd_m2"]) * area, 1e-12)
-            r2 = area + LIGHT_R2_M2
-            ems = []
-            if sh is not None and sh.emitter() is not None:
-                bb = sh.bbox()
-                c = 0.5 * (np.array(bb.min, dtype=np.float64) + np.array(bb.max, dtype=np.float64))
-                ems.append((sh.emitter(), (*c, *n, 0.0, r2, inten, KIND_FACE)))
-                b = emitters.get(ms.beam_id(lt["id"]))
-                if b is not None:
-                    p = c + ms.BEAM_OFFSET_M * n
-                    ems.append((b, (*p, *n, math.cos(math.radians(float(lt["spread_deg"]))), r2, inten, KIND_SPOT)))
-            by_light[lt["id"]] = ems
+            bb = sh.bbox()
+            c = 0.5 * (np.array(bb.min, dtype=np.float64) + np.array(bb.max, dtype=np.float64))
+            beam = emitters.get(ms.beam_id(lt["id"]))
+            cos_cut = math.cos(math.radians(float(lt["spread_deg"]))) if beam is not None else NO_BEAM
+            inten = max(float(lt["luminance_cd_m2"]) * ms.plane_area(lt), 1e-12)
+            by_light[lt["id"]] = (sh.emitter(), beam, (*c, *n, cos_cut, inten))
         for em in loaded.emitters():
             if em.is_environment():
-                sky.append((em, (0.0, 0.0, 0.0, 0.0, 0.0, 1.0, -1.0, 1.0, 1.0, KIND_ENV)))
+                sky.append((em, None, (0.0, 0.0, 0.0, 0.0, 0.0, 1.0, ENV_ROW, 1.0)))
         self.index: dict[str, int] = {}
 
-        def add(name, ems):
-            if not ems:
+        def add(name, rows):
+            if not rows:
                 return
             self.index[name] = len(self.names)
             self.names.append(name)
-            members.append(ems)
+            members.append(rows)
 
         for g in groups:
             if g == "skymap":
                 add("group:skymap", sky)
             else:
-                add(f"group:{g}", [e for lt in scene["lights"] if lt["group"] == g for e in by_light[lt["id"]]])
-        for lid, ems in by_light.items():
-            add(f"light:{lid}", ems)
-        # flat per-emitter rows; per emitter registry id: its group set and light set, and its row in each
-        rows, start, count = [], [], []
-        flat_em = []
+                add(f"group:{g}", [by_light[lt["id"]] for lt in scene["lights"]
+                                   if lt["group"] == g and lt["id"] in by_light])
+        for lid, row in by_light.items():
+            add(f"light:{lid}", [row])
+        # flat rows; per emitter registry id: (its group set, row, is beam) and (its light set, row, is beam)
+        rows, faces, beams, start, count = [], [], [], [], []
         group_of, light_of = {}, {}
+
+        def eid(e):
+            return int(dr.reinterpret_array(mi.UInt32, mi.EmitterPtr(e))[0])
+
         for k, mem in enumerate(members):
             start.append(len(rows))
             count.append(len(mem))
-            for e, geo in mem:
-                eid = int(dr.reinterpret_array(mi.UInt32, mi.EmitterPtr(e))[0])
-                (group_of if self.names[k].startswith("group:") else light_of)[eid] = (k, len(rows))
-                flat_em.append(e)
+            for face, beam, geo in mem:
+                of = group_of if self.names[k].startswith("group:") else light_of
+                of[eid(face)] = (k, len(rows), 0)
+                if beam is not None:
+                    of[eid(beam)] = (k, len(rows), 1)
+                faces.append(face)
+                beams.append(beam)
                 rows.append(geo)
         n_id = max(list(group_of) + list(light_of), default=0) + 1
-        tab = np.full((4, n_id), NO_SET, np.uint32)  # group set, its row, light set, its row
-        for eid, (k, r) in group_of.items():
-            tab[0, eid], tab[1, eid] = k, r
-        for eid, (k, r) in light_of.items():
-            tab[2, eid], tab[3, eid] = k, r
-        self.emitters = mi.EmitterPtr(flat_em) if flat_em else None
+        tab = np.full((6, n_id), NO_SET, np.uint32)  # group set, its row, is beam, light set, its row, is beam
+        for j, of in ((0, group_of), (3, light_of)):
+            for e, (k, r, isb) in of.items():
+                tab[j, e], tab[j + 1, e], tab[j + 2, e] = k, r, isb
+        # a dummy last entry: no table has a single entry (Dr.Jit loads size-1 arrays as scalars with an alignment
+        # that depends on the allocation, which changes the kernel's hash and forces a recompile)
+        self.faces = mi.EmitterPtr(faces + faces[-1:]) if faces else None
+        self.beams = mi.EmitterPtr(beams + beams[-1:]) if faces else None
         self.start = mi.UInt32(np.asarray(start + [0], np.uint32))
         self.count = mi.UInt32(np.asarray(count + [0], np.uint32))
-        self.gset, self.grow, self.lset, self.lrow = (mi.UInt32(t) for t in tab)
-        geo = np.asarray(rows + [rows[-1]] if rows else [[0.0] * 10] * 2, dtype=np.float32).T
+        self.tab = [mi.UInt32(t) for t in np.concatenate([tab, np.full((6, 1), NO_SET, np.uint32)], 1)]
+        geo = np.asarray(rows + rows[-1:] if rows else [[0.0] * 8] * 2, dtype=np.float32).T
         self.geo = [mi.Float(np.ascontiguousarray(c)) for c in geo]
         self.n_id = dr.opaque(mi.UInt32, n_id)
 
@@ -414,59 +418,70 @@ class Tracer:
             s += 1
         return acc
 
-    def _light_weight(self, row, p, n):
-        """Selection weight of emitter ``row`` (UInt32, a row of :class:`LightSets`) at a shading point ``p``
-        (Point3f, m) with normal ``n`` (Vector3f): an estimate of the light it brings there, intensity (cd) x
-        emission factor (the face's Lambertian cosine; 1 inside a beam's cone, else 0) x receiver |cosine|
-        (floored at :data:`RECEIVER_FLOOR`) / max(d^2, r^2) (m^2); the environment: its intensity entry (1).
-        Angular factors are floored at :data:`WEIGHT_FLOOR`, so no emitter's probability is ever 0 (the estimate
-        stays unbiased whatever the weight gets wrong: it only steers the samples). The point-light-style
-        estimate of an emitter's contribution used to choose lights in proportion to it (as in pbrt-v4's
-        power- and distance-aware light samplers, M. Pharr, W. Jakob, G. Humphreys, Physically Based Rendering,
-        4th ed., 2023, section 12.6)."""
+    def _lamp_weights(self, row, p, n):
+        """Selection weights of lamp ``row`` (UInt32, a row of :class:`LightSets`) at a shading point ``p``
+        (Point3f, m) with normal ``n`` (Vector3f): (face, beam), each an estimate of the light that emitter
+        brings there: intensity (cd) x emission factor (the face's Lambertian cosine; the beam: 1 inside its cone,
+        else 0) x receiver |cosine| (floored at :data:`RECEIVER_FLOOR`) / max(d^2, :data:`LIGHT_R2_M2`) (m^2),
+        the point-light estimate behind power- and distance-aware light samplers (M. Pharr, W. Jakob,
+        G. Humphreys, Physically Based Rendering, 4th ed., 2023, section 12.6). The environment: (1, 0).
+        Angular factors are floored at :data:`WEIGHT_FLOOR`, so no emitter's probability is ever 0: the estimate
+        stays unbiased whatever the weights get wrong, they only steer the samples."""
         mi, dr = self.mi, self.dr
         G = [dr.gather(mi.Float, c, row) for c in self.sets.geo]
-        d = mi.Vector3f(p[0] - G[0], p[1] - G[1], p[2] - G[2])  # from the light to the point
+        d = mi.Vector3f(p[0] - G[0], p[1] - G[1], p[2] - G[2])  # from the lamp to the point
         d2 = dr.squared_norm(d)
         inv = dr.rsqrt(dr.maximum(d2, 1e-12))
         cos_e = (d[0] * G[3] + d[1] * G[4] + d[2] * G[5]) * inv
-        ang = dr.select(G[9] == KIND_FACE, cos_e, dr.select(cos_e >= G[6] - 1e-2, 1.0, 0.0))
         rec = dr.maximum(dr.abs(dr.dot(n, d)) * inv, RECEIVER_FLOOR)
-        w = G[8] * dr.maximum(ang, WEIGHT_FLOOR) * rec / dr.maximum(d2, G[7])
-        return dr.select(G[9] == KIND_ENV, G[8], w)
+        base = G[7] * rec / dr.maximum(d2, LIGHT_R2_M2)
+        env = G[6] == ENV_ROW
+        w_face = dr.select(env, 1.0, base * dr.maximum(cos_e, WEIGHT_FLOOR))
+        w_beam = dr.select(G[6] > NO_BEAM, base * dr.select(cos_e >= G[6] - 1e-2, 1.0, WEIGHT_FLOOR), 0.0)
+        return w_face, w_beam
 
     @dr.syntax
     def _choose_light(self, sampler, start, cnt, p, n, active):
-        """Draw one emitter of a lane's set (rows ``start`` .. ``start + cnt - 1``) with probability in proportion
-        to :meth:`_light_weight` at (``p``, ``n``), by weighted reservoir sampling (one pass, one uniform per
-        member: row r replaces the choice with probability w_r / (w_0 + ... + w_r); M. T. Chao, "A general
-        purpose unequal probability sampling plan", Biometrika 69, 1982). Returns (row, its probability, sum
-        of the weights)."""
+        """Draw one emitter of a lane's set (lamp rows ``start`` .. ``start + cnt - 1``, each a face and maybe a
+        beam) with probability in proportion to its weight (:meth:`_lamp_weights`) at (``p``, ``n``): a lamp by
+        weighted reservoir sampling over the rows (one pass, one uniform per row: row r replaces the choice with
+        probability w_r / (w_0 + ... + w_r); M. T. Chao, "A general purpose unequal probability sampling plan",
+        Biometrika 69, 1982), then its face or beam in proportion to their weights. Returns (emitter, its
+        probability, sum of all weights)."""
         i = mi.UInt32(0)
         wsum = mi.Float(0.0)
         row = mi.UInt32(start)
-        w_row = mi.Float(0.0)
+        wf_row = mi.Float(0.0)
+        wb_row = mi.Float(0.0)
         while dr.hint(active & (i < cnt), label="lfm light choice"):
             r = start + i
-            w = self._light_weight(r, p, n)
+            wf, wb = self._lamp_weights(r, p, n)
+            w = wf + wb
             wsum += w
             take = sampler.next_float32() * wsum < w
             row = dr.select(take, r, row)
-            w_row = dr.select(take, w, w_row)
+            wf_row = dr.select(take, wf, wf_row)
+            wb_row = dr.select(take, wb, wb_row)
             i += 1
-        return row, dr.select(wsum > 0, w_row / wsum, 0.0), wsum
+        beam = sampler.next_float32() * (wf_row + wb_row) < wb_row
+        S = self.sets
+        em = dr.select(beam, dr.gather(mi.EmitterPtr, S.beams, row, active),
+                       dr.gather(mi.EmitterPtr, S.faces, row, active))
+        pmf = dr.select(wsum > 0, dr.select(beam, wb_row, wf_row) / wsum, 0.0)
+        return em, pmf, wsum
 
     def _set_row(self, em_ptr, lset):
-        """Row of emitter ``em_ptr`` in lane set ``lset`` (UInt32) and whether it is a member (its light is
-        recorded by this lane only then)."""
+        """Lamp row of emitter ``em_ptr`` in lane set ``lset`` (UInt32), whether it is the lamp's beam, and
+        whether it is a member at all (its light is recorded by this lane only then)."""
         mi, dr = self.mi, self.dr
         eid = dr.reinterpret_array(mi.UInt32, em_ptr)
-        S = self.sets
-        ok = eid < S.n_id
-        in_g = ok & (dr.gather(mi.UInt32, S.gset, eid, ok) == lset)
-        in_l = ok & (dr.gather(mi.UInt32, S.lset, eid, ok) == lset)
-        row = dr.select(in_g, dr.gather(mi.UInt32, S.grow, eid, in_g), dr.gather(mi.UInt32, S.lrow, eid, in_l))
-        return row, in_g | in_l
+        T = self.sets.tab
+        ok = eid < self.sets.n_id
+        in_g = ok & (dr.gather(mi.UInt32, T[0], eid, ok) == lset)
+        in_l = ok & (dr.gather(mi.UInt32, T[3], eid, ok) == lset)
+        row = dr.select(in_g, dr.gather(mi.UInt32, T[1], eid, in_g), dr.gather(mi.UInt32, T[4], eid, in_l))
+        beam = dr.select(in_g, dr.gather(mi.UInt32, T[2], eid, in_g), dr.gather(mi.UInt32, T[5], eid, in_l)) == 1
+        return row, beam, in_g | in_l
 
     @dr.syntax
     def _radiance(self, sampler, ray, lset):
@@ -491,8 +506,9 @@ class Tracer:
             # emission hit by the camera ray or by BSDF sampling, if the emitter is in this lane's set; its MIS
             # weight needs the probability with which the previous vertex's next-event estimation picks it
             ds = mi.DirectionSample3f(self.scene, si=si, ref=si_prev)
-            row_hit, in_set = self._set_row(ds.emitter, lset)
-            pmf_hit = dr.select(in_set & ~delta_prev, self._light_weight(row_hit, si_prev.p, si_prev.n), 0.0) \
+            row_hit, beam_hit, in_set = self._set_row(ds.emitter, lset)
+            wf_hit, wb_hit = self._lamp_weights(row_hit, si_prev.p, si_prev.n)
+            pmf_hit = dr.select(in_set & ~delta_prev, dr.select(beam_hit, wb_hit, wf_hit), 0.0) \
                 / dr.select(wsum_prev > 0, wsum_prev, 1.0)
             em_pdf = dr.select(delta_prev, 0.0, pmf_hit * ds.emitter.pdf_direction(si_prev, ds, active & ~delta_prev))
             hit_em = active & in_set
@@ -502,8 +518,7 @@ class Tracer:
             # next-event estimation: one emitter of this lane's set, chosen in proportion to its estimated light
             # at this point (:meth:`_choose_light`)
             active_em = active_next & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
-            idx, pmf_em, wsum = self._choose_light(sampler, start, cnt, si.p, si.n, active_em)
-            em = dr.gather(mi.EmitterPtr, S.emitters, idx, active_em)
+            em, pmf_em, wsum = self._choose_light(sampler, start, cnt, si.p, si.n, active_em)
             ds_em, w_em = em.sample_direction(si, mi.Point2f(sampler.next_float32(), sampler.next_float32()),
                                               active_em)
             active_em &= (ds_em.pdf != 0.0) & (pmf_em > 0)
