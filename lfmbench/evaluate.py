@@ -637,6 +637,9 @@ def register(app) -> None:
         perceptual: bool = typer.Option(True, help="also PU21-PSNR and ColorVideoVDP (needs cvvdp)"),
         device: str = typer.Option("cpu", help="torch device, e.g. cpu or cuda"),
         threads: int = typer.Option(None, help="torch CPU threads (default: torch's choice); recorded"),
+        cache_dir: Path = typer.Option(None, "--cache-dir",
+                                       help="projected-radiance cache directory (default <corpus>/.cache; "
+                                            "any writable directory for a read-only corpus)"),
     ) -> None:
         """Score a fusion method on a corpus split; write per-scene and aggregate metrics as JSON."""
         if threads is not None:
@@ -653,7 +656,8 @@ def register(app) -> None:
 
         try:
             fn = get_method(method)
-            ds = make_dataset(corpus, split, seed=seed, crop=crop, samples_per_scene=samples_per_scene)
+            extra = {} if cache_dir is None else {"cache_dir": cache_dir}
+            ds = make_dataset(corpus, split, seed=seed, crop=crop, samples_per_scene=samples_per_scene, **extra)
         except (MethodNotFoundError, FileNotFoundError, EmptyDataError, RuntimeError, ValueError) as exc:
             typer.secho(f"error: {exc}", fg=typer.colors.RED, err=True)
             raise typer.Exit(2) from exc

@@ -210,7 +210,9 @@ class LFMCaptureDataset(Dataset):
         line_time_s: rolling-shutter row delay (s); default the corpus's. Must keep every row's windows inside
             the rendered capture window (checked).
         cache_dir: directory of the per-sensor projected-radiance cache (default ``<root>/.cache``; ``False``
-            keeps it in memory only). cache_scenes: scenes kept in memory per worker.
+            keeps it in memory only; any writable directory for a read-only corpus). Entries are keyed by the
+            manifest SHA-256 of the files they come from and read with ``torch.load(weights_only=True)``
+            (:func:`lfmbench.datasets.projection.load_or_build`). cache_scenes: scenes kept in memory per worker.
         transforms: callable applied to the sample dict.
 
     Sample (F frames, crop h x w; batches add a leading B; see docs/contracts.md):

@@ -1,0 +1,103 @@
+"""Fault catalogue (docs/fault-catalogue.md): hostile or broken corpora, interrupted runs, absurd arguments.
+
+Tiny generated corpora only (no rendering, no network, no GPU).
+"""
+from __future__ import annotations
+
+import json
+import os
+import pickle
+import warnings
+
+import numpy as np
+import pytest
+import torch
+
+from lfmbench import corpus as C
+from lfmbench.datasets import LFMCaptureDataset
+from lfmbench.datasets import projection as P
+from tests.test_datasets import make_corpus
+
+
+@pytest.fixture
+def one(tmp_path):
+    return make_corpus(tmp_path / "c", n_scenes=1)
+
+
+def _entry(root):
+    files = list((root / ".cache").rglob("*.pt"))
+    assert len(files) == 1, files
+    return files[0]
+
+
+# ----------------------------------------------------------------------------------- 1. cache runs no code
+class _Evil:
+    def __reduce__(self):
+        return (os.system, ("touch PWNED_BY_CACHE",))
+
+
+def test_crafted_cache_entry_runs_no_code_and_is_rebuilt(one, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    gt = LFMCaptureDataset(one, split="all", noise=False)[0]["gt"]
+    p = _entry(one)
+    p.write_bytes(pickle.dumps(_Evil(), protocol=2))  # what torch.load(weights_only=False) would execute
+    P._warned.clear()
+    with pytest.warns(P.CacheWarning, match="unreadable") as rec:
+        again = LFMCaptureDataset(one, split="all", noise=False)[0]["gt"]
+    assert not (tmp_path / "PWNED_BY_CACHE").exists()
+    assert torch.equal(again, gt)
+    assert len([w for w in rec if issubclass(w.category, P.CacheWarning)]) == 1
+    # the broken entry was replaced by a good one: no warning the next time
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", P.CacheWarning)
+        assert torch.equal(LFMCaptureDataset(one, split="all", noise=False)[0]["gt"], gt)
+
+
+def test_truncated_cache_entry_warns_once_and_rebuilds(one):
+    LFMCaptureDataset(one, split="all", noise=False)[0]
+    p = _entry(one)
+    p.write_bytes(p.read_bytes()[:100])
+    P._warned.clear()
+    with pytest.warns(P.CacheWarning, match=str(p.name)):
+        LFMCaptureDataset(one, split="all", noise=False)[0]
+    torch.load(p, weights_only=True)  # rewritten whole
+
+
+# ------------------------------------------------------------------------------------ 2. no stale cache
+def test_rerendered_scene_invalidates_cache(tmp_path):
+    root = make_corpus(tmp_path / "c", n_scenes=1, scale=1e-3)
+    a = LFMCaptureDataset(root, split="all", noise=False)[0]["gt"].sum()
+    make_corpus(tmp_path / "c", n_scenes=1, scale=2e-3)  # same ids, new radiance, new manifest hashes
+    b = LFMCaptureDataset(root, split="all", noise=False)[0]["gt"].sum()
+    assert float(b) == pytest.approx(2 * float(a), rel=1e-3)
+    assert len(list((root / ".cache").rglob("*.pt"))) == 2  # a new key, the old entry is not used
+
+
+def test_file_changed_on_disk_is_not_served_from_cache(one):
+    LFMCaptureDataset(one, split="all", noise=False)[0]
+    p = sorted((one / "scenes" / "scene00000" / "f000").glob("*.exr"))[0]
+    data = bytearray(p.read_bytes())
+    data[-5] ^= 0xFF  # corrupt the file without updating the manifest
+    p.write_bytes(bytes(data))
+    with pytest.raises(C.CorpusFileError, match=f"{p.name}: bad checksum"):
+        LFMCaptureDataset(one, split="all", noise=False)[0]
+
+
+# ----------------------------------------------------------------------------------- 8. read-only corpus
+def test_cache_dir_outside_corpus_and_unwritable_cache(one, tmp_path, monkeypatch):
+    cd = tmp_path / "elsewhere"
+    gt = LFMCaptureDataset(one, split="all", noise=False, cache_dir=cd)[0]["gt"]
+    assert list(cd.rglob("*.pt")) and not (one / ".cache").exists()
+    # a read-only corpus: writing the default <root>/.cache fails (EROFS); the dataset goes on, one warning
+    import errno
+
+    def read_only(obj, path):
+        raise C.CorpusWriteError(errno.EROFS, f"could not write {path}: Read-only file system")
+
+    monkeypatch.setattr(P, "atomic_torch_save", read_only)
+    P._warned.clear()
+    with pytest.warns(P.CacheWarning, match="cannot write the projection cache") as rec:
+        ds = LFMCaptureDataset(one, split="all", noise=False, cache_scenes=0)
+        got = [ds[0]["gt"], ds[0]["gt"]]
+    assert torch.equal(got[0], gt) and torch.equal(got[1], gt)
+    assert len(rec) == 1
