@@ -101,3 +101,64 @@ def test_cache_dir_outside_corpus_and_unwritable_cache(one, tmp_path, monkeypatc
         got = [ds[0]["gt"], ds[0]["gt"]]
     assert torch.equal(got[0], gt) and torch.equal(got[1], gt)
     assert len(rec) == 1
+
+
+# ------------------------------------------------------------------------------ 4. paths stay in the root
+def _manifest(root):
+    return json.loads((root / "manifest.json").read_text())
+
+
+def _set_manifest(root, man):
+    (root / "manifest.json").write_text(json.dumps(man))
+
+
+@pytest.mark.parametrize("entry", ["../../../etc/hostname", "/etc/hostname", "scenes/scene00000/../../x.exr"])
+def test_manifest_file_entry_outside_root_is_refused(one, entry):
+    man = _manifest(one)
+    man["files"][entry] = C.sha256_file(one / "manifest.json")
+    _set_manifest(one, man)
+    rep = C.validate_corpus(one)
+    assert not rep.ok
+    assert any("manifest.json" in e and repr(entry) in e and "refused" in e for e in rep.errors), rep.errors
+    with pytest.raises(C.CorpusFileError, match=r"manifest\.json: file entry .* refused"):
+        C.Corpus(one)
+    with pytest.raises(C.CorpusFileError, match="refused"):
+        LFMCaptureDataset(one, split="all", cache_dir=False)
+
+
+def test_manifest_scene_id_outside_root_is_refused(one, tmp_path):
+    evil = tmp_path / "evil" / "sceneX"
+    (evil / "f000").mkdir(parents=True)
+    man = _manifest(one)
+    man["scenes"].append("../../evil/sceneX")
+    _set_manifest(one, man)
+    with pytest.raises(C.CorpusFileError, match=r"manifest\.json: scene entry '\.\./\.\./evil/sceneX' refused"):
+        LFMCaptureDataset(one, split="all")
+    rep = C.validate_corpus(one)
+    assert any("'../../evil/sceneX' refused" in e for e in rep.errors), rep.errors
+    assert not list((tmp_path / "evil").rglob("*.pt"))
+
+
+def test_scene_dir_symlinked_outside_root_is_refused(one, tmp_path):
+    outside = tmp_path / "outside"
+    (one / "scenes" / "scene00000").rename(outside)
+    (one / "scenes" / "scene00000").symlink_to(outside, target_is_directory=True)
+    with pytest.raises(C.CorpusFileError, match="outside the corpus root"):
+        C.Corpus(one).meta("scene00000")
+    assert any("outside the corpus root" in e for e in C.validate_corpus(one).errors)
+
+
+def test_splits_entry_outside_root_is_refused(one):
+    (one / "splits.json").write_text(json.dumps({"train": ["../../x"], "val": [], "test": []}))
+    with pytest.raises(C.CorpusFileError, match=r"splits\.json: split 'train' entry '\.\./\.\./x' refused"):
+        LFMCaptureDataset(one, split="train", cache_dir=False)
+    assert any("'../../x' refused" in e for e in C.validate_corpus(one).errors)
+
+
+def test_meta_scene_id_is_checked_on_read(one):
+    p = one / "scenes" / "scene00000" / "meta.json"
+    m = json.loads(p.read_text())
+    m["scene_id"] = "../x"
+    p.write_text(json.dumps(m))
+    with pytest.raises(ValueError, match=r"meta\.json: field 'scene_id'"):
+        C.Corpus(one).meta("scene00000")
