@@ -146,7 +146,7 @@ def render_cmd(
 
         try:
             summary = J.run_jobs(job_list, writer, workers=workers, ray_address=ray_address, on_start=on_start,
-                                 on_done=on_done, resume=not no_resume)
+                                 on_done=on_done, resume=not no_resume, split_seed=seed)
         except J.RenderInterrupted as exc:
             s = exc.summary
             console.print(f"[yellow]interrupted[/]: {len(s.rendered) + len(s.skipped)} complete scene(s) are in "

@@ -12,11 +12,15 @@ import warnings
 import numpy as np
 import pytest
 import torch
+from typer.testing import CliRunner
 
 from lfmbench import corpus as C
+from lfmbench.cli import app
 from lfmbench.datasets import LFMCaptureDataset
 from lfmbench.datasets import projection as P
+from render_tools import jobs as J
 from tests.test_datasets import make_corpus
+from tests.test_render_cli import ARGS, FAIL, fake, run  # noqa: F401 - fake is a fixture
 
 
 @pytest.fixture
@@ -162,3 +166,66 @@ def test_meta_scene_id_is_checked_on_read(one):
     p.write_text(json.dumps(m))
     with pytest.raises(ValueError, match=r"meta\.json: field 'scene_id'"):
         C.Corpus(one).meta("scene00000")
+
+
+# ------------------------------------------------------------------ 3, 5. Ctrl-C in a render, killed runs
+
+
+def _mitsuba_sigint(msg):
+    """What Mitsuba does with Ctrl-C: the SIGINT handler raises KeyboardInterrupt inside the render, and the
+    render loop turns it into a RuntimeError whose message does not say so."""
+    import signal
+
+    try:
+        signal.raise_signal(signal.SIGINT)
+    except KeyboardInterrupt:
+        return RuntimeError("drjit: render loop aborted")
+    raise AssertionError("SIGINT did not raise")
+
+
+def test_ctrl_c_inside_mitsuba_render_stops_with_130(tmp_path, fake):
+    out = tmp_path / "c"
+    FAIL["scene00001"] = _mitsuba_sigint
+    r = run("--out", str(out), "--scenes", "4", *ARGS)
+    assert r.exit_code == 130, r.output
+    assert "interrupted" in r.output and "failed" not in r.output
+    assert fake == ["scene00000", "scene00001"]  # no further scene started
+    rep = C.validate_corpus(out)
+    assert rep.ok, rep.errors  # splits.json written although the run never reached its end
+    assert C.Corpus(out).splits["test"] == ["scene00000"]
+
+
+def test_runtime_error_naming_keyboardinterrupt_is_an_interrupt():
+    try:
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt as e:
+            raise RuntimeError("wrapped") from e
+    except RuntimeError as exc:
+        assert J._is_interrupt(exc)
+    assert J._is_interrupt(RuntimeError("KeyboardInterrupt: "))
+    assert not J._is_interrupt(RuntimeError("out of memory"))
+
+
+class _Killed(BaseException):
+    """Stands for SIGKILL / power loss: nothing after it runs."""
+
+
+def test_killed_render_leaves_valid_corpus_with_splits(tmp_path, fake, monkeypatch):
+    out = tmp_path / "c"
+    real = C.CorpusWriter.write_splits
+    n = {"splits": 0}
+
+    def write_splits(self, *a, **k):
+        n["splits"] += 1
+        res = real(self, *a, **k)
+        if n["splits"] == 3:  # after the resume check, scene 0 and scene 1: killed before scene 2
+            raise _Killed
+        return res
+
+    monkeypatch.setattr(C.CorpusWriter, "write_splits", write_splits)
+    with pytest.raises(_Killed):
+        CliRunner().invoke(app, ["render", "--out", str(out), "--scenes", "3", *ARGS], catch_exceptions=False)
+    rep = C.validate_corpus(out)
+    assert rep.ok, rep.errors
+    assert sorted(sum(C.Corpus(out).splits.values(), [])) == ["scene00000", "scene00001"]
