@@ -229,3 +229,115 @@ def test_killed_render_leaves_valid_corpus_with_splits(tmp_path, fake, monkeypat
     rep = C.validate_corpus(out)
     assert rep.ok, rep.errors
     assert sorted(sum(C.Corpus(out).splits.values(), [])) == ["scene00000", "scene00001"]
+
+
+# ------------------------------------------------------------- 3, 6, 8, 9. evaluate and leaderboard faults
+METHODS = '''
+import sys
+import torch
+CALLS = []
+
+def always_fail(batch):
+    raise RuntimeError("nothing works")
+
+def exits(batch):
+    sys.exit(3)
+
+def interrupt_second(batch):
+    CALLS.append(1)
+    if len(CALLS) >= 3:  # first scene: call + timing warm-up + 1 repeat; then Ctrl-C
+        raise KeyboardInterrupt
+    return batch["gt"].clone()
+'''
+
+
+@pytest.fixture(scope="module")
+def eval_env(tmp_path_factory):
+    d = tmp_path_factory.mktemp("eval")
+    make_corpus(d / "corpus", n_scenes=2)
+    (d / "lfm_fault_methods.py").write_text(METHODS)
+    (d / "lfm_exit_on_import.py").write_text("import sys\nsys.exit('no GPU here')\n")
+    return d
+
+
+def _evaluate(env, monkeypatch, method, *extra):
+    monkeypatch.syspath_prepend(str(env))
+    return CliRunner().invoke(app, ["evaluate", "--method", method, "--corpus", str(env / "corpus"), "--split", "all",
+                                    "--repeats", "1", "--no-perceptual", *extra])
+
+
+def test_evaluate_all_scenes_failed_exits_1(eval_env, monkeypatch, tmp_path):
+    out = tmp_path / "f.json"
+    r = _evaluate(eval_env, monkeypatch, "lfm_fault_methods:always_fail", "--output", str(out))
+    assert r.exit_code == 1, r.output
+    assert "2 of 2 scenes failed" in r.output and "nothing works" in r.output
+    d = json.loads(out.read_text())
+    assert d["status"] == "failed" and d["aggregate"]["scenes_ok"] == 0
+
+
+def test_method_calling_sys_exit_is_a_recorded_failure(eval_env, monkeypatch, tmp_path):
+    out = tmp_path / "x.json"
+    r = _evaluate(eval_env, monkeypatch, "lfm_fault_methods:exits", "--output", str(out))
+    assert r.exit_code == 1, r.output
+    assert "sys.exit(3)" in r.output
+    d = json.loads(out.read_text())
+    assert [s["status"] for s in d["scenes"]] == ["error", "error"] and "sys.exit(3)" in d["scenes"][0]["error"]
+    r = _evaluate(eval_env, monkeypatch, "lfm_exit_on_import:f", "--output", str(out))
+    assert r.exit_code == 2 and "called sys.exit('no GPU here')" in r.output
+
+
+def test_evaluate_ctrl_c_exits_130_and_leaderboard_refuses_it(eval_env, monkeypatch, tmp_path):
+    out = tmp_path / "i.json"
+    r = _evaluate(eval_env, monkeypatch, "lfm_fault_methods:interrupt_second", "--output", str(out))
+    assert r.exit_code == 130, r.output
+    assert "interrupted" in r.output
+    d = json.loads(out.read_text())
+    assert d["status"] == "interrupted" and len(d["scenes"]) == 1
+    good = tmp_path / "g.json"
+    from lfmbench import evaluate as ev
+    from metrics_synthetic import make_batch
+
+    ev.evaluate("lpd_only", [make_batch(seed=0)], output=good, repeats=1, progress=False)
+    lb = ["leaderboard", str(good), str(out), "--markdown", str(tmp_path / "lb.md"), "--plot", str(tmp_path / "p.png")]
+    r = CliRunner().invoke(app, lb)
+    assert r.exit_code == 2 and "i.json: status 'interrupted'" in r.output and "--include-incomplete" in r.output
+    r = CliRunner().invoke(app, lb + ["--include-incomplete"])
+    assert r.exit_code == 0, r.output
+    md = (tmp_path / "lb.md").read_text()
+    assert "(interrupted: not a complete result)" in md
+    assert md.index("lpd_only") < md.index("interrupt_second")  # incomplete runs ranked after complete ones
+    (tmp_path / "run.json").write_text(json.dumps(dict(d, status="running")))  # a killed run
+    r = CliRunner().invoke(app, ["leaderboard", str(tmp_path / "run.json"), str(good)])
+    assert r.exit_code == 2 and "'running'" in r.output
+
+
+def test_evaluate_cache_dir_keeps_the_corpus_untouched(eval_env, monkeypatch, tmp_path):
+    corpus = tmp_path / "ro"
+    make_corpus(corpus, n_scenes=1)
+    before = sorted(p.relative_to(corpus) for p in corpus.rglob("*"))
+    env = tmp_path
+    r = CliRunner().invoke(app, ["evaluate", "--method", "lpd_only", "--corpus", str(corpus), "--split", "all",
+                                 "--repeats", "1", "--no-perceptual", "--output", str(env / "o.json"),
+                                 "--cache-dir", str(env / "cache")])
+    assert r.exit_code == 0, r.output
+    assert sorted(p.relative_to(corpus) for p in corpus.rglob("*")) == before
+    assert list((env / "cache").rglob("*.pt"))
+
+
+def test_evaluate_and_leaderboard_bad_arguments_are_one_line(eval_env, monkeypatch, tmp_path):
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    cases = [(["--max-scenes", "-1"], "--max-scenes must be an integer >= 1"),
+             (["--device", "banana"], "--device must be a torch device"),
+             (["--output", str(blocker / "r.json")], "--output"),
+             (["--output", str(tmp_path)], "--output")]
+    for extra, msg in cases:
+        r = _evaluate(eval_env, monkeypatch, "lpd_only", *extra)
+        assert r.exit_code == 2 and msg in r.output, (extra, r.output)
+        assert "Traceback" not in r.output and isinstance(r.exception, SystemExit)
+    (tmp_path / "bin.json").write_bytes(b"\x89PNG\r\n\x1a\n\xff\xfe")
+    (tmp_path / "fmt.json").write_text(json.dumps({"format": "lfmbench-eval"}))
+    for name, msg in (("bin.json", "cannot read JSON"), ("fmt.json", "field 'method' missing")):
+        r = CliRunner().invoke(app, ["leaderboard", str(tmp_path / name)])
+        assert r.exit_code == 2 and f"{name}: " in r.output and msg in r.output, r.output
+        assert isinstance(r.exception, SystemExit)
