@@ -341,3 +341,103 @@ def test_evaluate_and_leaderboard_bad_arguments_are_one_line(eval_env, monkeypat
         r = CliRunner().invoke(app, ["leaderboard", str(tmp_path / name)])
         assert r.exit_code == 2 and f"{name}: " in r.output and msg in r.output, r.output
         assert isinstance(r.exception, SystemExit)
+
+
+# ------------------------------------------------------------------------------------- 7. silent nonsense
+def test_unknown_group_names_group_and_available(one):
+    with pytest.raises(ValueError, match=r"groups: \['nonsense'\] are not light groups.*available: "
+                                         r"\['headlights', 'otherlights', 'skymap'\]"):
+        LFMCaptureDataset(one, split="all", groups=["nonsense"], cache_dir=False)
+    ds = LFMCaptureDataset(one, split="all", groups="headlights", cache_dir=False)  # a bare string is one group
+    assert ds.groups == ["headlights"]
+
+
+def _float32_corpus(root):
+    from tests.test_corpus_data import fake_frames, fake_meta, fake_scene
+
+    w = C.CorpusWriter(root, dtype="float32")
+    m = fake_meta("scene00000", width=24, height=16)
+    w.write_scene("scene00000", fake_scene("scene00000"), m, fake_frames(m))
+    w.write_splits(0)
+    return root
+
+
+def _set_radiance(path, value):
+    import OpenEXR
+
+    f = OpenEXR.File(str(path), separate_channels=True)
+    parts = []
+    for p in f.parts:
+        ch = {k: np.array(v.pixels) for k, v in p.channels.items()}
+        k0 = sorted(ch)[0]
+        ch[k0] = ch[k0].copy()
+        ch[k0].flat[0] = value
+        parts.append(OpenEXR.Part(dict(p.header), ch, p.name()))
+    OpenEXR.File(parts).write(str(path))
+
+
+@pytest.mark.parametrize("value", [1e30, 3e38])
+def test_implausible_radiance_is_named_by_validate_and_reader(tmp_path, value):
+    root = _float32_corpus(tmp_path / "c")
+    p = root / "scenes" / "scene00000" / "f000" / "headlights.exr"
+    _set_radiance(p, value)
+    man = _manifest(root)
+    man["files"][p.relative_to(root).as_posix()] = C.sha256_file(p)
+    _set_manifest(root, man)
+    errs = "\n".join(C.validate_corpus(root).errors)
+    assert str(p) in errs and "plausibility ceiling" in errs
+    with pytest.raises(C.CorpusValueError, match=f"{p}.*exceeds the plausibility ceiling"):
+        LFMCaptureDataset(root, split="all", frames=2, cache_dir=False)[0]
+
+
+def test_writer_refuses_implausible_radiance(tmp_path):
+    from tests.test_corpus_data import fake_frames, fake_meta, fake_scene
+
+    m = fake_meta("scene00000")
+    fr = fake_frames(m)
+    fr[0]["static"]["headlights"]["short"][0, 0, 0] = 1e12
+    with pytest.raises(C.CorpusValueError, match="plausibility ceiling"):
+        C.CorpusWriter(tmp_path / "c", dtype="float32").write_scene("scene00000", fake_scene("scene00000"), m, fr)
+
+
+def test_non_finite_sensor_output_names_the_scene(one, monkeypatch):
+    from lfmbench import sensor
+
+    def boom(*a, **k):
+        raise ValueError("lpd_electrons contains non-finite values (0 NaN, 3 inf)")
+
+    monkeypatch.setattr(sensor, "simulate_split_pixel_electrons", boom)
+    with pytest.raises(ValueError, match=r"scene 'scene00000' of .*lpd_electrons contains non-finite"):
+        LFMCaptureDataset(one, split="all", cache_dir=False)[0]
+
+
+# ---------------------------------------------------------------------------- 9. one-line clear errors
+@pytest.mark.parametrize("field,value,msg", [
+    ("lights", ["x"], r"lights\[0\] must be an object"),
+    ("lights", "x", r"field 'lights' must be a list"),
+    ("camera", [1, 2], r"field 'camera' must be an object"),
+])
+def test_bad_meta_json_is_named(one, field, value, msg):
+    p = one / "scenes" / "scene00000" / "meta.json"
+    m = json.loads(p.read_text())
+    m[field] = value
+    p.write_text(json.dumps(m))
+    with pytest.raises(ValueError, match=msg):
+        LFMCaptureDataset(one, split="all", cache_dir=False)
+    assert any(str(p) in e and field in e for e in C.validate_corpus(one).errors)
+
+
+@pytest.mark.parametrize("content,msg", [(["scene00000"], "must be a JSON object"),
+                                         ({"train": "scene00000", "val": [], "test": []},
+                                          "split 'train' must be a list")])
+def test_bad_splits_json_is_named(one, content, msg):
+    (one / "splits.json").write_text(json.dumps(content))
+    with pytest.raises(C.CorpusFileError, match=f"splits.json: {msg}"):
+        LFMCaptureDataset(one, split="train", cache_dir=False)
+    assert any(msg in e for e in C.validate_corpus(one).errors)
+
+
+@pytest.mark.parametrize("crop", ["abc", 2.7, (4,), (4, "x"), True])
+def test_bad_crop_is_named(one, crop):
+    with pytest.raises(ValueError, match=r"^crop must be None, an int or \(h, w\)"):
+        LFMCaptureDataset(one, split="all", crop=crop, cache_dir=False)
