@@ -67,13 +67,18 @@ def default_backend() -> Backend:
 def load_profile(profile: str | Path) -> dict:
     """RenderOptions overrides of a profile: a name in :data:`PROFILES_FILE` or a path to a YAML file.
 
-    Raises ``ValueError`` naming the file for an unknown profile or a value that is not a mapping.
+    Raises ``ValueError`` naming the file for an unknown profile, malformed YAML or a value that is not a
+    mapping.
     """
     import yaml  # noqa: PLC0415
 
     p = Path(profile)
     if p.suffix in (".yaml", ".yml", ".json") and p.is_file():
-        data = yaml.safe_load(p.read_text())
+        try:
+            data = yaml.safe_load(p.read_text(encoding="utf-8"))
+        except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
+            why = " ".join(str(exc).split()) or type(exc).__name__  # one line, position included
+            raise ValueError(f"{p}: cannot read the profile: {why}") from None
         src = p
     else:
         with open(PROFILES_FILE) as fh:

@@ -441,3 +441,35 @@ def test_bad_splits_json_is_named(one, content, msg):
 def test_bad_crop_is_named(one, crop):
     with pytest.raises(ValueError, match=r"^crop must be None, an int or \(h, w\)"):
         LFMCaptureDataset(one, split="all", crop=crop, cache_dir=False)
+
+
+def test_render_bad_out_and_profile_are_one_line(tmp_path, fake):
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    r = run("--out", str(blocker / "c"), "--scenes", "1", *ARGS)
+    assert r.exit_code == 2 and f"--out {blocker / 'c'}: cannot create or write" in r.output, r.output
+    assert isinstance(r.exception, SystemExit)
+    prof = tmp_path / "p.yaml"
+    prof.write_text("width: [16\nheight: 8\n")
+    r = run("--out", str(tmp_path / "c"), "--profile", str(prof))
+    assert r.exit_code == 2 and f"{prof}: cannot read the profile" in r.output and "line" in r.output, r.output
+    assert isinstance(r.exception, SystemExit) and fake == []
+
+
+# -------------------------------------------------------------------------------------------- 10. bounds
+@pytest.mark.parametrize("args,msg", [(["--scenes", "100000000"], "--scenes 100000000 is above the limit"),
+                                      (["--scenes", "20000"], "--scenes 20000 is above the sanity limit"),
+                                      (["--frames", "1000"], "--frames 1000 is above the sanity limit")])
+def test_render_absurd_sizes_need_yes(tmp_path, fake, args, msg):
+    out = tmp_path / "c"
+    r = run("--out", str(out), *ARGS, *args)
+    assert r.exit_code == 2 and msg in r.output, r.output
+    assert not out.exists() and fake == []  # refused before anything was written or allocated
+
+
+def test_render_large_run_with_yes_goes_ahead(tmp_path, fake, monkeypatch):
+    seen = {}
+    monkeypatch.setattr(J, "run_jobs", lambda jobs, writer, **kw: seen.setdefault("n", len(jobs)) and J.RunSummary())
+    r = run("--out", str(tmp_path / "c"), *ARGS, "--scenes", "20000", "--yes")
+    assert r.exit_code == 0, r.output
+    assert seen["n"] == 20000
