@@ -473,3 +473,9 @@ def test_render_large_run_with_yes_goes_ahead(tmp_path, fake, monkeypatch):
     r = run("--out", str(tmp_path / "c"), *ARGS, "--scenes", "20000", "--yes")
     assert r.exit_code == 0, r.output
     assert seen["n"] == 20000
+
+
+def test_bad_test_params_file_is_named(one):
+    (one / "test_params.json").write_text("[]")
+    with pytest.raises(ValueError, match=r"test_params\.json: not a valid test-parameter file.*delete it"):
+        LFMCaptureDataset(one, split="test", cache_dir=False)
