@@ -53,7 +53,7 @@ __all__ = [
     "group_storage", "encode_static_exr", "encode_lights_exr", "encode_aux_exr", "read_exr", "sha256_file",
     "atomic_write_bytes", "atomic_write_json", "make_splits", "validate_meta", "Corpus", "CorpusWriter",
     "ValidationReport", "validate_corpus", "encode_scene", "write_files", "prune_scene_dir", "ExrPart",
-    "check_scene_id",
+    "check_scene_id", "manifest_entry_errors", "inside_root", "check_splits", "RADIANCE_MAX",
 ]
 
 log = logging.getLogger(__name__)
@@ -74,6 +74,11 @@ AUX_CHANNELS = ("depth.Z", "depth.R", "mask.instance", "mask.light")
 #: Largest finite IEEE 754 binary16 value; radiance above it cannot be stored as HALF (IEEE 754-2008).
 HALF_MAX = 65504.0
 RADIANCE_UNIT = "W sr^-1 m^-2 nm^-1"
+#: Plausibility ceiling of spectral radiance (W sr^-1 m^-2 nm^-1), checked on write, on read and by
+#: :func:`validate_corpus`. The sun's disc seen from the ground peaks near 2e7 W sr^-1 m^-2 nm^-1
+#: (a 5800 K black body: B_lambda(500 nm) ~ 2.6e7); an LED die is far dimmer. 1e9 is fifty times the sun, so a
+#: value above it is a unit or scale error (e.g. a corrupted ``lfmbench_scale`` attribute), never a scene.
+RADIANCE_MAX = 1e9
 #: Name and channel of the placeholder part of a flickering-group EXR in which no light is visible.
 EMPTY_PART = "empty"
 #: Prefix of temporary files; stray ones (after a crash) are removed by :class:`CorpusWriter`.
@@ -222,6 +227,9 @@ def _check_radiance(arr: np.ndarray, what: str) -> np.ndarray:
         raise CorpusValueError(f"{what}: radiance contains NaN or inf")
     if arr.size and float(arr.min()) < 0:
         raise CorpusValueError(f"{what}: radiance contains negative values (min {float(arr.min()):.3g})")
+    if arr.size and float(arr.max()) > RADIANCE_MAX:
+        raise CorpusValueError(f"{what}: radiance {float(arr.max()):.3g} {RADIANCE_UNIT} exceeds the plausibility "
+                               f"ceiling RADIANCE_MAX = {RADIANCE_MAX:.0e} (50x the sun's disc): a unit or scale error")
     return arr
 
 
@@ -735,6 +743,11 @@ def _check_values(arr: np.ndarray, path: Path, what: str) -> None:
         raise CorpusValueError(f"EXR file {path} {what}: radiance contains NaN or inf")
     if lo < 0:
         raise CorpusValueError(f"EXR file {path} {what}: radiance contains negative values (min {lo:.3g})")
+    hi = float(arr.max())
+    if hi > RADIANCE_MAX:
+        raise CorpusValueError(f"EXR file {path} {what}: radiance {hi:.3g} {RADIANCE_UNIT} exceeds the plausibility "
+                               f"ceiling RADIANCE_MAX = {RADIANCE_MAX:.0e} (50x the sun's disc): a unit or scale "
+                               "error; run `lfmbench validate`")
 
 
 # ------------------------------------------------------------------------------------------------ splits
@@ -796,6 +809,9 @@ def validate_meta(meta: Mapping[str, Any], where: str = "meta.json") -> None:
     for k in _META_REQUIRED:
         if k not in meta:
             raise ValueError(f"{where}: missing field {k!r}")
+    why = _scene_id_error(meta["scene_id"])
+    if why is not None:
+        raise ValueError(f"{where}: field 'scene_id': {why}")
     for k in ("width", "height", "frames"):
         v = meta[k]
         if isinstance(v, bool) or not isinstance(v, int) or v < 1:
@@ -845,10 +861,17 @@ def validate_meta(meta: Mapping[str, Any], where: str = "meta.json") -> None:
                 raise ValueError(f"{tw}: field 'bins' must be an integer >= 1 for flickering group {name!r}, "
                                  f"got {kb!r}")
     cam = meta.get("camera", {}) or {}
+    if not isinstance(cam, Mapping):
+        raise ValueError(f"{where}: field 'camera' must be an object, got {cam!r}")
     if cam.get("speed_mps") is not None:
         _num(cam, "speed_mps", f"{where} camera", nonneg=True)
     ids = set()
-    for i, light in enumerate(meta.get("lights", [])):
+    lights = meta.get("lights", [])
+    if not isinstance(lights, list):
+        raise ValueError(f"{where}: field 'lights' must be a list of objects, got {lights!r}")
+    for i, light in enumerate(lights):
+        if not isinstance(light, Mapping):
+            raise ValueError(f"{where}: lights[{i}] must be an object with 'id' and 'group', got {light!r}")
         lid = light.get("id")
         if isinstance(lid, bool) or not isinstance(lid, int) or lid < 0 or lid in ids:
             raise ValueError(f"{where}: lights[{i}].id must be a unique integer >= 0, got {lid!r}")
@@ -883,13 +906,91 @@ def _check_version(v: Any, where: str) -> int:
     return int(v)
 
 
-def _check_manifest(man: Any, path: Path) -> dict:
+def _check_manifest(man: Any, path: Path, *, entries: bool = True) -> dict:
+    """The manifest if its format, version and (``entries``) every scene id and file entry are valid; else
+    ``CorpusFileError`` naming ``path`` and the first bad entry (:func:`manifest_entry_errors`)."""
     if not isinstance(man, dict) or man.get("format") != FORMAT_NAME:
         raise CorpusFileError(f"{path}: not an lfmbench corpus manifest (format must be {FORMAT_NAME!r})")
     _check_version(man.get("version"), str(path))
     if not isinstance(man.get("scenes"), list) or not isinstance(man.get("files"), dict):
         raise CorpusFileError(f"{path}: 'scenes' must be a list and 'files' an object")
+    if entries:
+        bad = manifest_entry_errors(man, path)
+        if bad:
+            more = f" (and {len(bad) - 1} more bad entries)" if len(bad) > 1 else ""
+            raise CorpusFileError(bad[0] + more)
     return man
+
+
+def _scene_id_error(scene_id: Any) -> str | None:
+    try:
+        check_scene_id(scene_id)
+    except ValueError as exc:
+        return str(exc)
+    return None
+
+
+def _file_entry_error(rel: Any, digest: Any, scenes: set) -> str | None:
+    """Why a manifest file entry is refused (None if it is fine): a relative POSIX path
+    ``scenes/<scene id>/...`` without ``.``/``..`` components, of a listed scene, with a SHA-256 hex digest."""
+    if not isinstance(rel, str) or not rel:
+        return "file path must be a non-empty string"
+    if rel.startswith("/") or "\\" in rel or re.match(r"[A-Za-z]:", rel):
+        return "absolute file path (must be relative to the corpus root)"
+    parts = rel.split("/")
+    if any(p in ("", ".", "..") for p in parts):
+        return "file path with an empty, '.' or '..' component (must stay inside the corpus root)"
+    if len(parts) < 3 or parts[0] != SCENES_DIR or _scene_id_error(parts[1]) is not None:
+        return f"file path must lie under {SCENES_DIR}/<scene id>/"
+    if parts[1] not in scenes:
+        return f"file of scene {parts[1]!r}, which is not in 'scenes'"
+    if not isinstance(digest, str) or not re.fullmatch(r"[0-9a-f]{64}", digest):
+        return "SHA-256 must be 64 lowercase hex digits"
+    return None
+
+
+def manifest_entry_errors(man: Mapping[str, Any], path: Path | str) -> list[str]:
+    """Errors (each naming ``path`` and the entry) for manifest scene ids that are not safe directory names
+    (:func:`check_scene_id`, the rule used when writing) and file entries that could leave the corpus root
+    (absolute, ``..``) or are malformed. Used by :class:`Corpus` (raises on the first) and
+    :func:`validate_corpus` (reports all)."""
+    out = []
+    for sid in man["scenes"]:
+        why = _scene_id_error(sid)
+        if why is not None:
+            out.append(f"{path}: scene entry {sid!r} refused: {why}")
+    scenes = {s for s in man["scenes"] if isinstance(s, str)}
+    for rel, digest in man["files"].items():
+        why = _file_entry_error(rel, digest, scenes)
+        if why is not None:
+            out.append(f"{path}: file entry {rel!r} refused: {why}")
+    return out
+
+
+def inside_root(root: Path, rel: str, what: str) -> Path:
+    """``root / rel`` resolved (symbolic links followed); ``CorpusFileError`` naming ``what`` and ``rel`` when it
+    leaves the resolved corpus root."""
+    base = Path(root).resolve()
+    p = (base / rel).resolve()
+    if p != base and base not in p.parents:
+        raise CorpusFileError(f"{what}: entry {rel!r} resolves to {p}, outside the corpus root {base}")
+    return p
+
+
+def check_splits(sp: Any, path: Path | str) -> dict[str, list[str]]:
+    """``splits.json`` content checked: an object whose ``train``/``val``/``test`` are lists of scene ids
+    (:func:`check_scene_id`); ``CorpusFileError`` naming ``path`` and the entry otherwise."""
+    if not isinstance(sp, dict):
+        raise CorpusFileError(f"{path}: must be a JSON object {{\"train\": [...], \"val\": [...], \"test\": "
+                              f"[...]}}, got a {type(sp).__name__}")
+    for k, ids in sp.items():
+        if not isinstance(ids, list):
+            raise CorpusFileError(f"{path}: split {k!r} must be a list of scene ids, got a {type(ids).__name__}")
+        for sid in ids:
+            why = _scene_id_error(sid)
+            if why is not None:
+                raise CorpusFileError(f"{path}: split {k!r} entry {sid!r} refused: {why}")
+    return sp
 
 
 class Corpus:
@@ -923,6 +1024,7 @@ class Corpus:
         self._cache_size = int(cache_size)
         self._cache: OrderedDict[Path, list[ExrPart]] = OrderedDict()
         self._meta: dict[str, dict] = {}
+        self._inside: set[str] = set()
 
     # -- index
     @property
@@ -933,11 +1035,15 @@ class Corpus:
     @property
     def splits(self) -> dict[str, list[str]]:
         """``splits.json`` content ``{"train": [...], "val": [...], "test": [...]}``."""
-        return _load_json(self.root / SPLITS_NAME, "splits file")
+        path = self.root / SPLITS_NAME
+        return check_splits(_load_json(path, "splits file"), path)
 
     def _scene_dir(self, scene_id: str) -> Path:
         if scene_id not in self.manifest["scenes"]:
             raise KeyError(f"scene {scene_id!r} is not in corpus {self.root} (see Corpus.scenes)")
+        if scene_id not in self._inside:  # ids were checked with the manifest; symbolic links are resolved here
+            inside_root(self.root, f"{SCENES_DIR}/{scene_id}", str(self.root / MANIFEST_NAME))
+            self._inside.add(scene_id)
         return self.root / SCENES_DIR / scene_id
 
     def meta(self, scene_id: str) -> dict:
@@ -1382,16 +1488,24 @@ def validate_corpus(root: str | os.PathLike, *, check_pixels: bool = True,
         err(f"{mpath}: manifest missing (not an lfmbench corpus)")
         return rep
     try:
-        man = _check_manifest(_load_json(mpath, "manifest"), mpath)
+        man = _check_manifest(_load_json(mpath, "manifest"), mpath, entries=False)
     except CorpusError as exc:
         err(str(exc))
         return rep
-    scenes = man["scenes"]
+    bad_entries = manifest_entry_errors(man, mpath)
+    rep.errors.extend(bad_entries)
+    scenes = [s for s in man["scenes"] if _scene_id_error(s) is None]
     rep.n_scenes = len(scenes)
-    files: dict[str, str] = man["files"]
-    rep.n_files = len(files)
-    # checksums and presence of every listed file
+    files: dict[str, str] = {rel: d for rel, d in man["files"].items()
+                             if _file_entry_error(rel, d, set(scenes)) is None}
+    rep.n_files = len(man["files"])
+    # checksums and presence of every listed file (only entries that stay inside the root)
     for rel, digest in files.items():
+        try:
+            p = inside_root(root, rel, str(mpath))
+        except CorpusFileError as exc:
+            err(str(exc))
+            continue
         p = root / rel
         if not p.is_file():
             err(f"{p}: missing (listed in manifest)")
@@ -1403,7 +1517,7 @@ def validate_corpus(root: str | os.PathLike, *, check_pixels: bool = True,
         err(f"{spath}: missing")
     else:
         try:
-            sp = _load_json(spath, "splits file")
+            sp = check_splits(_load_json(spath, "splits file"), spath)
             ids = [s for k in ("train", "val", "test") for s in sp.get(k, [])]
             if set(sp) != {"train", "val", "test"}:
                 err(f"{spath}: keys must be train, val, test; got {sorted(sp)}")
@@ -1431,6 +1545,11 @@ def validate_corpus(root: str | os.PathLike, *, check_pixels: bool = True,
             if d.is_dir() and d.name not in scenes:
                 rep.warnings.append(f"{d}: incomplete scene (not in manifest; re-run the render to finish it)")
     for i, sid in enumerate(sorted(scenes)):
+        try:
+            inside_root(root, f"{SCENES_DIR}/{sid}", str(mpath))
+        except CorpusFileError as exc:
+            err(str(exc))
+            continue
         _validate_scene(root, sid, files, rep, check_pixels)
         if progress is not None:
             progress(i + 1, len(scenes))
@@ -1551,12 +1670,27 @@ def _validate_storage_attrs(p: Path, part: ExrPart, window: str | None, rep: Val
 def _validate_pixels(p: Path, part: ExrPart, rep: ValidationReport, check_pixels: bool) -> None:
     if not check_pixels or part.channels is None:
         return
-    n_nan = n_inf = n_neg = 0
-    for a in part.channels.values():
+    n_nan = n_inf = n_neg = n_big = 0
+    peak = 0.0
+    for name, a in part.channels.items():
         a = np.asarray(a, dtype=np.float32)
         n_nan += int(np.isnan(a).sum())
         n_inf += int(np.isinf(a).sum())
         n_neg += int((a < 0).sum())
+        window = name.split(".", 1)[0]
+        try:
+            scale = layer_scale(part, window if window in STATIC_WINDOWS else None, p)
+        except CorpusFileError:  # reported by _validate_storage_attrs
+            continue
+        fin = a[np.isfinite(a)]
+        if fin.size:
+            big = fin.astype(np.float64) / scale > RADIANCE_MAX
+            n_big += int(big.sum())
+            peak = max(peak, float(fin.max()) / scale)
     for n, what in ((n_nan, "NaN"), (n_inf, "inf"), (n_neg, "negative")):
         if n:
             rep.errors.append(f"{p} part {part.name!r}: {n} {what} radiance values")
+    if n_big:
+        rep.errors.append(f"{p} part {part.name!r}: {n_big} radiance values above the plausibility ceiling "
+                          f"RADIANCE_MAX = {RADIANCE_MAX:.0e} {RADIANCE_UNIT} (max {peak:.3g}): a unit or scale "
+                          "error")

@@ -57,6 +57,26 @@ class DataSourceError(RuntimeError):
     """Reading a batch failed; the partial result (``status: failed``) has been written."""
 
 
+class EvaluationInterrupted(KeyboardInterrupt):
+    """Ctrl-C during :func:`evaluate`; the partial result (``status: interrupted``) has been written."""
+
+    def __init__(self, result: dict):
+        super().__init__("interrupted")
+        self.result = result
+
+
+#: ``status`` of a finished result file; anything else (``running``: killed, ``interrupted``, ``failed``) is
+#: not a result the leaderboard ranks without ``--include-incomplete``.
+COMPLETE = "complete"
+
+
+def _describe(exc: BaseException) -> str:
+    """``Type: message`` of a method's exception; ``SystemExit`` (a method module calling ``sys.exit``) says so."""
+    if isinstance(exc, SystemExit):
+        return f"SystemExit: the method called sys.exit({exc.code!r}) (a method must return or raise, not exit)"
+    return f"{type(exc).__name__}: {exc}"
+
+
 # ----------------------------------------------------------------------------------------------- provenance
 def _lfmbench_version() -> str:
     try:
@@ -286,12 +306,18 @@ def evaluate(method: Callable | str, batches: Iterable[dict], *, method_spec: st
     Returns:
         The result dict (also written to ``output``).
 
+    Result ``status``: ``complete``; ``failed`` when no scene was scored (the method failed on every one) or
+    the data source failed (:class:`DataSourceError`); ``interrupted`` after Ctrl-C
+    (:class:`EvaluationInterrupted`, the partial result written first); ``running`` in a file whose run was
+    killed. A method that calls ``sys.exit`` is recorded per scene like one that raises.
+
     Raises:
         EmptyDataError: if ``batches`` yields nothing.
+        EvaluationInterrupted: on Ctrl-C (a ``KeyboardInterrupt``).
         lfmbench.baselines.MethodNotFoundError: for an unknown spec.
     """
     from lfmbench.baselines import get_method
-    from lfmbench.metrics import ScoreOptions, hdr, score_batch
+    from lfmbench.metrics import ScoreOptions, hdr
 
     o = options or ScoreOptions()
     spec = method_spec or (method if isinstance(method, str) else getattr(method, "__qualname__", repr(method)))
@@ -323,9 +349,35 @@ def evaluate(method: Callable | str, batches: Iterable[dict], *, method_spec: st
         from tqdm import tqdm
 
         it = tqdm(batches, total=total, desc=f"evaluate {spec}", unit="batch")
+    source = iter(it)
+    try:
+        n_batches = _run_batches(fn, source, result, output, dev, o, base_opts, perceptual, warmup, repeats)
+    except KeyboardInterrupt:
+        result["status"] = "interrupted"
+        result["notes"].append(f"interrupted (Ctrl-C) after {len(result['scenes'])} scenes; not a complete result")
+        result["aggregate"] = _aggregate(result["scenes"])
+        if output is not None:
+            write_json_atomic(result, output)
+        raise EvaluationInterrupted(result) from None
+    if n_batches == 0:
+        raise EmptyDataError("the data source yielded no batch (empty corpus split?)")
+    result["aggregate"] = _aggregate(result["scenes"])
+    result["status"] = COMPLETE if result["aggregate"]["scenes_ok"] else "failed"
+    if result["status"] == "failed":
+        result["notes"].append("no scene was scored: the method failed on every scene")
+    if output is not None:
+        write_json_atomic(result, output)
+    return result
+
+
+def _run_batches(fn, source, result: dict, output, dev, o, base_opts, perceptual: bool, warmup: int,
+                 repeats: int) -> int:
+    """The loop of :func:`evaluate`: score every batch into ``result`` (rewritten to ``output`` after each);
+    returns the number of batches."""
+    from lfmbench.metrics import hdr, score_batch
+
     timed = False
     n_batches = 0
-    source = iter(it)
     while True:
         try:
             batch = next(source)
@@ -351,11 +403,11 @@ def evaluate(method: Callable | str, batches: Iterable[dict], *, method_spec: st
             _sync(dev)
             call_ms = (time.perf_counter() - t0) * 1e3
             pred = check_output(pred, gt)
-        except Exception as exc:  # the method's failure is a result, not a crash
+        except (Exception, SystemExit) as exc:  # the method's failure is a result, not a crash
             status = "bad_output" if isinstance(exc, MethodOutputError) else "error"
             for i, sid in enumerate(ids):
                 result["scenes"].append({"scene_id": sid, "index": len(result["scenes"]), "status": status,
-                                         "error": f"{type(exc).__name__}: {exc}"})
+                                         "error": _describe(exc)})
         else:
             try:
                 scores = score_batch(pred, dict(batch, gt=gt), base_opts)
@@ -392,18 +444,12 @@ def evaluate(method: Callable | str, batches: Iterable[dict], *, method_spec: st
                         if module is not None:
                             params, macs = count_params_macs(module, lambda: fn(dict(batch)))
                             result["method"].update(params=params, macs_per_call=macs, macs_per_megapixel=macs / mps)
-                    except Exception as exc:
-                        result["notes"].append(f"timing failed: {type(exc).__name__}: {exc}")
+                    except (Exception, SystemExit) as exc:
+                        result["notes"].append(f"timing failed: {_describe(exc)}")
         result["aggregate"] = _aggregate(result["scenes"])
         if output is not None:
             write_json_atomic(result, output)
-    if n_batches == 0:
-        raise EmptyDataError("the data source yielded no batch (empty corpus split?)")
-    result["status"] = "complete"
-    result["aggregate"] = _aggregate(result["scenes"])
-    if output is not None:
-        write_json_atomic(result, output)
-    return result
+    return n_batches
 
 
 # ---------------------------------------------------------------------------------------------- data source
@@ -443,12 +489,18 @@ def load_runs(paths: Iterable[str | Path]) -> list[dict]:
     for p in paths:
         p = Path(p)
         try:
-            d = json.loads(p.read_text())
-        except (OSError, json.JSONDecodeError) as exc:
-            raise ValueError(f"run file {p}: cannot read JSON ({exc})") from exc
+            d = json.loads(p.read_text(encoding="utf-8"))
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+            raise ValueError(f"run file {p}: cannot read JSON ({type(exc).__name__}: {exc})") from None
         if not isinstance(d, dict) or d.get("format") != RESULT_FORMAT:
             fmt = d.get("format") if isinstance(d, dict) else None
             raise ValueError(f"run file {p}: not an {RESULT_FORMAT} result (format={fmt!r})")
+        for key, typ in (("method", dict), ("runtime", dict), ("aggregate", dict), ("status", str)):
+            if not isinstance(d.get(key), typ):
+                raise ValueError(f"run file {p}: field {key!r} missing or not a{'n object' if typ is dict else ' string'}"
+                                 " (a truncated or hand-made result?)")
+        if not isinstance(d["method"].get("spec"), str):
+            raise ValueError(f"run file {p}: field 'method.spec' missing")
         d["_path"] = str(p)
         runs.append(d)
     if not runs:
@@ -480,10 +532,20 @@ def leaderboard_rows(runs: list[dict], sort_by: str = "psnr_mu") -> list[dict]:
             return (1, 0.0)
         return (0, -v if higher else v)
 
-    rows.sort(key=key)
+    rows.sort(key=lambda row: (row["status"] != COMPLETE, *key(row)))  # incomplete runs after complete ones
     for i, row in enumerate(rows):
         row["rank"] = i + 1
     return rows
+
+
+def _status_mark(row: dict) -> str:
+    """`` (interrupted)`` etc. after the method name of a run whose status is not ``complete``."""
+    return "" if row.get("status") == COMPLETE else f" ({row.get('status')}: not a complete result)"
+
+
+def incomplete_runs(runs: list[dict]) -> list[str]:
+    """``"<path>: status <status>"`` for each run that is not complete (interrupted, failed, killed)."""
+    return [f"{r.get('_path')}: status {r.get('status')!r}" for r in runs if r.get("status") != COMPLETE]
 
 
 def _fmt(v: Any, nd: int = 3) -> str:
@@ -510,7 +572,7 @@ def leaderboard_markdown(rows: list[dict], sort_by: str = "psnr_mu") -> str:
     lines = [f"Ranked by `{sort_by}`; run time = median ms per output megapixel after warm-up.", "",
              "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in rows:
-        cells = [str(r["rank"]), f"`{r['method']}`"] + [_fmt(r[k], 2 if k.startswith(("psnr", "pu21")) else 3)
+        cells = [str(r["rank"]), f"`{r['method']}`" + _status_mark(r)] + [_fmt(r[k], 2 if k.startswith(("psnr", "pu21")) else 3)
                                                          for k, _ in cols]
         cells += [_fmt(r["ms_per_megapixel"], 1), _fmt(r["params"]), _fmt(r["macs_per_megapixel"], 0),
                   f"{r['failed']}/{r['scenes']}"]
@@ -565,7 +627,7 @@ def print_leaderboard(rows: list[dict], sort_by: str = "psnr_mu", note: str = ""
     for h in ["#", "method"] + [h for _, h in cols] + ["ms/MP", "params", "failed"]:
         table.add_column(h, justify="left" if h == "method" else "right", no_wrap=h == "method")
     for r in rows:
-        table.add_row(str(r["rank"]), r["method"], *[_fmt(r[k], 2 if k.startswith(("psnr", "pu21")) else 3)
+        table.add_row(str(r["rank"]), r["method"] + _status_mark(r), *[_fmt(r[k], 2 if k.startswith(("psnr", "pu21")) else 3)
                                                      for k, _ in cols],
                       _fmt(r["ms_per_megapixel"], 1), _fmt(r["params"]), f"{r['failed']}/{r['scenes']}")
     console.print(table)
@@ -637,13 +699,44 @@ def register(app) -> None:
         perceptual: bool = typer.Option(True, help="also PU21-PSNR and ColorVideoVDP (needs cvvdp)"),
         device: str = typer.Option("cpu", help="torch device, e.g. cpu or cuda"),
         threads: int = typer.Option(None, help="torch CPU threads (default: torch's choice); recorded"),
+        cache_dir: Path = typer.Option(None, "--cache-dir",
+                                       help="projected-radiance cache directory (default <corpus>/.cache; "
+                                            "any writable directory for a read-only corpus)"),
     ) -> None:
-        """Score a fusion method on a corpus split; write per-scene and aggregate metrics as JSON."""
+        """Score a fusion method on a corpus split; write per-scene and aggregate metrics as JSON.
+
+        Exit status: 0 every scene scored, 1 some scenes failed or the data source failed (the result file
+        says which), 2 bad input, 130 interrupted (the result file has status "interrupted").
+        """
+        def fail(msg: str, code: int = 2) -> None:
+            typer.secho(f"error: {msg}", fg=typer.colors.RED, err=True)
+            raise typer.Exit(code)
+
         if threads is not None:
             if threads < 1:
-                typer.secho(f"error: --threads must be >= 1, got {threads}", fg=typer.colors.RED, err=True)
-                raise typer.Exit(2)
+                fail(f"--threads must be >= 1, got {threads}")
             torch.set_num_threads(threads)
+        for name, v, lo in (("--max-scenes", max_scenes, 1), ("--samples-per-scene", samples_per_scene, 1),
+                            ("--repeats", repeats, 1), ("--warmup", warmup, 0), ("--crop", crop, 2)):
+            if v is not None and v < lo:
+                fail(f"{name} must be an integer >= {lo}, got {v}")
+        try:
+            dev = torch.device(device)
+        except (RuntimeError, ValueError):
+            fail(f"--device must be a torch device such as cpu, cuda or cuda:0, got {device!r}")
+        if dev.type == "cuda" and not torch.cuda.is_available():
+            fail(f"--device {device}: CUDA is not available on this machine (use --device cpu)")
+        out = output or Path("runs") / f"{_safe_name(method)}.json"
+        try:  # an unwritable --output is found before any work is done
+            if out.is_dir():
+                raise IsADirectoryError(21, "is a directory")
+            out.parent.mkdir(parents=True, exist_ok=True)
+            import tempfile
+
+            with tempfile.TemporaryFile(dir=out.parent):
+                pass
+        except OSError as exc:
+            fail(f"--output {out}: cannot write the result file there ({exc.strerror or exc})")
         from itertools import islice
 
         from torch.utils.data import DataLoader
@@ -653,25 +746,35 @@ def register(app) -> None:
 
         try:
             fn = get_method(method)
-            ds = make_dataset(corpus, split, seed=seed, crop=crop, samples_per_scene=samples_per_scene)
+            extra = {} if cache_dir is None else {"cache_dir": cache_dir}
+            ds = make_dataset(corpus, split, seed=seed, crop=crop, samples_per_scene=samples_per_scene, **extra)
         except (MethodNotFoundError, FileNotFoundError, EmptyDataError, RuntimeError, ValueError) as exc:
-            typer.secho(f"error: {exc}", fg=typer.colors.RED, err=True)
-            raise typer.Exit(2) from exc
+            fail(str(exc))
         n = len(ds) if max_scenes is None else min(len(ds), max_scenes)
         loader = DataLoader(ds, batch_size=1, shuffle=False, num_workers=0, collate_fn=collate_samples)
-        out = output or Path("runs") / f"{_safe_name(method)}.json"
         try:
             res = evaluate(fn, islice(loader, n), method_spec=method, output=out,
                            options=ScoreOptions(perceptual=perceptual), warmup=warmup, repeats=repeats, device=device,
                            seeds={"dataset": seed}, dataset={"corpus": str(corpus), "split": split, "scenes": n,
                                                              "crop": crop}, total=n)
+        except EvaluationInterrupted as exc:
+            n_done = len(exc.result["scenes"])
+            typer.secho(f"interrupted: {n_done} scene(s) scored; {out} is marked status \"interrupted\" "
+                        "(the leaderboard skips it); run the command again for a complete result",
+                        fg=typer.colors.YELLOW, err=True)
+            raise typer.Exit(130) from None
         except (DataSourceError, EmptyDataError) as exc:
-            typer.secho(f"error: {exc} (partial results in {out})", fg=typer.colors.RED, err=True)
-            raise typer.Exit(1) from exc
+            fail(f"{exc} (partial results in {out})", 1)
+        except OSError as exc:  # the result file could not be written (disk full, ...)
+            fail(f"{exc.filename}: {exc.strerror or exc}" if exc.filename else (exc.strerror or str(exc)))
         agg = res["aggregate"]
         typer.echo(f"{method}: {agg.get('scenes_ok', 0)}/{agg.get('scenes', 0)} scenes ok, PSNR-mu "
                    f"{_fmt(agg.get('psnr_mu'), 2)} dB, MMP {_fmt(agg.get('mmp_pred'))}, "
                    f"{_fmt(res['runtime']['ms_per_megapixel'], 1)} ms/MP -> {out}")
+        bad = [sc for sc in res["scenes"] if sc.get("status") != "ok"]
+        if bad:
+            fail(f"{len(bad)} of {len(res['scenes'])} scenes failed (first: scene {bad[0].get('scene_id')}: "
+                 f"{bad[0].get('error', bad[0].get('status'))}); see {out}", 1)
 
     @app.command("leaderboard")
     def leaderboard_cmd(
@@ -679,14 +782,30 @@ def register(app) -> None:
         sort_by: str = typer.Option("psnr_mu", help="metric to rank by"),
         markdown: Path = typer.Option(Path("runs/leaderboard.md"), help="Markdown table output"),
         plot: Path = typer.Option(Path("runs/leaderboard.png"), help="quality-vs-run-time PNG output"),
+        include_incomplete: bool = typer.Option(False, "--include-incomplete",
+                                                help="rank interrupted or failed runs too (marked in the table)"),
     ) -> None:
-        """Rank evaluation results; print a table, write Markdown and a quality-vs-run-time plot."""
+        """Rank evaluation results; print a table, write Markdown and a quality-vs-run-time plot.
+
+        Runs whose status is not "complete" (interrupted, failed, or killed while "running") are refused unless
+        --include-incomplete, which ranks them after the complete ones and marks them.
+        """
         try:
-            rows = leaderboard_rows(load_runs(p for p in runs if p.suffix == ".json"), sort_by)
+            loaded = load_runs(p for p in runs if p.suffix == ".json")
+            bad = incomplete_runs(loaded)
+            if bad and not include_incomplete:
+                raise ValueError(f"{len(bad)} run file(s) are not complete results ({'; '.join(bad[:3])}"
+                                 f"{' ...' if len(bad) > 3 else ''}); re-run them, leave them out, or pass "
+                                 "--include-incomplete to rank them marked")
+            rows = leaderboard_rows(loaded, sort_by)
         except ValueError as exc:
             typer.secho(f"error: {exc}", fg=typer.colors.RED, err=True)
-            raise typer.Exit(2) from exc
+            raise typer.Exit(2) from None
         print_leaderboard(rows, sort_by, note=f"all columns in {markdown}")
-        _write_text_atomic(leaderboard_markdown(rows, sort_by), markdown)
-        plot_quality_vs_runtime(rows, plot, sort_by)
+        try:
+            _write_text_atomic(leaderboard_markdown(rows, sort_by), markdown)
+            plot_quality_vs_runtime(rows, plot, sort_by)
+        except OSError as exc:
+            typer.secho(f"error: {exc}", fg=typer.colors.RED, err=True)
+            raise typer.Exit(2) from None
         typer.echo(f"wrote {markdown} and {plot}")

@@ -12,7 +12,13 @@ from typing import List, Optional
 
 import typer
 
-__all__ = ["register", "render_cmd"]
+__all__ = ["register", "render_cmd", "CONFIRM_ABOVE", "MAX_SCENES"]
+
+#: Sizes above which ``lfmbench render`` asks for ``--yes`` (a typo such as ``--frames 1000`` would start a
+#: render of many hours per scene; ``--scenes 100000000`` would build a job list of gigabytes first).
+CONFIRM_ABOVE = {"scenes": 10_000, "frames": 300, "width": 7680, "height": 4320, "spp": 4096, "bins": 256}
+#: Largest ``--scenes`` accepted at all (even with ``--yes``).
+MAX_SCENES = 1_000_000
 
 def _split_groups(groups: Optional[List[str]]) -> list[str] | None:
     if not groups:
@@ -51,6 +57,8 @@ def render_cmd(
                                                "corpus's own (docs/corpus-format.md, docs/storage-benchmark.md)."),
     half: bool = typer.Option(False, "--half", help="Same as --storage float16."),
     no_resume: bool = typer.Option(False, "--no-resume", help="Re-render scenes that are already complete."),
+    yes: bool = typer.Option(False, "--yes", help="Confirm sizes above the sanity limits (e.g. --frames > 300, "
+                                                  "--scenes > 10000)."),
 ) -> None:
     """Render driving scenes (Mitsuba 3, spectral, light groups, time bins) into a corpus; resumable."""
     from rich.console import Console
@@ -78,6 +86,16 @@ def render_cmd(
                 fail(f"--{k} must be an integer >= 1, got {v!r}")
         if seed < 0:
             fail(f"--seed must be >= 0, got {seed}")
+        if not scene_file and scenes < 1:
+            fail(f"--scenes must be an integer >= 1, got {scenes}")
+        if not scene_file and scenes > MAX_SCENES:
+            fail(f"--scenes {scenes} is above the limit of {MAX_SCENES:,} scenes per run")
+        sizes = dict(options, scenes=None if scene_file else scenes)
+        for k, limit in CONFIRM_ABOVE.items():
+            v = sizes.get(k)
+            if isinstance(v, int) and v > limit and not yes:
+                fail(f"--{k} {v} is above the sanity limit {limit:,} (a render of this size takes very long or "
+                     f"needs much memory); pass --yes if you mean it")
         if workers < 1:
             fail(f"--workers must be >= 1, got {workers}")
         scene_dicts = None
@@ -129,6 +147,8 @@ def render_cmd(
         fail(str(exc))
     except CorpusWriteError as exc:
         fail(f"{exc.strerror or exc}")
+    except OSError as exc:  # --out cannot be created or written (permissions, a file in the way, read-only)
+        fail(f"--out {out}: cannot create or write the corpus there ({exc.strerror or exc})")
 
     with Progress(TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),
                   TimeElapsedColumn(), console=console) as prog:
@@ -146,7 +166,7 @@ def render_cmd(
 
         try:
             summary = J.run_jobs(job_list, writer, workers=workers, ray_address=ray_address, on_start=on_start,
-                                 on_done=on_done, resume=not no_resume)
+                                 on_done=on_done, resume=not no_resume, split_seed=seed)
         except J.RenderInterrupted as exc:
             s = exc.summary
             console.print(f"[yellow]interrupted[/]: {len(s.rendered) + len(s.skipped)} complete scene(s) are in "

@@ -14,9 +14,12 @@ so scene i is the same whatever ``--scenes N`` is and a run can be extended by r
 """
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import multiprocessing
+import signal
+import threading
 import time
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import dataclass, field
@@ -64,13 +67,18 @@ def default_backend() -> Backend:
 def load_profile(profile: str | Path) -> dict:
     """RenderOptions overrides of a profile: a name in :data:`PROFILES_FILE` or a path to a YAML file.
 
-    Raises ``ValueError`` naming the file for an unknown profile or a value that is not a mapping.
+    Raises ``ValueError`` naming the file for an unknown profile, malformed YAML or a value that is not a
+    mapping.
     """
     import yaml  # noqa: PLC0415
 
     p = Path(profile)
     if p.suffix in (".yaml", ".yml", ".json") and p.is_file():
-        data = yaml.safe_load(p.read_text())
+        try:
+            data = yaml.safe_load(p.read_text(encoding="utf-8"))
+        except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
+            why = " ".join(str(exc).split()) or type(exc).__name__  # one line, position included
+            raise ValueError(f"{p}: cannot read the profile: {why}") from None
         src = p
     else:
         with open(PROFILES_FILE) as fh:
@@ -183,6 +191,41 @@ class RunSummary:
     notes: list[str] = field(default_factory=list)
 
 
+def _is_interrupt(exc: BaseException) -> bool:
+    """True for Ctrl-C seen through a renderer: Mitsuba / Dr.Jit turn the ``KeyboardInterrupt`` raised by the
+    SIGINT handler inside a render into a ``RuntimeError`` (the cause or message still names it)."""
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        seen.add(id(exc))
+        if isinstance(exc, KeyboardInterrupt) or "KeyboardInterrupt" in str(exc):
+            return True
+        exc = exc.__cause__ or exc.__context__
+    return False
+
+
+@contextlib.contextmanager
+def _sigint_flag(hit: list):
+    """Append ``True`` to ``hit`` when SIGINT arrives while the block runs (the previous handler still runs, so
+    Ctrl-C still raises ``KeyboardInterrupt`` where Python code is running). Only in the main thread."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    prev = signal.getsignal(signal.SIGINT)
+
+    def handler(signum, frame):
+        hit.append(True)
+        if callable(prev):
+            prev(signum, frame)
+        elif prev == signal.SIG_DFL:
+            raise KeyboardInterrupt
+
+    signal.signal(signal.SIGINT, handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, prev)
+
+
 class RenderInterrupted(KeyboardInterrupt):
     """Ctrl-C during ``run_jobs``; carries the :class:`RunSummary` of what was finished and recorded."""
 
@@ -193,7 +236,8 @@ class RenderInterrupted(KeyboardInterrupt):
 
 def run_jobs(jobs: Sequence[RenderJob], writer: CorpusWriter, *, workers: int = 1, ray_address: str | None = None,
              on_start: Callable[[int, int], None] | None = None,
-             on_done: Callable[[str, str], None] | None = None, resume: bool = True) -> RunSummary:
+             on_done: Callable[[str, str], None] | None = None, resume: bool = True,
+             split_seed: int | None = None) -> RunSummary:
     """Run the jobs not yet complete in ``writer``'s corpus; commit each finished scene to the manifest.
 
     Args:
@@ -206,9 +250,14 @@ def run_jobs(jobs: Sequence[RenderJob], writer: CorpusWriter, *, workers: int = 
         on_start: ``on_start(n_todo, n_skipped)`` once the resume check is done.
         on_done: ``on_done(scene_id, status)`` with status ``rendered`` / ``failed`` after each job.
         resume: skip scenes complete in the manifest (files present with matching SHA-256).
+        split_seed: when given, ``splits.json`` is rewritten (atomically) from the manifest's scenes after the
+            resume check and after every committed scene, so the manifest and the splits describe the complete
+            scenes at every moment (a killed run leaves a corpus that passes ``lfmbench validate``).
 
     A :class:`lfmbench.corpus.CorpusWriteError` (e.g. disk full) stops the run and propagates; Ctrl-C raises
-    :class:`RenderInterrupted`; other job errors are collected in ``failed`` and the run continues.
+    :class:`RenderInterrupted`, also when the renderer turned it into another exception (Mitsuba raises
+    ``RuntimeError``): a scene interrupted by SIGINT is never recorded as failed. Other job errors are
+    collected in ``failed`` and the run continues.
     """
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
         raise ValueError(f"workers must be an integer >= 1, got {workers!r}")
@@ -222,19 +271,26 @@ def run_jobs(jobs: Sequence[RenderJob], writer: CorpusWriter, *, workers: int = 
         else:
             writer.forget_scene(j.scene_id)
             todo.append(j)
+    if split_seed is not None:
+        writer.write_splits(split_seed, SPLIT_FRACTIONS)
     if on_start is not None:
         on_start(len(todo), len(summary.skipped))
+    hit: list[bool] = []
 
     def finished(job: RenderJob, res: dict | None, exc: BaseException | None) -> None:
         if exc is not None:
             if isinstance(exc, CorpusWriteError):
                 raise exc
+            if hit or _is_interrupt(exc):
+                raise KeyboardInterrupt from exc
             summary.failed[job.scene_id] = f"{type(exc).__name__}: {exc}"
             log.error("scene %s failed: %s", job.scene_id, exc)
             if on_done is not None:
                 on_done(job.scene_id, "failed")
             return
         writer.commit_scene(job.scene_id, res["hashes"])
+        if split_seed is not None:
+            writer.write_splits(split_seed, SPLIT_FRACTIONS)
         summary.rendered.append(job.scene_id)
         summary.seconds[job.scene_id] = float(res["seconds"])
         summary.notes.extend(res.get("notes", []))
@@ -242,24 +298,30 @@ def run_jobs(jobs: Sequence[RenderJob], writer: CorpusWriter, *, workers: int = 
             on_done(job.scene_id, "rendered")
 
     try:
-        if ray_address:
-            _run_ray(todo, ray_address, workers, finished)
-        elif workers == 1:
-            for j in todo:
-                try:
-                    res = run_job(j)
-                except (KeyboardInterrupt, CorpusWriteError):
-                    raise
-                except Exception as exc:  # noqa: BLE001 - one bad scene must not stop the others
-                    finished(j, None, exc)
-                else:
-                    finished(j, res, None)
-        else:
-            _run_pool(todo, workers, finished)
+        with _sigint_flag(hit):
+            _dispatch(todo, ray_address, workers, finished)
     except KeyboardInterrupt:
         writer.cleanup_temp()
         raise RenderInterrupted(summary) from None
     return summary
+
+
+def _dispatch(todo: Sequence[RenderJob], ray_address: str | None, workers: int, finished: Callable) -> None:
+    """Run the jobs on Ray, in this process or in a process pool; ``finished(job, result, exc)`` after each."""
+    if ray_address:
+        _run_ray(todo, ray_address, workers, finished)
+    elif workers == 1:
+        for j in todo:
+            try:
+                res = run_job(j)
+            except (KeyboardInterrupt, CorpusWriteError):
+                raise
+            except Exception as exc:  # noqa: BLE001 - one bad scene must not stop the others
+                finished(j, None, exc)
+            else:
+                finished(j, res, None)
+    else:
+        _run_pool(todo, workers, finished)
 
 
 def _run_pool(todo: Sequence[RenderJob], workers: int, finished: Callable) -> None:

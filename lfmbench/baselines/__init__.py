@@ -66,6 +66,12 @@ def get_method(spec: str | Method) -> Method:
             mod = importlib.import_module(mod_name)
         except ImportError as exc:
             raise MethodNotFoundError(f"method {spec!r}: cannot import module {mod_name!r}: {exc}") from exc
+        except SystemExit as exc:  # a module that exits on import must not end the caller silently
+            raise MethodNotFoundError(f"method {spec!r}: importing module {mod_name!r} called "
+                                      f"sys.exit({exc.code!r})") from None
+        except Exception as exc:  # noqa: BLE001 - any error while importing user code, named
+            raise MethodNotFoundError(f"method {spec!r}: importing module {mod_name!r} failed: "
+                                      f"{type(exc).__name__}: {exc}") from exc
         obj = mod
         for part in attr.split("."):
             if not hasattr(obj, part):

@@ -210,7 +210,9 @@ class LFMCaptureDataset(Dataset):
         line_time_s: rolling-shutter row delay (s); default the corpus's. Must keep every row's windows inside
             the rendered capture window (checked).
         cache_dir: directory of the per-sensor projected-radiance cache (default ``<root>/.cache``; ``False``
-            keeps it in memory only). cache_scenes: scenes kept in memory per worker.
+            keeps it in memory only; any writable directory for a read-only corpus). Entries are keyed by the
+            manifest SHA-256 of the files they come from and read with ``torch.load(weights_only=True)``
+            (:func:`lfmbench.datasets.projection.load_or_build`). cache_scenes: scenes kept in memory per worker.
         transforms: callable applied to the sample dict.
 
     Sample (F frames, crop h x w; batches add a leading B; see docs/contracts.md):
@@ -254,18 +256,38 @@ class LFMCaptureDataset(Dataset):
             raise ValueError(f"samples_per_scene must be >= 1, got {samples_per_scene!r}")
         self.split, self.shutter, self.seed = split, shutter, int(seed)
         self.frames, self.outputs = frames, tuple(outputs)
+        if isinstance(groups, str):
+            groups = [groups]
+        if groups is not None and (not all(isinstance(g, str) for g in groups)):
+            raise ValueError(f"groups must be None or a list of light-group names, got {groups!r}")
         self.groups = None if groups is None else list(groups)
         self.samples_per_scene, self.noise, self.optics = int(samples_per_scene), bool(noise), bool(optics)
         self.max_lights, self.transforms = int(max_lights), transforms
         self.preset = _sensor.load_preset(sensor)
         self.sensor_name = self.preset.name
         self.pwm: PWMConfig = load_pwm_config(pwm)
-        self.crop = (crop, crop) if isinstance(crop, int) else (None if crop is None else tuple(int(c) for c in crop))
-        if self.crop is not None and (len(self.crop) != 2 or min(self.crop) < 2):
+        def _is_int(v):
+            return isinstance(v, (int, np.integer)) and not isinstance(v, bool)
+
+        if crop is None:
+            self.crop = None
+        elif _is_int(crop):
+            self.crop = (int(crop), int(crop))
+        elif isinstance(crop, (tuple, list)) and len(crop) == 2 and all(_is_int(c) for c in crop):
+            self.crop = (int(crop[0]), int(crop[1]))
+        else:
+            raise ValueError(f"crop must be None, an int or (h, w) of ints (pixels), got {crop!r}")
+        if self.crop is not None and min(self.crop) < 2:
             raise ValueError(f"crop must be None, an int or (h, w) with sides >= 2, got {crop!r}")
         self.scene_ids = self._split_scenes()
         if not self.scene_ids:
             raise DatasetNotFoundError(f"root: corpus {self.root} has no scenes in split {split!r}")
+        if self.groups is not None:
+            have = sorted({g for sid in self.scene_ids for g in self.corpus.meta(sid)["groups"]})
+            unknown = [g for g in self.groups if g not in have]
+            if unknown:
+                raise ValueError(f"groups: {unknown} are not light groups of any scene in split {split!r} of "
+                                 f"{self.root}; available: {have}")
         for sid in self.scene_ids:
             m = self.corpus.meta(sid)
             first = 0 if frame_start == "random" else frame_start
@@ -474,8 +496,12 @@ class LFMCaptureDataset(Dataset):
             if fpn is not None:
                 fpn = {k: v[..., y0:y0 + ch, x0:x0 + cw] for k, v in fpn.items()}
             gen = torch.Generator().manual_seed(int(noise_seed)) if self.noise else None
-            cap = _sensor.simulate_split_pixel_electrons(lpd, spd, self.preset, t_s, t_l, generator=gen,
-                                                         noise=self.noise, fpn=fpn)
+            try:
+                cap = _sensor.simulate_split_pixel_electrons(lpd, spd, self.preset, t_s, t_l, generator=gen,
+                                                             noise=self.noise, fpn=fpn)
+            except ValueError as exc:  # e.g. non-finite electrons from implausible radiance: name the scene
+                raise ValueError(f"scene {scene_id!r} of {self.root} (frames {s0}..{s0 + F - 1}): {exc}; check "
+                                 f"the corpus with `lfmbench validate {self.root}`") from None
             if "raw" in want:
                 sample.update({k: cap[k] for k in ("lpd_hcg", "lpd_lcg", "spd")})
             if want & {"input_referred", "rgb"}:

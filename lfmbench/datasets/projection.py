@@ -22,20 +22,22 @@ from __future__ import annotations
 
 import hashlib
 import json
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Sequence
+from typing import Mapping, Sequence
 
 import numpy as np
 import torch
 
 from lfmbench import optics as _optics
 from lfmbench import sensor as _sensor
-from lfmbench.corpus import Corpus, group_storage
+from lfmbench.corpus import (MANIFEST_NAME, SCENES_DIR, Corpus, CorpusFileError, check_scene_id, frame_dir,
+                             group_storage, sha256_file)
 from lfmbench.fileio import atomic_torch_save
 
 #: Version of the cached layout; bump when the projection changes so stale caches are not reused.
-CACHE_VERSION = 1
+CACHE_VERSION = 2
 PHOTODIODES = ("lpd", "spd")
 
 
@@ -119,12 +121,37 @@ class Projector:
         return pb, self.project(buf, pb)
 
 
-def cache_key(preset, meta: dict, groups: Sequence[str], frames: int, optics: bool) -> str:
-    """Hash of everything the projected layers depend on (preset, optics, bands, groups, frames)."""
+def cache_key(preset, meta: dict, groups: Sequence[str], frames: int, optics: bool,
+              sources: Mapping[str, str] | None = None) -> str:
+    """Hash of everything the projected layers depend on: preset, optics, bands, groups, frames and the
+    SHA-256 of every corpus file they are built from (``sources``: relpath -> digest from ``manifest.json``),
+    so a re-rendered or re-imported scene gets a new key."""
     desc = {"v": CACHE_VERSION, "preset": repr(preset), "optics": bool(optics), "groups": sorted(groups),
             "frames": int(frames), "bands": meta["bands_nm"], "bw": meta.get("band_width_nm"),
-            "size": [meta["height"], meta["width"]]}
+            "size": [meta["height"], meta["width"]], "sources": dict(sorted((sources or {}).items()))}
     return hashlib.sha256(json.dumps(desc, sort_keys=True, default=str).encode()).hexdigest()[:16]
+
+
+def source_files(corpus: Corpus, scene_id: str, groups: Sequence[str], frames: int,
+                 aux: Sequence[str] = ("depth.Z", "mask.light")) -> dict[str, str]:
+    """``{relpath: SHA-256 from the manifest}`` of the files :func:`build_layers` reads for these groups and
+    the first ``frames`` frames (``meta.json``, one EXR per frame and group, ``aux.exr``).
+
+    Raises:
+        lfmbench.corpus.CorpusFileError: a file the layers need is not in the manifest (names it).
+    """
+    files = corpus.manifest["files"]
+    rel0 = f"{SCENES_DIR}/{scene_id}"
+    want = [f"{rel0}/meta.json"]
+    for f in range(int(frames)):
+        want += [f"{rel0}/{frame_dir(f)}/{g}.exr" for g in groups]
+        if aux and f"{rel0}/{frame_dir(f)}/aux.exr" in files:
+            want.append(f"{rel0}/{frame_dir(f)}/aux.exr")
+    missing = [r for r in want if r not in files]
+    if missing:
+        raise CorpusFileError(f"{corpus.root / MANIFEST_NAME}: scene {scene_id!r} lacks manifest entries "
+                              f"{missing[:3]}{' ...' if len(missing) > 3 else ''}")
+    return {r: files[r] for r in want}
 
 
 def build_layers(corpus: Corpus, scene_id: str, preset, groups: Sequence[str] | None, frames: int,
@@ -170,20 +197,109 @@ def build_layers(corpus: Corpus, scene_id: str, preset, groups: Sequence[str] | 
     return SceneLayers(scene_id, static, group_static, lights, aux_out)
 
 
+#: Keys of a cache entry (a plain dict of tensors, ints, strings, lists, tuples: ``torch.load(weights_only=True)``).
+_ENTRY_KEYS = {"format", "scene_id", "sources", "static", "group_static", "lights", "aux"}
+_warned: set[str] = set()
+
+
+def _warn_once(key: str, msg: str) -> None:
+    """One warning per ``key`` and process (a broken cache directory must not flood the log)."""
+    if key not in _warned:
+        _warned.add(key)
+        warnings.warn(msg, CacheWarning, stacklevel=3)
+
+
+class CacheWarning(UserWarning):
+    """The on-disk projection cache could not be read or written; the layers were rebuilt from the corpus."""
+
+
+def _stamp(root: Path, sources: Mapping[str, str]) -> dict[str, list[int]]:
+    """``{relpath: [size (bytes), mtime (ns)]}`` of the source files, recorded in a cache entry."""
+    out = {}
+    for rel in sources:
+        st = (root / rel).stat()
+        out[rel] = [int(st.st_size), int(st.st_mtime_ns)]
+    return out
+
+
+def _verify_sources(root: Path, sources: Mapping[str, str]) -> None:
+    """Check the SHA-256 of every source file against the manifest (the cache must hold what it lists)."""
+    for rel, digest in sources.items():
+        p = root / rel
+        try:
+            ok = sha256_file(p) == digest
+        except OSError as exc:
+            raise CorpusFileError(f"{p}: cannot read ({exc.strerror or exc})") from None
+        if not ok:
+            raise CorpusFileError(f"{p}: bad checksum (SHA-256 differs from {root / MANIFEST_NAME}); the file "
+                                  "was changed or corrupted after the corpus was written: re-render the scene "
+                                  "or run `lfmbench validate`")
+
+
+def _read_entry(path: Path, scene_id: str, stamps: Mapping[str, list[int]]) -> SceneLayers | None:
+    """A cache entry as :class:`SceneLayers`, or None when it is stale (a source file changed on disk).
+
+    Loaded with ``torch.load(weights_only=True)``: tensors and plain containers only, never code. Raises
+    ``ValueError`` for an entry that is unreadable or not shaped like one.
+    """
+    try:
+        d = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as exc:  # noqa: BLE001 - torch raises many types for a damaged or hostile file
+        raise ValueError(f"{type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}") from None
+    if not isinstance(d, dict) or set(d) != _ENTRY_KEYS or d["format"] != CACHE_VERSION:
+        raise ValueError("not a projection-cache entry of this lfmbench version")
+    if d["scene_id"] != scene_id:
+        raise ValueError(f"entry is for scene {d['scene_id']!r}")
+    if d["sources"] != {k: list(v) for k, v in stamps.items()}:
+        return None
+    for pd_map in [d["static"], *d["group_static"].values()]:
+        if not all(isinstance(pd_map.get(pd), torch.Tensor) for pd in PHOTODIODES):
+            raise ValueError("entry lacks a photodiode layer")
+    return SceneLayers(scene_id, d["static"], d["group_static"], d["lights"], d["aux"])
+
+
 def load_or_build(corpus: Corpus, scene_id: str, preset, groups, frames: int, optics: bool,
                   cache_dir: Path | None) -> SceneLayers:
-    """:func:`build_layers` with an on-disk cache under ``cache_dir/<key>/<scene_id>.pt`` (atomic writes)."""
+    """:func:`build_layers` with an on-disk cache under ``cache_dir/<key>/<scene_id>.pt`` (atomic writes).
+
+    The key (:func:`cache_key`) includes the manifest SHA-256 of every file the layers are built from, and an
+    entry records those files' size and modification time: a re-rendered scene or a file changed on disk is
+    rebuilt, never served from the cache. A new entry is built only from files whose SHA-256 matches the
+    manifest (``CorpusFileError`` naming the file otherwise). Entries are read with
+    ``torch.load(weights_only=True)``, so a crafted file in a shared corpus cannot run code; an unreadable entry
+    is rebuilt with one :class:`CacheWarning`. An unwritable ``cache_dir`` (read-only corpus) gives one
+    :class:`CacheWarning` and the layers are used without being stored.
+    """
     if cache_dir is None:
         return build_layers(corpus, scene_id, preset, groups, frames, optics)
+    check_scene_id(scene_id)
     meta = corpus.meta(scene_id)
     use = list(meta["groups"]) if groups is None else [g for g in groups if g in meta["groups"]]
-    path = Path(cache_dir) / cache_key(preset, meta, use, frames, optics) / f"{scene_id}.pt"
+    sources = source_files(corpus, scene_id, use, frames)
+    try:
+        stamps = _stamp(corpus.root, sources)
+    except OSError as exc:
+        raise CorpusFileError(f"{exc.filename}: cannot read ({exc.strerror or exc})") from None
+    path = Path(cache_dir) / cache_key(preset, meta, use, frames, optics, sources) / f"{scene_id}.pt"
     if path.is_file():
         try:
-            d = torch.load(path, weights_only=False)
-            return SceneLayers(**d)
-        except Exception:  # a stale or damaged cache entry is rebuilt, never trusted
-            pass
+            layers = _read_entry(path, scene_id, stamps)
+        except ValueError as exc:
+            _warn_once(str(path), f"projection cache entry {path} is unreadable ({exc}); rebuilding it from the "
+                                  "corpus")
+            layers = None
+        if layers is not None:
+            return layers
+    _verify_sources(corpus.root, sources)
     layers = build_layers(corpus, scene_id, preset, use, frames, optics)
-    atomic_torch_save(layers.__dict__, path)
+    if _stamp(corpus.root, sources) != stamps:  # a file changed while it was read: do not store a mix
+        return layers
+    entry = {"format": CACHE_VERSION, "scene_id": scene_id, "sources": stamps, "static": layers.static,
+             "group_static": layers.group_static, "lights": layers.lights, "aux": layers.aux}
+    try:
+        atomic_torch_save(entry, path)
+    except OSError as exc:
+        _warn_once(f"write:{cache_dir}", f"cannot write the projection cache in {cache_dir} "
+                                         f"({exc.strerror or exc}); going on without it (choose a writable "
+                                         "directory with cache_dir= or `lfmbench evaluate --cache-dir`)")
     return layers
