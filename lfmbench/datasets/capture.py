@@ -155,6 +155,23 @@ def check_line_time(meta: dict, line_time_s: float, rows: int) -> None:
                          f"{(float(tm['capture_window_s']) - float(tm['long_exposure_s'])) / max(rows - 1, 1):.3g} s")
 
 
+def visible_lights(layers: SceneLayers, frame: int, crop: tuple[int, int, int, int], params: Mapping[int, dict]):
+    """The per-light layers of ``frame`` that a crop shows, for lights with PWM parameters.
+
+    Yields:
+        ``(light_id, pwm_dict, (by0, bx0), (iy0, iy1, ix0, ix1), {pd: (K, hh, ww) e-/s})``: the layer's box
+        origin and its intersection with the crop (absolute pixels, half-open), in the stored order.
+    """
+    y0, x0, h, w = crop
+    for light_id, _g, (by0, bx0, by1, bx1), rates in layers.lights[frame]:
+        iy0, iy1 = max(by0, y0), min(by1, y0 + h)
+        ix0, ix1 = max(bx0, x0), min(bx1, x0 + w)
+        p = params.get(light_id)
+        if p is None or iy0 >= iy1 or ix0 >= ix1:  # light left out, or outside the crop
+            continue
+        yield light_id, p, (by0, bx0), (iy0, iy1, ix0, ix1), rates
+
+
 def compose_frame(layers: SceneLayers, meta: dict, frame: int, crop: tuple[int, int, int, int],
                   params: dict[int, dict], group_params: dict[str, dict], shutter: str = "global",
                   line_time_s: float | None = None) -> dict:
@@ -188,13 +205,8 @@ def compose_frame(layers: SceneLayers, meta: dict, frame: int, crop: tuple[int, 
     # flickering lights stored per light in K time bins (K from the stored layer: a group may override it).
     # All visible lights with the same K share one pwm_exposure call per capture: (L, R, K) weights.
     visible: dict[int, list] = {}
-    for light_id, _g, (by0, bx0, by1, bx1), rates in layers.lights[frame]:
-        iy0, iy1 = max(by0, y0), min(by1, y0 + h)
-        ix0, ix1 = max(bx0, x0), min(bx1, x0 + w)
-        p = params.get(light_id)
-        if p is None or iy0 >= iy1 or ix0 >= ix1:  # light left out, or outside the crop
-            continue
-        visible.setdefault(int(rates["lpd"].shape[0]), []).append((p, (by0, bx0), (iy0, iy1, ix0, ix1), rates))
+    for _light_id, p, box0, inter, rates in visible_lights(layers, frame, crop, params):
+        visible.setdefault(int(rates["lpd"].shape[0]), []).append((p, box0, inter, rates))
     rolling = shutter == "rolling"
     for K, group in visible.items():
         edges = frame / float(meta["fps"]) + bin_edges(float(tm["capture_window_s"]), K)
@@ -239,6 +251,22 @@ def light_index(mask: torch.Tensor, lights: Sequence[Mapping]) -> torch.Tensor:
         lut[int(lt["id"])] = i
     valid = (ids >= 0) & (ids < len(lut) - 1)
     return torch.where(valid, lut[ids.clamp(0, len(lut) - 1)], -1)[:, None]
+
+
+def add_rgb(sample: dict, preset, want: set) -> None:
+    """Add ``lpd_lcg_rgb``, ``spd_rgb``, ``gt_rgb`` (*, 3, h, w) to ``sample`` (in place) from its (*, 1, h, w)
+    ``lpd_lcg_e``, ``spd_e``, ``gt`` (any leading shape), then drop those the caller did not ask for."""
+    from kornia.color import raw_to_rgb
+    cfa = preset.cfa.to_kornia()
+    # kornia's bilinear demosaic; crops start at even offsets, so the Bayer phase is the preset's
+    for src, dst in (("lpd_lcg_e", "lpd_lcg_rgb"), ("spd_e", "spd_rgb"), ("gt", "gt_rgb")):
+        x = sample[src].float()
+        sample[dst] = raw_to_rgb(x.reshape(-1, *x.shape[-3:]), cfa).reshape(*x.shape[:-3], 3, *x.shape[-2:])
+    if "input_referred" not in want:
+        for k in ("lpd_hcg_e", "lpd_lcg_e", "spd_e"):
+            del sample[k]
+    if "gt" not in want:
+        del sample["gt"]
 
 
 def _warm_cpu_kernels(noise: bool) -> None:
@@ -548,12 +576,7 @@ class LFMCaptureDataset(Dataset):
         params = {int(k): v for k, v in params.items()}
         group_params = dict(group_params or {})
         F = self.frames
-        if frame_start is None:
-            frame_start = 0 if self.frame_start == "random" else self.frame_start
-        s0 = int(frame_start)
-        if s0 < 0 or s0 + F > self._frames_to_load(scene_id):
-            raise ValueError(f"frame_start: frames {s0}..{s0 + F - 1} are not all available for scene {scene_id!r} "
-                             f"(dataset frame_start={self.frame_start!r}, frames={F}, scene frames {meta['frames']})")
+        s0 = self._first_frame(scene_id, frame_start)
         layers = self._layers(scene_id)
         frames = [compose_frame(layers, meta, f, crop, params, group_params, self.shutter, self.line_time_s)
                   for f in range(s0, s0 + F)]
@@ -588,19 +611,21 @@ class LFMCaptureDataset(Dataset):
             if "depth" in want:
                 sample["depth"] = aux["depth.Z"][s0:s0 + F, y0:y0 + ch, x0:x0 + cw][:, None]
         if "rgb" in want:
-            from kornia.color import raw_to_rgb
-            cfa = self.preset.cfa.to_kornia()
-            # kornia's bilinear demosaic; crops start at even offsets, so the Bayer phase is the preset's
-            for src, dst in (("lpd_lcg_e", "lpd_lcg_rgb"), ("spd_e", "spd_rgb"), ("gt", "gt_rgb")):
-                sample[dst] = raw_to_rgb(sample[src].float(), cfa)
-            if "input_referred" not in want:
-                for k in ("lpd_hcg_e", "lpd_lcg_e", "spd_e"):
-                    del sample[k]
-            if "gt" not in want:
-                del sample["gt"]
+            add_rgb(sample, self.preset, want)
         sample["meta"] = self._meta(scene_id, index, lights, params, crop, t_s, t_l, layers)
         sample["meta"]["frame_start"] = s0
         return sample
+
+    def _first_frame(self, scene_id: str, frame_start: int | None) -> int:
+        """The first of the F frames (``None``: the dataset's ``frame_start``, 0 for ``"random"``), checked."""
+        if frame_start is None:
+            frame_start = 0 if self.frame_start == "random" else self.frame_start
+        s0, F = int(frame_start), self.frames
+        if s0 < 0 or s0 + F > self._frames_to_load(scene_id):
+            raise ValueError(f"frame_start: frames {s0}..{s0 + F - 1} are not all available for scene {scene_id!r} "
+                             f"(dataset frame_start={self.frame_start!r}, frames={F}, scene frames "
+                             f"{self.corpus.meta(scene_id)['frames']})")
+        return s0
 
     def _meta(self, sid, index, lights, per_light, crop, t_s, t_l, layers) -> dict:
         L = self.max_lights
