@@ -48,7 +48,7 @@ from lfmbench.datasets.projection import PHOTODIODES
 from lfmbench.flicker import pwm_exposure
 
 __all__ = ["capture_pieces", "collate_pieces", "pieces_to", "simulate_batch", "BatchedCaptureSimulator",
-           "piece_bytes", "pwm_weights", "PWM_FIELDS"]
+           "piece_bytes", "pwm_weights", "compose_batch", "PWM_FIELDS"]
 
 #: Columns of ``slot_pwm``: period (s), duty (1), phase of a rising edge after frame 0 (s), rise (s), fall (s).
 PWM_FIELDS = ("period_s", "duty", "phase_s", "rise_s", "fall_s")
@@ -271,6 +271,36 @@ def pwm_weights(batch: Mapping[str, Any]) -> dict[str, torch.Tensor]:
     return out
 
 
+def compose_batch(batch: Mapping[str, Any]) -> dict[str, torch.Tensor]:
+    """Mean photo-electrons of every frame of a batch, and the ground truth (the batched :func:`compose_frame`).
+
+    Args:
+        batch: from :func:`collate_pieces`, on one device.
+
+    Returns:
+        ``{"lpd", "spd", "gt"}``: (B, F, h, w) float32 e- (mean, noise-free, unclipped): LPD over the short
+        window, SPD over the long one, ``gt`` the LPD with every LED at its duty cycle.
+    """
+    _check_batch(batch)
+    B, F, _, h, w = batch["static"].shape
+    t_s, t_l = batch["timing"][:, 0], batch["timing"][:, 1]
+    comp = {"lpd": batch["static"][:, :, 0] * t_s.float()[:, None, None, None],
+            "spd": batch["static"][:, :, 1] * t_l.float()[:, None, None, None]}
+    comp["gt"] = comp["lpd"].clone()
+    if int(batch["entry_pix"].shape[0]):
+        wts = pwm_weights(batch)
+        slot = batch["entry_slot"].long()
+        pix = batch["entry_pix"].long()
+        dest = batch["slot_sample"][slot] * (F * h * w) + pix
+        row = (pix % (h * w)) // w if wts["lpd"].shape[1] > 1 else torch.zeros_like(pix)
+        vals = batch["entry_values"]
+        for key, c in (("lpd", 0), ("spd", 1), ("gt", 0)):
+            wk = wts[key].float()[slot, row]                                          # (E, Kmax) s
+            contrib = (vals[:, :wk.shape[1], c] * wk[:, :vals.shape[1]]).sum(-1)       # (E,) e-
+            comp[key].view(-1).index_add_(0, dest, contrib)
+    return comp
+
+
 class _FPNCache:
     """Full-frame fixed-pattern maps per (preset, H, W, device, dtype), built once (:func:`sensor.fixed_pattern`)."""
 
@@ -325,25 +355,8 @@ def simulate_batch(batch: Mapping[str, Any], preset: Any, outputs: Sequence[str]
         raise ValueError(f"outputs: {sorted(missing)} were not requested from the dataset (it has "
                          f"{list(info['outputs'])})")
     noise = bool(info["noise"]) if noise is None else bool(noise)
-    B, F, _, h, w = batch["static"].shape
-    tim = batch["timing"]
-    t_s, t_l = tim[:, 0], tim[:, 1]
-    # composition: static rates x exposure, then every light entry (e-)
-    comp = {"lpd": batch["static"][:, :, 0] * t_s.float()[:, None, None, None],
-            "spd": batch["static"][:, :, 1] * t_l.float()[:, None, None, None]}
-    comp["gt"] = comp["lpd"].clone()
-    E = int(batch["entry_pix"].shape[0])
-    if E:
-        wts = pwm_weights(batch)
-        slot = batch["entry_slot"].long()
-        pix = batch["entry_pix"].long()
-        dest = batch["slot_sample"][slot] * (F * h * w) + pix
-        row = (pix % (h * w)) // w if wts["lpd"].shape[1] > 1 else torch.zeros_like(pix)
-        vals = batch["entry_values"]
-        for key, c in (("lpd", 0), ("spd", 1), ("gt", 0)):
-            wk = wts[key].float()[slot, row]                                          # (E, Kmax) s
-            contrib = (vals[:, :wk.shape[1], c] * wk[:, :vals.shape[1]]).sum(-1)       # (E,) e-
-            comp[key].view(-1).index_add_(0, dest, contrib)
+    comp = compose_batch(batch)
+    t_s, t_l = batch["timing"][:, 0], batch["timing"][:, 1]
     sample: dict[str, Any] = {}
     if want & {"raw", "input_referred", "saturated", "rgb"}:
         lpd, spd = comp["lpd"][:, :, None], comp["spd"][:, :, None]                 # (B, F, 1, h, w) e-
