@@ -291,3 +291,21 @@ def test_cuda_matches_cpu(corpus, shutter):
         d = (b[k].cpu().double() - a[k].double())
         ref_sd = float((a[k].double() - a["gt"].double()).std()) + 1.0
         assert abs(float(d.mean())) < 6 * ref_sd * np.sqrt(2.0 / n), k
+
+
+def test_gpu_training_example_in_docs_runs(tmp_path):
+    """The batched training loop of docs/datasets.md ("Captures on the GPU") runs (on the CPU here)."""
+    import re
+    from pathlib import Path
+
+    root = make_corpus(tmp_path / "c", n_scenes=2)
+    text = (Path(__file__).resolve().parents[1] / "docs" / "datasets.md").read_text()
+    section = text[text.index("## Captures on the GPU"):]
+    code = re.findall(r"```python\n(.*?)```", section, re.S)[0]
+    code = (code.replace('"demo_out/corpus"', repr(str(root))).replace("crop=128", "crop=8")
+            .replace("range(3)", "range(2)").replace("split=\"train\"", "split=\"all\"")
+            .replace("num_workers=2", "num_workers=0").replace(", persistent_workers=True", ""))
+    ns: dict = {}
+    exec(compile(code, "docs/datasets.md", "exec"), ns)
+    assert torch.isfinite(ns["loss"]) and ns["loss"].requires_grad
+    assert ns["batch"]["lpd_hcg_e"].shape[1:] == (3, 1, 8, 8) and ns["ds"].epoch == 1
