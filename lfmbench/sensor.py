@@ -48,6 +48,7 @@ from __future__ import annotations
 
 import functools
 import math
+import os
 from dataclasses import dataclass, field, fields
 from enum import Enum
 from pathlib import Path
@@ -652,13 +653,33 @@ def shot_noise(mean_e: torch.Tensor, generator: torch.Generator, gaussian_above_
     return out
 
 
+_DRAW_POOL: dict[tuple, Any] = {}
+
+
 def _per_generator(draw, x: torch.Tensor, generator) -> torch.Tensor:
-    """``draw(x, generator)``, or with a sequence of generators ``draw(x[b], generator[b])`` stacked over b."""
+    """``draw(x, generator)``, or with a sequence of generators ``draw(x[b], generator[b])`` stacked over b.
+
+    On the CPU the samples are drawn by ``torch.get_num_threads()`` Python threads (the compiled Poisson kernel
+    and torch's samplers release the GIL); each sample still reads only its own generator, so the result does not
+    depend on the thread count.
+    """
     if not isinstance(generator, (list, tuple)):
         return draw(x, generator)
     out = torch.empty_like(x)
-    for b, g in enumerate(generator):
-        out[b] = draw(x[b], g)
+
+    def one(b: int) -> None:
+        out[b] = draw(x[b], generator[b])
+
+    n = min(torch.get_num_threads(), len(generator))
+    if x.device.type != "cpu" or n < 2:
+        for b in range(len(generator)):
+            one(b)
+        return out
+    key = (os.getpid(), n)   # a forked child (DataLoader worker) builds its own pool: threads do not survive fork
+    if key not in _DRAW_POOL:
+        from concurrent.futures import ThreadPoolExecutor
+        _DRAW_POOL[key] = ThreadPoolExecutor(n, thread_name_prefix="lfmbench-draw")
+    list(_DRAW_POOL[key].map(one, range(len(generator))))
     return out
 
 

@@ -177,7 +177,7 @@ def _flat_batch(preset, levels_e: np.ndarray, seeds: list[int], size: int = 64, 
             "crop": torch.tensor([[0, 0, size, size]] * B), "scene_hw": torch.tensor([[size, size]] * B),
             "noise_seed": torch.tensor(seeds), "slot_pwm": torch.zeros(0, 5, dtype=torch.float64),
             "slot_frame": torch.zeros(0, dtype=torch.int64), "slot_K": torch.zeros(0, dtype=torch.int64),
-            "slot_sample": torch.zeros(0, dtype=torch.int64), "entry_values": torch.zeros(0, 1, 2),
+            "slot_sample": torch.zeros(0, dtype=torch.int64), "entry_values": torch.zeros(2, 1, 0),
             "entry_slot": torch.zeros(0, dtype=torch.int32), "entry_pix": torch.zeros(0, dtype=torch.int32),
             "info": {"sensor": preset.name, "frames": frames, "crop_hw": (size, size), "shutter": "global",
                      "noise": True, "outputs": ("raw",)}}

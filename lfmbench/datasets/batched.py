@@ -73,7 +73,7 @@ def capture_pieces(ds, scene_id: str, params: Mapping[int, Mapping], group_param
         ``noise_seed``: () int64.
         ``slot_pwm``: (S, 5) float64 PWM parameters (:data:`PWM_FIELDS`); ``slot_frame``: (S,) int64 frame
         within the sample; ``slot_K``: (S,) int64 bins (0: a group stored without bins, whole-window weight).
-        ``entry_values``: (E, Kmax, 2) float32 rates per bin (LPD, SPD), e-/s (zero past the slot's K);
+        ``entry_values``: (2, Kmax, E) float32 rates (LPD, SPD) per bin, e-/s (zero past the slot's K);
         ``entry_slot``: (E,) int32; ``entry_pix``: (E,) int32 flat index into (F, h, w).
         ``light_index``: (F, 1, h, w) int16 and ``depth``: (F, 1, h, w) float32 m, when requested.
         ``meta``: the per-sample ``meta`` dict. ``info``: the batch-consistency fields (sensor, frames, ...).
@@ -99,23 +99,23 @@ def capture_pieces(ds, scene_id: str, params: Mapping[int, Mapping], group_param
         "noise_seed": torch.tensor(int(noise_seed), dtype=torch.int64),
     }
     slots: list[tuple] = []          # (frame, K, pwm)
-    vals: list[torch.Tensor] = []    # (n, K, 2)
+    vals: dict[str, list] = {pd: [] for pd in PHOTODIODES}    # pd -> [(K, n)]
     pix: list[torch.Tensor] = []     # (n,)
     hw = h * w
     for g, rates in layers.group_static.items():
         p = group_params[g]
         for f in range(F):
             slots.append((f, 0, p))
-            vals.append(torch.stack([rates[pd][s0 + f, y0:y0 + h, x0:x0 + w].reshape(-1) for pd in PHOTODIODES],
-                                    -1)[:, None])
+            for pd in PHOTODIODES:
+                vals[pd].append(rates[pd][s0 + f, y0:y0 + h, x0:x0 + w].reshape(1, -1))
             pix.append(f * hw + torch.arange(hw, dtype=torch.int32))
     for f in range(F):
         for _lid, p, (by0, bx0), (iy0, iy1, ix0, ix1), rates in visible_lights(layers, s0 + f, (y0, x0, h, w),
                                                                               params):
             K = int(rates["lpd"].shape[0])
-            sub = torch.stack([rates[pd][:, iy0 - by0:iy1 - by0, ix0 - bx0:ix1 - bx0] for pd in PHOTODIODES], -1)
             slots.append((f, K, p))
-            vals.append(sub.permute(1, 2, 0, 3).reshape(-1, K, 2))                       # (hh*ww, K, 2)
+            for pd in PHOTODIODES:
+                vals[pd].append(rates[pd][:, iy0 - by0:iy1 - by0, ix0 - bx0:ix1 - bx0].reshape(K, -1))
             yy = torch.arange(iy0 - y0, iy1 - y0, dtype=torch.int32)[:, None]
             xx = torch.arange(ix0 - x0, ix1 - x0, dtype=torch.int32)[None, :]
             pix.append((f * hw + yy * w + xx).reshape(-1))
@@ -124,8 +124,9 @@ def capture_pieces(ds, scene_id: str, params: Mapping[int, Mapping], group_param
                                    dtype=torch.float64).reshape(len(slots), len(PWM_FIELDS))
     out["slot_frame"] = torch.tensor([s[0] for s in slots], dtype=torch.int64)
     out["slot_K"] = torch.tensor([s[1] for s in slots], dtype=torch.int64)
-    out["entry_values"] = (torch.cat([torch.nn.functional.pad(v, (0, 0, 0, kmax - v.shape[1])) for v in vals])
-                           if vals else torch.zeros(0, kmax, 2))
+    out["entry_values"] = torch.stack([
+        torch.cat([v if v.shape[0] == kmax else torch.nn.functional.pad(v, (0, 0, 0, kmax - v.shape[0]))
+                   for v in vals[pd]], 1) if pix else torch.zeros(kmax, 0) for pd in PHOTODIODES])
     out["entry_slot"] = (torch.cat([torch.full((len(pp),), i, dtype=torch.int32) for i, pp in enumerate(pix)])
                          if pix else torch.zeros(0, dtype=torch.int32))
     out["entry_pix"] = torch.cat(pix) if pix else torch.zeros(0, dtype=torch.int32)
@@ -179,9 +180,9 @@ def collate_pieces(samples: Sequence[Mapping[str, Any]]) -> dict:
         if k in samples[0]:
             out[k] = torch.stack([s[k] for s in samples])
     kmax = max(int(s["entry_values"].shape[1]) for s in samples)
-    out["entry_values"] = torch.cat([torch.nn.functional.pad(s["entry_values"],
-                                                             (0, 0, 0, kmax - s["entry_values"].shape[1]))
-                                     for s in samples])
+    out["entry_values"] = torch.cat([v if v.shape[1] == kmax else
+                                     torch.nn.functional.pad(v, (0, 0, 0, kmax - v.shape[1]))
+                                     for v in (s["entry_values"] for s in samples)], 2)
     n_slots = [int(s["slot_K"].shape[0]) for s in samples]
     offs = np.concatenate([[0], np.cumsum(n_slots)[:-1]])
     out["entry_slot"] = torch.cat([s["entry_slot"] + int(o) for s, o in zip(samples, offs)])
@@ -246,7 +247,7 @@ def pwm_weights(batch: Mapping[str, Any]) -> dict[str, torch.Tensor]:
     length = {"lpd": t_s, "spd": t_l}
     pw = {k: batch["slot_pwm"][:, i] for i, k in enumerate(PWM_FIELDS)}
     pw3 = {k: v[:, None, None] for k, v in pw.items()}
-    kmax = max(int(batch["entry_values"].shape[1]), int(K.max()) if S else 1)
+    kmax = int(batch["entry_values"].shape[1])
     if S == 0:
         z = torch.zeros(0, shift.shape[1], kmax, dtype=torch.float64, device=dev)
         return {"lpd": z, "spd": z, "gt": z}
@@ -296,7 +297,7 @@ def compose_batch(batch: Mapping[str, Any]) -> dict[str, torch.Tensor]:
         vals = batch["entry_values"]
         for key, c in (("lpd", 0), ("spd", 1), ("gt", 0)):
             wk = wts[key].float()[slot, row]                                          # (E, Kmax) s
-            contrib = (vals[:, :wk.shape[1], c] * wk[:, :vals.shape[1]]).sum(-1)       # (E,) e-
+            contrib = (vals[c].t() * wk).sum(-1)                                      # (E,) e-
             comp[key].view(-1).index_add_(0, dest, contrib)
     return comp
 
