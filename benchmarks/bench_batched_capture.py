@@ -71,10 +71,14 @@ def _sync(device: str) -> None:
         torch.cuda.synchronize()
 
 
-def time_batched(root: Path, device: str, batch: int, workers: int, n: int, passes: int) -> list[float]:
-    """samples/s of ``passes`` timed passes (after one warm-up pass) of the batched path."""
+def time_batched(root: Path, device: str, batch: int, workers: int, n: int, passes: int,
+                 threads: int) -> list[float]:
+    """samples/s of ``passes`` timed passes (after one warm-up pass) of the batched path, ``threads`` torch
+    threads in the main process (restored afterwards)."""
     from lfmbench.datasets.batched import BatchedCaptureSimulator, collate_pieces, pieces_to
 
+    old_threads = torch.get_num_threads()
+    torch.set_num_threads(threads)
     ds = _dataset(root, n, pieces=True)
     sim = BatchedCaptureSimulator.from_dataset(ds)
     kw = dict(num_workers=workers, persistent_workers=True, prefetch_factor=4) if workers else {}
@@ -92,6 +96,7 @@ def time_batched(root: Path, device: str, batch: int, workers: int, n: int, pass
         if p:
             rates.append(m / (time.perf_counter() - t0))
     del loader
+    torch.set_num_threads(old_threads)
     return rates
 
 
@@ -134,16 +139,17 @@ def report(res: dict) -> str:
          "(3 frames, 256x256 crops of the 2-scene 320x256 corpus, all outputs except `rgb`, noise on, warm "
          "per-sensor cache), end to end: reading the pieces in the DataLoader, collation, the copy to the device "
          "and the simulation there. Medians over the timed passes after one warm-up pass.", "",
-         "| path | device | batch | workers | samples / pass | timed passes | samples/s (median) | min - max |",
-         "|---|---|---|---|---|---|---|---|"]
+         "| path | device | batch | workers | main-process torch threads | samples / pass | timed passes | "
+         "samples/s (median) | min - max |",
+         "|---|---|---|---|---|---|---|---|---|"]
     for r in res["rows"]:
-        L.append(f"| {r['path']} | {r['device']} | {r['batch']} | {r['workers']} | {r['samples']} | "
+        L.append(f"| {r['path']} | {r['device']} | {r['batch']} | {r['workers']} | {r['threads']} | {r['samples']} | "
                  f"{len(r['sps_all'])} | {r['sps']:.1f} | {min(r['sps_all']):.1f} - {max(r['sps_all']):.1f} |")
     s = res["sizes"]
     best = max((r for r in res["rows"] if r["path"] == "batched"), key=lambda r: r["sps"])
     ref = [r for r in res["rows"] if r["path"] == "per_sample" and r["batch"] == 1]
     L += ["", f"Best batched configuration: **{best['sps']:.1f} samples/s** (batch {best['batch']}, "
-          f"{best['workers']} workers, {best['device']})."]
+          f"{best['workers']} workers, {best['threads']} main-process thread(s), {best['device']})."]
     if res["device"] == "cpu":
         verdict = "reached" if best["sps"] >= CPU_TARGET else "**not reached**"
         L.append(f"Target on 2 CPU cores, >= 1.5 x 52 = {CPU_TARGET:.0f} samples/s: {verdict}"
@@ -196,23 +202,25 @@ def main(argv=None) -> int:
         load_or_build(warm.corpus, sid, warm.preset, None, 3, True, warm.cache_dir)
     q = a.quick
     n, passes = (32, 2) if q else (64, 3)
-    if dev == "cpu":
-        configs = [(1, 0), (4, 0), (16, 0), (4, 2), (16, 2)] if not q else [(1, 0), (8, 0), (8, 2)]
+    if dev == "cpu":    # (batch, workers, main-process threads)
+        configs = ([(1, 0, 1), (8, 0, 1), (8, 0, 2), (1, 2, 1), (8, 2, 1), (16, 2, 1)] if not q else
+                   [(8, 0, 1), (8, 0, 2), (8, 2, 1)])
     else:
-        configs = [(16, 2), (64, 2), (256, 2)] if not q else [(64, 2)]
-        n = max(n, 4 * max(b for b, _ in configs))
+        configs = [(16, 2, 2), (64, 2, 2), (256, 2, 2)] if not q else [(64, 2, 2)]
+        n = max(n, 4 * max(c[0] for c in configs))
     rows = []
     if dev == "cpu":
         for bs in ((1,) if q else (1, 4)):
             rates = time_per_sample(root, bs, n, passes)
-            rows.append({"path": "per_sample", "device": "cpu", "batch": bs, "workers": 2, "samples": n,
+            rows.append({"path": "per_sample", "device": "cpu", "batch": bs, "workers": 2,
+                         "threads": torch.get_num_threads(), "samples": n,
                          "sps": statistics.median(rates), "sps_all": rates})
             _log(f"per_sample batch {bs}: {rows[-1]['sps']:.1f} samples/s {[round(r, 1) for r in rates]}")
-    for bs, wk in configs:
-        rates = time_batched(root, dev, bs, wk, n, passes)
-        rows.append({"path": "batched", "device": dev, "batch": bs, "workers": wk, "samples": n,
+    for bs, wk, th in configs:
+        rates = time_batched(root, dev, bs, wk, n, passes, th)
+        rows.append({"path": "batched", "device": dev, "batch": bs, "workers": wk, "threads": th, "samples": n,
                      "sps": statistics.median(rates), "sps_all": rates})
-        _log(f"batched {dev} batch {bs} workers {wk}: {rows[-1]['sps']:.1f} samples/s "
+        _log(f"batched {dev} batch {bs} workers {wk} threads {th}: {rows[-1]['sps']:.1f} samples/s "
              f"{[round(r, 1) for r in rates]}")
     env["load_end"] = ", ".join(f"{x:.1f}" for x in os.getloadavg())
     res = {"device": dev, "device_name": torch.cuda.get_device_name(dev) if dev.startswith("cuda") else "CPU",
