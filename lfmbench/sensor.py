@@ -48,6 +48,7 @@ from __future__ import annotations
 
 import functools
 import math
+import os
 from dataclasses import dataclass, field, fields
 from enum import Enum
 from pathlib import Path
@@ -652,6 +653,36 @@ def shot_noise(mean_e: torch.Tensor, generator: torch.Generator, gaussian_above_
     return out
 
 
+_DRAW_POOL: dict[tuple, Any] = {}
+
+
+def _per_generator(draw, x: torch.Tensor, generator) -> torch.Tensor:
+    """``draw(x, generator)``, or with a sequence of generators ``draw(x[b], generator[b])`` stacked over b.
+
+    On the CPU the samples are drawn by ``torch.get_num_threads()`` Python threads (the compiled Poisson kernel
+    and torch's samplers release the GIL); each sample still reads only its own generator, so the result does not
+    depend on the thread count.
+    """
+    if not isinstance(generator, (list, tuple)):
+        return draw(x, generator)
+    out = torch.empty_like(x)
+
+    def one(b: int) -> None:
+        out[b] = draw(x[b], generator[b])
+
+    n = min(torch.get_num_threads(), len(generator))
+    if x.device.type != "cpu" or n < 2:
+        for b in range(len(generator)):
+            one(b)
+        return out
+    key = (os.getpid(), n)   # a forked child (DataLoader worker) builds its own pool: threads do not survive fork
+    if key not in _DRAW_POOL:
+        from concurrent.futures import ThreadPoolExecutor
+        _DRAW_POOL[key] = ThreadPoolExecutor(n, thread_name_prefix="lfmbench-draw")
+    list(_DRAW_POOL[key].map(one, range(len(generator))))
+    return out
+
+
 def _exposure(value: float | torch.Tensor, name: str, lead: torch.Size, ref: torch.Tensor) -> torch.Tensor:
     t = torch.as_tensor(value, dtype=ref.dtype, device=ref.device)
     if not bool(torch.isfinite(t).all()) or bool((t <= 0).any()):
@@ -674,7 +705,8 @@ def read_capture(electrons: torch.Tensor, preset: SensorPreset, capture: str, ge
         electrons: (*, 1, H, W) collected electrons (already clipped to the full well), e-.
         preset: sensor preset.
         capture: one of :data:`CAPTURES`.
-        generator: random generator for the read noise (needed when ``noise``).
+        generator: random generator for the read noise (needed when ``noise``), or a sequence of B generators,
+            one per index of the leading dimension of ``electrons`` (each draws its own slice).
         noise: add Gaussian read noise.
         offset_e: (H, W) DSNU offset map in e- (or ``None``).
 
@@ -684,7 +716,8 @@ def read_capture(electrons: torch.Tensor, preset: SensorPreset, capture: str, ge
     spec = preset.captures[capture]
     # in-place on tensors made here (never on ``electrons``): a 3-frame 256x256 capture is 0.75 MiB per temporary
     if noise and spec.read_noise_e > 0:
-        volts = torch.randn(electrons.shape, generator=generator, device=electrons.device, dtype=electrons.dtype)
+        volts = _per_generator(lambda x, g: torch.randn(x.shape, generator=g, device=x.device, dtype=x.dtype),
+                               electrons, generator)
         volts.mul_(spec.read_noise_e).add_(electrons)
     else:
         volts = electrons.clone()
@@ -722,9 +755,14 @@ def simulate_split_pixel_electrons(lpd_electrons: torch.Tensor, spd_electrons: t
         spd_electrons: (*, 1, H, W) the same for the SPD over the long exposure (SPD fill factor included), e-.
         preset: sensor preset or name.
         exposure_short_s, exposure_long_s: exposure times in s, scalars or shape (*).
-        generator: ``torch.Generator`` on the inputs' device; required when ``noise`` is true.
+        generator: ``torch.Generator`` on the inputs' device; required when ``noise`` is true. Or a sequence of B
+            generators for inputs (B, *, 1, H, W): sample b then draws all its noise from its own generator, in the
+            same order as a call on that sample alone, so its output does not depend on the other samples or on
+            B (the batched dataset path, :mod:`lfmbench.datasets.batched`).
         noise: ``False``: noise-free chain (dark current mean kept, no FPN, clipping and quantisation kept).
-        fpn: fixed-pattern maps (H, W) from :func:`fixed_pattern` (default: built for (H, W) from the preset).
+        fpn: fixed-pattern maps (H, W) from :func:`fixed_pattern` (default: built for (H, W) from the preset),
+            or maps broadcastable to the inputs whose last two dimensions are (H, W) (e.g. (B, 1, 1, H, W): one
+            crop of the pattern per sample).
         check: validate the inputs (finite, >= 0, matching shapes).
 
     Returns:
@@ -736,10 +774,16 @@ def simulate_split_pixel_electrons(lpd_electrons: torch.Tensor, spd_electrons: t
     preset = load_preset(preset)
     x = lpd_electrons
     if noise:
-        if not isinstance(generator, torch.Generator):
-            raise ValueError("generator must be a torch.Generator when noise=True (no hidden global randomness)")
-        if generator.device.type != x.device.type:
-            raise ValueError(f"generator is on {generator.device} but the inputs are on {x.device}")
+        gens = list(generator) if isinstance(generator, (list, tuple)) else [generator]
+        if not gens or not all(isinstance(g, torch.Generator) for g in gens):
+            raise ValueError("generator must be a torch.Generator (or a sequence of them, one per sample) when "
+                             "noise=True (no hidden global randomness)")
+        if isinstance(generator, (list, tuple)) and (x.dim() < 4 or len(gens) != x.shape[0]):
+            raise ValueError(f"generator: {len(gens)} generators for inputs of shape {tuple(x.shape)}; a sequence "
+                             "needs one generator per index of the leading (sample) dimension")
+        for g in gens:
+            if g.device.type != x.device.type:
+                raise ValueError(f"generator is on {g.device} but the inputs are on {x.device}")
     lead = x.shape[:-3]
     H, W = x.shape[-2:]
     t_s = _exposure(exposure_short_s, "exposure_short_s", lead, x)
@@ -761,7 +805,8 @@ def simulate_split_pixel_electrons(lpd_electrons: torch.Tensor, spd_electrons: t
         if noise and fpn is not None and spec.prnu > 0:
             mu.mul_(fpn[f"{pd}_gain"])
         mu.add_(spec.dark_current_e_per_s * t)
-        n = shot_noise(mu, generator, preset.shot_noise_gaussian_above_e) if noise else mu
+        n = _per_generator(lambda m, g: shot_noise(m, g, preset.shot_noise_gaussian_above_e), mu, generator) \
+            if noise else mu
         collected[pd] = n.clamp_(0.0, spec.full_well_e)
 
     out: dict[str, torch.Tensor] = {}

@@ -1,7 +1,10 @@
 """Torch datasets over an lfmbench corpus: split-pixel captures simulated on the fly."""
 from lfmbench.datasets.capture import (DEFAULT_OUTPUTS, OUTPUTS, DatasetNotFoundError, LFMCaptureDataset, check_line_time,
                                        compose_frame, window_bin_exposure)
+from lfmbench.datasets.batched import (BatchedCaptureSimulator, collate_pieces, compose_batch, pieces_to,
+                                       simulate_batch)
 from lfmbench.datasets.pwm import PWMConfig, draw_pwm, load_pwm_config
 
 __all__ = ["LFMCaptureDataset", "DatasetNotFoundError", "OUTPUTS", "DEFAULT_OUTPUTS", "compose_frame",
-           "window_bin_exposure", "check_line_time", "PWMConfig", "load_pwm_config", "draw_pwm"]
+           "window_bin_exposure", "check_line_time", "PWMConfig", "load_pwm_config", "draw_pwm",
+           "BatchedCaptureSimulator", "collate_pieces", "compose_batch", "pieces_to", "simulate_batch"]

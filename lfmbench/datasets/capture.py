@@ -51,27 +51,84 @@ class DatasetNotFoundError(FileNotFoundError):
 # ----------------------------------------------------------------------------------------------------------
 # functional core
 # ----------------------------------------------------------------------------------------------------------
-def window_bin_exposure(edges: np.ndarray, start: np.ndarray, length: float, period, duty, led_phase,
-                        rise=0.0, fall=0.0, level: str = "pwm", check: bool = True) -> np.ndarray:
-    r"""Time (s) at PWM level 1 that each bin contributes to an exposure window.
+def _is_tensor(*xs) -> bool:
+    return any(isinstance(x, torch.Tensor) for x in xs)
+
+
+def bin_edges(window_s, bins: int, like=None):
+    r"""Edges (s) of ``bins`` equal time bins over ``[0, window_s]``, relative to the frame start.
+
+    The one definition of the bin grid (``np.linspace(0, window_s, bins + 1)``, bit for bit: ``i * (window_s /
+    bins)`` with the last edge set to ``window_s``), for numpy (``like=None``) or on the device of tensor
+    ``like``: there ``window_s`` and ``bins`` may be (S,) tensors (one grid per slot) and the result is (S, Kmax + 1)
+    with ``Kmax = bins.max()``; the edges past a slot's own K repeat its last edge (zero-length bins).
 
     Args:
-        edges: (K+1,) bin edges (s). start: (R,) window start per row (s). length: window length (s).
+        window_s: capture window (s), scalar or (S,). bins: K >= 1, int or (S,) int tensor.
+        like: ``None`` for numpy, else a tensor whose device is used (float64).
+
+    Returns:
+        (K + 1,) float64 numpy array, or an (S, Kmax + 1) float64 tensor.
+    """
+    if like is None:
+        return np.linspace(0.0, float(window_s), int(bins) + 1)
+    dev = like.device
+    K = torch.as_tensor(bins, device=dev).reshape(-1).long()
+    win = torch.as_tensor(window_s, dtype=torch.float64, device=dev).reshape(-1).expand(K.shape[0])
+    kmax = int(K.max()) if K.numel() else 1
+    i = torch.arange(kmax + 1, device=dev, dtype=torch.float64)
+    step = win / K.clamp_min(1).to(torch.float64)                                  # (S,) s
+    edges = i[None, :] * step[:, None] + 0.0                                       # numpy's linspace: i * step + 0
+    last = i[None, :] >= K[:, None].to(torch.float64)
+    return torch.where(last, win[:, None], edges)
+
+
+def window_bin_exposure(edges, start, length, period, duty, led_phase, rise=0.0, fall=0.0, level: str = "pwm",
+                        check: bool = True):
+    r"""Time (s) at PWM level 1 that each bin contributes to an exposure window.
+
+    Array-agnostic: numpy inputs take :func:`lfmbench.flicker.pwm_exposure`'s compiled kernel, torch tensors its
+    array formula on their device (bit-identical to the kernel in float64 on the CPU); the batched path of
+    :mod:`lfmbench.datasets.batched` calls this same function.
+
+    Args:
+        edges: (*, K+1) bin edges (s); the per-sample path passes (K+1,). start: (*, R) window start per row (s).
+        length: window length (s), a scalar or broadcastable to (*, 1, 1).
         period, duty, led_phase, rise, fall: PWM parameters (s, 1, s, s, s): scalars for one light, or arrays of
-            shape (L, 1, 1) for L lights at once.
+            shape (L, 1, 1) for L lights at once (generally: broadcastable to (*, R, K)).
         level: ``"pwm"`` (the modulated source) or ``"mean"`` (constant at its duty cycle: ground truth).
         check: validate the PWM parameters (``False`` when they were validated when drawn).
 
     Returns:
-        (R, K), or (L, R, K) for per-light arrays, float64:
+        (*, R, K), e.g. (R, K) or (L, R, K), float64:
         :math:`\int_{[t_k, t_{k+1}) \cap [a, a + t_e)} s(t)\,dt` in s.
     """
-    lo = np.maximum(edges[None, :-1], start[:, None])
-    hi = np.minimum(edges[None, 1:], start[:, None] + length)
-    dur = np.maximum(hi - lo, 0.0)
+    if _is_tensor(edges, start):
+        lo = torch.maximum(edges[..., None, :-1], start[..., :, None])
+        hi = torch.minimum(edges[..., None, 1:], start[..., :, None] + length)
+        dur = (hi - lo).clamp_min(0.0)
+    else:
+        lo = np.maximum(edges[..., None, :-1], start[..., :, None])
+        hi = np.minimum(edges[..., None, 1:], start[..., :, None] + length)
+        dur = np.maximum(hi - lo, 0.0)
     if level == "mean":
-        return dur * np.asarray(duty)
+        return dur * (duty if _is_tensor(duty) else np.asarray(duty))
     return pwm_exposure(lo - led_phase, dur, period, duty, rise_time=rise, fall_time=fall, check=check)
+
+
+def window_starts(t0, t_short, t_long, shift) -> dict:
+    """Window start times (s) of the LPD (short, centred in the long one) and SPD (long) windows.
+
+    The one definition of the capture timing (docs/contracts.md), array-agnostic (numpy or torch, broadcasting).
+
+    Args:
+        t0: frame start(s) (s). t_short, t_long: exposure times (s). shift: per-row delay ``row * line_time``
+            (s), zeros for a global shutter.
+
+    Returns:
+        ``{"lpd": t0 + (t_long - t_short) / 2 + shift, "spd": t0 + shift}`` in s.
+    """
+    return {"lpd": t0 + (t_long - t_short) / 2.0 + shift, "spd": t0 + shift}
 
 
 def _window_starts(meta: dict, frame: int, rows: np.ndarray, shutter: str,
@@ -82,7 +139,7 @@ def _window_starts(meta: dict, frame: int, rows: np.ndarray, shutter: str,
     ts, tl = float(tm["short_exposure_s"]), float(tm["long_exposure_s"])
     td = float(tm.get("line_time_s", 0.0)) if line_time_s is None else float(line_time_s)
     shift = rows * td if shutter == "rolling" else np.zeros(len(rows))
-    return {"lpd": t0 + (tl - ts) / 2.0 + shift, "spd": t0 + shift}
+    return window_starts(t0, ts, tl, shift)
 
 
 def check_line_time(meta: dict, line_time_s: float, rows: int) -> None:
@@ -96,6 +153,23 @@ def check_line_time(meta: dict, line_time_s: float, rows: int) -> None:
                          f"{(float(tm['long_exposure_s']) + last) * 1e3:.3f} ms, after the rendered capture window "
                          f"({float(tm['capture_window_s']) * 1e3:.3f} ms); at most "
                          f"{(float(tm['capture_window_s']) - float(tm['long_exposure_s'])) / max(rows - 1, 1):.3g} s")
+
+
+def visible_lights(layers: SceneLayers, frame: int, crop: tuple[int, int, int, int], params: Mapping[int, dict]):
+    """The per-light layers of ``frame`` that a crop shows, for lights with PWM parameters.
+
+    Yields:
+        ``(light_id, pwm_dict, (by0, bx0), (iy0, iy1, ix0, ix1), {pd: (K, hh, ww) e-/s})``: the layer's box
+        origin and its intersection with the crop (absolute pixels, half-open), in the stored order.
+    """
+    y0, x0, h, w = crop
+    for light_id, _g, (by0, bx0, by1, bx1), rates in layers.lights[frame]:
+        iy0, iy1 = max(by0, y0), min(by1, y0 + h)
+        ix0, ix1 = max(bx0, x0), min(bx1, x0 + w)
+        p = params.get(light_id)
+        if p is None or iy0 >= iy1 or ix0 >= ix1:  # light left out, or outside the crop
+            continue
+        yield light_id, p, (by0, bx0), (iy0, iy1, ix0, ix1), rates
 
 
 def compose_frame(layers: SceneLayers, meta: dict, frame: int, crop: tuple[int, int, int, int],
@@ -131,16 +205,11 @@ def compose_frame(layers: SceneLayers, meta: dict, frame: int, crop: tuple[int, 
     # flickering lights stored per light in K time bins (K from the stored layer: a group may override it).
     # All visible lights with the same K share one pwm_exposure call per capture: (L, R, K) weights.
     visible: dict[int, list] = {}
-    for light_id, _g, (by0, bx0, by1, bx1), rates in layers.lights[frame]:
-        iy0, iy1 = max(by0, y0), min(by1, y0 + h)
-        ix0, ix1 = max(bx0, x0), min(bx1, x0 + w)
-        p = params.get(light_id)
-        if p is None or iy0 >= iy1 or ix0 >= ix1:  # light left out, or outside the crop
-            continue
-        visible.setdefault(int(rates["lpd"].shape[0]), []).append((p, (by0, bx0), (iy0, iy1, ix0, ix1), rates))
+    for _light_id, p, box0, inter, rates in visible_lights(layers, frame, crop, params):
+        visible.setdefault(int(rates["lpd"].shape[0]), []).append((p, box0, inter, rates))
     rolling = shutter == "rolling"
     for K, group in visible.items():
-        edges = frame / float(meta["fps"]) + np.linspace(0.0, float(tm["capture_window_s"]), K + 1)
+        edges = frame / float(meta["fps"]) + bin_edges(float(tm["capture_window_s"]), K)
         pa = {k: np.array([g[0][k] for g in group], dtype=np.float64)[:, None, None]
               for k in ("period_s", "duty", "phase_s", "rise_s", "fall_s")}
         wts = {}
@@ -164,6 +233,40 @@ def compose_frame(layers: SceneLayers, meta: dict, frame: int, crop: tuple[int, 
                 out["gt"][win] += both[1]
                 out["spd"][win] += torch.tensordot(wts["spd"][i, 0], sub["spd"], dims=1)
     return out
+
+
+def light_index(mask: torch.Tensor, lights: Sequence[Mapping]) -> torch.Tensor:
+    """Index into the sample's light list per pixel, -1 where no listed light.
+
+    Args:
+        mask: (F, h, w) float ``mask.light`` aux channel (light id per pixel, -1 none).
+        lights: the sample's lights (``meta["lights"]`` entries with ``"id"``), in the order of the meta arrays.
+
+    Returns:
+        (F, 1, h, w) int64.
+    """
+    ids = mask.round().long()
+    lut = torch.full((int(max([int(lt["id"]) for lt in lights] + [0])) + 2,), -1, dtype=torch.long)
+    for i, lt in enumerate(lights):
+        lut[int(lt["id"])] = i
+    valid = (ids >= 0) & (ids < len(lut) - 1)
+    return torch.where(valid, lut[ids.clamp(0, len(lut) - 1)], -1)[:, None]
+
+
+def add_rgb(sample: dict, preset, want: set) -> None:
+    """Add ``lpd_lcg_rgb``, ``spd_rgb``, ``gt_rgb`` (*, 3, h, w) to ``sample`` (in place) from its (*, 1, h, w)
+    ``lpd_lcg_e``, ``spd_e``, ``gt`` (any leading shape), then drop those the caller did not ask for."""
+    from kornia.color import raw_to_rgb
+    cfa = preset.cfa.to_kornia()
+    # kornia's bilinear demosaic; crops start at even offsets, so the Bayer phase is the preset's
+    for src, dst in (("lpd_lcg_e", "lpd_lcg_rgb"), ("spd_e", "spd_rgb"), ("gt", "gt_rgb")):
+        x = sample[src].float()
+        sample[dst] = raw_to_rgb(x.reshape(-1, *x.shape[-3:]), cfa).reshape(*x.shape[:-3], 3, *x.shape[-2:])
+    if "input_referred" not in want:
+        for k in ("lpd_hcg_e", "lpd_lcg_e", "spd_e"):
+            del sample[k]
+    if "gt" not in want:
+        del sample["gt"]
 
 
 def _warm_cpu_kernels(noise: bool) -> None:
@@ -214,6 +317,10 @@ class LFMCaptureDataset(Dataset):
             manifest SHA-256 of the files they come from and read with ``torch.load(weights_only=True)``
             (:func:`lfmbench.datasets.projection.load_or_build`). cache_scenes: scenes kept in memory per worker.
         transforms: callable applied to the sample dict.
+        pieces: return the unsimulated pieces of a sample instead (projected rates of the crop, per-light time
+            bins, PWM draws, noise seed, masks, depth, meta; :func:`lfmbench.datasets.batched.capture_pieces`),
+            to be batched by :func:`~lfmbench.datasets.batched.collate_pieces` and simulated on the training
+            device by :func:`~lfmbench.datasets.batched.simulate_batch` (docs/datasets.md, "Captures on the GPU").
 
     Sample (F frames, crop h x w; batches add a leading B; see docs/contracts.md):
         ``lpd_hcg``, ``lpd_lcg``, ``spd``: (F, 1, h, w) DN; ``lpd_hcg_e``, ``lpd_lcg_e``, ``spd_e``: (F, 1, h, w)
@@ -232,8 +339,9 @@ class LFMCaptureDataset(Dataset):
                  samples_per_scene: int = 1, noise: bool = True, optics: bool = True, max_lights: int = 64,
                  cache_dir: str | os.PathLike | bool | None = None, cache_scenes: int = 8,
                  line_time_s: float | None = None, transforms: Callable[[dict], dict] | None = None,
-                 frame_start: int | str = 0) -> None:
+                 frame_start: int | str = 0, pieces: bool = False) -> None:
         self.root = Path(root)
+        self.pieces = bool(pieces)
         if not (self.root / "manifest.json").is_file():
             raise DatasetNotFoundError(
                 f"root: no lfmbench corpus at {self.root} (manifest.json missing). Render one with "
@@ -420,6 +528,21 @@ class LFMCaptureDataset(Dataset):
 
     # -- sample
     def __getitem__(self, index: int) -> dict:
+        sid, per_light, per_group, crop, noise_seed, start = self.draws(index)
+        if self.pieces:
+            from lfmbench.datasets.batched import capture_pieces
+            sample = capture_pieces(self, sid, per_light, per_group, crop, noise_seed, index, start)
+        else:
+            sample = self.simulate(sid, per_light, per_group, crop, noise_seed, index, start)
+        return self.transforms(sample) if self.transforms else sample
+
+    def draws(self, index: int) -> tuple:
+        """The random draws of sample ``index`` (functions of ``(seed, epoch, index)``; frozen for ``test``).
+
+        Returns:
+            ``(scene_id, per_light, per_group, crop, noise_seed, frame_start)``: PWM dicts by light id and by
+            flickering group, crop (y0, x0, h, w) in pixels, the sensor-noise seed and the first frame.
+        """
         if not 0 <= index < len(self):
             raise IndexError(f"index {index} out of range for a dataset of {len(self)} samples")
         sid = self.scene_ids[index // self.samples_per_scene]
@@ -449,8 +572,7 @@ class LFMCaptureDataset(Dataset):
             start = self._start(sid, float(rng.random()) if u is None else u)  # drawn last: other draws unchanged
         else:
             start = self.frame_start
-        sample = self.simulate(sid, per_light, per_group, (y0, x0, ch, cw), noise_seed, index, start)
-        return self.transforms(sample) if self.transforms else sample
+        return sid, per_light, per_group, (y0, x0, ch, cw), noise_seed, start
 
     def simulate(self, scene_id: str, params: Mapping[int, Mapping], group_params: Mapping[str, Mapping] | None = None,
                  crop: tuple[int, int, int, int] | None = None, noise_seed: int = 0, index: int = -1,
@@ -476,12 +598,7 @@ class LFMCaptureDataset(Dataset):
         params = {int(k): v for k, v in params.items()}
         group_params = dict(group_params or {})
         F = self.frames
-        if frame_start is None:
-            frame_start = 0 if self.frame_start == "random" else self.frame_start
-        s0 = int(frame_start)
-        if s0 < 0 or s0 + F > self._frames_to_load(scene_id):
-            raise ValueError(f"frame_start: frames {s0}..{s0 + F - 1} are not all available for scene {scene_id!r} "
-                             f"(dataset frame_start={self.frame_start!r}, frames={F}, scene frames {meta['frames']})")
+        s0 = self._first_frame(scene_id, frame_start)
         layers = self._layers(scene_id)
         frames = [compose_frame(layers, meta, f, crop, params, group_params, self.shutter, self.line_time_s)
                   for f in range(s0, s0 + F)]
@@ -516,28 +633,25 @@ class LFMCaptureDataset(Dataset):
         if "light_index" in want or "depth" in want:
             aux = layers.aux
             if "light_index" in want:
-                ids = aux["mask.light"][s0:s0 + F, y0:y0 + ch, x0:x0 + cw].round().long()
-                lut = torch.full((int(max([int(lt["id"]) for lt in lights] + [0])) + 2,), -1, dtype=torch.long)
-                for i, lt in enumerate(lights):
-                    lut[int(lt["id"])] = i
-                valid = (ids >= 0) & (ids < len(lut) - 1)
-                sample["light_index"] = torch.where(valid, lut[ids.clamp(0, len(lut) - 1)], -1)[:, None]
+                sample["light_index"] = light_index(aux["mask.light"][s0:s0 + F, y0:y0 + ch, x0:x0 + cw], lights)
             if "depth" in want:
                 sample["depth"] = aux["depth.Z"][s0:s0 + F, y0:y0 + ch, x0:x0 + cw][:, None]
         if "rgb" in want:
-            from kornia.color import raw_to_rgb
-            cfa = self.preset.cfa.to_kornia()
-            # kornia's bilinear demosaic; crops start at even offsets, so the Bayer phase is the preset's
-            for src, dst in (("lpd_lcg_e", "lpd_lcg_rgb"), ("spd_e", "spd_rgb"), ("gt", "gt_rgb")):
-                sample[dst] = raw_to_rgb(sample[src].float(), cfa)
-            if "input_referred" not in want:
-                for k in ("lpd_hcg_e", "lpd_lcg_e", "spd_e"):
-                    del sample[k]
-            if "gt" not in want:
-                del sample["gt"]
+            add_rgb(sample, self.preset, want)
         sample["meta"] = self._meta(scene_id, index, lights, params, crop, t_s, t_l, layers)
         sample["meta"]["frame_start"] = s0
         return sample
+
+    def _first_frame(self, scene_id: str, frame_start: int | None) -> int:
+        """The first of the F frames (``None``: the dataset's ``frame_start``, 0 for ``"random"``), checked."""
+        if frame_start is None:
+            frame_start = 0 if self.frame_start == "random" else self.frame_start
+        s0, F = int(frame_start), self.frames
+        if s0 < 0 or s0 + F > self._frames_to_load(scene_id):
+            raise ValueError(f"frame_start: frames {s0}..{s0 + F - 1} are not all available for scene {scene_id!r} "
+                             f"(dataset frame_start={self.frame_start!r}, frames={F}, scene frames "
+                             f"{self.corpus.meta(scene_id)['frames']})")
+        return s0
 
     def _meta(self, sid, index, lights, per_light, crop, t_s, t_l, layers) -> dict:
         L = self.max_lights
