@@ -19,8 +19,8 @@ of the scene in which only set ``k`` emits (the previous per-group scenes; check
 
 The path tracer follows Mitsuba 3's ``path`` integrator (and the primal loop of its Python ``prb``): unidirectional
 path tracing with next-event estimation for smooth BSDFs, multiple importance sampling with the balance
-heuristic (:func:`_mis_weight`, as Mitsuba's), emitters visible to camera rays, ``max_depth`` vertices, no Russian roulette
-(Mitsuba's ``rr_depth`` 5 is never reached at ``max_depth`` 5).
+heuristic (:func:`_mis_weight`, as Mitsuba's), emitters visible to camera rays, ``max_depth`` vertices, Russian
+roulette (Mitsuba's rule) for the paths that go on from the second hit (:data:`RR_DEPTH`).
 
 Camera: the ego camera of :mod:`render_tools.camera` (CTRV pose at the ray's time; OpenCV intrinsics of
 :func:`camera.intrinsics`; pixel (i, j) covers [j, j + 1) x [i, i + 1)), generated here so that crop, time
@@ -49,6 +49,9 @@ N_LAMBDA = 4
 #: Most samples (lanes x samples per pixel) in one kernel launch (bigger tile lists are split into several launches
 #: of the same kernel; a tile with more is split by samples).
 MAX_LANES = 1 << 28
+#: Path vertex from which Russian roulette may end a path (Mitsuba's ``rr_depth``, whose default 5 never acts at
+#: ``max_depth`` 5): vertices 3-5 cost 40 % of a night frame's time and carry little of its light.
+RR_DEPTH = 2
 #: Index value meaning "no set" in the per-emitter lookup tables.
 NO_SET = 0xFFFFFFFF
 #: Beam cut-off cosine entries of a :class:`LightSets` row meaning "a lamp without a beam" and "the environment".
@@ -535,6 +538,14 @@ class Tracer:
                                      active_next)
             ray = si.spawn_ray(si.to_world(bs.wo))
             beta *= bsdf_w
+            # Russian roulette from vertex RR_DEPTH on (as Mitsuba's path integrator, with its rule: survive with
+            # probability min(max throughput, 0.95), divide by it): unbiased, and the deep vertices of night
+            # scenes (little light, much cost) are mostly skipped
+            q = dr.minimum(dr.max(beta), 0.95)
+            rr = active_next & (depth + 1 >= RR_DEPTH)
+            survive = ~rr | (sampler.next_float32() < q)
+            beta = dr.select(rr & survive, beta / dr.select(q > 0, q, 1.0), beta)
+            active_next &= survive
             si_prev = dr.detach(si, True)
             pdf_prev = bs.pdf
             delta_prev = mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)
