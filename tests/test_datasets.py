@@ -339,3 +339,22 @@ def test_frozen_test_params_grow_without_changing_existing_draws(tmp_path):
     assert len(three) == 3 * len(one)
     assert torch.equal(three[0]["meta"]["duty"], first)
     assert len(json.loads((root / "test_params.json").read_text())["samples"]) == len(three)
+
+
+def test_corpus_without_aux_serves_every_output_but_depth_and_light_index(tmp_path):
+    """aux.exr is optional (docs/corpus-format.md 6.3): read only for ``light_index`` / ``depth``."""
+    root = tmp_path / "c"
+    w = C.CorpusWriter(root)
+    meta = fake_meta("scene00000", width=W, height=H, frames=2, bins=4)
+    w.write_scene("scene00000", fake_scene("scene00000"), meta, fake_frames(meta, aux=False))
+    w.write_splits(0)
+    assert C.validate_corpus(root).ok
+    assert not list(root.rglob("aux.exr"))
+    for cache in (False, None):  # without and with the projection cache
+        ds = LFMCaptureDataset(root, split="all", frames=2, outputs=("input_referred", "gt"), cache_dir=cache)
+        s = ds[0]
+        assert s["gt"].shape == (2, 1, H, W) and "depth" not in s and "light_index" not in s
+    for out in ("depth", "light_index"):
+        ds = LFMCaptureDataset(root, split="all", frames=2, outputs=("gt", out), cache_dir=False)
+        with pytest.raises(C.CorpusFileError, match=rf"aux\.exr.*\['{out}'\]"):
+            ds[0]

@@ -34,7 +34,7 @@ from torch.utils.data import Dataset
 from lfmbench import sensor as _sensor
 from lfmbench.corpus import Corpus
 from lfmbench.fileio import atomic_write_json
-from lfmbench.datasets.projection import PHOTODIODES, SceneLayers, load_or_build
+from lfmbench.datasets.projection import PHOTODIODES, SceneLayers, aux_channels, load_or_build
 from lfmbench.datasets.pwm import PWMConfig, draw_pwm, load_pwm_config
 from lfmbench.flicker import pwm_exposure
 
@@ -393,7 +393,7 @@ class LFMCaptureDataset(Dataset):
             self._cache.move_to_end(sid)
             return self._cache[sid]
         layers = load_or_build(self.corpus, sid, self.preset, self.groups, self._frames_to_load(sid), self.optics,
-                               self.cache_dir)
+                               self.cache_dir, aux=aux_channels(self.outputs))
         if self._cache_scenes:
             self._cache[sid] = layers
             while len(self._cache) > self._cache_scenes:
