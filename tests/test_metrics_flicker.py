@@ -50,6 +50,15 @@ def test_fdi_hand_values_and_reference_baseline():
     assert float(fm.fdi([0.0, 1.0], x_off=0.0)) == pytest.approx(0.5)
 
 
+def test_saturation_warning_compares_in_float64():
+    # the P2020 reference (NumPy float64) flags 0.1000000001 > 0.1; float32 rounds both to the same value
+    assert fm.saturation_warning([0.1000000001], 0.1)[0] is True
+    assert fm.saturation_warning(torch.tensor([0.1000000001], dtype=torch.float64), 0.1)[0] is True
+    assert fm.saturation_warning([0.1], 0.1)[0] is False
+    flag, idx = fm.saturation_warning(torch.tensor([[0.3, 0.1]], dtype=torch.float32), 0.2)
+    assert flag is True and idx.tolist() == [[True, False]]
+
+
 def test_saturation_warning_strictly_above():
     flag, idx = fm.saturation_warning([100.0, 240.0, 241.0], 240.0)
     assert flag is True and idx.tolist() == [False, False, True]
