@@ -40,6 +40,7 @@ from typing import Any, Iterable, Iterator, Mapping, Sequence
 
 import numpy as np
 
+from lfmbench.check import check_scene_id, scene_id_error
 from lfmbench.fileio import (TMP_PREFIX, AtomicWriteError, atomic_write_bytes, atomic_write_json,
                              json_default)
 
@@ -923,11 +924,8 @@ def _check_manifest(man: Any, path: Path, *, entries: bool = True) -> dict:
 
 
 def _scene_id_error(scene_id: Any) -> str | None:
-    try:
-        check_scene_id(scene_id)
-    except ValueError as exc:
-        return str(exc)
-    return None
+    why = scene_id_error(scene_id)
+    return None if why is None else f"scene_id {why}"
 
 
 def _file_entry_error(rel: Any, digest: Any, scenes: set) -> str | None:
@@ -1332,12 +1330,6 @@ def prune_scene_dir(root: str | os.PathLike, scene_id: str, keep: Iterable[str])
             elif p.is_dir() and not any(p.iterdir()):
                 p.rmdir()
     return removed
-
-
-def check_scene_id(scene_id: str) -> None:
-    """Raise ``ValueError`` unless ``scene_id`` is a safe directory name (letters, digits, ``_ - .``)."""
-    if not isinstance(scene_id, str) or not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9_.-]*", scene_id):
-        raise ValueError(f"scene_id must be letters, digits, '_', '-', '.', got {scene_id!r}")
 
 
 def _json_bytes(obj: Any) -> bytes:

@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from lfmbench.check import scene_id_error
 from lfmbench.fileio import atomic_write_json
 
 from . import spectra
@@ -512,7 +513,7 @@ def validate_scene(scene: dict) -> dict:
     """Validate a scene dict; returns it unchanged. Raises ``ValueError`` naming the first bad field.
 
     Schema (all lengths m, times s, angles deg unless named ``_rad``):
-    ``format`` ("lfmbench-scene"), ``version`` (1), ``scene_id`` (str), ``seed`` (int >= 0),
+    ``format`` ("lfmbench-scene"), ``version`` (1), ``scene_id`` (str, :func:`lfmbench.check.check_scene_id`), ``seed`` (int >= 0),
     ``time_of_day`` (day|dusk|night), ``timing.short_exposure_s`` (> 0),
     ``camera`` {position_m [3], yaw_deg, pitch_deg (-89, 89), fov_x_deg (0, 180), speed_mps >= 0,
     yaw_rate_rad_s}, ``sky`` {model: sunsky {sun_elevation_deg [-5, 90], sun_azimuth_deg, turbidity [1, 10],
@@ -528,8 +529,9 @@ def validate_scene(scene: dict) -> dict:
         _fail("scene.format", f"expected {SCENE_FORMAT!r}, got {scene['format']!r}")
     if scene["version"] != SCENE_VERSION:
         _fail("scene.version", f"unsupported version {scene['version']!r} (this reader: {SCENE_VERSION})")
-    if not isinstance(scene["scene_id"], str) or not scene["scene_id"] or any(c in scene["scene_id"] for c in "/\\ "):
-        _fail("scene.scene_id", f"must be a non-empty string without '/', '\\' or spaces, got {scene['scene_id']!r}")
+    why = scene_id_error(scene["scene_id"])  # the corpus rule: the id becomes a corpus directory name
+    if why is not None:
+        _fail("scene.scene_id", why)
     _int(scene["seed"], "scene.seed")
     if scene["time_of_day"] not in TIMES_OF_DAY:
         _fail("scene.time_of_day", f"{scene['time_of_day']!r} not one of {TIMES_OF_DAY}")
