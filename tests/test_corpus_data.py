@@ -21,7 +21,7 @@ def fake_meta(scene_id="scene00000", *, width=12, height=8, frames=2, bins=3, ba
     flick = [g for g, v in groups.items() if v["flicker"]]
     for i in range(n_lights if flick else 0):
         lights.append({"id": i, "group": flick[i % len(flick)], "kind": "tail", "instance": 10 + i,
-                       "luminance_cd_m2": 100.0, "spectrum": "led_red",
+                       "luminance_cd_m2": 100.0, "spectrum": {"model": "led", "peak_nm": 625.0, "fwhm_nm": 20.0},
                        "bbox": [[1, 1 + 3 * i, 4, 3 + 3 * i] for _ in range(frames)]})
     return {
         "scene_id": scene_id, "width": width, "height": height, "bands_nm": list(bands), "band_width_nm": 10.0,
