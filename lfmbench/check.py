@@ -120,18 +120,19 @@ def check_keys(data: Any, field: str, source: str | None = None, *, required: It
     >>> check_keys({"a": 1, "b": 2}, "timing", "x.json", required=["a"])
     Traceback (most recent call last):
     ...
-    ValueError: x.json: field 'timing.b' is unknown (allowed: ['a'])
+    ValueError: x.json: unknown field 'timing.b' (allowed: ['a'])
     """
     if not isinstance(data, Mapping):
-        fail(field, f"must be an object (mapping), got {type(data).__name__}", source)
+        fail(field or "(top level)", f"must be an object (mapping), got {type(data).__name__}", source)
     required = tuple(required)
     pre = f"{field}." if field else ""
     if optional is not None:
         allowed = set(required) | set(optional)
         unknown = sorted(str(k) for k in data if k not in allowed)
         if unknown:
-            fail(pre + unknown[0], f"is unknown (allowed: {sorted(allowed)})"
-                 + (f"; also unknown: {unknown[1:]}" if len(unknown) > 1 else ""), source)
+            names = ", ".join(f"'{pre}{u}'" for u in unknown)
+            raise ValueError(f"{source + ': ' if source else ''}unknown field{'s' if len(unknown) > 1 else ''} "
+                             f"{names} (allowed: {sorted(allowed)})")
     for k in required:
         if k not in data:
             fail(pre + k, "is missing", source)
@@ -165,9 +166,9 @@ def check_array(name: str, x: Any, *, lo: float | None = None, hi: float | None 
     if lo is not None:
         bad = (v <= lo) if lo_open else (v < lo)
         if bad.any():
-            raise ValueError(f"{name} must be {'>' if lo_open else '>='} {lo}; got {v[bad].flat[0]!r}")
+            raise ValueError(f"{name} must be {'>' if lo_open else '>='} {lo}; got {v[bad].flat[0].item()!r}")
     if hi is not None and (v > hi).any():
-        raise ValueError(f"{name} must be <= {hi}; got {v[v > hi].flat[0]!r}")
+        raise ValueError(f"{name} must be <= {hi}; got {v[v > hi].flat[0].item()!r}")
 
 
 # ------------------------------------------------------------------------------------------------ scene ids

@@ -783,19 +783,6 @@ _META_REQUIRED = ("scene_id", "width", "height", "bands_nm", "fps", "frames", "t
 _TIMING_REQUIRED = ("short_exposure_s", "long_exposure_s", "capture_window_s")
 
 
-def _num(d: Mapping, key: str, where: str, *, positive: bool = False, nonneg: bool = False) -> float:
-    if key not in d:
-        raise ValueError(f"{where}: missing field {key!r}")
-    v = d[key]
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(float(v)):
-        raise ValueError(f"{where}: field {key!r} must be a finite number, got {v!r}")
-    if positive and v <= 0:
-        raise ValueError(f"{where}: field {key!r} must be > 0, got {v!r}")
-    if nonneg and v < 0:
-        raise ValueError(f"{where}: field {key!r} must be >= 0, got {v!r}")
-    return float(v)
-
-
 def validate_meta(meta: Mapping[str, Any], where: str = "meta.json") -> None:
     """Check a scene's ``meta.json`` content; raise ``ValueError`` naming ``where`` and the field.
 
@@ -827,16 +814,16 @@ def validate_meta(meta: Mapping[str, Any], where: str = "meta.json") -> None:
         raise ValueError(f"{where}: field 'bands_nm' must hold numbers (nm), got {bands!r}") from None
     if not np.isfinite(b).all() or (b <= 0).any() or (np.diff(b) <= 0).any():
         raise ValueError(f"{where}: field 'bands_nm' must be positive and strictly increasing, got {bands!r}")
-    fps = _num(meta, "fps", where, positive=True)
+    fps = check.get_number(meta, "fps", where, lo=0.0, lo_open=True)
     frame_time = 1.0 / fps
     t = meta["timing"]
     if not isinstance(t, Mapping):
         raise ValueError(f"{where}: field 'timing' must be an object")
     tw = f"{where} timing"
     for k in _TIMING_REQUIRED:
-        _num(t, k, tw, positive=True)
+        check.get_number(t, k, where, "timing.", lo=0.0, lo_open=True)
     ts, tl, cw = t["short_exposure_s"], t["long_exposure_s"], t["capture_window_s"]
-    readout = _num(t, "readout_s", tw, nonneg=True) if "readout_s" in t else 0.0
+    readout = check.get_number(t, "readout_s", where, "timing.", lo=0.0, default=0.0)
     tol = TIMING_RTOL * frame_time
     if tl > frame_time + tol:
         raise ValueError(f"{tw}: long_exposure_s = {tl} s is longer than the frame time 1/fps = {frame_time:.6g} s")
@@ -866,7 +853,7 @@ def validate_meta(meta: Mapping[str, Any], where: str = "meta.json") -> None:
     if not isinstance(cam, Mapping):
         raise ValueError(f"{where}: field 'camera' must be an object, got {cam!r}")
     if cam.get("speed_mps") is not None:
-        _num(cam, "speed_mps", f"{where} camera", nonneg=True)
+        check.get_number(cam, "speed_mps", where, "camera.", lo=0.0)
     ids = set()
     lights = meta.get("lights", [])
     if not isinstance(lights, list):

@@ -12,6 +12,8 @@ from typing import Any, Mapping
 import numpy as np
 import yaml
 
+from lfmbench.check import check_choice, check_keys, fail, where
+
 DEFAULT_PWM_PATH = Path(__file__).resolve().parents[1] / "configs" / "pwm.yaml"
 _DISTS = ("uniform", "loguniform", "constant", "choice")
 _KEYS = {"frequency_hz", "duty", "rise_time_s", "fall_time_s", "sync"}
@@ -46,7 +48,7 @@ class Distribution:
 
 def _dist(d: Any, key: str, source: str, lo: float, hi: float) -> Distribution:
     if not isinstance(d, Mapping) or d.get("dist") not in _DISTS:
-        raise ValueError(f"{source}: field '{key}' must be a mapping with dist in {_DISTS}, got {d!r}")
+        fail(key, f"must be a mapping with dist in {_DISTS}, got {d!r}", source)
     kind = d["dist"]
     try:
         if kind == "constant":
@@ -63,9 +65,9 @@ def _dist(d: Any, key: str, source: str, lo: float, hi: float) -> Distribution:
                 raise ValueError
             out = Distribution(kind, low=vals[0], high=vals[1])
     except (KeyError, TypeError, ValueError):
-        raise ValueError(f"{source}: field '{key}' has invalid parameters {d!r}") from None
+        raise ValueError(f"{where(key, source)} has invalid parameters {d!r}") from None
     if not all(np.isfinite(v) and lo <= v <= hi for v in vals):
-        raise ValueError(f"{source}: field '{key}' must stay within [{lo}, {hi}], got {d!r}")
+        fail(key, f"must stay within [{lo}, {hi}], got {d!r}", source)
     return out
 
 
@@ -115,13 +117,10 @@ def load_pwm_config(pwm: "PWMConfig | Mapping | str | Path | None" = None) -> PW
         raise ValueError(f"pwm must be None, a mapping, a YAML path or a PWMConfig, got {type(pwm).__name__}")
     if not isinstance(user, Mapping):
         raise ValueError(f"{source}: must hold a mapping of fields")
-    unknown = set(user) - _KEYS
-    if unknown:
-        raise ValueError(f"{source}: unknown field(s) {sorted(unknown)} (known: {sorted(_KEYS)})")
+    check_keys(user, "", source, optional=_KEYS)
     cfg = {**base, **user}
     sync = cfg.get("sync", "light")
-    if sync not in ("light", "group"):
-        raise ValueError(f"{source}: field 'sync' must be 'light' or 'group', got {sync!r}")
+    check_choice(sync, "sync", ("light", "group"), source)
     return PWMConfig(frequency_hz=_dist(cfg["frequency_hz"], "frequency_hz", source, 1.0, 1e6),
                      duty=_dist(cfg["duty"], "duty", source, 0.0, 1.0),
                      rise_time_s=_dist(cfg["rise_time_s"], "rise_time_s", source, 0.0, 1.0),
