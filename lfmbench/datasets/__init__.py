@@ -1,7 +1,9 @@
 """Torch datasets over an lfmbench corpus: split-pixel captures simulated on the fly."""
 from lfmbench.datasets.capture import (DEFAULT_OUTPUTS, OUTPUTS, DatasetNotFoundError, LFMCaptureDataset, check_line_time,
                                        compose_frame, window_bin_exposure)
-from lfmbench.datasets.pwm import PWMConfig, draw_pwm, load_pwm_config
+from lfmbench.datasets.pwm import (TEST_SPLIT_SEED, PWMConfig, PWMParams, SceneDraw, draw_pwm, draw_scene_pwm,
+                                   load_pwm_config)
 
 __all__ = ["LFMCaptureDataset", "DatasetNotFoundError", "OUTPUTS", "DEFAULT_OUTPUTS", "compose_frame",
-           "window_bin_exposure", "check_line_time", "PWMConfig", "load_pwm_config", "draw_pwm"]
+           "window_bin_exposure", "check_line_time", "PWMConfig", "load_pwm_config", "draw_pwm", "draw_scene_pwm",
+           "PWMParams", "SceneDraw", "TEST_SPLIT_SEED"]
