@@ -10,7 +10,7 @@ import torch
 
 from lfmbench import check
 from lfmbench import corpus as C
-from tests.test_corpus_data import fake_meta
+from tests.data.corpus.data import fake_meta
 
 # (id, valid): the edge cases of the rule, each checked by every user of it
 SCENE_IDS = [

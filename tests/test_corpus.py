@@ -8,7 +8,7 @@ import os
 import numpy as np
 import OpenEXR
 import pytest
-from test_corpus_data import BANDS, fake_frames, fake_meta, fake_scene
+from tests.data.corpus.data import BANDS, fake_frames, fake_meta, fake_scene
 
 from lfmbench import corpus as C
 

@@ -6,7 +6,7 @@ import json
 import numpy as np
 import OpenEXR
 import pytest
-from test_corpus_data import fake_frames, fake_meta, fake_scene
+from tests.data.corpus.data import fake_frames, fake_meta, fake_scene
 from typer.testing import CliRunner
 
 from lfmbench import corpus as C

@@ -16,39 +16,7 @@ from lfmbench.datasets import DatasetNotFoundError, LFMCaptureDataset, compose_f
 from lfmbench.datasets.projection import build_layers
 from lfmbench.flicker import pwm_level
 from lfmbench.sensor import load_preset
-from tests.test_corpus_data import fake_frames, fake_meta, fake_scene
-
-H, W = 16, 24
-
-
-def make_corpus(root, n_scenes=3, frames=3, bins=4, scale=1e-3, static_camera=False, seed=0, groups=None):
-    """A corpus of ``n_scenes`` fake scenes; radiance scaled by ``scale`` (W sr^-1 m^-2 nm^-1) to stay unclipped."""
-    w = C.CorpusWriter(root)
-    for i in range(n_scenes):
-        meta = fake_meta(f"scene{i:05d}", width=W, height=H, frames=frames, bins=bins, groups=groups, n_lights=2)
-        fr = fake_frames(meta, seed=seed + i)
-        for f in fr:
-            for g in f["static"].values():
-                for k in g:
-                    g[k] *= scale
-            for g, ls in f["lights"].items():
-                new = []
-                for lid, box, arr in ls:
-                    arr = arr * scale
-                    if static_camera:
-                        arr[:] = arr[:1]  # every bin identical: a static scene
-                    new.append((lid, box, arr))
-                f["lights"][g] = new
-            f["aux"]["mask.light"][1:4, 4:6] = 1
-        w.write_scene(meta["scene_id"], fake_scene(meta["scene_id"]), meta, fr)
-    w.write_splits(0)
-    return root
-
-
-@pytest.fixture(scope="module")
-def corpus(tmp_path_factory):
-    return make_corpus(tmp_path_factory.mktemp("corpus"))
-
+from tests.data.corpus.data import H, W, fake_frames, fake_meta, fake_scene, make_corpus  # noqa: F401 - make_corpus re-exported
 
 def test_sample_keys_shapes_and_units(corpus):
     ds = LFMCaptureDataset(corpus, split="all", frames=3, crop=(8, 12), cache_dir=False)
@@ -308,7 +276,7 @@ def test_workers_forked_after_parent_openmp_do_not_deadlock(tmp_path):
     script = textwrap.dedent(f"""
         import sys, torch
         sys.path.insert(0, {str(Path(__file__).resolve().parents[1])!r})
-        import tests.test_datasets as T
+        import tests.data.corpus.data as T
         from pathlib import Path
         T.H, T.W = 96, 128   # 3 frames x 96 x 128 > torch's parallel grain size: workers would enter OpenMP
         root = T.make_corpus(Path({str(tmp_path / 'c')!r}), n_scenes=2)

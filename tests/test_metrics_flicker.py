@@ -9,7 +9,7 @@ import pytest
 import torch
 
 from lfmbench.metrics import flicker as fm
-from metrics_synthetic import make_batch
+from tests.data.metrics.data import make_batch
 
 
 def test_fmi_hand_values():

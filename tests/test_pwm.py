@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from lfmbench.datasets import pwm as P
-from tests.test_corpus_data import fake_meta
+from tests.data.corpus.data import fake_meta
 
 GROUPS = {"headlights": {"flicker": False}, "otherlights": {"flicker": True}, "signals": {"flicker": True}}
 
