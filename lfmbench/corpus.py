@@ -1033,7 +1033,8 @@ class Corpus:
     Example:
         >>> c = Corpus("demo_out/corpus")                                        # doctest: +SKIP
         >>> L = c.read_static(c.scenes[0], 0, "headlights", "short")             # doctest: +SKIP
-        >>> L.shape                                                              # (C, H, W) doctest: +SKIP
+        >>> L.shape                                                              # doctest: +SKIP
+        (C, H, W)
     """
 
     def __init__(self, root: str | os.PathLike, *, check_values: bool = True, cache_size: int = 4) -> None:
