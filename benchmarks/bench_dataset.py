@@ -72,7 +72,7 @@ from lfmbench.corpus import Corpus, CorpusWriter, group_storage  # noqa: E402
 from lfmbench.datasets import LFMCaptureDataset  # noqa: E402
 from lfmbench.datasets.capture import DEFAULT_OUTPUTS, compose_frame  # noqa: E402
 from lfmbench.datasets.projection import Projector, build_layers, load_or_build  # noqa: E402
-from lfmbench.datasets.pwm import draw_pwm, load_pwm_config  # noqa: E402
+from lfmbench.datasets.pwm import draw_scene_pwm, load_pwm_config  # noqa: E402
 
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -128,21 +128,11 @@ def _render(out: Path, options: dict, seed: int, scenes: int = 1, scene: dict | 
     return float(sum(summary.seconds.values())), cpu
 
 
-def _flicker_groups(meta: dict) -> list[str]:
-    return sorted(g for g, d in meta["groups"].items() if d.get("flicker"))
-
-
 def _draws(meta: dict, n: int, seed: int) -> list[dict]:
-    """``n`` PWM draws (light id -> PWM dict) for the scene's flickering lights (default pwm.yaml)."""
+    """``n`` PWM draws (light id -> PWM dict) for the scene's flickering lights (default pwm.yaml), drawn as
+    the dataset draws them (:func:`lfmbench.datasets.pwm.draw_scene_pwm`)."""
     cfg = load_pwm_config(None)
-    fl = set(_flicker_groups(meta))
-    lights = sorted((lt for lt in meta.get("lights", []) if lt["group"] in fl), key=lambda lt: int(lt["id"]))
-    out = []
-    for i in range(n):
-        d = draw_pwm(cfg, np.random.default_rng([seed, i]), [lt["group"] for lt in lights])
-        keys = ("period_s", "duty", "phase_s", "rise_s", "fall_s", "freq_hz")
-        out.append({int(lt["id"]): {k: float(d[k][j]) for k in keys} for j, lt in enumerate(lights)})
-    return out
+    return [draw_scene_pwm(cfg, meta, np.random.default_rng([seed, i])).to_dicts()[0] for i in range(n)]
 
 
 def _rel_rmse(est: list[torch.Tensor], ref: list[torch.Tensor]) -> float:

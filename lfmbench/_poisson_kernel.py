@@ -11,7 +11,7 @@ import math
 import numba
 import numpy as np
 
-from lfmbench.poisson import EXACT_LIMIT
+from lfmbench.constants import POISSON_EXACT_LIMIT
 
 _u64 = numba.uint64
 #: SplitMix64 increment (the golden-ratio constant), [Steele2014]_.
@@ -23,7 +23,7 @@ _INV_K = 1.0 / np.maximum(np.arange(64, dtype=np.float64), 1.0)
 #: log k! for k < 4096 (the PTRS draws below the 1000 e- switch-over), libm lgamma beyond: a table lookup
 #: instead of lgamma on the draws that leave the squeeze.
 _LOG_FACTORIAL = np.array([math.lgamma(k + 1.0) for k in range(4096)])
-_EXACT_LIMIT = EXACT_LIMIT
+_EXACT_LIMIT = POISSON_EXACT_LIMIT
 
 
 @numba.njit(inline="always", cache=True)

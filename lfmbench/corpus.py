@@ -40,6 +40,8 @@ from typing import Any, Iterable, Iterator, Mapping, Sequence
 
 import numpy as np
 
+from lfmbench import check
+from lfmbench.check import check_scene_id, scene_id_error
 from lfmbench.fileio import (TMP_PREFIX, AtomicWriteError, atomic_write_bytes, atomic_write_json,
                              json_default)
 
@@ -781,19 +783,6 @@ _META_REQUIRED = ("scene_id", "width", "height", "bands_nm", "fps", "frames", "t
 _TIMING_REQUIRED = ("short_exposure_s", "long_exposure_s", "capture_window_s")
 
 
-def _num(d: Mapping, key: str, where: str, *, positive: bool = False, nonneg: bool = False) -> float:
-    if key not in d:
-        raise ValueError(f"{where}: missing field {key!r}")
-    v = d[key]
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(float(v)):
-        raise ValueError(f"{where}: field {key!r} must be a finite number, got {v!r}")
-    if positive and v <= 0:
-        raise ValueError(f"{where}: field {key!r} must be > 0, got {v!r}")
-    if nonneg and v < 0:
-        raise ValueError(f"{where}: field {key!r} must be >= 0, got {v!r}")
-    return float(v)
-
-
 def validate_meta(meta: Mapping[str, Any], where: str = "meta.json") -> None:
     """Check a scene's ``meta.json`` content; raise ``ValueError`` naming ``where`` and the field.
 
@@ -825,16 +814,16 @@ def validate_meta(meta: Mapping[str, Any], where: str = "meta.json") -> None:
         raise ValueError(f"{where}: field 'bands_nm' must hold numbers (nm), got {bands!r}") from None
     if not np.isfinite(b).all() or (b <= 0).any() or (np.diff(b) <= 0).any():
         raise ValueError(f"{where}: field 'bands_nm' must be positive and strictly increasing, got {bands!r}")
-    fps = _num(meta, "fps", where, positive=True)
+    fps = check.get_number(meta, "fps", where, lo=0.0, lo_open=True)
     frame_time = 1.0 / fps
     t = meta["timing"]
     if not isinstance(t, Mapping):
         raise ValueError(f"{where}: field 'timing' must be an object")
     tw = f"{where} timing"
     for k in _TIMING_REQUIRED:
-        _num(t, k, tw, positive=True)
+        check.get_number(t, k, where, "timing.", lo=0.0, lo_open=True)
     ts, tl, cw = t["short_exposure_s"], t["long_exposure_s"], t["capture_window_s"]
-    readout = _num(t, "readout_s", tw, nonneg=True) if "readout_s" in t else 0.0
+    readout = check.get_number(t, "readout_s", where, "timing.", lo=0.0, default=0.0)
     tol = TIMING_RTOL * frame_time
     if tl > frame_time + tol:
         raise ValueError(f"{tw}: long_exposure_s = {tl} s is longer than the frame time 1/fps = {frame_time:.6g} s")
@@ -864,7 +853,7 @@ def validate_meta(meta: Mapping[str, Any], where: str = "meta.json") -> None:
     if not isinstance(cam, Mapping):
         raise ValueError(f"{where}: field 'camera' must be an object, got {cam!r}")
     if cam.get("speed_mps") is not None:
-        _num(cam, "speed_mps", f"{where} camera", nonneg=True)
+        check.get_number(cam, "speed_mps", where, "camera.", lo=0.0)
     ids = set()
     lights = meta.get("lights", [])
     if not isinstance(lights, list):
@@ -878,6 +867,45 @@ def validate_meta(meta: Mapping[str, Any], where: str = "meta.json") -> None:
         ids.add(lid)
         if light.get("group") not in groups:
             raise ValueError(f"{where}: lights[{i}].group {light.get('group')!r} is not in groups")
+        _check_light_fields(light, f"lights[{i}]", where, meta["frames"], meta["height"], meta["width"])
+
+
+#: Light kinds the renderer writes (``render_tools.scene.LIGHT_KINDS``); other writers may use other names.
+LIGHT_KINDS = ("headlight", "streetlight", "tail", "brake", "indicator", "billboard", "signal")
+#: Spectrum models the renderer writes (``render_tools.spectra.SPECTRUM_MODELS``) and their fields.
+SPECTRUM_MODELS = {"led": ("peak_nm", "fwhm_nm"), "light_source": ("name",), "illuminant": ("name",),
+                   "daylight": ("cct_k",)}
+
+
+def _check_light_fields(light: Mapping[str, Any], name: str, where: str, frames: int, H: int, W: int) -> None:
+    """The optional, informative fields of a ``meta.json`` light (``docs/corpus-format.md`` section 4):
+    ``kind`` non-empty str, ``instance`` int >= -1, ``luminance_cd_m2`` finite number >= 0 (cd/m^2),
+    ``spectrum`` object with a str ``model``, ``bbox`` list of ``frames`` entries, each null or a half-open
+    ``[y0, x0, y1, x1]`` of ints with ``0 <= y0 < y1 <= H`` and ``0 <= x0 < x1 <= W`` (px)."""
+    if "kind" in light and (not isinstance(light["kind"], str) or not light["kind"]):
+        check.fail(f"{name}.kind", f"must be a non-empty string, got {light['kind']!r}", where)
+    if "instance" in light:
+        check.check_integer(light["instance"], f"{name}.instance", where, lo=-1)
+    if "luminance_cd_m2" in light:
+        check.check_number(light["luminance_cd_m2"], f"{name}.luminance_cd_m2", where, lo=0.0)
+    if "spectrum" in light:
+        sp = light["spectrum"]
+        if not isinstance(sp, Mapping) or not isinstance(sp.get("model"), str):
+            check.fail(f"{name}.spectrum", f"must be an object with a string 'model', got {sp!r}", where)
+    if "bbox" in light:
+        bb = light["bbox"]
+        if not isinstance(bb, list) or len(bb) != frames:
+            check.fail(f"{name}.bbox", f"must be a list of {frames} boxes (one per frame, null = not visible), "
+                       f"got {bb!r}", where)
+        for n, b in enumerate(bb):
+            if b is None:
+                continue
+            ok = (isinstance(b, list) and len(b) == 4
+                  and all(isinstance(v, int) and not isinstance(v, bool) for v in b)
+                  and 0 <= b[0] < b[2] <= H and 0 <= b[1] < b[3] <= W)
+            if not ok:
+                check.fail(f"{name}.bbox[{n}]", f"must be null or [y0, x0, y1, x1] integers with 0 <= y0 < y1 <= "
+                           f"{H} and 0 <= x0 < x1 <= {W} (half-open, px), got {b!r}", where)
 
 
 def _check_meta_storage(meta: Mapping[str, Any], path: Path | str) -> None:
@@ -923,11 +951,8 @@ def _check_manifest(man: Any, path: Path, *, entries: bool = True) -> dict:
 
 
 def _scene_id_error(scene_id: Any) -> str | None:
-    try:
-        check_scene_id(scene_id)
-    except ValueError as exc:
-        return str(exc)
-    return None
+    why = scene_id_error(scene_id)
+    return None if why is None else f"scene_id {why}"
 
 
 def _file_entry_error(rel: Any, digest: Any, scenes: set) -> str | None:
@@ -1008,7 +1033,8 @@ class Corpus:
     Example:
         >>> c = Corpus("demo_out/corpus")                                        # doctest: +SKIP
         >>> L = c.read_static(c.scenes[0], 0, "headlights", "short")             # doctest: +SKIP
-        >>> L.shape                                                              # (C, H, W) doctest: +SKIP
+        >>> L.shape                                                              # doctest: +SKIP
+        (C, H, W)
     """
 
     def __init__(self, root: str | os.PathLike, *, check_values: bool = True, cache_size: int = 4) -> None:
@@ -1334,12 +1360,6 @@ def prune_scene_dir(root: str | os.PathLike, scene_id: str, keep: Iterable[str])
     return removed
 
 
-def check_scene_id(scene_id: str) -> None:
-    """Raise ``ValueError`` unless ``scene_id`` is a safe directory name (letters, digits, ``_ - .``)."""
-    if not isinstance(scene_id, str) or not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9_.-]*", scene_id):
-        raise ValueError(f"scene_id must be letters, digits, '_', '-', '.', got {scene_id!r}")
-
-
 def _json_bytes(obj: Any) -> bytes:
     return (json.dumps(obj, indent=1, allow_nan=False, default=json_default) + "\n").encode("utf-8")
 
@@ -1566,6 +1586,13 @@ def _validate_scene(root: Path, sid: str, files: Mapping[str, str], rep: Validat
             err(f"{sdir / name}: not in manifest")
     if not (sdir / "scene.json").is_file():
         err(f"{sdir / 'scene.json'}: missing")
+    else:
+        try:
+            sc = _load_json(sdir / "scene.json", "scene description")
+            if not isinstance(sc, dict):
+                err(f"{sdir / 'scene.json'}: must hold a JSON object (free-form content), got a {type(sc).__name__}")
+        except CorpusError as exc:
+            err(str(exc))
     mp = sdir / "meta.json"
     try:
         meta = _load_json(mp, "scene metadata")
@@ -1583,8 +1610,11 @@ def _validate_scene(root: Path, sid: str, files: Mapping[str, str], rep: Validat
         miss = sorted(set(range(meta["frames"])) - set(aux_frames))
         err(f"{sdir}: aux.exr missing for frames {miss}")
     light_ids = {}
+    bbox_of = {}  # light id -> per-frame box (half-open) or None, where meta.json gives one
     for lt in meta.get("lights", []):
         light_ids.setdefault(lt["group"], set()).add(lt["id"])
+        if "bbox" in lt:
+            bbox_of[lt["id"]] = lt["bbox"]
     for n in range(meta["frames"]):
         for g in list(meta["groups"]) + (["aux"] if n in aux_frames else []):
             p = sdir / frame_dir(n) / f"{g}.exr"
@@ -1628,7 +1658,11 @@ def _validate_scene(root: Path, sid: str, files: Mapping[str, str], rep: Validat
                 want = {c for row in bin_channels(K, bands) for c in row}
                 ids = light_ids.get(g, set())
                 if len(parts) == 1 and parts[0].name == EMPTY_PART:
+                    shown = [lid for lid in sorted(ids) if bbox_of.get(lid, [None] * (n + 1))[n] is not None]
+                    if shown:
+                        err(f"{p}: no light is stored but meta.json bbox[{n}] of lights {shown} is not null")
                     continue
+                have_parts = set()
                 for part in parts:
                     mt = re.fullmatch(r"light(\d+)", part.name)
                     if mt is None:
@@ -1636,12 +1670,24 @@ def _validate_scene(root: Path, sid: str, files: Mapping[str, str], rep: Validat
                         continue
                     if int(mt.group(1)) not in ids:
                         err(f"{p}: part {part.name!r} is not a light of group {g!r} in meta.json")
+                    have_parts.add(int(mt.group(1)))
+                    bbs = bbox_of.get(int(mt.group(1)))
+                    if bbs is not None and bbs[n] is None:
+                        err(f"{p}: part {part.name!r} is stored but meta.json bbox[{n}] is null (not visible)")
+                    elif bbs is not None and tuple(bbs[n]) != tuple(part.window):
+                        err(f"{p}: part {part.name!r} data window {part.window} != meta.json bbox[{n}] {bbs[n]} "
+                            "(half-open (y0, x0, y1, x1))")
                     y0, x0, y1, x1 = part.window
                     if not (0 <= y0 < y1 <= H and 0 <= x0 < x1 <= W):
                         err(f"{p}: part {part.name!r} data window {part.window} outside the {H}x{W} image")
                     _validate_channels(p, part, want, rep)
                     _validate_storage_attrs(p, part, None, rep)
                     _validate_pixels(p, part, rep, check_pixels)
+                for lid in sorted(ids - have_parts):
+                    bb = bbox_of.get(lid, [None] * (n + 1))[n]
+                    if bb is not None:
+                        err(f"{p}: meta.json bbox[{n}] of light {lid} is {bb} but the file has no part "
+                            f"'light{lid}' (null bbox = not visible)")
 
 
 def _validate_channels(p: Path, part: ExrPart, want: set[str], rep: ValidationReport) -> None:

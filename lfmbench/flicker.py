@@ -65,6 +65,8 @@ from typing import Any
 import numpy as np
 import torch
 
+from lfmbench.check import check_array
+
 __all__ = [
     "pwm_exposure",
     "pwm_level",
@@ -94,22 +96,6 @@ def _np_view(x: ArrayLike) -> np.ndarray:
     return np.asarray(x)
 
 
-def _check(name: str, x: ArrayLike, *, lo: float | None = None, hi: float | None = None,
-           lo_open: bool = False) -> None:
-    """Raise ``ValueError`` naming ``name`` when ``x`` holds NaN/inf or leaves ``[lo, hi]``."""
-    v = _np_view(x)
-    if v.dtype.kind not in "fiub":
-        raise ValueError(f"{name} must be a real number or array, got dtype {v.dtype}")
-    if v.dtype.kind == "f" and not np.isfinite(v).all():
-        raise ValueError(f"{name} must be finite; got NaN or inf")
-    if lo is not None:
-        bad = (v <= lo) if lo_open else (v < lo)
-        if bad.any():
-            raise ValueError(f"{name} must be {'>' if lo_open else '>='} {lo}; got {v[bad].flat[0]!r}")
-    if hi is not None and (v > hi).any():
-        raise ValueError(f"{name} must be <= {hi}; got {v[v > hi].flat[0]!r}")
-
-
 def _check_broadcast(names: tuple[str, ...], values: tuple[ArrayLike, ...]) -> None:
     shapes = [tuple(np.shape(_np_view(v))) if not isinstance(v, torch.Tensor) else tuple(v.shape)
               for v in values]
@@ -121,14 +107,14 @@ def _check_broadcast(names: tuple[str, ...], values: tuple[ArrayLike, ...]) -> N
 
 
 def _check_pwm_args(phase, exposure, period, duty, amplitude, offset, rise_time, fall_time) -> None:
-    _check("phase", phase)
-    _check("exposure", exposure, lo=0.0)
-    _check("period", period, lo=0.0, lo_open=True)
-    _check("duty", duty, lo=0.0, hi=1.0)
-    _check("amplitude", amplitude, lo=0.0)
-    _check("offset", offset, lo=0.0)
-    _check("rise_time", rise_time, lo=0.0)
-    _check("fall_time", fall_time, lo=0.0)
+    check_array("phase", phase)
+    check_array("exposure", exposure, lo=0.0)
+    check_array("period", period, lo=0.0, lo_open=True)
+    check_array("duty", duty, lo=0.0, hi=1.0)
+    check_array("amplitude", amplitude, lo=0.0)
+    check_array("offset", offset, lo=0.0)
+    check_array("rise_time", rise_time, lo=0.0)
+    check_array("fall_time", fall_time, lo=0.0)
     _check_broadcast(("phase", "exposure", "period", "duty", "amplitude", "offset", "rise_time", "fall_time"),
                      (phase, exposure, period, duty, amplitude, offset, rise_time, fall_time))
     ramps = (_np_view(rise_time) + _np_view(fall_time)) / 2.0
@@ -412,7 +398,7 @@ def pwm_level(t: ArrayLike, period: ArrayLike, duty: ArrayLike, amplitude: Array
     :math:`[kT, kT + DT)` (left-closed) and ``offset`` elsewhere; with ramps it is the derivative of
     :func:`pwm_exposure` in its exposure length.
     """
-    _check("t", t)
+    check_array("t", t)
     _check_pwm_args(0.0, 0.0, period, duty, amplitude, offset, rise_time, fall_time)
     torch_mode = _is_torch(t, period, duty, amplitude, offset, rise_time, fall_time)
     ops = _Ops(torch_mode)
@@ -466,10 +452,10 @@ def frame_phase(phase0: ArrayLike, frame_index: ArrayLike, frame_time: ArrayLike
         Phase in [0, T) (s), broadcast shape. Unlike the recursion of eq. 3, ``n * t_f`` is split exactly, so
         frame :math:`10^9` is within a few ulp of :math:`T`.
     """
-    _check("phase0", phase0)
-    _check("frame_index", frame_index, lo=0.0)
-    _check("frame_time", frame_time, lo=0.0)
-    _check("period", period, lo=0.0, lo_open=True)
+    check_array("phase0", phase0)
+    check_array("frame_index", frame_index, lo=0.0)
+    check_array("frame_time", frame_time, lo=0.0)
+    check_array("period", period, lo=0.0, lo_open=True)
     _check_broadcast(("phase0", "frame_index", "frame_time", "period"), (phase0, frame_index, frame_time, period))
     return _affine_phase(phase0, frame_index, frame_time, period)
 
@@ -488,10 +474,10 @@ def row_phase(phase: ArrayLike, row: ArrayLike, line_time: ArrayLike, period: Ar
     Returns:
         Phase in [0, T) (s), broadcast shape (``phase[..., None]`` with ``row`` of shape (H,) gives (..., H)).
     """
-    _check("phase", phase)
-    _check("row", row, lo=0.0)
-    _check("line_time", line_time, lo=0.0)
-    _check("period", period, lo=0.0, lo_open=True)
+    check_array("phase", phase)
+    check_array("row", row, lo=0.0)
+    check_array("line_time", line_time, lo=0.0)
+    check_array("period", period, lo=0.0, lo_open=True)
     _check_broadcast(("phase", "row", "line_time", "period"), (phase, row, line_time, period))
     return _affine_phase(phase, row, line_time, period)
 
@@ -514,7 +500,7 @@ def bin_weights(edges: ArrayLike, period: ArrayLike, duty: ArrayLike, led_phase:
     Returns:
         Mean levels, shape (..., K).
     """
-    _check("edges", edges)
+    check_array("edges", edges)
     torch_mode = _is_torch(edges, period, duty, led_phase, amplitude, offset, rise_time, fall_time)
     if torch_mode:
         edges, period, duty, led_phase, amplitude, offset, rise_time, fall_time = _as_tensors(
@@ -557,7 +543,7 @@ def flicker_severity(phi: ArrayLike, dim: int = -1) -> ArrayLike:
         >>> float(flicker_severity(np.array([1.0, 3.0])))
         0.5
     """
-    _check("phi", phi, lo=0.0)
+    check_array("phi", phi, lo=0.0)
     if isinstance(phi, torch.Tensor):
         hi = phi.amax(dim=dim)
         lo = phi.amin(dim=dim)

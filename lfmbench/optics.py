@@ -35,6 +35,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from lfmbench.check import check_integer, check_keys, check_number
 from lfmbench.constants import AIRY_FIRST_ZERO_FACTOR, M_PER_NM
 
 __all__ = [
@@ -92,12 +93,7 @@ class OpticsConfig:
         Raises:
             ValueError: unknown or invalid field; the message names the field and ``source``.
         """
-        if not isinstance(data, Mapping):
-            raise ValueError(f"{source}: field 'optics' must be a mapping, got {type(data).__name__}")
-        known = {f.name for f in fields(cls)}
-        unknown = set(data) - known
-        if unknown:
-            raise ValueError(f"{source}: unknown field(s) optics.{', optics.'.join(sorted(unknown))}")
+        check_keys(data, "optics", source, optional={f.name for f in fields(cls)})
         kw: dict[str, Any] = {}
         for name, value in data.items():
             field_name = f"optics.{name}"
@@ -107,11 +103,9 @@ class OpticsConfig:
                 kw[name] = value
             elif name in ("psf_radius_px", "psf_oversample"):
                 least = 0 if name == "psf_radius_px" else 1
-                if isinstance(value, bool) or not isinstance(value, int) or value < least:
-                    raise ValueError(f"{source}: field '{field_name}' must be an integer >= {least}, got {value!r}")
-                kw[name] = int(value)
+                kw[name] = check_integer(value, field_name, source, lo=least)
             else:
-                kw[name] = _as_float(value, field_name, source)
+                kw[name] = check_number(value, field_name, source)
         cfg = cls(**kw)
         if not (cfg.f_number > 0 and math.isfinite(cfg.f_number)):
             raise ValueError(f"{source}: field 'optics.f_number' must be > 0, got {cfg.f_number!r}")
@@ -122,15 +116,6 @@ class OpticsConfig:
         if not cfg.magnification >= 0:
             raise ValueError(f"{source}: field 'optics.magnification' must be >= 0, got {cfg.magnification!r}")
         return cfg
-
-
-def _as_float(value: Any, field_name: str, source: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ValueError(f"{source}: field '{field_name}' must be a number, got {value!r}")
-    value = float(value)
-    if not math.isfinite(value):
-        raise ValueError(f"{source}: field '{field_name}' must be finite, got {value!r}")
-    return value
 
 
 # ----------------------------------------------------------------------------------------------------------

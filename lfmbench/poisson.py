@@ -40,13 +40,15 @@ import math
 import numpy as np
 import torch
 
+from lfmbench.constants import POISSON_EXACT_LIMIT
+
 __all__ = ["poisson", "available", "INVERSION_BELOW", "EXACT_LIMIT"]
 
 #: Means below this use inversion, at or above it PTRS (which [Hormann1993]_ derives for mu >= 10).
 INVERSION_BELOW: float = 10.0
-#: Means from 2^52 on always take the rounded normal: float64 no longer holds every count exactly there, and
-#: integer candidates overflow int64 further up (``torch.poisson`` returns -2^63 for a mean of 1e20).
-EXACT_LIMIT: float = 2.0 ** 52
+#: Means from 2^52 on always take the rounded normal (defined in :mod:`lfmbench.constants`, shared with the
+#: compiled kernel :mod:`lfmbench._poisson_kernel`).
+EXACT_LIMIT: float = POISSON_EXACT_LIMIT
 
 _KERNEL = None
 

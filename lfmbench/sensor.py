@@ -60,6 +60,7 @@ import torch
 from torch import nn
 
 from lfmbench import poisson as _poisson
+from lfmbench.check import check_keys, get_number
 from lfmbench.constants import M_PER_NM, PLANCK_TIMES_C_J_M
 from lfmbench.optics import OpticsConfig, check_radiometric
 
@@ -303,47 +304,17 @@ def _load_preset_file(path: str, mtime_ns: int = 0) -> SensorPreset:
     return preset_from_dict(data, path)
 
 
-def _num(data: Mapping[str, Any], key: str, source: str, prefix: str = "", *, lo: float | None = None,
-         hi: float | None = None, lo_open: bool = False, default: Any = None, integer: bool = False,
-         allow_inf: bool = False) -> Any:
-    name = f"{prefix}{key}"
-    if key not in data:
-        if default is None:
-            raise ValueError(f"{source}: missing field '{name}'")
-        return default
-    v = data[key]
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or (integer and not float(v).is_integer()):
-        kind = "an integer" if integer else "a number"
-        raise ValueError(f"{source}: field '{name}' must be {kind}, got {v!r}")
-    if math.isnan(float(v)) or (math.isinf(float(v)) and not (allow_inf and float(v) > 0)):
-        raise ValueError(f"{source}: field '{name}' must be finite, got {v!r}")
-    if lo is not None and (v <= lo if lo_open else v < lo):
-        raise ValueError(f"{source}: field '{name}' must be {'>' if lo_open else '>='} {lo}, got {v!r}")
-    if hi is not None and v > hi:
-        raise ValueError(f"{source}: field '{name}' must be <= {hi}, got {v!r}")
-    return int(v) if integer else float(v)
-
-
-def _check_keys(data: Any, allowed: set[str], source: str, where: str) -> None:
-    if not isinstance(data, Mapping):
-        raise ValueError(f"{source}: field '{where or 'preset'}' must be a mapping, got {type(data).__name__}")
-    unknown = set(data) - allowed
-    if unknown:
-        pre = f"{where}." if where else ""
-        raise ValueError(f"{source}: unknown field(s) {', '.join(pre + u for u in sorted(map(str, unknown)))}")
-
-
 def _entries(data: Mapping[str, Any], section: str, names: Sequence[str], spec: type, source: str):
     """Yield ``(name, fields, prefix)`` for each required entry ``name`` of ``data[section]``, after checking
     that the section and every entry exist and hold only known keys (the fields of dataclass ``spec``)."""
     raw = data.get(section)
     if raw is None:
         raise ValueError(f"{source}: missing field '{section}'")
-    _check_keys(raw, set(names), source, section)
+    check_keys(raw, section, source, optional=set(names))
     for name in names:
         if name not in raw:
             raise ValueError(f"{source}: missing field '{section}.{name}'")
-        _check_keys(raw[name], {f.name for f in fields(spec)}, source, f"{section}.{name}")
+        check_keys(raw[name], f"{section}.{name}", source, optional={f.name for f in fields(spec)})
         yield name, raw[name], f"{section}.{name}."
 
 
@@ -355,30 +326,30 @@ def preset_from_dict(data: Mapping[str, Any], source: str = "<dict>") -> SensorP
     """
     top = {"name", "description", "pixel_pitch_m", "cfa", "adc_bits", "black_level_dn", "saturation_fraction",
            "spectral", "shot_noise_gaussian_above_e", "fpn_seed", "photodiodes", "captures", "optics"}
-    _check_keys(data, top, source, "")
+    check_keys(data, "", source, optional=top)
     name = data.get("name")
     if not isinstance(name, str) or not name:
         raise ValueError(f"{source}: field 'name' must be a non-empty string, got {name!r}")
     description = data.get("description", "")
     if not isinstance(description, str):
         raise ValueError(f"{source}: field 'description' must be a string")
-    pitch = _num(data, "pixel_pitch_m", source, lo=0, lo_open=True, hi=1e-3)
+    pitch = get_number(data, "pixel_pitch_m", source, lo=0, lo_open=True, hi=1e-3)
     try:
         cfa = CFAPattern(str(data.get("cfa", "GRBG")).upper())
     except ValueError:
         raise ValueError(f"{source}: field 'cfa' must be one of {[c.value for c in CFAPattern]}, "
                          f"got {data.get('cfa')!r}") from None
-    bits = _num(data, "adc_bits", source, lo=1, hi=24, integer=True)
-    black = _num(data, "black_level_dn", source, lo=0, hi=2 ** bits - 2, default=0.0)
-    sat_frac = _num(data, "saturation_fraction", source, lo=0, lo_open=True, hi=1.0, default=0.95)
-    gauss = _num(data, "shot_noise_gaussian_above_e", source, lo=0, default=1000.0, allow_inf=True)
-    seed = _num(data, "fpn_seed", source, lo=0, integer=True, default=0)
+    bits = get_number(data, "adc_bits", source, lo=1, hi=24, integer=True)
+    black = get_number(data, "black_level_dn", source, lo=0, hi=2 ** bits - 2, default=0.0)
+    sat_frac = get_number(data, "saturation_fraction", source, lo=0, lo_open=True, hi=1.0, default=0.95)
+    gauss = get_number(data, "shot_noise_gaussian_above_e", source, lo=0, default=1000.0, allow_inf=True)
+    seed = get_number(data, "fpn_seed", source, lo=0, integer=True, default=0)
 
     spectral = data.get("spectral")
     if spectral is None:
         raise ValueError(f"{source}: missing field 'spectral'")
-    _check_keys(spectral, {"filters", "peak_qe"}, source, "spectral")
-    peak_qe = _num(spectral, "peak_qe", source, "spectral.", lo=0, lo_open=True, hi=1.0)
+    check_keys(spectral, "spectral", source, optional={"filters", "peak_qe"})
+    peak_qe = get_number(spectral, "peak_qe", source, "spectral.", lo=0, lo_open=True, hi=1.0)
     filters = spectral.get("filters")
     if not isinstance(filters, str) or not filters:
         raise ValueError(f"{source}: field 'spectral.filters' must be a file name, got {filters!r}")
@@ -401,11 +372,11 @@ def preset_from_dict(data: Mapping[str, Any], source: str = "<dict>") -> SensorP
     pds: dict[str, PhotodiodeSpec] = {}
     for pd, d, pre in _entries(data, "photodiodes", PHOTODIODES, PhotodiodeSpec, source):
         pds[pd] = PhotodiodeSpec(
-            fill_factor=_num(d, "fill_factor", source, pre, lo=0, lo_open=True, hi=1.0),
-            full_well_e=_num(d, "full_well_e", source, pre, lo=0, lo_open=True),
-            dark_current_e_per_s=_num(d, "dark_current_e_per_s", source, pre, lo=0, default=0.0),
-            dsnu_e=_num(d, "dsnu_e", source, pre, lo=0, default=0.0),
-            prnu=_num(d, "prnu", source, pre, lo=0, hi=0.5, default=0.0),
+            fill_factor=get_number(d, "fill_factor", source, pre, lo=0, lo_open=True, hi=1.0),
+            full_well_e=get_number(d, "full_well_e", source, pre, lo=0, lo_open=True),
+            dark_current_e_per_s=get_number(d, "dark_current_e_per_s", source, pre, lo=0, default=0.0),
+            dsnu_e=get_number(d, "dsnu_e", source, pre, lo=0, default=0.0),
+            prnu=get_number(d, "prnu", source, pre, lo=0, hi=0.5, default=0.0),
         )
 
     caps: dict[str, CaptureSpec] = {}
@@ -415,9 +386,9 @@ def preset_from_dict(data: Mapping[str, Any], source: str = "<dict>") -> SensorP
             raise ValueError(f"{source}: field '{pre}photodiode' must be one of {list(PHOTODIODES)}, got {pd!r}")
         caps[cap] = CaptureSpec(
             photodiode=pd,
-            conversion_gain_v_per_e=_num(d, "conversion_gain_v_per_e", source, pre, lo=0, lo_open=True, hi=1e-2),
-            voltage_swing_v=_num(d, "voltage_swing_v", source, pre, lo=0, lo_open=True, hi=100.0),
-            read_noise_e=_num(d, "read_noise_e", source, pre, lo=0),
+            conversion_gain_v_per_e=get_number(d, "conversion_gain_v_per_e", source, pre, lo=0, lo_open=True, hi=1e-2),
+            voltage_swing_v=get_number(d, "voltage_swing_v", source, pre, lo=0, lo_open=True, hi=100.0),
+            read_noise_e=get_number(d, "read_noise_e", source, pre, lo=0),
         )
     if caps["lpd_hcg"].photodiode != "lpd" or caps["lpd_lcg"].photodiode != "lpd" or caps["spd"].photodiode != "spd":
         raise ValueError(f"{source}: field 'captures': lpd_hcg and lpd_lcg must read photodiode 'lpd' and spd "

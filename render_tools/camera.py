@@ -39,6 +39,24 @@ R_MI_FROM_CV = np.diag([-1.0, -1.0, 1.0])
 #: Sampler of every radiance render: stratified in each dimension for any sample count, which also
 #: stratifies the in-band wavelength of the band-stratified passes (per-band noise ~10x below independent).
 DEFAULT_SAMPLER = "multijitter"
+
+
+def multijitter_count(spp: int) -> int:
+    """The sample count Mitsuba's ``multijitter`` sampler uses for ``spp`` requested samples per pixel.
+
+    It stratifies on an ``a x b`` grid with ``a = floor(sqrt(spp))``, ``b = ceil(spp / a)`` and rounds any
+    other count up to ``a * b``, printing a ``Sample count rounded up`` warning on every render. Callers pass
+    this count instead, so the render uses the same samples and the log stays readable: counts such as 1..4, 6,
+    8, 9, 12, 16, 20, 24, 64 are kept; 5 -> 6, 32 -> 35.
+
+    >>> [multijitter_count(n) for n in (1, 4, 5, 16, 32, 64)]
+    [1, 4, 6, 16, 35, 64]
+    """
+    spp = int(spp)
+    if spp < 1:
+        raise ValueError(f"spp must be an integer >= 1, got {spp}")
+    a = math.isqrt(spp)
+    return a * -(-spp // a)
 #: Near clipping distance of the Mitsuba perspective camera, m.
 NEAR_CLIP_M = 0.01
 

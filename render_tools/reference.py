@@ -47,13 +47,15 @@ class ReferenceRenderer(SceneGeometry):
         """Radiance W sr^-1 m^-2 nm^-1 of ``bins`` consecutive time bins -> (bins, C, h, w) float32, in one
         Mitsuba render of an atlas (bins along x, band passes along y, summed here). ``velocity`` (m/s) and
         ``t_ref`` (s): render an object held at its ``t_ref`` position with its own motion (relative camera
-        motion, :func:`camera.sensor_dict`)."""
+        motion, :func:`camera.sensor_dict`). ``spp`` is rounded up to a count the multijitter sampler accepts
+        (:func:`camera.multijitter_count`: what Mitsuba would use anyway, without its warning per render)."""
         opts = self.opts
         y0, x0, y1, x1 = crop if crop is not None else (0, 0, opts.height, opts.width)
         h, w = y1 - y0, x1 - x0
         P = cam_mod.n_passes(len(opts.bands_nm))
         img = self.mi.render(scene_obj, sensor=self.sensor(t_start, bin_len, bins, crop, velocity=velocity,
-                                                           t_ref=t_ref), spp=int(spp), seed=int(seed))
+                                                           t_ref=t_ref), spp=cam_mod.multijitter_count(spp),
+                              seed=int(seed))
         a = np.array(img, dtype=np.float32).reshape(P, h, bins, w, len(opts.bands_nm)).sum(0)
         return np.ascontiguousarray(a.transpose(1, 3, 0, 2))
 

@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from lfmbench.check import check_integer, check_keys, check_number, check_vector, fail, scene_id_error
 from lfmbench.fileio import atomic_write_json
 
 from . import spectra
@@ -438,45 +439,10 @@ def generate_scene(seed: int, time_of_day: str | None = None, config: dict | str
 
 
 # ------------------------------------------------------------------------------------------- validation
-def _fail(path, msg):
-    raise ValueError(f"{path}: {msg}")
-
-
-def _keys(d, path, required, optional=()):
-    if not isinstance(d, dict):
-        _fail(path, f"expected an object, got {type(d).__name__}")
-    for k in d:
-        if k not in required and k not in optional:
-            _fail(f"{path}.{k}", f"unknown field (allowed: {sorted(set(required) | set(optional))})")
-    for k in required:
-        if k not in d:
-            _fail(f"{path}.{k}", "missing required field")
-
-
-def _num(v, path, lo=-math.inf, hi=math.inf, lo_open=False):
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-        _fail(path, f"expected a finite number, got {v!r}")
-    if v < lo or v > hi or (lo_open and v == lo):
-        _fail(path, f"{v!r} outside {'(' if lo_open else '['}{lo}, {hi}]")
-    return float(v)
-
-
-def _int(v, path, lo=0):
-    if isinstance(v, bool) or not isinstance(v, int) or v < lo:
-        _fail(path, f"expected an integer >= {lo}, got {v!r}")
-    return v
-
-
-def _vec(v, path, n=3, lo=-MAX_COORD_M, hi=MAX_COORD_M):
-    if not isinstance(v, (list, tuple)) or len(v) != n:
-        _fail(path, f"expected a list of {n} numbers, got {v!r}")
-    return [_num(x, f"{path}[{i}]", lo, hi) for i, x in enumerate(v)]
-
-
 def _unit(v, path):
-    x = np.array(_vec(v, path, 3, -1e3, 1e3))
+    x = np.array(check_vector(v, path, n=3, lo=-1e3, hi=1e3))
     if np.linalg.norm(x) < 1e-6:
-        _fail(path, "normal must be non-zero")
+        fail(path, "normal must be non-zero")
     return x
 
 
@@ -484,35 +450,36 @@ def _part_or_light_shape(p, path, extra_req, extra_opt, materials=None):
     shape = p.get("shape") if isinstance(p, dict) else None
     allowed = PART_SHAPES if materials is not None else ("rect", "disk")
     if shape not in allowed:
-        _fail(f"{path}.shape", f"{shape!r} not one of {allowed}")
+        fail(f"{path}.shape", f"{shape!r} not one of {allowed}")
     geo = {"box": (("center", "size"), ("yaw_deg",)), "cylinder": (("p0", "p1", "radius"), ()),
            "rect": (("center", "size", "normal"), ()), "disk": (("center", "radius", "normal"), ()),
            "sphere": (("center", "radius"), ())}[shape]
-    _keys(p, path, ("shape",) + geo[0] + extra_req, geo[1] + extra_opt)
+    check_keys(p, path, required=("shape",) + geo[0] + extra_req, optional=geo[1] + extra_opt)
     for k in ("center", "p0", "p1"):
         if k in p:
-            _vec(p[k], f"{path}.{k}")
+            check_vector(p[k], f"{path}.{k}", lo=-MAX_COORD_M, hi=MAX_COORD_M)
     if "size" in p:
-        _vec(p["size"], f"{path}.size", 3 if shape == "box" else 2, 0.0, MAX_COORD_M)
+        check_vector(p["size"], f"{path}.size", n=3 if shape == "box" else 2, lo=0.0, hi=MAX_COORD_M)
         if min(p["size"]) <= 0:
-            _fail(f"{path}.size", f"all sizes must be > 0 m, got {p['size']}")
+            fail(f"{path}.size", f"all sizes must be > 0 m, got {p['size']}")
     if "radius" in p:
-        _num(p["radius"], f"{path}.radius", 0.0, 1e3, lo_open=True)
+        check_number(p["radius"], f"{path}.radius", lo=0.0, hi=1e3, lo_open=True)
     if "normal" in p:
         _unit(p["normal"], f"{path}.normal")
     if "yaw_deg" in p:
-        _num(p["yaw_deg"], f"{path}.yaw_deg", -720.0, 720.0)
+        check_number(p["yaw_deg"], f"{path}.yaw_deg", lo=-720.0, hi=720.0)
     if shape == "cylinder" and np.allclose(p["p0"], p["p1"]):
-        _fail(f"{path}.p1", "cylinder end points coincide")
+        fail(f"{path}.p1", "cylinder end points coincide")
     if materials is not None and p.get("material") not in materials:
-        _fail(f"{path}.material", f"{p.get('material')!r} is not defined in scene.materials")
+        fail(f"{path}.material", f"{p.get('material')!r} is not defined in scene.materials")
 
 
 def validate_scene(scene: dict) -> dict:
     """Validate a scene dict; returns it unchanged. Raises ``ValueError`` naming the first bad field.
 
     Schema (all lengths m, times s, angles deg unless named ``_rad``):
-    ``format`` ("lfmbench-scene"), ``version`` (1), ``scene_id`` (str), ``seed`` (int >= 0),
+    ``format`` ("lfmbench-scene"), ``version`` (1), ``scene_id`` (str, :func:`lfmbench.check.check_scene_id`),
+    ``seed`` (int >= 0),
     ``time_of_day`` (day|dusk|night), ``timing.short_exposure_s`` (> 0),
     ``camera`` {position_m [3], yaw_deg, pitch_deg (-89, 89), fov_x_deg (0, 180), speed_mps >= 0,
     yaw_rate_rad_s}, ``sky`` {model: sunsky {sun_elevation_deg [-5, 90], sun_azimuth_deg, turbidity [1, 10],
@@ -522,102 +489,104 @@ def validate_scene(scene: dict) -> dict:
     group, kind, instance (object id), shape rect|disk, center, normal, size | radius, spread_deg (0, 90],
     spectrum (see :mod:`render_tools.spectra`), luminance_cd_m2 >= 0}].
     """
-    _keys(scene, "scene", ("format", "version", "scene_id", "seed", "time_of_day", "timing", "camera", "sky",
-                           "groups", "materials", "objects", "lights"))
+    check_keys(scene, "scene", required=("format", "version", "scene_id", "seed", "time_of_day", "timing", "camera",
+                                         "sky", "groups", "materials", "objects", "lights"))
     if scene["format"] != SCENE_FORMAT:
-        _fail("scene.format", f"expected {SCENE_FORMAT!r}, got {scene['format']!r}")
+        fail("scene.format", f"expected {SCENE_FORMAT!r}, got {scene['format']!r}")
     if scene["version"] != SCENE_VERSION:
-        _fail("scene.version", f"unsupported version {scene['version']!r} (this reader: {SCENE_VERSION})")
-    if not isinstance(scene["scene_id"], str) or not scene["scene_id"] or any(c in scene["scene_id"] for c in "/\\ "):
-        _fail("scene.scene_id", f"must be a non-empty string without '/', '\\' or spaces, got {scene['scene_id']!r}")
-    _int(scene["seed"], "scene.seed")
+        fail("scene.version", f"unsupported version {scene['version']!r} (this reader: {SCENE_VERSION})")
+    why = scene_id_error(scene["scene_id"])  # the corpus rule: the id becomes a corpus directory name
+    if why is not None:
+        fail("scene.scene_id", why)
+    check_integer(scene["seed"], "scene.seed")
     if scene["time_of_day"] not in TIMES_OF_DAY:
-        _fail("scene.time_of_day", f"{scene['time_of_day']!r} not one of {TIMES_OF_DAY}")
-    _keys(scene["timing"], "scene.timing", ("short_exposure_s",))
-    _num(scene["timing"]["short_exposure_s"], "scene.timing.short_exposure_s", 0.0, 1.0, lo_open=True)
+        fail("scene.time_of_day", f"{scene['time_of_day']!r} not one of {TIMES_OF_DAY}")
+    check_keys(scene["timing"], "scene.timing", required=("short_exposure_s",))
+    check_number(scene["timing"]["short_exposure_s"], "scene.timing.short_exposure_s", lo=0.0, hi=1.0, lo_open=True)
     c = scene["camera"]
-    _keys(c, "scene.camera", ("position_m", "yaw_deg", "pitch_deg", "fov_x_deg", "speed_mps", "yaw_rate_rad_s"))
-    _vec(c["position_m"], "scene.camera.position_m")
-    _num(c["yaw_deg"], "scene.camera.yaw_deg", -720, 720)
-    _num(c["pitch_deg"], "scene.camera.pitch_deg", -89, 89)
-    _num(c["fov_x_deg"], "scene.camera.fov_x_deg", 0.0, 179.0, lo_open=True)
-    _num(c["speed_mps"], "scene.camera.speed_mps", 0.0, 200.0)
-    _num(c["yaw_rate_rad_s"], "scene.camera.yaw_rate_rad_s", -10.0, 10.0)
+    check_keys(c, "scene.camera", required=("position_m", "yaw_deg", "pitch_deg", "fov_x_deg", "speed_mps",
+                                            "yaw_rate_rad_s"))
+    check_vector(c["position_m"], "scene.camera.position_m", lo=-MAX_COORD_M, hi=MAX_COORD_M)
+    check_number(c["yaw_deg"], "scene.camera.yaw_deg", lo=-720, hi=720)
+    check_number(c["pitch_deg"], "scene.camera.pitch_deg", lo=-89, hi=89)
+    check_number(c["fov_x_deg"], "scene.camera.fov_x_deg", lo=0.0, hi=179.0, lo_open=True)
+    check_number(c["speed_mps"], "scene.camera.speed_mps", lo=0.0, hi=200.0)
+    check_number(c["yaw_rate_rad_s"], "scene.camera.yaw_rate_rad_s", lo=-10.0, hi=10.0)
     s = scene["sky"]
     model = s.get("model") if isinstance(s, dict) else None
     if model == "sunsky":
-        _keys(s, "scene.sky", ("model", "sun_elevation_deg", "sun_azimuth_deg", "turbidity", "scale"))
-        _num(s["sun_elevation_deg"], "scene.sky.sun_elevation_deg", -5.0, 90.0)
-        _num(s["sun_azimuth_deg"], "scene.sky.sun_azimuth_deg", -360.0, 360.0)
-        _num(s["turbidity"], "scene.sky.turbidity", 1.0, 10.0)
-        _num(s["scale"], "scene.sky.scale", 0.0, 1e3, lo_open=True)
+        check_keys(s, "scene.sky", required=("model", "sun_elevation_deg", "sun_azimuth_deg", "turbidity", "scale"))
+        check_number(s["sun_elevation_deg"], "scene.sky.sun_elevation_deg", lo=-5.0, hi=90.0)
+        check_number(s["sun_azimuth_deg"], "scene.sky.sun_azimuth_deg", lo=-360.0, hi=360.0)
+        check_number(s["turbidity"], "scene.sky.turbidity", lo=1.0, hi=10.0)
+        check_number(s["scale"], "scene.sky.scale", lo=0.0, hi=1e3, lo_open=True)
     elif model == "constant":
-        _keys(s, "scene.sky", ("model", "spectrum", "luminance_cd_m2"))
+        check_keys(s, "scene.sky", required=("model", "spectrum", "luminance_cd_m2"))
         spectra.validate_spectrum(s["spectrum"], "scene.sky.spectrum")
-        _num(s["luminance_cd_m2"], "scene.sky.luminance_cd_m2", 0.0, 1e6)
+        check_number(s["luminance_cd_m2"], "scene.sky.luminance_cd_m2", lo=0.0, hi=1e6)
     else:
-        _fail("scene.sky.model", f"{model!r} not one of ('sunsky', 'constant')")
+        fail("scene.sky.model", f"{model!r} not one of ('sunsky', 'constant')")
     g = scene["groups"]
     if not isinstance(g, dict):
-        _fail("scene.groups", "expected an object")
+        fail("scene.groups", "expected an object")
     for name, v in g.items():
         if name not in GROUPS:
-            _fail(f"scene.groups.{name}", f"unknown group (allowed: {GROUPS})")
-        _keys(v, f"scene.groups.{name}", ("flicker",))
+            fail(f"scene.groups.{name}", f"unknown group (allowed: {GROUPS})")
+        check_keys(v, f"scene.groups.{name}", required=("flicker",))
         if not isinstance(v["flicker"], bool):
-            _fail(f"scene.groups.{name}.flicker", f"expected true/false, got {v['flicker']!r}")
+            fail(f"scene.groups.{name}.flicker", f"expected true/false, got {v['flicker']!r}")
     if g.get("skymap", {}).get("flicker"):
-        _fail("scene.groups.skymap.flicker", "the sky cannot flicker")
+        fail("scene.groups.skymap.flicker", "the sky cannot flicker")
     mats = scene["materials"]
     if not isinstance(mats, dict):
-        _fail("scene.materials", "expected an object")
+        fail("scene.materials", "expected an object")
     for name, m in mats.items():
         p = f"scene.materials.{name}"
         t = m.get("type") if isinstance(m, dict) else None
         if t not in MATERIAL_TYPES:
-            _fail(f"{p}.type", f"{t!r} not one of {MATERIAL_TYPES}")
+            fail(f"{p}.type", f"{t!r} not one of {MATERIAL_TYPES}")
         req = {"diffuse": ("type", "rgb"), "roughplastic": ("type", "rgb", "alpha"),
                "roughconductor": ("type", "alpha")}[t]
-        _keys(m, p, req)
+        check_keys(m, p, required=req)
         if "rgb" in m:
-            _vec(m["rgb"], f"{p}.rgb", 3, 0.0, 1.0)
+            check_vector(m["rgb"], f"{p}.rgb", n=3, lo=0.0, hi=1.0)
         if "alpha" in m:
-            _num(m["alpha"], f"{p}.alpha", 0.0, 1.0, lo_open=True)
+            check_number(m["alpha"], f"{p}.alpha", lo=0.0, hi=1.0, lo_open=True)
     objs = scene["objects"]
     if not isinstance(objs, list):
-        _fail("scene.objects", "expected a list")
+        fail("scene.objects", "expected a list")
     for i, o in enumerate(objs):
         p = f"scene.objects[{i}]"
-        _keys(o, p, ("id", "kind", "velocity_mps", "parts"))
-        if _int(o["id"], f"{p}.id") != i:
-            _fail(f"{p}.id", f"must equal its index {i}, got {o['id']}")
+        check_keys(o, p, required=("id", "kind", "velocity_mps", "parts"))
+        if check_integer(o["id"], f"{p}.id") != i:
+            fail(f"{p}.id", f"must equal its index {i}, got {o['id']}")
         if o["kind"] not in OBJECT_KINDS:
-            _fail(f"{p}.kind", f"{o['kind']!r} not one of {OBJECT_KINDS}")
-        _vec(o["velocity_mps"], f"{p}.velocity_mps", 3, -200.0, 200.0)
+            fail(f"{p}.kind", f"{o['kind']!r} not one of {OBJECT_KINDS}")
+        check_vector(o["velocity_mps"], f"{p}.velocity_mps", n=3, lo=-200.0, hi=200.0)
         if not isinstance(o["parts"], list) or not o["parts"]:
-            _fail(f"{p}.parts", "expected a non-empty list")
+            fail(f"{p}.parts", "expected a non-empty list")
         for j, part in enumerate(o["parts"]):
             _part_or_light_shape(part, f"{p}.parts[{j}]", ("material",), (), materials=mats)
     lights = scene["lights"]
     if not isinstance(lights, list):
-        _fail("scene.lights", "expected a list")
+        fail("scene.lights", "expected a list")
     for i, lt in enumerate(lights):
         p = f"scene.lights[{i}]"
         _part_or_light_shape(lt, p, ("id", "group", "kind", "instance", "spread_deg", "spectrum",
                                      "luminance_cd_m2"), ())
-        if _int(lt["id"], f"{p}.id") != i:
-            _fail(f"{p}.id", f"must equal its index {i}, got {lt['id']}")
+        if check_integer(lt["id"], f"{p}.id") != i:
+            fail(f"{p}.id", f"must equal its index {i}, got {lt['id']}")
         if lt["group"] not in LIGHT_GROUPS:
-            _fail(f"{p}.group", f"{lt['group']!r} not one of {LIGHT_GROUPS}")
+            fail(f"{p}.group", f"{lt['group']!r} not one of {LIGHT_GROUPS}")
         if lt["group"] not in g:
-            _fail(f"{p}.group", f"group {lt['group']!r} is not declared in scene.groups")
+            fail(f"{p}.group", f"group {lt['group']!r} is not declared in scene.groups")
         if lt["kind"] not in LIGHT_KINDS:
-            _fail(f"{p}.kind", f"{lt['kind']!r} not one of {sorted(LIGHT_KINDS)}")
-        if _int(lt["instance"], f"{p}.instance", -1) >= len(objs):
-            _fail(f"{p}.instance", f"object {lt['instance']} does not exist (-1 = none)")
-        _num(lt["spread_deg"], f"{p}.spread_deg", 0.0, 90.0, lo_open=True)
+            fail(f"{p}.kind", f"{lt['kind']!r} not one of {sorted(LIGHT_KINDS)}")
+        if check_integer(lt["instance"], f"{p}.instance", lo=-1) >= len(objs):
+            fail(f"{p}.instance", f"object {lt['instance']} does not exist (-1 = none)")
+        check_number(lt["spread_deg"], f"{p}.spread_deg", lo=0.0, hi=90.0, lo_open=True)
         spectra.validate_spectrum(lt["spectrum"], f"{p}.spectrum")
-        _num(lt["luminance_cd_m2"], f"{p}.luminance_cd_m2", 0.0, 1e9)
+        check_number(lt["luminance_cd_m2"], f"{p}.luminance_cd_m2", lo=0.0, hi=1e9)
     return scene
 
 

@@ -9,7 +9,7 @@ import torch
 
 from lfmbench import baselines
 from lfmbench.baselines import classic, learned
-from metrics_synthetic import SPD_GAIN, T_LONG_S, T_SHORT_S, make_batch
+from tests.data.metrics.data import SPD_GAIN, T_LONG_S, T_SHORT_S, make_batch
 
 
 def _tiny(hcg, lcg, spd, sat):

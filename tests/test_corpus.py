@@ -8,7 +8,7 @@ import os
 import numpy as np
 import OpenEXR
 import pytest
-from test_corpus_data import BANDS, fake_frames, fake_meta, fake_scene
+from tests.data.corpus.data import BANDS, fake_frames, fake_meta, fake_scene
 
 from lfmbench import corpus as C
 
@@ -125,6 +125,8 @@ def test_empty_flicker_group(tmp_path):
     meta = fake_meta()
     frames = fake_frames(meta)
     frames[0]["lights"]["otherlights"] = []  # no light visible in frame 0
+    for lt in meta["lights"]:
+        lt["bbox"][0] = None  # meta.json says so too
     w = C.CorpusWriter(tmp_path)
     w.write_scene(meta["scene_id"], fake_scene(), meta, frames)
     w.write_splits(0)

@@ -8,7 +8,9 @@ import json
 import numpy as np
 import OpenEXR
 
-from lfmbench.corpus import Corpus, validate_corpus
+import pytest
+
+from lfmbench.corpus import Corpus, make_splits, validate_corpus, validate_meta
 
 W, H, K = 9, 5, 2
 BANDS = [450, 500.5]
@@ -39,7 +41,7 @@ def test_independent_writer_following_the_spec(tmp_path):
                        "yaw_rate_rad_s": 0.0, "poses": [[np.eye(4).tolist(), np.eye(4).tolist()]]},
             "groups": {"sky": {"flicker": False}, "leds": {"flicker": True}},
             "lights": [{"id": 12, "group": "leds", "kind": "tail", "instance": 3, "luminance_cd_m2": 50.0,
-                        "spectrum": "x", "bbox": [[1, 2, 3, 5]]}]}
+                        "spectrum": {"model": "led", "peak_nm": 620, "fwhm_nm": 18}, "bbox": [[1, 2, 3, 5]]}]}
     sdir.mkdir(parents=True)
     (sdir / "meta.json").write_text(json.dumps(meta))
     (sdir / "scene.json").write_text(json.dumps({"made_by": "another tool"}))
@@ -68,3 +70,49 @@ def test_independent_writer_following_the_spec(tmp_path):
     assert (lid, box) == (12, (1, 2, 3, 5))
     np.testing.assert_array_equal(arr, led.astype(np.float32))
     assert arr.dtype == np.float32
+
+
+def _meta_with_light(**light):
+    meta = {"scene_id": "s", "width": W, "height": H, "bands_nm": BANDS, "fps": 30.0, "frames": 2,
+            "timing": {"short_exposure_s": 0.005, "long_exposure_s": 0.02, "capture_window_s": 0.02, "bins": K},
+            "groups": {"leds": {"flicker": True}},
+            "lights": [{"id": 0, "group": "leds", **light}]}
+    return meta
+
+
+@pytest.mark.parametrize("field,value", [
+    ("kind", ""), ("kind", 3), ("instance", -2), ("instance", 1.0), ("luminance_cd_m2", -1.0),
+    ("luminance_cd_m2", float("nan")), ("spectrum", "led_red"), ("spectrum", {"peak_nm": 600}),
+    ("bbox", [[0, 0, 1, 1]]),                      # one box for two frames
+    ("bbox", [[0, 0, 0, 1], None]),                # empty (half-open: y1 > y0)
+    ("bbox", [[0, 0, H + 1, 1], None]),            # outside the image
+    ("bbox", [[0.0, 0, 1, 1], None]),              # not integers
+])
+def test_light_fields_have_the_documented_types(field, value):
+    with pytest.raises(ValueError, match=rf"meta\.json: field 'lights\[0\]\.{field}"):
+        validate_meta(_meta_with_light(**{field: value}), "meta.json")
+
+
+def test_light_fields_valid_and_optional():
+    validate_meta(_meta_with_light(), "meta.json")  # all optional
+    validate_meta(_meta_with_light(kind="tail", instance=-1, luminance_cd_m2=0, bbox=[None, [0, 0, H, W]],
+                                   spectrum={"model": "illuminant", "name": "D65"}), "meta.json")
+
+
+def test_empty_groups_refused():
+    meta = _meta_with_light()
+    meta["groups"], meta["lights"] = {}, []
+    with pytest.raises(ValueError, match="groups"):
+        validate_meta(meta, "meta.json")
+
+
+@pytest.mark.parametrize("n", [0, 1, 2, 3, 5, 10])
+def test_split_rule_as_documented(n):
+    ids = [f"s{i}" for i in range(n)]
+    sp = make_splits(ids, 0)
+    n_test = min(n, max(1, round(0.2 * n))) if n else 0
+    n_val = min(round(0.2 * n), max(0, n - n_test - 1))
+    assert [len(sp["test"]), len(sp["val"]), len(sp["train"])] == [n_test, n_val, n - n_test - n_val]
+    assert sorted(sp["train"] + sp["val"] + sp["test"]) == sorted(ids)
+    if n == 1:
+        assert sp == {"train": [], "val": [], "test": ["s0"]}

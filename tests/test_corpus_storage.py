@@ -13,7 +13,7 @@ import math
 import numpy as np
 import OpenEXR
 import pytest
-from test_corpus_data import BANDS, fake_frames, fake_meta, fake_scene
+from tests.data.corpus.data import BANDS, fake_frames, fake_meta, fake_scene
 
 from lfmbench import corpus as C
 

@@ -6,7 +6,7 @@ import json
 import numpy as np
 import OpenEXR
 import pytest
-from test_corpus_data import fake_frames, fake_meta, fake_scene
+from tests.data.corpus.data import fake_frames, fake_meta, fake_scene
 from typer.testing import CliRunner
 
 from lfmbench import corpus as C
@@ -169,3 +169,24 @@ def test_invalid_meta_reported(good):
     p.write_text(json.dumps(m))
     _rehash(good, p)
     assert "short_exposure_s = 0.05 s is longer than long_exposure_s" in _errors(good)
+
+
+def test_bbox_must_match_the_part_data_window(good):
+    mp = good / "scenes" / "scene00000" / "meta.json"
+    meta = json.loads(mp.read_text())
+    meta["lights"][0]["bbox"][1] = [1, 1, 4, 4]  # the part light0 of frame 1 is (1, 1, 4, 3)
+    meta["lights"][1]["bbox"][0] = None           # the part light1 of frame 0 exists
+    mp.write_text(json.dumps(meta))
+    _rehash(good, mp)
+    errs = C.validate_corpus(good).errors
+    assert any("f001/otherlights.exr" in e and "'light0'" in e and "bbox[1]" in e for e in errs), errs
+    assert any("f000/otherlights.exr" in e and "'light1'" in e and "bbox[0] is null" in e for e in errs), errs
+    assert len(errs) == 2, errs
+
+
+def test_scene_json_must_be_an_object(good):
+    sp = good / "scenes" / "scene00001" / "scene.json"
+    sp.write_text("[1, 2]")
+    _rehash(good, sp)
+    errs = C.validate_corpus(good).errors
+    assert len(errs) == 1 and "scene00001/scene.json" in errs[0] and "JSON object" in errs[0], errs

@@ -16,39 +16,7 @@ from lfmbench.datasets import DatasetNotFoundError, LFMCaptureDataset, compose_f
 from lfmbench.datasets.projection import build_layers
 from lfmbench.flicker import pwm_level
 from lfmbench.sensor import load_preset
-from tests.test_corpus_data import fake_frames, fake_meta, fake_scene
-
-H, W = 16, 24
-
-
-def make_corpus(root, n_scenes=3, frames=3, bins=4, scale=1e-3, static_camera=False, seed=0, groups=None):
-    """A corpus of ``n_scenes`` fake scenes; radiance scaled by ``scale`` (W sr^-1 m^-2 nm^-1) to stay unclipped."""
-    w = C.CorpusWriter(root)
-    for i in range(n_scenes):
-        meta = fake_meta(f"scene{i:05d}", width=W, height=H, frames=frames, bins=bins, groups=groups, n_lights=2)
-        fr = fake_frames(meta, seed=seed + i)
-        for f in fr:
-            for g in f["static"].values():
-                for k in g:
-                    g[k] *= scale
-            for g, ls in f["lights"].items():
-                new = []
-                for lid, box, arr in ls:
-                    arr = arr * scale
-                    if static_camera:
-                        arr[:] = arr[:1]  # every bin identical: a static scene
-                    new.append((lid, box, arr))
-                f["lights"][g] = new
-            f["aux"]["mask.light"][1:4, 4:6] = 1
-        w.write_scene(meta["scene_id"], fake_scene(meta["scene_id"]), meta, fr)
-    w.write_splits(0)
-    return root
-
-
-@pytest.fixture(scope="module")
-def corpus(tmp_path_factory):
-    return make_corpus(tmp_path_factory.mktemp("corpus"))
-
+from tests.data.corpus.data import H, W, fake_frames, fake_meta, fake_scene, make_corpus  # noqa: F401 - make_corpus re-exported
 
 def test_sample_keys_shapes_and_units(corpus):
     ds = LFMCaptureDataset(corpus, split="all", frames=3, crop=(8, 12), cache_dir=False)
@@ -308,7 +276,7 @@ def test_workers_forked_after_parent_openmp_do_not_deadlock(tmp_path):
     script = textwrap.dedent(f"""
         import sys, torch
         sys.path.insert(0, {str(Path(__file__).resolve().parents[1])!r})
-        import tests.test_datasets as T
+        import tests.data.corpus.data as T
         from pathlib import Path
         T.H, T.W = 96, 128   # 3 frames x 96 x 128 > torch's parallel grain size: workers would enter OpenMP
         root = T.make_corpus(Path({str(tmp_path / 'c')!r}), n_scenes=2)
@@ -339,3 +307,22 @@ def test_frozen_test_params_grow_without_changing_existing_draws(tmp_path):
     assert len(three) == 3 * len(one)
     assert torch.equal(three[0]["meta"]["duty"], first)
     assert len(json.loads((root / "test_params.json").read_text())["samples"]) == len(three)
+
+
+def test_corpus_without_aux_serves_every_output_but_depth_and_light_index(tmp_path):
+    """aux.exr is optional (docs/corpus-format.md 6.3): read only for ``light_index`` / ``depth``."""
+    root = tmp_path / "c"
+    w = C.CorpusWriter(root)
+    meta = fake_meta("scene00000", width=W, height=H, frames=2, bins=4)
+    w.write_scene("scene00000", fake_scene("scene00000"), meta, fake_frames(meta, aux=False))
+    w.write_splits(0)
+    assert C.validate_corpus(root).ok
+    assert not list(root.rglob("aux.exr"))
+    for cache in (False, None):  # without and with the projection cache
+        ds = LFMCaptureDataset(root, split="all", frames=2, outputs=("input_referred", "gt"), cache_dir=cache)
+        s = ds[0]
+        assert s["gt"].shape == (2, 1, H, W) and "depth" not in s and "light_index" not in s
+    for out in ("depth", "light_index"):
+        ds = LFMCaptureDataset(root, split="all", frames=2, outputs=("gt", out), cache_dir=False)
+        with pytest.raises(C.CorpusFileError, match=rf"aux\.exr.*\['{out}'\]"):
+            ds[0]

@@ -10,7 +10,7 @@ from typer.testing import CliRunner
 
 from lfmbench import evaluate as ev
 from lfmbench.metrics import ScoreOptions
-from metrics_synthetic import make_batch
+from tests.data.metrics.data import make_batch
 
 
 def _batches(n=2, **kw):
@@ -171,7 +171,7 @@ def test_cli_evaluate_on_tiny_corpus(tmp_path):
     """The CLI path end to end: LFMCaptureDataset over a generated corpus -> JSON -> leaderboard."""
     import typer
 
-    from tests.test_datasets import make_corpus
+    from tests.data.corpus.data import make_corpus
 
     corpus = make_corpus(tmp_path / "corpus", n_scenes=3)
     app = typer.Typer()
@@ -231,7 +231,7 @@ def test_failing_data_source_saves_partial_result(tmp_path):
 
 
 def test_benchmark_runs_methods_and_writes_leaderboard(tmp_path, capsys):
-    from tests.test_datasets import make_corpus
+    from tests.data.corpus.data import make_corpus
 
     corpus = make_corpus(tmp_path / "corpus", n_scenes=3)
     rows = ev.benchmark(corpus, ["lpd_only", "spd_only"], tmp_path / "runs", split="all", perceptual=False,

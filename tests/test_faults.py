@@ -19,8 +19,8 @@ from lfmbench.cli import app
 from lfmbench.datasets import LFMCaptureDataset
 from lfmbench.datasets import projection as P
 from render_tools import jobs as J
-from tests.test_datasets import make_corpus
-from tests.test_render_cli import ARGS, FAIL, fake, run  # noqa: F401 - fake is a fixture
+from tests.data.corpus.data import make_corpus
+from tests.data.render.data import ARGS, FAIL, run
 
 
 @pytest.fixture
@@ -295,7 +295,7 @@ def test_evaluate_ctrl_c_exits_130_and_leaderboard_refuses_it(eval_env, monkeypa
     assert d["status"] == "interrupted" and len(d["scenes"]) == 1
     good = tmp_path / "g.json"
     from lfmbench import evaluate as ev
-    from metrics_synthetic import make_batch
+    from tests.data.metrics.data import make_batch
 
     ev.evaluate("lpd_only", [make_batch(seed=0)], output=good, repeats=1, progress=False)
     lb = ["leaderboard", str(good), str(out), "--markdown", str(tmp_path / "lb.md"), "--plot", str(tmp_path / "p.png")]
@@ -353,7 +353,7 @@ def test_unknown_group_names_group_and_available(one):
 
 
 def _float32_corpus(root):
-    from tests.test_corpus_data import fake_frames, fake_meta, fake_scene
+    from tests.data.corpus.data import fake_frames, fake_meta, fake_scene
 
     w = C.CorpusWriter(root, dtype="float32")
     m = fake_meta("scene00000", width=24, height=16)
@@ -391,7 +391,7 @@ def test_implausible_radiance_is_named_by_validate_and_reader(tmp_path, value):
 
 
 def test_writer_refuses_implausible_radiance(tmp_path):
-    from tests.test_corpus_data import fake_frames, fake_meta, fake_scene
+    from tests.data.corpus.data import fake_frames, fake_meta, fake_scene
 
     m = fake_meta("scene00000")
     fr = fake_frames(m)

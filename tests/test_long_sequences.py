@@ -18,8 +18,8 @@ from lfmbench.datasets.projection import build_layers
 from lfmbench.sensor import load_preset
 from render_tools import jobs as J
 from render_tools import render, scene
-from tests.test_corpus_data import fake_frames, fake_meta, fake_scene
-from tests.test_datasets import make_corpus
+from tests.data.corpus.data import fake_frames, fake_meta, fake_scene
+from tests.data.corpus.data import make_corpus
 
 LLVM = "/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1"
 
@@ -82,7 +82,7 @@ def test_tiny_render_with_overlapping_capture_windows_loads_with_rolling_shutter
 # ------------------------------------------------------------------------------------- long sequences
 def test_encode_and_job_stream_frames_without_collecting_them(tmp_path):
     """run_job writes frame n's files before frame n + 1 is rendered: nothing collects the frames."""
-    from tests import test_render_cli as T
+    from tests.data.render import data as T
 
     pulled = []
     out = tmp_path / "c"

@@ -9,7 +9,7 @@ import pytest
 import torch
 
 from lfmbench.metrics import flicker as fm
-from metrics_synthetic import make_batch
+from tests.data.metrics.data import make_batch
 
 
 def test_fmi_hand_values():
@@ -48,6 +48,15 @@ def test_fdi_hand_values_and_reference_baseline():
     assert torch.allclose(fm.fdi(x, x_off=torch.tensor([1.0, 10.0]), dim=0), torch.tensor([0.5, 0.0]))
     # zero OFF level: positive frames are detected (inf), zero frames are not (NaN), as numpy
     assert float(fm.fdi([0.0, 1.0], x_off=0.0)) == pytest.approx(0.5)
+
+
+def test_saturation_warning_compares_in_float64():
+    # the P2020 reference (NumPy float64) flags 0.1000000001 > 0.1; float32 rounds both to the same value
+    assert fm.saturation_warning([0.1000000001], 0.1)[0] is True
+    assert fm.saturation_warning(torch.tensor([0.1000000001], dtype=torch.float64), 0.1)[0] is True
+    assert fm.saturation_warning([0.1], 0.1)[0] is False
+    flag, idx = fm.saturation_warning(torch.tensor([[0.3, 0.1]], dtype=torch.float32), 0.2)
+    assert flag is True and idx.tolist() == [[True, False]]
 
 
 def test_saturation_warning_strictly_above():

@@ -7,7 +7,7 @@ import pytest
 import torch
 
 from lfmbench.metrics import REGISTRY, ScoreOptions, hdr, metric_versions, regions, score_batch
-from metrics_synthetic import make_batch
+from tests.data.metrics.data import make_batch
 
 
 def _single_light(h=48, w=48):

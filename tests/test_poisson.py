@@ -158,3 +158,17 @@ def test_compiled_kernel_reused_from_numba_cache():
     assert all(r.returncode == 0 for r in runs), runs[-1].stderr[-2000:]
     hits, misses = map(int, runs[1].stdout.split())
     assert hits >= 1 and misses == 0
+
+
+def test_no_import_cycle_between_poisson_and_its_kernel():
+    """The shared constant lives in lfmbench.constants: the kernel does not import lfmbench.poisson."""
+    import ast
+    import inspect
+
+    import lfmbench._poisson_kernel as K
+    from lfmbench import constants, poisson
+
+    mods = {n.module for n in ast.walk(ast.parse(inspect.getsource(K))) if isinstance(n, ast.ImportFrom)}
+    mods |= {a.name for n in ast.walk(ast.parse(inspect.getsource(K))) if isinstance(n, ast.Import) for a in n.names}
+    assert "lfmbench.poisson" not in mods and "lfmbench" not in mods
+    assert poisson.EXACT_LIMIT == K._EXACT_LIMIT == constants.POISSON_EXACT_LIMIT == 2.0 ** 52

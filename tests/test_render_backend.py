@@ -156,7 +156,7 @@ def _cuda_works() -> bool:
 @pytest.mark.slow
 @pytest.mark.skipif(not _cuda_works(), reason="no working CUDA device")
 def test_cuda_render_matches_llvm_mean():
-    from tests.test_render_physics import _wall_scene
+    from tests.data.render.data import wall_scene as _wall_scene
 
     s = _wall_scene()
     means = {}

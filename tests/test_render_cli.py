@@ -18,55 +18,7 @@ from lfmbench import corpus as C
 from lfmbench.cli import app
 from render_tools import jobs as J
 
-CALLS: list[str] = []
-FAIL: dict[str, type] = {}  # scene_id -> exception type raised after its first frame
-
-
-def fake_render_frames(scene, opts):
-    """Frames with the shapes ``render_tools.render.render_frames`` yields, from the real ``scene_meta``."""
-    from render_tools.render import scene_meta
-
-    CALLS.append(scene["scene_id"])
-    meta = scene_meta(scene, opts)
-    rng = np.random.default_rng(opts.seed)
-    C_, H, W, K = len(opts.bands_nm), opts.height, opts.width, opts.bins
-    for n in range(opts.frames):
-        if n == 1 and scene["scene_id"] in FAIL:
-            raise FAIL[scene["scene_id"]]("simulated failure")
-        static, lights = {}, {}
-        for g, v in meta["groups"].items():
-            if v["flicker"]:
-                lights[g] = [(lt["id"], tuple(lt["bbox"][n]),
-                              rng.random((K, C_, lt["bbox"][n][2] - lt["bbox"][n][0],
-                                          lt["bbox"][n][3] - lt["bbox"][n][1])).astype(np.float32))
-                             for lt in meta["lights"] if lt["group"] == g and lt["bbox"][n] is not None]
-            else:
-                static[g] = {w: rng.random((C_, H, W)).astype(np.float32) for w in ("short", "long")}
-        aux = {k: np.full((H, W), -1.0 if k.startswith("mask") else 5.0, np.float32) for k in C.AUX_CHANNELS}
-        yield {"frame": n, "static": static, "lights": lights, "aux": aux}
-
-
-def fake_backend():
-    from render_tools import render, scene
-
-    return J.Backend(scene.generate_scene, render.RenderOptions, render.scene_meta, fake_render_frames,
-                     scene.validate_scene)
-
-
-@pytest.fixture
-def fake(monkeypatch):
-    CALLS.clear()
-    FAIL.clear()
-    monkeypatch.setattr(J, "default_backend", fake_backend)
-    yield CALLS
-    FAIL.clear()
-
-
-ARGS = ["--width", "24", "--height", "16", "--spp", "2", "--frames", "2", "--bins", "2", "--profile", "small"]
-
-
-def run(*args):
-    return CliRunner().invoke(app, ["render", *args])
+from tests.data.render.data import ARGS, FAIL, fake_backend, run
 
 
 def _no_tmp(root):
@@ -252,9 +204,9 @@ def test_ray_local(tmp_path):
     ray = pytest.importorskip("ray")
     from ray import cloudpickle
 
-    import test_render_cli
+    from tests.data.render import data as render_data
 
-    cloudpickle.register_pickle_by_value(test_render_cli)  # workers need not import the test module
+    cloudpickle.register_pickle_by_value(render_data)  # workers need not import the tests package
     ray.init(num_cpus=1, include_dashboard=False, log_to_driver=False, configure_logging=False)
     try:
         out = tmp_path / "c"
@@ -273,7 +225,7 @@ def test_ray_local(tmp_path):
         assert C.validate_corpus(out).ok
     finally:
         ray.shutdown()
-        cloudpickle.unregister_pickle_by_value(test_render_cli)
+        cloudpickle.unregister_pickle_by_value(render_data)
         FAIL.clear()
 
 

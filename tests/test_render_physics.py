@@ -11,29 +11,13 @@ import numpy as np
 import pytest
 
 from render_tools import camera, reference, render, scene, spectra
-
-LED = {"model": "led", "peak_nm": 630.0, "fwhm_nm": 18.0}
-HPS = {"model": "light_source", "name": "HPS"}
-
-
-def _light(lid, group, center, normal, size, spec, lum, kind=None, instance=-1):
-    kind = kind or {"otherlights": "tail", "streetlights": "streetlight", "headlights": "headlight",
-                    "signals": "signal"}[group]
-    return {"id": lid, "group": group, "kind": kind, "instance": instance, "shape": "rect",
-            "center": list(center), "normal": list(normal), "size": list(size), "spread_deg": 90.0,
-            "spectrum": spec, "luminance_cd_m2": float(lum)}
+from tests.data.render.data import HPS, LED
+from tests.data.render.data import light as _light
+from tests.data.render.data import wall_scene as _wall_scene
 
 
 def _expected(spec, lum, opts):
     return spectra.band_means(spectra.absolute_spectrum(spec, lum), opts.bands_nm, opts.band_width_nm)
-
-
-def _wall_scene(speed=0.0):
-    """A red-LED panel (otherlights) filling the left of the view and an HPS panel (streetlights) the right."""
-    s = scene.empty_scene(speed_mps=speed)
-    s["lights"].append(_light(0, "otherlights", (5.0, 2.0, 1.4), (-1, 0, 0), (4.0, 6.0), LED, 800.0))
-    s["lights"].append(_light(1, "streetlights", (5.0, -2.0, 1.4), (-1, 0, 0), (4.0, 6.0), HPS, 2e4))
-    return scene.validate_scene(s)
 
 
 def test_scalar_variant_is_refused_with_a_clear_error():

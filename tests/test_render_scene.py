@@ -105,7 +105,7 @@ def test_other_lights_in_upstream_ratio_range():
 
 @pytest.mark.parametrize("path,value,match", [
     (("camera", "speed_mps"), -3.0, r"scene\.camera\.speed_mps"),
-    (("camera", "wings"), 2, r"scene\.camera\.wings: unknown field"),
+    (("camera", "wings"), 2, r"unknown field 'scene\.camera\.wings'"),
     (("timing", "short_exposure_s"), 0.0, r"scene\.timing\.short_exposure_s"),
     (("lights", 0, "luminance_cd_m2"), float("nan"), r"scene\.lights\[0\]\.luminance_cd_m2"),
     (("lights", 0, "group"), "disco", r"scene\.lights\[0\]\.group"),

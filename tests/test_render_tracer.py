@@ -185,3 +185,19 @@ def test_bad_tile_is_refused_naming_it(street):
                        opts.band_width_nm)
     with pytest.raises(ValueError, match=r"tiles\[0\]"):
         tr.render([tracer.Tile((4, 4, 4, 30), 1, 0.0, 0.004, 4, 0)], 1)
+
+
+@pytest.mark.parametrize("n", [1, 2, 5, 7, 10, 16, 32, 33, 64, 100])
+def test_multijitter_count_is_what_mitsuba_uses_without_a_warning(n, capfd):
+    import mitsuba as mi
+
+    from render_tools import backend, camera
+
+    if mi.variant() is None:
+        backend.select_variant()
+    k = camera.multijitter_count(n)
+    assert k >= n
+    assert mi.load_dict({"type": camera.DEFAULT_SAMPLER, "sample_count": n}).sample_count() == k
+    capfd.readouterr()
+    assert mi.load_dict({"type": camera.DEFAULT_SAMPLER, "sample_count": k}).sample_count() == k
+    assert "rounded up" not in "".join(capfd.readouterr())

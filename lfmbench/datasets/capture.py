@@ -34,8 +34,8 @@ from torch.utils.data import Dataset
 from lfmbench import sensor as _sensor
 from lfmbench.corpus import Corpus
 from lfmbench.fileio import atomic_write_json
-from lfmbench.datasets.projection import PHOTODIODES, SceneLayers, load_or_build
-from lfmbench.datasets.pwm import PWMConfig, draw_pwm, load_pwm_config
+from lfmbench.datasets.projection import PHOTODIODES, SceneLayers, aux_channels, load_or_build
+from lfmbench.datasets.pwm import PWMConfig, draw_scene_pwm, load_pwm_config, frozen_test_rng
 from lfmbench.flicker import pwm_exposure
 
 OUTPUTS = ("raw", "input_referred", "saturated", "gt", "light_index", "depth", "rgb")
@@ -439,25 +439,10 @@ class LFMCaptureDataset(Dataset):
         use = set(m["groups"]) if self.groups is None else set(self.groups)
         return sorted((lt for lt in m.get("lights", []) if lt["group"] in use), key=lambda lt: int(lt["id"]))
 
-    def _flicker_groups(self, sid: str) -> list[str]:
-        m = self.corpus.meta(sid)
-        return sorted(g for g, d in m["groups"].items() if d.get("flicker") and (self.groups is None or g in self.groups))
-
     def _draw(self, sid: str, rng: np.random.Generator) -> tuple[dict, dict]:
-        """PWM parameters for the scene's flickering lights (by id) and flickering groups (by name)."""
-        fl = self._flicker_groups(sid)
-        lights = [lt for lt in self._lights(sid) if lt["group"] in fl]
-        # one entry per light, plus one per flickering group (used by groups stored without bins)
-        names = [lt["group"] for lt in lights] + fl
-        d = draw_pwm(self.pwm, rng, names)
-        keys = ("period_s", "duty", "phase_s", "rise_s", "fall_s", "freq_hz")
-        per_light = {int(lt["id"]): {k: float(d[k][i]) for k in keys} for i, lt in enumerate(lights)}
-        n = len(lights)
-        per_group = {g: {k: float(d[k][n + i]) for k in keys} for i, g in enumerate(fl)}
-        if self.pwm.sync == "group":
-            for lt in lights:  # lights of a group share the group's draw
-                per_light[int(lt["id"])] = per_group[lt["group"]]
-        return per_light, per_group
+        """PWM parameters for the scene's flickering lights (by id) and flickering groups (by name):
+        :func:`lfmbench.datasets.pwm.draw_scene_pwm` as plain dicts."""
+        return draw_scene_pwm(self.pwm, self.corpus.meta(sid), rng, self.groups).to_dicts()
 
     def _load_or_freeze_test_params(self) -> dict:
         """Frozen PWM draws and noise seeds of the test split (``<root>/test_params.json``).
@@ -480,9 +465,8 @@ class LFMCaptureDataset(Dataset):
         for sid in self.scene_ids:
             for s in range(self.samples_per_scene):
                 key = f"{sid}/{s}"
-                sid_word = int.from_bytes(sid.encode()[:8].ljust(8, b"\0"), "little")
                 if key not in samples:
-                    rng = np.random.default_rng([20261121, s, sid_word])
+                    rng = frozen_test_rng(sid, s)
                     per_light, per_group = self._draw(sid, rng)
                     samples[key] = {"lights": {str(k): v for k, v in per_light.items()}, "groups": per_group,
                                     "noise_seed": int(rng.integers(2**62))}
@@ -490,7 +474,7 @@ class LFMCaptureDataset(Dataset):
                 if self.frame_start == "random" and "frame_u" not in samples[key]:
                     # the window start, as a fraction of the possible starts (any F), from its own stream:
                     # added to older entries without changing their draws
-                    samples[key]["frame_u"] = float(np.random.default_rng([20261121, s, sid_word, 1]).random())
+                    samples[key]["frame_u"] = float(frozen_test_rng(sid, s, stream=1).random())
                     added = True
         if added:
             atomic_write_json(path, data)
@@ -501,7 +485,7 @@ class LFMCaptureDataset(Dataset):
             self._cache.move_to_end(sid)
             return self._cache[sid]
         layers = load_or_build(self.corpus, sid, self.preset, self.groups, self._frames_to_load(sid), self.optics,
-                               self.cache_dir)
+                               self.cache_dir, aux=aux_channels(self.outputs))
         if self._cache_scenes:
             self._cache[sid] = layers
             while len(self._cache) > self._cache_scenes:

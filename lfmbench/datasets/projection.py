@@ -38,6 +38,10 @@ from lfmbench.fileio import atomic_torch_save
 
 #: Version of the cached layout; bump when the projection changes so stale caches are not reused.
 CACHE_VERSION = 2
+#: ``aux.exr`` channel behind each dataset output that needs one (every other output works without aux.exr).
+AUX_FOR_OUTPUT = {"depth": "depth.Z", "light_index": "mask.light"}
+#: Aux channels kept by :func:`build_layers` / :func:`load_or_build` when the caller does not say.
+AUX_DEFAULT = ("depth.Z", "mask.light")
 PHOTODIODES = ("lpd", "spd")
 
 
@@ -122,31 +126,60 @@ class Projector:
 
 
 def cache_key(preset, meta: dict, groups: Sequence[str], frames: int, optics: bool,
-              sources: Mapping[str, str] | None = None) -> str:
-    """Hash of everything the projected layers depend on: preset, optics, bands, groups, frames and the
-    SHA-256 of every corpus file they are built from (``sources``: relpath -> digest from ``manifest.json``),
-    so a re-rendered or re-imported scene gets a new key."""
+              sources: Mapping[str, str] | None = None, aux: Sequence[str] = AUX_DEFAULT) -> str:
+    """Hash of everything the projected layers depend on: preset, optics, bands, groups, frames, the aux
+    channels kept and the SHA-256 of every corpus file they are built from (``sources``: relpath -> digest from
+    ``manifest.json``), so a re-rendered or re-imported scene gets a new key."""
     desc = {"v": CACHE_VERSION, "preset": repr(preset), "optics": bool(optics), "groups": sorted(groups),
             "frames": int(frames), "bands": meta["bands_nm"], "bw": meta.get("band_width_nm"),
+            "aux": sorted(aux),
             "size": [meta["height"], meta["width"]], "sources": dict(sorted((sources or {}).items()))}
     return hashlib.sha256(json.dumps(desc, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
 
+def aux_channels(outputs: Sequence[str]) -> tuple[str, ...]:
+    """The ``aux.exr`` channels a dataset needs for ``outputs``: ``mask.light`` for ``light_index``,
+    ``depth.Z`` for ``depth``, nothing otherwise.
+
+    This is the one rule for the optional ``aux.exr`` (``docs/corpus-format.md`` section 6.3): it is read only
+    when one of these outputs is asked for, so a corpus without it serves every other output.
+
+    >>> aux_channels(("input_referred", "gt"))
+    ()
+    >>> aux_channels(("depth", "light_index"))
+    ('depth.Z', 'mask.light')
+    """
+    want = set(outputs)
+    return tuple(ch for out, ch in AUX_FOR_OUTPUT.items() if out in want)
+
+
+def _missing_aux_error(corpus: Corpus, scene_id: str, aux: Sequence[str], rel: str) -> CorpusFileError:
+    outs = [o for o, ch in AUX_FOR_OUTPUT.items() if ch in aux]
+    return CorpusFileError(f"{corpus.root / rel}: missing; the outputs {outs} need aux.exr (channels "
+                           f"{list(aux)}), which scene {scene_id!r} does not have (aux.exr is optional in the "
+                           "corpus format): leave these outputs out or render the corpus with aux")
+
+
 def source_files(corpus: Corpus, scene_id: str, groups: Sequence[str], frames: int,
-                 aux: Sequence[str] = ("depth.Z", "mask.light")) -> dict[str, str]:
+                 aux: Sequence[str] = AUX_DEFAULT) -> dict[str, str]:
     """``{relpath: SHA-256 from the manifest}`` of the files :func:`build_layers` reads for these groups and
-    the first ``frames`` frames (``meta.json``, one EXR per frame and group, ``aux.exr``).
+    the first ``frames`` frames (``meta.json``, one EXR per frame and group, and ``aux.exr`` when ``aux``
+    names channels).
 
     Raises:
-        lfmbench.corpus.CorpusFileError: a file the layers need is not in the manifest (names it).
+        lfmbench.corpus.CorpusFileError: a file the layers need is not in the manifest (names it), e.g.
+            ``aux.exr`` when ``aux`` is not empty and the scene has none.
     """
     files = corpus.manifest["files"]
     rel0 = f"{SCENES_DIR}/{scene_id}"
     want = [f"{rel0}/meta.json"]
     for f in range(int(frames)):
         want += [f"{rel0}/{frame_dir(f)}/{g}.exr" for g in groups]
-        if aux and f"{rel0}/{frame_dir(f)}/aux.exr" in files:
-            want.append(f"{rel0}/{frame_dir(f)}/aux.exr")
+        if aux:
+            rel = f"{rel0}/{frame_dir(f)}/aux.exr"
+            if rel not in files:
+                raise _missing_aux_error(corpus, scene_id, aux, rel)
+            want.append(rel)
     missing = [r for r in want if r not in files]
     if missing:
         raise CorpusFileError(f"{corpus.root / MANIFEST_NAME}: scene {scene_id!r} lacks manifest entries "
@@ -155,13 +188,18 @@ def source_files(corpus: Corpus, scene_id: str, groups: Sequence[str], frames: i
 
 
 def build_layers(corpus: Corpus, scene_id: str, preset, groups: Sequence[str] | None, frames: int,
-                 optics: bool = True, aux: Sequence[str] = ("depth.Z", "mask.light")) -> SceneLayers:
+                 optics: bool = True, aux: Sequence[str] = AUX_DEFAULT) -> SceneLayers:
     """Read the requested groups and frames of a scene (nothing else) and project them.
 
     Args:
         corpus: open corpus; scene_id: which scene.
         preset: sensor preset; groups: groups to include (None = all the scene has); frames: first F frames.
-        optics: apply the lens PSF; aux: aux channels to keep ((F, H, W) each).
+        optics: apply the lens PSF; aux: aux channels to keep ((F, H, W) each); ``aux.exr`` is read only when
+            this is not empty (see :func:`aux_channels`).
+
+    Raises:
+        lfmbench.corpus.CorpusFileError: ``aux`` is not empty and the scene has no ``aux.exr`` (names the file
+            and the outputs that need it).
     """
     meta = corpus.meta(scene_id)
     have = meta["groups"]
@@ -192,6 +230,9 @@ def build_layers(corpus: Corpus, scene_id: str, preset, groups: Sequence[str] | 
         lights.append(per_frame)
     aux_out = {}
     if aux:
+        rel = f"{SCENES_DIR}/{scene_id}/{frame_dir(0)}/aux.exr"
+        if not (corpus.root / rel).is_file():
+            raise _missing_aux_error(corpus, scene_id, aux, rel)
         arrs = [corpus.read_aux(scene_id, f, list(aux)) for f in range(frames)]
         aux_out = {n: torch.from_numpy(np.stack([a[n] for a in arrs]).astype(np.float32)) for n in aux}
     return SceneLayers(scene_id, static, group_static, lights, aux_out)
@@ -259,7 +300,7 @@ def _read_entry(path: Path, scene_id: str, stamps: Mapping[str, list[int]]) -> S
 
 
 def load_or_build(corpus: Corpus, scene_id: str, preset, groups, frames: int, optics: bool,
-                  cache_dir: Path | None) -> SceneLayers:
+                  cache_dir: Path | None, aux: Sequence[str] = AUX_DEFAULT) -> SceneLayers:
     """:func:`build_layers` with an on-disk cache under ``cache_dir/<key>/<scene_id>.pt`` (atomic writes).
 
     The key (:func:`cache_key`) includes the manifest SHA-256 of every file the layers are built from, and an
@@ -268,19 +309,21 @@ def load_or_build(corpus: Corpus, scene_id: str, preset, groups, frames: int, op
     manifest (``CorpusFileError`` naming the file otherwise). Entries are read with
     ``torch.load(weights_only=True)``, so a crafted file in a shared corpus cannot run code; an unreadable entry
     is rebuilt with one :class:`CacheWarning`. An unwritable ``cache_dir`` (read-only corpus) gives one
-    :class:`CacheWarning` and the layers are used without being stored.
+    :class:`CacheWarning` and the layers are used without being stored. ``aux``: the aux channels to keep
+    (``aux.exr`` is read only when not empty; :func:`aux_channels`).
     """
+    aux = tuple(aux)
     if cache_dir is None:
-        return build_layers(corpus, scene_id, preset, groups, frames, optics)
+        return build_layers(corpus, scene_id, preset, groups, frames, optics, aux)
     check_scene_id(scene_id)
     meta = corpus.meta(scene_id)
     use = list(meta["groups"]) if groups is None else [g for g in groups if g in meta["groups"]]
-    sources = source_files(corpus, scene_id, use, frames)
+    sources = source_files(corpus, scene_id, use, frames, aux)
     try:
         stamps = _stamp(corpus.root, sources)
     except OSError as exc:
         raise CorpusFileError(f"{exc.filename}: cannot read ({exc.strerror or exc})") from None
-    path = Path(cache_dir) / cache_key(preset, meta, use, frames, optics, sources) / f"{scene_id}.pt"
+    path = Path(cache_dir) / cache_key(preset, meta, use, frames, optics, sources, aux) / f"{scene_id}.pt"
     if path.is_file():
         try:
             layers = _read_entry(path, scene_id, stamps)
@@ -291,7 +334,7 @@ def load_or_build(corpus: Corpus, scene_id: str, preset, groups, frames: int, op
         if layers is not None:
             return layers
     _verify_sources(corpus.root, sources)
-    layers = build_layers(corpus, scene_id, preset, use, frames, optics)
+    layers = build_layers(corpus, scene_id, preset, use, frames, optics, aux)
     if _stamp(corpus.root, sources) != stamps:  # a file changed while it was read: do not store a mix
         return layers
     entry = {"format": CACHE_VERSION, "scene_id": scene_id, "sources": stamps, "static": layers.static,

@@ -2,15 +2,23 @@
 
 The defaults live in ``lfmbench/configs/pwm.yaml`` (ISET-LFM: duty U[0.1, 0.5], frequency U[90, 120] Hz, phase
 U[0, period)); a user passes a mapping or the path of an edited copy.
+
+- :func:`load_pwm_config` -> :class:`PWMConfig` (the distributions);
+- :func:`draw_pwm`: raw arrays for a list of lights;
+- :func:`draw_scene_pwm` -> :class:`SceneDraw`: the PWM of every flickering light and group of a scene
+  (:class:`PWMParams` records), the draw :class:`lfmbench.datasets.LFMCaptureDataset` and the benchmarks use;
+- :data:`TEST_SPLIT_SEED`, :func:`frozen_test_rng`: the fixed streams the frozen test-split draws come from.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 import yaml
+
+from lfmbench.check import check_choice, check_keys, fail, where
 
 DEFAULT_PWM_PATH = Path(__file__).resolve().parents[1] / "configs" / "pwm.yaml"
 _DISTS = ("uniform", "loguniform", "constant", "choice")
@@ -46,7 +54,7 @@ class Distribution:
 
 def _dist(d: Any, key: str, source: str, lo: float, hi: float) -> Distribution:
     if not isinstance(d, Mapping) or d.get("dist") not in _DISTS:
-        raise ValueError(f"{source}: field '{key}' must be a mapping with dist in {_DISTS}, got {d!r}")
+        fail(key, f"must be a mapping with dist in {_DISTS}, got {d!r}", source)
     kind = d["dist"]
     try:
         if kind == "constant":
@@ -63,9 +71,9 @@ def _dist(d: Any, key: str, source: str, lo: float, hi: float) -> Distribution:
                 raise ValueError
             out = Distribution(kind, low=vals[0], high=vals[1])
     except (KeyError, TypeError, ValueError):
-        raise ValueError(f"{source}: field '{key}' has invalid parameters {d!r}") from None
+        raise ValueError(f"{where(key, source)} has invalid parameters {d!r}") from None
     if not all(np.isfinite(v) and lo <= v <= hi for v in vals):
-        raise ValueError(f"{source}: field '{key}' must stay within [{lo}, {hi}], got {d!r}")
+        fail(key, f"must stay within [{lo}, {hi}], got {d!r}", source)
     return out
 
 
@@ -115,13 +123,10 @@ def load_pwm_config(pwm: "PWMConfig | Mapping | str | Path | None" = None) -> PW
         raise ValueError(f"pwm must be None, a mapping, a YAML path or a PWMConfig, got {type(pwm).__name__}")
     if not isinstance(user, Mapping):
         raise ValueError(f"{source}: must hold a mapping of fields")
-    unknown = set(user) - _KEYS
-    if unknown:
-        raise ValueError(f"{source}: unknown field(s) {sorted(unknown)} (known: {sorted(_KEYS)})")
+    check_keys(user, "", source, optional=_KEYS)
     cfg = {**base, **user}
     sync = cfg.get("sync", "light")
-    if sync not in ("light", "group"):
-        raise ValueError(f"{source}: field 'sync' must be 'light' or 'group', got {sync!r}")
+    check_choice(sync, "sync", ("light", "group"), source)
     return PWMConfig(frequency_hz=_dist(cfg["frequency_hz"], "frequency_hz", source, 1.0, 1e6),
                      duty=_dist(cfg["duty"], "duty", source, 0.0, 1.0),
                      rise_time_s=_dist(cfg["rise_time_s"], "rise_time_s", source, 0.0, 1.0),
@@ -156,3 +161,98 @@ def draw_pwm(cfg: PWMConfig, rng: np.random.Generator, groups: list[str]) -> dic
     total = rise + fall
     scale = np.where(total > room, room / np.where(total > 0, total, 1.0), 1.0)
     return {"freq_hz": f, "period_s": T, "duty": d, "phase_s": u * T, "rise_s": rise * scale, "fall_s": fall * scale}
+
+
+# ----------------------------------------------------------------------------------------------------------
+# one scene's draw
+# ----------------------------------------------------------------------------------------------------------
+#: Keys of a PWM record in dicts and JSON (``test_params.json``), in this order.
+PWM_KEYS = ("period_s", "duty", "phase_s", "rise_s", "fall_s", "freq_hz")
+
+
+@dataclass(frozen=True)
+class PWMParams:
+    """The PWM waveform of one light or group: frequency ``freq_hz`` (Hz) = 1 / ``period_s`` (s), ``duty`` in
+    [0, 1], ``phase_s`` (s): a rising edge after the start of frame 0, in [0, period), ramp times ``rise_s`` and
+    ``fall_s`` (s; ``(rise_s + fall_s) / 2 <= min(duty, 1 - duty) * period_s``)."""
+
+    period_s: float
+    duty: float
+    phase_s: float
+    rise_s: float
+    fall_s: float
+    freq_hz: float
+
+    def to_dict(self) -> dict[str, float]:
+        """``{key: float}`` in :data:`PWM_KEYS` order (the form ``LFMCaptureDataset.simulate`` takes)."""
+        return {k: float(v) for k, v in asdict(self).items()}
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> "PWMParams":
+        return cls(**{k: float(d[k]) for k in PWM_KEYS})
+
+
+@dataclass(frozen=True)
+class SceneDraw:
+    """One PWM draw for a scene: ``lights`` (light id -> :class:`PWMParams`, the flickering lights of the
+    groups in use) and ``groups`` (flickering group name -> :class:`PWMParams`, used by groups stored without
+    time bins, ``docs/corpus-format.md`` section 4)."""
+
+    lights: dict[int, PWMParams]
+    groups: dict[str, PWMParams]
+
+    def to_dicts(self) -> tuple[dict[int, dict[str, float]], dict[str, dict[str, float]]]:
+        """``(per_light, per_group)`` plain dicts (``LFMCaptureDataset.simulate(params, group_params)``)."""
+        return ({k: v.to_dict() for k, v in self.lights.items()}, {k: v.to_dict() for k, v in self.groups.items()})
+
+
+def flicker_groups(meta: Mapping[str, Any], groups: Sequence[str] | None = None) -> list[str]:
+    """Sorted names of the scene's flickering groups (``meta.json`` ``groups[g].flicker``), limited to
+    ``groups`` when given."""
+    return sorted(g for g, d in meta["groups"].items() if d.get("flicker") and (groups is None or g in groups))
+
+
+def draw_scene_pwm(cfg: PWMConfig, meta: Mapping[str, Any], rng: np.random.Generator,
+                   groups: Sequence[str] | None = None) -> SceneDraw:
+    """Draw the PWM of every flickering light (sorted by id) and flickering group of a scene.
+
+    One :func:`draw_pwm` call over the lights then the groups (that order fixes the random stream); with
+    ``cfg.sync == "group"`` the lights of a group share the group's draw.
+
+    Args:
+        cfg: the distributions. meta: the scene's ``meta.json``. rng: the random stream.
+        groups: groups in use (None: all the scene has).
+    """
+    fl = flicker_groups(meta, groups)
+    lights = sorted((lt for lt in meta.get("lights", []) if lt["group"] in fl), key=lambda lt: int(lt["id"]))
+    d = draw_pwm(cfg, rng, [lt["group"] for lt in lights] + fl)
+    rec = [PWMParams(**{k: float(d[k][i]) for k in PWM_KEYS}) for i in range(len(lights) + len(fl))]
+    n = len(lights)
+    per_group = {g: rec[n + i] for i, g in enumerate(fl)}
+    if cfg.sync == "group":  # lights of a group share the group's draw
+        per_light = {int(lt["id"]): per_group[lt["group"]] for lt in lights}
+    else:
+        per_light = {int(lt["id"]): rec[i] for i, lt in enumerate(lights)}
+    return SceneDraw(per_light, per_group)
+
+
+# ----------------------------------------------------------------------------------------------------------
+# the frozen test split
+# ----------------------------------------------------------------------------------------------------------
+#: Seed of the test split's frozen draws (``<corpus>/test_params.json``): every entry ``<scene_id>/<sample>``
+#: is drawn from ``(TEST_SPLIT_SEED, sample, scene id)`` alone, whatever the dataset's seed. Changing it changes
+#: every test score of a corpus whose test_params.json is re-created.
+TEST_SPLIT_SEED = 20261121
+
+
+def frozen_test_rng(scene_id: str, sample: int, stream: int | None = None) -> np.random.Generator:
+    """The random stream of test entry ``<scene_id>/<sample>``: ``stream=None`` for the PWM draw and noise seed,
+    ``stream=1`` for the window start of ``frame_start="random"`` (added later without changing the first).
+
+    The scene id enters as its first 8 UTF-8 bytes only, little-endian. Known limitation, kept so that new
+    entries of existing corpora stay what they were: ids that share their first 8 bytes (``scene00000`` ..
+    ``scene00099`` all start with ``scene000``) share the stream of a sample index.
+    """
+    sid_word = int.from_bytes(scene_id.encode()[:8].ljust(8, b"\0"), "little")
+    key = [TEST_SPLIT_SEED, int(sample), sid_word] + ([] if stream is None else [int(stream)])
+    return np.random.default_rng(key)

@@ -152,8 +152,15 @@ def saturation_warning(series, max_val) -> tuple[bool, torch.Tensor]:
 
     Returns:
         (flag: any frame saturated, mask: bool tensor of the shape of ``series``).
+
+    Both sides are compared in float64 (as the NumPy reference does): a float32 threshold would move by up to
+    6e-8 relative and flip frames just above it.
+
+    >>> saturation_warning([0.1000000001], 0.1)[0]
+    True
     """
-    idx = torch.gt(_as_float(series), torch.as_tensor(max_val))
+    s = series.double() if isinstance(series, torch.Tensor) else torch.as_tensor(series, dtype=torch.float64)
+    idx = torch.gt(s, torch.as_tensor(max_val, dtype=torch.float64))
     return bool(idx.any()), idx
 
 

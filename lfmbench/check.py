@@ -1,0 +1,204 @@
+"""Field and argument checks shared by every reader of user input (one copy, in the style of kornia's
+``core/check.py``).
+
+Each check raises ``ValueError`` whose message names the **field** (a dotted path such as
+``timing.short_exposure_s`` or ``scene.lights[3].spread_deg``, or an argument name) and, when given, the
+**source** (the file or argument the value came from)::
+
+    <source>: field '<field>' must be ..., got <value>
+
+Used by the corpus format (:mod:`lfmbench.corpus`), sensor presets (:mod:`lfmbench.sensor`), PWM
+configurations (:mod:`lfmbench.datasets.pwm`), optics (:mod:`lfmbench.optics`), the flicker model
+(:mod:`lfmbench.flicker`, array arguments: :func:`check_array`) and the scene files of ``render_tools``.
+
+The scene-id rule (:func:`check_scene_id`) lives here too, so that the corpus writer, the corpus reader and the
+scene-file validator accept exactly the same ids.
+"""
+from __future__ import annotations
+
+import math
+import re
+from typing import Any, Iterable, Mapping, Sequence
+
+import numpy as np
+
+__all__ = ["where", "fail", "check_number", "get_number", "check_integer", "check_vector", "check_keys",
+           "check_choice", "check_array", "SCENE_ID_PATTERN", "SCENE_ID_MAX_LEN", "scene_id_error",
+           "check_scene_id"]
+
+_MISSING = object()
+
+
+def where(field: str, source: str | None = None) -> str:
+    """Prefix of an error message: ``"<source>: field '<field>'"`` (or ``"field '<field>'"`` without source).
+
+    >>> where("fps", "meta.json")
+    "meta.json: field 'fps'"
+    """
+    return f"{source}: field '{field}'" if source else f"field '{field}'"
+
+
+def fail(field: str, msg: str, source: str | None = None) -> None:
+    """Raise ``ValueError(f"{where(field, source)} {msg}")``."""
+    raise ValueError(f"{where(field, source)} {msg}")
+
+
+def _interval(lo: float | None, hi: float | None, lo_open: bool, hi_open: bool) -> str:
+    if lo is not None and hi is not None:
+        return f"in {'(' if lo_open else '['}{lo}, {hi}{')' if hi_open else ']'}"
+    if lo is not None:
+        return f"{'>' if lo_open else '>='} {lo}"
+    return f"{'<' if hi_open else '<='} {hi}"
+
+
+def check_number(value: Any, field: str, source: str | None = None, *, lo: float | None = None,
+                 hi: float | None = None, lo_open: bool = False, hi_open: bool = False, integer: bool = False,
+                 allow_inf: bool = False) -> float | int:
+    """A real number (not a bool), finite (``allow_inf``: ``+inf`` allowed), within the bounds.
+
+    Args:
+        value: the value to check. field: its name (dotted path). source: the file or argument it came from.
+        lo, hi: bounds (None: unbounded); ``lo_open`` / ``hi_open`` exclude them.
+        integer: the value must be integral (``2`` and ``2.0`` pass); returned as ``int``.
+
+    Returns:
+        ``float(value)`` (``int`` with ``integer=True``).
+
+    >>> check_number(2, "fps", "meta.json", lo=0, lo_open=True)
+    2.0
+    >>> check_number(0, "fps", "meta.json", lo=0, lo_open=True)
+    Traceback (most recent call last):
+    ...
+    ValueError: meta.json: field 'fps' must be > 0, got 0
+    """
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        fail(field, f"must be {'an integer' if integer else 'a number'}, got {value!r}", source)
+    v = float(value)
+    if math.isnan(v) or (math.isinf(v) and not (allow_inf and v > 0)):
+        fail(field, f"must be finite, got {value!r}", source)
+    if integer and not v.is_integer():
+        fail(field, f"must be an integer, got {value!r}", source)
+    if (lo is not None and (v <= lo if lo_open else v < lo)) or (hi is not None and (v >= hi if hi_open else v > hi)):
+        fail(field, f"must be {_interval(lo, hi, lo_open, hi_open)}, got {value!r}", source)
+    return int(v) if integer else v
+
+
+def get_number(data: Mapping[str, Any], key: str, source: str | None = None, prefix: str = "", *,
+               default: Any = _MISSING, **bounds: Any) -> Any:
+    """``data[key]`` checked by :func:`check_number` (field name ``prefix + key``); ``default`` when absent,
+    an error naming the field when absent without default."""
+    if key not in data:
+        if default is _MISSING:
+            fail(f"{prefix}{key}", "is missing", source)
+        return default
+    return check_number(data[key], f"{prefix}{key}", source, **bounds)
+
+
+def check_integer(value: Any, field: str, source: str | None = None, *, lo: int | None = 0,
+                  hi: int | None = None) -> int:
+    """A JSON integer (``int``, not ``bool``, not ``2.0``) within ``[lo, hi]``."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        fail(field, f"must be an integer, got {value!r}", source)
+    if (lo is not None and value < lo) or (hi is not None and value > hi):
+        fail(field, f"must be an integer {_interval(lo, hi, False, False)}, got {value!r}", source)
+    return int(value)
+
+
+def check_vector(value: Any, field: str, source: str | None = None, n: int = 3, *, lo: float | None = None,
+                 hi: float | None = None) -> list[float]:
+    """A list (or tuple) of ``n`` finite numbers within ``[lo, hi]``; each error names the element."""
+    if not isinstance(value, (list, tuple)) or len(value) != n:
+        fail(field, f"must be a list of {n} numbers, got {value!r}", source)
+    return [check_number(x, f"{field}[{i}]", source, lo=lo, hi=hi) for i, x in enumerate(value)]
+
+
+def check_keys(data: Any, field: str, source: str | None = None, *, required: Iterable[str] = (),
+               optional: Iterable[str] | None = ()) -> Mapping[str, Any]:
+    """``data`` is a mapping holding every key of ``required`` and no key outside ``required | optional``
+    (``optional=None``: any other key is allowed). Errors name ``field.key``.
+
+    >>> check_keys({"a": 1, "b": 2}, "timing", "x.json", required=["a"])
+    Traceback (most recent call last):
+    ...
+    ValueError: x.json: unknown field 'timing.b' (allowed: ['a'])
+    """
+    if not isinstance(data, Mapping):
+        fail(field or "(top level)", f"must be an object (mapping), got {type(data).__name__}", source)
+    required = tuple(required)
+    pre = f"{field}." if field else ""
+    if optional is not None:
+        allowed = set(required) | set(optional)
+        unknown = sorted(str(k) for k in data if k not in allowed)
+        if unknown:
+            names = ", ".join(f"'{pre}{u}'" for u in unknown)
+            raise ValueError(f"{source + ': ' if source else ''}unknown field{'s' if len(unknown) > 1 else ''} "
+                             f"{names} (allowed: {sorted(allowed)})")
+    for k in required:
+        if k not in data:
+            fail(pre + k, "is missing", source)
+    return data
+
+
+def check_choice(value: Any, field: str, allowed: Sequence[Any], source: str | None = None) -> Any:
+    """``value`` is one of ``allowed``."""
+    if value not in allowed:
+        fail(field, f"must be one of {list(allowed)}, got {value!r}", source)
+    return value
+
+
+def check_array(name: str, x: Any, *, lo: float | None = None, hi: float | None = None,
+                lo_open: bool = False) -> None:
+    """A real scalar, array or tensor argument, finite, every element within ``[lo, hi]``; the message names
+    the argument ``name`` and the first bad element (for function arguments, not file fields).
+
+    >>> check_array("duty", [0.5, 1.5], lo=0.0, hi=1.0)
+    Traceback (most recent call last):
+    ...
+    ValueError: duty must be <= 1.0; got 1.5
+    """
+    if hasattr(x, "detach"):  # torch.Tensor without importing torch here
+        x = x.detach().cpu().numpy()
+    v = np.asarray(x)
+    if v.dtype.kind not in "fiub":
+        raise ValueError(f"{name} must be a real number or array, got dtype {v.dtype}")
+    if v.dtype.kind == "f" and not np.isfinite(v).all():
+        raise ValueError(f"{name} must be finite; got NaN or inf")
+    if lo is not None:
+        bad = (v <= lo) if lo_open else (v < lo)
+        if bad.any():
+            raise ValueError(f"{name} must be {'>' if lo_open else '>='} {lo}; got {v[bad].flat[0].item()!r}")
+    if hi is not None and (v > hi).any():
+        raise ValueError(f"{name} must be <= {hi}; got {v[v > hi].flat[0].item()!r}")
+
+
+# ------------------------------------------------------------------------------------------------ scene ids
+#: The one scene-id rule: ASCII letters, digits, ``_``, ``-``, ``.``, starting with a letter or digit. A scene id
+#: is a directory name in a corpus, so it must be a safe, portable file name (no ``/``, ``\``, spaces, ``+``,
+#: no leading ``.`` or ``-``).
+SCENE_ID_PATTERN = r"[A-Za-z0-9][A-Za-z0-9_.-]*"
+#: Longest scene id (characters): a file-name component is limited to 255 bytes on common file systems.
+SCENE_ID_MAX_LEN = 255
+
+
+def scene_id_error(scene_id: Any) -> str | None:
+    """Why ``scene_id`` is not a valid scene id, or None.
+
+    >>> scene_id_error("scene00000") is None, scene_id_error("1112201236") is None
+    (True, True)
+    >>> scene_id_error("a+b")
+    "must be letters, digits, '_', '-', '.', starting with a letter or digit, got 'a+b'"
+    """
+    if not isinstance(scene_id, str) or not re.fullmatch(SCENE_ID_PATTERN, scene_id):
+        return f"must be letters, digits, '_', '-', '.', starting with a letter or digit, got {scene_id!r}"
+    if len(scene_id) > SCENE_ID_MAX_LEN:
+        return f"must be at most {SCENE_ID_MAX_LEN} characters, got {len(scene_id)}"
+    return None
+
+
+def check_scene_id(scene_id: Any, field: str = "scene_id", source: str | None = None) -> str:
+    """Raise ``ValueError`` naming ``field`` (and ``source``) unless ``scene_id`` is a valid scene id
+    (:data:`SCENE_ID_PATTERN`, at most :data:`SCENE_ID_MAX_LEN` characters); returns it."""
+    why = scene_id_error(scene_id)
+    if why is not None:
+        fail(field, why, source)
+    return scene_id

@@ -1,0 +1,1 @@
+"""Fake-data generators of the tests, one package per kind (``tests/data/<name>/data.py``)."""

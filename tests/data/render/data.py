@@ -1,0 +1,75 @@
+"""Fake render data: a ``render_frames`` stand-in (seeded random radiance of the right shapes, from the real
+``scene_meta``) for testing the render orchestration without Mitsuba, the options of a tiny render, and a small
+hand-made scene (two lamp panels) for the physics tests.
+"""
+from __future__ import annotations
+
+import numpy as np
+from typer.testing import CliRunner
+
+from lfmbench import corpus as C
+from lfmbench.cli import app
+from render_tools import jobs as J
+from render_tools import scene
+
+CALLS: list[str] = []
+FAIL: dict[str, type] = {}  # scene_id -> exception type raised after its first frame
+
+
+def fake_render_frames(scene, opts):
+    """Frames with the shapes ``render_tools.render.render_frames`` yields, from the real ``scene_meta``."""
+    from render_tools.render import scene_meta
+
+    CALLS.append(scene["scene_id"])
+    meta = scene_meta(scene, opts)
+    rng = np.random.default_rng(opts.seed)
+    C_, H, W, K = len(opts.bands_nm), opts.height, opts.width, opts.bins
+    for n in range(opts.frames):
+        if n == 1 and scene["scene_id"] in FAIL:
+            raise FAIL[scene["scene_id"]]("simulated failure")
+        static, lights = {}, {}
+        for g, v in meta["groups"].items():
+            if v["flicker"]:
+                lights[g] = [(lt["id"], tuple(lt["bbox"][n]),
+                              rng.random((K, C_, lt["bbox"][n][2] - lt["bbox"][n][0],
+                                          lt["bbox"][n][3] - lt["bbox"][n][1])).astype(np.float32))
+                             for lt in meta["lights"] if lt["group"] == g and lt["bbox"][n] is not None]
+            else:
+                static[g] = {w: rng.random((C_, H, W)).astype(np.float32) for w in ("short", "long")}
+        aux = {k: np.full((H, W), -1.0 if k.startswith("mask") else 5.0, np.float32) for k in C.AUX_CHANNELS}
+        yield {"frame": n, "static": static, "lights": lights, "aux": aux}
+
+
+def fake_backend():
+    from render_tools import render, scene
+
+    return J.Backend(scene.generate_scene, render.RenderOptions, render.scene_meta, fake_render_frames,
+                     scene.validate_scene)
+
+
+ARGS = ["--width", "24", "--height", "16", "--spp", "2", "--frames", "2", "--bins", "2", "--profile", "small"]
+
+
+def run(*args):
+    return CliRunner().invoke(app, ["render", *args])
+
+
+LED = {"model": "led", "peak_nm": 630.0, "fwhm_nm": 18.0}
+HPS = {"model": "light_source", "name": "HPS"}
+
+
+def light(lid, group, center, normal, size, spec, lum, kind=None, instance=-1):
+    """A rectangular lamp of a scene file (m, cd/m^2)."""
+    kind = kind or {"otherlights": "tail", "streetlights": "streetlight", "headlights": "headlight",
+                    "signals": "signal"}[group]
+    return {"id": lid, "group": group, "kind": kind, "instance": instance, "shape": "rect",
+            "center": list(center), "normal": list(normal), "size": list(size), "spread_deg": 90.0,
+            "spectrum": spec, "luminance_cd_m2": float(lum)}
+
+
+def wall_scene(speed=0.0):
+    """A red-LED panel (otherlights) filling the left of the view and an HPS panel (streetlights) the right."""
+    s = scene.empty_scene(speed_mps=speed)
+    s["lights"].append(light(0, "otherlights", (5.0, 2.0, 1.4), (-1, 0, 0), (4.0, 6.0), LED, 800.0))
+    s["lights"].append(light(1, "streetlights", (5.0, -2.0, 1.4), (-1, 0, 0), (4.0, 6.0), HPS, 2e4))
+    return scene.validate_scene(s)

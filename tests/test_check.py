@@ -1,0 +1,134 @@
+"""lfmbench.check: the shared field checks and the one scene-id rule."""
+from __future__ import annotations
+
+import copy
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from lfmbench import check
+from lfmbench import corpus as C
+from tests.data.corpus.data import fake_meta
+
+# (id, valid): the edge cases of the rule, each checked by every user of it
+SCENE_IDS = [
+    ("scene00000", True), ("1112201236", True), ("a", True), ("A.b-c_d", True), ("a.", True), ("x" * 255, True),
+    ("a+b", False), ("", False), (".hidden", False), ("-a", False), ("_a", False), ("a/b", False),
+    ("a\\b", False), ("a b", False), ("..", False), ("a\n", False), ("caf\u00e9", False), ("x" * 256, False),
+    (7, False), (None, False),
+]
+
+
+@pytest.mark.parametrize("sid,ok", SCENE_IDS)
+def test_one_scene_id_rule_for_corpus_and_scene_files(sid, ok):
+    from render_tools import scene as S
+
+    assert (check.scene_id_error(sid) is None) == ok
+    sc = copy.deepcopy(S.empty_scene())
+    sc["scene_id"] = sid
+    meta = fake_meta()
+    meta["scene_id"] = sid
+    if ok:
+        assert check.check_scene_id(sid) == sid
+        C.check_scene_id(sid)
+        S.validate_scene(sc)
+        C.validate_meta(meta, "meta.json")
+    else:
+        with pytest.raises(ValueError, match="meta.json: field 'scene_id'"):
+            C.validate_meta(meta, "meta.json")
+        with pytest.raises(ValueError, match="field 'scene_id'"):
+            check.check_scene_id(sid)
+        with pytest.raises(ValueError, match="scene_id"):
+            C.check_scene_id(sid)
+        with pytest.raises(ValueError, match=r"scene\.scene_id"):
+            S.validate_scene(sc)
+
+
+@pytest.mark.parametrize("value,kw,msg", [
+    (True, {}, "must be a number, got True"),
+    ("1", {}, "must be a number"),
+    (math.nan, {}, "must be finite"),
+    (math.inf, {}, "must be finite"),
+    (0.0, {"lo": 0.0, "lo_open": True}, "must be > 0.0, got 0.0"),
+    (-1, {"lo": 0.0}, "must be >= 0.0, got -1"),
+    (2.0, {"lo": 0.0, "hi": 1.0}, r"must be in \[0.0, 1.0\], got 2.0"),
+    (1.0, {"lo": 0.0, "hi": 1.0, "hi_open": True}, r"must be in \[0.0, 1.0\), got 1.0"),
+    (2.5, {"integer": True}, "must be an integer, got 2.5"),
+])
+def test_check_number_names_field_and_source(value, kw, msg):
+    with pytest.raises(ValueError, match=rf"^cfg\.yaml: field 'a\.b' {msg}"):
+        check.check_number(value, "a.b", "cfg.yaml", **kw)
+
+
+def test_check_number_passes_and_converts():
+    assert check.check_number(np.float32(0.5), "x", lo=0, hi=1) == 0.5
+    assert check.check_number(3.0, "x", integer=True) == 3 and isinstance(check.check_number(3.0, "x", integer=True), int)
+    assert check.check_number(math.inf, "x", allow_inf=True) == math.inf
+    with pytest.raises(ValueError, match="finite"):
+        check.check_number(-math.inf, "x", allow_inf=True)
+    with pytest.raises(ValueError, match=r"^field 'x' must be a number"):  # no source: field only
+        check.check_number(None, "x")
+
+
+def test_get_number_missing_and_default():
+    assert check.get_number({"a": 2}, "a", "f.json", lo=0) == 2.0
+    assert check.get_number({}, "a", "f.json", default=7) == 7
+    with pytest.raises(ValueError, match=r"^f\.json: field 'timing\.a' is missing"):
+        check.get_number({}, "a", "f.json", "timing.")
+
+
+def test_check_integer_vector_choice():
+    assert check.check_integer(3, "n", "f") == 3
+    for bad in (True, 3.0, -1):
+        with pytest.raises(ValueError, match="f: field 'n' must be an integer"):
+            check.check_integer(bad, "n", "f")
+    assert check.check_vector([1, 2, 3], "p", "f") == [1.0, 2.0, 3.0]
+    with pytest.raises(ValueError, match=r"field 'p\[1\]' must be <= 1"):
+        check.check_vector([0, 5, 0], "p", "f", hi=1)
+    with pytest.raises(ValueError, match="list of 2 numbers"):
+        check.check_vector([0, 5, 0], "p", "f", n=2)
+    with pytest.raises(ValueError, match=r"f: field 'sync' must be one of \['light', 'group'\], got 'x'"):
+        check.check_choice("x", "sync", ("light", "group"), "f")
+
+
+def test_check_keys():
+    d = {"a": 1, "b": 2}
+    assert check.check_keys(d, "sec", "f", required=["a"], optional=["b"]) is d
+    assert check.check_keys(d, "sec", "f", required=["a"], optional=None) is d  # others allowed
+    with pytest.raises(ValueError, match=r"^f: unknown fields 'sec\.b', 'sec\.c'"):
+        check.check_keys({"a": 1, "b": 2, "c": 3}, "sec", "f", required=["a"])
+    with pytest.raises(ValueError, match=r"^f: field 'sec\.z' is missing"):
+        check.check_keys(d, "sec", "f", required=["z"], optional=None)
+    with pytest.raises(ValueError, match=r"^f: field 'sec' must be an object"):
+        check.check_keys([1], "sec", "f")
+
+
+def test_check_array_numpy_torch_and_bounds():
+    check.check_array("duty", torch.tensor([0.1, 0.9]), lo=0.0, hi=1.0)
+    with pytest.raises(ValueError, match="period must be > 0.0; got 0.0"):
+        check.check_array("period", np.array([1.0, 0.0]), lo=0.0, lo_open=True)
+    with pytest.raises(ValueError, match="phase must be finite"):
+        check.check_array("phase", torch.tensor([math.nan]))
+    with pytest.raises(ValueError, match="real number"):
+        check.check_array("phase", np.array(["a"]))
+
+
+def test_users_of_the_module_name_field_and_file(tmp_path):
+    """The former copies (sensor, optics, PWM, corpus meta, scene files) now raise through lfmbench.check."""
+    from lfmbench.datasets.pwm import load_pwm_config
+    from lfmbench.optics import OpticsConfig
+
+    with pytest.raises(ValueError, match=r"^pwm: field 'sync' must be one of"):
+        load_pwm_config({"sync": "all"})
+    with pytest.raises(ValueError, match=r"^pwm: unknown field 'dutty'"):
+        load_pwm_config({"dutty": {"dist": "constant", "value": 0.2}})
+    with pytest.raises(ValueError, match=r"^lens\.yaml: field 'optics\.psf_oversample' must be an integer"):
+        OpticsConfig.from_mapping({"psf_oversample": 0}, "lens.yaml")
+    with pytest.raises(ValueError, match=r"^lens\.yaml: unknown field 'optics\.zoom'"):
+        OpticsConfig.from_mapping({"zoom": 2}, "lens.yaml")
+    meta = fake_meta()
+    meta["timing"]["short_exposure_s"] = -1.0
+    with pytest.raises(ValueError, match=r"^m\.json: field 'timing\.short_exposure_s' must be > 0"):
+        C.validate_meta(meta, "m.json")
