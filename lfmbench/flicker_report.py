@@ -10,7 +10,6 @@ from pathlib import Path
 import numpy as np
 
 from lfmbench.fileio import atomic_save_figure
-from lfmbench.flicker import flicker_severity, frame_phase, pwm_exposure
 
 #: Exposure times of the split-pixel sensor used throughout (s): LPD short, SPD long (1/90 s).
 FIG3_EXPOSURES_S = (5e-3, 1 / 90)
@@ -24,6 +23,8 @@ def fig3_series(freq_hz: float = 95.0, duty: float = 0.2, fps: float = 30.0, fra
         dict with ``frame`` (N,), ``phase_s`` (N,), and for each exposure te (s) the key ``te`` -> Phi (N,) (s)
         and ``("fsi", te)`` -> FSI.
     """
+    from lfmbench.flicker import flicker_severity, frame_phase, pwm_exposure  # noqa: PLC0415 - torch: keep CLI start fast
+
     period = 1.0 / freq_hz
     n = np.arange(frames)
     ts = frame_phase(phase0_s, n, 1.0 / fps, period)
