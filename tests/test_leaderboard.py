@@ -114,6 +114,10 @@ def test_leaderboard_refuses_other_corpus_and_metric_versions(bench, tmp_path):
                                     str(d / "runs" / "spd_only.json"), *args])
     assert r.exit_code == 0, r.output
     assert (tmp_path / "l.json").is_file() and "ranked by led_score" in r.output
+    (tmp_path / "bins.yaml").write_text("speed: {edges: [3, 1]}\n")
+    r = CliRunner().invoke(_app(), ["leaderboard", str(d / "runs" / "lpd_only.json"), *args,
+                                    "--conditions", str(tmp_path / "bins.yaml")])
+    assert r.exit_code == 2 and "bins.yaml: speed.edges" in r.output
 
 
 def test_adding_a_metric_is_one_registry_entry(monkeypatch, tmp_path):

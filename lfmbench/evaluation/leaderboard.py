@@ -177,6 +177,10 @@ def leaderboard_rows(runs: list[dict], sort_by: str | None = None, *, ci: bool =
 
     sort_by = sort_by or PRIMARY
     spec = _check_sort_by(sort_by)
+    known = [r for r in runs if isinstance((r.get("versions") or {}).get("metrics"), dict)]
+    if known and not any(sort_by in r["versions"]["metrics"] for r in known):
+        raise ValueError(f"no run file was scored with {sort_by!r} ({_names([r['_path'] for r in known])}: made by "
+                         f"an older lfmbench?); re-run lfmbench evaluate, or rank with --sort-by psnr_mu")
     bins = load_bins(conditions_file)
     want_ci = {s.name for s in columns("table")} | {sort_by}
     rows = []

@@ -124,7 +124,7 @@ def per_scene(records: Iterable[dict], metrics: Iterable[str] | None = None) -> 
 
 
 def scene_values(scenes: list[dict], name: str) -> tuple[list[float], list[float] | None]:
-    """(per-scene values, per-scene weights or None) of one metric, for :func:`lfmbench.evaluation.stats.bootstrap_ci`."""
+    """(per-scene values, per-scene weights or None) of one metric, as :func:`stats.bootstrap_ci` takes them."""
     from lfmbench.metrics import REGISTRY
 
     spec = REGISTRY[name]

@@ -148,7 +148,7 @@ REGISTRY: dict[str, MetricSpec] = {s.name: s for s in [
                inputs=("dropout_rate", "fmi_abs_err", "led_rel_err"), show="console"),
     MetricSpec("dropout_rate", "1.0", "ISET-LFM Fig. 5: region-frames with output < 0.5 GT", "1", False, "flicker",
                "dropout", aggregate="pooled", weight="region_frames", show="console"),
-    MetricSpec("fmi_abs_err", "1.0", "|FMI(output) - FMI(GT)| per light", "1", False, "flicker", "|dFMI|",
+    MetricSpec("fmi_abs_err", "1.0", "|FMI(output) - FMI(GT)| per light", "1", False, "flicker", "abs dFMI",
                show="console"),
     MetricSpec("led_rel_err", "1.0", "min(1, |p - g| / g) of LED ROI means, mean over region-frames", "1", False,
                "flicker", "LED err", aggregate="pooled", weight="region_frames", show="console"),
