@@ -27,7 +27,7 @@ COMMAND_MODULES = (
     "lfmbench.paper_figures",
     "render_tools.cli",
     "lfmbench.corpus_cli",
-    "lfmbench.evaluate",
+    "lfmbench.evaluation.cli",
 )
 
 for _name in COMMAND_MODULES:

@@ -48,7 +48,7 @@ def run(out: str | Path | None = None, config: str | Path = CONFIG) -> dict:
                         "--batch-size", str(tr["batch_size"]), "--workers", str(tr["workers"])], check=True)
     secs["train"] = time.perf_counter() - t
 
-    from lfmbench.evaluate import benchmark
+    from lfmbench.evaluation import benchmark
     ev = cfg["evaluate"]
     t = _step(f"3. evaluate every baseline on the {ev['split']} split -> {runs}")
     rows = benchmark(corpus, runs_dir=runs, split=ev["split"], seed=ev["seed"], repeats=ev["repeats"],

@@ -293,11 +293,8 @@ def test_evaluate_ctrl_c_exits_130_and_leaderboard_refuses_it(eval_env, monkeypa
     assert "interrupted" in r.output
     d = json.loads(out.read_text())
     assert d["status"] == "interrupted" and len(d["scenes"]) == 1
-    good = tmp_path / "g.json"
-    from lfmbench import evaluate as ev
-    from tests.data.metrics.data import make_batch
-
-    ev.evaluate("lpd_only", [make_batch(seed=0)], output=good, repeats=1, progress=False)
+    good = tmp_path / "g.json"  # a complete run on the same corpus (the leaderboard refuses mixed corpora)
+    assert _evaluate(eval_env, monkeypatch, "lpd_only", "--output", str(good)).exit_code == 0
     lb = ["leaderboard", str(good), str(out), "--markdown", str(tmp_path / "lb.md"), "--plot", str(tmp_path / "p.png")]
     r = CliRunner().invoke(app, lb)
     assert r.exit_code == 2 and "i.json: status 'interrupted'" in r.output and "--include-incomplete" in r.output

@@ -221,7 +221,7 @@ def main(argv: list[str] | None = None) -> None:
     a = ap.parse_args(argv)
     from torch.utils.data import DataLoader
 
-    from lfmbench.evaluate import make_dataset, collate_samples
+    from lfmbench.datasets import make_dataset, collate_samples
 
     ds = make_dataset(a.corpus, a.split, seed=a.seed, crop=a.crop, samples_per_scene=a.samples_per_scene)
     loader = DataLoader(ds, batch_size=a.batch_size, shuffle=True, num_workers=a.workers,

@@ -1,65 +1,218 @@
-"""Metrics that score a fusion output against the flicker-free ground truth.
+"""Metrics that score a fusion output against the flicker-free ground truth, and the one metric registry.
 
 Modules: :mod:`~lfmbench.metrics.hdr` (PSNR-L, PSNR-mu, SSIM-mu, PU21-PSNR, ColorVideoVDP),
 :mod:`~lfmbench.metrics.flicker` (IEEE P2020 FMI / FDI / MMP per LED region, FSI, series error, light dropout,
-saturation flag) and :mod:`~lfmbench.metrics.regions` (errors outside the LED regions: ghosts and comets).
+LED brightness error, saturation flag) and :mod:`~lfmbench.metrics.regions` (errors inside and outside the LED
+regions: ghosts and comets).
 
-Every metric is registered in :data:`REGISTRY` with a name, a version string (bumped whenever its definition
-or defaults change, so results stay comparable) and its reference; :func:`metric_versions` is what the
-evaluation stores with every result. :func:`score_batch` computes them all for one batch.
-See ``docs/metrics.md``.
+Every metric is ONE entry of :data:`REGISTRY` (a :class:`MetricSpec`): name, version (bumped whenever its
+definition or defaults change, so results stay comparable), reference, unit, ranking direction, column
+header, aggregation over scenes, and how it is computed: its own function ``fn(pred, batch, options)``, a
+``derive(values)`` of other metrics of the same sample, or (``fn`` and ``derive`` both None) a
+:class:`MetricBlock` of :data:`BLOCKS` that computes several metrics in one pass (the P2020 region block,
+the perceptual block: pycvvdp is loaded and luminance converted once per batch). :func:`score_batch`,
+``lfmbench evaluate`` and ``lfmbench leaderboard`` all read this registry; :func:`metric_versions` is stored
+with every result. The primary ranking score is :data:`PRIMARY` (``led_score``). See ``docs/metrics.md``.
 """
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 import torch
 
 from lfmbench.metrics import flicker, hdr, regions
 
-__all__ = ["MetricSpec", "REGISTRY", "metric_versions", "score_batch", "ScoreOptions", "flicker", "hdr", "regions"]
+__all__ = ["MetricSpec", "MetricBlock", "REGISTRY", "BLOCKS", "PRIMARY", "metric_versions", "score_batch",
+           "ScoreOptions", "led_score", "columns", "flicker", "hdr", "regions"]
 
 
 @dataclass(frozen=True)
 class MetricSpec:
-    """One registered metric: ``name``, ``version``, ``reference``, ``unit`` and ranking direction."""
+    """One registered metric; adding a metric is one such entry in :data:`REGISTRY`.
+
+    Attributes:
+        name: key in result files.
+        version: bumped whenever the definition or a default changes.
+        reference: where the definition comes from.
+        unit: unit of the value ("1" = dimensionless).
+        higher_is_better: ranking direction.
+        group: ``hdr``, ``perceptual`` (only with ``ScoreOptions.perceptual``), ``flicker``, ``region``, ``led``;
+            a metric with neither ``fn`` nor ``derive`` is produced by the block of this name in :data:`BLOCKS`.
+        header: leaderboard column header.
+        aggregate: over scenes: ``mean`` (mean of the per-scene values) or ``pooled`` (sum of value x
+            ``weight`` / sum of ``weight``, e.g. dropout over all region-frames).
+        weight: per-sample key of the pooling weight (``aggregate="pooled"``).
+        fn: ``fn(pred (B, F, 1, H, W), batch, options) -> (B,)`` values, or None.
+        derive: ``derive(values: dict) -> float`` from other metrics of the same sample (``inputs``), or None.
+        inputs: the metrics ``derive`` reads.
+        needs: batch keys ``fn`` needs (the metric is skipped when one is missing).
+        digits: decimals shown in tables.
+        show: ``console`` (terminal table and Markdown), ``table`` (Markdown only), ``none`` (result file only).
+    """
 
     name: str
     version: str
     reference: str
     unit: str
     higher_is_better: bool
-    group: str  # 'hdr', 'perceptual', 'flicker', 'region'
+    group: str
+    header: str = ""
+    aggregate: str = "mean"
+    weight: str | None = None
+    fn: Callable[..., Any] | None = None
+    derive: Callable[[dict], float] | None = None
+    inputs: tuple[str, ...] = ()
+    needs: tuple[str, ...] = ()
+    digits: int = 3
+    show: str = "table"
+
+    @property
+    def direction(self) -> str:
+        """``"higher"`` or ``"lower"`` (is better)."""
+        return "higher" if self.higher_is_better else "lower"
+
+
+@dataclass(frozen=True)
+class MetricBlock:
+    """Several metrics computed in one pass: ``compute(pred, batch, options) -> list of B dicts``.
+
+    ``needs``: batch keys it needs (skipped when one is missing). ``on_error``: ``raise`` (the scene fails) or
+    ``record`` (its metrics become NaN and the error text is added to the sample's ``errors`` list: for an
+    optional external package).
+    """
+
+    name: str
+    compute: Callable[..., list[dict]]
+    needs: tuple[str, ...] = ()
+    on_error: str = "raise"
 
 
 _KR17 = "Kalantari & Ramamoorthi, ACM TOG 36(4) 2017"
 _P2020 = "IEEE P2020; CARpublic/P2020-flicker metrics/flicker.py; Deegan EI 2018 AVM-146"
+_DS80 = "Derringer & Suich, J. Quality Technology 12(4) 1980 (desirability, geometric mean)"
 
-#: name -> spec of every metric :func:`score_batch` can report.
-REGISTRY: dict[str, MetricSpec] = {s.name: s for s in [
-    MetricSpec("psnr_l", "1.0", _KR17 + " (normalised by GT peak)", "dB", True, "hdr"),
-    MetricSpec("psnr_mu", "1.0", _KR17 + " (mu = 5000)", "dB", True, "hdr"),
-    MetricSpec("ssim_mu", "1.0", "Wang et al. IEEE TIP 2004 via kornia.metrics.ssim, on mu-law images", "1", True, "hdr"),
-    MetricSpec("pu21_psnr", "1.0", "Mantiuk & Azimi PCS 2021 via pycvvdp.pu_psnr_y", "dB", True, "perceptual"),
-    MetricSpec("cvvdp_jod", "1.0", "Mantiuk et al. ACM TOG 2024 (ColorVideoVDP) via pycvvdp", "JOD", True, "perceptual"),
-    MetricSpec("fmi_pred", "1.0", _P2020 + " (FMI)", "1", False, "flicker"),
-    MetricSpec("fmi_gt", "1.0", _P2020 + " (FMI of the GT)", "1", False, "flicker"),
-    MetricSpec("fmi_abs_err", "1.0", "|FMI(output) - FMI(GT)| per light", "1", False, "flicker"),
-    MetricSpec("mmp_pred", "1.0", _P2020 + " (MMP, delta 0.1)", "1", True, "flicker"),
-    MetricSpec("mmp_gt", "1.0", _P2020 + " (MMP of the GT)", "1", True, "flicker"),
-    MetricSpec("fdi_pred", "1.0", _P2020 + " (FDI, threshold 0.1, OFF level from a ring)", "1", True, "flicker"),
-    MetricSpec("fdi_gt", "1.0", _P2020 + " (FDI of the GT)", "1", True, "flicker"),
-    MetricSpec("fsi_input", "1.0", "ISET-LFM eq. 2 via lfmbench.flicker.flicker_severity, LPD input", "1", False,
-               "flicker"),
-    MetricSpec("series_rel_rmse", "1.0", "relative RMS error of the ROI series vs GT", "1", False, "flicker"),
-    MetricSpec("dropout_rate", "1.0", "ISET-LFM Fig. 5: region-frames with output < 0.5 GT", "1", False, "flicker"),
-    MetricSpec("psnr_mu_outside", "1.0", _KR17 + " outside dilated LED regions", "dB", True, "region"),
-    MetricSpec("ghost_mae_mu", "1.0", "ISET-LFM Fig. 6: mean |mu-law error| in a band around LEDs", "1", False,
-               "region"),
-    MetricSpec("comet_excess_mu", "1.0", "ISET-LFM Fig. 6: mean positive mu-law error around LEDs", "1", False,
-               "region"),
+
+def led_score(dropout_rate: float, fmi_abs_err: float, led_rel_err: float) -> float:
+    r"""The primary ranking score: geometric mean of three desirabilities of the LED regions, in [0, 1].
+
+    :math:`S = \left[(1 - D)\,(1 - \min(1, |\Delta FMI|))\,(1 - E)\right]^{1/3}` with D = light dropout rate
+    (ISET-LFM Fig. 5), :math:`|\Delta FMI|` = |FMI(output) - FMI(GT)| (IEEE P2020) and E = truncated relative
+    brightness error of the lights (:func:`lfmbench.metrics.flicker.truncated_rel_err`); each factor is 1 for a
+    perfect reproduction and 0 for the worst (Derringer & Suich 1980: an unacceptable criterion zeroes the
+    score). NaN when an input is NaN (no LED region).
+
+    >>> round(led_score(0.0, 0.0, 0.0), 6), round(led_score(0.5, 0.0, 0.0), 6), led_score(1.0, 0.1, 0.1)
+    (1.0, 0.793701, 0.0)
+    """
+    d = [1.0 - float(dropout_rate), 1.0 - min(1.0, float(fmi_abs_err)), 1.0 - float(led_rel_err)]
+    if not all(math.isfinite(x) for x in d):
+        return float("nan")
+    return float(max(0.0, d[0]) * max(0.0, d[1]) * max(0.0, d[2])) ** (1.0 / 3.0)
+
+
+def _psnr_mu_led(pred: torch.Tensor, batch: dict, o) -> torch.Tensor:
+    """PSNR-mu over the LED region pixels (``light_index >= 0``) of every frame, (B,) dB."""
+    return regions.masked_psnr_mu(pred, batch["gt"], batch["light_index"] >= 0)
+
+
+def _region_block(pred: torch.Tensor, batch: dict, o) -> list[dict]:
+    li = batch["light_index"]
+    reg = flicker.region_flicker_metrics(pred, batch["gt"], li, batch.get("saturated"), batch.get("lpd_lcg_e"),
+                                         o.region)
+    out = regions.outside_led_metrics(pred, batch["gt"], li, o.margin_px, o.ring_px)
+    return [dict(a, **b) for a, b in zip(reg, out)]
+
+
+def _perceptual_block(pred: torch.Tensor, batch: dict, o) -> list[dict]:
+    v = hdr.perceptual_metrics(pred, batch["gt"], o.cd_per_unit, o.fps)
+    return [{k: x[i] for k, x in v.items()} for i in range(pred.shape[0])]
+
+
+#: Multi-metric blocks, by group name (each computed once per batch).
+BLOCKS: dict[str, MetricBlock] = {b.name: b for b in [
+    MetricBlock("perceptual", _perceptual_block, on_error="record"),
+    MetricBlock("flicker", _region_block, needs=("light_index",)),
 ]}
+
+#: The metric the leaderboard ranks by unless told otherwise.
+PRIMARY = "led_score"
+
+#: name -> spec of every metric :func:`score_batch` can report, in leaderboard column order.
+REGISTRY: dict[str, MetricSpec] = {s.name: s for s in [
+    MetricSpec("led_score", "1.0", _DS80 + " of 1 - dropout (ISET-LFM Fig. 5), 1 - |dFMI| (IEEE P2020) and "
+               "1 - LED brightness error", "1", True, "led", "LED score",
+               derive=lambda v: led_score(v["dropout_rate"], v["fmi_abs_err"], v["led_rel_err"]),
+               inputs=("dropout_rate", "fmi_abs_err", "led_rel_err"), show="console"),
+    MetricSpec("dropout_rate", "1.0", "ISET-LFM Fig. 5: region-frames with output < 0.5 GT", "1", False, "flicker",
+               "dropout", aggregate="pooled", weight="region_frames", show="console"),
+    MetricSpec("fmi_abs_err", "1.0", "|FMI(output) - FMI(GT)| per light", "1", False, "flicker", "abs dFMI",
+               show="console"),
+    MetricSpec("led_rel_err", "1.0", "min(1, |p - g| / g) of LED ROI means, mean over region-frames", "1", False,
+               "flicker", "LED err", aggregate="pooled", weight="region_frames", show="console"),
+    MetricSpec("psnr_mu_led", "1.0", _KR17 + " over the LED region pixels", "dB", True, "led", "PSNR-mu LED",
+               fn=_psnr_mu_led, needs=("light_index",), digits=2),
+    MetricSpec("psnr_mu", "1.0", _KR17 + " (mu = 5000)", "dB", True, "hdr", "PSNR-mu dB",
+               fn=lambda p, b, o: hdr.psnr_mu(p, b["gt"]), digits=2, show="console"),
+    MetricSpec("psnr_l", "1.0", _KR17 + " (normalised by GT peak)", "dB", True, "hdr", "PSNR-L dB",
+               fn=lambda p, b, o: hdr.psnr_l(p, b["gt"]), digits=2),
+    MetricSpec("ssim_mu", "1.0", "Wang et al. IEEE TIP 2004 via kornia.metrics.ssim, on mu-law images", "1", True,
+               "hdr", "SSIM-mu", fn=lambda p, b, o: hdr.ssim_mu(p, b["gt"])),
+    MetricSpec("pu21_psnr", "1.0", "Mantiuk & Azimi PCS 2021 via pycvvdp.pu_psnr_y", "dB", True, "perceptual",
+               "PU21 dB", digits=2),
+    MetricSpec("cvvdp_jod", "1.0", "Mantiuk et al. ACM TOG 2024 (ColorVideoVDP) via pycvvdp", "JOD", True,
+               "perceptual", "JOD", show="console"),
+    MetricSpec("mmp_pred", "1.0", _P2020 + " (MMP, delta 0.1)", "1", True, "flicker", "MMP"),
+    MetricSpec("fdi_pred", "1.0", _P2020 + " (FDI, threshold 0.1, OFF level from a ring)", "1", True, "flicker",
+               "FDI"),
+    MetricSpec("series_rel_rmse", "1.0", "relative RMS error of the ROI series vs GT", "1", False, "flicker",
+               "series err"),
+    MetricSpec("psnr_mu_outside", "1.0", _KR17 + " outside dilated LED regions", "dB", True, "region",
+               "PSNR-mu out", digits=2),
+    MetricSpec("ghost_mae_mu", "1.0", "ISET-LFM Fig. 6: mean |mu-law error| in a band around LEDs", "1", False,
+               "region", "ghost", show="console"),
+    MetricSpec("comet_excess_mu", "1.0", "ISET-LFM Fig. 6: mean positive mu-law error around LEDs", "1", False,
+               "region", "comet", show="none"),
+    MetricSpec("fmi_pred", "1.0", _P2020 + " (FMI)", "1", False, "flicker", "FMI", show="none"),
+    MetricSpec("fmi_gt", "1.0", _P2020 + " (FMI of the GT)", "1", False, "flicker", "FMI GT", show="none"),
+    MetricSpec("mmp_gt", "1.0", _P2020 + " (MMP of the GT)", "1", True, "flicker", "MMP GT", show="none"),
+    MetricSpec("fdi_gt", "1.0", _P2020 + " (FDI of the GT)", "1", True, "flicker", "FDI GT", show="none"),
+    MetricSpec("fsi_input", "1.0", "ISET-LFM eq. 2 via lfmbench.flicker.flicker_severity, LPD input", "1", False,
+               "flicker", "FSI in", show="none"),
+]}
+
+#: Groups whose block also produces the ``region`` group's metrics (one pass over the LED regions).
+_BLOCK_OF_GROUP = {"perceptual": "perceptual", "flicker": "flicker", "region": "flicker"}
+
+
+def _check_registry() -> None:
+    for s in REGISTRY.values():
+        kinds = (s.fn is not None) + (s.derive is not None)
+        if kinds > 1:
+            raise ValueError(f"metric {s.name!r}: give fn or derive, not both")
+        if kinds == 0 and s.group not in _BLOCK_OF_GROUP:
+            raise ValueError(f"metric {s.name!r}: no fn, no derive and no block for group {s.group!r}")
+        if s.aggregate not in ("mean", "pooled") or (s.aggregate == "pooled") != (s.weight is not None):
+            raise ValueError(f"metric {s.name!r}: aggregate must be 'mean', or 'pooled' with a weight")
+        if s.show not in ("console", "table", "none"):
+            raise ValueError(f"metric {s.name!r}: show must be console, table or none, got {s.show!r}")
+        if not s.header:
+            raise ValueError(f"metric {s.name!r}: a column header is needed")
+        missing = [i for i in s.inputs if i not in REGISTRY]
+        if missing:
+            raise ValueError(f"metric {s.name!r}: derive inputs {missing} are not registered")
+
+
+_check_registry()
+
+
+def columns(where: str = "table") -> list[MetricSpec]:
+    """Registered metrics shown in a table: ``where="table"`` (Markdown: console and table metrics) or
+    ``"console"`` (the terminal table), in registry order."""
+    keep = ("console",) if where == "console" else ("console", "table")
+    return [s for s in REGISTRY.values() if s.show in keep]
 
 
 def metric_versions() -> dict[str, str]:
@@ -84,39 +237,56 @@ def _f(x) -> float:
     return v if math.isfinite(v) or math.isinf(v) else float("nan")
 
 
+def _enabled(group: str, o: ScoreOptions) -> bool:
+    return o.perceptual or group != "perceptual"
+
+
 def score_batch(pred: torch.Tensor, batch: dict, options: ScoreOptions | None = None) -> list[dict]:
-    """All registered metrics for one batch, one dict per sample.
+    """Every registered metric for one batch, one dict per sample (each block computed once).
 
     Args:
         pred: fused estimate, (B, F, 1, H, W), in the units of ``batch['gt']`` (input-referred e-).
         batch: sample dict (``docs/contracts.md`` section 3) with ``gt`` and ``light_index``; ``saturated`` and
-            ``lpd_lcg_e`` are used when present.
+            ``lpd_lcg_e`` are used when present. Metrics whose ``needs`` are missing are left out.
         options: see :class:`ScoreOptions`.
 
     Returns:
-        list of B dicts: metric name -> float, plus ``lights`` (per-light records).
+        list of B dicts: metric name -> float, plus what the blocks add: ``lights`` (per-light records),
+        ``region_frames``, ``n_lights``, ``saturation_flag``, and ``errors`` (texts) when a block with
+        ``on_error="record"`` failed (its metrics are then NaN).
     """
     o = options or ScoreOptions()
     gt = batch["gt"]
     if pred.shape != gt.shape:
         raise ValueError(f"pred must have the shape of batch['gt'] {tuple(gt.shape)}, got {tuple(pred.shape)}")
     pred = pred.to(gt.dtype)
-    res = [dict() for _ in range(gt.shape[0])]
-    for name, fn in (("psnr_l", hdr.psnr_l), ("psnr_mu", hdr.psnr_mu), ("ssim_mu", hdr.ssim_mu)):
-        v = fn(pred, gt)
+    res: list[dict] = [dict() for _ in range(gt.shape[0])]
+    for block in BLOCKS.values():
+        if not _enabled(block.name, o) or any(batch.get(k) is None for k in block.needs):
+            continue
+        try:
+            out = block.compute(pred, batch, o)
+        except Exception as exc:
+            if block.on_error != "record":
+                raise
+            names = [s.name for s in REGISTRY.values()
+                     if _BLOCK_OF_GROUP.get(s.group) == block.name and s.fn is None and s.derive is None]
+            for r in res:
+                r.update({n: float("nan") for n in names})
+                r.setdefault("errors", []).append(f"{block.name}: {type(exc).__name__}: {exc}")
+            continue
+        for r, a in zip(res, out):
+            r.update({k: (_f(v) if isinstance(v, (float, torch.Tensor)) else v) for k, v in a.items()})
+    for s in REGISTRY.values():
+        if s.fn is None or not _enabled(s.group, o) or any(batch.get(k) is None for k in s.needs):
+            continue
+        v = s.fn(pred, batch, o)
         for i, r in enumerate(res):
-            r[name] = _f(v[i])
-    if o.perceptual:
-        for name, fn in (("pu21_psnr", lambda p, g: hdr.pu21_psnr(p, g, o.cd_per_unit, o.fps)),
-                         ("cvvdp_jod", lambda p, g: hdr.cvvdp_jod(p, g, o.fps, o.cd_per_unit))):
-            v = fn(pred, gt)
-            for i, r in enumerate(res):
-                r[name] = _f(v[i])
-    li = batch.get("light_index")
-    if li is not None:
-        reg = flicker.region_flicker_metrics(pred, gt, li, batch.get("saturated"), batch.get("lpd_lcg_e"), o.region)
-        out = regions.outside_led_metrics(pred, gt, li, o.margin_px, o.ring_px)
-        for r, a, b in zip(res, reg, out):
-            r.update(a)
-            r.update(b)
+            r[s.name] = _f(v[i])
+    for s in REGISTRY.values():
+        if s.derive is None:
+            continue
+        for r in res:
+            if all(i in r for i in s.inputs):
+                r[s.name] = _f(s.derive(r))
     return res

@@ -6,8 +6,9 @@ Defines
   factors on ROI-mean time series, following the public reference implementation CARpublic/P2020-flicker
   (``metrics/flicker.py``, MIT) definition by definition (differences are listed in each docstring).
 - :func:`fsi`: the ISET-LFM flicker severity index (paper eq. 2), through :func:`lfmbench.flicker.flicker_severity`.
-- :func:`series_rel_rmse`, :func:`dropout_mask`: the error of a region's time series against the ground truth's,
-  and the frames where a light is extinguished (output below half the GT: the paper's Fig. 5).
+- :func:`series_rel_rmse`, :func:`truncated_rel_err`, :func:`dropout_mask`: the error of a region's time series
+  against the ground truth's, and the frames where a light is extinguished (output below half the GT: the
+  paper's Fig. 5).
 - :func:`region_series`: ROI means per light and frame from the sample's ``light_index`` map.
 - :func:`region_flicker_metrics`: all of the above per LED region of a batch, output and GT side by side.
 
@@ -215,6 +216,25 @@ def dropout_mask(pred_series, gt_series, fraction: float = DROPOUT_FRACTION) -> 
     return p < fraction * g
 
 
+def truncated_rel_err(pred_series, gt_series) -> torch.Tensor:
+    r"""Relative error of a light's brightness per frame, truncated at 1: :math:`\min(1, |p_t - g_t| / g_t)`.
+
+    A light that is extinguished (:math:`p_t = 0`) or shown at twice its brightness or more scores 1 (fully
+    wrong); an exact reproduction scores 0. Frames with :math:`g_t \le 0` give NaN (no light to compare with).
+
+    Args:
+        pred_series, gt_series: ROI means, same shape, same unit.
+
+    Returns:
+        tensor of the same shape, dimensionless, in [0, 1] or NaN.
+    """
+    p, g = _as_float(pred_series), _as_float(gt_series)
+    if p.shape != g.shape:
+        raise ValueError(f"pred_series and gt_series must have the same shape, got {tuple(p.shape)}, {tuple(g.shape)}")
+    r = ((p - g).abs() / g.clamp_min(torch.finfo(g.dtype).tiny)).clamp_max(1.0)
+    return torch.where(g > 0, r, torch.full_like(r, float("nan")))
+
+
 def region_series(images: torch.Tensor, light_index: torch.Tensor, num_lights: int | None = None
                   ) -> tuple[torch.Tensor, torch.Tensor]:
     """ROI mean of every light in every frame, from the per-pixel light index.
@@ -313,6 +333,7 @@ def region_flicker_metrics(pred: torch.Tensor, gt: torch.Tensor, light_index: to
     - ``fsi_input``: FSI of the LPD input's region series (``lpd``, the flicker the method had to undo).
     - ``series_rel_rmse``: :func:`series_rel_rmse` of the output series against the GT series.
     - ``dropout_frames``: frames where the light is extinguished (:func:`dropout_mask`).
+    - ``led_rel_err``: mean over the frames of :func:`truncated_rel_err` (brightness error of the light).
     - ``saturated_frames``: frames where some ROI pixel is saturated in all three captures (``saturated``
       (B, F, 3, H, W)), i.e. no capture measured it: the P2020 saturation warning for this sensor.
 
@@ -327,7 +348,8 @@ def region_flicker_metrics(pred: torch.Tensor, gt: torch.Tensor, light_index: to
     Returns:
         One dict per sample: ``lights`` (list of per-light dicts) and the scene summary ``fmi_pred``,
         ``fmi_gt``, ``fmi_abs_err``, ``mmp_pred``, ``mmp_gt``, ``fdi_pred``, ``fdi_gt``, ``series_rel_rmse``
-        (means over lights), ``dropout_rate`` (dropped region-frames / region-frames), ``region_frames``,
+        (means over lights), ``dropout_rate`` (dropped region-frames / region-frames), ``led_rel_err`` (mean of
+        :func:`truncated_rel_err` over all region-frames with a lit GT), ``region_frames``,
         ``n_lights``, ``saturation_flag``.
     """
     o = options or RegionMetricOptions()
@@ -346,7 +368,7 @@ def region_flicker_metrics(pred: torch.Tensor, gt: torch.Tensor, light_index: to
     out = []
     for b in range(pred.shape[0]):
         lights = []
-        n_rf, n_drop = 0, 0
+        n_rf, n_drop, rel_sum, n_rel = 0, 0, 0.0, 0
         for j in range(n):
             valid = cnt[b, j] >= o.min_region_px
             if int(valid.sum()) < 1:
@@ -355,6 +377,10 @@ def region_flicker_metrics(pred: torch.Tensor, gt: torch.Tensor, light_index: to
             drop = dropout_mask(p, g, o.dropout_fraction)
             n_rf += int(valid.sum())
             n_drop += int(drop.sum())
+            rel = truncated_rel_err(p, g)
+            rel_ok = torch.isfinite(rel)
+            rel_sum += float(rel[rel_ok].sum())
+            n_rel += int(rel_ok.sum())
             rec = {
                 "light_id": j,
                 "frames": int(valid.sum()),
@@ -367,6 +393,7 @@ def region_flicker_metrics(pred: torch.Tensor, gt: torch.Tensor, light_index: to
                 "fdi_gt": _fdi_ring(g, g_off[b, j][valid], o.contrast_threshold),
                 "series_rel_rmse": float(series_rel_rmse(p, g)),
                 "dropout_frames": int(drop.sum()),
+                "led_rel_err": float(rel[rel_ok].mean()) if bool(rel_ok.any()) else float("nan"),
             }
             if l_ser is not None:
                 rec["fsi_input"] = float(fsi(l_ser[b, j][valid]))
@@ -379,6 +406,7 @@ def region_flicker_metrics(pred: torch.Tensor, gt: torch.Tensor, light_index: to
         if l_ser is not None:
             summ["fsi_input"] = _nanmean([r["fsi_input"] for r in lights])
         summ["dropout_rate"] = n_drop / n_rf if n_rf else float("nan")
+        summ["led_rel_err"] = rel_sum / n_rel if n_rel else float("nan")
         summ["region_frames"] = n_rf
         summ["n_lights"] = len(lights)
         summ["saturation_flag"] = bool(any(r.get("saturated_frames", 0) > 0 for r in lights))

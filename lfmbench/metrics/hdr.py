@@ -8,7 +8,8 @@ Defines
 - :func:`ssim_mu`: SSIM on mu-law tone-mapped values (kornia's maintained implementation).
 - :func:`bayer_luminance`: 2x2 GRBG quad average, a luminance proxy of a raw mosaic.
 - :func:`to_display_luminance`: input-referred sensor units -> absolute luminance on the reference display.
-- :func:`pu21_psnr`, :func:`cvvdp_jod`: the Mantiuk group's perceptual metrics through ``pycvvdp`` (optional).
+- :func:`pu21_psnr`, :func:`cvvdp_jod`: the Mantiuk group's perceptual metrics through ``pycvvdp`` (optional);
+  :func:`perceptual_metrics` computes both in one pass (one luminance conversion per sample).
 
 Units: the HDR tensors are in the ground truth's units (input-referred LPD-equivalent e- over the short
 exposure, see ``docs/contracts.md`` section 3); PSNR values are in dB; luminance in cd m^-2.
@@ -377,6 +378,62 @@ def _to_bcfhw_luminance(x: torch.Tensor) -> torch.Tensor:
     return y.unsqueeze(1)
 
 
+def _display_pairs(pred: torch.Tensor, gt: torch.Tensor, cd_per_unit: float | None):
+    """Per sample b: (prediction, reference) luminance videos (1, 1, F, H/2, W/2) in cd m^-2 on the display model."""
+    for b in range(pred.shape[0]):
+        lg, scale = to_display_luminance(gt[b:b + 1], gt[b:b + 1], cd_per_unit)
+        lp, _ = to_display_luminance(pred[b:b + 1], gt[b:b + 1], scale)
+        yield _to_bcfhw_luminance(lp).float(), _to_bcfhw_luminance(lg).float()
+
+
+#: The metrics :func:`perceptual_metrics` can compute (registry names).
+PERCEPTUAL_METRICS = ("pu21_psnr", "cvvdp_jod")
+
+
+def perceptual_metrics(pred: torch.Tensor, gt: torch.Tensor, cd_per_unit: float | None = None, fps: float = 60.0,
+                       which: tuple[str, ...] = PERCEPTUAL_METRICS) -> dict[str, torch.Tensor]:
+    """PU21-PSNR and ColorVideoVDP of a batch in one pass: pycvvdp is loaded, the metric objects are built and
+    each sample is converted to display luminance once, then every metric of ``which`` is computed.
+
+    Args:
+        pred, gt: raw sequences (B, F, 1, H, W) in input-referred e-; converted to luminance with
+            :func:`bayer_luminance` and :func:`to_display_luminance` (cd m^-2) per sample.
+        cd_per_unit: fixed calibration in cd m^-2 per e- (default: GT p99 at the display peak).
+        fps: frame rate in s^-1 (frames are a video when F > 1; PU21-PSNR pools the MSE over frames).
+        which: subset of :data:`PERCEPTUAL_METRICS`.
+
+    Returns:
+        name -> (B,) tensor: ``pu21_psnr`` in dB (PU21 units, peak = PU21(100 cd m^-2)), ``cvvdp_jod`` in JOD
+        (10 = identical).
+    """
+    _check_pair(pred, gt, min_dim=5)
+    unknown = [w for w in which if w not in PERCEPTUAL_METRICS]
+    if unknown:
+        raise ValueError(f"which: unknown perceptual metric(s) {unknown}; known: {list(PERCEPTUAL_METRICS)}")
+    pc = load_pycvvdp()
+    rate = fps if pred.shape[1] > 1 else 0
+    pu = jod = None
+    if "pu21_psnr" in which:
+        # pycvvdp 0.5.7's vq_metric.set_display_model misses an import: pass the photometry object explicitly.
+        photometry = pc.vvdp_display_photometry.load(CVVDP_DISPLAY, [])
+        pu = pc.pu_psnr_y(display_photometry=photometry, device=pred.device)
+        # vq_metric.predict misses the same import: the video source is built here.
+        from pycvvdp.video_source import video_source_array
+    if "cvvdp_jod" in which:
+        jod = pc.cvvdp(display_name=CVVDP_DISPLAY, device=pred.device, quiet=True)
+    out: dict[str, list] = {w: [] for w in which}
+    for lp, lg in _display_pairs(pred, gt, cd_per_unit):
+        with torch.no_grad():
+            if pu is not None:
+                vs = video_source_array(lp, lg, rate, dim_order="BCFHW", display_photometry=photometry)
+                q, _ = pu.predict_video_source(vs)
+                out["pu21_psnr"].append(torch.as_tensor(q, dtype=torch.float32).reshape(-1)[0])
+            if jod is not None:
+                q, _ = jod.predict(lp, lg, dim_order="BCFHW", frames_per_second=rate)
+                out["cvvdp_jod"].append(torch.as_tensor(q, dtype=torch.float32).reshape(-1)[0])
+    return {k: torch.stack(v) for k, v in out.items()}
+
+
 def pu21_psnr(pred: torch.Tensor, gt: torch.Tensor, cd_per_unit: float | None = None,
               fps: float = 60.0) -> torch.Tensor:
     """PU21-PSNR (Mantiuk & Azimi 2021) through ``pycvvdp.pu_psnr_y`` on absolute luminance.
@@ -390,25 +447,7 @@ def pu21_psnr(pred: torch.Tensor, gt: torch.Tensor, cd_per_unit: float | None = 
     Returns:
         (B,) in dB (PU21 units, peak = PU21(100 cd m^-2)).
     """
-    _check_pair(pred, gt, min_dim=5)
-    pc = load_pycvvdp()
-    # pycvvdp 0.5.7's vq_metric.set_display_model misses an import: pass the photometry object explicitly.
-    photometry = pc.vvdp_display_photometry.load(CVVDP_DISPLAY, [])
-    metric = pc.pu_psnr_y(display_photometry=photometry, device=pred.device)
-    out = []
-    for b in range(pred.shape[0]):
-        lg, scale = to_display_luminance(gt[b:b + 1], gt[b:b + 1], cd_per_unit)
-        lp, _ = to_display_luminance(pred[b:b + 1], gt[b:b + 1], scale)
-        # vq_metric.predict misses the same import: build the video source here.
-        from pycvvdp.video_source import video_source_array
-
-        vs = video_source_array(_to_bcfhw_luminance(lp).float(), _to_bcfhw_luminance(lg).float(),
-                                fps if pred.shape[1] > 1 else 0,
-                                dim_order="BCFHW", display_photometry=photometry)
-        with torch.no_grad():
-            q, _ = metric.predict_video_source(vs)
-        out.append(torch.as_tensor(q, dtype=torch.float32).reshape(-1)[0])
-    return torch.stack(out)
+    return perceptual_metrics(pred, gt, cd_per_unit, fps, which=("pu21_psnr",))["pu21_psnr"]
 
 
 def cvvdp_jod(pred: torch.Tensor, gt: torch.Tensor, fps: float = 60.0,
@@ -423,16 +462,4 @@ def cvvdp_jod(pred: torch.Tensor, gt: torch.Tensor, fps: float = 60.0,
     Returns:
         (B,) JOD.
     """
-    _check_pair(pred, gt, min_dim=5)
-    pc = load_pycvvdp()
-    metric = pc.cvvdp(display_name=CVVDP_DISPLAY, device=pred.device, quiet=True)
-    rate = fps if pred.shape[1] > 1 else 0
-    out = []
-    for b in range(pred.shape[0]):
-        lg, scale = to_display_luminance(gt[b:b + 1], gt[b:b + 1], cd_per_unit)
-        lp, _ = to_display_luminance(pred[b:b + 1], gt[b:b + 1], scale)
-        with torch.no_grad():
-            q, _ = metric.predict(_to_bcfhw_luminance(lp).float(), _to_bcfhw_luminance(lg).float(),
-                                  dim_order="BCFHW", frames_per_second=rate)
-        out.append(torch.as_tensor(q, dtype=torch.float32).reshape(-1)[0])
-    return torch.stack(out)
+    return perceptual_metrics(pred, gt, cd_per_unit, fps, which=("cvvdp_jod",))["cvvdp_jod"]

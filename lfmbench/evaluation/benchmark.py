@@ -1,0 +1,83 @@
+"""Evaluate several methods on one corpus split and write the leaderboard (what ``make demo`` needs)."""
+from __future__ import annotations
+
+import re
+from collections.abc import Iterable
+from pathlib import Path
+
+from lfmbench.fileio import atomic_write_text
+
+
+def safe_name(spec: str) -> str:
+    """A file name for a method spec (``pkg.mod:fn`` -> ``pkg.mod_fn``)."""
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", spec).strip("_") or "method"
+
+
+def corpus_run_inputs(corpus: str | Path, split: str, seed: int, crop: int | None, samples_per_scene: int,
+                      **dataset_kw):
+    """(dataset, corpus identity, scene-conditions reader) of a corpus split; the identity is taken after the
+    dataset has frozen the test draws (``test_params.json``), so it covers them."""
+    from lfmbench.datasets.loading import make_dataset
+    from lfmbench.evaluation.conditions import corpus_scene_conditions
+    from lfmbench.evaluation.provenance import corpus_identity
+
+    ds = make_dataset(corpus, split, seed=seed, crop=crop, samples_per_scene=samples_per_scene, **dataset_kw)
+    return ds, corpus_identity(corpus), corpus_scene_conditions(ds.corpus)
+
+
+def write_leaderboard(rows: list[dict], runs: list[dict], sort_by: str | None, markdown: str | Path,
+                      plot: str | Path, json_path: str | Path | None = None,
+                      conditions_file: str | Path | None = None) -> list[Path]:
+    """Write the Markdown table, the quality-vs-run-time plot and (``json_path``) the leaderboard JSON."""
+    from lfmbench.evaluation.leaderboard import leaderboard_json, leaderboard_markdown, plot_quality_vs_runtime
+    from lfmbench.evaluation.results import write_json_atomic
+
+    atomic_write_text(markdown, leaderboard_markdown(rows, sort_by))
+    out = [Path(markdown), plot_quality_vs_runtime(rows, plot, sort_by)]
+    if json_path is not None:
+        out.append(write_json_atomic(leaderboard_json(rows, runs, sort_by, conditions_file), json_path))
+    return out
+
+
+def benchmark(corpus: str | Path, methods: Iterable[str] | None = None, runs_dir: str | Path = "runs",
+              split: str = "test", seed: int = 0, crop: int | None = None, max_scenes: int | None = None,
+              perceptual: bool = True, repeats: int = 5, device: str = "cpu", sort_by: str | None = None,
+              progress: bool = True, samples_per_scene: int = 1, cache_dir: str | Path | None = None) -> list[dict]:
+    """Evaluate several methods on one corpus split and build the leaderboard.
+
+    Writes ``runs_dir/<method>.json`` per method, ``runs_dir/leaderboard.md``, ``leaderboard.json`` and
+    ``leaderboard.png``, prints the table and returns the ranked rows (default ranking: the LED score).
+    ``methods`` defaults to every registered baseline. ``cache_dir``: the dataset's projection cache (default
+    ``<corpus>/.cache``; any writable directory for a read-only corpus).
+    """
+    from itertools import islice
+
+    from torch.utils.data import DataLoader
+
+    from lfmbench.baselines import REGISTRY
+    from lfmbench.datasets.loading import collate_samples
+    from lfmbench.evaluation.leaderboard import check_comparable, leaderboard_rows, load_runs, print_leaderboard
+    from lfmbench.evaluation.run import evaluate
+    from lfmbench.metrics import ScoreOptions
+
+    runs_dir = Path(runs_dir)
+    extra = {} if cache_dir is None else {"cache_dir": cache_dir}
+    ds, ident, cond = corpus_run_inputs(corpus, split, seed, crop, samples_per_scene, **extra)
+    n = len(ds) if max_scenes is None else min(len(ds), max_scenes)
+    paths = []
+    for m in (list(methods) if methods is not None else list(REGISTRY)):
+        loader = DataLoader(ds, batch_size=1, shuffle=False, num_workers=0, collate_fn=collate_samples)
+        out = runs_dir / f"{safe_name(m)}.json"
+        evaluate(m, islice(loader, n), method_spec=m, output=out, options=ScoreOptions(perceptual=perceptual),
+                 repeats=repeats, device=device, seeds={"dataset": seed},
+                 dataset={"corpus": str(corpus), "split": split, "scenes": n, "crop": crop,
+                          "samples_per_scene": samples_per_scene}, progress=progress,
+                 total=n, corpus=ident, scene_conditions=cond)
+        paths.append(out)
+    runs = load_runs(paths)
+    check_comparable(runs)
+    rows = leaderboard_rows(runs, sort_by)
+    write_leaderboard(rows, runs, sort_by, runs_dir / "leaderboard.md", runs_dir / "leaderboard.png",
+                      runs_dir / "leaderboard.json")
+    print_leaderboard(rows, sort_by, note=f"all columns in {runs_dir / 'leaderboard.md'}")
+    return rows

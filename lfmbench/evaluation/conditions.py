@@ -1,0 +1,152 @@
+"""Conditions of every scored sample (time of day, PWM duty and frequency, ego speed) and their bins.
+
+- :func:`sample_conditions`: PWM duty and frequency of each sample of a batch, from its ``meta`` (the dataset's
+  per-light ``duty``, ``freq_hz`` and ``flicker`` arrays): means over the flickering lights.
+- :func:`corpus_scene_conditions`: a ``scene_id -> {time_of_day, ego_speed_mps}`` reader of a corpus
+  (``scene.json`` ``time_of_day``, ``meta.json`` ``camera.speed_mps``).
+- :func:`load_bins`, :func:`bin_label`: the breakdown bins of ``lfmbench/configs/conditions.yaml``.
+"""
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+#: The default bins (plain YAML a user can edit or replace with ``--conditions``).
+CONDITIONS_CONFIG = Path(__file__).resolve().parents[1] / "configs" / "conditions.yaml"
+#: Label of a sample without a value for a condition.
+NA = "n/a"
+
+
+def load_bins(path: str | Path | None = None) -> dict[str, dict]:
+    """Condition name -> ``{"categories": [...]}`` or ``{"edges": [...], "unit": str}``, checked.
+
+    Raises:
+        ValueError: naming the file and the entry when the file is not such a mapping.
+    """
+    p = Path(path or CONDITIONS_CONFIG)
+    try:
+        cfg = yaml.safe_load(p.read_text(encoding="utf-8"))
+    except (OSError, yaml.YAMLError, UnicodeDecodeError) as exc:
+        raise ValueError(f"conditions file {p}: cannot read YAML ({type(exc).__name__}: {exc})") from None
+    if not isinstance(cfg, dict) or not cfg:
+        raise ValueError(f"conditions file {p}: must map condition names to bins")
+    for name, spec in cfg.items():
+        if not isinstance(spec, dict) or ("categories" in spec) == ("edges" in spec):
+            raise ValueError(f"conditions file {p}: {name}: give either 'categories' or 'edges'")
+        if "edges" in spec:
+            e = spec["edges"]
+            if (not isinstance(e, list) or len(e) < 2 or not all(isinstance(x, (int, float)) for x in e)
+                    or any(b <= a for a, b in zip(e, e[1:]))):
+                raise ValueError(f"conditions file {p}: {name}.edges must be >= 2 increasing numbers, got {e!r}")
+        elif not isinstance(spec["categories"], list) or not spec["categories"]:
+            raise ValueError(f"conditions file {p}: {name}.categories must be a non-empty list")
+    return cfg
+
+
+def _num(x: float) -> str:
+    return "inf" if math.isinf(x) else f"{x:g}"
+
+
+def bin_labels(spec: dict) -> list[str]:
+    """Every label of a condition's bins, in order (``n/a`` last)."""
+    if "categories" in spec:
+        return [str(c) for c in spec["categories"]] + [NA]
+    e = spec["edges"]
+    return [f"[{_num(a)}, {_num(b)})" for a, b in zip(e, e[1:])] + [NA]
+
+
+def bin_label(value: Any, spec: dict) -> str:
+    """The bin of ``value`` under ``spec`` (see :func:`load_bins`); ``n/a`` for a missing or out-of-range value.
+
+    >>> bin_label(0.3, {"edges": [0.0, 0.2, 0.35, 1.0]}), bin_label("night", {"categories": ["day", "night"]})
+    ('[0.2, 0.35)', 'night')
+    """
+    if value is None:
+        return NA
+    if "categories" in spec:
+        return str(value) if str(value) in [str(c) for c in spec["categories"]] else NA
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        return NA
+    e = spec["edges"]
+    for a, b in zip(e, e[1:]):
+        if a <= v < b:
+            return f"[{_num(a)}, {_num(b)})"
+    return NA
+
+
+def _per_sample(meta: Any, key: str, b: int) -> list:
+    """``meta[key]`` split into ``b`` per-sample entries (collated dict, or a list of per-sample dicts)."""
+    if isinstance(meta, (list, tuple)):
+        return [m.get(key) if isinstance(m, dict) else None for m in meta][:b] + [None] * max(0, b - len(meta))
+    if not isinstance(meta, dict) or key not in meta:
+        return [None] * b
+    v = meta[key]
+    try:
+        import torch
+
+        if isinstance(v, torch.Tensor):
+            return list(v.reshape(b, -1)) if v.ndim >= 1 and v.shape[0] == b else [v] * b
+    except ImportError:  # pragma: no cover
+        pass
+    if isinstance(v, (list, tuple)) and len(v) == b:
+        return list(v)
+    return [v] * b
+
+
+def sample_conditions(batch: dict) -> list[dict]:
+    """PWM conditions of each sample of a batch: ``pwm_duty`` (1) and ``pwm_freq_hz`` (Hz), means over the
+    sample's flickering lights (``meta`` arrays ``duty``, ``freq_hz``, ``flicker`` of shape (B, L)); None when
+    the sample has no flickering light or the meta lacks them. ``time_of_day`` and ``ego_speed_mps`` are taken
+    from ``meta`` when a data source provides them."""
+    import torch
+
+    b = batch["gt"].shape[0]
+    meta = batch.get("meta", {})
+    duty, freq, flick = (_per_sample(meta, k, b) for k in ("duty", "freq_hz", "flicker"))
+    out = []
+    for i in range(b):
+        rec: dict[str, Any] = {}
+        for name, arr in (("pwm_duty", duty[i]), ("pwm_freq_hz", freq[i])):
+            if arr is None or flick[i] is None:
+                continue
+            a, f = torch.as_tensor(arr, dtype=torch.float64).reshape(-1), torch.as_tensor(flick[i]).reshape(-1)
+            if a.shape == f.shape and bool(f.bool().any()):
+                rec[name] = float(a[f.bool()].mean())
+        for key in ("time_of_day", "ego_speed_mps"):
+            v = _per_sample(meta, key, b)[i]
+            if v is not None:
+                rec[key] = v if isinstance(v, str) else float(v)
+        out.append(rec)
+    return out
+
+
+def corpus_scene_conditions(corpus) -> Callable[[str], dict]:
+    """``scene_id -> {"time_of_day": str, "ego_speed_mps": float}`` read (once per scene) from an
+    :class:`lfmbench.corpus.Corpus`; a field the scene files lack is left out."""
+    cache: dict[str, dict] = {}
+
+    def get(scene_id: str) -> dict:
+        if scene_id not in cache:
+            rec: dict[str, Any] = {}
+            try:
+                tod = corpus.scene(scene_id).get("time_of_day")
+                if isinstance(tod, str):
+                    rec["time_of_day"] = tod
+            except (OSError, ValueError, KeyError, AttributeError):  # a scene file the dataset did not need
+                pass
+            try:
+                v = corpus.meta(scene_id).get("camera", {}).get("speed_mps")
+                if isinstance(v, (int, float)) and math.isfinite(v):
+                    rec["ego_speed_mps"] = float(v)
+            except (OSError, ValueError, KeyError, AttributeError):  # a scene file the dataset did not need
+                pass
+            cache[scene_id] = rec
+        return cache[scene_id]
+
+    return get

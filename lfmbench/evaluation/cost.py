@@ -1,0 +1,77 @@
+"""Cost of a method: wall time per output megapixel, parameters and multiply-accumulates (MACs)."""
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from typing import Any
+
+import torch
+
+
+def method_module(method: Callable) -> torch.nn.Module | None:
+    """The ``nn.Module`` behind a method: the method itself, or its ``torch_module`` attribute (a module or a
+    zero-argument callable returning one)."""
+    if isinstance(method, torch.nn.Module):
+        return method
+    mod = getattr(method, "torch_module", None)
+    if mod is None:
+        return None
+    return mod if isinstance(mod, torch.nn.Module) else mod()
+
+
+def count_params_macs(module: torch.nn.Module, run: Callable[[], Any]) -> tuple[int, int]:
+    """(trainable + frozen parameter count, multiply-accumulates of one ``run()``).
+
+    MACs are counted with forward hooks: Conv1d/2d/3d ``out.numel() * in_channels / groups * prod(kernel)``,
+    Linear ``out.numel() * in_features`` (bias and activations not counted).
+    """
+    macs = 0
+
+    def conv_hook(m, inp, out):
+        nonlocal macs
+        k = 1
+        for s in m.kernel_size:
+            k *= s
+        macs += out.numel() * (m.in_channels // m.groups) * k
+
+    def lin_hook(m, inp, out):
+        nonlocal macs
+        macs += out.numel() * m.in_features
+
+    hooks = []
+    for m in module.modules():
+        if isinstance(m, (torch.nn.Conv1d, torch.nn.Conv2d, torch.nn.Conv3d)):
+            hooks.append(m.register_forward_hook(conv_hook))
+        elif isinstance(m, torch.nn.Linear):
+            hooks.append(m.register_forward_hook(lin_hook))
+    try:
+        with torch.no_grad():
+            run()
+    finally:
+        for h in hooks:
+            h.remove()
+    return sum(p.numel() for p in module.parameters()), int(macs)
+
+
+def sync(device: torch.device) -> None:
+    """Wait for the device (CUDA) to finish queued work; no-op on CPU."""
+    if device.type == "cuda":
+        torch.cuda.synchronize(device)
+
+
+def time_method(method: Callable, batch: dict, warmup: int = 1, repeats: int = 5,
+                device: str | torch.device = "cpu") -> list[float]:
+    """Wall time (ms) of ``repeats`` calls of ``method(batch)`` (batch tensors (B, F, C, H, W)) after ``warmup``
+    calls, synchronised on CUDA."""
+    dev = torch.device(device)
+    with torch.no_grad():
+        for _ in range(warmup):
+            method(dict(batch))
+        sync(dev)
+        out = []
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            method(dict(batch))
+            sync(dev)
+            out.append((time.perf_counter() - t0) * 1e3)
+    return out

@@ -1,0 +1,430 @@
+"""The leaderboard: rank evaluation results, with confidence intervals, paired tests and a breakdown by condition.
+
+- :func:`load_runs` reads result files; :func:`check_comparable` refuses results computed on different corpora,
+  with different metric versions or a different protocol (split, seed, crop, samples per scene, scoring
+  options), naming the files and how they differ.
+- :func:`leaderboard_rows` ranks them by one registered metric (default :data:`lfmbench.metrics.PRIMARY`, the
+  LED score): per-scene values from each result's sample records, bootstrap CIs over scenes, each method
+  against the best (Wilcoxon signed-rank, Holm-adjusted), the Pareto front of LED score against PSNR-mu
+  outside the LED regions, and the breakdown by condition.
+- :func:`leaderboard_markdown`, :func:`leaderboard_json`, :func:`print_leaderboard`,
+  :func:`plot_quality_vs_runtime` present them. Columns, headers and directions come from the metric registry.
+"""
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Iterable
+from pathlib import Path
+from typing import Any
+
+from lfmbench.evaluation import stats
+from lfmbench.evaluation.conditions import bin_labels, load_bins
+from lfmbench.evaluation.results import (COMPLETE, RESULT_FORMAT, breakdown, jsonable, metric_summary, num,
+                                         per_scene)
+from lfmbench.fileio import atomic_save_figure
+
+LEADERBOARD_FORMAT = "lfmbench-leaderboard"
+LEADERBOARD_VERSION = 1
+#: The two axes of the Pareto front: the lights, and the rest of the image.
+PARETO_AXES = ("led_score", "psnr_mu_outside")
+
+
+class IncomparableRunsError(ValueError):
+    """Result files computed on different corpora, metric versions or protocols."""
+
+
+def load_runs(paths: Iterable[str | Path]) -> list[dict]:
+    """Read evaluation JSON files; raise ValueError naming a file that is not an lfmbench result."""
+    runs = []
+    for p in paths:
+        p = Path(p)
+        try:
+            d = json.loads(p.read_text(encoding="utf-8"))
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+            raise ValueError(f"run file {p}: cannot read JSON ({type(exc).__name__}: {exc})") from None
+        if not isinstance(d, dict) or d.get("format") != RESULT_FORMAT:
+            fmt = d.get("format") if isinstance(d, dict) else None
+            raise ValueError(f"run file {p}: not an {RESULT_FORMAT} result (format={fmt!r})")
+        for key, typ in (("method", dict), ("runtime", dict), ("aggregate", dict), ("status", str)):
+            if not isinstance(d.get(key), typ):
+                raise ValueError(f"run file {p}: field {key!r} missing or not a{'n object' if typ is dict else ' string'}"
+                                 " (a truncated or hand-made result?)")
+        if not isinstance(d["method"].get("spec"), str):
+            raise ValueError(f"run file {p}: field 'method.spec' missing")
+        d["_path"] = str(p)
+        runs.append(d)
+    if not runs:
+        raise ValueError("no run files given")
+    return runs
+
+
+def incomplete_runs(runs: list[dict]) -> list[str]:
+    """``"<path>: status <status>"`` for each run that is not complete (interrupted, failed, killed)."""
+    return [f"{r.get('_path')}: status {r.get('status')!r}" for r in runs if r.get("status") != COMPLETE]
+
+
+# ------------------------------------------------------------------------------------------- comparability
+def identity(run: dict) -> dict[str, Any]:
+    """What must agree between results ranked together: corpus (manifest SHA-256, format version, frozen test
+    draws), metric versions, split, dataset seed, crop, samples per scene and scoring options."""
+    c = run.get("corpus") or {}
+    d = run.get("dataset") or {}
+    split = d.get("split")
+    return {
+        "corpus manifest sha256": c.get("manifest_sha256"),
+        "corpus format version": c.get("format_version"),
+        "corpus test draws (test_params.json) sha256": c.get("test_params_sha256") if split == "test" else None,
+        "metric versions": (run.get("versions") or {}).get("metrics"),
+        "split": split, "dataset seed": (run.get("seeds") or {}).get("dataset"), "crop": d.get("crop"),
+        "samples per scene": d.get("samples_per_scene", 1),
+        "scoring options": {k: v for k, v in (run.get("options") or {}).items() if k != "perceptual"},
+    }
+
+
+def _show(field: str, v: Any, run: dict) -> str:
+    if v is None:
+        return "none (not evaluated on a corpus, or a result file older than format version 2)" \
+            if field.startswith("corpus manifest") else "none"
+    if field == "corpus manifest sha256":
+        return f"{v[:12]}... (corpus {(run.get('corpus') or {}).get('path')})"
+    return json.dumps(v, sort_keys=True) if isinstance(v, (dict, list)) else str(v)
+
+
+def _names(paths: list[str], k: int = 3) -> str:
+    return ", ".join(Path(p).name if len({Path(q).name for q in paths}) == len(paths) else p for p in paths[:k]) + \
+        (f" (+{len(paths) - k} more)" if len(paths) > k else "")
+
+
+def comparability_problems(runs: list[dict]) -> list[str]:
+    """One line per field on which the runs differ, naming the files of each value (empty: comparable)."""
+    ids = [identity(r) for r in runs]
+    problems = []
+    for field in ids[0]:
+        vals = [i[field] for i in ids]
+        if all(v == vals[0] for v in vals):
+            continue
+        if field == "metric versions":
+            names = sorted(set().union(*[set(v or {}) for v in vals]))
+            diff = []
+            for n in names:
+                per = [(v or {}).get(n) for v in vals]
+                if any(x != per[0] for x in per):
+                    groups: dict[str, list[str]] = {}
+                    for r, x in zip(runs, per):
+                        groups.setdefault(x if x is not None else "missing", []).append(r["_path"])
+                    diff.append(f"{n}: " + "; ".join(f"{x} in {_names(p)}" for x, p in groups.items()))
+            problems.append("metric versions differ (" + " | ".join(diff[:4]) + (" | ..." if len(diff) > 4 else "")
+                            + ")")
+            continue
+        groups2: dict[str, list[str]] = {}
+        for r, v in zip(runs, vals):
+            groups2.setdefault(_show(field, v, r), []).append(r["_path"])
+        problems.append(f"{field} differs: " + "; ".join(f"{k} in {_names(p)}" for k, p in groups2.items()))
+    return problems
+
+
+def check_comparable(runs: list[dict]) -> None:
+    """Raise :class:`IncomparableRunsError` (one message, one clause per differing field) unless every run was
+    computed on the same corpus, with the same metric versions and protocol."""
+    problems = comparability_problems(runs)
+    if problems:
+        raise IncomparableRunsError("these results cannot be ranked together: " + "; ".join(problems)
+                                    + ". Re-evaluate every method on one corpus with one lfmbench version, or rank "
+                                      "the groups separately")
+
+
+# --------------------------------------------------------------------------------------------------- ranking
+def _check_sort_by(sort_by: str) -> Any:
+    from lfmbench.metrics import REGISTRY
+
+    if sort_by not in REGISTRY:
+        raise ValueError(f"sort_by must be a registered metric ({', '.join(REGISTRY)}), got {sort_by!r}")
+    return REGISTRY[sort_by]
+
+
+def _pareto(rows: list[dict], axes: tuple[str, str]) -> None:
+    """Mark ``row["pareto"]``: no other complete row is at least as good on both axes and better on one."""
+    from lfmbench.metrics import REGISTRY
+
+    sign = [1.0 if REGISTRY[a].higher_is_better else -1.0 for a in axes]
+
+    def pt(r):
+        return [s * r.get(a, float("nan")) for s, a in zip(sign, axes)]
+
+    for r in rows:
+        p = pt(r)
+        if r["status"] != COMPLETE or any(math.isnan(x) for x in p):
+            r["pareto"] = None
+            continue
+        r["pareto"] = not any(
+            o is not r and o["status"] == COMPLETE and all(a >= b for a, b in zip(pt(o), p))
+            and any(a > b for a, b in zip(pt(o), p)) for o in rows if not any(math.isnan(x) for x in pt(o)))
+
+
+def leaderboard_rows(runs: list[dict], sort_by: str | None = None, *, ci: bool = True,
+                     conditions_file: str | Path | None = None) -> list[dict]:
+    """One row per run, ranked by ``sort_by`` (default the LED score; direction from the metric registry; missing
+    values and incomplete runs last), with statistics.
+
+    Every row holds each registered metric's value over scenes (recomputed from the run's sample records),
+    ``ci`` (metric -> [low, high], bootstrap over scenes, for the table metrics and ``sort_by``),
+    ``n_scenes``, ``vs_best`` (the paired comparison with rank 1 on ``sort_by``: ``n``, ``mean_diff``, ``ci``,
+    ``p`` (Wilcoxon), ``p_holm``; None for rank 1), ``pareto`` (on the front of :data:`PARETO_AXES`) and
+    ``breakdown`` (``sort_by`` by condition).
+    """
+    from lfmbench.metrics import PRIMARY, REGISTRY, columns
+
+    sort_by = sort_by or PRIMARY
+    spec = _check_sort_by(sort_by)
+    known = [r for r in runs if isinstance((r.get("versions") or {}).get("metrics"), dict)]
+    if known and not any(sort_by in r["versions"]["metrics"] for r in known):
+        raise ValueError(f"no run file was scored with {sort_by!r} ({_names([r['_path'] for r in known])}: made by "
+                         f"an older lfmbench?); re-run lfmbench evaluate, or rank with --sort-by psnr_mu")
+    bins = load_bins(conditions_file)
+    want_ci = {s.name for s in columns("table")} | {sort_by}
+    rows = []
+    for r in runs:
+        agg = r.get("aggregate", {})
+        records = r.get("scenes") if isinstance(r.get("scenes"), list) else []
+        scenes = per_scene(records)
+        row = {"method": r["method"]["spec"], "path": r.get("_path"), "device": r["runtime"].get("device"),
+               "ms_per_megapixel": num(r["runtime"].get("ms_per_megapixel")),
+               "params": r["method"].get("params"), "macs_per_megapixel": r["method"].get("macs_per_megapixel"),
+               "scenes": agg.get("scenes", 0), "failed": agg.get("scenes_failed", 0), "status": r.get("status"),
+               "n_scenes": len(scenes), "ci": {}, "_scenes": scenes}
+        for k in REGISTRY:
+            if scenes and any(k in s["metrics"] for s in scenes):
+                m = metric_summary(scenes, k, ci=ci and k in want_ci)
+                row[k] = m["value"]
+                if ci and k in want_ci:
+                    row["ci"][k] = m["ci"]
+            else:  # a hand-made or truncated result without sample records: its stored aggregate
+                row[k] = num(agg.get(k))
+        row["breakdown"] = breakdown(records, sort_by, bins, ci=ci) if records else {}
+        rows.append(row)
+
+    def key(row):
+        v = row[sort_by]
+        if math.isnan(v):
+            return (1, 0.0)
+        return (0, -v if spec.higher_is_better else v)
+
+    rows.sort(key=lambda row: (row["status"] != COMPLETE, *key(row)))  # incomplete runs after complete ones
+    for i, row in enumerate(rows):
+        row["rank"] = i + 1
+    _compare_with_best(rows, sort_by)
+    if all(a in REGISTRY for a in PARETO_AXES):
+        _pareto(rows, PARETO_AXES)
+    return rows
+
+
+def _compare_with_best(rows: list[dict], sort_by: str) -> None:
+    """``vs_best`` of every row: paired over the scenes both the row and rank 1 scored."""
+    for r in rows:
+        r["vs_best"] = None
+    if not rows or rows[0]["status"] != COMPLETE or math.isnan(rows[0][sort_by]):
+        return
+    best = {s["scene_id"]: num(s["metrics"].get(sort_by)) for s in rows[0]["_scenes"]}
+    tested = []
+    for r in rows[1:]:
+        mine = {s["scene_id"]: num(s["metrics"].get(sort_by)) for s in r["_scenes"]}
+        common = [k for k in mine if k in best]
+        if not common:
+            continue
+        r["vs_best"] = stats.paired_test([mine[k] for k in common], [best[k] for k in common])
+        tested.append(r)
+    for r, p in zip(tested, stats.holm([r["vs_best"]["p"] for r in tested])):
+        r["vs_best"]["p_holm"] = p
+
+
+# ------------------------------------------------------------------------------------------------ formatting
+def _status_mark(row: dict) -> str:
+    """`` (interrupted)`` etc. after the method name of a run whose status is not ``complete``."""
+    return "" if row.get("status") == COMPLETE else f" ({row.get('status')}: not a complete result)"
+
+
+def _fmt(v: Any, nd: int = 3) -> str:
+    if v is None:
+        return "-"
+    if isinstance(v, bool):
+        return str(v)
+    if isinstance(v, int):
+        return f"{v:,}"
+    v = float(v)
+    if math.isnan(v):
+        return "-"
+    if math.isinf(v):
+        return "inf" if v > 0 else "-inf"
+    return f"{v:.{nd}f}" if abs(v) < 1e4 else f"{v:.3g}"
+
+
+def _ci(ci: list | None, nd: int) -> str:
+    if not ci or any(math.isnan(num(x)) for x in ci):
+        return "-"
+    return f"[{_fmt(ci[0], nd)}, {_fmt(ci[1], nd)}]"
+
+
+def _columns(rows: list[dict], where: str = "table") -> list:
+    from lfmbench.metrics import columns
+
+    return [s for s in columns(where) if any(not math.isnan(r[s.name]) for r in rows)]
+
+
+def _vs_best(row: dict, nd: int) -> tuple[str, str]:
+    vb = row.get("vs_best")
+    if row["rank"] == 1:
+        return "best", "-"
+    if not vb:
+        return "-", "-"
+    sig = " *" if num(vb.get("p_holm")) < stats.ALPHA else ""
+    return (f"{_fmt(vb['mean_diff'], nd)} {_ci(vb['ci'], nd)}", f"{_fmt(vb['p'])} / {_fmt(vb.get('p_holm'))}{sig}")
+
+
+def leaderboard_markdown(rows: list[dict], sort_by: str | None = None) -> str:
+    """The ranked table as GitHub Markdown, then the CIs of the main metrics and the breakdown by condition."""
+    from lfmbench.metrics import PRIMARY
+
+    sort_by = sort_by or PRIMARY
+    spec = _check_sort_by(sort_by)
+    nd = spec.digits
+    cols = [s for s in _columns(rows) if s.name != sort_by]
+    st = stats.settings()
+    head = (["#", "method", f"{spec.header} [95 % CI]", "diff vs best [95 % CI]", "p / p Holm", "n"]
+            + [s.header for s in cols] + ["Pareto", "ms/MP", "params", "MACs/MP", "failed"])
+    lines = [f"Ranked by `{sort_by}` ({spec.direction} is better; {spec.reference}). Intervals: "
+             f"{int(st['confidence'] * 100)} % {st['ci']}, {st['n_resamples']} resamples, seed {st['seed']}; "
+             f"n = scenes. Each method against the best: {st['paired_test']} (`*`: p Holm < {st['alpha']}). "
+             f"Pareto: not dominated on ({', '.join(PARETO_AXES)}). Run time = median ms per output megapixel "
+             "after warm-up.", "",
+             "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for r in rows:
+        d, p = _vs_best(r, nd)
+        cells = [str(r["rank"]), f"`{r['method']}`" + _status_mark(r),
+                 f"{_fmt(r[sort_by], nd)} {_ci(r['ci'].get(sort_by), nd)}", d, p, str(r["n_scenes"])]
+        cells += [_fmt(r[s.name], s.digits) for s in cols]
+        cells += ["yes" if r.get("pareto") else ("no" if r.get("pareto") is False else "-"),
+                  _fmt(r["ms_per_megapixel"], 1), _fmt(r["params"]), _fmt(r["macs_per_megapixel"], 0),
+                  f"{r['failed']}/{r['scenes']}"]
+        lines.append("| " + " | ".join(cells) + " |")
+    ci_cols = [s for s in _columns(rows, "console") if s.name != sort_by]
+    if any(r["ci"] for r in rows) and ci_cols:
+        lines += ["", f"{int(st['confidence'] * 100)} % confidence intervals over scenes:", "",
+                  "| method | " + " | ".join(s.header for s in ci_cols) + " |", "|---|" + "---|" * len(ci_cols)]
+        for r in rows:
+            lines.append(f"| `{r['method']}` | " + " | ".join(_ci(r["ci"].get(s.name), s.digits) for s in ci_cols)
+                         + " |")
+    bd = [r for r in rows if r.get("breakdown")]
+    if bd:
+        lines += ["", f"`{sort_by}` by condition (value [95 % CI] (scenes); bins: `lfmbench/configs/conditions.yaml`):"]
+        conds = list(bd[0]["breakdown"])
+        for cond in conds:
+            labels = [lab for lab in _all_labels(cond, bd) if any(lab in r["breakdown"].get(cond, {}) for r in bd)]
+            if not labels:
+                continue
+            lines += ["", f"| {cond} | " + " | ".join(labels) + " |", "|---|" + "---|" * len(labels)]
+            for r in bd:
+                c = r["breakdown"].get(cond, {})
+                lines.append(f"| `{r['method']}` | " + " | ".join(
+                    f"{_fmt(c[lab]['value'], nd)} {_ci(c[lab]['ci'], nd)} ({c[lab]['n']})" if lab in c else "-"
+                    for lab in labels) + " |")
+    devs = sorted({str(r["device"]) for r in rows})
+    lines += ["", f"Device: {'; '.join(devs)}."]
+    return "\n".join(lines) + "\n"
+
+
+def _all_labels(cond: str, rows: list[dict]) -> list[str]:
+    seen: list[str] = []
+    for r in rows:
+        for lab in r["breakdown"].get(cond, {}):
+            if lab not in seen:
+                seen.append(lab)
+    try:
+        order = bin_labels(load_bins()[cond])
+        return sorted(seen, key=lambda x: order.index(x) if x in order else len(order))
+    except (KeyError, ValueError):
+        return seen
+
+
+def leaderboard_json(rows: list[dict], runs: list[dict], sort_by: str | None = None,
+                     conditions_file: str | Path | None = None) -> dict:
+    """The leaderboard as a JSON-ready dict: settings, corpus identity, metric versions and every row."""
+    from lfmbench.metrics import PRIMARY, REGISTRY
+
+    sort_by = sort_by or PRIMARY
+    spec = REGISTRY[sort_by]
+    ident = identity(runs[0]) if runs else {}
+    return jsonable({
+        "format": LEADERBOARD_FORMAT, "version": LEADERBOARD_VERSION, "sort_by": sort_by,
+        "metric": {"name": spec.name, "version": spec.version, "unit": spec.unit, "direction": spec.direction,
+                   "reference": spec.reference},
+        "statistics": stats.settings(), "pareto_axes": list(PARETO_AXES),
+        "corpus": (runs[0].get("corpus") if runs else None), "protocol": ident,
+        "bins": load_bins(conditions_file),
+        "rows": [{k: v for k, v in r.items() if not k.startswith("_")} for r in rows],
+        "per_scene": {r["method"]: r["_scenes"] for r in rows},
+    })
+
+
+def plot_quality_vs_runtime(rows: list[dict], path: str | Path, metric: str | None = None) -> Path:
+    """Scatter of ``metric`` (default the LED score) against run time (ms per megapixel, log axis), one point
+    per method (legend), with the bootstrap CI of the metric as a vertical error bar."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from lfmbench.metrics import PRIMARY, REGISTRY
+
+    metric = metric or PRIMARY
+    fig, ax = plt.subplots(figsize=(7.6, 4.4), dpi=120)
+    markers = "osD^vP*Xh<>p"
+    for i, r in enumerate(rows):
+        x, y = r["ms_per_megapixel"], r[metric]
+        if math.isnan(x) or math.isnan(y) or math.isinf(y) or x <= 0:
+            continue
+        lo, hi = (num(v) for v in (r.get("ci", {}).get(metric) or (float("nan"), float("nan"))))
+        err = [[max(0.0, y - lo)], [max(0.0, hi - y)]] if math.isfinite(lo) and math.isfinite(hi) else None
+        # a legend rather than text labels: methods of similar cost and quality overlap
+        ax.errorbar([x], [y], yerr=err, fmt=markers[i % len(markers)], ms=6, capsize=3,
+                    label=f"{r.get('rank', i + 1)}. {r['method']}")
+    ax.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5), frameon=False)
+    ax.set_xscale("log")
+    ax.margins(x=0.25, y=0.1)
+    ax.set_xlabel("run time [ms per megapixel] (log)")
+    spec = REGISTRY.get(metric)
+    ax.set_ylabel(f"{spec.header if spec else metric} [{spec.unit if spec else ''}]")
+    ax.set_title(f"Quality vs run time ({'higher' if spec is None or spec.higher_is_better else 'lower'} is better; "
+                 f"bars: {int(stats.CONFIDENCE * 100)} % CI over scenes)", fontsize=9)
+    ax.grid(True, which="both", alpha=0.3)
+    fig.tight_layout()
+    path = atomic_save_figure(fig, path)
+    plt.close(fig)
+    return path
+
+
+def print_leaderboard(rows: list[dict], sort_by: str | None = None, note: str = "") -> None:
+    """Print the ranked rows as a rich table (the console metrics; the Markdown file has them all)."""
+    from rich.console import Console
+    from rich.table import Table
+
+    from lfmbench.metrics import PRIMARY
+
+    sort_by = sort_by or PRIMARY
+    spec = _check_sort_by(sort_by)
+    cols = [s for s in _columns(rows, "console") if s.name != sort_by]
+    console = Console()
+    if not console.is_terminal:
+        console = Console(width=180)
+    table = Table(title=f"lfmbench leaderboard (ranked by {sort_by}{'; ' + note if note else ''})")
+    heads = ["#", "method", f"{spec.header} [95% CI]", "p Holm vs best"] + [s.header for s in cols] + \
+        ["ms/MP", "params", "failed"]
+    for h in heads:
+        table.add_column(h, justify="left" if h == "method" else "right", no_wrap=h == "method")
+    for r in rows:
+        p = "best" if r["rank"] == 1 else (_fmt((r.get("vs_best") or {}).get("p_holm")))
+        table.add_row(str(r["rank"]), r["method"] + _status_mark(r),
+                      f"{_fmt(r[sort_by], spec.digits)} {_ci(r['ci'].get(sort_by), spec.digits)}", p,
+                      *[_fmt(r[s.name], s.digits) for s in cols],
+                      _fmt(r["ms_per_megapixel"], 1), _fmt(r["params"]), f"{r['failed']}/{r['scenes']}")
+    console.print(table)

@@ -1,0 +1,272 @@
+"""Run one fusion method over a stream of batches and score it: :func:`evaluate`.
+
+The data source is injectable (any iterable of sample-dict batches, ``docs/contracts.md`` section 3). Every
+scene is scored with :func:`lfmbench.metrics.score_batch`; the method is timed (warm-up, then the median of
+repeated synchronised calls, in ms per output megapixel) and its parameters and MACs counted when it is an
+``nn.Module``; versions, seeds, device, git revision and the corpus identity are recorded; the JSON result is
+written atomically after every batch. A method that raises, returns a wrong shape, NaN or inf is recorded per
+scene (``status``) and the run goes on. At the end the result gets per-scene values, bootstrap confidence
+intervals over scenes and the breakdown of the primary score by condition (``docs/metrics.md``).
+"""
+from __future__ import annotations
+
+import datetime as _dt
+import statistics
+import sys
+import time
+from collections.abc import Callable, Iterable
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from lfmbench.datasets.loading import EmptyDataError
+from lfmbench.evaluation import stats
+from lfmbench.evaluation.conditions import load_bins, sample_conditions
+from lfmbench.evaluation.cost import count_params_macs, method_module, sync, time_method
+from lfmbench.evaluation.provenance import device_name, git_revision, versions
+from lfmbench.evaluation.results import (COMPLETE, RESULT_FORMAT, RESULT_VERSION, aggregate, breakdown, per_scene,
+                                         write_json_atomic)
+
+__all__ = ["evaluate", "check_output", "MethodOutputError", "EmptyDataError", "DataSourceError",
+           "EvaluationInterrupted"]
+
+
+class MethodOutputError(ValueError):
+    """A method returned something that is not a finite (B, F, 1, H, W) tensor shaped like ``gt``."""
+
+
+class DataSourceError(RuntimeError):
+    """Reading a batch failed; the partial result (``status: failed``) has been written."""
+
+
+class EvaluationInterrupted(KeyboardInterrupt):
+    """Ctrl-C during :func:`evaluate`; the partial result (``status: interrupted``) has been written."""
+
+    def __init__(self, result: dict):
+        super().__init__("interrupted")
+        self.result = result
+
+
+def _describe(exc: BaseException) -> str:
+    """``Type: message`` of a method's exception; ``SystemExit`` (a method module calling ``sys.exit``) says so."""
+    if isinstance(exc, SystemExit):
+        return f"SystemExit: the method called sys.exit({exc.code!r}) (a method must return or raise, not exit)"
+    return f"{type(exc).__name__}: {exc}"
+
+
+def check_output(pred: Any, gt: torch.Tensor) -> torch.Tensor:
+    """Validate a method's output against ``gt`` (B, F, 1, H, W); raise :class:`MethodOutputError`."""
+    if not isinstance(pred, torch.Tensor):
+        raise MethodOutputError(f"method returned {type(pred).__name__}, expected a torch.Tensor")
+    if tuple(pred.shape) != tuple(gt.shape):
+        raise MethodOutputError(f"method returned shape {tuple(pred.shape)}, expected {tuple(gt.shape)} (shape of gt)")
+    if not pred.is_floating_point():
+        raise MethodOutputError(f"method returned dtype {pred.dtype}, expected a floating-point tensor")
+    finite = torch.isfinite(pred)
+    if not bool(finite.all()):
+        n_nan, n_inf = int(torch.isnan(pred).sum()), int(torch.isinf(pred).sum())
+        raise MethodOutputError(f"method returned non-finite values: {n_nan} NaN, {n_inf} inf")
+    return pred
+
+
+def _scene_ids(batch: dict) -> list[str]:
+    b = batch["gt"].shape[0]
+    meta = batch.get("meta", {})
+    ids = None
+    if isinstance(meta, dict):
+        ids = meta.get("scene_id")
+    elif isinstance(meta, (list, tuple)) and meta and isinstance(meta[0], dict):
+        ids = [m.get("scene_id") for m in meta]
+    if isinstance(ids, str):
+        ids = [ids]
+    if not isinstance(ids, (list, tuple)) or len(ids) != b:
+        ids = [None] * b
+    return [str(i) if i is not None else None for i in ids]
+
+
+def _to(batch: dict, device: torch.device) -> dict:
+    return {k: (v.to(device) if isinstance(v, torch.Tensor) else v) for k, v in batch.items()}
+
+
+def evaluate(method: Callable | str, batches: Iterable[dict], *, method_spec: str | None = None,
+             output: str | Path | None = None, options=None, warmup: int = 1, repeats: int = 5,
+             device: str | torch.device = "cpu", seeds: dict | None = None, dataset: dict | None = None,
+             progress: bool = True, total: int | None = None, corpus: dict | None = None,
+             scene_conditions: Callable[[str], dict] | None = None, conditions_file: str | Path | None = None
+             ) -> dict:
+    """Evaluate one fusion method over a stream of batches.
+
+    Args:
+        method: callable ``batch -> (B, F, 1, H, W)`` or a spec (registered name / ``package.module:function``).
+        batches: iterable of sample-dict batches (leading B); tensors are moved to ``device``.
+        method_spec: the spec string stored in the result (default: ``method`` if it is a string).
+        output: JSON path; rewritten atomically after every batch (partial results survive a crash).
+        options: :class:`lfmbench.metrics.ScoreOptions`.
+        warmup, repeats: timing protocol on the first batch the method handles (ms per output megapixel =
+            median of ``repeats`` calls / (B x F x H x W / 1e6)).
+        device: where the method and metrics run.
+        seeds: stored as given (dataset seed, PWM seed, ...).
+        dataset: description stored as given (corpus, split, ...).
+        progress: tqdm progress bar.
+        total: number of batches, for the progress bar.
+        corpus: the corpus identity (:func:`lfmbench.evaluation.provenance.corpus_identity`) stored as
+            ``corpus``; None for a data source that is not a corpus (the leaderboard then ranks the result only
+            with other results without a corpus).
+        scene_conditions: ``scene_id -> {"time_of_day", "ego_speed_mps"}`` stored with every sample record
+            (:func:`lfmbench.evaluation.conditions.corpus_scene_conditions`); PWM duty and frequency come from
+            the batch ``meta``.
+        conditions_file: bins of the breakdown by condition (default ``lfmbench/configs/conditions.yaml``).
+
+    Returns:
+        The result dict (also written to ``output``).
+
+    Result ``status``: ``complete``; ``failed`` when no scene was scored (the method failed on every one) or
+    the data source failed (:class:`DataSourceError`); ``interrupted`` after Ctrl-C
+    (:class:`EvaluationInterrupted`, the partial result written first); ``running`` in a file whose run was
+    killed. A method that calls ``sys.exit`` is recorded per scene like one that raises.
+
+    Raises:
+        EmptyDataError: if ``batches`` yields nothing.
+        EvaluationInterrupted: on Ctrl-C (a ``KeyboardInterrupt``).
+        lfmbench.baselines.MethodNotFoundError: for an unknown spec.
+    """
+    from lfmbench.baselines import get_method
+    from lfmbench.metrics import PRIMARY, ScoreOptions, hdr
+
+    o = options or ScoreOptions()
+    spec = method_spec or (method if isinstance(method, str) else getattr(method, "__qualname__", repr(method)))
+    fn = get_method(method)
+    bins = load_bins(conditions_file)
+    dev = torch.device(device)
+    result: dict[str, Any] = {
+        "format": RESULT_FORMAT, "version": RESULT_VERSION,
+        "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+        "method": {"spec": spec, "params": None, "macs_per_call": None, "macs_per_megapixel": None},
+        "dataset": dataset or {}, "corpus": corpus, "seeds": seeds or {},
+        "runtime": {"device": device_name(dev), "device_type": dev.type, "warmup": warmup, "repeats": repeats,
+                    "ms_per_megapixel": None, "median_ms": None, "times_ms": None, "megapixels_per_call": None},
+        "options": {"perceptual": o.perceptual, "fps": o.fps, "cd_per_unit": o.cd_per_unit,
+                    "region": vars(o.region), "margin_px": o.margin_px, "ring_px": o.ring_px},
+        "versions": versions(o.perceptual, o.cd_per_unit), "git": git_revision(),
+        "command": " ".join(sys.argv), "status": "running", "notes": [], "statistics": stats.settings(),
+        "aggregate": {}, "per_scene": [], "breakdown": {}, "scenes": [],
+    }
+    perceptual = o.perceptual
+    if perceptual:
+        try:
+            hdr.load_pycvvdp()
+        except hdr.CvvdpUnavailableError as exc:
+            perceptual = False
+            result["notes"].append(f"perceptual metrics skipped: {exc}")
+    opts = ScoreOptions(perceptual=perceptual, fps=o.fps, cd_per_unit=o.cd_per_unit, region=o.region,
+                        margin_px=o.margin_px, ring_px=o.ring_px)
+    it = batches
+    if progress:
+        from tqdm import tqdm
+
+        it = tqdm(batches, total=total, desc=f"evaluate {spec}", unit="batch")
+    source = iter(it)
+    try:
+        n_batches = _run_batches(fn, source, result, output, dev, opts, warmup, repeats, scene_conditions)
+    except KeyboardInterrupt:
+        result["status"] = "interrupted"
+        result["notes"].append(f"interrupted (Ctrl-C) after {len(result['scenes'])} scenes; not a complete result")
+        _finish(result, bins, PRIMARY)
+        if output is not None:
+            write_json_atomic(result, output)
+        raise EvaluationInterrupted(result) from None
+    if n_batches == 0:
+        raise EmptyDataError("the data source yielded no batch (empty corpus split?)")
+    _finish(result, bins, PRIMARY)
+    result["status"] = COMPLETE if result["aggregate"]["scenes_ok"] else "failed"
+    if result["status"] == "failed":
+        result["notes"].append("no scene was scored: the method failed on every scene")
+    if output is not None:
+        write_json_atomic(result, output)
+    return result
+
+
+def _finish(result: dict, bins: dict, metric: str) -> None:
+    """Final statistics of a result: aggregate with bootstrap CIs, per-scene values, breakdown of ``metric``."""
+    result["aggregate"] = aggregate(result["scenes"], ci=True)
+    result["per_scene"] = per_scene(result["scenes"])
+    result["breakdown"] = {"metric": metric, "bins": bins, "by": breakdown(result["scenes"], metric, bins)}
+
+
+def _run_batches(fn, source, result: dict, output, dev, opts, warmup: int, repeats: int,
+                 scene_conditions: Callable[[str], dict] | None) -> int:
+    """The loop of :func:`evaluate`: score every batch into ``result`` (rewritten to ``output`` after each,
+    without the bootstrap, which runs once at the end); returns the number of batches."""
+    from lfmbench.metrics import score_batch
+
+    timed = False
+    n_batches = 0
+    while True:
+        try:
+            batch = next(source)
+        except StopIteration:
+            break
+        except Exception as exc:  # the data source failed (corrupt file ...): save what we have, then stop
+            result["status"] = "failed"
+            result["notes"].append(f"data source failed after {n_batches} batches: {type(exc).__name__}: {exc}")
+            result["aggregate"] = aggregate(result["scenes"])
+            if output is not None:
+                write_json_atomic(result, output)
+            raise DataSourceError(f"reading batch {n_batches} failed: {type(exc).__name__}: {exc}") from exc
+        n_batches += 1
+        batch = _to(batch, dev)
+        if "gt" not in batch:
+            raise ValueError(f"batch {n_batches - 1} has no 'gt' key (keys: {sorted(batch)})")
+        gt = batch["gt"].clone()  # a method that edits its input in place must not change the reference
+        ids = _scene_ids(batch)
+        conds = sample_conditions(batch)
+        for sid, c in zip(ids, conds):
+            if scene_conditions is not None and sid is not None:
+                c.update(scene_conditions(sid))
+        t0 = time.perf_counter()
+        try:
+            with torch.no_grad():
+                pred = fn(dict(batch))
+            sync(dev)
+            call_ms = (time.perf_counter() - t0) * 1e3
+            pred = check_output(pred, gt)
+        except (Exception, SystemExit) as exc:  # the method's failure is a result, not a crash
+            status = "bad_output" if isinstance(exc, MethodOutputError) else "error"
+            for i, sid in enumerate(ids):
+                result["scenes"].append({"scene_id": sid, "index": len(result["scenes"]), "status": status,
+                                         "error": _describe(exc), "conditions": conds[i]})
+        else:
+            try:
+                scores = score_batch(pred, dict(batch, gt=gt), opts)
+            except Exception as exc:
+                scores = None
+                for i, sid in enumerate(ids):
+                    result["scenes"].append({"scene_id": sid, "index": len(result["scenes"]), "status": "metric_error",
+                                             "error": f"{type(exc).__name__}: {exc}", "conditions": conds[i]})
+            if scores is not None:
+                mp = gt[0].numel() / 1e6
+                for sid, s, c in zip(ids, scores, conds):
+                    result["scenes"].append({"scene_id": sid, "index": len(result["scenes"]), "status": "ok",
+                                             "call_ms": call_ms / gt.shape[0], "megapixels": mp, "metrics": s,
+                                             "conditions": c})
+                if not timed:
+                    timed = True
+                    try:
+                        times = time_method(fn, batch, warmup=max(0, warmup - 1), repeats=repeats, device=dev)
+                        med = statistics.median(times) if times else call_ms
+                        mps = gt.numel() / 1e6
+                        result["runtime"].update(times_ms=times, median_ms=med, megapixels_per_call=mps,
+                                                 ms_per_megapixel=med / mps)
+                        module = method_module(fn)
+                        if module is not None:
+                            params, macs = count_params_macs(module, lambda: fn(dict(batch)))
+                            result["method"].update(params=params, macs_per_call=macs, macs_per_megapixel=macs / mps)
+                    except (Exception, SystemExit) as exc:
+                        result["notes"].append(f"timing failed: {_describe(exc)}")
+        result["aggregate"] = aggregate(result["scenes"])
+        if output is not None:
+            write_json_atomic(result, output)
+    return n_batches
+
+
