@@ -110,7 +110,7 @@ def test_cache_decodes_once(one_scene, monkeypatch):
     root, meta, _ = one_scene
     calls = []
     real = C.read_exr
-    monkeypatch.setattr(C, "read_exr", lambda p, **kw: calls.append(p) or real(p, **kw))
+    monkeypatch.setattr(C.reader, "read_exr", lambda p, **kw: calls.append(p) or real(p, **kw))
     c = C.Corpus(root, cache_size=2)
     c.read_static(meta["scene_id"], 0, "headlights", "short")
     c.read_static(meta["scene_id"], 0, "headlights", "long")
@@ -298,12 +298,12 @@ def test_disk_full_leaves_valid_corpus(tmp_path, monkeypatch):
         if calls["n"] > 3:  # a few files go through, then the disk is full
             raise OSError(errno.ENOSPC, "No space left on device")
         real_fsync(fd)
-    monkeypatch.setattr(C.os, "fsync", full)
+    monkeypatch.setattr(os, "fsync", full)
     m1 = fake_meta("scene00001")
     with pytest.raises(C.CorpusWriteError, match="disk full") as ei:
         w.write_scene("scene00001", fake_scene(), m1, fake_frames(m1))
     assert ei.value.errno == errno.ENOSPC
-    monkeypatch.setattr(C.os, "fsync", real_fsync)
+    monkeypatch.setattr(os, "fsync", real_fsync)
     assert (root / "manifest.json").read_bytes() == manifest_before
     assert _no_tmp(root)
     rep = C.validate_corpus(root)

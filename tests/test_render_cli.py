@@ -113,9 +113,9 @@ def test_disk_full(tmp_path, fake, monkeypatch):
         if n["i"] > 2:
             raise OSError(errno.ENOSPC, "No space left on device")
         real(fd)
-    monkeypatch.setattr(C.os, "fsync", full)
+    monkeypatch.setattr(os, "fsync", full)
     r = run("--out", str(out), "--scenes", "2", *ARGS)
-    monkeypatch.setattr(C.os, "fsync", real)
+    monkeypatch.setattr(os, "fsync", real)
     assert r.exit_code == 2
     assert "disk full" in r.output and "re-run to resume" in r.output
     assert (out / "manifest.json").read_bytes() == before

@@ -1,0 +1,328 @@
+"""EXR encoding and decoding of corpus files through the OpenEXR 3.x Python API (``OpenEXR.File`` /
+``OpenEXR.Part``): :func:`encode_static_exr`, :func:`encode_lights_exr`, :func:`encode_aux_exr` (bytes, no I/O),
+:func:`read_exr` (:class:`ExrPart` per part) and the per-layer scale of a decoded part (:func:`layer_scale`).
+
+Units: spectral radiance in W sr^-1 m^-2 nm^-1, depth in m, bounding boxes in pixels as half-open
+``(y0, x0, y1, x1)``.
+
+References: OpenEXR file layout and multi-part files, https://openexr.com/en/latest/TechnicalIntroduction.html
+(data window / display window, part names).
+"""
+from __future__ import annotations
+
+import io
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+
+from lfmbench.corpus.errors import CorpusChannelError, CorpusFileError, CorpusValueError
+from lfmbench.corpus.naming import (ATTR, AUX_CHANNELS, EMPTY_PART, FORMAT_VERSION, RADIANCE_MAX, RADIANCE_UNIT,
+                                    STATIC_WINDOWS, _check_version, bin_channels, static_channels)
+from lfmbench.corpus.storage import (COMPRESSIONS, DEFAULT_STORAGE, EXTRA_COMPRESSIONS, LayerStore, SCALE_EXP_RANGE,
+                                     Storage, StorageStats, resolve_storage, scale_attr, store_layer)
+
+__all__ = ["encode_static_exr", "encode_lights_exr", "encode_aux_exr", "ExrPart", "read_exr", "layer_scale"]
+
+
+def _exr():
+    try:
+        import OpenEXR  # noqa: PLC0415
+    except ImportError as exc:  # pragma: no cover - a declared dependency
+        raise ImportError("lfmbench.corpus needs the OpenEXR 3.x Python bindings: pip install 'OpenEXR>=3.2'") \
+            from exc
+    return OpenEXR
+
+
+def _check_radiance(arr: np.ndarray, what: str) -> np.ndarray:
+    arr = np.asarray(arr)
+    if not np.issubdtype(arr.dtype, np.floating):
+        raise ValueError(f"{what}: radiance must be a floating-point array, got dtype {arr.dtype}")
+    if arr.size and not np.isfinite(arr).all():
+        raise CorpusValueError(f"{what}: radiance contains NaN or inf")
+    if arr.size and float(arr.min()) < 0:
+        raise CorpusValueError(f"{what}: radiance contains negative values (min {float(arr.min()):.3g})")
+    if arr.size and float(arr.max()) > RADIANCE_MAX:
+        raise CorpusValueError(f"{what}: radiance {float(arr.max()):.3g} {RADIANCE_UNIT} exceeds the plausibility "
+                               f"ceiling RADIANCE_MAX = {RADIANCE_MAX:.0e} (50x the sun's disc): a unit or scale error")
+    return arr
+
+
+def _note_layer(ls: LayerStore, what: str, notes: list[str], stats: StorageStats | None) -> None:
+    if stats is not None:
+        stats.add(ls, what)
+    elif ls.fallback:  # no aggregator: one note per fallback (rare: see HALF_UNDERFLOW_ERROR_FRACTION)
+        notes.append(f"{what}: {ls.fallback}: stored as FLOAT")
+
+
+def _base_header(width: int, height: int, data_window: tuple[int, int, int, int] | None = None,
+                 compression: str = "zip") -> dict:
+    """EXR header: ``compression`` (a key of :data:`COMPRESSIONS` / :data:`EXTRA_COMPRESSIONS`), scanlines,
+    display window = full image, data window (y0, x0, y1, x1) half-open, ``lfmbench_format_version``."""
+    exr = _exr()
+    if data_window is None:
+        data_window = (0, 0, height, width)
+    y0, x0, y1, x1 = data_window
+    return {
+        "compression": getattr(exr, {**COMPRESSIONS, **EXTRA_COMPRESSIONS}[compression]),
+        "type": exr.scanlineimage,
+        "displayWindow": ((0, 0), (width - 1, height - 1)),
+        "dataWindow": ((x0, y0), (x1 - 1, y1 - 1)),
+        ATTR["version"]: FORMAT_VERSION,
+    }
+
+
+def _encode(parts: list, what: str) -> bytes:
+    exr = _exr()
+    buf = io.BytesIO()
+    try:
+        exr.File(parts).write(buf)
+    except Exception as exc:  # OpenEXR raises RuntimeError / ValueError from C++
+        raise ValueError(f"{what}: OpenEXR could not encode the image: {exc}") from exc
+    return buf.getvalue()
+
+
+def encode_static_exr(windows: Mapping[str, np.ndarray], bands_nm: Sequence[float], *,
+                      dtype: str | Storage = DEFAULT_STORAGE, attrs: Mapping[str, Any] | None = None,
+                      what: str = "static group", notes: list[str] | None = None,
+                      stats: StorageStats | None = None) -> bytes:
+    """Encode a static group (one part, channels ``short.<wl>nm`` / ``long.<wl>nm``) as EXR bytes.
+
+    Args:
+        windows: ``{"short": (C, H, W), "long": (C, H, W)}`` time-averaged spectral radiance over each exposure
+            window, W sr^-1 m^-2 nm^-1, finite and >= 0.
+        bands_nm: the C band centres (nm).
+        dtype: storage, a name of :data:`STORAGES` (``"compact"``: HALF x 2^e with 5 mantissa bits, PIZ;
+            ``"float16"``; ``"float32"``: lossless FLOAT as in format version 1) or a :class:`Storage`. Each
+            window is one layer with its own scale, attribute ``lfmbench_scale_<window>``.
+        attrs: extra header attributes (str / int / float values).
+        what: the file's name for error messages.
+        notes: list that receives one message per layer stored FLOAT instead of HALF.
+        stats: optional accumulator of the layers' measured errors.
+    """
+    st = resolve_storage(dtype)
+    notes = [] if notes is None else notes
+    if set(windows) != set(STATIC_WINDOWS):
+        raise ValueError(f"{what}: static windows must be exactly {STATIC_WINDOWS}, got {sorted(windows)}")
+    shape = None
+    for w in STATIC_WINDOWS:
+        a = _check_radiance(windows[w], f"{what} [{w}]")
+        if a.ndim != 3 or a.shape[0] != len(bands_nm):
+            raise ValueError(f"{what} [{w}]: expected shape (C={len(bands_nm)}, H, W), got {a.shape}")
+        if shape is not None and a.shape != shape:
+            raise ValueError(f"{what}: short {shape} and long {a.shape} shapes differ")
+        shape = a.shape
+    _, height, width = shape
+    channels = {}
+    stored = set()
+    header = _base_header(width, height, compression=st.compression)
+    header.update(attrs or {})
+    for w in STATIC_WINDOWS:
+        ls = store_layer(windows[w], st, f"{what} [{w}]")
+        _note_layer(ls, f"{what} [{w}]", notes, stats)
+        stored.add(ls.pixel_type)
+        header[scale_attr(w)] = ls.scale
+        for c, name in enumerate(static_channels(w, bands_nm)):
+            channels[name] = ls.data[c]
+    header[ATTR["kind"]] = "static"
+    header[ATTR["units"]] = RADIANCE_UNIT
+    header[ATTR["stored"]] = "float32" if "float32" in stored else "float16"
+    header[ATTR["mantissa"]] = st.bits
+    exr = _exr()
+    return _encode([exr.Part(header, channels, "static")], what)
+
+
+def _clip_box(box: Sequence[int], height: int, width: int, what: str) -> tuple[int, int, int, int]:
+    if len(box) != 4:
+        raise ValueError(f"{what}: bbox must be (y0, x0, y1, x1), got {box!r}")
+    y0, x0, y1, x1 = (int(v) for v in box)
+    if not (0 <= y0 < y1 <= height and 0 <= x0 < x1 <= width):
+        raise ValueError(f"{what}: bbox {box} is empty or outside the {height}x{width} image")
+    return y0, x0, y1, x1
+
+
+def encode_lights_exr(lights: Sequence[tuple[int, Sequence[int], np.ndarray]], bands_nm: Sequence[float],
+                      bins: int, height: int, width: int, *, dtype: str | Storage = DEFAULT_STORAGE,
+                      attrs: Mapping[str, Any] | None = None, what: str = "flickering group",
+                      notes: list[str] | None = None, stats: StorageStats | None = None) -> bytes:
+    """Encode a flickering group as a multi-part EXR: one part ``light<id>`` per light, sparse data windows.
+
+    Args:
+        lights: ``[(light_id, (y0, x0, y1, x1), bins_array)]`` with ``bins_array`` of shape (K, C, h, w),
+            h = y1 - y0, w = x1 - x0, spectral radiance W sr^-1 m^-2 nm^-1 time-averaged over each bin with the
+            light at PWM level 1. Boxes are half-open pixel ranges inside the H x W image.
+        bands_nm: the C band centres (nm).
+        bins: K, the number of time bins.
+        height, width: full image size H, W (the display window).
+        dtype: storage as in :func:`encode_static_exr`; each light (K x C bins) is one layer with its own
+            scale, attribute ``lfmbench_scale`` of its part.
+        notes, stats: as in :func:`encode_static_exr`.
+
+    A group with no visible light is stored as one placeholder part named ``empty`` (1x1, channel ``empty``,
+    attribute ``lfmbench_nparts = 0``) because an EXR file needs at least one part.
+    """
+    st = resolve_storage(dtype)
+    notes = [] if notes is None else notes
+    if bins < 1:
+        raise ValueError(f"{what}: bins must be >= 1, got {bins}")
+    exr = _exr()
+    names = bin_channels(bins, bands_nm)
+    parts = []
+    seen = set()
+    for light_id, box, arr in lights:
+        lid = int(light_id)
+        if lid < 0 or lid in seen:
+            raise ValueError(f"{what}: light ids must be unique and >= 0, got {light_id!r}")
+        seen.add(lid)
+        pw = f"{what} light{lid}"
+        y0, x0, y1, x1 = _clip_box(box, height, width, pw)
+        a = _check_radiance(arr, pw)
+        if a.shape != (bins, len(bands_nm), y1 - y0, x1 - x0):
+            raise ValueError(f"{pw}: expected shape (K={bins}, C={len(bands_nm)}, {y1 - y0}, {x1 - x0}) "
+                             f"for bbox {(y0, x0, y1, x1)}, got {a.shape}")
+        ls = store_layer(a, st, pw)
+        _note_layer(ls, pw, notes, stats)
+        channels = {names[k][c]: ls.data[k, c] for k in range(bins) for c in range(len(bands_nm))}
+        header = _base_header(width, height, (y0, x0, y1, x1), st.compression)
+        header.update(attrs or {})
+        header.update({ATTR["kind"]: "lights", ATTR["light"]: lid, ATTR["bins"]: int(bins),
+                       ATTR["units"]: RADIANCE_UNIT, ATTR["stored"]: ls.pixel_type, scale_attr(None): ls.scale,
+                       ATTR["mantissa"]: st.bits})
+        parts.append((lid, header, channels))
+    if not parts:
+        header = _base_header(width, height, (0, 0, 1, 1), st.compression)
+        header.update(attrs or {})
+        header.update({ATTR["kind"]: "lights", ATTR["nparts"]: 0, ATTR["bins"]: int(bins)})
+        return _encode([exr.Part(header, {EMPTY_PART: np.zeros((1, 1), np.float32)}, EMPTY_PART)], what)
+    out = []
+    for lid, header, channels in sorted(parts, key=lambda p: p[0]):
+        header[ATTR["nparts"]] = len(parts)
+        out.append(exr.Part(header, channels, f"light{lid}"))
+    return _encode(out, what)
+
+
+def encode_aux_exr(aux: Mapping[str, np.ndarray], height: int, width: int, *,
+                   attrs: Mapping[str, Any] | None = None, what: str = "aux") -> bytes:
+    """Encode ``aux.exr``: FLOAT channels ``depth.Z``, ``depth.R`` (m; +inf where no surface) and
+    ``mask.instance``, ``mask.light`` (integer ids stored as float32, -1 = none), each (H, W)."""
+    if set(aux) != set(AUX_CHANNELS):
+        raise ValueError(f"{what}: aux channels must be exactly {AUX_CHANNELS}, got {sorted(aux)}")
+    channels = {}
+    for name in AUX_CHANNELS:
+        a = np.asarray(aux[name])
+        if a.shape != (height, width):
+            raise ValueError(f"{what} [{name}]: expected shape ({height}, {width}), got {a.shape}")
+        a = np.ascontiguousarray(a, dtype=np.float32)
+        _check_aux(name, a, what)
+        channels[name] = a
+    header = _base_header(width, height)
+    header.update(attrs or {})
+    header[ATTR["kind"]] = "aux"
+    return _encode([_exr().Part(header, channels, "aux")], what)
+
+
+def _check_aux(name: str, a: np.ndarray, what: str) -> None:
+    if np.isnan(a).any():
+        raise CorpusValueError(f"{what} [{name}]: contains NaN")
+    if name.startswith("depth."):
+        if (a < 0).any():
+            raise CorpusValueError(f"{what} [{name}]: negative depth")
+    else:
+        if not np.isfinite(a).all() or (a < -1).any() or (a != np.round(a)).any():
+            raise CorpusValueError(f"{what} [{name}]: ids must be integers >= -1")
+
+
+@dataclass
+class ExrPart:
+    """One decoded EXR part: name, header dict, data window ``(y0, x0, y1, x1)`` (half-open), display size
+    ``(H, W)`` and channels ``{name: (h, w) ndarray}`` (None when read header-only)."""
+
+    name: str
+    header: dict
+    window: tuple[int, int, int, int]
+    size: tuple[int, int]
+    channel_names: list[str]
+    channels: dict[str, np.ndarray] | None = None
+
+
+def read_exr(path: str | os.PathLike, *, header_only: bool = False) -> list[ExrPart]:
+    """Decode every part of an EXR file (OpenEXR 3.x reads whole files: all parts, all channels).
+
+    Raises :class:`CorpusFileError` naming ``path`` when it is missing, not an EXR, or truncated (a part whose
+    pixels cannot be read, detected by comparing with the part count of the header).
+    """
+    exr = _exr()
+    path = Path(path)
+    if not path.is_file():
+        raise CorpusFileError(f"EXR file is missing: {path}")
+    try:
+        hdr = exr.File(str(path), header_only=True)
+        n_parts = len(hdr.parts)
+        f = hdr if header_only else exr.File(str(path), separate_channels=True)
+    except Exception as exc:  # RuntimeError from the C++ library
+        raise CorpusFileError(f"cannot read EXR file {path}: {exc}") from exc
+    if len(f.parts) != n_parts:
+        raise CorpusFileError(f"EXR file {path} is truncated or corrupt: {len(f.parts)} of {n_parts} parts "
+                              "could be read")
+    out = []
+    for p in f.parts:
+        h = p.header
+        if ATTR["version"] in h:
+            _check_version(h[ATTR["version"]], f"EXR file {path} part {p.name()!r} ({ATTR['version']})")
+        (dx0, dy0), (dx1, dy1) = (tuple(int(v) for v in c) for c in h["dataWindow"])
+        (wx0, wy0), (wx1, wy1) = (tuple(int(v) for v in c) for c in h["displayWindow"])
+        names = [c.name for c in h.get("channels", [])] if header_only else list(p.channels)
+        chans = None
+        if not header_only:
+            chans = {}
+            for k, ch in p.channels.items():
+                px = ch.pixels
+                if px is None or px.shape != (dy1 - dy0 + 1, dx1 - dx0 + 1):
+                    raise CorpusFileError(f"EXR file {path} part {p.name()!r}: channel {k!r} could not be read")
+                chans[k] = px
+        out.append(ExrPart(name=p.name(), header=dict(h), window=(dy0, dx0, dy1 + 1, dx1 + 1),
+                           size=(wy1 - wy0 + 1, wx1 - wx0 + 1), channel_names=names, channels=chans))
+    return out
+
+
+def layer_scale(part: ExrPart, window: str | None, path: str | os.PathLike) -> float:
+    """The scale 2^e by which a layer's stored values exceed the radiance (format version 2, section 6 of
+    ``docs/corpus-format.md``): header attribute :func:`scale_attr` of ``window`` (``None``: a light part),
+    1.0 when absent (version 1). ``CorpusFileError`` naming the file unless it is a power of two 2^e,
+    e in :data:`SCALE_EXP_RANGE`."""
+    key = scale_attr(window)
+    v = part.header.get(key, 1.0)
+    ok = isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v > 0
+    if ok:
+        f, q = math.frexp(float(v))
+        ok = f == 0.5 and SCALE_EXP_RANGE[0] <= q - 1 <= SCALE_EXP_RANGE[1]
+    if not ok:
+        raise CorpusFileError(f"EXR file {path} part {part.name!r}: attribute {key} = {v!r} must be a power of "
+                              f"two 2^e with e in [{SCALE_EXP_RANGE[0]}, {SCALE_EXP_RANGE[1]}]")
+    return float(v)
+
+
+def _stack(part: ExrPart, names: Sequence[str], path: Path) -> np.ndarray:
+    missing = [n for n in names if n not in part.channels]
+    if missing:
+        raise CorpusChannelError(f"EXR file {path} part {part.name!r} lacks channels {missing[:4]}"
+                                 f"{' ...' if len(missing) > 4 else ''}")
+    return np.stack([np.asarray(part.channels[n], dtype=np.float32) for n in names])
+
+
+def _check_values(arr: np.ndarray, path: Path, what: str) -> None:
+    if arr.size == 0:
+        return
+    lo = float(arr.min())
+    if not math.isfinite(lo) or not math.isfinite(float(arr.max())):
+        raise CorpusValueError(f"EXR file {path} {what}: radiance contains NaN or inf")
+    if lo < 0:
+        raise CorpusValueError(f"EXR file {path} {what}: radiance contains negative values (min {lo:.3g})")
+    hi = float(arr.max())
+    if hi > RADIANCE_MAX:
+        raise CorpusValueError(f"EXR file {path} {what}: radiance {hi:.3g} {RADIANCE_UNIT} exceeds the plausibility "
+                               f"ceiling RADIANCE_MAX = {RADIANCE_MAX:.0e} (50x the sun's disc): a unit or scale "
+                               "error; run `lfmbench validate`")

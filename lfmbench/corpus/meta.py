@@ -1,0 +1,302 @@
+"""The JSON side of the corpus: ``meta.json`` checks (:func:`validate_meta`), ``manifest.json`` checks
+(:func:`manifest_entry_errors`, :func:`inside_root`), ``splits.json`` (:func:`make_splits`,
+:func:`check_splits`) and file checksums (:func:`sha256_file`, SHA-256 of FIPS PUB 180-4).
+
+Units: times in s, wavelengths in nm, speeds in m/s, luminance in cd/m^2, bounding boxes in pixels as half-open
+``[y0, x0, y1, x1]``.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import re
+from pathlib import Path
+from typing import Any, Iterable, Mapping, Sequence
+
+import numpy as np
+
+from lfmbench import check
+from lfmbench.check import scene_id_error
+from lfmbench.corpus.errors import CorpusFileError
+from lfmbench.corpus.naming import FORMAT_NAME, FORMAT_VERSION, SCENES_DIR, _check_version
+
+__all__ = ["TIMING_RTOL", "sha256_file", "make_splits", "validate_meta", "LIGHT_KINDS", "SPECTRUM_MODELS",
+           "manifest_entry_errors", "inside_root", "check_splits"]
+
+#: Relative tolerance of the timing consistency checks (s / s).
+TIMING_RTOL = 1e-6
+
+
+def sha256_file(path: str | os.PathLike, chunk: int = 1 << 20) -> str:
+    """SHA-256 hex digest (FIPS 180-4) of a file, read in 1 MiB chunks."""
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        while True:
+            b = fh.read(chunk)
+            if not b:
+                break
+            h.update(b)
+    return h.hexdigest()
+
+
+def _load_json(path: Path, what: str) -> Any:
+    try:
+        with open(path, encoding="utf-8") as fh:
+            return json.load(fh)
+    except FileNotFoundError:
+        raise CorpusFileError(f"{what} is missing: {path}") from None
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise CorpusFileError(f"{what} {path} is not valid JSON: {exc}") from exc
+
+
+def make_splits(scene_ids: Iterable[str], seed: int,
+                fractions: Sequence[float] = (0.6, 0.2, 0.2)) -> dict[str, list[str]]:
+    """Deterministic train / val / test split of scene ids.
+
+    The sorted ids are shuffled with ``numpy.random.default_rng(seed)``; test gets ``round(f_test * n)``
+    scenes but at least one, val ``round(f_val * n)`` (only while train keeps >= 1 scene), train the rest.
+
+    Args:
+        scene_ids: the ids (order does not matter).
+        seed: integer seed.
+        fractions: (train, val, test), each >= 0, summing to 1.
+    """
+    fr = [float(f) for f in fractions]
+    if len(fr) != 3 or any(f < 0 for f in fr) or abs(sum(fr) - 1) > 1e-9:
+        raise ValueError(f"fractions must be three numbers >= 0 summing to 1, got {fractions!r}")
+    ids = sorted(set(scene_ids))
+    n = len(ids)
+    order = np.random.default_rng(seed).permutation(n)
+    ids = [ids[i] for i in order]
+    n_test = min(n, max(1, round(fr[2] * n))) if n else 0
+    n_val = min(round(fr[1] * n), max(0, n - n_test - 1))
+    test, val, train = ids[:n_test], ids[n_test:n_test + n_val], ids[n_test + n_val:]
+    return {"train": sorted(train), "val": sorted(val), "test": sorted(test)}
+
+
+_META_REQUIRED = ("scene_id", "width", "height", "bands_nm", "fps", "frames", "timing", "groups")
+_TIMING_REQUIRED = ("short_exposure_s", "long_exposure_s", "capture_window_s")
+
+
+def validate_meta(meta: Mapping[str, Any], where: str = "meta.json") -> None:
+    """Check a scene's ``meta.json`` content; raise ``ValueError`` naming ``where`` and the field.
+
+    Checks: required fields; image size > 0; bands strictly increasing and positive (nm); fps > 0; frames >= 1;
+    ``0 < short_exposure_s <= long_exposure_s <= 1/fps`` (an exposure cannot be longer than the frame time);
+    ``capture_window_s == long_exposure_s + readout_s`` (the bins must cover both windows; the capture window
+    may exceed 1/fps with a rolling shutter, since row i of frame n+1 starts at t_(n+1) + i * line_time);
+    bins >= 1 for per-light groups; camera ``speed_mps >= 0``; groups known by name with a boolean
+    ``flicker``; lights with unique integer ids >= 0 whose group exists.
+    """
+    if not isinstance(meta, Mapping):
+        raise ValueError(f"{where}: must be a JSON object")
+    for k in _META_REQUIRED:
+        if k not in meta:
+            raise ValueError(f"{where}: missing field {k!r}")
+    why = _scene_id_error(meta["scene_id"])
+    if why is not None:
+        raise ValueError(f"{where}: field 'scene_id': {why}")
+    for k in ("width", "height", "frames"):
+        v = meta[k]
+        if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+            raise ValueError(f"{where}: field {k!r} must be an integer >= 1, got {v!r}")
+    bands = meta["bands_nm"]
+    if not isinstance(bands, list) or not bands:
+        raise ValueError(f"{where}: field 'bands_nm' must be a non-empty list of wavelengths (nm)")
+    try:
+        b = np.asarray(bands, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"{where}: field 'bands_nm' must hold numbers (nm), got {bands!r}") from None
+    if not np.isfinite(b).all() or (b <= 0).any() or (np.diff(b) <= 0).any():
+        raise ValueError(f"{where}: field 'bands_nm' must be positive and strictly increasing, got {bands!r}")
+    fps = check.get_number(meta, "fps", where, lo=0.0, lo_open=True)
+    frame_time = 1.0 / fps
+    t = meta["timing"]
+    if not isinstance(t, Mapping):
+        raise ValueError(f"{where}: field 'timing' must be an object")
+    tw = f"{where} timing"
+    for k in _TIMING_REQUIRED:
+        check.get_number(t, k, where, "timing.", lo=0.0, lo_open=True)
+    ts, tl, cw = t["short_exposure_s"], t["long_exposure_s"], t["capture_window_s"]
+    readout = check.get_number(t, "readout_s", where, "timing.", lo=0.0, default=0.0)
+    tol = TIMING_RTOL * frame_time
+    if tl > frame_time + tol:
+        raise ValueError(f"{tw}: long_exposure_s = {tl} s is longer than the frame time 1/fps = {frame_time:.6g} s")
+    if ts > tl + tol:
+        raise ValueError(f"{tw}: short_exposure_s = {ts} s is longer than long_exposure_s = {tl} s")
+    if abs(cw - (tl + readout)) > tol:
+        raise ValueError(f"{tw}: capture_window_s = {cw} s must equal long_exposure_s + readout_s = "
+                         f"{tl + readout} s so that the time bins cover the exposure windows")
+    if "alignment" in t and t["alignment"] != "center":
+        raise ValueError(f"{tw}: alignment must be 'center', got {t['alignment']!r}")
+    groups = meta["groups"]
+    if not isinstance(groups, Mapping) or not groups:
+        raise ValueError(f"{where}: field 'groups' must be a non-empty object")
+    for name, g in groups.items():
+        if not re.fullmatch(r"[A-Za-z][A-Za-z0-9_]*", str(name)) or name == "aux":
+            raise ValueError(f"{where}: group name {name!r} must be an identifier other than 'aux'")
+        if not isinstance(g, Mapping) or not isinstance(g.get("flicker"), bool):
+            raise ValueError(f"{where}: groups[{name!r}] must be an object with a boolean 'flicker'")
+        if "bins" in g and (isinstance(g["bins"], bool) or not isinstance(g["bins"], int) or g["bins"] < 0):
+            raise ValueError(f"{where}: groups[{name!r}].bins must be an integer >= 0, got {g['bins']!r}")
+        if g["flicker"] and "bins" not in g:
+            kb = t.get("bins")
+            if isinstance(kb, bool) or not isinstance(kb, int) or kb < 1:
+                raise ValueError(f"{tw}: field 'bins' must be an integer >= 1 for flickering group {name!r}, "
+                                 f"got {kb!r}")
+    cam = meta.get("camera", {}) or {}
+    if not isinstance(cam, Mapping):
+        raise ValueError(f"{where}: field 'camera' must be an object, got {cam!r}")
+    if cam.get("speed_mps") is not None:
+        check.get_number(cam, "speed_mps", where, "camera.", lo=0.0)
+    ids = set()
+    lights = meta.get("lights", [])
+    if not isinstance(lights, list):
+        raise ValueError(f"{where}: field 'lights' must be a list of objects, got {lights!r}")
+    for i, light in enumerate(lights):
+        if not isinstance(light, Mapping):
+            raise ValueError(f"{where}: lights[{i}] must be an object with 'id' and 'group', got {light!r}")
+        lid = light.get("id")
+        if isinstance(lid, bool) or not isinstance(lid, int) or lid < 0 or lid in ids:
+            raise ValueError(f"{where}: lights[{i}].id must be a unique integer >= 0, got {lid!r}")
+        ids.add(lid)
+        if light.get("group") not in groups:
+            raise ValueError(f"{where}: lights[{i}].group {light.get('group')!r} is not in groups")
+        _check_light_fields(light, f"lights[{i}]", where, meta["frames"], meta["height"], meta["width"])
+
+
+#: Light kinds the renderer writes (``render_tools.scene.LIGHT_KINDS``); other writers may use other names.
+LIGHT_KINDS = ("headlight", "streetlight", "tail", "brake", "indicator", "billboard", "signal")
+#: Spectrum models the renderer writes (``render_tools.spectra.SPECTRUM_MODELS``) and their fields.
+SPECTRUM_MODELS = {"led": ("peak_nm", "fwhm_nm"), "light_source": ("name",), "illuminant": ("name",),
+                   "daylight": ("cct_k",)}
+
+
+def _check_light_fields(light: Mapping[str, Any], name: str, where: str, frames: int, H: int, W: int) -> None:
+    """The optional, informative fields of a ``meta.json`` light (``docs/corpus-format.md`` section 4):
+    ``kind`` non-empty str, ``instance`` int >= -1, ``luminance_cd_m2`` finite number >= 0 (cd/m^2),
+    ``spectrum`` object with a str ``model``, ``bbox`` list of ``frames`` entries, each null or a half-open
+    ``[y0, x0, y1, x1]`` of ints with ``0 <= y0 < y1 <= H`` and ``0 <= x0 < x1 <= W`` (px)."""
+    if "kind" in light and (not isinstance(light["kind"], str) or not light["kind"]):
+        check.fail(f"{name}.kind", f"must be a non-empty string, got {light['kind']!r}", where)
+    if "instance" in light:
+        check.check_integer(light["instance"], f"{name}.instance", where, lo=-1)
+    if "luminance_cd_m2" in light:
+        check.check_number(light["luminance_cd_m2"], f"{name}.luminance_cd_m2", where, lo=0.0)
+    if "spectrum" in light:
+        sp = light["spectrum"]
+        if not isinstance(sp, Mapping) or not isinstance(sp.get("model"), str):
+            check.fail(f"{name}.spectrum", f"must be an object with a string 'model', got {sp!r}", where)
+    if "bbox" in light:
+        bb = light["bbox"]
+        if not isinstance(bb, list) or len(bb) != frames:
+            check.fail(f"{name}.bbox", f"must be a list of {frames} boxes (one per frame, null = not visible), "
+                       f"got {bb!r}", where)
+        for n, b in enumerate(bb):
+            if b is None:
+                continue
+            ok = (isinstance(b, list) and len(b) == 4
+                  and all(isinstance(v, int) and not isinstance(v, bool) for v in b)
+                  and 0 <= b[0] < b[2] <= H and 0 <= b[1] < b[3] <= W)
+            if not ok:
+                check.fail(f"{name}.bbox[{n}]", f"must be null or [y0, x0, y1, x1] integers with 0 <= y0 < y1 <= "
+                           f"{H} and 0 <= x0 < x1 <= {W} (half-open, px), got {b!r}", where)
+
+
+def _check_meta_storage(meta: Mapping[str, Any], path: Path | str) -> None:
+    """Check the optional ``storage`` entry of a ``meta.json`` (format version 2); raise naming ``path``."""
+    sto = meta.get("storage")
+    if sto is None:
+        return
+    if not isinstance(sto, Mapping):
+        raise CorpusFileError(f"{path}: field 'storage' must be an object")
+    _check_version(sto.get("format_version"), f"{path} storage.format_version")
+
+
+def _empty_manifest() -> dict:
+    return {"format": FORMAT_NAME, "version": FORMAT_VERSION, "scenes": [], "files": {}}
+
+
+def _check_manifest(man: Any, path: Path, *, entries: bool = True) -> dict:
+    """The manifest if its format, version and (``entries``) every scene id and file entry are valid; else
+    ``CorpusFileError`` naming ``path`` and the first bad entry (:func:`manifest_entry_errors`)."""
+    if not isinstance(man, dict) or man.get("format") != FORMAT_NAME:
+        raise CorpusFileError(f"{path}: not an lfmbench corpus manifest (format must be {FORMAT_NAME!r})")
+    _check_version(man.get("version"), str(path))
+    if not isinstance(man.get("scenes"), list) or not isinstance(man.get("files"), dict):
+        raise CorpusFileError(f"{path}: 'scenes' must be a list and 'files' an object")
+    if entries:
+        bad = manifest_entry_errors(man, path)
+        if bad:
+            more = f" (and {len(bad) - 1} more bad entries)" if len(bad) > 1 else ""
+            raise CorpusFileError(bad[0] + more)
+    return man
+
+
+def _scene_id_error(scene_id: Any) -> str | None:
+    why = scene_id_error(scene_id)
+    return None if why is None else f"scene_id {why}"
+
+
+def _file_entry_error(rel: Any, digest: Any, scenes: set) -> str | None:
+    """Why a manifest file entry is refused (None if it is fine): a relative POSIX path
+    ``scenes/<scene id>/...`` without ``.``/``..`` components, of a listed scene, with a SHA-256 hex digest."""
+    if not isinstance(rel, str) or not rel:
+        return "file path must be a non-empty string"
+    if rel.startswith("/") or "\\" in rel or re.match(r"[A-Za-z]:", rel):
+        return "absolute file path (must be relative to the corpus root)"
+    parts = rel.split("/")
+    if any(p in ("", ".", "..") for p in parts):
+        return "file path with an empty, '.' or '..' component (must stay inside the corpus root)"
+    if len(parts) < 3 or parts[0] != SCENES_DIR or _scene_id_error(parts[1]) is not None:
+        return f"file path must lie under {SCENES_DIR}/<scene id>/"
+    if parts[1] not in scenes:
+        return f"file of scene {parts[1]!r}, which is not in 'scenes'"
+    if not isinstance(digest, str) or not re.fullmatch(r"[0-9a-f]{64}", digest):
+        return "SHA-256 must be 64 lowercase hex digits"
+    return None
+
+
+def manifest_entry_errors(man: Mapping[str, Any], path: Path | str) -> list[str]:
+    """Errors (each naming ``path`` and the entry) for manifest scene ids that are not safe directory names
+    (:func:`check_scene_id`, the rule used when writing) and file entries that could leave the corpus root
+    (absolute, ``..``) or are malformed. Used by :class:`Corpus` (raises on the first) and
+    :func:`validate_corpus` (reports all)."""
+    out = []
+    for sid in man["scenes"]:
+        why = _scene_id_error(sid)
+        if why is not None:
+            out.append(f"{path}: scene entry {sid!r} refused: {why}")
+    scenes = {s for s in man["scenes"] if isinstance(s, str)}
+    for rel, digest in man["files"].items():
+        why = _file_entry_error(rel, digest, scenes)
+        if why is not None:
+            out.append(f"{path}: file entry {rel!r} refused: {why}")
+    return out
+
+
+def inside_root(root: Path, rel: str, what: str) -> Path:
+    """``root / rel`` resolved (symbolic links followed); ``CorpusFileError`` naming ``what`` and ``rel`` when it
+    leaves the resolved corpus root."""
+    base = Path(root).resolve()
+    p = (base / rel).resolve()
+    if p != base and base not in p.parents:
+        raise CorpusFileError(f"{what}: entry {rel!r} resolves to {p}, outside the corpus root {base}")
+    return p
+
+
+def check_splits(sp: Any, path: Path | str) -> dict[str, list[str]]:
+    """``splits.json`` content checked: an object whose ``train``/``val``/``test`` are lists of scene ids
+    (:func:`check_scene_id`); ``CorpusFileError`` naming ``path`` and the entry otherwise."""
+    if not isinstance(sp, dict):
+        raise CorpusFileError(f"{path}: must be a JSON object {{\"train\": [...], \"val\": [...], \"test\": "
+                              f"[...]}}, got a {type(sp).__name__}")
+    for k, ids in sp.items():
+        if not isinstance(ids, list):
+            raise CorpusFileError(f"{path}: split {k!r} must be a list of scene ids, got a {type(ids).__name__}")
+        for sid in ids:
+            why = _scene_id_error(sid)
+            if why is not None:
+                raise CorpusFileError(f"{path}: split {k!r} entry {sid!r} refused: {why}")
+    return sp

@@ -1,0 +1,122 @@
+"""Format constants and channel / file naming of the lfmbench corpus (``docs/corpus-format.md``).
+
+Format name and versions (:func:`_check_version`), file and directory names, the header attribute names
+(:data:`ATTR`), the radiance unit and plausibility ceiling, channel names (:func:`band_channel`,
+:func:`bin_prefix`, :func:`static_channels`, :func:`bin_channels`), frame directories (:func:`frame_dir`) and how
+a group is stored (:func:`group_storage`).
+
+Units: wavelengths in nm, spectral radiance in W sr^-1 m^-2 nm^-1.
+"""
+from __future__ import annotations
+
+import math
+from typing import Any, Mapping, Sequence
+
+from lfmbench.corpus.errors import CorpusFileError
+
+__all__ = ["FORMAT_NAME", "FORMAT_VERSION", "READABLE_VERSIONS", "MANIFEST_NAME", "SPLITS_NAME", "SCENES_DIR",
+           "STATIC_WINDOWS", "AUX_CHANNELS", "RADIANCE_UNIT", "RADIANCE_MAX", "EMPTY_PART", "ATTR", "band_channel",
+           "bin_prefix", "static_channels", "bin_channels", "frame_dir", "group_storage"]
+
+#: ``manifest.json`` "format" value and format version written by this module. Version 2 (HALF x 2^e layers,
+#: codecs and mantissa rounding, ``docs/corpus-format.md``) reads every version-1 file unchanged.
+FORMAT_NAME = "lfmbench-corpus"
+FORMAT_VERSION = 2
+#: Format versions this module reads.
+READABLE_VERSIONS = (1, 2)
+MANIFEST_NAME = "manifest.json"
+SPLITS_NAME = "splits.json"
+SCENES_DIR = "scenes"
+#: Exposure windows stored for static (non-flickering) groups, in this channel-prefix order.
+STATIC_WINDOWS = ("short", "long")
+#: Channels of ``aux.exr``: z-depth and range (m) and instance / light ids (float32, -1 = none).
+AUX_CHANNELS = ("depth.Z", "depth.R", "mask.instance", "mask.light")
+RADIANCE_UNIT = "W sr^-1 m^-2 nm^-1"
+#: Plausibility ceiling of spectral radiance (W sr^-1 m^-2 nm^-1), checked on write, on read and by
+#: :func:`validate_corpus`. The sun's disc seen from the ground peaks near 2e7 W sr^-1 m^-2 nm^-1
+#: (a 5800 K black body: B_lambda(500 nm) ~ 2.6e7); an LED die is far dimmer. 1e9 is fifty times the sun, so a
+#: value above it is a unit or scale error (e.g. a corrupted ``lfmbench_scale`` attribute), never a scene.
+RADIANCE_MAX = 1e9
+#: Name and channel of the placeholder part of a flickering-group EXR in which no light is visible.
+EMPTY_PART = "empty"
+#: Header attribute names (all prefixed ``lfmbench_``).
+ATTR = {
+    "kind": "lfmbench_kind", "scene": "lfmbench_scene_id", "frame": "lfmbench_frame",
+    "group": "lfmbench_group", "units": "lfmbench_units", "light": "lfmbench_light_id",
+    "nparts": "lfmbench_nparts", "bins": "lfmbench_bins", "stored": "lfmbench_stored_as",
+    "version": "lfmbench_format_version", "mantissa": "lfmbench_mantissa_bits", "scale": "lfmbench_scale",
+}
+
+
+def _fmt_nm(wl: float) -> str:
+    """Wavelength (nm) as written in channel names: ``400`` -> ``"400"``, ``402.5`` -> ``"402.5"``."""
+    wl = float(wl)
+    if not math.isfinite(wl) or wl <= 0:
+        raise ValueError(f"wavelength must be a positive number of nm, got {wl!r}")
+    return f"{wl:.6g}"
+
+
+def band_channel(prefix: str, wl_nm: float) -> str:
+    """Channel name of one band: ``band_channel("short", 400) == "short.400nm"``.
+
+    Args:
+        prefix: ``"short"``, ``"long"`` or a bin prefix from :func:`bin_prefix`.
+        wl_nm: band centre wavelength (nm).
+    """
+    return f"{prefix}.{_fmt_nm(wl_nm)}nm"
+
+
+def bin_prefix(k: int, bins: int) -> str:
+    """Prefix of time bin ``k`` of ``bins``: ``bin00`` .. ``bin{K-1}``, zero-padded to max(2, digits(K-1))."""
+    width = max(2, len(str(max(bins - 1, 0))))
+    return f"bin{k:0{width}d}"
+
+
+def static_channels(window: str, bands_nm: Sequence[float]) -> list[str]:
+    """Channel names of one exposure window (``short`` / ``long``) of a static group, band order."""
+    if window not in STATIC_WINDOWS:
+        raise ValueError(f"window must be one of {STATIC_WINDOWS}, got {window!r}")
+    return [band_channel(window, wl) for wl in bands_nm]
+
+
+def bin_channels(bins: int, bands_nm: Sequence[float]) -> list[list[str]]:
+    """Channel names of a per-light part: ``[k][c]`` -> ``bin{k}.{wl_c}nm``."""
+    return [[band_channel(bin_prefix(k, bins), wl) for wl in bands_nm] for k in range(bins)]
+
+
+def frame_dir(frame: int) -> str:
+    """Directory name of frame ``frame``: ``f000``, ``f001``, ..."""
+    return f"f{int(frame):03d}"
+
+
+def group_storage(meta: Mapping[str, Any], group: str) -> str:
+    """How ``group`` is stored: ``"lights"`` (per-light sparse time bins) or ``"static"`` (short/long).
+
+    A group is stored per light when its meta entry is ``"flicker": true`` and its ``bins`` (default: the
+    scene's ``timing.bins``) is > 0. Imported ISET-LFM groups use ``"flicker": true, "bins": 0``: flickering,
+    but stored as exposure windows only (one PWM weight per frame).
+    """
+    groups = meta.get("groups", {})
+    if group not in groups:
+        raise ValueError(f"group {group!r} is not in this scene's meta.json groups {sorted(groups)}")
+    g = groups[group]
+    if not g.get("flicker", False):
+        return "static"
+    bins = int(g.get("bins", meta.get("timing", {}).get("bins", 0)))
+    return "lights" if bins > 0 else "static"
+
+
+def _group_bins(meta: Mapping[str, Any], group: str) -> int:
+    g = meta["groups"][group]
+    return int(g.get("bins", meta.get("timing", {}).get("bins", 0)))
+
+
+def _check_version(v: Any, where: str) -> int:
+    """``v`` as a readable format version; ``CorpusFileError`` naming ``where`` (and the version) otherwise."""
+    if isinstance(v, int) and not isinstance(v, bool) and v > FORMAT_VERSION:
+        raise CorpusFileError(f"{where}: corpus format version {v} is newer than this lfmbench reads "
+                              f"(versions {', '.join(map(str, READABLE_VERSIONS))}); upgrade lfmbench")
+    if v not in READABLE_VERSIONS or isinstance(v, bool):
+        raise CorpusFileError(f"{where}: unsupported corpus format version {v!r} (this lfmbench reads versions "
+                              f"{', '.join(map(str, READABLE_VERSIONS))})")
+    return int(v)

@@ -1,0 +1,212 @@
+""":class:`Corpus`, the reader of an lfmbench corpus: lazy (one file per frame and light group is decoded
+only when asked for), with a small cache so that reading ``short`` then ``long`` decodes the file once.
+"""
+from __future__ import annotations
+
+import os
+import re
+from collections import OrderedDict
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from lfmbench.corpus.errors import CorpusChannelError, CorpusNotFoundError
+from lfmbench.corpus.exr import ExrPart, _check_aux, _check_values, _stack, layer_scale, read_exr
+from lfmbench.corpus.meta import (_check_manifest, _check_meta_storage, _load_json, check_splits, inside_root,
+                                  validate_meta)
+from lfmbench.corpus.naming import (AUX_CHANNELS, EMPTY_PART, MANIFEST_NAME, SCENES_DIR, SPLITS_NAME, _group_bins,
+                                    bin_channels, frame_dir, group_storage, static_channels)
+
+__all__ = ["Corpus"]
+
+
+class Corpus:
+    """Read an lfmbench corpus (see ``docs/corpus-format.md``).
+
+    Files are decoded only when a method asks for them; the last ``cache_size`` decoded EXR files are kept in
+    memory (so ``read_static(..., "short")`` then ``(..., "long")`` decodes once). OpenEXR 3.x decodes whole
+    files, so a call reads every channel of that one frame/group file, never other groups or frames.
+
+    Args:
+        root: corpus directory (holds ``manifest.json``).
+        check_values: check every array returned for NaN / inf / negative radiance (cheap min/max).
+        cache_size: number of decoded EXR files kept (>= 0).
+
+    Example:
+        >>> c = Corpus("demo_out/corpus")                                        # doctest: +SKIP
+        >>> L = c.read_static(c.scenes[0], 0, "headlights", "short")             # doctest: +SKIP
+        >>> L.shape                                                              # doctest: +SKIP
+        (C, H, W)
+    """
+
+    def __init__(self, root: str | os.PathLike, *, check_values: bool = True, cache_size: int = 4) -> None:
+        self.root = Path(root)
+        mpath = self.root / MANIFEST_NAME
+        if not mpath.is_file():
+            raise CorpusNotFoundError(f"no lfmbench corpus at {self.root} ({MANIFEST_NAME} missing): make one with "
+                                      "`lfmbench render --out DIR` or `lfmbench import-isetlfm SRC DIR`")
+        self.manifest = _check_manifest(_load_json(mpath, "manifest"), mpath)
+        self.check_values = bool(check_values)
+        if cache_size < 0:
+            raise ValueError(f"cache_size must be >= 0, got {cache_size}")
+        self._cache_size = int(cache_size)
+        self._cache: OrderedDict[Path, list[ExrPart]] = OrderedDict()
+        self._meta: dict[str, dict] = {}
+        self._inside: set[str] = set()
+
+    # -- index
+    @property
+    def scenes(self) -> list[str]:
+        """Scene ids recorded as complete in the manifest (sorted)."""
+        return sorted(self.manifest["scenes"])
+
+    @property
+    def splits(self) -> dict[str, list[str]]:
+        """``splits.json`` content ``{"train": [...], "val": [...], "test": [...]}``."""
+        path = self.root / SPLITS_NAME
+        return check_splits(_load_json(path, "splits file"), path)
+
+    def _scene_dir(self, scene_id: str) -> Path:
+        if scene_id not in self.manifest["scenes"]:
+            raise KeyError(f"scene {scene_id!r} is not in corpus {self.root} (see Corpus.scenes)")
+        if scene_id not in self._inside:  # ids were checked with the manifest; symbolic links are resolved here
+            inside_root(self.root, f"{SCENES_DIR}/{scene_id}", str(self.root / MANIFEST_NAME))
+            self._inside.add(scene_id)
+        return self.root / SCENES_DIR / scene_id
+
+    def meta(self, scene_id: str) -> dict:
+        """The scene's ``meta.json`` (camera, timing, bands, groups, lights)."""
+        if scene_id not in self._meta:
+            p = self._scene_dir(scene_id) / "meta.json"
+            m = _load_json(p, "scene metadata")
+            validate_meta(m, str(p))
+            _check_meta_storage(m, p)
+            self._meta[scene_id] = m
+        return self._meta[scene_id]
+
+    def scene(self, scene_id: str) -> dict:
+        """The editable scene description ``scene.json`` the scene was rendered from."""
+        return _load_json(self._scene_dir(scene_id) / "scene.json", "scene description")
+
+    def path(self, scene_id: str, frame: int, group: str) -> Path:
+        """Path of the EXR of ``group`` (or ``"aux"``) in frame ``frame``."""
+        return self._scene_dir(scene_id) / frame_dir(frame) / f"{group}.exr"
+
+    def groups(self, scene_id: str) -> dict[str, dict]:
+        """``meta.json`` groups: ``{name: {"flicker": bool, ...}}``."""
+        return self.meta(scene_id)["groups"]
+
+    # -- decoding
+    def _parts(self, path: Path) -> list[ExrPart]:
+        if path in self._cache:
+            self._cache.move_to_end(path)
+            return self._cache[path]
+        parts = read_exr(path)
+        if self._cache_size:
+            self._cache[path] = parts
+            while len(self._cache) > self._cache_size:
+                self._cache.popitem(last=False)
+        return parts
+
+    def _frame_group(self, scene_id: str, frame: int, group: str) -> tuple[dict, Path]:
+        m = self.meta(scene_id)
+        if isinstance(frame, bool) or not isinstance(frame, (int, np.integer)) or not 0 <= frame < m["frames"]:
+            raise ValueError(f"frame must be an integer in [0, {m['frames']}) for scene {scene_id!r}, got {frame!r}")
+        if group not in m["groups"]:
+            raise ValueError(f"group {group!r} is not in scene {scene_id!r} (groups: {sorted(m['groups'])})")
+        return m, self.path(scene_id, frame, group)
+
+    @staticmethod
+    def _band_list(m: dict, bands: Sequence[float] | None) -> list[float]:
+        all_b = [float(b) for b in m["bands_nm"]]
+        if bands is None:
+            return all_b
+        out = []
+        for b in bands:
+            if not any(abs(float(b) - a) < 1e-6 for a in all_b):
+                raise ValueError(f"bands: {b!r} nm is not a band of this scene ({all_b[0]:g}..{all_b[-1]:g} nm)")
+            out.append(float(b))
+        return out
+
+    def read_static(self, scene_id: str, frame: int, group: str, window: str,
+                    bands: Sequence[float] | None = None) -> np.ndarray:
+        """Time-averaged spectral radiance of a statically stored group over one exposure window.
+
+        Args:
+            scene_id, frame, group: which file.
+            window: ``"short"`` (LPD) or ``"long"`` (SPD) exposure window.
+            bands: band centres (nm) to return, default all of ``meta["bands_nm"]``.
+
+        Returns:
+            ndarray (C, H, W) float32, W sr^-1 m^-2 nm^-1.
+        """
+        m, path = self._frame_group(scene_id, frame, group)
+        if group_storage(m, group) != "static":
+            raise ValueError(f"group {group!r} of scene {scene_id!r} is stored per light in time bins: use "
+                             "read_light_bins")
+        names = static_channels(window, self._band_list(m, bands))
+        parts = self._parts(path)
+        arr = _stack(parts[0], names, path)
+        scale = layer_scale(parts[0], window, path)
+        if scale != 1.0:
+            arr /= np.float32(scale)  # exact: a power of two
+        if arr.shape[1:] != (m["height"], m["width"]):
+            raise CorpusChannelError(f"EXR file {path}: image is {arr.shape[1:]}, meta.json says "
+                                     f"({m['height']}, {m['width']})")
+        if self.check_values:
+            _check_values(arr, path, f"[{window}]")
+        return arr
+
+    def read_light_bins(self, scene_id: str, frame: int, group: str, bands: Sequence[float] | None = None
+                        ) -> list[tuple[int, tuple[int, int, int, int], np.ndarray]]:
+        """Per-light time bins of a flickering group.
+
+        Returns:
+            ``[(light_id, (y0, x0, y1, x1), ndarray (K, C, h, w) float32)]`` sorted by light id; boxes are
+            half-open pixel ranges; values are spectral radiance (W sr^-1 m^-2 nm^-1) averaged over each of the
+            K bins of the capture window with the light at PWM level 1. Empty list when no light is visible.
+        """
+        m, path = self._frame_group(scene_id, frame, group)
+        if group_storage(m, group) != "lights":
+            raise ValueError(f"group {group!r} of scene {scene_id!r} is stored as short/long windows "
+                             f"(bins 0): use read_static")
+        k = _group_bins(m, group)
+        bl = self._band_list(m, bands)
+        names = [n for row in bin_channels(k, bl) for n in row]
+        out = []
+        for p in self._parts(path):
+            if p.name == EMPTY_PART:
+                continue
+            mt = re.fullmatch(r"light(\d+)", p.name)
+            if mt is None:
+                raise CorpusChannelError(f"EXR file {path}: unexpected part {p.name!r} (want light<id>)")
+            arr = _stack(p, names, path).reshape(k, len(bl), p.window[2] - p.window[0], p.window[3] - p.window[1])
+            scale = layer_scale(p, None, path)
+            if scale != 1.0:
+                arr /= np.float32(scale)  # exact: a power of two
+            if self.check_values:
+                _check_values(arr, path, f"part {p.name!r}")
+            out.append((int(mt.group(1)), p.window, arr))
+        return sorted(out, key=lambda t: t[0])
+
+    def read_aux(self, scene_id: str, frame: int, names: Sequence[str] | None = None) -> dict[str, np.ndarray]:
+        """Aux channels of a frame: ``{name: (H, W) float32}``; depth in m (+inf: no surface), ids -1 = none.
+
+        Args:
+            names: subset of :data:`AUX_CHANNELS` (default all).
+        """
+        m = self.meta(scene_id)
+        if not 0 <= int(frame) < m["frames"]:
+            raise ValueError(f"frame must be in [0, {m['frames']}) for scene {scene_id!r}, got {frame!r}")
+        names = list(AUX_CHANNELS if names is None else names)
+        bad = [n for n in names if n not in AUX_CHANNELS]
+        if bad:
+            raise ValueError(f"names: unknown aux channels {bad} (known: {AUX_CHANNELS})")
+        path = self.path(scene_id, frame, "aux")
+        part = self._parts(path)[0]
+        arr = _stack(part, names, path)
+        if self.check_values:
+            for n, a in zip(names, arr):
+                _check_aux(n, a, f"EXR file {path}")
+        return {n: a for n, a in zip(names, arr)}

@@ -1,0 +1,265 @@
+"""How radiance layers are stored in format version 2 (``docs/corpus-format.md`` section 6): EXR pixel
+type, per-layer power-of-two scale for HALF, mantissa rounding and compression (:class:`Storage`,
+:data:`STORAGES`), and the encoding of one layer (:func:`store_layer`, no I/O).
+
+Units: radiance in W sr^-1 m^-2 nm^-1; errors are relative (dimensionless).
+
+References: IEEE 754-2008 binary16 (HALF) range and subnormals; OpenEXR compressions,
+https://openexr.com/en/latest/TechnicalIntroduction.html
+"""
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from lfmbench.corpus.naming import ATTR, STATIC_WINDOWS
+
+__all__ = ["HALF_MAX", "COMPRESSIONS", "EXTRA_COMPRESSIONS", "HALF_MIN_NORMAL", "HALF_PRECISION_RANGE_LOG2",
+           "SCALE_EXP_RANGE", "HALF_UNDERFLOW_ERROR_FRACTION", "MANTISSA_BITS", "Storage", "STORAGES",
+           "DEFAULT_STORAGE", "resolve_storage", "round_mantissa", "scale_exponent", "LayerStore", "StorageStats",
+           "store_layer", "scale_attr"]
+
+log = logging.getLogger(__name__)
+
+#: Largest finite IEEE 754 binary16 value; radiance above it cannot be stored as HALF (IEEE 754-2008).
+HALF_MAX = 65504.0
+#: EXR compressions a corpus file may use, by name -> ``OpenEXR`` enum member. All are readable by OpenEXR 2.2
+#: and later; every one of them is lossless on the channels lfmbench writes except PXR24 on FLOAT channels
+#: (rounded to 24 bits, <= 2^-16 relative): DWAA/DWAB compress lossily only channels named R, G, B, Y, BY, RY
+#: (and ``*.R`` ...), never ``short.400nm`` (checked in ``docs/storage-benchmark.md``).
+COMPRESSIONS = {"none": "NO_COMPRESSION", "rle": "RLE_COMPRESSION", "zips": "ZIPS_COMPRESSION",
+                "zip": "ZIP_COMPRESSION", "piz": "PIZ_COMPRESSION", "pxr24": "PXR24_COMPRESSION",
+                "dwaa": "DWAA_COMPRESSION", "dwab": "DWAB_COMPRESSION"}
+#: Compressions accepted only with ``Storage(allow_lossy_codec=True)`` (benchmarks): B44/B44A quantise every
+#: HALF channel (up to ~12 % per value), an error the writer does not measure; ZSTD / HTJ2K need OpenEXR >= 3.4.
+EXTRA_COMPRESSIONS = {"b44": "B44_COMPRESSION", "b44a": "B44A_COMPRESSION", "zstd": "ZSTD_COMPRESSION",
+                      "htj2k32": "HTJ2K32_COMPRESSION", "htj2k256": "HTJ2K256_COMPRESSION"}
+#: Smallest positive normal binary16 value, 2^-14 ~ 6.1e-5 (IEEE 754-2008).
+HALF_MIN_NORMAL = 2.0 ** -14
+#: Octaves R below a HALF layer's peak in which every value keeps the full relative precision of the stored
+#: mantissa bits m (2^20 ~ 1.05e6, 120 dB, the range of an HDR automotive sensor). HALF's subnormals have an
+#: absolute step of 2^-24, i.e. m-bit relative precision down to 2^(m-24); so the layer is scaled by 2^e with
+#: its peak in [2^(P-1), 2^P), P = R - 23 + m (P = 2 for m = 5, 7 for m = 10), and values below peak * 2^-R
+#: keep an absolute error <= 2^-25 / 2^e (W sr^-1 m^-2 nm^-1), below 2^-(R+m+1) of the peak.
+HALF_PRECISION_RANGE_LOG2 = 20
+#: Allowed range of the scale exponent e (2^e must be a normal float32 for the float attribute).
+SCALE_EXP_RANGE = (-126, 127)
+#: Bound of the energy-weighted relative error ``sum_{x*s < 2^-14} |x' - x| / sum x`` caused by values that fall
+#: below HALF's normal range after scaling (x' the value read back, s = 2^e), as a multiple of the rounding
+#: bound 2^-(m+1) of m mantissa bits: a quarter, i.e. 2^-(m+3) (1.2e-4 for m = 10, 3.9e-3 for m = 5). A layer
+#: above it is stored FLOAT (with the same mantissa rounding). Subnormal HALF keeps an absolute step of 2^-24,
+#: so this error is <= n * 2^-(P+24) for a layer of n values whose peak is >= 2^(P-1).
+HALF_UNDERFLOW_ERROR_FRACTION = 0.25
+#: Explicit mantissa bits of the EXR pixel types.
+MANTISSA_BITS = {"float16": 10, "float32": 23}
+
+
+@dataclass(frozen=True)
+class Storage:
+    """How radiance layers (a static group's window: C bands; a light: K bins x C bands) are stored.
+
+    Attributes:
+        dtype: ``"float16"``: EXR HALF holding ``radiance * 2^e`` with one power-of-two scale per layer (peak
+            in [2^(P-1), 2^P), see :func:`scale_exponent`), FLOAT fallback for a layer whose underflow error
+            would exceed :attr:`max_underflow_error`; ``"float32"``: EXR FLOAT, scale 1.
+        compression: a key of :data:`COMPRESSIONS`.
+        mantissa_bits: round every stored value to this many explicit mantissa bits (round to nearest, ties to
+            even) before compression, 1..10 for HALF, 1..23 for FLOAT; ``None`` keeps all. The relative
+            error of a value in the normal range is <= 2^-(mantissa_bits + 1).
+        allow_lossy_codec: accept :data:`EXTRA_COMPRESSIONS` (benchmarks only).
+    """
+
+    dtype: str = "float16"
+    compression: str = "zip"
+    mantissa_bits: int | None = None
+    allow_lossy_codec: bool = False
+
+    def __post_init__(self) -> None:
+        if self.dtype not in MANTISSA_BITS:
+            raise ValueError(f"dtype must be 'float32' (EXR FLOAT) or 'float16' (EXR HALF x 2^e), got "
+                             f"{self.dtype!r}")
+        known = dict(COMPRESSIONS, **(EXTRA_COMPRESSIONS if self.allow_lossy_codec else {}))
+        if self.compression not in known:
+            raise ValueError(f"compression must be one of {sorted(known)}, got {self.compression!r}")
+        mb = self.mantissa_bits
+        top = MANTISSA_BITS[self.dtype]
+        if mb is not None and (isinstance(mb, bool) or not isinstance(mb, int) or not 1 <= mb <= top):
+            raise ValueError(f"mantissa_bits must be None or an integer in [1, {top}] for {self.dtype}, got {mb!r}")
+
+    @property
+    def bits(self) -> int:
+        """Explicit mantissa bits actually kept (10 for HALF, 23 for FLOAT when not rounded)."""
+        return MANTISSA_BITS[self.dtype] if self.mantissa_bits is None else int(self.mantissa_bits)
+
+    @property
+    def max_rel_rounding_error(self) -> float:
+        """Largest relative change of a value in HALF's normal range (or any FLOAT value): 2^-(bits+1)."""
+        return 2.0 ** -(self.bits + 1)
+
+    @property
+    def max_underflow_error(self) -> float:
+        """Largest energy-weighted error from values below HALF's normal range before a layer is stored FLOAT:
+        ``HALF_UNDERFLOW_ERROR_FRACTION * 2^-(bits+1)``."""
+        return HALF_UNDERFLOW_ERROR_FRACTION * self.max_rel_rounding_error
+
+    def to_dict(self) -> dict:
+        """``meta.json`` ``storage`` entry (without ``format_version``)."""
+        return {"dtype": self.dtype, "compression": self.compression, "mantissa_bits": self.bits}
+
+
+#: Named storages (``lfmbench render --storage NAME``). ``compact`` is the default of new corpora (chosen in
+#: ``docs/storage-benchmark.md``); ``float32`` stores the pixels as format version 1 did (lossless FLOAT, ZIP).
+STORAGES = {
+    "compact": Storage("float16", "piz", 5),
+    "float16": Storage("float16", "zip", None),
+    "float32": Storage("float32", "zip", None),
+}
+DEFAULT_STORAGE = "compact"
+
+
+def resolve_storage(storage: str | Storage, what: str = "dtype") -> Storage:
+    """A :class:`Storage` from a name of :data:`STORAGES` or a :class:`Storage`; ``ValueError`` naming ``what``."""
+    if isinstance(storage, Storage):
+        return storage
+    if isinstance(storage, str) and storage in STORAGES:
+        return STORAGES[storage]
+    raise ValueError(f"{what} must be one of {sorted(STORAGES)} or a corpus.Storage, got {storage!r}")
+
+
+def round_mantissa(arr: np.ndarray, bits: int) -> np.ndarray:
+    """``arr`` (finite, any float dtype) as float32 rounded to ``bits`` explicit mantissa bits (1..23).
+
+    Round to nearest, ties to even, on the float32 bit pattern (a carry into the exponent is the correct
+    result); relative change <= 2^-(bits+1) for normal float32 values. Returns a new float32 array.
+    """
+    a = np.array(arr, dtype=np.float32, copy=True)
+    if not 1 <= int(bits) <= 23:
+        raise ValueError(f"bits must be in [1, 23], got {bits!r}")
+    drop = 23 - int(bits)
+    if drop == 0:
+        return a
+    b = a.view(np.uint32)
+    lsb = (b >> np.uint32(drop)) & np.uint32(1)
+    b += np.uint32((1 << (drop - 1)) - 1) + lsb
+    b &= np.uint32(~((1 << drop) - 1) & 0xFFFFFFFF)
+    return a
+
+
+def scale_exponent(peak: float, bits: int = 10) -> int:
+    """Exponent e of the power-of-two scale of a HALF layer with maximum ``peak`` (W sr^-1 m^-2 nm^-1) whose
+    values keep ``bits`` mantissa bits: ``peak * 2^e`` lies in [2^(P-1), 2^P) with
+    ``P = HALF_PRECISION_RANGE_LOG2 - 23 + bits``; 0 for an all-zero layer; clipped to :data:`SCALE_EXP_RANGE`."""
+    if not peak > 0:
+        return 0
+    top = HALF_PRECISION_RANGE_LOG2 - 23 + int(bits)
+    _, q = math.frexp(float(peak))  # peak = f * 2^q, f in [0.5, 1)
+    return int(min(max(top - q, SCALE_EXP_RANGE[0]), SCALE_EXP_RANGE[1]))
+
+
+@dataclass
+class LayerStore:
+    """One stored layer: the array to write (float16 or float32), its EXR pixel type, the scale ``2^e`` the
+    radiance was multiplied by, and the measured energy-weighted relative errors (dimensionless) of the
+    values read back: ``error`` over the whole layer, ``underflow_error`` from values below HALF's normal range."""
+
+    data: np.ndarray
+    pixel_type: str
+    scale: float
+    error: float
+    underflow_error: float
+    fallback: str | None = None
+
+
+@dataclass
+class StorageStats:
+    """Aggregate of :class:`LayerStore` results (for one readable note per scene instead of one per layer)."""
+
+    layers: int = 0
+    half: int = 0
+    fallbacks: list[str] = field(default_factory=list)
+    max_error: float = 0.0
+    max_underflow_error: float = 0.0
+
+    def add(self, ls: LayerStore, what: str) -> None:
+        self.layers += 1
+        self.half += ls.pixel_type == "float16"
+        self.max_error = max(self.max_error, ls.error)
+        self.max_underflow_error = max(self.max_underflow_error, ls.underflow_error)
+        if ls.fallback:
+            self.fallbacks.append(f"{what}: {ls.fallback}")
+
+    def summary(self, what: str, storage: Storage) -> str:
+        """One line: layers, HALF share, largest errors, FLOAT fallbacks (the first three named)."""
+        s = (f"{what}: {self.layers} radiance layers, {self.half} HALF x 2^e ({storage.bits} mantissa bits, "
+             f"{storage.compression}); energy-weighted relative error max {self.max_error:.2g}, from values "
+             f"below HALF's normal range max {self.max_underflow_error:.2g}")
+        if self.fallbacks:
+            s += (f"; {len(self.fallbacks)} layer(s) stored FLOAT: " + "; ".join(self.fallbacks[:3])
+                  + (" ..." if len(self.fallbacks) > 3 else ""))
+        return s
+
+
+def _energy_error(orig: np.ndarray, back: np.ndarray, total: float, mask: np.ndarray | None = None
+                  ) -> tuple[float, float]:
+    """``(sum|back - orig| / total, same sum over mask / total)``; float32 differences of nearby values are
+    exact (Sterbenz), sums in float64."""
+    if total <= 0:
+        return 0.0, 0.0
+    d = np.abs(back - orig)
+    under = float(np.sum(d[mask], dtype=np.float64)) / total if mask is not None else 0.0
+    return float(np.sum(d, dtype=np.float64)) / total, under
+
+
+def store_layer(arr: np.ndarray, storage: str | Storage, what: str = "layer") -> LayerStore:
+    """Encode one radiance layer for storage (no I/O): the scale rule of ``docs/corpus-format.md`` section 6.
+
+    Args:
+        arr: radiance, any shape (e.g. (C, H, W) or (K, C, h, w)), W sr^-1 m^-2 nm^-1, finite and >= 0.
+        storage: a :class:`Storage` or a name of :data:`STORAGES`.
+        what: the layer's name for messages.
+
+    HALF: ``stored = half(round_m(arr * 2^e))`` with ``e = scale_exponent(max(arr), m)``; the reader computes
+    ``stored / 2^e``. The scale is a power of two, so it changes no mantissa bit: the only errors are the
+    rounding to ``bits`` mantissa bits (<= 2^-(bits+1) relative) and, for values below 2^-14 after scaling,
+    HALF's subnormal step (measured: ``underflow_error``). When that exceeds
+    :data:`HALF_UNDERFLOW_ERROR_FRACTION` (or the exponent had to be clipped) the layer is stored FLOAT with
+    scale 1 and the same mantissa rounding.
+    """
+    st = resolve_storage(storage, "storage")
+    x = np.asarray(arr, dtype=np.float32)
+    total = float(np.sum(x, dtype=np.float64))
+    if st.dtype == "float16":
+        peak = float(np.max(x)) if x.size else 0.0
+        e = scale_exponent(peak, st.bits)
+        scaled = x * np.float32(2.0 ** e)  # exact: power of two (unless float32 over/underflows, checked below)
+        if st.mantissa_bits is not None:
+            scaled = round_mantissa(scaled, st.bits)
+        h = scaled.astype(np.float16)
+        back = h.astype(np.float32) / np.float32(2.0 ** e)
+        err, under = _energy_error(x, back, total, scaled < HALF_MIN_NORMAL)
+        reason = None
+        if peak > 0 and not HALF_MIN_NORMAL <= peak * 2.0 ** e <= HALF_MAX:
+            reason = f"peak {peak:.3g} cannot be scaled into HALF's range by 2^{e}"
+        elif not math.isfinite(err) or under > st.max_underflow_error:
+            reason = (f"HALF x 2^{e} would change the radiance by {under:.2g} (energy-weighted, values below "
+                      f"HALF's normal range) > {st.max_underflow_error:.2g}")
+        if reason is None:
+            return LayerStore(np.ascontiguousarray(h), "float16", float(2.0 ** e), err, under)
+        log.debug("%s: %s: stored FLOAT", what, reason)
+        fb = round_mantissa(x, st.bits) if st.mantissa_bits is not None else np.ascontiguousarray(x)
+        return LayerStore(fb, "float32", 1.0, _energy_error(x, fb, total)[0], 0.0, reason)
+    out = round_mantissa(x, st.bits) if st.mantissa_bits is not None else np.ascontiguousarray(x)
+    return LayerStore(out, "float32", 1.0, _energy_error(x, out, total)[0] if st.mantissa_bits else 0.0, 0.0)
+
+
+def scale_attr(window: str | None) -> str:
+    """Header attribute holding a layer's scale 2^e: ``lfmbench_scale_short`` / ``lfmbench_scale_long`` for the
+    windows of a static part, ``lfmbench_scale`` (``window=None``) for a light part."""
+    if window is None:
+        return ATTR["scale"]
+    if window not in STATIC_WINDOWS:
+        raise ValueError(f"window must be one of {STATIC_WINDOWS} or None, got {window!r}")
+    return f"{ATTR['scale']}_{window}"

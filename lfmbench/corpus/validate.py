@@ -1,0 +1,300 @@
+""":func:`validate_corpus`: a full check of a corpus (missing files, checksums, channels, NaN/inf/negative
+radiance, metadata consistency), used by ``lfmbench validate``.
+"""
+from __future__ import annotations
+
+import os
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+
+from lfmbench.corpus.errors import CorpusError, CorpusFileError, CorpusValueError
+from lfmbench.corpus.exr import ExrPart, _check_aux, layer_scale, read_exr
+from lfmbench.corpus.meta import (_check_manifest, _check_meta_storage, _file_entry_error, _load_json, _scene_id_error,
+                                  check_splits, inside_root, manifest_entry_errors, sha256_file, validate_meta)
+from lfmbench.corpus.naming import (ATTR, AUX_CHANNELS, EMPTY_PART, MANIFEST_NAME, RADIANCE_MAX, RADIANCE_UNIT,
+                                    SCENES_DIR, SPLITS_NAME, STATIC_WINDOWS, _group_bins, bin_channels, frame_dir,
+                                    group_storage, static_channels)
+from lfmbench.fileio import TMP_PREFIX
+
+__all__ = ["ValidationReport", "validate_corpus"]
+
+
+@dataclass
+class ValidationReport:
+    """Result of :func:`validate_corpus`: ``errors`` (each names a file), ``warnings``, counters."""
+
+    root: str
+    errors: list[str] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+    n_scenes: int = 0
+    n_files: int = 0
+
+    @property
+    def ok(self) -> bool:
+        return not self.errors
+
+    def to_dict(self) -> dict:
+        return {"root": self.root, "ok": self.ok, "n_scenes": self.n_scenes, "n_files": self.n_files,
+                "errors": self.errors, "warnings": self.warnings}
+
+
+def validate_corpus(root: str | os.PathLike, *, check_pixels: bool = True,
+                    progress: Any = None) -> ValidationReport:
+    """Check a whole corpus; never raises for corpus problems, collects them in the report.
+
+    Checks: manifest format; ``splits.json`` (ids known, disjoint); per scene ``scene.json`` / ``meta.json``
+    (:func:`validate_meta`); every expected EXR present (each frame x group, ``aux.exr`` all or none) and in
+    the manifest; every manifest file present with the right SHA-256; files on disk not in the manifest
+    (warning); per EXR: display window = meta size, parts / channels exactly as meta.json announces
+    (``short``/``long`` x bands, or ``light<id>`` parts with K bins x bands, data windows inside the image,
+    ids of that group), and (``check_pixels``) NaN / inf / negative radiance and invalid aux values.
+
+    Args:
+        root: corpus directory.
+        check_pixels: decode pixel data (slow for big corpora) in addition to headers.
+        progress: optional callable ``progress(done, total)`` called after each scene.
+    """
+    root = Path(root)
+    rep = ValidationReport(str(root))
+    err = rep.errors.append
+    mpath = root / MANIFEST_NAME
+    if not mpath.is_file():
+        err(f"{mpath}: manifest missing (not an lfmbench corpus)")
+        return rep
+    try:
+        man = _check_manifest(_load_json(mpath, "manifest"), mpath, entries=False)
+    except CorpusError as exc:
+        err(str(exc))
+        return rep
+    bad_entries = manifest_entry_errors(man, mpath)
+    rep.errors.extend(bad_entries)
+    scenes = [s for s in man["scenes"] if _scene_id_error(s) is None]
+    rep.n_scenes = len(scenes)
+    files: dict[str, str] = {rel: d for rel, d in man["files"].items()
+                             if _file_entry_error(rel, d, set(scenes)) is None}
+    rep.n_files = len(man["files"])
+    # checksums and presence of every listed file (only entries that stay inside the root)
+    for rel, digest in files.items():
+        try:
+            p = inside_root(root, rel, str(mpath))
+        except CorpusFileError as exc:
+            err(str(exc))
+            continue
+        p = root / rel
+        if not p.is_file():
+            err(f"{p}: missing (listed in manifest)")
+        elif sha256_file(p) != digest:
+            err(f"{p}: bad checksum (SHA-256 differs from manifest)")
+    # splits
+    spath = root / SPLITS_NAME
+    if not spath.is_file():
+        err(f"{spath}: missing")
+    else:
+        try:
+            sp = check_splits(_load_json(spath, "splits file"), spath)
+            ids = [s for k in ("train", "val", "test") for s in sp.get(k, [])]
+            if set(sp) != {"train", "val", "test"}:
+                err(f"{spath}: keys must be train, val, test; got {sorted(sp)}")
+            if len(ids) != len(set(ids)):
+                err(f"{spath}: a scene appears in more than one split")
+            unknown = sorted(set(ids) - set(scenes))
+            if unknown:
+                err(f"{spath}: scenes not in the manifest: {unknown[:5]}")
+            unsplit = sorted(set(scenes) - set(ids))
+            if unsplit:
+                rep.warnings.append(f"{spath}: scenes in no split: {unsplit[:5]}")
+        except CorpusError as exc:
+            err(str(exc))
+    # files on disk not in the manifest
+    sroot = root / SCENES_DIR
+    if sroot.is_dir():
+        for p in sorted(sroot.rglob("*")):
+            if p.is_file():
+                rel = p.relative_to(root).as_posix()
+                if p.name.startswith(TMP_PREFIX):
+                    rep.warnings.append(f"{p}: temporary file of an interrupted run")
+                elif rel not in files and rel.split("/")[1] in scenes:
+                    rep.warnings.append(f"{p}: not in manifest")
+        for d in sorted(sroot.iterdir()):
+            if d.is_dir() and d.name not in scenes:
+                rep.warnings.append(f"{d}: incomplete scene (not in manifest; re-run the render to finish it)")
+    for i, sid in enumerate(sorted(scenes)):
+        try:
+            inside_root(root, f"{SCENES_DIR}/{sid}", str(mpath))
+        except CorpusFileError as exc:
+            err(str(exc))
+            continue
+        _validate_scene(root, sid, files, rep, check_pixels)
+        if progress is not None:
+            progress(i + 1, len(scenes))
+    return rep
+
+
+def _validate_scene(root: Path, sid: str, files: Mapping[str, str], rep: ValidationReport,
+                    check_pixels: bool) -> None:
+    err = rep.errors.append
+    sdir = root / SCENES_DIR / sid
+    rel0 = f"{SCENES_DIR}/{sid}"
+    for name in ("scene.json", "meta.json"):
+        if f"{rel0}/{name}" not in files:
+            err(f"{sdir / name}: not in manifest")
+    if not (sdir / "scene.json").is_file():
+        err(f"{sdir / 'scene.json'}: missing")
+    else:
+        try:
+            sc = _load_json(sdir / "scene.json", "scene description")
+            if not isinstance(sc, dict):
+                err(f"{sdir / 'scene.json'}: must hold a JSON object (free-form content), got a {type(sc).__name__}")
+        except CorpusError as exc:
+            err(str(exc))
+    mp = sdir / "meta.json"
+    try:
+        meta = _load_json(mp, "scene metadata")
+        validate_meta(meta, str(mp))
+        _check_meta_storage(meta, mp)
+    except (CorpusError, ValueError) as exc:
+        err(str(exc))
+        return
+    if meta["scene_id"] != sid:
+        err(f"{mp}: scene_id {meta['scene_id']!r} != directory name {sid!r}")
+    H, W, bands = meta["height"], meta["width"], meta["bands_nm"]
+    aux_frames = [n for n in range(meta["frames"]) if f"{rel0}/{frame_dir(n)}/aux.exr" in files
+                  or (sdir / frame_dir(n) / "aux.exr").is_file()]
+    if aux_frames and len(aux_frames) != meta["frames"]:
+        miss = sorted(set(range(meta["frames"])) - set(aux_frames))
+        err(f"{sdir}: aux.exr missing for frames {miss}")
+    light_ids = {}
+    bbox_of = {}  # light id -> per-frame box (half-open) or None, where meta.json gives one
+    for lt in meta.get("lights", []):
+        light_ids.setdefault(lt["group"], set()).add(lt["id"])
+        if "bbox" in lt:
+            bbox_of[lt["id"]] = lt["bbox"]
+    for n in range(meta["frames"]):
+        for g in list(meta["groups"]) + (["aux"] if n in aux_frames else []):
+            p = sdir / frame_dir(n) / f"{g}.exr"
+            rel = p.relative_to(root).as_posix()
+            if not p.is_file():
+                if rel not in files:  # listed-but-missing files were already reported
+                    err(f"{p}: missing")
+                continue
+            if rel not in files:
+                err(f"{p}: not in manifest")
+            try:
+                parts = read_exr(p, header_only=not check_pixels)
+            except CorpusError as exc:
+                err(str(exc))
+                continue
+            for part in parts:
+                if part.size != (H, W):
+                    err(f"{p} part {part.name!r}: display window {part.size} != meta.json ({H}, {W})")
+            if g == "aux":
+                _validate_channels(p, parts[0], set(AUX_CHANNELS), rep)
+                if check_pixels and parts[0].channels is not None:
+                    for name in AUX_CHANNELS:
+                        if name in parts[0].channels:
+                            try:
+                                _check_aux(name, np.asarray(parts[0].channels[name]), str(p))
+                            except CorpusValueError as exc:
+                                err(str(exc))
+                continue
+            if group_storage(meta, g) == "static":
+                if len(parts) != 1:
+                    err(f"{p}: static group must have exactly one part, has {len(parts)}")
+                want = {c for w in STATIC_WINDOWS for c in static_channels(w, bands)}
+                _validate_channels(p, parts[0], want, rep)
+                if parts[0].window != (0, 0, H, W):
+                    err(f"{p}: data window {parts[0].window} must cover the whole image")
+                for w in STATIC_WINDOWS:
+                    _validate_storage_attrs(p, parts[0], w, rep)
+                _validate_pixels(p, parts[0], rep, check_pixels)
+            else:
+                K = _group_bins(meta, g)
+                want = {c for row in bin_channels(K, bands) for c in row}
+                ids = light_ids.get(g, set())
+                if len(parts) == 1 and parts[0].name == EMPTY_PART:
+                    shown = [lid for lid in sorted(ids) if bbox_of.get(lid, [None] * (n + 1))[n] is not None]
+                    if shown:
+                        err(f"{p}: no light is stored but meta.json bbox[{n}] of lights {shown} is not null")
+                    continue
+                have_parts = set()
+                for part in parts:
+                    mt = re.fullmatch(r"light(\d+)", part.name)
+                    if mt is None:
+                        err(f"{p}: unexpected part name {part.name!r} (want light<id>)")
+                        continue
+                    if int(mt.group(1)) not in ids:
+                        err(f"{p}: part {part.name!r} is not a light of group {g!r} in meta.json")
+                    have_parts.add(int(mt.group(1)))
+                    bbs = bbox_of.get(int(mt.group(1)))
+                    if bbs is not None and bbs[n] is None:
+                        err(f"{p}: part {part.name!r} is stored but meta.json bbox[{n}] is null (not visible)")
+                    elif bbs is not None and tuple(bbs[n]) != tuple(part.window):
+                        err(f"{p}: part {part.name!r} data window {part.window} != meta.json bbox[{n}] {bbs[n]} "
+                            "(half-open (y0, x0, y1, x1))")
+                    y0, x0, y1, x1 = part.window
+                    if not (0 <= y0 < y1 <= H and 0 <= x0 < x1 <= W):
+                        err(f"{p}: part {part.name!r} data window {part.window} outside the {H}x{W} image")
+                    _validate_channels(p, part, want, rep)
+                    _validate_storage_attrs(p, part, None, rep)
+                    _validate_pixels(p, part, rep, check_pixels)
+                for lid in sorted(ids - have_parts):
+                    bb = bbox_of.get(lid, [None] * (n + 1))[n]
+                    if bb is not None:
+                        err(f"{p}: meta.json bbox[{n}] of light {lid} is {bb} but the file has no part "
+                            f"'light{lid}' (null bbox = not visible)")
+
+
+def _validate_channels(p: Path, part: ExrPart, want: set[str], rep: ValidationReport) -> None:
+    have = set(part.channel_names)
+    missing, extra = sorted(want - have), sorted(have - want)
+    if missing:
+        rep.errors.append(f"{p} part {part.name!r}: missing channels {missing[:4]}"
+                          f"{' ...' if len(missing) > 4 else ''} ({len(missing)} in all)")
+    if extra:
+        rep.errors.append(f"{p} part {part.name!r}: unexpected channels {extra[:4]}"
+                          f"{' ...' if len(extra) > 4 else ''} ({len(extra)} in all)")
+
+
+def _validate_storage_attrs(p: Path, part: ExrPart, window: str | None, rep: ValidationReport) -> None:
+    """Format-version-2 attributes: the layer's scale (a power of two) and ``lfmbench_mantissa_bits``."""
+    try:
+        layer_scale(part, window, p)
+    except CorpusFileError as exc:
+        rep.errors.append(str(exc))
+    mb = part.header.get(ATTR["mantissa"])
+    if mb is not None and (isinstance(mb, bool) or not isinstance(mb, int) or not 1 <= mb <= 23):
+        rep.errors.append(f"{p} part {part.name!r}: attribute {ATTR['mantissa']} = {mb!r} must be an integer "
+                          "in [1, 23]")
+
+
+def _validate_pixels(p: Path, part: ExrPart, rep: ValidationReport, check_pixels: bool) -> None:
+    if not check_pixels or part.channels is None:
+        return
+    n_nan = n_inf = n_neg = n_big = 0
+    peak = 0.0
+    for name, a in part.channels.items():
+        a = np.asarray(a, dtype=np.float32)
+        n_nan += int(np.isnan(a).sum())
+        n_inf += int(np.isinf(a).sum())
+        n_neg += int((a < 0).sum())
+        window = name.split(".", 1)[0]
+        try:
+            scale = layer_scale(part, window if window in STATIC_WINDOWS else None, p)
+        except CorpusFileError:  # reported by _validate_storage_attrs
+            continue
+        fin = a[np.isfinite(a)]
+        if fin.size:
+            big = fin.astype(np.float64) / scale > RADIANCE_MAX
+            n_big += int(big.sum())
+            peak = max(peak, float(fin.max()) / scale)
+    for n, what in ((n_nan, "NaN"), (n_inf, "inf"), (n_neg, "negative")):
+        if n:
+            rep.errors.append(f"{p} part {part.name!r}: {n} {what} radiance values")
+    if n_big:
+        rep.errors.append(f"{p} part {part.name!r}: {n_big} radiance values above the plausibility ceiling "
+                          f"RADIANCE_MAX = {RADIANCE_MAX:.0e} {RADIANCE_UNIT} (max {peak:.3g}): a unit or scale "
+                          "error")

@@ -1,0 +1,280 @@
+"""Writing a corpus: :func:`encode_scene` (pure encoding, usable in render workers), :func:`write_files`
+(atomic writes: temporary name in the same directory, then :func:`os.replace`) and :class:`CorpusWriter` (a
+manifest that is rewritten atomically after each finished scene, resume support).
+"""
+from __future__ import annotations
+
+import contextlib
+import json
+import logging
+import os
+from pathlib import Path
+from typing import Any, Iterable, Iterator, Mapping, Sequence
+
+import numpy as np
+
+from lfmbench.check import check_scene_id
+from lfmbench.corpus.exr import encode_aux_exr, encode_lights_exr, encode_static_exr
+from lfmbench.corpus.meta import _check_manifest, _empty_manifest, _load_json, make_splits, sha256_file, validate_meta
+from lfmbench.corpus.naming import (ATTR, FORMAT_VERSION, MANIFEST_NAME, SCENES_DIR, SPLITS_NAME, _group_bins,
+                                    frame_dir, group_storage)
+from lfmbench.corpus.storage import DEFAULT_STORAGE, Storage, StorageStats, resolve_storage
+from lfmbench.fileio import TMP_PREFIX, atomic_write_bytes, atomic_write_json, json_default
+
+__all__ = ["CorpusWriter", "prune_scene_dir", "encode_scene", "write_files"]
+
+log = logging.getLogger(__name__)
+
+
+class CorpusWriter:
+    """Write an lfmbench corpus atomically, scene by scene.
+
+    Every file goes through :func:`atomic_write_bytes` (temp file in the same directory + :func:`os.replace`);
+    a scene enters ``manifest.json`` (rewritten atomically) only after all its files are on disk, so a crash or
+    Ctrl-C leaves the corpus valid: the unfinished scene is simply absent and is redone on resume. Stray
+    temporary files of a killed run are removed when a writer opens the corpus.
+
+    Args:
+        root: corpus directory (created if needed).
+        dtype: storage of the radiance layers: a name of :data:`STORAGES` or a :class:`Storage`. Default
+            ``"compact"`` (HALF x per-layer 2^e, mantissas rounded to 5 bits: <= 2^-6 ~ 1.6 % relative per value,
+            PIZ); ``"float16"`` (HALF x 2^e, 10 bits, <= 2^-11); ``"float32"`` (lossless FLOAT, as version 1).
+        render: optional dict of the options the corpus is rendered with, stored in the manifest as
+            ``"render"``; re-opening with different options raises ``ValueError`` (resume safety).
+    """
+
+    def __init__(self, root: str | os.PathLike, *, dtype: str | Storage = DEFAULT_STORAGE,
+                 render: Mapping[str, Any] | None = None) -> None:
+        self.root = Path(root)
+        self.storage = resolve_storage(dtype)
+        self.dtype = dtype
+        if self.root.exists() and not self.root.is_dir():
+            raise ValueError(f"corpus root {self.root} exists and is not a directory")
+        self.root.mkdir(parents=True, exist_ok=True)
+        mpath = self.root / MANIFEST_NAME
+        if mpath.exists():
+            self.manifest = _check_manifest(_load_json(mpath, "manifest"), mpath)
+            # version-2 readers read version-1 files: new scenes may join an old corpus, which becomes version 2
+            self.manifest["version"] = FORMAT_VERSION
+        else:
+            self.manifest = _empty_manifest()
+            self.write_manifest()  # an empty corpus is a valid corpus
+        if render is not None:
+            render = json.loads(json.dumps(dict(render), default=json_default))
+            old = self.manifest.get("render")
+            if old is not None and old != render:
+                diff = sorted(k for k in set(old) | set(render) if old.get(k) != render.get(k))
+                raise ValueError(f"corpus {self.root} was rendered with different options ({', '.join(diff)}); "
+                                 "use a new --out directory or the original options to resume")
+            if old is None:
+                self.manifest["render"] = render
+                self.write_manifest()
+        self.notes: list[str] = []
+        self.cleanup_temp()
+
+    def cleanup_temp(self) -> int:
+        """Remove temporary files left by an interrupted run; returns how many were removed."""
+        n = 0
+        for p in self.root.rglob(TMP_PREFIX + "*"):
+            with contextlib.suppress(OSError):
+                p.unlink()
+                n += 1
+        return n
+
+    @property
+    def scenes(self) -> list[str]:
+        return sorted(self.manifest["scenes"])
+
+    def _rel(self, path: Path) -> str:
+        return path.relative_to(self.root).as_posix()
+
+    def is_complete(self, scene_id: str, *, verify: bool = True) -> bool:
+        """True when the scene is in the manifest and (``verify``) all its files exist with their SHA-256."""
+        if scene_id not in self.manifest["scenes"]:
+            return False
+        prefix = f"{SCENES_DIR}/{scene_id}/"
+        files = {k: v for k, v in self.manifest["files"].items() if k.startswith(prefix)}
+        if not files:
+            return False
+        if not verify:
+            return True
+        for rel, digest in files.items():
+            p = self.root / rel
+            if not p.is_file() or sha256_file(p) != digest:
+                return False
+        return True
+
+    def write_manifest(self) -> None:
+        """Rewrite ``manifest.json`` atomically (scenes and files sorted)."""
+        self.manifest["scenes"] = sorted(set(self.manifest["scenes"]))
+        self.manifest["files"] = dict(sorted(self.manifest["files"].items()))
+        atomic_write_json(self.root / MANIFEST_NAME, self.manifest)
+
+    def encode_scene(self, scene_id: str, scene: Mapping[str, Any], meta: Mapping[str, Any],
+                     frames: Iterable[Mapping[str, Any]]) -> Iterator[tuple[str, bytes]]:
+        """:func:`encode_scene` with this writer's storage (HALF -> FLOAT fallback notes go to ``self.notes``)."""
+        return encode_scene(scene_id, scene, meta, frames, dtype=self.storage, notes=self.notes)
+
+    def write_files(self, files: Iterable[tuple[str, bytes]]) -> dict[str, str]:
+        """:func:`write_files` under this corpus root."""
+        return write_files(self.root, files)
+
+    def commit_scene(self, scene_id: str, hashes: Mapping[str, str]) -> None:
+        """Record a finished scene and its files' SHA-256 in the manifest (written atomically)."""
+        check_scene_id(scene_id)
+        prefix = f"{SCENES_DIR}/{scene_id}/"
+        if not hashes or any(not k.startswith(prefix) for k in hashes):
+            raise ValueError(f"commit_scene: file paths must lie under {prefix}")
+        self.manifest["files"] = {k: v for k, v in self.manifest["files"].items() if not k.startswith(prefix)}
+        self.manifest["files"].update(hashes)
+        self.manifest["scenes"] = sorted(set(self.manifest["scenes"]) | {scene_id})
+        self.write_manifest()
+
+    def forget_scene(self, scene_id: str) -> None:
+        """Drop a scene from the manifest (before re-rendering it); its files stay until overwritten."""
+        prefix = f"{SCENES_DIR}/{scene_id}/"
+        if scene_id in self.manifest["scenes"]:
+            self.manifest["scenes"].remove(scene_id)
+            self.manifest["files"] = {k: v for k, v in self.manifest["files"].items() if not k.startswith(prefix)}
+            self.write_manifest()
+
+    def write_scene(self, scene_id: str, scene: Mapping[str, Any], meta: Mapping[str, Any],
+                    frames: Iterable[Mapping[str, Any]]) -> dict[str, str]:
+        """Encode, write and commit one scene (files as they are rendered, manifest last); returns the hashes.
+
+        Removes files of the scene that a previous, different run left and that this run did not write
+        (:func:`prune_scene_dir`).
+        """
+        self.forget_scene(scene_id)
+        hashes = self.write_files(self.encode_scene(scene_id, scene, meta, frames))
+        prune_scene_dir(self.root, scene_id, hashes)
+        self.commit_scene(scene_id, hashes)
+        return hashes
+
+    def write_splits(self, seed: int, fractions: Sequence[float] = (0.6, 0.2, 0.2)) -> dict[str, list[str]]:
+        """Write ``splits.json`` from the manifest's scenes (see :func:`make_splits`)."""
+        splits = make_splits(self.manifest["scenes"], seed, fractions)
+        atomic_write_json(self.root / SPLITS_NAME, splits)
+        return splits
+
+
+def prune_scene_dir(root: str | os.PathLike, scene_id: str, keep: Iterable[str]) -> list[str]:
+    """Delete files under ``scenes/<scene_id>/`` whose relpath is not in ``keep`` (stale files of an earlier,
+    different render of the scene); returns the removed relpaths. Empty frame directories are removed too."""
+    root = Path(root)
+    sdir = root / SCENES_DIR / scene_id
+    keep = set(keep)
+    removed = []
+    if sdir.is_dir():
+        for p in sorted(sdir.rglob("*"), reverse=True):
+            rel = p.relative_to(root).as_posix()
+            if p.is_file() and rel not in keep and not p.name.startswith(TMP_PREFIX):
+                p.unlink()
+                removed.append(rel)
+            elif p.is_dir() and not any(p.iterdir()):
+                p.rmdir()
+    return removed
+
+
+def _json_bytes(obj: Any) -> bytes:
+    return (json.dumps(obj, indent=1, allow_nan=False, default=json_default) + "\n").encode("utf-8")
+
+
+def _attrs(scene_id: str, frame: int, group: str) -> dict:
+    return {ATTR["scene"]: scene_id, ATTR["frame"]: int(frame), ATTR["group"]: group}
+
+
+def encode_scene(scene_id: str, scene: Mapping[str, Any], meta: Mapping[str, Any],
+                 frames: Iterable[Mapping[str, Any]], *, dtype: str | Storage = DEFAULT_STORAGE,
+                 notes: list[str] | None = None) -> Iterator[tuple[str, bytes]]:
+    """Yield ``(relpath, bytes)`` for every file of a scene, frame by frame (checks shapes vs ``meta``).
+
+    Pure encoding (no disk access), so that render workers can call it; ``dtype`` (the storage) as in
+    :class:`CorpusWriter`. ``meta.json`` gets a ``storage`` entry (format version, pixel type, compression,
+    mantissa bits). ``notes`` receives at most one message per scene: the layers stored FLOAT instead of HALF
+    (if any) with the largest measured errors; the error summary of every scene is logged at INFO level.
+
+    ``frames`` yields the renderer's frame dicts (``render_tools.render.render_frames``)::
+
+        {"frame": n, "static": {group: {"short": (C,H,W), "long": (C,H,W)}},
+         "lights": {group: [(light_id, (y0,x0,y1,x1), (K,C,h,w))]},
+         "aux": {"depth.Z": (H,W), "depth.R": (H,W), "mask.instance": (H,W), "mask.light": (H,W)}}
+    """
+    check_scene_id(scene_id)
+    st = resolve_storage(dtype)
+    meta = dict(meta)
+    if meta.get("scene_id") != scene_id:
+        raise ValueError(f"meta.json scene_id {meta.get('scene_id')!r} != scene id {scene_id!r}")
+    validate_meta(meta, f"meta.json of scene {scene_id}")
+    meta["storage"] = {"format_version": FORMAT_VERSION, **st.to_dict()}
+    stats = StorageStats()
+    sdir = f"{SCENES_DIR}/{scene_id}"
+    yield f"{sdir}/scene.json", _json_bytes(scene)
+    yield f"{sdir}/meta.json", _json_bytes(meta)
+    bands = meta["bands_nm"]
+    H, W = meta["height"], meta["width"]
+    seen: list[int] = []
+    with_aux: list[int] = []
+    for fr in frames:
+        n = fr.get("frame")
+        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or not 0 <= n < meta["frames"] \
+                or n in seen:
+            raise ValueError(f"scene {scene_id}: frame index {n!r} is invalid or repeated "
+                             f"(meta.json frames = {meta['frames']})")
+        seen.append(int(n))
+        fdir = f"{sdir}/{frame_dir(n)}"
+        static = fr.get("static", {}) or {}
+        lights = fr.get("lights", {}) or {}
+        got = set(static) | set(lights)
+        if got != set(meta["groups"]) or set(static) & set(lights):
+            raise ValueError(f"scene {scene_id} frame {n}: groups rendered {sorted(got)} do not match "
+                             f"meta.json groups {sorted(meta['groups'])}")
+        for g, wins in static.items():
+            what = f"{fdir}/{g}.exr"
+            if group_storage(meta, g) != "static":
+                raise ValueError(f"{what}: group {g!r} is flickering with bins > 0 in meta.json but was "
+                                 "rendered as static windows")
+            data = encode_static_exr(wins, bands, dtype=st, what=what, notes=notes, stats=stats,
+                                     attrs=_attrs(scene_id, n, g))
+            if (H, W) != tuple(np.asarray(wins["short"]).shape[1:]):
+                raise ValueError(f"{what}: image size {np.asarray(wins['short']).shape[1:]} != meta.json "
+                                 f"({H}, {W})")
+            yield what, data
+        for g, ls in lights.items():
+            what = f"{fdir}/{g}.exr"
+            if group_storage(meta, g) != "lights":
+                raise ValueError(f"{what}: group {g!r} is static in meta.json but was rendered per light")
+            known = {lt["id"] for lt in meta.get("lights", []) if lt.get("group") == g}
+            bad = [lid for lid, _, _ in ls if int(lid) not in known]
+            if bad:
+                raise ValueError(f"{what}: light ids {bad} are not lights of group {g!r} in meta.json")
+            yield what, encode_lights_exr(ls, bands, _group_bins(meta, g), H, W, dtype=st,
+                                          what=what, notes=notes, stats=stats, attrs=_attrs(scene_id, n, g))
+        if fr.get("aux"):
+            with_aux.append(int(n))
+            yield f"{fdir}/aux.exr", encode_aux_exr(fr["aux"], H, W, what=f"{fdir}/aux.exr",
+                                                    attrs=_attrs(scene_id, n, "aux"))
+    if sorted(seen) != list(range(meta["frames"])):
+        raise ValueError(f"scene {scene_id}: got frames {sorted(seen)}, meta.json announces "
+                         f"{meta['frames']}")
+    if with_aux and len(with_aux) != len(seen):
+        raise ValueError(f"scene {scene_id}: aux given for frames {sorted(with_aux)} only (all frames or none)")
+    summary = stats.summary(f"scene {scene_id}", st)
+    log.info("%s", summary)
+    if stats.fallbacks and notes is not None:
+        notes.append(summary)
+
+
+def write_files(root: str | os.PathLike, files: Iterable[tuple[str, bytes]]) -> dict[str, str]:
+    """Write ``(relpath, bytes)`` pairs under ``root`` atomically (safe in parallel workers).
+
+    Returns ``{relpath: sha256}``; the manifest is not touched (see :meth:`CorpusWriter.commit_scene`).
+    """
+    root = Path(root)
+    out = {}
+    for rel, data in files:
+        p = (root / rel).resolve()
+        if root.resolve() not in p.parents:
+            raise ValueError(f"file path {rel!r} escapes the corpus root")
+        out[rel] = atomic_write_bytes(p, data)
+    return out
