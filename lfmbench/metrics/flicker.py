@@ -43,7 +43,10 @@ MIN_REGION_PX = 1
 
 
 def _as_float(x) -> torch.Tensor:
-    t = torch.as_tensor(x)
+    """``x`` as a floating tensor: a tensor keeps its dtype (integers -> float64); anything else goes through
+    ``numpy.asarray``, so Python numbers are float64 as in the NumPy reference (``torch.as_tensor`` would make
+    them float32, 6e-8 relative, enough to move MMP / FDI decisions at a band edge)."""
+    t = x if isinstance(x, torch.Tensor) else torch.as_tensor(np.asarray(x))
     return t if t.is_floating_point() else t.double()
 
 
@@ -83,8 +86,11 @@ def fdi(series, x_off=None, contrast_threshold: float = FDI_CONTRAST_THRESHOLD, 
     :math:`c` = ``contrast_threshold`` (default 0.1), over frames ``t >= start_index``.
 
     As the reference ``calc_FDI``: when ``x_off`` is None it is the mean of the first ``start_index // 4``
-    frames (the baseline frames recorded with the light OFF). Difference: the reference sums the detections
-    over all ROIs before dividing by T; here each ROI (every index but ``dim``) gets its own FDI.
+    frames (the baseline frames recorded with the light OFF). Differences: on a 2-D NumPy array the reference
+    sums the detections over all ROIs before dividing by T (on a DataFrame, as its demo, it is per ROI as here);
+    here each ROI (every index but ``dim``) gets its own FDI. With ``start_index < 4`` and no ``x_off`` the
+    reference averages no frame (NaN) and reports 0; here that is a ``ValueError`` (``x_off=nan`` gives 0).
+    Checked against the reference in ``tests/test_p2020_reference.py``.
     ``x_off = 0`` gives ``s_t = inf`` for a positive ``x_t`` (detected) and NaN for 0 (not detected), as numpy.
 
     Args:
