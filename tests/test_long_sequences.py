@@ -1,5 +1,5 @@
 """The paper's 1920 x 1080 (capture window longer than the frame time) and long sequences (24, 100 frames):
-options, metadata, streaming corpus writes, and windows of F frames in the dataset."""
+options, metadata, streaming corpus writes, windows of F frames in the dataset, and `lfmbench evaluate --frames 24`."""
 from __future__ import annotations
 
 import json
@@ -206,3 +206,49 @@ def test_random_windows_of_the_test_split_are_frozen(tmp_path):
     # the fixed-start test split is unchanged by the added field (PWM draws as before)
     c = LFMCaptureDataset(root, **kw)
     assert torch.equal(c[0]["meta"]["duty"], a[0]["meta"]["duty"]) and c[0]["meta"]["frame_start"] == 0
+
+
+def test_evaluate_cli_scores_24_frame_sequences_end_to_end(long_corpus, tmp_path):
+    """``lfmbench evaluate --frames 24`` on the 24-frame corpus: every light's P2020 series spans the 24 frames and
+    its FMI / MMP / FDI are those of :mod:`lfmbench.metrics.flicker` (checked against the public reference in
+    test_p2020_reference.py) on the stored series; asking for more frames than the corpus holds is refused, and a
+    3-frame run is not ranked with it."""
+    from lfmbench.metrics import flicker as fm
+
+    out = tmp_path / "runs" / "fa.json"
+    threads = torch.get_num_threads()
+    try:
+        r = CliRunner().invoke(app, ["evaluate", "--method", "flicker_aware", "--corpus", str(long_corpus), "--split",
+                                     "all", "--frames", "24", "--max-scenes", "1", "--output", str(out),
+                                     "--repeats", "1", "--warmup", "0", "--no-perceptual", "--threads", "1"])
+    finally:
+        torch.set_num_threads(threads)
+    assert r.exit_code == 0, r.output
+    d = json.loads(out.read_text())
+    assert d["status"] == "complete" and d["dataset"]["frames"] == 24
+    sc = d["scenes"][0]
+    assert sc["status"] == "ok"
+    m = sc["metrics"]
+    assert m["n_lights"] >= 1 and m["region_frames"] == 24 * m["n_lights"]
+    for light in m["lights"]:
+        p, g = light["series_pred"], light["series_gt"]
+        assert light["frames"] == len(p) == len(g) == 24
+        assert light["fmi_pred"] == pytest.approx(float(fm.fmi(p)), rel=1e-12)
+        assert light["fmi_gt"] == pytest.approx(float(fm.fmi(g)), rel=1e-12)
+        assert light["mmp_pred"] == float(fm.mmp(p)) and light["mmp_gt"] == float(fm.mmp(g))
+        assert 0.0 <= light["fdi_pred"] <= 1.0
+    assert sc["megapixels"] == pytest.approx(24 * 16 * 24 / 1e6)  # F x H x W of one sample
+    r = CliRunner().invoke(app, ["evaluate", "--method", "lpd_only", "--corpus", str(long_corpus), "--split", "all",
+                                 "--frames", "25", "--output", str(tmp_path / "x.json"), "--no-perceptual"])
+    assert r.exit_code == 2 and "frames=25" in r.output
+    # a run over 3-frame samples is another protocol: the leaderboard refuses to rank the two together
+    three = tmp_path / "runs" / "fa3.json"
+    r = CliRunner().invoke(app, ["evaluate", "--method", "flicker_aware", "--corpus", str(long_corpus), "--split",
+                                 "all", "--max-scenes", "1", "--output", str(three), "--repeats", "1", "--warmup", "0",
+                                 "--no-perceptual", "--threads", "1"])
+    torch.set_num_threads(threads)
+    assert r.exit_code == 0, r.output
+    assert json.loads(three.read_text())["dataset"]["frames"] == 3
+    r = CliRunner().invoke(app, ["leaderboard", str(out), str(three), "--markdown", str(tmp_path / "l.md"),
+                                 "--plot", str(tmp_path / "l.png"), "--json", str(tmp_path / "l.json")])
+    assert r.exit_code == 2 and "frames per sample differs" in r.output, r.output

@@ -26,6 +26,7 @@ def register(app) -> None:
         seed: int = typer.Option(0, help="dataset seed (PWM draws, noise)"),
         max_scenes: int = typer.Option(None, help="evaluate at most this many scenes"),
         crop: int = typer.Option(None, help="square crop in px passed to the dataset"),
+        frames: int = typer.Option(3, help="consecutive frames per sample (e.g. 24 or 100; <= the corpus frames)"),
         samples_per_scene: int = typer.Option(1, help="PWM draws per scene (test draws frozen in the corpus)"),
         repeats: int = typer.Option(5, help="timed calls after warm-up"),
         warmup: int = typer.Option(1, help="untimed warm-up calls"),
@@ -50,6 +51,7 @@ def register(app) -> None:
                 fail(f"--threads must be >= 1, got {threads}")
             torch.set_num_threads(threads)
         for name, v, lo in (("--max-scenes", max_scenes, 1), ("--samples-per-scene", samples_per_scene, 1),
+                            ("--frames", frames, 1),
                             ("--repeats", repeats, 1), ("--warmup", warmup, 0), ("--crop", crop, 2)):
             if v is not None and v < lo:
                 fail(f"{name} must be an integer >= {lo}, got {v}")
@@ -79,7 +81,7 @@ def register(app) -> None:
 
         try:
             fn = get_method(method)
-            extra = {} if cache_dir is None else {"cache_dir": cache_dir}
+            extra = {"frames": frames} if cache_dir is None else {"frames": frames, "cache_dir": cache_dir}
             ds, ident, cond = corpus_run_inputs(corpus, split, seed, crop, samples_per_scene, **extra)
         except (MethodNotFoundError, FileNotFoundError, EmptyDataError, RuntimeError, ValueError) as exc:
             fail(str(exc))
@@ -89,7 +91,8 @@ def register(app) -> None:
             res = evaluate(fn, islice(loader, n), method_spec=method, output=out,
                            options=ScoreOptions(perceptual=perceptual), warmup=warmup, repeats=repeats, device=device,
                            seeds={"dataset": seed}, dataset={"corpus": str(corpus), "split": split, "scenes": n,
-                                                             "crop": crop, "samples_per_scene": samples_per_scene},
+                                                             "crop": crop, "samples_per_scene": samples_per_scene,
+                                                             "frames": frames},
                            total=n, corpus=ident, scene_conditions=cond)
         except EvaluationInterrupted as exc:
             n_done = len(exc.result["scenes"])

@@ -67,7 +67,8 @@ def incomplete_runs(runs: list[dict]) -> list[str]:
 # ------------------------------------------------------------------------------------------- comparability
 def identity(run: dict) -> dict[str, Any]:
     """What must agree between results ranked together: corpus (manifest SHA-256, format version, frozen test
-    draws), metric versions, split, dataset seed, crop, samples per scene and scoring options."""
+    draws), metric versions, split, dataset seed, crop, samples per scene, frames per sample (3, the dataset's
+    default, in files that do not record it) and scoring options."""
     c = run.get("corpus") or {}
     d = run.get("dataset") or {}
     split = d.get("split")
@@ -77,7 +78,7 @@ def identity(run: dict) -> dict[str, Any]:
         "corpus test draws (test_params.json) sha256": c.get("test_params_sha256") if split == "test" else None,
         "metric versions": (run.get("versions") or {}).get("metrics"),
         "split": split, "dataset seed": (run.get("seeds") or {}).get("dataset"), "crop": d.get("crop"),
-        "samples per scene": d.get("samples_per_scene", 1),
+        "samples per scene": d.get("samples_per_scene", 1), "frames per sample": d.get("frames", 3),
         "scoring options": {k: v for k, v in (run.get("options") or {}).items() if k != "perceptual"},
     }
 
