@@ -35,6 +35,7 @@ import importlib.util
 import json
 import math
 import platform
+import re
 import subprocess
 import sys
 import warnings
@@ -194,7 +195,10 @@ def main() -> None:
         "cases": single,
         "multi_roi": m,
     }
-    a.out.write_text(json.dumps(doc, indent=1, allow_nan=False) + "\n", encoding="utf-8")
+    text = json.dumps(doc, indent=1, allow_nan=False)
+    # one line per list of numbers / flags (a compact, still diff-friendly file)
+    text = re.sub(r"\[\s*([^\[\]{}]*?)\s*\]", lambda mt: "[" + re.sub(r"\s*\n\s*", " ", mt.group(1)) + "]", text)
+    a.out.write_text(text + "\n", encoding="utf-8")
     print(f"wrote {a.out}: {len(single)} single-ROI cases and one {arr.shape[0]} x {arr.shape[1]} multi-ROI case")
 
 
