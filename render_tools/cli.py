@@ -266,7 +266,8 @@ def protocols_cmd(
         cfg, bad = load_config(), 0
         for ps in p.scenes:
             try:
-                miss = P.check_scene(generate_scene(ps.seed, scene_id=ps.scene_id, config=cfg, **ps.scene_kw()), ps)
+                miss = P.check_scene(generate_scene(ps.seed, scene_id=ps.scene_id, config=cfg, **ps.scene_kw()),
+                                     ps, cfg)
             except ValueError as exc:
                 miss = [str(exc)]
             if miss:

@@ -35,7 +35,8 @@ from lfmbench.corpus import (DEFAULT_STORAGE, SPLITS_NAME, CorpusWriteError, Cor
 from lfmbench.fileio import atomic_write_json
 
 __all__ = ["PROFILES_FILE", "Backend", "default_backend", "load_profile", "scene_seed", "scene_id_for",
-           "RenderJob", "make_jobs", "protocol_jobs", "write_splits", "run_job", "RunSummary", "run_jobs", "RenderInterrupted"]
+           "RenderJob", "make_jobs", "protocol_jobs", "write_splits", "run_job", "RunSummary", "run_jobs",
+           "RenderInterrupted"]
 
 log = logging.getLogger(__name__)
 

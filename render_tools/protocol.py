@@ -298,10 +298,11 @@ def coverage_table(protocol: Protocol, split: str = "test") -> str:
 
 
 # ------------------------------------------------------------------------------------------ scene check
-def check_scene(scene: Mapping[str, Any], ps: ProtocolScene) -> list[str]:
+def check_scene(scene: Mapping[str, Any], ps: ProtocolScene, config: dict | None = None) -> list[str]:
     """The pinned conditions of ``ps`` that the generated ``scene`` (a scene dict) does not meet; empty when
     it meets all: time of day, camera speed (m/s, to 1e-9), vehicle kinds among the moving objects, the
-    signal state (lit signal lamps: red, amber, green) or no signal."""
+    signal state (lit signal lamps: red, amber, green) or no signal. ``config``: the generator defaults the
+    scene was made with (default: :func:`render_tools.scene.load_config`)."""
     bad = []
     if scene["time_of_day"] != ps.time_of_day:
         bad.append(f"time_of_day {scene['time_of_day']} != {ps.time_of_day}")
@@ -311,7 +312,7 @@ def check_scene(scene: Mapping[str, Any], ps: ProtocolScene) -> list[str]:
     for k in ps.vehicle_kinds:
         if k not in moving:
             bad.append(f"no moving {k}")
-    lc = apply_overrides(load_config(), ps.generator_overrides())["lights"]
+    lc = apply_overrides(load_config() if config is None else config, ps.generator_overrides())["lights"]
     colours = {"red": lc["led_red"], "amber": lc["led_amber"], "green": lc["led_green"]}
     lit = {next((c for c, spec in colours.items() if lt["spectrum"] == spec), "?")
            for lt in scene["lights"] if lt["kind"] == "signal"}

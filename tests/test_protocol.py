@@ -84,7 +84,7 @@ def test_pinned_conditions_hold(part, cfg):
     assert len(entries) >= 24
     for ps in entries:
         sc = S.generate_scene(ps.seed, scene_id=ps.scene_id, config=cfg, **ps.scene_kw())
-        assert P.check_scene(sc, ps) == [], ps.scene_id
+        assert P.check_scene(sc, ps, cfg) == [], ps.scene_id
 
 
 def test_check_scene_sees_a_missed_pin(cfg):
