@@ -1,4 +1,6 @@
-"""``lfmbench render``: render procedural driving scenes into an lfmbench corpus (see docs/corpus-format.md).
+"""``lfmbench render``: render procedural driving scenes into an lfmbench corpus (see docs/corpus-format.md);
+``lfmbench render --protocol NAME`` renders a benchmark protocol, ``lfmbench protocols`` lists and checks them
+(docs/benchmark-protocol.md).
 
 ``register(app)`` adds the command to :mod:`lfmbench.cli`; Mitsuba and Ray are imported only when it runs.
 Exit status: 0 all scenes done, 1 some scenes failed (the others are in the corpus), 2 bad input or write
@@ -12,13 +14,18 @@ from typing import List, Optional
 
 import typer
 
-__all__ = ["register", "render_cmd", "CONFIRM_ABOVE", "MAX_SCENES"]
+__all__ = ["register", "render_cmd", "protocols_cmd", "CONFIRM_ABOVE", "MAX_SCENES", "PROTOCOL_FIXED"]
 
 #: Sizes above which ``lfmbench render`` asks for ``--yes`` (a typo such as ``--frames 1000`` would start a
 #: render of many hours per scene; ``--scenes 100000000`` would build a job list of gigabytes first).
 CONFIRM_ABOVE = {"scenes": 10_000, "frames": 300, "width": 7680, "height": 4320, "spp": 4096, "bins": 256}
 #: Largest ``--scenes`` accepted at all (even with ``--yes``).
 MAX_SCENES = 1_000_000
+#: Options that a protocol fixes: given together with ``--protocol`` they are refused (edit a copy of the
+#: protocol file instead, which changes its hash). ``--variant``, ``--workers``, ``--ray-address``,
+#: ``--no-resume`` and ``--yes`` change how, not what, is rendered and stay allowed.
+PROTOCOL_FIXED = ("scenes", "width", "height", "spp", "seed", "bins", "frames", "groups", "profile", "scene",
+                  "storage", "half")
 
 def _split_groups(groups: Optional[List[str]]) -> list[str] | None:
     if not groups:
@@ -29,17 +36,23 @@ def _split_groups(groups: Optional[List[str]]) -> list[str] | None:
 
 def render_cmd(
     out: Path = typer.Option(..., "--out", help="Corpus directory (created, or resumed when it exists)."),
-    scenes: int = typer.Option(1, "--scenes", help="Number of procedural scenes to generate and render."),
+    scenes: Optional[int] = typer.Option(None, "--scenes",
+                                         help="Number of procedural scenes to generate and render [default: 1]."),
     width: Optional[int] = typer.Option(None, "--width", help="Image width, pixels (default: profile)."),
     height: Optional[int] = typer.Option(None, "--height", help="Image height, pixels (default: profile)."),
     spp: Optional[int] = typer.Option(None, "--spp", help="Samples per pixel (default: profile)."),
-    seed: int = typer.Option(0, "--seed", help="Run seed: scene i uses a seed derived from it (reproducible)."),
+    seed: Optional[int] = typer.Option(None, "--seed", help="Run seed: scene i uses a seed derived from it "
+                                                            "(reproducible) [default: 0]."),
     bins: Optional[int] = typer.Option(None, "--bins", help="Time bins K per capture window for flickering groups."),
     frames: Optional[int] = typer.Option(None, "--frames", help="Frames per sequence (default: profile, 3)."),
     groups: Optional[List[str]] = typer.Option(None, "--groups",
                                                help="Light groups to render (repeatable or comma separated; "
                                                     "default: all a scene has)."),
-    profile: str = typer.Option("default", "--profile", help="small | default | path to a YAML profile."),
+    profile: Optional[str] = typer.Option(None, "--profile",
+                                          help="small | default | path to a YAML profile [default: default]."),
+    protocol: Optional[str] = typer.Option(None, "--protocol",
+                                           help="Render a benchmark protocol (name from `lfmbench protocols` or a "
+                                                "YAML path): its scenes, splits and settings; resumable."),
     workers: int = typer.Option(1, "--workers", help="Scenes rendered in parallel (local process pool)."),
     ray_address: Optional[str] = typer.Option(None, "--ray-address",
                                               help="Run on Ray: 'local', 'auto' or ray://host:port."),
@@ -73,8 +86,25 @@ def render_cmd(
         console.print(f"[red]error[/]: {msg}", highlight=False)
         raise typer.Exit(code)
 
+    proto = None
+    if protocol is not None:
+        given = {"scenes": scenes, "width": width, "height": height, "spp": spp, "seed": seed, "bins": bins,
+                 "frames": frames, "groups": groups, "profile": profile, "scene": scene_file, "storage": storage,
+                 "half": half or None}
+        clash = [f"--{k}" for k in PROTOCOL_FIXED if given[k] not in (None, [])]
+        if clash:
+            fail(f"{', '.join(clash)} cannot be combined with --protocol: the protocol fixes the scenes, splits "
+                 "and render settings (edit a copy of the protocol file with a new name or version and pass its "
+                 "path instead)")
+    scenes = 1 if scenes is None else scenes
+    seed = 0 if seed is None else seed
+    profile = "default" if profile is None else profile
     try:
-        options = J.load_profile(profile)
+        if protocol is not None:
+            from render_tools.protocol import load_protocol  # noqa: PLC0415
+
+            proto = load_protocol(protocol)
+        options = dict(proto.render) if proto is not None else J.load_profile(profile)
         given = {"width": width, "height": height, "spp": spp, "bins": bins, "frames": frames, "variant": variant}
         options.update({k: v for k, v in given.items() if v is not None})
         gl = _split_groups(groups)
@@ -114,6 +144,8 @@ def render_cmd(
         try:
             backend.RenderOptions(**options, seed=0)
         except TypeError as exc:  # an unknown field in the profile
+            if proto is not None:
+                fail(f"protocol file {proto.path}: render: {exc}")
             fail(f"{profile if Path(profile).is_file() else J.PROFILES_FILE} (profile {profile!r}): {exc}")
         # a forced variant (--variant, profile or LFMBENCH_VARIANT) that cannot run here: one line, exit 2
         from render_tools.backend import check_variant  # noqa: PLC0415
@@ -128,6 +160,8 @@ def render_cmd(
         if half and storage not in (None, "float16"):
             fail(f"--half means --storage float16, but --storage {storage} was given")
         dtype = "float16" if half else storage
+        if proto is not None:
+            dtype = proto.storage
         if dtype is None:  # resume with the corpus's own storage, else the default of new corpora
             try:
                 old = json.loads((Path(out) / "manifest.json").read_text()).get("render") or {}
@@ -138,9 +172,14 @@ def render_cmd(
             fail(f"--storage must be one of {', '.join(sorted(STORAGES))}, got {dtype!r}")
         ids = [str(sc.get("scene_id") or Path(p).stem) for p, sc in zip(scene_file, scene_dicts)] \
             if scene_dicts else None
-        job_list = J.make_jobs(out, n_scenes=scenes, seed=seed, options=options, scenes=scene_dicts,
-                               scene_ids=ids, dtype=dtype, backend=backend)
-        writer = CorpusWriter(out, dtype=dtype, render=J.render_record(seed, options, dtype, {}))
+        if proto is not None:
+            job_list = J.protocol_jobs(out, proto, options=options, backend=backend)
+        else:
+            job_list = J.make_jobs(out, n_scenes=scenes, seed=seed, options=options, scenes=scene_dicts,
+                                   scene_ids=ids, dtype=dtype, backend=backend)
+        writer = CorpusWriter(out, dtype=dtype, render=J.render_record(
+            seed, options, dtype, {}, protocol=None if proto is None else proto.record()))
+        fixed_splits = None if proto is None else proto.splits
     except typer.Exit:
         raise
     except (ValueError, CorpusError) as exc:
@@ -166,7 +205,7 @@ def render_cmd(
 
         try:
             summary = J.run_jobs(job_list, writer, workers=workers, ray_address=ray_address, on_start=on_start,
-                                 on_done=on_done, resume=not no_resume, split_seed=seed)
+                                 on_done=on_done, resume=not no_resume, split_seed=seed, splits=fixed_splits)
         except J.RenderInterrupted as exc:
             s = exc.summary
             console.print(f"[yellow]interrupted[/]: {len(s.rendered) + len(s.skipped)} complete scene(s) are in "
@@ -176,7 +215,7 @@ def render_cmd(
             fail(f"{exc.strerror or exc}; the corpus still holds only complete scenes (re-run to resume)")
         except ValueError as exc:
             fail(str(exc))
-    writer.write_splits(seed, J.SPLIT_FRACTIONS)
+    J.write_splits(writer, seed, fixed_splits)
     for n in summary.notes:
         console.print(f"[yellow]note[/]: {n}", highlight=False)
     for sid, msg in summary.failed.items():
@@ -188,6 +227,58 @@ def render_cmd(
         raise typer.Exit(1)
 
 
+def protocols_cmd(
+    name: Optional[str] = typer.Argument(None, help="A protocol (name or YAML path): show its coverage."),
+    check: bool = typer.Option(False, "--check", help="Also generate every scene of NAME (no rendering) and "
+                                                      "check that it meets its pinned conditions."),
+) -> None:
+    """List the benchmark protocols, or show one protocol's splits and test-split coverage."""
+    from render_tools import protocol as P  # noqa: PLC0415
+
+    def fail(msg: str) -> None:
+        typer.echo(f"error: {msg}", err=True)
+        raise typer.Exit(2)
+
+    if name is None:
+        if check:
+            fail("--check needs a protocol NAME")
+        for n, path in P.list_protocols().items():
+            try:
+                p = P.load_protocol(path)
+            except ValueError as exc:
+                typer.echo(f"{n}: INVALID: {exc}")
+                continue
+            r = p.render
+            typer.echo(f"{p.name} v{p.version}  {r.get('width')}x{r.get('height')}  "
+                       + "  ".join(f"{k} {len(v)}" for k, v in p.splits.items()) + f"  sha256 {p.sha256[:12]}")
+        typer.echo(f"render one with: lfmbench render --protocol NAME --out DIR  (files: {P.PROTOCOL_DIR})")
+        return
+    try:
+        p = P.load_protocol(name)
+    except ValueError as exc:
+        fail(str(exc))
+    typer.echo(f"{p.path}\n{p.description}\nsha256 {p.sha256}\nrender {p.render}, storage {p.storage}\n"
+               + ", ".join(f"{k} {len(v)} scenes" for k, v in p.splits.items()) + "\n")
+    typer.echo(P.coverage_table(p, "test"))
+    if check:
+        from render_tools.scene import generate_scene, load_config  # noqa: PLC0415
+
+        cfg, bad = load_config(), 0
+        for ps in p.scenes:
+            try:
+                miss = P.check_scene(generate_scene(ps.seed, scene_id=ps.scene_id, config=cfg, **ps.scene_kw()),
+                                     ps, cfg)
+            except ValueError as exc:
+                miss = [str(exc)]
+            if miss:
+                bad += 1
+                typer.echo(f"{ps.scene_id}: " + "; ".join(miss))
+        typer.echo(f"\n{len(p.scenes) - bad} of {len(p.scenes)} scenes meet their pinned conditions")
+        if bad:
+            raise typer.Exit(1)
+
+
 def register(app: typer.Typer) -> None:
-    """Add ``render`` to the ``lfmbench`` app."""
+    """Add ``render`` and ``protocols`` to the ``lfmbench`` app."""
     app.command("render")(render_cmd)
+    app.command("protocols")(protocols_cmd)

@@ -10,7 +10,9 @@ checksums, an unfinished one is not (its partial files are overwritten on resume
 removed), and re-running the same command skips every scene whose files match the manifest.
 
 Seeds: scene i of a run with ``--seed K`` uses ``scene_seed(K, i)`` (a ``numpy.random.SeedSequence`` child),
-so scene i is the same whatever ``--scenes N`` is and a run can be extended by raising N.
+so scene i is the same whatever ``--scenes N`` is and a run can be extended by raising N. A benchmark protocol
+(:mod:`render_tools.protocol`, :func:`protocol_jobs`) gives every scene its id, seed, pinned conditions and
+split instead; ``splits.json`` then comes from the protocol, not from :func:`lfmbench.corpus.make_splits`.
 """
 from __future__ import annotations
 
@@ -28,11 +30,13 @@ from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
-from lfmbench.corpus import (DEFAULT_STORAGE, CorpusWriteError, CorpusWriter, check_scene_id, encode_scene,
-                             prune_scene_dir, write_files)
+from lfmbench.corpus import (DEFAULT_STORAGE, SPLITS_NAME, CorpusWriteError, CorpusWriter, check_scene_id,
+                             encode_scene, prune_scene_dir, write_files)
+from lfmbench.fileio import atomic_write_json
 
 __all__ = ["PROFILES_FILE", "Backend", "default_backend", "load_profile", "scene_seed", "scene_id_for",
-           "RenderJob", "make_jobs", "run_job", "RunSummary", "run_jobs", "RenderInterrupted"]
+           "RenderJob", "make_jobs", "protocol_jobs", "write_splits", "run_job", "RunSummary", "run_jobs",
+           "RenderInterrupted"]
 
 log = logging.getLogger(__name__)
 
@@ -109,7 +113,8 @@ def scene_id_for(index: int) -> str:
 @dataclass
 class RenderJob:
     """One scene to render into ``out``: id, seed, RenderOptions fields (without ``seed``), an explicit scene
-    dict (from a scene JSON file) or None to generate one with ``generate_scene(seed, **scene_kw)``."""
+    dict (from a scene JSON file) or None to generate one with ``generate_scene(seed, **scene_kw)``;
+    ``meta_extra``: fields added to the scene's ``meta.json`` (e.g. ``protocol``)."""
 
     index: int
     scene_id: str
@@ -120,6 +125,7 @@ class RenderJob:
     scene_kw: dict = field(default_factory=dict)
     dtype: str = DEFAULT_STORAGE
     backend: Backend | None = None
+    meta_extra: dict = field(default_factory=dict)
 
 
 def make_jobs(out: str | Path, *, n_scenes: int, seed: int, options: Mapping[str, Any],
@@ -151,6 +157,34 @@ def make_jobs(out: str | Path, *, n_scenes: int, seed: int, options: Mapping[str
     return jobs
 
 
+def protocol_jobs(out: str | Path, protocol, *, options: Mapping[str, Any] | None = None,
+                  backend: Backend | None = None) -> list[RenderJob]:
+    """One job per scene of ``protocol`` (a :class:`render_tools.protocol.Protocol`), in file order (train, val,
+    test): the scene's id and seed, its pinned conditions as generator overrides, the protocol's storage, and
+    ``meta.json`` field ``protocol`` = ``{name, version, sha256, split}``. ``options``: RenderOptions fields
+    (default: the protocol's ``render``; the CLI adds only ``variant``)."""
+    opts = dict(protocol.render if options is None else options)
+    out = Path(out).resolve()
+    return [RenderJob(i, ps.scene_id, ps.seed, str(out), dict(opts), None, ps.scene_kw(), protocol.storage,
+                      backend, {"protocol": dict(protocol.record(), split=ps.split)})
+            for i, ps in enumerate(protocol.scenes)]
+
+
+def write_splits(writer: CorpusWriter, split_seed: int | None = None,
+                 splits: Mapping[str, Sequence[str]] | None = None) -> dict[str, list[str]] | None:
+    """Rewrite ``splits.json`` (atomically) for the scenes in ``writer``'s manifest: from the fixed ``splits``
+    (a protocol's; scenes not yet complete are left out) or else from ``make_splits(scenes, split_seed)``;
+    neither given: nothing is written (returns None)."""
+    if splits is not None:
+        have = set(writer.scenes)
+        out = {k: sorted(s for s in splits.get(k, ()) if s in have) for k in ("train", "val", "test")}
+        atomic_write_json(writer.root / SPLITS_NAME, out)
+        return out
+    if split_seed is not None:
+        return writer.write_splits(split_seed, SPLIT_FRACTIONS)
+    return None
+
+
 def _prepare(job: RenderJob, be: Backend) -> tuple[dict, Any, dict]:
     if job.scene is not None:
         scene = dict(job.scene)
@@ -160,6 +194,7 @@ def _prepare(job: RenderJob, be: Backend) -> tuple[dict, Any, dict]:
         scene = be.generate_scene(job.seed, scene_id=job.scene_id, **job.scene_kw)
     opts = be.RenderOptions(**job.options, seed=job.seed)
     meta = dict(be.scene_meta(scene, opts))
+    meta.update(job.meta_extra)
     meta["scene_id"] = job.scene_id
     return scene, opts, meta
 
@@ -237,7 +272,7 @@ class RenderInterrupted(KeyboardInterrupt):
 def run_jobs(jobs: Sequence[RenderJob], writer: CorpusWriter, *, workers: int = 1, ray_address: str | None = None,
              on_start: Callable[[int, int], None] | None = None,
              on_done: Callable[[str, str], None] | None = None, resume: bool = True,
-             split_seed: int | None = None) -> RunSummary:
+             split_seed: int | None = None, splits: Mapping[str, Sequence[str]] | None = None) -> RunSummary:
     """Run the jobs not yet complete in ``writer``'s corpus; commit each finished scene to the manifest.
 
     Args:
@@ -253,6 +288,8 @@ def run_jobs(jobs: Sequence[RenderJob], writer: CorpusWriter, *, workers: int = 
         split_seed: when given, ``splits.json`` is rewritten (atomically) from the manifest's scenes after the
             resume check and after every committed scene, so the manifest and the splits describe the complete
             scenes at every moment (a killed run leaves a corpus that passes ``lfmbench validate``).
+        splits: fixed ``{"train": [ids], "val": [...], "test": [...]}`` (a protocol's): written like
+            ``split_seed``'s splits, restricted to the complete scenes; takes precedence over ``split_seed``.
 
     A :class:`lfmbench.corpus.CorpusWriteError` (e.g. disk full) stops the run and propagates; Ctrl-C raises
     :class:`RenderInterrupted`, also when the renderer turned it into another exception (Mitsuba raises
@@ -271,8 +308,7 @@ def run_jobs(jobs: Sequence[RenderJob], writer: CorpusWriter, *, workers: int = 
         else:
             writer.forget_scene(j.scene_id)
             todo.append(j)
-    if split_seed is not None:
-        writer.write_splits(split_seed, SPLIT_FRACTIONS)
+    write_splits(writer, split_seed, splits)
     if on_start is not None:
         on_start(len(todo), len(summary.skipped))
     hit: list[bool] = []
@@ -289,8 +325,7 @@ def run_jobs(jobs: Sequence[RenderJob], writer: CorpusWriter, *, workers: int = 
                 on_done(job.scene_id, "failed")
             return
         writer.commit_scene(job.scene_id, res["hashes"])
-        if split_seed is not None:
-            writer.write_splits(split_seed, SPLIT_FRACTIONS)
+        write_splits(writer, split_seed, splits)
         summary.rendered.append(job.scene_id)
         summary.seconds[job.scene_id] = float(res["seconds"])
         summary.notes.extend(res.get("notes", []))
@@ -369,9 +404,13 @@ def _run_ray(todo: Sequence[RenderJob], address: str, workers: int, finished: Ca
         raise
 
 
-def render_record(seed: int, options: Mapping[str, Any], dtype: str, scene_kw: Mapping[str, Any]) -> dict:
+def render_record(seed: int, options: Mapping[str, Any], dtype: str, scene_kw: Mapping[str, Any],
+                  protocol: Mapping[str, Any] | None = None) -> dict:
     """What the manifest records as ``"render"`` (a resume with different values is refused). The Mitsuba
-    ``variant`` is left out: it changes speed, not the radiance being estimated."""
+    ``variant`` is left out: it changes speed, not the radiance being estimated. ``protocol``: the
+    ``Protocol.record()`` of a protocol render (``{name, version, sha256}``), stored as ``render.protocol``."""
     opts = {k: v for k, v in options.items() if k != "variant"}
-    return json.loads(json.dumps({"seed": int(seed), "options": opts, "dtype": dtype,
-                                  "scene_kw": dict(scene_kw)}, default=str))
+    rec = {"seed": int(seed), "options": opts, "dtype": dtype, "scene_kw": dict(scene_kw)}
+    if protocol is not None:
+        rec["protocol"] = dict(protocol)
+    return json.loads(json.dumps(rec, default=str))

@@ -24,6 +24,7 @@ import json
 import math
 import os
 from pathlib import Path
+from typing import Any, Mapping
 
 import numpy as np
 
@@ -44,6 +45,8 @@ LIGHT_KINDS = {"headlight": "headlights", "streetlight": "streetlights", "tail":
                "brake": "otherlights", "indicator": "otherlights", "billboard": "otherlights",
                "signal": "signals"}
 TIMES_OF_DAY = ("day", "dusk", "night")
+#: Vehicle kinds (``vehicles.kind_weights``, ``vehicles.require_kinds``).
+VEHICLE_KINDS = ("car", "truck", "motorcycle")
 OBJECT_KINDS = ("ground", "road", "marking", "sidewalk", "building", "car", "truck", "motorcycle",
                 "streetlight_pole", "signal_pole")
 PART_SHAPES = ("box", "cylinder", "rect", "disk", "sphere")
@@ -65,21 +68,85 @@ def load_config(path: str | os.PathLike | None = None) -> dict:
             cfg = yaml.safe_load(fh)
     except (OSError, yaml.YAMLError) as exc:
         raise ValueError(f"config file {p}: cannot read ({exc})") from exc
+    return check_config(cfg, f"config file {p}")
+
+
+#: Traffic-signal states the generator knows (``lights.signal_states``).
+SIGNAL_STATES = ("red", "amber", "green", "red_amber")
+
+
+def check_config(cfg: Any, source: str = "config") -> dict:
+    """Check generator defaults (a :func:`load_config` dict, possibly with overrides applied); returns ``cfg``.
+
+    Raises ``ValueError`` starting with ``source`` (e.g. ``config file x.yaml``) for a missing section or an
+    impossible value. Keys added after the first release (``vehicles.require_kinds``, ``lights.signal_states``)
+    may be absent from an older edited copy; the generator then uses their defaults (none required, all four
+    signal states).
+    """
     need = ("time_of_day_weights", "timing", "camera", "road", "buildings", "vehicles", "lights", "sky", "groups")
     if not isinstance(cfg, dict):
-        raise ValueError(f"config file {p}: expected a mapping")
+        raise ValueError(f"{source}: expected a mapping")
     for k in need:
         if k not in cfg:
-            raise ValueError(f"config file {p}: missing section {k!r}")
+            raise ValueError(f"{source}: missing section {k!r}")
     for g in cfg["groups"]:
         if g not in GROUPS:
-            raise ValueError(f"config file {p}: groups.{g} is not one of {GROUPS}")
+            raise ValueError(f"{source}: groups.{g} is not one of {GROUPS}")
     lo, hi = cfg["timing"]["short_exposure_s"]
     if not 0 < lo <= hi:
-        raise ValueError(f"config file {p}: timing.short_exposure_s must be 0 < lo <= hi, got {[lo, hi]}")
-    if cfg["camera"]["speed_mps"][0] < 0:
-        raise ValueError(f"config file {p}: camera.speed_mps must be >= 0")
+        raise ValueError(f"{source}: timing.short_exposure_s must be 0 < lo <= hi, got {[lo, hi]}")
+    lo, hi = cfg["camera"]["speed_mps"]
+    if not 0 <= lo <= hi:
+        raise ValueError(f"{source}: camera.speed_mps must be 0 <= lo <= hi m/s, got {[lo, hi]}")
+    for k in cfg["vehicles"]["kind_weights"]:
+        if k not in VEHICLE_KINDS:
+            raise ValueError(f"{source}: vehicles.kind_weights.{k} is not one of {VEHICLE_KINDS}")
+    req = cfg["vehicles"].get("require_kinds", [])
+    if not isinstance(req, list) or any(k not in VEHICLE_KINDS for k in req):
+        raise ValueError(f"{source}: vehicles.require_kinds must be a list of {VEHICLE_KINDS}, got {req!r}")
+    states = cfg["lights"].get("signal_states", list(SIGNAL_STATES))
+    if not isinstance(states, list) or any(st not in SIGNAL_STATES for st in states):
+        raise ValueError(f"{source}: lights.signal_states must be a list of {SIGNAL_STATES} "
+                         f"([] = no traffic signal), got {states!r}")
     return cfg
+
+
+def apply_overrides(cfg: dict, overrides: Mapping[str, Any] | None, source: str = "overrides") -> dict:
+    """A copy of generator defaults ``cfg`` with ``overrides`` merged in, checked with :func:`check_config`.
+
+    Nested mappings merge key by key; any other value (a range, a list) replaces the default. To replace a
+    whole mapping (e.g. ``vehicles.kind_weights``) give every key of it: ``{car: 0, truck: 1, motorcycle: 0}``.
+
+    Only keys the defaults have may be overridden (plus the optional ``vehicles.require_kinds`` and
+    ``lights.signal_states``): a typo raises ``ValueError`` naming ``source`` and the dotted key.
+
+    >>> cfg = apply_overrides(load_config(), {"camera": {"speed_mps": [30.0, 30.0]}})
+    >>> cfg["camera"]["speed_mps"], cfg["camera"]["fov_x_deg"]
+    ([30.0, 30.0], 40.0)
+    >>> apply_overrides(load_config(), {"camera": {"sped_mps": [1, 1]}})
+    Traceback (most recent call last):
+    ...
+    ValueError: overrides: unknown key 'camera.sped_mps'
+    """
+    out = copy.deepcopy(cfg)
+    if not overrides:
+        return out
+    optional = {("vehicles", "require_kinds"), ("lights", "signal_states")}
+
+    def merge(dst: dict, src: Any, path: tuple) -> None:
+        if not isinstance(src, Mapping):
+            raise ValueError(f"{source}: {'.'.join(path) or '(top level)'} must be a mapping, got {src!r}")
+        for k, v in src.items():
+            key = path + (str(k),)
+            if k not in dst and key not in optional:
+                raise ValueError(f"{source}: unknown key {'.'.join(key)!r}")
+            if isinstance(dst.get(k), dict):
+                merge(dst[k], v, key)
+            else:
+                dst[k] = copy.deepcopy(v)
+
+    merge(out, overrides, ())
+    return check_config(out, source)
 
 
 # ------------------------------------------------------------------------------------------- generator
@@ -234,8 +301,38 @@ def _vehicle(b: _Builder, kind: str, x: float, y: float, heading: float, speed: 
                                    "size": [w, h]}, lc["led_amber"], b.other_luminance(), lc["tail_spread_deg"])
 
 
+def _signal(b: _Builder, lc: dict, half: float, n: int, lw: float, states: list) -> None:
+    """A traffic signal over the ego lanes (facing the camera) and a second head on its pole, in a state drawn
+    from ``states``; ``half``: road half-width (m), ``n`` lanes per direction of width ``lw`` (m)."""
+    rng = b.rng
+    sx = b.u(lc["signal_distance_m"])
+    state = states[int(rng.integers(0, len(states)))]
+    py = -(half + 0.4)
+    arm_y = -max(0.0, (n - 0.5) * lw) * 0.5 - 0.5 * lw
+    ph = 5.6
+    parts = [_cyl((sx, py, 0.0), (sx, py, ph + 0.6), 0.12, "metal"),
+             _box((sx, (py + arm_y) / 2, ph + 0.5), (0.12, abs(py - arm_y) + 0.4, 0.12), "metal")]
+    heads = [(sx, arm_y, ph - 0.2), (sx - 0.15, py, 3.0)]
+    lamps = {"red": (0.33, lc["led_red"]), "amber": (0.0, lc["led_amber"]), "green": (-0.33, lc["led_green"])}
+    on = {"red": ["red"], "amber": ["amber"], "green": ["green"], "red_amber": ["red", "amber"]}[state]
+    off_parts = []
+    for hx, hy, hz in heads:
+        parts.append(_box((hx + 0.15, hy, hz), (0.3, 0.38, 1.05), "housing"))
+        for name, (dz, _) in lamps.items():
+            if name not in on:
+                off_parts.append({"shape": "disk", "center": [hx - 0.005, hy, hz + dz], "radius": 0.1,
+                                  "normal": [-1.0, 0.0, 0.0], "material": "lamp_off"})
+    oid = b.obj("signal_pole", parts + off_parts)
+    sig_lum = b.u(lc["signal_luminance_cd_m2"])
+    for hx, hy, hz in heads:
+        for name in on:
+            dz, spec = lamps[name]
+            b.light("signal", oid, {"shape": "disk", "center": [hx - 0.005, hy, hz + dz], "normal": [-1, 0, 0],
+                                    "radius": 0.1}, spec, sig_lum, 90.0)
+
+
 def generate_scene(seed: int, time_of_day: str | None = None, config: dict | str | None = None,
-                   scene_id: str | None = None) -> dict:
+                   scene_id: str | None = None, overrides: Mapping[str, Any] | None = None) -> dict:
     """Generate a driving scene.
 
     Args:
@@ -243,12 +340,21 @@ def generate_scene(seed: int, time_of_day: str | None = None, config: dict | str
         time_of_day: ``"day"``, ``"dusk"``, ``"night"`` or None (drawn with the config's weights).
         config: generator defaults (dict or YAML path); default :data:`DEFAULT_CONFIG`.
         scene_id: identifier stored in the scene (default ``"scene_<seed>"``).
+        overrides: per-scene changes of ``config`` (see :func:`apply_overrides`), e.g. ``{"camera":
+            {"speed_mps": [30.0, 30.0]}, "vehicles": {"require_kinds": ["truck"]}, "lights": {"signal_states":
+            ["red"]}}`` pins the ego speed (m/s), a truck among the vehicles ahead and a red signal (the benchmark
+            protocols of :mod:`render_tools.protocol` pin their conditions this way).
     Returns:
         A validated scene dict (see :func:`validate_scene` for the schema).
+
+    Raises ``ValueError`` for a bad argument, and when a kind of ``vehicles.require_kinds`` finds no free place
+    ahead (rare; another seed places it).
     """
     if not isinstance(seed, (int, np.integer)) or isinstance(seed, bool) or seed < 0:
         raise ValueError(f"seed: must be a non-negative integer, got {seed!r}")
     cfg = config if isinstance(config, dict) else load_config(config)
+    if overrides:
+        cfg = apply_overrides(cfg, overrides)
     rng = np.random.default_rng(int(seed))
     if time_of_day is None:
         names = list(cfg["time_of_day_weights"])
@@ -340,10 +446,15 @@ def generate_scene(seed: int, time_of_day: str | None = None, config: dict | str
                 return False
         return True
 
-    def place(lane_ys, count, heading, moving):
-        for _ in range(count):
+    def place(lane_ys, count, heading, moving, require=()):
+        """Place ``count`` vehicles; the first ones take the kinds of ``require`` (one each); returns the kinds
+        placed."""
+        placed = []
+        for i in range(max(count, len(require))):
             for _try in range(20):
                 kind = kinds[int(rng.choice(len(kinds), p=kp))] if moving else "car"
+                if i < len(require):
+                    kind = require[i]
                 ln = _TEMPLATES[kind]["length"]
                 ly = lane_ys[int(rng.integers(0, len(lane_ys)))]
                 x = rng.uniform(r0, r1)
@@ -356,11 +467,18 @@ def generate_scene(seed: int, time_of_day: str | None = None, config: dict | str
                     _vehicle(b, kind, x, yy, heading, sp, lights_on=moving and (dark or kind == "motorcycle"),
                              braking=moving and rng.random() < vc["brake_probability"],
                              indicator=moving and rng.random() < vc["indicator_probability"])
+                    placed.append(kind)
                     break
+        return placed
 
     same = [-(k + 0.5) * lw for k in range(n)]
     onc = [(k + 0.5) * lw for k in range(n)]
-    place(same, b.ui(vc["ahead_same_dir"]), 0.0, True)
+    require = list(vc.get("require_kinds", []))
+    placed = place(same, b.ui(vc["ahead_same_dir"]), 0.0, True, require)
+    missing = [k for k in require if k not in placed]
+    if missing:
+        raise ValueError(f"vehicles.require_kinds: no free place ahead for {missing} with seed {int(seed)}; "
+                         "choose another seed")
     place(onc, b.ui(vc["oncoming"]), math.pi, True)
     place([-(n * lw + park / 2)], b.ui(vc["parked_per_side"]), 0.0, False)
     place([n * lw + park / 2], b.ui(vc["parked_per_side"]), math.pi, False)
@@ -384,32 +502,11 @@ def generate_scene(seed: int, time_of_day: str | None = None, config: dict | str
                                              "size": [0.6, 0.25]}, sl_spec, sl_lum, 90.0)
             xx += spacing
 
-    # --- traffic signal ahead (over the ego lanes, facing the camera) and one on the pole
-    sx = b.u(lc["signal_distance_m"])
-    state = ["red", "amber", "green", "red_amber"][int(rng.integers(0, 4))]
-    py = -(half + 0.4)
-    arm_y = -max(0.0, (n - 0.5) * lw) * 0.5 - 0.5 * lw
-    ph = 5.6
-    parts = [_cyl((sx, py, 0.0), (sx, py, ph + 0.6), 0.12, "metal"),
-             _box((sx, (py + arm_y) / 2, ph + 0.5), (0.12, abs(py - arm_y) + 0.4, 0.12), "metal")]
-    heads = [(sx, arm_y, ph - 0.2), (sx - 0.15, py, 3.0)]
-    lamps = {"red": (0.33, lc["led_red"]), "amber": (0.0, lc["led_amber"]), "green": (-0.33, lc["led_green"])}
-    on = {"red": ["red"], "amber": ["amber"], "green": ["green"], "red_amber": ["red", "amber"]}[state]
-    off_parts = []
-    for hx, hy, hz in heads:
-        parts.append(_box((hx + 0.15, hy, hz), (0.3, 0.38, 1.05), "housing"))
-        for name, (dz, _) in lamps.items():
-            if name not in on:
-                off_parts.append({"shape": "disk", "center": [hx - 0.005, hy, hz + dz], "radius": 0.1,
-                                  "normal": [-1.0, 0.0, 0.0], "material": "lamp_off"})
-    oid = b.obj("signal_pole", parts + off_parts)
-    sig_lum = b.u(lc["signal_luminance_cd_m2"])
-    for hx, hy, hz in heads:
-        for name in on:
-            dz, spec = lamps[name]
-            b.light("signal", oid, {"shape": "disk", "center": [hx - 0.005, hy, hz + dz], "normal": [-1, 0, 0],
-                                    "radius": 0.1}, spec, sig_lum, 90.0)
-
+    # --- traffic signal ahead (over the ego lanes, facing the camera) and one on the pole; its state is drawn
+    # from lights.signal_states (an empty list: no signal)
+    states = list(lc.get("signal_states", SIGNAL_STATES))
+    if states:
+        _signal(b, lc, half, n, lw, states)
     # --- sky
     sc = cfg["sky"][time_of_day]
     if time_of_day == "night":

@@ -1,0 +1,1 @@
+"""Fake benchmark protocols (see data.py)."""
