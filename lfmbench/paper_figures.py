@@ -508,7 +508,8 @@ class Setup7:
         scene_id, meta: the scene. line_time_s, short_s, lpd_start_s: row delay, exposure, row 0's window start
         in the frame (s). phase_a, phase_b: PWM phases (s). upper_rows, lower_rows, target_rows: (first, last + 1)
         image rows (px) of the high-mount brake lights, of the other lights and of the occluded target.
-        target_box, zoom_box: (y0, x0, y1, x1) px. light_ids: the synchronised lights. images: "mean", "A", "B" ->
+        target_box, zoom_box: (y0, x0, y1, x1) px. light_ids: the synchronised lights; target_ids: the occluded
+        ones. images: "mean", "A", "B" ->
         (1, H, W) e- (the truth; the single-exposure captures). cfa, peak, wb: display settings.
     """
 
@@ -525,6 +526,7 @@ class Setup7:
     target_box: tuple
     zoom_box: tuple
     light_ids: list
+    target_ids: list
     images: dict
     cfa: object
     peak: float
@@ -593,7 +595,7 @@ def build_fig7(corpus: str | Path, seed: int = 0, line_time_s: float | None = No
     peak, wb = _display_scale(images["mean"], cfa)
     zoom = _box_union([tbox] + [v[1] for v in others])
     return Setup7(sid, meta, float(line_time_s), ts, a0, pa, pb, up_rows, lo_rows, (tbox[0], tbox[2] + 1), tbox,
-                  zoom, ids, images, cfa, peak, wb)
+                  zoom, ids, sorted(tids), images, cfa, peak, wb)
 
 
 def fig7(corpus: str | Path, out_dir: str | Path, setup: Setup7 | None = None) -> Path:
