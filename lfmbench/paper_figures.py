@@ -29,7 +29,6 @@ from pathlib import Path
 
 import numpy as np
 
-from lfmbench.fileio import atomic_save_figure
 
 #: Directory of the figure scene files and render profiles.
 CONFIG_DIR = Path(__file__).with_name("configs") / "paper_figures"
@@ -242,11 +241,24 @@ def _rect(ax, ys: slice, xs: slice, color: str = "cyan", lw: float = 1.2) -> Non
                                     fill=False, ec=color, lw=lw))
 
 
-def _save(fig, path: Path) -> Path:
+def _save(fig, path: Path, colors: int = 256) -> Path:
+    """Write ``fig`` as a PNG at 100 dpi, quantised to ``colors`` palette colours (the noisy captures would
+    otherwise make files of several MB), atomically; closes the figure and returns ``path``."""
+    import io
+
+    from PIL import Image
+
+    from lfmbench.fileio import atomic_write_bytes
+
     plt = _plt()
-    p = atomic_save_figure(fig, path, dpi=100)
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=100)
     plt.close(fig)
-    return p
+    img = Image.open(io.BytesIO(buf.getvalue())).convert("RGB").quantize(colors, method=Image.Quantize.MEDIANCUT)
+    out = io.BytesIO()
+    img.save(out, format="PNG", optimize=True)
+    atomic_write_bytes(path, out.getvalue())
+    return Path(path)
 
 
 # ------------------------------------------------------------------------------------------ Figs. 4-6
@@ -258,7 +270,8 @@ class Sequence46:
         scene_id, meta: the scene. sample: the dataset sample ((F, 1, H, W) e- captures). fused: method name ->
         (F, 1, H, W) e-. pwm: light id -> (freq Hz, duty, phase s). dropout, dropout2, comet: (instance id,
         light ids, (y0, x0, y1, x1) signal box px in the off / shown frame, frame index). cfa, peak, wb:
-        display settings. lpd_start_s: LPD window start in a frame (s).
+        display settings. lpd_start_s: LPD window start in a frame (s). boxes: instance id -> per-frame
+        (y0, x0, y1, x1) px of its lights (None where not visible).
     """
 
     scene_id: str
@@ -273,6 +286,7 @@ class Sequence46:
     peak: float
     wb: object
     lpd_start_s: float
+    boxes: dict
 
 
 def _vehicle_lights(ds, sid: str, frame: int) -> dict:
@@ -294,8 +308,9 @@ def build_sequence46(corpus: str | Path, seed: int = 0, noise: bool = True) -> S
     """Simulate the Figs. 4-6 sequence on the paper-figure corpus (or any corpus with 3 frames).
 
     PWM: the vehicle whose lights carry the most LPD signal near the image centre drops out in frame 1
-    (:data:`DROPOUT_PWM`, :func:`dropout_phase`); the vehicle whose lights sweep the longest screen distance is
-    the comet (:data:`COMET_PWM`, its pulse ending 2 ms into frame 1's LPD window); a third vehicle drops out
+    (:data:`DROPOUT_PWM`, :func:`dropout_phase`); the vehicle whose lights move most on screen from frame 0 to
+    1 relative to their size is the comet (:data:`COMET_PWM`, one pulse ending as frame 1's SPD window closes,
+    so the LPD sees its start only); a third vehicle drops out
     in frame 2 (:data:`DROPOUT2_PWM`); every other flickering light gets f, D drawn from the paper's ranges
     with a random phase (``seed``). All lights of one vehicle share one PWM.
     """
@@ -324,13 +339,19 @@ def build_sequence46(corpus: str | Path, seed: int = 0, noise: bool = True) -> S
         cx = (b[1] + b[3]) / 2 / W
         return tot[i] * (1.0 - abs(cx - 0.5))
 
-    def sweep(i):  # screen extent of the light's layer box over the capture window (motion), px
-        return max((bx[2] - bx[0]) + (bx[3] - bx[1]) for lid, _g, bx, _r in ds._layers(sid).lights[1]
-                   if lid in {l_ for l_, _b, _t in veh[i]})
+    veh0 = _vehicle_lights(ds, sid, 0)
+
+    def sweep(i):  # image motion of the vehicle's lights from frame 0 to 1 over their size (px / px)
+        if not veh0.get(i):
+            return 0.0
+        a = _box_union(bb for _l, bb, _t in veh0[i])
+        b = _box_union(bb for _l, bb, _t in veh[i])
+        shift = np.hypot((b[0] + b[2] - a[0] - a[2]) / 2, (b[1] + b[3] - a[1] - a[3]) / 2)
+        return float(shift / np.sqrt(max((a[2] - a[0]) * (a[3] - a[1]), 1)))
 
     drop = max(veh, key=centrality)
     rest = [i for i in veh if i != drop]
-    comet = max(rest, key=lambda i: sweep(i) * np.sqrt(tot[i])) if rest else None
+    comet = max(rest, key=sweep) if rest else None
     rest2 = [i for i in rest if i != comet]
     drop2 = max(rest2, key=lambda i: tot[i]) if rest2 else None
     rng = np.random.default_rng(seed)
@@ -353,7 +374,9 @@ def build_sequence46(corpus: str | Path, seed: int = 0, noise: bool = True) -> S
         set_inst(drop2, f2, d2, dropout_phase(f2, d2, 2, 3, fps, a0, ts))
     if comet is not None:
         fc, dc = COMET_PWM
-        set_inst(comet, fc, dc, (1.0 / fps + a0 + 0.002 - dc / fc) % (1.0 / fc))
+        # one pulse that ends as frame 1's long exposure closes: the short exposure sees only its start (the
+        # sharp head), the long one the rest of it too (one contiguous trail, no second pulse)
+        set_inst(comet, fc, dc, (1.0 / fps + tl - dc / fc) % (1.0 / fc))
     s = ds.simulate(sid, _params(pwm), crop=None, noise_seed=seed)
     b = _batch(s)
     fused = {m: get_method(m)(b)[0] for m in ("upstream_saturated", "flicker_aware")}
@@ -366,7 +389,11 @@ def build_sequence46(corpus: str | Path, seed: int = 0, noise: bool = True) -> S
         v = _vehicle_lights(ds, sid, frame).get(i) or veh[i]
         return (i, [l_ for l_, _b, _t in v], _box_union(bb for _l, bb, _t in v), frame)
 
-    return Sequence46(sid, meta, s, fused, pwm, info(drop, 1), info(drop2, 2), info(comet, 1), cfa, peak, wb, a0)
+    per_frame = [_vehicle_lights(ds, sid, f) for f in range(3)]
+    boxes = {i: [(_box_union(bb for _l, bb, _t in pf[i]) if pf.get(i) else None) for pf in per_frame]
+             for i in (drop, drop2, comet) if i is not None}
+    return Sequence46(sid, meta, s, fused, pwm, info(drop, 1), info(drop2, 2), info(comet, 1), cfa, peak, wb, a0,
+                      boxes)
 
 
 def _img(seq: Sequence46, key: str, frame: int) -> np.ndarray:
@@ -375,42 +402,49 @@ def _img(seq: Sequence46, key: str, frame: int) -> np.ndarray:
 
 
 def fig4(corpus: str | Path, out_dir: str | Path, seq: Sequence46 | None = None) -> Path:
-    """Fig. 4: frames 0 and 1, LPD (5 ms) and SPD (11.11 ms), full frame and zoom on the dropout vehicle.
+    """Fig. 4: frames 0 and 1, LPD (short) and SPD (long): full frame, zoom on the dropout vehicle and zoom on
+    the fastest-moving (most blurred) vehicle.
 
     Writes ``out_dir/fig4_lpd_spd_sequence.png`` and returns its path.
     """
     plt = _plt()
     seq = seq or build_sequence46(corpus)
     H, W = seq.meta["height"], seq.meta["width"]
-    box = seq.dropout[2]
-    ys, xs = _zoom(box, H, W, pad=1.2)
     f_hz, duty = DROPOUT_PWM
     ts, tl = seq.meta["timing"]["short_exposure_s"], seq.meta["timing"]["long_exposure_s"]
-    fig = plt.figure(figsize=(16.0, 7.4))
-    gs = fig.add_gridspec(2, 4, width_ratios=[1.6, 1, 1.6, 1], wspace=0.04, hspace=0.12)
-    rows = [("lpd_lcg_e", f"LPD (short, {ts * 1e3:.2f} ms)"), ("spd_e", f"SPD (long, {tl * 1e3:.2f} ms)")]
-    for r, (key, name) in enumerate(rows):
-        for c, frame in enumerate((0, 1)):
-            img = _img(seq, key, frame)
-            ax = fig.add_subplot(gs[r, 2 * c])
-            ax.imshow(img, interpolation="nearest")
-            _rect(ax, ys, xs)
-            ax.set_title(f"{name}, frame {frame}", fontsize=10)
-            ax = fig.add_subplot(gs[r, 2 * c + 1])
-            ax.imshow(img[ys, xs], interpolation="nearest")
-            if key == "lpd_lcg_e":
-                _arrow(ax, box, "cyan", ys, xs)
-            ax.set_title(f"zoom, frame {frame}" + (": lights OFF" if key == "lpd_lcg_e" and frame == 1 else ""),
-                         fontsize=10)
+    drop = seq.dropout[0]
+    moving = seq.comet[0] if seq.comet else None
+    ncol = 3 if moving is not None else 2
+    fig = plt.figure(figsize=(15.0, 13.6))
+    gs = fig.add_gridspec(4, ncol, width_ratios=[W / H, 1.25, 1.25][:ncol], wspace=0.03, hspace=0.13)
+    rows = [("lpd_lcg_e", 0, f"LPD (short, {ts * 1e3:.2f} ms)"), ("lpd_lcg_e", 1, f"LPD (short, {ts * 1e3:.2f} ms)"),
+            ("spd_e", 0, f"SPD (long, {tl * 1e3:.2f} ms)"), ("spd_e", 1, f"SPD (long, {tl * 1e3:.2f} ms)")]
+    for r, (key, frame, name) in enumerate(rows):
+        img = _img(seq, key, frame)
+        ax = fig.add_subplot(gs[r, 0])
+        ax.imshow(img, interpolation="nearest")
+        ax.set_title(f"{name}, frame {frame}", fontsize=10)
+        for c, (inst, color, what) in enumerate([(drop, "cyan", "braking car"), (moving, "yellow", "motorcycle")][:ncol - 1]):
+            box = seq.boxes[inst][frame] or seq.boxes[inst][1]
+            ys, xs = _zoom(box, H, W, pad=0.6 if c == 0 else 1.0, aspect=1.25, min_h=40)
+            _rect(ax, ys, xs, color)
+            z = fig.add_subplot(gs[r, c + 1])
+            z.imshow(img[ys, xs], interpolation="nearest")
+            if c == 0 and key == "lpd_lcg_e":
+                _arrow(z, box, "cyan", ys, xs)
+            note = ": its lights OFF" if (c == 0 and key == "lpd_lcg_e" and frame == 1) else ""
+            if c == 1:
+                note = ": sharp" if key == "lpd_lcg_e" else ": smeared over 11.1 ms"
+            z.set_title(f"zoom, {what}{note}", fontsize=10)
     for ax in fig.axes:
         ax.set_axis_off()
     cam = seq.meta["camera"]
     fig.suptitle(f"Fig. 4: two-frame sequence, {seq.meta['fps']:g} fps, ego {cam.get('speed_mps', 0):.0f} m/s, "
-                 f"global shutter. The short LPD is sharp but the braking car's lights (arrows; {f_hz:g} Hz, "
-                 f"D = {duty:g}) are OFF for all of frame 1's exposure;\nthe long SPD holds them in every frame "
-                 f"but blurs the scene (radially, most at the edges). Scene {seq.scene_id}; mu-law display, "
-                 f"same scale in every panel.", fontsize=10.5)
-    fig.subplots_adjust(left=0.005, right=0.995, top=0.9, bottom=0.01)
+                 f"global shutter (scene {seq.scene_id}).\nThe short LPD is sharp, but the braking car's lights "
+                 f"(cyan arrows; {f_hz:g} Hz, D = {duty:g}) are OFF for all of frame 1's exposure.\nThe long SPD "
+                 f"holds every light in every frame but smears what moves across the image (the motorcycle near the "
+                 f"edge, yellow). mu-law display, one scale.", fontsize=10.5)
+    fig.subplots_adjust(left=0.005, right=0.995, top=0.925, bottom=0.005)
     return _save(fig, Path(out_dir) / "fig4_lpd_spd_sequence.png")
 
 
@@ -436,10 +470,10 @@ def fig5(corpus: str | Path, out_dir: str | Path, seq: Sequence46 | None = None)
             if key != "gt":
                 if frame == seq.dropout[3]:
                     _arrow(ax, seq.dropout[2], "cyan", ys, xs)
-                    note = ": brake lights OFF"
+                    note = ": car's lights OFF"
                 if seq.dropout2 and frame == seq.dropout2[3]:
                     _arrow(ax, seq.dropout2[2], "yellow", ys, xs, from_side="right")
-                    note = ": tail lights OFF"
+                    note = ": lights OFF"
             ax.set_title(f"{name}, frame {frame}{note}", fontsize=10)
         ax = fig.add_subplot(gs[r, 3])
         ax.imshow(_img(seq, key, 1), interpolation="nearest")
@@ -470,32 +504,44 @@ def fig6(corpus: str | Path, out_dir: str | Path, seq: Sequence46 | None = None)
         raise FigureInputError("--corpus: the scene has no second flickering vehicle to show the comet with")
     H, W = seq.meta["height"], seq.meta["width"]
     frame = seq.comet[3]
-    # the comet box: the light's layer box over the capture window (its whole motion), frame 1
-    layers_box = _box_union(seq.comet[2] for _ in range(1))
-    ys, xs = _zoom(layers_box, H, W, pad=0.5, aspect=1.3, min_h=40)
+    ys, xs = _zoom(seq.comet[2], H, W, pad=0.5, aspect=1.3, min_h=40)
     panels = [("lpd_lcg_e", "LPD (short)"), ("spd_e", "SPD (long)"),
-              ("upstream_saturated", "simple fusion (upstream)"), ("flicker_aware", "flicker-aware fusion"),
-              ("gt", "ground truth")]
+              ("upstream_saturated", "simple fusion (upstream): LPD kept"),
+              ("flicker_aware", "flicker-aware fusion: the comet"), ("gt", "ground truth")]
     fig = plt.figure(figsize=(16.0, 7.8))
-    gs = fig.add_gridspec(2, 5, height_ratios=[1, 1.05], wspace=0.04, hspace=0.12)
+    gs = fig.add_gridspec(2, 5, height_ratios=[1, 1.05], wspace=0.04, hspace=0.14)
     for c, (key, name) in enumerate(panels):
         ax = fig.add_subplot(gs[0, c])
         ax.imshow(_img(seq, key, frame)[ys, xs], interpolation="nearest")
         ax.set_title(name, fontsize=10)
-    for c, (key, name) in enumerate([("spd_e", "SPD (long)"), ("flicker_aware", "flicker-aware fusion")]):
-        ax = fig.add_subplot(gs[1, c * 2 + (0 if c == 0 else 1):c * 2 + (2 if c == 0 else 3)])
-        ax.imshow(_img(seq, key, frame), interpolation="nearest")
-        _rect(ax, ys, xs)
-        ax.set_title(f"{name}, frame {frame} (full frame)", fontsize=10)
+    ax = fig.add_subplot(gs[1, 0:2])
+    ax.imshow(_img(seq, "spd_e", frame), interpolation="nearest")
+    _rect(ax, ys, xs)
+    ax.set_title(f"SPD (long), frame {frame} (full frame)", fontsize=10)
+    # where the flicker-aware fusion took the SPD: its output differs from the exposure-corrected LPD fusion
+    from lfmbench.baselines import get_method
+
+    base = get_method("saturated_exposure_corrected")(_batch(seq.sample))[0]
+    took = (seq.fused["flicker_aware"][frame, 0] != base[frame, 0]).numpy()
+    ax = fig.add_subplot(gs[1, 2])
+    show = _img(seq, "lpd_lcg_e", frame)[ys, xs] * 0.6
+    show[took[ys, xs]] = (1.0, 0.0, 1.0)
+    ax.imshow(show, interpolation="nearest")
+    ax.set_title("flicker-aware: pixels taken\nfrom the SPD (magenta) on the LPD", fontsize=10)
+    ax = fig.add_subplot(gs[1, 3:5])
+    ax.imshow(_img(seq, "flicker_aware", frame), interpolation="nearest")
+    _rect(ax, ys, xs)
+    ax.set_title(f"flicker-aware fusion, frame {frame} (full frame)", fontsize=10)
     for ax in fig.axes:
         ax.set_axis_off()
     fc, dc = COMET_PWM
-    fig.suptitle(f"Fig. 6: motion-flicker trade-off, frame {frame}. The car's lights ({fc:g} Hz, D = {dc:g}) are ON "
-                 f"for the first 2 ms of the short exposure: the LPD records a short sharp streak, the SPD the long "
-                 f"trail of\nits 11.1 ms. A fusion that takes the SPD where the LPD is saturated or too dark pastes "
-                 f"the trail onto the sharp LPD head: a comet that no exposure of the scene shows. "
+    fig.suptitle(f"Fig. 6: motion-flicker trade-off, frame {frame}, the motorcycle near the image edge "
+                 f"({fc:g} Hz, D = {dc:g}; one pulse, ending as the long exposure closes).\n"
+                 f"The LPD records a short sharp head, the SPD a trail smeared over its 11.1 ms. A fusion that takes "
+                 f"the SPD where the LPD reads below it (flicker-aware) pastes\nthe trail onto the sharp LPD head: a "
+                 f"comet that no exposure of the scene shows. The simple fusion keeps the unsaturated LPD here. "
                  f"Scene {seq.scene_id}, {seq.meta['camera'].get('speed_mps', 0):.0f} m/s.", fontsize=10.5)
-    fig.subplots_adjust(left=0.005, right=0.995, top=0.9, bottom=0.01)
+    fig.subplots_adjust(left=0.005, right=0.995, top=0.87, bottom=0.01)
     return _save(fig, Path(out_dir) / "fig6_comet.png")
 
 
@@ -593,7 +639,13 @@ def build_fig7(corpus: str | Path, seed: int = 0, line_time_s: float | None = No
         images[name] = s["gt"][0] if name == "mean" else lpd_only(_batch(s))[0, 0]
     cfa = ds.preset.cfa.to_kornia()
     peak, wb = _display_scale(images["mean"], cfa)
-    zoom = _box_union([tbox] + [v[1] for v in others])
+    # zoom: the target and the vehicle with the most light signal (the nearest car)
+    inst = {lid: lt.get("instance", -1) for lid, lt in lights.items()}
+    sig: dict = {}
+    for v in others:
+        sig[inst[v[0]]] = sig.get(inst[v[0]], 0.0) + v[2]
+    near = max(sig, key=sig.get) if sig else None
+    zoom = _box_union([tbox] + [v[1] for v in others if inst[v[0]] == near])
     return Setup7(sid, meta, float(line_time_s), ts, a0, pa, pb, up_rows, lo_rows, (tbox[0], tbox[2] + 1), tbox,
                   zoom, ids, sorted(tids), images, cfa, peak, wb)
 
@@ -609,8 +661,8 @@ def fig7(corpus: str | Path, out_dir: str | Path, setup: Setup7 | None = None) -
     f_hz, duty = FIG7_PWM
     rows = np.arange(H)
     zb = st.zoom_box
-    ys = slice(max(0, zb[0] - 10), min(H, zb[2] + 10))
-    xs = slice(max(0, zb[1] - 16), min(W, zb[3] + 16))
+    ys = slice(max(0, zb[0] - 14), min(H, zb[2] + 14))
+    xs = slice(max(0, zb[1] - 24), min(W, zb[3] + 24))
     zr = (xs.stop - xs.start) / (ys.stop - ys.start)
     panels = [("mean", "ground truth (LEDs at their mean level)"),
               ("A", "(a) phase A: dark band above the tail lights"),
@@ -639,6 +691,8 @@ def fig7(corpus: str | Path, out_dir: str | Path, setup: Setup7 | None = None) -
     ax.set_ylim(H, 0)
     ax.set_xlabel("LED exposure of the row / its mean", fontsize=10)
     ax.set_ylabel("image row", fontsize=10)
+    ax.yaxis.set_label_position("right")
+    ax.yaxis.tick_right()
     ax.legend(fontsize=8.5, loc="lower right")
     ax.tick_params(labelsize=9)
     fig.suptitle(f"Fig. 7: rolling-shutter banding, static scene, single exposure of {st.short_s * 1e3:g} ms, all "
@@ -646,7 +700,7 @@ def fig7(corpus: str | Path, out_dir: str | Path, setup: Setup7 | None = None) -
                  f"({H} rows; scene {st.scene_id}).\nPhase A = {st.phase_a * 1e3:.2f} ms, phase B = "
                  f"{st.phase_b * 1e3:.2f} ms (first rising edge after the frame start); right: the exact LED "
                  f"exposure of each row. mu-law display.", fontsize=10.5)
-    fig.subplots_adjust(left=0.005, right=0.99, top=0.92, bottom=0.05)
+    fig.subplots_adjust(left=0.005, right=0.955, top=0.92, bottom=0.06)
     return _save(fig, Path(out_dir) / "fig7_rolling_shutter.png")
 
 

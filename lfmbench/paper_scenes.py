@@ -8,9 +8,9 @@ generator (``generate_scene(seed, "night")`` with no random vehicles), then vehi
 
 - ``paper_fig4_6``: Figs. 4-6 of the paper (60 fps, ego speed 60 m/s, global shutter, LPD 5 ms, SPD 11.11 ms).
   Every vehicle is parked (velocity 0), as in the paper's model (a static environment, fast ego motion), with
-  tail and brake lights on: a braking car in the ego lane 11 m ahead, a braking car in the right lane 11 m
-  ahead near the image edge (its lights sweep 10-20 px in 11.1 ms: the comet), a motorcycle between the lanes,
-  a car further ahead and an oncoming car (headlights).
+  tail and brake lights on: a braking car in the ego lane 11 m ahead (the dropout), a braking motorcycle in
+  the right lane 9 m ahead near the image edge (its small lamps sweep about twice their own width in 11.1 ms:
+  the comet), two cars further ahead in the right lane and an oncoming car (headlights).
 - ``paper_fig7``: Fig. 7 (a static scene, speed 0): a motorcycle coming towards the camera (its headlight and
   nothing else shows at night) and cars ahead at several distances with tail and brake lights; the headlight
   group is made to flicker too, so *all* vehicle lights can be synchronised.
@@ -80,8 +80,8 @@ def fig4_6_scene() -> dict:
 
     sc, b = _street("paper_fig4_6", 60.0, 0.005)
     _car(b, "car", 13.0, -1.75, 0.0, braking=True)         # ego lane: the brake-light dropout (Figs. 4, 5)
-    _car(b, "car", 13.2, -4.75, 0.0, braking=True)         # right lane, near the image edge: the comet (Fig. 6)
-    _car(b, "motorcycle", 22.0, -3.4, 0.0, braking=False)  # between the lanes
+    _car(b, "motorcycle", 9.9, -4.15, 0.0, braking=True)   # right lane, close to the image edge: the comet (Fig. 6)
+    _car(b, "car", 20.0, -5.25, 0.0, braking=True)         # right lane
     _car(b, "car", 35.0, -5.4, 0.0, braking=False)         # right lane, further ahead
     _car(b, "car", 40.0, 5.25, math.pi, braking=False)     # oncoming lane: headlights
     return validate_scene(json.loads(json.dumps(sc)))
