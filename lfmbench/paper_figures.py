@@ -271,7 +271,8 @@ class Sequence46:
         (F, 1, H, W) e-. pwm: light id -> (freq Hz, duty, phase s). dropout, dropout2, comet: (instance id,
         light ids, (y0, x0, y1, x1) signal box px in the off / shown frame, frame index). cfa, peak, wb:
         display settings. lpd_start_s: LPD window start in a frame (s). boxes: instance id -> per-frame
-        (y0, x0, y1, x1) px of its lights (None where not visible).
+        (y0, x0, y1, x1) px of its lights (None where not visible). kinds: instance id -> object kind ("car",
+        "motorcycle", ...; empty when the corpus's scene.json holds no objects).
     """
 
     scene_id: str
@@ -287,6 +288,15 @@ class Sequence46:
     wb: object
     lpd_start_s: float
     boxes: dict
+    kinds: dict
+
+
+def _object_kinds(ds, sid: str) -> dict:
+    """Object id -> kind from the corpus's copy of the scene file ({} for corpora whose scene.json has none)."""
+    try:
+        return {int(o["id"]): str(o["kind"]) for o in ds.corpus.scene(sid).get("objects", [])}
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
+        return {}
 
 
 def _vehicle_lights(ds, sid: str, frame: int) -> dict:
@@ -393,7 +403,7 @@ def build_sequence46(corpus: str | Path, seed: int = 0, noise: bool = True) -> S
     boxes = {i: [(_box_union(bb for _l, bb, _t in pf[i]) if pf.get(i) else None) for pf in per_frame]
              for i in (drop, drop2, comet) if i is not None}
     return Sequence46(sid, meta, s, fused, pwm, info(drop, 1), info(drop2, 2), info(comet, 1), cfa, peak, wb, a0,
-                      boxes)
+                      boxes, _object_kinds(ds, sid))
 
 
 def _img(seq: Sequence46, key: str, frame: int) -> np.ndarray:
@@ -424,7 +434,8 @@ def fig4(corpus: str | Path, out_dir: str | Path, seq: Sequence46 | None = None)
         ax = fig.add_subplot(gs[r, 0])
         ax.imshow(img, interpolation="nearest")
         ax.set_title(f"{name}, frame {frame}", fontsize=10)
-        for c, (inst, color, what) in enumerate([(drop, "cyan", "braking car"), (moving, "yellow", "motorcycle")][:ncol - 1]):
+        zooms = [(drop, "cyan", seq.kinds.get(drop, "vehicle")), (moving, "yellow", seq.kinds.get(moving, "vehicle"))]
+        for c, (inst, color, what) in enumerate(zooms[:ncol - 1]):
             box = seq.boxes[inst][frame] or seq.boxes[inst][1]
             ys, xs = _zoom(box, H, W, pad=0.6 if c == 0 else 1.0, aspect=1.25, min_h=40)
             _rect(ax, ys, xs, color)
@@ -442,8 +453,9 @@ def fig4(corpus: str | Path, out_dir: str | Path, seq: Sequence46 | None = None)
     fig.suptitle(f"Fig. 4: two-frame sequence, {seq.meta['fps']:g} fps, ego {cam.get('speed_mps', 0):.0f} m/s, "
                  f"global shutter (scene {seq.scene_id}).\nThe short LPD is sharp, but the braking car's lights "
                  f"(cyan arrows; {f_hz:g} Hz, D = {duty:g}) are OFF for all of frame 1's exposure.\nThe long SPD "
-                 f"holds every light in every frame but smears what moves across the image (the motorcycle near the "
-                 f"edge, yellow). mu-law display, one scale.", fontsize=10.5)
+                 f"holds every light in every frame but smears what moves across the image (the "
+                 f"{seq.kinds.get(moving, 'vehicle')} near the edge, yellow). mu-law display, one scale.",
+                 fontsize=10.5)
     fig.subplots_adjust(left=0.005, right=0.995, top=0.925, bottom=0.005)
     return _save(fig, Path(out_dir) / "fig4_lpd_spd_sequence.png")
 
@@ -535,7 +547,8 @@ def fig6(corpus: str | Path, out_dir: str | Path, seq: Sequence46 | None = None)
     for ax in fig.axes:
         ax.set_axis_off()
     fc, dc = COMET_PWM
-    fig.suptitle(f"Fig. 6: motion-flicker trade-off, frame {frame}, the motorcycle near the image edge "
+    fig.suptitle(f"Fig. 6: motion-flicker trade-off, frame {frame}, the {seq.kinds.get(seq.comet[0], 'vehicle')} "
+                 f"near the image edge "
                  f"({fc:g} Hz, D = {dc:g}; one pulse, ending as the long exposure closes).\n"
                  f"The LPD records a short sharp head, the SPD a trail smeared over its 11.1 ms. A fusion that takes "
                  f"the SPD where the LPD reads below it (flicker-aware) pastes\nthe trail onto the sharp LPD head: a "
@@ -555,7 +568,7 @@ class Setup7:
         in the frame (s). phase_a, phase_b: PWM phases (s). upper_rows, lower_rows, target_rows: (first, last + 1)
         image rows (px) of the high-mount brake lights, of the other lights and of the occluded target.
         target_box, zoom_box: (y0, x0, y1, x1) px. light_ids: the synchronised lights; target_ids: the occluded
-        ones. images: "mean", "A", "B" ->
+        ones; target_name: what they are ("the motorcycle" or "the brightest light"). images: "mean", "A", "B" ->
         (1, H, W) e- (the truth; the single-exposure captures). cfa, peak, wb: display settings.
     """
 
@@ -573,6 +586,7 @@ class Setup7:
     zoom_box: tuple
     light_ids: list
     target_ids: list
+    target_name: str
     images: dict
     cfa: object
     peak: float
@@ -612,10 +626,7 @@ def build_fig7(corpus: str | Path, seed: int = 0, line_time_s: float | None = No
            for lid, _g, box, r in layers.lights[0] if float(r["lpd"].sum()) > 0]
     if not vis:
         raise FigureInputError(f"--corpus {root}: scene {sid} has no flickering light")
-    try:
-        objs = {o["id"]: o["kind"] for o in ds.corpus.scene(sid).get("objects", [])}
-    except (OSError, ValueError, KeyError, TypeError):  # imported corpora need not store the objects
-        objs = {}
+    objs = _object_kinds(ds, sid)
     kind_of = {lid: objs.get(lt.get("instance"), "") for lid, lt in lights.items()}
     moto = [v for v in vis if kind_of.get(v[0]) == "motorcycle"]
     target = moto or [max(vis, key=lambda v: v[2])]
@@ -647,7 +658,7 @@ def build_fig7(corpus: str | Path, seed: int = 0, line_time_s: float | None = No
     near = max(sig, key=sig.get) if sig else None
     zoom = _box_union([tbox] + [v[1] for v in others if inst[v[0]] == near])
     return Setup7(sid, meta, float(line_time_s), ts, a0, pa, pb, up_rows, lo_rows, (tbox[0], tbox[2] + 1), tbox,
-                  zoom, ids, sorted(tids), images, cfa, peak, wb)
+                  zoom, ids, sorted(tids), "the motorcycle" if moto else "the brightest light", images, cfa, peak, wb)
 
 
 def fig7(corpus: str | Path, out_dir: str | Path, setup: Setup7 | None = None) -> Path:
@@ -666,7 +677,7 @@ def fig7(corpus: str | Path, out_dir: str | Path, setup: Setup7 | None = None) -
     zr = (xs.stop - xs.start) / (ys.stop - ys.start)
     panels = [("mean", "ground truth (LEDs at their mean level)"),
               ("A", "(a) phase A: dark band above the tail lights"),
-              ("B", "(b) phase B: the motorcycle is not recorded")]
+              ("B", f"(b) phase B: {st.target_name} is not recorded")]
     fig = plt.figure(figsize=(16.0, 10.0))
     gs = fig.add_gridspec(3, 3, width_ratios=[W / H, zr, 0.55], wspace=0.03, hspace=0.14)
     for r, (key, name) in enumerate(panels):
@@ -679,14 +690,14 @@ def fig7(corpus: str | Path, out_dir: str | Path, setup: Setup7 | None = None) -
         ax = fig.add_subplot(gs[r, 1])
         ax.imshow(img[ys, xs], interpolation="nearest")
         _arrow(ax, st.target_box, "yellow", ys, xs)
-        ax.set_title("zoom (arrow: the motorcycle's light)", fontsize=10)
+        ax.set_title(f"zoom (arrow: {st.target_name})", fontsize=10)
         ax.set_axis_off()
     ax = fig.add_subplot(gs[:, 2])
     for key, ph, col in (("A", st.phase_a, "tab:blue"), ("B", st.phase_b, "tab:orange")):
         e = row_exposure(rows, ph, f_hz, duty, st.lpd_start_s, st.short_s, st.line_time_s)
         ax.plot(e / (duty * st.short_s), rows, color=col, lw=2, label=f"phase {key}")
     ax.axhspan(st.upper_rows[0], st.upper_rows[1], color="cyan", alpha=0.35, label="high brake lights")
-    ax.axhspan(st.target_rows[0], st.target_rows[1], color="gold", alpha=0.6, label="motorcycle light")
+    ax.axhspan(st.target_rows[0], st.target_rows[1], color="gold", alpha=0.6, label=st.target_name.replace("the ", ""))
     ax.axhspan(st.lower_rows[0], st.lower_rows[1], color="red", alpha=0.15, label="other lights")
     ax.set_ylim(H, 0)
     ax.set_xlabel("LED exposure of the row / its mean", fontsize=10)
