@@ -9,16 +9,37 @@ PWM, ego speed and their bins), :mod:`~lfmbench.evaluation.stats` (bootstrap CIs
 tables), :mod:`~lfmbench.evaluation.benchmark` (several methods on one corpus) and
 :mod:`~lfmbench.evaluation.cli` (the two commands). Result format: ``docs/metrics.md`` ("Result files").
 """
-from lfmbench.datasets.loading import EmptyDataError, collate_samples, make_dataset
-from lfmbench.evaluation.benchmark import benchmark, safe_name, write_leaderboard
-from lfmbench.evaluation.cost import count_params_macs, method_module, time_method
-from lfmbench.evaluation.leaderboard import (IncomparableRunsError, check_comparable, comparability_problems,
-                                             incomplete_runs, leaderboard_json, leaderboard_markdown,
-                                             leaderboard_rows, load_runs, plot_quality_vs_runtime, print_leaderboard)
-from lfmbench.evaluation.provenance import corpus_identity, device_name, git_revision, versions
-from lfmbench.evaluation.results import COMPLETE, RESULT_FORMAT, RESULT_VERSION, num, per_scene, write_json_atomic
-from lfmbench.evaluation.run import (DataSourceError, EvaluationInterrupted, MethodOutputError, check_output,
-                                     evaluate)
+import importlib
+
+#: public name -> submodule that defines it; imported on first access (PEP 562), so that importing
+#: :mod:`lfmbench.evaluation.cli` to register the commands does not import torch and the dataset.
+_WHERE = {
+    **dict.fromkeys(["EmptyDataError", "collate_samples", "make_dataset"], "lfmbench.datasets.loading"),
+    **dict.fromkeys(["benchmark", "safe_name", "write_leaderboard"], "lfmbench.evaluation.benchmark"),
+    **dict.fromkeys(["count_params_macs", "method_module", "time_method"], "lfmbench.evaluation.cost"),
+    **dict.fromkeys(["IncomparableRunsError", "check_comparable", "comparability_problems", "incomplete_runs",
+                     "leaderboard_json", "leaderboard_markdown", "leaderboard_rows", "load_runs",
+                     "plot_quality_vs_runtime", "print_leaderboard"], "lfmbench.evaluation.leaderboard"),
+    **dict.fromkeys(["corpus_identity", "device_name", "git_revision", "versions"],
+                    "lfmbench.evaluation.provenance"),
+    **dict.fromkeys(["COMPLETE", "RESULT_FORMAT", "RESULT_VERSION", "num", "per_scene", "write_json_atomic"],
+                    "lfmbench.evaluation.results"),
+    **dict.fromkeys(["DataSourceError", "EvaluationInterrupted", "MethodOutputError", "check_output", "evaluate"],
+                    "lfmbench.evaluation.run"),
+}
+
+
+def __getattr__(name: str):
+    if name in _WHERE:
+        value = getattr(importlib.import_module(_WHERE[name]), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'lfmbench.evaluation' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(list(globals()) + list(_WHERE))
+
 
 __all__ = ["evaluate", "benchmark", "check_output", "MethodOutputError", "EmptyDataError", "DataSourceError",
            "EvaluationInterrupted", "IncomparableRunsError", "COMPLETE", "RESULT_FORMAT", "RESULT_VERSION", "num",

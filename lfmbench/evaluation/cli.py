@@ -1,15 +1,11 @@
-"""The ``lfmbench evaluate`` and ``lfmbench leaderboard`` commands (thin wrappers of the library modules)."""
+"""The ``lfmbench evaluate`` and ``lfmbench leaderboard`` commands (thin wrappers of the library modules).
+
+The library (torch, the dataset) is imported inside the command bodies: the ``lfmbench`` CLI imports this module
+to register the commands, and ``lfmbench render`` or ``--help`` must not pay for torch."""
 from __future__ import annotations
 
 from pathlib import Path
 
-import torch
-
-from lfmbench.datasets.loading import EmptyDataError, collate_samples
-from lfmbench.evaluation.benchmark import corpus_run_inputs, safe_name, write_leaderboard
-from lfmbench.evaluation.leaderboard import (_fmt, check_comparable, incomplete_runs, leaderboard_rows, load_runs,
-                                             print_leaderboard)
-from lfmbench.evaluation.run import DataSourceError, EvaluationInterrupted, evaluate
 
 
 def register(app) -> None:
@@ -42,6 +38,13 @@ def register(app) -> None:
         Exit status: 0 every scene scored, 1 some scenes failed or the data source failed (the result file
         says which), 2 bad input, 130 interrupted (the result file has status "interrupted").
         """
+        import torch  # noqa: PLC0415 - heavy: only when the command runs
+
+        from lfmbench.datasets.loading import EmptyDataError, collate_samples  # noqa: PLC0415
+        from lfmbench.evaluation.benchmark import corpus_run_inputs, safe_name  # noqa: PLC0415
+        from lfmbench.evaluation.leaderboard import _fmt  # noqa: PLC0415
+        from lfmbench.evaluation.run import DataSourceError, EvaluationInterrupted, evaluate  # noqa: PLC0415
+
         def fail(msg: str, code: int = 2) -> None:
             typer.secho(f"error: {msg}", fg=typer.colors.RED, err=True)
             raise typer.Exit(code)
@@ -136,6 +139,10 @@ def register(app) -> None:
         different corpora (manifest SHA-256, format version, test draws), with different metric versions or a
         different protocol (split, seed, crop, samples per scene, scoring options) are refused.
         """
+        from lfmbench.evaluation.benchmark import write_leaderboard  # noqa: PLC0415
+        from lfmbench.evaluation.leaderboard import (check_comparable, incomplete_runs,  # noqa: PLC0415
+                                                     leaderboard_rows, load_runs, print_leaderboard)
+
         try:
             loaded = load_runs(p for p in runs if p.suffix == ".json")
             bad = incomplete_runs(loaded)
