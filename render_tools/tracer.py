@@ -61,6 +61,12 @@ LIGHT_R2_M2 = 0.05
 #: Floor of a selection weight's angular factors (behind a face, outside a beam, grazing receiver): every emitter
 #: keeps a positive probability, so next-event estimation stays unbiased whatever the weights get wrong.
 WEIGHT_FLOOR = 1e-3
+#: Lower bound of emitted spectral radiance (W sr^-1 m^-2 nm^-1) in the tracer. Mitsuba's ``sunsky`` (Hosek-Wilkie
+#: fit) returns negative values near the horizon at short wavelengths when the sun is low: at sun elevation 1.1 deg
+#: (dusk) 1.5e-5 of random directions, down to -3.8e-5 against a sky peak of 1.1e-2 (measured, Mitsuba 3.9.1); a
+#: frame then held radiance below -1e-6 x its peak and the corpus writer refused it (12 of 33 dusk scenes of the
+#: lfmbench-v1-mini protocol). The tracer uses max(L_e, 0): the image of the sky with its negative lobes cut off.
+EMISSION_FLOOR = 0.0
 #: Floor of the receiver cosine in the selection weight.
 RECEIVER_FLOOR = 0.1
 
@@ -515,7 +521,9 @@ class Tracer:
                 / dr.select(wsum_prev > 0, wsum_prev, 1.0)
             em_pdf = dr.select(delta_prev, 0.0, pmf_hit * ds.emitter.pdf_direction(si_prev, ds, active & ~delta_prev))
             hit_em = active & in_set
-            L += beta * _mis_weight(pdf_prev, em_pdf) * ds.emitter.eval(si, hit_em)
+            # emission clamped at 0 (:data:`EMISSION_FLOOR`): Mitsuba's sunsky returns slightly negative spectral
+            # radiance near the horizon at low sun (dusk), which no light can have
+            L += beta * _mis_weight(pdf_prev, em_pdf) * dr.maximum(ds.emitter.eval(si, hit_em), EMISSION_FLOOR)
 
             active_next = active & (depth + 1 < self.max_depth) & si.is_valid()
             # next-event estimation: one emitter of this lane's set, chosen in proportion to its estimated light
@@ -524,6 +532,7 @@ class Tracer:
             em, pmf_em, wsum = self._choose_light(sampler, start, cnt, si.p, si.n, active_em)
             ds_em, w_em = em.sample_direction(si, mi.Point2f(sampler.next_float32(), sampler.next_float32()),
                                               active_em)
+            w_em = dr.maximum(w_em, EMISSION_FLOOR)  # as above: the clamped sky, an unbiased estimate of it
             active_em &= (ds_em.pdf != 0.0) & (pmf_em > 0)
             occluded = self.scene.ray_test(si.spawn_ray_to(ds_em.p), active_em)
             active_em &= ~occluded
