@@ -6,7 +6,9 @@ For every run: mean PSNR-mu (dB), light dropout rate (pooled over region-frames)
 series_rel_rmse (relative RMS error of the LED-region series, an LED-region quality), each with a percentile
 bootstrap CI that resamples *scenes* (all frozen draws of a resampled scene go together, since draws of one
 scene are correlated). Every run must cover the same scenes; the same resampled scene sets are used for all
-runs. Prints a Markdown table (docs/baselines.md, "U-Net baseline"). Used to report numbers, not a timed test.
+runs. Prints a Markdown table (docs/baselines.md, "U-Net baseline"); with ``--against NAME`` also the paired
+differences ``NAME - other`` per metric (same resampled scenes for both, so scene difficulty cancels) with their
+CIs. Used to report numbers, not a timed test.
 """
 from __future__ import annotations
 
@@ -43,6 +45,7 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("runs", nargs="+", type=Path)
     ap.add_argument("--resamples", type=int, default=2000)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--against", default=None, help="run name (file stem) to compare with every other run")
     a = ap.parse_args(argv)
     runs = {p.stem: _per_scene(json.loads(p.read_text())) for p in a.runs if p.stem != "leaderboard"}
     scenes = sorted(next(iter(runs.values())))
@@ -64,6 +67,24 @@ def main(argv: list[str] | None = None) -> None:
             cells.append(f"{point:.3f} [{lo:.3f}, {hi:.3f}]" if m != "psnr_mu" else
                          f"{point:.2f} [{lo:.2f}, {hi:.2f}]")
         print(f"| {name} | " + " | ".join(cells) + " |")
+    if a.against:
+        if a.against not in runs:
+            raise SystemExit(f"--against {a.against}: no such run ({sorted(runs)})")
+        ref = runs[a.against]
+        print(f"\npaired differences {a.against} - other, 95 % scene-bootstrap CI\n")
+        print("| other | " + " | ".join(METRICS) + " |")
+        print("|---|" + "---|" * len(METRICS))
+        for name, r in sorted(runs.items()):
+            if name == a.against:
+                continue
+            cells = []
+            for m in METRICS:
+                d = _stat([ref[s] for s in scenes], m) - _stat([r[s] for s in scenes], m)
+                boot = [_stat([ref[scenes[i]] for i in row], m) - _stat([r[scenes[i]] for i in row], m)
+                        for row in picks]
+                lo, hi = np.nanpercentile(boot, [2.5, 97.5])
+                cells.append(f"{d:+.3f} [{lo:+.3f}, {hi:+.3f}]")
+            print(f"| {name} | " + " | ".join(cells) + " |")
 
 
 if __name__ == "__main__":

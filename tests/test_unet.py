@@ -40,10 +40,17 @@ def test_forward_shape_dtype_and_range(dtype, h, w):
     assert out.shape == b["gt"].shape and out.dtype == dtype and out.device == b["gt"].device
     assert bool(torch.isfinite(out).all()) and bool((out >= 0).all())
     cand, feats = m.candidates(b)
-    assert cand.shape == (2, 3, 3, h, w) and feats.shape == (2, 3, m.in_channels, h, w)
-    # untrained: a fixed blend leaning on L (the saturated fusion), no gain
-    wl = torch.softmax(torch.tensor([2.0, 0.0, 0.0]), 0)
-    assert torch.allclose(out, (cand * wl.to(dtype).reshape(1, 1, 3, 1, 1)).sum(2, keepdim=True), rtol=1e-5)
+    assert cand.shape == (2, 3, 4, h, w) and feats.shape == (2, 3, m.in_channels, h, w)
+    # candidates H, L, S, T in the configured order
+    assert torch.equal(cand[:, :, 0:1], baselines.lpd_only(b))
+    assert torch.equal(cand[:, :, 1:2], baselines.saturated_exposure_corrected(b))
+    assert torch.equal(cand[:, :, 2:3], b["spd_e"])
+    # untrained: a fixed blend leaning on the first candidate, no gain
+    wl = torch.softmax(torch.tensor([2.0, 0.0, 0.0, 0.0]), 0)
+    assert torch.allclose(out, (cand * wl.to(dtype).reshape(1, 1, 4, 1, 1)).sum(2, keepdim=True), rtol=1e-5)
+    m3 = U.UNetFusion(U.config_from_dict({"model": {"base_channels": 2, "depth": 1, "candidates": ["S", "L"]}}).model)
+    c3, _ = m3.candidates(b)
+    assert c3.shape[2] == 2 and torch.equal(c3[:, :, 0:1], b["spd_e"]) and m3(b).shape == b["gt"].shape
 
 
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="needs CUDA")
@@ -139,6 +146,7 @@ def test_train_command_writes_loadable_checkpoint_and_resumes_deterministically(
     ("loss: {led_weight: -1}\n", "loss.led_weight must be >= 0"),
     ("train: {crop: 63}\n", "train.crop must be even"),
     ("optimizer: {}\n", r"unknown section\(s\)"),
+    ("model: {candidates: [L, X]}\n", "model.candidates must be a non-empty list"),
     ("model: [1, 2\n", "not valid YAML"),
 ])
 def test_bad_config_names_the_file(tmp_path, text, match):

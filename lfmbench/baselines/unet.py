@@ -8,11 +8,13 @@ plus the three saturation flags; the log of the frame mean of the saturated fusi
 (``pixel_unshuffle``), so the U-Net runs at half resolution and every packed pixel sees one whole RGGB quad.
 
 Output: like the small :mod:`~lfmbench.baselines.learned` net, the U-Net does not regress radiance directly: per
-pixel it predicts softmax weights over three candidates in the GT units, L (exposure-corrected saturated fusion),
-S (``spd_e``) and T (frame mean of L), and a bounded log-gain ``g`` (``|g| <= gain_range``):
-``out = exp(g) * sum_k w_k C_k``. The head starts with zero weights, logits ``(init_bias, 0, 0)`` and ``g = 0``,
-so an untrained model is a fixed blend leaning on L (weight 0.79 at ``init_bias = 2``); the output stays
-non-negative and within a factor ``exp(gain_range)`` of the candidates' range.
+pixel it predicts softmax weights over candidates in the GT units (``model.candidates``, from :data:`CANDIDATES`:
+H = ``lpd_only`` (HCG where unsaturated, else LCG), L = exposure-corrected saturated fusion, S = ``spd_e``,
+T = frame mean of L) and a bounded log-gain ``g`` (``|g| <= gain_range``): ``out = exp(g) * sum_k w_k C_k``.
+The head starts with zero weights, logit ``init_bias`` for the first candidate (0 for the others) and ``g = 0``,
+so an untrained model is a fixed blend leaning on the first candidate (weight 0.71 with 4 candidates at
+``init_bias = 2``); the output stays non-negative and within a factor ``exp(gain_range)`` of the candidates'
+range. The per-pixel gain, predicted from a neighbourhood, also lets the network denoise.
 
 Loss (:func:`led_weighted_loss`): L1 of the mu-law images normalised by the GT peak (the PSNR-mu convention),
 plus ``led_weight`` x the same L1 averaged over LED pixels only (``light_index >= 0``), plus ``region_weight`` x
@@ -50,8 +52,9 @@ DEFAULT_CHECKPOINT = Path("runs") / "unet_fusion.pt"
 CHECKPOINT_ENV = "LFMBENCH_UNET_CHECKPOINT"
 CHECKPOINT_FORMAT = "lfmbench-unet-fusion"
 FORMAT_VERSION = 1
-#: Number of blend candidates (L, S, T).
-N_CANDIDATES = 3
+#: Blend candidates the config may list (``model.candidates``).
+CANDIDATES = {"H": "lpd_only: HCG where unsaturated, else LCG", "L": "saturated_exposure_corrected",
+              "S": "spd_only (spd_e)", "T": "frame mean of L"}
 
 
 class CheckpointNotFoundError(FileNotFoundError):
@@ -71,7 +74,8 @@ class ModelConfig:
     depth: int = 3                 #: number of 2x down-samplings inside the U-Net (after the 2x2 packing)
     context_frames: int = 1        #: neighbouring frames each side given as temporal context
     gain_range: float = 1.0        #: bound of the learned natural-log gain on the blend
-    init_bias: float = 2.0         #: starting logit of candidate L (others 0): untrained = blend leaning on L
+    candidates: list = field(default_factory=lambda: ["H", "L", "S", "T"])  #: blend candidates (CANDIDATES)
+    init_bias: float = 2.0         #: starting logit of the first candidate (others 0)
     feature_scale_e: float = 100.0  #: e-, scale inside log1p of the input transform
     feature_max_e: float = 1.0e6   #: e-, value mapped to 1 by the input transform
 
@@ -152,7 +156,13 @@ def config_from_dict(data: Any, source: str = "<dict>") -> UNetConfig:
             default = getattr(defaults, name)
             v = raw.get(name, default)
             where = f"{source}: {sec}.{name}"
-            if isinstance(default, bool) or isinstance(default, str):
+            if isinstance(default, list):
+                if (not isinstance(v, list) or not v or len(set(v)) != len(v)
+                        or not all(isinstance(c, str) and c in CANDIDATES for c in v)):
+                    raise ConfigError(f"{where} must be a non-empty list of distinct names from "
+                                      f"{sorted(CANDIDATES)}, got {v!r}")
+                v = list(v)
+            elif isinstance(default, bool) or isinstance(default, str):
                 if type(v) is not type(default):
                     raise ConfigError(f"{where} must be a {type(default).__name__}, got {v!r}")
             elif isinstance(default, int):
@@ -248,10 +258,11 @@ class UNetFusion(nn.Module):
         cfg = config.model if isinstance(config, UNetConfig) else (config or ModelConfig())
         self.config = cfg
         self.in_channels = 6 * (2 * cfg.context_frames + 1) + 2
-        self.unet = UNet(4 * self.in_channels, 4 * (N_CANDIDATES + 1), cfg.base_channels, cfg.depth)
+        self.n_candidates = k = len(cfg.candidates)
+        self.unet = UNet(4 * self.in_channels, 4 * (k + 1), cfg.base_channels, cfg.depth)
         with torch.no_grad():  # start as a fixed blend leaning on L, gain 1
             self.unet.head.weight.zero_()
-            bias = torch.zeros(N_CANDIDATES + 1, 4)
+            bias = torch.zeros(k + 1, 4)
             bias[0] = cfg.init_bias
             self.unet.head.bias.copy_(bias.reshape(-1))  # pixel_shuffle order: channel-major, 2x2 minor
 
@@ -260,11 +271,13 @@ class UNetFusion(nn.Module):
         return torch.log1p(x.clamp_min(0.0) / c.feature_scale_e) / math.log1p(c.feature_max_e / c.feature_scale_e)
 
     def candidates(self, batch: dict) -> tuple[torch.Tensor, torch.Tensor]:
-        """Blend candidates (B, F, 3, H, W) e- = (L, S, T) and input features (B, F, C_in, H, W) float32."""
+        """Blend candidates (B, F, K, H, W) e- (``config.candidates`` in order) and input features
+        (B, F, C_in, H, W) float32."""
         hcg, lcg, spd, sat = _captures(batch)
         lo = saturated_fusion(hcg, lcg, spd, sat)
         t = lo.mean(dim=1, keepdim=True).expand_as(lo)
-        cand = torch.cat([lo, spd, t], dim=2)
+        pool = {"L": lo, "S": spd, "T": t, "H": torch.where(sat[:, :, 0:1], lcg, hcg)}
+        cand = torch.cat([pool[c] for c in self.config.candidates], dim=2)
         per_frame = torch.cat([self._log(hcg), self._log(lcg), self._log(spd), sat.to(hcg.dtype)], dim=2).float()
         nf = per_frame.shape[1]
         ctx = self.config.context_frames
@@ -284,9 +297,10 @@ class UNetFusion(nn.Module):
         if ph or pw:
             x = F.pad(x, (0, pw, 0, ph), mode="replicate")
         y = F.pixel_shuffle(self.unet(F.pixel_unshuffle(x, 2)), 2)[..., :h, :w]
-        y = y.reshape(b, nf, N_CANDIDATES + 1, h, w)
-        wts = torch.softmax(y[:, :, :N_CANDIDATES], dim=2).to(cand.dtype)
-        gain = torch.exp(self.config.gain_range * torch.tanh(y[:, :, N_CANDIDATES:])).to(cand.dtype)
+        k = self.n_candidates
+        y = y.reshape(b, nf, k + 1, h, w)
+        wts = torch.softmax(y[:, :, :k], dim=2).to(cand.dtype)
+        gain = torch.exp(self.config.gain_range * torch.tanh(y[:, :, k:])).to(cand.dtype)
         return (wts * cand).sum(dim=2, keepdim=True) * gain
 
 
