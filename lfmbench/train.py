@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import math
 import os
+import statistics
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -243,4 +244,4 @@ def register(app) -> None:
         secs = hist["epoch_seconds"]
         typer.echo(f"saved {out}: {count_parameters(model):,} parameters, {len(secs)} epochs, "
                    f"final loss {hist['epoch_loss'][-1] if hist['epoch_loss'] else float('nan'):.4f}"
-                   + (f", median {sorted(secs)[len(secs) // 2]:.1f} s/epoch" if secs else ""))
+                   + (f", median {statistics.median(secs):.1f} s/epoch" if secs else ""))
