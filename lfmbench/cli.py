@@ -27,6 +27,7 @@ COMMAND_MODULES = (
     "lfmbench.paper_figures",
     "render_tools.cli",
     "lfmbench.corpus_cli",
+    "lfmbench.train_cli",
     "lfmbench.evaluation.cli",
 )
 

@@ -1,7 +1,8 @@
 """The end-to-end demo behind ``make demo`` (settings: ``lfmbench/configs/demo.yaml``).
 
 1. render the small default corpus (fast Mitsuba path; resumable, so a second run reuses it);
-2. train the learned baseline through the DataLoader (skipped when its checkpoint exists);
+2. train the learned baseline and the tiny U-Net (``unet.config`` of the demo config, by default
+   ``lfmbench/configs/unet_tiny.yaml``) through the DataLoader (each skipped when its checkpoint exists);
 3. evaluate every registered baseline on the test split and print the leaderboard;
 4. reproduce the paper's figures from the corpus.
 """
@@ -47,6 +48,22 @@ def run(out: str | Path | None = None, config: str | Path = CONFIG) -> dict:
                         "--checkpoint", str(ckpt), "--epochs", str(tr["epochs"]), "--crop", str(tr["crop"]),
                         "--batch-size", str(tr["batch_size"]), "--workers", str(tr["workers"])], check=True)
     secs["train"] = time.perf_counter() - t
+
+    uck = out / "unet_fusion.pt"
+    os.environ["LFMBENCH_UNET_CHECKPOINT"] = str(uck)
+    un = cfg.get("unet", {})
+    t = _step(f"2b. train the tiny U-Net baseline -> {uck}")
+    if uck.is_file():
+        print(f"   {uck} exists: reused (delete it to retrain)")
+    else:
+        from lfmbench.baselines.unet import TINY_CONFIG
+        cmd = [sys.executable, "-m", "lfmbench.cli", "train", "--corpus", str(corpus), "--out", str(uck),
+               "--config", str(un.get("config") or TINY_CONFIG)]
+        for key in ("epochs", "workers"):
+            if un.get(key) is not None:
+                cmd += [f"--{key}", str(un[key])]
+        subprocess.run(cmd, check=True)
+    secs["train_unet"] = time.perf_counter() - t
 
     from lfmbench.evaluation import benchmark
     ev = cfg["evaluate"]

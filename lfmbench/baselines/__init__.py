@@ -31,6 +31,22 @@ def _learned_module():
 
 _learned_lazy.torch_module = _learned_module  # type: ignore[attr-defined]
 
+
+def _unet_lazy(batch: dict):
+    """The U-Net baseline (:func:`lfmbench.baselines.unet.unet`), imported on first use."""
+    from lfmbench.baselines.unet import unet as _fn
+
+    return _fn(batch)
+
+
+def _unet_module():
+    from lfmbench.baselines.unet import _model
+
+    return _model()
+
+
+_unet_lazy.torch_module = _unet_module  # type: ignore[attr-defined]
+
 #: Registered baselines, in leaderboard order.
 REGISTRY: dict[str, Method] = {
     "lpd_only": lpd_only,
@@ -41,6 +57,7 @@ REGISTRY: dict[str, Method] = {
     "flicker_aware_two_sided": flicker_aware_two_sided,
     "temporal": temporal,
     "learned": _learned_lazy,
+    "unet": _unet_lazy,
 }
 
 

@@ -1,0 +1,415 @@
+"""U-Net fusion baseline (0.3-3 M parameters at the default config): the network, its loss and checkpoints.
+
+Input (per output frame f): the split-pixel captures of frame f and of ``context_frames`` neighbours on each side
+(edge frames repeated), each as the three input-referred reads (LPD HCG, LPD LCG, SPD, in LPD-equivalent e- over
+the short exposure) mapped to a log domain ``log1p(x / feature_scale_e) / log1p(feature_max_e / feature_scale_e)``
+plus the three saturation flags; the log of the frame mean of the saturated fusion (a temporal LED level); and
+``log(T_long / T_short) / log(100)`` (the exposure ratio, a constant plane). The Bayer mosaic is packed 2 x 2
+(``pixel_unshuffle``), so the U-Net runs at half resolution and every packed pixel sees one whole RGGB quad.
+
+Output: like the small :mod:`~lfmbench.baselines.learned` net, the U-Net does not regress radiance directly: per
+pixel it predicts softmax weights over candidates in the GT units (``model.candidates``, from :data:`CANDIDATES`:
+H = ``lpd_only`` (HCG where unsaturated, else LCG), L = exposure-corrected saturated fusion, S = ``spd_e``,
+T = frame mean of L) and a bounded log-gain ``g`` (``|g| <= gain_range``): ``out = exp(g) * sum_k w_k C_k``.
+The head starts with zero weights, logit ``init_bias`` for the first candidate (0 for the others) and ``g = 0``,
+so an untrained model is a fixed blend leaning on the first candidate (weight 0.71 with 4 candidates at
+``init_bias = 2``); the output stays non-negative and within a factor ``exp(gain_range)`` of the candidates'
+range. The per-pixel gain, predicted from a neighbourhood, also lets the network denoise.
+
+Loss (:func:`led_weighted_loss`): L1 of the mu-law images normalised by the GT peak (the PSNR-mu convention),
+plus ``led_weight`` x the same L1 averaged over LED pixels only (``light_index >= 0``), plus ``region_weight`` x
+the mean ``|log1p(P_j / s) - log1p(G_j / s)|`` of the region means P_j, G_j of every light and frame (what the
+light-dropout and FMI metrics read).
+
+Configuration: a plain YAML file (``lfmbench/configs/unet.yaml``; ``unet_tiny.yaml`` for the demo) with sections
+``model``, ``loss`` and ``train`` (:func:`load_config`). Training: ``lfmbench train`` (:mod:`lfmbench.train`).
+The registered method :func:`unet` reads the checkpoint at ``$LFMBENCH_UNET_CHECKPOINT`` or
+:data:`DEFAULT_CHECKPOINT`.
+"""
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import asdict, dataclass, field, fields
+from pathlib import Path
+from typing import Any
+
+import torch
+import torch.nn as nn
+import torch.nn.functional as F
+
+from lfmbench.baselines.classic import _captures, exposures_s, saturated_fusion
+from lfmbench.fileio import atomic_torch_save
+from lfmbench.metrics.flicker import region_series
+from lfmbench.metrics.hdr import MU_DEFAULT, mu_law, normalize_hdr
+
+#: The editable default configuration (about 1 M parameters).
+DEFAULT_CONFIG = Path(__file__).resolve().parents[1] / "configs" / "unet.yaml"
+#: The demo's configuration (a few thousand parameters).
+TINY_CONFIG = Path(__file__).resolve().parents[1] / "configs" / "unet_tiny.yaml"
+#: Where :func:`unet` looks for weights unless ``$LFMBENCH_UNET_CHECKPOINT`` is set.
+DEFAULT_CHECKPOINT = Path("runs") / "unet_fusion.pt"
+CHECKPOINT_ENV = "LFMBENCH_UNET_CHECKPOINT"
+CHECKPOINT_FORMAT = "lfmbench-unet-fusion"
+FORMAT_VERSION = 1
+#: Blend candidates the config may list (``model.candidates``).
+CANDIDATES = {"H": "lpd_only: HCG where unsaturated, else LCG", "L": "saturated_exposure_corrected",
+              "S": "spd_only (spd_e)", "T": "frame mean of L"}
+
+
+class CheckpointNotFoundError(FileNotFoundError):
+    """No trained U-Net weights."""
+
+
+class ConfigError(ValueError):
+    """A U-Net configuration file is missing, unreadable or holds a bad value (the message names the file)."""
+
+
+# --------------------------------------------------------------------------------------------- configuration
+@dataclass
+class ModelConfig:
+    """Architecture. Channels count feature maps; ``feature_*_e`` are input-referred e-."""
+
+    base_channels: int = 24        #: channels of the first U-Net level (doubled per level)
+    depth: int = 3                 #: number of 2x down-samplings inside the U-Net (after the 2x2 packing)
+    context_frames: int = 1        #: neighbouring frames each side given as temporal context
+    gain_range: float = 1.0        #: bound of the learned natural-log gain on the blend
+    candidates: list = field(default_factory=lambda: ["H", "L", "S", "T"])  #: blend candidates (CANDIDATES)
+    init_bias: float = 2.0         #: starting logit of the first candidate (others 0)
+    feature_scale_e: float = 100.0  #: e-, scale inside log1p of the input transform
+    feature_max_e: float = 1.0e6   #: e-, value mapped to 1 by the input transform
+
+
+@dataclass
+class LossConfig:
+    """Loss weights (dimensionless) and the mu of the mu-law (PSNR-mu uses 5000)."""
+
+    led_weight: float = 4.0
+    region_weight: float = 1.0
+    mu: float = MU_DEFAULT
+
+
+@dataclass
+class TrainConfig:
+    """Optimisation and data settings of ``lfmbench train``."""
+
+    epochs: int = 20
+    batch_size: int = 4
+    crop: int = 64                 #: square training crop, pixels (even)
+    samples_per_scene: int = 16    #: PWM draws and crops per scene per epoch
+    frames: int = 3                #: frames per sample
+    lr: float = 2.0e-3             #: Adam learning rate (cosine-annealed to lr_min over the run)
+    lr_min: float = 1.0e-4
+    weight_decay: float = 0.0
+    grad_clip: float = 1.0         #: max gradient norm (0: off)
+    workers: int = 1               #: DataLoader worker processes
+    seed: int = 0
+    split: str = "train"
+    sensor: str = "ovt"
+
+
+@dataclass
+class UNetConfig:
+    """The three sections of a U-Net configuration file."""
+
+    model: ModelConfig = field(default_factory=ModelConfig)
+    loss: LossConfig = field(default_factory=LossConfig)
+    train: TrainConfig = field(default_factory=TrainConfig)
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+_MINIMA = {"base_channels": 1, "depth": 0, "context_frames": 0, "epochs": 1, "batch_size": 1, "crop": 8,
+           "samples_per_scene": 1, "frames": 1, "workers": 0}
+_POSITIVE = {"gain_range", "feature_scale_e", "feature_max_e", "mu", "lr"}
+_NONNEG = {"led_weight", "region_weight", "lr_min", "weight_decay", "grad_clip"}
+
+
+def config_from_dict(data: Any, source: str = "<dict>") -> UNetConfig:
+    """Build a :class:`UNetConfig` from nested mappings; missing keys take the defaults.
+
+    Raises:
+        ConfigError: naming ``source`` and the offending key for an unknown section or key, a wrong type or an
+            out-of-range value.
+    """
+    if data is None:
+        data = {}
+    if not isinstance(data, dict):
+        raise ConfigError(f"{source}: expected a mapping with sections model, loss, train; got {type(data).__name__}")
+    sections = {f.name: f.type for f in fields(UNetConfig)}
+    unknown = sorted(set(data) - set(sections))
+    if unknown:
+        raise ConfigError(f"{source}: unknown section(s) {unknown}; expected {sorted(sections)}")
+    built = {}
+    for sec, cls in (("model", ModelConfig), ("loss", LossConfig), ("train", TrainConfig)):
+        raw = data.get(sec) or {}
+        if not isinstance(raw, dict):
+            raise ConfigError(f"{source}: section {sec!r} must be a mapping, got {type(raw).__name__}")
+        defaults = cls()
+        names = {f.name for f in fields(cls)}
+        bad = sorted(set(raw) - names)
+        if bad:
+            raise ConfigError(f"{source}: unknown key(s) {bad} in section {sec!r}; known: {sorted(names)}")
+        vals = {}
+        for name in names:
+            default = getattr(defaults, name)
+            v = raw.get(name, default)
+            where = f"{source}: {sec}.{name}"
+            if isinstance(default, list):
+                if (not isinstance(v, list) or not v or len(set(v)) != len(v)
+                        or not all(isinstance(c, str) and c in CANDIDATES for c in v)):
+                    raise ConfigError(f"{where} must be a non-empty list of distinct names from "
+                                      f"{sorted(CANDIDATES)}, got {v!r}")
+                v = list(v)
+            elif isinstance(default, bool) or isinstance(default, str):
+                if type(v) is not type(default):
+                    raise ConfigError(f"{where} must be a {type(default).__name__}, got {v!r}")
+            elif isinstance(default, int):
+                if isinstance(v, bool) or not isinstance(v, int):
+                    raise ConfigError(f"{where} must be an integer, got {v!r}")
+                if v < _MINIMA.get(name, 0):
+                    raise ConfigError(f"{where} must be >= {_MINIMA.get(name, 0)}, got {v}")
+            else:
+                if isinstance(v, str):  # PyYAML reads 1.0e6 (no exponent sign) as a string
+                    try:
+                        v = float(v)
+                    except ValueError:
+                        pass
+                if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(float(v)):
+                    raise ConfigError(f"{where} must be a finite number, got {v!r}")
+                v = float(v)
+                if name in _POSITIVE and v <= 0:
+                    raise ConfigError(f"{where} must be > 0, got {v}")
+                if name in _NONNEG and v < 0:
+                    raise ConfigError(f"{where} must be >= 0, got {v}")
+            vals[name] = v
+        built[sec] = cls(**vals)
+    cfg = UNetConfig(**built)
+    if cfg.train.crop % 2:
+        raise ConfigError(f"{source}: train.crop must be even (keeps the Bayer phase), got {cfg.train.crop}")
+    if cfg.model.feature_max_e <= cfg.model.feature_scale_e:
+        raise ConfigError(f"{source}: model.feature_max_e must exceed model.feature_scale_e")
+    return cfg
+
+
+def load_config(path: str | os.PathLike | None = None) -> UNetConfig:
+    """Read a U-Net YAML configuration (default :data:`DEFAULT_CONFIG`); :class:`ConfigError` names the file."""
+    import yaml
+
+    path = Path(path) if path is not None else DEFAULT_CONFIG
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read the U-Net config ({exc.strerror or exc})") from None
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        raise ConfigError(f"{path}: not valid YAML ({str(exc).splitlines()[0]})") from None
+    return config_from_dict(data, str(path))
+
+
+# --------------------------------------------------------------------------------------------------- network
+def _block(cin: int, cout: int) -> nn.Sequential:
+    return nn.Sequential(nn.Conv2d(cin, cout, 3, padding=1), nn.LeakyReLU(0.1, inplace=True),
+                         nn.Conv2d(cout, cout, 3, padding=1), nn.LeakyReLU(0.1, inplace=True))
+
+
+class UNet(nn.Module):
+    """Plain U-Net: ``depth`` max-pool levels, two 3x3 convs per level, transposed-conv up-sampling, skip concat.
+
+    Input (N, cin, H, W) with H, W multiples of ``2**depth``; output (N, cout, H, W).
+    """
+
+    def __init__(self, cin: int, cout: int, base: int, depth: int):
+        super().__init__()
+        chans = [base * 2 ** i for i in range(depth + 1)]
+        self.down = nn.ModuleList([_block(cin, chans[0])] + [_block(chans[i - 1], chans[i])
+                                                              for i in range(1, depth + 1)])
+        self.up = nn.ModuleList([nn.ConvTranspose2d(chans[i], chans[i - 1], 2, stride=2)
+                                 for i in range(depth, 0, -1)])
+        self.dec = nn.ModuleList([_block(2 * chans[i - 1], chans[i - 1]) for i in range(depth, 0, -1)])
+        self.head = nn.Conv2d(chans[0], cout, 1)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        skips = []
+        for i, blk in enumerate(self.down):
+            if i:
+                x = F.max_pool2d(x, 2)
+            x = blk(x)
+            skips.append(x)
+        for up, dec, skip in zip(self.up, self.dec, reversed(skips[:-1])):
+            x = dec(torch.cat([up(x), skip], dim=1))
+        return self.head(x)
+
+
+class UNetFusion(nn.Module):
+    """Fusion network: features of the split-pixel captures -> blend weights and gain (see the module doc).
+
+    Args:
+        config: :class:`ModelConfig` (or a :class:`UNetConfig`, whose ``model`` is used).
+
+    Input: batch dict with ``lpd_hcg_e``, ``lpd_lcg_e``, ``spd_e`` (B, F, 1, H, W) input-referred e-,
+    ``saturated`` (B, F, 3, H, W) bool and ``meta`` exposures (s). Output: (B, F, 1, H, W) e-, dtype of ``spd_e``.
+    """
+
+    def __init__(self, config: ModelConfig | UNetConfig | None = None):
+        super().__init__()
+        cfg = config.model if isinstance(config, UNetConfig) else (config or ModelConfig())
+        self.config = cfg
+        self.in_channels = 6 * (2 * cfg.context_frames + 1) + 2
+        self.n_candidates = k = len(cfg.candidates)
+        self.unet = UNet(4 * self.in_channels, 4 * (k + 1), cfg.base_channels, cfg.depth)
+        with torch.no_grad():  # start as a fixed blend leaning on L, gain 1
+            self.unet.head.weight.zero_()
+            bias = torch.zeros(k + 1, 4)
+            bias[0] = cfg.init_bias
+            self.unet.head.bias.copy_(bias.reshape(-1))  # pixel_shuffle order: channel-major, 2x2 minor
+
+    def _log(self, x: torch.Tensor) -> torch.Tensor:
+        c = self.config
+        return torch.log1p(x.clamp_min(0.0) / c.feature_scale_e) / math.log1p(c.feature_max_e / c.feature_scale_e)
+
+    def candidates(self, batch: dict) -> tuple[torch.Tensor, torch.Tensor]:
+        """Blend candidates (B, F, K, H, W) e- (``config.candidates`` in order) and input features
+        (B, F, C_in, H, W) float32."""
+        hcg, lcg, spd, sat = _captures(batch)
+        lo = saturated_fusion(hcg, lcg, spd, sat)
+        t = lo.mean(dim=1, keepdim=True).expand_as(lo)
+        pool = {"L": lo, "S": spd, "T": t, "H": torch.where(sat[:, :, 0:1], lcg, hcg)}
+        cand = torch.cat([pool[c] for c in self.config.candidates], dim=2)
+        per_frame = torch.cat([self._log(hcg), self._log(lcg), self._log(spd), sat.to(hcg.dtype)], dim=2).float()
+        nf = per_frame.shape[1]
+        ctx = self.config.context_frames
+        frames = [per_frame[:, (torch.arange(nf) + d).clamp(0, nf - 1)] for d in range(-ctx, ctx + 1)]
+        ts, tl = exposures_s(batch)
+        ratio = (torch.log(tl / ts) / math.log(100.0)).float().to(per_frame.device)
+        ratio = ratio.reshape(-1, 1, 1, 1, 1).expand(per_frame.shape[0], nf, 1, *per_frame.shape[-2:])
+        feats = torch.cat(frames + [self._log(t).float(), ratio], dim=2)
+        return cand, feats
+
+    def forward(self, batch: dict) -> torch.Tensor:
+        cand, feats = self.candidates(batch)
+        b, nf, c, h, w = feats.shape
+        m = 2 * 2 ** self.config.depth
+        ph, pw = (-h) % m, (-w) % m
+        x = feats.reshape(b * nf, c, h, w)
+        if ph or pw:
+            x = F.pad(x, (0, pw, 0, ph), mode="replicate")
+        y = F.pixel_shuffle(self.unet(F.pixel_unshuffle(x, 2)), 2)[..., :h, :w]
+        k = self.n_candidates
+        y = y.reshape(b, nf, k + 1, h, w)
+        wts = torch.softmax(y[:, :, :k], dim=2).to(cand.dtype)
+        gain = torch.exp(self.config.gain_range * torch.tanh(y[:, :, k:])).to(cand.dtype)
+        return (wts * cand).sum(dim=2, keepdim=True) * gain
+
+
+def count_parameters(model: nn.Module) -> int:
+    """Number of trainable parameters."""
+    return sum(p.numel() for p in model.parameters() if p.requires_grad)
+
+
+# ------------------------------------------------------------------------------------------------------ loss
+def led_weighted_loss(pred: torch.Tensor, gt: torch.Tensor, light_index: torch.Tensor | None,
+                      loss: LossConfig | None = None, feature_scale_e: float = 100.0) -> tuple[torch.Tensor, dict]:
+    """Training loss favouring the LED regions (scalar, dimensionless) and its terms.
+
+    Args:
+        pred, gt: (B, F, 1, H, W) e-.
+        light_index: (B, F, 1, H, W) int, -1 off the lights (None: no LED terms).
+        loss: weights and mu (:class:`LossConfig`).
+        feature_scale_e: e-, scale of the log1p in the region term.
+
+    Returns:
+        (total, {"mu_l1", "led_l1", "region_log"} floats).
+    """
+    lc = loss or LossConfig()
+    p, g = normalize_hdr(pred, gt, "max")
+    err = (mu_law(p, lc.mu) - mu_law(g, lc.mu)).abs()
+    total = err.mean()
+    terms = {"mu_l1": float(total.detach())}
+    if light_index is not None and (lc.led_weight or lc.region_weight):
+        led = (light_index >= 0).to(err.dtype)
+        n = led.sum()
+        if float(n) > 0:
+            led_l1 = (err * led).sum() / n
+            pm, cnt = region_series(pred, light_index)
+            gm, _ = region_series(gt, light_index)
+            ok = cnt > 0
+            reg = (torch.log1p(pm[ok].clamp_min(0) / feature_scale_e)
+                   - torch.log1p(gm[ok].clamp_min(0) / feature_scale_e)).abs().mean().to(err.dtype)
+            total = total + lc.led_weight * led_l1 + lc.region_weight * reg
+            terms.update(led_l1=float(led_l1.detach()), region_log=float(reg.detach()))
+    return total, terms
+
+
+# ----------------------------------------------------------------------------------------------- checkpoints
+def save_checkpoint(model: UNetFusion, path: str | os.PathLike, config: UNetConfig | None = None,
+                    extra: dict | None = None) -> Path:
+    """Write ``{format, format_version, model_config, config, state_dict, **extra}`` atomically (temp + rename)."""
+    return atomic_torch_save({"format": CHECKPOINT_FORMAT, "format_version": FORMAT_VERSION,
+                              "model_config": asdict(model.config),
+                              "config": config.to_dict() if config is not None else None,
+                              "state_dict": model.state_dict(), **(extra or {})}, path)
+
+
+def read_checkpoint(path: str | os.PathLike, map_location: str | torch.device = "cpu") -> dict:
+    """The checkpoint dict (tensors and plain data only: ``weights_only=True``); clear errors for a missing or
+    foreign file."""
+    path = Path(path)
+    if not path.is_file():
+        raise CheckpointNotFoundError(
+            f"no U-Net checkpoint at {path}; train one with `lfmbench train --corpus DIR --out {path}` "
+            f"(or set ${CHECKPOINT_ENV})")
+    try:
+        ck = torch.load(path, map_location=map_location, weights_only=True)
+    except Exception as exc:  # noqa: BLE001 - truncated file, pickle of code, ...
+        raise ValueError(f"checkpoint {path}: cannot be read ({type(exc).__name__}: {exc})") from None
+    if not isinstance(ck, dict) or ck.get("format") != CHECKPOINT_FORMAT or ck.get("format_version") != FORMAT_VERSION:
+        raise ValueError(f"checkpoint {path} is not a {CHECKPOINT_FORMAT} checkpoint of format {FORMAT_VERSION}")
+    return ck
+
+
+def load_checkpoint(path: str | os.PathLike, map_location: str | torch.device = "cpu") -> UNetFusion:
+    """Build a :class:`UNetFusion` (eval mode) from a checkpoint written by :func:`save_checkpoint`."""
+    ck = read_checkpoint(path, map_location)
+    try:
+        model = UNetFusion(config_from_dict({"model": ck["model_config"]}, f"checkpoint {path}").model)
+        model.load_state_dict(ck["state_dict"])
+    except (KeyError, RuntimeError) as exc:
+        raise ValueError(f"checkpoint {path}: weights do not match its model config ({exc})") from None
+    return model.eval()
+
+
+_CACHE: dict[tuple[str, float], UNetFusion] = {}
+
+
+def checkpoint_path() -> Path:
+    """``$LFMBENCH_UNET_CHECKPOINT`` or :data:`DEFAULT_CHECKPOINT`."""
+    return Path(os.environ.get(CHECKPOINT_ENV, DEFAULT_CHECKPOINT))
+
+
+def _model() -> UNetFusion:
+    path = checkpoint_path()
+    if not path.is_file():
+        read_checkpoint(path)  # raises CheckpointNotFoundError with the training command
+    key = (str(path.resolve()), path.stat().st_mtime)
+    if key not in _CACHE:
+        _CACHE.clear()
+        _CACHE[key] = load_checkpoint(path)
+    return _CACHE[key]
+
+
+def unet(batch: dict) -> torch.Tensor:
+    """Registered method: :class:`UNetFusion` with the weights at :func:`checkpoint_path`.
+
+    Returns (B, F, 1, H, W) e-. Raises :class:`CheckpointNotFoundError` if no checkpoint exists.
+    """
+    model = _model()
+    dev = batch["spd_e"].device
+    with torch.no_grad():
+        return model.to(dev)(batch)
+
+
+#: Lets the evaluation count parameters and MACs of the module behind :func:`unet`.
+unet.torch_module = _model  # type: ignore[attr-defined]

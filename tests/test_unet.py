@@ -1,0 +1,184 @@
+"""Tests of the U-Net fusion baseline (lfmbench.baselines.unet) and its training command (lfmbench.train):
+parameter budget, forward contract, a tiny overfit, checkpoints, the CLI on a tiny corpus, resume, bad configs."""
+from __future__ import annotations
+
+import pytest
+import torch
+import yaml
+from typer.testing import CliRunner
+
+from lfmbench import baselines
+from lfmbench import train as T
+from lfmbench.baselines import unet as U
+from lfmbench.cli import app
+from tests.data.metrics.data import make_batch
+
+#: A U-Net small enough for the 16 x 24 px test corpus and a fast test.
+TINY = {"model": {"base_channels": 2, "depth": 1},
+        "train": {"epochs": 1, "batch_size": 2, "crop": 8, "samples_per_scene": 2, "workers": 0, "lr": 1e-2}}
+
+
+def _write_cfg(path, data=TINY):
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+def test_default_config_parameter_budget_and_tiny_demo_config():
+    n = U.count_parameters(U.UNetFusion(U.load_config()))
+    assert 300_000 <= n <= 3_000_000, n
+    tiny = U.count_parameters(U.UNetFusion(U.load_config(U.TINY_CONFIG)))
+    assert tiny < 100_000 < n
+
+
+@pytest.mark.parametrize("dtype,h,w", [(torch.float32, 32, 32), (torch.float64, 22, 30)])
+def test_forward_shape_dtype_and_range(dtype, h, w):
+    b = make_batch(b=2, h=32, w=32, noise=True)
+    b = {k: (v[..., :h, :w].to(dtype) if torch.is_tensor(v) and v.is_floating_point() else
+             (v[..., :h, :w] if torch.is_tensor(v) else v)) for k, v in b.items()}
+    m = U.UNetFusion(U.config_from_dict(TINY).model)
+    out = m(b)
+    assert out.shape == b["gt"].shape and out.dtype == dtype and out.device == b["gt"].device
+    assert bool(torch.isfinite(out).all()) and bool((out >= 0).all())
+    cand, feats = m.candidates(b)
+    assert cand.shape == (2, 3, 4, h, w) and feats.shape == (2, 3, m.in_channels, h, w)
+    # candidates H, L, S, T in the configured order
+    assert torch.equal(cand[:, :, 0:1], baselines.lpd_only(b))
+    assert torch.equal(cand[:, :, 1:2], baselines.saturated_exposure_corrected(b))
+    assert torch.equal(cand[:, :, 2:3], b["spd_e"])
+    # untrained: a fixed blend leaning on the first candidate, no gain
+    wl = torch.softmax(torch.tensor([2.0, 0.0, 0.0, 0.0]), 0)
+    assert torch.allclose(out, (cand * wl.to(dtype).reshape(1, 1, 4, 1, 1)).sum(2, keepdim=True), rtol=1e-5)
+    m3 = U.UNetFusion(U.config_from_dict({"model": {"base_channels": 2, "depth": 1, "candidates": ["S", "L"]}}).model)
+    c3, _ = m3.candidates(b)
+    assert c3.shape[2] == 2 and torch.equal(c3[:, :, 0:1], b["spd_e"]) and m3(b).shape == b["gt"].shape
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs CUDA")
+def test_forward_on_cuda():
+    b = {k: (v.cuda() if torch.is_tensor(v) else v) for k, v in make_batch().items()}
+    out = U.UNetFusion(U.config_from_dict(TINY).model).cuda()(b)
+    assert out.device.type == "cuda" and out.shape == b["gt"].shape
+
+
+def test_tiny_overfit_reduces_loss():
+    torch.manual_seed(0)
+    b = make_batch(b=2, noise=True, seed=1)
+    cfg = U.config_from_dict({"model": {"base_channels": 4, "depth": 1}})
+    m = U.UNetFusion(cfg)
+    opt = torch.optim.Adam(m.parameters(), lr=5e-3)
+    losses = []
+    for _ in range(25):
+        loss, terms = U.led_weighted_loss(m(b), b["gt"], b["light_index"], cfg.loss)
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+        losses.append(float(loss.detach()))
+    assert set(terms) == {"mu_l1", "led_l1", "region_log"}
+    assert losses[-1] < 0.6 * losses[0], losses
+
+
+def test_loss_weights_the_led_regions():
+    b = make_batch()
+    gt, li = b["gt"], b["light_index"]
+    led = li >= 0
+    off_led = torch.where(led, gt, gt * 0.5)   # error off the lights
+    on_led = torch.where(led, gt * 0.5, gt)    # the same relative error on the lights
+    cfg = U.LossConfig(led_weight=4.0, region_weight=1.0)
+    assert U.led_weighted_loss(on_led, gt, li, cfg)[0] > 2 * U.led_weighted_loss(off_led, gt, li, cfg)[0]
+    plain = U.LossConfig(led_weight=0.0, region_weight=0.0)
+    assert U.led_weighted_loss(gt, gt, li, plain)[0] == 0.0
+
+
+def test_checkpoint_roundtrip_and_registered_method(tmp_path, monkeypatch):
+    cfg = U.config_from_dict(TINY)
+    torch.manual_seed(3)
+    m = U.UNetFusion(cfg)
+    with torch.no_grad():
+        for p in m.parameters():
+            p.add_(0.05 * torch.randn_like(p))
+    ck = U.save_checkpoint(m, tmp_path / "u.pt", cfg, {"epochs_done": 1})
+    b = make_batch(noise=True)
+    back = U.load_checkpoint(ck)
+    assert torch.equal(back(b), m.eval()(b))
+    monkeypatch.setenv(U.CHECKPOINT_ENV, str(ck))
+    out = baselines.get_method("unet")(b)
+    assert torch.equal(out, m(b))
+    assert isinstance(baselines.REGISTRY["unet"].torch_module(), U.UNetFusion)
+    monkeypatch.setenv(U.CHECKPOINT_ENV, str(tmp_path / "missing.pt"))
+    with pytest.raises(U.CheckpointNotFoundError, match="lfmbench train"):
+        baselines.get_method("unet")(b)
+    bad = tmp_path / "bad.pt"
+    torch.save({"format_version": 1}, bad)
+    with pytest.raises(ValueError, match="bad.pt"):
+        U.load_checkpoint(bad)
+
+
+def test_train_command_writes_loadable_checkpoint_and_resumes_deterministically(corpus, tmp_path):
+    torch.set_num_threads(1)
+    cfg = _write_cfg(tmp_path / "tiny.yaml")
+    a, b = tmp_path / "a.pt", tmp_path / "b.pt"
+    r = CliRunner().invoke(app, ["train", "--corpus", str(corpus), "--config", str(cfg), "--out", str(a),
+                                 "--epochs", "2"])
+    assert r.exit_code == 0, r.output
+    assert "saved" in r.output and a.is_file()
+    ck = U.read_checkpoint(a)
+    assert ck["epochs_done"] == 2 and len(ck["history"]["epoch_loss"]) == 2 and ck["parameters"] > 0
+    model = U.load_checkpoint(a)
+    batch = make_batch(h=16, w=24)
+    assert model(batch).shape == batch["gt"].shape
+    # one epoch, then the same command with --epochs 2 resumes: the same weights as the uninterrupted run
+    for n in ("1", "2"):
+        r = CliRunner().invoke(app, ["train", "--corpus", str(corpus), "--config", str(cfg), "--out", str(b),
+                                     "--epochs", n])
+        assert r.exit_code == 0, r.output
+    assert "resuming" in r.output
+    sa, sb = U.read_checkpoint(a)["state_dict"], U.read_checkpoint(b)["state_dict"]
+    assert all(torch.equal(sa[k], sb[k]) for k in sa)
+    # another config refuses to resume from that checkpoint
+    other = _write_cfg(tmp_path / "other.yaml", {**TINY, "loss": {"led_weight": 1.0}})
+    r = CliRunner().invoke(app, ["train", "--corpus", str(corpus), "--config", str(other), "--out", str(b)])
+    assert r.exit_code == 2 and "another config" in r.output
+
+
+@pytest.mark.parametrize("text,match", [
+    ("model: {base_chanels: 8}\n", r"unknown key\(s\) \['base_chanels'\] in section 'model'"),
+    ("model: {depth: two}\n", "model.depth must be an integer"),
+    ("loss: {led_weight: -1}\n", "loss.led_weight must be >= 0"),
+    ("train: {crop: 63}\n", "train.crop must be even"),
+    ("optimizer: {}\n", r"unknown section\(s\)"),
+    ("model: {candidates: [L, X]}\n", "model.candidates must be a non-empty list"),
+    ("model: [1, 2\n", "not valid YAML"),
+])
+def test_bad_config_names_the_file(tmp_path, text, match):
+    p = tmp_path / "bad.yaml"
+    p.write_text(text)
+    with pytest.raises(U.ConfigError, match=match) as exc:
+        U.load_config(p)
+    assert str(p) in str(exc.value)
+    with pytest.raises(U.ConfigError, match="missing.yaml"):
+        U.load_config(tmp_path / "missing.yaml")
+
+
+def test_train_command_bad_input_exits_2(corpus, tmp_path):
+    p = tmp_path / "bad.yaml"
+    p.write_text("model: {depth: -1}\n")
+    r = CliRunner().invoke(app, ["train", "--corpus", str(corpus), "--config", str(p), "--out",
+                                 str(tmp_path / "x.pt")])
+    assert r.exit_code == 2 and "bad.yaml" in r.output and "model.depth" in r.output
+    r = CliRunner().invoke(app, ["train", "--corpus", str(tmp_path / "none"), "--config",
+                                 str(_write_cfg(tmp_path / "t.yaml")), "--out", str(tmp_path / "x.pt")])
+    assert r.exit_code == 2 and "does not exist" in r.output
+    r = CliRunner().invoke(app, ["train", "--corpus", str(corpus), "--epochs", "0"])
+    assert r.exit_code == 2 and "--epochs" in r.output
+
+
+def test_epoch_sampler_depends_only_on_seed_and_epoch():
+    s = T.EpochSampler(10, seed=1)
+    s.set_epoch(3)
+    first = list(s)
+    s.set_epoch(0)
+    s.set_epoch(3)
+    assert list(s) == first and sorted(i for _, i in first) == list(range(10)) and {e for e, _ in first} == {3}
+    s.set_epoch(4)
+    assert [i for _, i in s] != [i for _, i in first]
+    assert T.cosine_lr(0, 10, 1e-2, 1e-4) == pytest.approx(1e-2) and T.cosine_lr(10, 10, 1e-2, 1e-4) == 1e-4
