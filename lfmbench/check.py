@@ -24,7 +24,7 @@ import numpy as np
 
 __all__ = ["where", "fail", "check_number", "get_number", "check_integer", "check_vector", "check_keys",
            "check_choice", "check_array", "SCENE_ID_PATTERN", "SCENE_ID_MAX_LEN", "scene_id_error",
-           "check_scene_id"]
+           "check_scene_id", "torch_device"]
 
 _MISSING = object()
 
@@ -202,3 +202,17 @@ def check_scene_id(scene_id: Any, field: str = "scene_id", source: str | None = 
     if why is not None:
         fail(field, why, source)
     return scene_id
+
+
+def torch_device(name: str, arg: str = "--device"):
+    """``torch.device(name)``, checked: a ``ValueError`` naming ``arg`` for a name torch does not know or a CUDA
+    device on a machine without CUDA. (torch is imported here, not at module level.)"""
+    import torch  # noqa: PLC0415
+
+    try:
+        dev = torch.device(name)
+    except (RuntimeError, ValueError):
+        raise ValueError(f"{arg} must be a torch device such as cpu, cuda or cuda:0, got {name!r}") from None
+    if dev.type == "cuda" and not torch.cuda.is_available():
+        raise ValueError(f"{arg} {name}: CUDA is not available on this machine (use --device cpu)")
+    return dev

@@ -28,6 +28,8 @@ def register(app) -> None:
         """
         import torch  # noqa: PLC0415 - heavy: only when the command runs
 
+        from lfmbench.check import torch_device  # noqa: PLC0415
+
         from lfmbench.baselines.unet import ConfigError, count_parameters  # noqa: PLC0415
         from lfmbench.datasets.loading import EmptyDataError  # noqa: PLC0415
         from lfmbench.train import load_config, train  # noqa: PLC0415
@@ -40,11 +42,9 @@ def register(app) -> None:
             if v is not None and v < lo:
                 fail(f"{name} must be an integer >= {lo}, got {v}")
         try:
-            dev = torch.device(device)
-        except (RuntimeError, ValueError):
-            fail(f"--device must be a torch device such as cpu, cuda or cuda:0, got {device!r}")
-        if dev.type == "cuda" and not torch.cuda.is_available():
-            fail(f"--device {device}: CUDA is not available on this machine (use --device cpu)")
+            torch_device(device)
+        except ValueError as exc:
+            fail(str(exc))
         if threads is not None:
             torch.set_num_threads(threads)
         try:

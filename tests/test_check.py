@@ -132,3 +132,16 @@ def test_users_of_the_module_name_field_and_file(tmp_path):
     meta["timing"]["short_exposure_s"] = -1.0
     with pytest.raises(ValueError, match=r"^m\.json: field 'timing\.short_exposure_s' must be > 0"):
         C.validate_meta(meta, "m.json")
+
+
+def test_torch_device_names_the_argument():
+    import torch
+
+    from lfmbench.check import torch_device
+
+    assert torch_device("cpu") == torch.device("cpu")
+    with pytest.raises(ValueError, match="--device must be a torch device.*'banana'"):
+        torch_device("banana")
+    if not torch.cuda.is_available():
+        with pytest.raises(ValueError, match="--gpu cuda: CUDA is not available"):
+            torch_device("cuda", "--gpu")

@@ -9,43 +9,12 @@ from __future__ import annotations
 import importlib
 from collections.abc import Callable
 
+from lfmbench.baselines.checkpoint import lazy_method
 from lfmbench.baselines.classic import (flicker_aware, flicker_aware_two_sided, lpd_only, saturated_exposure_corrected,
                                         spd_only, temporal, upstream_saturated)
 
 Method = Callable[[dict], "object"]
 
-
-def _learned_lazy(batch: dict):
-    """The learned baseline (:func:`lfmbench.baselines.learned.learned`), imported on first use so that
-    ``python -m lfmbench.baselines.learned`` (the training script) runs without a pre-imported copy."""
-    from lfmbench.baselines.learned import learned as _fn
-
-    return _fn(batch)
-
-
-def _learned_module():
-    from lfmbench.baselines.learned import _model
-
-    return _model()
-
-
-_learned_lazy.torch_module = _learned_module  # type: ignore[attr-defined]
-
-
-def _unet_lazy(batch: dict):
-    """The U-Net baseline (:func:`lfmbench.baselines.unet.unet`), imported on first use."""
-    from lfmbench.baselines.unet import unet as _fn
-
-    return _fn(batch)
-
-
-def _unet_module():
-    from lfmbench.baselines.unet import _model
-
-    return _model()
-
-
-_unet_lazy.torch_module = _unet_module  # type: ignore[attr-defined]
 
 #: Registered baselines, in leaderboard order.
 REGISTRY: dict[str, Method] = {
@@ -56,8 +25,8 @@ REGISTRY: dict[str, Method] = {
     "flicker_aware": flicker_aware,
     "flicker_aware_two_sided": flicker_aware_two_sided,
     "temporal": temporal,
-    "learned": _learned_lazy,
-    "unet": _unet_lazy,
+    "learned": lazy_method("lfmbench.baselines.learned", "learned"),
+    "unet": lazy_method("lfmbench.baselines.unet", "unet"),
 }
 
 

@@ -22,13 +22,13 @@ Training script: ``python -m lfmbench.baselines.learned --corpus DIR --epochs 3 
 from __future__ import annotations
 
 import argparse
-import os
 import time
 from collections.abc import Callable, Iterable
 from pathlib import Path
 
 import torch
 
+from lfmbench.baselines.checkpoint import CheckpointedModel
 from lfmbench.fileio import atomic_torch_save
 import torch.nn as nn
 
@@ -169,23 +169,10 @@ def train(loader: Iterable[dict], checkpoint: str | Path | None = None, epochs: 
     return model.eval(), losses
 
 
-_CACHE: dict[tuple[str, float], LearnedFusion] = {}
-
-
-def checkpoint_path() -> Path:
-    """``$LFMBENCH_LEARNED_CHECKPOINT`` or :data:`DEFAULT_CHECKPOINT`."""
-    return Path(os.environ.get(CHECKPOINT_ENV, DEFAULT_CHECKPOINT))
-
-
-def _model() -> LearnedFusion:
-    path = checkpoint_path()
-    if not path.is_file():
-        load_checkpoint(path)  # raises CheckpointNotFoundError with the training command
-    key = (str(path.resolve()), path.stat().st_mtime)
-    if key not in _CACHE:
-        _CACHE.clear()
-        _CACHE[key] = load_checkpoint(path)
-    return _CACHE[key]
+#: Where the weights are (``$LFMBENCH_LEARNED_CHECKPOINT`` or :data:`DEFAULT_CHECKPOINT`), loaded once per file version.
+WEIGHTS = CheckpointedModel(CHECKPOINT_ENV, DEFAULT_CHECKPOINT, load_checkpoint)
+checkpoint_path = WEIGHTS.path
+_model = WEIGHTS.model
 
 
 def learned(batch: dict) -> torch.Tensor:
@@ -193,10 +180,7 @@ def learned(batch: dict) -> torch.Tensor:
 
     Returns (B, F, 1, H, W) e-. Raises :class:`CheckpointNotFoundError` if no checkpoint exists.
     """
-    model = _model()
-    dev = batch["spd_e"].device
-    with torch.no_grad():
-        return model.to(dev)(batch)
+    return WEIGHTS.run(batch)
 
 
 #: Lets the evaluation count parameters and MACs of the module behind :func:`learned`.

@@ -38,6 +38,7 @@ import torch
 import torch.nn as nn
 import torch.nn.functional as F
 
+from lfmbench.baselines.checkpoint import CheckpointedModel
 from lfmbench.baselines.classic import _captures, exposures_s, saturated_fusion
 from lfmbench.fileio import atomic_torch_save
 from lfmbench.metrics.flicker import region_series
@@ -381,23 +382,10 @@ def load_checkpoint(path: str | os.PathLike, map_location: str | torch.device = 
     return model.eval()
 
 
-_CACHE: dict[tuple[str, float], UNetFusion] = {}
-
-
-def checkpoint_path() -> Path:
-    """``$LFMBENCH_UNET_CHECKPOINT`` or :data:`DEFAULT_CHECKPOINT`."""
-    return Path(os.environ.get(CHECKPOINT_ENV, DEFAULT_CHECKPOINT))
-
-
-def _model() -> UNetFusion:
-    path = checkpoint_path()
-    if not path.is_file():
-        read_checkpoint(path)  # raises CheckpointNotFoundError with the training command
-    key = (str(path.resolve()), path.stat().st_mtime)
-    if key not in _CACHE:
-        _CACHE.clear()
-        _CACHE[key] = load_checkpoint(path)
-    return _CACHE[key]
+#: Where the weights are (``$LFMBENCH_UNET_CHECKPOINT`` or :data:`DEFAULT_CHECKPOINT`), loaded once per file version.
+WEIGHTS = CheckpointedModel(CHECKPOINT_ENV, DEFAULT_CHECKPOINT, load_checkpoint)
+checkpoint_path = WEIGHTS.path
+_model = WEIGHTS.model
 
 
 def unet(batch: dict) -> torch.Tensor:
@@ -405,10 +393,7 @@ def unet(batch: dict) -> torch.Tensor:
 
     Returns (B, F, 1, H, W) e-. Raises :class:`CheckpointNotFoundError` if no checkpoint exists.
     """
-    model = _model()
-    dev = batch["spd_e"].device
-    with torch.no_grad():
-        return model.to(dev)(batch)
+    return WEIGHTS.run(batch)
 
 
 #: Lets the evaluation count parameters and MACs of the module behind :func:`unet`.

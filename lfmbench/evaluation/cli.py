@@ -40,6 +40,8 @@ def register(app) -> None:
         """
         import torch  # noqa: PLC0415 - heavy: only when the command runs
 
+        from lfmbench.check import torch_device  # noqa: PLC0415
+
         from lfmbench.datasets.loading import EmptyDataError, collate_samples  # noqa: PLC0415
         from lfmbench.evaluation.benchmark import corpus_run_inputs, safe_name  # noqa: PLC0415
         from lfmbench.evaluation.leaderboard import _fmt  # noqa: PLC0415
@@ -59,11 +61,9 @@ def register(app) -> None:
             if v is not None and v < lo:
                 fail(f"{name} must be an integer >= {lo}, got {v}")
         try:
-            dev = torch.device(device)
-        except (RuntimeError, ValueError):
-            fail(f"--device must be a torch device such as cpu, cuda or cuda:0, got {device!r}")
-        if dev.type == "cuda" and not torch.cuda.is_available():
-            fail(f"--device {device}: CUDA is not available on this machine (use --device cpu)")
+            torch_device(device)
+        except ValueError as exc:
+            fail(str(exc))
         out = output or Path("runs") / f"{safe_name(method)}.json"
         try:  # an unwritable --output is found before any work is done
             if out.is_dir():

@@ -1,0 +1,53 @@
+"""Learned baselines backed by a checkpoint file: one rule for where the weights are, loading them once, running
+them, and registering them lazily (so that importing :mod:`lfmbench.baselines` imports no network module)."""
+from __future__ import annotations
+
+import importlib
+import os
+from collections.abc import Callable
+from pathlib import Path
+
+import torch
+
+
+class CheckpointedModel:
+    """The weights of a registered learned method: the file named by environment variable ``env`` (default
+    ``default``), loaded by ``load(path) -> torch.nn.Module`` (which raises a clear error naming the training
+    command when the file is missing) and kept until the file changes (path, mtime)."""
+
+    def __init__(self, env: str, default: str | os.PathLike, load: Callable[[Path], torch.nn.Module]):
+        self.env, self.default, self.load = env, Path(default), load
+        self._cache: dict[tuple[str, float], torch.nn.Module] = {}
+
+    def path(self) -> Path:
+        """``$env`` or the default checkpoint path."""
+        return Path(os.environ.get(self.env, self.default))
+
+    def model(self) -> torch.nn.Module:
+        """The module with the current checkpoint's weights (eval mode)."""
+        path = self.path()
+        if not path.is_file():
+            self.load(path)  # raises its CheckpointNotFoundError with the training command
+        key = (str(path.resolve()), path.stat().st_mtime)
+        if key not in self._cache:
+            self._cache.clear()
+            self._cache[key] = self.load(path)
+        return self._cache[key]
+
+    def run(self, batch: dict) -> torch.Tensor:
+        """The module on ``batch`` (on the batch's device, no gradients): (B, F, 1, H, W) e-."""
+        model = self.model()
+        with torch.no_grad():
+            return model.to(batch["spd_e"].device)(batch)
+
+
+def lazy_method(module: str, name: str) -> Callable[[dict], torch.Tensor]:
+    """A registry entry for ``module.name`` that imports the module on first use; its ``torch_module`` (what the
+    evaluation counts parameters and MACs of) is the method's own."""
+    def method(batch: dict) -> torch.Tensor:
+        return getattr(importlib.import_module(module), name)(batch)
+
+    method.__name__ = name
+    method.__doc__ = f"``{module}.{name}``, imported on first use."
+    method.torch_module = lambda: getattr(importlib.import_module(module), name).torch_module()  # type: ignore[attr-defined]
+    return method
