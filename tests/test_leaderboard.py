@@ -199,3 +199,18 @@ def test_pareto_front_by_hand():
     lb._pareto(rows, lb.PARETO_AXES)
     assert [r["pareto"] for r in rows] == [True, True, False, None]  # z is dominated by y
     assert math.isnan(rows[3]["led_score"])
+
+
+def test_leaderboard_glob_over_its_own_output_directory_runs_twice(bench, tmp_path):
+    """`lfmbench leaderboard runs/*.json` as the README writes it: the runs directory already holds the
+    leaderboard.json an earlier call (or benchmark()) wrote; it is left out with a note, not refused."""
+    d, _, rows = bench
+    files = sorted((d / "runs").glob("*.json"))
+    assert any(p.name == "leaderboard.json" for p in files)
+    out = tmp_path / "lb"
+    args = ["leaderboard", *map(str, files), "--markdown", str(out / "lb.md"), "--plot", str(out / "lb.png"),
+            "--json", str(out / "lb.json")]
+    r = CliRunner().invoke(_app(), args)
+    assert r.exit_code == 0, r.output
+    assert "left out 1 leaderboard file(s)" in r.output
+    assert [x["method"] for x in json.loads((out / "lb.json").read_text())["rows"]] == [x["method"] for x in rows]

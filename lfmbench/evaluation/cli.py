@@ -143,8 +143,11 @@ def register(app) -> None:
         from lfmbench.evaluation.leaderboard import (check_comparable, incomplete_runs,  # noqa: PLC0415
                                                      leaderboard_rows, load_runs, print_leaderboard)
 
+        skipped: list[str] = []
         try:
-            loaded = load_runs(p for p in runs if p.suffix == ".json")
+            loaded = load_runs((p for p in runs if p.suffix == ".json"), skipped)
+            if skipped:
+                typer.echo(f"left out {len(skipped)} leaderboard file(s), not results: {', '.join(skipped[:3])}")
             bad = incomplete_runs(loaded)
             if bad and not include_incomplete:
                 raise ValueError(f"{len(bad)} run file(s) are not complete results ({'; '.join(bad[:3])}"

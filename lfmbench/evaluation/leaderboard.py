@@ -34,8 +34,11 @@ class IncomparableRunsError(ValueError):
     """Result files computed on different corpora, metric versions or protocols."""
 
 
-def load_runs(paths: Iterable[str | Path]) -> list[dict]:
-    """Read evaluation JSON files; raise ValueError naming a file that is not an lfmbench result."""
+def load_runs(paths: Iterable[str | Path], skipped: list[str] | None = None) -> list[dict]:
+    """Read evaluation JSON files; raise ValueError naming a file that is not an lfmbench result.
+
+    A leaderboard file this module wrote (format :data:`LEADERBOARD_FORMAT`, e.g. ``runs/leaderboard.json`` caught
+    by ``runs/*.json``) is not a result: it is left out and its path appended to ``skipped`` (if given)."""
     runs = []
     for p in paths:
         p = Path(p)
@@ -43,6 +46,10 @@ def load_runs(paths: Iterable[str | Path]) -> list[dict]:
             d = json.loads(p.read_text(encoding="utf-8"))
         except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
             raise ValueError(f"run file {p}: cannot read JSON ({type(exc).__name__}: {exc})") from None
+        if isinstance(d, dict) and d.get("format") == LEADERBOARD_FORMAT:
+            if skipped is not None:
+                skipped.append(str(p))
+            continue
         if not isinstance(d, dict) or d.get("format") != RESULT_FORMAT:
             fmt = d.get("format") if isinstance(d, dict) else None
             raise ValueError(f"run file {p}: not an {RESULT_FORMAT} result (format={fmt!r})")
