@@ -80,25 +80,32 @@ def fake_scene(scene_id="scene00000"):
 H, W = 16, 24
 
 
+def scale_frames(frames, static_scale, light_scale, static_camera=False):
+    """Scale fake frames in place: static layers by ``static_scale``, light bins by ``light_scale`` (both
+    W sr^-1 m^-2 nm^-1 per unit); ``static_camera``: every bin equal to the first (a static scene). Marks a small
+    light-mask patch. Returns ``frames``."""
+    for f in frames:
+        for g in f["static"].values():
+            for k in g:
+                g[k] *= static_scale
+        for g, ls in f["lights"].items():
+            new = []
+            for lid, box, arr in ls:
+                arr = arr * light_scale
+                if static_camera:
+                    arr[:] = arr[:1]  # every bin identical: a static scene
+                new.append((lid, box, arr))
+            f["lights"][g] = new
+        f["aux"]["mask.light"][1:4, 4:6] = 1
+    return frames
+
+
 def make_corpus(root, n_scenes=3, frames=3, bins=4, scale=1e-3, static_camera=False, seed=0, groups=None):
     """A corpus of ``n_scenes`` fake scenes; radiance scaled by ``scale`` (W sr^-1 m^-2 nm^-1) to stay unclipped."""
     w = C.CorpusWriter(root)
     for i in range(n_scenes):
         meta = fake_meta(f"scene{i:05d}", width=W, height=H, frames=frames, bins=bins, groups=groups, n_lights=2)
-        fr = fake_frames(meta, seed=seed + i)
-        for f in fr:
-            for g in f["static"].values():
-                for k in g:
-                    g[k] *= scale
-            for g, ls in f["lights"].items():
-                new = []
-                for lid, box, arr in ls:
-                    arr = arr * scale
-                    if static_camera:
-                        arr[:] = arr[:1]  # every bin identical: a static scene
-                    new.append((lid, box, arr))
-                f["lights"][g] = new
-            f["aux"]["mask.light"][1:4, 4:6] = 1
+        fr = scale_frames(fake_frames(meta, seed=seed + i), scale, scale, static_camera)
         w.write_scene(meta["scene_id"], fake_scene(meta["scene_id"]), meta, fr)
     w.write_splits(0)
     return root

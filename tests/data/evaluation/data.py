@@ -8,7 +8,7 @@ passes the short exposure through extinguishes lights. Radiance in W sr^-1 m^-2 
 from __future__ import annotations
 
 from lfmbench import corpus as C
-from tests.data.corpus.data import H, W, fake_frames, fake_meta, fake_scene
+from tests.data.corpus.data import H, W, fake_frames, fake_meta, fake_scene, scale_frames
 
 TIMES = ("day", "dusk", "night")
 SPEEDS_MPS = (0.0, 10.0, 20.0, 40.0)
@@ -22,14 +22,7 @@ def make_led_corpus(root, n_scenes: int = 6, frames: int = 3, bins: int = 4, sca
         sid = f"scene{i:05d}"
         meta = fake_meta(sid, width=W, height=H, frames=frames, bins=bins, n_lights=2)
         meta["camera"]["speed_mps"] = SPEEDS_MPS[i % len(SPEEDS_MPS)]
-        fr = fake_frames(meta, seed=seed + i)
-        for f in fr:
-            for g in f["static"].values():
-                for k in g:
-                    g[k] *= scale
-            for g, ls in f["lights"].items():
-                f["lights"][g] = [(lid, box, arr * scale * led_gain) for lid, box, arr in ls]
-            f["aux"]["mask.light"][1:4, 4:6] = 1
+        fr = scale_frames(fake_frames(meta, seed=seed + i), scale, scale * led_gain)
         w.write_scene(sid, dict(fake_scene(sid), time_of_day=TIMES[i % len(TIMES)]), meta, fr)
     w.write_splits(0)
     return root
