@@ -41,10 +41,4 @@ def __dir__() -> list[str]:
     return sorted(list(globals()) + list(_WHERE))
 
 
-__all__ = ["evaluate", "benchmark", "check_output", "MethodOutputError", "EmptyDataError", "DataSourceError",
-           "EvaluationInterrupted", "IncomparableRunsError", "COMPLETE", "RESULT_FORMAT", "RESULT_VERSION", "num",
-           "per_scene", "write_json_atomic", "load_runs", "check_comparable", "comparability_problems",
-           "incomplete_runs", "leaderboard_rows", "leaderboard_markdown", "leaderboard_json",
-           "plot_quality_vs_runtime", "print_leaderboard", "write_leaderboard", "safe_name", "corpus_identity",
-           "device_name", "git_revision", "versions", "count_params_macs", "method_module", "time_method",
-           "make_dataset", "collate_samples"]
+__all__ = sorted(_WHERE)
