@@ -18,11 +18,22 @@ Spectrum models (``spec["model"]``), dispatched through :data:`SPECTRUM_MODELS`:
 - ``"daylight"``: CIE D-series daylight at correlated colour temperature ``cct_k`` (K)
   (``colour.sd_CIE_illuminant_D_series``; CIE 015:2018 sec. 4.1.2).
 Tables are interpolated linearly onto the 1 nm grid and set to 0 outside their measured range.
+
+Precomputed table (:data:`TABLE_FILE`): importing colour-science costs 2-3 s (it imports matplotlib and
+scipy), more than a render spends on all of its spectra. So the CIE 1931 colour-matching functions on the
+1 nm grid and the relative spectra (:func:`relative_spectrum`) of every spectrum the scene generator's
+default configuration uses (``render_tools/configs/scene_defaults.yaml``, and D65 of
+:func:`render_tools.scene.empty_scene`) are stored in a small CSV file written from colour-science by
+``python -m render_tools.spectra`` (:func:`write_table`; exact float64 values). Any other spectrum, and the
+name check of a model not in the table, falls back to colour-science; ``tests/test_render_scene.py`` checks
+the table against colour-science's own output.
 """
 from __future__ import annotations
 
 import math
+import os
 from functools import lru_cache
+from pathlib import Path
 
 import numpy as np
 
@@ -50,17 +61,43 @@ def wavelengths() -> np.ndarray:
     return np.arange(WL_MIN_NM, WL_MAX_NM + 0.5 * WL_STEP_NM, WL_STEP_NM)
 
 
+#: Precomputed CMFs and relative spectra (see the module docstring); written by :func:`write_table`.
+TABLE_FILE = Path(__file__).with_name("data") / "spectra_1nm.csv"
+#: Columns of :data:`TABLE_FILE` holding the CIE 1931 colour-matching functions xbar, ybar, zbar.
+CMF_COLUMNS = ("cie1931_xbar", "cie1931_ybar", "cie1931_zbar")
+#: Relative spectra computed through colour-science kept per process (spectra not in the table).
+_FALLBACK_CACHE_SIZE = 64
+
+
+def spectrum_key(spec: dict) -> str:
+    """Canonical name of a spectrum dict, its column in :data:`TABLE_FILE`: ``model(field=value;...)``, fields
+    sorted, numbers as floats (``{"model": "led", "peak_nm": 630, "fwhm_nm": 18}`` ->
+    ``led(fwhm_nm=18.0;peak_nm=630.0)``)."""
+    fields = []
+    for k in sorted(k for k in spec if k != "model"):
+        v = spec[k]
+        fields.append(f"{k}={float(v)!r}" if isinstance(v, (int, float)) and not isinstance(v, bool) else f"{k}={v}")
+    return f"{spec.get('model')}({';'.join(fields)})"
+
+
 @lru_cache(maxsize=1)
-def _ybar() -> np.ndarray:
-    import colour  # noqa: PLC0415
+def _table() -> dict[str, np.ndarray]:
+    """Columns of :data:`TABLE_FILE` ({name: (N,) float64}); empty when the file is missing or unreadable (every
+    spectrum then comes from colour-science)."""
+    try:
+        with open(TABLE_FILE, encoding="utf-8") as fh:
+            lines = [ln for ln in fh if not ln.startswith("#")]
+        names = lines[0].rstrip("\n").split(",")
+        data = np.loadtxt(lines[1:], delimiter=",", dtype=np.float64, ndmin=2)
+    except (OSError, ValueError, IndexError):
+        return {}
+    if data.shape != (wavelengths().size, len(names)) or not np.array_equal(data[:, 0], wavelengths()):
+        return {}
+    return {n: np.ascontiguousarray(data[:, i]) for i, n in enumerate(names)}
 
-    cmfs = colour.MSDS_CMFS[CMFS_NAME]
-    wl = wavelengths()
-    return np.interp(wl, cmfs.wavelengths, cmfs.values[:, 1], left=0.0, right=0.0)
 
-
-@lru_cache(maxsize=1)
-def _xyz_bar() -> np.ndarray:
+def _cmfs_colour() -> np.ndarray:
+    """(N, 3) CIE 1931 xbar, ybar, zbar on :func:`wavelengths` from colour-science (0 outside its range)."""
     import colour  # noqa: PLC0415
 
     cmfs = colour.MSDS_CMFS[CMFS_NAME]
@@ -68,10 +105,25 @@ def _xyz_bar() -> np.ndarray:
     return np.stack([np.interp(wl, cmfs.wavelengths, cmfs.values[:, i], left=0.0, right=0.0) for i in range(3)], -1)
 
 
-def validate_spectrum(spec, where: str = "spectrum") -> dict:
-    """Check a spectrum dict; returns it. Raises ``ValueError`` naming ``where`` and the field."""
-    import colour  # noqa: PLC0415
+@lru_cache(maxsize=1)
+def _xyz_bar() -> np.ndarray:
+    """(N, 3) CIE 1931 colour-matching functions on :func:`wavelengths` (table, else colour-science)."""
+    t = _table()
+    if all(c in t for c in CMF_COLUMNS):
+        return np.stack([t[c] for c in CMF_COLUMNS], -1)
+    return _cmfs_colour()
 
+
+def _ybar() -> np.ndarray:
+    """(N,) photopic luminous efficiency V = ybar on :func:`wavelengths`."""
+    return _xyz_bar()[:, 1]
+
+
+def validate_spectrum(spec, where: str = "spectrum") -> dict:
+    """Check a spectrum dict; returns it. Raises ``ValueError`` naming ``where`` and the field.
+
+    A ``light_source`` / ``illuminant`` name is checked against colour-science's tables unless the spectrum is
+    in :data:`TABLE_FILE` (written from those tables), which spares the colour-science import."""
     if not isinstance(spec, dict):
         raise ValueError(f"{where}: expected an object, got {type(spec).__name__}")
     model = spec.get("model")
@@ -89,17 +141,40 @@ def validate_spectrum(spec, where: str = "spectrum") -> dict:
             raise ValueError(f"{where}.peak_nm: must be a number in [380, 780] nm, got {spec['peak_nm']!r}")
         if not (isinstance(spec["fwhm_nm"], (int, float)) and 1 <= spec["fwhm_nm"] <= 200):
             raise ValueError(f"{where}.fwhm_nm: must be a number in [1, 200] nm, got {spec['fwhm_nm']!r}")
-    elif model == "light_source" and spec["name"] not in colour.SDS_LIGHT_SOURCES:
-        raise ValueError(f"{where}.name: {spec['name']!r} is not in colour.SDS_LIGHT_SOURCES")
-    elif model == "illuminant" and spec["name"] not in colour.SDS_ILLUMINANTS:
-        raise ValueError(f"{where}.name: {spec['name']!r} is not in colour.SDS_ILLUMINANTS")
+    elif model in ("light_source", "illuminant") and spectrum_key(spec) not in _table():
+        import colour  # noqa: PLC0415
+
+        known = colour.SDS_LIGHT_SOURCES if model == "light_source" else colour.SDS_ILLUMINANTS
+        if not isinstance(spec["name"], str) or spec["name"] not in known:
+            raise ValueError(f"{where}.name: {spec['name']!r} is not in colour."
+                             f"{'SDS_LIGHT_SOURCES' if model == 'light_source' else 'SDS_ILLUMINANTS'}")
     elif model == "daylight" and not (isinstance(spec["cct_k"], (int, float)) and 4000 <= spec["cct_k"] <= 25000):
         raise ValueError(f"{where}.cct_k: CIE D series needs 4000..25000 K, got {spec['cct_k']!r}")
     return spec
 
 
 def relative_spectrum(spec: dict) -> np.ndarray:
-    """Relative spectral distribution (N,) on :func:`wavelengths` (arbitrary scale, max 1)."""
+    """Relative spectral distribution (N,) on :func:`wavelengths` (arbitrary scale, max 1): the column of
+    :data:`TABLE_FILE` when the spectrum is there, else computed with colour-science (kept per process)."""
+    validate_spectrum(spec)
+    key = spectrum_key(spec)
+    col = _table().get(key)
+    if col is None:
+        col = _relative_cached(key, _freeze(spec))
+    return col.copy()
+
+
+def _freeze(spec: dict) -> tuple:
+    return tuple(sorted(spec.items()))
+
+
+@lru_cache(maxsize=_FALLBACK_CACHE_SIZE)
+def _relative_cached(key: str, frozen: tuple) -> np.ndarray:
+    return relative_spectrum_colour(dict(frozen))
+
+
+def relative_spectrum_colour(spec: dict) -> np.ndarray:
+    """:func:`relative_spectrum` computed with colour-science (no table): (N,) on :func:`wavelengths`, max 1."""
     import colour  # noqa: PLC0415
 
     validate_spectrum(spec)
@@ -127,12 +202,9 @@ def luminance(values: np.ndarray, wl_nm: np.ndarray | None = None) -> np.ndarray
     values = np.asarray(values, dtype=np.float64)
     if wl_nm is None:
         wl_nm, yb = wavelengths(), _ybar()
-    else:
-        import colour  # noqa: PLC0415
-
-        cm = colour.MSDS_CMFS[CMFS_NAME]
+    else:  # the CMFs are tabulated at exactly the 1 nm grid nodes, so this equals colour-science's interpolation
         wl_nm = np.asarray(wl_nm, dtype=np.float64)
-        yb = np.interp(wl_nm, cm.wavelengths, cm.values[:, 1], left=0.0, right=0.0)
+        yb = np.interp(wl_nm, wavelengths(), _ybar(), left=0.0, right=0.0)
     if values.shape[-1] != wl_nm.shape[0]:
         raise ValueError(f"values: last axis {values.shape[-1]} != number of wavelengths {wl_nm.shape[0]}")
     return K_M_LM_PER_W * np.trapezoid(values * yb, wl_nm, axis=-1)
@@ -186,3 +258,67 @@ def spectral_to_xyz(img: np.ndarray, bands_nm, band_width_nm: float) -> np.ndarr
         for j in range(3):
             w[i, j] = np.trapezoid(np.interp(fine, wl, cmf[:, j]), fine)
     return K_M_LM_PER_W * np.einsum("chw,cj->jhw", img, w)
+
+
+def table_spectra() -> list[dict]:
+    """The spectrum dicts :func:`write_table` tabulates: every spectrum in the scene generator's default
+    configuration (any mapping with a ``model`` key, in file order) and the D65 sky of ``empty_scene``."""
+    from .scene import DEFAULT_CONFIG, empty_scene  # noqa: PLC0415
+    import yaml  # noqa: PLC0415
+
+    with open(DEFAULT_CONFIG, encoding="utf-8") as fh:
+        cfg = yaml.safe_load(fh)
+    found: list[dict] = []
+
+    def walk(x) -> None:
+        if isinstance(x, dict):
+            if "model" in x and x.get("model") in SPECTRUM_MODELS:
+                found.append(dict(x))
+                return
+            for v in x.values():
+                walk(v)
+        elif isinstance(x, list):
+            for v in x:
+                walk(v)
+
+    walk(cfg)
+    walk(empty_scene()["sky"])
+    out, seen = [], set()
+    for spec in found:
+        if spectrum_key(spec) not in seen:
+            seen.add(spectrum_key(spec))
+            out.append(spec)
+    return out
+
+
+def write_table(path: str | os.PathLike = TABLE_FILE) -> Path:
+    """Write :data:`TABLE_FILE` from colour-science (atomically): wavelength, the CIE 1931 CMFs and the relative
+    spectrum of every :func:`table_spectra` entry on the 1 nm grid, each value as 17 significant digits (the
+    float64 read back is the value written). Returns the path."""
+    import colour  # noqa: PLC0415
+
+    from lfmbench.fileio import atomic_write_text  # noqa: PLC0415
+
+    cmfs = colour.MSDS_CMFS[CMFS_NAME]
+    if not np.array_equal(np.asarray(cmfs.wavelengths, float), wavelengths()):
+        raise ValueError(f"{CMFS_NAME}: colour-science tabulates it on another grid than 360..830 nm step 1 nm; "
+                         "the table would not reproduce its interpolation")
+    cols = {"wavelength_nm": wavelengths()}
+    cols.update(zip(CMF_COLUMNS, _cmfs_colour().T))
+    for spec in table_spectra():
+        cols[spectrum_key(spec)] = relative_spectrum_colour(spec)
+    bad = [k for k in cols if "," in k or "\n" in k]
+    if bad:
+        raise ValueError(f"spectra {bad}: a name with a comma cannot be a CSV column")
+    data = np.stack(list(cols.values()), -1)
+    lines = [f"# written by `python -m render_tools.spectra` from colour-science {colour.__version__}; do not edit",
+             "# relative spectra (max 1) and CIE 1931 2-degree CMFs on 360..830 nm, 1 nm step (render_tools.spectra)",
+             ",".join(cols)]
+    lines += [",".join(f"{v:.17g}" for v in row) for row in data]
+    path = Path(path)
+    atomic_write_text(path, "\n".join(lines) + "\n")
+    return path
+
+
+if __name__ == "__main__":  # pragma: no cover - regenerates the table
+    print(write_table())

@@ -4,6 +4,7 @@ from __future__ import annotations
 import copy
 import json
 import math
+import os
 import warnings
 
 import numpy as np
@@ -49,6 +50,59 @@ def test_spectrum_validation_names_field():
         spectra.validate_spectrum({"model": "light_source", "name": "Candle of Doom"}, "x")
     with pytest.raises(ValueError, match=r"luminance_cd_m2"):
         spectra.absolute_spectrum({"model": "daylight", "cct_k": 6500.0}, -1.0)
+
+
+def test_spectra_table_equals_colour_science():
+    """The precomputed table (render_tools/data/spectra_1nm.csv) holds exactly what colour-science computes."""
+    table = spectra._table()
+    specs = spectra.table_spectra()
+    assert len(specs) >= 8  # 3 LEDs, YAG, HPS, LPS, LED-B3 of the generator's config, D65 of empty_scene
+    for spec in specs:
+        np.testing.assert_allclose(table[spectra.spectrum_key(spec)], spectra.relative_spectrum_colour(spec),
+                                   rtol=1e-14, atol=1e-300, err_msg=spectra.spectrum_key(spec))
+    np.testing.assert_allclose(np.stack([table[c] for c in spectra.CMF_COLUMNS], -1), spectra._cmfs_colour(),
+                               rtol=1e-14, atol=1e-300)
+
+
+def test_spectra_outside_the_table_come_from_colour_science(monkeypatch):
+    other = [{"model": "led", "peak_nm": 600.0, "fwhm_nm": 20.0}, {"model": "illuminant", "name": "HP1"},
+             {"model": "daylight", "cct_k": 6500.0}]
+    for spec in other:
+        assert spectra.spectrum_key(spec) not in spectra._table()
+        np.testing.assert_array_equal(spectra.relative_spectrum(spec), spectra.relative_spectrum_colour(spec))
+    # no table at all (a missing or broken file): every spectrum from colour-science, same numbers
+    hps = {"model": "light_source", "name": "HPS"}
+    with_table = spectra.absolute_spectrum(hps, 50.0)
+    monkeypatch.setattr(spectra, "TABLE_FILE", spectra.TABLE_FILE.with_name("missing.csv"))
+    spectra._table.cache_clear()
+    spectra._xyz_bar.cache_clear()
+    try:
+        assert spectra._table() == {}
+        np.testing.assert_allclose(spectra.absolute_spectrum(hps, 50.0), with_table, rtol=1e-14)
+        with pytest.raises(ValueError, match=r"x\.name"):
+            spectra.validate_spectrum({"model": "illuminant", "name": "HPS"}, "x")  # a light source, not a CIE illuminant
+    finally:
+        monkeypatch.undo()
+        spectra._table.cache_clear()
+        spectra._xyz_bar.cache_clear()
+
+
+def test_scene_generation_and_spectra_do_not_import_colour_science():
+    """colour-science costs 2-3 s to import; a generated scene's spectra come from the table alone."""
+    import subprocess
+    import sys
+
+    code = ("import sys\n"
+            "from render_tools import render, scene, spectra\n"
+            "for seed in (101, 202):\n"
+            "    s = scene.generate_scene(seed)\n"
+            "    render.scene_meta(s, render.RenderOptions(width=32, height=18))\n"
+            "    [spectra.absolute_spectrum(lt['spectrum'], lt['luminance_cd_m2']) for lt in s['lights']]\n"
+            "    spectra.absolute_spectrum(scene.empty_scene()['sky']['spectrum'], 1.0)\n"
+            "assert 'colour' not in sys.modules, 'colour was imported'\n")
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))  # this checkout's render_tools
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=root)
+    assert r.returncode == 0, r.stderr[-2000:]
 
 
 def test_xyz_of_flat_band_image_matches_cmf_integral():
