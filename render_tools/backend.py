@@ -14,6 +14,13 @@ version). Without a CUDA driver library (``libcuda.so``; no GPU, as on a CPU-onl
 at once, without a child process: drjit would only raise ``ImportError`` from ``mi.set_variant`` there
 ("the CUDA backend hasn't been initialized").
 
+Background probes: :func:`start_probes` starts, without waiting, the child processes that a later
+:func:`select_variant` / :func:`check_variant` would run (only those without a cached verdict: none at all
+once the cache holds them); ``lfmbench render`` calls it first, so a cold probe (about 1.3 s of one core)
+runs while the command imports its modules and generates the scene. :func:`probe_llvm` / :func:`probe_cuda`
+then collect that child's verdict instead of starting their own (the same script, environment, timeout and
+cache entry as a foreground probe).
+
 ``LFMBENCH_VARIANT`` (environment) changes the automatic choice: ``auto`` (default: CUDA, LLVM, scalar),
 ``cpu`` (never CUDA: LLVM, else scalar) or a variant name (used as if given explicitly).
 
@@ -21,12 +28,14 @@ Functions
 - :func:`find_libllvm` -> candidate library paths, best first.
 - :func:`probe_llvm` -> whether a library renders in a child process.
 - :func:`find_libcuda`, :func:`probe_cuda` -> the CUDA driver library; whether ``cuda_ad_spectral`` renders.
+- :func:`start_probes` -> start the probes a render will need in the background.
 - :func:`select_variant` -> the variant name, set in Mitsuba (``mi.set_variant``).
 - :func:`check_variant` -> fail early (before a render job writes anything) for an unusable explicit variant.
 - :func:`clamp_roundoff` -> radiance with tiny negative round-off of the JIT back ends set to 0.
 """
 from __future__ import annotations
 
+import atexit
 import ctypes.util
 import glob
 import json
@@ -35,6 +44,7 @@ import os
 import re
 import subprocess
 import sys
+import time
 import warnings
 
 import numpy as np
@@ -86,6 +96,12 @@ _PROBE_SCRIPT = _PROBE_TEMPLATE.format(variant="llvm_ad_spectral", tag="LLVM")
 _CUDA_PROBE_SCRIPT = _PROBE_TEMPLATE.format(variant="cuda_ad_spectral", tag="CUDA")
 
 _chosen: str | None = None
+#: Probe children started by :func:`start_probes` and not yet collected: key -> (Popen, start time in s of
+#: ``time.monotonic``, library path). Keys: ``"llvm|" + _cache_key(lib)``, ``"cuda|" + _cuda_cache_key(lib)``.
+_pending: dict[str, tuple[subprocess.Popen, float, str]] = {}
+_atexit_registered = False
+#: What :func:`_collect` returns when no background probe was started for a key.
+_NOT_STARTED = object()
 #: Why the last :func:`probe_cuda` said no (for error messages).
 _cuda_reason: str = ""
 
@@ -163,13 +179,10 @@ def probe_llvm(lib: str, use_cache: bool = True) -> bool:
     cache = _read_cache(cache_file) if use_cache else {}
     if key in cache:
         return bool(cache[key])
-    env = dict(os.environ, DRJIT_LIBLLVM_PATH=lib)
-    try:
-        res = subprocess.run([sys.executable, "-c", _PROBE_SCRIPT], env=env, capture_output=True, text=True,
-                             timeout=PROBE_TIMEOUT_S)
-        ok = res.returncode == 0 and "LLVM_PROBE_OK" in res.stdout
-    except subprocess.TimeoutExpired:
-        ok = False
+    res = _collect("llvm|" + key)
+    if res is _NOT_STARTED:
+        res = _spawn_and_wait(_PROBE_SCRIPT, _llvm_env(lib))
+    ok = res is not None and res[0] == 0 and "LLVM_PROBE_OK" in res[1]
     if use_cache:
         cache[key] = ok
         atomic_write_json(cache_file, cache)
@@ -259,22 +272,142 @@ def probe_cuda(use_cache: bool = True) -> bool:
     return ok
 
 
-def _run_cuda_child(lib: str | None = None) -> tuple[bool, str]:
-    """Run the CUDA probe script in a child process; returns (ok, reason for a failure)."""
+def _cuda_env(lib: str | None) -> dict:
     env = dict(os.environ)
     if lib is not None and os.path.isabs(lib):
         env["DRJIT_LIBCUDA_PATH"] = lib
-    try:
-        res = subprocess.run([sys.executable, "-c", _CUDA_PROBE_SCRIPT], env=env, capture_output=True, text=True,
-                             timeout=PROBE_TIMEOUT_S)
-    except subprocess.TimeoutExpired:
+    return env
+
+
+def _llvm_env(lib: str) -> dict:
+    return dict(os.environ, DRJIT_LIBLLVM_PATH=lib)
+
+
+def _run_cuda_child(lib: str | None = None) -> tuple[bool, str]:
+    """The CUDA probe's verdict from a child process (the one :func:`start_probes` started for ``lib``, else a
+    new one); returns (ok, reason for a failure)."""
+    res = _NOT_STARTED if lib is None else _collect("cuda|" + _cuda_cache_key(lib))
+    if res is _NOT_STARTED:
+        res = _spawn_and_wait(_CUDA_PROBE_SCRIPT, _cuda_env(lib))
+    if res is None:
         return False, f"the CUDA probe did not finish in {PROBE_TIMEOUT_S:g} s"
-    if res.returncode == 0 and "CUDA_PROBE_OK" in res.stdout:
+    code, out, err = res
+    if code == 0 and "CUDA_PROBE_OK" in out:
         return True, ""
-    lines = [ln for ln in (res.stdout + "\n" + res.stderr).splitlines() if ln.strip()]
+    lines = [ln for ln in (out + "\n" + err).splitlines() if ln.strip()]
     fail = [ln for ln in lines if ln.startswith("CUDA_PROBE_FAIL")]
     why = fail[0][len("CUDA_PROBE_FAIL"):].strip() if fail else (lines[-1] if lines else "")
-    return False, f"probe render failed (exit {res.returncode}): {why[:200]}"
+    return False, f"probe render failed (exit {code}): {why[:200]}"
+
+
+def _spawn(script: str, env: dict) -> tuple[subprocess.Popen, float]:
+    """Start a probe child (``python -c script``) without waiting; output captured as text."""
+    proc = subprocess.Popen([sys.executable, "-c", script], env=env, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, stdin=subprocess.DEVNULL, text=True)
+    return proc, time.monotonic()
+
+
+def _wait(proc: subprocess.Popen, started: float) -> tuple[int, str, str] | None:
+    """(exit status, stdout, stderr) of a probe child, or None when it ran past :data:`PROBE_TIMEOUT_S` (counted
+    from its start; it is killed then)."""
+    try:
+        out, err = proc.communicate(timeout=max(0.0, PROBE_TIMEOUT_S - (time.monotonic() - started)))
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.communicate()
+        return None
+    except BaseException:  # Ctrl-C while waiting: do not leave the child behind
+        proc.kill()
+        proc.wait()
+        raise
+    return proc.returncode, out, err
+
+
+def _spawn_and_wait(script: str, env: dict) -> tuple[int, str, str] | None:
+    return _wait(*_spawn(script, env))
+
+
+def _collect(key: str):
+    """The result (as :func:`_wait`'s) of the background probe started for ``key``, waiting for it;
+    :data:`_NOT_STARTED` when none was started (the caller then probes in the foreground)."""
+    entry = _pending.pop(key, None)
+    return _NOT_STARTED if entry is None else _wait(*entry[:2])
+
+
+def _stop_pending() -> None:
+    """Kill the probe children nobody collected (the command ended early, e.g. on bad options)."""
+    while _pending:
+        _, (proc, _, _) = _pending.popitem()
+        if proc.poll() is None:
+            proc.kill()
+        proc.communicate()
+
+
+def _start(key: str, script: str, env: dict, lib: str) -> bool:
+    global _atexit_registered
+    if key in _pending:
+        return False
+    _pending[key] = (*_spawn(script, env), lib)
+    if not _atexit_registered:
+        atexit.register(_stop_pending)
+        _atexit_registered = True
+    return True
+
+
+def finish_probes() -> None:
+    """Wait for the background probes of :func:`start_probes` and cache their verdicts (for callers that will
+    not render in this process, e.g. before starting a process pool whose workers read the cache)."""
+    for key, (_, _, lib) in list(_pending.items()):
+        if key.startswith("llvm|"):
+            probe_llvm(lib)
+        else:
+            probe_cuda()
+    _stop_pending()  # any not collected above (a library changed meanwhile)
+
+
+def start_probes(variant: str | None = None) -> list[str]:
+    """Start in the background the child-process probes that :func:`select_variant` (``variant``) will need,
+    without waiting for them; returns what was started (``"cuda"``, ``"llvm:<lib>"``; empty when every
+    needed verdict is cached or no probe is needed).
+
+    Mirrors :func:`select_variant`'s order: a forced ``scalar_spectral`` needs none; auto (or
+    ``cuda_ad_spectral``) on a machine with a CUDA driver library probes CUDA (LLVM only later, in the
+    foreground, if CUDA fails); otherwise the first libLLVM candidate without a cached verdict is probed (the
+    candidates before it are cached as failing). :func:`probe_llvm` / :func:`probe_cuda` collect the verdicts
+    and cache them as a foreground probe does. Never raises: a bad ``variant`` or ``LFMBENCH_VARIANT`` is
+    reported by :func:`select_variant` / :func:`check_variant`, where it is used.
+    """
+    started: list[str] = []
+    try:
+        v = requested_variant(variant)
+    except ValueError:
+        return started
+    if v == SCALAR_VARIANT or _chosen is not None:
+        return started
+    no_cuda = os.environ.get(VARIANT_ENV, "").strip() == "cpu"
+    try:
+        cuda_lib = find_libcuda() if v == CUDA_VARIANT or (v is None and not no_cuda) else None
+        if cuda_lib is not None:
+            key = _cuda_cache_key(cuda_lib)
+            if key not in _read_cache(_cache_path("cuda_probe.json")) and \
+                    _start("cuda|" + key, _CUDA_PROBE_SCRIPT, _cuda_env(cuda_lib), cuda_lib):
+                started.append("cuda")
+            return started  # auto: LLVM is needed only if CUDA fails; forced CUDA: never
+        if v == CUDA_VARIANT:
+            return started  # no driver library: the answer is "no" at once, no child
+        cache = _read_cache(_cache_path())
+        for lib in find_libllvm():
+            key = _cache_key(lib)
+            if key in cache:
+                if cache[key]:
+                    break  # a cached working library: no probe
+                continue
+            if _start("llvm|" + key, _PROBE_SCRIPT, _llvm_env(lib), lib):
+                started.append(f"llvm:{lib}")
+            break
+    except OSError:  # a library vanished between the search and stat(): the foreground probe reports it
+        pass
+    return started
 
 
 def cuda_unavailable_reason() -> str:

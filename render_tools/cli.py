@@ -74,6 +74,11 @@ def render_cmd(
                                                   "--scenes > 10000)."),
 ) -> None:
     """Render driving scenes (Mitsuba 3, spectral, light groups, time bins) into a corpus; resumable."""
+    from render_tools import backend as B  # noqa: PLC0415
+
+    # a cold Mitsuba back-end probe (a child process, ~1.3 s of one core) runs while this process imports its
+    # modules and generates the scene; nothing is started when the verdict is cached (render_tools.backend)
+    B.start_probes(variant)
     from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
@@ -148,9 +153,8 @@ def render_cmd(
                 fail(f"protocol file {proto.path}: render: {exc}")
             fail(f"{profile if Path(profile).is_file() else J.PROFILES_FILE} (profile {profile!r}): {exc}")
         # a forced variant (--variant, profile or LFMBENCH_VARIANT) that cannot run here: one line, exit 2
-        from render_tools.backend import check_variant  # noqa: PLC0415
-
-        check_variant(options.get("variant"))
+        B.start_probes(options.get("variant"))  # the profile or protocol may name another variant
+        B.check_variant(options.get("variant"))
         if scene_dicts and backend.validate_scene is not None:
             for p, sc in zip(scene_file, scene_dicts):
                 try:
@@ -203,6 +207,8 @@ def render_cmd(
             if status != "rendered":
                 prog.console.print(f"[red]scene {sid} failed[/]")
 
+        if workers > 1 or ray_address:
+            B.finish_probes()  # the scenes render in other processes: they read the cached verdict
         try:
             summary = J.run_jobs(job_list, writer, workers=workers, ray_address=ray_address, on_start=on_start,
                                  on_done=on_done, resume=not no_resume, split_seed=seed, splits=fixed_splits)
