@@ -2,7 +2,8 @@
 
 One job = one scene: generate (or load) the scene, render every frame with
 ``render_tools.render.render_frames``, encode the EXRs (:func:`lfmbench.corpus.encode_scene`) and write them
-atomically into the corpus (:func:`lfmbench.corpus.write_files`). Workers write the files themselves (the
+atomically into the corpus (:func:`lfmbench.corpus.write_files`); encoding and writing run in a worker thread
+(:class:`lfmbench.corpus.ThreadedSceneWriter`) while the next frame renders in the calling thread. Workers write the files themselves (the
 output directory must be visible to them: the local machine, or a shared file system on a Ray cluster) and
 return the files' SHA-256; only the driver touches ``manifest.json``, rewriting it atomically after each
 finished scene. So a crash or Ctrl-C leaves a valid corpus: finished scenes are in the manifest with their
@@ -30,8 +31,8 @@ from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
-from lfmbench.corpus import (DEFAULT_STORAGE, SPLITS_NAME, CorpusWriteError, CorpusWriter, check_scene_id,
-                             encode_scene, prune_scene_dir, write_files)
+from lfmbench.corpus import (DEFAULT_STORAGE, SPLITS_NAME, CorpusWriteError, CorpusWriter, ThreadedSceneWriter,
+                             check_scene_id, prune_scene_dir)
 from lfmbench.fileio import atomic_write_json
 
 __all__ = ["PROFILES_FILE", "Backend", "default_backend", "load_profile", "scene_seed", "scene_id_for",
@@ -208,8 +209,13 @@ def run_job(job: RenderJob | Mapping[str, Any]) -> dict:
     be = job.backend or default_backend()
     scene, opts, meta = _prepare(job, be)
     notes: list[str] = []
-    files = encode_scene(job.scene_id, scene, meta, be.render_frames(scene, opts), dtype=job.dtype, notes=notes)
-    hashes = write_files(job.out, files)
+    # frame n is encoded and written in a worker thread while frame n + 1 renders here (the main thread keeps
+    # the render, so Ctrl-C reaches it as before); an error or interrupt stops and joins the worker
+    with ThreadedSceneWriter(job.out, job.scene_id, scene, meta, dtype=job.dtype, notes=notes) as w:
+        for frame in be.render_frames(scene, opts):
+            w.put(frame)
+            del frame  # the worker holds it now: at most one frame encoded while the next renders
+        hashes = w.close()
     prune_scene_dir(job.out, job.scene_id, hashes)
     return {"scene_id": job.scene_id, "hashes": hashes, "notes": notes, "seconds": time.perf_counter() - t0}
 

@@ -17,7 +17,8 @@ This package defines the on-disk format specified in ``docs/corpus-format.md`` (
   decoded only when asked for, with a small cache so that reading ``short`` then ``long`` decodes the file once);
 * :mod:`~lfmbench.corpus.writer`: :class:`CorpusWriter`: atomic writes (temporary name in the same directory,
   then :func:`os.replace`), a manifest that is rewritten atomically after each finished scene, resume support
-  (:meth:`CorpusWriter.is_complete`); :func:`encode_scene`, :func:`write_files`;
+  (:meth:`CorpusWriter.is_complete`); :func:`encode_scene`, :func:`write_files`; :class:`ThreadedSceneWriter`
+  (encoding and writing in a worker thread while the next frame renders);
 * :mod:`~lfmbench.corpus.validate`: :func:`validate_corpus`, a full check of a corpus (missing files,
   checksums, channels, NaN/inf/negative radiance, metadata consistency), used by ``lfmbench validate``.
 
@@ -51,7 +52,7 @@ from lfmbench.corpus.storage import (COMPRESSIONS, DEFAULT_STORAGE, EXTRA_COMPRE
                                      SCALE_EXP_RANGE, STORAGES, LayerStore, Storage, StorageStats, resolve_storage,
                                      round_mantissa, scale_attr, scale_exponent, store_layer)
 from lfmbench.corpus.validate import ValidationReport, validate_corpus
-from lfmbench.corpus.writer import CorpusWriter, encode_scene, prune_scene_dir, write_files
+from lfmbench.corpus.writer import CorpusWriter, ThreadedSceneWriter, encode_scene, prune_scene_dir, write_files
 from lfmbench.fileio import TMP_PREFIX, atomic_write_bytes, atomic_write_json
 
 __all__ = [
@@ -65,4 +66,5 @@ __all__ = [
     "atomic_write_bytes", "atomic_write_json", "make_splits", "validate_meta", "Corpus", "CorpusWriter",
     "ValidationReport", "validate_corpus", "encode_scene", "write_files", "prune_scene_dir", "ExrPart",
     "check_scene_id", "manifest_entry_errors", "inside_root", "check_splits", "RADIANCE_MAX",
+    "ThreadedSceneWriter",
 ]

@@ -1,6 +1,7 @@
 """Writing a corpus: :func:`encode_scene` (pure encoding, usable in render workers), :func:`write_files`
-(atomic writes: temporary name in the same directory, then :func:`os.replace`) and :class:`CorpusWriter` (a
-manifest that is rewritten atomically after each finished scene, resume support).
+(atomic writes: temporary name in the same directory, then :func:`os.replace`), :class:`ThreadedSceneWriter`
+(both in a worker thread, fed one frame at a time while the caller renders the next) and :class:`CorpusWriter`
+(a manifest that is rewritten atomically after each finished scene, resume support).
 """
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ import contextlib
 import json
 import logging
 import os
+import threading
 from pathlib import Path
 from typing import Any, Iterable, Iterator, Mapping, Sequence
 
@@ -21,7 +23,7 @@ from lfmbench.corpus.naming import (ATTR, FORMAT_VERSION, MANIFEST_NAME, SCENES_
 from lfmbench.corpus.storage import DEFAULT_STORAGE, Storage, StorageStats, resolve_storage
 from lfmbench.fileio import TMP_PREFIX, atomic_write_bytes, atomic_write_json, json_default
 
-__all__ = ["CorpusWriter", "prune_scene_dir", "encode_scene", "write_files"]
+__all__ = ["CorpusWriter", "prune_scene_dir", "encode_scene", "write_files", "ThreadedSceneWriter"]
 
 log = logging.getLogger(__name__)
 
@@ -278,3 +280,142 @@ def write_files(root: str | os.PathLike, files: Iterable[tuple[str, bytes]]) -> 
             raise ValueError(f"file path {rel!r} escapes the corpus root")
         out[rel] = atomic_write_bytes(p, data)
     return out
+
+
+class _Stopped(Exception):
+    """Raised inside the worker of :class:`ThreadedSceneWriter` by :meth:`ThreadedSceneWriter.abort`."""
+
+
+_EMPTY = object()
+
+
+class ThreadedSceneWriter:
+    """:func:`encode_scene` + :func:`write_files` of one scene in a worker thread, fed frame by frame.
+
+    The caller (e.g. a render loop in the main thread) hands each frame dict to :meth:`put` and goes on
+    producing the next one while the worker encodes and writes the previous one: encoding (numpy, OpenEXR
+    compression) and rendering (Dr.Jit releases the GIL while its kernels run) overlap. The hand-over has
+    depth 1: :meth:`put` returns once the worker has *taken* the frame, i.e. finished the frame before, so
+    at most one frame is being encoded while the next is produced (memory about one frame more than a
+    serial loop). Files are written as :func:`write_files` writes them (temporary name, then rename).
+
+    Errors: an exception in the worker (a bad frame, disk full: :class:`lfmbench.corpus.CorpusWriteError`)
+    is raised again, the same object with its message, by the next :meth:`put` or by :meth:`close`. Used as
+    a context manager, any exception in the block (including ``KeyboardInterrupt``) stops the worker at the
+    next file boundary and joins it (:meth:`abort`) before it propagates; files already written stay
+    complete, nothing is half-written, and the scene is not committed to any manifest.
+
+    Example::
+
+        with ThreadedSceneWriter(root, scene_id, scene, meta, dtype="compact", notes=notes) as w:
+            for frame in render_frames(scene, opts):
+                w.put(frame)
+            hashes = w.close()          # {relpath: sha256}, as write_files returns
+
+    Args:
+        root: corpus root (files go under ``scenes/<scene_id>/``).
+        scene_id, scene, meta, dtype, notes: as for :func:`encode_scene`.
+    """
+
+    def __init__(self, root: str | os.PathLike, scene_id: str, scene: Mapping[str, Any], meta: Mapping[str, Any],
+                 *, dtype: str | Storage = DEFAULT_STORAGE, notes: list[str] | None = None) -> None:
+        self.root = Path(root)
+        self._args = (scene_id, scene, meta)
+        self._dtype, self._notes = dtype, notes
+        self._cv = threading.Condition()
+        self._slot: Any = _EMPTY
+        self._end = self._stop = self._finished = False
+        self._exc: BaseException | None = None
+        self._hashes: dict[str, str] | None = None
+        self._thread = threading.Thread(target=self._run, name=f"lfmbench-writer-{scene_id}", daemon=True)
+        self._thread.start()
+
+    # ------------------------------------------------------------------------------------------- worker
+    def _frames(self) -> Iterator[Mapping[str, Any]]:
+        while True:
+            with self._cv:
+                while self._slot is _EMPTY and not (self._end or self._stop):
+                    self._cv.wait()
+                if self._stop:
+                    raise _Stopped
+                if self._slot is _EMPTY:  # end of frames
+                    return
+                frame, self._slot = self._slot, _EMPTY
+                self._cv.notify_all()
+            yield frame
+
+    def _files(self) -> Iterator[tuple[str, bytes]]:
+        scene_id, scene, meta = self._args
+        for item in encode_scene(scene_id, scene, meta, self._frames(), dtype=self._dtype, notes=self._notes):
+            if self._stop:
+                raise _Stopped
+            yield item
+
+    def _run(self) -> None:
+        try:
+            self._hashes = write_files(self.root, self._files())
+        except _Stopped:
+            pass
+        except BaseException as exc:  # noqa: BLE001 - handed to the caller's thread
+            self._exc = exc
+        finally:
+            with self._cv:
+                self._finished = True
+                self._cv.notify_all()
+
+    # ------------------------------------------------------------------------------------------- caller
+    def _raise_if_failed(self) -> None:
+        if self._exc is not None:
+            raise self._exc
+        if self._finished:
+            raise RuntimeError("ThreadedSceneWriter: the writer has already finished (put after close/abort)")
+
+    def put(self, frame: Mapping[str, Any]) -> None:
+        """Hand one frame dict (as :func:`encode_scene` reads them) to the worker; returns once it has taken it.
+        Raises the worker's exception if it failed."""
+        with self._cv:
+            if self._end:
+                raise RuntimeError("ThreadedSceneWriter.put: called after close()")
+            self._raise_if_failed()
+            self._slot = frame
+            self._cv.notify_all()
+            while self._slot is not _EMPTY and not self._finished:
+                self._cv.wait()
+            if self._slot is not _EMPTY:  # the worker ended without taking it
+                self._slot = _EMPTY
+                self._raise_if_failed()
+
+    def close(self) -> dict[str, str]:
+        """No more frames: wait for the worker to write the rest; returns ``{relpath: sha256}``. Raises the
+        worker's exception if it failed (e.g. the frames do not match ``meta``)."""
+        with self._cv:
+            self._end = True
+            self._cv.notify_all()
+        self._thread.join()
+        if self._exc is not None:
+            raise self._exc
+        if self._hashes is None:
+            raise RuntimeError("ThreadedSceneWriter.close: the writer was aborted")
+        return self._hashes
+
+    def abort(self) -> None:
+        """Stop the worker at its next file boundary and join it (a file being written is finished or, if
+        its write fails, not there; no temporary file is left by :func:`write_files`)."""
+        with self._cv:
+            self._stop = True
+            self._cv.notify_all()
+        self._thread.join()
+
+    @property
+    def alive(self) -> bool:
+        """Whether the worker thread is still running."""
+        return self._thread.is_alive()
+
+    def __enter__(self) -> "ThreadedSceneWriter":
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        if exc_type is not None:
+            self.abort()
+        elif not self._end:  # the block ended without close(): finish the scene (errors propagate)
+            self.close()
