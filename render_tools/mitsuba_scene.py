@@ -22,6 +22,7 @@ exposure; the ego-motion blur is continuous, see :mod:`render_tools.camera`).
 """
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -167,6 +168,28 @@ def part_mesh(part: dict, offset=np.zeros(3)) -> tuple[np.ndarray, np.ndarray]:
     return V, np.array(F)
 
 
+def _moves(scene: dict, instance: int) -> bool:
+    """Whether object ``instance`` (-1: none, static) has a non-zero velocity."""
+    return instance >= 0 and any(float(v) != 0.0 for v in scene["objects"][instance]["velocity_mps"])
+
+
+def _object_meshes(obj: dict, offset: np.ndarray) -> list[tuple[str, np.ndarray, np.ndarray]]:
+    """Meshes of one object moved by ``offset`` (3,) m, one per material sorted by name (the order of
+    :func:`shape_id`): ``[(material, V (n, 3) m, F (m, 3))]``, parts of a material merged."""
+    by_mat: dict = {}
+    for part in obj["parts"]:
+        by_mat.setdefault(part["material"], []).append(part_mesh(part, offset))
+    out = []
+    for mat, meshes in sorted(by_mat.items()):
+        Vs, Fs, base = [], [], 0
+        for V, F in meshes:
+            Vs.append(V)
+            Fs.append(F + base)
+            base += len(V)
+        out.append((mat, np.vstack(Vs), np.vstack(Fs)))
+    return out
+
+
 def _mesh(mi, name: str, V: np.ndarray, F: np.ndarray, bsdf, emitter=None):
     props = mi.Properties()
     props["bsdf"] = bsdf
@@ -228,7 +251,9 @@ def mitsuba_dict(scene: dict, t: float, emit: str | None = None, lights: list[in
             (every light, and the sky unless it emits nothing) or ``None`` (no emitter: geometry only, e.g. for AOVs).
         lights: optional subset of light ids of ``emit`` to include as emitters (default all of the group).
         integrator: Mitsuba integrator dict (default ``path`` with :data:`MAX_DEPTH`).
-        cache: optional dict reused across calls for the same scene and variant (keeps the loaded BSDFs).
+        cache: optional dict reused across calls for the same scene and variant: keeps the loaded BSDFs, the
+            meshes (numpy vertices and faces) of objects and lamps that do not move, and every lamp's spectrum
+            dicts, so the frames after the first rebuild only what moves (the result is the same).
     Returns:
         dict for ``mi.load_dict`` holding instantiated meshes (one per object and material, one per lamp
         face); shape ids follow :func:`shape_id`, :func:`light_shape_id`, :func:`beam_id`.
@@ -246,32 +271,39 @@ def mitsuba_dict(scene: dict, t: float, emit: str | None = None, lights: list[in
         cache["bsdfs"] = {name: mi.load_dict(_bsdf(m)) for name, m in scene["materials"].items()}
         cache["off_lens"] = mi.load_dict(OFF_LENS)
     bsdfs, off_lens = cache["bsdfs"], cache["off_lens"]
+    rest = cache.setdefault("rest_meshes", {})  # geometry of objects and lamps that never move (numpy arrays)
+    emission = cache.setdefault("emission", {})  # per light: spectrum dicts of its face and beam (strings)
     for o in scene["objects"]:
-        off = object_offset(scene, o["id"], t)
-        by_mat: dict = {}
-        for part in o["parts"]:
-            by_mat.setdefault(part["material"], []).append(part_mesh(part, off))
-        for k, (mat, meshes) in enumerate(sorted(by_mat.items())):
-            Vs, Fs, base = [], [], 0
-            for V, F in meshes:
-                Vs.append(V)
-                Fs.append(F + base)
-                base += len(V)
+        key = ("object", o["id"])
+        meshes = rest.get(key)
+        if meshes is None:
+            meshes = _object_meshes(o, object_offset(scene, o["id"], t))
+            if not _moves(scene, o["id"]):
+                rest[key] = meshes  # the same arrays every frame: offset 0, bit for bit what would be rebuilt
+        for k, (mat, V, F) in enumerate(meshes):
             name = shape_id(o["id"], k)
-            d[name] = _mesh(mi, name, np.vstack(Vs), np.vstack(Fs), bsdfs[mat])
+            d[name] = _mesh(mi, name, V, F, bsdfs[mat])
     wanted = None if lights is None else set(int(i) for i in lights)
     for lt in scene["lights"]:
         off = object_offset(scene, lt["instance"], t)
         on = emit == "all" or (emit == lt["group"] and (wanted is None or lt["id"] in wanted))
-        V, F = _plane_mesh(lt, off)
+        key = ("light", lt["id"])
+        VF = rest.get(key)
+        if VF is None:
+            VF = _plane_mesh(lt, off)
+            if not _moves(scene, lt["instance"]):
+                rest[key] = VF
         emitter = None
         if on:
-            rad = light_spectrum(lt)
+            ekey = (lt["id"], json.dumps(lt["spectrum"], sort_keys=True), float(lt["luminance_cd_m2"]))
+            if ekey not in emission:
+                rad = light_spectrum(lt)
+                emission[ekey] = (spectra.mitsuba_spectrum(rad), spectra.mitsuba_spectrum(rad, scale=plane_area(lt)))
+            face_spec, beam_spec = emission[ekey]
             # light sampling in proportion to luminous flux (pi * Lv * A for a Lambertian face) instead of
             # uniformly over the emitters, so dim tail lamps do not take samples from bright headlights
             flux = math.pi * float(lt["luminance_cd_m2"]) * plane_area(lt)
-            emitter = mi.load_dict({"type": "area", "radiance": spectra.mitsuba_spectrum(rad),
-                                    "sampling_weight": max(flux, 1e-12)})
+            emitter = mi.load_dict({"type": "area", "radiance": dict(face_spec), "sampling_weight": max(flux, 1e-12)})
             if lt["spread_deg"] < 90.0:
                 n = np.asarray(lt["normal"], dtype=float)
                 n /= np.linalg.norm(n)
@@ -279,14 +311,14 @@ def mitsuba_dict(scene: dict, t: float, emit: str | None = None, lights: list[in
                 up = [0.0, 0.0, 1.0] if abs(n[2]) < 0.9 else [1.0, 0.0, 0.0]
                 d[beam_id(lt["id"])] = {
                     "type": "spot", "to_world": mi.ScalarTransform4f().look_at(pos.tolist(), (pos + n).tolist(), up),
-                    "intensity": spectra.mitsuba_spectrum(rad, scale=plane_area(lt)),
+                    "intensity": dict(beam_spec),
                     "cutoff_angle": float(lt["spread_deg"]),
                     # flux of a cone of intensity I: ~ I * 2 pi (1 - cos cutoff)
                     "sampling_weight": max(2 * math.pi * (1 - math.cos(math.radians(lt["spread_deg"])))
                                            * float(lt["luminance_cd_m2"]) * plane_area(lt), 1e-12),
                     "beam_width": BEAM_WIDTH_FRACTION * float(lt["spread_deg"])}
         name = light_shape_id(lt["id"])
-        d[name] = _mesh(mi, name, V, F, off_lens, emitter)
+        d[name] = _mesh(mi, name, VF[0], VF[1], off_lens, emitter)
     if emit == "skymap" or (emit == "all" and "skymap" in scene_groups(scene)):
         # one sky object per scene: Mitsuba bakes the environment emitter's registry id into kernels as a
         # literal, so a new sky object per frame would force a recompile per frame

@@ -20,7 +20,7 @@ from lfmbench.corpus.naming import ATTR, STATIC_WINDOWS
 __all__ = ["HALF_MAX", "COMPRESSIONS", "EXTRA_COMPRESSIONS", "HALF_MIN_NORMAL", "HALF_PRECISION_RANGE_LOG2",
            "SCALE_EXP_RANGE", "HALF_UNDERFLOW_ERROR_FRACTION", "MANTISSA_BITS", "Storage", "STORAGES",
            "DEFAULT_STORAGE", "resolve_storage", "round_mantissa", "scale_exponent", "LayerStore", "StorageStats",
-           "store_layer", "scale_attr"]
+           "store_layer", "scale_attr", "float_to_half"]
 
 log = logging.getLogger(__name__)
 
@@ -55,6 +55,9 @@ SCALE_EXP_RANGE = (-126, 127)
 HALF_UNDERFLOW_ERROR_FRACTION = 0.25
 #: Explicit mantissa bits of the EXR pixel types.
 MANTISSA_BITS = {"float16": 10, "float32": 23}
+#: Values per chunk of :func:`store_layer`'s HALF encoding (256 Ki float32 = 1 MiB): its dozen temporaries stay
+#: in the CPU cache instead of making a dozen passes over a 28 MB layer (measured in docs/rendering.md).
+ENCODE_CHUNK = 1 << 18
 
 
 @dataclass(frozen=True)
@@ -138,14 +141,92 @@ def round_mantissa(arr: np.ndarray, bits: int) -> np.ndarray:
     a = np.array(arr, dtype=np.float32, copy=True)
     if not 1 <= int(bits) <= 23:
         raise ValueError(f"bits must be in [1, 23], got {bits!r}")
-    drop = 23 - int(bits)
+    return _round_mantissa_inplace(a, int(bits))
+
+
+def _round_mantissa_inplace(a: np.ndarray, bits: int) -> np.ndarray:
+    """:func:`round_mantissa` on a float32 array ``a`` in place (returns ``a``)."""
+    drop = 23 - bits
     if drop == 0:
         return a
     b = a.view(np.uint32)
-    lsb = (b >> np.uint32(drop)) & np.uint32(1)
-    b += np.uint32((1 << (drop - 1)) - 1) + lsb
+    lsb = b >> np.uint32(drop)
+    lsb &= np.uint32(1)
+    b += np.uint32((1 << (drop - 1)) - 1)
+    b += lsb
     b &= np.uint32(~((1 << drop) - 1) & 0xFFFFFFFF)
     return a
+
+
+#: float32 bit patterns used by :func:`_half_parts`: 0.5 (its ulp is 2^-24, HALF's subnormal step), the exponent
+#: re-bias 127 - 15 = 112, the smallest normal HALF 2^-14 (biased float32 exponent 113) and float32 infinity.
+_HALF_SUB_ADD = np.float32(0.5)
+_HALF_SUB_ADD_BITS = np.uint32(0x3F000000)
+_HALF_REBIAS = np.uint32(112 << 10)
+_HALF_NORMAL_MIN_BITS = np.uint32(113 << 23)
+_F32_INF_BITS = np.uint32(0x7F800000)
+#: float32 pattern of 2^16: a value rounded to it or beyond overflows HALF (65504 is its largest finite value).
+_HALF_OVERFLOW_BITS = np.uint32(0x47800000)
+
+
+def _half_parts(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """IEEE 754 binary16 of float32 values ``x`` (any shape), rounded to nearest, ties to even, as numpy's
+    ``x.astype(np.float16)`` (bit for bit, also for -0, overflow to inf, inf; NaN gives the quiet NaN 0x7E00):
+    returns ``(bits (uint16, same shape), value of each HALF as float32 (exact))``.
+
+    Normal HALF results: the float32 pattern rounded at bit 13 (the carry into the exponent is right) and
+    re-biased; subnormal ones (|x| < 2^-14): ``|x| + 0.5`` in float32 arithmetic rounds |x| to the
+    multiple of 2^-24 (HALF's subnormal step), ties to even, and its low bits are the HALF's. Integer and float
+    passes only, the two cases merged with bit masks (no branches): numpy's own cast takes a slow path for
+    HALF-subnormal results (up to ~15x slower).
+    """
+    b = x.view(np.uint32)
+    a = b & np.uint32(0x7FFFFFFF)
+    rr = a >> np.uint32(13)
+    rr &= np.uint32(1)
+    rr += a
+    rr += np.uint32(0x0FFF)  # a + 0xFFF + lsb: round to nearest even at bit 13
+    rr &= np.uint32(0xFFFFE000)  # the rounded float32 pattern (normal HALF range)
+    with np.errstate(invalid="ignore", over="ignore"):
+        sub_f = a.view(np.float32) + _HALF_SUB_ADD  # rounded to 2^-24 steps (inf / NaN: replaced below)
+        vb = (sub_f - _HALF_SUB_ADD).view(np.uint32)
+    msk = (a < _HALF_NORMAL_MIN_BITS).astype(np.uint32)
+    np.negative(msk, out=msk)  # all ones where the HALF is subnormal
+    vb ^= rr  # value = msk ? subnormal value : rounded pattern
+    vb &= msk
+    vb ^= rr
+    h32 = rr >> np.uint32(13)
+    h32 -= _HALF_REBIAS  # wraps around for the subnormal range: replaced below
+    np.minimum(h32, np.uint32(0x7C00), out=h32)  # overflow (>= 65520 after rounding) and inf -> inf
+    sb = sub_f.view(np.uint32)
+    sb -= _HALF_SUB_ADD_BITS
+    sb ^= h32  # bits = msk ? subnormal bits : normal bits
+    sb &= msk
+    sb ^= h32
+    big = rr >= _HALF_OVERFLOW_BITS
+    if big.any():
+        vb[big] = _F32_INF_BITS
+    nan = a > _F32_INF_BITS
+    if nan.any():
+        sb[nan] = 0x7E00
+        vb[nan] = 0x7FC00000
+    h = sb.astype(np.uint16)
+    sign = b >> np.uint32(16)
+    sign &= np.uint32(0x8000)
+    h |= sign.astype(np.uint16)
+    vb |= b & np.uint32(0x80000000)
+    return h, vb.view(np.float32)
+
+
+def float_to_half(x: np.ndarray) -> np.ndarray:
+    """``x.astype(np.float16)`` bit for bit (round to nearest even; NaN -> quiet NaN), faster where results are
+    HALF subnormals: ``x`` any shape (converted to float32), returns float16 of the same shape."""
+    x = np.ascontiguousarray(x, dtype=np.float32)
+    flat = x.reshape(-1)
+    out = np.empty(flat.size, np.uint16)
+    for i in range(0, flat.size, ENCODE_CHUNK):
+        out[i:i + ENCODE_CHUNK] = _half_parts(flat[i:i + ENCODE_CHUNK])[0]
+    return out.view(np.float16).reshape(x.shape)
 
 
 def scale_exponent(peak: float, bits: int = 10) -> int:
@@ -213,6 +294,36 @@ def _energy_error(orig: np.ndarray, back: np.ndarray, total: float, mask: np.nda
     return float(np.sum(d, dtype=np.float64)) / total, under
 
 
+def _encode_half(x: np.ndarray, e: int, mantissa_bits: int | None, total: float
+                 ) -> tuple[np.ndarray, float, float]:
+    """HALF encoding of a layer ``x`` (float32, W sr^-1 m^-2 nm^-1, any shape) scaled by 2^e: returns
+    ``(half(round_m(x * 2^e)) as float16 of x's shape, error, underflow error)``, the errors as
+    :func:`_energy_error` of the values read back (``half / 2^e``), the underflow one over the values below
+    2^-14 after scaling. Works in chunks of :data:`ENCODE_CHUNK` values (cache-sized temporaries); the sums
+    are float64 per chunk, so they may differ from one whole-array sum in the last digits."""
+    x = np.ascontiguousarray(x, dtype=np.float32)
+    flat = x.reshape(-1)
+    out = np.empty(flat.size, np.uint16)
+    s = np.float32(2.0 ** e)
+    err = under = 0.0
+    for i in range(0, flat.size, ENCODE_CHUNK):
+        xc = flat[i:i + ENCODE_CHUNK]
+        scaled = xc * s  # exact: power of two (unless float32 over/underflows: store_layer checks the peak)
+        if mantissa_bits is not None:
+            _round_mantissa_inplace(scaled, int(mantissa_bits))
+        out[i:i + ENCODE_CHUNK], back = _half_parts(scaled)
+        back /= s  # the value read back
+        back -= xc
+        np.abs(back, out=back)
+        err += float(np.sum(back, dtype=np.float64))
+        with np.errstate(invalid="ignore"):  # inf * 0 (an overflow, refused by store_layer) -> NaN
+            back *= scaled < HALF_MIN_NORMAL  # (a multiply: a masked sum is ~8x slower on mixed masks)
+        under += float(np.sum(back, dtype=np.float64))
+    if total <= 0:
+        return out.view(np.float16).reshape(x.shape), 0.0, 0.0
+    return out.view(np.float16).reshape(x.shape), err / total, under / total
+
+
 def store_layer(arr: np.ndarray, storage: str | Storage, what: str = "layer") -> LayerStore:
     """Encode one radiance layer for storage (no I/O): the scale rule of ``docs/corpus-format.md`` section 6.
 
@@ -234,12 +345,7 @@ def store_layer(arr: np.ndarray, storage: str | Storage, what: str = "layer") ->
     if st.dtype == "float16":
         peak = float(np.max(x)) if x.size else 0.0
         e = scale_exponent(peak, st.bits)
-        scaled = x * np.float32(2.0 ** e)  # exact: power of two (unless float32 over/underflows, checked below)
-        if st.mantissa_bits is not None:
-            scaled = round_mantissa(scaled, st.bits)
-        h = scaled.astype(np.float16)
-        back = h.astype(np.float32) / np.float32(2.0 ** e)
-        err, under = _energy_error(x, back, total, scaled < HALF_MIN_NORMAL)
+        h, err, under = _encode_half(x, e, st.mantissa_bits, total)
         reason = None
         if peak > 0 and not HALF_MIN_NORMAL <= peak * 2.0 ** e <= HALF_MAX:
             reason = f"peak {peak:.3g} cannot be scaled into HALF's range by 2^{e}"
@@ -247,7 +353,7 @@ def store_layer(arr: np.ndarray, storage: str | Storage, what: str = "layer") ->
             reason = (f"HALF x 2^{e} would change the radiance by {under:.2g} (energy-weighted, values below "
                       f"HALF's normal range) > {st.max_underflow_error:.2g}")
         if reason is None:
-            return LayerStore(np.ascontiguousarray(h), "float16", float(2.0 ** e), err, under)
+            return LayerStore(h, "float16", float(2.0 ** e), err, under)
         log.debug("%s: %s: stored FLOAT", what, reason)
         fb = round_mantissa(x, st.bits) if st.mantissa_bits is not None else np.ascontiguousarray(x)
         return LayerStore(fb, "float32", 1.0, _energy_error(x, fb, total)[0], 0.0, reason)
