@@ -340,6 +340,117 @@ def test_interrupted_scene_is_not_recorded(tmp_path):
     assert w.is_complete(meta["scene_id"])
 
 
+# ---------------------------------------------------------------------------- threaded scene writer
+def _serial_files(meta, frames, dtype="compact"):
+    return dict(C.encode_scene(meta["scene_id"], fake_scene(), meta, frames, dtype=dtype))
+
+
+def test_threaded_writer_writes_what_the_serial_writer_writes(tmp_path):
+    meta = fake_meta(frames=3)
+    frames = fake_frames(meta)
+    want = _serial_files(meta, frames)
+    notes: list[str] = []
+    with C.ThreadedSceneWriter(tmp_path, meta["scene_id"], fake_scene(), meta, dtype="compact", notes=notes) as w:
+        for fr in frames:
+            w.put(fr)
+        hashes = w.close()
+    assert not w.alive
+    assert sorted(hashes) == sorted(want)
+    for rel, data in want.items():
+        assert (tmp_path / rel).read_bytes() == data, rel
+        assert hashes[rel] == C.sha256_file(tmp_path / rel)
+    assert _no_tmp(tmp_path)
+
+
+def test_threaded_writer_hands_over_one_frame_at_a_time(tmp_path, monkeypatch):
+    """put() returns only once the worker has taken the frame, i.e. finished encoding the one before."""
+    import threading
+
+    from lfmbench.corpus import writer as W
+
+    meta = fake_meta(frames=3)
+    frames = fake_frames(meta)
+    gate = threading.Event()
+    real = W.encode_static_exr
+
+    def slow(*a, **k):
+        gate.wait(10)
+        return real(*a, **k)
+    monkeypatch.setattr(W, "encode_static_exr", slow)
+    w = C.ThreadedSceneWriter(tmp_path, meta["scene_id"], fake_scene(), meta)
+    w.put(frames[0])  # taken at once: the worker was idle
+    t = threading.Thread(target=w.put, args=(frames[1],))
+    t.start()
+    t.join(0.3)
+    assert t.is_alive()  # blocked: frame 0 is still being encoded
+    gate.set()
+    t.join(10)
+    assert not t.is_alive()
+    w.put(frames[2])
+    assert sorted(w.close()) == sorted(_serial_files(meta, frames))
+
+
+def test_threaded_writer_raises_the_workers_error_with_its_message(tmp_path):
+    meta = fake_meta(frames=3)
+    frames = fake_frames(meta)
+    bad = dict(frames[1], frame=0)  # a repeated frame index: encode_scene refuses it in the worker
+    with pytest.raises(ValueError, match=r"frame index 0 is invalid or repeated"):
+        with C.ThreadedSceneWriter(tmp_path, meta["scene_id"], fake_scene(), meta) as w:
+            w.put(frames[0])
+            w.put(bad)
+            w.put(frames[2])  # the worker has failed by now at the latest: raised here or by close()
+            w.close()
+    assert not w.alive
+    assert _no_tmp(tmp_path)
+
+
+def test_threaded_writer_disk_full_is_a_corpus_write_error(tmp_path, monkeypatch):
+    meta = fake_meta(frames=2)
+    frames = fake_frames(meta)
+    calls = {"n": 0}
+    real_fsync = os.fsync
+
+    def full(fd):
+        calls["n"] += 1
+        if calls["n"] > 3:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        real_fsync(fd)
+    monkeypatch.setattr(os, "fsync", full)
+    with pytest.raises(C.CorpusWriteError, match="disk full") as ei:
+        with C.ThreadedSceneWriter(tmp_path, meta["scene_id"], fake_scene(), meta) as w:
+            for fr in frames:
+                w.put(fr)
+            w.close()
+    assert ei.value.errno == errno.ENOSPC and not w.alive
+    assert _no_tmp(tmp_path)
+
+
+def test_threaded_writer_stops_on_an_interrupt_in_the_producer(tmp_path):
+    """Ctrl-C (or any error) while the next frame renders: the worker stops at a file boundary and is joined;
+    every file on disk is complete (temp name, then rename) and the later frames are never written."""
+    meta = fake_meta(frames=3)
+    frames = fake_frames(meta)
+    want = _serial_files(meta, frames)
+
+    def render():
+        yield frames[0]
+        raise KeyboardInterrupt
+    with pytest.raises(KeyboardInterrupt):
+        with C.ThreadedSceneWriter(tmp_path, meta["scene_id"], fake_scene(), meta) as w:
+            for fr in render():
+                w.put(fr)
+            w.close()
+    assert not w.alive
+    assert _no_tmp(tmp_path)
+    written = {p.relative_to(tmp_path).as_posix() for p in tmp_path.rglob("*") if p.is_file()}
+    assert written <= set(want)
+    assert not any("/f001/" in r or "/f002/" in r for r in written)
+    for rel in written:
+        assert (tmp_path / rel).read_bytes() == want[rel], rel  # no half-written file
+    with pytest.raises(RuntimeError, match="aborted"):
+        w.close()
+
+
 def test_is_complete_checks_checksums(one_scene):
     root, meta, _ = one_scene
     w = C.CorpusWriter(root)

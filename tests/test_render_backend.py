@@ -125,6 +125,60 @@ def test_cli_explicit_cuda_without_gpu_is_a_one_line_error(fresh, monkeypatch, t
     assert r.exit_code == 2 and "no working CUDA device" in r.output and not out.exists()
 
 
+# ----------------------------------------------------------------------------------- background probes
+@pytest.fixture
+def no_pending():
+    yield
+    backend._stop_pending()
+
+
+@pytest.mark.skipif(backend.find_libcuda() is not None, reason="auto probes CUDA first on this machine")
+def test_background_llvm_probe_gives_the_foreground_verdict(fresh, no_pending, monkeypatch):
+    libs = backend.find_libllvm()
+    if not libs:
+        pytest.skip("no libLLVM candidate on this machine")
+    started = backend.start_probes()
+    assert started == [f"llvm:{libs[0]}"]
+    assert backend.start_probes() == []  # already running: not started twice
+    spawned = []
+    real_spawn = backend._spawn
+    monkeypatch.setattr(backend, "_spawn", lambda *a: spawned.append(1) or real_spawn(*a))
+    bg = backend.probe_llvm(libs[0])  # collects the background child's verdict
+    assert spawned == [] and not backend._pending
+    fg = backend.probe_llvm(libs[0], use_cache=False)  # a new child in the foreground
+    assert spawned == [1] and bg == fg
+    # the verdict is cached: no child at all the next time
+    assert backend.start_probes() == [] and not backend._pending
+    # a forced scalar variant or LFMBENCH_VARIANT=scalar_spectral needs no probe
+    assert backend.start_probes("scalar_spectral") == []
+
+
+def test_background_cuda_probe_gives_the_foreground_verdict(fresh, no_pending, monkeypatch, tmp_path):
+    fake = tmp_path / "libcuda.so.1"
+    fake.write_bytes(b"")  # not a library: the child fails in mi.set_variant (the same on any machine)
+    monkeypatch.setenv("DRJIT_LIBCUDA_PATH", str(fake))
+    assert backend.start_probes("cuda_ad_spectral") == ["cuda"]
+    assert backend.probe_cuda() is False
+    bg = backend.cuda_unavailable_reason()
+    assert not backend._pending and "ImportError" in bg
+    ok, fg = backend._run_cuda_child(str(fake.resolve()))  # foreground child
+    assert ok is False and fg == bg
+    assert backend.start_probes("cuda_ad_spectral") == []  # cached
+
+
+def test_uncollected_background_probe_is_stopped(fresh, monkeypatch, tmp_path):
+    fake = tmp_path / "libcuda.so.1"
+    fake.write_bytes(b"")
+    monkeypatch.setenv("DRJIT_LIBCUDA_PATH", str(fake))
+    monkeypatch.setattr(backend, "_CUDA_PROBE_SCRIPT", "import time; time.sleep(60)")
+    assert backend.start_probes("cuda_ad_spectral") == ["cuda"]
+    (proc, _, _), = backend._pending.values()
+    t0 = time.perf_counter()
+    backend._stop_pending()  # what runs at exit when a command ends before it needs the verdict
+    assert proc.returncode is not None and not backend._pending
+    assert time.perf_counter() - t0 < 10
+
+
 # ------------------------------------------------------------------------------------------ round-off
 def test_clamp_roundoff_zeroes_tiny_negatives_only():
     a = np.array([[2.0, -1.25e-9, 0.5], [0.0, 1.0, -2e-6]], np.float32)  # peak 2: tolerance 2e-6

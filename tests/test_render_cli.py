@@ -177,6 +177,42 @@ def test_scene_files(tmp_path, fake):
     assert fake == ["my_street"]
 
 
+# ------------------------------------------------------------------------- encoding overlaps rendering
+def test_frame_is_encoded_while_the_next_one_renders(tmp_path, monkeypatch):
+    """run_job: frame 0's EXR encoding (worker thread) is still running when frame 1's render starts (main
+    thread); a serial loop would only render frame 1 after frame 0's files are written (here: a timeout)."""
+    import threading
+
+    from lfmbench.corpus import writer as W
+    from tests.data.render import data as R
+
+    started_1 = threading.Event()
+    seen = {}
+    real_frames, real_encode = R.fake_render_frames, W.encode_static_exr
+
+    def frames(scene, opts):
+        for fr in real_frames(scene, opts):
+            if fr["frame"] == 1:
+                started_1.set()
+            seen.setdefault("render_thread", threading.current_thread().name)
+            yield fr
+
+    def encode(*a, **k):
+        if k["attrs"][C.ATTR["frame"]] == 0:
+            seen["overlap"] = started_1.wait(20)  # frame 0 is being encoded: does frame 1 render meanwhile?
+            seen["encode_thread"] = threading.current_thread().name
+        return real_encode(*a, **k)
+    monkeypatch.setattr(W, "encode_static_exr", encode)
+    be = fake_backend()
+    be = J.Backend(be.generate_scene, be.RenderOptions, be.scene_meta, frames, be.validate_scene)
+    job = J.make_jobs(tmp_path / "c", n_scenes=1, seed=1, options={"width": 24, "height": 16, "spp": 2,
+                                                                   "frames": 2, "bins": 2}, backend=be)[0]
+    res = J.run_job(job)
+    assert seen["overlap"] is True
+    assert seen["render_thread"] == "MainThread" and seen["encode_thread"].startswith("lfmbench-writer")
+    assert res["hashes"] and all((tmp_path / "c" / rel).is_file() for rel in res["hashes"])
+
+
 # --------------------------------------------------------------------------------------- pool / Ray
 @pytest.mark.slow
 def test_process_pool(tmp_path):
