@@ -156,11 +156,22 @@ def _read_cache(path: str) -> dict:
     return data if isinstance(data, dict) else {}
 
 
-def _cache_key(lib: str) -> str:
-    import mitsuba  # noqa: PLC0415 - heavy, needed only here
+def _mitsuba_version() -> str:
+    """The installed Mitsuba version, from the package metadata (no ``import mitsuba``: 0.2-0.3 s, which
+    :func:`start_probes` would spend before starting its child); ``mitsuba.__version__`` if there is none."""
+    from importlib import metadata  # noqa: PLC0415
 
+    try:
+        return metadata.version("mitsuba")
+    except metadata.PackageNotFoundError:  # e.g. a source build on PYTHONPATH
+        import mitsuba  # noqa: PLC0415
+
+        return mitsuba.__version__
+
+
+def _cache_key(lib: str) -> str:
     st = os.stat(lib)
-    return f"{lib}|{st.st_size}|{int(st.st_mtime)}|mitsuba-{mitsuba.__version__}"
+    return f"{lib}|{st.st_size}|{int(st.st_mtime)}|mitsuba-{_mitsuba_version()}"
 
 
 def probe_llvm(lib: str, use_cache: bool = True) -> bool:
@@ -226,15 +237,13 @@ def _gpu_models() -> list[str]:
 
 
 def _cuda_cache_key(lib: str) -> str:
-    import mitsuba  # noqa: PLC0415
-
     try:
         st = os.stat(lib)
         stamp = f"{st.st_size}|{int(st.st_mtime)}"
     except OSError:
         stamp = "?"
     return (f"{lib}|{stamp}|gpus={','.join(_gpu_models())}|"
-            f"visible={os.environ.get('CUDA_VISIBLE_DEVICES', '*')}|mitsuba-{mitsuba.__version__}")
+            f"visible={os.environ.get('CUDA_VISIBLE_DEVICES', '*')}|mitsuba-{_mitsuba_version()}")
 
 
 def probe_cuda(use_cache: bool = True) -> bool:

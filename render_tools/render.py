@@ -434,6 +434,9 @@ def render_frames(scene: dict, opts: RenderOptions) -> Iterator[dict]:
     groups = _selected_groups(scene, opts)
     from . import backend  # noqa: PLC0415
 
+    # numpy-only scene geometry and lamp spectra first: on a first run this overlaps the back-end probe, a child
+    # process that select_variant waits for (render_tools.backend.start_probes)
+    mcache: dict = ms.prepare_geometry(scene, {})  # BSDFs, static meshes and lamp spectra: once per scene
     variant = backend.select_variant(opts.variant)
     if variant.startswith("scalar"):
         raise RuntimeError("variant: rendering needs a JIT variant of Mitsuba (llvm_ad_spectral or "
@@ -445,7 +448,6 @@ def render_frames(scene: dict, opts: RenderOptions) -> Iterator[dict]:
     from . import tracer  # noqa: PLC0415
 
     geo = SceneGeometry(scene, opts)
-    mcache: dict = {}  # BSDFs loaded once per scene
     for n, tm in enumerate(timings):
         t_obj = 0.5 * (tm["window"][0] + tm["window"][1])
         loaded = mi.load_dict(ms.mitsuba_dict(scene, t_obj, emit="all", cache=mcache))

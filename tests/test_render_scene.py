@@ -347,3 +347,10 @@ def test_mitsuba_dict_cache_rebuilds_what_moves_and_equals_a_fresh_build():
     assert cache["rest_meshes"].keys() == rest.keys()  # nothing moving was cached
     assert all(cache["rest_meshes"][k] is v for k, v in rest.items())  # built once
     assert not any(("object", oid) in rest for oid in moving)
+    # what render_frames prepares before the back end is chosen (no Mitsuba) is the same geometry
+    prepared = mitsuba_scene.prepare_geometry(s, {})["rest_meshes"]
+    assert prepared.keys() == rest.keys()
+    for k, v in rest.items():
+        for x, y in zip(prepared[k] if k[0] == "light" else sum((m[1:] for m in prepared[k]), ()),
+                        v if k[0] == "light" else sum((m[1:] for m in v), ())):
+            np.testing.assert_array_equal(x, y, err_msg=str(k))
