@@ -362,6 +362,24 @@ def test_threaded_writer_writes_what_the_serial_writer_writes(tmp_path):
     assert _no_tmp(tmp_path)
 
 
+def test_parallel_encoding_gives_the_same_files_and_notes():
+    """encode_scene with a thread pool: the files of a frame encoded in parallel, yielded in the serial order
+    with the same bytes; the FLOAT-fallback note of the scene is the same."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    meta = fake_meta(frames=3)
+    frames = fake_frames(meta)
+    frames[1]["static"]["skymap"]["short"][:] = 1e-44  # too dim for any HALF scale: stored FLOAT, one note
+    serial_notes: list[str] = []
+    serial = list(C.encode_scene(meta["scene_id"], fake_scene(), meta, frames, notes=serial_notes))
+    notes: list[str] = []
+    with ThreadPoolExecutor(3) as pool:
+        par = list(C.encode_scene(meta["scene_id"], fake_scene(), meta, frames, notes=notes, executor=pool))
+    assert [r for r, _ in par] == [r for r, _ in serial]
+    assert all(a == b for (_, a), (_, b) in zip(par, serial))
+    assert notes == serial_notes and len(notes) == 1 and "skymap.exr [short]" in notes[0]
+
+
 def test_threaded_writer_hands_over_one_frame_at_a_time(tmp_path, monkeypatch):
     """put() returns only once the worker has taken the frame, i.e. finished encoding the one before."""
     import threading

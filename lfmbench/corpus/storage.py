@@ -272,6 +272,14 @@ class StorageStats:
         if ls.fallback:
             self.fallbacks.append(f"{what}: {ls.fallback}")
 
+    def merge(self, other: "StorageStats") -> None:
+        """Add another aggregate (e.g. of one file encoded in another thread) to this one."""
+        self.layers += other.layers
+        self.half += other.half
+        self.fallbacks.extend(other.fallbacks)
+        self.max_error = max(self.max_error, other.max_error)
+        self.max_underflow_error = max(self.max_underflow_error, other.max_underflow_error)
+
     def summary(self, what: str, storage: Storage) -> str:
         """One line: layers, HALF share, largest errors, FLOAT fallbacks (the first three named)."""
         s = (f"{what}: {self.layers} radiance layers, {self.half} HALF x 2^e ({storage.bits} mantissa bits, "
