@@ -81,7 +81,8 @@ def test_tiny_render_with_overlapping_capture_windows_loads_with_rolling_shutter
 
 # ------------------------------------------------------------------------------------- long sequences
 def test_encode_and_job_stream_frames_without_collecting_them(tmp_path):
-    """run_job writes frame n's files before frame n + 1 is rendered: nothing collects the frames."""
+    """run_job streams: frame n is written (in the writer thread) while frame n + 1 renders, and frame n + 2 is
+    not rendered before frame n is on disk: nothing collects the frames (at most one frame is pending)."""
     from tests.data.render import data as T
 
     pulled = []
@@ -90,8 +91,8 @@ def test_encode_and_job_stream_frames_without_collecting_them(tmp_path):
     def streaming_render(scene_, opts):
         for fr in T.fake_render_frames(scene_, opts):
             n = fr["frame"]
-            if n > 0:  # the previous frame is already on disk
-                assert (out / "scenes" / "scene00000" / C.frame_dir(n - 1) / "aux.exr").is_file()
+            if n > 1:  # the frame before the previous one is already on disk
+                assert (out / "scenes" / "scene00000" / C.frame_dir(n - 2) / "aux.exr").is_file()
             pulled.append(n)
             yield fr
 
