@@ -154,6 +154,7 @@ def main() -> None:
                      f"{g('load_dict', 0):.2f} | {wait:.2f} | {outside - named:.2f} | {enc:.1f} | {p['load']:.1f} |")
     lines += ["", "Run again with `python benchmarks/bench_render_phases.py` (about 3 minutes).", ""]
     out = Path(a.out) / "render-phases-benchmark.md"
+    out.parent.mkdir(parents=True, exist_ok=True)
     tmp_out = out.with_suffix(".md.tmp")
     tmp_out.write_text("\n".join(lines))
     os.replace(tmp_out, out)
