@@ -54,6 +54,55 @@ def test_round_mantissa_matches_float16_and_bound():
         C.round_mantissa(x, 0)
 
 
+# ------------------------------------------------------------------------------------ float32 -> HALF
+def test_float_to_half_is_numpys_cast_bit_for_bit():
+    """The fast conversion against numpy's own float16 cast (IEEE 754 round to nearest even): every 4099th
+    float32 bit pattern (both signs, subnormal, normal, overflow, inf) and the edge cases."""
+    from lfmbench.corpus.storage import _half_parts
+
+    pats = np.arange(0, 2 ** 32, 4099, dtype=np.uint64).astype(np.uint32).view(np.float32)
+    edges = np.array([0.0, -0.0, 2.0 ** -25, 3 * 2.0 ** -26, 2.0 ** -24, 1.5 * 2.0 ** -24, 2.5 * 2.0 ** -24,
+                      2.0 ** -14 - 2.0 ** -25, 2.0 ** -14 - 2.0 ** -26, 2.0 ** -14, 1 + 2.0 ** -11,
+                      1 + 3 * 2.0 ** -11, 65504.0, 65519.99, 65520.0, 1e30, np.inf, -np.inf, -1e-6], np.float32)
+    x = np.concatenate([pats, edges])
+    finite_or_inf = ~np.isnan(x)
+    with np.errstate(over="ignore", invalid="ignore"):
+        want = x.astype(np.float16)
+    bits, value = _half_parts(x)
+    np.testing.assert_array_equal(bits[finite_or_inf], want.view(np.uint16)[finite_or_inf])
+    np.testing.assert_array_equal(value[finite_or_inf].view(np.uint32),
+                                  want.astype(np.float32)[finite_or_inf].view(np.uint32))  # exact HALF values
+    assert np.isnan(bits.view(np.float16)[~finite_or_inf]).all() and np.isnan(value[~finite_or_inf]).all()
+    np.testing.assert_array_equal(C.float_to_half(x[finite_or_inf].reshape(-1, 1)).view(np.uint16).ravel(),
+                                  want.view(np.uint16)[finite_or_inf])
+
+
+@pytest.mark.parametrize("storage", ["compact", "float16"])
+def test_store_layer_equals_the_direct_formula_over_many_chunks(storage):
+    """store_layer (chunked, fused) against the formula written out with numpy casts on the whole layer: a
+    night-like layer (values over 12 decades, most of them HALF subnormals after scaling) larger than a chunk."""
+    from lfmbench.corpus.storage import ENCODE_CHUNK
+
+    rng = np.random.default_rng(5)
+    x = np.exp(rng.uniform(np.log(1e-9), np.log(1e3), (3, 300, 301))).astype(np.float32)
+    x[:, :40] = 0.0
+    assert x.size > ENCODE_CHUNK
+    st = C.STORAGES[storage]
+    ls = C.store_layer(x, st)
+    e = _expected_exponent(float(x.max()), st.bits)
+    scaled = x * np.float32(2.0 ** e)
+    if st.mantissa_bits is not None:
+        scaled = C.round_mantissa(scaled, st.bits)
+    want = scaled.astype(np.float16)
+    assert ls.pixel_type == "float16" and ls.scale == 2.0 ** e
+    np.testing.assert_array_equal(ls.data.view(np.uint16), want.view(np.uint16))
+    d = np.abs(want.astype(np.float32) / np.float32(2.0 ** e) - x).astype(np.float64)
+    total = x.sum(dtype=np.float64)
+    assert ls.error == pytest.approx(d.sum() / total, rel=1e-9)
+    assert ls.underflow_error == pytest.approx(d[scaled < C.HALF_MIN_NORMAL].sum() / total, rel=1e-9)
+    assert (scaled < C.HALF_MIN_NORMAL).mean() > 0.3  # premise: many subnormals
+
+
 # ------------------------------------------------------------------------------------------- scaled HALF
 @pytest.mark.parametrize("level", [1e-6, 3.0, 2e5])  # night, day, above HALF_MAX (65504)
 def test_scaled_half_equals_independent_float16(level):

@@ -50,7 +50,7 @@ from lfmbench.corpus.reader import Corpus
 from lfmbench.corpus.storage import (COMPRESSIONS, DEFAULT_STORAGE, EXTRA_COMPRESSIONS, HALF_MAX, HALF_MIN_NORMAL,
                                      HALF_PRECISION_RANGE_LOG2, HALF_UNDERFLOW_ERROR_FRACTION, MANTISSA_BITS,
                                      SCALE_EXP_RANGE, STORAGES, LayerStore, Storage, StorageStats, resolve_storage,
-                                     round_mantissa, scale_attr, scale_exponent, store_layer)
+                                     float_to_half, round_mantissa, scale_attr, scale_exponent, store_layer)
 from lfmbench.corpus.validate import ValidationReport, validate_corpus
 from lfmbench.corpus.writer import CorpusWriter, ThreadedSceneWriter, encode_scene, prune_scene_dir, write_files
 from lfmbench.fileio import TMP_PREFIX, atomic_write_bytes, atomic_write_json
@@ -66,5 +66,5 @@ __all__ = [
     "atomic_write_bytes", "atomic_write_json", "make_splits", "validate_meta", "Corpus", "CorpusWriter",
     "ValidationReport", "validate_corpus", "encode_scene", "write_files", "prune_scene_dir", "ExrPart",
     "check_scene_id", "manifest_entry_errors", "inside_root", "check_splits", "RADIANCE_MAX",
-    "ThreadedSceneWriter",
+    "ThreadedSceneWriter", "float_to_half",
 ]
