@@ -243,7 +243,7 @@ def iset_scene_meta(prep: _Prepared) -> dict:
                    "readout_s": readout, "capture_window_s": tl + readout, "bins": 0},
         "camera": {"fov_x_deg": fov, "K": K, "poses": poses, "speed_mps": v, "yaw_rate_rad_s": 0.0},
         "groups": groups, "lights": [],
-        "source": {"dataset": "ISET-LFM", "scene_dir": str(sc.root), "frame_files": [f"{f:02d}.exr" for f in
+        "source": {"dataset": "ISET-LFM", "scene_dir": sc.root.name, "frame_files": [f"{f:02d}.exr" for f in
                                                                                     sc.frames],
                    "radiance": "as rendered by PBRT/ISET3D (not rescaled)", "notes": prep.notes},
     }
@@ -355,7 +355,9 @@ def import_isetlfm(src: str | Path, out: str | Path, *, scenes: list[str] | None
                 warnings.warn(f"scene {sc.scene_id}: {msg}", stacklevel=2)
                 rep.warnings.append(f"scene {sc.scene_id}: {msg}")
             meta = iset_scene_meta(prep)
-            scene = {"source": "ISET-LFM", "scene_id": sc.scene_id, "dataset_dir": str(sc.root),
+            # the scene's folder relative to the dataset folder: no path of the importing machine in the corpus
+            # (the same download imported anywhere gives the same files and hashes)
+            scene = {"source": "ISET-LFM", "scene_id": sc.scene_id, "dataset_dir": sc.root.name,
                      "imported_by": "lfmbench import-isetlfm"}
             writer.write_scene(sc.scene_id, scene, meta, iset_scene_frames(prep, repair=repair, counts=rep.repaired))
             rep.imported.append(sc.scene_id)

@@ -49,6 +49,8 @@ BBOX_TIME_SAMPLES = 17
 CROP_QUANTUM_PX = 1
 #: Minimum depth of a projected point treated as in front of the camera, m.
 MIN_DEPTH_M = 0.05
+#: Ways of tracing the static groups' full frames (:class:`RenderOptions` ``static_pass``).
+STATIC_PASSES = ("union", "per_group")
 
 
 @dataclass
@@ -65,7 +67,10 @@ class RenderOptions:
     groups: groups to render (None = all the scene has). seed: Monte Carlo seed. variant: Mitsuba variant,
     ``cuda_ad_spectral``, ``llvm_ad_spectral`` or ``scalar_spectral`` (None = auto, see
     :mod:`render_tools.backend`). aux: render AOVs. light_spp: spp of the per-light crops
-    (None = spp). pad_px: padding of a light's crop around its moving screen bbox, px.
+    (None = spp). pad_px: padding of a light's crop around its moving screen bbox, px. static_pass: how the
+    full frames of the static groups are traced: ``"union"`` (default: one camera path per sample records every
+    static group, next-event estimation draws from all their lamps, :class:`render_tools.tracer.LightSets`) or
+    ``"per_group"`` (one path per group and sample, as before 2026-11-23); both are unbiased per group.
     """
 
     width: int = 640
@@ -84,6 +89,7 @@ class RenderOptions:
     aux: bool = True
     light_spp: int | None = None
     pad_px: int = 2
+    static_pass: str = "union"
 
     def __post_init__(self):
         self.bands_nm = tuple(float(b) for b in self.bands_nm)
@@ -99,6 +105,8 @@ class RenderOptions:
                 raise ValueError(f"{name}: must be an integer >= 1, got {v!r}")
         if self.light_spp is not None and (not isinstance(self.light_spp, (int, np.integer)) or self.light_spp < 1):
             raise ValueError(f"light_spp: must be None or an integer >= 1, got {self.light_spp!r}")
+        if self.static_pass not in STATIC_PASSES:
+            raise ValueError(f"static_pass: must be one of {STATIC_PASSES}, got {self.static_pass!r}")
         if not isinstance(self.pad_px, (int, np.integer)) or self.pad_px < 0:
             raise ValueError(f"pad_px: must be an integer >= 0, got {self.pad_px!r}")
         if not self.bands_nm:
@@ -252,6 +260,13 @@ def _selected_groups(scene: dict, opts: RenderOptions) -> dict:
     return {g: have[g] for g in opts.groups if g in have}
 
 
+def static_union(groups: dict, opts: RenderOptions) -> list[str]:
+    """The static groups traced together (``opts.static_pass == "union"``, two or more static groups selected:
+    ``groups`` as :func:`_selected_groups`), in scene order; ``[]`` otherwise (each traced on its own)."""
+    static = [g for g, info in groups.items() if not info["flicker"]]
+    return static if opts.static_pass == "union" and len(static) >= 2 else []
+
+
 def scene_meta(scene: dict, opts: RenderOptions) -> dict:
     """The ``meta.json`` content of a scene rendered with ``opts`` (see module docstring and the contract).
 
@@ -291,7 +306,7 @@ def scene_meta(scene: dict, opts: RenderOptions) -> dict:
         "groups": groups,
         "lights": lights,
         "render": {"spp": opts.spp, "light_spp": opts.light_spp or opts.spp, "seed": opts.seed,
-                   "pad_px": opts.pad_px},
+                   "pad_px": opts.pad_px, "static_pass": opts.static_pass},
     }
 
 
@@ -369,18 +384,25 @@ def plan_frame(scene: dict, opts: RenderOptions, n: int, sets, geo: SceneGeometr
     full = (0, 0, opts.height, opts.width)
     light_spp = opts.light_spp or opts.spp
     tiles, plan, visible = [], [], set()
+    (sa, sb), (la, lb) = tm["short"], tm["long"]
+    # the long window = the short one inside it + the rest: the long estimate reuses the short samples
+    # (rest_spp: same variance as ``spp`` over the whole long window, at less cost; :func:`rest_spp`)
+    wins = [("short", sa, sb - sa, math.inf, 0.0, 1.0)]
+    if (lb - la) - (sb - sa) > 1e-12 * (lb - la):
+        wins.append(("rest", la, (lb - la) - (sb - sa), sa, sb - sa, (sb - sa) / (lb - la)))
+    union = list(getattr(sets, "union", ()) or ())
+    if union:  # the static groups' full frames: one tile per window records all of them (one image per slot)
+        for win, t0, dt, gap_at, gap_len, frac in wins:
+            plan.append(("union", tuple(union), win, full, len(tiles), 1))
+            tiles.append(Tile(full, 1, t0, dt, opts.spp if win == "short" else rest_spp(opts.spp, frac),
+                              sets["union:static"], gap_at=gap_at, gap_len=gap_len, slots=len(union),
+                              key=_seed("union", "long" if win == "rest" else win)))
     for g, info in _selected_groups(scene, opts).items():
         lamps = [lt for lt in scene["lights"] if lt["group"] == g]
         if not info["flicker"]:
             k = sets[f"group:{g}"]
-            (sa, sb), (la, lb) = tm["short"], tm["long"]
-            # the long window = the short one inside it + the rest: the long estimate reuses the short samples
-            # (rest_spp: same variance as ``spp`` over the whole long window, at less cost; :func:`rest_spp`)
-            wins = [("short", sa, sb - sa, math.inf, 0.0, 1.0)]
-            if (lb - la) - (sb - sa) > 1e-12 * (lb - la):
-                wins.append(("rest", la, (lb - la) - (sb - sa), sa, sb - sa, (sb - sa) / (lb - la)))
             for win, t0, dt, gap_at, gap_len, frac in wins:
-                for kind, crop, n_s, key in [("static", full, opts.spp, None)] + [
+                for kind, crop, n_s, key in [("static", full, opts.spp, None)] * (g not in union) + [
                         ("refine", geo.light_bbox(lt, t_obj, la, lb) if win == "rest" else
                          geo.light_bbox(lt, t_obj, sa, sb), light_spp, lt["id"])
                         for lt in (lamps if light_spp > opts.spp else ())]:
@@ -451,13 +473,18 @@ def render_frames(scene: dict, opts: RenderOptions) -> Iterator[dict]:
     for n, tm in enumerate(timings):
         t_obj = 0.5 * (tm["window"][0] + tm["window"][1])
         loaded = mi.load_dict(ms.mitsuba_dict(scene, t_obj, emit="all", cache=mcache))
-        sets = tracer.LightSets(mi, dr, loaded, scene, list(groups))
+        sets = tracer.LightSets(mi, dr, loaded, scene, list(groups), union=static_union(groups, opts))
         tr = tracer.Tracer(mi, dr, loaded, sets, geo.ego, geo.fov, (opts.width, opts.height), opts.bands_nm,
                            opts.band_width_nm)
         tiles, plan, visible = plan_frame(scene, opts, n, sets, geo)
         imgs = tr.render(tiles, _seed(opts.seed, n, "frame")) if tiles else []
         out = {"frame": n, "static": {}, "lights": {}, "aux": {}}
         for kind, g, key, bb, ti, rep in plan:
+            if kind == "union":  # one image per static group (slot), in the union's order
+                for j, gj in enumerate(g):
+                    out["static"].setdefault(gj, {})[key] = backend.clamp_roundoff(
+                        imgs[ti][j], name=f"frame {n} {gj} static {key}")[0]
+                continue
             img = backend.clamp_roundoff(imgs[ti], name=f"frame {n} {g} {kind} {key}")
             if kind == "static":
                 out["static"].setdefault(g, {})[key] = img[0]

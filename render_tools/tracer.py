@@ -83,7 +83,9 @@ class Tile:
     the list (a group left out changes nothing in the others). gap_at, gap_len: a time interval [gap_at,
     gap_at + gap_len) (s, absolute) cut out of a one-bin tile: its samples cover [t_start, t_start + bin_len +
     gap_len) minus the gap (a long exposure without the short one inside it). The tile's output is (K, C, h, w)
-    float32 radiance, W sr^-1 m^-2 nm^-1, each bin the time average over its interval.
+    float32 radiance, W sr^-1 m^-2 nm^-1, each bin the time average over its interval. slots: the number of
+    images the tile records, 1, or for a tile of a *union* set (:class:`LightSets`) its number of member groups:
+    the output is then (slots, K, C, h, w), one image per group in the union's order.
     """
 
     crop: tuple
@@ -97,6 +99,7 @@ class Tile:
     key: int = 0
     gap_at: float = math.inf
     gap_len: float = 0.0
+    slots: int = 1
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -115,11 +118,25 @@ class LightSets:
     emitter and beam emitter (or none), position (m, world), axis (unit), the cosine of the beam's cut-off
     (:data:`NO_BEAM` without one, :data:`ENV_ROW` for the environment) and intensity (cd: luminance x face
     area); :meth:`Tracer._lamp_weights` turns them into selection weights at a shading point.
+
+    ``union`` (group names, at least two of ``groups``): one more set, ``union:static``, whose members are the
+    rows of those groups, each row tagged with its group's *slot* (its index in ``union``). A lane of a union set
+    follows one camera path and records the light of every member group separately, one image per slot
+    (:class:`Tile` ``slots``): emission hits go to the slot of the emitter hit, and next-event estimation draws
+    one emitter of the whole union (:meth:`Tracer._choose_light`). By linearity each slot's image is the image of
+    the scene in which only that group emits, as with one set per group, at about a third of the camera paths and
+    shadow rays for three groups (docs/rendering.md, "Static groups in one pass").
     """
 
-    def __init__(self, mi, dr, loaded, scene: dict, groups):
+    def __init__(self, mi, dr, loaded, scene: dict, groups, union=()):
         self.names: list[str] = []
         members: list[list] = []  # per set: [(face emitter, beam emitter or None, geometry row)]
+        union = list(union)
+        if union and (len(union) < 2 or len(set(union)) != len(union) or not set(union) <= set(groups)):
+            raise ValueError(f"union: needs two or more distinct groups of {list(groups)}, got {union}")
+        self.union: list[str] = union
+        #: Images per lane: the number of groups of the union set (1 without one).
+        self.slots: int = max(1, len(union))
         by_light: dict[int, tuple] = {}
         sky = []
         shapes = {sh.id(): sh for sh in loaded.shapes()}
@@ -156,9 +173,18 @@ class LightSets:
                                    if lt["group"] == g and lt["id"] in by_light])
         for lid, row in by_light.items():
             add(f"light:{lid}", [row])
-        # flat rows; per emitter registry id: (its group set, row, is beam) and (its light set, row, is beam)
-        rows, faces, beams, start, count = [], [], [], [], []
-        group_of, light_of = {}, {}
+        slot_of_row: list[int] = []  # slot of each row of the union set, in member order
+        if union:
+            urows = []
+            for j, g in enumerate(union):
+                mem = members[self.index[f"group:{g}"]] if f"group:{g}" in self.index else []
+                urows += mem
+                slot_of_row += [j] * len(mem)
+            add("union:static", urows)
+        # flat rows; per emitter registry id: (its group set, row, is beam), (its light set, row, is beam) and
+        # (its union set, row, is beam)
+        rows, faces, beams, start, count, slot = [], [], [], [], [], []
+        group_of, light_of, union_of = {}, {}, {}
 
         def eid(e):
             return int(dr.reinterpret_array(mi.UInt32, mi.EmitterPtr(e))[0])
@@ -166,17 +192,20 @@ class LightSets:
         for k, mem in enumerate(members):
             start.append(len(rows))
             count.append(len(mem))
-            for face, beam, geo in mem:
-                of = group_of if self.names[k].startswith("group:") else light_of
+            kind = self.names[k].split(":")[0]
+            of = {"group": group_of, "light": light_of, "union": union_of}[kind]
+            for m, (face, beam, geo) in enumerate(mem):
                 of[eid(face)] = (k, len(rows), 0)
                 if beam is not None:
                     of[eid(beam)] = (k, len(rows), 1)
                 faces.append(face)
                 beams.append(beam)
                 rows.append(geo)
+                slot.append(slot_of_row[m] if kind == "union" else 0)
         n_id = max(list(group_of) + list(light_of), default=0) + 1
-        tab = np.full((6, n_id), NO_SET, np.uint32)  # group set, its row, is beam, light set, its row, is beam
-        for j, of in ((0, group_of), (3, light_of)):
+        # per emitter: group set, its row, is beam; light set, row, is beam; union set, row, is beam
+        tab = np.full((9, n_id), NO_SET, np.uint32)
+        for j, of in ((0, group_of), (3, light_of), (6, union_of)):
             for e, (k, r, isb) in of.items():
                 tab[j, e], tab[j + 1, e], tab[j + 2, e] = k, r, isb
         # a dummy last entry: no table has a single entry (Dr.Jit loads size-1 arrays as scalars with an alignment
@@ -185,7 +214,8 @@ class LightSets:
         self.beams = mi.EmitterPtr(beams + beams[-1:]) if faces else None
         self.start = mi.UInt32(np.asarray(start + [0], np.uint32))
         self.count = mi.UInt32(np.asarray(count + [0], np.uint32))
-        self.tab = [mi.UInt32(t) for t in np.concatenate([tab, np.full((6, 1), NO_SET, np.uint32)], 1)]
+        self.tab = [mi.UInt32(t) for t in np.concatenate([tab, np.full((9, 1), NO_SET, np.uint32)], 1)]
+        self.slot = mi.UInt32(np.asarray(slot + slot[-1:] if slot else [0, 0], np.uint32))
         geo = np.asarray(rows + rows[-1:] if rows else [[0.0] * 8] * 2, dtype=np.float32).T
         self.geo = [mi.Float(np.ascontiguousarray(c)) for c in geo]
         self.n_id = dr.opaque(mi.UInt32, n_id)
@@ -236,6 +266,7 @@ class Tracer:
         self.C = len(bands_nm)
         self.P = cam_mod.n_passes(self.C)
         self.max_depth = int(max_depth)
+        self.S = int(sets.slots)  # images per lane (the union set's groups; 1 without a union)
         K = cam_mod.intrinsics(self.W, self.H, fov_x_deg)
         o = lambda v: dr.opaque(mi.Float, float(v))  # noqa: E731 - every scene number is kernel data
         self.f, self.cx, self.cy = o(K[0, 0]), o(K[0, 2]), o(K[1, 2])
@@ -304,14 +335,17 @@ class Tracer:
             if t.gap_len < 0 or (t.gap_len > 0 and t.bins != 1):
                 raise ValueError(f"tiles[{i}]: a time gap needs gap_len >= 0 s and one bin, got {t.gap_len} s, "
                                  f"{t.bins} bins")
-            outs.append((size, (t.bins, C, h, w)))
+            if not 1 <= t.slots <= self.S:
+                raise ValueError(f"tiles[{i}]: slots {t.slots} not in [1, {self.S}] (the light sets' union has "
+                                 f"{self.S} group(s))")
+            outs.append((size, (t.slots, t.bins, C, h, w) if t.slots > 1 else (t.bins, C, h, w)))
             n_split = max(1, -(-h * w * t.bins * P * t.spp // MAX_LANES))
             base, extra = divmod(t.spp, n_split)
             for j in range(n_split):
                 sp = base + (j < extra)
                 if sp:
                     parts.append((i, sp, 1.0 / t.spp, size, j))
-            size += t.bins * C * h * w
+            size += t.slots * t.bins * C * h * w
         buf = dr.zeros(mi.Float, max(size, 1))
         batch, lanes = [], 0
         launch = 0
@@ -339,7 +373,7 @@ class Tracer:
             y0, x0, y1, x1 = t.crop
             key = (int(t.key) * 0x9E3779B1 + j * 0x85EBCA77) & 0xFFFFFFFF
             rows.append((off, y0, x0, y1 - y0, x1 - x0, t.bins, sp, t.light_set, out, t.t_start, t.bin_len, wgt,
-                         *[float(v) for v in t.velocity], t.t_ref, key, min(t.gap_at, 3e38), t.gap_len))
+                         *[float(v) for v in t.velocity], t.t_ref, key, min(t.gap_at, 3e38), t.gap_len, t.slots))
             off += (y1 - y0) * (x1 - x0) * t.bins * self.P
         # a dummy last row: no table has a single entry (Dr.Jit loads size-1 arrays as scalars with an alignment
         # that depends on the allocation, which changes the kernel's hash and forces a recompile)
@@ -348,7 +382,7 @@ class Tracer:
         F = lambda c: mi.Float(a[:, c].astype(np.float32))  # noqa: E731
         tab = {"off": mi.UInt32(np.append(a[:-1, 0], off).astype(np.uint32)), "y0": U(1), "x0": U(2), "h": U(3),
                "w": U(4), "K": U(5), "spp": U(6), "set": U(7), "out": U(8), "t0": F(9), "dt": F(10), "wgt": F(11),
-               "vx": F(12), "vy": F(13), "vz": F(14), "tref": F(15), "key": U(16), "gap": F(17), "gap_len": F(18)}
+               "vx": F(12), "vy": F(13), "vz": F(14), "tref": F(15), "key": U(16), "gap": F(17), "gap_len": F(18), "slots": U(19)}
         n_tiles = dr.opaque(mi.UInt32, len(rows))
         self._trace(buf, tab, n_tiles, off, seed)
         dr.eval(buf)
@@ -389,9 +423,13 @@ class Tracer:
                         g("tref", mi.Float), lo_nm, g("set"), g("gap", mi.Float), g("gap_len", mi.Float))
         wgt = g("wgt", mi.Float)
         out0 = g("out")
-        for j in range(N_LAMBDA):
-            idx = out0 + ((k * self.n_bands + bands[j]) * h + y) * w + x
-            dr.scatter_reduce(dr.ReduceOp.Add, buf, L[j] * wgt, idx, bands[j] < self.n_bands)
+        n_slots = g("slots")
+        stride = K * self.n_bands * h * w  # one image of the tile (a slot)
+        for sl in range(self.S):
+            for j in range(N_LAMBDA):
+                idx = out0 + sl * stride + ((k * self.n_bands + bands[j]) * h + y) * w + x
+                dr.scatter_reduce(dr.ReduceOp.Add, buf, L[sl][j] * wgt, idx,
+                                  (bands[j] < self.n_bands) & (sl < n_slots))
 
     @dr.syntax
     def _pixel(self, sampler, spp, rot, key, x0, y0, t0, dt, vel, t_ref, lo_nm, lset, gap_at, gap_len):
@@ -402,8 +440,9 @@ class Tracer:
         time are stratified too, each through its own permutation of the strata keyed by ``key`` (UInt32 per
         lane; :func:`_permute`), so that the strata of different dimensions are paired at random: one rotation
         per dimension would pair them along diagonals, which for a lamp moving across a pixel aliased and
-        raised the variance several times. Non-finite samples are dropped (counted as 0)."""
-        acc = mi.Spectrum(0.0)
+        raised the variance several times. Non-finite samples are dropped (counted as 0). Returns one sum per
+        slot (list of :attr:`S` ``mi.Spectrum``)."""
+        acc = [mi.Spectrum(0.0) for _ in range(self.S)]
         s = mi.UInt32(0)
         inv = dr.rcp(mi.Float(spp))
         pow2 = (spp & (spp - 1)) == 0
@@ -423,7 +462,7 @@ class Tracer:
             ray.wavelengths = mi.Spectrum(lo_nm[0] + u * self.band_w, lo_nm[1] + u * self.band_w,
                                           lo_nm[2] + u * self.band_w, lo_nm[3] + u * self.band_w)
             L = self._radiance(sampler, ray, lset)
-            acc += mi.Spectrum(dr.select(dr.isfinite(L), L, 0.0))
+            acc = [acc[j] + mi.Spectrum(dr.select(dr.isfinite(L[j]), L[j], 0.0)) for j in range(self.S)]
             s += 1
         return acc
 
@@ -455,8 +494,9 @@ class Tracer:
         beam) with probability in proportion to its weight (:meth:`_lamp_weights`) at (``p``, ``n``): a lamp by
         weighted reservoir sampling over the rows (one pass, one uniform per row: row r replaces the choice with
         probability w_r / (w_0 + ... + w_r); M. T. Chao, "A general purpose unequal probability sampling plan",
-        Biometrika 69, 1982), then its face or beam in proportion to their weights. Returns (emitter, its
-        probability, sum of all weights)."""
+        Biometrika 69, 1982), then its face or beam in proportion to their weights. A union set's rows are the
+        lamps of all its groups, so the draw goes where most light comes from, whichever group it belongs to.
+        Returns (emitter, its probability, sum of all weights, the slot of its row: 0 outside a union)."""
         i = mi.UInt32(0)
         wsum = mi.Float(0.0)
         row = mi.UInt32(start)
@@ -477,11 +517,12 @@ class Tracer:
         em = dr.select(beam, dr.gather(mi.EmitterPtr, S.beams, row, active),
                        dr.gather(mi.EmitterPtr, S.faces, row, active))
         pmf = dr.select(wsum > 0, dr.select(beam, wb_row, wf_row) / wsum, 0.0)
-        return em, pmf, wsum
+        slot = dr.gather(mi.UInt32, S.slot, row, active) if self.S > 1 else mi.UInt32(0)
+        return em, pmf, wsum, slot
 
     def _set_row(self, em_ptr, lset):
-        """Lamp row of emitter ``em_ptr`` in lane set ``lset`` (UInt32), whether it is the lamp's beam, and
-        whether it is a member at all (its light is recorded by this lane only then)."""
+        """Lamp row of emitter ``em_ptr`` in lane set ``lset`` (UInt32), whether it is the lamp's beam, whether it
+        is a member at all (its light is recorded by this lane only then) and its slot (0 outside a union)."""
         mi, dr = self.mi, self.dr
         eid = dr.reinterpret_array(mi.UInt32, em_ptr)
         T = self.sets.tab
@@ -490,16 +531,26 @@ class Tracer:
         in_l = ok & (dr.gather(mi.UInt32, T[3], eid, ok) == lset)
         row = dr.select(in_g, dr.gather(mi.UInt32, T[1], eid, in_g), dr.gather(mi.UInt32, T[4], eid, in_l))
         beam = dr.select(in_g, dr.gather(mi.UInt32, T[2], eid, in_g), dr.gather(mi.UInt32, T[5], eid, in_l)) == 1
-        return row, beam, in_g | in_l
+        member = in_g | in_l
+        slot = mi.UInt32(0)
+        if self.S > 1:
+            in_u = ok & (dr.gather(mi.UInt32, T[6], eid, ok) == lset)
+            row = dr.select(in_u, dr.gather(mi.UInt32, T[7], eid, in_u), row)
+            beam = dr.select(in_u, dr.gather(mi.UInt32, T[8], eid, in_u) == 1, beam)
+            member |= in_u
+            slot = dr.select(in_u, dr.gather(mi.UInt32, self.sets.slot, row, in_u), 0)
+        return row, beam, member, slot
 
     @dr.syntax
     def _radiance(self, sampler, ray, lset):
-        """Radiance (``mi.Spectrum``, W sr^-1 m^-2 nm^-1 at the ray's 4 wavelengths) arriving along ``ray`` from
-        the emitters of light set ``lset`` (UInt32 per lane): Mitsuba's ``path`` integrator restricted to a set.
-        ``sampler``: a ``mi.PCG32`` with one stream per lane."""
+        """Radiance (one ``mi.Spectrum`` per slot, W sr^-1 m^-2 nm^-1 at the ray's 4 wavelengths) arriving along
+        ``ray`` from the emitters of light set ``lset`` (UInt32 per lane): Mitsuba's ``path`` integrator restricted
+        to a set, the light of a union set's groups kept apart by slot. ``sampler``: a ``mi.PCG32`` with one
+        stream per lane."""
         S = self.sets
+        n_slots = self.S
         ctx = mi.BSDFContext()
-        L = mi.Spectrum(0.0)
+        L = [mi.Spectrum(0.0) for _ in range(n_slots)]
         beta = mi.Spectrum(1.0)
         depth = mi.UInt32(0)
         active = mi.Bool(True)
@@ -515,7 +566,7 @@ class Tracer:
             # emission hit by the camera ray or by BSDF sampling, if the emitter is in this lane's set; its MIS
             # weight needs the probability with which the previous vertex's next-event estimation picks it
             ds = mi.DirectionSample3f(self.scene, si=si, ref=si_prev)
-            row_hit, beam_hit, in_set = self._set_row(ds.emitter, lset)
+            row_hit, beam_hit, in_set, slot_hit = self._set_row(ds.emitter, lset)
             wf_hit, wb_hit = self._lamp_weights(row_hit, si_prev.p, si_prev.n)
             pmf_hit = dr.select(in_set & ~delta_prev, dr.select(beam_hit, wb_hit, wf_hit), 0.0) \
                 / dr.select(wsum_prev > 0, wsum_prev, 1.0)
@@ -523,13 +574,14 @@ class Tracer:
             hit_em = active & in_set
             # emission clamped at 0 (:data:`EMISSION_FLOOR`): Mitsuba's sunsky returns slightly negative spectral
             # radiance near the horizon at low sun (dusk), which no light can have
-            L += beta * _mis_weight(pdf_prev, em_pdf) * dr.maximum(ds.emitter.eval(si, hit_em), EMISSION_FLOOR)
+            c_hit = beta * _mis_weight(pdf_prev, em_pdf) * dr.maximum(ds.emitter.eval(si, hit_em), EMISSION_FLOOR)
+            L = [L[k] + (dr.select(slot_hit == k, c_hit, 0.0) if n_slots > 1 else c_hit) for k in range(n_slots)]
 
             active_next = active & (depth + 1 < self.max_depth) & si.is_valid()
             # next-event estimation: one emitter of this lane's set, chosen in proportion to its estimated light
             # at this point (:meth:`_choose_light`)
             active_em = active_next & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
-            em, pmf_em, wsum = self._choose_light(sampler, start, cnt, si.p, si.n, active_em)
+            em, pmf_em, wsum, slot_em = self._choose_light(sampler, start, cnt, si.p, si.n, active_em)
             ds_em, w_em = em.sample_direction(si, mi.Point2f(sampler.next_float32(), sampler.next_float32()),
                                               active_em)
             w_em = dr.maximum(w_em, EMISSION_FLOOR)  # as above: the clamped sky, an unbiased estimate of it
@@ -539,7 +591,8 @@ class Tracer:
             wo = si.to_local(ds_em.d)
             bsdf_val, bsdf_pdf = bsdf.eval_pdf(ctx, si, wo, active_em)
             mis_em = dr.select(ds_em.delta, 1.0, _mis_weight(ds_em.pdf * pmf_em, bsdf_pdf))
-            L += dr.select(active_em, beta * mis_em * bsdf_val * w_em / pmf_em, 0.0)
+            c_em = dr.select(active_em, beta * mis_em * bsdf_val * w_em / pmf_em, 0.0)
+            L = [L[k] + (dr.select(slot_em == k, c_em, 0.0) if n_slots > 1 else c_em) for k in range(n_slots)]
 
             # continue the path by BSDF sampling
             u1 = sampler.next_float32()

@@ -92,6 +92,32 @@ def test_count_params_macs_conv_and_linear():
     assert macs == 2 * 64 * 9 + 4 * 128  # conv: out elements x k^2 x C_in; linear: out x in_features
 
 
+def test_count_macs_transposed_conv():
+    """A 2x2 stride-2 transposed convolution (the U-Net's up-sampling): each output element receives exactly one
+    kernel tap per input channel, so MACs = out elements x C_in (counted from the output side, independently of
+    the input-side formula in count_params_macs)."""
+    net = torch.nn.ConvTranspose2d(2, 4, 2, stride=2)
+    x = torch.zeros(1, 2, 3, 5)
+    out_elems = 1 * 4 * 6 * 10
+    params, macs = ev.count_params_macs(net, lambda: net(x))
+    assert params == 2 * 4 * 4 + 4 and macs == out_elems * 2
+
+
+def test_count_macs_matches_torch_flop_counter_on_the_unet():
+    """The hook count on the tiny U-Net (convolutions, transposed convolutions, 1x1 head) equals PyTorch's own
+    ``torch.utils.flop_counter`` (FLOPs / 2), an independent count."""
+    from torch.utils.flop_counter import FlopCounterMode
+
+    from lfmbench.baselines import unet
+
+    net = unet.UNetFusion(unet.load_config(unet.TINY_CONFIG)).unet
+    x = torch.zeros(1, net.down[0][0].in_channels, 16, 24)
+    _, macs = ev.count_params_macs(net, lambda: net(x))
+    with FlopCounterMode(display=False) as fc, torch.no_grad():
+        net(x)
+    assert macs == fc.get_total_flops() // 2 > 0
+
+
 def test_learned_module_costs_recorded(tmp_path, monkeypatch):
     from lfmbench.baselines import learned
 

@@ -114,6 +114,24 @@ def test_import_round_trip(tmp_path):
     assert rep2.imported == [] and rep2.skipped == c.scenes
 
 
+def test_import_writes_no_path_of_the_importing_machine(tmp_path):
+    """The same download imported from two places gives byte-identical scene.json / meta.json (and hashes): the
+    scene's folder is recorded relative to the dataset folder, not as an absolute path."""
+    import shutil
+
+    make_iset_scene(tmp_path / "a" / "iset", "1112201236", frames=2)
+    shutil.copytree(tmp_path / "a" / "iset", tmp_path / "elsewhere" / "deeper" / "iset")
+    for src, out in ((tmp_path / "a" / "iset", tmp_path / "c1"),
+                     (tmp_path / "elsewhere" / "deeper" / "iset", tmp_path / "c2")):
+        I.import_isetlfm(src, out)
+    for f in ("scene.json", "meta.json"):
+        one = (tmp_path / "c1" / "scenes" / "1112201236" / f).read_bytes()
+        assert one == (tmp_path / "c2" / "scenes" / "1112201236" / f).read_bytes()
+        assert str(tmp_path).encode() not in one
+    assert json.loads((tmp_path / "c1" / "scenes" / "1112201236" / "scene.json").read_text())["dataset_dir"] \
+        == "1112201236"
+
+
 def test_defaults_without_mat_and_old_depth_names(tmp_path):
     src = tmp_path / "iset"
     make_iset_scene(src, "s1", groups=("skymap",), frames=2, mat=False, depth="Pxyz", dtype=np.float16)

@@ -253,3 +253,16 @@ def test_evaluate_cli_scores_24_frame_sequences_end_to_end(long_corpus, tmp_path
     r = CliRunner().invoke(app, ["leaderboard", str(out), str(three), "--markdown", str(tmp_path / "l.md"),
                                  "--plot", str(tmp_path / "l.png"), "--json", str(tmp_path / "l.json")])
     assert r.exit_code == 2 and "frames per sample differs" in r.output, r.output
+
+
+def test_benchmark_scores_24_frame_sequences(long_corpus, tmp_path):
+    """``benchmark(frames=24)`` (the library call behind a leaderboard run) scores 24-frame series like
+    ``evaluate --frames 24``, and records the frame count, so that its runs are not ranked with 3-frame ones."""
+    from lfmbench import evaluation as ev
+
+    rows = ev.benchmark(long_corpus, ["lpd_only"], tmp_path / "runs", split="all", perceptual=False, repeats=1,
+                        progress=False, max_scenes=1, frames=24)
+    assert [r["method"] for r in rows] == ["lpd_only"]
+    d = json.loads((tmp_path / "runs" / "lpd_only.json").read_text())
+    assert d["dataset"]["frames"] == 24
+    assert all(light["frames"] == 24 for light in d["scenes"][0]["metrics"]["lights"])

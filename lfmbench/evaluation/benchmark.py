@@ -42,13 +42,15 @@ def write_leaderboard(rows: list[dict], runs: list[dict], sort_by: str | None, m
 def benchmark(corpus: str | Path, methods: Iterable[str] | None = None, runs_dir: str | Path = "runs",
               split: str = "test", seed: int = 0, crop: int | None = None, max_scenes: int | None = None,
               perceptual: bool = True, repeats: int = 5, device: str = "cpu", sort_by: str | None = None,
-              progress: bool = True, samples_per_scene: int = 1, cache_dir: str | Path | None = None) -> list[dict]:
+              progress: bool = True, samples_per_scene: int = 1, cache_dir: str | Path | None = None,
+              frames: int = 3) -> list[dict]:
     """Evaluate several methods on one corpus split and build the leaderboard.
 
     Writes ``runs_dir/<method>.json`` per method, ``runs_dir/leaderboard.md``, ``leaderboard.json`` and
     ``leaderboard.png``, prints the table and returns the ranked rows (default ranking: the LED score).
     ``methods`` defaults to every registered baseline. ``cache_dir``: the dataset's projection cache (default
-    ``<corpus>/.cache``; any writable directory for a read-only corpus).
+    ``<corpus>/.cache``; any writable directory for a read-only corpus). ``frames``: consecutive frames per
+    sample, as ``lfmbench evaluate --frames`` (24 or more for the IEEE P2020 flicker metrics; <= the corpus's).
     """
     from itertools import islice
 
@@ -61,7 +63,7 @@ def benchmark(corpus: str | Path, methods: Iterable[str] | None = None, runs_dir
     from lfmbench.metrics import ScoreOptions
 
     runs_dir = Path(runs_dir)
-    extra = {} if cache_dir is None else {"cache_dir": cache_dir}
+    extra = {"frames": frames} if cache_dir is None else {"frames": frames, "cache_dir": cache_dir}
     ds, ident, cond = corpus_run_inputs(corpus, split, seed, crop, samples_per_scene, **extra)
     n = len(ds) if max_scenes is None else min(len(ds), max_scenes)
     paths = []
@@ -71,7 +73,7 @@ def benchmark(corpus: str | Path, methods: Iterable[str] | None = None, runs_dir
         evaluate(m, islice(loader, n), method_spec=m, output=out, options=ScoreOptions(perceptual=perceptual),
                  repeats=repeats, device=device, seeds={"dataset": seed},
                  dataset={"corpus": str(corpus), "split": split, "scenes": n, "crop": crop,
-                          "samples_per_scene": samples_per_scene}, progress=progress,
+                          "samples_per_scene": samples_per_scene, "frames": frames}, progress=progress,
                  total=n, corpus=ident, scene_conditions=cond)
         paths.append(out)
     runs = load_runs(paths)

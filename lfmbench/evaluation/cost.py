@@ -23,7 +23,9 @@ def count_params_macs(module: torch.nn.Module, run: Callable[[], Any]) -> tuple[
     """(trainable + frozen parameter count, multiply-accumulates of one ``run()``).
 
     MACs are counted with forward hooks: Conv1d/2d/3d ``out.numel() * in_channels / groups * prod(kernel)``,
-    Linear ``out.numel() * in_features`` (bias and activations not counted).
+    ConvTranspose1d/2d/3d ``in.numel() * out_channels / groups * prod(kernel)`` (every input element scatters a
+    kernel-sized patch into each output channel of its group), Linear ``out.numel() * in_features`` (bias and
+    activations not counted).
     """
     macs = 0
 
@@ -34,6 +36,13 @@ def count_params_macs(module: torch.nn.Module, run: Callable[[], Any]) -> tuple[
             k *= s
         macs += out.numel() * (m.in_channels // m.groups) * k
 
+    def tconv_hook(m, inp, out):
+        nonlocal macs
+        k = 1
+        for s in m.kernel_size:
+            k *= s
+        macs += inp[0].numel() * (m.out_channels // m.groups) * k
+
     def lin_hook(m, inp, out):
         nonlocal macs
         macs += out.numel() * m.in_features
@@ -42,6 +51,8 @@ def count_params_macs(module: torch.nn.Module, run: Callable[[], Any]) -> tuple[
     for m in module.modules():
         if isinstance(m, (torch.nn.Conv1d, torch.nn.Conv2d, torch.nn.Conv3d)):
             hooks.append(m.register_forward_hook(conv_hook))
+        elif isinstance(m, (torch.nn.ConvTranspose1d, torch.nn.ConvTranspose2d, torch.nn.ConvTranspose3d)):
+            hooks.append(m.register_forward_hook(tconv_hook))
         elif isinstance(m, torch.nn.Linear):
             hooks.append(m.register_forward_hook(lin_hook))
     try:
