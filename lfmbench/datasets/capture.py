@@ -269,7 +269,7 @@ def add_rgb(sample: dict, preset, want: set) -> None:
         del sample["gt"]
 
 
-def _warm_cpu_kernels(noise: bool) -> None:
+def _warm_cpu_kernels(noise: bool, preset) -> None:
     """Compile (or load from numba's cache) the serial CPU kernels a sample uses, in this process.
 
     DataLoader workers are forked from here and inherit them, instead of each worker loading them at its first
@@ -277,8 +277,10 @@ def _warm_cpu_kernels(noise: bool) -> None:
     kernels: they start no threading layer, so forking after them is safe (docs/flicker.md).
     """
     pwm_exposure(np.zeros(1), 1e-3, 1e-2, 0.5, check=False)
-    if noise:
-        _sensor.shot_noise(torch.zeros(1), torch.Generator().manual_seed(0))
+    # the sensor chain's compiled passes (float32, the dataset's dtype)
+    z = torch.zeros(1, 1, 2, 2)
+    _sensor.simulate_split_pixel_electrons(z, z, preset, 1e-3, 1e-2, torch.Generator().manual_seed(0), noise=noise,
+                                           check=False)
 
 
 # ----------------------------------------------------------------------------------------------------------
@@ -415,7 +417,7 @@ class LFMCaptureDataset(Dataset):
         self._fpn: dict | None = None
         self.epoch = 0
         self._frozen = self._load_or_freeze_test_params() if split == "test" else None
-        _warm_cpu_kernels(self.noise)
+        _warm_cpu_kernels(self.noise, self.preset)
 
     # -- bookkeeping
     def _split_scenes(self) -> list[str]:
