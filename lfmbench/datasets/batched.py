@@ -34,7 +34,7 @@ window (the per-sample rule, ``K = 0`` in ``slot_K``).
 """
 from __future__ import annotations
 
-from typing import Any, Mapping, Sequence
+from typing import Any, Mapping, NamedTuple, Sequence
 
 import numpy as np
 import torch
@@ -42,7 +42,7 @@ from torch import nn
 from torch.utils.data import default_collate
 
 from lfmbench import sensor as _sensor
-from lfmbench.datasets.capture import (add_rgb, bin_edges, light_index, visible_lights,
+from lfmbench.datasets.capture import (add_rgb, bin_edges, visible_lights,
                                        window_bin_exposure, window_starts)
 from lfmbench.datasets.projection import PHOTODIODES
 from lfmbench.flicker import pwm_exposure
@@ -59,6 +59,45 @@ _INFO_FIELDS = ("sensor", "frames", "crop_hw", "shutter", "noise", "outputs")
 # ----------------------------------------------------------------------------------------------------------
 # pieces (DataLoader workers, CPU)
 # ----------------------------------------------------------------------------------------------------------
+class _FrameEntries(NamedTuple):
+    """The per-light layers of one frame as pixel entries, in the stored light order, row-major in each box."""
+
+    lights: list       # [(light_id, K, (y0, x0, y1, x1))] px, half-open
+    y: torch.Tensor    # (N,) int32 absolute row, px
+    x: torch.Tensor    # (N,) int32 absolute column, px
+    pos: torch.Tensor  # (N,) int64 position of the entry's light in ``lights``
+    vals: torch.Tensor  # (N, 2, Kscene) float32 rates (LPD, SPD) per bin, e-/s, zero past the light's K
+    #                     (entry-major: a sample's entries are whole rows of it)
+
+
+class _SceneEntries:
+    """Every frame's per-light layers of one scene flattened into pixel entries (:class:`_FrameEntries`), built
+    once per scene (``LFMCaptureDataset._scene_cached``) so that a sample's entries are a mask of them, not a
+    Python loop over its lights."""
+
+    def __init__(self, layers) -> None:
+        kmax = max([int(r["lpd"].shape[0]) for fr in layers.lights for *_, r in fr] + [1])
+        self.frames: list[_FrameEntries] = []
+        for fr in layers.lights:
+            lights, ys, xs, ps, vs = [], [], [], [], []
+            for i, (lid, _g, (by0, bx0, by1, bx1), rates) in enumerate(fr):
+                K, hh, ww = (int(n) for n in rates["lpd"].shape)
+                if (hh, ww) != (by1 - by0, bx1 - bx0):
+                    raise ValueError(f"light {lid}: layer of {hh}x{ww} px in a box of {by1 - by0}x{bx1 - bx0} px")
+                lights.append((int(lid), K, (int(by0), int(bx0), int(by1), int(bx1))))
+                ys.append(torch.arange(by0, by1, dtype=torch.int32).repeat_interleave(ww))
+                xs.append(torch.arange(bx0, bx1, dtype=torch.int32).repeat(hh))
+                ps.append(torch.full((hh * ww,), i, dtype=torch.int64))
+                v = torch.stack([rates[pd].reshape(K, -1) for pd in PHOTODIODES])          # (2, K, n) e-/s
+                vs.append(torch.nn.functional.pad(v, (0, 0, 0, kmax - K)).permute(2, 0, 1))
+            if lights:
+                self.frames.append(_FrameEntries(lights, torch.cat(ys), torch.cat(xs), torch.cat(ps),
+                                                 torch.cat(vs).contiguous()))
+            else:
+                z = torch.zeros(0, dtype=torch.int32)
+                self.frames.append(_FrameEntries([], z, z, z.long(), torch.zeros(0, 2, kmax)))
+
+
 def capture_pieces(ds, scene_id: str, params: Mapping[int, Mapping], group_params: Mapping[str, Mapping] | None,
                    crop: tuple[int, int, int, int], noise_seed: int, index: int = -1,
                    frame_start: int | None = None) -> dict:
@@ -101,6 +140,7 @@ def capture_pieces(ds, scene_id: str, params: Mapping[int, Mapping], group_param
     slots: list[tuple] = []          # (frame, K, pwm)
     vals: dict[str, list] = {pd: [] for pd in PHOTODIODES}    # pd -> [(K, n)]
     pix: list[torch.Tensor] = []     # (n,)
+    slot_of: list[torch.Tensor] = []  # (n,)
     hw = h * w
     for g, rates in layers.group_static.items():
         p = group_params[g]
@@ -109,33 +149,52 @@ def capture_pieces(ds, scene_id: str, params: Mapping[int, Mapping], group_param
             for pd in PHOTODIODES:
                 vals[pd].append(rates[pd][s0 + f, y0:y0 + h, x0:x0 + w].reshape(1, -1))
             pix.append(f * hw + torch.arange(hw, dtype=torch.int32))
+            slot_of.append(torch.full((hw,), len(slots) - 1, dtype=torch.int32))
+    # per-light layers: the scene's entries (fixed per scene) masked to the crop and the lights with PWM draws
+    ent = ds._scene_cached(scene_id, "pieces_entries", _SceneEntries)
+    picks = []
     for f in range(F):
-        for _lid, p, (by0, bx0), (iy0, iy1, ix0, ix1), rates in visible_lights(layers, s0 + f, (y0, x0, h, w),
-                                                                              params):
-            K = int(rates["lpd"].shape[0])
-            slots.append((f, K, p))
-            for pd in PHOTODIODES:
-                vals[pd].append(rates[pd][:, iy0 - by0:iy1 - by0, ix0 - bx0:ix1 - bx0].reshape(K, -1))
-            yy = torch.arange(iy0 - y0, iy1 - y0, dtype=torch.int32)[:, None]
-            xx = torch.arange(ix0 - x0, ix1 - x0, dtype=torch.int32)[None, :]
-            pix.append((f * hw + yy * w + xx).reshape(-1))
+        fe = ent.frames[s0 + f]
+        shown = {id(rates) for *_, rates in visible_lights(layers, s0 + f, (y0, x0, h, w), params)}
+        vis = [i for i, (*_, rates) in enumerate(layers.lights[s0 + f]) if id(rates) in shown]
+        if not vis:
+            continue
+        rank = torch.full((len(fe.lights),), -1, dtype=torch.int32)
+        rank[vis] = torch.arange(len(slots), len(slots) + len(vis), dtype=torch.int32)
+        slots.extend((f, fe.lights[i][1], params[fe.lights[i][0]]) for i in vis)
+        keep = (fe.y >= y0) & (fe.y < y0 + h) & (fe.x >= x0) & (fe.x < x0 + w)
+        if len(vis) < len(fe.lights):
+            keep &= rank[fe.pos] >= 0
+        idx = keep.nonzero()[:, 0]
+        picks.append((fe, idx, len(pix)))
+        pix.append(f * hw + (fe.y[idx] - y0) * w + (fe.x[idx] - x0))
+        slot_of.append(rank[fe.pos[idx]])
     kmax = max([max(s[1], 1) for s in slots] + [1])
     out["slot_pwm"] = torch.tensor([[float(s[2][k]) for k in PWM_FIELDS] for s in slots],
                                    dtype=torch.float64).reshape(len(slots), len(PWM_FIELDS))
     out["slot_frame"] = torch.tensor([s[0] for s in slots], dtype=torch.int64)
     out["slot_K"] = torch.tensor([s[1] for s in slots], dtype=torch.int64)
-    out["entry_values"] = torch.stack([
-        torch.cat([v if v.shape[0] == kmax else torch.nn.functional.pad(v, (0, 0, 0, kmax - v.shape[0]))
-                   for v in vals[pd]], 1) if pix else torch.zeros(kmax, 0) for pd in PHOTODIODES])
-    out["entry_slot"] = (torch.cat([torch.full((len(pp),), i, dtype=torch.int32) for i, pp in enumerate(pix)])
-                         if pix else torch.zeros(0, dtype=torch.int32))
-    out["entry_pix"] = torch.cat(pix) if pix else torch.zeros(0, dtype=torch.int32)
+    if pix:
+        n_all = [int(p_.shape[0]) for p_ in pix]
+        ev = torch.zeros(2, kmax, sum(n_all))
+        o = np.concatenate([[0], np.cumsum(n_all)])
+        for pd_i, pd in enumerate(PHOTODIODES):
+            for j, v in enumerate(vals[pd]):                                  # groups: (1, hw)
+                ev[pd_i, :1, o[j]:o[j + 1]] = v
+        for fe, idx, j in picks:
+            ev[:, :, o[j]:o[j + 1]] = fe.vals.index_select(0, idx)[:, :, :kmax].permute(1, 2, 0)
+        out["entry_values"] = ev
+        out["entry_slot"] = torch.cat(slot_of)
+        out["entry_pix"] = torch.cat(pix)
+    else:
+        out["entry_values"] = torch.zeros(2, kmax, 0)
+        out["entry_slot"] = torch.zeros(0, dtype=torch.int32)
+        out["entry_pix"] = torch.zeros(0, dtype=torch.int32)
     lights = ds._lights(scene_id)
     if len(lights) > ds.max_lights:
         raise ValueError(f"max_lights={ds.max_lights} but scene {scene_id!r} has {len(lights)} lights")
     if "light_index" in want:
-        out["light_index"] = light_index(layers.aux["mask.light"][s0:s0 + F, y0:y0 + h, x0:x0 + w],
-                                         lights).to(torch.int16)
+        out["light_index"] = ds._light_index(scene_id, lights, s0, (y0, x0, h, w))
     if "depth" in want:
         out["depth"] = layers.aux["depth.Z"][s0:s0 + F, y0:y0 + h, x0:x0 + w][:, None].contiguous()
     out["meta"] = ds._meta(scene_id, index, lights, params, (y0, x0, h, w), t_s, t_l, layers)
@@ -293,11 +352,12 @@ def compose_batch(batch: Mapping[str, Any]) -> dict[str, torch.Tensor]:
         slot = batch["entry_slot"].long()
         pix = batch["entry_pix"].long()
         dest = batch["slot_sample"][slot] * (F * h * w) + pix
-        row = (pix % (h * w)) // w if wts["lpd"].shape[1] > 1 else torch.zeros_like(pix)
-        vals = batch["entry_values"]
+        R = wts["lpd"].shape[1]
+        at = slot * R + (pix % (h * w)) // w if R > 1 else slot                      # (E,) row of (S * R, Kmax)
+        vals = batch["entry_values"].transpose(1, 2).contiguous()                    # (2, E, Kmax) e-/s
         for key, c in (("lpd", 0), ("spd", 1), ("gt", 0)):
-            wk = wts[key].float()[slot, row]                                          # (E, Kmax) s
-            contrib = (vals[c].t() * wk).sum(-1)                                      # (E,) e-
+            wk = wts[key].float().reshape(-1, wts[key].shape[-1]).index_select(0, at)  # (E, Kmax) s
+            contrib = (vals[c] * wk).sum(-1)                                          # (E,) e-
             comp[key].view(-1).index_add_(0, dest, contrib)
     return comp
 
@@ -308,8 +368,11 @@ class _FPNCache:
     def __init__(self) -> None:
         self.maps: dict = {}
 
-    def crops(self, preset, scene_hw: torch.Tensor, crop: torch.Tensor, dev, dtype) -> dict[str, torch.Tensor]:
-        """(B, 1, 1, h, w) crops of each sample's full-frame pattern."""
+    def crops(self, preset, scene_hw: torch.Tensor, crop: torch.Tensor, dev, dtype,
+              keys: Sequence[str] | None = None) -> dict[str, torch.Tensor]:
+        """(B, 1, 1, h, w) crops of each sample's full-frame pattern (only the maps ``keys``; default all)."""
+        if keys is not None and not keys:
+            return {}
         hw = scene_hw.tolist()
         cr = crop.tolist()
         out: dict[str, list] = {}
@@ -318,7 +381,8 @@ class _FPNCache:
             if key not in self.maps:
                 self.maps[key] = _sensor.fixed_pattern(preset, H, W, device=dev, dtype=dtype)
             for k, v in self.maps[key].items():
-                out.setdefault(k, []).append(v[y0:y0 + h, x0:x0 + w])
+                if keys is None or k in keys:
+                    out.setdefault(k, []).append(v[y0:y0 + h, x0:x0 + w])
         return {k: torch.stack(v)[:, None, None] for k, v in out.items()}
 
 
@@ -364,7 +428,10 @@ def simulate_batch(batch: Mapping[str, Any], preset: Any, outputs: Sequence[str]
         fpn = None
         gens = None
         if noise:
-            fpn = (fpn_cache or _DEFAULT_FPN).crops(preset, batch["scene_hw"], batch["crop"], dev, lpd.dtype)
+            # only the maps the chain reads (a PRNU gain where prnu > 0, a DSNU offset where dsnu > 0)
+            used = [f"{pd}_{m}" for pd, spec in preset.photodiodes.items()
+                    for m, on in (("gain", spec.prnu > 0), ("offset_e", spec.dsnu_e > 0)) if on]
+            fpn = (fpn_cache or _DEFAULT_FPN).crops(preset, batch["scene_hw"], batch["crop"], dev, lpd.dtype, used)
             gens = [torch.Generator(device=dev).manual_seed(int(s)) for s in batch["noise_seed"].tolist()]
         cap = _sensor.simulate_split_pixel_electrons(lpd, spd, preset, t_s[:, None], t_l[:, None], generator=gens,
                                                      noise=noise, fpn=fpn)
