@@ -41,6 +41,12 @@ def _uniform(state):
     return (np.float64(_mix(state) >> _u64(11)) + 0.5) * (1.0 / 9007199254740992.0), state
 
 
+@numba.njit(inline="always", cache=True)
+def _inv_k(k):
+    """1 / k (k >= 1): a table lookup below 64."""
+    return _INV_K[k] if k < 64 else 1.0 / k
+
+
 @numba.njit(inline="always", cache=True, error_model="numpy")
 def _draw(mu, st, gaussian_above):  # pragma: no cover - compiled by numba
     """One draw ~ Poisson(mu) (float64 mu > 0, finite) from the stream starting at state ``st``, as a float64
@@ -51,16 +57,34 @@ def _draw(mu, st, gaussian_above):  # pragma: no cover - compiled by numba
         z = math.sqrt(-2.0 * math.log(u1)) * math.cos(2.0 * math.pi * u2)
         return max(0.0, np.rint(mu + math.sqrt(mu) * z))
     if mu < 10.0:
+        # sequential search: the smallest k with u <= F(k) or p_k == 0 (p_k = p_{k-1} mu / k, F(k) = F(k-1) + p_k;
+        # F reaches 1 - 1e-16 by k ~ 40 for mu < 10, p underflows or rounding stalls F beyond). Both conditions
+        # only switch from false to true as k grows, so k is also the number of terms where neither holds: the
+        # terms are evaluated four at a time without a branch per term (the same products and sums, so the same
+        # k; a mispredicted loop exit per term cost more than the arithmetic), after a k = 0 test (most means
+        # are < 1 e-).
         u, st = _uniform(st)
         p = math.exp(-mu)
+        if u <= p:
+            return 0.0
         f = p
         k = 0
-        # F(k) reaches 1 - 1e-16 by k ~ 40 for mu < 10; stop where p underflows or rounding stalls F
-        while u > f and p > 0.0:
-            k += 1
-            p *= mu * (_INV_K[k] if k < 64 else 1.0 / k)
-            f += p
-        return np.float64(k)
+        while True:
+            p1 = p * (mu * _inv_k(k + 1))
+            f1 = f + p1
+            p2 = p1 * (mu * _inv_k(k + 2))
+            f2 = f1 + p2
+            p3 = p2 * (mu * _inv_k(k + 3))
+            f3 = f2 + p3
+            p4 = p3 * (mu * _inv_k(k + 4))
+            f4 = f3 + p4
+            c = (np.int64((u > f) & (p > 0.0)) + np.int64((u > f1) & (p1 > 0.0))
+                 + np.int64((u > f2) & (p2 > 0.0)) + np.int64((u > f3) & (p3 > 0.0)))
+            if c < 4:
+                return np.float64(k + c)
+            k += 4
+            p = p4
+            f = f4
     # PTRS; the logs of the exact test are only needed off the squeeze (24-65 % of first tries)
     b = 0.931 + 2.53 * math.sqrt(mu)
     a = -0.059 + 0.02483 * b
