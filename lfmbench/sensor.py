@@ -675,7 +675,7 @@ def _map_rows(m: torch.Tensor, lead: torch.Size, H: int, W: int) -> tuple[np.nda
 
 def _chain_fused(lpd_e: torch.Tensor, spd_e: torch.Tensor, preset: SensorPreset, t_s: torch.Tensor,
                  t_l: torch.Tensor, generator, noise: bool, fpn: Mapping[str, torch.Tensor] | None) -> dict:
-    """The CPU chain of :func:`simulate_split_pixel_electrons` in compiled passes (backend ``"fused"``).
+    """The CPU chain of :func:`simulate_split_pixel_electrons` in compiled passes (backend ``"numba"``).
 
     Args: ``lpd_e``, ``spd_e`` (*, 1, H, W) mean e- (float32/float64, CPU); ``t_s``, ``t_l`` (*, 1, 1, 1)
     exposures in s (dtype of the inputs); ``generator`` one CPU generator or B of them (one per index of the
@@ -830,17 +830,18 @@ def simulate_split_pixel_electrons(lpd_electrons: torch.Tensor, spd_electrons: t
             crop of the pattern per sample).
         check: validate the inputs (finite, >= 0, matching shapes).
         backend: ``"torch"``: the chain as torch element-wise operations (any device; shot noise by
-            :func:`shot_noise`'s ``"auto"`` backend); ``"fused"`` (CPU, float32/float64, needs numba): the same
+            :func:`shot_noise`'s ``"auto"`` backend); ``"numba"`` (CPU, float32/float64, needs numba): the same
             operations compiled into one pass per photodiode (clipping, PRNU, dark signal, shot noise, full
             well: :func:`lfmbench._poisson_kernel.collect`) and one per capture (the read-out:
-            :func:`lfmbench._readout_kernel.readout`), bit-identical to ``"torch"`` on the CPU and about 3x
-            faster; ``"auto"``: ``"fused"`` where it applies, else ``"torch"``.
+            :func:`lfmbench._readout_kernel.readout`), bit-identical to ``"torch"`` on the CPU with a fraction of
+            its memory passes (docs/dataset-benchmark.md); ``"auto"``: ``"numba"`` where it applies, else
+            ``"torch"``.
 
     Returns:
         as :func:`simulate_split_pixel`.
     """
-    if backend not in ("auto", "fused", "torch"):
-        raise ValueError(f"backend must be 'auto', 'fused' or 'torch', got {backend!r}")
+    if backend not in ("auto", "numba", "torch"):
+        raise ValueError(f"backend must be 'auto', 'numba' or 'torch', got {backend!r}")
     _check_pair(lpd_electrons, spd_electrons, "lpd_electrons", "spd_electrons", check)
     if lpd_electrons.shape[-3] != 1:
         raise ValueError(f"lpd_electrons must have shape (*, 1, H, W) (a CFA mosaic), got {tuple(lpd_electrons.shape)}")
@@ -869,8 +870,8 @@ def simulate_split_pixel_electrons(lpd_electrons: torch.Tensor, spd_electrons: t
             if v.shape[-2:] != (H, W):
                 raise ValueError(f"fpn[{k!r}] has shape {tuple(v.shape)}, expected (..., {H}, {W})")
     fused = x.device.type == "cpu" and x.dtype in (torch.float32, torch.float64) and _poisson.available()
-    if backend == "fused" and not fused:
-        raise ValueError(f"backend='fused' needs float32/float64 CPU inputs and numba (got {x.dtype} on {x.device})")
+    if backend == "numba" and not fused:
+        raise ValueError(f"backend='numba' needs float32/float64 CPU inputs and numba (got {x.dtype} on {x.device})")
     if fused and backend != "torch":
         return _chain_fused(lpd_electrons, spd_electrons, preset, t_s, t_l, generator, noise, fpn)
 

@@ -104,6 +104,29 @@ def test_batched_outputs_equal_the_per_sample_outputs(corpus, shutter):
                 assert got == v or (torch.is_tensor(got) and got.item() == v), k
 
 
+@pytest.mark.parametrize("shutter", ["global", "rolling"])
+def test_compiled_composition_matches_the_torch_composition(corpus, imported, shutter):
+    """compose_batch's compiled CPU pass against its torch form (the one the GPU runs): lights in K bins, rolling
+    rows, groups stored without bins (K = 0 slots), a batch without light entries."""
+    for root, kw in ((corpus, {"frames": 3, "crop": (12, 16), "samples_per_scene": 3}),
+                     (imported, {"samples_per_scene": 2})):
+        _, ds = _pair(root, shutter=shutter, **kw)
+        batch = _batch(ds, range(len(ds)))
+        assert batch["entry_pix"].numel() > 0
+        ref = compose_batch(batch, backend="torch")
+        got = compose_batch(batch, backend="numba")
+        for k in ("lpd", "spd", "gt"):
+            assert got[k].shape == ref[k].shape and got[k].dtype == ref[k].dtype
+            torch.testing.assert_close(got[k], ref[k], rtol=1e-6, atol=1e-6 * float(ref[k].abs().max()))
+        assert not torch.equal(ref["lpd"], ref["gt"])                      # the PWM weights did something
+    empty = {k: (v[:, :, :0] if k == "entry_values" else v[:0]) if k.startswith("entry_") else v
+             for k, v in batch.items()}
+    for k in ("lpd", "gt"):
+        assert torch.equal(compose_batch(empty, backend="numba")[k], compose_batch(empty, backend="torch")[k])
+    with pytest.raises(ValueError, match="backend"):
+        compose_batch(batch, backend="cuda")
+
+
 def test_groups_stored_without_bins(imported):
     ref_ds, ds = _pair(imported, noise=False, outputs=("input_referred", "gt"), samples_per_scene=2)
     batch = _batch(ds, [0, 1])

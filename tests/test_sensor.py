@@ -389,8 +389,8 @@ def test_electron_entry_point_matches_radiant_path():
 
 
 @pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
-def test_fused_cpu_chain_is_bit_identical_to_the_torch_chain(dtype):
-    """The compiled CPU chain (backend "fused": one pass per photodiode, one per capture) against the torch
+def test_compiled_cpu_chain_is_bit_identical_to_the_torch_chain(dtype):
+    """The compiled CPU chain (backend "numba": one pass per photodiode, one per capture) against the torch
     element-wise chain, output for output, bit for bit: PRNU and DSNU on (full-frame and per-sample maps) and off,
     noise on and off, one generator or one per sample, means from 0 through saturation to past the input cap
     (1e9 e-), per-frame exposures."""
@@ -415,7 +415,7 @@ def test_fused_cpu_chain_is_bit_identical_to_the_torch_chain(dtype):
         for noise in (True, False):
             for per_sample_gens in (True, False):
                 outs = []
-                for backend in ("torch", "fused"):
+                for backend in ("torch", "numba"):
                     gens = [_gen(10 + b) for b in range(B)] if per_sample_gens else _gen(3)
                     outs.append(simulate_split_pixel_electrons(le, se, preset, t_s, T_L, gens, noise, fpn,
                                                                backend=backend))
@@ -426,10 +426,10 @@ def test_fused_cpu_chain_is_bit_identical_to_the_torch_chain(dtype):
                 n_checked += 1
     assert n_checked == 12 and ref["saturated"].any() and not ref["saturated"].all()
     with pytest.raises(ValueError, match="backend"):
-        simulate_split_pixel_electrons(le, se, ovt, T_S, T_L, _gen(0), backend="numba")
-    with pytest.raises(ValueError, match="backend='fused'"):
+        simulate_split_pixel_electrons(le, se, ovt, T_S, T_L, _gen(0), backend="fused")
+    with pytest.raises(ValueError, match="backend='numba'"):
         simulate_split_pixel_electrons(torch.ones(1, 1, 2, 2).half(), torch.ones(1, 1, 2, 2).half(), ovt, T_S, T_L,
-                                       _gen(0), backend="fused")
+                                       _gen(0), backend="numba")
 
 
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")

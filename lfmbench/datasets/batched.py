@@ -331,19 +331,43 @@ def pwm_weights(batch: Mapping[str, Any]) -> dict[str, torch.Tensor]:
     return out
 
 
-def compose_batch(batch: Mapping[str, Any]) -> dict[str, torch.Tensor]:
+def compose_batch(batch: Mapping[str, Any], backend: str = "auto") -> dict[str, torch.Tensor]:
     """Mean photo-electrons of every frame of a batch, and the ground truth (the batched :func:`compose_frame`).
 
     Args:
         batch: from :func:`collate_pieces`, on one device.
+        backend: ``"torch"`` (any device), ``"numba"`` (CPU, numba: one pass over the static rates and one
+            over the entries, :mod:`lfmbench.datasets._compose_kernel`; the same products, sums in float32 in
+            another order, so equal to ``"torch"`` up to float32 rounding) or ``"auto"`` (``"numba"`` on the CPU
+            when numba is importable).
 
     Returns:
         ``{"lpd", "spd", "gt"}``: (B, F, h, w) float32 e- (mean, noise-free, unclipped): LPD over the short
         window, SPD over the long one, ``gt`` the LPD with every LED at its duty cycle.
     """
-    _check_batch(batch)
+    if backend not in ("auto", "torch", "numba"):
+        raise ValueError(f"backend must be 'auto', 'torch' or 'numba', got {backend!r}")
+    dev = _check_batch(batch)
     B, F, _, h, w = batch["static"].shape
     t_s, t_l = batch["timing"][:, 0], batch["timing"][:, 1]
+    compiled = dev.type == "cpu" and batch["static"].dtype == torch.float32 and _numba_available()
+    if backend == "numba" and not compiled:
+        raise ValueError("backend='numba' needs a float32 batch on the CPU and numba")
+    if compiled and backend != "torch":
+        from lfmbench.datasets._compose_kernel import compose
+
+        E = int(batch["entry_pix"].shape[0])
+        if E:
+            wts = {k: v.float().contiguous() for k, v in pwm_weights(batch).items()}
+        else:
+            wts = {k: torch.zeros(0, 1, 1) for k in ("lpd", "spd", "gt")}
+        comp = {k: torch.empty(B, F, h, w) for k in ("lpd", "spd", "gt")}
+        n = lambda x: x.contiguous().numpy()  # noqa: E731
+        compose(n(batch["static"].reshape(B, F, 2, h * w)), n(t_s.float()), n(t_l.float()), n(batch["slot_sample"]),
+                n(batch["entry_slot"]), n(batch["entry_pix"]), n(batch["entry_values"]), wts["lpd"].numpy(),
+                wts["spd"].numpy(), wts["gt"].numpy(), w, *(comp[k].view(B, F, h * w).numpy()
+                                                            for k in ("lpd", "spd", "gt")))
+        return comp
     comp = {"lpd": batch["static"][:, :, 0] * t_s.float()[:, None, None, None],
             "spd": batch["static"][:, :, 1] * t_l.float()[:, None, None, None]}
     comp["gt"] = comp["lpd"].clone()
@@ -360,6 +384,13 @@ def compose_batch(batch: Mapping[str, Any]) -> dict[str, torch.Tensor]:
             contrib = (vals[c] * wk).sum(-1)                                          # (E,) e-
             comp[key].view(-1).index_add_(0, dest, contrib)
     return comp
+
+
+def _numba_available() -> bool:
+    """Whether numba is importable (the compiled CPU backends)."""
+    from lfmbench import poisson
+
+    return poisson.available()
 
 
 class _FPNCache:
