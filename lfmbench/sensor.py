@@ -627,10 +627,11 @@ def shot_noise(mean_e: torch.Tensor, generator: torch.Generator, gaussian_above_
 _DRAW_POOL: dict[tuple, Any] = {}
 
 
-def _map_samples(fn, count: int) -> None:
-    """``fn(b)`` for b in range(count), by ``min(torch.get_num_threads(), count)`` Python threads on the CPU (the
-    compiled kernels and torch's samplers release the GIL); in order in this thread when that is 1."""
-    n = min(torch.get_num_threads(), count)
+def _map_samples(fn, count: int, threads: int | None = None) -> None:
+    """``fn(b)`` for b in range(count), by ``min(threads, count)`` Python threads (default
+    ``torch.get_num_threads()``; the compiled kernels and torch's samplers release the GIL); in order in this
+    thread when that is 1."""
+    n = min(torch.get_num_threads() if threads is None else int(threads), count)
     if n < 2:
         for b in range(count):
             fn(b)
@@ -642,10 +643,10 @@ def _map_samples(fn, count: int) -> None:
     list(_DRAW_POOL[key].map(fn, range(count)))
 
 
-def _per_generator(draw, x: torch.Tensor, generator) -> torch.Tensor:
+def _per_generator(draw, x: torch.Tensor, generator, threads: int | None = None) -> torch.Tensor:
     """``draw(x, generator)``, or with a sequence of generators ``draw(x[b], generator[b])`` stacked over b.
 
-    On the CPU the samples are drawn by ``torch.get_num_threads()`` Python threads (:func:`_map_samples`); each
+    On the CPU the samples are drawn by ``threads`` Python threads (:func:`_map_samples`); each
     sample still reads only its own generator, so the result does not depend on the thread count.
     """
     if not isinstance(generator, (list, tuple)):
@@ -659,7 +660,7 @@ def _per_generator(draw, x: torch.Tensor, generator) -> torch.Tensor:
         for b in range(len(generator)):
             one(b)
     else:
-        _map_samples(one, len(generator))
+        _map_samples(one, len(generator), threads)
     return out
 
 
@@ -674,7 +675,8 @@ def _map_rows(m: torch.Tensor, lead: torch.Size, H: int, W: int) -> tuple[np.nda
 
 
 def _chain_fused(lpd_e: torch.Tensor, spd_e: torch.Tensor, preset: SensorPreset, t_s: torch.Tensor,
-                 t_l: torch.Tensor, generator, noise: bool, fpn: Mapping[str, torch.Tensor] | None) -> dict:
+                 t_l: torch.Tensor, generator, noise: bool, fpn: Mapping[str, torch.Tensor] | None,
+                 threads: int | None = None) -> dict:
     """The CPU chain of :func:`simulate_split_pixel_electrons` in compiled passes (backend ``"numba"``).
 
     Args: ``lpd_e``, ``spd_e`` (*, 1, H, W) mean e- (float32/float64, CPU); ``t_s``, ``t_l`` (*, 1, 1, 1)
@@ -741,7 +743,7 @@ def _chain_fused(lpd_e: torch.Tensor, spd_e: torch.Tensor, preset: SensorPreset,
 
     if isinstance(generator, (list, tuple)):
         per = L // len(generator)
-        _map_samples(lambda b: run(b * per, (b + 1) * per, generator[b], lpd_e.shape[1:]), len(generator))
+        _map_samples(lambda b: run(b * per, (b + 1) * per, generator[b], lpd_e.shape[1:]), len(generator), threads)
     else:
         run(0, L, generator, lpd_e.shape)
     out["saturated"] = sat
@@ -809,7 +811,8 @@ def simulate_split_pixel_electrons(lpd_electrons: torch.Tensor, spd_electrons: t
                                    preset: SensorPreset | str, exposure_short_s: float | torch.Tensor,
                                    exposure_long_s: float | torch.Tensor, generator: torch.Generator | None = None,
                                    noise: bool = True, fpn: Mapping[str, torch.Tensor] | None = None,
-                                   check: bool = True, backend: str = "auto") -> dict[str, torch.Tensor]:
+                                   check: bool = True, backend: str = "auto",
+                                   threads: int | None = None) -> dict[str, torch.Tensor]:
     """The three captures from mean photo-electrons (the noise and read-out part of :func:`simulate_split_pixel`).
 
     Use this when the spectral projection (:func:`ideal_electrons` or a cached equivalent) is done elsewhere.
@@ -836,6 +839,10 @@ def simulate_split_pixel_electrons(lpd_electrons: torch.Tensor, spd_electrons: t
             :func:`lfmbench._readout_kernel.readout`), bit-identical to ``"torch"`` on the CPU with a fraction of
             its memory passes (docs/dataset-benchmark.md); ``"auto"``: ``"numba"`` where it applies, else
             ``"torch"``.
+        threads: with one generator per sample on the CPU, the samples are simulated by this many Python threads
+            (default ``torch.get_num_threads()``; the result does not depend on it). The threads do not spin while
+            they wait, unlike OpenMP's: on a machine shared with other jobs use ``torch.set_num_threads(1)`` and
+            ``threads`` = the cores to use.
 
     Returns:
         as :func:`simulate_split_pixel`.
@@ -873,7 +880,7 @@ def simulate_split_pixel_electrons(lpd_electrons: torch.Tensor, spd_electrons: t
     if backend == "numba" and not fused:
         raise ValueError(f"backend='numba' needs float32/float64 CPU inputs and numba (got {x.dtype} on {x.device})")
     if fused and backend != "torch":
-        return _chain_fused(lpd_electrons, spd_electrons, preset, t_s, t_l, generator, noise, fpn)
+        return _chain_fused(lpd_electrons, spd_electrons, preset, t_s, t_l, generator, noise, fpn, threads)
 
     pd_inputs = {"lpd": (lpd_electrons, t_s), "spd": (spd_electrons, t_l)}
     collected: dict[str, torch.Tensor] = {}
@@ -884,8 +891,8 @@ def simulate_split_pixel_electrons(lpd_electrons: torch.Tensor, spd_electrons: t
         if noise and fpn is not None and spec.prnu > 0:
             mu.mul_(fpn[f"{pd}_gain"])
         mu.add_(spec.dark_current_e_per_s * t)
-        n = _per_generator(lambda m, g: shot_noise(m, g, preset.shot_noise_gaussian_above_e), mu, generator) \
-            if noise else mu
+        n = _per_generator(lambda m, g: shot_noise(m, g, preset.shot_noise_gaussian_above_e), mu, generator,
+                           threads) if noise else mu
         collected[pd] = n.clamp_(0.0, spec.full_well_e)
 
     out: dict[str, torch.Tensor] = {}

@@ -159,6 +159,17 @@ def test_dataloader_with_collate_and_module(corpus):
     assert batches[0]["light_index"].dtype == torch.int64 and batches[0]["saturated"].shape[2] == 3
 
 
+def test_collate_in_a_worker_gives_the_same_batch(corpus):
+    """In a DataLoader worker collate_pieces allocates the batch in shared memory (its own path); the batch equals
+    the one collated in the main process."""
+    _, ds = _pair(corpus, frames=2, crop=(12, 16), samples_per_scene=2)
+    ref = _batch(ds, range(3))
+    got = next(iter(DataLoader(ds, batch_size=3, num_workers=1, collate_fn=collate_pieces)))
+    for k, v in ref.items():
+        if torch.is_tensor(v):
+            assert torch.equal(got[k], v), k
+
+
 # ----------------------------------------------------------------------------------------------------------
 # determinism, batch-size independence, statistics
 # ----------------------------------------------------------------------------------------------------------

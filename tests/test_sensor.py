@@ -425,6 +425,9 @@ def test_compiled_cpu_chain_is_bit_identical_to_the_torch_chain(dtype):
                     assert got[k].dtype == ref[k].dtype and torch.equal(got[k], ref[k]), (k, noise, per_sample_gens)
                 n_checked += 1
     assert n_checked == 12 and ref["saturated"].any() and not ref["saturated"].all()
+    one, three = (simulate_split_pixel_electrons(le, se, fpn_preset, t_s, T_L, [_gen(10 + b) for b in range(B)],
+                                                 threads=n) for n in (1, 3))
+    assert all(torch.equal(one[k], three[k]) for k in one)              # samples in parallel threads: same result
     with pytest.raises(ValueError, match="backend"):
         simulate_split_pixel_electrons(le, se, ovt, T_S, T_L, _gen(0), backend="fused")
     with pytest.raises(ValueError, match="backend='numba'"):

@@ -235,17 +235,32 @@ def collate_pieces(samples: Sequence[Mapping[str, Any]]) -> dict:
         if len(vals) > 1:
             raise ValueError(f"samples: a batch must share one {f}; this one mixes {', '.join(vals)}")
     out: dict[str, Any] = {}
+    shared = torch.utils.data.get_worker_info() is not None
+
+    def cat(ts: list[torch.Tensor], dim: int = 0, stack: bool = False) -> torch.Tensor:
+        # in a DataLoader worker, straight into shared memory (as default_collate does): no second copy when the
+        # batch is sent to the main process
+        if not shared:
+            return torch.stack(ts, dim) if stack else torch.cat(ts, dim)
+        shape = list(ts[0].shape)
+        if stack:
+            shape.insert(dim, len(ts))
+        else:
+            shape[dim] = sum(int(t.shape[dim]) for t in ts)
+        res = ts[0].new(ts[0]._typed_storage()._new_shared(int(np.prod(shape)), device=ts[0].device))
+        res = res.resize_(shape)
+        return torch.stack(ts, dim, out=res) if stack else torch.cat(ts, dim, out=res)
+
     for k in ("static", "t0", "timing", "crop", "scene_hw", "noise_seed", "light_index", "depth"):
         if k in samples[0]:
-            out[k] = torch.stack([s[k] for s in samples])
+            out[k] = cat([s[k] for s in samples], stack=True)
     kmax = max(int(s["entry_values"].shape[1]) for s in samples)
-    out["entry_values"] = torch.cat([v if v.shape[1] == kmax else
-                                     torch.nn.functional.pad(v, (0, 0, 0, kmax - v.shape[1]))
-                                     for v in (s["entry_values"] for s in samples)], 2)
+    out["entry_values"] = cat([v if v.shape[1] == kmax else torch.nn.functional.pad(v, (0, 0, 0, kmax - v.shape[1]))
+                               for v in (s["entry_values"] for s in samples)], 2)
     n_slots = [int(s["slot_K"].shape[0]) for s in samples]
     offs = np.concatenate([[0], np.cumsum(n_slots)[:-1]])
-    out["entry_slot"] = torch.cat([s["entry_slot"] + int(o) for s, o in zip(samples, offs)])
-    out["entry_pix"] = torch.cat([s["entry_pix"] for s in samples])
+    out["entry_slot"] = cat([s["entry_slot"] + int(o) for s, o in zip(samples, offs)])
+    out["entry_pix"] = cat([s["entry_pix"] for s in samples])
     for k in ("slot_pwm", "slot_frame", "slot_K"):
         out[k] = torch.cat([s[k] for s in samples])
     out["slot_sample"] = torch.repeat_interleave(torch.arange(len(samples)), torch.tensor(n_slots, dtype=torch.long))
@@ -421,7 +436,7 @@ _DEFAULT_FPN = _FPNCache()
 
 
 def simulate_batch(batch: Mapping[str, Any], preset: Any, outputs: Sequence[str] | None = None,
-                   noise: bool | None = None, fpn_cache: _FPNCache | None = None) -> dict:
+                   noise: bool | None = None, fpn_cache: _FPNCache | None = None, threads: int | None = None) -> dict:
     """Simulate a batch of pieces on their device: the batched equivalent of ``LFMCaptureDataset.simulate``.
 
     Args:
@@ -430,6 +445,8 @@ def simulate_batch(batch: Mapping[str, Any], preset: Any, outputs: Sequence[str]
             projected for (checked against the batch's sensor name).
         outputs: subset of the batch's outputs (default: the dataset's). noise: default the dataset's.
         fpn_cache: where full-frame fixed-pattern maps are kept (default: a module-level cache).
+        threads: on the CPU, Python threads simulating the samples' noise and read-out in parallel (default
+            ``torch.get_num_threads()``; see :func:`lfmbench.sensor.simulate_split_pixel_electrons`).
 
     Returns:
         the per-sample path's sample dict with a leading B (B, F, C, h, w): ``lpd_hcg``, ``lpd_lcg``, ``spd``
@@ -465,7 +482,7 @@ def simulate_batch(batch: Mapping[str, Any], preset: Any, outputs: Sequence[str]
             fpn = (fpn_cache or _DEFAULT_FPN).crops(preset, batch["scene_hw"], batch["crop"], dev, lpd.dtype, used)
             gens = [torch.Generator(device=dev).manual_seed(int(s)) for s in batch["noise_seed"].tolist()]
         cap = _sensor.simulate_split_pixel_electrons(lpd, spd, preset, t_s[:, None], t_l[:, None], generator=gens,
-                                                     noise=noise, fpn=fpn)
+                                                     noise=noise, fpn=fpn, threads=threads)
         if "raw" in want:
             sample.update({k: cap[k] for k in ("lpd_hcg", "lpd_lcg", "spd")})
         if want & {"input_referred", "rgb"}:
@@ -491,22 +508,24 @@ class BatchedCaptureSimulator(nn.Module):
 
     Args:
         preset: sensor preset, name or YAML path. outputs: default subset of outputs (None: the batch's).
-        noise: default noise flag (None: the batch's).
+        noise: default noise flag (None: the batch's). threads: CPU threads per batch (see :func:`simulate_batch`).
     """
 
-    def __init__(self, preset: Any = "ovt", outputs: Sequence[str] | None = None, noise: bool | None = None) -> None:
+    def __init__(self, preset: Any = "ovt", outputs: Sequence[str] | None = None, noise: bool | None = None,
+                 threads: int | None = None) -> None:
         super().__init__()
         self.preset = _sensor.load_preset(preset)
         self.outputs = None if outputs is None else tuple(outputs)
         self.noise = noise
+        self.threads = threads
         self._fpn = _FPNCache()
 
     @classmethod
-    def from_dataset(cls, ds) -> "BatchedCaptureSimulator":
+    def from_dataset(cls, ds, threads: int | None = None) -> "BatchedCaptureSimulator":
         """The simulator matching an :class:`LFMCaptureDataset` (its preset, outputs and noise setting)."""
-        return cls(ds.preset, ds.outputs, ds.noise)
+        return cls(ds.preset, ds.outputs, ds.noise, threads)
 
     def forward(self, batch: Mapping[str, Any]) -> dict:
         """``simulate_batch(batch, ...)``; see there for shapes and units."""
-        return simulate_batch(batch, self.preset, self.outputs, self.noise, self._fpn)
+        return simulate_batch(batch, self.preset, self.outputs, self.noise, self._fpn, self.threads)
 
