@@ -185,7 +185,7 @@ class PWMParams:
 
     def to_dict(self) -> dict[str, float]:
         """``{key: float}`` in :data:`PWM_KEYS` order (the form ``LFMCaptureDataset.simulate`` takes)."""
-        return {k: float(getattr(self, k)) for k in PWM_KEYS}     # (not asdict: it deep-copies, 20 us a light)
+        return {k: float(getattr(self, k)) for k in PWM_KEYS}     # (not asdict: it deep-copies)
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> "PWMParams":
