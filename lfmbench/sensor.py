@@ -49,6 +49,7 @@ from __future__ import annotations
 import functools
 import math
 import os
+import threading
 from dataclasses import dataclass, field, fields
 from enum import Enum
 from pathlib import Path
@@ -664,6 +665,24 @@ def _per_generator(draw, x: torch.Tensor, generator, threads: int | None = None)
     return out
 
 
+_SCRATCH = threading.local()
+#: Work arrays up to this many bytes are kept per thread between calls (fresh pages cost a fault each).
+_SCRATCH_MAX_BYTES = 16 * 2 ** 20
+
+
+def _scratch(name: str, rows: int, cols: int, dtype) -> np.ndarray:
+    """A (rows, cols) work array of this thread, reused from call to call when small enough (contents undefined)."""
+    n = rows * cols
+    dt = np.dtype(dtype)
+    if n * dt.itemsize > _SCRATCH_MAX_BYTES:
+        return np.empty((rows, cols), dt)
+    bufs = _SCRATCH.__dict__.setdefault("bufs", {})
+    b = bufs.get((name, dt))
+    if b is None or b.size < n:
+        b = bufs[(name, dt)] = np.empty(n, dt)
+    return b[:n].reshape(rows, cols)
+
+
 def _map_rows(m: torch.Tensor, lead: torch.Size, H: int, W: int) -> tuple[np.ndarray, np.ndarray]:
     """A map (..., H, W) broadcastable to inputs ``lead + (1, H, W)`` as ``(base, row)``: ``base`` (M, H*W) its
     distinct planes (C-contiguous numpy), ``row`` (L,) int64 the plane each of the L = prod(lead) input planes
@@ -710,7 +729,6 @@ def _chain_fused(lpd_e: torch.Tensor, spd_e: torch.Tensor, preset: SensorPreset,
         maps[f"{pd}_gain"] = _map_rows(fpn[f"{pd}_gain"], lead, H, W) if use and spec.prnu > 0 else (empty, none_row)
         maps[f"{pd}_offset_e"] = (_map_rows(fpn[f"{pd}_offset_e"], lead, H, W) if use and spec.dsnu_e > 0
                                   else (empty, none_row))
-    collected = {pd: np.empty((L, P), dtype=nt) for pd in PHOTODIODES}
     out = {k: torch.empty(*lead, 1, H, W, dtype=dtype) for k in (*CAPTURES, *(f"{c}_e" for c in CAPTURES))}
     sat = torch.empty(*lead, 3, H, W, dtype=torch.bool)
     flat = {k: v.view(L, P).numpy() for k, v in out.items()}
@@ -719,23 +737,27 @@ def _chain_fused(lpd_e: torch.Tensor, spd_e: torch.Tensor, preset: SensorPreset,
 
     def run(r0: int, r1: int, g, shape: torch.Size) -> None:
         """Rows r0..r1 (one generator's inputs, of shape ``shape``)."""
+        collected = {pd: _scratch(pd, r1 - r0, P, nt) for pd in PHOTODIODES}            # e-
         for pd in PHOTODIODES:
             spec = preset.photodiodes[pd]
             gain, grow = maps[f"{pd}_gain"]
             seed = _poisson.draw_seed(g) if noise else np.uint64(0)
             bad = collect(rows[pd][r0:r1], gain, grow[r0:r1], dark[pd][r0:r1],
                           nt(_MEAN_CAP_FULL_WELLS * spec.full_well_e), nt(spec.full_well_e), seed, gsw, noise,
-                          collected[pd][r0:r1])
+                          collected[pd])
             if bad >= 0:  # pragma: no cover - the clipped means are finite and >= 0
                 raise ValueError(f"shot noise: invalid mean at flat index {bad} of {pd}")
+        z_all = _scratch("z", r1 - r0, P, nt)
         for c, cap in enumerate(CAPTURES):
             spec = preset.captures[cap]
             pd = spec.photodiode
             z = empty
             if noise and spec.read_noise_e > 0:
-                z = torch.randn(shape, generator=g, dtype=dtype).view(r1 - r0, P).numpy()
+                # into a reused buffer: the same draws as a new tensor
+                torch.randn(shape, generator=g, dtype=dtype, out=torch.from_numpy(z_all).view(shape))
+                z = z_all
             off, orow = maps[f"{pd}_offset_e"]
-            readout(collected[pd][r0:r1], z, nt(spec.read_noise_e), off, orow[r0:r1],
+            readout(collected[pd], z, nt(spec.read_noise_e), off, orow[r0:r1],
                     nt(spec.conversion_gain_v_per_e), nt(spec.voltage_swing_v), nt(preset.dn_per_volt(cap)),
                     nt(preset.black_level_dn), nt(preset.max_dn), nt(preset.saturation_fraction * spec.voltage_swing_v),
                     nt(preset.system_gain(cap)), dark[pd][r0:r1], spd_factor[r0:r1] if pd == "spd" else no_factor,

@@ -60,14 +60,14 @@ _INFO_FIELDS = ("sensor", "frames", "crop_hw", "shutter", "noise", "outputs")
 # pieces (DataLoader workers, CPU)
 # ----------------------------------------------------------------------------------------------------------
 class _FrameEntries(NamedTuple):
-    """The per-light layers of one frame as pixel entries, in the stored light order, row-major in each box."""
+    """The per-light layers of one frame as pixel entries, in the stored light order, row-major in each box
+    (numpy arrays: a sample takes a few small gathers of them, where torch's per-call overhead would dominate)."""
 
     lights: list       # [(light_id, K, (y0, x0, y1, x1))] px, half-open
-    y: torch.Tensor    # (N,) int32 absolute row, px
-    x: torch.Tensor    # (N,) int32 absolute column, px
-    pos: torch.Tensor  # (N,) int64 position of the entry's light in ``lights``
-    vals: torch.Tensor  # (N, 2, Kscene) float32 rates (LPD, SPD) per bin, e-/s, zero past the light's K
-    #                     (entry-major: a sample's entries are whole rows of it)
+    y: np.ndarray      # (N,) int32 absolute row, px
+    x: np.ndarray      # (N,) int32 absolute column, px
+    pos: np.ndarray    # (N,) int64 position of the entry's light in ``lights``
+    vals: np.ndarray   # (2, Kscene, N) float32 rates (LPD, SPD) per bin, e-/s, zero past the light's K
 
 
 class _SceneEntries:
@@ -85,17 +85,17 @@ class _SceneEntries:
                 if (hh, ww) != (by1 - by0, bx1 - bx0):
                     raise ValueError(f"light {lid}: layer of {hh}x{ww} px in a box of {by1 - by0}x{bx1 - bx0} px")
                 lights.append((int(lid), K, (int(by0), int(bx0), int(by1), int(bx1))))
-                ys.append(torch.arange(by0, by1, dtype=torch.int32).repeat_interleave(ww))
-                xs.append(torch.arange(bx0, bx1, dtype=torch.int32).repeat(hh))
-                ps.append(torch.full((hh * ww,), i, dtype=torch.int64))
+                ys.append(np.repeat(np.arange(by0, by1, dtype=np.int32), ww))
+                xs.append(np.tile(np.arange(bx0, bx1, dtype=np.int32), hh))
+                ps.append(np.full(hh * ww, i, dtype=np.int64))
                 v = torch.stack([rates[pd].reshape(K, -1) for pd in PHOTODIODES])          # (2, K, n) e-/s
-                vs.append(torch.nn.functional.pad(v, (0, 0, 0, kmax - K)).permute(2, 0, 1))
+                vs.append(torch.nn.functional.pad(v, (0, 0, 0, kmax - K)).numpy())
             if lights:
-                self.frames.append(_FrameEntries(lights, torch.cat(ys), torch.cat(xs), torch.cat(ps),
-                                                 torch.cat(vs).contiguous()))
+                self.frames.append(_FrameEntries(lights, np.concatenate(ys), np.concatenate(xs), np.concatenate(ps),
+                                                 np.ascontiguousarray(np.concatenate(vs, 2), dtype=np.float32)))
             else:
-                z = torch.zeros(0, dtype=torch.int32)
-                self.frames.append(_FrameEntries([], z, z, z.long(), torch.zeros(0, 2, kmax)))
+                z = np.zeros(0, dtype=np.int32)
+                self.frames.append(_FrameEntries([], z, z, z.astype(np.int64), np.zeros((2, kmax, 0), np.float32)))
 
 
 def capture_pieces(ds, scene_id: str, params: Mapping[int, Mapping], group_params: Mapping[str, Mapping] | None,
@@ -159,16 +159,16 @@ def capture_pieces(ds, scene_id: str, params: Mapping[int, Mapping], group_param
         vis = [i for i, (*_, rates) in enumerate(layers.lights[s0 + f]) if id(rates) in shown]
         if not vis:
             continue
-        rank = torch.full((len(fe.lights),), -1, dtype=torch.int32)
-        rank[vis] = torch.arange(len(slots), len(slots) + len(vis), dtype=torch.int32)
+        rank = np.full(len(fe.lights), -1, dtype=np.int32)
+        rank[vis] = np.arange(len(slots), len(slots) + len(vis), dtype=np.int32)
         slots.extend((f, fe.lights[i][1], params[fe.lights[i][0]]) for i in vis)
         keep = (fe.y >= y0) & (fe.y < y0 + h) & (fe.x >= x0) & (fe.x < x0 + w)
         if len(vis) < len(fe.lights):
             keep &= rank[fe.pos] >= 0
-        idx = keep.nonzero()[:, 0]
+        idx = np.flatnonzero(keep)
         picks.append((fe, idx, len(pix)))
-        pix.append(f * hw + (fe.y[idx] - y0) * w + (fe.x[idx] - x0))
-        slot_of.append(rank[fe.pos[idx]])
+        pix.append(torch.from_numpy((f * hw + (fe.y[idx] - y0) * w + (fe.x[idx] - x0)).astype(np.int32)))
+        slot_of.append(torch.from_numpy(rank[fe.pos[idx]]))
     kmax = max([max(s[1], 1) for s in slots] + [1])
     out["slot_pwm"] = torch.tensor([[float(s[2][k]) for k in PWM_FIELDS] for s in slots],
                                    dtype=torch.float64).reshape(len(slots), len(PWM_FIELDS))
@@ -176,14 +176,15 @@ def capture_pieces(ds, scene_id: str, params: Mapping[int, Mapping], group_param
     out["slot_K"] = torch.tensor([s[1] for s in slots], dtype=torch.int64)
     if pix:
         n_all = [int(p_.shape[0]) for p_ in pix]
-        ev = torch.zeros(2, kmax, sum(n_all))
         o = np.concatenate([[0], np.cumsum(n_all)])
+        ev = np.empty((2, kmax, int(o[-1])), dtype=np.float32)
         for pd_i, pd in enumerate(PHOTODIODES):
-            for j, v in enumerate(vals[pd]):                                  # groups: (1, hw)
-                ev[pd_i, :1, o[j]:o[j + 1]] = v
+            for j, v in enumerate(vals[pd]):                                  # groups: (1, hw), zero past bin 0
+                ev[pd_i, 0, o[j]:o[j + 1]] = v.reshape(-1).numpy()
+                ev[pd_i, 1:, o[j]:o[j + 1]] = 0.0
         for fe, idx, j in picks:
-            ev[:, :, o[j]:o[j + 1]] = fe.vals.index_select(0, idx)[:, :, :kmax].permute(1, 2, 0)
-        out["entry_values"] = ev
+            np.take(fe.vals[:, :kmax], idx, axis=2, out=ev[:, :, o[j]:o[j + 1]], mode="clip")
+        out["entry_values"] = torch.from_numpy(ev)
         out["entry_slot"] = torch.cat(slot_of)
         out["entry_pix"] = torch.cat(pix)
     else:
