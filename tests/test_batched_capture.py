@@ -119,6 +119,13 @@ def test_compiled_composition_matches_the_torch_composition(corpus, imported, sh
             assert got[k].shape == ref[k].shape and got[k].dtype == ref[k].dtype
             torch.testing.assert_close(got[k], ref[k], rtol=1e-6, atol=1e-6 * float(ref[k].abs().max()))
         assert not torch.equal(ref["lpd"], ref["gt"])                      # the PWM weights did something
+        parallel = compose_batch(batch, backend="numba", threads=3)
+        assert all(torch.equal(parallel[k], got[k]) for k in got)           # samples in threads: same result
+        perm = torch.randperm(batch["entry_pix"].numel(), generator=torch.Generator().manual_seed(0))
+        shuffled = dict(batch, entry_slot=batch["entry_slot"][perm], entry_pix=batch["entry_pix"][perm],
+                        entry_values=batch["entry_values"][:, :, perm])     # entries out of sample order
+        for k, v in compose_batch(shuffled, backend="numba", threads=3).items():
+            torch.testing.assert_close(v, ref[k], rtol=1e-6, atol=1e-6 * float(ref[k].abs().max()))
     empty = {k: (v[:, :, :0] if k == "entry_values" else v[:0]) if k.startswith("entry_") else v
              for k, v in batch.items()}
     for k in ("lpd", "gt"):

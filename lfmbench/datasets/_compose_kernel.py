@@ -12,7 +12,7 @@ import numpy as np
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
 def compose(static, t_s, t_l, slot_sample, entry_slot, entry_pix, vals, w_lpd, w_spd, w_gt, width, out_lpd,
-            out_spd, out_gt):  # pragma: no cover - compiled by numba
+            out_spd, out_gt, b0, b1, e0, e1):  # pragma: no cover - compiled by numba
     """Mean electrons of a batch (all float arrays float32; the torch formula's products, and its summation order
     per pixel).
 
@@ -26,12 +26,13 @@ def compose(static, t_s, t_l, slot_sample, entry_slot, entry_pix, vals, w_lpd, w
             not depend on the row).
         width: w, the crop width in pixels (the row of pixel p is (p mod P) div w).
         out_lpd, out_spd, out_gt: (B, F, P) written: e-.
+        b0, b1, e0, e1: the samples b0..b1-1 and their entries e0..e1-1 (a part of the batch, for threads).
 
     ``out_lpd = static_lpd * t_s`` and ``out_spd = static_spd * t_l`` per pixel, ``out_gt = out_lpd``; then entry by
     entry in order, ``out[dest] += sum_k vals[k] * w[slot, row, k]`` (k ascending).
     """
-    B, F, _, P = static.shape
-    for b in range(B):
+    _, F, _, P = static.shape
+    for b in range(b0, b1):
         ts = t_s[b]
         tl = t_l[b]
         for f in range(F):
@@ -42,7 +43,7 @@ def compose(static, t_s, t_l, slot_sample, entry_slot, entry_pix, vals, w_lpd, w
                 out_spd[b, f, j] = static[b, f, 1, j] * tl
     R = w_lpd.shape[1]
     K = vals.shape[1]
-    for e in range(entry_slot.shape[0]):
+    for e in range(e0, e1):
         s = entry_slot[e]
         b = slot_sample[s]
         p = entry_pix[e]
