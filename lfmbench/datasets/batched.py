@@ -105,7 +105,9 @@ def capture_pieces(ds, scene_id: str, params: Mapping[int, Mapping], group_param
 
     Args: as :meth:`LFMCaptureDataset.simulate` (``crop`` required).
 
-    Returns (F frames, crop h x w, S light slots, E pixel entries, Kmax bins; all CPU tensors):
+    Returns (F frames, crop h x w, S light slots, E pixel entries, Kmax bins; all CPU tensors; ``static``,
+    ``light_index`` and ``depth`` are views into the dataset's scene cache, copied once by :func:`collate_pieces`:
+    copy them before changing them in place):
         ``static``: (F, 2, h, w) float32, static rates of LPD and SPD, e-/s.
         ``t0``: (F,) float64 frame start times (s). ``timing``: (4,) float64: short and long exposure, line time,
         capture window (s). ``crop``: (4,) int64 (y0, x0, h, w) px. ``scene_hw``: (2,) int64 px.
@@ -130,7 +132,7 @@ def capture_pieces(ds, scene_id: str, params: Mapping[int, Mapping], group_param
     fps = float(meta["fps"])
     want = set(ds.outputs)
     out: dict[str, Any] = {
-        "static": torch.stack([layers.static[pd][s0:s0 + F, y0:y0 + h, x0:x0 + w] for pd in PHOTODIODES], 1),
+        "static": ds._static_both(scene_id, layers)[s0:s0 + F, :, y0:y0 + h, x0:x0 + w],
         "t0": torch.tensor([(s0 + f) / fps for f in range(F)], dtype=torch.float64),
         "timing": torch.tensor([t_s, t_l, td, float(tm["capture_window_s"])], dtype=torch.float64),
         "crop": torch.tensor([y0, x0, h, w], dtype=torch.int64),
@@ -151,7 +153,7 @@ def capture_pieces(ds, scene_id: str, params: Mapping[int, Mapping], group_param
             pix.append(f * hw + torch.arange(hw, dtype=torch.int32))
             slot_of.append(torch.full((hw,), len(slots) - 1, dtype=torch.int32))
     # per-light layers: the scene's entries (fixed per scene) masked to the crop and the lights with PWM draws
-    ent = ds._scene_cached(scene_id, "pieces_entries", _SceneEntries)
+    ent = ds._scene_cached(scene_id, "pieces_entries", _SceneEntries, layers)
     picks = []
     for f in range(F):
         fe = ent.frames[s0 + f]
@@ -195,9 +197,9 @@ def capture_pieces(ds, scene_id: str, params: Mapping[int, Mapping], group_param
     if len(lights) > ds.max_lights:
         raise ValueError(f"max_lights={ds.max_lights} but scene {scene_id!r} has {len(lights)} lights")
     if "light_index" in want:
-        out["light_index"] = ds._light_index(scene_id, lights, s0, (y0, x0, h, w))
+        out["light_index"] = ds._light_index(scene_id, lights, s0, (y0, x0, h, w), layers)
     if "depth" in want:
-        out["depth"] = layers.aux["depth.Z"][s0:s0 + F, y0:y0 + h, x0:x0 + w][:, None].contiguous()
+        out["depth"] = layers.aux["depth.Z"][s0:s0 + F, y0:y0 + h, x0:x0 + w][:, None]
     out["meta"] = ds._meta(scene_id, index, lights, params, (y0, x0, h, w), t_s, t_l, layers)
     out["meta"]["frame_start"] = s0
     out["info"] = {"sensor": ds.sensor_name, "frames": F, "crop_hw": (h, w), "shutter": ds.shutter,

@@ -497,10 +497,12 @@ class LFMCaptureDataset(Dataset):
                 self._cache.popitem(last=False)
         return layers
 
-    def _scene_cached(self, sid: str, key: str, build: Callable[[SceneLayers], Any]) -> Any:
+    def _scene_cached(self, sid: str, key: str, build: Callable[[SceneLayers], Any],
+                      layers: SceneLayers | None = None) -> Any:
         """``build(layers)`` of scene ``sid``: something fixed per scene (not per crop or draw), computed once and
-        kept as long as the scene's layers stay in the in-memory cache (recomputed per call without it)."""
-        layers = self._layers(sid)
+        kept as long as the scene's layers stay in the in-memory cache (recomputed per call without it).
+        ``layers``: the scene's layers if the caller has them (``self._layers(sid)`` otherwise)."""
+        layers = self._layers(sid) if layers is None else layers
         if sid not in self._cache:
             return build(layers)
         held = self._derived.get(sid)
@@ -512,16 +514,27 @@ class LFMCaptureDataset(Dataset):
             held[1][key] = build(layers)
         return held[1][key]
 
-    def _light_index(self, sid: str, lights: list[dict], s0: int, crop: tuple[int, int, int, int]) -> torch.Tensor:
-        """:func:`light_index` of a crop of frames s0..s0+F-1: a crop of the scene's full-frame light index,
-        computed once per scene. Returns (F, 1, h, w) int16 (int32 from 2^15 lights on)."""
+    def _light_index(self, sid: str, lights: list[dict], s0: int, crop: tuple[int, int, int, int],
+                     layers: SceneLayers | None = None) -> torch.Tensor:
+        """:func:`light_index` of a crop of frames s0..s0+F-1: a crop (a view) of the scene's full-frame light
+        index, computed once per scene. Returns (F, 1, h, w) int16 (int32 from 2^15 lights on)."""
         def build(layers: SceneLayers) -> torch.Tensor:
             dt = torch.int16 if len(lights) < 2 ** 15 else torch.int32
             return light_index(layers.aux["mask.light"], lights).to(dt)                    # (Fs, 1, H, W)
 
         y0, x0, h, w = crop
-        full = self._scene_cached(sid, "light_index", build)
-        return full[s0:s0 + self.frames, :, y0:y0 + h, x0:x0 + w].contiguous()
+        full = self._scene_cached(sid, "light_index", build, layers)
+        return full[s0:s0 + self.frames, :, y0:y0 + h, x0:x0 + w]
+
+    def _static_both(self, sid: str, layers: SceneLayers | None = None) -> torch.Tensor:
+        """The static rates of both photodiodes of scene ``sid`` as one (Fs, 2, H, W) tensor, e-/s (the cached
+        layers' ``static[pd]`` become views of it: the rates are not held twice)."""
+        def build(layers: SceneLayers) -> torch.Tensor:
+            both = torch.stack([layers.static[pd] for pd in PHOTODIODES], 1)
+            layers.static = {pd: both[:, i] for i, pd in enumerate(PHOTODIODES)}
+            return both
+
+        return self._scene_cached(sid, "static_both", build, layers)
 
     def _frames_to_load(self, sid: str) -> int:
         """Leading frames of scene ``sid`` a sample can use: s + F for a fixed start s, all for ``"random"``."""
@@ -648,7 +661,7 @@ class LFMCaptureDataset(Dataset):
         if "light_index" in want or "depth" in want:
             aux = layers.aux
             if "light_index" in want:
-                sample["light_index"] = self._light_index(scene_id, lights, s0, crop).long()
+                sample["light_index"] = self._light_index(scene_id, lights, s0, crop, layers).long()
             if "depth" in want:
                 sample["depth"] = aux["depth.Z"][s0:s0 + F, y0:y0 + ch, x0:x0 + cw][:, None]
         if "rgb" in want:
