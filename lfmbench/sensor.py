@@ -688,7 +688,7 @@ def _map_rows(m: torch.Tensor, lead: torch.Size, H: int, W: int) -> tuple[np.nda
     distinct planes (C-contiguous numpy), ``row`` (L,) int64 the plane each of the L = prod(lead) input planes
     reads (no copy of the map per input plane)."""
     base = m.reshape(-1, H * W).contiguous()
-    idx = torch.arange(base.shape[0]).reshape(m.shape[:-2])
+    idx = torch.arange(base.shape[0], device=m.device).reshape(m.shape[:-2])
     row = torch.broadcast_to(idx, (*lead, 1)).reshape(-1).contiguous()
     return base.numpy(), row.numpy()
 
@@ -729,8 +729,9 @@ def _chain_fused(lpd_e: torch.Tensor, spd_e: torch.Tensor, preset: SensorPreset,
         maps[f"{pd}_gain"] = _map_rows(fpn[f"{pd}_gain"], lead, H, W) if use and spec.prnu > 0 else (empty, none_row)
         maps[f"{pd}_offset_e"] = (_map_rows(fpn[f"{pd}_offset_e"], lead, H, W) if use and spec.dsnu_e > 0
                                   else (empty, none_row))
-    out = {k: torch.empty(*lead, 1, H, W, dtype=dtype) for k in (*CAPTURES, *(f"{c}_e" for c in CAPTURES))}
-    sat = torch.empty(*lead, 3, H, W, dtype=torch.bool)
+    dev = lpd_e.device
+    out = {k: torch.empty(*lead, 1, H, W, dtype=dtype, device=dev) for k in (*CAPTURES, *(f"{c}_e" for c in CAPTURES))}
+    sat = torch.empty(*lead, 3, H, W, dtype=torch.bool, device=dev)
     flat = {k: v.view(L, P).numpy() for k, v in out.items()}
     sat_np = sat.view(L, 3, P).numpy()
     gsw = float(preset.shot_noise_gaussian_above_e)
@@ -754,7 +755,7 @@ def _chain_fused(lpd_e: torch.Tensor, spd_e: torch.Tensor, preset: SensorPreset,
             z = empty
             if noise and spec.read_noise_e > 0:
                 # into a reused buffer: the same draws as a new tensor
-                torch.randn(shape, generator=g, dtype=dtype, out=torch.from_numpy(z_all).view(shape))
+                torch.randn(shape, generator=g, dtype=dtype, device=dev, out=torch.from_numpy(z_all).view(shape))
                 z = z_all
             off, orow = maps[f"{pd}_offset_e"]
             readout(collected[pd], z, nt(spec.read_noise_e), off, orow[r0:r1],
@@ -770,6 +771,17 @@ def _chain_fused(lpd_e: torch.Tensor, spd_e: torch.Tensor, preset: SensorPreset,
         run(0, L, generator, lpd_e.shape)
     out["saturated"] = sat
     return out
+
+
+def _warm_fused(preset: SensorPreset | str, noise: bool) -> None:
+    """Compile (or load from numba's cache) the compiled CPU chain's kernels for float32 inputs, in this process
+    (what a DataLoader's parent does before forking its workers)."""
+    if not _poisson.available():  # pragma: no cover - numba is a dependency
+        return
+    preset = load_preset(preset)
+    z = torch.zeros(1, 1, 2, 2, device="cpu")
+    t = torch.full((1, 1, 1), 1e-3, device="cpu")
+    _chain_fused(z, z, preset, t, 10 * t, torch.Generator().manual_seed(0) if noise else None, noise, None)
 
 
 def _exposure(value: float | torch.Tensor, name: str, lead: torch.Size, ref: torch.Tensor) -> torch.Tensor:

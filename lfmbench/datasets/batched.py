@@ -380,8 +380,8 @@ def compose_batch(batch: Mapping[str, Any], backend: str = "auto", threads: int 
         if E:
             wts = {k: v.float().contiguous() for k, v in pwm_weights(batch).items()}
         else:
-            wts = {k: torch.zeros(0, 1, 1) for k in ("lpd", "spd", "gt")}
-        comp = {k: torch.empty(B, F, h, w) for k in ("lpd", "spd", "gt")}
+            wts = {k: torch.zeros(0, 1, 1, device=dev) for k in ("lpd", "spd", "gt")}
+        comp = {k: torch.empty(B, F, h, w, device=dev) for k in ("lpd", "spd", "gt")}
         n = lambda x: x.contiguous().numpy()  # noqa: E731
         args = (n(batch["static"].reshape(B, F, 2, h * w)), n(t_s.float()), n(t_l.float()), n(batch["slot_sample"]),
                 n(batch["entry_slot"]), n(batch["entry_pix"]), n(batch["entry_values"]), wts["lpd"].numpy(),
@@ -507,7 +507,7 @@ def simulate_batch(batch: Mapping[str, Any], preset: Any, outputs: Sequence[str]
     if "light_index" in want:
         li = batch["light_index"]
         if dev.type == "cpu":       # int16 -> int64 per sample in the threads (6 MiB of a batch of 8)
-            sample["light_index"] = torch.empty(li.shape, dtype=torch.long)
+            sample["light_index"] = torch.empty(li.shape, dtype=torch.long, device=dev)
             _sensor._map_samples(lambda b: sample["light_index"][b].copy_(li[b]), li.shape[0], threads)
         else:
             sample["light_index"] = li.long()

@@ -279,10 +279,7 @@ def _warm_cpu_kernels(noise: bool, preset) -> None:
     pwm_exposure(np.zeros(1), 1e-3, 1e-2, 0.5, check=False)
     if noise:
         _sensor.shot_noise(torch.zeros(1), torch.Generator().manual_seed(0))
-    # the sensor chain's compiled passes (float32, the dataset's dtype)
-    z = torch.zeros(1, 1, 2, 2)
-    _sensor.simulate_split_pixel_electrons(z, z, preset, 1e-3, 1e-2, torch.Generator().manual_seed(0), noise=noise,
-                                           check=False)
+    _sensor._warm_fused(preset, noise)         # the sensor chain's compiled passes (float32, the dataset's dtype)
 
 
 # ----------------------------------------------------------------------------------------------------------
