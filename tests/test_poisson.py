@@ -189,10 +189,12 @@ def test_inversion_equals_a_plain_sequential_search():
     """Below 10 e- the kernel evaluates the inversion's terms four at a time; the counts must be those of the
     textbook one-term-at-a-time search [Devroye1986] (X.3.3) written here in plain Python, on each pixel's own
     counter-based stream (start mix(seed) + i * 2^20 * gamma): the same uniforms, products and sums, so the same k
-    for every pixel, including means where F(k) stalls below u (mu ~ 1e-300) and the last k of the table."""
+    for every pixel, including means where F(k) stalls below u (mu ~ 1e-300), the means below 1 e- where k = 0 is
+    decided by a lower bound of exp(-mu) without computing it, and the last k of the table."""
     m64 = (1 << 64) - 1
     mus = np.concatenate([np.geomspace(1e-300, 1e-3, 40), np.linspace(1e-3, 9.999999, 1500),
-                          np.full(400, 9.9999), np.full(60, 0.7)])
+                          np.full(400, 9.9999), np.full(60, 0.7), np.geomspace(9e-4, 0.3, 300),
+                          np.linspace(0.3, 1.7, 2000)])
     seed = 123456789
     out = torch.empty(mus.size, dtype=torch.float64)
     from lfmbench._poisson_kernel import kernel

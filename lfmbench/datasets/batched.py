@@ -34,7 +34,9 @@ window (the per-sample rule, ``K = 0`` in ``slot_K``).
 """
 from __future__ import annotations
 
-from typing import Any, Mapping, NamedTuple, Sequence
+import queue
+import threading
+from typing import Any, Iterable, Iterator, Mapping, NamedTuple, Sequence
 
 import numpy as np
 import torch
@@ -47,7 +49,7 @@ from lfmbench.datasets.capture import (add_rgb, bin_edges, visible_lights,
 from lfmbench.datasets.projection import PHOTODIODES
 from lfmbench.flicker import pwm_exposure
 
-__all__ = ["capture_pieces", "collate_pieces", "pieces_to", "simulate_batch", "BatchedCaptureSimulator",
+__all__ = ["capture_pieces", "collate_pieces", "pieces_to", "prefetch", "simulate_batch", "BatchedCaptureSimulator",
            "piece_bytes", "pwm_weights", "compose_batch", "PWM_FIELDS"]
 
 #: Columns of ``slot_pwm``: period (s), duty (1), phase of a rising edge after frame 0 (s), rise (s), fall (s).
@@ -275,6 +277,58 @@ def collate_pieces(samples: Sequence[Mapping[str, Any]]) -> dict:
 def pieces_to(batch: Mapping[str, Any], device: torch.device | str, non_blocking: bool = False) -> dict:
     """``batch`` (from :func:`collate_pieces`) with its tensors on ``device`` (``meta`` stays where it is)."""
     return {k: (v.to(device, non_blocking=non_blocking) if torch.is_tensor(v) else v) for k, v in batch.items()}
+
+
+def prefetch(iterable: Iterable, depth: int = 1) -> Iterator:
+    """The items of ``iterable`` in order, the next ``depth`` of them produced by a background thread.
+
+    For a ``DataLoader`` with ``num_workers=0`` on the CPU: the next batch's pieces are built (Python and numpy,
+    partly under the GIL) while the current batch is simulated (compiled kernels in the simulation threads, no
+    GIL), instead of one after the other; no process boundary, so no shared-memory copy of the pieces. The
+    iterable is only touched by that thread. An exception raised there is raised here, at the item it replaced;
+    leaving the loop early stops the thread after its current item.
+
+    Args:
+        iterable: e.g. ``DataLoader(ds, ..., num_workers=0, collate_fn=collate_pieces)``.
+        depth: items produced ahead (>= 1).
+    """
+    if int(depth) < 1:
+        raise ValueError(f"depth must be >= 1, got {depth!r}")
+    q: queue.Queue = queue.Queue(maxsize=int(depth))
+    stop = threading.Event()
+    end = object()
+
+    def put(item) -> bool:
+        while not stop.is_set():
+            try:
+                q.put(item, timeout=0.05)
+                return True
+            except queue.Full:
+                continue
+        return False
+
+    def produce() -> None:
+        try:
+            for item in iterable:
+                if not put((item, None)):
+                    return
+            put((end, None))
+        except BaseException as exc:  # noqa: BLE001 - handed to the consumer
+            put((end, exc))
+
+    worker = threading.Thread(target=produce, name="lfmbench-prefetch", daemon=True)
+    worker.start()
+    try:
+        while True:
+            item, exc = q.get()
+            if item is end:
+                if exc is not None:
+                    raise exc
+                return
+            yield item
+    finally:
+        stop.set()
+        worker.join()
 
 
 # ----------------------------------------------------------------------------------------------------------
