@@ -14,7 +14,7 @@ from torch.utils.data import DataLoader
 from lfmbench import corpus as C
 from lfmbench.datasets import LFMCaptureDataset
 from lfmbench.datasets.batched import (BatchedCaptureSimulator, collate_pieces, compose_batch, pieces_to,
-                                       pwm_weights, simulate_batch)
+                                       prefetch, pwm_weights, simulate_batch)
 from lfmbench.datasets.capture import _window_starts, bin_edges, visible_lights, window_bin_exposure
 from lfmbench.datasets.projection import build_layers
 from lfmbench.flicker import pwm_exposure
@@ -175,6 +175,36 @@ def test_collate_in_a_worker_gives_the_same_batch(corpus):
     for k, v in ref.items():
         if torch.is_tensor(v):
             assert torch.equal(got[k], v), k
+
+
+def test_prefetch_keeps_order_raises_and_stops(corpus):
+    """prefetch: the same batches in the same order as the loader itself; an error in the producing thread is
+    raised at its place in the sequence; leaving early stops the thread."""
+    import threading
+
+    _, ds = _pair(corpus, frames=2, crop=(12, 16), samples_per_scene=3)
+    loader = DataLoader(ds, batch_size=2, collate_fn=collate_pieces)
+    ref, got = list(loader), list(prefetch(loader, depth=2))
+    assert len(got) == len(ref) == 3
+    for a, b in zip(ref, got):
+        assert all(torch.equal(a[k], b[k]) for k in a if torch.is_tensor(a[k]))
+
+    def failing():
+        yield 1
+        yield 2
+        raise KeyError("scene 7")
+
+    seen = []
+    with pytest.raises(KeyError, match="scene 7"):
+        for x in prefetch(failing()):
+            seen.append(x)
+    assert seen == [1, 2]
+    it = prefetch(iter(range(10 ** 9)))
+    assert next(it) == 0
+    it.close()                                                              # the consumer leaves early
+    assert not [t for t in threading.enumerate() if t.name == "lfmbench-prefetch"]
+    with pytest.raises(ValueError, match="depth"):
+        next(prefetch([1], depth=0))
 
 
 # ----------------------------------------------------------------------------------------------------------
