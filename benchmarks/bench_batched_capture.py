@@ -292,19 +292,24 @@ def report(res: dict) -> str:
                   + (f" ({1e3 / tk:.0f} and {2e3 / tk:.0f} with malloc keeping freed memory)" if sk else "")
                   + ". The largest stages: "
                   + ", ".join(f"{k} {v:.1f} ms ({100 * v / tot:.0f} %)" for v, k in top[:3])
-                  + ". Shot noise is exact Poisson sampling of 2 x 196,608 pixels (about 25 ns a draw: inversion "
-                  "below 10 e-, PTRS above); the read-noise draws are 3 x 196,608 normals from each sample's own "
-                  "`torch.Generator` (the determinism contract); both are per-sample work that batching cannot "
-                  "share. The rest is bookkeeping and memory passes, and page faults: a batch of 8 allocates about "
-                  "100 MiB of tensors (collated pieces, composed means, outputs), glibc gives freed ones back to the "
-                  "kernel, and the next batch's first writes fault every page in again, zeroed; keeping freed "
-                  "memory in the process removes that (the right-hand column, the `malloc keeps freed memory` rows;"
-                  " jemalloc or tcmalloc, which PyTorch's CPU performance guide suggests, do the same)."]
+                  + ". Shot noise is exact Poisson sampling of 2 x 196,608 pixels (inversion below 10 e-, PTRS "
+                  "above; about 25 ns a draw on this machine); the read-noise draws are 3 x 196,608 normals from each "
+                  "sample's own `torch.Generator` (the determinism contract); both are per-sample work that batching "
+                  "cannot share. The rest is bookkeeping, memory passes and page faults: a batch of 8 allocates about "
+                  "100 MiB of tensors (collated pieces, composed means, outputs); glibc's malloc gives freed ones back "
+                  "to the kernel and the next batch's first writes fault the pages in again, zeroed. The right-hand "
+                  "column and the `malloc keeps freed memory` rows run the same code in a child process with "
+                  f"`{keep_env}` (jemalloc or tcmalloc, which PyTorch's CPU performance guide suggests, also keep "
+                  "freed memory); on this shared machine the difference is within the run-to-run spread of one "
+                  "configuration (see min - max)."]
         L += ["", "Threads: the rows with 2 main-process torch threads use OpenMP, whose threads spin while they "
               "wait for each other; when other jobs hold the cores that collapses (a waiting thread burns its time "
-              "slice for a descheduled partner). The simulation threads (`BatchedCaptureSimulator(threads=2)`, "
-              "Python threads over the samples of a batch running the compiled kernels) only block, so on a shared "
-              "machine `torch.set_num_threads(1)` with 2 simulation threads is the configuration to use."]
+              "slice for a descheduled partner: 5 samples/s in one measurement at load average 3). The simulation "
+              "threads (`BatchedCaptureSimulator(threads=2)`, Python threads over the samples of a batch running "
+              "the compiled kernels) only block, and the prefetch thread (`lfmbench.datasets.batched.prefetch`) "
+              "builds the next batch's pieces while the current one is simulated; DataLoader workers instead pay "
+              "for moving every batch's pieces through fresh shared memory. On a shared 2-core machine: "
+              "`torch.set_num_threads(1)`, `num_workers=0`, 2 simulation threads and the prefetch thread."]
     else:
         verdict = "reached" if best["sps"] >= GPU_TARGET else "**not reached**"
         L.append(f"Target on one GPU, >= {GPU_TARGET:.0f} samples/s: {verdict}.")
