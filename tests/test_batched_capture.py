@@ -392,3 +392,26 @@ def test_gpu_training_example_in_docs_runs(tmp_path):
     exec(compile(code, "docs/datasets.md", "exec"), ns)
     assert torch.isfinite(ns["loss"]) and ns["loss"].requires_grad
     assert ns["batch"]["lpd_hcg_e"].shape[1:] == (3, 1, 8, 8) and ns["ds"].epoch == 1
+
+
+def test_cpu_configuration_example_in_docs_runs(tmp_path):
+    """The CPU configuration of docs/datasets.md (one torch thread, simulation threads, prefetch) runs after the
+    section's training example and gives the batches of a plain loop."""
+    import re
+    from pathlib import Path
+
+    root = make_corpus(tmp_path / "c", n_scenes=2)
+    text = (Path(__file__).resolve().parents[1] / "docs" / "datasets.md").read_text()
+    blocks = re.findall(r"```python\n(.*?)```", text[text.index("## Captures on the GPU"):], re.S)
+    setup = (blocks[0].split("net = ")[0].replace('"demo_out/corpus"', repr(str(root))).replace("crop=128", "crop=8")
+             .replace("split=\"train\"", "split=\"all\"").replace("num_workers=2", "num_workers=0")
+             .replace(", persistent_workers=True", ""))
+    cpu = blocks[1].replace("range(3)", "range(1)").replace("shuffle=True", "shuffle=False")
+    threads = torch.get_num_threads()
+    ns: dict = {}
+    try:
+        exec(compile(setup + cpu, "docs/datasets.md", "exec"), ns)
+    finally:
+        torch.set_num_threads(threads)
+    ref = simulate_batch(_batch(ns["ds"], range(len(ns["ds"]) - 8, len(ns["ds"]))), ns["ds"].preset)
+    assert torch.equal(ns["batch"]["lpd_hcg_e"], ref["lpd_hcg_e"])            # the last batch, bit for bit
