@@ -6,7 +6,9 @@
 
 - mean ``mu < 10``: **inversion** by sequential search from ``k = 0`` [Devroye1986]_ (X.3.3): one uniform ``u``,
   ``p_0 = exp(-mu)``, ``p_k = p_{k-1} mu / k``, the smallest ``k`` with ``F(k) >= u``. Exact up to float64 rounding
-  of the cumulative sum (about 1e-16); shot-noise means are mostly below 1 e-, where this costs one ``exp``.
+  of the cumulative sum (about 1e-16); shot-noise means are mostly below 1 e-, where this costs one ``exp`` or
+  none (``k = 0`` when ``u`` is below the lower bound ``1 - mu + mu^2/2 - mu^3/6`` of ``exp(-mu)``); the terms are
+  evaluated four at a time (the same products and sums, so the same ``k`` as one at a time: tests/test_poisson.py).
 - ``10 <= mu < gaussian_above``: **PTRS**, the transformed rejection with squeeze of [Hormann1993]_, the method
   of numpy's legacy ``random_poisson_ptrs`` (valid for mu >= 10, O(1) uniforms per draw, exact).
 - ``mu >= gaussian_above``: the rounded normal ``max(0, rint(mu + sqrt(mu) z))`` with ``z`` by Box-Muller,

@@ -20,7 +20,10 @@ window timing (:func:`~lfmbench.datasets.capture.window_starts`), bin weights
 visible lights of a crop (:func:`~lfmbench.datasets.capture.visible_lights`), the sensor chain and its noise
 (one ``torch.Generator`` per sample, seeded by the sample's own noise seed), the fixed pattern
 (:func:`lfmbench.sensor.fixed_pattern`), ``light_index``, ``meta`` and the demosaic. The draws are made by
-``LFMCaptureDataset.draws`` (functions of ``(seed, epoch, index)``).
+``LFMCaptureDataset.draws`` (functions of ``(seed, epoch, index)``). On the CPU the composition and the sensor
+chain run as compiled passes of the same formulas (:mod:`lfmbench.datasets._compose_kernel`, the ``"numba"``
+backend of :func:`lfmbench.sensor.simulate_split_pixel_electrons`), the samples of a batch in parallel threads;
+:func:`prefetch` overlaps building the next batch's pieces with that.
 
 Composition (the formula of :mod:`lfmbench.datasets.capture`), per sample b, frame f and photodiode pd:
 
