@@ -332,8 +332,9 @@ def main() -> None:
         f"Distances computed exactly from the two CDFs; times for {SIZE * SIZE * 3} samples of one mean. Both exact "
         "samplers draw the Poisson distribution (tests/test_poisson.py: chi-square against the pmf); "
         "`lfmbench.poisson` is what `shot_noise` uses on the CPU, `torch.poisson` on other devices. Below 1 e- the "
-        "compiled sampler needs one uniform and one exp; between 1 and 10 e- its sequential search mispredicts "
-        "branches; from 10 e- it is PTRS (two uniforms, a log only off the squeeze).",
+        "compiled sampler needs one uniform and one exp; between 1 and 10 e- its sequential search adds a few terms "
+        "(evaluated four at a time, one branch per four terms); from 10 e- it is PTRS (two uniforms, a log only off "
+        "the squeeze).",
         "",
         "| mean (e-) | Kolmogorov distance | total variation | lfmbench.poisson (ms, median / fastest) "
         "| torch.poisson (ms, median / fastest) | Gaussian (ms, median / fastest) |",

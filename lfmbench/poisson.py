@@ -6,7 +6,9 @@
 
 - mean ``mu < 10``: **inversion** by sequential search from ``k = 0`` [Devroye1986]_ (X.3.3): one uniform ``u``,
   ``p_0 = exp(-mu)``, ``p_k = p_{k-1} mu / k``, the smallest ``k`` with ``F(k) >= u``. Exact up to float64 rounding
-  of the cumulative sum (about 1e-16); shot-noise means are mostly below 1 e-, where this costs one ``exp``.
+  of the cumulative sum (about 1e-16); shot-noise means are mostly below 1 e-, where this costs one ``exp`` or
+  none (``k = 0`` when ``u`` is below the lower bound ``1 - mu + mu^2/2 - mu^3/6`` of ``exp(-mu)``); the terms are
+  evaluated four at a time (the same products and sums, so the same ``k`` as one at a time: tests/test_poisson.py).
 - ``10 <= mu < gaussian_above``: **PTRS**, the transformed rejection with squeeze of [Hormann1993]_, the method
   of numpy's legacy ``random_poisson_ptrs`` (valid for mu >= 10, O(1) uniforms per draw, exact).
 - ``mu >= gaussian_above``: the rounded normal ``max(0, rint(mu + sqrt(mu) z))`` with ``z`` by Box-Muller,
@@ -42,7 +44,7 @@ import torch
 
 from lfmbench.constants import POISSON_EXACT_LIMIT
 
-__all__ = ["poisson", "available", "INVERSION_BELOW", "EXACT_LIMIT"]
+__all__ = ["poisson", "draw_seed", "available", "INVERSION_BELOW", "EXACT_LIMIT"]
 
 #: Means below this use inversion, at or above it PTRS (which [Hormann1993]_ derives for mu >= 10).
 INVERSION_BELOW: float = 10.0
@@ -75,6 +77,12 @@ def available() -> bool:
     return _kernel() is not None
 
 
+def draw_seed(generator: torch.Generator) -> np.uint64:
+    """The 64-bit seed of one call, drawn from the caller's CPU ``generator`` (advances it by one draw)."""
+    return np.uint64(int(torch.randint(-(2 ** 63), 2 ** 63 - 1, (), generator=generator, dtype=torch.int64,
+                                       device="cpu")) & (2 ** 64 - 1))
+
+
 def poisson(mean: torch.Tensor, generator: torch.Generator, gaussian_above: float = math.inf) -> torch.Tensor:
     """Poisson draws with the given means (CPU), rounded-normal from ``gaussian_above`` on.
 
@@ -99,14 +107,13 @@ def poisson(mean: torch.Tensor, generator: torch.Generator, gaussian_above: floa
     kernel = _kernel()
     if kernel is None:  # pragma: no cover - numba is a dependency
         raise RuntimeError("numba is not available; use torch.poisson")
-    seed = int(torch.randint(-(2 ** 63), 2 ** 63 - 1, (), generator=generator, dtype=torch.int64,
-                             device="cpu")) & (2 ** 64 - 1)
+    seed = draw_seed(generator)
     m = mean.detach()
     if m.dtype not in (torch.float32, torch.float64):
         m = m.to(torch.float32)
     m = m.contiguous()
     out = torch.empty_like(m)
-    bad = kernel(m.view(-1).numpy(), out.view(-1).numpy(), np.uint64(seed), float(gaussian_above))
+    bad = kernel(m.view(-1).numpy(), out.view(-1).numpy(), seed, float(gaussian_above))
     if bad >= 0:
         raise ValueError(f"mean must be finite and >= 0, got {float(m.view(-1)[bad])!r} at flat index {bad}")
     return out.to(mean.dtype)

@@ -14,7 +14,7 @@ from torch.utils.data import DataLoader
 from lfmbench import corpus as C
 from lfmbench.datasets import LFMCaptureDataset
 from lfmbench.datasets.batched import (BatchedCaptureSimulator, collate_pieces, compose_batch, pieces_to,
-                                       pwm_weights, simulate_batch)
+                                       prefetch, pwm_weights, simulate_batch)
 from lfmbench.datasets.capture import _window_starts, bin_edges, visible_lights, window_bin_exposure
 from lfmbench.datasets.projection import build_layers
 from lfmbench.flicker import pwm_exposure
@@ -104,6 +104,36 @@ def test_batched_outputs_equal_the_per_sample_outputs(corpus, shutter):
                 assert got == v or (torch.is_tensor(got) and got.item() == v), k
 
 
+@pytest.mark.parametrize("shutter", ["global", "rolling"])
+def test_compiled_composition_matches_the_torch_composition(corpus, imported, shutter):
+    """compose_batch's compiled CPU pass against its torch form (the one the GPU runs): lights in K bins, rolling
+    rows, groups stored without bins (K = 0 slots), a batch without light entries."""
+    for root, kw in ((corpus, {"frames": 3, "crop": (12, 16), "samples_per_scene": 3}),
+                     (imported, {"samples_per_scene": 2})):
+        _, ds = _pair(root, shutter=shutter, **kw)
+        batch = _batch(ds, range(len(ds)))
+        assert batch["entry_pix"].numel() > 0
+        ref = compose_batch(batch, backend="torch")
+        got = compose_batch(batch, backend="numba")
+        for k in ("lpd", "spd", "gt"):
+            assert got[k].shape == ref[k].shape and got[k].dtype == ref[k].dtype
+            torch.testing.assert_close(got[k], ref[k], rtol=1e-6, atol=1e-6 * float(ref[k].abs().max()))
+        assert not torch.equal(ref["lpd"], ref["gt"])                      # the PWM weights did something
+        parallel = compose_batch(batch, backend="numba", threads=3)
+        assert all(torch.equal(parallel[k], got[k]) for k in got)           # samples in threads: same result
+        perm = torch.randperm(batch["entry_pix"].numel(), generator=torch.Generator().manual_seed(0))
+        shuffled = dict(batch, entry_slot=batch["entry_slot"][perm], entry_pix=batch["entry_pix"][perm],
+                        entry_values=batch["entry_values"][:, :, perm])     # entries out of sample order
+        for k, v in compose_batch(shuffled, backend="numba", threads=3).items():
+            torch.testing.assert_close(v, ref[k], rtol=1e-6, atol=1e-6 * float(ref[k].abs().max()))
+    empty = {k: (v[:, :, :0] if k == "entry_values" else v[:0]) if k.startswith("entry_") else v
+             for k, v in batch.items()}
+    for k in ("lpd", "gt"):
+        assert torch.equal(compose_batch(empty, backend="numba")[k], compose_batch(empty, backend="torch")[k])
+    with pytest.raises(ValueError, match="backend"):
+        compose_batch(batch, backend="cuda")
+
+
 def test_groups_stored_without_bins(imported):
     ref_ds, ds = _pair(imported, noise=False, outputs=("input_referred", "gt"), samples_per_scene=2)
     batch = _batch(ds, [0, 1])
@@ -134,6 +164,47 @@ def test_dataloader_with_collate_and_module(corpus):
     batches = [sim(pieces_to(b, "cpu")) for b in DataLoader(ds, batch_size=3, collate_fn=collate_pieces)]
     assert [b["lpd_lcg"].shape for b in batches] == [(3, 2, 1, 8, 8), (1, 2, 1, 8, 8)]
     assert batches[0]["light_index"].dtype == torch.int64 and batches[0]["saturated"].shape[2] == 3
+
+
+def test_collate_in_a_worker_gives_the_same_batch(corpus):
+    """In a DataLoader worker collate_pieces allocates the batch in shared memory (its own path); the batch equals
+    the one collated in the main process."""
+    _, ds = _pair(corpus, frames=2, crop=(12, 16), samples_per_scene=2)
+    ref = _batch(ds, range(3))
+    got = next(iter(DataLoader(ds, batch_size=3, num_workers=1, collate_fn=collate_pieces)))
+    for k, v in ref.items():
+        if torch.is_tensor(v):
+            assert torch.equal(got[k], v), k
+
+
+def test_prefetch_keeps_order_raises_and_stops(corpus):
+    """prefetch: the same batches in the same order as the loader itself; an error in the producing thread is
+    raised at its place in the sequence; leaving early stops the thread."""
+    import threading
+
+    _, ds = _pair(corpus, frames=2, crop=(12, 16), samples_per_scene=3)
+    loader = DataLoader(ds, batch_size=2, collate_fn=collate_pieces)
+    ref, got = list(loader), list(prefetch(loader, depth=2))
+    assert len(got) == len(ref) == 3
+    for a, b in zip(ref, got):
+        assert all(torch.equal(a[k], b[k]) for k in a if torch.is_tensor(a[k]))
+
+    def failing():
+        yield 1
+        yield 2
+        raise KeyError("scene 7")
+
+    seen = []
+    with pytest.raises(KeyError, match="scene 7"):
+        for x in prefetch(failing()):
+            seen.append(x)
+    assert seen == [1, 2]
+    it = prefetch(iter(range(10 ** 9)))
+    assert next(it) == 0
+    it.close()                                                              # the consumer leaves early
+    assert not [t for t in threading.enumerate() if t.name == "lfmbench-prefetch"]
+    with pytest.raises(ValueError, match="depth"):
+        next(prefetch([1], depth=0))
 
 
 # ----------------------------------------------------------------------------------------------------------
@@ -321,3 +392,26 @@ def test_gpu_training_example_in_docs_runs(tmp_path):
     exec(compile(code, "docs/datasets.md", "exec"), ns)
     assert torch.isfinite(ns["loss"]) and ns["loss"].requires_grad
     assert ns["batch"]["lpd_hcg_e"].shape[1:] == (3, 1, 8, 8) and ns["ds"].epoch == 1
+
+
+def test_cpu_configuration_example_in_docs_runs(tmp_path):
+    """The CPU configuration of docs/datasets.md (one torch thread, simulation threads, prefetch) runs after the
+    section's training example and gives the batches of a plain loop."""
+    import re
+    from pathlib import Path
+
+    root = make_corpus(tmp_path / "c", n_scenes=2)
+    text = (Path(__file__).resolve().parents[1] / "docs" / "datasets.md").read_text()
+    blocks = re.findall(r"```python\n(.*?)```", text[text.index("## Captures on the GPU"):], re.S)
+    setup = (blocks[0].split("net = ")[0].replace('"demo_out/corpus"', repr(str(root))).replace("crop=128", "crop=8")
+             .replace("split=\"train\"", "split=\"all\"").replace("num_workers=2", "num_workers=0")
+             .replace(", persistent_workers=True", ""))
+    cpu = blocks[1].replace("range(3)", "range(1)").replace("shuffle=True", "shuffle=False")
+    threads = torch.get_num_threads()
+    ns: dict = {}
+    try:
+        exec(compile(setup + cpu, "docs/datasets.md", "exec"), ns)
+    finally:
+        torch.set_num_threads(threads)
+    ref = simulate_batch(_batch(ns["ds"], range(len(ns["ds"]) - 8, len(ns["ds"]))), ns["ds"].preset)
+    assert torch.equal(ns["batch"]["lpd_hcg_e"], ref["lpd_hcg_e"])            # the last batch, bit for bit

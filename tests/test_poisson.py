@@ -172,3 +172,51 @@ def test_no_import_cycle_between_poisson_and_its_kernel():
     mods |= {a.name for n in ast.walk(ast.parse(inspect.getsource(K))) if isinstance(n, ast.Import) for a in n.names}
     assert "lfmbench.poisson" not in mods and "lfmbench" not in mods
     assert poisson.EXACT_LIMIT == K._EXACT_LIMIT == constants.POISSON_EXACT_LIMIT == 2.0 ** 52
+
+
+def _splitmix_uniform(state: int) -> tuple[float, int]:
+    """One SplitMix64 step in plain Python integers [Steele2014] (the kernel's ``_uniform``): (u in (0, 1), state)."""
+    m = (1 << 64) - 1
+    state = (state + 0x9E3779B97F4A7C15) & m
+    z = state
+    z = ((z ^ (z >> 30)) * 0xBF58476D1CE4E5B9) & m
+    z = ((z ^ (z >> 27)) * 0x94D049BB133111EB) & m
+    z ^= z >> 31
+    return ((z >> 11) + 0.5) / 9007199254740992.0, state
+
+
+def test_inversion_equals_a_plain_sequential_search():
+    """Below 10 e- the kernel evaluates the inversion's terms four at a time; the counts must be those of the
+    textbook one-term-at-a-time search [Devroye1986] (X.3.3) written here in plain Python, on each pixel's own
+    counter-based stream (start mix(seed) + i * 2^20 * gamma): the same uniforms, products and sums, so the same k
+    for every pixel, including means where F(k) stalls below u (mu ~ 1e-300), the means below 1 e- where k = 0 is
+    decided by a lower bound of exp(-mu) without computing it, and the last k of the table."""
+    m64 = (1 << 64) - 1
+    mus = np.concatenate([np.geomspace(1e-300, 1e-3, 40), np.linspace(1e-3, 9.999999, 1500),
+                          np.full(400, 9.9999), np.full(60, 0.7), np.geomspace(9e-4, 0.3, 300),
+                          np.linspace(0.3, 1.7, 2000)])
+    seed = 123456789
+    out = torch.empty(mus.size, dtype=torch.float64)
+    from lfmbench._poisson_kernel import kernel
+    assert kernel(mus, out.numpy(), np.uint64(seed), math.inf) == -1
+
+    def mix(z: int) -> int:
+        z = ((z ^ (z >> 30)) * 0xBF58476D1CE4E5B9) & m64
+        z = ((z ^ (z >> 27)) * 0x94D049BB133111EB) & m64
+        return z ^ (z >> 31)
+
+    base = mix(seed)
+    stride = (0x9E3779B97F4A7C15 << 20) & m64
+    ref = []
+    for i, mu in enumerate(mus):
+        u, _ = _splitmix_uniform((base + i * stride) & m64)
+        p = f = math.exp(-mu)
+        k = 0
+        while u > f and p > 0.0:
+            k += 1
+            p *= mu * (1.0 / k)
+            f += p
+        ref.append(k)
+    ref = np.array(ref, dtype=np.float64)
+    assert np.array_equal(out.numpy(), ref), np.flatnonzero(out.numpy() != ref)[:10]
+    assert ref.max() >= 17 and (ref == 0).sum() >= 40                   # both ends of the search exercised

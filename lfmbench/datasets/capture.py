@@ -269,7 +269,7 @@ def add_rgb(sample: dict, preset, want: set) -> None:
         del sample["gt"]
 
 
-def _warm_cpu_kernels(noise: bool) -> None:
+def _warm_cpu_kernels(noise: bool, preset) -> None:
     """Compile (or load from numba's cache) the serial CPU kernels a sample uses, in this process.
 
     DataLoader workers are forked from here and inherit them, instead of each worker loading them at its first
@@ -279,6 +279,7 @@ def _warm_cpu_kernels(noise: bool) -> None:
     pwm_exposure(np.zeros(1), 1e-3, 1e-2, 0.5, check=False)
     if noise:
         _sensor.shot_noise(torch.zeros(1), torch.Generator().manual_seed(0))
+    _sensor._warm_fused(preset, noise)         # the sensor chain's compiled passes (float32, the dataset's dtype)
 
 
 # ----------------------------------------------------------------------------------------------------------
@@ -412,10 +413,11 @@ class LFMCaptureDataset(Dataset):
         self.cache_dir = None if cache_dir is False else Path(cache_dir)
         self._cache: OrderedDict[str, SceneLayers] = OrderedDict()
         self._cache_scenes = int(cache_scenes)
+        self._derived: dict[str, tuple[SceneLayers, dict]] = {}
         self._fpn: dict | None = None
         self.epoch = 0
         self._frozen = self._load_or_freeze_test_params() if split == "test" else None
-        _warm_cpu_kernels(self.noise)
+        _warm_cpu_kernels(self.noise, self.preset)
 
     # -- bookkeeping
     def _split_scenes(self) -> list[str]:
@@ -491,6 +493,45 @@ class LFMCaptureDataset(Dataset):
             while len(self._cache) > self._cache_scenes:
                 self._cache.popitem(last=False)
         return layers
+
+    def _scene_cached(self, sid: str, key: str, build: Callable[[SceneLayers], Any],
+                      layers: SceneLayers | None = None) -> Any:
+        """``build(layers)`` of scene ``sid``: something fixed per scene (not per crop or draw), computed once and
+        kept as long as the scene's layers stay in the in-memory cache (recomputed per call without it).
+        ``layers``: the scene's layers if the caller has them (``self._layers(sid)`` otherwise)."""
+        layers = self._layers(sid) if layers is None else layers
+        if sid not in self._cache:
+            return build(layers)
+        held = self._derived.get(sid)
+        if held is None or held[0] is not layers:
+            for s in [s for s in self._derived if s not in self._cache]:
+                del self._derived[s]
+            held = self._derived[sid] = (layers, {})
+        if key not in held[1]:
+            held[1][key] = build(layers)
+        return held[1][key]
+
+    def _light_index(self, sid: str, lights: list[dict], s0: int, crop: tuple[int, int, int, int],
+                     layers: SceneLayers | None = None) -> torch.Tensor:
+        """:func:`light_index` of a crop of frames s0..s0+F-1: a crop (a view) of the scene's full-frame light
+        index, computed once per scene. Returns (F, 1, h, w) int16 (int32 from 2^15 lights on)."""
+        def build(layers: SceneLayers) -> torch.Tensor:
+            dt = torch.int16 if len(lights) < 2 ** 15 else torch.int32
+            return light_index(layers.aux["mask.light"], lights).to(dt)                    # (Fs, 1, H, W)
+
+        y0, x0, h, w = crop
+        full = self._scene_cached(sid, "light_index", build, layers)
+        return full[s0:s0 + self.frames, :, y0:y0 + h, x0:x0 + w]
+
+    def _static_both(self, sid: str, layers: SceneLayers | None = None) -> torch.Tensor:
+        """The static rates of both photodiodes of scene ``sid`` as one (Fs, 2, H, W) tensor, e-/s (the cached
+        layers' ``static[pd]`` become views of it: the rates are not held twice)."""
+        def build(layers: SceneLayers) -> torch.Tensor:
+            both = torch.stack([layers.static[pd] for pd in PHOTODIODES], 1)
+            layers.static = {pd: both[:, i] for i, pd in enumerate(PHOTODIODES)}
+            return both
+
+        return self._scene_cached(sid, "static_both", build, layers)
 
     def _frames_to_load(self, sid: str) -> int:
         """Leading frames of scene ``sid`` a sample can use: s + F for a fixed start s, all for ``"random"``."""
@@ -617,7 +658,7 @@ class LFMCaptureDataset(Dataset):
         if "light_index" in want or "depth" in want:
             aux = layers.aux
             if "light_index" in want:
-                sample["light_index"] = light_index(aux["mask.light"][s0:s0 + F, y0:y0 + ch, x0:x0 + cw], lights)
+                sample["light_index"] = self._light_index(scene_id, lights, s0, crop, layers).long()
             if "depth" in want:
                 sample["depth"] = aux["depth.Z"][s0:s0 + F, y0:y0 + ch, x0:x0 + cw][:, None]
         if "rgb" in want:
@@ -638,18 +679,13 @@ class LFMCaptureDataset(Dataset):
         return s0
 
     def _meta(self, sid, index, lights, per_light, crop, t_s, t_l, layers) -> dict:
-        L = self.max_lights
-        arr = {k: torch.zeros(L, dtype=torch.float64) for k in ("freq_hz", "duty", "phase_s")}
-        light_id = torch.full((L,), -1, dtype=torch.long)
-        flick = torch.zeros(L, dtype=torch.bool)
-        for i, lt in enumerate(lights):
-            light_id[i] = int(lt["id"])
-            p = per_light.get(int(lt["id"]))
-            if p is not None:
-                flick[i] = True
-                arr["freq_hz"][i], arr["duty"][i], arr["phase_s"][i] = p["freq_hz"], p["duty"], p["phase_s"]
-            else:
-                arr["duty"][i] = 1.0
+        L, n = self.max_lights, len(lights)
+        ids = [int(lt["id"]) for lt in lights]
+        ps = [per_light.get(i) for i in ids]
+        light_id = torch.tensor(ids + [-1] * (L - n), dtype=torch.long)
+        flick = torch.tensor([p is not None for p in ps] + [False] * (L - n), dtype=torch.bool)
+        arr = {k: torch.tensor([(d if p is None else p[k]) for p in ps] + [0.0] * (L - n), dtype=torch.float64)
+               for k, d in (("freq_hz", 0.0), ("duty", 1.0), ("phase_s", 0.0))}
         mode = "per_frame_weight" if layers.group_static else "bins"
         return {"scene_id": sid, "index": index, "epoch": self.epoch, "num_lights": len(lights),
                 "light_id": light_id, "flicker": flick, **arr, "exposure_short_s": t_s, "exposure_long_s": t_l,

@@ -11,7 +11,7 @@ U[0, period)); a user passes a mapping or the path of an edited copy.
 """
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
@@ -185,7 +185,7 @@ class PWMParams:
 
     def to_dict(self) -> dict[str, float]:
         """``{key: float}`` in :data:`PWM_KEYS` order (the form ``LFMCaptureDataset.simulate`` takes)."""
-        return {k: float(v) for k, v in asdict(self).items()}
+        return {k: float(getattr(self, k)) for k in PWM_KEYS}     # (not asdict: it deep-copies)
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> "PWMParams":
