@@ -22,9 +22,12 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import _llvm  # noqa: E402,F401 - sets DRJIT_LIBLLVM_PATH
+
+from lfmbench.fileio import atomic_write_text  # noqa: E402
 
 
 def render(out: Path, scenes: int, profile: str, seed: int, extra=()) -> float:
@@ -79,9 +82,7 @@ def main() -> None:
         lines += ["", "Ray is not installed here (`pip install 'lfmbench[distributed]'`): its row is missing."]
     lines += ["", "One process runs Dr.Jit's kernels on every core, but much of a small new scene is single-threaded: the LLVM compile of its scene layout's kernel (a new scene compiles one), scene generation, Mitsuba scene loading, the last frame's encoding; two workers on the same 2 cores overlap those, hence more than 2x for the process pool. Ray pays for its start-up (a local instance, a few s) and task dispatch. On a cluster, Ray's scenes per hour scale with its nodes: each worker renders whole scenes and writes them atomically into the shared corpus folder (which every node must see).", ""]
     out = Path(a.out) / "ray-benchmark.md"
-    tmp_out = out.with_suffix(".md.tmp")
-    tmp_out.write_text("\n".join(lines))
-    os.replace(tmp_out, out)
+    atomic_write_text(out, "\n".join(lines))
     print(f"wrote {out}")
 
 

@@ -31,6 +31,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import _llvm  # noqa: E402,F401 - sets DRJIT_LIBLLVM_PATH
 
+from lfmbench.fileio import atomic_write_text  # noqa: E402
+
 #: (label, module path, attribute path) of the functions timed in the child.
 TIMED = [("trace", "render_tools.tracer", "Tracer.render"), ("trace", "render_tools.tracer", "Tracer.hits"),
          ("probe_wait", "render_tools.backend", "select_variant"),
@@ -155,9 +157,7 @@ def main() -> None:
     lines += ["", "Run again with `python benchmarks/bench_render_phases.py` (about 3 minutes).", ""]
     out = Path(a.out) / "render-phases-benchmark.md"
     out.parent.mkdir(parents=True, exist_ok=True)
-    tmp_out = out.with_suffix(".md.tmp")
-    tmp_out.write_text("\n".join(lines))
-    os.replace(tmp_out, out)
+    atomic_write_text(out, "\n".join(lines))
     print(out.read_text())
 
 

@@ -25,6 +25,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import _llvm  # noqa: E402,F401 - sets DRJIT_LIBLLVM_PATH
 
+from lfmbench.fileio import atomic_write_text  # noqa: E402
+
 
 def _du_mb(path: Path) -> float:
     return sum(f.stat().st_size for f in path.rglob("*") if f.is_file()) / 1e6
@@ -95,9 +97,7 @@ def main() -> None:
                      f"{c['seconds']:.1f} | {c['kernels']} | {w['seconds']:.1f} | {c['mb']:.0f} |")
     lines += ["", "Run again with `python benchmarks/bench_render_scale.py` (about 5 minutes).", ""]
     out = Path(a.out) / "render-scale-benchmark.md"
-    tmp_out = out.with_suffix(".md.tmp")
-    tmp_out.write_text("\n".join(lines))
-    os.replace(tmp_out, out)
+    atomic_write_text(out, "\n".join(lines))
     print(out.read_text())
 
 
