@@ -53,6 +53,10 @@ def render_cmd(
     protocol: Optional[str] = typer.Option(None, "--protocol",
                                            help="Render a benchmark protocol (name from `lfmbench protocols` or a "
                                                 "YAML path): its scenes, splits and settings; resumable."),
+    split: Optional[List[str]] = typer.Option(None, "--split",
+                                              help="With --protocol: render only these splits (train, val, "
+                                                   "test; repeatable or comma separated), e.g. the test split "
+                                                   "first; a later run without --split adds the rest."),
     workers: int = typer.Option(1, "--workers", help="Scenes rendered in parallel (local process pool)."),
     ray_address: Optional[str] = typer.Option(None, "--ray-address",
                                               help="Run on Ray: 'local', 'auto' or ray://host:port."),
@@ -92,6 +96,15 @@ def render_cmd(
         raise typer.Exit(code)
 
     proto = None
+    splits_wanted = _split_groups(split)
+    if splits_wanted is not None:
+        if protocol is None:
+            fail("--split needs --protocol (a plain render's split is drawn from --seed after rendering)")
+        from render_tools.protocol import SPLITS  # noqa: PLC0415
+
+        bad = [s for s in splits_wanted if s not in SPLITS]
+        if bad:
+            fail(f"--split {bad[0]!r} is not a split; choose from {', '.join(SPLITS)}")
     if protocol is not None:
         given = {"scenes": scenes, "width": width, "height": height, "spp": spp, "seed": seed, "bins": bins,
                  "frames": frames, "groups": groups, "profile": profile, "scene": scene_file, "storage": storage,
@@ -177,7 +190,7 @@ def render_cmd(
         ids = [str(sc.get("scene_id") or Path(p).stem) for p, sc in zip(scene_file, scene_dicts)] \
             if scene_dicts else None
         if proto is not None:
-            job_list = J.protocol_jobs(out, proto, options=options, backend=backend)
+            job_list = J.protocol_jobs(out, proto, options=options, backend=backend, splits=splits_wanted)
         else:
             job_list = J.make_jobs(out, n_scenes=scenes, seed=seed, options=options, scenes=scene_dicts,
                                    scene_ids=ids, dtype=dtype, backend=backend)

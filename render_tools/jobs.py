@@ -159,16 +159,17 @@ def make_jobs(out: str | Path, *, n_scenes: int, seed: int, options: Mapping[str
 
 
 def protocol_jobs(out: str | Path, protocol, *, options: Mapping[str, Any] | None = None,
-                  backend: Backend | None = None) -> list[RenderJob]:
+                  backend: Backend | None = None, splits: Sequence[str] | None = None) -> list[RenderJob]:
     """One job per scene of ``protocol`` (a :class:`render_tools.protocol.Protocol`), in file order (train, val,
     test): the scene's id and seed, its pinned conditions as generator overrides, the protocol's storage, and
     ``meta.json`` field ``protocol`` = ``{name, version, sha256, split}``. ``options``: RenderOptions fields
-    (default: the protocol's ``render``; the CLI adds only ``variant``)."""
+    (default: the protocol's ``render``; the CLI adds only ``variant``). ``splits``: only the scenes of these
+    splits (default: all); the job indices stay the scenes' places in the protocol."""
     opts = dict(protocol.render if options is None else options)
     out = Path(out).resolve()
     return [RenderJob(i, ps.scene_id, ps.seed, str(out), dict(opts), None, ps.scene_kw(), protocol.storage,
                       backend, {"protocol": dict(protocol.record(), split=ps.split)})
-            for i, ps in enumerate(protocol.scenes)]
+            for i, ps in enumerate(protocol.scenes) if splits is None or ps.split in splits]
 
 
 def write_splits(writer: CorpusWriter, split_seed: int | None = None,

@@ -267,3 +267,26 @@ def test_protocols_command(tmp_path):
     d["scenes"]["test"][0]["signal"] = "purple"
     r = _run("protocols", str(write_protocol(tmp_path / "bad.yaml", d)))
     assert r.exit_code == 2 and str(tmp_path / "bad.yaml") in r.output and "signal" in r.output
+
+
+def test_render_protocol_one_split_then_the_rest(tmp_path, fake):
+    """``--split test`` renders only the test scenes (splits.json lists only them); the same command without
+    ``--split`` adds the others and skips the test scene; a misspelt split or ``--split`` without a protocol is
+    refused before anything is written."""
+    proto = write_protocol(tmp_path / "tiny.yaml")
+    out = tmp_path / "c"
+    r = _run("render", "--protocol", str(proto), "--out", str(out), "--split", "test")
+    assert r.exit_code == 0 and "1 rendered" in r.output, r.output
+    assert sorted(fake) == ["te_a"]
+    assert C.Corpus(out).splits == {"train": [], "val": [], "test": ["te_a"]}
+    r = _run("render", "--protocol", str(proto), "--out", str(out), "--split", "train,val")
+    assert r.exit_code == 0 and "2 rendered" in r.output and "0 skipped" in r.output, r.output
+    r = _run("render", "--protocol", str(proto), "--out", str(out))
+    assert r.exit_code == 0 and "3 skipped" in r.output, r.output
+    assert sorted(fake) == ["te_a", "tr_a", "va_a"]
+    assert C.Corpus(out).splits == {"train": ["tr_a"], "val": ["va_a"], "test": ["te_a"]}
+    r = _run("render", "--protocol", str(proto), "--out", str(tmp_path / "d"), "--split", "tset")
+    assert r.exit_code == 2 and "--split 'tset' is not a split" in r.output, r.output
+    r = _run("render", "--out", str(tmp_path / "d"), "--split", "test")
+    assert r.exit_code == 2 and "--split needs --protocol" in r.output, r.output
+    assert not (tmp_path / "d").exists()
