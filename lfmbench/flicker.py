@@ -12,6 +12,8 @@ Defines
   PWM draw.
 - :func:`flicker_severity`: flicker severity index FSI (eq. 2), which equals the IEEE P2020 flicker
   modulation index FMI.
+- :func:`miss_probability`: probability that an exposure at a uniformly random phase receives nothing of the
+  pulse (the light vanishes from that frame), in closed form.
 
 Conventions (SI units throughout)
 ---------------------------------
@@ -74,6 +76,7 @@ __all__ = [
     "row_phase",
     "bin_weights",
     "flicker_severity",
+    "miss_probability",
 ]
 
 ArrayLike = Any  # float, numpy array or torch tensor
@@ -556,3 +559,47 @@ def flicker_severity(phi: ArrayLike, dim: int = -1) -> ArrayLike:
     den = hi + lo
     with np.errstate(invalid="ignore", divide="ignore"):
         return np.where(den > 0, (hi - lo) / np.where(den > 0, den, 1.0), 0.0)
+
+
+def miss_probability(exposure: ArrayLike, period: ArrayLike, duty: ArrayLike, rise_time: ArrayLike = 0.0,
+                     fall_time: ArrayLike = 0.0) -> ArrayLike:
+    r"""Probability that an exposure of length ``exposure`` (s), started at a phase drawn uniformly over one
+    period, receives none of the pulse: the light is missed in that frame (or row).
+
+    The pulse level is non-zero for :math:`DT + (t_r + t_f)/2` of every period (the ramps are centred on the
+    ideal edges, module docstring), so it is zero on one interval of length :math:`g = (1-D)T - (t_r+t_f)/2`
+    per period. An exposure :math:`[s, s + t_e)` receives nothing exactly when it lies inside such a gap, which
+    for :math:`s` uniform over a period has probability
+
+    .. math:: p_{miss} = \max(0,\ g - t_e) / T = \max\!\left(0,\ 1 - D - \frac{t_e + (t_r+t_f)/2}{T}\right).
+
+    For ideal pulses this is the "exposure shorter than the OFF time" condition of ISET-LFM (Sec. 2) made a
+    probability; with many frames it is the expected share of frames in which the short exposure shows a
+    PWM light dark (what drives the dropout metric). Derived here from the pulse model of :func:`pwm_exposure`
+    and checked against a phase sweep of it (tests/test_flicker.py).
+
+    Args:
+        exposure: exposure time :math:`t_e` (s), >= 0.
+        period: PWM period :math:`T` (s), > 0.
+        duty: duty cycle :math:`D` in [0, 1] (1).
+        rise_time, fall_time: ramp widths :math:`t_r, t_f` (s), >= 0.
+
+    Returns:
+        :math:`p_{miss}` in [0, 1] (1), the broadcast shape of the inputs (numpy float64 or torch). A pulse of
+        zero length (:math:`D = 0` without ramps) or an exposure of zero length receives nothing: 1.
+
+    Example:
+        >>> float(miss_probability(4e-3, 1 / 100.0, 0.25))  # 10 ms period, 7.5 ms dark, 4 ms exposure
+        0.35
+    """
+    _check_pwm_args(0.0, exposure, period, duty, 1.0, 0.0, rise_time, fall_time)
+    if _is_torch(exposure, period, duty, rise_time, fall_time):
+        exposure, period, duty, rise_time, fall_time = _as_tensors(exposure, period, duty, rise_time, fall_time)
+        ramps = 0.5 * (rise_time + fall_time)
+        p = torch.clamp(((1.0 - duty) * period - ramps - exposure) / period, min=0.0, max=1.0)
+        return torch.where((duty * period + ramps > 0) & (exposure > 0), p, torch.ones_like(p))
+    exposure, period, duty, rise_time, fall_time = (np.asarray(x, dtype=np.float64) for x in
+                                                    (exposure, period, duty, rise_time, fall_time))
+    ramps = 0.5 * (rise_time + fall_time)
+    p = np.clip(((1.0 - duty) * period - ramps - exposure) / period, 0.0, 1.0)
+    return np.where((duty * period + ramps > 0) & (exposure > 0), p, 1.0)

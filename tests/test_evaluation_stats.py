@@ -119,6 +119,10 @@ def test_condition_bins_and_sample_conditions(tmp_path):
                       "flicker": torch.tensor([[True, True, False], [False, False, False]])}}
     c = sample_conditions(batch)
     assert c[0] == {"pwm_duty": pytest.approx(0.3), "pwm_freq_hz": pytest.approx(150.0)} and c[1] == {}
+    # with the short exposure: the mean miss probability, 4 ms at (0.2, 100 Hz) -> 0.4, at (0.4, 200 Hz) -> 0
+    batch["meta"]["exposure_short_s"] = torch.tensor([4e-3, 4e-3], dtype=torch.float64)
+    c = sample_conditions(batch)
+    assert c[0]["pwm_miss_prob"] == pytest.approx(0.2) and c[1] == {}
     bad = tmp_path / "b.yaml"
     bad.write_text("speed: {edges: [3, 1]}\n")
     with pytest.raises(ValueError, match=r"b\.yaml: speed\.edges"):

@@ -18,7 +18,8 @@ import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from lfmbench.flicker import (bin_weights, flicker_severity, frame_phase, pwm_exposure, pwm_level, row_phase)
+from lfmbench.flicker import (bin_weights, flicker_severity, frame_phase, miss_probability, pwm_exposure, pwm_level,
+                              row_phase)
 
 REL = 1e-12
 
@@ -403,3 +404,33 @@ def test_forked_worker_after_openmp_use_does_not_hang():
 
 def _sum_in_child():
     return float(pwm_exposure(np.zeros(10_000), 0.004, 0.01, 0.3).sum())
+
+
+@pytest.mark.parametrize("exposure, period, duty, rise, fall", [
+    (4e-3, 1 / 100, 0.25, 0.0, 0.0),        # the docstring's case
+    (3e-3, 1 / 90, 0.1, 0.0, 0.0),          # long dark gap: most phases miss
+    (5e-3, 1 / 120, 0.5, 0.0, 0.0),         # exposure longer than the gap: never missed
+    (2e-3, 1 / 95, 0.3, 4e-4, 1e-4),        # trapezoid: the ramps shorten the gap
+    (1e-9, 1 / 100, 0.999, 0.0, 0.0),       # stiff: a 10 us gap and a 1 ns exposure
+    (1e-3, 1 / 100, 0.0, 0.0, 0.0),         # no pulse at all: always missed
+    (0.0, 1 / 100, 0.5, 0.0, 0.0),          # empty exposure receives nothing
+])
+def test_miss_probability_against_phase_sweep(exposure, period, duty, rise, fall):
+    """Share of 200,001 evenly spaced phases over one period at which the exact pulse integral
+    (:func:`pwm_exposure`, trapezoid included) is 0, against the closed form; torch gives the same."""
+    n = 200_001
+    phases = (np.arange(n) + 0.5) / n * period
+    phi = pwm_exposure(phases, exposure, period, duty, rise_time=rise, fall_time=fall)
+    brute = float(np.mean(phi <= 0.0))
+    p = float(miss_probability(exposure, period, duty, rise, fall))
+    assert p == pytest.approx(brute, abs=2.0 / n + 1e-12)
+    t = miss_probability(torch.tensor(exposure, dtype=torch.float64), torch.tensor(period, dtype=torch.float64),
+                         torch.tensor(duty, dtype=torch.float64), rise, fall)
+    assert float(t) == pytest.approx(p, abs=1e-15)
+
+
+def test_miss_probability_rejects_bad_input():
+    with pytest.raises(ValueError, match="duty"):
+        miss_probability(1e-3, 0.01, 1.5)
+    with pytest.raises(ValueError, match="period"):
+        miss_probability(1e-3, 0.0, 0.5)

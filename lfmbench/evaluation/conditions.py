@@ -1,7 +1,8 @@
 """Conditions of every scored sample (time of day, PWM duty and frequency, ego speed) and their bins.
 
-- :func:`sample_conditions`: PWM duty and frequency of each sample of a batch, from its ``meta`` (the dataset's
-  per-light ``duty``, ``freq_hz`` and ``flicker`` arrays): means over the flickering lights.
+- :func:`sample_conditions`: PWM duty, frequency and miss probability of each sample of a batch, from its ``meta``
+  (the dataset's per-light ``duty``, ``freq_hz`` and ``flicker`` arrays and ``exposure_short_s``): means over the
+  flickering lights.
 - :func:`corpus_scene_conditions`: a ``scene_id -> {time_of_day, ego_speed_mps}`` reader of a corpus
   (``scene.json`` ``time_of_day``, ``meta.json`` ``camera.speed_mps``).
 - :func:`load_bins`, :func:`bin_label`: the breakdown bins of ``lfmbench/configs/conditions.yaml``.
@@ -100,24 +101,36 @@ def _per_sample(meta: Any, key: str, b: int) -> list:
 
 
 def sample_conditions(batch: dict) -> list[dict]:
-    """PWM conditions of each sample of a batch: ``pwm_duty`` (1) and ``pwm_freq_hz`` (Hz), means over the
-    sample's flickering lights (``meta`` arrays ``duty``, ``freq_hz``, ``flicker`` of shape (B, L)); None when
-    the sample has no flickering light or the meta lacks them. ``time_of_day`` and ``ego_speed_mps`` are taken
-    from ``meta`` when a data source provides them."""
+    """PWM conditions of each sample of a batch, means over the sample's flickering lights (``meta`` arrays
+    ``duty``, ``freq_hz``, ``flicker`` of shape (B, L)): ``pwm_duty`` (1), ``pwm_freq_hz`` (Hz) and
+    ``pwm_miss_prob`` (1; :func:`lfmbench.flicker.miss_probability` of the short exposure ``exposure_short_s``
+    (s), the light's period and duty: the expected share of frames in which the LPD sees the light dark);
+    left out when the sample has no flickering light or the meta lacks them. ``time_of_day`` and
+    ``ego_speed_mps`` are taken from ``meta`` when a data source provides them."""
     import torch
+
+    from lfmbench.flicker import miss_probability
 
     b = batch["gt"].shape[0]
     meta = batch.get("meta", {})
-    duty, freq, flick = (_per_sample(meta, k, b) for k in ("duty", "freq_hz", "flicker"))
+    duty, freq, flick, t_s = (_per_sample(meta, k, b) for k in ("duty", "freq_hz", "flicker", "exposure_short_s"))
     out = []
     for i in range(b):
         rec: dict[str, Any] = {}
+        if flick[i] is None:
+            out.append(rec)
+            continue
+        f = torch.as_tensor(flick[i]).reshape(-1).bool()
+        vals = {}
         for name, arr in (("pwm_duty", duty[i]), ("pwm_freq_hz", freq[i])):
-            if arr is None or flick[i] is None:
-                continue
-            a, f = torch.as_tensor(arr, dtype=torch.float64).reshape(-1), torch.as_tensor(flick[i]).reshape(-1)
-            if a.shape == f.shape and bool(f.bool().any()):
-                rec[name] = float(a[f.bool()].mean())
+            if arr is not None:
+                a = torch.as_tensor(arr, dtype=torch.float64).reshape(-1)
+                if a.shape == f.shape and bool(f.any()):
+                    vals[name] = a[f]
+                    rec[name] = float(a[f].mean())
+        if t_s[i] is not None and {"pwm_duty", "pwm_freq_hz"} <= vals.keys() and bool((vals["pwm_freq_hz"] > 0).all()):
+            ts = float(torch.as_tensor(t_s[i], dtype=torch.float64).reshape(-1)[0])
+            rec["pwm_miss_prob"] = float(miss_probability(ts, 1.0 / vals["pwm_freq_hz"], vals["pwm_duty"]).mean())
         for key in ("time_of_day", "ego_speed_mps"):
             v = _per_sample(meta, key, b)[i]
             if v is not None:
