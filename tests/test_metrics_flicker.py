@@ -145,3 +145,34 @@ def test_fdi_without_off_reference_is_nan():
     li[li < 0] = 1  # every pixel belongs to a light: no ring, no OFF reference
     r = fm.region_flicker_metrics(b["gt"], b["gt"], li)[0]
     assert all(math.isnan(x["fdi_pred"]) for x in r["lights"])
+
+
+def test_ring_series_matches_full_image_rings():
+    """The per-light box shortcut of the FDI OFF rings equals rings built on the whole image (brute force:
+    dilate every light's mask over the full frame), for several images at once, lights touching the border,
+    a light id without pixels and lights moving between frames."""
+    from lfmbench.metrics.flicker import _ring_series
+    from lfmbench.metrics.regions import dilate
+
+    g = torch.Generator().manual_seed(3)
+    b, f, h, w, n, ring = 2, 3, 40, 56, 6, 3
+    li = torch.full((b, f, 1, h, w), -1, dtype=torch.long)
+    for bi in range(b):
+        for fi in range(f):
+            for j in (0, 1, 2, 4, 5):  # id 3 has no pixel
+                y = int(torch.randint(0, h - 4, (1,), generator=g))
+                x = int(torch.randint(-2, w - 3, (1,), generator=g))
+                li[bi, fi, 0, y:y + 4, max(x, 0):x + 5] = j
+    imgs = [torch.rand(b, f, 2, h, w, generator=g, dtype=torch.float64) * 100 for _ in range(2)]
+    got = _ring_series(imgs, li, n, ring)
+    idx = li.reshape(b * f, h, w)
+    for im, out in zip(imgs, got):
+        x = im.mean(dim=2).reshape(b * f, h, w)
+        for j in range(n):
+            if not bool((idx == j).any()):
+                assert torch.isnan(out[:, j]).all()
+                continue
+            rg = dilate(idx == j, ring) & ~dilate(idx >= 0, 1)
+            cnt = rg.sum(dim=(1, 2)).double()
+            ref = torch.where(cnt > 0, (x * rg).sum(dim=(1, 2)) / cnt.clamp_min(1), torch.tensor(float("nan")))
+            torch.testing.assert_close(out[:, j, :].reshape(-1), ref, equal_nan=True, rtol=1e-12, atol=1e-12)

@@ -26,6 +26,7 @@ References
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -271,32 +272,48 @@ def region_series(images: torch.Tensor, light_index: torch.Tensor, num_lights: i
     return means[..., 1:].permute(0, 2, 1), cnts[..., 1:].permute(0, 2, 1)
 
 
-def _ring_series(images: torch.Tensor, light_index: torch.Tensor, n: int, ring_px: int) -> torch.Tensor:
-    """Mean of ``images`` over a ring of ``ring_px`` around each light, off every light: (B, L, F).
+def _light_boxes(idx: torch.Tensor, n: int) -> list[tuple[int, int, int, int] | None]:
+    """Bounding box ``(y_min, y_max, x_min, x_max)`` (px, inclusive) of each light id 0..n-1 over all images of
+    ``idx`` ((N, H, W) int, -1 = no light), None for an id without pixels: one scatter pass over the pixels."""
+    _, h, w = idx.shape
+    flat = idx.reshape(-1).long()
+    keep = (flat >= 0) & (flat < n)
+    ids = flat[keep]
+    pix = torch.arange(h * w, device=idx.device).repeat(idx.shape[0])[keep]
+    ys, xs = pix // w, pix % w
+    big = torch.full((n,), max(h, w), dtype=torch.long, device=idx.device)
+    neg = torch.full((n,), -1, dtype=torch.long, device=idx.device)
+    box = torch.stack([big.scatter_reduce(0, ids, ys, "amin"), neg.scatter_reduce(0, ids, ys, "amax"),
+                       big.scatter_reduce(0, ids, xs, "amin"), neg.scatter_reduce(0, ids, xs, "amax")], 1)
+    return [tuple(r) if r[1] >= 0 else None for r in box.tolist()]
+
+
+def _ring_series(images: Sequence[torch.Tensor], light_index: torch.Tensor, n: int,
+                 ring_px: int) -> list[torch.Tensor]:
+    """Mean of each of ``images`` over a ring of ``ring_px`` around each light, off every light: (B, L, F) each.
 
     Each light is processed inside its bounding box (over all frames) grown by the ring, so the cost follows
-    the lights' size, not the image's.
+    the lights' size, not the image's; the ring of a light is built once for all ``images`` (all (B, F, C, H, W)).
     """
     from lfmbench.metrics.regions import dilate
 
-    b, f, c, h, w = images.shape
+    b, f, c, h, w = images[0].shape
     idx = light_index.reshape(b * f, h, w)
-    x = images.double().mean(dim=2).reshape(b * f, h, w)
-    out = torch.full((b, n, f), float("nan"), dtype=torch.float64, device=images.device)
+    xs = [im.double().mean(dim=2).reshape(b * f, h, w) for im in images]
+    outs = [torch.full((b, n, f), float("nan"), dtype=torch.float64, device=images[0].device) for _ in images]
     pad = ring_px + 2
-    for j in range(n):
-        hit = idx == j
-        rows, cols = hit.any(dim=(0, 2)).nonzero(), hit.any(dim=(0, 1)).nonzero()
-        if rows.numel() == 0:
+    for j, box in enumerate(_light_boxes(idx, n)):
+        if box is None:
             continue
-        y0, y1 = max(int(rows[0]) - pad, 0), min(int(rows[-1]) + pad + 1, h)
-        x0, x1 = max(int(cols[0]) - pad, 0), min(int(cols[-1]) + pad + 1, w)
+        y0, y1 = max(box[0] - pad, 0), min(box[1] + pad + 1, h)
+        x0, x1 = max(box[2] - pad, 0), min(box[3] + pad + 1, w)
         sub = idx[:, y0:y1, x0:x1]
         ring = dilate(sub == j, ring_px) & ~dilate(sub >= 0, 1)
         cnt = ring.sum(dim=(1, 2)).double()
-        s = (x[:, y0:y1, x0:x1] * ring).sum(dim=(1, 2))
-        out[:, j, :] = torch.where(cnt > 0, s / cnt.clamp_min(1), torch.full_like(s, float("nan"))).reshape(b, f)
-    return out
+        for x, out in zip(xs, outs):
+            s = (x[:, y0:y1, x0:x1] * ring).sum(dim=(1, 2))
+            out[:, j, :] = torch.where(cnt > 0, s / cnt.clamp_min(1), torch.full_like(s, float("nan"))).reshape(b, f)
+    return outs
 
 
 @dataclass
@@ -365,8 +382,7 @@ def region_flicker_metrics(pred: torch.Tensor, gt: torch.Tensor, light_index: to
     n = max(n, 0)
     p_ser, cnt = region_series(pred, light_index, n)
     g_ser, _ = region_series(gt, light_index, n)
-    p_off = _ring_series(pred, light_index, n, o.ring_px)
-    g_off = _ring_series(gt, light_index, n, o.ring_px)
+    p_off, g_off = _ring_series([pred, gt], light_index, n, o.ring_px)
     l_ser = region_series(lpd, light_index, n)[0] if lpd is not None else None
     if saturated is not None:
         all_sat = saturated.all(dim=2, keepdim=True).double()
