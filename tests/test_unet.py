@@ -28,6 +28,9 @@ def test_default_config_parameter_budget_and_tiny_demo_config():
     assert 300_000 <= n <= 3_000_000, n
     tiny = U.count_parameters(U.UNetFusion(U.load_config(U.TINY_CONFIG)))
     assert tiny < 100_000 < n
+    # the 640x360 protocol's config: the same network (its checkpoint loads into the default model), other crops
+    v1 = U.load_config(U.DEFAULT_CONFIG.with_name("unet_v1.yaml"))
+    assert v1.model == U.load_config().model and (v1.train.crop, v1.train.samples_per_scene) == (128, 8)
 
 
 @pytest.mark.parametrize("dtype,h,w", [(torch.float32, 32, 32), (torch.float64, 22, 30)])
