@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 import os
 import pickle
+import signal
 import warnings
 
 import numpy as np
@@ -193,6 +194,25 @@ def test_ctrl_c_inside_mitsuba_render_stops_with_130(tmp_path, fake):
     rep = C.validate_corpus(out)
     assert rep.ok, rep.errors  # splits.json written although the run never reached its end
     assert C.Corpus(out).splits["test"] == ["scene00000"]
+
+
+def test_sigint_ignored_at_start_stays_ignored():
+    """A render started with SIGINT ignored (``nohup lfmbench render ... &``) keeps it ignored: the flag handler
+    is not installed (it would record the signal but stop nothing); an ordinary start gets it."""
+    prev = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        hit = []
+        with J._sigint_flag(hit):
+            assert signal.getsignal(signal.SIGINT) == signal.SIG_IGN
+            signal.raise_signal(signal.SIGINT)
+        assert hit == []
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+        with J._sigint_flag(hit):
+            with pytest.raises(KeyboardInterrupt):
+                signal.raise_signal(signal.SIGINT)
+        assert hit == [True] and signal.getsignal(signal.SIGINT) == signal.default_int_handler
+    finally:
+        signal.signal(signal.SIGINT, prev)
 
 
 def test_runtime_error_naming_keyboardinterrupt_is_an_interrupt():
