@@ -326,3 +326,19 @@ def test_corpus_without_aux_serves_every_output_but_depth_and_light_index(tmp_pa
         ds = LFMCaptureDataset(root, split="all", frames=2, outputs=("gt", out), cache_dir=False)
         with pytest.raises(C.CorpusFileError, match=rf"aux\.exr.*\['{out}'\]"):
             ds[0]
+
+
+def test_max_lights_default_follows_the_corpus(corpus, monkeypatch):
+    """The padded per-light ``meta`` arrays are long enough for every scene by default (a 640x360 night scene
+    of lfmbench-v1 has 66 lights, more than the old fixed 64); an explicit value too small is refused at
+    construction, naming the scene, instead of failing at that scene's first sample."""
+    from lfmbench.datasets import capture
+
+    most = max(len(C.Corpus(corpus).meta(s)["lights"]) for s in C.Corpus(corpus).scenes)
+    assert LFMCaptureDataset(corpus, split="all").max_lights == max(64, most)
+    monkeypatch.setattr(capture, "DEFAULT_MAX_LIGHTS", 1)
+    ds = LFMCaptureDataset(corpus, split="all", outputs=["gt"])
+    assert ds.max_lights == most > 1
+    assert ds[0]["meta"]["light_id"].shape == (most,)
+    with pytest.raises(ValueError, match=r"max_lights=1 but scene 'scene\d+' of .* has \d+ lights"):
+        LFMCaptureDataset(corpus, split="all", max_lights=1)

@@ -41,6 +41,8 @@ from lfmbench.flicker import pwm_exposure
 OUTPUTS = ("raw", "input_referred", "saturated", "gt", "light_index", "depth", "rgb")
 DEFAULT_OUTPUTS = ("raw", "input_referred", "saturated", "gt", "light_index", "depth")
 TEST_PARAMS_NAME = "test_params.json"
+#: Smallest default length of the padded per-light ``meta`` arrays (``LFMCaptureDataset(max_lights=None)``).
+DEFAULT_MAX_LIGHTS = 64
 SPLITS = ("train", "val", "test", "all")
 
 
@@ -310,7 +312,9 @@ class LFMCaptureDataset(Dataset):
         samples_per_scene: samples per scene per epoch (each its own PWM draw and crop).
         noise: simulate temporal noise (False: mean electrons through clipping and quantisation).
         optics: apply the lens PSF.
-        max_lights: length of the padded per-light metadata arrays.
+        max_lights: length of the padded per-light metadata arrays (``meta`` ``light_id``, ``flicker``, ``duty``,
+            ...); default: 64, or the most lights of one of the dataset's scenes when that is more (a 640x360
+            night scene can hold 66). An explicit value below that is refused here, naming the scene.
         line_time_s: rolling-shutter row delay (s); default the corpus's. Must keep every row's windows inside
             the rendered capture window (checked).
         cache_dir: directory of the per-sensor projected-radiance cache (default ``<root>/.cache``; ``False``
@@ -337,7 +341,7 @@ class LFMCaptureDataset(Dataset):
     def __init__(self, root: str | os.PathLike, split: str = "train", sensor: Any = "ovt", frames: int = 3,
                  crop: int | tuple[int, int] | None = None, pwm: Any = None, shutter: str = "global", seed: int = 0,
                  outputs: Sequence[str] = DEFAULT_OUTPUTS, groups: Sequence[str] | None = None,
-                 samples_per_scene: int = 1, noise: bool = True, optics: bool = True, max_lights: int = 64,
+                 samples_per_scene: int = 1, noise: bool = True, optics: bool = True, max_lights: int | None = None,
                  cache_dir: str | os.PathLike | bool | None = None, cache_scenes: int = 8,
                  line_time_s: float | None = None, transforms: Callable[[dict], dict] | None = None,
                  frame_start: int | str = 0, pieces: bool = False) -> None:
@@ -371,7 +375,7 @@ class LFMCaptureDataset(Dataset):
             raise ValueError(f"groups must be None or a list of light-group names, got {groups!r}")
         self.groups = None if groups is None else list(groups)
         self.samples_per_scene, self.noise, self.optics = int(samples_per_scene), bool(noise), bool(optics)
-        self.max_lights, self.transforms = int(max_lights), transforms
+        self.transforms = transforms
         self.preset = _sensor.load_preset(sensor)
         self.sensor_name = self.preset.name
         self.pwm: PWMConfig = load_pwm_config(pwm)
@@ -397,6 +401,14 @@ class LFMCaptureDataset(Dataset):
             if unknown:
                 raise ValueError(f"groups: {unknown} are not light groups of any scene in split {split!r} of "
                                  f"{self.root}; available: {have}")
+        most = max([len(self._lights(sid)) for sid in self.scene_ids] + [0])
+        if max_lights is None:
+            max_lights = max(DEFAULT_MAX_LIGHTS, most)
+        elif isinstance(max_lights, bool) or not isinstance(max_lights, (int, np.integer)) or max_lights < most:
+            worst = max(self.scene_ids, key=lambda sid: len(self._lights(sid)))
+            raise ValueError(f"max_lights={max_lights!r} but scene {worst!r} of {self.root} has {most} lights; pass "
+                             f"max_lights >= {most} or leave it at None")
+        self.max_lights = int(max_lights)
         for sid in self.scene_ids:
             m = self.corpus.meta(sid)
             first = 0 if frame_start == "random" else frame_start
