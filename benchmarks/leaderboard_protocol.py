@@ -1,8 +1,13 @@
-"""Leaderboard of the classical baselines and the U-Net on a protocol corpus's test split (docs/leaderboard-v1-mini.md).
+"""Leaderboard of the classical baselines and the U-Net on a protocol corpus's test split (docs/leaderboard-v1.md,
+docs/leaderboard-v1-mini.md).
 
     lfmbench render --protocol lfmbench-v1-mini --out v1mini --workers 2
     lfmbench train --corpus v1mini --config lfmbench/configs/unet.yaml --out runs/unet_fusion.pt --epochs 16
     python benchmarks/leaderboard_protocol.py --corpus v1mini --checkpoint runs/unet_fusion.pt --runs runs/v1mini
+
+    lfmbench render --protocol lfmbench-v1 --out v1 --workers 2            # or --split test, then --split train
+    lfmbench train --corpus v1 --config lfmbench/configs/unet_v1.yaml --out runs/unet_v1.pt --epochs 12
+    python benchmarks/leaderboard_protocol.py --corpus v1 --checkpoint runs/unet_v1.pt --runs runs/v1
 
 Writes one result JSON per method, ``leaderboard.md``, ``leaderboard.json`` and ``leaderboard.png`` into ``--runs``
 (8 frozen PWM draws per test scene, no perceptual metrics: PU21 / ColorVideoVDP add minutes and are secondary).
