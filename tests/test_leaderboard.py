@@ -98,7 +98,7 @@ def test_leaderboard_refuses_other_corpus_and_metric_versions(bench, tmp_path):
     assert r.exit_code == 0, r.output
     args = ["--markdown", str(tmp_path / "l.md"), "--plot", str(tmp_path / "l.png"), "--json", str(tmp_path / "l.json")]
     r = CliRunner().invoke(_app(), ["leaderboard", str(d / "runs" / "flicker_aware.json"), str(out), *args])
-    assert r.exit_code == 2 and "corpus manifest sha256 differs" in r.output
+    assert r.exit_code == 2 and "corpus scenes sha256 differs: scenes " in r.output
     assert "flicker_aware.json" in r.output and "o.json" in r.output and not (tmp_path / "l.md").exists()
     r = CliRunner().invoke(_app(), ["leaderboard", str(d / "runs" / "flicker_aware.json"), str(out), *args,
                                     "--include-incomplete"])
@@ -214,3 +214,27 @@ def test_leaderboard_glob_over_its_own_output_directory_runs_twice(bench, tmp_pa
     assert r.exit_code == 0, r.output
     assert "left out 1 leaderboard file(s)" in r.output
     assert [x["method"] for x in json.loads((out / "lb.json").read_text())["rows"]] == [x["method"] for x in rows]
+
+
+def test_corpus_identity_follows_the_scored_scenes_not_the_whole_manifest(tmp_path):
+    """Two corpora with the same two scenes (byte-identical files) but a third scene in one of them: the
+    manifests differ, the identity of the scored scenes does not (a protocol corpus scored after ``--split test``
+    stays comparable once its training scenes are added); other scenes or an edited file change it."""
+    from lfmbench.evaluation.provenance import corpus_identity
+    from tests.data.corpus.data import make_corpus
+
+    a, b = make_corpus(tmp_path / "a", n_scenes=2), make_corpus(tmp_path / "b", n_scenes=3)
+    ids = ["scene00000", "scene00001"]
+    ia, ib = corpus_identity(a, ids), corpus_identity(b, ids)
+    assert ia["manifest_sha256"] != ib["manifest_sha256"]
+    assert ia["scenes_sha256"] == ib["scenes_sha256"] is not None
+    assert lb.identity({"corpus": ia})["corpus scenes sha256"] == lb.identity({"corpus": ib})["corpus scenes sha256"]
+    assert corpus_identity(b, ["scene00000", "scene00002"])["scenes_sha256"] != ib["scenes_sha256"]
+    man = json.loads((b / "manifest.json").read_text())
+    key = next(k for k in man["files"] if k.startswith("scenes/scene00001/"))
+    man["files"][key] = "0" * 64
+    (b / "manifest.json").write_text(json.dumps(man))
+    assert corpus_identity(b, ids)["scenes_sha256"] != ia["scenes_sha256"]
+    with pytest.raises(ValueError, match=r"no files listed for scene\(s\) \['nope'\]"):
+        corpus_identity(a, ["nope"])
+    assert corpus_identity(a)["scenes_sha256"] is None

@@ -22,7 +22,7 @@ def corpus_run_inputs(corpus: str | Path, split: str, seed: int, crop: int | Non
     from lfmbench.evaluation.provenance import corpus_identity
 
     ds = make_dataset(corpus, split, seed=seed, crop=crop, samples_per_scene=samples_per_scene, **dataset_kw)
-    return ds, corpus_identity(corpus), corpus_scene_conditions(ds.corpus)
+    return ds, corpus_identity(corpus, list(ds.scene_ids)), corpus_scene_conditions(ds.corpus)
 
 
 def write_leaderboard(rows: list[dict], runs: list[dict], sort_by: str | None, markdown: str | Path,

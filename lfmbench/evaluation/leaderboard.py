@@ -73,14 +73,16 @@ def incomplete_runs(runs: list[dict]) -> list[str]:
 
 # ------------------------------------------------------------------------------------------- comparability
 def identity(run: dict) -> dict[str, Any]:
-    """What must agree between results ranked together: corpus (manifest SHA-256, format version, frozen test
-    draws), metric versions, split, dataset seed, crop, samples per scene, frames per sample (3, the dataset's
-    default, in files that do not record it) and scoring options."""
+    """What must agree between results ranked together: corpus (the scored scenes' files, or the manifest SHA-256
+    in result files that do not record them; format version, frozen test draws), metric versions, split, dataset
+    seed, crop, samples per scene, frames per sample (3, the dataset's default, in files that do not record it)
+    and scoring options."""
     c = run.get("corpus") or {}
     d = run.get("dataset") or {}
     split = d.get("split")
     return {
-        "corpus manifest sha256": c.get("manifest_sha256"),
+        "corpus scenes sha256": (f"scenes {c['scenes_sha256']}" if c.get("scenes_sha256")
+                                 else f"manifest {c['manifest_sha256']}" if c.get("manifest_sha256") else None),
         "corpus format version": c.get("format_version"),
         "corpus test draws (test_params.json) sha256": c.get("test_params_sha256") if split == "test" else None,
         "metric versions": (run.get("versions") or {}).get("metrics"),
@@ -93,9 +95,10 @@ def identity(run: dict) -> dict[str, Any]:
 def _show(field: str, v: Any, run: dict) -> str:
     if v is None:
         return "none (not evaluated on a corpus, or a result file older than format version 2)" \
-            if field.startswith("corpus manifest") else "none"
-    if field == "corpus manifest sha256":
-        return f"{v[:12]}... (corpus {(run.get('corpus') or {}).get('path')})"
+            if field.startswith("corpus scenes") else "none"
+    if field == "corpus scenes sha256":  # "scenes <sha>" (the scored scenes' files) or "manifest <sha>" (older)
+        kind, sha = v.split(" ", 1)
+        return f"{kind} {sha[:12]}... (corpus {(run.get('corpus') or {}).get('path')})"
     return json.dumps(v, sort_keys=True) if isinstance(v, (dict, list)) else str(v)
 
 

@@ -1,9 +1,11 @@
 """Provenance stored with every result: versions, git revision, device, and the corpus identity.
 
 - :func:`versions`, :func:`git_revision`, :func:`device_name`: what produced a result.
-- :func:`corpus_identity`: what it was computed on: the SHA-256 of the corpus ``manifest.json`` bytes, the corpus
-  format version and the SHA-256 of the frozen test draws (``test_params.json``) when the corpus has them.
-  ``lfmbench leaderboard`` refuses to rank results whose identities differ.
+- :func:`corpus_identity`: what it was computed on: the SHA-256 of the corpus ``manifest.json`` bytes, the SHA-256
+  of the scored scenes' files (their manifest checksums), the corpus format version and the SHA-256 of the frozen
+  test draws (``test_params.json``) when the corpus has them. ``lfmbench leaderboard`` refuses to rank results
+  whose identities differ; it compares the scored scenes' files, not the whole manifest, so a protocol corpus
+  scored after ``--split test`` and again after its training scenes were added stays comparable.
 """
 from __future__ import annotations
 
@@ -31,14 +33,16 @@ def file_sha256(path: str | Path) -> str:
     return h.hexdigest()
 
 
-def corpus_identity(root: str | Path) -> dict:
-    """``{"path", "manifest_sha256", "format_version", "test_params_sha256"}`` of a corpus directory.
+def corpus_identity(root: str | Path, scene_ids: list[str] | None = None) -> dict:
+    """``{"path", "manifest_sha256", "scenes_sha256", "format_version", "test_params_sha256"}`` of a corpus.
 
-    ``test_params_sha256`` is None until the test split's draws are frozen (first use of the split).
+    ``scenes_sha256``: SHA-256 of the canonical JSON ``{scene_id: {file: sha256}}`` of ``scene_ids`` (the scenes a
+    result scores) from the manifest's file checksums; None without ``scene_ids``. ``test_params_sha256`` is None
+    until the test split's draws are frozen (first use of the split).
 
     Raises:
         FileNotFoundError: naming the missing ``manifest.json``.
-        ValueError: naming a manifest that is not a JSON object.
+        ValueError: naming a manifest that is not a JSON object, or a scene it does not list.
     """
     root = Path(root)
     man = root / MANIFEST_NAME
@@ -51,8 +55,20 @@ def corpus_identity(root: str | Path) -> dict:
         raise ValueError(f"{man}: not JSON ({exc})") from None
     if not isinstance(doc, dict):
         raise ValueError(f"{man}: must hold a JSON object")
+    scenes_sha = None
+    if scene_ids is not None:
+        files = doc.get("files") if isinstance(doc.get("files"), dict) else {}
+        per: dict[str, dict] = {str(s): {} for s in scene_ids}
+        for rel, sha in files.items():
+            parts = str(rel).split("/")
+            if len(parts) > 2 and parts[1] in per:
+                per[parts[1]]["/".join(parts[2:])] = sha
+        missing = [s for s, f in per.items() if not f]
+        if missing:
+            raise ValueError(f"{man}: no files listed for scene(s) {missing[:3]}")
+        scenes_sha = hashlib.sha256(json.dumps(per, sort_keys=True).encode()).hexdigest()
     tp = root / TEST_PARAMS_NAME
-    return {"path": str(root), "manifest_sha256": hashlib.sha256(raw).hexdigest(),
+    return {"path": str(root), "manifest_sha256": hashlib.sha256(raw).hexdigest(), "scenes_sha256": scenes_sha,
             "format_version": doc.get("version"),
             "test_params_sha256": file_sha256(tp) if tp.is_file() else None}
 
