@@ -8,7 +8,7 @@ import os
 import numpy as np
 import OpenEXR
 import pytest
-from tests.data.corpus.data import BANDS, fake_frames, fake_meta, fake_scene
+from tests.data.corpus.data import BANDS, disk_full_after, fake_frames, fake_meta, fake_scene
 
 from lfmbench import corpus as C
 
@@ -290,15 +290,7 @@ def test_disk_full_leaves_valid_corpus(tmp_path, monkeypatch):
     w.write_scene("scene00000", fake_scene(), m0, fake_frames(m0))
     w.write_splits(0)
     manifest_before = (root / "manifest.json").read_bytes()
-    calls = {"n": 0}
-    real_fsync = os.fsync
-
-    def full(fd):
-        calls["n"] += 1
-        if calls["n"] > 3:  # a few files go through, then the disk is full
-            raise OSError(errno.ENOSPC, "No space left on device")
-        real_fsync(fd)
-    monkeypatch.setattr(os, "fsync", full)
+    real_fsync = disk_full_after(monkeypatch, 3)  # a few files go through, then the disk is full
     m1 = fake_meta("scene00001")
     with pytest.raises(C.CorpusWriteError, match="disk full") as ei:
         w.write_scene("scene00001", fake_scene(), m1, fake_frames(m1))
@@ -425,15 +417,7 @@ def test_threaded_writer_raises_the_workers_error_with_its_message(tmp_path):
 def test_threaded_writer_disk_full_is_a_corpus_write_error(tmp_path, monkeypatch):
     meta = fake_meta(frames=2)
     frames = fake_frames(meta)
-    calls = {"n": 0}
-    real_fsync = os.fsync
-
-    def full(fd):
-        calls["n"] += 1
-        if calls["n"] > 3:
-            raise OSError(errno.ENOSPC, "No space left on device")
-        real_fsync(fd)
-    monkeypatch.setattr(os, "fsync", full)
+    disk_full_after(monkeypatch, 3)
     with pytest.raises(C.CorpusWriteError, match="disk full") as ei:
         with C.ThreadedSceneWriter(tmp_path, meta["scene_id"], fake_scene(), meta) as w:
             for fr in frames:

@@ -6,7 +6,6 @@ in milliseconds; one end-to-end test renders a tiny scene with Mitsuba.
 """
 from __future__ import annotations
 
-import errno
 import json
 import os
 
@@ -18,6 +17,7 @@ from lfmbench import corpus as C
 from lfmbench.cli import app
 from render_tools import jobs as J
 
+from tests.data.corpus.data import disk_full_after
 from tests.data.render.data import ARGS, FAIL, fake_backend, run
 
 
@@ -105,15 +105,7 @@ def test_disk_full(tmp_path, fake, monkeypatch):
     out = tmp_path / "c"
     assert run("--out", str(out), "--scenes", "1", *ARGS).exit_code == 0
     before = (out / "manifest.json").read_bytes()
-    real = os.fsync
-    n = {"i": 0}
-
-    def full(fd):
-        n["i"] += 1
-        if n["i"] > 2:
-            raise OSError(errno.ENOSPC, "No space left on device")
-        real(fd)
-    monkeypatch.setattr(os, "fsync", full)
+    real = disk_full_after(monkeypatch, 2)
     r = run("--out", str(out), "--scenes", "2", *ARGS)
     monkeypatch.setattr(os, "fsync", real)
     assert r.exit_code == 2

@@ -9,6 +9,9 @@ Run as a script to write an example corpus: ``python -m tests.data.corpus.data O
 """
 from __future__ import annotations
 
+import errno
+import os
+
 import numpy as np
 
 from lfmbench import corpus as C
@@ -98,6 +101,21 @@ def scale_frames(frames, static_scale, light_scale, static_camera=False):
             f["lights"][g] = new
         f["aux"]["mask.light"][1:4, 4:6] = 1
     return frames
+
+
+def disk_full_after(monkeypatch, n_ok: int):
+    """Make ``os.fsync`` succeed ``n_ok`` times, then raise ``ENOSPC`` (a disk that fills up mid-write); returns
+    the real ``os.fsync`` so a test can restore it before it goes on."""
+    real = os.fsync
+    calls = {"n": 0}
+
+    def full(fd):
+        calls["n"] += 1
+        if calls["n"] > n_ok:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        real(fd)
+    monkeypatch.setattr(os, "fsync", full)
+    return real
 
 
 def make_corpus(root, n_scenes=3, frames=3, bins=4, scale=1e-3, static_camera=False, seed=0, groups=None):
