@@ -593,13 +593,11 @@ def miss_probability(exposure: ArrayLike, period: ArrayLike, duty: ArrayLike, ri
         0.35
     """
     _check_pwm_args(0.0, exposure, period, duty, 1.0, 0.0, rise_time, fall_time)
-    if _is_torch(exposure, period, duty, rise_time, fall_time):
-        exposure, period, duty, rise_time, fall_time = _as_tensors(exposure, period, duty, rise_time, fall_time)
-        ramps = 0.5 * (rise_time + fall_time)
-        p = torch.clamp(((1.0 - duty) * period - ramps - exposure) / period, min=0.0, max=1.0)
-        return torch.where((duty * period + ramps > 0) & (exposure > 0), p, torch.ones_like(p))
-    exposure, period, duty, rise_time, fall_time = (np.asarray(x, dtype=np.float64) for x in
-                                                    (exposure, period, duty, rise_time, fall_time))
+    torch_mode = _is_torch(exposure, period, duty, rise_time, fall_time)
+    args = (exposure, period, duty, rise_time, fall_time)
+    exposure, period, duty, rise_time, fall_time = (_as_tensors(*args) if torch_mode else
+                                                    [np.asarray(x, dtype=np.float64) for x in args])
+    ops = _Ops(torch_mode)
     ramps = 0.5 * (rise_time + fall_time)
-    p = np.clip(((1.0 - duty) * period - ramps - exposure) / period, 0.0, 1.0)
-    return np.where((duty * period + ramps > 0) & (exposure > 0), p, 1.0)
+    p = ops.clip(((1.0 - duty) * period - ramps - exposure) / period, 0.0, 1.0)
+    return ops.where((duty * period + ramps > 0) & (exposure > 0), p, 1.0)
