@@ -71,6 +71,62 @@ EMISSION_FLOOR = 0.0
 RECEIVER_FLOOR = 0.1
 
 
+#: Smallest registry size class (:func:`registry_class`).
+REGISTRY_CLASS_MIN = 16
+
+
+def registry_class(n: int) -> int:
+    """The size class of ``n`` registered Mitsuba objects of one kind: the smallest power of two >= max(n,
+    :data:`REGISTRY_CLASS_MIN`)."""
+    return max(REGISTRY_CLASS_MIN, 1 << max(0, int(n) - 1).bit_length())
+
+
+def pad_registry(mi, dr, loaded, bsdf) -> list:
+    """Pad Dr.Jit's registry of shapes, emitters and BSDFs to their size classes with inert objects.
+
+    Why: a kernel's virtual-call tables have one entry per registered object of a kind (Dr.Jit's registry id
+    bound), and their sizes enter the kernel as literal offsets (measured: two night scenes with 37 and 58 lights
+    differed in nothing else), so every new scene compiled one new kernel (1.4-2.8 s at 160x90 on 2 cores).
+    Padding each kind to :func:`registry_class` of its id bound makes scenes of one class share a kernel.
+
+    The dummies are never part of ``loaded``: nothing can hit or sample them, so the image is unchanged (bit for
+    bit; tests/test_render_tracer.py). Each kind gets at least one dummy of a fixed type (a ``spot`` emitter, a
+    one-triangle mesh with ``bsdf``, a ``diffuse`` BSDF), so the set of object types, which also enters the
+    kernel, does not depend on whether a scene happens to fill its class. ``loaded``: the frame's ``mi.Scene``;
+    ``bsdf``: a BSDF of the scene for the dummy meshes. Returns the dummies: keep them alive as long as the
+    kernels are traced (the frame); freeing them frees their ids.
+    """
+    def rid(ptr_type, obj):
+        return int(dr.reinterpret_array(mi.UInt32, ptr_type(obj))[0])
+
+    shapes = list(loaded.shapes())
+    bsdfs = {rid(mi.BSDFPtr, b): b for b in [sh.bsdf() for sh in shapes] + [bsdf] if b is not None}
+    kinds = (  # emitters first: none of the later dummies registers an emitter, and meshes need no new BSDF
+        (mi.EmitterPtr, [rid(mi.EmitterPtr, e) for e in loaded.emitters()],
+         lambda: mi.load_dict({"type": "spot"})),
+        (mi.ShapePtr, [rid(mi.ShapePtr, sh) for sh in shapes],
+         lambda: _dummy_mesh(mi, bsdf)),
+        (mi.BSDFPtr, list(bsdfs), lambda: mi.load_dict({"type": "diffuse"})),
+    )
+    dummies = []
+    for ptr_type, ids, make in kinds:
+        target = registry_class(max(ids, default=0) + 1)
+        while True:  # Dr.Jit hands out the lowest free id: the holes fill first, then the ids up to the target
+            obj = make()
+            dummies.append(obj)
+            if rid(ptr_type, obj) >= target:
+                break
+    return dummies
+
+
+def _dummy_mesh(mi, bsdf):
+    """A one-triangle mesh with ``bsdf``, in no scene (a :func:`pad_registry` dummy)."""
+    props = mi.Properties()
+    props["bsdf"] = bsdf
+    m = mi.Mesh("lfm_pad", 3, 1, props=props)
+    return m
+
+
 @dataclass
 class Tile:
     """One rectangle of the image to render.
@@ -280,6 +336,8 @@ class Tracer:
         self.band_w = o(band_width_nm)
         self.n_bands = dr.opaque(mi.UInt32, self.C)
         self.n_pass = dr.opaque(mi.UInt32, self.P)
+        env = loaded.environment()
+        self.env = mi.EmitterPtr([env, env])  # two entries: a size-1 array would be loaded as a scalar
 
     # ------------------------------------------------------------------ camera
     def _pose(self, t):
@@ -428,8 +486,10 @@ class Tracer:
         for sl in range(self.S):
             for j in range(N_LAMBDA):
                 idx = out0 + sl * stride + ((k * self.n_bands + bands[j]) * h + y) * w + x
+                # mode Local, not Auto: Auto expands a buffer of <= 1 M values per thread with the buffer's size
+                # as a kernel literal (a new kernel per size); frames of 160x90 and more got Local already
                 dr.scatter_reduce(dr.ReduceOp.Add, buf, L[sl][j] * wgt, idx,
-                                  (bands[j] < self.n_bands) & (sl < n_slots))
+                                  (bands[j] < self.n_bands) & (sl < n_slots), mode=dr.ReduceMode.Local)
 
     @dr.syntax
     def _pixel(self, sampler, spp, rot, key, x0, y0, t0, dt, vel, t_ref, lo_nm, lset, gap_at, gap_len):
@@ -566,6 +626,10 @@ class Tracer:
             # emission hit by the camera ray or by BSDF sampling, if the emitter is in this lane's set; its MIS
             # weight needs the probability with which the previous vertex's next-event estimation picks it
             ds = mi.DirectionSample3f(self.scene, si=si, ref=si_prev)
+            # the emitter hit, as si.emitter(scene) but with the environment read from an array: Mitsuba's
+            # select puts the environment's registry id into the kernel as a literal (another per scene)
+            ds.emitter = dr.select(si.is_valid(), si.shape.emitter(),
+                                   dr.gather(mi.EmitterPtr, self.env, 0, active))
             row_hit, beam_hit, in_set, slot_hit = self._set_row(ds.emitter, lset)
             wf_hit, wb_hit = self._lamp_weights(row_hit, si_prev.p, si_prev.n)
             pmf_hit = dr.select(in_set & ~delta_prev, dr.select(beam_hit, wb_hit, wf_hit), 0.0) \

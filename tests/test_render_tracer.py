@@ -241,3 +241,63 @@ def test_multijitter_count_is_what_mitsuba_uses_without_a_warning(n, capfd):
     capfd.readouterr()
     assert mi.load_dict({"type": camera.DEFAULT_SAMPLER, "sample_count": k}).sample_count() == k
     assert "rounded up" not in "".join(capfd.readouterr())
+
+
+def _with_more_lights(s: dict, n: int) -> dict:
+    """``s`` with ``n`` more streetlights along the street (another scene of the same kind and size class)."""
+    s = {**s, "lights": list(s["lights"])}
+    for i in range(n):
+        s["lights"].append({"shape": "rect", "id": len(s["lights"]), "group": "streetlights", "kind": "streetlight",
+                            "instance": -1, "center": [14.0 + 6 * i, 2.5, 5.0], "normal": [0, 0, -1],
+                            "size": [0.4, 0.4], "spread_deg": 90.0, "spectrum": HPS, "luminance_cd_m2": 4e4})
+    return scene.validate_scene(s)
+
+
+def _frame_and_main_kernel(s: dict, opts) -> tuple[dict, dict]:
+    """Render frame 0 of ``s``; returns it and the Dr.Jit kernel-history entry of its biggest kernel (the
+    tracer's launch)."""
+    import drjit as dr
+
+    dr.kernel_history()  # empties the history
+    dr.set_flag(dr.JitFlag.KernelHistory, True)
+    try:
+        fr = next(render.render_frames(s, opts))
+        ks = [k for k in dr.kernel_history() if k.get("type") == dr.KernelType.JIT]
+    finally:
+        dr.set_flag(dr.JitFlag.KernelHistory, False)
+    return fr, max(ks, key=lambda k: k["operation_count"])
+
+
+def _same_arrays(a, b) -> bool:
+    if isinstance(a, dict):
+        return a.keys() == b.keys() and all(_same_arrays(a[k], b[k]) for k in a)
+    if isinstance(a, (list, tuple)):
+        return len(a) == len(b) and all(_same_arrays(x, y) for x, y in zip(a, b))
+    return np.array_equal(a, b) if isinstance(a, np.ndarray) else a == b
+
+
+@pytest.mark.parametrize("n", [0, 1, 15, 16, 17, 100])
+def test_registry_class_is_the_next_power_of_two_from_16(n):
+    c = tracer.registry_class(n)
+    assert c >= max(n, tracer.REGISTRY_CLASS_MIN) and c & (c - 1) == 0 and (c == 16 or c // 2 < n)
+
+
+def test_registry_padding_changes_no_pixel_and_a_new_scene_reuses_the_kernel(monkeypatch):
+    """Padding the registry (tracer.pad_registry) with objects outside the scene leaves every image and map bit
+    for bit as without it; a new scene with three more lights (other shape and emitter counts, same size class)
+    then runs the kernel already compiled, which without the padding it cannot (the mutation check)."""
+    opts = render.RenderOptions(width=32, height=24, spp=2, light_spp=8, bins=2, frames=1, seed=5)
+    a, b = _street(), _with_more_lights(_street(), 3)
+    fr_a, _ = _frame_and_main_kernel(a, opts)
+    fr_b, k_b = _frame_and_main_kernel(b, opts)
+    assert k_b["cache_hit"], "a new scene of the same size class compiled a new kernel"
+    real = tracer.pad_registry
+    monkeypatch.setattr(tracer, "pad_registry", lambda *args: [])
+    plain_a, _ = _frame_and_main_kernel(a, opts)
+    assert _same_arrays(plain_a, fr_a) and plain_a["aux"] and plain_a["lights"]["otherlights"]
+    c = _with_more_lights(_street(), 4)  # never rendered: without padding its layout is a new kernel
+    _, k_c = _frame_and_main_kernel(c, opts)
+    assert not k_c["cache_hit"]
+    monkeypatch.setattr(tracer, "pad_registry", real)
+    _, k_c2 = _frame_and_main_kernel(c, opts)
+    assert k_c2["cache_hit"]
