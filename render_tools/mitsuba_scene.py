@@ -238,14 +238,22 @@ def light_spectrum(light: dict) -> np.ndarray:
     return spectra.absolute_spectrum(light["spectrum"], light["luminance_cd_m2"])
 
 
-def sky_dict(scene: dict) -> dict:
-    """Mitsuba emitter dict of the scene's sky (group ``skymap``)."""
+def sky_scale(scene: dict) -> float:
+    """The factor on Mitsuba's ``sunsky`` radiance of the scene's sky (``sky.scale``; 1 for other skies)."""
+    s = scene["sky"]
+    return float(s["scale"]) if s["model"] == "sunsky" else 1.0
+
+
+def sky_dict(scene: dict, unit_scale: bool = False) -> dict:
+    """Mitsuba emitter dict of the scene's sky (group ``skymap``). ``unit_scale``: a ``sunsky`` without its
+    :func:`sky_scale` (the renderer applies it: Mitsuba compiles the scale into kernels as a literal)."""
     s = scene["sky"]
     if s["model"] == "sunsky":
         el, az = math.radians(s["sun_elevation_deg"]), math.radians(s["sun_azimuth_deg"])
         d = [math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el)]
+        k = 1.0 if unit_scale else sky_scale(scene)
         return {"type": "sunsky", "sun_direction": d, "turbidity": float(s["turbidity"]),
-                "sun_scale": float(s["scale"]), "sky_scale": float(s["scale"])}
+                "sun_scale": k, "sky_scale": k}
     return {"type": "constant",
             "radiance": spectra.mitsuba_spectrum(spectra.absolute_spectrum(s["spectrum"], s["luminance_cd_m2"]))}
 
@@ -278,7 +286,7 @@ def prepare_geometry(scene: dict, cache: dict) -> dict:
 
 
 def mitsuba_dict(scene: dict, t: float, emit: str | None = None, lights: list[int] | None = None,
-                 integrator: dict | None = None, cache: dict | None = None) -> dict:
+                 integrator: dict | None = None, cache: dict | None = None, unit_sky: bool = False) -> dict:
     """Mitsuba scene dict (no sensor) of ``scene`` at time ``t`` (s, places moving objects).
 
     Args:
@@ -289,6 +297,8 @@ def mitsuba_dict(scene: dict, t: float, emit: str | None = None, lights: list[in
         cache: optional dict reused across calls for the same scene and variant: keeps the loaded BSDFs, the
             meshes (numpy vertices and faces) of objects and lamps that do not move, and every lamp's spectrum
             dicts, so the frames after the first rebuild only what moves (the result is the same).
+        unit_sky: the sky without its :func:`sky_scale` (``sky_dict(unit_scale=True)``), for a renderer that
+            applies the scale itself.
     Returns:
         dict for ``mi.load_dict`` holding instantiated meshes (one per object and material, one per lamp
         face); shape ids follow :func:`shape_id`, :func:`light_shape_id`, :func:`beam_id`.
@@ -301,7 +311,7 @@ def mitsuba_dict(scene: dict, t: float, emit: str | None = None, lights: list[in
                "integrator": integrator or {"type": "path", "max_depth": MAX_DEPTH, "hide_emitters": False}}
     cache = {} if cache is None else cache
     if cache.get("variant") != mi.variant():  # Mitsuba objects belong to a variant; numpy arrays do not
-        for k in ("bsdfs", "off_lens", "sky"):
+        for k in ("bsdfs", "off_lens", "sky", "sky_unit"):
             cache.pop(k, None)
         cache["variant"] = mi.variant()
         cache["bsdfs"] = {name: mi.load_dict(_bsdf(m)) for name, m in scene["materials"].items()}
@@ -345,10 +355,17 @@ def mitsuba_dict(scene: dict, t: float, emit: str | None = None, lights: list[in
     if emit == "skymap" or (emit == "all" and "skymap" in scene_groups(scene)):
         # one sky object per scene: Mitsuba bakes the environment emitter's registry id into kernels as a
         # literal, so a new sky object per frame would force a recompile per frame
-        if "sky" not in cache:
-            cache["sky"] = mi.load_dict(sky_dict(scene))
-        d["sky"] = cache["sky"]
+        key = "sky_unit" if unit_sky else "sky"
+        if key not in cache:
+            cache[key] = mi.load_dict(sky_dict(scene, unit_scale=unit_sky))
+        d["sky"] = cache[key]
     return d
+
+
+def pad_emitter_dict() -> dict:
+    """Mitsuba dict of an emitter of the same plugin and spectrum type as a lamp's beam (a ``spot`` with a
+    ``regular`` spectrum), for the inert registry padding of :func:`render_tools.tracer.pad_registry`."""
+    return {"type": "spot", "intensity": spectra.mitsuba_spectrum(np.ones(len(spectra.wavelengths())))}
 
 
 def _off_values(values):

@@ -226,11 +226,13 @@ class SceneGeometry:
         v = self.object_velocity(light) if moving else np.zeros(3)
         uvs = []
         for t in times:
-            uv, z = cam_mod.project(pts + v * (t - t_obj), self.ego.pose_cv(t), self.K)
+            pose = self.ego.pose_cv(t)
+            pw = pts + v * (t - t_obj)
+            uv, z = cam_mod.project(pw, pose, self.K)
             if np.all(z <= MIN_DEPTH_M):
                 continue
-            if np.any(z <= MIN_DEPTH_M):  # straddles the camera plane: take the whole image
-                return (0, 0, self.opts.height, self.opts.width)
+            if np.any(z <= MIN_DEPTH_M):  # straddles the camera plane: project the part in front of it
+                uv, _ = cam_mod.project(clip_near(pw, z, MIN_DEPTH_M), pose, self.K)
             uvs.append(uv)
         if not uvs:
             return None
@@ -243,6 +245,24 @@ class SceneGeometry:
         x0, x1 = _round_span(x0, x1, self.opts.width)
         y0, y1 = _round_span(y0, y1, self.opts.height)
         return (int(y0), int(x0), int(y1), int(x1))
+
+
+def clip_near(points: np.ndarray, z: np.ndarray, near: float) -> np.ndarray:
+    """The part of a convex planar polygon in front of the plane ``z = near`` (m), as points whose convex hull it
+    is: its corners with z > near and the points where the segment between any corner in front and any corner
+    behind crosses the plane (the crossings of its edges among them; the others lie inside it).
+
+    points: (P, 3) world corners (any order), m; z: (P,) their depths along the optical axis, m (at least one
+    > near). Returns (Q, 3) world points, m. A lamp that straddles the camera plane (a streetlight overhead, a
+    car alongside) is bounded by what of it the camera can see, instead of the whole image (which made its
+    light_spp refinement tile full-frame: 94 s for such a 640x360 scene instead of 27 s).
+    """
+    front = z > near
+    pf, pb = points[front], points[~front]
+    zf, zb = z[front][:, None], z[~front][None, :]
+    s = (zf - near) / (zf - zb)  # (F, B) in (0, 1]: zf > near >= zb
+    cross = pf[:, None, :] + s[..., None] * (pb[None, :, :] - pf[:, None, :])
+    return np.concatenate([pf, cross.reshape(-1, 3)])
 
 
 def _round_span(a: int, b: int, n: int) -> tuple[int, int]:
@@ -472,11 +492,11 @@ def render_frames(scene: dict, opts: RenderOptions) -> Iterator[dict]:
     geo = SceneGeometry(scene, opts)
     for n, tm in enumerate(timings):
         t_obj = 0.5 * (tm["window"][0] + tm["window"][1])
-        loaded = mi.load_dict(ms.mitsuba_dict(scene, t_obj, emit="all", cache=mcache))
+        loaded = mi.load_dict(ms.mitsuba_dict(scene, t_obj, emit="all", cache=mcache, unit_sky=True))
         pad = tracer.pad_registry(mi, dr, loaded, mcache["off_lens"])  # scenes of a size class share kernels
         sets = tracer.LightSets(mi, dr, loaded, scene, list(groups), union=static_union(groups, opts))
         tr = tracer.Tracer(mi, dr, loaded, sets, geo.ego, geo.fov, (opts.width, opts.height), opts.bands_nm,
-                           opts.band_width_nm)
+                           opts.band_width_nm, sky_scale=ms.sky_scale(scene))
         tiles, plan, visible = plan_frame(scene, opts, n, sets, geo)
         imgs = tr.render(tiles, _seed(opts.seed, n, "frame")) if tiles else []
         out = {"frame": n, "static": {}, "lights": {}, "aux": {}}

@@ -52,6 +52,9 @@ MAX_LANES = 1 << 28
 #: Path vertex from which Russian roulette may end a path (Mitsuba's ``rr_depth``, whose default 5 never acts at
 #: ``max_depth`` 5): vertices 3-5 cost 40 % of a night frame's time and carry little of its light.
 RR_DEPTH = 2
+#: Fewest images a lane records (:class:`Tracer`): the static groups of a generated scene (headlights, streetlights,
+#: sky), so that a scene with fewer of them (a day street: the sky alone) runs the same kernel.
+MIN_SLOTS = 3
 #: Index value meaning "no set" in the per-emitter lookup tables.
 NO_SET = 0xFFFFFFFF
 #: Beam cut-off cosine entries of a :class:`LightSets` row meaning "a lamp without a beam" and "the environment".
@@ -71,14 +74,16 @@ EMISSION_FLOOR = 0.0
 RECEIVER_FLOOR = 0.1
 
 
-#: Smallest registry size class (:func:`registry_class`).
-REGISTRY_CLASS_MIN = 16
+#: Smallest registry size class per kind of Mitsuba object (:func:`registry_class`): above what a generated scene
+#: has (120 scenes of the default generator: 108-207 shapes, 5-92 emitters, 42-58 BSDFs), so that every generated
+#: scene of one time of day runs the same kernel; a bigger scene pads to the next power of two.
+REGISTRY_CLASS_MIN = {"shape": 256, "emitter": 128, "bsdf": 64}
 
 
-def registry_class(n: int) -> int:
-    """The size class of ``n`` registered Mitsuba objects of one kind: the smallest power of two >= max(n,
-    :data:`REGISTRY_CLASS_MIN`)."""
-    return max(REGISTRY_CLASS_MIN, 1 << max(0, int(n) - 1).bit_length())
+def registry_class(n: int, kind: str = "shape") -> int:
+    """The size class of ``n`` registered Mitsuba objects of ``kind`` (``shape``, ``emitter``, ``bsdf``): the
+    smallest power of two >= max(n, :data:`REGISTRY_CLASS_MIN` [kind])."""
+    return max(REGISTRY_CLASS_MIN[kind], 1 << max(0, int(n) - 1).bit_length())
 
 
 def pad_registry(mi, dr, loaded, bsdf) -> list:
@@ -90,9 +95,9 @@ def pad_registry(mi, dr, loaded, bsdf) -> list:
     Padding each kind to :func:`registry_class` of its id bound makes scenes of one class share a kernel.
 
     The dummies are never part of ``loaded``: nothing can hit or sample them, so the image is unchanged (bit for
-    bit; tests/test_render_tracer.py). Each kind gets at least one dummy of a fixed type (a ``spot`` emitter, a
-    one-triangle mesh with ``bsdf``, a ``diffuse`` BSDF), so the set of object types, which also enters the
-    kernel, does not depend on whether a scene happens to fill its class. ``loaded``: the frame's ``mi.Scene``;
+    bit; tests/test_render_tracer.py). Each kind gets at least one dummy of a fixed type (a ``spot`` emitter of
+    the beams' spectrum type, a one-triangle mesh with ``bsdf``, a ``diffuse`` BSDF), so the set of object types,
+    which also enters the kernel, does not depend on whether a scene happens to fill its class or has beams. ``loaded``: the frame's ``mi.Scene``;
     ``bsdf``: a BSDF of the scene for the dummy meshes. Returns the dummies: keep them alive as long as the
     kernels are traced (the frame); freeing them frees their ids.
     """
@@ -102,15 +107,14 @@ def pad_registry(mi, dr, loaded, bsdf) -> list:
     shapes = list(loaded.shapes())
     bsdfs = {rid(mi.BSDFPtr, b): b for b in [sh.bsdf() for sh in shapes] + [bsdf] if b is not None}
     kinds = (  # emitters first: none of the later dummies registers an emitter, and meshes need no new BSDF
-        (mi.EmitterPtr, [rid(mi.EmitterPtr, e) for e in loaded.emitters()],
-         lambda: mi.load_dict({"type": "spot"})),
-        (mi.ShapePtr, [rid(mi.ShapePtr, sh) for sh in shapes],
-         lambda: _dummy_mesh(mi, bsdf)),
-        (mi.BSDFPtr, list(bsdfs), lambda: mi.load_dict({"type": "diffuse"})),
+        ("emitter", mi.EmitterPtr, [rid(mi.EmitterPtr, e) for e in loaded.emitters()],
+         lambda: mi.load_dict(ms.pad_emitter_dict())),
+        ("shape", mi.ShapePtr, [rid(mi.ShapePtr, sh) for sh in shapes], lambda: _dummy_mesh(mi, bsdf)),
+        ("bsdf", mi.BSDFPtr, list(bsdfs), lambda: mi.load_dict({"type": "diffuse"})),
     )
     dummies = []
-    for ptr_type, ids, make in kinds:
-        target = registry_class(max(ids, default=0) + 1)
+    for kind, ptr_type, ids, make in kinds:
+        target = registry_class(max(ids, default=0) + 1, kind)
         while True:  # Dr.Jit hands out the lowest free id: the holes fill first, then the ids up to the target
             obj = make()
             dummies.append(obj)
@@ -313,16 +317,21 @@ class Tracer:
         sets: its :class:`LightSets`.
         ego: :class:`camera.EgoMotion`; fov_x_deg: horizontal field of view, deg; size: (width, height) px.
         bands_nm: (C,) band centres, nm; band_width_nm: band width, nm. max_depth: path vertices (Mitsuba's).
+        sky_scale: factor on the environment emitter's radiance, for a scene loaded with a unit-scale ``sunsky``
+            (``mitsuba_dict(unit_sky=True)``; :func:`render_tools.mitsuba_scene.sky_scale`): kernel data here,
+            where Mitsuba's ``sky_scale`` is a literal (a new kernel per scene).
     """
 
     def __init__(self, mi, dr, loaded, sets: LightSets, ego, fov_x_deg: float, size, bands_nm, band_width_nm: float,
-                 max_depth: int = ms.MAX_DEPTH):
+                 max_depth: int = ms.MAX_DEPTH, sky_scale: float = 1.0):
         self.mi, self.dr, self.scene, self.sets = mi, dr, loaded, sets
         self.W, self.H = int(size[0]), int(size[1])
         self.C = len(bands_nm)
         self.P = cam_mod.n_passes(self.C)
         self.max_depth = int(max_depth)
-        self.S = int(sets.slots)  # images per lane (the union set's groups; 1 without a union)
+        # images per lane: the union set's groups, at least MIN_SLOTS (unused slots record nothing, the same kernel
+        # serves scenes with one, two or three static groups)
+        self.S = max(int(sets.slots), MIN_SLOTS)
         K = cam_mod.intrinsics(self.W, self.H, fov_x_deg)
         o = lambda v: dr.opaque(mi.Float, float(v))  # noqa: E731 - every scene number is kernel data
         self.f, self.cx, self.cy = o(K[0, 0]), o(K[0, 2]), o(K[1, 2])
@@ -338,6 +347,9 @@ class Tracer:
         self.n_pass = dr.opaque(mi.UInt32, self.P)
         env = loaded.environment()
         self.env = mi.EmitterPtr([env, env])  # two entries: a size-1 array would be loaded as a scalar
+        self.env_id = dr.opaque(mi.UInt32, int(dr.reinterpret_array(mi.UInt32, mi.EmitterPtr(env))[0])
+                                if env is not None else NO_SET)
+        self.sky_scale = o(sky_scale)
 
     # ------------------------------------------------------------------ camera
     def _pose(self, t):
@@ -393,9 +405,9 @@ class Tracer:
             if t.gap_len < 0 or (t.gap_len > 0 and t.bins != 1):
                 raise ValueError(f"tiles[{i}]: a time gap needs gap_len >= 0 s and one bin, got {t.gap_len} s, "
                                  f"{t.bins} bins")
-            if not 1 <= t.slots <= self.S:
-                raise ValueError(f"tiles[{i}]: slots {t.slots} not in [1, {self.S}] (the light sets' union has "
-                                 f"{self.S} group(s))")
+            if not 1 <= t.slots <= (sets_slots := self.sets.slots):
+                raise ValueError(f"tiles[{i}]: slots {t.slots} not in [1, {sets_slots}] (the groups of the light "
+                                 "sets' union)")
             outs.append((size, (t.slots, t.bins, C, h, w) if t.slots > 1 else (t.bins, C, h, w)))
             n_split = max(1, -(-h * w * t.bins * P * t.spp // MAX_LANES))
             base, extra = divmod(t.spp, n_split)
@@ -638,7 +650,8 @@ class Tracer:
             hit_em = active & in_set
             # emission clamped at 0 (:data:`EMISSION_FLOOR`): Mitsuba's sunsky returns slightly negative spectral
             # radiance near the horizon at low sun (dusk), which no light can have
-            c_hit = beta * _mis_weight(pdf_prev, em_pdf) * dr.maximum(ds.emitter.eval(si, hit_em), EMISSION_FLOOR)
+            c_hit = beta * _mis_weight(pdf_prev, em_pdf) * dr.maximum(ds.emitter.eval(si, hit_em), EMISSION_FLOOR) \
+                * dr.select(si.is_valid(), 1.0, self.sky_scale)
             L = [L[k] + (dr.select(slot_hit == k, c_hit, 0.0) if n_slots > 1 else c_hit) for k in range(n_slots)]
 
             active_next = active & (depth + 1 < self.max_depth) & si.is_valid()
@@ -649,6 +662,7 @@ class Tracer:
             ds_em, w_em = em.sample_direction(si, mi.Point2f(sampler.next_float32(), sampler.next_float32()),
                                               active_em)
             w_em = dr.maximum(w_em, EMISSION_FLOOR)  # as above: the clamped sky, an unbiased estimate of it
+            w_em *= dr.select(dr.reinterpret_array(mi.UInt32, em) == self.env_id, self.sky_scale, 1.0)
             active_em &= (ds_em.pdf != 0.0) & (pmf_em > 0)
             occluded = self.scene.ray_test(si.spawn_ray_to(ds_em.p), active_em)
             active_em &= ~occluded

@@ -155,6 +155,50 @@ def test_light_crop_and_projection_agree_with_render():
     assert mask[int(uv[0, 1]), int(uv[0, 0])] == 0 and (mask == -1).mean() > 0.9
 
 
+def test_lamp_straddling_the_camera_plane_gets_the_crop_of_its_visible_part():
+    """A light strip overhead from 2 m behind the camera to 8 m ahead: its crop holds all of its light in a
+    Mitsuba render of it alone (the independent answer), and is the top of the image only (the strip is above
+    the horizon), not the whole image."""
+    s = scene.empty_scene()
+    s["lights"].append(_light(0, "otherlights", (3.0, 0.0, 2.0), (0, 0, -1), (10.0, 0.4), LED, 800.0))
+    s = scene.validate_scene(s)
+    opts = render.RenderOptions(width=64, height=40, spp=16, frames=1, bins=1, aux=False)
+    fr = next(render.render_frames(s, opts))
+    (_, (y0, x0, y1, x1), b), = fr["lights"]["otherlights"]
+    import mitsuba as mi
+
+    from render_tools import mitsuba_scene as ms
+
+    full = reference.ReferenceRenderer(s, opts).render(mi.load_dict(ms.mitsuba_dict(s, 0.0, emit="otherlights")),
+                                                       0.0, opts.capture_window_s, 16, 9)[0].sum(0)
+    assert full.sum() > 0 and full[y0:y1, x0:x1].sum() / full.sum() > 0.995
+    assert y0 == 0 and y1 < opts.height // 2 and (y1 - y0) * (x1 - x0) < 0.5 * opts.width * opts.height
+    assert float(b[0].sum()) == pytest.approx(float(full[y0:y1, x0:x1].sum()), rel=0.03)  # the same light
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_near_plane_clip_bounds_the_visible_part_of_a_face(seed):
+    """render.clip_near against brute force: the bbox of the clipped face's points equals the bbox of the points
+    of a dense grid over the face (its corners' convex hull) that lie in front of the plane."""
+    from scipy.spatial import Delaunay
+
+    rng = np.random.default_rng(seed)
+    flat = rng.normal(size=(4, 2)) * 3.0  # a planar quad in its own (u, v) coordinates, corners in any order
+    rot = np.linalg.qr(rng.normal(size=(3, 3)))[0]  # tilted at random, 1 m off the origin
+    to3 = lambda uv: np.column_stack([uv, np.ones(len(uv))]) @ rot.T  # noqa: E731
+    corners = to3(flat)
+    z, near = corners[:, 2], float(rng.uniform(corners[:, 2].min(), corners[:, 2].max()))
+    got = render.clip_near(corners, z, near)
+    assert np.all(got[:, 2] >= near - 1e-9)
+    g = np.stack(np.meshgrid(*[np.linspace(flat[:, i].min(), flat[:, i].max(), 1200) for i in (0, 1)]), -1)
+    g = g.reshape(-1, 2)
+    dense = to3(g[Delaunay(flat).find_simplex(g) >= 0])
+    dense = dense[dense[:, 2] > near]
+    lo, hi = got.min(0), got.max(0)
+    assert np.all(dense.min(0) >= lo - 1e-9) and np.all(dense.max(0) <= hi + 1e-9)  # nothing visible is cut
+    assert np.allclose(dense.min(0), lo, atol=0.03) and np.allclose(dense.max(0), hi, atol=0.03)  # nor added
+
+
 def test_aux_depth_range_and_instance_mask():
     d = 10.0
     s = scene.empty_scene()

@@ -276,10 +276,11 @@ def _same_arrays(a, b) -> bool:
     return np.array_equal(a, b) if isinstance(a, np.ndarray) else a == b
 
 
-@pytest.mark.parametrize("n", [0, 1, 15, 16, 17, 100])
-def test_registry_class_is_the_next_power_of_two_from_16(n):
-    c = tracer.registry_class(n)
-    assert c >= max(n, tracer.REGISTRY_CLASS_MIN) and c & (c - 1) == 0 and (c == 16 or c // 2 < n)
+@pytest.mark.parametrize("n", [0, 1, 63, 64, 65, 100, 300, 513])
+@pytest.mark.parametrize("kind", ["shape", "emitter", "bsdf"])
+def test_registry_class_is_the_next_power_of_two_from_the_kinds_floor(n, kind):
+    c, lo = tracer.registry_class(n, kind), tracer.REGISTRY_CLASS_MIN[kind]
+    assert c >= max(n, lo) and c & (c - 1) == 0 and (c == lo or c // 2 < n)
 
 
 def test_registry_padding_changes_no_pixel_and_a_new_scene_reuses_the_kernel(monkeypatch):
@@ -301,3 +302,32 @@ def test_registry_padding_changes_no_pixel_and_a_new_scene_reuses_the_kernel(mon
     monkeypatch.setattr(tracer, "pad_registry", real)
     _, k_c2 = _frame_and_main_kernel(c, opts)
     assert k_c2["cache_hit"]
+
+
+def test_scaled_sunsky_matches_mitsuba_with_its_scale():
+    """The renderer loads the sunsky at unit scale and applies ``sky.scale`` in the tracer (kernel data instead
+    of Mitsuba's literal): the sky seen directly and the ground it lights (next-event estimation and BSDF hits)
+    must equal Mitsuba's own path integrator with the scale in the emitter."""
+    import mitsuba as mi
+
+    from render_tools import mitsuba_scene as ms
+
+    s = scene.empty_scene(fov_x_deg=60.0)
+    s["sky"] = {"model": "sunsky", "sun_elevation_deg": 35.0, "sun_azimuth_deg": 30.0, "turbidity": 3.0,
+                "scale": 0.02}
+    s["materials"]["grey"] = {"type": "diffuse", "rgb": [0.4, 0.4, 0.4]}
+    s["objects"].append({"id": 0, "kind": "ground", "velocity_mps": [0, 0, 0],
+                         "parts": [{"shape": "rect", "center": [30, 0, 0], "size": [80, 60], "normal": [0, 0, 1],
+                                    "material": "grey"}]})
+    s = scene.validate_scene(s)
+    opts = render.RenderOptions(width=32, height=24, spp=16, bins=1, frames=1, aux=False, seed=2,
+                                groups=("skymap",))
+    got = next(render.render_frames(s, opts))["static"]["skymap"]["long"].sum(0)
+    tm = render.frame_timing(s, opts, 0)
+    a, b = tm["long"]
+    sc = mi.load_dict(ms.mitsuba_dict(s, 0.5 * (tm["window"][0] + tm["window"][1]), emit="skymap"))
+    want = reference.ReferenceRenderer(s, opts).render(sc, a, b - a, 32, 5)[0].sum(0)
+    sky, ground = want[:8], want[16:]  # above and below the horizon (row 12)
+    assert ground.mean() > 0.05 * sky.mean() > 0
+    assert got[:8].sum() == pytest.approx(sky.sum(), rel=0.02)
+    assert got[16:].sum() == pytest.approx(ground.sum(), rel=0.03)
