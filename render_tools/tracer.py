@@ -6,7 +6,8 @@ literal in the kernel (shutter length, film size, group layout), compiled anew b
 frame is a list of :class:`Tile` s (a crop of the image, a time window split into K bins, a sample count and a
 *light set*: the emitters whose light this tile records) and one Dr.Jit kernel renders any list of tiles:
 everything that differs between tiles, frames and scenes is data (gathered from opaque arrays), so the kernel
-is traced once per launch and compiled once per (variant, spectral setup, scene layout).
+is traced once per launch and compiled once per (variant, spectral setup, kind of sky): a new scene of a class
+already compiled is a cache hit (:func:`pad_registry`, docs/rendering.md).
 
 Light sets replace per-group and per-light Mitsuba scenes. The scene is loaded once per frame with every
 emitter on; a lane of set ``k`` counts only emission of the emitters in ``k`` (a light group, or one light's
@@ -90,16 +91,17 @@ def pad_registry(mi, dr, loaded, bsdf) -> list:
     """Pad Dr.Jit's registry of shapes, emitters and BSDFs to their size classes with inert objects.
 
     Why: a kernel's virtual-call tables have one entry per registered object of a kind (Dr.Jit's registry id
-    bound), and their sizes enter the kernel as literal offsets (measured: two night scenes with 37 and 58 lights
-    differed in nothing else), so every new scene compiled one new kernel (1.4-2.8 s at 160x90 on 2 cores).
-    Padding each kind to :func:`registry_class` of its id bound makes scenes of one class share a kernel.
+    bound), and their sizes enter the kernel as literal offsets (the LLVM IR of two night scenes with 37 and 58
+    lights differed in these offsets and in the environment's id, :meth:`Tracer._radiance`), so every new scene
+    compiled a new kernel (1.3-3.5 s at 160x90 on 2 cores). Padding each kind to :func:`registry_class` of its id
+    bound makes scenes of one class share a kernel.
 
     The dummies are never part of ``loaded``: nothing can hit or sample them, so the image is unchanged (bit for
-    bit; tests/test_render_tracer.py). Each kind gets at least one dummy of a fixed type (a ``spot`` emitter of
-    the beams' spectrum type, a one-triangle mesh with ``bsdf``, a ``diffuse`` BSDF), so the set of object types,
-    which also enters the kernel, does not depend on whether a scene happens to fill its class or has beams. ``loaded``: the frame's ``mi.Scene``;
-    ``bsdf``: a BSDF of the scene for the dummy meshes. Returns the dummies: keep them alive as long as the
-    kernels are traced (the frame); freeing them frees their ids.
+    bit; tests/test_render_tracer.py). Each kind gets at least one dummy of a fixed type (a ``spot`` emitter of the
+    beams' spectrum type, a one-triangle mesh with ``bsdf``, a ``diffuse`` BSDF), so the set of object types, which
+    also enters the kernel, does not depend on whether a scene happens to fill its class or has beams.
+    ``loaded``: the frame's ``mi.Scene``; ``bsdf``: a BSDF of the scene for the dummy meshes. Returns the dummies:
+    keep them alive while the frame's kernels are traced; freeing them frees their ids.
     """
     def rid(ptr_type, obj):
         return int(dr.reinterpret_array(mi.UInt32, ptr_type(obj))[0])
@@ -127,8 +129,7 @@ def _dummy_mesh(mi, bsdf):
     """A one-triangle mesh with ``bsdf``, in no scene (a :func:`pad_registry` dummy)."""
     props = mi.Properties()
     props["bsdf"] = bsdf
-    m = mi.Mesh("lfm_pad", 3, 1, props=props)
-    return m
+    return mi.Mesh("lfm_pad", 3, 1, props=props)
 
 
 @dataclass
