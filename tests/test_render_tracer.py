@@ -286,48 +286,15 @@ def test_registry_class_is_the_next_power_of_two_from_the_kinds_floor(n, kind):
 def test_registry_padding_changes_no_pixel_and_a_new_scene_reuses_the_kernel(monkeypatch):
     """Padding the registry (tracer.pad_registry) with objects outside the scene leaves every image and map bit
     for bit as without it; a new scene with three more lights (other shape and emitter counts, same size class)
-    then runs the kernel already compiled, which without the padding it cannot (the mutation check)."""
+    then runs the same kernel (the same hash: a cache hit), which without the padding it does not (the mutation
+    check). Hashes, not cache hits, are compared: ~/.drjit may hold the unpadded kernels of an earlier run."""
     opts = render.RenderOptions(width=32, height=24, spp=2, light_spp=8, bins=2, frames=1, seed=5)
     a, b = _street(), _with_more_lights(_street(), 3)
-    fr_a, _ = _frame_and_main_kernel(a, opts)
-    fr_b, k_b = _frame_and_main_kernel(b, opts)
-    assert k_b["cache_hit"], "a new scene of the same size class compiled a new kernel"
-    real = tracer.pad_registry
+    fr_a, k_a = _frame_and_main_kernel(a, opts)
+    _, k_b = _frame_and_main_kernel(b, opts)
+    assert k_b["hash"] == k_a["hash"], "a new scene of the same size class compiled a new kernel"
     monkeypatch.setattr(tracer, "pad_registry", lambda *args: [])
-    plain_a, _ = _frame_and_main_kernel(a, opts)
+    plain_a, k_plain_a = _frame_and_main_kernel(a, opts)
     assert _same_arrays(plain_a, fr_a) and plain_a["aux"] and plain_a["lights"]["otherlights"]
-    c = _with_more_lights(_street(), 4)  # never rendered: without padding its layout is a new kernel
-    _, k_c = _frame_and_main_kernel(c, opts)
-    assert not k_c["cache_hit"]
-    monkeypatch.setattr(tracer, "pad_registry", real)
-    _, k_c2 = _frame_and_main_kernel(c, opts)
-    assert k_c2["cache_hit"]
-
-
-def test_scaled_sunsky_matches_mitsuba_with_its_scale():
-    """The renderer loads the sunsky at unit scale and applies ``sky.scale`` in the tracer (kernel data instead
-    of Mitsuba's literal): the sky seen directly and the ground it lights (next-event estimation and BSDF hits)
-    must equal Mitsuba's own path integrator with the scale in the emitter."""
-    import mitsuba as mi
-
-    from render_tools import mitsuba_scene as ms
-
-    s = scene.empty_scene(fov_x_deg=60.0)
-    s["sky"] = {"model": "sunsky", "sun_elevation_deg": 35.0, "sun_azimuth_deg": 30.0, "turbidity": 3.0,
-                "scale": 0.02}
-    s["materials"]["grey"] = {"type": "diffuse", "rgb": [0.4, 0.4, 0.4]}
-    s["objects"].append({"id": 0, "kind": "ground", "velocity_mps": [0, 0, 0],
-                         "parts": [{"shape": "rect", "center": [30, 0, 0], "size": [80, 60], "normal": [0, 0, 1],
-                                    "material": "grey"}]})
-    s = scene.validate_scene(s)
-    opts = render.RenderOptions(width=32, height=24, spp=16, bins=1, frames=1, aux=False, seed=2,
-                                groups=("skymap",))
-    got = next(render.render_frames(s, opts))["static"]["skymap"]["long"].sum(0)
-    tm = render.frame_timing(s, opts, 0)
-    a, b = tm["long"]
-    sc = mi.load_dict(ms.mitsuba_dict(s, 0.5 * (tm["window"][0] + tm["window"][1]), emit="skymap"))
-    want = reference.ReferenceRenderer(s, opts).render(sc, a, b - a, 32, 5)[0].sum(0)
-    sky, ground = want[:8], want[16:]  # above and below the horizon (row 12)
-    assert ground.mean() > 0.05 * sky.mean() > 0
-    assert got[:8].sum() == pytest.approx(sky.sum(), rel=0.02)
-    assert got[16:].sum() == pytest.approx(ground.sum(), rel=0.03)
+    _, k_plain_b = _frame_and_main_kernel(b, opts)
+    assert k_plain_b["hash"] != k_plain_a["hash"]
