@@ -493,7 +493,8 @@ def render_frames(scene: dict, opts: RenderOptions) -> Iterator[dict]:
     for n, tm in enumerate(timings):
         t_obj = 0.5 * (tm["window"][0] + tm["window"][1])
         loaded = mi.load_dict(ms.mitsuba_dict(scene, t_obj, emit="all", cache=mcache, unit_sky=True))
-        pad = tracer.pad_registry(mi, dr, loaded, mcache["off_lens"])  # scenes of a size class share kernels
+        if n == 0:  # scenes of a size class share kernels; the next frames' objects take this frame's ids
+            pad = tracer.pad_registry(mi, dr, loaded, mcache["off_lens"])
         sets = tracer.LightSets(mi, dr, loaded, scene, list(groups), union=static_union(groups, opts))
         tr = tracer.Tracer(mi, dr, loaded, sets, geo.ego, geo.fov, (opts.width, opts.height), opts.bands_nm,
                            opts.band_width_nm, sky_scale=ms.sky_scale(scene))
@@ -526,6 +527,7 @@ def render_frames(scene: dict, opts: RenderOptions) -> Iterator[dict]:
             ids, pos = tr.hits(tm["t_aux"], LIGHT_MASK_PASSES, _seed(opts.seed, n, "aux"))
             out["aux"] = _aux_maps(loaded, scene, ids, pos, geo.ego.position(tm["t_aux"]),
                                    geo.ego.rotation_mi(tm["t_aux"])[:, 2], visible)
-        del tr, sets, loaded, pad  # free the frame's Mitsuba objects before the next frame is loaded
+        del tr, sets, loaded  # free the frame's Mitsuba objects before the next frame is loaded
         gc.collect()
         yield out
+    del pad  # the registry padding lives as long as the scene's frames

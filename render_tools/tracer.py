@@ -6,8 +6,8 @@ literal in the kernel (shutter length, film size, group layout), compiled anew b
 frame is a list of :class:`Tile` s (a crop of the image, a time window split into K bins, a sample count and a
 *light set*: the emitters whose light this tile records) and one Dr.Jit kernel renders any list of tiles:
 everything that differs between tiles, frames and scenes is data (gathered from opaque arrays), so the kernel
-is traced once per launch and compiled once per (variant, spectral setup, kind of sky): a new scene of a class
-already compiled is a cache hit (:func:`pad_registry`, docs/rendering.md).
+is traced once per launch and compiled once per (variant, kind of sky, number of static groups): a new scene of a
+class already compiled is a cache hit (:func:`pad_registry`, docs/rendering.md).
 
 Light sets replace per-group and per-light Mitsuba scenes. The scene is loaded once per frame with every
 emitter on; a lane of set ``k`` counts only emission of the emitters in ``k`` (a light group, or one light's
@@ -53,9 +53,6 @@ MAX_LANES = 1 << 28
 #: Path vertex from which Russian roulette may end a path (Mitsuba's ``rr_depth``, whose default 5 never acts at
 #: ``max_depth`` 5): vertices 3-5 cost 40 % of a night frame's time and carry little of its light.
 RR_DEPTH = 2
-#: Fewest images a lane records (:class:`Tracer`): the static groups of a generated scene (headlights, streetlights,
-#: sky), so that a scene with fewer of them (a day street: the sky alone) runs the same kernel.
-MIN_SLOTS = 3
 #: Index value meaning "no set" in the per-emitter lookup tables.
 NO_SET = 0xFFFFFFFF
 #: Beam cut-off cosine entries of a :class:`LightSets` row meaning "a lamp without a beam" and "the environment".
@@ -76,8 +73,9 @@ RECEIVER_FLOOR = 0.1
 
 
 #: Smallest registry size class per kind of Mitsuba object (:func:`registry_class`): above what a generated scene
-#: has (120 scenes of the default generator: 108-207 shapes, 5-92 emitters, 42-58 BSDFs), so that every generated
-#: scene of one time of day runs the same kernel; a bigger scene pads to the next power of two.
+#: has (120 scenes of the default generator: 108-207 shapes, 5-92 emitters, 42-58 BSDFs), so that generated scenes
+#: with the same kind of sky and number of static groups run the same kernel; a bigger scene pads to the next power
+#: of two.
 REGISTRY_CLASS_MIN = {"shape": 256, "emitter": 128, "bsdf": 64}
 
 
@@ -330,9 +328,10 @@ class Tracer:
         self.C = len(bands_nm)
         self.P = cam_mod.n_passes(self.C)
         self.max_depth = int(max_depth)
-        # images per lane: the union set's groups, at least MIN_SLOTS (unused slots record nothing, the same kernel
-        # serves scenes with one, two or three static groups)
-        self.S = max(int(sets.slots), MIN_SLOTS)
+        # images per lane: the union set's groups (1 without a union). Not padded to 3 so that scenes with one, two
+        # or three static groups share a kernel: that cost 3-5 % per frame of a sky-only day scene, more than the
+        # one-time compile of each of these (at most 3) kernel classes, which the disk cache keeps
+        self.S = int(sets.slots)
         K = cam_mod.intrinsics(self.W, self.H, fov_x_deg)
         o = lambda v: dr.opaque(mi.Float, float(v))  # noqa: E731 - every scene number is kernel data
         self.f, self.cx, self.cy = o(K[0, 0]), o(K[0, 2]), o(K[1, 2])
@@ -406,9 +405,9 @@ class Tracer:
             if t.gap_len < 0 or (t.gap_len > 0 and t.bins != 1):
                 raise ValueError(f"tiles[{i}]: a time gap needs gap_len >= 0 s and one bin, got {t.gap_len} s, "
                                  f"{t.bins} bins")
-            if not 1 <= t.slots <= (sets_slots := self.sets.slots):
-                raise ValueError(f"tiles[{i}]: slots {t.slots} not in [1, {sets_slots}] (the groups of the light "
-                                 "sets' union)")
+            if not 1 <= t.slots <= self.S:
+                raise ValueError(f"tiles[{i}]: slots {t.slots} not in [1, {self.S}] (the light sets' union has "
+                                 f"{self.S} group(s))")
             outs.append((size, (t.slots, t.bins, C, h, w) if t.slots > 1 else (t.bins, C, h, w)))
             n_split = max(1, -(-h * w * t.bins * P * t.spp // MAX_LANES))
             base, extra = divmod(t.spp, n_split)
