@@ -111,7 +111,7 @@ def main() -> None:
         lines.append(f"| {prof} | {p['width']}x{p['height']} | {p.get('frames', 3)} | {seed} | {c['tod']} | "
                      f"{c['seconds']:.1f} | {c['kernels']} | {w['seconds']:.1f} | {n['seconds'] / N_NEW:.1f} | "
                      f"{n['kernels'] / N_NEW:.2f} | {c['mb']:.0f} |")
-    lines += ["", "Run again with `python benchmarks/bench_render_scale.py` (about 12 minutes).", ""]
+    lines += ["", "Run again with `python benchmarks/bench_render_scale.py` (7-12 minutes).", ""]
     out = Path(a.out) / "render-scale-benchmark.md"
     atomic_write_text(out, "\n".join(lines))
     print(out.read_text())
