@@ -85,6 +85,12 @@ def registry_class(n: int, kind: str = "shape") -> int:
     return max(REGISTRY_CLASS_MIN[kind], 1 << max(0, int(n) - 1).bit_length())
 
 
+def registry_id(mi, dr, ptr_type, obj) -> int:
+    """Dr.Jit registry id of Mitsuba object ``obj`` (``ptr_type``: ``mi.EmitterPtr``, ``mi.ShapePtr``,
+    ``mi.BSDFPtr``): what a kernel's pointer arrays hold (0 = none)."""
+    return int(dr.reinterpret_array(mi.UInt32, ptr_type(obj))[0])
+
+
 def pad_registry(mi, dr, loaded, bsdf) -> list:
     """Pad Dr.Jit's registry of shapes, emitters and BSDFs to their size classes with inert objects.
 
@@ -102,7 +108,7 @@ def pad_registry(mi, dr, loaded, bsdf) -> list:
     keep them alive while the frame's kernels are traced; freeing them frees their ids.
     """
     def rid(ptr_type, obj):
-        return int(dr.reinterpret_array(mi.UInt32, ptr_type(obj))[0])
+        return registry_id(mi, dr, ptr_type, obj)
 
     shapes = list(loaded.shapes())
     bsdfs = {rid(mi.BSDFPtr, b): b for b in [sh.bsdf() for sh in shapes] + [bsdf] if b is not None}
@@ -246,7 +252,7 @@ class LightSets:
         group_of, light_of, union_of = {}, {}, {}
 
         def eid(e):
-            return int(dr.reinterpret_array(mi.UInt32, mi.EmitterPtr(e))[0])
+            return registry_id(mi, dr, mi.EmitterPtr, e)
 
         for k, mem in enumerate(members):
             start.append(len(rows))
@@ -347,8 +353,7 @@ class Tracer:
         self.n_pass = dr.opaque(mi.UInt32, self.P)
         env = loaded.environment()
         self.env = mi.EmitterPtr([env, env])  # two entries: a size-1 array would be loaded as a scalar
-        self.env_id = dr.opaque(mi.UInt32, int(dr.reinterpret_array(mi.UInt32, mi.EmitterPtr(env))[0])
-                                if env is not None else NO_SET)
+        self.env_id = dr.opaque(mi.UInt32, registry_id(mi, dr, mi.EmitterPtr, env) if env is not None else NO_SET)
         self.sky_scale = o(sky_scale)
 
     # ------------------------------------------------------------------ camera
