@@ -143,8 +143,8 @@ def stage_profile(root: Path, n: int, batch: int = 8, passes: int = 3) -> dict:
     DataLoader (the stages run in the main process one after the other, so each is timed alone): the median over
     ``passes`` timed passes after a warm-up pass. Stages inside library functions are timed by wrapping the
     functions they call (the compiled kernels, ``torch.randn``, ``pwm_weights``) for the duration of the run."""
-    import lfmbench._poisson_kernel as PK
-    import lfmbench._readout_kernel as RK
+    import lfmbench.sensor._poisson_kernel as PK
+    import lfmbench.sensor._readout_kernel as RK
     from lfmbench import sensor as S
     from lfmbench.datasets import batched as BT
 

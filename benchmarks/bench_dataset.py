@@ -637,7 +637,7 @@ def plots(tp: dict, bins: dict, psf: dict, rs: dict) -> None:
 
 def _airy_outside(radius_px: int, wavelength_nm: float = 550.0) -> float:
     """Fraction (1) of the ``ovt`` lens's Airy PSF energy outside a circle of ``radius_px`` pixels."""
-    from lfmbench.optics import airy_encircled_energy
+    from lfmbench.sensor.optics import airy_encircled_energy
 
     p = _sensor.load_preset("ovt")
     r = torch.tensor([radius_px * p.pixel_pitch_m], dtype=torch.float64)
@@ -771,12 +771,12 @@ def report(tp: dict, bins: dict, psf: dict, rs: dict, env: dict, quick: bool, pr
           "Relative RMSE over the frame, and the 99th percentile / maximum of the per-pixel relative error "
           "|e - e_ref| / (e_ref + eps), eps = 1 % of the mean, and the share of pixels where it exceeds 1 %. "
           "The last-but-two column is the Airy energy outside a circle of radius R px at 550 nm "
-          "(`lfmbench.optics.airy_encircled_energy`; it falls as 1/R): the renormalised kernel puts it back "
+          "(`lfmbench.sensor.optics.airy_encircled_energy`; it falls as 1/R): the renormalised kernel puts it back "
           "into the core, so the pixels around bright lights lose their diffraction halo; where the scene is "
           "dark that halo dominates, hence the large per-pixel errors even at R = 16. "
           "`build_layers`: projecting every layer of the scene "
           "(EXR decode included, the per-scene cost of a cold cache); `project`: one full-frame 31-band layer "
-          "(direct conv2d below a 31 px kernel, FFT above; `lfmbench.optics.apply_psf`).", "",
+          "(direct conv2d below a 31 px kernel, FFT above; `lfmbench.sensor.optics.apply_psf`).", "",
           "| R (px) | rel. RMSE | p99 per-pixel rel. err | pixels > 1 % off | max per-pixel rel. err | "
           "Airy energy outside R | build_layers (s) | project (ms) |", "|---|---|---|---|---|---|---|---|"]
     for r in psf["rows"]:
@@ -888,7 +888,7 @@ def main(argv=None) -> int:
             note += (f" `shot_noise` on one sample's `gt` (LPD mean electrons; {sn['pixels']} px, "
                      f"{sn['frac_small'] * 100:.1f} % below the {sn['switch_e']:.0f} e- Gaussian switch-over, so "
                      f"exact Poisson almost everywhere): {sn['shot_noise_s'] * 1e3:.1f} ms with the compiled "
-                     f"sampler of `lfmbench.poisson` (what the CPU path uses), "
+                     f"sampler of `lfmbench.sensor.poisson` (what the CPU path uses), "
                      f"{sn['shot_noise_torch_s'] * 1e3:.1f} ms with the `torch` backend, against "
                      f"{sn['poisson_s'] * 1e3:.1f} ms for bare `torch.poisson` and "
                      f"{sn['randn_s'] * 1e3:.1f} ms for `torch.randn` on every pixel.")

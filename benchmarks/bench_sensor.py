@@ -31,7 +31,7 @@ import torch  # noqa: E402
 
 from _timing import median_time  # noqa: E402
 from lfmbench.fileio import atomic_save_figure, atomic_write_text  # noqa: E402
-from lfmbench.optics import airy_kernel, apply_psf, simulate_optics  # noqa: E402
+from lfmbench.sensor.optics import airy_kernel, apply_psf, simulate_optics  # noqa: E402
 from lfmbench.sensor import (  # noqa: E402
     CAPTURES,
     electron_weights,
@@ -206,7 +206,7 @@ def bench_shot_noise() -> tuple[list[dict], Path]:
     ax[0].set_ylabel("rounded Gaussian vs Poisson")
     ax[0].legend(fontsize=8)
     ax[0].grid(True, which="both", alpha=0.3)
-    ax[1].semilogx(mus, [1e3 * r["t_numba"][1] for r in rows], "^-", label="exact Poisson, lfmbench.poisson (numba)")
+    ax[1].semilogx(mus, [1e3 * r["t_numba"][1] for r in rows], "^-", label="exact Poisson, lfmbench.sensor.poisson (numba)")
     ax[1].semilogx(mus, [1e3 * r["t_poisson"][1] for r in rows], "o-", label="exact Poisson, torch.poisson")
     ax[1].semilogx(mus, [1e3 * r["t_gauss"][1] for r in rows], "s-", label="rounded Gaussian")
     ax[1].set_xlabel("mean electrons mu")
@@ -331,12 +331,12 @@ def main() -> None:
         "",
         f"Distances computed exactly from the two CDFs; times for {SIZE * SIZE * 3} samples of one mean. Both exact "
         "samplers draw the Poisson distribution (tests/test_poisson.py: chi-square against the pmf); "
-        "`lfmbench.poisson` is what `shot_noise` uses on the CPU, `torch.poisson` on other devices. Below 1 e- the "
+        "`lfmbench.sensor.poisson` is what `shot_noise` uses on the CPU, `torch.poisson` on other devices. Below 1 e- the "
         "compiled sampler needs one uniform and one exp; between 1 and 10 e- its sequential search adds a few terms "
         "(evaluated four at a time, one branch per four terms); from 10 e- it is PTRS (two uniforms, a log only off "
         "the squeeze).",
         "",
-        "| mean (e-) | Kolmogorov distance | total variation | lfmbench.poisson (ms, median / fastest) "
+        "| mean (e-) | Kolmogorov distance | total variation | lfmbench.sensor.poisson (ms, median / fastest) "
         "| torch.poisson (ms, median / fastest) | Gaussian (ms, median / fastest) |",
         "|---:|---:|---:|---:|---:|---:|",
     ]

@@ -8,7 +8,7 @@ Each check raises ``ValueError`` whose message names the **field** (a dotted pat
     <source>: field '<field>' must be ..., got <value>
 
 Used by the corpus format (:mod:`lfmbench.corpus`), sensor presets (:mod:`lfmbench.sensor`), PWM
-configurations (:mod:`lfmbench.datasets.pwm`), optics (:mod:`lfmbench.optics`), the flicker model
+configurations (:mod:`lfmbench.datasets.pwm`), optics (:mod:`lfmbench.sensor.optics`), the flicker model
 (:mod:`lfmbench.flicker`, array arguments: :func:`check_array`) and the scene files of ``render_tools``.
 
 The scene-id rule (:func:`check_scene_id`) lives here too, so that the corpus writer, the corpus reader and the

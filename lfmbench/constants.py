@@ -63,7 +63,7 @@ __all__ = [
     "POISSON_EXACT_LIMIT",
 ]
 
-#: Poisson means from 2^52 on are drawn as a rounded normal by :mod:`lfmbench.poisson` and its compiled kernel
-#: :mod:`lfmbench._poisson_kernel`: float64 no longer holds every count exactly there, and integer candidates
+#: Poisson means from 2^52 on are drawn as a rounded normal by :mod:`lfmbench.sensor.poisson` and its compiled kernel
+#: :mod:`lfmbench.sensor._poisson_kernel`: float64 no longer holds every count exactly there, and integer candidates
 #: overflow int64 further up (``torch.poisson`` returns -2^63 for a mean of 1e20). Electrons (e-).
 POISSON_EXACT_LIMIT: float = 2.0 ** 52

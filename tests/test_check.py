@@ -118,7 +118,7 @@ def test_check_array_numpy_torch_and_bounds():
 def test_users_of_the_module_name_field_and_file(tmp_path):
     """The former copies (sensor, optics, PWM, corpus meta, scene files) now raise through lfmbench.check."""
     from lfmbench.datasets.pwm import load_pwm_config
-    from lfmbench.optics import OpticsConfig
+    from lfmbench.sensor.optics import OpticsConfig
 
     with pytest.raises(ValueError, match=r"^pwm: field 'sync' must be one of"):
         load_pwm_config({"sync": "all"})

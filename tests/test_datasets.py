@@ -282,7 +282,7 @@ def test_workers_forked_after_parent_openmp_do_not_deadlock(tmp_path):
         root = T.make_corpus(Path({str(tmp_path / 'c')!r}), n_scenes=2)
         from lfmbench.datasets import LFMCaptureDataset
         from lfmbench import flicker
-        from lfmbench._poisson_kernel import kernel
+        from lfmbench.sensor._poisson_kernel import kernel
         from torch.utils.data import DataLoader
         assert not kernel.signatures and "cpu" not in (flicker._NUMBA_KERNELS or {{}})
         ds = LFMCaptureDataset(root, split="all", samples_per_scene=2)

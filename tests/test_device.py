@@ -12,7 +12,7 @@ import numpy as np
 import torch
 
 from lfmbench.flicker import pwm_exposure
-from lfmbench.optics import DiffractionOptics, OpticsConfig, airy_kernel, apply_psf, simulate_optics
+from lfmbench.sensor.optics import DiffractionOptics, OpticsConfig, airy_kernel, apply_psf, simulate_optics
 from lfmbench.sensor import SplitPixelSensor, fixed_pattern, load_preset, shot_noise, simulate_split_pixel
 
 WL = [400.0 + 10 * i for i in range(31)]

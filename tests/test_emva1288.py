@@ -111,9 +111,9 @@ TOL = {"K": 0.03, "sigma_d": 0.05, "sigma_d_emva": 0.12, "sat": 0.05, "R": 0.03}
 @pytest.mark.parametrize("capture", ["lpd_hcg", "lpd_lcg", "spd"])
 def test_photon_transfer_recovers_ovt_parameters(capture, backend, monkeypatch):
     # both shot-noise samplers (the compiled CPU one and torch.poisson, which CUDA uses) must pass EMVA 1288
-    import lfmbench.poisson
+    import lfmbench.sensor.poisson
 
-    monkeypatch.setattr(lfmbench.poisson, "available", lambda: backend == "numba")
+    monkeypatch.setattr(lfmbench.sensor.poisson, "available", lambda: backend == "numba")
     preset = load_preset("ovt")
     sat = preset.saturation_capacity_e(capture)
     levels = np.concatenate([[0.0], np.linspace(0.02, 0.7, 20) * sat, np.linspace(0.71, 1.15, 45) * sat])

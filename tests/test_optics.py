@@ -1,4 +1,4 @@
-"""Tests of lfmbench.optics against analytic answers (camera equation, Airy pattern) and brute force."""
+"""Tests of lfmbench.sensor.optics against analytic answers (camera equation, Airy pattern) and brute force."""
 from __future__ import annotations
 
 import math
@@ -9,7 +9,7 @@ import scipy.integrate as si
 import scipy.special as ss
 import torch
 
-from lfmbench.optics import (
+from lfmbench.sensor.optics import (
     DiffractionOptics,
     OpticsConfig,
     airy_encircled_energy,

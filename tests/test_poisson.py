@@ -1,4 +1,4 @@
-"""The compiled Poisson sampler (lfmbench.poisson) against the Poisson pmf, and its determinism contract."""
+"""The compiled Poisson sampler (lfmbench.sensor.poisson) against the Poisson pmf, and its determinism contract."""
 from __future__ import annotations
 
 import math
@@ -8,7 +8,7 @@ import pytest
 import scipy.stats as st
 import torch
 
-from lfmbench import poisson as P
+from lfmbench.sensor import poisson as P
 from lfmbench.sensor import shot_noise
 
 pytestmark = pytest.mark.skipif(not P.available(), reason="numba not importable")
@@ -150,7 +150,7 @@ def test_compiled_kernel_reused_from_numba_cache():
     import subprocess
     import sys
 
-    script = ("import torch\nfrom lfmbench import poisson\nfrom lfmbench._poisson_kernel import kernel\n"
+    script = ("import torch\nfrom lfmbench.sensor import poisson\nfrom lfmbench.sensor._poisson_kernel import kernel\n"
               "poisson.poisson(torch.ones(3), torch.Generator())\n"
               "print(sum(kernel.stats.cache_hits.values()), sum(kernel.stats.cache_misses.values()))")
     runs = [subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
@@ -161,16 +161,17 @@ def test_compiled_kernel_reused_from_numba_cache():
 
 
 def test_no_import_cycle_between_poisson_and_its_kernel():
-    """The shared constant lives in lfmbench.constants: the kernel does not import lfmbench.poisson."""
+    """The shared constant lives in lfmbench.constants: the kernel does not import lfmbench.sensor.poisson."""
     import ast
     import inspect
 
-    import lfmbench._poisson_kernel as K
-    from lfmbench import constants, poisson
+    import lfmbench.sensor._poisson_kernel as K
+    from lfmbench import constants
+    from lfmbench.sensor import poisson
 
     mods = {n.module for n in ast.walk(ast.parse(inspect.getsource(K))) if isinstance(n, ast.ImportFrom)}
     mods |= {a.name for n in ast.walk(ast.parse(inspect.getsource(K))) if isinstance(n, ast.Import) for a in n.names}
-    assert "lfmbench.poisson" not in mods and "lfmbench" not in mods
+    assert "lfmbench.sensor.poisson" not in mods and "lfmbench" not in mods
     assert poisson.EXACT_LIMIT == K._EXACT_LIMIT == constants.POISSON_EXACT_LIMIT == 2.0 ** 52
 
 
@@ -197,7 +198,7 @@ def test_inversion_equals_a_plain_sequential_search():
                           np.linspace(0.3, 1.7, 2000)])
     seed = 123456789
     out = torch.empty(mus.size, dtype=torch.float64)
-    from lfmbench._poisson_kernel import kernel
+    from lfmbench.sensor._poisson_kernel import kernel
     assert kernel(mus, out.numpy(), np.uint64(seed), math.inf) == -1
 
     def mix(z: int) -> int:

@@ -437,7 +437,7 @@ def test_compiled_cpu_chain_is_bit_identical_to_the_torch_chain(dtype):
 
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")
 def test_cuda_matches_cpu():
-    from lfmbench.optics import airy_kernel, apply_psf
+    from lfmbench.sensor.optics import airy_kernel, apply_psf
 
     p = load_preset("imx490")
     x = torch.rand(2, 31, 32, 32, dtype=torch.float64) * 1e-6

@@ -47,6 +47,7 @@ from torch import nn
 from torch.utils.data import default_collate
 
 from lfmbench import sensor as _sensor
+from lfmbench.sensor.fused import map_samples
 from lfmbench.datasets.capture import (add_rgb, bin_edges, visible_lights,
                                        window_bin_exposure, window_starts)
 from lfmbench.datasets.projection import PHOTODIODES
@@ -451,7 +452,7 @@ def compose_batch(batch: Mapping[str, Any], backend: str = "auto", threads: int 
             compose(*args, 0, B, 0, E)
         else:
             e_at = np.searchsorted(ent_sample, np.arange(B + 1), side="left")
-            _sensor._map_samples(lambda b: compose(*args, b, b + 1, int(e_at[b]), int(e_at[b + 1])), B, threads)
+            map_samples(lambda b: compose(*args, b, b + 1, int(e_at[b]), int(e_at[b + 1])), B, threads)
         return comp
     comp = {"lpd": batch["static"][:, :, 0] * t_s.float()[:, None, None, None],
             "spd": batch["static"][:, :, 1] * t_l.float()[:, None, None, None]}
@@ -473,7 +474,7 @@ def compose_batch(batch: Mapping[str, Any], backend: str = "auto", threads: int 
 
 def _numba_available() -> bool:
     """Whether numba is importable (the compiled CPU backends)."""
-    from lfmbench import poisson
+    from lfmbench.sensor import poisson
 
     return poisson.available()
 
@@ -565,7 +566,7 @@ def simulate_batch(batch: Mapping[str, Any], preset: Any, outputs: Sequence[str]
         li = batch["light_index"]
         if dev.type == "cpu":       # int16 -> int64 per sample in the threads (6 MiB of a batch of 8)
             sample["light_index"] = torch.empty(li.shape, dtype=torch.long, device=dev)
-            _sensor._map_samples(lambda b: sample["light_index"][b].copy_(li[b]), li.shape[0], threads)
+            map_samples(lambda b: sample["light_index"][b].copy_(li[b]), li.shape[0], threads)
         else:
             sample["light_index"] = li.long()
     if "depth" in want:

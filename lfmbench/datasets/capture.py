@@ -32,6 +32,7 @@ import torch
 from torch.utils.data import Dataset
 
 from lfmbench import sensor as _sensor
+from lfmbench.sensor.fused import warm_fused
 from lfmbench.corpus import Corpus
 from lfmbench.fileio import atomic_write_json
 from lfmbench.datasets.projection import PHOTODIODES, SceneLayers, aux_channels, load_or_build
@@ -281,7 +282,7 @@ def _warm_cpu_kernels(noise: bool, preset) -> None:
     pwm_exposure(np.zeros(1), 1e-3, 1e-2, 0.5, check=False)
     if noise:
         _sensor.shot_noise(torch.zeros(1), torch.Generator().manual_seed(0))
-    _sensor._warm_fused(preset, noise)         # the sensor chain's compiled passes (float32, the dataset's dtype)
+    warm_fused(preset, noise)         # the sensor chain's compiled passes (float32, the dataset's dtype)
 
 
 # ----------------------------------------------------------------------------------------------------------

@@ -30,7 +30,7 @@ from typing import Mapping, Sequence
 import numpy as np
 import torch
 
-from lfmbench import optics as _optics
+from lfmbench.sensor import optics as _optics
 from lfmbench import sensor as _sensor
 from lfmbench.corpus import (MANIFEST_NAME, SCENES_DIR, Corpus, CorpusFileError, check_scene_id, frame_dir,
                              group_storage, sha256_file)

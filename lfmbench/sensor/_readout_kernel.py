@@ -5,7 +5,7 @@ gain, voltage swing, ADC, saturation flag, input referral): the same float opera
 same dtype as the torch chain of :func:`lfmbench.sensor.read_capture` and
 :func:`lfmbench.sensor.simulate_split_pixel_electrons`, so both give bit-identical outputs
 (``tests/test_sensor.py`` checks it). Module-level and ``cache=True`` so that DataLoader workers load it from
-numba's on-disk cache (see :mod:`lfmbench._poisson_kernel`).
+numba's on-disk cache (see :mod:`lfmbench.sensor._poisson_kernel`).
 """
 from __future__ import annotations
 

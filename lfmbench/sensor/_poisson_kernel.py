@@ -1,8 +1,8 @@
-"""The compiled part of :mod:`lfmbench.poisson` (imported lazily: it needs numba at import time).
+"""The compiled part of :mod:`lfmbench.sensor.poisson` (imported lazily: it needs numba at import time).
 
 Module-level jitted functions and constant arrays, so that numba's on-disk cache (``cache=True``) is reused by
 every process and DataLoader worker instead of compiling again (a closure over arrays is compiled anew in each
-process: 0.5-0.8 s per worker start). The algorithm and its references are in :mod:`lfmbench.poisson`.
+process: 0.5-0.8 s per worker start). The algorithm and its references are in :mod:`lfmbench.sensor.poisson`.
 """
 from __future__ import annotations
 

@@ -49,7 +49,7 @@ __all__ = ["poisson", "draw_seed", "available", "INVERSION_BELOW", "EXACT_LIMIT"
 #: Means below this use inversion, at or above it PTRS (which [Hormann1993]_ derives for mu >= 10).
 INVERSION_BELOW: float = 10.0
 #: Means from 2^52 on always take the rounded normal (defined in :mod:`lfmbench.constants`, shared with the
-#: compiled kernel :mod:`lfmbench._poisson_kernel`).
+#: compiled kernel :mod:`lfmbench.sensor._poisson_kernel`).
 EXACT_LIMIT: float = POISSON_EXACT_LIMIT
 
 _KERNEL = None
@@ -58,7 +58,7 @@ _KERNEL = None
 def _build():
     """Load the compiled kernel (lazily: importing lfmbench must not need numba); None without numba."""
     try:
-        from lfmbench._poisson_kernel import kernel
+        from lfmbench.sensor._poisson_kernel import kernel
     except ImportError:  # pragma: no cover - numba is a dependency
         return None
     return kernel

@@ -1,0 +1,184 @@
+"""The sensor chain's CPU machinery: the chain in compiled passes, and the Python threads that run per-sample work.
+
+:func:`chain_fused` is :func:`lfmbench.sensor.noise.simulate_split_pixel_electrons` (backend ``"numba"``) as one
+compiled pass per photodiode (:func:`lfmbench.sensor._poisson_kernel.collect`) and one per capture
+(:func:`lfmbench.sensor._readout_kernel.readout`); :func:`map_samples` runs ``fn(b)`` for every sample by a pool
+of threads (the kernels and torch's samplers release the GIL); :func:`warm_fused` compiles the kernels ahead of
+a fork.
+"""
+from __future__ import annotations
+
+import os
+import threading
+from typing import Any, Mapping
+
+import numpy as np
+import torch
+
+from lfmbench.sensor import poisson as _poisson
+from lfmbench.sensor.preset import CAPTURES, PHOTODIODES, SensorPreset, load_preset
+
+__all__ = ["MEAN_CAP_FULL_WELLS", "map_samples", "per_generator", "chain_fused", "warm_fused"]
+
+#: Mean electrons are capped at this multiple of the full well before noise: everything above the full well
+#: clips anyway, and the cap keeps sun-in-view inputs finite in float32 (both backends of the chain).
+MEAN_CAP_FULL_WELLS: float = 100.0
+
+
+_DRAW_POOL: dict[tuple, Any] = {}
+
+
+def map_samples(fn, count: int, threads: int | None = None) -> None:
+    """``fn(b)`` for b in range(count), by ``min(threads, count)`` Python threads (default
+    ``torch.get_num_threads()``; the compiled kernels and torch's samplers release the GIL); in order in this
+    thread when that is 1."""
+    n = min(torch.get_num_threads() if threads is None else int(threads), count)
+    if n < 2:
+        for b in range(count):
+            fn(b)
+        return
+    key = (os.getpid(), n)   # a forked child (DataLoader worker) builds its own pool: threads do not survive fork
+    if key not in _DRAW_POOL:
+        from concurrent.futures import ThreadPoolExecutor
+        _DRAW_POOL[key] = ThreadPoolExecutor(n, thread_name_prefix="lfmbench-draw")
+    list(_DRAW_POOL[key].map(fn, range(count)))
+
+
+def per_generator(draw, x: torch.Tensor, generator, threads: int | None = None) -> torch.Tensor:
+    """``draw(x, generator)``, or with a sequence of generators ``draw(x[b], generator[b])`` stacked over b.
+
+    On the CPU the samples are drawn by ``threads`` Python threads (:func:`map_samples`); each
+    sample still reads only its own generator, so the result does not depend on the thread count.
+    """
+    if not isinstance(generator, (list, tuple)):
+        return draw(x, generator)
+    out = torch.empty_like(x)
+
+    def one(b: int) -> None:
+        out[b] = draw(x[b], generator[b])
+
+    if x.device.type != "cpu":
+        for b in range(len(generator)):
+            one(b)
+    else:
+        map_samples(one, len(generator), threads)
+    return out
+
+
+_SCRATCH = threading.local()
+#: Work arrays up to this many bytes are kept per thread between calls (fresh pages cost a fault each).
+_SCRATCH_MAX_BYTES = 16 * 2 ** 20
+
+
+def _scratch(name: str, rows: int, cols: int, dtype) -> np.ndarray:
+    """A (rows, cols) work array of this thread, reused from call to call when small enough (contents undefined)."""
+    n = rows * cols
+    dt = np.dtype(dtype)
+    if n * dt.itemsize > _SCRATCH_MAX_BYTES:
+        return np.empty((rows, cols), dt)
+    bufs = _SCRATCH.__dict__.setdefault("bufs", {})
+    b = bufs.get((name, dt))
+    if b is None or b.size < n:
+        b = bufs[(name, dt)] = np.empty(n, dt)
+    return b[:n].reshape(rows, cols)
+
+
+def _map_rows(m: torch.Tensor, lead: torch.Size, H: int, W: int) -> tuple[np.ndarray, np.ndarray]:
+    """A map (..., H, W) broadcastable to inputs ``lead + (1, H, W)`` as ``(base, row)``: ``base`` (M, H*W) its
+    distinct planes (C-contiguous numpy), ``row`` (L,) int64 the plane each of the L = prod(lead) input planes
+    reads (no copy of the map per input plane)."""
+    base = m.reshape(-1, H * W).contiguous()
+    idx = torch.arange(base.shape[0], device=m.device).reshape(m.shape[:-2])
+    row = torch.broadcast_to(idx, (*lead, 1)).reshape(-1).contiguous()
+    return base.numpy(), row.numpy()
+
+
+def chain_fused(lpd_e: torch.Tensor, spd_e: torch.Tensor, preset: SensorPreset, t_s: torch.Tensor,
+                 t_l: torch.Tensor, generator, noise: bool, fpn: Mapping[str, torch.Tensor] | None,
+                 threads: int | None = None) -> dict:
+    """The CPU chain of :func:`simulate_split_pixel_electrons` in compiled passes (backend ``"numba"``).
+
+    Args: ``lpd_e``, ``spd_e`` (*, 1, H, W) mean e- (float32/float64, CPU); ``t_s``, ``t_l`` (*, 1, 1, 1)
+    exposures in s (dtype of the inputs); ``generator`` one CPU generator or B of them (one per index of the
+    leading dimension); ``fpn`` maps (..., H, W) already on the inputs' dtype, or None. Every generator is drawn
+    in the torch chain's order (LPD Poisson seed, SPD Poisson seed, HCG, LCG, SPD read noise), and every
+    per-row scalar is computed by the torch chain's own expressions, so the outputs are bit-identical to it.
+    """
+    from lfmbench.sensor._poisson_kernel import collect
+    from lfmbench.sensor._readout_kernel import readout
+
+    lead, (H, W) = lpd_e.shape[:-3], lpd_e.shape[-2:]
+    P = H * W
+    L = int(np.prod(lead, dtype=np.int64)) if len(lead) else 1
+    dtype = lpd_e.dtype
+    nt = np.float32 if dtype == torch.float32 else np.float64
+    t_pd = {"lpd": t_s, "spd": t_l}
+    rows = {pd: (lpd_e if pd == "lpd" else spd_e).detach().reshape(L, P).contiguous().numpy() for pd in PHOTODIODES}
+    def per_row(v: torch.Tensor) -> np.ndarray:
+        return torch.broadcast_to(v, (*lead, 1, 1, 1)).reshape(L).contiguous().numpy()
+
+    dark = {pd: per_row(preset.photodiodes[pd].dark_current_e_per_s * t_pd[pd]) for pd in PHOTODIODES}
+    spd_factor = per_row(preset.sensitivity_ratio * t_s / t_l)
+    empty = np.zeros((0, P), dtype=nt)
+    no_factor = np.zeros(0, dtype=nt)
+    none_row = np.zeros(L, dtype=np.int64)
+    maps = {}
+    for pd in PHOTODIODES:
+        spec = preset.photodiodes[pd]
+        use = noise and fpn is not None
+        maps[f"{pd}_gain"] = _map_rows(fpn[f"{pd}_gain"], lead, H, W) if use and spec.prnu > 0 else (empty, none_row)
+        maps[f"{pd}_offset_e"] = (_map_rows(fpn[f"{pd}_offset_e"], lead, H, W) if use and spec.dsnu_e > 0
+                                  else (empty, none_row))
+    dev = lpd_e.device
+    out = {k: torch.empty(*lead, 1, H, W, dtype=dtype, device=dev) for k in (*CAPTURES, *(f"{c}_e" for c in CAPTURES))}
+    sat = torch.empty(*lead, 3, H, W, dtype=torch.bool, device=dev)
+    flat = {k: v.view(L, P).numpy() for k, v in out.items()}
+    sat_np = sat.view(L, 3, P).numpy()
+    gsw = float(preset.shot_noise_gaussian_above_e)
+
+    def run(r0: int, r1: int, g, shape: torch.Size) -> None:
+        """Rows r0..r1 (one generator's inputs, of shape ``shape``)."""
+        collected = {pd: _scratch(pd, r1 - r0, P, nt) for pd in PHOTODIODES}            # e-
+        for pd in PHOTODIODES:
+            spec = preset.photodiodes[pd]
+            gain, grow = maps[f"{pd}_gain"]
+            seed = _poisson.draw_seed(g) if noise else np.uint64(0)
+            bad = collect(rows[pd][r0:r1], gain, grow[r0:r1], dark[pd][r0:r1],
+                          nt(MEAN_CAP_FULL_WELLS * spec.full_well_e), nt(spec.full_well_e), seed, gsw, noise,
+                          collected[pd])
+            if bad >= 0:  # pragma: no cover - the clipped means are finite and >= 0
+                raise ValueError(f"shot noise: invalid mean at flat index {bad} of {pd}")
+        z_all = _scratch("z", r1 - r0, P, nt)
+        for c, cap in enumerate(CAPTURES):
+            spec = preset.captures[cap]
+            pd = spec.photodiode
+            z = empty
+            if noise and spec.read_noise_e > 0:
+                # into a reused buffer: the same draws as a new tensor
+                torch.randn(shape, generator=g, dtype=dtype, device=dev, out=torch.from_numpy(z_all).view(shape))
+                z = z_all
+            off, orow = maps[f"{pd}_offset_e"]
+            readout(collected[pd], z, nt(spec.read_noise_e), off, orow[r0:r1],
+                    nt(spec.conversion_gain_v_per_e), nt(spec.voltage_swing_v), nt(preset.dn_per_volt(cap)),
+                    nt(preset.black_level_dn), nt(preset.max_dn), nt(preset.saturation_fraction * spec.voltage_swing_v),
+                    nt(preset.system_gain(cap)), dark[pd][r0:r1], spd_factor[r0:r1] if pd == "spd" else no_factor,
+                    flat[cap][r0:r1], flat[f"{cap}_e"][r0:r1], sat_np[r0:r1], c)
+
+    if isinstance(generator, (list, tuple)):
+        per = L // len(generator)
+        map_samples(lambda b: run(b * per, (b + 1) * per, generator[b], lpd_e.shape[1:]), len(generator), threads)
+    else:
+        run(0, L, generator, lpd_e.shape)
+    out["saturated"] = sat
+    return out
+
+
+def warm_fused(preset: SensorPreset | str, noise: bool) -> None:
+    """Compile (or load from numba's cache) the compiled CPU chain's kernels for float32 inputs, in this process
+    (what a DataLoader's parent does before forking its workers)."""
+    if not _poisson.available():  # pragma: no cover - numba is a dependency
+        return
+    preset = load_preset(preset)
+    z = torch.zeros(1, 1, 2, 2, device="cpu")
+    t = torch.full((1, 1, 1), 1e-3, device="cpu")
+    chain_fused(z, z, preset, t, 10 * t, torch.Generator().manual_seed(0) if noise else None, noise, None)

@@ -1,0 +1,329 @@
+"""The noise chain of the split-pixel sensor: mean photo-electrons -> noise -> volts -> DN.
+
+Functional core in torch (batched over any leading dimensions, CPU or CUDA, float32/float64 following the
+input, no per-pixel Python loops) with a thin :class:`SplitPixelSensor` module:
+:func:`shot_noise`, :func:`fixed_pattern`, :func:`read_capture`, :func:`simulate_split_pixel_electrons`,
+:func:`simulate_split_pixel` (the signal chain is listed in :mod:`lfmbench.sensor`).
+
+References
+----------
+.. [EMVA1288] EMVA Standard 1288, "Standard for Characterization of Image Sensors and Cameras", Release 4.0
+   Linear (2021): the linear camera model (sec. 2) and the photon-transfer method of the sensitivity, linearity
+   and noise measurement.
+"""
+from __future__ import annotations
+
+import functools
+from typing import Mapping, Sequence
+
+import torch
+from torch import nn
+
+from lfmbench.sensor import poisson as _poisson
+from lfmbench.sensor.fused import MEAN_CAP_FULL_WELLS, chain_fused, per_generator
+from lfmbench.sensor.optics import check_radiometric
+from lfmbench.sensor.preset import CAPTURES, PHOTODIODES, SensorPreset, load_preset
+from lfmbench.sensor.response import ideal_electrons
+
+__all__ = ["fixed_pattern", "shot_noise", "read_capture", "simulate_split_pixel_electrons", "simulate_split_pixel",
+           "SplitPixelSensor"]
+
+
+@functools.lru_cache(maxsize=8)
+def _fixed_pattern_cpu(seed: int, height: int, width: int) -> tuple[torch.Tensor, ...]:
+    g = torch.Generator(device="cpu").manual_seed(int(seed))
+    # fixed draw order: lpd gain, lpd offset, spd gain, spd offset (standard normal, float64)
+    return tuple(torch.randn(height, width, generator=g, dtype=torch.float64) for _ in range(4))
+
+
+def fixed_pattern(preset: SensorPreset | str, height: int, width: int, device: torch.device | str | None = None,
+                  dtype: torch.dtype = torch.float32) -> dict[str, torch.Tensor]:
+    """Per-sensor fixed-pattern noise maps, identical on every call, device and dtype for the same preset and size.
+
+    Drawn from ``torch.Generator().manual_seed(preset.fpn_seed)`` on the CPU in float64 (so CPU and CUDA agree).
+    For crops of one sensor, build the full-frame pattern once and crop it.
+
+    Returns:
+        ``{"lpd_gain", "spd_gain"}``: PRNU gain maps 1 + prnu z (clipped >= 0), dimensionless;
+        ``{"lpd_offset_e", "spd_offset_e"}``: DSNU offset maps dsnu_e z in e-; each (H, W).
+    """
+    preset = load_preset(preset)
+    z = _fixed_pattern_cpu(preset.fpn_seed, int(height), int(width))
+    out = {}
+    for i, pd in enumerate(PHOTODIODES):
+        spec = preset.photodiodes[pd]
+        out[f"{pd}_gain"] = (1.0 + spec.prnu * z[2 * i]).clamp_min(0.0).to(device=device, dtype=dtype)
+        out[f"{pd}_offset_e"] = (spec.dsnu_e * z[2 * i + 1]).to(device=device, dtype=dtype)
+    return out
+
+
+def shot_noise(mean_e: torch.Tensor, generator: torch.Generator, gaussian_above_e: float = 1000.0,
+               backend: str = "auto") -> torch.Tensor:
+    """Photon (and dark-current) shot noise: a Poisson sample of the mean electron count.
+
+    Means >= ``gaussian_above_e`` use the normal approximation N(mu, mu) rounded to integers (Poisson's skewness
+    1/sqrt(mu) is < 3 % there; the distribution error is measured in ``benchmarks/bench_sensor.py``); smaller
+    means are exact Poisson. ``gaussian_above_e = inf`` forces exact Poisson everywhere below 2^52 e-
+    (:data:`lfmbench.sensor.poisson.EXACT_LIMIT`, where float64 stops holding counts exactly).
+
+    Backends: ``"numba"`` (CPU only) is the compiled counter-based sampler of :mod:`lfmbench.sensor.poisson`
+    (inversion below 10 e-, PTRS above; 1.6-2.3x faster than ``torch.poisson`` on a sample's means);
+    ``"torch"`` uses ``torch.poisson`` and ``torch.randn`` (any device); ``"auto"`` picks ``"numba"`` for CPU
+    tensors when numba is importable, else ``"torch"``. Both draw the same distribution, not the same numbers.
+
+    Args:
+        mean_e: (*) mean electrons, >= 0, e-.
+        generator: random generator on the device of ``mean_e``.
+        gaussian_above_e: switch-over mean in e-.
+        backend: ``"auto"``, ``"numba"`` or ``"torch"``.
+
+    Returns:
+        (*) integer-valued electron counts, e-, dtype of ``mean_e``.
+    """
+    if backend not in ("auto", "numba", "torch"):
+        raise ValueError(f"backend must be 'auto', 'numba' or 'torch', got {backend!r}")
+    if backend == "numba" or (backend == "auto" and mean_e.device.type == "cpu" and _poisson.available()):
+        return _poisson.poisson(mean_e, generator, gaussian_above_e)
+    # torch.poisson overflows int64 for huge means (1e20 -> -2^63): those take the rounded normal too
+    small = mean_e < min(gaussian_above_e, _poisson.EXACT_LIMIT)
+    n_small = int(small.sum())
+    if n_small == mean_e.numel():
+        return torch.poisson(mean_e, generator=generator)
+    z = torch.randn(mean_e.shape, generator=generator, device=mean_e.device, dtype=mean_e.dtype)
+    out = torch.round(mean_e + torch.sqrt(mean_e) * z).clamp_min(0.0)
+    if n_small:
+        # Poisson where the mean is small; a masked gather/scatter costs more than drawing Poisson(0) elsewhere
+        # (14.5 -> 10.5 ms for a 3-frame 256x256 split-pixel sample, docs/dataset-benchmark.md)
+        pois = torch.poisson(torch.where(small, mean_e, torch.zeros_like(mean_e)), generator=generator)
+        out = torch.where(small, pois, out)
+    return out
+
+
+def _exposure(value: float | torch.Tensor, name: str, lead: torch.Size, ref: torch.Tensor) -> torch.Tensor:
+    t = torch.as_tensor(value, dtype=ref.dtype, device=ref.device)
+    if not bool(torch.isfinite(t).all()) or bool((t <= 0).any()):
+        raise ValueError(f"{name} must be finite and > 0 (s), got {value!r}")
+    if t.dim() > len(lead):
+        raise ValueError(f"{name} must be a scalar or broadcastable to the leading shape {tuple(lead)}")
+    try:
+        t = t.reshape(*t.shape, 1, 1, 1).expand(*lead, 1, 1, 1) if t.dim() else t.reshape(1, 1, 1)
+    except RuntimeError:
+        raise ValueError(f"{name} with shape {tuple(t.shape)} does not broadcast to the leading shape "
+                         f"{tuple(lead)}") from None
+    return t
+
+
+def read_capture(electrons: torch.Tensor, preset: SensorPreset, capture: str, generator: torch.Generator | None,
+                 noise: bool = True, offset_e: torch.Tensor | None = None) -> dict[str, torch.Tensor]:
+    """Read one capture of collected photodiode electrons: offset, read noise, conversion gain, swing, ADC.
+
+    Args:
+        electrons: (*, 1, H, W) collected electrons (already clipped to the full well), e-.
+        preset: sensor preset.
+        capture: one of :data:`CAPTURES`.
+        generator: random generator for the read noise (needed when ``noise``), or a sequence of B generators,
+            one per index of the leading dimension of ``electrons`` (each draws its own slice).
+        noise: add Gaussian read noise.
+        offset_e: (H, W) DSNU offset map in e- (or ``None``).
+
+    Returns:
+        ``{"dn": (*, 1, H, W) DN, "volts": (*, 1, H, W) V (clipped at the swing), "saturated": bool (*, 1, H, W)}``.
+    """
+    spec = preset.captures[capture]
+    # in-place on tensors made here (never on ``electrons``): a 3-frame 256x256 capture is 0.75 MiB per temporary
+    if noise and spec.read_noise_e > 0:
+        volts = per_generator(lambda x, g: torch.randn(x.shape, generator=g, device=x.device, dtype=x.dtype),
+                               electrons, generator)
+        volts.mul_(spec.read_noise_e).add_(electrons)
+    else:
+        volts = electrons.clone()
+    if offset_e is not None:
+        volts.add_(offset_e)
+    volts.mul_(spec.conversion_gain_v_per_e).clamp_max_(spec.voltage_swing_v)
+    dn = (volts * preset.dn_per_volt(capture)).add_(preset.black_level_dn).round_().clamp_(0.0, float(preset.max_dn))
+    saturated = volts >= preset.saturation_fraction * spec.voltage_swing_v
+    return {"dn": dn, "volts": volts, "saturated": saturated}
+
+
+def _check_pair(lpd: torch.Tensor, spd: torch.Tensor, lpd_name: str, spd_name: str, check: bool) -> None:
+    """The LPD and SPD inputs of a capture set: radiometric (if ``check``), same shape, same dtype."""
+    if check:
+        check_radiometric(lpd, lpd_name)
+        check_radiometric(spd, spd_name)
+    if lpd.shape != spd.shape:
+        raise ValueError(f"{spd_name} shape {tuple(spd.shape)} differs from {lpd_name} shape {tuple(lpd.shape)}")
+    if spd.dtype != lpd.dtype:
+        raise ValueError(f"{spd_name} and {lpd_name} must have the same dtype")
+
+
+def simulate_split_pixel_electrons(lpd_electrons: torch.Tensor, spd_electrons: torch.Tensor,
+                                   preset: SensorPreset | str, exposure_short_s: float | torch.Tensor,
+                                   exposure_long_s: float | torch.Tensor, generator: torch.Generator | None = None,
+                                   noise: bool = True, fpn: Mapping[str, torch.Tensor] | None = None,
+                                   check: bool = True, backend: str = "auto",
+                                   threads: int | None = None) -> dict[str, torch.Tensor]:
+    """The three captures from mean photo-electrons (the noise and read-out part of :func:`simulate_split_pixel`).
+
+    Use this when the spectral projection (:func:`ideal_electrons` or a cached equivalent) is done elsewhere.
+
+    Args:
+        lpd_electrons: (*, 1, H, W) mean photo-electrons of the LPD over the short exposure (CFA mosaic, LPD fill
+            factor included, no dark current, no PRNU), e-.
+        spd_electrons: (*, 1, H, W) the same for the SPD over the long exposure (SPD fill factor included), e-.
+        preset: sensor preset or name.
+        exposure_short_s, exposure_long_s: exposure times in s, scalars or shape (*).
+        generator: ``torch.Generator`` on the inputs' device; required when ``noise`` is true. Or a sequence of B
+            generators for inputs (B, *, 1, H, W): sample b then draws all its noise from its own generator, in the
+            same order as a call on that sample alone, so its output does not depend on the other samples or on
+            B (the batched dataset path, :mod:`lfmbench.datasets.batched`).
+        noise: ``False``: noise-free chain (dark current mean kept, no FPN, clipping and quantisation kept).
+        fpn: fixed-pattern maps (H, W) from :func:`fixed_pattern` (default: built for (H, W) from the preset),
+            or maps broadcastable to the inputs whose last two dimensions are (H, W) (e.g. (B, 1, 1, H, W): one
+            crop of the pattern per sample).
+        check: validate the inputs (finite, >= 0, matching shapes).
+        backend: ``"torch"``: the chain as torch element-wise operations (any device; shot noise by
+            :func:`shot_noise`'s ``"auto"`` backend); ``"numba"`` (CPU, float32/float64, needs numba): the same
+            operations compiled into one pass per photodiode (clipping, PRNU, dark signal, shot noise, full
+            well: :func:`lfmbench.sensor._poisson_kernel.collect`) and one per capture (the read-out:
+            :func:`lfmbench.sensor._readout_kernel.readout`), bit-identical to ``"torch"`` on the CPU with a fraction of
+            its memory passes (docs/dataset-benchmark.md); ``"auto"``: ``"numba"`` where it applies, else
+            ``"torch"``.
+        threads: with one generator per sample on the CPU, the samples are simulated by this many Python threads
+            (default ``torch.get_num_threads()``; the result does not depend on it). The threads do not spin while
+            they wait, unlike OpenMP's: on a machine shared with other jobs use ``torch.set_num_threads(1)`` and
+            ``threads`` = the cores to use.
+
+    Returns:
+        as :func:`simulate_split_pixel`.
+    """
+    if backend not in ("auto", "numba", "torch"):
+        raise ValueError(f"backend must be 'auto', 'numba' or 'torch', got {backend!r}")
+    _check_pair(lpd_electrons, spd_electrons, "lpd_electrons", "spd_electrons", check)
+    if lpd_electrons.shape[-3] != 1:
+        raise ValueError(f"lpd_electrons must have shape (*, 1, H, W) (a CFA mosaic), got {tuple(lpd_electrons.shape)}")
+    preset = load_preset(preset)
+    x = lpd_electrons
+    if noise:
+        gens = list(generator) if isinstance(generator, (list, tuple)) else [generator]
+        if not gens or not all(isinstance(g, torch.Generator) for g in gens):
+            raise ValueError("generator must be a torch.Generator (or a sequence of them, one per sample) when "
+                             "noise=True (no hidden global randomness)")
+        if isinstance(generator, (list, tuple)) and (x.dim() < 4 or len(gens) != x.shape[0]):
+            raise ValueError(f"generator: {len(gens)} generators for inputs of shape {tuple(x.shape)}; a sequence "
+                             "needs one generator per index of the leading (sample) dimension")
+        for g in gens:
+            if g.device.type != x.device.type:
+                raise ValueError(f"generator is on {g.device} but the inputs are on {x.device}")
+    lead = x.shape[:-3]
+    H, W = x.shape[-2:]
+    t_s = _exposure(exposure_short_s, "exposure_short_s", lead, x)
+    t_l = _exposure(exposure_long_s, "exposure_long_s", lead, x)
+    if fpn is None and noise and any(p.prnu > 0 or p.dsnu_e > 0 for p in preset.photodiodes.values()):
+        fpn = fixed_pattern(preset, H, W, device=x.device, dtype=x.dtype)
+    elif fpn is not None:
+        fpn = {k: v.to(device=x.device, dtype=x.dtype) for k, v in fpn.items()}
+        for k, v in fpn.items():
+            if v.shape[-2:] != (H, W):
+                raise ValueError(f"fpn[{k!r}] has shape {tuple(v.shape)}, expected (..., {H}, {W})")
+    fused = x.device.type == "cpu" and x.dtype in (torch.float32, torch.float64) and _poisson.available()
+    if backend == "numba" and not fused:
+        raise ValueError(f"backend='numba' needs float32/float64 CPU inputs and numba (got {x.dtype} on {x.device})")
+    if fused and backend != "torch":
+        return chain_fused(lpd_electrons, spd_electrons, preset, t_s, t_l, generator, noise, fpn, threads)
+
+    pd_inputs = {"lpd": (lpd_electrons, t_s), "spd": (spd_electrons, t_l)}
+    collected: dict[str, torch.Tensor] = {}
+    for pd, (mu, t) in pd_inputs.items():
+        spec = preset.photodiodes[pd]
+        cap = MEAN_CAP_FULL_WELLS * spec.full_well_e
+        mu = torch.nan_to_num(mu, nan=0.0, posinf=cap).clamp_(0.0, cap)         # overflow-safe, exact after clip
+        if noise and fpn is not None and spec.prnu > 0:
+            mu.mul_(fpn[f"{pd}_gain"])
+        mu.add_(spec.dark_current_e_per_s * t)
+        n = per_generator(lambda m, g: shot_noise(m, g, preset.shot_noise_gaussian_above_e), mu, generator,
+                           threads) if noise else mu
+        collected[pd] = n.clamp_(0.0, spec.full_well_e)
+
+    out: dict[str, torch.Tensor] = {}
+    sats = []
+    for cap in CAPTURES:
+        pd = preset.captures[cap].photodiode
+        offset = fpn[f"{pd}_offset_e"] if (noise and fpn is not None and preset.photodiodes[pd].dsnu_e > 0) else None
+        r = read_capture(collected[pd], preset, cap, generator, noise, offset)
+        out[cap] = r["dn"]
+        # DN -> e-, minus the mean dark signal (what optical-black clamping removes), so that the expectation
+        # of the input-referred value equals ideal_electrons() below saturation
+        e_ref = (r["dn"] - preset.black_level_dn).div_(preset.system_gain(cap)) \
+            .sub_(preset.photodiodes[pd].dark_current_e_per_s * pd_inputs[pd][1])
+        if pd == "spd":
+            e_ref.mul_(preset.sensitivity_ratio * t_s / t_l)
+        out[f"{cap}_e"] = e_ref
+        sats.append(r["saturated"])
+    out["saturated"] = torch.cat(sats, dim=-3)
+    return out
+
+
+def simulate_split_pixel(lpd_radiant_exposure: torch.Tensor, spd_radiant_exposure: torch.Tensor,
+                         preset: SensorPreset | str, wavelengths_nm: Sequence[float] | torch.Tensor,
+                         exposure_short_s: float | torch.Tensor, exposure_long_s: float | torch.Tensor,
+                         generator: torch.Generator | None = None, noise: bool = True,
+                         bandwidths_nm: Sequence[float] | None = None,
+                         fpn: Mapping[str, torch.Tensor] | None = None, check: bool = True) -> dict[str, torch.Tensor]:
+    """Simulate the three captures (LPD-HCG, LPD-LCG, SPD) of a split-pixel sensor.
+
+    Args:
+        lpd_radiant_exposure: (*, C, H, W) spectral radiant exposure at the pixel over the short (LPD) exposure,
+            J m^-2 nm^-1 (spectral irradiance W m^-2 nm^-1 x s, flicker weights included by the caller).
+        spd_radiant_exposure: (*, C, H, W) the same over the long (SPD) exposure, J m^-2 nm^-1.
+        preset: sensor preset or name (``"ovt"``, ``"imx490"``, a YAML path).
+        wavelengths_nm: C band centres in nm.
+        exposure_short_s: LPD exposure time in s, scalar or shape (*) (per sample); used for dark current.
+        exposure_long_s: SPD exposure time in s, scalar or shape (*); used for dark current and input referral.
+        generator: ``torch.Generator`` on the inputs' device; required when ``noise`` is true.
+        noise: ``False`` gives the noise-free chain (mean electrons incl. dark current, no FPN, clipping and
+            quantisation kept).
+        bandwidths_nm: band widths in nm (default: local spacing of ``wavelengths_nm``).
+        fpn: fixed-pattern maps from :func:`fixed_pattern` (default: built for (H, W) from the preset's seed).
+        check: validate the inputs (finite, >= 0, matching shapes).
+
+    Returns:
+        dict with ``lpd_hcg``, ``lpd_lcg``, ``spd``: (*, 1, H, W) raw DN (black level included);
+        ``lpd_hcg_e``, ``lpd_lcg_e``, ``spd_e``: (*, 1, H, W) input-referred LPD-equivalent e- over the short
+        exposure, mean dark signal removed (same units and expectation as :func:`ideal_electrons` of the LPD);
+        ``saturated``: (*, 3, H, W) bool (hcg, lcg, spd), volts >= saturation_fraction x swing.
+        Floating outputs have the dtype of the inputs.
+    """
+    _check_pair(lpd_radiant_exposure, spd_radiant_exposure, "lpd_radiant_exposure", "spd_radiant_exposure", check)
+    preset = load_preset(preset)
+    lpd_e = ideal_electrons(lpd_radiant_exposure, preset, wavelengths_nm, "lpd", bandwidths_nm, check=False)
+    spd_e = ideal_electrons(spd_radiant_exposure, preset, wavelengths_nm, "spd", bandwidths_nm, check=False)
+    return simulate_split_pixel_electrons(lpd_e, spd_e, preset, exposure_short_s, exposure_long_s, generator,
+                                          noise, fpn, check=False)
+
+
+class SplitPixelSensor(nn.Module):
+    """``nn.Module`` wrapper of :func:`simulate_split_pixel` holding the preset and the band grid.
+
+    Args:
+        preset: preset, name or YAML path.
+        wavelengths_nm: C band centres in nm (default 400:10:700).
+        noise: default for the ``noise`` argument.
+
+    Shape:
+        inputs (*, C, H, W) spectral radiant exposure in J m^-2 nm^-1; outputs as :func:`simulate_split_pixel`.
+    """
+
+    def __init__(self, preset: SensorPreset | str = "ovt", wavelengths_nm: Sequence[float] | None = None,
+                 noise: bool = True) -> None:
+        super().__init__()
+        self.preset = load_preset(preset)
+        wl = range(400, 701, 10) if wavelengths_nm is None else wavelengths_nm
+        self.wavelengths_nm = [float(w) for w in wl]
+        self.noise = noise
+
+    def forward(self, lpd_radiant_exposure: torch.Tensor, spd_radiant_exposure: torch.Tensor,
+                exposure_short_s: float | torch.Tensor, exposure_long_s: float | torch.Tensor,
+                generator: torch.Generator | None = None, noise: bool | None = None) -> dict[str, torch.Tensor]:
+        return simulate_split_pixel(lpd_radiant_exposure, spd_radiant_exposure, self.preset, self.wavelengths_nm,
+                                    exposure_short_s, exposure_long_s, generator=generator,
+                                    noise=self.noise if noise is None else noise)

@@ -1,0 +1,329 @@
+"""Sensor presets: the schema of a split-pixel camera and its YAML files (``lfmbench/configs/sensors/``).
+
+- :class:`SensorPreset` (+ :class:`PhotodiodeSpec`, :class:`CaptureSpec`), loaded from YAML by
+  :func:`load_preset` (``"ovt"``, ``"imx490"`` or a file path); invalid fields raise ``ValueError`` naming the
+  field and file.
+- :class:`CFAPattern`: Bayer layouts by their top-left 2x2 cell (``GRBG`` default), with the kornia mapping.
+
+References
+----------
+.. [EMVA1288] EMVA Standard 1288, "Standard for Characterization of Image Sensors and Cameras", Release 4.0
+   Linear (2021): the linear camera model (sec. 2).
+.. [Solhusvik2019] J. Solhusvik et al., "A 1280x960 2.8 um HDR CIS with DCG and Split-Pixel Combined",
+   International Image Sensor Workshop (2019) - the 'ovt' preset, via ISETCam ``sensorCreate('ovt-large')``.
+"""
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass, field, fields
+from enum import Enum
+from pathlib import Path
+from types import MappingProxyType
+from typing import Any, Mapping, Sequence
+
+import torch
+
+from lfmbench.check import check_keys, get_number
+from lfmbench.sensor.optics import OpticsConfig
+from lfmbench.sensor.spectral_data import DATA_DIR, read_spectral_csv
+
+__all__ = ["CAPTURES", "PHOTODIODES", "PRESET_DIR", "CFAPattern", "PhotodiodeSpec", "CaptureSpec", "SensorPreset",
+           "available_presets", "load_preset", "preset_from_dict"]
+
+#: Capture names in the order of the ``saturated`` channels (docs/contracts.md).
+CAPTURES: tuple[str, ...] = ("lpd_hcg", "lpd_lcg", "spd")
+#: Photodiode names.
+PHOTODIODES: tuple[str, ...] = ("lpd", "spd")
+#: Shipped sensor presets (YAML).
+PRESET_DIR: Path = Path(__file__).resolve().parent.parent / "configs" / "sensors"
+
+
+class CFAPattern(str, Enum):
+    """Bayer layout named by its top-left 2x2 cell read row by row (``GRBG``: G R / B G)."""
+
+    RGGB = "RGGB"
+    GRBG = "GRBG"
+    GBRG = "GBRG"
+    BGGR = "BGGR"
+
+    def cell(self, device: torch.device | str | None = None) -> torch.Tensor:
+        """(2, 2) int64 channel indices (0 = r, 1 = g, 2 = b) of the top-left cell, on ``device``."""
+        lut = {"R": 0, "G": 1, "B": 2}
+        return torch.tensor([[lut[self.value[0]], lut[self.value[1]]], [lut[self.value[2]], lut[self.value[3]]]],
+                            device=device)
+
+    def index_map(self, height: int, width: int, device: torch.device | str | None = None) -> torch.Tensor:
+        """(H, W) int64 channel index (0 = r, 1 = g, 2 = b) of every pixel."""
+        cell = self.cell(device)
+        return cell.repeat((height + 1) // 2, (width + 1) // 2)[:height, :width]
+
+    def to_kornia(self):
+        """The equivalent ``kornia.color.CFA`` member (kornia uses OpenCV names read from pixel (1, 1))."""
+        from kornia.color import CFA  # lazy: kornia is only needed for demosaicing
+
+        return {"RGGB": CFA.BG, "GRBG": CFA.GB, "BGGR": CFA.RG, "GBRG": CFA.GR}[self.value]
+
+
+@dataclass(frozen=True)
+class PhotodiodeSpec:
+    """One photodiode of the split pixel.
+
+    Attributes:
+        fill_factor: effective light-collecting fraction of the pixel area (dimensionless, (0, 1]).
+        full_well_e: full-well capacity in e-.
+        dark_current_e_per_s: mean dark current in e-/s.
+        dsnu_e: dark-signal non-uniformity, standard deviation of a per-pixel offset in e-.
+        prnu: photo-response non-uniformity, standard deviation of the per-pixel gain (fraction, 0.01 = 1 %).
+    """
+
+    fill_factor: float
+    full_well_e: float
+    dark_current_e_per_s: float = 0.0
+    dsnu_e: float = 0.0
+    prnu: float = 0.0
+
+
+@dataclass(frozen=True)
+class CaptureSpec:
+    """One read-out of a photodiode.
+
+    Attributes:
+        photodiode: ``"lpd"`` or ``"spd"``.
+        conversion_gain_v_per_e: conversion gain in V/e-.
+        voltage_swing_v: voltage swing (ADC input range) in V.
+        read_noise_e: read noise standard deviation in e- (Gaussian).
+    """
+
+    photodiode: str
+    conversion_gain_v_per_e: float
+    voltage_swing_v: float
+    read_noise_e: float
+
+
+@dataclass(frozen=True)
+class SensorPreset:
+    """A split-pixel camera: pixel, CFA, photodiodes, captures, ADC and lens. Load with :func:`load_preset`.
+
+    Attributes:
+        name: preset name.
+        description: one line.
+        pixel_pitch_m: pixel pitch in m.
+        cfa: Bayer layout.
+        adc_bits: ADC resolution in bits.
+        black_level_dn: black level (pedestal) in DN.
+        saturation_fraction: a capture is flagged saturated at volts >= this fraction of its swing.
+        filters_path: CSV of relative spectral sensitivities (columns wavelength_nm, r, g, b).
+        peak_qe: scale of the relative curves to absolute QE (e- per photon).
+        shot_noise_gaussian_above_e: mean (e-) from which shot noise is drawn as a rounded Gaussian.
+        fpn_seed: seed of the fixed DSNU/PRNU pattern.
+        photodiodes: ``{"lpd": PhotodiodeSpec, "spd": PhotodiodeSpec}``.
+        captures: ``{"lpd_hcg": CaptureSpec, "lpd_lcg": ..., "spd": ...}``.
+        optics: lens of the camera.
+        source: file the preset was read from.
+    """
+
+    name: str
+    description: str
+    pixel_pitch_m: float
+    cfa: CFAPattern
+    adc_bits: int
+    black_level_dn: float
+    saturation_fraction: float
+    filters_path: Path
+    peak_qe: float
+    shot_noise_gaussian_above_e: float
+    fpn_seed: int
+    photodiodes: Mapping[str, PhotodiodeSpec]
+    captures: Mapping[str, CaptureSpec]
+    optics: OpticsConfig = field(default_factory=OpticsConfig)
+    source: str = "<dict>"
+
+    def __hash__(self) -> int:
+        # equal presets have equal scalar fields; the mappings are left out (unhashable)
+        return hash((self.name, self.source, self.pixel_pitch_m, self.adc_bits, self.black_level_dn, self.fpn_seed,
+                     self.peak_qe, str(self.filters_path)))
+
+    def __reduce__(self):
+        # the read-only mapping proxies do not pickle: rebuild from plain dicts (DataLoader workers, spawn)
+        state = {f.name: getattr(self, f.name) for f in fields(self)}
+        state["photodiodes"], state["captures"] = dict(self.photodiodes), dict(self.captures)
+        return (_rebuild_preset, (state,))
+
+    @property
+    def max_dn(self) -> int:
+        """Largest ADC code, 2^bits - 1 (DN)."""
+        return 2 ** self.adc_bits - 1
+
+    @property
+    def pixel_area_m2(self) -> float:
+        """Pixel area in m^2."""
+        return self.pixel_pitch_m ** 2
+
+    @property
+    def sensitivity_ratio(self) -> float:
+        """LPD / SPD sensitivity (dimensionless): ratio of the fill factors (both share the spectral curves)."""
+        return self.photodiodes["lpd"].fill_factor / self.photodiodes["spd"].fill_factor
+
+    def dn_per_volt(self, capture: str) -> float:
+        """ADC gain of ``capture`` in DN/V: (2^bits - 1 - black_level) / voltage_swing."""
+        return (self.max_dn - self.black_level_dn) / self.captures[capture].voltage_swing_v
+
+    def system_gain(self, capture: str) -> float:
+        """Overall system gain K of ``capture`` in DN/e- [EMVA1288]_ (conversion gain x ADC gain)."""
+        return self.captures[capture].conversion_gain_v_per_e * self.dn_per_volt(capture)
+
+    def saturation_capacity_e(self, capture: str) -> float:
+        """Electrons at which ``capture`` clips: min(full well, voltage swing / conversion gain), in e-."""
+        spec = self.captures[capture]
+        return min(self.photodiodes[spec.photodiode].full_well_e, spec.voltage_swing_v / spec.conversion_gain_v_per_e)
+
+
+def _rebuild_preset(state: dict[str, Any]) -> SensorPreset:
+    state = dict(state)
+    state["photodiodes"] = MappingProxyType(dict(state["photodiodes"]))
+    state["captures"] = MappingProxyType(dict(state["captures"]))
+    return SensorPreset(**state)
+
+
+def available_presets() -> list[str]:
+    """Names of the shipped presets (files ``lfmbench/configs/sensors/<name>.yaml``)."""
+    return sorted(p.stem for p in PRESET_DIR.glob("*.yaml"))
+
+
+def load_preset(preset: "str | Path | SensorPreset | Mapping[str, Any]") -> SensorPreset:
+    """Load a preset by name (``"ovt"``, ``"imx490"``), from a YAML file path, or from a mapping.
+
+    Raises:
+        ValueError: unknown name, missing/unreadable file, or an invalid field (the message names the field and
+            the file).
+    """
+    if isinstance(preset, SensorPreset):
+        return preset
+    if isinstance(preset, Mapping):
+        return preset_from_dict(preset, "<dict>")
+    if not isinstance(preset, (str, Path)):
+        raise ValueError(f"preset must be a name, a path or a mapping, got {type(preset).__name__}")
+    text = str(preset)
+    path = Path(text)
+    if path.suffix.lower() not in (".yaml", ".yml", ".json") and not path.exists():
+        candidate = PRESET_DIR / f"{text}.yaml"
+        if not candidate.exists():
+            raise ValueError(f"preset: unknown sensor preset {text!r}; shipped presets are {available_presets()} "
+                             "or give a path to a YAML file")
+        path = candidate
+    resolved = path.resolve()
+    if not resolved.is_file():
+        raise ValueError(f"preset: file {resolved} does not exist")
+    return _load_preset_file(str(resolved), resolved.stat().st_mtime_ns)
+
+
+@functools.lru_cache(maxsize=32)
+def _load_preset_file(path: str, mtime_ns: int = 0) -> SensorPreset:
+    """Parse one preset file (cached per path and modification time, so edits are picked up)."""
+    import yaml
+
+    p = Path(path)
+    if not p.is_file():
+        raise ValueError(f"preset: file {path} does not exist")
+    try:
+        data = yaml.safe_load(p.read_text())
+    except (OSError, yaml.YAMLError) as exc:
+        raise ValueError(f"preset: cannot read {path}: {exc}") from exc
+    return preset_from_dict(data, path)
+
+
+def _entries(data: Mapping[str, Any], section: str, names: Sequence[str], spec: type, source: str):
+    """Yield ``(name, fields, prefix)`` for each required entry ``name`` of ``data[section]``, after checking
+    that the section and every entry exist and hold only known keys (the fields of dataclass ``spec``)."""
+    raw = data.get(section)
+    if raw is None:
+        raise ValueError(f"{source}: missing field '{section}'")
+    check_keys(raw, section, source, optional=set(names))
+    for name in names:
+        if name not in raw:
+            raise ValueError(f"{source}: missing field '{section}.{name}'")
+        check_keys(raw[name], f"{section}.{name}", source, optional={f.name for f in fields(spec)})
+        yield name, raw[name], f"{section}.{name}."
+
+
+def preset_from_dict(data: Mapping[str, Any], source: str = "<dict>") -> SensorPreset:
+    """Validate a plain mapping (the YAML structure of ``configs/sensors/ovt.yaml``) into a :class:`SensorPreset`.
+
+    Raises:
+        ValueError: naming the offending field and ``source``.
+    """
+    top = {"name", "description", "pixel_pitch_m", "cfa", "adc_bits", "black_level_dn", "saturation_fraction",
+           "spectral", "shot_noise_gaussian_above_e", "fpn_seed", "photodiodes", "captures", "optics"}
+    check_keys(data, "", source, optional=top)
+    name = data.get("name")
+    if not isinstance(name, str) or not name:
+        raise ValueError(f"{source}: field 'name' must be a non-empty string, got {name!r}")
+    description = data.get("description", "")
+    if not isinstance(description, str):
+        raise ValueError(f"{source}: field 'description' must be a string")
+    pitch = get_number(data, "pixel_pitch_m", source, lo=0, lo_open=True, hi=1e-3)
+    try:
+        cfa = CFAPattern(str(data.get("cfa", "GRBG")).upper())
+    except ValueError:
+        raise ValueError(f"{source}: field 'cfa' must be one of {[c.value for c in CFAPattern]}, "
+                         f"got {data.get('cfa')!r}") from None
+    bits = get_number(data, "adc_bits", source, lo=1, hi=24, integer=True)
+    black = get_number(data, "black_level_dn", source, lo=0, hi=2 ** bits - 2, default=0.0)
+    sat_frac = get_number(data, "saturation_fraction", source, lo=0, lo_open=True, hi=1.0, default=0.95)
+    gauss = get_number(data, "shot_noise_gaussian_above_e", source, lo=0, default=1000.0, allow_inf=True)
+    seed = get_number(data, "fpn_seed", source, lo=0, integer=True, default=0)
+
+    spectral = data.get("spectral")
+    if spectral is None:
+        raise ValueError(f"{source}: missing field 'spectral'")
+    check_keys(spectral, "spectral", source, optional={"filters", "peak_qe"})
+    peak_qe = get_number(spectral, "peak_qe", source, "spectral.", lo=0, lo_open=True, hi=1.0)
+    filters = spectral.get("filters")
+    if not isinstance(filters, str) or not filters:
+        raise ValueError(f"{source}: field 'spectral.filters' must be a file name, got {filters!r}")
+    fpath = Path(filters)
+    if not fpath.is_absolute():
+        here = Path(source).parent if source != "<dict>" else None
+        cands = ([here / fpath] if here is not None else []) + [DATA_DIR / fpath]
+        fpath = next((c for c in cands if c.is_file()), cands[-1])
+    if not fpath.is_file():
+        raise ValueError(f"{source}: field 'spectral.filters': file {filters!r} not found (looked next to the "
+                         f"preset and in {DATA_DIR})")
+    try:
+        _, names, _ = read_spectral_csv(fpath)
+    except ValueError as exc:
+        raise ValueError(f"{source}: field 'spectral.filters': {exc}") from exc
+    if [n.lower() for n in names] != ["r", "g", "b"]:
+        raise ValueError(f"{source}: field 'spectral.filters': {fpath} must have columns wavelength_nm,r,g,b, "
+                         f"got {names}")
+
+    pds: dict[str, PhotodiodeSpec] = {}
+    for pd, d, pre in _entries(data, "photodiodes", PHOTODIODES, PhotodiodeSpec, source):
+        pds[pd] = PhotodiodeSpec(
+            fill_factor=get_number(d, "fill_factor", source, pre, lo=0, lo_open=True, hi=1.0),
+            full_well_e=get_number(d, "full_well_e", source, pre, lo=0, lo_open=True),
+            dark_current_e_per_s=get_number(d, "dark_current_e_per_s", source, pre, lo=0, default=0.0),
+            dsnu_e=get_number(d, "dsnu_e", source, pre, lo=0, default=0.0),
+            prnu=get_number(d, "prnu", source, pre, lo=0, hi=0.5, default=0.0),
+        )
+
+    caps: dict[str, CaptureSpec] = {}
+    for cap, d, pre in _entries(data, "captures", CAPTURES, CaptureSpec, source):
+        pd = d.get("photodiode")
+        if pd not in PHOTODIODES:
+            raise ValueError(f"{source}: field '{pre}photodiode' must be one of {list(PHOTODIODES)}, got {pd!r}")
+        caps[cap] = CaptureSpec(
+            photodiode=pd,
+            conversion_gain_v_per_e=get_number(d, "conversion_gain_v_per_e", source, pre, lo=0, lo_open=True, hi=1e-2),
+            voltage_swing_v=get_number(d, "voltage_swing_v", source, pre, lo=0, lo_open=True, hi=100.0),
+            read_noise_e=get_number(d, "read_noise_e", source, pre, lo=0),
+        )
+    if caps["lpd_hcg"].photodiode != "lpd" or caps["lpd_lcg"].photodiode != "lpd" or caps["spd"].photodiode != "spd":
+        raise ValueError(f"{source}: field 'captures': lpd_hcg and lpd_lcg must read photodiode 'lpd' and spd "
+                         "must read photodiode 'spd'")
+    optics = OpticsConfig.from_mapping(data["optics"], source) if "optics" in data else OpticsConfig()
+    return SensorPreset(name=name, description=description, pixel_pitch_m=pitch, cfa=cfa, adc_bits=bits,
+                        black_level_dn=black, saturation_fraction=sat_frac, filters_path=fpath, peak_qe=peak_qe,
+                        shot_noise_gaussian_above_e=gauss, fpn_seed=seed, photodiodes=MappingProxyType(pds),
+                        captures=MappingProxyType(caps),
+                        optics=optics, source=source)
