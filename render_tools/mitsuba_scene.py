@@ -27,8 +27,10 @@ import math
 
 import numpy as np
 
+from lfmbench.vocabulary import LIGHT_GROUPS
+
 from . import spectra
-from .scene import LIGHT_GROUPS, scene_groups
+from .scene import scene_groups
 
 #: Path-tracing depth: Mitsuba ``max_depth`` 5 = 4 indirect bounces (upstream renders with 4 bounces).
 MAX_DEPTH = 5

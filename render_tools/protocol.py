@@ -27,8 +27,9 @@ from pathlib import Path
 from typing import Any, Mapping
 
 from lfmbench.check import check_integer, check_keys, check_number, fail, scene_id_error
+from lfmbench.vocabulary import VEHICLE_KINDS
 
-from .scene import SIGNAL_STATES, TIMES_OF_DAY, VEHICLE_KINDS, apply_overrides, load_config
+from .scene import SIGNAL_STATES, TIMES_OF_DAY, apply_overrides, load_config
 
 __all__ = ["PROTOCOL_FORMAT", "PROTOCOL_DIR", "SPLITS", "SPEED_BINS_MPS", "ProtocolScene", "Protocol",
            "list_protocols", "resolve_protocol", "load_protocol", "coverage", "coverage_table", "check_scene"]

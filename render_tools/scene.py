@@ -30,25 +30,14 @@ import numpy as np
 
 from lfmbench.check import check_integer, check_keys, check_number, check_vector, fail, scene_id_error
 from lfmbench.fileio import atomic_write_json
+from lfmbench.vocabulary import GROUPS, LIGHT_GROUPS, LIGHT_KINDS, OBJECT_KINDS, VEHICLE_KINDS
 
 from . import spectra
 
 #: Scene file format name and version.
 SCENE_FORMAT = "lfmbench-scene"
 SCENE_VERSION = 1
-#: Light groups (upstream names + traffic signals).
-GROUPS = ("headlights", "streetlights", "otherlights", "skymap", "signals")
-#: Groups that hold emitters placed in the scene (skymap is the sky emitter).
-LIGHT_GROUPS = ("headlights", "streetlights", "otherlights", "signals")
-#: Light kinds and the group they belong to by default.
-LIGHT_KINDS = {"headlight": "headlights", "streetlight": "streetlights", "tail": "otherlights",
-               "brake": "otherlights", "indicator": "otherlights", "billboard": "otherlights",
-               "signal": "signals"}
 TIMES_OF_DAY = ("day", "dusk", "night")
-#: Vehicle kinds (``vehicles.kind_weights``, ``vehicles.require_kinds``).
-VEHICLE_KINDS = ("car", "truck", "motorcycle")
-OBJECT_KINDS = ("ground", "road", "marking", "sidewalk", "building", "car", "truck", "motorcycle",
-                "streetlight_pole", "signal_pole")
 PART_SHAPES = ("box", "cylinder", "rect", "disk", "sphere")
 MATERIAL_TYPES = ("diffuse", "roughplastic", "roughconductor")
 #: Default generator configuration file.

@@ -24,18 +24,19 @@ scipy), more than a render spends on all of its spectra. So the CIE 1931 colour-
 1 nm grid and the relative spectra (:func:`relative_spectrum`) of every spectrum the scene generator's
 default configuration uses (``render_tools/configs/scene_defaults.yaml``, and D65 of
 :func:`render_tools.scene.empty_scene`) are stored in a small CSV file written from colour-science by
-``python -m render_tools.spectra`` (:func:`write_table`; exact float64 values). Any other spectrum, and the
+``python -m render_tools.spectra_table`` (:func:`render_tools.spectra_table.write_table`; exact float64 values). Any other spectrum, and the
 name check of a model not in the table, falls back to colour-science; ``tests/test_render_scene.py`` checks
 the table against colour-science's own output.
 """
 from __future__ import annotations
 
 import math
-import os
 from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
+
+from lfmbench.vocabulary import SPECTRUM_MODELS
 
 #: Spectral range of Mitsuba's spectral variants (MI_CIE_MIN, MI_CIE_MAX), nm.
 WL_MIN_NM = 360.0
@@ -47,13 +48,6 @@ K_M_LM_PER_W = 683.0
 #: Colour-matching functions used for luminance and XYZ.
 CMFS_NAME = "CIE 1931 2 Degree Standard Observer"
 
-#: Spectrum models and their required (and optional) parameters.
-SPECTRUM_MODELS = {
-    "led": {"required": ("peak_nm", "fwhm_nm"), "optional": ()},
-    "light_source": {"required": ("name",), "optional": ()},
-    "illuminant": {"required": ("name",), "optional": ()},
-    "daylight": {"required": ("cct_k",), "optional": ()},
-}
 
 
 def wavelengths() -> np.ndarray:
@@ -61,7 +55,7 @@ def wavelengths() -> np.ndarray:
     return np.arange(WL_MIN_NM, WL_MAX_NM + 0.5 * WL_STEP_NM, WL_STEP_NM)
 
 
-#: Precomputed CMFs and relative spectra (see the module docstring); written by :func:`write_table`.
+#: Precomputed CMFs and relative spectra (see the module docstring); written by :func:`render_tools.spectra_table.write_table`.
 TABLE_FILE = Path(__file__).with_name("data") / "spectra_1nm.csv"
 #: Columns of :data:`TABLE_FILE` holding the CIE 1931 colour-matching functions xbar, ybar, zbar.
 CMF_COLUMNS = ("cie1931_xbar", "cie1931_ybar", "cie1931_zbar")
@@ -258,67 +252,3 @@ def spectral_to_xyz(img: np.ndarray, bands_nm, band_width_nm: float) -> np.ndarr
         for j in range(3):
             w[i, j] = np.trapezoid(np.interp(fine, wl, cmf[:, j]), fine)
     return K_M_LM_PER_W * np.einsum("chw,cj->jhw", img, w)
-
-
-def table_spectra() -> list[dict]:
-    """The spectrum dicts :func:`write_table` tabulates: every spectrum in the scene generator's default
-    configuration (any mapping with a ``model`` key, in file order) and the D65 sky of ``empty_scene``."""
-    from .scene import DEFAULT_CONFIG, empty_scene  # noqa: PLC0415
-    import yaml  # noqa: PLC0415
-
-    with open(DEFAULT_CONFIG, encoding="utf-8") as fh:
-        cfg = yaml.safe_load(fh)
-    found: list[dict] = []
-
-    def walk(x) -> None:
-        if isinstance(x, dict):
-            if "model" in x and x.get("model") in SPECTRUM_MODELS:
-                found.append(dict(x))
-                return
-            for v in x.values():
-                walk(v)
-        elif isinstance(x, list):
-            for v in x:
-                walk(v)
-
-    walk(cfg)
-    walk(empty_scene()["sky"])
-    out, seen = [], set()
-    for spec in found:
-        if spectrum_key(spec) not in seen:
-            seen.add(spectrum_key(spec))
-            out.append(spec)
-    return out
-
-
-def write_table(path: str | os.PathLike = TABLE_FILE) -> Path:
-    """Write :data:`TABLE_FILE` from colour-science (atomically): wavelength, the CIE 1931 CMFs and the relative
-    spectrum of every :func:`table_spectra` entry on the 1 nm grid, each value as 17 significant digits (the
-    float64 read back is the value written). Returns the path."""
-    import colour  # noqa: PLC0415
-
-    from lfmbench.fileio import atomic_write_text  # noqa: PLC0415
-
-    cmfs = colour.MSDS_CMFS[CMFS_NAME]
-    if not np.array_equal(np.asarray(cmfs.wavelengths, float), wavelengths()):
-        raise ValueError(f"{CMFS_NAME}: colour-science tabulates it on another grid than 360..830 nm step 1 nm; "
-                         "the table would not reproduce its interpolation")
-    cols = {"wavelength_nm": wavelengths()}
-    cols.update(zip(CMF_COLUMNS, _cmfs_colour().T))
-    for spec in table_spectra():
-        cols[spectrum_key(spec)] = relative_spectrum_colour(spec)
-    bad = [k for k in cols if "," in k or "\n" in k]
-    if bad:
-        raise ValueError(f"spectra {bad}: a name with a comma cannot be a CSV column")
-    data = np.stack(list(cols.values()), -1)
-    lines = [f"# written by `python -m render_tools.spectra` from colour-science {colour.__version__}; do not edit",
-             "# relative spectra (max 1) and CIE 1931 2-degree CMFs on 360..830 nm, 1 nm step (render_tools.spectra)",
-             ",".join(cols)]
-    lines += [",".join(f"{v:.17g}" for v in row) for row in data]
-    path = Path(path)
-    atomic_write_text(path, "\n".join(lines) + "\n")
-    return path
-
-
-if __name__ == "__main__":  # pragma: no cover - regenerates the table
-    print(write_table())

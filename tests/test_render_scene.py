@@ -10,7 +10,7 @@ import warnings
 import numpy as np
 import pytest
 
-from render_tools import backend, camera, mitsuba_scene, render, scene, spectra
+from render_tools import backend, camera, mitsuba_scene, render, scene, spectra, spectra_table
 
 
 @pytest.fixture(scope="module")
@@ -55,7 +55,7 @@ def test_spectrum_validation_names_field():
 def test_spectra_table_equals_colour_science():
     """The precomputed table (render_tools/data/spectra_1nm.csv) holds exactly what colour-science computes."""
     table = spectra._table()
-    specs = spectra.table_spectra()
+    specs = spectra_table.table_spectra()
     assert len(specs) >= 8  # 3 LEDs, YAG, HPS, LPS, LED-B3 of the generator's config, D65 of empty_scene
     for spec in specs:
         np.testing.assert_allclose(table[spectra.spectrum_key(spec)], spectra.relative_spectrum_colour(spec),

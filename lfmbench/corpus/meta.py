@@ -20,6 +20,7 @@ from lfmbench import check
 from lfmbench.check import scene_id_error
 from lfmbench.corpus.errors import CorpusFileError
 from lfmbench.corpus.naming import FORMAT_NAME, FORMAT_VERSION, SCENES_DIR, _check_version
+from lfmbench.vocabulary import LIGHT_KINDS, SPECTRUM_MODELS
 
 __all__ = ["TIMING_RTOL", "sha256_file", "make_splits", "validate_meta", "LIGHT_KINDS", "SPECTRUM_MODELS",
            "manifest_entry_errors", "inside_root", "check_splits"]
@@ -166,11 +167,6 @@ def validate_meta(meta: Mapping[str, Any], where: str = "meta.json") -> None:
         _check_light_fields(light, f"lights[{i}]", where, meta["frames"], meta["height"], meta["width"])
 
 
-#: Light kinds the renderer writes (``render_tools.scene.LIGHT_KINDS``); other writers may use other names.
-LIGHT_KINDS = ("headlight", "streetlight", "tail", "brake", "indicator", "billboard", "signal")
-#: Spectrum models the renderer writes (``render_tools.spectra.SPECTRUM_MODELS``) and their fields.
-SPECTRUM_MODELS = {"led": ("peak_nm", "fwhm_nm"), "light_source": ("name",), "illuminant": ("name",),
-                   "daylight": ("cct_k",)}
 
 
 def _check_light_fields(light: Mapping[str, Any], name: str, where: str, frames: int, H: int, W: int) -> None:

@@ -35,6 +35,7 @@ from lfmbench import sensor as _sensor
 from lfmbench.corpus import (MANIFEST_NAME, SCENES_DIR, Corpus, CorpusFileError, check_scene_id, frame_dir,
                              group_storage, sha256_file)
 from lfmbench.fileio import atomic_torch_save
+from lfmbench.vocabulary import PHOTODIODES
 
 #: Version of the cached layout; bump when the projection changes so stale caches are not reused.
 CACHE_VERSION = 2
@@ -42,7 +43,6 @@ CACHE_VERSION = 2
 AUX_FOR_OUTPUT = {"depth": "depth.Z", "light_index": "mask.light"}
 #: Aux channels kept by :func:`build_layers` / :func:`load_or_build` when the caller does not say.
 AUX_DEFAULT = ("depth.Z", "mask.light")
-PHOTODIODES = ("lpd", "spd")
 
 
 @dataclass

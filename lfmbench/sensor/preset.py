@@ -26,14 +26,11 @@ import torch
 from lfmbench.check import check_keys, get_number
 from lfmbench.sensor.optics import OpticsConfig
 from lfmbench.sensor.spectral_data import DATA_DIR, read_spectral_csv
+from lfmbench.vocabulary import CAPTURES, PHOTODIODES
 
 __all__ = ["CAPTURES", "PHOTODIODES", "PRESET_DIR", "CFAPattern", "PhotodiodeSpec", "CaptureSpec", "SensorPreset",
            "available_presets", "load_preset", "preset_from_dict"]
 
-#: Capture names in the order of the ``saturated`` channels (docs/contracts.md).
-CAPTURES: tuple[str, ...] = ("lpd_hcg", "lpd_lcg", "spd")
-#: Photodiode names.
-PHOTODIODES: tuple[str, ...] = ("lpd", "spd")
 #: Shipped sensor presets (YAML).
 PRESET_DIR: Path = Path(__file__).resolve().parent.parent / "configs" / "sensors"
 

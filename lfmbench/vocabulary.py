@@ -1,0 +1,42 @@
+"""The names every stage shares: light groups and kinds, object and vehicle kinds, spectrum models, photodiodes
+and captures.
+
+One definition each: the scene generator and the renderer (``render_tools``), the corpus format
+(:mod:`lfmbench.corpus`), the sensor (:mod:`lfmbench.sensor`) and the datasets import them from here. Adding a
+kind means adding it here (and, for scene content, a template entry of ``render_tools``); nothing else lists
+them. Names only: no units, no numbers.
+"""
+from __future__ import annotations
+
+from types import MappingProxyType
+from typing import Mapping
+
+__all__ = ["GROUPS", "LIGHT_GROUPS", "LIGHT_KINDS", "VEHICLE_KINDS", "OBJECT_KINDS", "SPECTRUM_MODELS",
+           "PHOTODIODES", "CAPTURES"]
+
+#: Light groups (upstream ISET-LFM names + traffic signals); each group is one radiance layer of a corpus.
+GROUPS: tuple[str, ...] = ("headlights", "streetlights", "otherlights", "skymap", "signals")
+#: Groups that hold emitters placed in the scene (skymap is the sky emitter).
+LIGHT_GROUPS: tuple[str, ...] = ("headlights", "streetlights", "otherlights", "signals")
+#: Light kinds the renderer writes, and the group each belongs to by default (other corpus writers may use
+#: other kind names: ``meta.json`` treats ``kind`` as informative).
+LIGHT_KINDS: Mapping[str, str] = MappingProxyType({
+    "headlight": "headlights", "streetlight": "streetlights", "tail": "otherlights", "brake": "otherlights",
+    "indicator": "otherlights", "billboard": "otherlights", "signal": "signals"})
+#: Vehicle kinds of the scene generator (``vehicles.kind_weights``, ``vehicles.require_kinds`` of a scene config).
+VEHICLE_KINDS: tuple[str, ...] = ("car", "truck", "motorcycle")
+#: Object kinds of a scene file: the static scene parts, the vehicles, the poles.
+OBJECT_KINDS: tuple[str, ...] = ("ground", "road", "marking", "sidewalk", "building", *VEHICLE_KINDS,
+                                 "streetlight_pole", "signal_pole")
+#: Emission-spectrum models (``spectrum["model"]`` of a scene light and of ``meta.json``) and their required and
+#: optional parameters (the models themselves: :mod:`render_tools.spectra`).
+SPECTRUM_MODELS: Mapping[str, Mapping[str, tuple[str, ...]]] = MappingProxyType({
+    "led": MappingProxyType({"required": ("peak_nm", "fwhm_nm"), "optional": ()}),
+    "light_source": MappingProxyType({"required": ("name",), "optional": ()}),
+    "illuminant": MappingProxyType({"required": ("name",), "optional": ()}),
+    "daylight": MappingProxyType({"required": ("cct_k",), "optional": ()}),
+})
+#: Photodiodes of the split pixel: large (LPD, short exposure) and small (SPD, long exposure).
+PHOTODIODES: tuple[str, ...] = ("lpd", "spd")
+#: Captures of the split pixel, in the order of the ``saturated`` channels (docs/contracts.md).
+CAPTURES: tuple[str, ...] = ("lpd_hcg", "lpd_lcg", "spd")
