@@ -33,7 +33,7 @@ llvm:
 	@test -e $(LLVM) || (apt-get install -y -q libllvm19 >/dev/null 2>&1 || (apt-get update -q >/dev/null && apt-get install -y -q libllvm19 >/dev/null)) || echo "warning: libllvm19 not installed; rendering falls back to scalar_spectral"
 
 demo: $(STAMP) llvm
-	DRJIT_LIBLLVM_PATH=$(wildcard /usr/lib/x86_64-linux-gnu/libLLVM.so.19.1) $(PY) -m lfmbench.demo
+	DRJIT_LIBLLVM_PATH=$(wildcard /usr/lib/x86_64-linux-gnu/libLLVM.so.19.1) $(PY) -m lfmbench.cli demo
 
 # Every benchmark behind the tables and plots in docs/ (about 25 minutes on 2 cores; each script also runs alone).
 bench: $(STAMP) llvm

@@ -1,4 +1,4 @@
-"""Tests of lfmbench.evaluate: result files, bad methods reported per scene, MAC counting, leaderboard, CLI."""
+"""Tests of lfmbench.evaluation: result files, bad methods reported per scene, MAC counting, leaderboard, CLI."""
 from __future__ import annotations
 
 import json
@@ -8,7 +8,9 @@ import pytest
 import torch
 from typer.testing import CliRunner
 
-from lfmbench import evaluate as ev
+from lfmbench import evaluation as ev
+from lfmbench.cli.evaluate import register as register_evaluate
+from lfmbench.evaluation.benchmark import benchmark as run_benchmark
 from lfmbench.metrics import ScoreOptions
 from tests.data.metrics.data import make_batch
 
@@ -157,7 +159,7 @@ def test_cli_leaderboard_and_evaluate_errors(tmp_path):
     import typer
 
     app = typer.Typer()
-    ev.register(app)
+    register_evaluate(app)
     ev.evaluate("lpd_only", _batches(1), output=tmp_path / "a.json", repeats=1, progress=False)
     ev.evaluate("spd_only", _batches(1), output=tmp_path / "b.json", repeats=1, progress=False)
     r = CliRunner().invoke(app, ["leaderboard", str(tmp_path / "a.json"), str(tmp_path / "b.json"),
@@ -201,7 +203,7 @@ def test_cli_evaluate_on_tiny_corpus(tmp_path):
 
     corpus = make_corpus(tmp_path / "corpus", n_scenes=3)
     app = typer.Typer()
-    ev.register(app)
+    register_evaluate(app)
     out = tmp_path / "runs" / "fa.json"
     threads = torch.get_num_threads()
     try:
@@ -260,7 +262,7 @@ def test_benchmark_runs_methods_and_writes_leaderboard(tmp_path, capsys):
     from tests.data.corpus.data import make_corpus
 
     corpus = make_corpus(tmp_path / "corpus", n_scenes=3)
-    rows = ev.benchmark(corpus, ["lpd_only", "spd_only"], tmp_path / "runs", split="all", perceptual=False,
+    rows = run_benchmark(corpus, ["lpd_only", "spd_only"], tmp_path / "runs", split="all", perceptual=False,
                         repeats=1, progress=False)
     assert [r["rank"] for r in rows] == [1, 2] and {r["method"] for r in rows} == {"lpd_only", "spd_only"}
     for f in ("lpd_only.json", "spd_only.json", "leaderboard.md", "leaderboard.png"):

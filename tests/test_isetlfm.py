@@ -1,4 +1,4 @@
-"""Import of the released ISET-LFM dataset (lfmbench.isetlfm) from tiny files written in its layout."""
+"""Import of the released ISET-LFM dataset (lfmbench.corpus.isetlfm) from tiny files written in its layout."""
 from __future__ import annotations
 
 import json
@@ -10,7 +10,7 @@ import scipy.io
 from typer.testing import CliRunner
 
 from lfmbench import corpus as C
-from lfmbench import isetlfm as I
+from lfmbench.corpus import isetlfm as I
 from lfmbench.cli import app
 
 H, W = 6, 10

@@ -9,7 +9,9 @@ import pytest
 import typer
 from typer.testing import CliRunner
 
-from lfmbench import evaluate as ev
+from lfmbench import evaluation as ev
+from lfmbench.cli.evaluate import register as register_evaluate
+from lfmbench.evaluation.benchmark import benchmark as run_benchmark
 from lfmbench.evaluation import leaderboard as lb
 from lfmbench.evaluation import stats
 from lfmbench.metrics import REGISTRY, MetricSpec, ScoreOptions, score_batch
@@ -24,13 +26,13 @@ def bench(tmp_path_factory):
     """Three baselines scored on a 6-scene corpus of bright flickering LEDs (split 'all')."""
     d = tmp_path_factory.mktemp("lb")
     corpus = make_led_corpus(d / "corpus", n_scenes=6)
-    rows = ev.benchmark(corpus, METHODS, d / "runs", split="all", perceptual=False, repeats=1, progress=False)
+    rows = run_benchmark(corpus, METHODS, d / "runs", split="all", perceptual=False, repeats=1, progress=False)
     return d, corpus, rows
 
 
 def _app():
     app = typer.Typer()
-    ev.register(app)
+    register_evaluate(app)
     return app
 
 

@@ -258,9 +258,9 @@ def test_evaluate_cli_scores_24_frame_sequences_end_to_end(long_corpus, tmp_path
 def test_benchmark_scores_24_frame_sequences(long_corpus, tmp_path):
     """``benchmark(frames=24)`` (the library call behind a leaderboard run) scores 24-frame series like
     ``evaluate --frames 24``, and records the frame count, so that its runs are not ranked with 3-frame ones."""
-    from lfmbench import evaluation as ev
+    from lfmbench.evaluation.benchmark import benchmark
 
-    rows = ev.benchmark(long_corpus, ["lpd_only"], tmp_path / "runs", split="all", perceptual=False, repeats=1,
+    rows = benchmark(long_corpus, ["lpd_only"], tmp_path / "runs", split="all", perceptual=False, repeats=1,
                         progress=False, max_scenes=1, frames=24)
     assert [r["method"] for r in rows] == ["lpd_only"]
     d = json.loads((tmp_path / "runs" / "lpd_only.json").read_text())

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import yaml
 
-from lfmbench import paper_figures as P
+from lfmbench.paper import figures as P
 from lfmbench.flicker import pwm_exposure
 
 FPS = 60.0
@@ -194,6 +194,6 @@ def test_cli_fig3_needs_no_corpus(tmp_path):
 
 
 def test_module_does_not_import_torch():
-    code = "import sys, lfmbench.paper_figures, lfmbench.paper_scenes; print('torch' in sys.modules)"
+    code = "import sys, lfmbench.paper.figures, lfmbench.paper.scenes; print('torch' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "False"

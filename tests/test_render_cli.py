@@ -1,4 +1,4 @@
-"""``lfmbench render`` orchestration (render_tools.cli, render_tools.jobs): resume, atomicity, bad input, pool, Ray.
+"""``lfmbench render`` orchestration (lfmbench.cli.render, render_tools.jobs): resume, atomicity, bad input, pool, Ray.
 
 Most tests use the real scene generator, scene validation, RenderOptions and ``scene_meta`` (no Mitsuba) with a
 fake ``render_frames`` that returns seeded random radiance of the right shapes, so the orchestration is tested

@@ -7,12 +7,12 @@ PWM, ego speed and their bins), :mod:`~lfmbench.evaluation.stats` (bootstrap CIs
 :mod:`~lfmbench.evaluation.results` (the result file: per-scene values, aggregates, breakdown),
 :mod:`~lfmbench.evaluation.run` (:func:`evaluate`), :mod:`~lfmbench.evaluation.leaderboard` (ranking and
 tables), :mod:`~lfmbench.evaluation.benchmark` (several methods on one corpus) and
-:mod:`~lfmbench.evaluation.cli` (the two commands). Result format: ``docs/metrics.md`` ("Result files").
+:mod:`~lfmbench.cli.evaluate` (the two commands). Result format: ``docs/metrics.md`` ("Result files").
 """
 import importlib
 
 #: public name -> submodule that defines it; imported on first access (PEP 562), so that importing
-#: :mod:`lfmbench.evaluation.cli` to register the commands does not import torch and the dataset.
+#: :mod:`lfmbench.cli.evaluate` to register the commands does not import torch and the dataset.
 _WHERE = {
     **dict.fromkeys(["EmptyDataError", "collate_samples", "make_dataset"], "lfmbench.datasets.loading"),
     **dict.fromkeys(["benchmark", "safe_name", "write_leaderboard"], "lfmbench.evaluation.benchmark"),

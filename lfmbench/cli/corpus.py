@@ -61,7 +61,7 @@ def import_isetlfm_cmd(
     from rich.progress import Progress
 
     from lfmbench.corpus import CorpusError, CorpusWriteError
-    from lfmbench.isetlfm import find_scenes, import_isetlfm
+    from lfmbench.corpus.isetlfm import find_scenes, import_isetlfm
 
     console = Console(stderr=True, soft_wrap=True)
     try:

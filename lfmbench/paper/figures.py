@@ -1,6 +1,6 @@
 """Reproductions of the ISET-LFM paper's Figs. 3-7 with lfmbench (``lfmbench paper-figures``).
 
-- Fig. 3: Phi[n] at 30 fps for 5 ms and 11.11 ms exposures (:mod:`lfmbench.flicker_report`; no render).
+- Fig. 3: Phi[n] at 30 fps for 5 ms and 11.11 ms exposures (:mod:`lfmbench.paper.fig3`; no render).
 - Fig. 4: a two-frame sequence (60 fps, 60 m/s, global shutter): the 5 ms LPD is sharp but a car's tail and
   brake lights vanish in one frame; the 11.11 ms SPD is steady but motion-blurred.
 - Fig. 5: the simple (upstream input-referred) fusion prefers the unsaturated LPD, so the dropout of a light
@@ -31,7 +31,7 @@ import numpy as np
 
 
 #: Directory of the figure scene files and render profiles.
-CONFIG_DIR = Path(__file__).with_name("configs") / "paper_figures"
+CONFIG_DIR = Path(__file__).resolve().parent.parent / "configs" / "paper_figures"
 #: Sub-corpus name, scene file and render profile of each rendered figure scene.
 RENDERS = {"fig4_6": ("fig4_6_scene.json", "fig4_6_render.yaml"),
            "fig7": ("fig7_scene.json", "fig7_render.yaml")}
@@ -718,7 +718,7 @@ def fig7(corpus: str | Path, out_dir: str | Path, setup: Setup7 | None = None) -
 # ------------------------------------------------------------------------------------------ driver
 def fig3(out_dir: str | Path) -> Path:
     """Fig. 3 (no corpus): ``out_dir/fig3_flicker.png``, 12 frames at 30 fps, 95 Hz, D = 0.2."""
-    from lfmbench.flicker_report import plot_fig3
+    from lfmbench.paper.fig3 import plot_fig3
 
     return plot_fig3(Path(out_dir) / "fig3_flicker.png", frames=12)
 
@@ -773,38 +773,3 @@ def render_corpus(corpus: str | Path, workers: int = 1) -> None:
         rc = subprocess.call(cmd)
         if rc != 0:
             raise RuntimeError(f"render failed (exit {rc}): {' '.join(cmd[2:])}")
-
-
-def register(app) -> None:
-    import typer
-
-    @app.command("paper-figures")
-    def paper_figures(fig: str = typer.Option("all", "--fig", help="figure: 3, 4, 5, 6, 7 or all"),
-                      corpus: Path = typer.Option(None, "--corpus",
-                                                  help="paper-figure corpus (DIR with fig4_6/ and fig7/, from "
-                                                       "--render) or any rendered corpus; not needed for --fig 3"),
-                      out: Path = typer.Option(Path("docs/img"), "--out", help="directory for the PNG files"),
-                      render: bool = typer.Option(False, "--render",
-                                                  help="first render the figure scenes into --corpus (skips "
-                                                       "scenes already there)"),
-                      workers: int = typer.Option(1, "--workers", help="render processes (with --render)")) -> None:
-        """Reproduce the ISET-LFM paper's Figs. 3-7 (docs/paper-figures.md)."""
-        def fail(msg: str) -> None:
-            typer.echo(f"error: {msg}", err=True)
-            raise typer.Exit(2)
-
-        if fig not in FIGURES:
-            fail(f"--fig must be one of {', '.join(FIGURES)}; got {fig!r}")
-        if render:
-            if corpus is None:
-                fail("--render needs --corpus DIR (where the figure corpus is rendered)")
-            try:
-                render_corpus(corpus, workers)
-            except RuntimeError as exc:
-                fail(str(exc))
-        try:
-            paths = make_figures(fig, corpus, out)
-        except FigureInputError as exc:
-            fail(str(exc))
-        for p in paths:
-            typer.echo(f"wrote {p}")

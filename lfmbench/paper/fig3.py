@@ -55,33 +55,3 @@ def plot_fig3(path: str | Path, **kw) -> Path:
     path = atomic_save_figure(fig, path, dpi=110)
     plt.close(fig)
     return path
-
-
-def register(app) -> None:
-    import typer
-
-    @app.command("flicker-report")
-    def flicker_report(freq_hz: float = typer.Option(95.0, help="PWM frequency (Hz)"),
-                       duty: float = typer.Option(0.2, help="duty cycle (0..1)"),
-                       fps: float = typer.Option(30.0, help="frame rate (1/s)"),
-                       frames: int = typer.Option(12, help="number of frames"),
-                       plot: Path = typer.Option(None, help="write the Fig. 3 plot to this PNG")) -> None:
-        """Reproduce the paper's Fig. 3: Phi[n] of a PWM LED for 5 ms and 11.11 ms exposures."""
-        from rich.console import Console
-        from rich.table import Table
-
-        try:
-            s = fig3_series(freq_hz, duty, fps, frames)
-        except ValueError as exc:
-            raise typer.BadParameter(str(exc)) from None
-        t = Table(title=f"PWM flicker: f = {freq_hz:g} Hz, D = {duty:g}, {fps:g} fps (exact model)")
-        t.add_column("frame")
-        t.add_column("phase [ms]")
-        for te in FIG3_EXPOSURES_S:
-            t.add_column(f"Phi, te={te * 1e3:.2f} ms [ms ON]")
-        for i in range(frames):
-            t.add_row(str(i), f"{s['phase_s'][i] * 1e3:.3f}", *(f"{s[te][i] * 1e3:.3f}" for te in FIG3_EXPOSURES_S))
-        t.add_row("FSI", "", *(f"{s[('fsi', te)]:.3f}" for te in FIG3_EXPOSURES_S))
-        Console().print(t)
-        if plot:
-            typer.echo(f"wrote {plot_fig3(plot, freq_hz=freq_hz, duty=duty, fps=fps, frames=frames)}")

@@ -1,4 +1,6 @@
-"""The end-to-end demo behind ``make demo`` (settings: ``lfmbench/configs/demo.yaml``).
+"""``lfmbench demo``: the end-to-end demo behind ``make demo`` (settings: ``lfmbench/configs/demo.yaml``).
+
+0. print the flicker model at the paper's Fig. 3 settings (no render);
 
 1. render the small default corpus (fast Mitsuba path; resumable, so a second run reuses it);
 2. train the learned baseline and the tiny U-Net (``unet.config`` of the demo config, by default
@@ -14,9 +16,14 @@ import sys
 import time
 from pathlib import Path
 
+import typer
 import yaml
 
-CONFIG = Path(__file__).resolve().parent / "configs" / "demo.yaml"
+from lfmbench.paper.fig3 import FIG3_EXPOSURES_S, fig3_series
+
+__all__ = ["CONFIG", "run", "main", "register"]
+
+CONFIG = Path(__file__).resolve().parent.parent / "configs" / "demo.yaml"
 
 
 def _step(title: str) -> float:
@@ -65,14 +72,14 @@ def run(out: str | Path | None = None, config: str | Path = CONFIG) -> dict:
         subprocess.run(cmd, check=True)
     secs["train_unet"] = time.perf_counter() - t
 
-    from lfmbench.evaluation import benchmark
+    from lfmbench.evaluation.benchmark import benchmark
     ev = cfg["evaluate"]
     t = _step(f"3. evaluate every baseline on the {ev['split']} split -> {runs}")
     rows = benchmark(corpus, runs_dir=runs, split=ev["split"], seed=ev["seed"], repeats=ev["repeats"],
                      perceptual=ev["perceptual"], samples_per_scene=ev["samples_per_scene"])
     secs["evaluate"] = time.perf_counter() - t
 
-    from lfmbench.paper_figures import make_all
+    from lfmbench.paper.figures import make_all
     t = _step(f"4. reproduce the paper's figures -> {figs}")
     paths = make_all(corpus, figs)
     for p in paths:
@@ -81,3 +88,27 @@ def run(out: str | Path | None = None, config: str | Path = CONFIG) -> dict:
     print("\ndone in " + ", ".join(f"{k} {v:.0f} s" for k, v in secs.items()) +
           f". Leaderboard: {runs / 'leaderboard.md'} and {runs / 'leaderboard.png'}")
     return {"rows": rows, "figures": paths, "seconds": secs}
+
+
+def main(out: str | Path | None = None, config: str | Path = CONFIG) -> dict:
+    """The flicker model at the paper's Fig. 3 settings, then :func:`run`; returns what :func:`run` returns."""
+    s = fig3_series(frames=12)
+    print("Flicker model (paper Fig. 3 settings: 95 Hz, D = 0.2, 30 fps):")
+    for te in FIG3_EXPOSURES_S:
+        print(f"  te = {te * 1e3:5.2f} ms  Phi[n] (ms ON) = {' '.join(f'{v * 1e3:.3f}' for v in s[te][:6])} ...  "
+              f"FSI = {s[('fsi', te)]:.3f}")
+    return run(out, config)
+
+
+def demo_cmd(
+    out: Path = typer.Option(None, "--out", help="output directory (default: out_dir of the config)"),
+    config: Path = typer.Option(CONFIG, "--config", help="demo settings (YAML)"),
+) -> None:
+    """Render the small demo corpus, train the learned baselines, evaluate every baseline and reproduce the
+    paper's figures (what ``make demo`` runs; resumable: a second run reuses the corpus and checkpoints)."""
+    main(out, config)
+
+
+def register(app: typer.Typer) -> None:
+    """Add ``demo`` to the ``lfmbench`` app."""
+    app.command("demo")(demo_cmd)

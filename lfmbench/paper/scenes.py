@@ -4,7 +4,7 @@ were made.
 The scene files are the data of record (plain JSON of :mod:`render_tools.scene`, edit them by hand if you
 like); this module only documents and reproduces their construction: a night street from the procedural
 generator (``generate_scene(seed, "night")`` with no random vehicles), then vehicles placed by hand.
-``python -m lfmbench.paper_scenes [OUT_DIR]`` rewrites them (default: the package's ``configs/paper_figures``).
+``python -m lfmbench.paper.scenes [OUT_DIR]`` rewrites them (default: the package's ``configs/paper_figures``).
 
 - ``paper_fig4_6``: Figs. 4-6 of the paper (60 fps, ego speed 60 m/s, global shutter, LPD 5 ms, SPD 11.11 ms).
   Every vehicle is parked (velocity 0), as in the paper's model (a static environment, fast ego motion), with
@@ -26,7 +26,7 @@ import sys
 from pathlib import Path
 
 #: Directory of the figure scene files and render profiles, inside the package.
-SCENE_DIR = Path(__file__).with_name("configs") / "paper_figures"
+SCENE_DIR = Path(__file__).resolve().parent.parent / "configs" / "paper_figures"
 #: Generator seed of the street (buildings, streetlights, road) of both scenes.
 STREET_SEED = 11
 #: Fixed luminances, cd/m^2.

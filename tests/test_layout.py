@@ -1,0 +1,180 @@
+"""The package layout: data flows one way (scene -> corpus -> captures -> estimate -> scores), with no import cycle.
+
+The imports are read from the source (``ast``), at module level and inside functions alike, so an import hidden
+in a function body counts as much as one at the top. A module that loads modules by name
+(``importlib.import_module``) is taken to import every module of the tree that it names in a string.
+"""
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGES = ("lfmbench", "render_tools")
+
+#: Layers from the bottom up; a module may import modules of its own layer's package or of a lower layer only.
+#: Each entry is a module or a package prefix (``lfmbench.sensor`` covers ``lfmbench.sensor.noise``).
+LAYERS = (
+    ("lfmbench", "lfmbench.constants", "lfmbench.check", "lfmbench.fileio", "lfmbench.vocabulary",
+     "lfmbench.limits"),
+    ("lfmbench.flicker",),
+    ("lfmbench.corpus",),
+    ("render_tools", "lfmbench.sensor"),
+    ("lfmbench.datasets",),
+    ("lfmbench.metrics",),
+    ("lfmbench.baselines",),
+    ("lfmbench.train",),
+    ("lfmbench.evaluation",),
+    ("lfmbench.paper",),
+    ("lfmbench.cli",),
+)
+
+
+#: Cycles known and being removed (the per-sample and batched sample assembly, issue 24 step 2); empty when done.
+KNOWN_CYCLES = ({"lfmbench.datasets.batched", "lfmbench.datasets.capture"},)
+
+
+def _module_name(path: Path) -> str:
+    parts = list(path.relative_to(ROOT).with_suffix("").parts)
+    if parts[-1] == "__init__":
+        parts.pop()
+    return ".".join(parts)
+
+
+def _modules() -> dict[str, Path]:
+    out = {}
+    for pkg in PACKAGES:
+        for p in sorted((ROOT / pkg).rglob("*.py")):
+            out[_module_name(p)] = p
+    return out
+
+
+MODULES = _modules()
+
+
+def _target(name: str) -> str | None:
+    """The module of the tree that ``import name`` loads last (``a.b.c`` -> ``a.b.c`` or its package)."""
+    while name and name not in MODULES:
+        name = name.rpartition(".")[0]
+    return name or None
+
+
+def _imports(mod: str, path: Path) -> set[str]:
+    """Modules of the tree that ``mod`` imports anywhere in its body."""
+    tree = ast.parse(path.read_text(encoding="utf-8"), str(path))
+    is_pkg = path.name == "__init__.py"
+    found: set[str] = set()
+    by_name = False
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            found.update(filter(None, (_target(a.name) for a in node.names)))
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = mod if is_pkg else mod.rpartition(".")[0]
+                for _ in range(node.level - 1):
+                    base = base.rpartition(".")[0]
+                src = f"{base}.{node.module}" if node.module else base
+            else:
+                src = node.module or ""
+            for a in node.names:
+                t = _target(f"{src}.{a.name}") if f"{src}.{a.name}" in MODULES else _target(src)
+                if t:
+                    found.add(t)
+        elif isinstance(node, ast.Attribute) and node.attr == "import_module":
+            by_name = True
+    if by_name:
+        found.update(n.value for n in ast.walk(tree)
+                     if isinstance(n, ast.Constant) and isinstance(n.value, str) and n.value in MODULES)
+    found.discard(mod)
+    return found
+
+
+GRAPH = {m: _imports(m, p) for m, p in MODULES.items()}
+
+
+def _layer(mod: str) -> tuple[int, str]:
+    """(layer index, the entry of :data:`LAYERS` that holds ``mod``): the longest matching prefix."""
+    best = None
+    for i, entries in enumerate(LAYERS):
+        for e in entries:
+            if (mod == e or mod.startswith(e + ".")) and (best is None or len(e) > len(best[1])):
+                best = (i, e)
+    if best is None:
+        raise AssertionError(f"{mod} is in no layer: add it to LAYERS in tests/test_layout.py")
+    return best
+
+
+def _is_parent(a: str, b: str) -> bool:
+    """``b`` is a package that holds ``a`` (importing ``a`` runs ``b``'s ``__init__`` first anyway)."""
+    return a.startswith(b + ".")
+
+
+def test_every_module_has_a_layer():
+    for m in MODULES:
+        _layer(m)
+
+
+def test_no_import_cycle():
+    """Depth-first search for a back edge; an edge from a module to a package holding it is not followed (the
+    package's ``__init__`` runs before the module whatever the module imports)."""
+    state: dict[str, int] = {}
+    stack: list[str] = []
+    cycles: list[list[str]] = []
+
+    def visit(m: str) -> None:
+        state[m] = 1
+        stack.append(m)
+        for n in sorted(GRAPH[m]):
+            if _is_parent(m, n):
+                continue
+            if state.get(n) == 1:
+                cycles.append(stack[stack.index(n):] + [n])
+            elif n not in state:
+                visit(n)
+        stack.pop()
+        state[m] = 2
+
+    for m in sorted(GRAPH):
+        if m not in state:
+            visit(m)
+    cycles = [c for c in cycles if set(c) not in KNOWN_CYCLES]
+    assert not cycles, "import cycles: " + "; ".join(" -> ".join(c) for c in cycles)
+
+
+def test_imports_point_down_the_pipeline():
+    """Every import goes to the module's own package entry or to a lower layer: no stage imports a later stage,
+    no stage of lfmbench imports render_tools (only lfmbench.cli and lfmbench.paper join them), and render_tools
+    imports from lfmbench only what lies below it."""
+    bad = []
+    for m, targets in GRAPH.items():
+        lm, em = _layer(m)
+        for t in targets:
+            lt, et = _layer(t)
+            if lt > lm or (lt == lm and em != et):
+                bad.append(f"{m} -> {t}")
+    assert not bad, "imports against the flow: " + ", ".join(sorted(bad))
+
+
+def test_no_library_module_of_lfmbench_imports_render_tools():
+    joins = ("lfmbench.cli", "lfmbench.paper")
+    bad = sorted(m for m, targets in GRAPH.items()
+                 if m.startswith("lfmbench") and not any(m == j or m.startswith(j + ".") for j in joins)
+                 and any(t.split(".")[0] == "render_tools" for t in targets))
+    assert not bad, f"library modules importing render_tools: {bad}"
+
+
+@pytest.mark.parametrize("source, expected", [
+    ("from lfmbench.sensor import noise\n", {"lfmbench.sensor.noise"}),
+    ("def f():\n    from lfmbench.sensor import load_preset\n", {"lfmbench.sensor"}),
+    ("import lfmbench.sensor.poisson as P\n", {"lfmbench.sensor.poisson"}),
+    ("from .scene import load_config\n", {"render_tools.scene"}),
+    ("import importlib\nimportlib.import_module('lfmbench.flicker')\n", {"lfmbench.flicker"}),
+    ("x = 'lfmbench.flicker'\n", set()),
+])
+def test_import_reader(tmp_path, source, expected):
+    """The reader itself, on small sources standing in for ``render_tools/spectra.py``."""
+    p = tmp_path / "spectra.py"
+    p.write_text(source)
+    assert _imports("render_tools.spectra", p) == expected
