@@ -225,7 +225,7 @@ def _make_class(mi):
             self.n_bands = len(lo)
             self.band_w = props.get("band_width", 10.0)
             if self.n_bands:
-                self.n_pass = -(-self.n_bands // n_lambda)
+                self.n_pass = n_passes(self.n_bands)
                 if self.tiles_y != self.n_pass:
                     raise ValueError(f"tiles_y: must equal the number of band passes {self.n_pass}")
                 # sentinel: wavelengths of a missing band go to 820..830 nm, outside every band (contribute 0)

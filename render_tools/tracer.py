@@ -44,6 +44,7 @@ import numpy as np
 
 from . import camera as cam_mod
 from . import mitsuba_scene as ms
+from .kernel_rules import lane_divisor
 
 #: Wavelengths per Mitsuba spectral sample (MI_SPECTRUM_SAMPLES).
 N_LAMBDA = 4
@@ -476,7 +477,8 @@ class Tracer:
             hi = dr.select(go, hi, mid)
         ti = lo
         g = lambda k, T=mi.UInt32: dr.gather(T, tab[k], ti)  # noqa: E731
-        w, h, K, spp = g("w"), g("h"), g("K"), g("spp")
+        # divisors clamped to >= 1: the masked tail lanes of the last packet gather 0 (kernel_rules)
+        w, h, K, spp = (lane_divisor(g(k)) for k in ("w", "h", "K", "spp"))
         local = lane - g("off")
         x = local % w
         r = local // w
@@ -520,6 +522,7 @@ class Tracer:
         raised the variance several times. Non-finite samples are dropped (counted as 0). Returns one sum per
         slot (list of :attr:`S` ``mi.Spectrum``)."""
         acc = [mi.Spectrum(0.0) for _ in range(self.S)]
+        spp = lane_divisor(spp)  # a divisor below (kernel_rules); the caller's is clamped already
         s = mi.UInt32(0)
         inv = dr.rcp(mi.Float(spp))
         pow2 = (spp & (spp - 1)) == 0
