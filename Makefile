@@ -1,6 +1,6 @@
 # lfmbench: two commands do all set-up on a fresh machine.
-#   make test   create .venv, install everything (once), run the test suite
-#   make demo   set up the fast render path, render the demo corpus, evaluate the baselines
+#   make test   create .venv, install everything (once), install libLLVM 19 (once), run the test suite
+#   make demo   the same set-up, then render the demo corpus, evaluate the baselines
 SHELL  := /bin/bash
 PYTHON ?= python3
 VENV   := .venv
@@ -8,9 +8,9 @@ PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.lfmbench-installed
 PIP    := $(PY) -m pip install -q
 LLVM   := /usr/lib/x86_64-linux-gnu/libLLVM.so.19.1
-export DRJIT_LIBLLVM_PATH ?= $(wildcard /usr/lib/x86_64-linux-gnu/libLLVM.so.19.1)
+# a DRJIT_LIBLLVM_PATH of the caller is kept; else the recipes name Debian's libLLVM 19 once `llvm` installed it
 
-.PHONY: test demo venv llvm bench clean-venv
+.PHONY: setup test demo venv llvm bench clean-venv
 
 venv: $(STAMP)
 
@@ -25,24 +25,28 @@ $(STAMP): pyproject.toml constraints.txt
 	$(PY) -c "import torch; assert torch.__version__.startswith('2.13.0'), torch.__version__"
 	touch $(STAMP)
 
-test: $(STAMP)
-	$(PY) -m pytest -q -n 2 tests
+# Everything `test`, `demo` and `bench` need: the Python environment and the render dependency.
+setup: $(STAMP) llvm
 
-# Debian's LLVM 19 for Mitsuba's llvm_* variants (LLVM 15 crashes on these CPUs; see docs/rendering.md).
-llvm: 
-	@test -e $(LLVM) || (apt-get install -y -q libllvm19 >/dev/null 2>&1 || (apt-get update -q >/dev/null && apt-get install -y -q libllvm19 >/dev/null)) || echo "warning: libllvm19 not installed; rendering falls back to scalar_spectral"
+test: setup
+	DRJIT_LIBLLVM_PATH=$${DRJIT_LIBLLVM_PATH:-$$(ls $(LLVM) 2>/dev/null)} $(PY) -m pytest -q -n 2 tests
 
-demo: $(STAMP) llvm
-	DRJIT_LIBLLVM_PATH=$(wildcard /usr/lib/x86_64-linux-gnu/libLLVM.so.19.1) $(PY) -m lfmbench.cli demo
+# Debian's LLVM 19 for Mitsuba's llvm_* variants (the system's LLVM 15 crashes on AVX-512 CPUs; README, "System
+# dependency"). Needs root (apt-get); without it the render tests skip with one line saying why (CI never skips).
+llvm:
+	@test -e $(LLVM) || (echo "installing Debian's libllvm19 (render dependency)"; apt-get install -y -q libllvm19 >/dev/null 2>&1 || (apt-get update -q >/dev/null 2>&1 && apt-get install -y -q libllvm19 >/dev/null 2>&1)) || echo "warning: could not install libllvm19 (needs root: sudo apt-get install libllvm19); renders need it, their tests skip"
+
+demo: setup
+	DRJIT_LIBLLVM_PATH=$${DRJIT_LIBLLVM_PATH:-$$(ls $(LLVM) 2>/dev/null)} $(PY) -m lfmbench.cli demo
 
 # Every benchmark behind the tables and plots in docs/ (about 25 minutes on 2 cores; each script also runs alone).
-bench: $(STAMP) llvm
+bench: setup
 	$(PY) benchmarks/bench_flicker.py
 	$(PY) benchmarks/bench_sensor.py
-	DRJIT_LIBLLVM_PATH=$(wildcard $(LLVM)) $(PY) benchmarks/bench_dataset.py
-	DRJIT_LIBLLVM_PATH=$(wildcard $(LLVM)) $(PY) benchmarks/bench_render.py
-	DRJIT_LIBLLVM_PATH=$(wildcard $(LLVM)) $(PY) benchmarks/bench_crop_pad.py
-	DRJIT_LIBLLVM_PATH=$(wildcard $(LLVM)) $(PY) benchmarks/bench_object_motion.py
+	DRJIT_LIBLLVM_PATH=$${DRJIT_LIBLLVM_PATH:-$$(ls $(LLVM) 2>/dev/null)} $(PY) benchmarks/bench_dataset.py
+	DRJIT_LIBLLVM_PATH=$${DRJIT_LIBLLVM_PATH:-$$(ls $(LLVM) 2>/dev/null)} $(PY) benchmarks/bench_render.py
+	DRJIT_LIBLLVM_PATH=$${DRJIT_LIBLLVM_PATH:-$$(ls $(LLVM) 2>/dev/null)} $(PY) benchmarks/bench_crop_pad.py
+	DRJIT_LIBLLVM_PATH=$${DRJIT_LIBLLVM_PATH:-$$(ls $(LLVM) 2>/dev/null)} $(PY) benchmarks/bench_object_motion.py
 
 clean-venv:
 	rm -rf $(VENV)

@@ -2,6 +2,8 @@
 test modules never import each other)."""
 from __future__ import annotations
 
+import functools
+import os
 import sys
 from pathlib import Path
 
@@ -11,6 +13,37 @@ import pytest
 _ROOT = str(Path(__file__).resolve().parents[1])
 if _ROOT not in sys.path:
     sys.path.insert(0, _ROOT)
+
+
+#: What a render test says when this machine cannot run it (one line, also in CI's log).
+NO_JIT = ("renders need a JIT variant of Mitsuba: no working libLLVM 19 here (install it as root with "
+          "`apt-get install libllvm19`, which `make test` does; README 'System dependency')")
+
+
+@functools.lru_cache(maxsize=1)
+def jit_unavailable() -> str | None:
+    """None when ``llvm_ad_spectral`` or ``cuda_ad_spectral`` renders on this machine (the probe verdicts of
+    ``render_tools.backend`` are cached on disk, so this costs a child process once per machine), else why not."""
+    from render_tools import backend
+
+    if any(backend.probe_llvm(lib) for lib in backend.find_libllvm()) or backend.probe_cuda():
+        return None
+    return NO_JIT
+
+
+def pytest_configure(config):
+    config.addinivalue_line("markers", "jit: renders with Mitsuba's JIT back end (skipped, with one line saying "
+                                       "why, where no libLLVM 19 works; never skipped in CI)")
+
+
+def pytest_runtest_setup(item):
+    """Tests marked ``jit`` skip where no JIT variant works, all under one reported line (the skip is raised
+    here, so pytest groups them by this location). CI (``CI`` set) installs libllvm19 and must run them: there
+    they are not skipped, and fail with the renderer's own error if the set-up did not work."""
+    if item.get_closest_marker("jit") is not None and not os.environ.get("CI"):
+        reason = jit_unavailable()
+        if reason:
+            pytest.skip(reason)
 
 
 @pytest.fixture

@@ -80,6 +80,10 @@ def test_pwm_weights_equal_the_per_sample_weights_exactly(corpus, shutter):
     assert s == batch["slot_K"].shape[0] and n_checked >= 3 * 6
 
 
+#: Relative tolerance between two summation orders of <= 16 non-negative float32 terms: (16 - 1) eps.
+SUM_ORDER_RTOL = 15 * torch.finfo(torch.float32).eps
+
+
 @pytest.mark.parametrize("shutter", ["global", "rolling"])
 def test_batched_outputs_equal_the_per_sample_outputs(corpus, shutter):
     ref_ds, ds = _pair(corpus, shutter=shutter, frames=3, crop=(12, 16), samples_per_scene=3, outputs=ALL)
@@ -92,10 +96,18 @@ def test_batched_outputs_equal_the_per_sample_outputs(corpus, shutter):
             got = out[k][i]
             assert got.shape == v.shape and got.dtype == v.dtype, k
             if v.is_floating_point():
-                torch.testing.assert_close(got, v, rtol=1e-5, atol=1e-6 * float(v.abs().max()) + 1e-6)
-            # noise draws come from the same per-sample streams: DN and flags agree (a mean that differed in its
-            # last float32 bit could flip a draw; allow one pixel in a thousand)
-            assert (got != v).float().mean() <= 1e-3, k
+                # the two paths add a pixel's layers (static groups, light bins x PWM weights: n <= 16 terms in
+                # this corpus, all >= 0) in different orders, and the order depends on the CPU's vector width.
+                # Two float32 sums of the same n non-negative terms differ by at most (n - 1) eps of the sum
+                # (each order errs by <= (n - 1) eps / 2, Higham, "Accuracy and Stability of Numerical
+                # Algorithms", 2nd ed., 2002, eq. 4.4): a bound per value, never a count of bit-equal values
+                # (depth holds inf where no surface is hit: equal infinities and NaNs count as equal)
+                ok = torch.isclose(got, v, rtol=SUM_ORDER_RTOL, atol=0.0, equal_nan=True)
+                assert ok.all(), (k, float(((got - v).abs() / v.abs())[~ok].max()))
+            else:
+                # noise draws come from the same per-sample streams: DN and flags agree (a mean that differed in
+                # its last float32 bit could flip a draw; allow one pixel in a thousand)
+                assert (got != v).float().mean() <= 1e-3, k
         for k, v in ref["meta"].items():
             got = out["meta"][k][i]
             if torch.is_tensor(v):

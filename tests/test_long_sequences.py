@@ -44,6 +44,7 @@ def test_paper_resolution_capture_window_longer_than_frame_time_is_accepted():
 
 
 @pytest.mark.slow
+@pytest.mark.jit
 def test_tiny_render_with_overlapping_capture_windows_loads_with_rolling_shutter(tmp_path, monkeypatch):
     """16 x 8 px with a 2 ms line time: readout 16 ms, capture window 27.1 ms > 1/60 s. Rendered by the real
     renderer, validated, and simulated with a rolling shutter; row windows checked against the analytic timing."""

@@ -259,6 +259,7 @@ def test_ray_local(tmp_path):
 
 # ----------------------------------------------------------------------------------------- end to end
 @pytest.mark.slow
+@pytest.mark.jit
 def test_render_end_to_end_mitsuba(tmp_path, monkeypatch):
     """The real renderer: 32x18 px, 4 spp, 1 scene, 2 frames, through the CLI; then validate and read."""
     llvm = "/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1"

@@ -26,6 +26,7 @@ def test_scalar_variant_is_refused_with_a_clear_error():
         next(render.render_frames(_wall_scene(), opts))
 
 
+@pytest.mark.jit
 def test_directly_viewed_emitter_returns_its_spectral_radiance_per_nm():
     s = _wall_scene()
     opts = render.RenderOptions(width=12, height=8, spp=16, bins=2, frames=1, aux=False)
@@ -44,6 +45,7 @@ def test_directly_viewed_emitter_returns_its_spectral_radiance_per_nm():
     assert "skymap" not in fr["static"]  # zero-luminance sky: the group is left out
 
 
+@pytest.mark.jit
 def test_lambertian_plane_under_uniform_sky():
     rho, lsky = 0.5, 1000.0
     s = scene.empty_scene(pitch_deg=-45.0, fov_x_deg=20.0, sky_luminance_cd_m2=lsky)
@@ -59,6 +61,7 @@ def test_lambertian_plane_under_uniform_sky():
     assert np.allclose(img.mean((1, 2)), exp, rtol=0.04)
 
 
+@pytest.mark.jit
 def test_lambertian_plane_under_small_source():
     rho, lum, a, h = 0.5, 3e4, 0.2, 3.0
     s = scene.empty_scene(position_m=(3.0, 0.0, 2.0), pitch_deg=-89.0, fov_x_deg=4.0)
@@ -75,6 +78,7 @@ def test_lambertian_plane_under_small_source():
     assert np.allclose(img.mean((1, 2)), exp, rtol=0.04, atol=0.02 * exp.max())
 
 
+@pytest.mark.jit
 def test_static_camera_gives_identical_time_bins():
     opts = render.RenderOptions(width=12, height=8, spp=4, bins=5, frames=2, aux=False, groups=("otherlights",))
     for fr in render.render_frames(_wall_scene(), opts):
@@ -89,6 +93,7 @@ def _lamp_scene(speed):
     return scene.validate_scene(s)
 
 
+@pytest.mark.jit
 def test_bins_of_a_window_average_to_one_render_of_that_window():
     s = _lamp_scene(40.0)
     base = dict(width=48, height=32, spp=64, frames=1, aux=False, seed=3)
@@ -121,6 +126,7 @@ def test_continuous_blur_matches_average_of_instantaneous_subframes():
     assert streak >= 3
 
 
+@pytest.mark.jit
 def test_group_left_out_changes_nothing_in_the_others():
     s = _wall_scene()
     base = dict(width=12, height=8, spp=4, bins=2, frames=1, aux=False, seed=5)
@@ -131,6 +137,7 @@ def test_group_left_out_changes_nothing_in_the_others():
         assert np.array_equal(both["static"]["streetlights"][w], one["static"]["streetlights"][w])
 
 
+@pytest.mark.jit
 def test_light_crop_and_projection_agree_with_render():
     s = _lamp_scene(0.0)
     opts = render.RenderOptions(width=64, height=40, spp=16, frames=1, bins=1, aux=True)
@@ -155,6 +162,7 @@ def test_light_crop_and_projection_agree_with_render():
     assert mask[int(uv[0, 1]), int(uv[0, 0])] == 0 and (mask == -1).mean() > 0.9
 
 
+@pytest.mark.jit
 def test_lamp_straddling_the_camera_plane_gets_the_crop_of_its_visible_part():
     """A light strip overhead from 2 m behind the camera to 8 m ahead: its crop holds all of its light in a
     Mitsuba render of it alone (the independent answer), and is the top of the image only (the strip is above
@@ -199,6 +207,7 @@ def test_near_plane_clip_bounds_the_visible_part_of_a_face(seed):
     assert np.allclose(dense.min(0), lo, atol=0.03) and np.allclose(dense.max(0), hi, atol=0.03)  # nor added
 
 
+@pytest.mark.jit
 def test_aux_depth_range_and_instance_mask():
     d = 10.0
     s = scene.empty_scene()
@@ -256,6 +265,7 @@ def _expected_centroids(s, opts, velocity, lamp_center):
     (30.0, (-20.0, 0.0, 0.0), (10.0, 1.5, 1.4), 0.0),    # oncoming car
     (0.0, (0.0, -15.0, 0.0), (8.0, 0.5, 1.4), 0.0),      # crossing car, ego stopped
     (20.0, (10.0, -8.0, 0.0), (9.0, 0.5, 1.4), 0.6)])    # ego turning (0.6 rad/s), car drifting across
+@pytest.mark.jit
 def test_lamp_on_a_moving_vehicle_moves_with_it_inside_the_exposure(ego_speed, velocity, lamp, yaw_rate):
     """Per-light bins follow the lamp's true screen path (ego and vehicle motion), not the ego motion alone:
     bin centroids against the analytic projection of the moving lamp centre at each bin's mid-time."""
@@ -277,6 +287,7 @@ def test_lamp_on_a_moving_vehicle_moves_with_it_inside_the_exposure(ego_speed, v
     assert tuple(meta["lights"][0]["bbox"][0]) == tuple(bb)
 
 
+@pytest.mark.jit
 def test_dusk_sky_with_negative_lobes_renders_non_negative():
     """Mitsuba's sunsky gives slightly negative spectral radiance near the horizon at low sun (measured here,
     independently of the tracer); the tracer cuts it at 0, so the dusk scene that the corpus writer refused

@@ -44,6 +44,7 @@ def street():
     return s, opts, next(render.render_frames(s, opts))
 
 
+@pytest.mark.jit
 def test_static_group_matches_mitsuba_path_integrator(street):
     import mitsuba as mi
 
@@ -71,6 +72,7 @@ def test_static_group_matches_mitsuba_path_integrator(street):
         assert got.sum() == pytest.approx(want.sum(), rel=0.1)
 
 
+@pytest.mark.jit
 def test_light_set_matches_solo_render_with_object_motion(street):
     import mitsuba as mi
 
@@ -115,6 +117,7 @@ def _many_streetlights():
     return scene.validate_scene(s)
 
 
+@pytest.mark.jit
 def test_light_choice_by_estimated_contribution_is_unbiased():
     """Next-event estimation picks among many lamps in proportion to an estimate of their light at the point
     (distance, beam cone, face orientation): the image must equal Mitsuba's (uniform or flux-proportional
@@ -149,6 +152,7 @@ def test_light_choice_by_estimated_contribution_is_unbiased():
     assert np.allclose(gblk[big], wblk[big], rtol=0.06)
 
 
+@pytest.mark.jit
 def test_union_of_static_groups_matches_mitsuba_per_group():
     """Static groups traced together (``static_pass="union"``: one camera path records every static group, one
     next-event estimation over all their lamps) give each group's own image: each equals Mitsuba's path
@@ -189,6 +193,7 @@ def test_static_pass_is_checked():
         render.RenderOptions(static_pass="together")
 
 
+@pytest.mark.jit
 def test_tiles_are_independent_of_the_other_tiles_in_the_launch(street):
     """A tile's random numbers depend on (seed, key, index in the tile) only: the same tile rendered alone, or
     after other tiles, or with another MAX_LANES split of the launch, is bit-identical."""
@@ -211,6 +216,7 @@ def test_tiles_are_independent_of_the_other_tiles_in_the_launch(street):
     assert not np.array_equal(alone, tr.render([a], 6)[0])  # another seed, another estimate
 
 
+@pytest.mark.jit
 def test_bad_tile_is_refused_naming_it(street):
     import drjit as dr
     import mitsuba as mi
@@ -283,6 +289,7 @@ def test_registry_class_is_the_next_power_of_two_from_the_kinds_floor(n, kind):
     assert c >= max(n, lo) and c & (c - 1) == 0 and (c == lo or c // 2 < n)
 
 
+@pytest.mark.jit
 def test_registry_padding_changes_no_pixel_and_a_new_scene_reuses_the_kernel(monkeypatch):
     """Padding the registry (tracer.pad_registry) with objects outside the scene leaves every image and map bit
     for bit as without it; a new scene with three more lights (other shape and emitter counts, same size class)
