@@ -20,11 +20,9 @@ from __future__ import annotations
 import contextlib
 import json
 import logging
-import multiprocessing
 import signal
 import threading
 import time
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
@@ -34,6 +32,8 @@ import numpy as np
 from lfmbench.corpus import (DEFAULT_STORAGE, SPLITS_NAME, CorpusWriteError, CorpusWriter, ThreadedSceneWriter,
                              check_scene_id, prune_scene_dir)
 from lfmbench.fileio import atomic_write_json
+
+from .workers import WorkerDied, run_supervised
 
 __all__ = ["PROFILES_FILE", "Backend", "default_backend", "load_profile", "scene_seed", "scene_id_for",
            "RenderJob", "make_jobs", "protocol_jobs", "write_splits", "run_job", "RunSummary", "run_jobs",
@@ -45,6 +45,10 @@ log = logging.getLogger(__name__)
 PROFILES_FILE = Path(__file__).with_name("configs") / "render_profiles.yaml"
 #: Fractions of the train / val / test split written to ``splits.json``.
 SPLIT_FRACTIONS = (0.6, 0.2, 0.2)
+#: Default of ``run_jobs(isolate=...)``: render in worker processes also with ``workers=1``, so that a native
+#: crash of the renderer (SIGFPE, SIGSEGV, out-of-memory kill) is reported with its scene and signal and the
+#: other scenes go on (render_tools.workers). Tests of in-process fakes set it to False.
+ISOLATE_RENDERS = True
 
 
 @dataclass(frozen=True)
@@ -284,14 +288,18 @@ class RenderInterrupted(KeyboardInterrupt):
 def run_jobs(jobs: Sequence[RenderJob], writer: CorpusWriter, *, workers: int = 1, ray_address: str | None = None,
              on_start: Callable[[int, int], None] | None = None,
              on_done: Callable[[str, str], None] | None = None, resume: bool = True,
-             split_seed: int | None = None, splits: Mapping[str, Sequence[str]] | None = None) -> RunSummary:
+             split_seed: int | None = None, splits: Mapping[str, Sequence[str]] | None = None,
+             isolate: bool | None = None) -> RunSummary:
     """Run the jobs not yet complete in ``writer``'s corpus; commit each finished scene to the manifest.
 
     Args:
         jobs: from :func:`make_jobs` (all with ``out == writer.root``).
         writer: the corpus writer (only the driver writes the manifest).
-        workers: parallel scenes; 1 renders in this process, > 1 uses a spawn-context process pool (each
-            Mitsuba llvm render already uses every core, so 1 is usually fastest on a small machine).
+        workers: parallel scenes, each in a worker process (:func:`render_tools.workers.run_supervised`; each
+            Mitsuba llvm render already uses every core, so 1 is usually fastest on a small machine). A worker
+            killed by a signal fails its scene with the signal and a hint; a fresh worker renders the others.
+        isolate: with ``workers=1``, render in one worker process (True) or in this process (False: a native
+            crash then ends this process); None: :data:`ISOLATE_RENDERS` (True).
         ray_address: run on Ray instead: ``"local"`` (start or reuse a local instance with ``workers`` CPUs),
             ``"auto"`` or ``"ray://host:port"``; the output directory must be visible to the Ray workers.
         on_start: ``on_start(n_todo, n_skipped)`` once the resume check is done.
@@ -331,6 +339,8 @@ def run_jobs(jobs: Sequence[RenderJob], writer: CorpusWriter, *, workers: int = 
                 raise exc
             if hit or _is_interrupt(exc):
                 raise KeyboardInterrupt from exc
+            if isinstance(exc, WorkerDied):  # its writer thread died with it, perhaps in the middle of a file
+                writer.cleanup_temp(job.scene_id)
             summary.failed[job.scene_id] = f"{type(exc).__name__}: {exc}"
             log.error("scene %s failed: %s", job.scene_id, exc)
             if on_done is not None:
@@ -344,9 +354,10 @@ def run_jobs(jobs: Sequence[RenderJob], writer: CorpusWriter, *, workers: int = 
         if on_done is not None:
             on_done(job.scene_id, "rendered")
 
+    in_process = workers == 1 and not (ISOLATE_RENDERS if isolate is None else isolate)
     try:
         with _sigint_flag(hit):
-            _dispatch(todo, ray_address, workers, finished)
+            _dispatch(todo, ray_address, 0 if in_process else workers, finished)
     except KeyboardInterrupt:
         writer.cleanup_temp()
         raise RenderInterrupted(summary) from None
@@ -354,10 +365,11 @@ def run_jobs(jobs: Sequence[RenderJob], writer: CorpusWriter, *, workers: int = 
 
 
 def _dispatch(todo: Sequence[RenderJob], ray_address: str | None, workers: int, finished: Callable) -> None:
-    """Run the jobs on Ray, in this process or in a process pool; ``finished(job, result, exc)`` after each."""
+    """Run the jobs on Ray, in this process (``workers`` 0) or in worker processes; ``finished(job, result,
+    exc)`` after each."""
     if ray_address:
-        _run_ray(todo, ray_address, workers, finished)
-    elif workers == 1:
+        _run_ray(todo, ray_address, max(workers, 1), finished)
+    elif workers == 0:
         for j in todo:
             try:
                 res = run_job(j)
@@ -372,18 +384,7 @@ def _dispatch(todo: Sequence[RenderJob], ray_address: str | None, workers: int, 
 
 
 def _run_pool(todo: Sequence[RenderJob], workers: int, finished: Callable) -> None:
-    ctx = multiprocessing.get_context("spawn")  # no fork of a process that may hold drjit / LLVM state
-    ex = ProcessPoolExecutor(max_workers=min(workers, max(1, len(todo))), mp_context=ctx)
-    try:
-        pending = {ex.submit(run_job, j): j for j in todo}
-        while pending:
-            done, _ = wait(pending, return_when=FIRST_COMPLETED)
-            for fut in done:
-                job = pending.pop(fut)
-                exc = fut.exception()
-                finished(job, None if exc else fut.result(), exc)
-    finally:
-        ex.shutdown(wait=True, cancel_futures=True)
+    run_supervised(todo, run_job, workers, finished, label=lambda j: f"scene {j.scene_id}")
 
 
 def _run_ray(todo: Sequence[RenderJob], address: str, workers: int, finished: Callable) -> None:

@@ -48,14 +48,15 @@ def pytest_runtest_setup(item):
 
 @pytest.fixture
 def fake(monkeypatch):
-    """``render_tools.jobs.default_backend`` replaced by the fake renderer of ``tests/data/render/data.py``;
-    yields the list of scene ids it was called for."""
+    """``render_tools.jobs.default_backend`` replaced by the fake renderer of ``tests/data/render/data.py``, run
+    in this process (``workers=1``); yields the list of scene ids it was called for."""
     from render_tools import jobs as J
     from tests.data.render.data import CALLS, FAIL, fake_backend
 
     CALLS.clear()
     FAIL.clear()
     monkeypatch.setattr(J, "default_backend", fake_backend)
+    monkeypatch.setattr(J, "ISOLATE_RENDERS", False)  # the fake and its CALLS / FAIL live in this process
     yield CALLS
     FAIL.clear()
 

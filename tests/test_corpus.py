@@ -507,3 +507,19 @@ def test_splits_deterministic_and_disjoint():
             assert len(s["train"]) >= 1
     with pytest.raises(ValueError, match="fractions"):
         C.make_splits(ids, 0, (0.5, 0.5, 0.5))
+
+
+def test_cleanup_temp_of_one_scene_leaves_the_others(tmp_path):
+    """After a render worker dies, the driver removes that scene's temporary files only: another worker may be
+    writing its own scene's at that moment."""
+    w = C.CorpusWriter(tmp_path / "c")
+    mine, other = (w.root / C.SCENES_DIR / s for s in ("scene00001", "scene00002"))
+    for d in (mine, other):
+        d.mkdir(parents=True)
+        (d / (C.TMP_PREFIX + "frame0000.exr.x")).write_bytes(b"partial")
+    (mine / "kept.txt").write_text("not ours to delete")
+    assert w.cleanup_temp("scene00001") == 1
+    assert sorted(p.name for p in mine.iterdir()) == ["kept.txt"]
+    assert (other / (C.TMP_PREFIX + "frame0000.exr.x")).exists()
+    with pytest.raises(ValueError, match="scene_id"):
+        w.cleanup_temp("../x")

@@ -18,7 +18,14 @@ from lfmbench.cli import app
 from render_tools import jobs as J
 
 from tests.data.corpus.data import disk_full_after
-from tests.data.render.data import ARGS, FAIL, fake_backend, run
+from tests.data.render.data import ARGS, CRASH_ENV, FAIL, fake_backend, run
+
+
+def _line_of(text: str) -> int:
+    """Line number of ``text`` in tests/data/render/data.py."""
+    from tests.data.render import data
+
+    return next(i for i, ln in enumerate(open(data.__file__).read().splitlines(), 1) if text in ln)
 
 
 def _no_tmp(root):
@@ -78,6 +85,36 @@ def test_crash_in_one_scene(tmp_path, fake):
     assert C.validate_corpus(out).ok
     FAIL.clear()
     r = run("--out", str(out), "--scenes", "3", *ARGS)
+    assert r.exit_code == 0 and "1 rendered" in r.output and "2 skipped" in r.output
+    assert C.validate_corpus(out).ok
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("workers,sig,words", [(1, "SIGFPE", "integer division by zero"),
+                                               (2, "SIGFPE", "integer division by zero"),
+                                               (2, "SIGSEGV", "native code"),
+                                               (1, "SIGKILL", "out-of-memory")])
+def test_a_worker_killed_by_a_signal_is_reported_and_the_others_go_on(tmp_path, fake, monkeypatch, workers, sig,
+                                                                      words):
+    """A render whose process dies (a native crash: SIGFPE as Dr.Jit's masked-lane division did, SIGSEGV; the
+    OOM killer's SIGKILL) fails its own scene, named with the signal and a hint; the other scenes render in a
+    fresh worker; exit 1; the same command again renders only that scene. Also with --workers 1 (the render
+    runs in one worker process, never in the CLI's own)."""
+    monkeypatch.setattr(J, "ISOLATE_RENDERS", True)  # the fake renders in spawned workers (it pickles by reference)
+    monkeypatch.setenv(CRASH_ENV, f"scene00001:{sig}")
+    out = tmp_path / "c"
+    r = run("--out", str(out), "--scenes", "3", "--workers", str(workers), *ARGS)
+    assert r.exit_code == 1, r.output
+    msg = " ".join(r.output.split())
+    # where in Python it died, from the worker's faulthandler dump (none for SIGKILL, which no handler sees)
+    at = "" if sig == "SIGKILL" else f" (Python frame: data.py:{_line_of('os.kill(')} in fake_render_frames)"
+    assert f"scene scene00001 failed: WorkerDied: the render worker process died while rendering scene scene00001" \
+           f"{at}: killed by {sig}" in msg and words in msg, msg
+    assert "scene00000 failed" not in msg and "scene00002 failed" not in msg
+    assert C.Corpus(out).scenes == ["scene00000", "scene00002"] and C.validate_corpus(out).ok
+    assert _no_tmp(out)  # nothing half-written left behind
+    monkeypatch.delenv(CRASH_ENV)
+    r = run("--out", str(out), "--scenes", "3", "--workers", str(workers), *ARGS)
     assert r.exit_code == 0 and "1 rendered" in r.output and "2 skipped" in r.output
     assert C.validate_corpus(out).ok
 

@@ -220,8 +220,7 @@ def render_cmd(
             if status != "rendered":
                 prog.console.print(f"[red]scene {sid} failed[/]")
 
-        if workers > 1 or ray_address:
-            B.finish_probes()  # the scenes render in other processes: they read the cached verdict
+        B.finish_probes()  # the scenes render in worker processes: they read the cached verdict
         try:
             summary = J.run_jobs(job_list, writer, workers=workers, ray_address=ray_address, on_start=on_start,
                                  on_done=on_done, resume=not no_resume, split_seed=seed, splits=fixed_splits)

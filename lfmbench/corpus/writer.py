@@ -76,10 +76,12 @@ class CorpusWriter:
         self.notes: list[str] = []
         self.cleanup_temp()
 
-    def cleanup_temp(self) -> int:
-        """Remove temporary files left by an interrupted run; returns how many were removed."""
+    def cleanup_temp(self, scene_id: str | None = None) -> int:
+        """Remove temporary files left by an interrupted run (``scene_id``: only those of that scene's folder,
+        e.g. after its render worker died while others still write theirs); returns how many were removed."""
         n = 0
-        for p in self.root.rglob(TMP_PREFIX + "*"):
+        top = self.root if scene_id is None else self.root / SCENES_DIR / check_scene_id(scene_id)
+        for p in top.rglob(TMP_PREFIX + "*"):
             with contextlib.suppress(OSError):
                 p.unlink()
                 n += 1
