@@ -20,6 +20,7 @@ from __future__ import annotations
 import contextlib
 import json
 import logging
+import pickle
 import signal
 import threading
 import time
@@ -355,6 +356,13 @@ def run_jobs(jobs: Sequence[RenderJob], writer: CorpusWriter, *, workers: int = 
             on_done(job.scene_id, "rendered")
 
     in_process = workers == 1 and not (ISOLATE_RENDERS if isolate is None else isolate)
+    if todo and not in_process and not ray_address:
+        try:
+            pickle.dumps(todo[0])
+        except Exception as exc:  # noqa: BLE001 - a local function, a lambda, an open handle in the backend
+            raise ValueError(f"jobs: job {todo[0].scene_id} does not pickle, so it cannot render in a worker "
+                             f"process ({type(exc).__name__}: {exc}); use module-level functions in the backend, "
+                             "or run_jobs(..., workers=1, isolate=False) to render in this process") from None
     try:
         with _sigint_flag(hit):
             _dispatch(todo, ray_address, 0 if in_process else workers, finished)

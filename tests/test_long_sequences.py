@@ -102,7 +102,8 @@ def test_encode_and_job_stream_frames_without_collecting_them(tmp_path):
     be = J.Backend(S.generate_scene, R.RenderOptions, R.scene_meta, streaming_render, S.validate_scene)
     opts = {"width": 8, "height": 6, "spp": 1, "bins": 2, "frames": 24, "groups": ["headlights", "otherlights"]}
     w = C.CorpusWriter(out, render=J.render_record(0, opts, "float32", {}))
-    s = J.run_jobs(J.make_jobs(out, n_scenes=1, seed=0, options=opts, backend=be), w)
+    # in this process: the local renderer does not pickle, and ``pulled`` must be this process's list
+    s = J.run_jobs(J.make_jobs(out, n_scenes=1, seed=0, options=opts, backend=be), w, isolate=False)
     assert s.rendered == ["scene00000"] and pulled == list(range(24))
     assert C.Corpus(out).meta("scene00000")["frames"] == 24
 

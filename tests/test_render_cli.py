@@ -345,3 +345,16 @@ def test_render_storage_default_and_resume(tmp_path, fake):
     assert r.exit_code == 2 and "dtype" in r.output  # different options on an existing corpus
     r = run("--out", str(tmp_path / "x"), "--storage", "float64", *ARGS)
     assert r.exit_code == 2 and "--storage must be one of" in r.output
+
+
+def test_a_job_that_does_not_pickle_is_refused_before_any_worker_starts(tmp_path):
+    be = fake_backend()
+    local = J.Backend(be.generate_scene, be.RenderOptions, be.scene_meta, lambda s, o: be.render_frames(s, o))
+    out = tmp_path / "c"
+    w = C.CorpusWriter(out)
+    with pytest.raises(ValueError, match=r"job scene00000 does not pickle.*isolate=False"):
+        J.run_jobs(J.make_jobs(out, n_scenes=1, seed=0, options={"width": 8, "height": 6}, backend=local), w)
+    assert C.Corpus(out).scenes == []
+    s = J.run_jobs(J.make_jobs(out, n_scenes=1, seed=0, options={"width": 8, "height": 6}, backend=local), w,
+                   isolate=False)
+    assert s.rendered == ["scene00000"]
