@@ -12,12 +12,14 @@ import numba
 import numpy as np
 
 from lfmbench.constants import POISSON_EXACT_LIMIT
+from lfmbench.counter_rng import GAMMA, MIX_MUL, STRIDE_LOG2
 
 _u64 = numba.uint64
-#: SplitMix64 increment (the golden-ratio constant), [Steele2014]_.
-_GAMMA = np.uint64(0x9E3779B97F4A7C15)
+#: SplitMix64 increment and finaliser multipliers: the streams of :mod:`lfmbench.counter_rng`, [Steele2014]_.
+_GAMMA = np.uint64(GAMMA)
+_MUL0, _MUL1 = np.uint64(MIX_MUL[0]), np.uint64(MIX_MUL[1])
 #: Distance between two pixels' stream starts: 2^20 SplitMix64 steps (a draw uses at most a few dozen).
-_STRIDE = np.uint64((0x9E3779B97F4A7C15 << 20) & 0xFFFFFFFFFFFFFFFF)
+_STRIDE = np.uint64((GAMMA << STRIDE_LOG2) & 0xFFFFFFFFFFFFFFFF)
 #: 1/k for k < 64 (k = 0 unused): a multiply instead of a divide in the sequential search.
 _INV_K = 1.0 / np.maximum(np.arange(64, dtype=np.float64), 1.0)
 #: log k! for k < 4096 (the PTRS draws below the 1000 e- switch-over), libm lgamma beyond: a table lookup
@@ -29,8 +31,8 @@ _EXACT_LIMIT = POISSON_EXACT_LIMIT
 @numba.njit(inline="always", cache=True)
 def _mix(z):
     """SplitMix64 finaliser (variant 13)."""
-    z = (z ^ (z >> _u64(30))) * _u64(0xBF58476D1CE4E5B9)
-    z = (z ^ (z >> _u64(27))) * _u64(0x94D049BB133111EB)
+    z = (z ^ (z >> _u64(30))) * _MUL0
+    z = (z ^ (z >> _u64(27))) * _MUL1
     return z ^ (z >> _u64(31))
 
 
