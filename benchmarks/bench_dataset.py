@@ -15,7 +15,7 @@ Measures on this machine (CPU; shared with other jobs, so every time is an upper
    A :mod:`cProfile` breakdown of the warm ``__getitem__`` names where the time goes.
 2. **Time bins K**: the same scene (flickering groups only, one frame, same seed and spp) rendered at
    K = 1, 2, 4, 8, 16 and a reference K_ref = 64; for the same PWM draws, the noise-free LPD and SPD mean
-   electrons composed by :func:`lfmbench.datasets.capture.compose_frame` are compared with the reference:
+   electrons composed by :func:`lfmbench.datasets.assembly.compose_frame` are compared with the reference:
    relative RMSE ``||e_K - e_ref|| / ||e_ref||`` over the frame (only flickering layers are rendered, so only LED
    pixels and their blur are non-zero), pooled over the draws. The Monte Carlo floor of that metric is the same
    comparison between two reference renders with different seeds. Render time (s) per K.
@@ -70,7 +70,8 @@ from lfmbench.fileio import atomic_save_figure, atomic_write_text  # noqa: E402
 from lfmbench import sensor as _sensor  # noqa: E402
 from lfmbench.corpus import Corpus, CorpusWriter, group_storage  # noqa: E402
 from lfmbench.datasets import LFMCaptureDataset  # noqa: E402
-from lfmbench.datasets.capture import DEFAULT_OUTPUTS, compose_frame  # noqa: E402
+from lfmbench.datasets.assembly import compose_frame  # noqa: E402
+from lfmbench.datasets.capture import DEFAULT_OUTPUTS  # noqa: E402
 from lfmbench.datasets.projection import Projector, build_layers, load_or_build  # noqa: E402
 from lfmbench.datasets.pwm import draw_scene_pwm, load_pwm_config  # noqa: E402
 

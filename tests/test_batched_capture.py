@@ -15,7 +15,7 @@ from lfmbench import corpus as C
 from lfmbench.datasets import LFMCaptureDataset
 from lfmbench.datasets.batched import (BatchedCaptureSimulator, collate_pieces, compose_batch, pieces_to,
                                        prefetch, pwm_weights, simulate_batch)
-from lfmbench.datasets.capture import _window_starts, bin_edges, visible_lights, window_bin_exposure
+from lfmbench.datasets.assembly import bin_edges, row_window_starts, visible_lights, window_bin_exposure
 from lfmbench.datasets.projection import build_layers
 from lfmbench.flicker import pwm_exposure
 from lfmbench.sensor import load_preset
@@ -61,9 +61,9 @@ def test_pwm_weights_equal_the_per_sample_weights_exactly(corpus, shutter):
         meta = c.meta(sid)
         tm = meta["timing"]
         t_len = {"lpd": tm["short_exposure_s"], "spd": tm["long_exposure_s"]}
-        layers = ds._layers(sid)
+        layers = ds.scene(sid).layers
         rows = np.arange(crop[0], crop[0] + crop[2], dtype=np.float64)
-        starts = {f: _window_starts(meta, f, rows, shutter) for f in range(start, start + 3)}
+        starts = {f: row_window_starts(meta, f, rows, shutter) for f in range(start, start + 3)}
         for f in range(start, start + 3):
             for _lid, p, _b0, _inter, rates in visible_lights(layers, f, crop, per_light):
                 K = int(rates["lpd"].shape[0])

@@ -32,10 +32,6 @@ LAYERS = (
 )
 
 
-#: Cycles known and being removed (the per-sample and batched sample assembly, issue 24 step 2); empty when done.
-KNOWN_CYCLES = ({"lfmbench.datasets.batched", "lfmbench.datasets.capture"},)
-
-
 def _module_name(path: Path) -> str:
     parts = list(path.relative_to(ROOT).with_suffix("").parts)
     if parts[-1] == "__init__":
@@ -139,7 +135,6 @@ def test_no_import_cycle():
     for m in sorted(GRAPH):
         if m not in state:
             visit(m)
-    cycles = [c for c in cycles if set(c) not in KNOWN_CYCLES]
     assert not cycles, "import cycles: " + "; ".join(" -> ".join(c) for c in cycles)
 
 

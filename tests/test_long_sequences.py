@@ -13,7 +13,8 @@ from typer.testing import CliRunner
 from lfmbench import corpus as C
 from lfmbench.cli import app
 from lfmbench.datasets import LFMCaptureDataset, compose_frame
-from lfmbench.datasets.capture import _window_starts, window_bin_exposure
+from lfmbench.datasets.assembly import row_window_starts, window_bin_exposure
+from lfmbench.datasets.pwm import draw_scene_pwm
 from lfmbench.datasets.projection import build_layers
 from lfmbench.sensor import load_preset
 from render_tools import jobs as J
@@ -64,13 +65,13 @@ def test_tiny_render_with_overlapping_capture_windows_loads_with_rolling_shutter
     cw = meta["timing"]["capture_window_s"]
     assert td == 0.002 and cw == pytest.approx(1 / 90 + 8 * 0.002) and cw > 1 / fps
     rows = np.arange(8.0)
-    s1 = _window_starts(meta, 1, rows, "rolling")["spd"]
+    s1 = row_window_starts(meta, 1, rows, "rolling")["spd"]
     np.testing.assert_allclose(s1, 1 / 60 + rows * 0.002, rtol=0, atol=1e-15)  # analytic row starts
     end0 = 0 / 60 + cw  # frame 0's capture window ends at t_0 + T_L + H * line_time
     assert s1[0] < end0 and np.sum(s1 < end0) == 6  # rows 0..5 of frame 1 open before frame 0's window closes
     for n in range(2):  # every row's windows lie inside frame n's bins (exact coverage: overlap = length)
         edges = n / fps + np.linspace(0.0, cw, 3)
-        st = _window_starts(meta, n, rows, "rolling")
+        st = row_window_starts(meta, n, rows, "rolling")
         for pd, length in (("lpd", meta["timing"]["short_exposure_s"]), ("spd", tl)):
             cover = window_bin_exposure(edges, st[pd], length, 1.0, 1.0, 0.0, level="mean").sum(1)
             np.testing.assert_allclose(cover, length, rtol=1e-12)
@@ -141,7 +142,7 @@ def test_dataset_windows_of_a_24_frame_corpus(long_corpus):
     s = first[0]
     assert s["meta"]["frame_start"] == 0 and s["gt"].shape[0] == 3
     sid = first.scene_ids[0]
-    params = {int(k): v for k, v in first._draw(sid, np.random.default_rng([0, 0, 0]))[0].items()}
+    params = {int(k): v for k, v in draw_scene_pwm(first.pwm, first.corpus.meta(sid), np.random.default_rng([0, 0, 0]), first.groups).to_dicts()[0].items()}
     torch.testing.assert_close(s["gt"], _expected_gt(long_corpus, sid, 0, 3, params))
     later = LFMCaptureDataset(long_corpus, frames=3, frame_start=20, **kw)
     t = later[0]
@@ -188,7 +189,7 @@ def _draws(ds, index):
     sid = ds.scene_ids[index // ds.samples_per_scene]
     m = ds.corpus.meta(sid)
     rng = np.random.default_rng([ds.seed, ds.epoch, index])
-    per_light, per_group = ds._draw(sid, rng)
+    per_light, per_group = draw_scene_pwm(ds.pwm, m, rng, ds.groups).to_dicts()
     noise_seed = int(rng.integers(2**62))
     H, W = m["height"], m["width"]
     return per_light, per_group, (0, 0, H, W), noise_seed, index

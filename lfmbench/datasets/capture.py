@@ -4,20 +4,9 @@ For every sample the dataset draws PWM parameters (per light or per group, :mod:
 crop and a noise seed from ``(seed, epoch, index)``, composes the mean photo-electrons of each capture from the
 scene's camera-projected layers (:mod:`lfmbench.datasets.projection`) and runs the split-pixel sensor model.
 
-Exposure composition (timing of ``docs/contracts.md``; frame n starts at :math:`t_n = n/\text{fps}`):
-
-.. math:: \bar e_{pd}(y,x) = R^{static}_{pd}(y,x)\,t_{pd}
-          + \sum_j \sum_k R^{j}_{pd,k}(y,x)\;\Phi_j\big([t_k, t_{k+1}) \cap [a_{pd}(y), a_{pd}(y) + t_{pd})\big)
-
-with :math:`R` the projected rates (e-/s), :math:`t_k` the K bin edges of the frame's capture window, and
-:math:`\Phi_j` the exact PWM exposure of light j (:func:`lfmbench.flicker.pwm_exposure`) over the overlap. The
-LPD window is the short exposure :math:`[t_n + (T_L - T_S)/2, +T_S)`, the SPD window the long one
-:math:`[t_n, t_n + T_L)`; under a rolling shutter row y starts ``y * line_time`` later (flickering layers
-only; static layers keep their global-shutter motion, a documented approximation).
-
-Ground truth ``gt`` (docs/datasets.md): the mean LPD electrons of the short exposure with every LED at its
-time-averaged level (duty cycle x ON level), noise-free and unclipped, in the input-referred units of the
-``*_e`` outputs (LPD-equivalent e- over the short exposure).
+The composition and timing rules and the sample dict are those of :mod:`lfmbench.datasets.assembly` (shared with
+the batched path :mod:`lfmbench.datasets.batched`); :meth:`LFMCaptureDataset.scene` gives a scene as the dataset
+holds it (:class:`SceneView`: layers, lights, static rates, light index, meta) to figures and the batched path.
 """
 from __future__ import annotations
 
@@ -32,12 +21,16 @@ import torch
 from torch.utils.data import Dataset
 
 from lfmbench import sensor as _sensor
-from lfmbench.sensor.fused import warm_fused
 from lfmbench.corpus import Corpus
+from lfmbench.datasets.assembly import (SENSOR_OUTPUTS, assemble_sample, check_line_time, compose_frame,
+                                        light_index)
+from lfmbench.datasets.pieces import capture_pieces
+from lfmbench.datasets.projection import SceneLayers, aux_channels, load_or_build
+from lfmbench.datasets.pwm import PWMConfig, draw_scene_pwm, frozen_test_rng, load_pwm_config
 from lfmbench.fileio import atomic_write_json
-from lfmbench.datasets.projection import PHOTODIODES, SceneLayers, aux_channels, load_or_build
-from lfmbench.datasets.pwm import PWMConfig, draw_scene_pwm, load_pwm_config, frozen_test_rng
 from lfmbench.flicker import pwm_exposure
+from lfmbench.sensor.fused import warm_fused
+from lfmbench.vocabulary import PHOTODIODES
 
 OUTPUTS = ("raw", "input_referred", "saturated", "gt", "light_index", "depth", "rgb")
 DEFAULT_OUTPUTS = ("raw", "input_referred", "saturated", "gt", "light_index", "depth")
@@ -51,225 +44,57 @@ class DatasetNotFoundError(FileNotFoundError):
     """The corpus directory holds no (complete) lfmbench corpus."""
 
 
-# ----------------------------------------------------------------------------------------------------------
-# functional core
-# ----------------------------------------------------------------------------------------------------------
-def _is_tensor(*xs) -> bool:
-    return any(isinstance(x, torch.Tensor) for x in xs)
+class SceneView:
+    """One scene as an :class:`LFMCaptureDataset` holds it (for its sensor, groups, optics and frames): what
+    figures, the batched path (:func:`lfmbench.datasets.pieces.capture_pieces`) and sensor plans read, without
+    reaching into the dataset. Made by :meth:`LFMCaptureDataset.scene`; the layers are loaded on first use.
 
-
-def bin_edges(window_s, bins: int, like=None):
-    r"""Edges (s) of ``bins`` equal time bins over ``[0, window_s]``, relative to the frame start.
-
-    The one definition of the bin grid (``np.linspace(0, window_s, bins + 1)``, bit for bit: ``i * (window_s /
-    bins)`` with the last edge set to ``window_s``), for numpy (``like=None``) or on the device of tensor
-    ``like``: there ``window_s`` and ``bins`` may be (S,) tensors (one grid per slot) and the result is (S, Kmax + 1)
-    with ``Kmax = bins.max()``; the edges past a slot's own K repeat its last edge (zero-length bins).
-
-    Args:
-        window_s: capture window (s), scalar or (S,). bins: K >= 1, int or (S,) int tensor.
-        like: ``None`` for numpy, else a tensor whose device is used (float64).
-
-    Returns:
-        (K + 1,) float64 numpy array, or an (S, Kmax + 1) float64 tensor.
+    Attributes:
+        scene_id: the scene's id. meta: its ``meta.json`` (a dict; read-only by convention).
     """
-    if like is None:
-        return np.linspace(0.0, float(window_s), int(bins) + 1)
-    dev = like.device
-    K = torch.as_tensor(bins, device=dev).reshape(-1).long()
-    win = torch.as_tensor(window_s, dtype=torch.float64, device=dev).reshape(-1).expand(K.shape[0])
-    kmax = int(K.max()) if K.numel() else 1
-    i = torch.arange(kmax + 1, device=dev, dtype=torch.float64)
-    step = win / K.clamp_min(1).to(torch.float64)                                  # (S,) s
-    edges = i[None, :] * step[:, None] + 0.0                                       # numpy's linspace: i * step + 0
-    last = i[None, :] >= K[:, None].to(torch.float64)
-    return torch.where(last, win[:, None], edges)
 
+    def __init__(self, ds: "LFMCaptureDataset", scene_id: str) -> None:
+        self._ds = ds
+        self.scene_id = scene_id
+        self.meta = ds.corpus.meta(scene_id)
 
-def window_bin_exposure(edges, start, length, period, duty, led_phase, rise=0.0, fall=0.0, level: str = "pwm",
-                        check: bool = True):
-    r"""Time (s) at PWM level 1 that each bin contributes to an exposure window.
+    @property
+    def layers(self) -> SceneLayers:
+        """The projected layers (e-/s per pixel, :class:`lfmbench.datasets.projection.SceneLayers`) of the frames
+        a sample can use, from the dataset's cache."""
+        return self._ds._layers(self.scene_id)
 
-    Array-agnostic: numpy inputs take :func:`lfmbench.flicker.pwm_exposure`'s compiled kernel, torch tensors its
-    array formula on their device (bit-identical to the kernel in float64 on the CPU); the batched path of
-    :mod:`lfmbench.datasets.batched` calls this same function.
+    @property
+    def lights(self) -> list[dict]:
+        """The ``meta.json`` lights of the dataset's groups, sorted by id: the order of the per-light ``meta``
+        arrays of a sample (``light_id``, ``flicker``, ``freq_hz``, ...) and of ``light_index``."""
+        return self._ds._lights(self.scene_id)
 
-    Args:
-        edges: (*, K+1) bin edges (s); the per-sample path passes (K+1,). start: (*, R) window start per row (s).
-        length: window length (s), a scalar or broadcastable to (*, 1, 1).
-        period, duty, led_phase, rise, fall: PWM parameters (s, 1, s, s, s): scalars for one light, or arrays of
-            shape (L, 1, 1) for L lights at once (generally: broadcastable to (*, R, K)).
-        level: ``"pwm"`` (the modulated source) or ``"mean"`` (constant at its duty cycle: ground truth).
-        check: validate the PWM parameters (``False`` when they were validated when drawn).
+    def static_rates(self) -> torch.Tensor:
+        """(Fs, 2, H, W) float32 static rates of the LPD and SPD, e-/s, kept once per scene (the layers'
+        ``static[pd]`` become views of it: the rates are not held twice)."""
+        def build(layers: SceneLayers) -> torch.Tensor:
+            both = torch.stack([layers.static[pd] for pd in PHOTODIODES], 1)
+            layers.static = {pd: both[:, i] for i, pd in enumerate(PHOTODIODES)}
+            return both
 
-    Returns:
-        (*, R, K), e.g. (R, K) or (L, R, K), float64:
-        :math:`\int_{[t_k, t_{k+1}) \cap [a, a + t_e)} s(t)\,dt` in s.
-    """
-    if _is_tensor(edges, start):
-        lo = torch.maximum(edges[..., None, :-1], start[..., :, None])
-        hi = torch.minimum(edges[..., None, 1:], start[..., :, None] + length)
-        dur = (hi - lo).clamp_min(0.0)
-    else:
-        lo = np.maximum(edges[..., None, :-1], start[..., :, None])
-        hi = np.minimum(edges[..., None, 1:], start[..., :, None] + length)
-        dur = np.maximum(hi - lo, 0.0)
-    if level == "mean":
-        return dur * (duty if _is_tensor(duty) else np.asarray(duty))
-    return pwm_exposure(lo - led_phase, dur, period, duty, rise_time=rise, fall_time=fall, check=check)
+        return self.cached("static_both", build)
 
+    def light_index(self) -> torch.Tensor:
+        """(Fs, 1, H, W) full-frame :func:`lfmbench.datasets.assembly.light_index` of the scene (int16; int32 from
+        2^15 lights on), computed once per scene."""
+        lights = self.lights
 
-def window_starts(t0, t_short, t_long, shift) -> dict:
-    """Window start times (s) of the LPD (short, centred in the long one) and SPD (long) windows.
+        def build(layers: SceneLayers) -> torch.Tensor:
+            dt = torch.int16 if len(lights) < 2 ** 15 else torch.int32
+            return light_index(layers.aux["mask.light"], lights).to(dt)
 
-    The one definition of the capture timing (docs/contracts.md), array-agnostic (numpy or torch, broadcasting).
+        return self.cached("light_index", build)
 
-    Args:
-        t0: frame start(s) (s). t_short, t_long: exposure times (s). shift: per-row delay ``row * line_time``
-            (s), zeros for a global shutter.
-
-    Returns:
-        ``{"lpd": t0 + (t_long - t_short) / 2 + shift, "spd": t0 + shift}`` in s.
-    """
-    return {"lpd": t0 + (t_long - t_short) / 2.0 + shift, "spd": t0 + shift}
-
-
-def _window_starts(meta: dict, frame: int, rows: np.ndarray, shutter: str,
-                   line_time_s: float | None = None) -> dict[str, np.ndarray]:
-    """Window start times (s) per row for the LPD (short) and SPD (long) windows of ``frame``."""
-    tm = meta["timing"]
-    t0 = frame / float(meta["fps"])
-    ts, tl = float(tm["short_exposure_s"]), float(tm["long_exposure_s"])
-    td = float(tm.get("line_time_s", 0.0)) if line_time_s is None else float(line_time_s)
-    shift = rows * td if shutter == "rolling" else np.zeros(len(rows))
-    return window_starts(t0, ts, tl, shift)
-
-
-def check_line_time(meta: dict, line_time_s: float, rows: int) -> None:
-    """Raise ``ValueError`` (naming ``line_time_s``) if the last row's windows leave the rendered bins."""
-    tm = meta["timing"]
-    last = (rows - 1) * float(line_time_s)
-    if not (np.isfinite(line_time_s) and line_time_s >= 0):
-        raise ValueError(f"line_time_s must be finite and >= 0 (s), got {line_time_s!r}")
-    if float(tm["long_exposure_s"]) + last > float(tm["capture_window_s"]) * (1 + 1e-9):
-        raise ValueError(f"line_time_s = {line_time_s} s: row {rows - 1} ends at "
-                         f"{(float(tm['long_exposure_s']) + last) * 1e3:.3f} ms, after the rendered capture window "
-                         f"({float(tm['capture_window_s']) * 1e3:.3f} ms); at most "
-                         f"{(float(tm['capture_window_s']) - float(tm['long_exposure_s'])) / max(rows - 1, 1):.3g} s")
-
-
-def visible_lights(layers: SceneLayers, frame: int, crop: tuple[int, int, int, int], params: Mapping[int, dict]):
-    """The per-light layers of ``frame`` that a crop shows, for lights with PWM parameters.
-
-    Yields:
-        ``(light_id, pwm_dict, (by0, bx0), (iy0, iy1, ix0, ix1), {pd: (K, hh, ww) e-/s})``: the layer's box
-        origin and its intersection with the crop (absolute pixels, half-open), in the stored order.
-    """
-    y0, x0, h, w = crop
-    for light_id, _g, (by0, bx0, by1, bx1), rates in layers.lights[frame]:
-        iy0, iy1 = max(by0, y0), min(by1, y0 + h)
-        ix0, ix1 = max(bx0, x0), min(bx1, x0 + w)
-        p = params.get(light_id)
-        if p is None or iy0 >= iy1 or ix0 >= ix1:  # light left out, or outside the crop
-            continue
-        yield light_id, p, (by0, bx0), (iy0, iy1, ix0, ix1), rates
-
-
-def compose_frame(layers: SceneLayers, meta: dict, frame: int, crop: tuple[int, int, int, int],
-                  params: dict[int, dict], group_params: dict[str, dict], shutter: str = "global",
-                  line_time_s: float | None = None) -> dict:
-    """Mean photo-electrons of one frame in a crop, and the ground truth.
-
-    Args:
-        layers: projected scene layers. meta: the scene's meta.json. frame: frame index.
-        crop: (y0, x0, h, w) in pixels. params: light_id -> PWM dict (period_s, duty, phase_s, rise_s, fall_s);
-            lights without an entry are left out.
-        group_params: group -> PWM dict, for flickering groups stored without time bins.
-        shutter: ``"global"`` or ``"rolling"``. line_time_s: row delay (s), default ``meta["timing"]``.
-
-    Returns:
-        ``{"lpd": (h, w), "spd": (h, w), "gt": (h, w)}`` float32 tensors in e- (mean, noise-free, unclipped).
-    """
-    tm = meta["timing"]
-    t_len = {"lpd": float(tm["short_exposure_s"]), "spd": float(tm["long_exposure_s"])}
-    y0, x0, h, w = crop
-    rows = np.arange(y0, y0 + h, dtype=np.float64)
-    starts = _window_starts(meta, frame, rows, shutter, line_time_s)
-    out = {pd: layers.static[pd][frame, y0:y0 + h, x0:x0 + w] * t_len[pd] for pd in PHOTODIODES}
-    out["gt"] = out["lpd"].clone()
-    # flickering groups without time bins: one weight per frame (per row for a rolling shutter)
-    for g, rates in layers.group_static.items():
-        p = group_params[g]
-        for pd in PHOTODIODES:
-            wgt = pwm_exposure(starts[pd] - p["phase_s"], t_len[pd], p["period_s"], p["duty"],
-                               rise_time=p["rise_s"], fall_time=p["fall_s"])
-            out[pd] = out[pd] + rates[pd][frame, y0:y0 + h, x0:x0 + w] * torch.from_numpy(wgt).float()[:, None]
-        out["gt"] = out["gt"] + rates["lpd"][frame, y0:y0 + h, x0:x0 + w] * float(p["duty"] * t_len["lpd"])
-    # flickering lights stored per light in K time bins (K from the stored layer: a group may override it).
-    # All visible lights with the same K share one pwm_exposure call per capture: (L, R, K) weights.
-    visible: dict[int, list] = {}
-    for _light_id, p, box0, inter, rates in visible_lights(layers, frame, crop, params):
-        visible.setdefault(int(rates["lpd"].shape[0]), []).append((p, box0, inter, rates))
-    rolling = shutter == "rolling"
-    for K, group in visible.items():
-        edges = frame / float(meta["fps"]) + bin_edges(float(tm["capture_window_s"]), K)
-        pa = {k: np.array([g[0][k] for g in group], dtype=np.float64)[:, None, None]
-              for k in ("period_s", "duty", "phase_s", "rise_s", "fall_s")}
-        wts = {}
-        for key, pd, level in (("lpd", "lpd", "pwm"), ("spd", "spd", "pwm"), ("gt", "lpd", "mean")):
-            st = starts[pd] if rolling else starts[pd][:1]
-            w = window_bin_exposure(edges, st, t_len[pd], pa["period_s"], pa["duty"], pa["phase_s"],
-                                    pa["rise_s"], pa["fall_s"], level, check=False)        # (L, R, K) s
-            wts[key] = torch.from_numpy(np.ascontiguousarray(w)).float()
-        if not rolling:
-            # one weight vector per light and window: LPD and gt share the LPD bins, one (2, K) x (K, hh, ww)
-            w_lpd_gt = torch.stack([wts["lpd"][:, 0], wts["gt"][:, 0]], dim=1)              # (L, 2, K) s
-        for i, (_p, (by0, bx0), (iy0, iy1, ix0, ix1), rates) in enumerate(group):
-            win = (slice(iy0 - y0, iy1 - y0), slice(ix0 - x0, ix1 - x0))
-            sub = {pd: rates[pd][:, iy0 - by0:iy1 - by0, ix0 - bx0:ix1 - bx0] for pd in PHOTODIODES}  # (K, hh, ww)
-            if rolling:
-                for key, pd in (("lpd", "lpd"), ("spd", "spd"), ("gt", "lpd")):
-                    out[key][win] += torch.einsum("kyx,yk->yx", sub[pd], wts[key][i, iy0 - y0:iy1 - y0])
-            else:
-                both = torch.tensordot(w_lpd_gt[i], sub["lpd"], dims=1)                     # (2, hh, ww) e-
-                out["lpd"][win] += both[0]
-                out["gt"][win] += both[1]
-                out["spd"][win] += torch.tensordot(wts["spd"][i, 0], sub["spd"], dims=1)
-    return out
-
-
-def light_index(mask: torch.Tensor, lights: Sequence[Mapping]) -> torch.Tensor:
-    """Index into the sample's light list per pixel, -1 where no listed light.
-
-    Args:
-        mask: (F, h, w) float ``mask.light`` aux channel (light id per pixel, -1 none).
-        lights: the sample's lights (``meta["lights"]`` entries with ``"id"``), in the order of the meta arrays.
-
-    Returns:
-        (F, 1, h, w) int64.
-    """
-    ids = mask.round().long()
-    lut = torch.full((int(max([int(lt["id"]) for lt in lights] + [0])) + 2,), -1, dtype=torch.long)
-    for i, lt in enumerate(lights):
-        lut[int(lt["id"])] = i
-    valid = (ids >= 0) & (ids < len(lut) - 1)
-    return torch.where(valid, lut[ids.clamp(0, len(lut) - 1)], -1)[:, None]
-
-
-def add_rgb(sample: dict, preset, want: set) -> None:
-    """Add ``lpd_lcg_rgb``, ``spd_rgb``, ``gt_rgb`` (*, 3, h, w) to ``sample`` (in place) from its (*, 1, h, w)
-    ``lpd_lcg_e``, ``spd_e``, ``gt`` (any leading shape), then drop those the caller did not ask for."""
-    from kornia.color import raw_to_rgb
-    cfa = preset.cfa.to_kornia()
-    # kornia's bilinear demosaic; crops start at even offsets, so the Bayer phase is the preset's
-    for src, dst in (("lpd_lcg_e", "lpd_lcg_rgb"), ("spd_e", "spd_rgb"), ("gt", "gt_rgb")):
-        x = sample[src].float()
-        sample[dst] = raw_to_rgb(x.reshape(-1, *x.shape[-3:]), cfa).reshape(*x.shape[:-3], 3, *x.shape[-2:])
-    if "input_referred" not in want:
-        for k in ("lpd_hcg_e", "lpd_lcg_e", "spd_e"):
-            del sample[k]
-    if "gt" not in want:
-        del sample["gt"]
+    def cached(self, key: str, build: Callable[[SceneLayers], Any]) -> Any:
+        """``build(layers)``: something fixed per scene (not per crop or draw), computed once and kept as long as
+        the scene's layers stay in the dataset's in-memory cache (recomputed per call without it)."""
+        return self._ds._scene_cached(self.scene_id, key, build)
 
 
 def _warm_cpu_kernels(noise: bool, preset) -> None:
@@ -524,28 +349,6 @@ class LFMCaptureDataset(Dataset):
             held[1][key] = build(layers)
         return held[1][key]
 
-    def _light_index(self, sid: str, lights: list[dict], s0: int, crop: tuple[int, int, int, int],
-                     layers: SceneLayers | None = None) -> torch.Tensor:
-        """:func:`light_index` of a crop of frames s0..s0+F-1: a crop (a view) of the scene's full-frame light
-        index, computed once per scene. Returns (F, 1, h, w) int16 (int32 from 2^15 lights on)."""
-        def build(layers: SceneLayers) -> torch.Tensor:
-            dt = torch.int16 if len(lights) < 2 ** 15 else torch.int32
-            return light_index(layers.aux["mask.light"], lights).to(dt)                    # (Fs, 1, H, W)
-
-        y0, x0, h, w = crop
-        full = self._scene_cached(sid, "light_index", build, layers)
-        return full[s0:s0 + self.frames, :, y0:y0 + h, x0:x0 + w]
-
-    def _static_both(self, sid: str, layers: SceneLayers | None = None) -> torch.Tensor:
-        """The static rates of both photodiodes of scene ``sid`` as one (Fs, 2, H, W) tensor, e-/s (the cached
-        layers' ``static[pd]`` become views of it: the rates are not held twice)."""
-        def build(layers: SceneLayers) -> torch.Tensor:
-            both = torch.stack([layers.static[pd] for pd in PHOTODIODES], 1)
-            layers.static = {pd: both[:, i] for i, pd in enumerate(PHOTODIODES)}
-            return both
-
-        return self._scene_cached(sid, "static_both", build, layers)
-
     def _frames_to_load(self, sid: str) -> int:
         """Leading frames of scene ``sid`` a sample can use: s + F for a fixed start s, all for ``"random"``."""
         if self.frame_start == "random":
@@ -568,7 +371,6 @@ class LFMCaptureDataset(Dataset):
     def __getitem__(self, index: int) -> dict:
         sid, per_light, per_group, crop, noise_seed, start = self.draws(index)
         if self.pieces:
-            from lfmbench.datasets.batched import capture_pieces
             sample = capture_pieces(self, sid, per_light, per_group, crop, noise_seed, index, start)
         else:
             sample = self.simulate(sid, per_light, per_group, crop, noise_seed, index, start)
@@ -629,24 +431,25 @@ class LFMCaptureDataset(Dataset):
         Returns:
             the sample dict (see the class docstring), without ``transforms``.
         """
-        meta = self.corpus.meta(scene_id)
+        view = self.scene(scene_id)
+        meta = view.meta
         H, W = meta["height"], meta["width"]
         y0, x0, ch, cw = (0, 0, H, W) if crop is None else crop
         crop = (y0, x0, ch, cw)
         params = {int(k): v for k, v in params.items()}
         group_params = dict(group_params or {})
         F = self.frames
-        s0 = self._first_frame(scene_id, frame_start)
-        layers = self._layers(scene_id)
+        s0 = self.first_frame(scene_id, frame_start)
+        layers = view.layers
         frames = [compose_frame(layers, meta, f, crop, params, group_params, self.shutter, self.line_time_s)
                   for f in range(s0, s0 + F)]
-        lpd = torch.stack([fr_["lpd"] for fr_ in frames])[:, None]       # (F, 1, h, w) e-
-        spd = torch.stack([fr_["spd"] for fr_ in frames])[:, None]
         tm = meta["timing"]
         t_s, t_l = float(tm["short_exposure_s"]), float(tm["long_exposure_s"])
-        sample: dict[str, Any] = {}
         want = set(self.outputs)
-        if want & {"raw", "input_referred", "saturated", "rgb"}:
+        cap = None
+        if want & SENSOR_OUTPUTS:
+            lpd = torch.stack([fr_["lpd"] for fr_ in frames])[:, None]       # (F, 1, h, w) e-
+            spd = torch.stack([fr_["spd"] for fr_ in frames])[:, None]
             fpn = self._fixed_pattern(H, W)
             if fpn is not None:
                 fpn = {k: v[..., y0:y0 + ch, x0:x0 + cw] for k, v in fpn.items()}
@@ -657,31 +460,21 @@ class LFMCaptureDataset(Dataset):
             except ValueError as exc:  # e.g. non-finite electrons from implausible radiance: name the scene
                 raise ValueError(f"scene {scene_id!r} of {self.root} (frames {s0}..{s0 + F - 1}): {exc}; check "
                                  f"the corpus with `lfmbench validate {self.root}`") from None
-            if "raw" in want:
-                sample.update({k: cap[k] for k in ("lpd_hcg", "lpd_lcg", "spd")})
-            if want & {"input_referred", "rgb"}:
-                sample.update({k: cap[k] for k in ("lpd_hcg_e", "lpd_lcg_e", "spd_e")})
-            if "saturated" in want:
-                sample["saturated"] = cap["saturated"]
-        if "gt" in want or "rgb" in want:
-            sample["gt"] = torch.stack([fr_["gt"] for fr_ in frames])[:, None]
-        lights = self._lights(scene_id)
-        if len(lights) > self.max_lights:
-            raise ValueError(f"max_lights={self.max_lights} but scene {scene_id!r} has {len(lights)} lights")
-        if "light_index" in want or "depth" in want:
-            aux = layers.aux
-            if "light_index" in want:
-                sample["light_index"] = self._light_index(scene_id, lights, s0, crop, layers).long()
-            if "depth" in want:
-                sample["depth"] = aux["depth.Z"][s0:s0 + F, y0:y0 + ch, x0:x0 + cw][:, None]
-        if "rgb" in want:
-            add_rgb(sample, self.preset, want)
-        sample["meta"] = self._meta(scene_id, index, lights, params, crop, t_s, t_l, layers)
-        sample["meta"]["frame_start"] = s0
+        gt = torch.stack([fr_["gt"] for fr_ in frames])[:, None] if want & {"gt", "rgb"} else None
+        meta_out = self.sample_meta(view, index, params, crop, s0)
+        li = view.light_index()[s0:s0 + F, :, y0:y0 + ch, x0:x0 + cw].long() if "light_index" in want else None
+        depth = layers.aux["depth.Z"][s0:s0 + F, y0:y0 + ch, x0:x0 + cw][:, None] if "depth" in want else None
+        sample = assemble_sample(want, cap, gt, self.preset, li, depth)
+        sample["meta"] = meta_out
         return sample
 
-    def _first_frame(self, scene_id: str, frame_start: int | None) -> int:
-        """The first of the F frames (``None``: the dataset's ``frame_start``, 0 for ``"random"``), checked."""
+    def scene(self, scene_id: str) -> SceneView:
+        """The scene ``scene_id`` as this dataset holds it (:class:`SceneView`)."""
+        return SceneView(self, scene_id)
+
+    def first_frame(self, scene_id: str, frame_start: int | None) -> int:
+        """The first of a sample's F frames (``None``: the dataset's ``frame_start``, 0 for ``"random"``), checked
+        against the frames the dataset holds of ``scene_id``."""
         if frame_start is None:
             frame_start = 0 if self.frame_start == "random" else self.frame_start
         s0, F = int(frame_start), self.frames
@@ -691,19 +484,31 @@ class LFMCaptureDataset(Dataset):
                              f"{self.corpus.meta(scene_id)['frames']})")
         return s0
 
-    def _meta(self, sid, index, lights, per_light, crop, t_s, t_l, layers) -> dict:
+    def sample_meta(self, view: SceneView, index: int, per_light: Mapping[int, Mapping],
+                    crop: tuple[int, int, int, int], frame_start: int) -> dict:
+        """The ``meta`` of a sample of scene ``view`` (class docstring): the per-light arrays padded to
+        ``max_lights`` in the order of ``view.lights``, exposures (s), crop (px), sensor, shutter, flicker mode.
+
+        Raises:
+            ValueError: the scene has more lights than ``max_lights``.
+        """
+        lights = view.lights
         L, n = self.max_lights, len(lights)
+        if n > L:
+            raise ValueError(f"max_lights={L} but scene {view.scene_id!r} has {n} lights")
+        tm = view.meta["timing"]
         ids = [int(lt["id"]) for lt in lights]
         ps = [per_light.get(i) for i in ids]
         light_id = torch.tensor(ids + [-1] * (L - n), dtype=torch.long)
         flick = torch.tensor([p is not None for p in ps] + [False] * (L - n), dtype=torch.bool)
         arr = {k: torch.tensor([(d if p is None else p[k]) for p in ps] + [0.0] * (L - n), dtype=torch.float64)
                for k, d in (("freq_hz", 0.0), ("duty", 1.0), ("phase_s", 0.0))}
-        mode = "per_frame_weight" if layers.group_static else "bins"
-        return {"scene_id": sid, "index": index, "epoch": self.epoch, "num_lights": len(lights),
-                "light_id": light_id, "flicker": flick, **arr, "exposure_short_s": t_s, "exposure_long_s": t_l,
-                "crop": torch.tensor(crop), "sensor": self.sensor_name, "shutter": self.shutter,
-                "flicker_mode": mode}
+        mode = "per_frame_weight" if view.layers.group_static else "bins"
+        return {"scene_id": view.scene_id, "index": index, "epoch": self.epoch, "num_lights": n,
+                "light_id": light_id, "flicker": flick, **arr, "exposure_short_s": float(tm["short_exposure_s"]),
+                "exposure_long_s": float(tm["long_exposure_s"]), "crop": torch.tensor(crop),
+                "sensor": self.sensor_name, "shutter": self.shutter, "flicker_mode": mode,
+                "frame_start": int(frame_start)}
 
     # -- display
     @staticmethod

@@ -9,7 +9,7 @@ that pixel's Bayer filter) for each photodiode:
           \qquad E_\lambda = \frac{\pi\,T_{lens}}{4N^2} L_\lambda
 
 with :math:`w` from :func:`lfmbench.sensor.electron_weights` (e- per J m^-2 nm^-1). A capture then needs only
-sums of these rates times PWM-weighted times (:mod:`lfmbench.datasets.capture`). This is exact (no
+sums of these rates times PWM-weighted times (:mod:`lfmbench.datasets.assembly`). This is exact (no
 approximation beyond those of the optics and sensor models): the PSF is applied per band before the
 spectral sum. Per-light layers are projected in their bounding box padded by the PSF radius (zero radiance
 outside the box, as stored).

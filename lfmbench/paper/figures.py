@@ -302,8 +302,9 @@ def _object_kinds(ds, sid: str) -> dict:
 def _vehicle_lights(ds, sid: str, frame: int) -> dict:
     """instance id -> list of (light id, (y0, x0, y1, x1) signal box px, LPD rate sum e-/s) of the flickering
     lights visible in ``frame``."""
-    layers = ds._layers(sid)
-    inst = {int(lt["id"]): int(lt.get("instance", -1)) for lt in ds._lights(sid)}
+    view = ds.scene(sid)
+    layers = view.layers
+    inst = {int(lt["id"]): int(lt.get("instance", -1)) for lt in view.lights}
     out: dict = {}
     for lid, _g, box, rates in layers.lights[frame]:
         lpd = rates["lpd"]
@@ -366,11 +367,12 @@ def build_sequence46(corpus: str | Path, seed: int = 0, noise: bool = True) -> S
     drop2 = max(rest2, key=lambda i: tot[i]) if rest2 else None
     rng = np.random.default_rng(seed)
     pwm: dict = {}
-    for lt in ds._lights(sid):
+    lights = ds.scene(sid).lights
+    for lt in lights:
         if meta["groups"].get(lt["group"], {}).get("flicker"):
             T = 1.0 / rng.uniform(*FREQ_RANGE_HZ)
             pwm[int(lt["id"])] = (1.0 / T, float(rng.uniform(*DUTY_RANGE)), float(rng.uniform(0, T)))
-    inst_of = {int(lt["id"]): int(lt.get("instance", -1)) for lt in ds._lights(sid)}
+    inst_of = {int(lt["id"]): int(lt.get("instance", -1)) for lt in lights}
 
     def set_inst(i, f, d, ph):
         for lid, inst in inst_of.items():
@@ -620,8 +622,9 @@ def build_fig7(corpus: str | Path, seed: int = 0, line_time_s: float | None = No
                            outputs=("raw", "input_referred", "saturated", "gt"))
     ts, tl = float(tm["short_exposure_s"]), float(tm["long_exposure_s"])
     a0 = (tl - ts) / 2
-    lights = {int(lt["id"]): lt for lt in ds._lights(sid)}
-    layers = ds._layers(sid)
+    view = ds.scene(sid)
+    lights = {int(lt["id"]): lt for lt in view.lights}
+    layers = view.layers
     vis = [(int(lid), _signal_box(r["lpd"], box), float(r["lpd"].sum()), _signal_box(r["lpd"], box, 0.01))
            for lid, _g, box, r in layers.lights[0] if float(r["lpd"].sum()) > 0]
     if not vis:
