@@ -18,6 +18,7 @@ Functions
 - :func:`mix64` -> the SplitMix64 finaliser of int64 words.
 - :func:`derive_key` -> one stream key from several words (seed, epoch, sample index, purpose).
 - :func:`uniforms` -> (..., n) float64 uniforms in (0, 1) of the streams with the given keys.
+- :func:`uniform_at` -> draw ``j`` of each stream, same shape as the keys.
 
 References
 ----------
@@ -29,7 +30,7 @@ from __future__ import annotations
 
 import torch
 
-__all__ = ["GAMMA", "STRIDE_LOG2", "MIX_MUL", "mix64", "derive_key", "uniforms"]
+__all__ = ["GAMMA", "STRIDE_LOG2", "MIX_MUL", "mix64", "derive_key", "uniform_at", "uniforms"]
 
 #: SplitMix64 increment: the odd integer closest to 2^64 / golden ratio.
 GAMMA = 0x9E3779B97F4A7C15
@@ -120,5 +121,15 @@ def uniforms(key: torch.Tensor, n: int, start: int = 0) -> torch.Tensor:
     if isinstance(start, bool) or not isinstance(start, int) or start < 0:
         raise ValueError(f"start must be an integer >= 0, got {start!r}")
     j = torch.arange(start + 1, start + n + 1, dtype=torch.int64, device=key.device)
-    z = mix64(key.unsqueeze(-1) + j * _GAMMA_S)
+    return _to_unit(mix64(key.unsqueeze(-1) + j * _GAMMA_S))
+
+
+def uniform_at(key: torch.Tensor, j: int) -> torch.Tensor:
+    """Draw ``j`` (>= 0) of the streams with keys ``key`` ((*) int64): (*) float64 in (0, 1), element for element
+    ``uniforms(key, 1, start=j)[..., 0]``."""
+    return _to_unit(mix64(key + _signed((j + 1) * GAMMA)))
+
+
+def _to_unit(z: torch.Tensor) -> torch.Tensor:
+    """The top 53 bits of 64-bit words as a float64 in (0, 1): ``(z >> 11 + 0.5) / 2^53``."""
     return (_shr(z, 11).to(torch.float64) + 0.5) * (1.0 / 9007199254740992.0)

@@ -93,3 +93,8 @@ def test_cuda_gives_the_same_bits():
     keys = R.derive_key(3, 7, torch.arange(4096), 1)
     assert torch.equal(R.uniforms(keys.cuda(), 5).cpu(), R.uniforms(keys, 5))
     assert torch.equal(R.derive_key(3, 7, torch.arange(4096, device="cuda"), 1).cpu(), keys)
+
+
+def test_uniform_at_is_one_draw_of_uniforms():
+    keys = R.derive_key(9, torch.arange(100))
+    assert torch.equal(torch.stack([R.uniform_at(keys, j) for j in range(3, 7)], -1), R.uniforms(keys, 4, start=3))

@@ -41,7 +41,7 @@ T_SHORT = 1e-3         # s, LPD exposure
 T_LONG = 1e-3          # s, SPD exposure (equal, so dark current stays small for both)
 
 
-def _flat_field_pairs(preset, capture: str, levels_e: np.ndarray, seed: int) -> np.ndarray:
+def _flat_field_pairs(preset, capture: str, levels_e: np.ndarray, seed: int, counter: bool = False) -> np.ndarray:
     """Simulate two frames per level; returns DN of the green pixels, shape (2, L, N)."""
     pd = preset.captures[capture].photodiode
     # radiant exposure that gives the wanted mean electrons on a green pixel; computed with scipy's constants
@@ -53,8 +53,12 @@ def _flat_field_pairs(preset, capture: str, levels_e: np.ndarray, seed: int) -> 
     x = H.reshape(1, -1, 1, 1, 1).expand(2, -1, 1, SIZE, SIZE).contiguous()
     zero = torch.zeros_like(x)
     lpd, spd = (x, zero) if pd == "lpd" else (zero, x)
-    g = torch.Generator().manual_seed(seed)
-    out = simulate_split_pixel(lpd, spd, preset, [WL_NM], T_SHORT, T_LONG, generator=g, bandwidths_nm=[BAND_NM])
+    if counter:  # counter-based noise: one seed per frame of the pair (the leading, sample dimension)
+        out = simulate_split_pixel(lpd, spd, preset, [WL_NM], T_SHORT, T_LONG, bandwidths_nm=[BAND_NM],
+                                   seeds=torch.tensor([seed, seed + 1]))
+    else:
+        g = torch.Generator().manual_seed(seed)
+        out = simulate_split_pixel(lpd, spd, preset, [WL_NM], T_SHORT, T_LONG, generator=g, bandwidths_nm=[BAND_NM])
     dn = out[capture][:, :, 0].numpy()                                   # (2, L, H, W)
     green = preset.cfa.index_map(SIZE, SIZE).numpy() == 1
     return dn[..., green], eta
@@ -107,17 +111,19 @@ def expected_saturation_e(full_well: float, clip_e: float, read_e: float) -> flo
 TOL = {"K": 0.03, "sigma_d": 0.05, "sigma_d_emva": 0.12, "sat": 0.05, "R": 0.03}
 
 
-@pytest.mark.parametrize("backend", ["numba", "torch"])
+@pytest.mark.parametrize("backend", ["numba", "torch", "counter-numba"])
 @pytest.mark.parametrize("capture", ["lpd_hcg", "lpd_lcg", "spd"])
 def test_photon_transfer_recovers_ovt_parameters(capture, backend, monkeypatch):
-    # both shot-noise samplers (the compiled CPU one and torch.poisson, which CUDA uses) must pass EMVA 1288
+    # every shot-noise sampler must pass EMVA 1288: the compiled CPU one, torch.poisson (which CUDA uses), and
+    # the counter-based streams (lfmbench.sensor.counter_noise; its torch chain gives the compiled chain's numbers:
+    # tests/test_counter_noise.py)
     import lfmbench.sensor.poisson
 
-    monkeypatch.setattr(lfmbench.sensor.poisson, "available", lambda: backend == "numba")
+    monkeypatch.setattr(lfmbench.sensor.poisson, "available", lambda: backend.endswith("numba"))
     preset = load_preset("ovt")
     sat = preset.saturation_capacity_e(capture)
     levels = np.concatenate([[0.0], np.linspace(0.02, 0.7, 20) * sat, np.linspace(0.71, 1.15, 45) * sat])
-    y, eta = _flat_field_pairs(preset, capture, levels, seed=1288)
+    y, eta = _flat_field_pairs(preset, capture, levels, seed=1288, counter=backend.startswith("counter"))
     res = photon_transfer(y)
 
     spec = preset.captures[capture]

@@ -16,6 +16,7 @@ import numpy as np
 import torch
 
 from lfmbench.sensor import poisson as _poisson
+from lfmbench.sensor import counter_noise as _cn
 from lfmbench.sensor.preset import CAPTURES, PHOTODIODES, SensorPreset, load_preset
 
 __all__ = ["MEAN_CAP_FULL_WELLS", "map_samples", "per_generator", "chain_fused", "warm_fused"]
@@ -95,7 +96,7 @@ def _map_rows(m: torch.Tensor, lead: torch.Size, H: int, W: int) -> tuple[np.nda
 
 def chain_fused(lpd_e: torch.Tensor, spd_e: torch.Tensor, preset: SensorPreset, t_s: torch.Tensor,
                  t_l: torch.Tensor, generator, noise: bool, fpn: Mapping[str, torch.Tensor] | None,
-                 threads: int | None = None) -> dict:
+                 threads: int | None = None, seeds: torch.Tensor | None = None) -> dict:
     """The CPU chain of :func:`simulate_split_pixel_electrons` in compiled passes (backend ``"numba"``).
 
     Args: ``lpd_e``, ``spd_e`` (*, 1, H, W) mean e- (float32/float64, CPU); ``t_s``, ``t_l`` (*, 1, 1, 1)
@@ -103,6 +104,9 @@ def chain_fused(lpd_e: torch.Tensor, spd_e: torch.Tensor, preset: SensorPreset, 
     leading dimension); ``fpn`` maps (..., H, W) already on the inputs' dtype, or None. Every generator is drawn
     in the torch chain's order (LPD Poisson seed, SPD Poisson seed, HCG, LCG, SPD read noise), and every
     per-row scalar is computed by the torch chain's own expressions, so the outputs are bit-identical to it.
+    With ``seeds`` ((B,) int64, instead of generators) sample b's shot noise comes from the compiled sampler
+    seeded with its counter shot seed and its read noise from its counter read streams
+    (:mod:`lfmbench.sensor.counter_noise`): the numbers of the torch chain with ``seeds``, on any device.
     """
     from lfmbench.sensor._poisson_kernel import collect
     from lfmbench.sensor._readout_kernel import readout
@@ -136,13 +140,18 @@ def chain_fused(lpd_e: torch.Tensor, spd_e: torch.Tensor, preset: SensorPreset, 
     sat_np = sat.view(L, 3, P).numpy()
     gsw = float(preset.shot_noise_gaussian_above_e)
 
-    def run(r0: int, r1: int, g, shape: torch.Size) -> None:
-        """Rows r0..r1 (one generator's inputs, of shape ``shape``)."""
+    def run(r0: int, r1: int, g, shape: torch.Size, b: int = -1) -> None:
+        """Rows r0..r1 (one generator's inputs, or sample ``b``'s with ``seeds``, of shape ``shape``)."""
         collected = {pd: _scratch(pd, r1 - r0, P, nt) for pd in PHOTODIODES}            # e-
-        for pd in PHOTODIODES:
+        for i_pd, pd in enumerate(PHOTODIODES):
             spec = preset.photodiodes[pd]
             gain, grow = maps[f"{pd}_gain"]
-            seed = _poisson.draw_seed(g) if noise else np.uint64(0)
+            if not noise:
+                seed = np.uint64(0)
+            elif seeds is not None:
+                seed = np.uint64(int(_cn.shot_seed(seeds[b:b + 1], i_pd)) & 0xFFFFFFFFFFFFFFFF)
+            else:
+                seed = _poisson.draw_seed(g)
             bad = collect(rows[pd][r0:r1], gain, grow[r0:r1], dark[pd][r0:r1],
                           nt(MEAN_CAP_FULL_WELLS * spec.full_well_e), nt(spec.full_well_e), seed, gsw, noise,
                           collected[pd])
@@ -153,7 +162,10 @@ def chain_fused(lpd_e: torch.Tensor, spd_e: torch.Tensor, preset: SensorPreset, 
             spec = preset.captures[cap]
             pd = spec.photodiode
             z = empty
-            if noise and spec.read_noise_e > 0:
+            if noise and spec.read_noise_e > 0 and seeds is not None:
+                z_all[:] = _cn.normal(_cn.read_seed(seeds[b:b + 1], c), P * (r1 - r0)).view(r1 - r0, P).numpy()
+                z = z_all
+            elif noise and spec.read_noise_e > 0:
                 # into a reused buffer: the same draws as a new tensor
                 torch.randn(shape, generator=g, dtype=dtype, device=dev, out=torch.from_numpy(z_all).view(shape))
                 z = z_all
@@ -164,7 +176,10 @@ def chain_fused(lpd_e: torch.Tensor, spd_e: torch.Tensor, preset: SensorPreset, 
                     nt(preset.system_gain(cap)), dark[pd][r0:r1], spd_factor[r0:r1] if pd == "spd" else no_factor,
                     flat[cap][r0:r1], flat[f"{cap}_e"][r0:r1], sat_np[r0:r1], c)
 
-    if isinstance(generator, (list, tuple)):
+    if seeds is not None:
+        per = L // len(seeds)
+        map_samples(lambda b: run(b * per, (b + 1) * per, None, lpd_e.shape[1:], b), len(seeds), threads)
+    elif isinstance(generator, (list, tuple)):
         per = L // len(generator)
         map_samples(lambda b: run(b * per, (b + 1) * per, generator[b], lpd_e.shape[1:]), len(generator), threads)
     else:

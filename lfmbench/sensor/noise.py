@@ -19,6 +19,7 @@ from typing import Mapping, Sequence
 import torch
 from torch import nn
 
+from lfmbench.sensor import counter_noise as _cn
 from lfmbench.sensor import poisson as _poisson
 from lfmbench.sensor.fused import MEAN_CAP_FULL_WELLS, chain_fused, per_generator
 from lfmbench.sensor.optics import check_radiometric
@@ -114,7 +115,8 @@ def _exposure(value: float | torch.Tensor, name: str, lead: torch.Size, ref: tor
 
 
 def read_capture(electrons: torch.Tensor, preset: SensorPreset, capture: str, generator: torch.Generator | None,
-                 noise: bool = True, offset_e: torch.Tensor | None = None) -> dict[str, torch.Tensor]:
+                 noise: bool = True, offset_e: torch.Tensor | None = None,
+                 normals: torch.Tensor | None = None) -> dict[str, torch.Tensor]:
     """Read one capture of collected photodiode electrons: offset, read noise, conversion gain, swing, ADC.
 
     Args:
@@ -125,6 +127,8 @@ def read_capture(electrons: torch.Tensor, preset: SensorPreset, capture: str, ge
             one per index of the leading dimension of ``electrons`` (each draws its own slice).
         noise: add Gaussian read noise.
         offset_e: (H, W) DSNU offset map in e- (or ``None``).
+        normals: (*, 1, H, W) standard normals to use for the read noise instead of drawing them from
+            ``generator`` (the counter-based streams of :mod:`lfmbench.sensor.counter_noise`).
 
     Returns:
         ``{"dn": (*, 1, H, W) DN, "volts": (*, 1, H, W) V (clipped at the swing), "saturated": bool (*, 1, H, W)}``.
@@ -132,8 +136,8 @@ def read_capture(electrons: torch.Tensor, preset: SensorPreset, capture: str, ge
     spec = preset.captures[capture]
     # in-place on tensors made here (never on ``electrons``): a 3-frame 256x256 capture is 0.75 MiB per temporary
     if noise and spec.read_noise_e > 0:
-        volts = per_generator(lambda x, g: torch.randn(x.shape, generator=g, device=x.device, dtype=x.dtype),
-                               electrons, generator)
+        volts = normals.to(electrons.dtype) if normals is not None else per_generator(
+            lambda x, g: torch.randn(x.shape, generator=g, device=x.device, dtype=x.dtype), electrons, generator)
         volts.mul_(spec.read_noise_e).add_(electrons)
     else:
         volts = electrons.clone()
@@ -161,7 +165,8 @@ def simulate_split_pixel_electrons(lpd_electrons: torch.Tensor, spd_electrons: t
                                    exposure_long_s: float | torch.Tensor, generator: torch.Generator | None = None,
                                    noise: bool = True, fpn: Mapping[str, torch.Tensor] | None = None,
                                    check: bool = True, backend: str = "auto",
-                                   threads: int | None = None) -> dict[str, torch.Tensor]:
+                                   threads: int | None = None,
+                                   seeds: torch.Tensor | None = None) -> dict[str, torch.Tensor]:
     """The three captures from mean photo-electrons (the noise and read-out part of :func:`simulate_split_pixel`).
 
     Use this when the spectral projection (:func:`ideal_electrons` or a cached equivalent) is done elsewhere.
@@ -188,6 +193,11 @@ def simulate_split_pixel_electrons(lpd_electrons: torch.Tensor, spd_electrons: t
             :func:`lfmbench.sensor._readout_kernel.readout`), bit-identical to ``"torch"`` on the CPU with a fraction of
             its memory passes (docs/dataset-benchmark.md); ``"auto"``: ``"numba"`` where it applies, else
             ``"torch"``.
+        seeds: instead of ``generator``: a (B,) int64 tensor, one noise seed per index of the leading (sample)
+            dimension. Sample b then draws its shot and read noise from counter-based streams of ``seeds[b]``
+            (:mod:`lfmbench.sensor.counter_noise`): the same numbers on the CPU (compiled or torch) and on a GPU,
+            alone or in a batch of any size, with no generator object per sample; the whole batch is one set of
+            tensor operations on a GPU.
         threads: with one generator per sample on the CPU, the samples are simulated by this many Python threads
             (default ``torch.get_num_threads()``; the result does not depend on it). The threads do not spin while
             they wait, unlike OpenMP's: on a machine shared with other jobs use ``torch.set_num_threads(1)`` and
@@ -203,7 +213,13 @@ def simulate_split_pixel_electrons(lpd_electrons: torch.Tensor, spd_electrons: t
         raise ValueError(f"lpd_electrons must have shape (*, 1, H, W) (a CFA mosaic), got {tuple(lpd_electrons.shape)}")
     preset = load_preset(preset)
     x = lpd_electrons
-    if noise:
+    if noise and seeds is not None:
+        if generator is not None:
+            raise ValueError("give either generator or seeds, not both")
+        if x.dim() < 4:
+            raise ValueError(f"seeds need inputs (B, *, 1, H, W) with a sample dimension, got {tuple(x.shape)}")
+        seeds = _cn.check_seeds(seeds, x.shape[0]).to(x.device)
+    elif noise:
         gens = list(generator) if isinstance(generator, (list, tuple)) else [generator]
         if not gens or not all(isinstance(g, torch.Generator) for g in gens):
             raise ValueError("generator must be a torch.Generator (or a sequence of them, one per sample) when "
@@ -229,7 +245,9 @@ def simulate_split_pixel_electrons(lpd_electrons: torch.Tensor, spd_electrons: t
     if backend == "numba" and not fused:
         raise ValueError(f"backend='numba' needs float32/float64 CPU inputs and numba (got {x.dtype} on {x.device})")
     if fused and backend != "torch":
-        return chain_fused(lpd_electrons, spd_electrons, preset, t_s, t_l, generator, noise, fpn, threads)
+        return chain_fused(lpd_electrons, spd_electrons, preset, t_s, t_l, generator, noise, fpn, threads,
+                           seeds if noise else None)
+    counter = noise and seeds is not None
 
     pd_inputs = {"lpd": (lpd_electrons, t_s), "spd": (spd_electrons, t_l)}
     collected: dict[str, torch.Tensor] = {}
@@ -240,8 +258,13 @@ def simulate_split_pixel_electrons(lpd_electrons: torch.Tensor, spd_electrons: t
         if noise and fpn is not None and spec.prnu > 0:
             mu.mul_(fpn[f"{pd}_gain"])
         mu.add_(spec.dark_current_e_per_s * t)
-        n = per_generator(lambda m, g: shot_noise(m, g, preset.shot_noise_gaussian_above_e), mu, generator,
-                           threads) if noise else mu
+        if counter:  # sample b's pixels from the streams of its shot seed (the compiled sampler's streams)
+            B = mu.shape[0]
+            n = _cn.poisson(mu.reshape(B, -1), _cn.shot_seed(seeds, PHOTODIODES.index(pd)),
+                            preset.shot_noise_gaussian_above_e).to(mu.dtype).reshape(mu.shape)
+        else:
+            n = per_generator(lambda m, g: shot_noise(m, g, preset.shot_noise_gaussian_above_e), mu, generator,
+                               threads) if noise else mu
         collected[pd] = n.clamp_(0.0, spec.full_well_e)
 
     out: dict[str, torch.Tensor] = {}
@@ -249,7 +272,11 @@ def simulate_split_pixel_electrons(lpd_electrons: torch.Tensor, spd_electrons: t
     for cap in CAPTURES:
         pd = preset.captures[cap].photodiode
         offset = fpn[f"{pd}_offset_e"] if (noise and fpn is not None and preset.photodiodes[pd].dsnu_e > 0) else None
-        r = read_capture(collected[pd], preset, cap, generator, noise, offset)
+        z = None
+        if counter and preset.captures[cap].read_noise_e > 0:
+            z = _cn.normal(_cn.read_seed(seeds, CAPTURES.index(cap)), collected[pd][0].numel()).reshape(
+                collected[pd].shape)
+        r = read_capture(collected[pd], preset, cap, generator, noise, offset, normals=z)
         out[cap] = r["dn"]
         # DN -> e-, minus the mean dark signal (what optical-black clamping removes), so that the expectation
         # of the input-referred value equals ideal_electrons() below saturation
@@ -268,7 +295,8 @@ def simulate_split_pixel(lpd_radiant_exposure: torch.Tensor, spd_radiant_exposur
                          exposure_short_s: float | torch.Tensor, exposure_long_s: float | torch.Tensor,
                          generator: torch.Generator | None = None, noise: bool = True,
                          bandwidths_nm: Sequence[float] | None = None,
-                         fpn: Mapping[str, torch.Tensor] | None = None, check: bool = True) -> dict[str, torch.Tensor]:
+                         fpn: Mapping[str, torch.Tensor] | None = None, check: bool = True,
+                         seeds: torch.Tensor | None = None) -> dict[str, torch.Tensor]:
     """Simulate the three captures (LPD-HCG, LPD-LCG, SPD) of a split-pixel sensor.
 
     Args:
@@ -285,6 +313,8 @@ def simulate_split_pixel(lpd_radiant_exposure: torch.Tensor, spd_radiant_exposur
         bandwidths_nm: band widths in nm (default: local spacing of ``wavelengths_nm``).
         fpn: fixed-pattern maps from :func:`fixed_pattern` (default: built for (H, W) from the preset's seed).
         check: validate the inputs (finite, >= 0, matching shapes).
+        seeds: (B,) int64 per-sample noise seeds instead of ``generator`` (counter-based noise, see
+            :func:`simulate_split_pixel_electrons`).
 
     Returns:
         dict with ``lpd_hcg``, ``lpd_lcg``, ``spd``: (*, 1, H, W) raw DN (black level included);
@@ -298,7 +328,7 @@ def simulate_split_pixel(lpd_radiant_exposure: torch.Tensor, spd_radiant_exposur
     lpd_e = ideal_electrons(lpd_radiant_exposure, preset, wavelengths_nm, "lpd", bandwidths_nm, check=False)
     spd_e = ideal_electrons(spd_radiant_exposure, preset, wavelengths_nm, "spd", bandwidths_nm, check=False)
     return simulate_split_pixel_electrons(lpd_e, spd_e, preset, exposure_short_s, exposure_long_s, generator,
-                                          noise, fpn, check=False)
+                                          noise, fpn, check=False, seeds=seeds)
 
 
 class SplitPixelSensor(nn.Module):

@@ -1,0 +1,148 @@
+"""Sensor simulation alone, on the CPU and (where one is) a GPU: per-sample generators against counter seeds.
+
+The split-pixel chain of a batch of 3-frame 256 x 256 captures (:func:`lfmbench.sensor.simulate_split_pixel_electrons`,
+mean electrons already on the device, FPN maps on, every capture), timed three ways:
+
+- ``generators``: one ``torch.Generator`` per sample (what the batched dataset path does today: on a GPU one
+  ``torch.poisson`` / ``torch.randn`` launch per sample and capture);
+- ``seeds``: one int64 noise seed per sample, noise from counter-based streams (:mod:`lfmbench.sensor.counter_noise`):
+  the batch in one set of tensor operations;
+- ``seeds+compile`` (CUDA only): the same with the counter Poisson and normal samplers fused by ``torch.compile``.
+
+Reports samples/s (median of ``--repeats`` timed calls after two warm-up calls; CUDA synchronised) and the peak
+device memory of a call, per batch size, and writes ``docs/sensor-device-benchmark.md`` (``--no-doc``: only print).
+The CPU rows are always measured (on a GPU machine: on its host CPU); without a GPU the file says that the GPU
+rows were not run.
+
+Run: ``.venv/bin/python benchmarks/bench_sensor_device.py [--device cuda] [--quick]``.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import torch
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+DOC = ROOT / "docs" / "sensor-device-benchmark.md"
+FRAMES, H, W = 3, 256, 256
+
+
+def _inputs(batch: int, device: str):
+    g = torch.Generator().manual_seed(0)
+    # a night-street-like mix of means: most pixels below 10 e-, a tail of lamps up to saturation
+    lpd = (torch.rand(batch, FRAMES, 1, H, W, generator=g) ** 6 * 4e4).to(device)
+    spd = (lpd * 0.05).contiguous()
+    return lpd, spd
+
+
+def _sync(device: str) -> None:
+    if device.startswith("cuda"):
+        torch.cuda.synchronize()
+
+
+def time_mode(mode: str, batch: int, device: str, repeats: int) -> dict:
+    from lfmbench.counter_rng import derive_key
+    from lfmbench.sensor import counter_noise as CN
+    from lfmbench.sensor import fixed_pattern, load_preset, simulate_split_pixel_electrons
+
+    preset = load_preset("ovt")
+    lpd, spd = _inputs(batch, device)
+    fpn = fixed_pattern(preset, H, W, device=device)
+    orig = (CN.poisson, CN.normal)
+    if mode == "seeds+compile":
+        CN.poisson, CN.normal = torch.compile(CN.poisson, dynamic=False), torch.compile(CN.normal, dynamic=False)
+    try:
+        def call(i: int):
+            if mode == "generators":
+                gens = [torch.Generator(device=device).manual_seed(1000 * i + b) for b in range(batch)]
+                return simulate_split_pixel_electrons(lpd, spd, preset, 4e-3, 11e-3, gens, fpn=fpn, check=False)
+            seeds = derive_key(i, torch.arange(batch)).to(device)
+            return simulate_split_pixel_electrons(lpd, spd, preset, 4e-3, 11e-3, fpn=fpn, check=False, seeds=seeds)
+
+        t0 = time.perf_counter()
+        call(0)
+        _sync(device)
+        first = time.perf_counter() - t0
+        call(1)
+        _sync(device)
+        if device.startswith("cuda"):
+            torch.cuda.reset_peak_memory_stats()
+            base = torch.cuda.memory_allocated()
+        times = []
+        for i in range(repeats):
+            t0 = time.perf_counter()
+            call(2 + i)
+            _sync(device)
+            times.append(time.perf_counter() - t0)
+        peak = (torch.cuda.max_memory_allocated() - base) if device.startswith("cuda") else None
+    finally:
+        CN.poisson, CN.normal = orig
+    med = statistics.median(times)
+    return {"mode": mode, "batch": batch, "device": device, "samples_per_s": batch / med, "median_s": med,
+            "first_call_s": first, "peak_bytes": peak}
+
+
+def report(rows: list[dict], machine: dict, gpu_run: bool) -> str:
+    lines = ["# Sensor simulation alone: per-sample generators against counter seeds", "",
+             "Written by `benchmarks/bench_sensor_device.py` (rerun: `.venv/bin/python "
+             "benchmarks/bench_sensor_device.py --device cuda`, and without `--device` for the CPU rows). "
+             f"Workload: {FRAMES} frames of {H} x {W} px per sample, `ovt` preset, FPN on, every capture, mean "
+             "electrons already on the device (no composition, no data loading). Median of timed calls after two "
+             "warm-up calls; `first call` includes compilation where there is one.", "",
+             f"Machine: {machine}", ""]
+    if not gpu_run:
+        lines += ["**GPU rows not run**: no CUDA device on the machine that wrote this file.", ""]
+    lines += ["| device | noise | batch | samples/s | first call (s) | peak device memory (MiB) | MiB per sample |",
+              "|---|---|---|---|---|---|---|"]
+    for r in rows:
+        pk = "" if r["peak_bytes"] is None else f"{r['peak_bytes'] / 2**20:.0f}"
+        per = "" if r["peak_bytes"] is None else f"{r['peak_bytes'] / 2**20 / r['batch']:.1f}"
+        lines.append(f"| {r['device']} | {r['mode']} | {r['batch']} | {r['samples_per_s']:.0f} | "
+                     f"{r['first_call_s']:.2f} | {pk} | {per} |")
+    return "\n".join(lines) + "\n"
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--device", default="cpu", help="cpu or cuda")
+    ap.add_argument("--quick", action="store_true", help="smaller batches, fewer repeats")
+    ap.add_argument("--repeats", type=int, default=None)
+    ap.add_argument("--no-doc", action="store_true")
+    ap.add_argument("--json", type=Path, help="also write the rows as JSON here")
+    args = ap.parse_args(argv)
+    gpu = args.device.startswith("cuda")
+    if gpu and not torch.cuda.is_available():
+        print("error: --device cuda: no CUDA device here", file=sys.stderr)
+        return 2
+    repeats = args.repeats or (3 if args.quick else 5)
+    # the CPU rows always (on a GPU machine: its host CPU), the GPU rows with --device cuda
+    plan = [("cpu", b, m) for b in ((2,) if args.quick else (2, 8)) for m in ("generators", "seeds")]
+    if gpu:
+        plan += [(args.device, b, m) for b in (64, 256) for m in ("generators", "seeds", "seeds+compile")]
+    rows = []
+    for dev, b, m in plan:
+        r = time_mode(m, b, dev, repeats)
+        rows.append(r)
+        peak = "-" if r["peak_bytes"] is None else f"{r['peak_bytes'] / 2**20:.0f} MiB"
+        print(f"{r['device']} {m:14s} batch {b:4d}: {r['samples_per_s']:9.1f} samples/s "
+              f"(first call {r['first_call_s']:.2f} s, peak {peak})", flush=True)
+    name = torch.cuda.get_device_name() if gpu else platform.processor() or platform.machine()
+    machine = f"{name}, torch {torch.__version__}, {torch.get_num_threads()} CPU threads"
+    if args.json:
+        args.json.write_text(json.dumps({"machine": machine, "rows": rows}, indent=1))
+    text = report(rows, machine, gpu)
+    print(text)
+    if not args.no_doc:
+        DOC.write_text(text)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
