@@ -1,33 +1,55 @@
-"""Training of the U-Net fusion baseline: ``lfmbench train`` (settings: a YAML config, ``lfmbench/configs/unet.yaml``).
+"""The one training loop of every trainable baseline: ``lfmbench train --method NAME`` (a registered learned
+baseline, :data:`lfmbench.baselines.LEARNED`; settings: its YAML config, e.g. ``lfmbench/configs/unet.yaml``).
 
 Data flow: :class:`~lfmbench.datasets.LFMCaptureDataset` (random crops, PWM draws and noise per sample) ->
-``torch.utils.data.DataLoader`` (``workers`` processes) -> :class:`~lfmbench.baselines.unet.UNetFusion` ->
-:func:`~lfmbench.baselines.unet.led_weighted_loss` -> Adam with a cosine learning-rate schedule.
+``torch.utils.data.DataLoader`` (``workers`` processes) -> the baseline's network -> its loss
+(:class:`lfmbench.baselines.trainable.Trainable`) -> Adam with a cosine learning-rate schedule (constant when
+``lr_min = lr``) and optional gradient clipping.
 
-Deterministic given the seed: a sample depends only on ``(seed, epoch, index)`` (docs/datasets.md), the order of
-the samples of epoch e only on ``(seed, e)`` (:class:`EpochSampler`), and the weights are initialised after
-``torch.manual_seed(seed)``. The sampler hands ``(epoch, index)`` pairs to the workers, so persistent workers
-(which keep their scene caches between epochs) still draw the right epoch. The checkpoint is written atomically
-after every epoch with the optimiser state; running the same command again resumes after the last finished
-epoch (and does nothing when all epochs are done), so a resumed run ends with the same weights as an
-uninterrupted one.
+Deterministic given the seed: a sample depends only on ``(seed, epoch, index)`` (docs/datasets.md), the weights are
+initialised after ``torch.manual_seed(seed)``, and the order of an epoch's samples is either a permutation that
+depends only on ``(seed, epoch)`` (:class:`EpochSampler`; the sampler hands ``(epoch, index)`` pairs to the
+workers, so persistent workers still draw the right epoch) or a DataLoader shuffled by one generator seeded once
+whose state is kept in the checkpoint. The checkpoint is written atomically after every epoch with the optimiser
+state; running the same command again resumes after the last finished epoch (and does nothing when all epochs
+are done), so a resumed run ends with the same weights as an uninterrupted one.
 """
 from __future__ import annotations
 
+import importlib
 import math
 import os
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
+from typing import Any
 
 import torch
 from torch.utils.data import DataLoader, Dataset, Sampler
 
-from lfmbench.baselines.unet import (UNetConfig, UNetFusion, config_from_dict, count_parameters,
-                                     led_weighted_loss, load_config, read_checkpoint, save_checkpoint)
+from lfmbench.baselines import LEARNED
+from lfmbench.baselines.trainable import Trainable, count_parameters
 
-#: Dataset outputs the training reads (no DN images, no depth).
-TRAIN_OUTPUTS = ("input_referred", "saturated", "gt", "light_index")
+__all__ = ["trainable", "load_config", "make_loader", "fit", "train", "train_batches", "EpochSampler",
+           "EpochIndexed", "cosine_lr"]
+
+
+def trainable(method: str | Trainable) -> Trainable:
+    """The :class:`Trainable` of a registered learned baseline (``TRAINING`` of its module).
+
+    Raises:
+        ValueError: ``method`` is not one of :data:`lfmbench.baselines.LEARNED` (the message lists them).
+    """
+    if isinstance(method, Trainable):
+        return method
+    if method not in LEARNED:
+        raise ValueError(f"--method {method!r} is not a trainable baseline; trainable: {', '.join(LEARNED)}")
+    return importlib.import_module(LEARNED[method]).TRAINING
+
+
+def load_config(method: str | Trainable, path: str | os.PathLike | None = None) -> Any:
+    """The training configuration of ``method`` from ``path`` (default: the method's own config file)."""
+    return trainable(method).load_config(path)
 
 
 class EpochSampler(Sampler):
@@ -62,20 +84,26 @@ class EpochIndexed(Dataset):
         return self.dataset[index]
 
 
-def make_loader(corpus: str | os.PathLike, cfg: UNetConfig, workers: int | None = None,
-                device: torch.device | str = "cpu") -> tuple[DataLoader, EpochSampler]:
-    """DataLoader of training batches over :class:`~lfmbench.datasets.LFMCaptureDataset` and its sampler."""
+def make_loader(corpus: str | os.PathLike, spec: Trainable, cfg: Any, workers: int | None = None,
+                device: torch.device | str = "cpu") -> tuple[DataLoader, Callable[[int], None]]:
+    """DataLoader of training batches over :class:`~lfmbench.datasets.LFMCaptureDataset` and the function that
+    selects an epoch's draws and order (``set_epoch(epoch)``), for ``spec.data_order``."""
     from lfmbench.datasets.loading import collate_samples, make_dataset
 
     t = cfg.train
+    extra = {} if spec.outputs is None else {"outputs": spec.outputs}
     ds = make_dataset(corpus, t.split, seed=t.seed, crop=t.crop, samples_per_scene=t.samples_per_scene,
-                      frames=t.frames, sensor=t.sensor, outputs=TRAIN_OUTPUTS)
-    sampler = EpochSampler(len(ds), t.seed)
+                      frames=t.frames, sensor=t.sensor, **extra)
     nw = t.workers if workers is None else int(workers)
+    if spec.data_order == "shuffle":
+        loader = DataLoader(ds, batch_size=t.batch_size, shuffle=True, num_workers=nw, collate_fn=collate_samples,
+                            generator=torch.Generator().manual_seed(t.seed))
+        return loader, ds.set_epoch
+    sampler = EpochSampler(len(ds), t.seed)
     loader = DataLoader(EpochIndexed(ds), batch_size=t.batch_size, sampler=sampler, num_workers=nw,
                         collate_fn=collate_samples, persistent_workers=nw > 0,
                         pin_memory=torch.device(device).type == "cuda")
-    return loader, sampler
+    return loader, sampler.set_epoch
 
 
 def cosine_lr(step: int, total: int, lr: float, lr_min: float) -> float:
@@ -88,71 +116,51 @@ def _to(batch: dict, device: torch.device) -> dict:
     return {k: (v.to(device, non_blocking=True) if isinstance(v, torch.Tensor) else v) for k, v in batch.items()}
 
 
-def train(corpus: str | os.PathLike, out: str | os.PathLike, cfg: UNetConfig, *, device: str = "cpu",
-          epochs: int | None = None, workers: int | None = None, resume: bool = True, max_steps: int | None = None,
-          progress: bool = True, log: Callable[[str], None] | None = print) -> tuple[UNetFusion, dict]:
-    """Train :class:`UNetFusion` on ``corpus`` and write the checkpoint ``out`` after every epoch (atomically).
+def fit(model: torch.nn.Module, opt: torch.optim.Optimizer, spec: Trainable, cfg: Any, batches: Iterable[dict], *,
+        device: str | torch.device = "cpu", out: str | os.PathLike | None = None, start: int = 0,
+        history: dict | None = None, set_epoch: Callable[[int], None] | None = None,
+        checkpoint_extra: Callable[[], dict] | None = None, max_steps: int | None = None, progress: bool = True,
+        log: Callable[[str], None] | None = print, corpus: str | os.PathLike | None = None) -> dict:
+    """The training loop: epochs ``start .. cfg.train.epochs - 1`` over ``batches``, the checkpoint ``out`` written
+    (atomically, by ``spec.save_checkpoint``) after every epoch with the optimiser state and the history.
 
     Args:
-        corpus: corpus directory.
-        out: checkpoint path (resumed from when it exists and ``resume``).
-        cfg: configuration (:func:`lfmbench.baselines.unet.load_config`).
-        device: torch device of the network.
-        epochs: overrides ``cfg.train.epochs`` (the total, counting epochs done before a resume).
-        workers: overrides ``cfg.train.workers``.
-        resume: continue from ``out`` when it holds a checkpoint of the same model and training config.
-        max_steps: stop after this many optimiser steps in this call (tests); the checkpoint is still written.
-        progress: show a tqdm bar per epoch.
-        log: callback for one line per epoch (None: silent).
+        model, opt: the network (on ``device``) and its optimiser.
+        spec: the baseline's :class:`Trainable` (its loss and checkpoint format). cfg: its configuration.
+        batches: iterable of batch dicts, re-iterated once per epoch.
+        out: checkpoint path, or None (nothing written).
+        start, history: the epochs already done and their history (a resume).
+        set_epoch: called with the epoch before it starts (fresh draws, crops, noise and order per epoch).
+        checkpoint_extra: more fields for every checkpoint (e.g. the data order's generator state).
+        max_steps: stop after this many optimiser steps in this call; the checkpoint is still written.
+        progress: show a tqdm bar per epoch. log: one line per epoch (None: silent).
 
     Returns:
-        (model in eval mode, the checkpoint's ``history`` dict: per-epoch mean losses and seconds, steps).
+        the history: ``epoch_loss`` and ``epoch_seconds`` per epoch, ``terms`` (mean loss terms per epoch),
+        ``step_loss`` per optimiser step, ``steps`` in all.
     """
     dev = torch.device(device)
-    if epochs is not None:
-        if epochs < 1:
-            raise ValueError(f"epochs must be >= 1, got {epochs}")
-        cfg = config_from_dict({**cfg.to_dict(), "train": {**cfg.to_dict()["train"], "epochs": int(epochs)}})
     t = cfg.train
-    out = Path(out)
-    torch.manual_seed(t.seed)
-    model = UNetFusion(cfg).to(dev)
-    opt = torch.optim.Adam(model.parameters(), lr=t.lr, weight_decay=t.weight_decay)
-    history = {"epoch_loss": [], "epoch_seconds": [], "steps": 0, "terms": []}
-    start = 0
-    if resume and out.exists():
-        ck = read_checkpoint(out, map_location=dev)
-        same = {k: v for k, v in (ck.get("config") or {}).get("train", {}).items() if k not in ("epochs", "workers")}
-        want = {k: v for k, v in cfg.to_dict()["train"].items() if k not in ("epochs", "workers")}
-        if ck.get("model_config") != cfg.to_dict()["model"] or (ck.get("config") or {}).get("loss") != \
-                cfg.to_dict()["loss"] or same != want:
-            raise ValueError(f"checkpoint {out} was trained with another config; pass --no-resume to start again "
-                             "(it is overwritten) or choose another --out")
-        model.load_state_dict(ck["state_dict"])
-        opt.load_state_dict(ck["optimizer"])
-        history = ck["history"]
-        start = int(ck["epochs_done"])
-        if log:
-            log(f"resuming {out} after epoch {start}/{t.epochs}")
-    loader, sampler = make_loader(corpus, cfg, workers, dev)
-    total_steps = t.epochs * len(loader)
-    scale = cfg.model.feature_scale_e
+    history = history or {"epoch_loss": [], "epoch_seconds": [], "steps": 0, "terms": [], "step_loss": []}
+    history.setdefault("step_loss", [])
+    total_steps = t.epochs * len(batches) if hasattr(batches, "__len__") else 0
     steps_this_call = 0
     for ep in range(start, t.epochs):
         model.train()
-        sampler.set_epoch(ep)
+        if set_epoch is not None:
+            set_epoch(ep)
         t0 = time.perf_counter()
-        it = loader
+        it = batches
         if progress:
             from tqdm import tqdm
 
-            it = tqdm(loader, desc=f"train epoch {ep + 1}/{t.epochs}", unit="batch", leave=False)
+            it = tqdm(batches, desc=f"train epoch {ep + 1}/{t.epochs}", unit="batch", leave=False)
         sums: dict[str, float] = {}
         lr = cosine_lr(history["steps"], total_steps, t.lr, t.lr_min)
         n = 0
         for batch in it:
             batch = _to(batch, dev)
-            loss, terms = led_weighted_loss(model(batch), batch["gt"], batch.get("light_index"), cfg.loss, scale)
+            loss, terms = spec.loss(model, batch, cfg)
             lr = cosine_lr(history["steps"], total_steps, t.lr, t.lr_min)
             for g in opt.param_groups:
                 g["lr"] = lr
@@ -164,7 +172,9 @@ def train(corpus: str | os.PathLike, out: str | os.PathLike, cfg: UNetConfig, *,
             history["steps"] += 1
             steps_this_call += 1
             n += 1
-            for k, v in {"loss": float(loss.detach()), **terms}.items():
+            value = float(loss.detach())
+            history["step_loss"].append(value)
+            for k, v in {"loss": value, **terms}.items():
                 sums[k] = sums.get(k, 0.0) + v
             if progress:
                 it.set_postfix(loss=f"{sums['loss'] / n:.4f}")
@@ -175,15 +185,101 @@ def train(corpus: str | os.PathLike, out: str | os.PathLike, cfg: UNetConfig, *,
         history["epoch_loss"].append(means.get("loss", float("nan")))
         history["terms"].append(means)
         history["epoch_seconds"].append(secs)
-        save_checkpoint(model, out, cfg, {"optimizer": opt.state_dict(), "epochs_done": ep + 1,
-                                          "history": history, "parameters": count_parameters(model),
-                                          "corpus": str(corpus)})
+        if out is not None:
+            spec.save_checkpoint(model, out, cfg, {"optimizer": opt.state_dict(), "epochs_done": ep + 1,
+                                                   "history": history, "parameters": count_parameters(model),
+                                                   "corpus": None if corpus is None else str(corpus),
+                                                   **(checkpoint_extra() if checkpoint_extra else {})})
         if log:
-            log(f"epoch {ep + 1}/{t.epochs}: loss {means.get('loss', float('nan')):.4f} "
-                f"(mu-L1 {means.get('mu_l1', float('nan')):.4f}, LED {means.get('led_l1', float('nan')):.4f}, "
-                f"region {means.get('region_log', float('nan')):.4f}), {n} steps, {secs:.1f} s, "
-                f"lr {lr:.2e} -> {out}")
+            extra = ", ".join(f"{k} {v:.4f}" for k, v in means.items() if k != "loss")
+            log(f"epoch {ep + 1}/{t.epochs}: loss {means.get('loss', float('nan')):.4f}"
+                + (f" ({extra})" if extra else "") + f", {n} steps, {secs:.1f} s, lr {lr:.2e}"
+                + (f" -> {out}" if out is not None else ""))
         if max_steps is not None and steps_this_call >= max_steps:
             break
+    return history
+
+
+def train(method: str | Trainable, corpus: str | os.PathLike, out: str | os.PathLike, cfg: Any = None, *,
+          device: str = "cpu", epochs: int | None = None, workers: int | None = None, resume: bool = True,
+          max_steps: int | None = None, progress: bool = True,
+          log: Callable[[str], None] | None = print, **train_overrides: Any) -> tuple[torch.nn.Module, dict]:
+    """Train the baseline ``method`` on ``corpus`` and write the checkpoint ``out`` after every epoch (atomically).
+
+    Args:
+        method: a name of :data:`lfmbench.baselines.LEARNED` (or its :class:`Trainable`).
+        corpus: corpus directory.
+        out: checkpoint path (resumed from when it exists and ``resume``).
+        cfg: configuration (default: the method's config file, :func:`load_config`).
+        device: torch device of the network.
+        epochs: overrides ``cfg.train.epochs`` (the total, counting epochs done before a resume).
+        workers: overrides ``cfg.train.workers``.
+        resume: continue from ``out`` when it holds a checkpoint of the same model and training config.
+        max_steps: stop after this many optimiser steps in this call (tests); the checkpoint is still written.
+        progress: show a tqdm bar per epoch.
+        log: callback for one line per epoch (None: silent).
+        train_overrides: other keys of the ``train`` section (``crop``, ``batch_size``, ``seed``, ...).
+
+    Returns:
+        (model in eval mode, the checkpoint's ``history`` dict: per-epoch mean losses and seconds, steps).
+    """
+    spec = trainable(method)
+    cfg = spec.load_config(None) if cfg is None else cfg
+    over = {k: v for k, v in {"epochs": epochs, **train_overrides}.items() if v is not None}
+    if "epochs" in over and over["epochs"] < 1:
+        raise ValueError(f"epochs must be >= 1, got {over['epochs']}")
+    if over:
+        d = cfg.to_dict()
+        cfg = spec.config_from_dict({**d, "train": {**d["train"], **over}}, "the command-line options")
+    t = cfg.train
+    dev = torch.device(device)
+    out = Path(out)
+    torch.manual_seed(t.seed)
+    model = spec.build_model(cfg).to(dev)
+    opt = torch.optim.Adam(model.parameters(), lr=t.lr, weight_decay=t.weight_decay)
+    history, start, data_rng = None, 0, None
+    if resume and out.exists():
+        ck = spec.read_checkpoint(out, map_location=dev)
+        mine = {k: v for k, v in cfg.to_dict().items() if k != "train"}
+        theirs = {k: v for k, v in (ck.get("config") or {}).items() if k != "train"}
+        same = {k: v for k, v in (ck.get("config") or {}).get("train", {}).items() if k not in ("epochs", "workers")}
+        want = {k: v for k, v in cfg.to_dict()["train"].items() if k not in ("epochs", "workers")}
+        if mine != theirs or same != want or "optimizer" not in ck:
+            raise ValueError(f"checkpoint {out} was trained with another config; pass --no-resume to start again "
+                             "(it is overwritten) or choose another --out")
+        model.load_state_dict(ck["state_dict"])
+        opt.load_state_dict(ck["optimizer"])
+        history = ck["history"]
+        start = int(ck["epochs_done"])
+        data_rng = ck.get("data_rng")
+        if log:
+            log(f"resuming {out} after epoch {start}/{t.epochs}")
+    loader, set_epoch = make_loader(corpus, spec, cfg, workers, dev)
+    gen = loader.generator if spec.data_order == "shuffle" else None
+    if gen is not None and data_rng is not None:
+        gen.set_state(data_rng)
+    history = fit(model, opt, spec, cfg, loader, device=dev, out=out, start=start, history=history,
+                  set_epoch=set_epoch, checkpoint_extra=(lambda: {"data_rng": gen.get_state()}) if gen else None,
+                  max_steps=max_steps, progress=progress, log=log, corpus=corpus)
     return model.eval(), history
 
+
+def train_batches(method: str | Trainable, batches: Iterable[dict], cfg: Any = None, *,
+                  out: str | os.PathLike | None = None, device: str | torch.device = "cpu",
+                  max_steps: int | None = None, progress: bool = False,
+                  log: Callable[[str], None] | None = None) -> tuple[torch.nn.Module, dict]:
+    """Train a fresh ``method`` network on any iterable of batch dicts (re-iterated once per epoch;
+    ``batches.dataset.set_epoch`` is called when it exists), by :func:`fit`; no resume.
+
+    Returns:
+        (model in eval mode, history: ``step_loss`` per optimiser step, ``epoch_loss`` per epoch, ...).
+    """
+    spec = trainable(method)
+    cfg = spec.load_config(None) if cfg is None else cfg
+    torch.manual_seed(cfg.train.seed)
+    model = spec.build_model(cfg).to(device)
+    opt = torch.optim.Adam(model.parameters(), lr=cfg.train.lr, weight_decay=cfg.train.weight_decay)
+    dataset = getattr(batches, "dataset", None)
+    history = fit(model, opt, spec, cfg, batches, device=device, out=out,
+                  set_epoch=getattr(dataset, "set_epoch", None), max_steps=max_steps, progress=progress, log=log)
+    return model.eval(), history

@@ -1,5 +1,5 @@
-"""The names every stage shares: light groups and kinds, object and vehicle kinds, spectrum models, photodiodes
-and captures.
+"""The names every stage shares: light groups and kinds, object and vehicle kinds, spectrum models, photodiodes,
+captures and the learned baselines.
 
 One definition each: the scene generator and the renderer (``render_tools``), the corpus format
 (:mod:`lfmbench.corpus`), the sensor (:mod:`lfmbench.sensor`) and the datasets import them from here. Adding a
@@ -12,7 +12,7 @@ from types import MappingProxyType
 from typing import Mapping
 
 __all__ = ["GROUPS", "LIGHT_GROUPS", "LIGHT_KINDS", "VEHICLE_KINDS", "OBJECT_KINDS", "SPECTRUM_MODELS",
-           "PHOTODIODES", "CAPTURES"]
+           "PHOTODIODES", "CAPTURES", "LEARNED_BASELINES"]
 
 #: Light groups (upstream ISET-LFM names + traffic signals); each group is one radiance layer of a corpus.
 GROUPS: tuple[str, ...] = ("headlights", "streetlights", "otherlights", "skymap", "signals")
@@ -40,3 +40,10 @@ SPECTRUM_MODELS: Mapping[str, Mapping[str, tuple[str, ...]]] = MappingProxyType(
 PHOTODIODES: tuple[str, ...] = ("lpd", "spd")
 #: Captures of the split pixel, in the order of the ``saturated`` channels (docs/contracts.md).
 CAPTURES: tuple[str, ...] = ("lpd_hcg", "lpd_lcg", "spd")
+#: Learned baselines: name -> the module that defines the registered method ``name`` (backed by a checkpoint) and
+#: ``TRAINING`` (how ``lfmbench train --method NAME`` trains it); :data:`lfmbench.baselines.LEARNED`. Here, without
+#: torch, so that the command line can list them in its help.
+LEARNED_BASELINES: Mapping[str, str] = MappingProxyType({
+    "learned": "lfmbench.baselines.learned",
+    "unet": "lfmbench.baselines.unet",
+})

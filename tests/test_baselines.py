@@ -127,7 +127,11 @@ def test_learned_train_checkpoint_roundtrip(tmp_path, monkeypatch):
     batches = [make_batch(b=1, h=16, w=16, noise=True, seed=i, lpd_on=(0.1 * i, 1.0 - 0.1 * i, 0.5))
                for i in range(3)]
     ck = tmp_path / "lf.pt"
-    model, losses = learned.train(batches, ck, epochs=4, lr=1e-2, seed=0)
+    from lfmbench.train import train_batches
+
+    cfg = learned.config_from_dict({"train": {"epochs": 4, "lr": 1e-2, "lr_min": 1e-2, "grad_clip": 0.0}})
+    model, hist = train_batches("learned", batches, cfg, out=ck)
+    losses = hist["step_loss"]
     n_params = sum(p.numel() for p in model.parameters())
     assert 1000 < n_params < 10000
     assert ck.is_file() and len(losses) == 12 and losses[-1] < losses[0]
@@ -144,7 +148,7 @@ def test_learned_train_checkpoint_roundtrip(tmp_path, monkeypatch):
 
 def test_learned_without_checkpoint_has_clear_error(tmp_path, monkeypatch):
     monkeypatch.setenv(learned.CHECKPOINT_ENV, str(tmp_path / "missing.pt"))
-    with pytest.raises(learned.CheckpointNotFoundError, match="python -m lfmbench.baselines.learned"):
+    with pytest.raises(learned.CheckpointNotFoundError, match="lfmbench train --method learned"):
         learned.learned(make_batch())
     bad = tmp_path / "bad.pt"
     torch.save({"something": 1}, bad)

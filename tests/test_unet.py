@@ -1,4 +1,4 @@
-"""Tests of the U-Net fusion baseline (lfmbench.baselines.unet) and its training command (lfmbench.train):
+"""Tests of the U-Net fusion baseline (lfmbench.baselines.unet) and the training command (lfmbench.train):
 parameter budget, forward contract, a tiny overfit, checkpoints, the CLI on a tiny corpus, resume, bad configs."""
 from __future__ import annotations
 
@@ -185,3 +185,39 @@ def test_epoch_sampler_depends_only_on_seed_and_epoch():
     s.set_epoch(4)
     assert [i for _, i in s] != [i for _, i in first]
     assert T.cosine_lr(0, 10, 1e-2, 1e-4) == pytest.approx(1e-2) and T.cosine_lr(10, 10, 1e-2, 1e-4) == 1e-4
+
+
+def test_train_command_trains_the_learned_baseline_and_resumes_its_shuffled_order(corpus, tmp_path):
+    """``lfmbench train --method learned`` goes through the same loop; its order is a DataLoader shuffled by one
+    generator seeded once, whose state the checkpoint keeps, so a resumed run ends with the weights of an
+    uninterrupted one (without it, a resumed epoch 2 would replay epoch 1's order)."""
+    from lfmbench.baselines import learned as L
+
+    torch.set_num_threads(1)
+    cfg = _write_cfg(tmp_path / "learned.yaml", {"train": {"epochs": 2, "batch_size": 2, "crop": 8,
+                                                           "samples_per_scene": 2, "workers": 0, "lr": 1e-2,
+                                                           "lr_min": 1e-2, "grad_clip": 0.0}})
+    a, b = tmp_path / "a.pt", tmp_path / "b.pt"
+    base = ["train", "--method", "learned", "--corpus", str(corpus), "--config", str(cfg)]
+    r = CliRunner().invoke(app, base + ["--out", str(a)])
+    assert r.exit_code == 0, r.output
+    for n in ("1", "2"):
+        r = CliRunner().invoke(app, base + ["--out", str(b), "--epochs", n])
+        assert r.exit_code == 0, r.output
+    assert "resuming" in r.output
+    sa, sb = L.load_checkpoint(a).state_dict(), L.load_checkpoint(b).state_dict()
+    assert all(torch.equal(sa[k], sb[k]) for k in sa)
+    assert not all(torch.equal(sa[k], L.LearnedFusion().state_dict()[k]) for k in sa)   # it did train
+    r = CliRunner().invoke(app, ["train", "--method", "nope", "--corpus", str(corpus)])
+    assert r.exit_code == 2 and "learned" in r.output and "unet" in r.output
+
+
+def test_every_learned_baseline_is_registered_and_trainable():
+    """One entry of lfmbench.vocabulary.LEARNED_BASELINES makes a method: registered, with a Trainable."""
+    from lfmbench.vocabulary import LEARNED_BASELINES
+
+    for name in LEARNED_BASELINES:
+        spec = T.trainable(name)
+        assert spec.name == name and name in baselines.REGISTRY and spec.default_config.is_file()
+        cfg = spec.load_config(None)
+        assert cfg.train.epochs >= 1 and spec.build_model(cfg) is not None

@@ -10,11 +10,18 @@ import importlib
 from collections.abc import Callable
 
 from lfmbench.baselines.checkpoint import lazy_method
+from lfmbench.vocabulary import LEARNED_BASELINES
 from lfmbench.baselines.classic import (flicker_aware, flicker_aware_two_sided, lpd_only, saturated_exposure_corrected,
                                         spd_only, temporal, upstream_saturated)
 
 Method = Callable[[dict], "object"]
 
+
+#: Learned baselines: name -> the module that defines the registered method ``name`` (backed by a checkpoint,
+#: :func:`lfmbench.baselines.checkpoint.checkpointed_method`) and ``TRAINING`` (how ``lfmbench train --method
+#: NAME`` trains it, :class:`lfmbench.baselines.trainable.Trainable`). A new learned baseline is one module and
+#: one entry of :data:`lfmbench.vocabulary.LEARNED_BASELINES`.
+LEARNED = LEARNED_BASELINES
 
 #: Registered baselines, in leaderboard order.
 REGISTRY: dict[str, Method] = {
@@ -25,8 +32,7 @@ REGISTRY: dict[str, Method] = {
     "flicker_aware": flicker_aware,
     "flicker_aware_two_sided": flicker_aware_two_sided,
     "temporal": temporal,
-    "learned": lazy_method("lfmbench.baselines.learned", "learned"),
-    "unet": lazy_method("lfmbench.baselines.unet", "unet"),
+    **{name: lazy_method(module, name) for name, module in LEARNED.items()},
 }
 
 
@@ -70,5 +76,5 @@ def get_method(spec: str | Method) -> Method:
                               "or give 'package.module:function'")
 
 
-__all__ = ["REGISTRY", "get_method", "MethodNotFoundError", "lpd_only", "spd_only", "upstream_saturated",
+__all__ = ["REGISTRY", "LEARNED", "get_method", "MethodNotFoundError", "lpd_only", "spd_only", "upstream_saturated",
            "saturated_exposure_corrected", "flicker_aware", "flicker_aware_two_sided", "temporal"]

@@ -1,5 +1,7 @@
 """Learned baselines backed by a checkpoint file: one rule for where the weights are, loading them once, running
-them, and registering them lazily (so that importing :mod:`lfmbench.baselines` imports no network module)."""
+them (:func:`checkpointed_method`, the one registration helper of every checkpoint-backed baseline), and
+registering them lazily (:func:`lazy_method`, so that importing :mod:`lfmbench.baselines` imports no network
+module)."""
 from __future__ import annotations
 
 import importlib
@@ -39,6 +41,28 @@ class CheckpointedModel:
         model = self.model()
         with torch.no_grad():
             return model.to(batch["spd_e"].device)(batch)
+
+
+def checkpointed_method(name: str, env: str, default: str | os.PathLike,
+                        load: Callable[[Path], torch.nn.Module]) -> Callable[[dict], torch.Tensor]:
+    """The registered method of a checkpoint-backed baseline: ``method(batch)`` runs the module that ``load`` builds
+    from the file ``$env`` (default ``default``) on the batch's device without gradients, (B, F, 1, H, W) e-.
+
+    The method carries ``torch_module()`` (the loaded module: the evaluation counts its parameters and MACs),
+    ``checkpoint_path()`` and ``weights`` (the :class:`CheckpointedModel`).
+    """
+    weights = CheckpointedModel(env, default, load)
+
+    def method(batch: dict) -> torch.Tensor:
+        return weights.run(batch)
+
+    method.__name__ = method.__qualname__ = name
+    method.__doc__ = (f"Registered method ``{name}``: the network with the weights at ``${env}`` or {default}; "
+                      "(B, F, 1, H, W) e-.")
+    method.torch_module = weights.model  # type: ignore[attr-defined]
+    method.checkpoint_path = weights.path  # type: ignore[attr-defined]
+    method.weights = weights  # type: ignore[attr-defined]
+    return method
 
 
 def lazy_method(module: str, name: str) -> Callable[[dict], torch.Tensor]:

@@ -12,29 +12,32 @@ Features (per frame, per pixel): log1p of L, S and T over :data:`FEATURE_SCALE_E
 flags. Loss: L1 between the mu-law tone-mapped output and GT, both normalised by the GT peak
 (:func:`lfmbench.metrics.hdr.normalize_hdr`, :func:`~lfmbench.metrics.hdr.mu_law`; Kalantari & Ramamoorthi 2017).
 
-Defines :class:`LearnedFusion` (``nn.Module``, input the batch dict), :func:`train`, :func:`save_checkpoint`,
-:func:`load_checkpoint` and the registered method :func:`learned`, which reads the checkpoint at
-``$LFMBENCH_LEARNED_CHECKPOINT`` or :data:`DEFAULT_CHECKPOINT` and raises :class:`CheckpointNotFoundError`
-with the training command when there is none.
+Defines :class:`LearnedFusion` (``nn.Module``, input the batch dict), :func:`save_checkpoint`, :func:`load_checkpoint`, the registered method :func:`learned`, which reads the
+checkpoint at ``$LFMBENCH_LEARNED_CHECKPOINT`` or :data:`DEFAULT_CHECKPOINT` and raises
+:class:`CheckpointNotFoundError` with the training command when there is none, and :data:`TRAINING`.
 
-Training script: ``python -m lfmbench.baselines.learned --corpus DIR --epochs 3 --checkpoint runs/learned_fusion.pt``.
+Training: ``lfmbench train --method learned --corpus DIR --out runs/learned_fusion.pt`` (settings:
+``lfmbench/configs/learned.yaml``; the loop of :mod:`lfmbench.train`; on any iterable of batches:
+``lfmbench.train.train_batches("learned", batches, cfg)``).
 """
 from __future__ import annotations
 
-import argparse
-import time
-from collections.abc import Callable, Iterable
+import os
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
+from typing import Any
 
 import torch
-
-from lfmbench.baselines.checkpoint import CheckpointedModel
-from lfmbench.fileio import atomic_torch_save
 import torch.nn as nn
 
-from lfmbench.baselines.classic import saturated_fusion, _captures
+from lfmbench.baselines.checkpoint import checkpointed_method
+from lfmbench.baselines.classic import _captures, saturated_fusion
+from lfmbench.baselines.trainable import Trainable, TrainConfig, read_sections, read_yaml_config
+from lfmbench.fileio import atomic_torch_save
 from lfmbench.metrics.hdr import mu_law, normalize_hdr
 
+#: The editable default training configuration.
+DEFAULT_CONFIG = Path(__file__).resolve().parents[1] / "configs" / "learned.yaml"
 #: Where :func:`learned` looks for weights unless ``$LFMBENCH_LEARNED_CHECKPOINT`` is set.
 DEFAULT_CHECKPOINT = Path("runs") / "learned_fusion.pt"
 CHECKPOINT_ENV = "LFMBENCH_LEARNED_CHECKPOINT"
@@ -46,6 +49,35 @@ FORMAT_VERSION = 1
 
 class CheckpointNotFoundError(FileNotFoundError):
     """No trained weights for the learned baseline."""
+
+
+@dataclass
+class ModelConfig:
+    """Architecture: hidden channels of the conv net (12 -> 3.6 k parameters)."""
+
+    width: int = 12
+
+
+@dataclass
+class LearnedConfig:
+    """The two sections of ``lfmbench/configs/learned.yaml``."""
+
+    model: ModelConfig = field(default_factory=ModelConfig)
+    train: TrainConfig = field(default_factory=TrainConfig)
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+def config_from_dict(data: Any, source: str = "<dict>") -> LearnedConfig:
+    """A :class:`LearnedConfig` from nested mappings (missing keys: the defaults); :class:`ConfigError` names
+    ``source`` and the key."""
+    return LearnedConfig(**read_sections(data, {"model": ModelConfig, "train": TrainConfig}, source))
+
+
+def load_config(path: str | os.PathLike | None = None) -> LearnedConfig:
+    """Read a learned-fusion YAML configuration (default :data:`DEFAULT_CONFIG`)."""
+    return read_yaml_config(DEFAULT_CONFIG if path is None else path, config_from_dict, "learned-fusion")
 
 
 class LearnedFusion(nn.Module):
@@ -104,8 +136,8 @@ def load_checkpoint(path: str | Path, map_location: str | torch.device = "cpu") 
     path = Path(path)
     if not path.is_file():
         raise CheckpointNotFoundError(
-            f"no learned-fusion checkpoint at {path}; train one with `python -m lfmbench.baselines.learned "
-            f"--corpus DIR --checkpoint {path}` (or set ${CHECKPOINT_ENV})")
+            f"no learned-fusion checkpoint at {path}; train one with `lfmbench train --method learned "
+            f"--corpus DIR --out {path}` (or set ${CHECKPOINT_ENV})")
     ck = torch.load(path, map_location=map_location, weights_only=True)
     if not isinstance(ck, dict) or ck.get("format_version") != FORMAT_VERSION:
         raise ValueError(f"checkpoint {path} is not a lfmbench learned-fusion checkpoint of format {FORMAT_VERSION}")
@@ -114,107 +146,28 @@ def load_checkpoint(path: str | Path, map_location: str | torch.device = "cpu") 
     return model.eval()
 
 
-def train(loader: Iterable[dict], checkpoint: str | Path | None = None, epochs: int = 1, lr: float = 3e-3,
-          width: int = 12, max_steps: int | None = None, seed: int = 0, device: str | torch.device = "cpu",
-          model: LearnedFusion | None = None, progress: bool = False,
-          log: Callable[[str], None] | None = None) -> tuple[LearnedFusion, list[float]]:
-    """Train :class:`LearnedFusion` with Adam on batches from ``loader`` (e.g. a DataLoader of the dataset).
-
-    Args:
-        loader: iterable of batch dicts (re-iterated once per epoch).
-        checkpoint: where to save the weights after each epoch (atomic), or None.
-        epochs, lr, width, max_steps: optimisation settings (max_steps caps the total number of steps).
-        seed: seeds the weight initialisation (``torch.manual_seed``).
-        device: training device.
-        model: continue training this model instead of a fresh one.
-        progress: show a tqdm bar.
-        log: optional callback for one line per epoch.
-
-    Returns:
-        (trained model in eval mode, per-step losses).
-    """
-    torch.manual_seed(seed)
-    model = (model or LearnedFusion(width)).to(device).train()
-    opt = torch.optim.Adam(model.parameters(), lr=lr)
-    losses: list[float] = []
-    step = 0
-    for ep in range(epochs):
-        t0 = time.perf_counter()
-        dataset = getattr(loader, "dataset", None)
-        if hasattr(dataset, "set_epoch"):
-            dataset.set_epoch(ep)  # fresh PWM draws, crops and noise every epoch
-        it = loader
-        if progress:
-            from tqdm import tqdm
-
-            it = tqdm(loader, desc=f"epoch {ep + 1}/{epochs}", leave=False)
-        for batch in it:
-            batch = {k: (v.to(device) if isinstance(v, torch.Tensor) else v) for k, v in batch.items()}
-            loss = fusion_loss(model(batch), batch["gt"])
-            opt.zero_grad()
-            loss.backward()
-            opt.step()
-            losses.append(float(loss.detach()))
-            step += 1
-            if max_steps is not None and step >= max_steps:
-                break
-        if log:
-            n = max(1, min(len(losses), 20))
-            log(f"epoch {ep + 1}: loss {sum(losses[-n:]) / n:.4f} ({time.perf_counter() - t0:.1f} s, {step} steps)")
-        if checkpoint is not None:
-            save_checkpoint(model, checkpoint, {"epochs": ep + 1, "steps": step, "lr": lr, "seed": seed,
-                                                "losses": losses})
-        if max_steps is not None and step >= max_steps:
-            break
-    return model.eval(), losses
+def _loss(model: LearnedFusion, batch: dict, cfg: LearnedConfig) -> tuple[torch.Tensor, dict]:
+    """The training loss of a batch: :func:`fusion_loss` of the model's output."""
+    return fusion_loss(model(batch), batch["gt"]), {}
 
 
-#: Where the weights are (``$LFMBENCH_LEARNED_CHECKPOINT`` or :data:`DEFAULT_CHECKPOINT`), loaded once per file version.
-WEIGHTS = CheckpointedModel(CHECKPOINT_ENV, DEFAULT_CHECKPOINT, load_checkpoint)
-checkpoint_path = WEIGHTS.path
-_model = WEIGHTS.model
+def _save(model: LearnedFusion, path: str | Path, cfg: LearnedConfig | None = None, extra: dict | None = None) -> Path:
+    return save_checkpoint(model, path, {"config": cfg.to_dict() if cfg is not None else None, **(extra or {})})
 
 
-def learned(batch: dict) -> torch.Tensor:
-    """Registered method: :class:`LearnedFusion` with the weights at :func:`checkpoint_path`.
-
-    Returns (B, F, 1, H, W) e-. Raises :class:`CheckpointNotFoundError` if no checkpoint exists.
-    """
-    return WEIGHTS.run(batch)
+def _read(path: str | Path, map_location: str | torch.device = "cpu") -> dict:
+    load_checkpoint(path, map_location)  # the format checks, with their messages
+    return torch.load(path, map_location=map_location, weights_only=True)
 
 
-#: Lets the evaluation count parameters and MACs of the module behind :func:`learned`.
-learned.torch_module = _model  # type: ignore[attr-defined]
+#: The registered method: :class:`LearnedFusion` with the weights at ``$LFMBENCH_LEARNED_CHECKPOINT`` or
+#: :data:`DEFAULT_CHECKPOINT`, (B, F, 1, H, W) e-; :class:`CheckpointNotFoundError` when there are none.
+learned = checkpointed_method("learned", CHECKPOINT_ENV, DEFAULT_CHECKPOINT, load_checkpoint)
+checkpoint_path = learned.checkpoint_path
 
-
-def main(argv: list[str] | None = None) -> None:
-    """Training script: ``python -m lfmbench.baselines.learned --corpus DIR [--epochs N] [--checkpoint PATH]``."""
-    ap = argparse.ArgumentParser(description="Train the lfmbench learned fusion baseline on a corpus.")
-    ap.add_argument("--corpus", required=True, help="corpus root directory")
-    ap.add_argument("--split", default="train")
-    ap.add_argument("--checkpoint", default=str(checkpoint_path()))
-    ap.add_argument("--epochs", type=int, default=3)
-    ap.add_argument("--batch-size", type=int, default=4)
-    ap.add_argument("--workers", type=int, default=2)
-    ap.add_argument("--lr", type=float, default=3e-3)
-    ap.add_argument("--max-steps", type=int, default=None)
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--crop", type=int, default=None, help="square random crop in px (default: full frames)")
-    ap.add_argument("--samples-per-scene", type=int, default=16,
-                    help="samples (PWM draws, crops) per scene per epoch")
-    a = ap.parse_args(argv)
-    from torch.utils.data import DataLoader
-
-    from lfmbench.datasets import make_dataset, collate_samples
-
-    ds = make_dataset(a.corpus, a.split, seed=a.seed, crop=a.crop, samples_per_scene=a.samples_per_scene)
-    loader = DataLoader(ds, batch_size=a.batch_size, shuffle=True, num_workers=a.workers,
-                        collate_fn=collate_samples, generator=torch.Generator().manual_seed(a.seed))
-    model, losses = train(loader, a.checkpoint, epochs=a.epochs, lr=a.lr, max_steps=a.max_steps, seed=a.seed,
-                          progress=True, log=print)
-    print(f"saved {a.checkpoint} ({sum(p.numel() for p in model.parameters())} parameters, final loss "
-          f"{losses[-1] if losses else float('nan'):.4f})")
-
-
-if __name__ == "__main__":  # pragma: no cover
-    main()
+#: How ``lfmbench train --method learned`` trains it (:mod:`lfmbench.train`): a DataLoader shuffled by one
+#: generator seeded once (the order the published demo checkpoints were trained with).
+TRAINING = Trainable(name="learned", default_config=DEFAULT_CONFIG, load_config=load_config,
+                     config_from_dict=config_from_dict, build_model=lambda cfg: LearnedFusion(cfg.model.width),
+                     loss=_loss, save_checkpoint=_save, read_checkpoint=_read, default_checkpoint=DEFAULT_CHECKPOINT,
+                     checkpoint_env=CHECKPOINT_ENV, data_order="shuffle")

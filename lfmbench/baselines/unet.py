@@ -22,7 +22,7 @@ the mean ``|log1p(P_j / s) - log1p(G_j / s)|`` of the region means P_j, G_j of e
 light-dropout and FMI metrics read).
 
 Configuration: a plain YAML file (``lfmbench/configs/unet.yaml``; ``unet_tiny.yaml`` for the demo) with sections
-``model``, ``loss`` and ``train`` (:func:`load_config`). Training: ``lfmbench train`` (:mod:`lfmbench.train`).
+``model``, ``loss`` and ``train`` (:func:`load_config`). Training: ``lfmbench train --method unet`` (:mod:`lfmbench.train`).
 The registered method :func:`unet` reads the checkpoint at ``$LFMBENCH_UNET_CHECKPOINT`` or
 :data:`DEFAULT_CHECKPOINT`.
 """
@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import math
 import os
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -38,8 +38,10 @@ import torch
 import torch.nn as nn
 import torch.nn.functional as F
 
-from lfmbench.baselines.checkpoint import CheckpointedModel
+from lfmbench.baselines.checkpoint import checkpointed_method
 from lfmbench.baselines.classic import _captures, exposures_s, saturated_fusion
+from lfmbench.baselines.trainable import (ConfigError, Trainable, TrainConfig, count_parameters, read_sections,
+                                          read_yaml_config)
 from lfmbench.fileio import atomic_torch_save
 from lfmbench.metrics.flicker import region_series
 from lfmbench.metrics.hdr import MU_DEFAULT, mu_law, normalize_hdr
@@ -60,10 +62,6 @@ CANDIDATES = {"H": "lpd_only: HCG where unsaturated, else LCG", "L": "saturated_
 
 class CheckpointNotFoundError(FileNotFoundError):
     """No trained U-Net weights."""
-
-
-class ConfigError(ValueError):
-    """A U-Net configuration file is missing, unreadable or holds a bad value (the message names the file)."""
 
 
 # --------------------------------------------------------------------------------------------- configuration
@@ -91,25 +89,6 @@ class LossConfig:
 
 
 @dataclass
-class TrainConfig:
-    """Optimisation and data settings of ``lfmbench train``."""
-
-    epochs: int = 20
-    batch_size: int = 4
-    crop: int = 64                 #: square training crop, pixels (even)
-    samples_per_scene: int = 16    #: PWM draws and crops per scene per epoch
-    frames: int = 3                #: frames per sample
-    lr: float = 2.0e-3             #: Adam learning rate (cosine-annealed to lr_min over the run)
-    lr_min: float = 1.0e-4
-    weight_decay: float = 0.0
-    grad_clip: float = 1.0         #: max gradient norm (0: off)
-    workers: int = 1               #: DataLoader worker processes
-    seed: int = 0
-    split: str = "train"
-    sensor: str = "ovt"
-
-
-@dataclass
 class UNetConfig:
     """The three sections of a U-Net configuration file."""
 
@@ -121,10 +100,11 @@ class UNetConfig:
         return asdict(self)
 
 
-_MINIMA = {"base_channels": 1, "depth": 0, "context_frames": 0, "epochs": 1, "batch_size": 1, "crop": 8,
-           "samples_per_scene": 1, "frames": 1, "workers": 0}
-_POSITIVE = {"gain_range", "feature_scale_e", "feature_max_e", "mu", "lr"}
-_NONNEG = {"led_weight", "region_weight", "lr_min", "weight_decay", "grad_clip"}
+def _candidates(where: str, v: Any) -> list:
+    if (not isinstance(v, list) or not v or len(set(v)) != len(v)
+            or not all(isinstance(c, str) and c in CANDIDATES for c in v)):
+        raise ConfigError(f"{where} must be a non-empty list of distinct names from {sorted(CANDIDATES)}, got {v!r}")
+    return list(v)
 
 
 def config_from_dict(data: Any, source: str = "<dict>") -> UNetConfig:
@@ -134,61 +114,8 @@ def config_from_dict(data: Any, source: str = "<dict>") -> UNetConfig:
         ConfigError: naming ``source`` and the offending key for an unknown section or key, a wrong type or an
             out-of-range value.
     """
-    if data is None:
-        data = {}
-    if not isinstance(data, dict):
-        raise ConfigError(f"{source}: expected a mapping with sections model, loss, train; got {type(data).__name__}")
-    sections = {f.name: f.type for f in fields(UNetConfig)}
-    unknown = sorted(set(data) - set(sections))
-    if unknown:
-        raise ConfigError(f"{source}: unknown section(s) {unknown}; expected {sorted(sections)}")
-    built = {}
-    for sec, cls in (("model", ModelConfig), ("loss", LossConfig), ("train", TrainConfig)):
-        raw = data.get(sec) or {}
-        if not isinstance(raw, dict):
-            raise ConfigError(f"{source}: section {sec!r} must be a mapping, got {type(raw).__name__}")
-        defaults = cls()
-        names = {f.name for f in fields(cls)}
-        bad = sorted(set(raw) - names)
-        if bad:
-            raise ConfigError(f"{source}: unknown key(s) {bad} in section {sec!r}; known: {sorted(names)}")
-        vals = {}
-        for name in names:
-            default = getattr(defaults, name)
-            v = raw.get(name, default)
-            where = f"{source}: {sec}.{name}"
-            if isinstance(default, list):
-                if (not isinstance(v, list) or not v or len(set(v)) != len(v)
-                        or not all(isinstance(c, str) and c in CANDIDATES for c in v)):
-                    raise ConfigError(f"{where} must be a non-empty list of distinct names from "
-                                      f"{sorted(CANDIDATES)}, got {v!r}")
-                v = list(v)
-            elif isinstance(default, bool) or isinstance(default, str):
-                if type(v) is not type(default):
-                    raise ConfigError(f"{where} must be a {type(default).__name__}, got {v!r}")
-            elif isinstance(default, int):
-                if isinstance(v, bool) or not isinstance(v, int):
-                    raise ConfigError(f"{where} must be an integer, got {v!r}")
-                if v < _MINIMA.get(name, 0):
-                    raise ConfigError(f"{where} must be >= {_MINIMA.get(name, 0)}, got {v}")
-            else:
-                if isinstance(v, str):  # PyYAML reads 1.0e6 (no exponent sign) as a string
-                    try:
-                        v = float(v)
-                    except ValueError:
-                        pass
-                if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(float(v)):
-                    raise ConfigError(f"{where} must be a finite number, got {v!r}")
-                v = float(v)
-                if name in _POSITIVE and v <= 0:
-                    raise ConfigError(f"{where} must be > 0, got {v}")
-                if name in _NONNEG and v < 0:
-                    raise ConfigError(f"{where} must be >= 0, got {v}")
-            vals[name] = v
-        built[sec] = cls(**vals)
-    cfg = UNetConfig(**built)
-    if cfg.train.crop % 2:
-        raise ConfigError(f"{source}: train.crop must be even (keeps the Bayer phase), got {cfg.train.crop}")
+    cfg = UNetConfig(**read_sections(data, {"model": ModelConfig, "loss": LossConfig, "train": TrainConfig}, source,
+                                     _candidates))
     if cfg.model.feature_max_e <= cfg.model.feature_scale_e:
         raise ConfigError(f"{source}: model.feature_max_e must exceed model.feature_scale_e")
     return cfg
@@ -196,18 +123,7 @@ def config_from_dict(data: Any, source: str = "<dict>") -> UNetConfig:
 
 def load_config(path: str | os.PathLike | None = None) -> UNetConfig:
     """Read a U-Net YAML configuration (default :data:`DEFAULT_CONFIG`); :class:`ConfigError` names the file."""
-    import yaml
-
-    path = Path(path) if path is not None else DEFAULT_CONFIG
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise ConfigError(f"{path}: cannot read the U-Net config ({exc.strerror or exc})") from None
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        raise ConfigError(f"{path}: not valid YAML ({str(exc).splitlines()[0]})") from None
-    return config_from_dict(data, str(path))
+    return read_yaml_config(DEFAULT_CONFIG if path is None else path, config_from_dict, "U-Net")
 
 
 # --------------------------------------------------------------------------------------------------- network
@@ -305,11 +221,6 @@ class UNetFusion(nn.Module):
         return (wts * cand).sum(dim=2, keepdim=True) * gain
 
 
-def count_parameters(model: nn.Module) -> int:
-    """Number of trainable parameters."""
-    return sum(p.numel() for p in model.parameters() if p.requires_grad)
-
-
 # ------------------------------------------------------------------------------------------------------ loss
 def led_weighted_loss(pred: torch.Tensor, gt: torch.Tensor, light_index: torch.Tensor | None,
                       loss: LossConfig | None = None, feature_scale_e: float = 100.0) -> tuple[torch.Tensor, dict]:
@@ -360,7 +271,7 @@ def read_checkpoint(path: str | os.PathLike, map_location: str | torch.device = 
     path = Path(path)
     if not path.is_file():
         raise CheckpointNotFoundError(
-            f"no U-Net checkpoint at {path}; train one with `lfmbench train --corpus DIR --out {path}` "
+            f"no U-Net checkpoint at {path}; train one with `lfmbench train --method unet --corpus DIR --out {path}` "
             f"(or set ${CHECKPOINT_ENV})")
     try:
         ck = torch.load(path, map_location=map_location, weights_only=True)
@@ -382,19 +293,20 @@ def load_checkpoint(path: str | os.PathLike, map_location: str | torch.device = 
     return model.eval()
 
 
-#: Where the weights are (``$LFMBENCH_UNET_CHECKPOINT`` or :data:`DEFAULT_CHECKPOINT`), loaded once per file version.
-WEIGHTS = CheckpointedModel(CHECKPOINT_ENV, DEFAULT_CHECKPOINT, load_checkpoint)
-checkpoint_path = WEIGHTS.path
-_model = WEIGHTS.model
+def _loss(model: UNetFusion, batch: dict, cfg: UNetConfig) -> tuple[torch.Tensor, dict]:
+    """The training loss of a batch: :func:`led_weighted_loss` of the model's output."""
+    return led_weighted_loss(model(batch), batch["gt"], batch.get("light_index"), cfg.loss,
+                             cfg.model.feature_scale_e)
 
 
-def unet(batch: dict) -> torch.Tensor:
-    """Registered method: :class:`UNetFusion` with the weights at :func:`checkpoint_path`.
+#: The registered method: :class:`UNetFusion` with the weights at ``$LFMBENCH_UNET_CHECKPOINT`` or
+#: :data:`DEFAULT_CHECKPOINT` (B, F, 1, H, W) e-; :class:`CheckpointNotFoundError` when there are none.
+unet = checkpointed_method("unet", CHECKPOINT_ENV, DEFAULT_CHECKPOINT, load_checkpoint)
+checkpoint_path = unet.checkpoint_path
 
-    Returns (B, F, 1, H, W) e-. Raises :class:`CheckpointNotFoundError` if no checkpoint exists.
-    """
-    return WEIGHTS.run(batch)
-
-
-#: Lets the evaluation count parameters and MACs of the module behind :func:`unet`.
-unet.torch_module = _model  # type: ignore[attr-defined]
+#: How ``lfmbench train --method unet`` trains it (:mod:`lfmbench.train`).
+TRAINING = Trainable(name="unet", default_config=DEFAULT_CONFIG, load_config=load_config,
+                     config_from_dict=config_from_dict, build_model=UNetFusion, loss=_loss,
+                     save_checkpoint=save_checkpoint, read_checkpoint=read_checkpoint,
+                     default_checkpoint=DEFAULT_CHECKPOINT, checkpoint_env=CHECKPOINT_ENV,
+                     outputs=("input_referred", "saturated", "gt", "light_index"))

@@ -3,8 +3,9 @@
 0. print the flicker model at the paper's Fig. 3 settings (no render);
 
 1. render the small default corpus (fast Mitsuba path; resumable, so a second run reuses it);
-2. train the learned baseline and the tiny U-Net (``unet.config`` of the demo config, by default
-   ``lfmbench/configs/unet_tiny.yaml``) through the DataLoader (each skipped when its checkpoint exists);
+2. train every learned baseline of :data:`lfmbench.vocabulary.LEARNED_BASELINES` (``lfmbench train --method
+   NAME`` with its options under ``train`` of the demo config; the U-Net with ``lfmbench/configs/unet_tiny.yaml``),
+   each skipped when its checkpoint exists;
 3. evaluate every registered baseline on the test split and print the leaderboard;
 4. reproduce the paper's figures from the corpus.
 """
@@ -20,6 +21,7 @@ import typer
 import yaml
 
 from lfmbench.paper.fig3 import FIG3_EXPOSURES_S, fig3_series
+from lfmbench.vocabulary import LEARNED_BASELINES
 
 __all__ = ["CONFIG", "run", "main", "register"]
 
@@ -29,6 +31,31 @@ CONFIG = Path(__file__).resolve().parent.parent / "configs" / "demo.yaml"
 def _step(title: str) -> float:
     print(f"\n== {title}", flush=True)
     return time.perf_counter()
+
+
+def _train(name: str, opts: dict, corpus: Path, out: Path) -> float:
+    """Step 2 for one learned baseline: ``lfmbench train --method NAME`` with the demo's options, unless its
+    checkpoint ``out/<name>_fusion.pt`` exists; its environment variable then points the evaluation at it.
+    Returns the seconds taken."""
+    from lfmbench.train import trainable
+
+    spec = trainable(name)
+    ckpt = out / spec.default_checkpoint.name
+    os.environ[spec.checkpoint_env] = str(ckpt)
+    t = _step(f"2. train the {name} baseline -> {ckpt}")
+    if ckpt.is_file():
+        print(f"   {ckpt} exists: reused (delete it to retrain)")
+    else:
+        cmd = [sys.executable, "-m", "lfmbench.cli", "train", "--method", name, "--corpus", str(corpus),
+               "--out", str(ckpt)]
+        if opts.get("config"):
+            path = Path(opts["config"])
+            cmd += ["--config", str(path if path.exists() else CONFIG.parent / path)]
+        for key in ("epochs", "workers", "crop", "batch_size"):
+            if opts.get(key) is not None:
+                cmd += [f"--{key.replace('_', '-')}", str(opts[key])]
+        subprocess.run(cmd, check=True)
+    return time.perf_counter() - t
 
 
 def run(out: str | Path | None = None, config: str | Path = CONFIG) -> dict:
@@ -44,33 +71,12 @@ def run(out: str | Path | None = None, config: str | Path = CONFIG) -> dict:
     subprocess.run(cmd, check=True)
     secs["render"] = time.perf_counter() - t
 
-    ckpt = out / "learned_fusion.pt"
-    os.environ["LFMBENCH_LEARNED_CHECKPOINT"] = str(ckpt)
-    tr = cfg["train"]
-    t = _step(f"2. train the learned baseline -> {ckpt}")
-    if ckpt.is_file():
-        print(f"   {ckpt} exists: reused (delete it to retrain)")
-    else:
-        subprocess.run([sys.executable, "-m", "lfmbench.baselines.learned", "--corpus", str(corpus),
-                        "--checkpoint", str(ckpt), "--epochs", str(tr["epochs"]), "--crop", str(tr["crop"]),
-                        "--batch-size", str(tr["batch_size"]), "--workers", str(tr["workers"])], check=True)
-    secs["train"] = time.perf_counter() - t
-
-    uck = out / "unet_fusion.pt"
-    os.environ["LFMBENCH_UNET_CHECKPOINT"] = str(uck)
-    un = cfg.get("unet", {})
-    t = _step(f"2b. train the tiny U-Net baseline -> {uck}")
-    if uck.is_file():
-        print(f"   {uck} exists: reused (delete it to retrain)")
-    else:
-        from lfmbench.baselines.unet import TINY_CONFIG
-        cmd = [sys.executable, "-m", "lfmbench.cli", "train", "--corpus", str(corpus), "--out", str(uck),
-               "--config", str(un.get("config") or TINY_CONFIG)]
-        for key in ("epochs", "workers"):
-            if un.get(key) is not None:
-                cmd += [f"--{key}", str(un[key])]
-        subprocess.run(cmd, check=True)
-    secs["train_unet"] = time.perf_counter() - t
+    opts = cfg.get("train") or {}
+    unknown = sorted(set(opts) - set(LEARNED_BASELINES))
+    if unknown:
+        raise ValueError(f"{config}: train: {unknown} are not learned baselines ({', '.join(LEARNED_BASELINES)})")
+    for name in LEARNED_BASELINES:
+        secs[f"train_{name}"] = _train(name, opts.get(name) or {}, corpus, out)
 
     from lfmbench.evaluation.benchmark import benchmark
     ev = cfg["evaluate"]

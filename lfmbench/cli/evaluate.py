@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from lfmbench.cli._common import check_minima, fail, torch_setup
 
 
 def register(app) -> None:
@@ -38,32 +39,16 @@ def register(app) -> None:
         Exit status: 0 every scene scored, 1 some scenes failed or the data source failed (the result file
         says which), 2 bad input, 130 interrupted (the result file has status "interrupted").
         """
-        import torch  # noqa: PLC0415 - heavy: only when the command runs
-
-        from lfmbench.check import torch_device  # noqa: PLC0415
-
         from lfmbench.datasets.loading import EmptyDataError, collate_samples  # noqa: PLC0415
         from lfmbench.evaluation.benchmark import corpus_run_inputs, safe_name  # noqa: PLC0415
         from lfmbench.evaluation.leaderboard import _fmt  # noqa: PLC0415
         from lfmbench.evaluation.run import DataSourceError, EvaluationInterrupted, evaluate  # noqa: PLC0415
 
-        def fail(msg: str, code: int = 2) -> None:
-            typer.secho(f"error: {msg}", fg=typer.colors.RED, err=True)
-            raise typer.Exit(code)
-
-        if threads is not None:
-            if threads < 1:
-                fail(f"--threads must be >= 1, got {threads}")
-            torch.set_num_threads(threads)
-        for name, v, lo in (("--max-scenes", max_scenes, 1), ("--samples-per-scene", samples_per_scene, 1),
-                            ("--frames", frames, 1),
-                            ("--repeats", repeats, 1), ("--warmup", warmup, 0), ("--crop", crop, 2)):
-            if v is not None and v < lo:
-                fail(f"{name} must be an integer >= {lo}, got {v}")
-        try:
-            torch_device(device)
-        except ValueError as exc:
-            fail(str(exc))
+        if threads is not None and threads < 1:
+            fail(f"--threads must be >= 1, got {threads}")
+        check_minima((("--max-scenes", max_scenes, 1), ("--samples-per-scene", samples_per_scene, 1),
+                      ("--frames", frames, 1), ("--repeats", repeats, 1), ("--warmup", warmup, 0), ("--crop", crop, 2)))
+        torch_setup(device, threads)
         out = output or Path("runs") / f"{safe_name(method)}.json"
         try:  # an unwritable --output is found before any work is done
             if out.is_dir():

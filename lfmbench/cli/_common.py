@@ -1,0 +1,37 @@
+"""Checks shared by the commands that run torch (``train``, ``evaluate``): one-line errors, exit status 2."""
+from __future__ import annotations
+
+from collections.abc import Iterable
+
+import typer
+
+__all__ = ["fail", "check_minima", "torch_setup"]
+
+
+def fail(msg: str, code: int = 2) -> None:
+    """Print ``error: msg`` to stderr and end the command with ``code`` (no traceback)."""
+    typer.secho(f"error: {msg}", fg=typer.colors.RED, err=True)
+    raise typer.Exit(code)
+
+
+def check_minima(options: Iterable[tuple[str, int | None, int]]) -> None:
+    """``(name, value, lo)`` per integer option: a value given (not None) must be >= lo."""
+    for name, v, lo in options:
+        if v is not None and v < lo:
+            fail(f"{name} must be an integer >= {lo}, got {v}")
+
+
+def torch_setup(device: str, threads: int | None) -> None:
+    """Check ``--threads`` (>= 1; then ``torch.set_num_threads``) and ``--device`` (usable on this machine)."""
+    import torch  # noqa: PLC0415 - heavy: only when a command runs
+
+    from lfmbench.check import torch_device  # noqa: PLC0415
+
+    if threads is not None:
+        if threads < 1:
+            fail(f"--threads must be >= 1, got {threads}")
+        torch.set_num_threads(threads)
+    try:
+        torch_device(device)
+    except ValueError as exc:
+        fail(str(exc))
