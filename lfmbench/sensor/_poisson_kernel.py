@@ -13,6 +13,7 @@ import numpy as np
 
 from lfmbench.constants import POISSON_EXACT_LIMIT
 from lfmbench.counter_rng import GAMMA, MIX_MUL, STRIDE_LOG2
+from lfmbench.sensor.counter_noise import LOG_FACTORIAL
 
 _u64 = numba.uint64
 #: SplitMix64 increment and finaliser multipliers: the streams of :mod:`lfmbench.counter_rng`, [Steele2014]_.
@@ -24,7 +25,7 @@ _STRIDE = np.uint64((GAMMA << STRIDE_LOG2) & 0xFFFFFFFFFFFFFFFF)
 _INV_K = 1.0 / np.maximum(np.arange(64, dtype=np.float64), 1.0)
 #: log k! for k < 4096 (the PTRS draws below the 1000 e- switch-over), libm lgamma beyond: a table lookup
 #: instead of lgamma on the draws that leave the squeeze.
-_LOG_FACTORIAL = np.array([math.lgamma(k + 1.0) for k in range(4096)])
+_LOG_FACTORIAL = LOG_FACTORIAL
 _EXACT_LIMIT = POISSON_EXACT_LIMIT
 
 

@@ -21,6 +21,8 @@ Functions
 - :func:`pixel_keys` -> (B, N) stream keys of N pixels of B samples.
 - :func:`poisson` -> (B, N) Poisson counts.
 - :func:`normal` -> (B, N) standard normals.
+  On CUDA both run as Triton kernels (:mod:`lfmbench.sensor._counter_triton`) where Triton is importable: the same
+  draws, but each block of pixels loops only until its own draws are done.
 - :func:`shot_seed`, :func:`read_seed` -> the seeds of a sample's shot noise (per photodiode) and read noise (per
   capture), derived from its one noise seed, so that every path draws a capture's noise from the same streams.
 """
@@ -28,13 +30,14 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import torch
 
 from lfmbench.constants import POISSON_EXACT_LIMIT
 from lfmbench.counter_rng import GAMMA, STRIDE_LOG2, _signed, derive_key, mix64, uniform_at
 
-__all__ = ["INVERSION_STEPS", "PTRS_ROUNDS", "pixel_keys", "poisson", "normal", "shot_seed", "read_seed",
-           "check_seeds"]
+__all__ = ["INVERSION_STEPS", "PTRS_ROUNDS", "LOG_FACTORIAL", "log_factorial", "pixel_keys", "poisson", "normal",
+           "shot_seed", "read_seed", "check_seeds"]
 
 #: Steps of the sequential search (means below 10): the search ends by step 64 except with probability < 1e-15.
 INVERSION_STEPS = 64
@@ -42,6 +45,46 @@ INVERSION_STEPS = 64
 #: with probability < 1e-19.
 PTRS_ROUNDS = 24
 _STRIDE_S = _signed(GAMMA << STRIDE_LOG2)
+#: log k! for k < 4096, from the C library's ``lgamma`` (Python's ``math.lgamma``): PTRS's exact test reads this
+#: table (as the compiled sampler does) so that every form agrees on it bit for bit; beyond it (means above about
+#: 3,000 e- with ``gaussian_above = inf``) :func:`log_factorial` uses Stirling's series.
+LOG_FACTORIAL = np.array([math.lgamma(k + 1.0) for k in range(4096)])
+
+
+def log_factorial(k: torch.Tensor) -> torch.Tensor:
+    """log k! of float64 integer values k >= 0: the table :data:`LOG_FACTORIAL` below 4096, else Stirling's series
+    (k + 1/2) ln(k + 1) - (k + 1) + ln(2 pi) / 2 + 1 / (12 (k + 1)) - 1 / (360 (k + 1)^3) + 1 / (1260 (k + 1)^5),
+    whose truncation error at k >= 4096 is below 1e-23 (M. Abramowitz, I. A. Stegun, Handbook of Mathematical
+    Functions, 1964, 6.1.41)."""
+    table = torch.as_tensor(LOG_FACTORIAL, device=k.device)
+    idx = torch.clamp(k, 0, LOG_FACTORIAL.size - 1).to(torch.int64)
+    x = torch.clamp_min(k, 0.0) + 1.0
+    x2 = x * x
+    stirling = ((x - 0.5) * torch.log(x) - x + 0.5 * math.log(2.0 * math.pi)
+                + (1.0 / 12.0 - (1.0 / 360.0 - 1.0 / (1260.0 * x2)) / x2) / x)
+    return torch.where(k < LOG_FACTORIAL.size, table[idx], stirling)
+#: On CUDA, draw with the Triton kernels of :mod:`lfmbench.sensor._counter_triton` (each block of pixels stops
+#: when its own draws are done) where Triton is importable; False: the torch form everywhere (tests compare them).
+USE_TRITON = True
+_TRITON = None
+
+
+def _triton():
+    """The Triton kernels' module, or None where Triton is not importable."""
+    global _TRITON
+    if _TRITON is None:
+        try:
+            from lfmbench.sensor import _counter_triton as T  # noqa: PLC0415 - needs triton and a GPU
+        except ImportError:
+            T = False
+        _TRITON = T
+    return _TRITON or None
+
+
+def _use_triton(t: torch.Tensor) -> bool:
+    return USE_TRITON and t.is_cuda and _triton() is not None
+
+
 #: Purpose words of :func:`lfmbench.counter_rng.derive_key` for the two kinds of sensor noise.
 SHOT_PURPOSE, READ_PURPOSE = 0x53484F54, 0x52454144  # "SHOT", "READ"
 
@@ -97,6 +140,8 @@ def normal(seed: torch.Tensor, n: int) -> torch.Tensor:
     Returns:
         (B, n) float64 standard normals.
     """
+    if _use_triton(seed):
+        return _triton().normal(seed, n)
     keys = pixel_keys(seed, n)
     u1, u2 = _u(keys, 0), _u(keys, 1)
     return torch.sqrt(-2.0 * torch.log(u1)) * torch.cos(2.0 * math.pi * u2)
@@ -117,6 +162,8 @@ def poisson(mean: torch.Tensor, seed: torch.Tensor, gaussian_above: float = math
     """
     if mean.dim() != 2 or seed.shape != mean.shape[:1]:
         raise ValueError(f"mean must be (B, N) and seed (B,), got {tuple(mean.shape)} and {tuple(seed.shape)}")
+    if _use_triton(mean):
+        return _triton().poisson(mean, seed, gaussian_above, INVERSION_STEPS, PTRS_ROUNDS)
     mu = mean.to(torch.float64)
     keys = pixel_keys(seed, mu.shape[1])
     gauss = (mu >= gaussian_above) | (mu >= POISSON_EXACT_LIMIT)
@@ -159,7 +206,7 @@ def poisson(mean: torch.Tensor, seed: torch.Tensor, gaussian_above: float = math
         quick = (us >= 0.07) & (v <= vr)
         reject = (kk < 0.0) | ((us < 0.013) & (v > us))
         kc = torch.clamp_min(kk, 0.0)
-        exact = torch.log(v * invalpha / (a / (us * us) + b)) <= -mub + kc * log_mu - torch.lgamma(kc + 1.0)
+        exact = torch.log(v * invalpha / (a / (us * us) + b)) <= -mub + kc * log_mu - log_factorial(kc)
         acc = ~done & (quick | (~reject & exact))
         res = torch.where(acc, kk, res)
         done = done | acc
