@@ -181,3 +181,15 @@ def collect(mean, gain, gain_row, add, cap, full_well, seed, gaussian_above, noi
             else:
                 out[r, j] = min(max(x, zero), full_well)
     return -1
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def normals(seed, out):  # pragma: no cover - compiled by numba
+    """Standard normals of the counter streams (:func:`lfmbench.sensor.counter_noise.normal` for one sample):
+    ``out[i] = sqrt(-2 ln u0) cos(2 pi u1)`` with u0, u1 draws 0 and 1 of pixel i's stream of ``seed`` (uint64);
+    ``out`` (N,) float32 or float64 is written in place."""
+    base = _mix(seed)
+    for i in range(out.size):
+        u1, st = _uniform(base + _u64(i) * _STRIDE)
+        u2, st = _uniform(st)
+        out[i] = math.sqrt(-2.0 * math.log(u1)) * math.cos(2.0 * math.pi * u2)

@@ -108,7 +108,7 @@ def chain_fused(lpd_e: torch.Tensor, spd_e: torch.Tensor, preset: SensorPreset, 
     seeded with its counter shot seed and its read noise from its counter read streams
     (:mod:`lfmbench.sensor.counter_noise`): the numbers of the torch chain with ``seeds``, on any device.
     """
-    from lfmbench.sensor._poisson_kernel import collect
+    from lfmbench.sensor._poisson_kernel import collect, normals
     from lfmbench.sensor._readout_kernel import readout
 
     lead, (H, W) = lpd_e.shape[:-3], lpd_e.shape[-2:]
@@ -163,7 +163,7 @@ def chain_fused(lpd_e: torch.Tensor, spd_e: torch.Tensor, preset: SensorPreset, 
             pd = spec.photodiode
             z = empty
             if noise and spec.read_noise_e > 0 and seeds is not None:
-                z_all[:] = _cn.normal(_cn.read_seed(seeds[b:b + 1], c), P * (r1 - r0)).view(r1 - r0, P).numpy()
+                normals(np.uint64(int(_cn.read_seed(seeds[b:b + 1], c)) & 0xFFFFFFFFFFFFFFFF), z_all.reshape(-1))
                 z = z_all
             elif noise and spec.read_noise_e > 0:
                 # into a reused buffer: the same draws as a new tensor
