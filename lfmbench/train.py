@@ -28,6 +28,7 @@ import torch
 from torch.utils.data import DataLoader, Dataset, Sampler
 
 from lfmbench.baselines import LEARNED
+from lfmbench.datasets.device import epoch_order
 from lfmbench.baselines.trainable import Trainable, count_parameters
 
 __all__ = ["trainable", "load_config", "make_loader", "fit", "train", "train_batches", "EpochSampler",
@@ -65,8 +66,7 @@ class EpochSampler(Sampler):
         return self.n
 
     def __iter__(self) -> Iterator[tuple[int, int]]:
-        g = torch.Generator().manual_seed(self.seed * 1_000_003 + self.epoch)
-        return iter([(self.epoch, int(i)) for i in torch.randperm(self.n, generator=g)])
+        return iter([(self.epoch, int(i)) for i in epoch_order(self.n, self.seed, self.epoch)])
 
 
 class EpochIndexed(Dataset):
@@ -104,6 +104,28 @@ def make_loader(corpus: str | os.PathLike, spec: Trainable, cfg: Any, workers: i
                         collate_fn=collate_samples, persistent_workers=nw > 0,
                         pin_memory=torch.device(device).type == "cuda")
     return loader, sampler.set_epoch
+
+
+#: Where training batches come from (``train(data=...)``): ``"loader"``, the per-sample dataset in a DataLoader
+#: (CPU workers; generator noise); ``"device"``, :class:`lfmbench.datasets.device.DeviceBatches` (the corpus
+#: resident on the training device, batches cut and simulated there; counter noise); ``"auto"``: ``"device"`` on
+#: CUDA, else ``"loader"``.
+DATA_SOURCES = ("auto", "loader", "device")
+
+
+def make_device_batches(corpus: str | os.PathLike, spec: Trainable, cfg: Any,
+                        device: torch.device | str) -> tuple[Any, Callable[[int], None]]:
+    """:class:`~lfmbench.datasets.device.DeviceBatches` of the training split on ``device`` (epoch order
+    :func:`~lfmbench.datasets.device.epoch_order` of ``(seed, epoch)``) and its ``set_epoch``."""
+    from lfmbench.datasets.device import DeviceBatches
+    from lfmbench.datasets.loading import make_dataset
+
+    t = cfg.train
+    extra = {} if spec.outputs is None else {"outputs": spec.outputs}
+    ds = make_dataset(corpus, t.split, seed=t.seed, crop=t.crop, samples_per_scene=t.samples_per_scene,
+                      frames=t.frames, sensor=t.sensor, noise_streams="counter", **extra)
+    batches = DeviceBatches(ds, t.batch_size, device, seed=t.seed)
+    return batches, batches.set_epoch
 
 
 def cosine_lr(step: int, total: int, lr: float, lr_min: float) -> float:
@@ -203,7 +225,8 @@ def fit(model: torch.nn.Module, opt: torch.optim.Optimizer, spec: Trainable, cfg
 def train(method: str | Trainable, corpus: str | os.PathLike, out: str | os.PathLike, cfg: Any = None, *,
           device: str = "cpu", epochs: int | None = None, workers: int | None = None, resume: bool = True,
           max_steps: int | None = None, progress: bool = True,
-          log: Callable[[str], None] | None = print, **train_overrides: Any) -> tuple[torch.nn.Module, dict]:
+          log: Callable[[str], None] | None = print, data: str = "auto",
+          **train_overrides: Any) -> tuple[torch.nn.Module, dict]:
     """Train the baseline ``method`` on ``corpus`` and write the checkpoint ``out`` after every epoch (atomically).
 
     Args:
@@ -218,12 +241,17 @@ def train(method: str | Trainable, corpus: str | os.PathLike, out: str | os.Path
         max_steps: stop after this many optimiser steps in this call (tests); the checkpoint is still written.
         progress: show a tqdm bar per epoch.
         log: callback for one line per epoch (None: silent).
+        data: where the batches come from, one of :data:`DATA_SOURCES` (``"device"``: the corpus resident on
+            ``device``, sample order :func:`~lfmbench.datasets.device.epoch_order`, counter-based noise; a split
+            that does not fit raises :class:`~lfmbench.datasets.device.ResidentMemoryError`).
         train_overrides: other keys of the ``train`` section (``crop``, ``batch_size``, ``seed``, ...).
 
     Returns:
         (model in eval mode, the checkpoint's ``history`` dict: per-epoch mean losses and seconds, steps).
     """
     spec = trainable(method)
+    if data not in DATA_SOURCES:
+        raise ValueError(f"data must be one of {DATA_SOURCES}, got {data!r:.40}")
     cfg = spec.load_config(None) if cfg is None else cfg
     over = {k: v for k, v in {"epochs": epochs, **train_overrides}.items() if v is not None}
     if "epochs" in over and over["epochs"] < 1:
@@ -254,8 +282,12 @@ def train(method: str | Trainable, corpus: str | os.PathLike, out: str | os.Path
         data_rng = ck.get("data_rng")
         if log:
             log(f"resuming {out} after epoch {start}/{t.epochs}")
-    loader, set_epoch = make_loader(corpus, spec, cfg, workers, dev)
-    gen = loader.generator if spec.data_order == "shuffle" else None
+    on_device = data == "device" or (data == "auto" and dev.type == "cuda")
+    if on_device:
+        loader, set_epoch = make_device_batches(corpus, spec, cfg, dev)
+    else:
+        loader, set_epoch = make_loader(corpus, spec, cfg, workers, dev)
+    gen = loader.generator if spec.data_order == "shuffle" and not on_device else None
     if gen is not None and data_rng is not None:
         gen.set_state(data_rng)
     history = fit(model, opt, spec, cfg, loader, device=dev, out=out, start=start, history=history,

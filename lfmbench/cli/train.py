@@ -27,6 +27,9 @@ def train_cmd(
     batch_size: int = typer.Option(None, "--batch-size", help="batch size (overrides train.batch_size)"),
     threads: int = typer.Option(None, help="torch CPU threads (default: torch's choice)"),
     resume: bool = typer.Option(True, help="continue from --out when it holds a checkpoint of this config"),
+    data: str = typer.Option("auto", help="where batches come from: loader (DataLoader workers on the CPU), "
+                                          "device (the corpus resident on --device, batches simulated there), "
+                                          "auto (device on CUDA, else loader)"),
 ) -> None:
     """Train a learned fusion baseline; checkpoint written atomically after every epoch (resumable).
 
@@ -54,7 +57,7 @@ def train_cmd(
         fail(f"--out {out}: cannot create its directory ({exc.strerror or exc})")
     try:
         model, hist = train(method, corpus, out, cfg, device=device, epochs=epochs, workers=workers, resume=resume,
-                            crop=crop, batch_size=batch_size)
+                            crop=crop, batch_size=batch_size, data=data)
     except (FileNotFoundError, EmptyDataError, ValueError) as exc:
         fail(str(exc))
     secs = hist["epoch_seconds"]

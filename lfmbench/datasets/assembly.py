@@ -32,9 +32,14 @@ from lfmbench.datasets.projection import SceneLayers
 from lfmbench.flicker import pwm_exposure
 from lfmbench.vocabulary import PHOTODIODES
 
-__all__ = ["SENSOR_OUTPUTS", "bin_edges", "window_bin_exposure", "window_starts", "row_window_starts",
+__all__ = ["NOISE_STREAMS", "SENSOR_OUTPUTS", "bin_edges", "window_bin_exposure", "window_starts", "row_window_starts",
            "check_line_time", "visible_lights", "compose_frame", "light_index", "add_rgb", "assemble_sample"]
 
+#: Where a sample's sensor noise comes from: ``"generator"``, ``torch.Generator().manual_seed(noise_seed)`` (the
+#: numbers of every published benchmark result); ``"counter"``, counter-based streams of the noise seed
+#: (:mod:`lfmbench.sensor.counter_noise`: the same numbers per sample on any device and in any batch, what the
+#: device path :mod:`lfmbench.datasets.device` draws). Same distribution, different numbers.
+NOISE_STREAMS = ("generator", "counter")
 #: Outputs that need the sensor chain (the others come from the composition and the aux layers alone).
 SENSOR_OUTPUTS = frozenset({"raw", "input_referred", "saturated", "rgb"})
 

@@ -49,7 +49,7 @@ from torch import nn
 from torch.utils.data import default_collate
 
 from lfmbench import sensor as _sensor
-from lfmbench.datasets.assembly import SENSOR_OUTPUTS, assemble_sample, bin_edges, window_bin_exposure, window_starts
+from lfmbench.datasets.assembly import NOISE_STREAMS, SENSOR_OUTPUTS, assemble_sample, bin_edges, window_bin_exposure, window_starts
 from lfmbench.datasets.pieces import PWM_FIELDS, capture_pieces
 from lfmbench.flicker import pwm_exposure
 from lfmbench.sensor.fused import map_samples
@@ -358,7 +358,8 @@ _DEFAULT_FPN = _FPNCache()
 
 
 def simulate_batch(batch: Mapping[str, Any], preset: Any, outputs: Sequence[str] | None = None,
-                   noise: bool | None = None, fpn_cache: _FPNCache | None = None, threads: int | None = None) -> dict:
+                   noise: bool | None = None, fpn_cache: _FPNCache | None = None, threads: int | None = None,
+                   noise_streams: str | None = None) -> dict:
     """Simulate a batch of pieces on their device: the batched equivalent of ``LFMCaptureDataset.simulate``.
 
     Args:
@@ -369,6 +370,10 @@ def simulate_batch(batch: Mapping[str, Any], preset: Any, outputs: Sequence[str]
         fpn_cache: where full-frame fixed-pattern maps are kept (default: a module-level cache).
         threads: on the CPU, Python threads simulating the samples' noise and read-out in parallel (default
             ``torch.get_num_threads()``; see :func:`lfmbench.sensor.simulate_split_pixel_electrons`).
+        noise_streams: ``"generator"``: sample b's noise from ``torch.Generator().manual_seed(noise_seed[b])`` (the
+            per-sample path's default); ``"counter"``: from counter-based streams of ``noise_seed[b]``
+            (:mod:`lfmbench.sensor.counter_noise`: the whole batch in one set of tensor operations, no host
+            synchronisation); default: the batch's (its dataset's ``noise_streams``).
 
     Returns:
         the per-sample path's sample dict with a leading B (B, F, C, h, w): ``lpd_hcg``, ``lpd_lcg``, ``spd``
@@ -402,9 +407,14 @@ def simulate_batch(batch: Mapping[str, Any], preset: Any, outputs: Sequence[str]
             used = [f"{pd}_{m}" for pd, spec in preset.photodiodes.items()
                     for m, on in (("gain", spec.prnu > 0), ("offset_e", spec.dsnu_e > 0)) if on]
             fpn = (fpn_cache or _DEFAULT_FPN).crops(preset, batch["scene_hw"], batch["crop"], dev, lpd.dtype, used)
+        streams = info.get("noise_streams", "generator") if noise_streams is None else noise_streams
+        if streams not in NOISE_STREAMS:
+            raise ValueError(f"noise_streams must be one of {NOISE_STREAMS}, got {streams!r}")
+        seeds = batch["noise_seed"] if noise and streams == "counter" else None
+        if noise and seeds is None:
             gens = [torch.Generator(device=dev).manual_seed(int(s)) for s in batch["noise_seed"].tolist()]
         cap = _sensor.simulate_split_pixel_electrons(lpd, spd, preset, t_s[:, None], t_l[:, None], generator=gens,
-                                                     noise=noise, fpn=fpn, threads=threads)
+                                                     noise=noise, fpn=fpn, threads=threads, seeds=seeds)
     li = None
     if "light_index" in want:
         li = batch["light_index"]

@@ -22,7 +22,7 @@ from torch.utils.data import Dataset
 
 from lfmbench import sensor as _sensor
 from lfmbench.corpus import Corpus
-from lfmbench.datasets.assembly import (SENSOR_OUTPUTS, assemble_sample, check_line_time, compose_frame,
+from lfmbench.datasets.assembly import (NOISE_STREAMS, SENSOR_OUTPUTS, assemble_sample, check_line_time, compose_frame,
                                         light_index)
 from lfmbench.datasets.pieces import capture_pieces
 from lfmbench.datasets.projection import SceneLayers, aux_channels, load_or_build
@@ -152,6 +152,10 @@ class LFMCaptureDataset(Dataset):
             bins, PWM draws, noise seed, masks, depth, meta; :func:`lfmbench.datasets.batched.capture_pieces`),
             to be batched by :func:`~lfmbench.datasets.batched.collate_pieces` and simulated on the training
             device by :func:`~lfmbench.datasets.batched.simulate_batch` (docs/datasets.md, "Captures on the GPU").
+        noise_streams: ``"generator"`` (default; the numbers of the published results) or ``"counter"``: each
+            sample's sensor noise from counter-based streams of its noise seed, the numbers the device path
+            (:class:`lfmbench.datasets.device.DeviceBatches`) gives on any device and batch size
+            (:data:`lfmbench.datasets.assembly.NOISE_STREAMS`).
 
     Sample (F frames, crop h x w; batches add a leading B; see docs/contracts.md):
         ``lpd_hcg``, ``lpd_lcg``, ``spd``: (F, 1, h, w) DN; ``lpd_hcg_e``, ``lpd_lcg_e``, ``spd_e``: (F, 1, h, w)
@@ -170,9 +174,12 @@ class LFMCaptureDataset(Dataset):
                  samples_per_scene: int = 1, noise: bool = True, optics: bool = True, max_lights: int | None = None,
                  cache_dir: str | os.PathLike | bool | None = None, cache_scenes: int = 8,
                  line_time_s: float | None = None, transforms: Callable[[dict], dict] | None = None,
-                 frame_start: int | str = 0, pieces: bool = False) -> None:
+                 frame_start: int | str = 0, pieces: bool = False, noise_streams: str = "generator") -> None:
         self.root = Path(root)
         self.pieces = bool(pieces)
+        if noise_streams not in NOISE_STREAMS:
+            raise ValueError(f"noise_streams must be one of {NOISE_STREAMS}, got {noise_streams!r:.40}")
+        self.noise_streams = noise_streams
         if not (self.root / "manifest.json").is_file():
             raise DatasetNotFoundError(
                 f"root: no lfmbench corpus at {self.root} (manifest.json missing). Render one with "
@@ -453,10 +460,18 @@ class LFMCaptureDataset(Dataset):
             fpn = self._fixed_pattern(H, W)
             if fpn is not None:
                 fpn = {k: v[..., y0:y0 + ch, x0:x0 + cw] for k, v in fpn.items()}
-            gen = torch.Generator().manual_seed(int(noise_seed)) if self.noise else None
+            counter = self.noise and self.noise_streams == "counter"
+            gen = torch.Generator().manual_seed(int(noise_seed)) if self.noise and not counter else None
             try:
-                cap = _sensor.simulate_split_pixel_electrons(lpd, spd, self.preset, t_s, t_l, generator=gen,
-                                                             noise=self.noise, fpn=fpn)
+                if counter:  # a batch of one: the sample's counter streams (what the device path draws)
+                    cap = _sensor.simulate_split_pixel_electrons(
+                        lpd[None], spd[None], self.preset, t_s, t_l, noise=True,
+                        fpn=None if fpn is None else {k: v[None] for k, v in fpn.items()},
+                        seeds=torch.tensor([int(noise_seed)]))
+                    cap = {k: v[0] for k, v in cap.items()}
+                else:
+                    cap = _sensor.simulate_split_pixel_electrons(lpd, spd, self.preset, t_s, t_l, generator=gen,
+                                                                 noise=self.noise, fpn=fpn)
             except ValueError as exc:  # e.g. non-finite electrons from implausible radiance: name the scene
                 raise ValueError(f"scene {scene_id!r} of {self.root} (frames {s0}..{s0 + F - 1}): {exc}; check "
                                  f"the corpus with `lfmbench validate {self.root}`") from None

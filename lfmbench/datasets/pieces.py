@@ -63,10 +63,13 @@ class _SceneEntries:
 
 def capture_pieces(ds, scene_id: str, params: Mapping[int, Mapping], group_params: Mapping[str, Mapping] | None,
                    crop: tuple[int, int, int, int], noise_seed: int, index: int = -1,
-                   frame_start: int | None = None) -> dict:
+                   frame_start: int | None = None, resident: Any = None) -> dict:
     """The unsimulated pieces of one sample of ``ds`` (an :class:`LFMCaptureDataset`) with the given draws.
 
-    Args: as :meth:`LFMCaptureDataset.simulate` (``crop`` required).
+    Args: as :meth:`LFMCaptureDataset.simulate` (``crop`` required). ``resident``: a
+    :class:`lfmbench.datasets.device.ResidentScenes` holding the scene's layers on a device: the pieces are then
+    cut from those (on that device: crops, gathers of the entries' rates) by the same rules, and only the small
+    per-sample tables (slots, entry positions) are made on the host.
 
     Returns (F frames, crop h x w, S light slots, E pixel entries, Kmax bins; all CPU tensors; ``static``,
     ``light_index`` and ``depth`` are views into the dataset's scene cache, copied once by :func:`collate_pieces`:
@@ -95,8 +98,9 @@ def capture_pieces(ds, scene_id: str, params: Mapping[int, Mapping], group_param
     td = float(tm.get("line_time_s", 0.0)) if ds.line_time_s is None else float(ds.line_time_s)
     fps = float(meta["fps"])
     want = set(ds.outputs)
+    src = None if resident is None else resident.scene(scene_id)
     out: dict[str, Any] = {
-        "static": view.static_rates()[s0:s0 + F, :, y0:y0 + h, x0:x0 + w],
+        "static": (view.static_rates() if src is None else src.static)[s0:s0 + F, :, y0:y0 + h, x0:x0 + w],
         "t0": torch.tensor([(s0 + f) / fps for f in range(F)], dtype=torch.float64),
         "timing": torch.tensor([t_s, t_l, td, float(tm["capture_window_s"])], dtype=torch.float64),
         "crop": torch.tensor([y0, x0, h, w], dtype=torch.int64),
@@ -108,13 +112,13 @@ def capture_pieces(ds, scene_id: str, params: Mapping[int, Mapping], group_param
     pix: list[torch.Tensor] = []     # (n,)
     slot_of: list[torch.Tensor] = []  # (n,)
     hw = h * w
-    for g, rates in layers.group_static.items():
+    for g, rates in (layers.group_static if src is None else src.group_static).items():
         p = group_params[g]
         for f in range(F):
             slots.append((f, 0, p))
             for pd in PHOTODIODES:
                 vals[pd].append(rates[pd][s0 + f, y0:y0 + h, x0:x0 + w].reshape(1, -1))
-            pix.append(f * hw + torch.arange(hw, dtype=torch.int32))
+            pix.append(torch.arange(f * hw, (f + 1) * hw, dtype=torch.int32))
             slot_of.append(torch.full((hw,), len(slots) - 1, dtype=torch.int32))
     # per-light layers: the scene's entries (fixed per scene) masked to the crop and the lights with PWM draws
     ent = view.cached("pieces_entries", _SceneEntries)
@@ -132,7 +136,7 @@ def capture_pieces(ds, scene_id: str, params: Mapping[int, Mapping], group_param
         if len(vis) < len(fe.lights):
             keep &= rank[fe.pos] >= 0
         idx = np.flatnonzero(keep)
-        picks.append((fe, idx, len(pix)))
+        picks.append((f, fe, idx, len(pix)))
         pix.append(torch.from_numpy((f * hw + (fe.y[idx] - y0) * w + (fe.x[idx] - x0)).astype(np.int32)))
         slot_of.append(torch.from_numpy(rank[fe.pos[idx]]))
     kmax = max([max(s[1], 1) for s in slots] + [1])
@@ -140,7 +144,17 @@ def capture_pieces(ds, scene_id: str, params: Mapping[int, Mapping], group_param
                                    dtype=torch.float64).reshape(len(slots), len(PWM_FIELDS))
     out["slot_frame"] = torch.tensor([s[0] for s in slots], dtype=torch.int64)
     out["slot_K"] = torch.tensor([s[1] for s in slots], dtype=torch.int64)
-    if pix:
+    if pix and src is not None:
+        # on the resident layers' device: the groups' crops and a gather of the lights' entries
+        dev = src.static.device
+        parts = [torch.nn.functional.pad(torch.stack([vals[pd][j].reshape(-1) for pd in PHOTODIODES])[:, None],
+                                         (0, 0, 0, kmax - 1)) for j in range(len(vals[PHOTODIODES[0]]))]
+        for f, fe, idx, j in picks:
+            parts.append(src.entries[s0 + f][:, :kmax].index_select(2, torch.from_numpy(idx).to(dev)))
+        out["entry_values"] = torch.cat(parts, 2)
+        out["entry_slot"] = torch.cat(slot_of).to(dev)
+        out["entry_pix"] = torch.cat(pix).to(dev)
+    elif pix:
         n_all = [int(p_.shape[0]) for p_ in pix]
         o = np.concatenate([[0], np.cumsum(n_all)])
         ev = np.empty((2, kmax, int(o[-1])), dtype=np.float32)
@@ -148,7 +162,7 @@ def capture_pieces(ds, scene_id: str, params: Mapping[int, Mapping], group_param
             for j, v in enumerate(vals[pd]):                                  # groups: (1, hw), zero past bin 0
                 ev[pd_i, 0, o[j]:o[j + 1]] = v.reshape(-1).numpy()
                 ev[pd_i, 1:, o[j]:o[j + 1]] = 0.0
-        for fe, idx, j in picks:
+        for _f, fe, idx, j in picks:
             np.take(fe.vals[:, :kmax], idx, axis=2, out=ev[:, :, o[j]:o[j + 1]], mode="clip")
         out["entry_values"] = torch.from_numpy(ev)
         out["entry_slot"] = torch.cat(slot_of)
@@ -159,10 +173,11 @@ def capture_pieces(ds, scene_id: str, params: Mapping[int, Mapping], group_param
         out["entry_pix"] = torch.zeros(0, dtype=torch.int32)
     meta_out = ds.sample_meta(view, index, params, (y0, x0, h, w), s0)
     if "light_index" in want:
-        out["light_index"] = view.light_index()[s0:s0 + F, :, y0:y0 + h, x0:x0 + w]
+        out["light_index"] = (view.light_index() if src is None else src.light_index)[s0:s0 + F, :, y0:y0 + h,
+                                                                                          x0:x0 + w]
     if "depth" in want:
-        out["depth"] = layers.aux["depth.Z"][s0:s0 + F, y0:y0 + h, x0:x0 + w][:, None]
+        out["depth"] = (layers.aux["depth.Z"] if src is None else src.depth)[s0:s0 + F, y0:y0 + h, x0:x0 + w][:, None]
     out["meta"] = meta_out
     out["info"] = {"sensor": ds.sensor_name, "frames": F, "crop_hw": (h, w), "shutter": ds.shutter,
-                   "noise": ds.noise, "outputs": tuple(ds.outputs)}
+                   "noise": ds.noise, "outputs": tuple(ds.outputs), "noise_streams": ds.noise_streams}
     return out

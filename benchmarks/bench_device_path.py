@@ -1,0 +1,232 @@
+"""The training data path end to end: DataLoader workers against the corpus resident on the device (issue 28).
+
+Times, in samples/s (median of timed passes after a warm-up pass; CUDA synchronised), on ``--device``:
+
+- ``loader``: ``LFMCaptureDataset`` in a ``DataLoader`` (``--workers`` processes, per-sample composition and noise
+  on the CPU), each batch moved to the device: what ``train(data="loader")`` feeds the network;
+- ``device``: :class:`lfmbench.datasets.device.DeviceBatches` (layers resident on the device, each batch cut,
+  composed and simulated there with counter-based noise): what ``train(data="device")`` feeds it;
+- ``step``: the U-Net (``unet_v1``) training step alone on a batch already on the device (the ceiling);
+- ``train``: ``lfmbench.train.train`` end to end for ``--steps`` optimiser steps, per data source.
+
+Workload: a synthetic corpus written here (``--scenes`` scenes of 640 x 360 px, 4 frames, 8 time bins, 24 lamps of
+24 x 40 px each, 4 bands; random radiance: the throughput does not depend on the values), 3 frames per sample,
+every output but ``rgb``; capture rows at a 256 x 256 crop, training rows at crop 128. Also reports the resident
+bytes per scene and the peak device memory per batch.
+
+Writes ``docs/device-path-benchmark.md`` (``--no-doc``: only print; ``--json PATH``: the rows, written as they come).
+Run: ``.venv/bin/python benchmarks/bench_device_path.py --device cuda`` (without a GPU: the CPU rows, and the file
+says the GPU rows were not run).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+DOC = ROOT / "docs" / "device-path-benchmark.md"
+OUTS = ("raw", "input_referred", "saturated", "gt", "light_index", "depth")
+
+
+def make_corpus(root: Path, scenes: int, width: int = 640, height: int = 360, frames: int = 4, bins: int = 8,
+                lamps: int = 24) -> Path:
+    """The synthetic throughput corpus (fake radiance in the corpus format; see module docstring)."""
+    from lfmbench import corpus as C
+    from tests.data.corpus.data import fake_frames, fake_meta, fake_scene, scale_frames
+
+    if (root / "manifest.json").is_file():
+        return root
+    w = C.CorpusWriter(root)
+    rng = np.random.default_rng(0)
+    for i in range(scenes):
+        meta = fake_meta(f"scene{i:05d}", width=width, height=height, frames=frames, bins=bins,
+                         bands=[450.0, 530.0, 610.0, 690.0], n_lights=lamps)
+        for lt in meta["lights"]:
+            y0, x0 = int(rng.integers(0, height - 24)), int(rng.integers(0, width - 40))
+            lt["bbox"] = [[y0, x0, y0 + 24, x0 + 40] for _ in range(frames)]
+        fr = scale_frames(fake_frames(meta, seed=i), 1e-3, 1e-3, False)
+        w.write_scene(meta["scene_id"], fake_scene(meta["scene_id"]), meta, fr)
+    w.write_splits(0)
+    return root
+
+
+def _sync(dev: torch.device) -> None:
+    if dev.type == "cuda":
+        torch.cuda.synchronize(dev)
+
+
+def _dataset(root: Path, crop: int, **kw):
+    from lfmbench.datasets import LFMCaptureDataset
+
+    kw.setdefault("outputs", OUTS)
+    return LFMCaptureDataset(root, split="all", frames=3, crop=crop, samples_per_scene=64, **kw)
+
+
+def _timed(fn, passes: int, dev: torch.device) -> tuple[float, float]:
+    fn()
+    _sync(dev)
+    ts = []
+    for _ in range(passes):
+        t0 = time.perf_counter()
+        fn()
+        _sync(dev)
+        ts.append(time.perf_counter() - t0)
+    return statistics.median(ts), ts[0]
+
+
+def time_loader(root, dev, batch, workers, batches, passes):
+    from torch.utils.data import DataLoader
+
+    from lfmbench.datasets.loading import collate_samples
+
+    ds = _dataset(root, 256)
+    dl = DataLoader(ds, batch_size=batch, shuffle=False, num_workers=workers, collate_fn=collate_samples,
+                    persistent_workers=workers > 0, pin_memory=dev.type == "cuda")
+
+    def run():
+        for i, b in enumerate(dl):
+            {k: v.to(dev, non_blocking=True) for k, v in b.items() if torch.is_tensor(v)}
+            if i + 1 >= batches:
+                break
+    med, _ = _timed(run, passes, dev)
+    return batch * batches / med
+
+
+def time_device(root, dev, batch, batches, passes):
+    from lfmbench.datasets.device import DeviceBatches
+
+    t0 = time.perf_counter()
+    db = DeviceBatches(_dataset(root, 256), batch, dev, seed=0)
+    load_s = time.perf_counter() - t0
+    if dev.type == "cuda":
+        torch.cuda.reset_peak_memory_stats(dev)
+        base = torch.cuda.memory_allocated(dev)
+
+    def run():
+        for i, b in enumerate(db):
+            if i + 1 >= batches:
+                break
+    med, _ = _timed(run, passes, dev)
+    peak = (torch.cuda.max_memory_allocated(dev) - base) if dev.type == "cuda" else None
+    scenes = len(dict.fromkeys(db.ds.scene_ids))
+    return batch * batches / med, load_s, db.resident.bytes / scenes, peak
+
+
+def time_step(root, dev, batch, crop, passes):
+    """The U-Net (unet_v1) optimiser step alone on one device-path batch already on the device."""
+    from lfmbench.datasets.device import DeviceBatches
+    from lfmbench.train import load_config, trainable
+
+    spec = trainable("unet")
+    cfg = load_config("unet", ROOT / "lfmbench" / "configs" / "unet_v1.yaml")
+    model = spec.build_model(cfg).to(dev)
+    opt = torch.optim.Adam(model.parameters(), lr=1e-3)
+    kw = {} if spec.outputs is None else {"outputs": spec.outputs}
+    ds = _dataset(root, crop, noise_streams="counter", **kw)
+    sample = next(iter(DeviceBatches(ds, batch, dev, seed=0)))
+
+    def run():
+        for _ in range(5):
+            opt.zero_grad(set_to_none=True)
+            loss, _terms = spec.loss(model, sample, cfg)
+            loss.backward()
+            opt.step()
+    med, _ = _timed(run, passes, dev)
+    return 5 * batch / med
+
+
+def time_train(root, dev, data, steps, batch, crop, workers):
+    from lfmbench.train import train
+
+    with tempfile.TemporaryDirectory() as tmp:
+        t0 = time.perf_counter()
+        train("unet", root, Path(tmp) / "u.pt", device=str(dev), data=data, epochs=1, max_steps=steps, crop=crop,
+              batch_size=batch, split="all", samples_per_scene=64, workers=workers, progress=False, log=None)
+        _sync(dev)
+        return steps * batch / (time.perf_counter() - t0)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--device", default="cpu")
+    ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--scenes", type=int, default=2)
+    ap.add_argument("--workers", type=int, default=None, help="DataLoader workers (default: cores - 2, at least 1)")
+    ap.add_argument("--corpus", type=Path, default=None, help="where the synthetic corpus is written / reused")
+    ap.add_argument("--no-doc", action="store_true")
+    ap.add_argument("--json", type=Path)
+    args = ap.parse_args(argv)
+    dev = torch.device(args.device)
+    if dev.type == "cuda" and not torch.cuda.is_available():
+        print("error: --device cuda: no CUDA device here", file=sys.stderr)
+        return 2
+    workers = args.workers if args.workers is not None else max(1, (os.cpu_count() or 2) - 2)
+    root = make_corpus(args.corpus or Path(tempfile.mkdtemp()) / "corpus", args.scenes)
+    gpu = dev.type == "cuda"
+    batches = (64, 256) if gpu else (8,)
+    n_b, passes = (2, 2) if args.quick else (4, 3)
+    rows: list[dict] = []
+
+    def add(**r):
+        rows.append(r)
+        print(json.dumps(r), flush=True)
+        if args.json:
+            args.json.write_text(json.dumps({"rows": rows}, indent=1))
+
+    for b in batches:
+        add(path="loader", batch=b, workers=workers, samples_per_s=time_loader(root, dev, b, workers, n_b, passes))
+        sps, load_s, per_scene, peak = time_device(root, dev, b, n_b, passes)
+        add(path="device", batch=b, samples_per_s=sps, load_s=load_s, resident_bytes_per_scene=per_scene,
+            peak_bytes=peak)
+    step_b = 64 if gpu else 4
+    add(path="step", batch=step_b, crop=128, samples_per_s=time_step(root, dev, step_b, 128, passes))
+    steps = 8 if args.quick else 16
+    for data in ("loader", "device"):
+        add(path=f"train({data})", batch=step_b, crop=128, steps=steps,
+            samples_per_s=time_train(root, dev, data, steps, step_b, 128, workers))
+    name = torch.cuda.get_device_name(dev) if gpu else (platform.processor() or platform.machine())
+    text = report(rows, f"{name}, torch {torch.__version__}, {os.cpu_count()} CPU cores, {workers} loader workers",
+                  gpu)
+    print(text)
+    if not args.no_doc:
+        DOC.write_text(text)
+    return 0
+
+
+def report(rows, machine, gpu) -> str:
+    lines = ["# The training data path: DataLoader workers against the corpus resident on the device", "",
+             "Written by `benchmarks/bench_device_path.py` (rerun: `.venv/bin/python benchmarks/bench_device_path.py "
+             "--device cuda`). Synthetic corpus (640 x 360, 4 frames, 8 bins, 24 lamps of 24 x 40 px), 3 frames "
+             "per sample, every output but `rgb`; capture rows at crop 256, training rows at crop 128. Medians of "
+             "timed passes after a warm-up pass.", "", f"Machine: {machine}", ""]
+    if not gpu:
+        lines += ["**GPU rows not run**: no CUDA device on the machine that wrote this file.", ""]
+    lines += ["| path | batch | samples/s | notes |", "|---|---|---|---|"]
+    for r in rows:
+        notes = []
+        if "load_s" in r:
+            notes.append(f"layers loaded in {r['load_s']:.1f} s, {r['resident_bytes_per_scene'] / 2**20:.0f} MiB "
+                         "per scene resident")
+        if r.get("peak_bytes"):
+            notes.append(f"peak {r['peak_bytes'] / 2**20:.0f} MiB per batch")
+        if "workers" in r:
+            notes.append(f"{r['workers']} workers")
+        if "steps" in r:
+            notes.append(f"{r['steps']} steps, start-up included")
+        lines.append(f"| {r['path']} | {r['batch']} | {r['samples_per_s']:.0f} | {'; '.join(notes)} |")
+    return "\n".join(lines) + "\n"
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,109 @@
+"""The device path (lfmbench.datasets.device) on the CPU: the same pieces and captures as the DataLoader paths,
+deterministic across batch sizes, a split that does not fit refused before anything is copied."""
+from __future__ import annotations
+
+import pytest
+import torch
+
+from lfmbench.datasets import LFMCaptureDataset, collate_pieces, simulate_batch
+from lfmbench.datasets.device import DeviceBatches, ResidentMemoryError, ResidentScenes, epoch_order
+from lfmbench.datasets.pieces import capture_pieces
+
+OUTS = ("raw", "input_referred", "saturated", "gt", "light_index", "depth")
+#: (n - 1) eps of float32 sums of n <= 16 non-negative terms in two orders (tests/test_batched_capture.py)
+SUM_ORDER_RTOL = 15 * torch.finfo(torch.float32).eps
+
+
+def _ds(root, **kw):
+    return LFMCaptureDataset(root, split="all", frames=3, crop=(12, 16), samples_per_scene=3, outputs=OUTS, **kw)
+
+
+def test_resident_pieces_equal_the_host_pieces(corpus):
+    ds = _ds(corpus)
+    res = ResidentScenes(ds, "cpu")
+    for i in range(len(ds)):
+        sid, pl, pg, crop, ns, start = ds.draws(i)
+        host = capture_pieces(ds, sid, pl, pg, crop, ns, i, start)
+        dev = capture_pieces(ds, sid, pl, pg, crop, ns, i, start, resident=res)
+        assert set(host) == set(dev)
+        for k, v in host.items():
+            if torch.is_tensor(v):
+                assert v.dtype == dev[k].dtype and torch.equal(v, dev[k]), (i, k)
+    assert res.bytes == sum(ResidentScenes.estimate_scene(ds, s) for s in dict.fromkeys(ds.scene_ids))
+
+
+def test_device_batches_equal_the_per_sample_path_with_counter_noise(corpus):
+    """A DeviceBatches batch against the per-sample path (noise_streams="counter") sample for sample: draws, meta
+    and integer outputs identical; floats within the summation-order bound; noise from the same streams."""
+    ref = _ds(corpus, noise_streams="counter")
+    db = DeviceBatches(_ds(corpus), batch_size=4, device="cpu", seed=5)
+    db.set_epoch(2)
+    ref.set_epoch(2)
+    order = epoch_order(len(ref), 5, 2).tolist()
+    seen = 0
+    for b, batch in enumerate(db):
+        for j, i in enumerate(order[4 * b:4 * b + 4]):
+            want = ref[i]
+            for k, v in want.items():
+                if k == "meta":
+                    assert batch["meta"]["scene_id"][j] == v["scene_id"]
+                    continue
+                got = batch[k][j]
+                assert got.shape == v.shape and got.dtype == v.dtype, k
+                if v.is_floating_point():
+                    ok = torch.isclose(got, v, rtol=SUM_ORDER_RTOL, atol=0.0, equal_nan=True)
+                    # a composed mean that differs in its last bit can move a noise draw or a DN rounding
+                    assert ok.double().mean() >= 0.999, (k, float(ok.double().mean()))
+                else:
+                    assert (got != v).double().mean() <= 1e-3, k
+            seen += 1
+    assert seen == len(ref)
+
+
+def test_device_batches_do_not_depend_on_the_batch_size(corpus):
+    a = DeviceBatches(_ds(corpus), batch_size=2, device="cpu", seed=1)
+    b = DeviceBatches(_ds(corpus), batch_size=9, device="cpu", seed=1)
+    big = next(iter(b))
+    small = [x for x in a]
+    for k in ("lpd_hcg", "spd_e", "gt", "light_index"):
+        assert torch.equal(torch.cat([x[k] for x in small]), big[k]), k
+    a.set_epoch(1)
+    assert not torch.equal(next(iter(a))["gt"], small[0]["gt"])  # another epoch: other draws
+
+
+def test_split_that_does_not_fit_is_refused_before_copying(corpus):
+    ds = _ds(corpus)
+    need = sum(ResidentScenes.estimate_scene(ds, s) for s in dict.fromkeys(ds.scene_ids))
+    with pytest.raises(ResidentMemoryError, match=r"split 'all' .* scenes need .* GiB on cpu .* the budget is"):
+        ResidentScenes(ds, "cpu", budget_bytes=need - 1)
+    with pytest.raises(ValueError, match="batch_size"):
+        DeviceBatches(ds, 0, "cpu")
+    with pytest.raises(ValueError, match="noise_streams"):
+        _ds(corpus, noise_streams="philox")
+    pieces = [capture_pieces(ds, *ds.draws(0)[:5])]
+    with pytest.raises(ValueError, match="noise_streams"):
+        simulate_batch(collate_pieces(pieces), ds.preset, noise_streams="philox")
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs CUDA")
+def test_cuda_device_batches_match_the_cpu(corpus):
+    cpu = next(iter(DeviceBatches(_ds(corpus), batch_size=9, device="cpu", seed=1)))
+    gpu = next(iter(DeviceBatches(_ds(corpus), batch_size=9, device="cuda", seed=1)))
+    for k in ("lpd_hcg", "spd_e", "gt", "light_index", "depth"):
+        assert gpu[k].device.type == "cuda"
+        assert (gpu[k].cpu() != cpu[k]).double().mean() <= 2e-3, k
+
+
+def test_train_from_the_device_path(tmp_path, corpus):
+    """train(..., data="device") runs the one training loop on DeviceBatches: it learns (the loss moves), writes
+    its checkpoint and resumes like the loader path; an unknown data source is refused."""
+    from lfmbench.train import train
+
+    kw = dict(epochs=2, crop=16, batch_size=4, samples_per_scene=2, split="all", progress=False, log=None)
+    model, hist = train("unet", corpus, tmp_path / "u.pt", device="cpu", data="device", **kw)
+    assert len(hist["epoch_loss"]) == 2 and all(torch.isfinite(torch.tensor(hist["epoch_loss"])))
+    assert (tmp_path / "u.pt").is_file()
+    _, again = train("unet", corpus, tmp_path / "u.pt", device="cpu", data="device", **kw)  # resumes: nothing to do
+    assert again["epoch_loss"] == hist["epoch_loss"]
+    with pytest.raises(ValueError, match="data must be one of"):
+        train("unet", corpus, tmp_path / "v.pt", device="cpu", data="gpu", **kw)
