@@ -19,7 +19,6 @@ import triton.language as tl
 
 from lfmbench.constants import POISSON_EXACT_LIMIT
 from lfmbench.counter_rng import GAMMA, MIX_MUL, STRIDE_LOG2
-from lfmbench.sensor.counter_noise import LOG_FACTORIAL
 
 __all__ = ["poisson", "normal"]
 
@@ -149,14 +148,16 @@ def _consts():
     return (GAMMA, (GAMMA << STRIDE_LOG2) & ((1 << 64) - 1), MIX_MUL[0], MIX_MUL[1])
 
 
-def poisson(mean: torch.Tensor, seed: torch.Tensor, gaussian_above: float, max_steps: int, max_rounds: int):
-    """:func:`lfmbench.sensor.counter_noise.poisson` for (B, N) means and (B,) int64 seeds on one device."""
+def poisson(mean: torch.Tensor, seed: torch.Tensor, gaussian_above: float, max_steps: int, max_rounds: int,
+            log_factorial) -> torch.Tensor:
+    """:func:`lfmbench.sensor.counter_noise.poisson` for (B, N) means and (B,) int64 seeds on one device
+    (``log_factorial``: its table of log k!, a float64 array)."""
     B, N = mean.shape
     mean = mean.contiguous()
     out = torch.empty(B, N, dtype=torch.float64, device=mean.device)
     if B and N:
         g, s, m0, m1 = _consts()
-        table = torch.as_tensor(LOG_FACTORIAL, device=mean.device)
+        table = torch.as_tensor(log_factorial, dtype=torch.float64, device=mean.device)
         limits = torch.tensor([float(gaussian_above), float(POISSON_EXACT_LIMIT)], dtype=torch.float64,
                               device=mean.device)
         _poisson_kernel[(triton.cdiv(N, _BLOCK), B)](mean, seed.contiguous(), out, table, table.numel(), limits, N,

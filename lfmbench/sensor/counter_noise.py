@@ -163,7 +163,7 @@ def poisson(mean: torch.Tensor, seed: torch.Tensor, gaussian_above: float = math
     if mean.dim() != 2 or seed.shape != mean.shape[:1]:
         raise ValueError(f"mean must be (B, N) and seed (B,), got {tuple(mean.shape)} and {tuple(seed.shape)}")
     if _use_triton(mean):
-        return _triton().poisson(mean, seed, gaussian_above, INVERSION_STEPS, PTRS_ROUNDS)
+        return _triton().poisson(mean, seed, gaussian_above, INVERSION_STEPS, PTRS_ROUNDS, LOG_FACTORIAL)
     mu = mean.to(torch.float64)
     keys = pixel_keys(seed, mu.shape[1])
     gauss = (mu >= gaussian_above) | (mu >= POISSON_EXACT_LIMIT)
