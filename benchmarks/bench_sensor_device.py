@@ -6,8 +6,11 @@ mean electrons already on the device, FPN maps on, every capture), timed three w
 - ``generators``: one ``torch.Generator`` per sample (what the batched dataset path does today: on a GPU one
   ``torch.poisson`` / ``torch.randn`` launch per sample and capture);
 - ``seeds``: one int64 noise seed per sample, noise from counter-based streams (:mod:`lfmbench.sensor.counter_noise`):
-  the batch in one set of tensor operations;
-- ``seeds+compile`` (CUDA only): the same with the counter Poisson and normal samplers fused by ``torch.compile``.
+  the batch in one set of tensor operations,
+  on CUDA the Triton kernels of :mod:`lfmbench.sensor._counter_triton` (a block of pixels stops when its draws
+  are done);
+- ``seeds-torch`` (CUDA): the same numbers from the torch form (every branch and rejection round for every pixel);
+- ``seeds+compile`` (CUDA, ``--compile``): the torch form fused by ``torch.compile``.
 
 Reports samples/s (median of ``--repeats`` timed calls after two warm-up calls; CUDA synchronised) and the peak
 device memory of a call, per batch size, and writes ``docs/sensor-device-benchmark.md`` (``--no-doc``: only print).
@@ -55,9 +58,12 @@ def time_mode(mode: str, batch: int, device: str, repeats: int) -> dict:
     preset = load_preset("ovt")
     lpd, spd = _inputs(batch, device)
     fpn = fixed_pattern(preset, H, W, device=device)
-    orig = (CN.poisson, CN.normal)
-    if mode == "seeds+compile":
+    orig = (CN.poisson, CN.normal, CN.USE_TRITON)
+    if mode == "seeds+compile":  # the torch form fused by torch.compile (what Triton kernels replace)
+        CN.USE_TRITON = False
         CN.poisson, CN.normal = torch.compile(CN.poisson, dynamic=True), torch.compile(CN.normal, dynamic=True)
+    elif mode == "seeds-torch":  # the torch form, every branch and round for every pixel
+        CN.USE_TRITON = False
     try:
         def call(i: int):
             if mode == "generators":
@@ -83,7 +89,7 @@ def time_mode(mode: str, batch: int, device: str, repeats: int) -> dict:
             times.append(time.perf_counter() - t0)
         peak = (torch.cuda.max_memory_allocated() - base) if device.startswith("cuda") else None
     finally:
-        CN.poisson, CN.normal = orig
+        CN.poisson, CN.normal, CN.USE_TRITON = orig
     med = statistics.median(times)
     return {"mode": mode, "batch": batch, "device": device, "samples_per_s": batch / med, "median_s": med,
             "first_call_s": first, "peak_bytes": peak}
@@ -114,6 +120,8 @@ def main(argv=None) -> int:
     ap.add_argument("--device", default="cpu", help="cpu or cuda")
     ap.add_argument("--quick", action="store_true", help="smaller batches, fewer repeats")
     ap.add_argument("--repeats", type=int, default=None)
+    ap.add_argument("--compile", action="store_true", help="also time the torch form under torch.compile (CUDA; "
+                                                           "about 100 s of compilation)")
     ap.add_argument("--no-doc", action="store_true")
     ap.add_argument("--json", type=Path, help="also write the rows as JSON here")
     args = ap.parse_args(argv)
@@ -125,7 +133,8 @@ def main(argv=None) -> int:
     # the CPU rows always (on a GPU machine: its host CPU), the GPU rows with --device cuda
     plan = [("cpu", b, m) for b in ((2,) if args.quick else (2, 8)) for m in ("generators", "seeds")]
     if gpu:
-        plan += [(args.device, b, m) for b in (64, 256) for m in ("generators", "seeds", "seeds+compile")]
+        modes = ("generators", "seeds", "seeds-torch") + (("seeds+compile",) if args.compile else ())
+        plan += [(args.device, b, m) for b in (64, 256) for m in modes]
     rows = []
     for dev, b, m in plan:
         r = time_mode(m, b, dev, repeats)
