@@ -5,6 +5,7 @@ itself (chi-square), the normal distribution's moments."""
 from __future__ import annotations
 
 import math
+import warnings
 
 import numpy as np
 import pytest
@@ -86,7 +87,10 @@ def test_cuda_draws_equal_the_cpu_draws(monkeypatch, use_triton, gaussian_above)
     mean = torch.tensor(np.stack([np.concatenate([np.repeat(MEANS, 50), rng.gamma(0.5, 40.0, 50000)])] * 3))
     seed = derive_key(1, torch.arange(3))
     cpu = CN.poisson(mean, seed, gaussian_above)
-    gpu = CN.poisson(mean.cuda(), seed.cuda(), gaussian_above).cpu()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # a Triton kernel that fails to compile must fail this test
+        gpu = CN.poisson(mean.cuda(), seed.cuda(), gaussian_above).cpu()
+    assert CN.USE_TRITON == use_triton
     diff = cpu != gpu
     assert diff.double().mean() <= 1e-4 and bool((torch.abs(cpu - gpu)[diff] <= 3 * mean[diff].sqrt() + 3).all())
     z_cpu, z_gpu = CN.normal(seed, 20000), CN.normal(seed.cuda(), 20000).cpu()

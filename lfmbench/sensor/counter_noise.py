@@ -29,6 +29,7 @@ Functions
 from __future__ import annotations
 
 import math
+import warnings
 
 import numpy as np
 import torch
@@ -83,6 +84,20 @@ def _triton():
 
 def _use_triton(t: torch.Tensor) -> bool:
     return USE_TRITON and t.is_cuda and _triton() is not None
+
+
+def _run_triton(name: str, *args):
+    """The Triton kernel ``name``, or None after turning the kernels off with one warning when it cannot be
+    compiled here (an unsupported GPU or Triton version): the torch form then gives the same numbers."""
+    global USE_TRITON
+    try:
+        return getattr(_triton(), name)(*args)
+    except Exception as exc:  # noqa: BLE001 - a compiler error of any kind: fall back to the torch form once
+        warnings.warn(f"counter noise: the Triton kernel {name} failed ({type(exc).__name__}: "
+                      f"{str(exc).splitlines()[0][:200] if str(exc) else ''}); using the torch form (same numbers, "
+                      "slower)", RuntimeWarning, stacklevel=3)
+        USE_TRITON = False
+        return None
 
 
 #: Purpose words of :func:`lfmbench.counter_rng.derive_key` for the two kinds of sensor noise.
@@ -141,7 +156,9 @@ def normal(seed: torch.Tensor, n: int) -> torch.Tensor:
         (B, n) float64 standard normals.
     """
     if _use_triton(seed):
-        return _triton().normal(seed, n)
+        out = _run_triton("normal", seed, n)
+        if out is not None:
+            return out
     keys = pixel_keys(seed, n)
     u1, u2 = _u(keys, 0), _u(keys, 1)
     return torch.sqrt(-2.0 * torch.log(u1)) * torch.cos(2.0 * math.pi * u2)
@@ -163,7 +180,9 @@ def poisson(mean: torch.Tensor, seed: torch.Tensor, gaussian_above: float = math
     if mean.dim() != 2 or seed.shape != mean.shape[:1]:
         raise ValueError(f"mean must be (B, N) and seed (B,), got {tuple(mean.shape)} and {tuple(seed.shape)}")
     if _use_triton(mean):
-        return _triton().poisson(mean, seed, gaussian_above, INVERSION_STEPS, PTRS_ROUNDS, LOG_FACTORIAL)
+        out = _run_triton("poisson", mean, seed, gaussian_above, INVERSION_STEPS, PTRS_ROUNDS, LOG_FACTORIAL)
+        if out is not None:
+            return out
     mu = mean.to(torch.float64)
     keys = pixel_keys(seed, mu.shape[1])
     gauss = (mu >= gaussian_above) | (mu >= POISSON_EXACT_LIMIT)
