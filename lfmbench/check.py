@@ -21,6 +21,7 @@ import re
 from typing import Any, Iterable, Mapping, Sequence
 
 import numpy as np
+from lfmbench.limits import brief
 
 __all__ = ["where", "fail", "check_number", "get_number", "check_integer", "check_vector", "check_keys",
            "check_choice", "check_array", "SCENE_ID_PATTERN", "SCENE_ID_MAX_LEN", "scene_id_error",
@@ -72,14 +73,14 @@ def check_number(value: Any, field: str, source: str | None = None, *, lo: float
     ValueError: meta.json: field 'fps' must be > 0, got 0
     """
     if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-        fail(field, f"must be {'an integer' if integer else 'a number'}, got {value!r}", source)
+        fail(field, f"must be {'an integer' if integer else 'a number'}, got {brief(value)}", source)
     v = float(value)
     if math.isnan(v) or (math.isinf(v) and not (allow_inf and v > 0)):
-        fail(field, f"must be finite, got {value!r}", source)
+        fail(field, f"must be finite, got {brief(value)}", source)
     if integer and not v.is_integer():
-        fail(field, f"must be an integer, got {value!r}", source)
+        fail(field, f"must be an integer, got {brief(value)}", source)
     if (lo is not None and (v <= lo if lo_open else v < lo)) or (hi is not None and (v >= hi if hi_open else v > hi)):
-        fail(field, f"must be {_interval(lo, hi, lo_open, hi_open)}, got {value!r}", source)
+        fail(field, f"must be {_interval(lo, hi, lo_open, hi_open)}, got {brief(value)}", source)
     return int(v) if integer else v
 
 
@@ -98,9 +99,9 @@ def check_integer(value: Any, field: str, source: str | None = None, *, lo: int 
                   hi: int | None = None) -> int:
     """A JSON integer (``int``, not ``bool``, not ``2.0``) within ``[lo, hi]``."""
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        fail(field, f"must be an integer, got {value!r}", source)
+        fail(field, f"must be an integer, got {brief(value)}", source)
     if (lo is not None and value < lo) or (hi is not None and value > hi):
-        fail(field, f"must be an integer {_interval(lo, hi, False, False)}, got {value!r}", source)
+        fail(field, f"must be an integer {_interval(lo, hi, False, False)}, got {brief(value)}", source)
     return int(value)
 
 
@@ -108,7 +109,7 @@ def check_vector(value: Any, field: str, source: str | None = None, n: int = 3, 
                  hi: float | None = None) -> list[float]:
     """A list (or tuple) of ``n`` finite numbers within ``[lo, hi]``; each error names the element."""
     if not isinstance(value, (list, tuple)) or len(value) != n:
-        fail(field, f"must be a list of {n} numbers, got {value!r}", source)
+        fail(field, f"must be a list of {n} numbers, got {brief(value)}", source)
     return [check_number(x, f"{field}[{i}]", source, lo=lo, hi=hi) for i, x in enumerate(value)]
 
 
@@ -142,7 +143,7 @@ def check_keys(data: Any, field: str, source: str | None = None, *, required: It
 def check_choice(value: Any, field: str, allowed: Sequence[Any], source: str | None = None) -> Any:
     """``value`` is one of ``allowed``."""
     if value not in allowed:
-        fail(field, f"must be one of {list(allowed)}, got {value!r}", source)
+        fail(field, f"must be one of {list(allowed)}, got {brief(value)}", source)
     return value
 
 
@@ -166,9 +167,9 @@ def check_array(name: str, x: Any, *, lo: float | None = None, hi: float | None 
     if lo is not None:
         bad = (v <= lo) if lo_open else (v < lo)
         if bad.any():
-            raise ValueError(f"{name} must be {'>' if lo_open else '>='} {lo}; got {v[bad].flat[0].item()!r}")
+            raise ValueError(f"{name} must be {'>' if lo_open else '>='} {lo}; got {brief(v[bad].flat[0].item())}")
     if hi is not None and (v > hi).any():
-        raise ValueError(f"{name} must be <= {hi}; got {v[v > hi].flat[0].item()!r}")
+        raise ValueError(f"{name} must be <= {hi}; got {brief(v[v > hi].flat[0].item())}")
 
 
 # ------------------------------------------------------------------------------------------------ scene ids
@@ -189,7 +190,7 @@ def scene_id_error(scene_id: Any) -> str | None:
     "must be letters, digits, '_', '-', '.', starting with a letter or digit, got 'a+b'"
     """
     if not isinstance(scene_id, str) or not re.fullmatch(SCENE_ID_PATTERN, scene_id):
-        return f"must be letters, digits, '_', '-', '.', starting with a letter or digit, got {scene_id!r}"
+        return f"must be letters, digits, '_', '-', '.', starting with a letter or digit, got {brief(scene_id)}"
     if len(scene_id) > SCENE_ID_MAX_LEN:
         return f"must be at most {SCENE_ID_MAX_LEN} characters, got {len(scene_id)}"
     return None
@@ -212,7 +213,7 @@ def torch_device(name: str, arg: str = "--device"):
     try:
         dev = torch.device(name)
     except (RuntimeError, ValueError):
-        raise ValueError(f"{arg} must be a torch device such as cpu, cuda or cuda:0, got {name!r}") from None
+        raise ValueError(f"{arg} must be a torch device such as cpu, cuda or cuda:0, got {brief(name)}") from None
     if dev.type == "cuda" and not torch.cuda.is_available():
         raise ValueError(f"{arg} {name}: CUDA is not available on this machine (use --device cpu)")
     return dev

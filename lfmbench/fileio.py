@@ -1,8 +1,18 @@
-"""Atomic file writes: the one implementation every lfmbench module uses.
+"""File I/O of user-facing files: the one implementation every lfmbench module uses for writing any file and
+for reading JSON and YAML.
 
-A file is written to a temporary name in its own directory (prefix :data:`TMP_PREFIX`), flushed and fsync'ed,
-then renamed over the target with :func:`os.replace` (atomic on POSIX): readers see the old file or the new one,
-never half of one, and an interrupted or failed write leaves the old file untouched and no temporary behind.
+Writing (:func:`atomic_write_bytes` and its wrappers): a file is written to a temporary name in its own
+directory (prefix :data:`TMP_PREFIX`), flushed and fsync'ed, then renamed over the target with
+:func:`os.replace` (atomic on POSIX): readers see the old file or the new one, never half of one, and an
+interrupted or failed write leaves the old file untouched and no temporary behind. What is at the path is never
+replaced by something else: a symbolic link is written through (its target is replaced, the link stays), and a
+path that exists and is not a regular file (``/dev/null``, ``/dev/stdout``, a FIFO) is written directly. Every
+write error (disk full, read-only file system, I/O error, a FIFO without reader) is an :class:`AtomicWriteError`
+whose message names the path.
+
+Reading (:func:`load_json`, :func:`loads_json`, :func:`load_yaml`): bounded by :mod:`lfmbench.limits` (file
+size, JSON nesting depth, YAML aliases and expanded nodes) and strict (no ``NaN``/``Infinity``, no number that
+overflows to inf); every refusal is an :class:`InputFileError` (a ``ValueError``) naming the file.
 """
 from __future__ import annotations
 
@@ -11,12 +21,16 @@ import errno
 import hashlib
 import io
 import json
+import math
 import os
+import stat
 import tempfile
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from lfmbench.limits import LimitError, limit
 
 #: Prefix of temporary files; stray ones (after a crash) can be found and removed by this prefix.
 TMP_PREFIX = ".lfmtmp-"
@@ -24,6 +38,10 @@ TMP_PREFIX = ".lfmtmp-"
 
 class AtomicWriteError(OSError):
     """Writing a file failed (disk full, permissions, ...); the message names the file; nothing was changed."""
+
+
+class InputFileError(ValueError):
+    """A JSON or YAML file that is malformed or above a limit of :mod:`lfmbench.limits`; the message names it."""
 
 
 def _file_mode() -> int:
@@ -42,26 +60,88 @@ def _tmp_path(path: Path) -> Path:
     return Path(name)
 
 
+def _why(exc: OSError) -> str:
+    return "disk full" if exc.errno == errno.ENOSPC else (exc.strerror or str(exc))
+
+
+def write_target(path: str | os.PathLike) -> tuple[Path, bool]:
+    """Where a write of ``path`` goes and how: ``(target, direct)``.
+
+    A symbolic link is followed to its final target (the link itself is never replaced); a target that exists and
+    is not a regular file (character device, FIFO, socket) is written directly (``direct`` True), never replaced;
+    a directory raises ``IsADirectoryError`` naming ``path``.
+    """
+    path = Path(path)
+    try:
+        st = os.stat(path)  # follows symbolic links
+    except FileNotFoundError:
+        st = None
+    if st is not None and stat.S_ISDIR(st.st_mode):
+        raise IsADirectoryError(errno.EISDIR, f"{path} is a directory")
+    if st is not None and not stat.S_ISREG(st.st_mode):
+        return path, True
+    if path.is_symlink():
+        return Path(os.path.realpath(path)), False
+    return path, False
+
+
+def writable_error(path: str | os.PathLike) -> str | None:
+    """Why ``path`` cannot be written by :func:`atomic_write_bytes` (checked before long work starts), or None."""
+    try:
+        target, direct = write_target(path)
+        if direct:
+            return None if os.access(target, os.W_OK) else "permission denied"
+        target.parent.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=target.parent):
+            pass
+    except OSError as exc:
+        return exc.strerror or str(exc)
+    return None
+
+
+def _write_direct(path: Path, data: bytes) -> None:
+    """Write into an existing non-regular file (device, FIFO) in place; a FIFO without reader is an error, not a
+    hang (ENXIO)."""
+    fifo = stat.S_ISFIFO(os.stat(path).st_mode)
+    fd = os.open(path, os.O_WRONLY | (os.O_NONBLOCK if fifo else 0))
+    if fifo:
+        os.set_blocking(fd, True)
+    with os.fdopen(fd, "wb") as fh:
+        fh.write(data)
+        fh.flush()
+
+
 def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> str:
     """Write ``data`` to ``path`` atomically and return its SHA-256 hex digest.
+
+    A symbolic link is written through; a path that is not a regular file is written directly
+    (:func:`write_target`).
 
     Raises:
         AtomicWriteError: naming ``path`` (``errno.ENOSPC``: "disk full"); the temporary file is removed.
     """
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     tmp = None
     try:
-        tmp = _tmp_path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        target, direct = write_target(path)
+        if direct:
+            try:
+                _write_direct(target, data)
+            except OSError as exc:
+                raise AtomicWriteError(exc.errno, f"could not write {path}: {_why(exc)}") from exc
+            return hashlib.sha256(data).hexdigest()
+        tmp = _tmp_path(target)
         with open(tmp, "wb") as fh:
             fh.write(data)
             fh.flush()
             os.fsync(fh.fileno())
-        os.replace(tmp, path)
+        os.replace(tmp, target)
         tmp = None
+    except AtomicWriteError:
+        raise
     except OSError as exc:
-        why = "disk full" if exc.errno == errno.ENOSPC else (exc.strerror or str(exc))
-        raise AtomicWriteError(exc.errno, f"could not write {path}: {why}; nothing was changed") from exc
+        raise AtomicWriteError(exc.errno, f"could not write {path}: {_why(exc)}; nothing was changed") from exc
     finally:
         if tmp is not None:
             with contextlib.suppress(OSError):
@@ -108,3 +188,165 @@ def atomic_torch_save(obj: Any, path: str | os.PathLike) -> Path:
     torch.save(obj, buf)
     atomic_write_bytes(path, buf.getvalue())
     return path
+
+
+# --------------------------------------------------------------------------------------------------- reading
+def read_bytes(path: str | os.PathLike, what: str = "file", limit_name: str = "json_bytes") -> bytes:
+    """The bytes of ``path``, refused (:class:`lfmbench.limits.LimitError`, naming it) above limit ``limit_name``
+    before they are read. ``OSError`` (missing, unreadable) propagates."""
+    cap = limit(limit_name)
+    with open(path, "rb") as fh:
+        size = os.fstat(fh.fileno()).st_size
+        if size > cap:
+            raise LimitError(str(path), f"{what} of {size:,} bytes", size, limit_name)
+        raw = fh.read(cap + 1)  # a growing or non-regular file: never more than the limit
+    if len(raw) > cap:
+        raise LimitError(str(path), f"{what} of more than {cap:,} bytes", len(raw), limit_name)
+    return raw
+
+
+def _no_constant(name: str) -> Any:
+    raise ValueError(f"{name} is not a JSON number (non-finite values are not allowed)")
+
+
+def _finite_float(text: str) -> float:
+    v = float(text)
+    if not math.isfinite(v):
+        raise ValueError(f"number {text[:40]}{'...' if len(text) > 40 else ''} is out of the float range")
+    return v
+
+
+def json_depth_exceeds(obj: Any, cap: int) -> bool:
+    """True when ``obj`` (parsed JSON) nests lists / objects deeper than ``cap`` levels (iterative)."""
+    stack = [(obj, 1)]
+    while stack:
+        o, d = stack.pop()
+        if d > cap:
+            return True
+        if isinstance(o, dict):
+            stack.extend((v, d + 1) for v in o.values() if isinstance(v, (dict, list)))
+        elif isinstance(o, list):
+            stack.extend((v, d + 1) for v in o if isinstance(v, (dict, list)))
+    return False
+
+
+def loads_json(raw: bytes | str, source: str) -> Any:
+    """Parse JSON text from ``source`` (a file name, for the messages) strictly and within the depth limit:
+    ``NaN``, ``Infinity`` and numbers that overflow to inf are refused; every refusal is an
+    :class:`InputFileError` naming ``source``."""
+    cap = limit("json_depth")
+    try:
+        obj = json.loads(raw, parse_constant=_no_constant, parse_float=_finite_float)
+    except RecursionError:
+        raise InputFileError(f"{source}: JSON nested deeper than the limit json_depth={cap} (raise it with "
+                             f"`lfmbench --limit json_depth=N` if the file is trusted)") from None
+    except (ValueError, UnicodeDecodeError) as exc:  # JSONDecodeError, int digit limit, our hooks
+        msg = " ".join(str(exc).split())
+        raise InputFileError(f"{source}: not valid JSON: {msg[:200]}") from None
+    if json_depth_exceeds(obj, cap):
+        raise InputFileError(f"{source}: JSON nested deeper than the limit json_depth={cap} (raise it with "
+                             f"`lfmbench --limit json_depth=N` if the file is trusted)")
+    return obj
+
+
+def load_json(path: str | os.PathLike, what: str = "JSON file", limit_name: str = "json_bytes") -> Any:
+    """Read and parse the JSON file ``path`` within the limits (:func:`read_bytes`, :func:`loads_json`).
+
+    Raises:
+        InputFileError: malformed, too deep or too large (a ``ValueError`` naming ``path``).
+        OSError: missing or unreadable (``FileNotFoundError`` for a missing file).
+    """
+    try:
+        raw = read_bytes(path, what, limit_name)
+    except LimitError as exc:
+        raise InputFileError(str(exc)) from None
+    return loads_json(raw, str(path))
+
+
+def _yaml_loader():
+    import yaml  # noqa: PLC0415
+
+    class BoundedLoader(yaml.SafeLoader):
+        """``yaml.SafeLoader`` that counts aliases while composing (limit ``yaml_aliases``)."""
+
+        n_aliases = 0
+
+        def compose_node(self, parent, index):
+            if self.check_event(yaml.AliasEvent):
+                self.n_aliases += 1
+                if self.n_aliases > limit("yaml_aliases"):
+                    raise LimitError(self.source, f"YAML document with more than {limit('yaml_aliases')} aliases",
+                                     None, "yaml_aliases")
+            return super().compose_node(parent, index)
+
+    return yaml, BoundedLoader
+
+
+def _expanded_nodes(node: Any, cap: int) -> int:
+    """Nodes of a composed YAML graph with every alias expanded (memoised per node: linear in the graph);
+    stops counting above ``cap``."""
+    import yaml  # noqa: PLC0415
+
+    memo: dict[int, int] = {}
+
+    def size(n) -> int:
+        k = id(n)
+        if k in memo:
+            return memo[k]
+        if isinstance(n, yaml.SequenceNode):
+            total = 1 + sum(size(c) for c in n.value)
+        elif isinstance(n, yaml.MappingNode):
+            total = 1 + sum(size(a) + size(b) for a, b in n.value)
+        else:
+            total = 1
+        memo[k] = total = min(total, cap + 1)
+        return total
+
+    return size(node)
+
+
+def load_yaml(path: str | os.PathLike | None = None, *, text: str | None = None, source: str | None = None) -> Any:
+    """Parse a YAML file (or ``text``) safely and within the limits: ``yaml.safe_load`` semantics, the file size
+    (``yaml_bytes``), aliases (``yaml_aliases``) and nodes after alias expansion (``yaml_nodes``, the "billion
+    laughs" bound) are checked before any Python object is built.
+
+    Raises:
+        InputFileError: malformed or above a limit (a ``ValueError`` whose single line names the file and, for
+            a syntax error, the position; quoted text is cut short).
+        OSError: the file is missing or unreadable.
+    """
+    source = str(source or path or "<yaml>")
+    try:
+        if text is None:
+            raw = read_bytes(path, "YAML file", "yaml_bytes")
+            try:
+                text = raw.decode("utf-8")
+            except UnicodeDecodeError as exc:
+                raise InputFileError(f"{source}: not UTF-8 text ({exc.reason} at byte {exc.start})") from None
+        elif len(text) > limit("yaml_bytes"):
+            raise LimitError(source, f"YAML text of {len(text):,} characters", len(text), "yaml_bytes")
+        yaml, Loader = _yaml_loader()
+        loader = Loader(text)
+        loader.source = source
+        try:
+            node = loader.get_single_node()
+            if node is None:
+                return None
+            cap = limit("yaml_nodes")
+            n = _expanded_nodes(node, cap)
+            if n > cap:
+                raise LimitError(source, "YAML document of more nodes (after alias expansion)", None, "yaml_nodes")
+            return loader.construct_document(node)
+        finally:
+            loader.dispose()
+    except LimitError as exc:
+        raise InputFileError(str(exc)) from None
+    except RecursionError:
+        raise InputFileError(f"{source}: YAML nested too deeply") from None
+    except Exception as exc:  # yaml.YAMLError (syntax, unknown tag): one line, position included, cut short
+        import yaml  # noqa: PLC0415
+
+        if not isinstance(exc, yaml.YAMLError):
+            raise
+        msg = " ".join(str(exc).split())
+        raise InputFileError(f"{source}: not valid YAML: {msg[:300]}{'...' if len(msg) > 300 else ''}") from None

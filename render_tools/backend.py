@@ -38,7 +38,6 @@ from __future__ import annotations
 import atexit
 import ctypes.util
 import glob
-import json
 import math
 import os
 import re
@@ -49,7 +48,7 @@ import warnings
 
 import numpy as np
 
-from lfmbench.fileio import atomic_write_json
+from lfmbench.fileio import atomic_write_json, load_json
 
 #: Preferred spectral variants, fast first.
 CUDA_VARIANT = "cuda_ad_spectral"
@@ -149,8 +148,7 @@ def _read_cache(path: str) -> dict:
     if not os.path.isfile(path):
         return {}
     try:
-        with open(path, encoding="utf-8") as fh:
-            data = json.load(fh)
+        data = load_json(path, "probe cache")
     except (OSError, ValueError):
         return {}
     return data if isinstance(data, dict) else {}

@@ -80,19 +80,19 @@ def load_profile(profile: str | Path) -> dict:
     Raises ``ValueError`` naming the file for an unknown profile, malformed YAML or a value that is not a
     mapping.
     """
-    import yaml  # noqa: PLC0415
+    from lfmbench.fileio import InputFileError, load_yaml  # noqa: PLC0415
 
     p = Path(profile)
     if p.suffix in (".yaml", ".yml", ".json") and p.is_file():
         try:
-            data = yaml.safe_load(p.read_text(encoding="utf-8"))
-        except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
-            why = " ".join(str(exc).split()) or type(exc).__name__  # one line, position included
-            raise ValueError(f"{p}: cannot read the profile: {why}") from None
+            data = load_yaml(p)
+        except OSError as exc:
+            raise ValueError(f"{p}: cannot read the profile: {exc.strerror or exc}") from None
+        except InputFileError as exc:  # one line, position included
+            raise ValueError(f"{p}: cannot read the profile: {str(exc).removeprefix(f'{p}: ')}") from None
         src = p
     else:
-        with open(PROFILES_FILE) as fh:
-            table = yaml.safe_load(fh)
+        table = load_yaml(PROFILES_FILE)
         if str(profile) not in table:
             raise ValueError(f"profile: {profile!r} is not in {PROFILES_FILE} (known: {sorted(table)}) "
                              "and is not a YAML file")

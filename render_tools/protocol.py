@@ -26,6 +26,7 @@ from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any, Mapping
 
+from lfmbench.limits import brief
 from lfmbench.check import check_integer, check_keys, check_number, fail, scene_id_error
 from lfmbench.vocabulary import VEHICLE_KINDS
 
@@ -129,7 +130,7 @@ def resolve_protocol(name_or_path: str | os.PathLike) -> Path:
     known = list_protocols()
     if str(name_or_path) in known:
         return known[str(name_or_path)]
-    raise ValueError(f"protocol: {str(name_or_path)!r} is neither a protocol of {PROTOCOL_DIR} "
+    raise ValueError(f"protocol: {brief(str(name_or_path))} is neither a protocol of {PROTOCOL_DIR} "
                      f"(known: {sorted(known)}) nor a YAML file")
 
 
@@ -153,16 +154,16 @@ def _scene(entry: Any, split: str, i: int, src: str, cfg: dict) -> ProtocolScene
         fail(f"{f}.id", why, src)
     seed = check_integer(entry["seed"], f"{f}.seed", src, lo=0)
     if entry["time_of_day"] not in TIMES_OF_DAY:
-        fail(f"{f}.time_of_day", f"{entry['time_of_day']!r} is not one of {TIMES_OF_DAY}", src)
+        fail(f"{f}.time_of_day", f"{brief(entry['time_of_day'])} is not one of {TIMES_OF_DAY}", src)
     speed = check_number(entry["ego_speed_mps"], f"{f}.ego_speed_mps", src, lo=0.0, hi=200.0)
     kinds = entry["vehicle_kinds"]
     if not isinstance(kinds, list) or any(k not in VEHICLE_KINDS for k in kinds) or len(set(kinds)) != len(kinds):
-        fail(f"{f}.vehicle_kinds", f"must be a list of distinct kinds of {VEHICLE_KINDS}, got {kinds!r}", src)
+        fail(f"{f}.vehicle_kinds", f"must be a list of distinct kinds of {VEHICLE_KINDS}, got {brief(kinds)}", src)
     if entry["signal"] not in SIGNALS:
-        fail(f"{f}.signal", f"{entry['signal']!r} is not one of {SIGNALS}", src)
+        fail(f"{f}.signal", f"{brief(entry['signal'])} is not one of {SIGNALS}", src)
     ov = entry.get("overrides") or {}
     if not isinstance(ov, Mapping):
-        fail(f"{f}.overrides", f"must be a mapping of generator defaults, got {ov!r}", src)
+        fail(f"{f}.overrides", f"must be a mapping of generator defaults, got {brief(ov)}", src)
     for a, b in _PINNED_KEYS:
         if b in (ov.get(a) or {}):
             fail(f"{f}.overrides", f"must not set {a}.{b}: the scene's pinned conditions set it", src)
@@ -179,22 +180,21 @@ def load_protocol(name_or_path: str | os.PathLike) -> Protocol:
     missing or unknown key, an impossible value, duplicate scene ids or seeds, or a coverage rule of the file's
     ``coverage`` section that its scenes do not meet.
     """
-    import yaml  # noqa: PLC0415
+    from lfmbench.fileio import load_yaml  # noqa: PLC0415
 
     path = resolve_protocol(name_or_path)
     src = f"protocol file {path}"
     try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
-        why = " ".join(str(exc).split()) or type(exc).__name__
-        raise ValueError(f"{src}: cannot read YAML: {why}") from None
+        data = load_yaml(path, source=src)
+    except OSError as exc:
+        raise ValueError(f"{src}: cannot read YAML: {exc.strerror or exc}") from None
     check_keys(data, "", src, required=("format", "name", "version", "render", "storage", "pwm", "coverage",
                                         "scenes"), optional=("description",))
     if data["format"] != PROTOCOL_FORMAT:
-        fail("format", f"must be {PROTOCOL_FORMAT!r}, got {data['format']!r}", src)
+        fail("format", f"must be {brief(PROTOCOL_FORMAT)}, got {brief(data['format'])}", src)
     name = data["name"]
     if not isinstance(name, str) or not _NAME_RE.match(name):
-        fail("name", f"must be lower-case letters, digits, '.', '_' or '-', got {name!r}", src)
+        fail("name", f"must be lower-case letters, digits, '.', '_' or '-', got {brief(name)}", src)
     version = check_integer(data["version"], "version", src, lo=1)
     render = data["render"]
     check_keys(render, "render", src, optional=sorted(_render_fields()))
@@ -207,7 +207,7 @@ def load_protocol(name_or_path: str | os.PathLike) -> Protocol:
     from lfmbench.corpus import STORAGES  # noqa: PLC0415
 
     if data["storage"] not in STORAGES:
-        fail("storage", f"{data['storage']!r} is not one of {sorted(STORAGES)}", src)
+        fail("storage", f"{brief(data['storage'])} is not one of {sorted(STORAGES)}", src)
     pwm = data["pwm"]
     check_keys(pwm, "pwm", src, required=("test_split_seed", "distributions"))
     check_integer(pwm["test_split_seed"], "pwm.test_split_seed", src, lo=0)
@@ -227,9 +227,9 @@ def load_protocol(name_or_path: str | os.PathLike) -> Protocol:
     seen_seed: dict[int, str] = {}
     for s in scenes:
         if s.scene_id in seen_id:
-            fail("scenes", f"scene id {s.scene_id!r} appears twice ({seen_id[s.scene_id]} and {s.split})", src)
+            fail("scenes", f"scene id {brief(s.scene_id)} appears twice ({seen_id[s.scene_id]} and {s.split})", src)
         if s.seed in seen_seed:
-            fail("scenes", f"seed {s.seed} is used by {seen_seed[s.seed]!r} and {s.scene_id!r} "
+            fail("scenes", f"seed {s.seed} is used by {brief(seen_seed[s.seed])} and {brief(s.scene_id)} "
                            "(one seed, one scene: no scene may appear in two splits)", src)
         seen_id[s.scene_id], seen_seed[s.seed] = s.split, s.scene_id
     proto = Protocol(name, int(version), str(data.get("description", "")), path, content_sha256(data),
@@ -273,7 +273,7 @@ def _check_coverage(p: Protocol, src: str) -> None:
                           ("signals", cov["signal"])):
             want = r.get(key, [])
             if not isinstance(want, list) or any(w not in have for w in want):
-                fail(f"{f}.{key}", f"must be a list of {sorted(have)}, got {want!r}", src)
+                fail(f"{f}.{key}", f"must be a list of {sorted(have)}, got {brief(want)}", src)
             missing = [w for w in want if not have[w]]
             if missing:
                 fail(f"{f}.{key}", f"no {split} scene has {missing}", src)

@@ -28,6 +28,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from lfmbench.limits import brief
 from lfmbench.check import check_integer, check_keys, check_number, check_vector, fail, scene_id_error
 from lfmbench.fileio import atomic_write_json
 from lfmbench.vocabulary import GROUPS, LIGHT_GROUPS, LIGHT_KINDS, OBJECT_KINDS, VEHICLE_KINDS
@@ -49,14 +50,13 @@ MAX_COORD_M = 1.0e4
 # ----------------------------------------------------------------------------------------------- config
 def load_config(path: str | os.PathLike | None = None) -> dict:
     """Generator defaults from YAML (default :data:`DEFAULT_CONFIG`); raises ``ValueError`` naming the file."""
-    import yaml  # noqa: PLC0415
+    from lfmbench.fileio import load_yaml  # noqa: PLC0415
 
     p = Path(path) if path is not None else DEFAULT_CONFIG
     try:
-        with open(p, encoding="utf-8") as fh:
-            cfg = yaml.safe_load(fh)
-    except (OSError, yaml.YAMLError) as exc:
-        raise ValueError(f"config file {p}: cannot read ({exc})") from exc
+        cfg = load_yaml(p, source=f"config file {p}")
+    except OSError as exc:
+        raise ValueError(f"config file {p}: cannot read ({exc.strerror or exc})") from None
     return check_config(cfg, f"config file {p}")
 
 
@@ -77,7 +77,7 @@ def check_config(cfg: Any, source: str = "config") -> dict:
         raise ValueError(f"{source}: expected a mapping")
     for k in need:
         if k not in cfg:
-            raise ValueError(f"{source}: missing section {k!r}")
+            raise ValueError(f"{source}: missing section {brief(k)}")
     for g in cfg["groups"]:
         if g not in GROUPS:
             raise ValueError(f"{source}: groups.{g} is not one of {GROUPS}")
@@ -92,11 +92,11 @@ def check_config(cfg: Any, source: str = "config") -> dict:
             raise ValueError(f"{source}: vehicles.kind_weights.{k} is not one of {VEHICLE_KINDS}")
     req = cfg["vehicles"].get("require_kinds", [])
     if not isinstance(req, list) or any(k not in VEHICLE_KINDS for k in req):
-        raise ValueError(f"{source}: vehicles.require_kinds must be a list of {VEHICLE_KINDS}, got {req!r}")
+        raise ValueError(f"{source}: vehicles.require_kinds must be a list of {VEHICLE_KINDS}, got {brief(req)}")
     states = cfg["lights"].get("signal_states", list(SIGNAL_STATES))
     if not isinstance(states, list) or any(st not in SIGNAL_STATES for st in states):
         raise ValueError(f"{source}: lights.signal_states must be a list of {SIGNAL_STATES} "
-                         f"([] = no traffic signal), got {states!r}")
+                         f"([] = no traffic signal), got {brief(states)}")
     return cfg
 
 
@@ -124,11 +124,11 @@ def apply_overrides(cfg: dict, overrides: Mapping[str, Any] | None, source: str 
 
     def merge(dst: dict, src: Any, path: tuple) -> None:
         if not isinstance(src, Mapping):
-            raise ValueError(f"{source}: {'.'.join(path) or '(top level)'} must be a mapping, got {src!r}")
+            raise ValueError(f"{source}: {'.'.join(path) or '(top level)'} must be a mapping, got {brief(src)}")
         for k, v in src.items():
             key = path + (str(k),)
             if k not in dst and key not in optional:
-                raise ValueError(f"{source}: unknown key {'.'.join(key)!r}")
+                raise ValueError(f"{source}: unknown key {brief('.'.join(key))}")
             if isinstance(dst.get(k), dict):
                 merge(dst[k], v, key)
             else:
@@ -340,7 +340,7 @@ def generate_scene(seed: int, time_of_day: str | None = None, config: dict | str
     ahead (rare; another seed places it).
     """
     if not isinstance(seed, (int, np.integer)) or isinstance(seed, bool) or seed < 0:
-        raise ValueError(f"seed: must be a non-negative integer, got {seed!r}")
+        raise ValueError(f"seed: must be a non-negative integer, got {brief(seed)}")
     cfg = config if isinstance(config, dict) else load_config(config)
     if overrides:
         cfg = apply_overrides(cfg, overrides)
@@ -350,7 +350,7 @@ def generate_scene(seed: int, time_of_day: str | None = None, config: dict | str
         p = np.array([cfg["time_of_day_weights"][n] for n in names], dtype=float)
         time_of_day = names[int(rng.choice(len(names), p=p / p.sum()))]
     if time_of_day not in TIMES_OF_DAY:
-        raise ValueError(f"time_of_day: {time_of_day!r} not one of {TIMES_OF_DAY}")
+        raise ValueError(f"time_of_day: {brief(time_of_day)} not one of {TIMES_OF_DAY}")
     b = _Builder(rng, cfg, time_of_day)
     rc, bc, vc, lc = cfg["road"], cfg["buildings"], cfg["vehicles"], cfg["lights"]
     dark = time_of_day != "day"
@@ -536,7 +536,7 @@ def _part_or_light_shape(p, path, extra_req, extra_opt, materials=None):
     shape = p.get("shape") if isinstance(p, dict) else None
     allowed = PART_SHAPES if materials is not None else ("rect", "disk")
     if shape not in allowed:
-        fail(f"{path}.shape", f"{shape!r} not one of {allowed}")
+        fail(f"{path}.shape", f"{brief(shape)} not one of {allowed}")
     geo = {"box": (("center", "size"), ("yaw_deg",)), "cylinder": (("p0", "p1", "radius"), ()),
            "rect": (("center", "size", "normal"), ()), "disk": (("center", "radius", "normal"), ()),
            "sphere": (("center", "radius"), ())}[shape]
@@ -557,7 +557,7 @@ def _part_or_light_shape(p, path, extra_req, extra_opt, materials=None):
     if shape == "cylinder" and np.allclose(p["p0"], p["p1"]):
         fail(f"{path}.p1", "cylinder end points coincide")
     if materials is not None and p.get("material") not in materials:
-        fail(f"{path}.material", f"{p.get('material')!r} is not defined in scene.materials")
+        fail(f"{path}.material", f"{brief(p.get('material'))} is not defined in scene.materials")
 
 
 def validate_scene(scene: dict) -> dict:
@@ -578,15 +578,15 @@ def validate_scene(scene: dict) -> dict:
     check_keys(scene, "scene", required=("format", "version", "scene_id", "seed", "time_of_day", "timing", "camera",
                                          "sky", "groups", "materials", "objects", "lights"))
     if scene["format"] != SCENE_FORMAT:
-        fail("scene.format", f"expected {SCENE_FORMAT!r}, got {scene['format']!r}")
+        fail("scene.format", f"expected {brief(SCENE_FORMAT)}, got {brief(scene['format'])}")
     if scene["version"] != SCENE_VERSION:
-        fail("scene.version", f"unsupported version {scene['version']!r} (this reader: {SCENE_VERSION})")
+        fail("scene.version", f"unsupported version {brief(scene['version'])} (this reader: {SCENE_VERSION})")
     why = scene_id_error(scene["scene_id"])  # the corpus rule: the id becomes a corpus directory name
     if why is not None:
         fail("scene.scene_id", why)
     check_integer(scene["seed"], "scene.seed")
     if scene["time_of_day"] not in TIMES_OF_DAY:
-        fail("scene.time_of_day", f"{scene['time_of_day']!r} not one of {TIMES_OF_DAY}")
+        fail("scene.time_of_day", f"{brief(scene['time_of_day'])} not one of {TIMES_OF_DAY}")
     check_keys(scene["timing"], "scene.timing", required=("short_exposure_s",))
     check_number(scene["timing"]["short_exposure_s"], "scene.timing.short_exposure_s", lo=0.0, hi=1.0, lo_open=True)
     c = scene["camera"]
@@ -611,7 +611,7 @@ def validate_scene(scene: dict) -> dict:
         spectra.validate_spectrum(s["spectrum"], "scene.sky.spectrum")
         check_number(s["luminance_cd_m2"], "scene.sky.luminance_cd_m2", lo=0.0, hi=1e6)
     else:
-        fail("scene.sky.model", f"{model!r} not one of ('sunsky', 'constant')")
+        fail("scene.sky.model", f"{brief(model)} not one of ('sunsky', 'constant')")
     g = scene["groups"]
     if not isinstance(g, dict):
         fail("scene.groups", "expected an object")
@@ -620,7 +620,7 @@ def validate_scene(scene: dict) -> dict:
             fail(f"scene.groups.{name}", f"unknown group (allowed: {GROUPS})")
         check_keys(v, f"scene.groups.{name}", required=("flicker",))
         if not isinstance(v["flicker"], bool):
-            fail(f"scene.groups.{name}.flicker", f"expected true/false, got {v['flicker']!r}")
+            fail(f"scene.groups.{name}.flicker", f"expected true/false, got {brief(v['flicker'])}")
     if g.get("skymap", {}).get("flicker"):
         fail("scene.groups.skymap.flicker", "the sky cannot flicker")
     mats = scene["materials"]
@@ -630,7 +630,7 @@ def validate_scene(scene: dict) -> dict:
         p = f"scene.materials.{name}"
         t = m.get("type") if isinstance(m, dict) else None
         if t not in MATERIAL_TYPES:
-            fail(f"{p}.type", f"{t!r} not one of {MATERIAL_TYPES}")
+            fail(f"{p}.type", f"{brief(t)} not one of {MATERIAL_TYPES}")
         req = {"diffuse": ("type", "rgb"), "roughplastic": ("type", "rgb", "alpha"),
                "roughconductor": ("type", "alpha")}[t]
         check_keys(m, p, required=req)
@@ -647,7 +647,7 @@ def validate_scene(scene: dict) -> dict:
         if check_integer(o["id"], f"{p}.id") != i:
             fail(f"{p}.id", f"must equal its index {i}, got {o['id']}")
         if o["kind"] not in OBJECT_KINDS:
-            fail(f"{p}.kind", f"{o['kind']!r} not one of {OBJECT_KINDS}")
+            fail(f"{p}.kind", f"{brief(o['kind'])} not one of {OBJECT_KINDS}")
         check_vector(o["velocity_mps"], f"{p}.velocity_mps", n=3, lo=-200.0, hi=200.0)
         if not isinstance(o["parts"], list) or not o["parts"]:
             fail(f"{p}.parts", "expected a non-empty list")
@@ -663,11 +663,11 @@ def validate_scene(scene: dict) -> dict:
         if check_integer(lt["id"], f"{p}.id") != i:
             fail(f"{p}.id", f"must equal its index {i}, got {lt['id']}")
         if lt["group"] not in LIGHT_GROUPS:
-            fail(f"{p}.group", f"{lt['group']!r} not one of {LIGHT_GROUPS}")
+            fail(f"{p}.group", f"{brief(lt['group'])} not one of {LIGHT_GROUPS}")
         if lt["group"] not in g:
-            fail(f"{p}.group", f"group {lt['group']!r} is not declared in scene.groups")
+            fail(f"{p}.group", f"group {brief(lt['group'])} is not declared in scene.groups")
         if lt["kind"] not in LIGHT_KINDS:
-            fail(f"{p}.kind", f"{lt['kind']!r} not one of {sorted(LIGHT_KINDS)}")
+            fail(f"{p}.kind", f"{brief(lt['kind'])} not one of {sorted(LIGHT_KINDS)}")
         if check_integer(lt["instance"], f"{p}.instance", lo=-1) >= len(objs):
             fail(f"{p}.instance", f"object {lt['instance']} does not exist (-1 = none)")
         check_number(lt["spread_deg"], f"{p}.spread_deg", lo=0.0, hi=90.0, lo_open=True)
@@ -694,11 +694,14 @@ def scene_groups(scene: dict) -> dict:
 # -------------------------------------------------------------------------------------------------- I/O
 def load_scene(path: str | os.PathLike) -> dict:
     """Read and validate a scene JSON file; errors name the file."""
+    from lfmbench.fileio import InputFileError, load_json  # noqa: PLC0415
+
     try:
-        with open(path, encoding="utf-8") as fh:
-            scene = json.load(fh)
-    except (OSError, ValueError) as exc:
-        raise ValueError(f"scene file {path}: cannot read JSON ({exc})") from exc
+        scene = load_json(path, "scene file")
+    except OSError as exc:
+        raise ValueError(f"scene file {path}: cannot read JSON ({exc.strerror or exc})") from None
+    except InputFileError as exc:
+        raise ValueError(f"scene file {exc}") from None
     try:
         return validate_scene(scene)
     except ValueError as exc:

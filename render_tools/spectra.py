@@ -36,6 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
+from lfmbench.limits import brief
 from lfmbench.vocabulary import SPECTRUM_MODELS
 
 #: Spectral range of Mitsuba's spectral variants (MI_CIE_MIN, MI_CIE_MAX), nm.
@@ -70,7 +71,7 @@ def spectrum_key(spec: dict) -> str:
     fields = []
     for k in sorted(k for k in spec if k != "model"):
         v = spec[k]
-        fields.append(f"{k}={float(v)!r}" if isinstance(v, (int, float)) and not isinstance(v, bool) else f"{k}={v}")
+        fields.append(f"{k}={brief(float(v))}" if isinstance(v, (int, float)) and not isinstance(v, bool) else f"{k}={v}")
     return f"{spec.get('model')}({';'.join(fields)})"
 
 
@@ -122,28 +123,28 @@ def validate_spectrum(spec, where: str = "spectrum") -> dict:
         raise ValueError(f"{where}: expected an object, got {type(spec).__name__}")
     model = spec.get("model")
     if model not in SPECTRUM_MODELS:
-        raise ValueError(f"{where}.model: {model!r} not one of {sorted(SPECTRUM_MODELS)}")
+        raise ValueError(f"{where}.model: {brief(model)} not one of {sorted(SPECTRUM_MODELS)}")
     req, opt = SPECTRUM_MODELS[model]["required"], SPECTRUM_MODELS[model]["optional"]
     for k in spec:
         if k != "model" and k not in req and k not in opt:
-            raise ValueError(f"{where}.{k}: unknown field for model {model!r} (allowed: {list(req + opt)})")
+            raise ValueError(f"{where}.{k}: unknown field for model {brief(model)} (allowed: {list(req + opt)})")
     for k in req:
         if k not in spec:
-            raise ValueError(f"{where}.{k}: missing (required for model {model!r})")
+            raise ValueError(f"{where}.{k}: missing (required for model {brief(model)})")
     if model == "led":
         if not (isinstance(spec["peak_nm"], (int, float)) and 380 <= spec["peak_nm"] <= 780):
-            raise ValueError(f"{where}.peak_nm: must be a number in [380, 780] nm, got {spec['peak_nm']!r}")
+            raise ValueError(f"{where}.peak_nm: must be a number in [380, 780] nm, got {brief(spec['peak_nm'])}")
         if not (isinstance(spec["fwhm_nm"], (int, float)) and 1 <= spec["fwhm_nm"] <= 200):
-            raise ValueError(f"{where}.fwhm_nm: must be a number in [1, 200] nm, got {spec['fwhm_nm']!r}")
+            raise ValueError(f"{where}.fwhm_nm: must be a number in [1, 200] nm, got {brief(spec['fwhm_nm'])}")
     elif model in ("light_source", "illuminant") and spectrum_key(spec) not in _table():
         import colour  # noqa: PLC0415
 
         known = colour.SDS_LIGHT_SOURCES if model == "light_source" else colour.SDS_ILLUMINANTS
         if not isinstance(spec["name"], str) or spec["name"] not in known:
-            raise ValueError(f"{where}.name: {spec['name']!r} is not in colour."
+            raise ValueError(f"{where}.name: {brief(spec['name'])} is not in colour."
                              f"{'SDS_LIGHT_SOURCES' if model == 'light_source' else 'SDS_ILLUMINANTS'}")
     elif model == "daylight" and not (isinstance(spec["cct_k"], (int, float)) and 4000 <= spec["cct_k"] <= 25000):
-        raise ValueError(f"{where}.cct_k: CIE D series needs 4000..25000 K, got {spec['cct_k']!r}")
+        raise ValueError(f"{where}.cct_k: CIE D series needs 4000..25000 K, got {brief(spec['cct_k'])}")
     return spec
 
 
@@ -186,7 +187,7 @@ def relative_spectrum_colour(spec: dict) -> np.ndarray:
         sd = colour.sd_CIE_illuminant_D_series(xy)
     v = np.interp(wl, sd.wavelengths, np.clip(sd.values, 0.0, None), left=0.0, right=0.0)
     if not np.any(v > 0):
-        raise ValueError(f"spectrum: {spec!r} is zero on {WL_MIN_NM}..{WL_MAX_NM} nm")
+        raise ValueError(f"spectrum: {brief(spec)} is zero on {WL_MIN_NM}..{WL_MAX_NM} nm")
     return v / v.max()
 
 
@@ -207,7 +208,7 @@ def luminance(values: np.ndarray, wl_nm: np.ndarray | None = None) -> np.ndarray
 def absolute_spectrum(spec: dict, luminance_cd_m2: float) -> np.ndarray:
     """Spectral radiance (N,) W sr^-1 m^-2 nm^-1 on :func:`wavelengths` with luminance ``luminance_cd_m2``."""
     if not (isinstance(luminance_cd_m2, (int, float)) and math.isfinite(luminance_cd_m2) and luminance_cd_m2 >= 0):
-        raise ValueError(f"luminance_cd_m2: must be finite and >= 0 cd/m^2, got {luminance_cd_m2!r}")
+        raise ValueError(f"luminance_cd_m2: must be finite and >= 0 cd/m^2, got {brief(luminance_cd_m2)}")
     rel = relative_spectrum(spec)
     return rel * (float(luminance_cd_m2) / float(luminance(rel)))
 

@@ -11,9 +11,9 @@ import os
 from pathlib import Path
 
 import numpy as np
-import yaml
 
-from lfmbench.fileio import atomic_write_text
+
+from lfmbench.fileio import atomic_write_text, load_yaml
 from lfmbench.vocabulary import SPECTRUM_MODELS
 
 from .scene import DEFAULT_CONFIG, empty_scene
@@ -26,8 +26,7 @@ __all__ = ["table_spectra", "write_table"]
 def table_spectra() -> list[dict]:
     """The spectrum dicts :func:`write_table` tabulates: every spectrum in the scene generator's default
     configuration (any mapping with a ``model`` key, in file order) and the D65 sky of ``empty_scene``."""
-    with open(DEFAULT_CONFIG, encoding="utf-8") as fh:
-        cfg = yaml.safe_load(fh)
+    cfg = load_yaml(DEFAULT_CONFIG)
     found: list[dict] = []
 
     def walk(x) -> None:

@@ -14,6 +14,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
+from lfmbench.limits import brief
 
 __all__ = ["TrainConfig", "Trainable", "ConfigError", "read_sections", "read_yaml_config", "DATA_ORDERS",
            "count_parameters"]
@@ -62,13 +63,13 @@ def _value(name: str, v: Any, default: Any, where: str, check_list: Callable[[st
         return check_list(where, v)
     if isinstance(default, (bool, str)):
         if type(v) is not type(default):
-            raise ConfigError(f"{where} must be a {type(default).__name__}, got {v!r}")
+            raise ConfigError(f"{where} must be a {type(default).__name__}, got {brief(v)}")
         return v
     if isinstance(default, int) or name == "crop":
         if name == "crop" and v is None:  # full frames
             return None
         if isinstance(v, bool) or not isinstance(v, int):
-            raise ConfigError(f"{where} must be an integer, got {v!r}")
+            raise ConfigError(f"{where} must be an integer, got {brief(v)}")
         if v < MINIMA.get(name, 0):
             raise ConfigError(f"{where} must be >= {MINIMA.get(name, 0)}, got {v}")
         return v
@@ -78,7 +79,7 @@ def _value(name: str, v: Any, default: Any, where: str, check_list: Callable[[st
         except ValueError:
             pass
     if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(float(v)):
-        raise ConfigError(f"{where} must be a finite number, got {v!r}")
+        raise ConfigError(f"{where} must be a finite number, got {brief(v)}")
     v = float(v)
     if name in POSITIVE and v <= 0:
         raise ConfigError(f"{where} must be > 0, got {v}")
@@ -113,12 +114,12 @@ def read_sections(data: Any, sections: Mapping[str, type], source: str = "<dict>
     for sec, cls in sections.items():
         raw = data.get(sec) or {}
         if not isinstance(raw, dict):
-            raise ConfigError(f"{source}: section {sec!r} must be a mapping, got {type(raw).__name__}")
+            raise ConfigError(f"{source}: section {brief(sec)} must be a mapping, got {type(raw).__name__}")
         defaults = cls()
         names = [f.name for f in fields(cls)]
         bad = sorted(set(raw) - set(names))
         if bad:
-            raise ConfigError(f"{source}: unknown key(s) {bad} in section {sec!r}; known: {sorted(names)}")
+            raise ConfigError(f"{source}: unknown key(s) {bad} in section {brief(sec)}; known: {sorted(names)}")
         built[sec] = cls(**{n: _value(n, raw.get(n, getattr(defaults, n)), getattr(defaults, n),
                                       f"{source}: {sec}.{n}", check_list) for n in names})
     train = built.get("train")
@@ -129,17 +130,15 @@ def read_sections(data: Any, sections: Mapping[str, type], source: str = "<dict>
 
 def read_yaml_config(path: str | os.PathLike, build: Callable[[Any, str], Any], what: str) -> Any:
     """``build(data, str(path))`` of a YAML file; :class:`ConfigError` names the file (``what``: e.g. "U-Net")."""
-    import yaml
+    from lfmbench.fileio import InputFileError, load_yaml
 
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        data = load_yaml(path)
     except OSError as exc:
         raise ConfigError(f"{path}: cannot read the {what} config ({exc.strerror or exc})") from None
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        raise ConfigError(f"{path}: not valid YAML ({str(exc).splitlines()[0]})") from None
+    except InputFileError as exc:
+        raise ConfigError(str(exc)) from None
     return build(data, str(path))
 
 
@@ -183,4 +182,4 @@ class Trainable:
 
     def __post_init__(self) -> None:
         if self.data_order not in DATA_ORDERS:
-            raise ValueError(f"data_order must be one of {DATA_ORDERS}, got {self.data_order!r}")
+            raise ValueError(f"data_order must be one of {DATA_ORDERS}, got {brief(self.data_order)}")

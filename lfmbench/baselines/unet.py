@@ -38,6 +38,7 @@ import torch
 import torch.nn as nn
 import torch.nn.functional as F
 
+from lfmbench.limits import brief
 from lfmbench.baselines.checkpoint import checkpointed_method
 from lfmbench.baselines.classic import _captures, exposures_s, saturated_fusion
 from lfmbench.baselines.trainable import (ConfigError, Trainable, TrainConfig, count_parameters, read_sections,
@@ -103,7 +104,7 @@ class UNetConfig:
 def _candidates(where: str, v: Any) -> list:
     if (not isinstance(v, list) or not v or len(set(v)) != len(v)
             or not all(isinstance(c, str) and c in CANDIDATES for c in v)):
-        raise ConfigError(f"{where} must be a non-empty list of distinct names from {sorted(CANDIDATES)}, got {v!r}")
+        raise ConfigError(f"{where} must be a non-empty list of distinct names from {sorted(CANDIDATES)}, got {brief(v)}")
     return list(v)
 
 

@@ -18,7 +18,7 @@ import time
 from pathlib import Path
 
 import typer
-import yaml
+
 
 from lfmbench.paper.fig3 import FIG3_EXPOSURES_S, fig3_series
 from lfmbench.vocabulary import LEARNED_BASELINES
@@ -60,7 +60,9 @@ def _train(name: str, opts: dict, corpus: Path, out: Path) -> float:
 
 def run(out: str | Path | None = None, config: str | Path = CONFIG) -> dict:
     """Run the demo; returns ``{"rows": leaderboard rows, "figures": [paths], "seconds": {step: s}}``."""
-    cfg = yaml.safe_load(Path(config).read_text())
+    from lfmbench.fileio import load_yaml  # noqa: PLC0415
+
+    cfg = load_yaml(config)
     out = Path(out or cfg["out_dir"])
     corpus, runs, figs = out / "corpus", out / "runs", out / "figures"
     secs: dict[str, float] = {}

@@ -8,7 +8,6 @@ error (e.g. disk full), 130 interrupted (Ctrl-C; re-run the same command to resu
 """
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import List, Optional
 
@@ -87,6 +86,7 @@ def render_cmd(
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
     from lfmbench.corpus import DEFAULT_STORAGE, STORAGES, CorpusError, CorpusWriteError, CorpusWriter
+    from lfmbench.fileio import InputFileError, load_json
     from render_tools import jobs as J
 
     console = Console(stderr=True, soft_wrap=True)
@@ -151,9 +151,11 @@ def render_cmd(
             scene_dicts = []
             for p in scene_file:
                 try:
-                    sc = json.loads(Path(p).read_text())
-                except (OSError, json.JSONDecodeError) as exc:
-                    fail(f"--scene {p}: cannot read scene JSON: {exc}")
+                    sc = load_json(p, "scene file")
+                except OSError as exc:
+                    fail(f"--scene {p}: cannot read scene JSON: {exc.strerror or exc}")
+                except InputFileError as exc:
+                    fail(f"--scene {exc}")
                 if not isinstance(sc, dict):
                     fail(f"--scene {p}: a scene file must hold a JSON object")
                 scene_dicts.append(sc)
@@ -181,8 +183,8 @@ def render_cmd(
             dtype = proto.storage
         if dtype is None:  # resume with the corpus's own storage, else the default of new corpora
             try:
-                old = json.loads((Path(out) / "manifest.json").read_text()).get("render") or {}
-            except (OSError, json.JSONDecodeError, AttributeError):
+                old = load_json(Path(out) / "manifest.json", "manifest", "manifest_bytes").get("render") or {}
+            except (OSError, ValueError, AttributeError):
                 old = {}
             dtype = old.get("dtype") if old.get("dtype") in STORAGES else DEFAULT_STORAGE
         if dtype not in STORAGES:

@@ -8,7 +8,6 @@ Units: times in s, wavelengths in nm, speeds in m/s, luminance in cd/m^2, boundi
 from __future__ import annotations
 
 import hashlib
-import json
 import os
 import re
 from pathlib import Path
@@ -16,11 +15,13 @@ from typing import Any, Iterable, Mapping, Sequence
 
 import numpy as np
 
+from lfmbench.limits import brief
 from lfmbench import check
 from lfmbench.check import scene_id_error
 from lfmbench.corpus.errors import CorpusFileError
 from lfmbench.corpus.naming import FORMAT_NAME, FORMAT_VERSION, SCENES_DIR, _check_version
 from lfmbench.vocabulary import LIGHT_KINDS, SPECTRUM_MODELS
+from lfmbench.fileio import InputFileError, load_json
 
 __all__ = ["TIMING_RTOL", "sha256_file", "make_splits", "validate_meta", "LIGHT_KINDS", "SPECTRUM_MODELS",
            "manifest_entry_errors", "inside_root", "check_splits"]
@@ -42,13 +43,16 @@ def sha256_file(path: str | os.PathLike, chunk: int = 1 << 20) -> str:
 
 
 def _load_json(path: Path, what: str) -> Any:
+    """A corpus JSON file through the one bounded reader (:func:`lfmbench.fileio.load_json`; a manifest has its
+    own size limit ``manifest_bytes``); ``CorpusFileError`` naming the file."""
     try:
-        with open(path, encoding="utf-8") as fh:
-            return json.load(fh)
+        return load_json(path, what, "manifest_bytes" if what == "manifest" else "json_bytes")
     except FileNotFoundError:
         raise CorpusFileError(f"{what} is missing: {path}") from None
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise CorpusFileError(f"{what} {path} is not valid JSON: {exc}") from exc
+    except OSError as exc:
+        raise CorpusFileError(f"{what} {path} cannot be read: {exc.strerror or exc}") from None
+    except InputFileError as exc:
+        raise CorpusFileError(f"{what} {exc}") from None
 
 
 def make_splits(scene_ids: Iterable[str], seed: int,
@@ -65,7 +69,7 @@ def make_splits(scene_ids: Iterable[str], seed: int,
     """
     fr = [float(f) for f in fractions]
     if len(fr) != 3 or any(f < 0 for f in fr) or abs(sum(fr) - 1) > 1e-9:
-        raise ValueError(f"fractions must be three numbers >= 0 summing to 1, got {fractions!r}")
+        raise ValueError(f"fractions must be three numbers >= 0 summing to 1, got {brief(fractions)}")
     ids = sorted(set(scene_ids))
     n = len(ids)
     order = np.random.default_rng(seed).permutation(n)
@@ -94,23 +98,23 @@ def validate_meta(meta: Mapping[str, Any], where: str = "meta.json") -> None:
         raise ValueError(f"{where}: must be a JSON object")
     for k in _META_REQUIRED:
         if k not in meta:
-            raise ValueError(f"{where}: missing field {k!r}")
+            raise ValueError(f"{where}: missing field {brief(k)}")
     why = _scene_id_error(meta["scene_id"])
     if why is not None:
         raise ValueError(f"{where}: field 'scene_id': {why}")
     for k in ("width", "height", "frames"):
         v = meta[k]
         if isinstance(v, bool) or not isinstance(v, int) or v < 1:
-            raise ValueError(f"{where}: field {k!r} must be an integer >= 1, got {v!r}")
+            raise ValueError(f"{where}: field {brief(k)} must be an integer >= 1, got {brief(v)}")
     bands = meta["bands_nm"]
     if not isinstance(bands, list) or not bands:
         raise ValueError(f"{where}: field 'bands_nm' must be a non-empty list of wavelengths (nm)")
     try:
         b = np.asarray(bands, dtype=float)
     except (TypeError, ValueError):
-        raise ValueError(f"{where}: field 'bands_nm' must hold numbers (nm), got {bands!r}") from None
+        raise ValueError(f"{where}: field 'bands_nm' must hold numbers (nm), got {brief(bands)}") from None
     if not np.isfinite(b).all() or (b <= 0).any() or (np.diff(b) <= 0).any():
-        raise ValueError(f"{where}: field 'bands_nm' must be positive and strictly increasing, got {bands!r}")
+        raise ValueError(f"{where}: field 'bands_nm' must be positive and strictly increasing, got {brief(bands)}")
     fps = check.get_number(meta, "fps", where, lo=0.0, lo_open=True)
     frame_time = 1.0 / fps
     t = meta["timing"]
@@ -130,40 +134,40 @@ def validate_meta(meta: Mapping[str, Any], where: str = "meta.json") -> None:
         raise ValueError(f"{tw}: capture_window_s = {cw} s must equal long_exposure_s + readout_s = "
                          f"{tl + readout} s so that the time bins cover the exposure windows")
     if "alignment" in t and t["alignment"] != "center":
-        raise ValueError(f"{tw}: alignment must be 'center', got {t['alignment']!r}")
+        raise ValueError(f"{tw}: alignment must be 'center', got {brief(t['alignment'])}")
     groups = meta["groups"]
     if not isinstance(groups, Mapping) or not groups:
         raise ValueError(f"{where}: field 'groups' must be a non-empty object")
     for name, g in groups.items():
         if not re.fullmatch(r"[A-Za-z][A-Za-z0-9_]*", str(name)) or name == "aux":
-            raise ValueError(f"{where}: group name {name!r} must be an identifier other than 'aux'")
+            raise ValueError(f"{where}: group name {brief(name)} must be an identifier other than 'aux'")
         if not isinstance(g, Mapping) or not isinstance(g.get("flicker"), bool):
-            raise ValueError(f"{where}: groups[{name!r}] must be an object with a boolean 'flicker'")
+            raise ValueError(f"{where}: groups[{brief(name)}] must be an object with a boolean 'flicker'")
         if "bins" in g and (isinstance(g["bins"], bool) or not isinstance(g["bins"], int) or g["bins"] < 0):
-            raise ValueError(f"{where}: groups[{name!r}].bins must be an integer >= 0, got {g['bins']!r}")
+            raise ValueError(f"{where}: groups[{brief(name)}].bins must be an integer >= 0, got {brief(g['bins'])}")
         if g["flicker"] and "bins" not in g:
             kb = t.get("bins")
             if isinstance(kb, bool) or not isinstance(kb, int) or kb < 1:
-                raise ValueError(f"{tw}: field 'bins' must be an integer >= 1 for flickering group {name!r}, "
-                                 f"got {kb!r}")
+                raise ValueError(f"{tw}: field 'bins' must be an integer >= 1 for flickering group {brief(name)}, "
+                                 f"got {brief(kb)}")
     cam = meta.get("camera", {}) or {}
     if not isinstance(cam, Mapping):
-        raise ValueError(f"{where}: field 'camera' must be an object, got {cam!r}")
+        raise ValueError(f"{where}: field 'camera' must be an object, got {brief(cam)}")
     if cam.get("speed_mps") is not None:
         check.get_number(cam, "speed_mps", where, "camera.", lo=0.0)
     ids = set()
     lights = meta.get("lights", [])
     if not isinstance(lights, list):
-        raise ValueError(f"{where}: field 'lights' must be a list of objects, got {lights!r}")
+        raise ValueError(f"{where}: field 'lights' must be a list of objects, got {brief(lights)}")
     for i, light in enumerate(lights):
         if not isinstance(light, Mapping):
-            raise ValueError(f"{where}: lights[{i}] must be an object with 'id' and 'group', got {light!r}")
+            raise ValueError(f"{where}: lights[{i}] must be an object with 'id' and 'group', got {brief(light)}")
         lid = light.get("id")
         if isinstance(lid, bool) or not isinstance(lid, int) or lid < 0 or lid in ids:
-            raise ValueError(f"{where}: lights[{i}].id must be a unique integer >= 0, got {lid!r}")
+            raise ValueError(f"{where}: lights[{i}].id must be a unique integer >= 0, got {brief(lid)}")
         ids.add(lid)
         if light.get("group") not in groups:
-            raise ValueError(f"{where}: lights[{i}].group {light.get('group')!r} is not in groups")
+            raise ValueError(f"{where}: lights[{i}].group {brief(light.get('group'))} is not in groups")
         _check_light_fields(light, f"lights[{i}]", where, meta["frames"], meta["height"], meta["width"])
 
 
@@ -175,7 +179,7 @@ def _check_light_fields(light: Mapping[str, Any], name: str, where: str, frames:
     ``spectrum`` object with a str ``model``, ``bbox`` list of ``frames`` entries, each null or a half-open
     ``[y0, x0, y1, x1]`` of ints with ``0 <= y0 < y1 <= H`` and ``0 <= x0 < x1 <= W`` (px)."""
     if "kind" in light and (not isinstance(light["kind"], str) or not light["kind"]):
-        check.fail(f"{name}.kind", f"must be a non-empty string, got {light['kind']!r}", where)
+        check.fail(f"{name}.kind", f"must be a non-empty string, got {brief(light['kind'])}", where)
     if "instance" in light:
         check.check_integer(light["instance"], f"{name}.instance", where, lo=-1)
     if "luminance_cd_m2" in light:
@@ -183,12 +187,12 @@ def _check_light_fields(light: Mapping[str, Any], name: str, where: str, frames:
     if "spectrum" in light:
         sp = light["spectrum"]
         if not isinstance(sp, Mapping) or not isinstance(sp.get("model"), str):
-            check.fail(f"{name}.spectrum", f"must be an object with a string 'model', got {sp!r}", where)
+            check.fail(f"{name}.spectrum", f"must be an object with a string 'model', got {brief(sp)}", where)
     if "bbox" in light:
         bb = light["bbox"]
         if not isinstance(bb, list) or len(bb) != frames:
             check.fail(f"{name}.bbox", f"must be a list of {frames} boxes (one per frame, null = not visible), "
-                       f"got {bb!r}", where)
+                       f"got {brief(bb)}", where)
         for n, b in enumerate(bb):
             if b is None:
                 continue
@@ -197,7 +201,7 @@ def _check_light_fields(light: Mapping[str, Any], name: str, where: str, frames:
                   and 0 <= b[0] < b[2] <= H and 0 <= b[1] < b[3] <= W)
             if not ok:
                 check.fail(f"{name}.bbox[{n}]", f"must be null or [y0, x0, y1, x1] integers with 0 <= y0 < y1 <= "
-                           f"{H} and 0 <= x0 < x1 <= {W} (half-open, px), got {b!r}", where)
+                           f"{H} and 0 <= x0 < x1 <= {W} (half-open, px), got {brief(b)}", where)
 
 
 def _check_meta_storage(meta: Mapping[str, Any], path: Path | str) -> None:
@@ -218,7 +222,7 @@ def _check_manifest(man: Any, path: Path, *, entries: bool = True) -> dict:
     """The manifest if its format, version and (``entries``) every scene id and file entry are valid; else
     ``CorpusFileError`` naming ``path`` and the first bad entry (:func:`manifest_entry_errors`)."""
     if not isinstance(man, dict) or man.get("format") != FORMAT_NAME:
-        raise CorpusFileError(f"{path}: not an lfmbench corpus manifest (format must be {FORMAT_NAME!r})")
+        raise CorpusFileError(f"{path}: not an lfmbench corpus manifest (format must be {brief(FORMAT_NAME)})")
     _check_version(man.get("version"), str(path))
     if not isinstance(man.get("scenes"), list) or not isinstance(man.get("files"), dict):
         raise CorpusFileError(f"{path}: 'scenes' must be a list and 'files' an object")
@@ -248,7 +252,7 @@ def _file_entry_error(rel: Any, digest: Any, scenes: set) -> str | None:
     if len(parts) < 3 or parts[0] != SCENES_DIR or _scene_id_error(parts[1]) is not None:
         return f"file path must lie under {SCENES_DIR}/<scene id>/"
     if parts[1] not in scenes:
-        return f"file of scene {parts[1]!r}, which is not in 'scenes'"
+        return f"file of scene {brief(parts[1])}, which is not in 'scenes'"
     if not isinstance(digest, str) or not re.fullmatch(r"[0-9a-f]{64}", digest):
         return "SHA-256 must be 64 lowercase hex digits"
     return None
@@ -263,12 +267,12 @@ def manifest_entry_errors(man: Mapping[str, Any], path: Path | str) -> list[str]
     for sid in man["scenes"]:
         why = _scene_id_error(sid)
         if why is not None:
-            out.append(f"{path}: scene entry {sid!r} refused: {why}")
+            out.append(f"{path}: scene entry {brief(sid)} refused: {why}")
     scenes = {s for s in man["scenes"] if isinstance(s, str)}
     for rel, digest in man["files"].items():
         why = _file_entry_error(rel, digest, scenes)
         if why is not None:
-            out.append(f"{path}: file entry {rel!r} refused: {why}")
+            out.append(f"{path}: file entry {brief(rel)} refused: {why}")
     return out
 
 
@@ -278,7 +282,7 @@ def inside_root(root: Path, rel: str, what: str) -> Path:
     base = Path(root).resolve()
     p = (base / rel).resolve()
     if p != base and base not in p.parents:
-        raise CorpusFileError(f"{what}: entry {rel!r} resolves to {p}, outside the corpus root {base}")
+        raise CorpusFileError(f"{what}: entry {brief(rel)} resolves to {p}, outside the corpus root {base}")
     return p
 
 
@@ -290,9 +294,9 @@ def check_splits(sp: Any, path: Path | str) -> dict[str, list[str]]:
                               f"[...]}}, got a {type(sp).__name__}")
     for k, ids in sp.items():
         if not isinstance(ids, list):
-            raise CorpusFileError(f"{path}: split {k!r} must be a list of scene ids, got a {type(ids).__name__}")
+            raise CorpusFileError(f"{path}: split {brief(k)} must be a list of scene ids, got a {type(ids).__name__}")
         for sid in ids:
             why = _scene_id_error(sid)
             if why is not None:
-                raise CorpusFileError(f"{path}: split {k!r} entry {sid!r} refused: {why}")
+                raise CorpusFileError(f"{path}: split {brief(k)} entry {brief(sid)} refused: {why}")
     return sp

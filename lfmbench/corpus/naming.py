@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 from typing import Any, Mapping, Sequence
 
+from lfmbench.limits import brief
 from lfmbench.corpus.errors import CorpusFileError
 
 __all__ = ["FORMAT_NAME", "FORMAT_VERSION", "READABLE_VERSIONS", "MANIFEST_NAME", "SPLITS_NAME", "SCENES_DIR",
@@ -52,7 +53,7 @@ def _fmt_nm(wl: float) -> str:
     """Wavelength (nm) as written in channel names: ``400`` -> ``"400"``, ``402.5`` -> ``"402.5"``."""
     wl = float(wl)
     if not math.isfinite(wl) or wl <= 0:
-        raise ValueError(f"wavelength must be a positive number of nm, got {wl!r}")
+        raise ValueError(f"wavelength must be a positive number of nm, got {brief(wl)}")
     return f"{wl:.6g}"
 
 
@@ -75,7 +76,7 @@ def bin_prefix(k: int, bins: int) -> str:
 def static_channels(window: str, bands_nm: Sequence[float]) -> list[str]:
     """Channel names of one exposure window (``short`` / ``long``) of a static group, band order."""
     if window not in STATIC_WINDOWS:
-        raise ValueError(f"window must be one of {STATIC_WINDOWS}, got {window!r}")
+        raise ValueError(f"window must be one of {STATIC_WINDOWS}, got {brief(window)}")
     return [band_channel(window, wl) for wl in bands_nm]
 
 
@@ -98,7 +99,7 @@ def group_storage(meta: Mapping[str, Any], group: str) -> str:
     """
     groups = meta.get("groups", {})
     if group not in groups:
-        raise ValueError(f"group {group!r} is not in this scene's meta.json groups {sorted(groups)}")
+        raise ValueError(f"group {brief(group)} is not in this scene's meta.json groups {sorted(groups)}")
     g = groups[group]
     if not g.get("flicker", False):
         return "static"
@@ -117,6 +118,6 @@ def _check_version(v: Any, where: str) -> int:
         raise CorpusFileError(f"{where}: corpus format version {v} is newer than this lfmbench reads "
                               f"(versions {', '.join(map(str, READABLE_VERSIONS))}); upgrade lfmbench")
     if v not in READABLE_VERSIONS or isinstance(v, bool):
-        raise CorpusFileError(f"{where}: unsupported corpus format version {v!r} (this lfmbench reads versions "
+        raise CorpusFileError(f"{where}: unsupported corpus format version {brief(v)} (this lfmbench reads versions "
                               f"{', '.join(map(str, READABLE_VERSIONS))})")
     return int(v)

@@ -11,6 +11,7 @@ from typing import Sequence
 
 import numpy as np
 
+from lfmbench.limits import brief
 from lfmbench.corpus.errors import CorpusChannelError, CorpusNotFoundError
 from lfmbench.corpus.exr import ExrPart, _check_aux, _check_values, _stack, layer_scale, read_exr
 from lfmbench.corpus.meta import (_check_manifest, _check_meta_storage, _load_json, check_splits, inside_root,
@@ -69,7 +70,7 @@ class Corpus:
 
     def _scene_dir(self, scene_id: str) -> Path:
         if scene_id not in self.manifest["scenes"]:
-            raise KeyError(f"scene {scene_id!r} is not in corpus {self.root} (see Corpus.scenes)")
+            raise KeyError(f"scene {brief(scene_id)} is not in corpus {self.root} (see Corpus.scenes)")
         if scene_id not in self._inside:  # ids were checked with the manifest; symbolic links are resolved here
             inside_root(self.root, f"{SCENES_DIR}/{scene_id}", str(self.root / MANIFEST_NAME))
             self._inside.add(scene_id)
@@ -112,9 +113,9 @@ class Corpus:
     def _frame_group(self, scene_id: str, frame: int, group: str) -> tuple[dict, Path]:
         m = self.meta(scene_id)
         if isinstance(frame, bool) or not isinstance(frame, (int, np.integer)) or not 0 <= frame < m["frames"]:
-            raise ValueError(f"frame must be an integer in [0, {m['frames']}) for scene {scene_id!r}, got {frame!r}")
+            raise ValueError(f"frame must be an integer in [0, {m['frames']}) for scene {brief(scene_id)}, got {brief(frame)}")
         if group not in m["groups"]:
-            raise ValueError(f"group {group!r} is not in scene {scene_id!r} (groups: {sorted(m['groups'])})")
+            raise ValueError(f"group {brief(group)} is not in scene {brief(scene_id)} (groups: {sorted(m['groups'])})")
         return m, self.path(scene_id, frame, group)
 
     @staticmethod
@@ -125,7 +126,7 @@ class Corpus:
         out = []
         for b in bands:
             if not any(abs(float(b) - a) < 1e-6 for a in all_b):
-                raise ValueError(f"bands: {b!r} nm is not a band of this scene ({all_b[0]:g}..{all_b[-1]:g} nm)")
+                raise ValueError(f"bands: {brief(b)} nm is not a band of this scene ({all_b[0]:g}..{all_b[-1]:g} nm)")
             out.append(float(b))
         return out
 
@@ -143,7 +144,7 @@ class Corpus:
         """
         m, path = self._frame_group(scene_id, frame, group)
         if group_storage(m, group) != "static":
-            raise ValueError(f"group {group!r} of scene {scene_id!r} is stored per light in time bins: use "
+            raise ValueError(f"group {brief(group)} of scene {brief(scene_id)} is stored per light in time bins: use "
                              "read_light_bins")
         names = static_channels(window, self._band_list(m, bands))
         parts = self._parts(path)
@@ -169,7 +170,7 @@ class Corpus:
         """
         m, path = self._frame_group(scene_id, frame, group)
         if group_storage(m, group) != "lights":
-            raise ValueError(f"group {group!r} of scene {scene_id!r} is stored as short/long windows "
+            raise ValueError(f"group {brief(group)} of scene {brief(scene_id)} is stored as short/long windows "
                              f"(bins 0): use read_static")
         k = _group_bins(m, group)
         bl = self._band_list(m, bands)
@@ -180,13 +181,13 @@ class Corpus:
                 continue
             mt = re.fullmatch(r"light(\d+)", p.name)
             if mt is None:
-                raise CorpusChannelError(f"EXR file {path}: unexpected part {p.name!r} (want light<id>)")
+                raise CorpusChannelError(f"EXR file {path}: unexpected part {brief(p.name)} (want light<id>)")
             arr = _stack(p, names, path).reshape(k, len(bl), p.window[2] - p.window[0], p.window[3] - p.window[1])
             scale = layer_scale(p, None, path)
             if scale != 1.0:
                 arr /= np.float32(scale)  # exact: a power of two
             if self.check_values:
-                _check_values(arr, path, f"part {p.name!r}")
+                _check_values(arr, path, f"part {brief(p.name)}")
             out.append((int(mt.group(1)), p.window, arr))
         return sorted(out, key=lambda t: t[0])
 
@@ -198,7 +199,7 @@ class Corpus:
         """
         m = self.meta(scene_id)
         if not 0 <= int(frame) < m["frames"]:
-            raise ValueError(f"frame must be in [0, {m['frames']}) for scene {scene_id!r}, got {frame!r}")
+            raise ValueError(f"frame must be in [0, {m['frames']}) for scene {brief(scene_id)}, got {brief(frame)}")
         names = list(AUX_CHANNELS if names is None else names)
         bad = [n for n in names if n not in AUX_CHANNELS]
         if bad:

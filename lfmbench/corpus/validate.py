@@ -11,6 +11,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from lfmbench.limits import brief
 from lfmbench.corpus.errors import CorpusError, CorpusFileError, CorpusValueError
 from lfmbench.corpus.exr import ExrPart, _check_aux, layer_scale, read_exr
 from lfmbench.corpus.meta import (_check_manifest, _check_meta_storage, _file_entry_error, _load_json, _scene_id_error,
@@ -160,7 +161,7 @@ def _validate_scene(root: Path, sid: str, files: Mapping[str, str], rep: Validat
         err(str(exc))
         return
     if meta["scene_id"] != sid:
-        err(f"{mp}: scene_id {meta['scene_id']!r} != directory name {sid!r}")
+        err(f"{mp}: scene_id {brief(meta['scene_id'])} != directory name {brief(sid)}")
     H, W, bands = meta["height"], meta["width"], meta["bands_nm"]
     aux_frames = [n for n in range(meta["frames"]) if f"{rel0}/{frame_dir(n)}/aux.exr" in files
                   or (sdir / frame_dir(n) / "aux.exr").is_file()]
@@ -190,7 +191,7 @@ def _validate_scene(root: Path, sid: str, files: Mapping[str, str], rep: Validat
                 continue
             for part in parts:
                 if part.size != (H, W):
-                    err(f"{p} part {part.name!r}: display window {part.size} != meta.json ({H}, {W})")
+                    err(f"{p} part {brief(part.name)}: display window {part.size} != meta.json ({H}, {W})")
             if g == "aux":
                 _validate_channels(p, parts[0], set(AUX_CHANNELS), rep)
                 if check_pixels and parts[0].channels is not None:
@@ -224,20 +225,20 @@ def _validate_scene(root: Path, sid: str, files: Mapping[str, str], rep: Validat
                 for part in parts:
                     mt = re.fullmatch(r"light(\d+)", part.name)
                     if mt is None:
-                        err(f"{p}: unexpected part name {part.name!r} (want light<id>)")
+                        err(f"{p}: unexpected part name {brief(part.name)} (want light<id>)")
                         continue
                     if int(mt.group(1)) not in ids:
-                        err(f"{p}: part {part.name!r} is not a light of group {g!r} in meta.json")
+                        err(f"{p}: part {brief(part.name)} is not a light of group {brief(g)} in meta.json")
                     have_parts.add(int(mt.group(1)))
                     bbs = bbox_of.get(int(mt.group(1)))
                     if bbs is not None and bbs[n] is None:
-                        err(f"{p}: part {part.name!r} is stored but meta.json bbox[{n}] is null (not visible)")
+                        err(f"{p}: part {brief(part.name)} is stored but meta.json bbox[{n}] is null (not visible)")
                     elif bbs is not None and tuple(bbs[n]) != tuple(part.window):
-                        err(f"{p}: part {part.name!r} data window {part.window} != meta.json bbox[{n}] {bbs[n]} "
+                        err(f"{p}: part {brief(part.name)} data window {part.window} != meta.json bbox[{n}] {bbs[n]} "
                             "(half-open (y0, x0, y1, x1))")
                     y0, x0, y1, x1 = part.window
                     if not (0 <= y0 < y1 <= H and 0 <= x0 < x1 <= W):
-                        err(f"{p}: part {part.name!r} data window {part.window} outside the {H}x{W} image")
+                        err(f"{p}: part {brief(part.name)} data window {part.window} outside the {H}x{W} image")
                     _validate_channels(p, part, want, rep)
                     _validate_storage_attrs(p, part, None, rep)
                     _validate_pixels(p, part, rep, check_pixels)
@@ -252,10 +253,10 @@ def _validate_channels(p: Path, part: ExrPart, want: set[str], rep: ValidationRe
     have = set(part.channel_names)
     missing, extra = sorted(want - have), sorted(have - want)
     if missing:
-        rep.errors.append(f"{p} part {part.name!r}: missing channels {missing[:4]}"
+        rep.errors.append(f"{p} part {brief(part.name)}: missing channels {missing[:4]}"
                           f"{' ...' if len(missing) > 4 else ''} ({len(missing)} in all)")
     if extra:
-        rep.errors.append(f"{p} part {part.name!r}: unexpected channels {extra[:4]}"
+        rep.errors.append(f"{p} part {brief(part.name)}: unexpected channels {extra[:4]}"
                           f"{' ...' if len(extra) > 4 else ''} ({len(extra)} in all)")
 
 
@@ -267,7 +268,7 @@ def _validate_storage_attrs(p: Path, part: ExrPart, window: str | None, rep: Val
         rep.errors.append(str(exc))
     mb = part.header.get(ATTR["mantissa"])
     if mb is not None and (isinstance(mb, bool) or not isinstance(mb, int) or not 1 <= mb <= 23):
-        rep.errors.append(f"{p} part {part.name!r}: attribute {ATTR['mantissa']} = {mb!r} must be an integer "
+        rep.errors.append(f"{p} part {brief(part.name)}: attribute {ATTR['mantissa']} = {brief(mb)} must be an integer "
                           "in [1, 23]")
 
 
@@ -293,8 +294,8 @@ def _validate_pixels(p: Path, part: ExrPart, rep: ValidationReport, check_pixels
             peak = max(peak, float(fin.max()) / scale)
     for n, what in ((n_nan, "NaN"), (n_inf, "inf"), (n_neg, "negative")):
         if n:
-            rep.errors.append(f"{p} part {part.name!r}: {n} {what} radiance values")
+            rep.errors.append(f"{p} part {brief(part.name)}: {n} {what} radiance values")
     if n_big:
-        rep.errors.append(f"{p} part {part.name!r}: {n_big} radiance values above the plausibility ceiling "
+        rep.errors.append(f"{p} part {brief(part.name)}: {n_big} radiance values above the plausibility ceiling "
                           f"RADIANCE_MAX = {RADIANCE_MAX:.0e} {RADIANCE_UNIT} (max {peak:.3g}): a unit or scale "
                           "error")

@@ -10,7 +10,6 @@ holds it (:class:`SceneView`: layers, lights, static rates, light index, meta) t
 """
 from __future__ import annotations
 
-import json
 import os
 from collections import OrderedDict
 from pathlib import Path
@@ -20,6 +19,7 @@ import numpy as np
 import torch
 from torch.utils.data import Dataset
 
+from lfmbench.limits import brief
 from lfmbench import sensor as _sensor
 from lfmbench.corpus import Corpus
 from lfmbench.datasets.assembly import (NOISE_STREAMS, SENSOR_OUTPUTS, assemble_sample, check_line_time, compose_frame,
@@ -27,7 +27,7 @@ from lfmbench.datasets.assembly import (NOISE_STREAMS, SENSOR_OUTPUTS, assemble_
 from lfmbench.datasets.pieces import capture_pieces
 from lfmbench.datasets.projection import SceneLayers, aux_channels, load_or_build
 from lfmbench.datasets.pwm import PWMConfig, draw_scene_pwm, frozen_test_rng, load_pwm_config
-from lfmbench.fileio import atomic_write_json
+from lfmbench.fileio import atomic_write_json, load_json
 from lfmbench.flicker import pwm_exposure
 from lfmbench.sensor.fused import warm_fused
 from lfmbench.vocabulary import PHOTODIODES
@@ -186,26 +186,26 @@ class LFMCaptureDataset(Dataset):
                 f"`lfmbench render --out {self.root}` or import ISET-LFM data with `lfmbench import-isetlfm`.")
         self.corpus = Corpus(self.root)
         if split not in SPLITS:
-            raise ValueError(f"split must be one of {SPLITS}, got {split!r}")
+            raise ValueError(f"split must be one of {SPLITS}, got {brief(split)}")
         if shutter not in ("global", "rolling"):
-            raise ValueError(f"shutter must be 'global' or 'rolling', got {shutter!r}")
+            raise ValueError(f"shutter must be 'global' or 'rolling', got {brief(shutter)}")
         bad = [o for o in outputs if o not in OUTPUTS]
         if bad:
             raise ValueError(f"outputs: unknown {bad} (known: {OUTPUTS})")
         if isinstance(frames, bool) or not isinstance(frames, int) or frames < 1:
-            raise ValueError(f"frames must be a positive integer, got {frames!r}")
+            raise ValueError(f"frames must be a positive integer, got {brief(frames)}")
         if frame_start != "random" and (isinstance(frame_start, bool) or not isinstance(frame_start, int)
                                         or frame_start < 0):
-            raise ValueError(f"frame_start must be an integer >= 0 or 'random', got {frame_start!r}")
+            raise ValueError(f"frame_start must be an integer >= 0 or 'random', got {brief(frame_start)}")
         self.frame_start = frame_start
         if samples_per_scene < 1:
-            raise ValueError(f"samples_per_scene must be >= 1, got {samples_per_scene!r}")
+            raise ValueError(f"samples_per_scene must be >= 1, got {brief(samples_per_scene)}")
         self.split, self.shutter, self.seed = split, shutter, int(seed)
         self.frames, self.outputs = frames, tuple(outputs)
         if isinstance(groups, str):
             groups = [groups]
         if groups is not None and (not all(isinstance(g, str) for g in groups)):
-            raise ValueError(f"groups must be None or a list of light-group names, got {groups!r}")
+            raise ValueError(f"groups must be None or a list of light-group names, got {brief(groups)}")
         self.groups = None if groups is None else list(groups)
         self.samples_per_scene, self.noise, self.optics = int(samples_per_scene), bool(noise), bool(optics)
         self.transforms = transforms
@@ -222,34 +222,34 @@ class LFMCaptureDataset(Dataset):
         elif isinstance(crop, (tuple, list)) and len(crop) == 2 and all(_is_int(c) for c in crop):
             self.crop = (int(crop[0]), int(crop[1]))
         else:
-            raise ValueError(f"crop must be None, an int or (h, w) of ints (pixels), got {crop!r}")
+            raise ValueError(f"crop must be None, an int or (h, w) of ints (pixels), got {brief(crop)}")
         if self.crop is not None and min(self.crop) < 2:
-            raise ValueError(f"crop must be None, an int or (h, w) with sides >= 2, got {crop!r}")
+            raise ValueError(f"crop must be None, an int or (h, w) with sides >= 2, got {brief(crop)}")
         self.scene_ids = self._split_scenes()
         if not self.scene_ids:
-            raise DatasetNotFoundError(f"root: corpus {self.root} has no scenes in split {split!r}")
+            raise DatasetNotFoundError(f"root: corpus {self.root} has no scenes in split {brief(split)}")
         if self.groups is not None:
             have = sorted({g for sid in self.scene_ids for g in self.corpus.meta(sid)["groups"]})
             unknown = [g for g in self.groups if g not in have]
             if unknown:
-                raise ValueError(f"groups: {unknown} are not light groups of any scene in split {split!r} of "
+                raise ValueError(f"groups: {unknown} are not light groups of any scene in split {brief(split)} of "
                                  f"{self.root}; available: {have}")
         most = max([len(self._lights(sid)) for sid in self.scene_ids] + [0])
         if max_lights is None:
             max_lights = max(DEFAULT_MAX_LIGHTS, most)
         elif isinstance(max_lights, bool) or not isinstance(max_lights, (int, np.integer)) or max_lights < most:
             worst = max(self.scene_ids, key=lambda sid: len(self._lights(sid)))
-            raise ValueError(f"max_lights={max_lights!r} but scene {worst!r} of {self.root} has {most} lights; pass "
+            raise ValueError(f"max_lights={brief(max_lights)} but scene {brief(worst)} of {self.root} has {most} lights; pass "
                              f"max_lights >= {most} or leave it at None")
         self.max_lights = int(max_lights)
         for sid in self.scene_ids:
             m = self.corpus.meta(sid)
             first = 0 if frame_start == "random" else frame_start
             if first + frames > m["frames"]:
-                raise ValueError(f"frames={frames}, frame_start={frame_start} but scene {sid!r} of {self.root} has "
+                raise ValueError(f"frames={frames}, frame_start={frame_start} but scene {brief(sid)} of {self.root} has "
                                  f"only {m['frames']} frames")
             if self.crop is not None and (self.crop[0] > m["height"] or self.crop[1] > m["width"]):
-                raise ValueError(f"crop {self.crop} is larger than scene {sid!r} ({m['height']}x{m['width']})")
+                raise ValueError(f"crop {self.crop} is larger than scene {brief(sid)} ({m['height']}x{m['width']})")
             if line_time_s is not None and shutter == "rolling":
                 check_line_time(m, line_time_s, m["height"])
         self.line_time_s = line_time_s
@@ -270,7 +270,7 @@ class LFMCaptureDataset(Dataset):
             return list(self.corpus.scenes)
         splits = self.corpus.splits
         if self.split not in splits:
-            raise ValueError(f"split {self.split!r} is not in {self.root / 'splits.json'} ({sorted(splits)})")
+            raise ValueError(f"split {brief(self.split)} is not in {self.root / 'splits.json'} ({sorted(splits)})")
         complete = set(self.corpus.scenes)
         return [s for s in splits[self.split] if s in complete]
 
@@ -303,10 +303,12 @@ class LFMCaptureDataset(Dataset):
                 "note": "frozen PWM draws of the test split; delete to re-draw (changes every test score)"}
         if path.is_file():
             try:
-                data = json.loads(path.read_text())
-                data["samples"]
-            except (ValueError, KeyError, TypeError) as exc:
-                raise ValueError(f"{path}: not a valid test-parameter file ({exc}); delete it to re-freeze") from None
+                data = load_json(path, "test-parameter file")
+                if not isinstance(data, dict) or not isinstance(data.get("samples"), dict):
+                    raise ValueError("'samples' must be an object")
+            except (OSError, ValueError) as exc:
+                why = str(exc).removeprefix(f"{path}: ")
+                raise ValueError(f"{path}: not a valid test-parameter file ({why}); delete it to re-freeze") from None
         samples = data["samples"]
         added = False
         for sid in self.scene_ids:
@@ -473,7 +475,7 @@ class LFMCaptureDataset(Dataset):
                     cap = _sensor.simulate_split_pixel_electrons(lpd, spd, self.preset, t_s, t_l, generator=gen,
                                                                  noise=self.noise, fpn=fpn)
             except ValueError as exc:  # e.g. non-finite electrons from implausible radiance: name the scene
-                raise ValueError(f"scene {scene_id!r} of {self.root} (frames {s0}..{s0 + F - 1}): {exc}; check "
+                raise ValueError(f"scene {brief(scene_id)} of {self.root} (frames {s0}..{s0 + F - 1}): {exc}; check "
                                  f"the corpus with `lfmbench validate {self.root}`") from None
         gt = torch.stack([fr_["gt"] for fr_ in frames])[:, None] if want & {"gt", "rgb"} else None
         meta_out = self.sample_meta(view, index, params, crop, s0)
@@ -494,8 +496,8 @@ class LFMCaptureDataset(Dataset):
             frame_start = 0 if self.frame_start == "random" else self.frame_start
         s0, F = int(frame_start), self.frames
         if s0 < 0 or s0 + F > self._frames_to_load(scene_id):
-            raise ValueError(f"frame_start: frames {s0}..{s0 + F - 1} are not all available for scene {scene_id!r} "
-                             f"(dataset frame_start={self.frame_start!r}, frames={F}, scene frames "
+            raise ValueError(f"frame_start: frames {s0}..{s0 + F - 1} are not all available for scene {brief(scene_id)} "
+                             f"(dataset frame_start={brief(self.frame_start)}, frames={F}, scene frames "
                              f"{self.corpus.meta(scene_id)['frames']})")
         return s0
 
@@ -510,7 +512,7 @@ class LFMCaptureDataset(Dataset):
         lights = view.lights
         L, n = self.max_lights, len(lights)
         if n > L:
-            raise ValueError(f"max_lights={L} but scene {view.scene_id!r} has {n} lights")
+            raise ValueError(f"max_lights={L} but scene {brief(view.scene_id)} has {n} lights")
         tm = view.meta["timing"]
         ids = [int(lt["id"]) for lt in lights]
         ps = [per_light.get(i) for i in ids]

@@ -16,9 +16,10 @@ from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 import numpy as np
-import yaml
 
+from lfmbench.limits import brief
 from lfmbench.check import check_choice, check_keys, fail, where
+from lfmbench.fileio import load_yaml
 
 DEFAULT_PWM_PATH = Path(__file__).resolve().parents[1] / "configs" / "pwm.yaml"
 _DISTS = ("uniform", "loguniform", "constant", "choice")
@@ -54,7 +55,7 @@ class Distribution:
 
 def _dist(d: Any, key: str, source: str, lo: float, hi: float) -> Distribution:
     if not isinstance(d, Mapping) or d.get("dist") not in _DISTS:
-        fail(key, f"must be a mapping with dist in {_DISTS}, got {d!r}", source)
+        fail(key, f"must be a mapping with dist in {_DISTS}, got {brief(d)}", source)
     kind = d["dist"]
     try:
         if kind == "constant":
@@ -71,9 +72,9 @@ def _dist(d: Any, key: str, source: str, lo: float, hi: float) -> Distribution:
                 raise ValueError
             out = Distribution(kind, low=vals[0], high=vals[1])
     except (KeyError, TypeError, ValueError):
-        raise ValueError(f"{where(key, source)} has invalid parameters {d!r}") from None
+        raise ValueError(f"{where(key, source)} has invalid parameters {brief(d)}") from None
     if not all(np.isfinite(v) and lo <= v <= hi for v in vals):
-        fail(key, f"must stay within [{lo}, {hi}], got {d!r}", source)
+        fail(key, f"must stay within [{lo}, {hi}], got {brief(d)}", source)
     return out
 
 
@@ -104,16 +105,16 @@ def load_pwm_config(pwm: "PWMConfig | Mapping | str | Path | None" = None) -> PW
     """
     if isinstance(pwm, PWMConfig):
         return pwm
-    base = yaml.safe_load(DEFAULT_PWM_PATH.read_text())
+    base = load_yaml(DEFAULT_PWM_PATH)
     source = str(DEFAULT_PWM_PATH)
     if isinstance(pwm, (str, Path)):
         path = Path(pwm)
         if not path.is_file():
             raise ValueError(f"pwm: no PWM config file at {path}")
         try:
-            user = yaml.safe_load(path.read_text())
-        except yaml.YAMLError as exc:
-            raise ValueError(f"pwm: {path} is not valid YAML: {exc}") from None
+            user = load_yaml(path)
+        except OSError as exc:
+            raise ValueError(f"pwm: cannot read {path}: {exc.strerror or exc}") from None
         source = str(path)
     elif pwm is None:
         user = {}

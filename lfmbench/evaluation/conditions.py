@@ -14,7 +14,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-import yaml
+from lfmbench.limits import brief
+from lfmbench.fileio import load_yaml
 
 #: The default bins (plain YAML a user can edit or replace with ``--conditions``).
 CONDITIONS_CONFIG = Path(__file__).resolve().parents[1] / "configs" / "conditions.yaml"
@@ -30,9 +31,9 @@ def load_bins(path: str | Path | None = None) -> dict[str, dict]:
     """
     p = Path(path or CONDITIONS_CONFIG)
     try:
-        cfg = yaml.safe_load(p.read_text(encoding="utf-8"))
-    except (OSError, yaml.YAMLError, UnicodeDecodeError) as exc:
-        raise ValueError(f"conditions file {p}: cannot read YAML ({type(exc).__name__}: {exc})") from None
+        cfg = load_yaml(p, source=f"conditions file {p}")
+    except OSError as exc:
+        raise ValueError(f"conditions file {p}: cannot read YAML ({exc.strerror or exc})") from None
     if not isinstance(cfg, dict) or not cfg:
         raise ValueError(f"conditions file {p}: must map condition names to bins")
     for name, spec in cfg.items():
@@ -42,7 +43,7 @@ def load_bins(path: str | Path | None = None) -> dict[str, dict]:
             e = spec["edges"]
             if (not isinstance(e, list) or len(e) < 2 or not all(isinstance(x, (int, float)) for x in e)
                     or any(b <= a for a, b in zip(e, e[1:]))):
-                raise ValueError(f"conditions file {p}: {name}.edges must be >= 2 increasing numbers, got {e!r}")
+                raise ValueError(f"conditions file {p}: {name}.edges must be >= 2 increasing numbers, got {brief(e)}")
         elif not isinstance(spec["categories"], list) or not spec["categories"]:
             raise ValueError(f"conditions file {p}: {name}.categories must be a non-empty list")
     return cfg

@@ -18,11 +18,12 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
+from lfmbench.limits import brief
 from lfmbench.evaluation import stats
 from lfmbench.evaluation.conditions import bin_labels, load_bins
 from lfmbench.evaluation.results import (COMPLETE, RESULT_FORMAT, breakdown, jsonable, metric_summary, num,
                                          per_scene)
-from lfmbench.fileio import atomic_save_figure
+from lfmbench.fileio import InputFileError, atomic_save_figure, load_json
 
 LEADERBOARD_FORMAT = "lfmbench-leaderboard"
 LEADERBOARD_VERSION = 1
@@ -43,19 +44,21 @@ def load_runs(paths: Iterable[str | Path], skipped: list[str] | None = None) -> 
     for p in paths:
         p = Path(p)
         try:
-            d = json.loads(p.read_text(encoding="utf-8"))
-        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-            raise ValueError(f"run file {p}: cannot read JSON ({type(exc).__name__}: {exc})") from None
+            d = load_json(p, "run file")
+        except OSError as exc:
+            raise ValueError(f"run file {p}: cannot read JSON ({exc.strerror or exc})") from None
+        except InputFileError as exc:
+            raise ValueError(f"run file {exc} (cannot read JSON)") from None
         if isinstance(d, dict) and d.get("format") == LEADERBOARD_FORMAT:
             if skipped is not None:
                 skipped.append(str(p))
             continue
         if not isinstance(d, dict) or d.get("format") != RESULT_FORMAT:
             fmt = d.get("format") if isinstance(d, dict) else None
-            raise ValueError(f"run file {p}: not an {RESULT_FORMAT} result (format={fmt!r})")
+            raise ValueError(f"run file {p}: not an {RESULT_FORMAT} result (format={brief(fmt)})")
         for key, typ in (("method", dict), ("runtime", dict), ("aggregate", dict), ("status", str)):
             if not isinstance(d.get(key), typ):
-                raise ValueError(f"run file {p}: field {key!r} missing or not a{'n object' if typ is dict else ' string'}"
+                raise ValueError(f"run file {p}: field {brief(key)} missing or not a{'n object' if typ is dict else ' string'}"
                                  " (a truncated or hand-made result?)")
         if not isinstance(d["method"].get("spec"), str):
             raise ValueError(f"run file {p}: field 'method.spec' missing")
@@ -68,7 +71,7 @@ def load_runs(paths: Iterable[str | Path], skipped: list[str] | None = None) -> 
 
 def incomplete_runs(runs: list[dict]) -> list[str]:
     """``"<path>: status <status>"`` for each run that is not complete (interrupted, failed, killed)."""
-    return [f"{r.get('_path')}: status {r.get('status')!r}" for r in runs if r.get("status") != COMPLETE]
+    return [f"{r.get('_path')}: status {brief(r.get('status'))}" for r in runs if r.get("status") != COMPLETE]
 
 
 # ------------------------------------------------------------------------------------------- comparability
@@ -150,7 +153,7 @@ def _check_sort_by(sort_by: str) -> Any:
     from lfmbench.metrics import REGISTRY
 
     if sort_by not in REGISTRY:
-        raise ValueError(f"sort_by must be a registered metric ({', '.join(REGISTRY)}), got {sort_by!r}")
+        raise ValueError(f"sort_by must be a registered metric ({', '.join(REGISTRY)}), got {brief(sort_by)}")
     return REGISTRY[sort_by]
 
 
@@ -190,7 +193,7 @@ def leaderboard_rows(runs: list[dict], sort_by: str | None = None, *, ci: bool =
     spec = _check_sort_by(sort_by)
     known = [r for r in runs if isinstance((r.get("versions") or {}).get("metrics"), dict)]
     if known and not any(sort_by in r["versions"]["metrics"] for r in known):
-        raise ValueError(f"no run file was scored with {sort_by!r} ({_names([r['_path'] for r in known])}: made by "
+        raise ValueError(f"no run file was scored with {brief(sort_by)} ({_names([r['_path'] for r in known])}: made by "
                          f"an older lfmbench?); re-run lfmbench evaluate, or rank with --sort-by psnr_mu")
     bins = load_bins(conditions_file)
     want_ci = {s.name for s in columns("table")} | {sort_by}

@@ -48,11 +48,10 @@ def corpus_identity(root: str | Path, scene_ids: list[str] | None = None) -> dic
     man = root / MANIFEST_NAME
     if not man.is_file():
         raise FileNotFoundError(f"corpus {root}: {MANIFEST_NAME} not found (not an lfmbench corpus?)")
-    raw = man.read_bytes()
-    try:
-        doc = json.loads(raw.decode("utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise ValueError(f"{man}: not JSON ({exc})") from None
+    from lfmbench.fileio import loads_json, read_bytes  # noqa: PLC0415
+
+    raw = read_bytes(man, "manifest", "manifest_bytes")
+    doc = loads_json(raw, str(man))
     if not isinstance(doc, dict):
         raise ValueError(f"{man}: must hold a JSON object")
     scenes_sha = None

@@ -23,6 +23,7 @@ from typing import Any, Mapping, Sequence
 
 import torch
 
+from lfmbench.limits import brief
 from lfmbench.check import check_keys, get_number
 from lfmbench.sensor.optics import OpticsConfig
 from lfmbench.sensor.spectral_data import DATA_DIR, read_spectral_csv
@@ -205,7 +206,7 @@ def load_preset(preset: "str | Path | SensorPreset | Mapping[str, Any]") -> Sens
     if path.suffix.lower() not in (".yaml", ".yml", ".json") and not path.exists():
         candidate = PRESET_DIR / f"{text}.yaml"
         if not candidate.exists():
-            raise ValueError(f"preset: unknown sensor preset {text!r}; shipped presets are {available_presets()} "
+            raise ValueError(f"preset: unknown sensor preset {brief(text)}; shipped presets are {available_presets()} "
                              "or give a path to a YAML file")
         path = candidate
     resolved = path.resolve()
@@ -217,15 +218,15 @@ def load_preset(preset: "str | Path | SensorPreset | Mapping[str, Any]") -> Sens
 @functools.lru_cache(maxsize=32)
 def _load_preset_file(path: str, mtime_ns: int = 0) -> SensorPreset:
     """Parse one preset file (cached per path and modification time, so edits are picked up)."""
-    import yaml
+    from lfmbench.fileio import load_yaml
 
     p = Path(path)
     if not p.is_file():
         raise ValueError(f"preset: file {path} does not exist")
     try:
-        data = yaml.safe_load(p.read_text())
-    except (OSError, yaml.YAMLError) as exc:
-        raise ValueError(f"preset: cannot read {path}: {exc}") from exc
+        data = load_yaml(p, source=f"preset {path}")
+    except OSError as exc:
+        raise ValueError(f"preset: cannot read {path}: {exc.strerror or exc}") from None
     return preset_from_dict(data, path)
 
 
@@ -254,7 +255,7 @@ def preset_from_dict(data: Mapping[str, Any], source: str = "<dict>") -> SensorP
     check_keys(data, "", source, optional=top)
     name = data.get("name")
     if not isinstance(name, str) or not name:
-        raise ValueError(f"{source}: field 'name' must be a non-empty string, got {name!r}")
+        raise ValueError(f"{source}: field 'name' must be a non-empty string, got {brief(name)}")
     description = data.get("description", "")
     if not isinstance(description, str):
         raise ValueError(f"{source}: field 'description' must be a string")
@@ -263,7 +264,7 @@ def preset_from_dict(data: Mapping[str, Any], source: str = "<dict>") -> SensorP
         cfa = CFAPattern(str(data.get("cfa", "GRBG")).upper())
     except ValueError:
         raise ValueError(f"{source}: field 'cfa' must be one of {[c.value for c in CFAPattern]}, "
-                         f"got {data.get('cfa')!r}") from None
+                         f"got {brief(data.get('cfa'))}") from None
     bits = get_number(data, "adc_bits", source, lo=1, hi=24, integer=True)
     black = get_number(data, "black_level_dn", source, lo=0, hi=2 ** bits - 2, default=0.0)
     sat_frac = get_number(data, "saturation_fraction", source, lo=0, lo_open=True, hi=1.0, default=0.95)
@@ -277,14 +278,14 @@ def preset_from_dict(data: Mapping[str, Any], source: str = "<dict>") -> SensorP
     peak_qe = get_number(spectral, "peak_qe", source, "spectral.", lo=0, lo_open=True, hi=1.0)
     filters = spectral.get("filters")
     if not isinstance(filters, str) or not filters:
-        raise ValueError(f"{source}: field 'spectral.filters' must be a file name, got {filters!r}")
+        raise ValueError(f"{source}: field 'spectral.filters' must be a file name, got {brief(filters)}")
     fpath = Path(filters)
     if not fpath.is_absolute():
         here = Path(source).parent if source != "<dict>" else None
         cands = ([here / fpath] if here is not None else []) + [DATA_DIR / fpath]
         fpath = next((c for c in cands if c.is_file()), cands[-1])
     if not fpath.is_file():
-        raise ValueError(f"{source}: field 'spectral.filters': file {filters!r} not found (looked next to the "
+        raise ValueError(f"{source}: field 'spectral.filters': file {brief(filters)} not found (looked next to the "
                          f"preset and in {DATA_DIR})")
     try:
         _, names, _ = read_spectral_csv(fpath)
@@ -308,7 +309,7 @@ def preset_from_dict(data: Mapping[str, Any], source: str = "<dict>") -> SensorP
     for cap, d, pre in _entries(data, "captures", CAPTURES, CaptureSpec, source):
         pd = d.get("photodiode")
         if pd not in PHOTODIODES:
-            raise ValueError(f"{source}: field '{pre}photodiode' must be one of {list(PHOTODIODES)}, got {pd!r}")
+            raise ValueError(f"{source}: field '{pre}photodiode' must be one of {list(PHOTODIODES)}, got {brief(pd)}")
         caps[cap] = CaptureSpec(
             photodiode=pd,
             conversion_gain_v_per_e=get_number(d, "conversion_gain_v_per_e", source, pre, lo=0, lo_open=True, hi=1e-2),

@@ -1,0 +1,134 @@
+"""Input limits: the one table of sizes, depths and counts that every reader of user files checks before it
+allocates (docs/fault-catalogue.md, "Limits").
+
+A file may claim anything (a 1.9 MB EXR can declare a 6 GB image, a 300-byte YAML file can expand to a billion
+nodes, a results file can nest 100,000 arrays): readers compare what a file declares with these limits first
+and refuse it with one line naming the file, the limit and how to raise it. The defaults are far above what
+lfmbench itself writes (the margins are stated per limit); a user who really needs more raises a limit
+explicitly, for one run:
+
+- CLI: ``lfmbench --limit exr_bytes=8e9 validate DIR`` (repeatable, before the command), or
+- environment: ``LFMBENCH_LIMITS="exr_bytes=8e9,json_bytes=1e9"`` (also seen by worker processes), or
+- Python: ``lfmbench.limits.set_limit("exr_bytes", 8e9)``.
+
+Error messages quote at most :data:`QUOTE_CHARS` characters of a bad value (:func:`brief`).
+"""
+from __future__ import annotations
+
+import os
+import reprlib
+from typing import Any
+
+__all__ = ["LIMITS", "LimitError", "limit", "set_limit", "parse_overrides", "brief", "QUOTE_CHARS", "ENV"]
+
+#: name -> (default, what it bounds and why the default). Bytes are bytes of the file or of decoded pixels.
+LIMITS: dict[str, tuple[int, str]] = {
+    "json_bytes": (64 << 20, "size of a JSON file other than a manifest (results, meta.json, splits.json, "
+                             "test_params.json, ...); a result of the 64-scene v1 test split is < 1 MB"),
+    "manifest_bytes": (1 << 30, "size of a corpus manifest.json (about 1 KB per scene: 1 GiB is ~10^6 scenes)"),
+    "json_depth": (64, "nesting depth of a JSON document (lfmbench writes at most 6 levels)"),
+    "yaml_bytes": (4 << 20, "size of a YAML file (presets, profiles, protocols; the largest shipped is 27 KB)"),
+    "yaml_aliases": (100, "YAML aliases (*name) per document; the shipped files use none"),
+    "yaml_nodes": (200_000, "YAML nodes per document after alias expansion (the 'billion laughs' bound)"),
+    "exr_parts": (4200, "parts of one EXR file: one per light of a group, so MAX_LIGHTS_PER_SCENE plus margin"),
+    "exr_channels": (8192, "channels of one EXR part (time bins x bands; 256 bins x 31 bands = 7936)"),
+    "exr_side": (65536, "width or height of an EXR display or data window, pixels"),
+    "exr_bytes": (4 << 30, "decoded pixel bytes of one EXR file, all parts and channels, as its header declares "
+                           "(a 1920x1080 static layer of 2 x 31 FLOAT bands is 514 MB)"),
+    "exr_header_bytes": (64 << 20, "bytes of the headers of one EXR file"),
+    "lights_per_scene": (4096, "lights of one scene (meta.json, scene files, dataset max_lights): every light is "
+                               "one EXR part per frame and group, one padded entry per sample and one frozen "
+                               "draw per test sample; the busiest rendered scene has 66"),
+}
+
+#: Environment variable of explicit overrides: ``name=value`` pairs separated by commas.
+ENV = "LFMBENCH_LIMITS"
+#: Longest quotation of a bad value in an error message, characters.
+QUOTE_CHARS = 80
+
+_overrides: dict[str, int] = {}
+
+
+class LimitError(ValueError):
+    """Input above a limit of :data:`LIMITS`; the message names the file, the limit and how to raise it."""
+
+    def __init__(self, source: str, what: str, value: Any, name: str):
+        super().__init__(f"{source}: {what} {value:,} is above the limit {name}={limit(name):,} "
+                         f"(raise it with `lfmbench --limit {name}=N ...` or {ENV}=\"{name}=N\" if the file "
+                         "is trusted)" if isinstance(value, int) else
+                         f"{source}: {what} is above the limit {name}={limit(name):,} (raise it with "
+                         f"`lfmbench --limit {name}=N ...` or {ENV}=\"{name}=N\" if the file is trusted)")
+        self.name = name
+
+
+def parse_overrides(text: str, source: str = ENV) -> dict[str, int]:
+    """``"a=1,b=2e6"`` -> ``{"a": 1, "b": 2000000}``; ``ValueError`` naming ``source`` for an unknown name or a
+    value that is not a positive integer."""
+    out = {}
+    for item in (t.strip() for t in text.split(",")):
+        if not item:
+            continue
+        name, sep, val = item.partition("=")
+        name = name.strip()
+        if not sep or name not in LIMITS:
+            raise ValueError(f"{source}: {brief(item)} must be NAME=VALUE with NAME one of {', '.join(LIMITS)}")
+        try:
+            v = float(val)
+            if not (v >= 1 and v == int(v)) or v > 2 ** 62:
+                raise ValueError
+        except (ValueError, OverflowError):
+            raise ValueError(f"{source}: {name} must be a positive integer, got {brief(val.strip())}") from None
+        out[name] = int(v)
+    return out
+
+
+def limit(name: str) -> int:
+    """The current value of limit ``name``: :func:`set_limit`, else :data:`ENV`, else the default."""
+    if name in _overrides:
+        return _overrides[name]
+    env = os.environ.get(ENV)
+    if env:
+        try:
+            v = parse_overrides(env).get(name)
+        except ValueError:
+            v = None  # reported once by the CLI; a bad variable must not break library calls
+        if v is not None:
+            return v
+    return LIMITS[name][0]
+
+
+def set_limit(name: str, value: int | None) -> None:
+    """Raise (or lower) limit ``name`` for this process; ``None`` restores the default / environment value."""
+    if name not in LIMITS:
+        raise ValueError(f"limit name must be one of {', '.join(LIMITS)}, got {brief(name)}")
+    if value is None:
+        _overrides.pop(name, None)
+        return
+    _overrides.update(parse_overrides(f"{name}={value}", "set_limit"))
+
+
+def brief(value: Any, n: int | None = None) -> str:
+    """``repr(value)`` for an error message, at most ``n`` (default :data:`QUOTE_CHARS`) characters: containers,
+    strings and integers are abbreviated before they are turned into text (:mod:`reprlib`), so a huge or deeply
+    nested value costs neither time nor memory here.
+
+    >>> brief("x" * 500)[:20], len(brief("x" * 500)) <= QUOTE_CHARS
+    ("'xxxxxxxxxxxxxxxxxxx", True)
+    >>> brief([1, 2, 3])
+    '[1, 2, 3]'
+    """
+    n = QUOTE_CHARS if n is None else n
+    s = _REPR.repr(value)
+    return s if len(s) <= n else s[:n - 3] + "..."
+
+
+class _Brief(reprlib.Repr):
+    def repr_int(self, x: int, level: int) -> str:
+        if x.bit_length() > 128:  # also: no int-to-text conversion above Python's digit limit
+            return f"<an integer of about {int(x.bit_length() * 0.30103) + 1} digits>"
+        return super().repr_int(x, level)
+
+
+_REPR = _Brief()
+_REPR.maxlevel, _REPR.maxlist, _REPR.maxtuple, _REPR.maxdict, _REPR.maxset = 3, 8, 8, 6, 8
+_REPR.maxstring, _REPR.maxlong, _REPR.maxother = QUOTE_CHARS, 40, QUOTE_CHARS
