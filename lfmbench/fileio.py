@@ -25,6 +25,7 @@ import math
 import os
 import stat
 import tempfile
+import time
 from pathlib import Path
 from typing import Any
 
@@ -99,13 +100,27 @@ def writable_error(path: str | os.PathLike) -> str | None:
     return None
 
 
+#: How long a write waits for a process to open a FIFO for reading, s.
+FIFO_WAIT_S = 3.0
+
+
 def _write_direct(path: Path, data: bytes) -> None:
-    """Write into an existing non-regular file (device, FIFO) in place; a FIFO without reader is an error, not a
-    hang (ENXIO)."""
+    """Write into an existing non-regular file (device, FIFO) in place; a FIFO that no process opens for reading
+    within :data:`FIFO_WAIT_S` is an error (ENXIO), not a hang."""
     fifo = stat.S_ISFIFO(os.stat(path).st_mode)
-    fd = os.open(path, os.O_WRONLY | (os.O_NONBLOCK if fifo else 0))
     if fifo:
+        t_end = time.monotonic() + FIFO_WAIT_S
+        while True:
+            try:
+                fd = os.open(path, os.O_WRONLY | os.O_NONBLOCK)
+                break
+            except OSError as exc:
+                if exc.errno != errno.ENXIO or time.monotonic() > t_end:
+                    raise
+                time.sleep(0.02)
         os.set_blocking(fd, True)
+    else:
+        fd = os.open(path, os.O_WRONLY)
     with os.fdopen(fd, "wb") as fh:
         fh.write(data)
         fh.flush()
@@ -242,7 +257,7 @@ def loads_json(raw: bytes | str, source: str) -> Any:
                              f"`lfmbench --limit json_depth=N` if the file is trusted)") from None
     except (ValueError, UnicodeDecodeError) as exc:  # JSONDecodeError, int digit limit, our hooks
         msg = " ".join(str(exc).split())
-        raise InputFileError(f"{source}: not valid JSON: {msg[:200]}") from None
+        raise InputFileError(f"{source}: cannot read JSON: {msg[:200]}") from None
     if json_depth_exceeds(obj, cap):
         raise InputFileError(f"{source}: JSON nested deeper than the limit json_depth={cap} (raise it with "
                              f"`lfmbench --limit json_depth=N` if the file is trusted)")
@@ -327,7 +342,7 @@ def load_yaml(path: str | os.PathLike | None = None, *, text: str | None = None,
             raise LimitError(source, f"YAML text of {len(text):,} characters", len(text), "yaml_bytes")
         yaml, Loader = _yaml_loader()
         loader = Loader(text)
-        loader.source = source
+        loader.source = loader.name = source  # positions in messages name the file
         try:
             node = loader.get_single_node()
             if node is None:
@@ -349,4 +364,4 @@ def load_yaml(path: str | os.PathLike | None = None, *, text: str | None = None,
         if not isinstance(exc, yaml.YAMLError):
             raise
         msg = " ".join(str(exc).split())
-        raise InputFileError(f"{source}: not valid YAML: {msg[:300]}{'...' if len(msg) > 300 else ''}") from None
+        raise InputFileError(f"{source}: cannot read YAML: {msg[:300]}{'...' if len(msg) > 300 else ''}") from None

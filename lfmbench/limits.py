@@ -19,7 +19,8 @@ import os
 import reprlib
 from typing import Any
 
-__all__ = ["LIMITS", "LimitError", "limit", "set_limit", "parse_overrides", "brief", "QUOTE_CHARS", "ENV"]
+__all__ = ["LIMITS", "LimitError", "limit", "set_limit", "parse_overrides", "brief", "QUOTE_CHARS", "ENV",
+           "lights_cap_message"]
 
 #: name -> (default, what it bounds and why the default). Bytes are bytes of the file or of decoded pixels.
 LIMITS: dict[str, tuple[int, str]] = {
@@ -105,6 +106,13 @@ def set_limit(name: str, value: int | None) -> None:
         _overrides.pop(name, None)
         return
     _overrides.update(parse_overrides(f"{name}={value}", "set_limit"))
+
+
+def lights_cap_message(n: int) -> str:
+    """The one message of the per-scene light cap (``lights_per_scene``) for a scene with ``n`` lights."""
+    return (f"has {n:,} lights, above the cap of {limit('lights_per_scene'):,} lights per scene (each light is an "
+            "EXR part per frame and group and a frozen draw per test sample; raise it with `lfmbench --limit "
+            "lights_per_scene=N` if you mean it)")
 
 
 def brief(value: Any, n: int | None = None) -> str:

@@ -28,7 +28,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from lfmbench.limits import brief
+from lfmbench.limits import brief, lights_cap_message, limit
 from lfmbench.check import check_integer, check_keys, check_number, check_vector, fail, scene_id_error
 from lfmbench.fileio import atomic_write_json
 from lfmbench.vocabulary import GROUPS, LIGHT_GROUPS, LIGHT_KINDS, OBJECT_KINDS, VEHICLE_KINDS
@@ -656,6 +656,8 @@ def validate_scene(scene: dict) -> dict:
     lights = scene["lights"]
     if not isinstance(lights, list):
         fail("scene.lights", "expected a list")
+    if len(lights) > limit("lights_per_scene"):
+        fail("scene.lights", lights_cap_message(len(lights)))
     for i, lt in enumerate(lights):
         p = f"scene.lights[{i}]"
         _part_or_light_shape(lt, p, ("id", "group", "kind", "instance", "spread_deg", "spectrum",

@@ -150,7 +150,7 @@ def test_train_command_writes_loadable_checkpoint_and_resumes_deterministically(
     ("train: {crop: 63}\n", "train.crop must be even"),
     ("optimizer: {}\n", r"unknown section\(s\)"),
     ("model: {candidates: [L, X]}\n", "model.candidates must be a non-empty list"),
-    ("model: [1, 2\n", "not valid YAML"),
+    ("model: [1, 2\n", "cannot read YAML"),
 ])
 def test_bad_config_names_the_file(tmp_path, text, match):
     p = tmp_path / "bad.yaml"

@@ -155,7 +155,7 @@ def render_cmd(
                 except OSError as exc:
                     fail(f"--scene {p}: cannot read scene JSON: {exc.strerror or exc}")
                 except InputFileError as exc:
-                    fail(f"--scene {exc}")
+                    fail(f"--scene {p}: cannot read scene JSON: {str(exc).removeprefix(f'{p}: cannot read JSON: ')}")
                 if not isinstance(sc, dict):
                     fail(f"--scene {p}: a scene file must hold a JSON object")
                 scene_dicts.append(sc)

@@ -37,8 +37,8 @@ References: OpenEXR file layout and multi-part files, https://openexr.com/en/lat
 """
 from lfmbench.check import check_scene_id
 from lfmbench.corpus.errors import (CorpusChannelError, CorpusError, CorpusFileError, CorpusNotFoundError,
-                                    CorpusValueError, CorpusWriteError)
-from lfmbench.corpus.exr import (ExrPart, encode_aux_exr, encode_lights_exr, encode_static_exr, layer_scale,
+                                    CorpusLockedError, CorpusValueError, CorpusWriteError)
+from lfmbench.corpus.exr import (ExrPart, check_exr_header, encode_aux_exr, encode_lights_exr, encode_static_exr, layer_scale,
                                  read_exr)
 from lfmbench.corpus.meta import (LIGHT_KINDS, SPECTRUM_MODELS, TIMING_RTOL, check_splits, inside_root, make_splits,
                                   manifest_entry_errors, sha256_file, validate_meta)
@@ -52,7 +52,8 @@ from lfmbench.corpus.storage import (COMPRESSIONS, DEFAULT_STORAGE, EXTRA_COMPRE
                                      SCALE_EXP_RANGE, STORAGES, LayerStore, Storage, StorageStats, resolve_storage,
                                      float_to_half, round_mantissa, scale_attr, scale_exponent, store_layer)
 from lfmbench.corpus.validate import ValidationReport, validate_corpus
-from lfmbench.corpus.writer import CorpusWriter, ThreadedSceneWriter, encode_scene, prune_scene_dir, write_files
+from lfmbench.corpus.writer import (LOCK_NAME, CorpusLock, CorpusWriter, ThreadedSceneWriter, encode_scene,
+                                    prune_scene_dir, write_files)
 from lfmbench.fileio import TMP_PREFIX, atomic_write_bytes, atomic_write_json
 
 __all__ = [
@@ -66,5 +67,5 @@ __all__ = [
     "atomic_write_bytes", "atomic_write_json", "make_splits", "validate_meta", "Corpus", "CorpusWriter",
     "ValidationReport", "validate_corpus", "encode_scene", "write_files", "prune_scene_dir", "ExrPart",
     "check_scene_id", "manifest_entry_errors", "inside_root", "check_splits", "RADIANCE_MAX",
-    "ThreadedSceneWriter", "float_to_half",
+    "ThreadedSceneWriter", "float_to_half", "CorpusLockedError", "CorpusLock", "LOCK_NAME", "check_exr_header",
 ]

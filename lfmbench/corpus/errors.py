@@ -6,7 +6,7 @@ from __future__ import annotations
 from lfmbench.fileio import AtomicWriteError
 
 __all__ = ["CorpusError", "CorpusNotFoundError", "CorpusFileError", "CorpusChannelError", "CorpusValueError",
-           "CorpusWriteError"]
+           "CorpusWriteError", "CorpusLockedError"]
 
 
 class CorpusError(ValueError):
@@ -23,6 +23,10 @@ class CorpusFileError(CorpusError):
 
 class CorpusChannelError(CorpusError):
     """An EXR lacks expected channels / parts or has channels the metadata does not announce."""
+
+
+class CorpusLockedError(CorpusError):
+    """Another process is writing the corpus (the message names the folder, the holder's pid and host)."""
 
 
 class CorpusValueError(CorpusError):

@@ -13,6 +13,7 @@ from __future__ import annotations
 import io
 import math
 import os
+import struct
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping, Sequence
@@ -22,10 +23,12 @@ import numpy as np
 from lfmbench.corpus.errors import CorpusChannelError, CorpusFileError, CorpusValueError
 from lfmbench.corpus.naming import (ATTR, AUX_CHANNELS, EMPTY_PART, FORMAT_VERSION, RADIANCE_MAX, RADIANCE_UNIT,
                                     STATIC_WINDOWS, _check_version, bin_channels, static_channels)
+from lfmbench.limits import LimitError, limit
 from lfmbench.corpus.storage import (COMPRESSIONS, DEFAULT_STORAGE, EXTRA_COMPRESSIONS, LayerStore, SCALE_EXP_RANGE,
                                      Storage, StorageStats, resolve_storage, scale_attr, store_layer)
 
-__all__ = ["encode_static_exr", "encode_lights_exr", "encode_aux_exr", "ExrPart", "read_exr", "layer_scale"]
+__all__ = ["encode_static_exr", "encode_lights_exr", "encode_aux_exr", "ExrPart", "read_exr", "layer_scale",
+           "check_exr_header"]
 
 
 def _exr():
@@ -248,16 +251,135 @@ class ExrPart:
     channels: dict[str, np.ndarray] | None = None
 
 
+#: Bytes per pixel of the EXR pixel types UINT, HALF, FLOAT (OpenEXR file layout).
+_EXR_TYPE_BYTES = {0: 4, 1: 2, 2: 4}
+
+
+class _Reader:
+    """Bounded sequential reads of an EXR header (never more than the ``exr_header_bytes`` limit)."""
+
+    def __init__(self, fh, path: Path):
+        self.fh, self.path, self.n, self.cap = fh, path, 0, limit("exr_header_bytes")
+
+    def read(self, k: int) -> bytes:
+        if self.n + k > self.cap:
+            raise LimitError(str(self.path), "EXR header of more bytes", None, "exr_header_bytes")
+        b = self.fh.read(k)
+        self.n += len(b)
+        if len(b) != k:
+            raise CorpusFileError(f"EXR file {self.path} is truncated or corrupt: header ends early")
+        return b
+
+    def cstr(self) -> bytes:
+        out = bytearray()
+        while True:
+            c = self.read(1)
+            if c == b"\0":
+                return bytes(out)
+            out += c
+            if len(out) > 255:
+                raise CorpusFileError(f"EXR file {self.path} is corrupt: a header name longer than 255 bytes")
+
+
+def check_exr_header(path: str | os.PathLike) -> dict:
+    """Read the headers of an EXR file (pure Python, nothing but the header bytes) and check what they declare
+    against :mod:`lfmbench.limits` before any pixel buffer is allocated: number of parts (``exr_parts``),
+    channels per part (``exr_channels``), display / data window sides (``exr_side``; the data window must have
+    positive size) and the decoded size of all parts (``exr_bytes``). Deep and tiled-only layouts are allowed
+    through to OpenEXR, which reports them.
+
+    Returns:
+        ``{"parts": n, "decoded_bytes": b}``.
+
+    Raises:
+        CorpusFileError: naming ``path``: not an EXR, truncated header, or a limit exceeded (the message names the
+            limit and how to raise it).
+    """
+    path = Path(path)
+    try:
+        with open(path, "rb") as fh:
+            r = _Reader(fh, path)
+            magic, flags = struct.unpack("<iI", r.read(8))
+            if magic != 20000630:
+                raise CorpusFileError(f"cannot read EXR file {path}: not an OpenEXR file (bad magic number)")
+            multipart = bool(flags & 0x1000)
+            parts, total = 0, 0
+            max_parts, max_ch, max_side = limit("exr_parts"), limit("exr_channels"), limit("exr_side")
+            while True:
+                windows: dict[str, tuple[int, int, int, int]] = {}
+                n_ch, px_bytes, first = 0, 0, True
+                while True:
+                    name = r.cstr()
+                    if not name:
+                        break
+                    first = False
+                    typ = r.cstr()
+                    (size,) = struct.unpack("<i", r.read(4))
+                    if size < 0:
+                        raise CorpusFileError(f"EXR file {path} is corrupt: negative attribute size")
+                    if typ == b"chlist":
+                        body = r.read(size)
+                        i = 0
+                        while i < len(body) and body[i] != 0:
+                            j = body.index(b"\0", i)
+                            (ptype,) = struct.unpack_from("<i", body, j + 1)
+                            xs, ys = struct.unpack_from("<ii", body, j + 9)
+                            n_ch += 1
+                            if n_ch > max_ch:
+                                raise LimitError(str(path), f"EXR part {parts} with more than {max_ch:,} channels",
+                                                 None, "exr_channels")
+                            px_bytes += _EXR_TYPE_BYTES.get(ptype, 4) / max(1, xs) / max(1, ys)
+                            i = j + 17
+                    elif typ == b"box2i" and name in (b"dataWindow", b"displayWindow"):
+                        windows[name.decode()] = struct.unpack("<iiii", r.read(16)) if size == 16 else \
+                            (0, 0, -1, -1)
+                        if size != 16:
+                            r.read(size)
+                    else:
+                        r.read(size)
+                if first and multipart and parts:  # the empty header that ends a multi-part header list
+                    break
+                parts += 1
+                if parts > max_parts:
+                    raise LimitError(str(path), f"EXR file with more than {max_parts:,} parts", None, "exr_parts")
+                for key in ("displayWindow", "dataWindow"):
+                    x0, y0, x1, y1 = windows.get(key, (0, 0, 0, 0))
+                    w, h = x1 - x0 + 1, y1 - y0 + 1
+                    if w < 1 or h < 1:
+                        raise CorpusFileError(f"EXR file {path} part {parts - 1}: {key} {windows.get(key)} is empty "
+                                              "or missing")
+                    if max(w, h) > max_side:
+                        raise LimitError(str(path), f"EXR part {parts - 1} {key} side", max(w, h), "exr_side")
+                x0, y0, x1, y1 = windows["dataWindow"]
+                total += int((x1 - x0 + 1) * (y1 - y0 + 1) * px_bytes)
+                if total > limit("exr_bytes"):
+                    raise LimitError(str(path), f"EXR file declaring {total:,} or more decoded pixel bytes", total,
+                                     "exr_bytes")
+                if not multipart:
+                    break
+    except LimitError as exc:
+        raise CorpusFileError(str(exc)) from None
+    except (OSError, struct.error, ValueError) as exc:
+        if isinstance(exc, CorpusFileError):
+            raise
+        raise CorpusFileError(f"cannot read EXR file {path}: {exc}") from None
+    return {"parts": parts, "decoded_bytes": total}
+
+
 def read_exr(path: str | os.PathLike, *, header_only: bool = False) -> list[ExrPart]:
     """Decode every part of an EXR file (OpenEXR 3.x reads whole files: all parts, all channels).
 
-    Raises :class:`CorpusFileError` naming ``path`` when it is missing, not an EXR, or truncated (a part whose
-    pixels cannot be read, detected by comparing with the part count of the header).
+    The headers are checked first (:func:`check_exr_header`): a file that declares more parts, channels,
+    pixels or decoded bytes than :mod:`lfmbench.limits` allows is refused before OpenEXR allocates anything.
+
+    Raises :class:`CorpusFileError` naming ``path`` when it is missing, not an EXR, truncated (a part whose
+    pixels cannot be read, detected by comparing with the part count of the header) or above a limit.
     """
     exr = _exr()
     path = Path(path)
     if not path.is_file():
         raise CorpusFileError(f"EXR file is missing: {path}")
+    check_exr_header(path)
     try:
         hdr = exr.File(str(path), header_only=True)
         n_parts = len(hdr.parts)

@@ -15,7 +15,7 @@ from typing import Any, Iterable, Mapping, Sequence
 
 import numpy as np
 
-from lfmbench.limits import brief
+from lfmbench.limits import brief, lights_cap_message, limit
 from lfmbench import check
 from lfmbench.check import scene_id_error
 from lfmbench.corpus.errors import CorpusFileError
@@ -159,6 +159,8 @@ def validate_meta(meta: Mapping[str, Any], where: str = "meta.json") -> None:
     lights = meta.get("lights", [])
     if not isinstance(lights, list):
         raise ValueError(f"{where}: field 'lights' must be a list of objects, got {brief(lights)}")
+    if len(lights) > limit("lights_per_scene"):
+        raise ValueError(f"{where}: field 'lights' {lights_cap_message(len(lights))}")
     for i, light in enumerate(lights):
         if not isinstance(light, Mapping):
             raise ValueError(f"{where}: lights[{i}] must be an object with 'id' and 'group', got {brief(light)}")
@@ -264,10 +266,17 @@ def manifest_entry_errors(man: Mapping[str, Any], path: Path | str) -> list[str]
     (absolute, ``..``) or are malformed. Used by :class:`Corpus` (raises on the first) and
     :func:`validate_corpus` (reports all)."""
     out = []
+    seen: dict[str, str] = {}  # casefolded id -> id: ids that one case-insensitive file system cannot tell apart
     for sid in man["scenes"]:
         why = _scene_id_error(sid)
         if why is not None:
             out.append(f"{path}: scene entry {brief(sid)} refused: {why}")
+            continue
+        other = seen.setdefault(sid.casefold(), sid)
+        if other is not sid:
+            out.append(f"{path}: scene id {brief(sid)} is listed twice" if other == sid else
+                       f"{path}: scene ids {brief(other)} and {brief(sid)} differ only in case (one folder on a "
+                       "case-insensitive file system)")
     scenes = {s for s in man["scenes"] if isinstance(s, str)}
     for rel, digest in man["files"].items():
         why = _file_entry_error(rel, digest, scenes)
@@ -292,6 +301,7 @@ def check_splits(sp: Any, path: Path | str) -> dict[str, list[str]]:
     if not isinstance(sp, dict):
         raise CorpusFileError(f"{path}: must be a JSON object {{\"train\": [...], \"val\": [...], \"test\": "
                               f"[...]}}, got a {type(sp).__name__}")
+    where: dict[str, str] = {}
     for k, ids in sp.items():
         if not isinstance(ids, list):
             raise CorpusFileError(f"{path}: split {brief(k)} must be a list of scene ids, got a {type(ids).__name__}")
@@ -299,4 +309,11 @@ def check_splits(sp: Any, path: Path | str) -> dict[str, list[str]]:
             why = _scene_id_error(sid)
             if why is not None:
                 raise CorpusFileError(f"{path}: split {brief(k)} entry {brief(sid)} refused: {why}")
+            first = where.get(sid)
+            if first == k:
+                raise CorpusFileError(f"{path}: scene {brief(sid)} is listed twice in split {brief(k)}")
+            if first is not None:
+                raise CorpusFileError(f"{path}: scene {brief(sid)} is in split {brief(first)} and in split "
+                                      f"{brief(k)} (a scene scored in the split it was trained on)")
+            where[sid] = k
     return sp

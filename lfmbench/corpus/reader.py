@@ -55,6 +55,7 @@ class Corpus:
         self._cache: OrderedDict[Path, list[ExrPart]] = OrderedDict()
         self._meta: dict[str, dict] = {}
         self._inside: set[str] = set()
+        self._scene_set = set(self.manifest["scenes"])
 
     # -- index
     @property
@@ -69,7 +70,7 @@ class Corpus:
         return check_splits(_load_json(path, "splits file"), path)
 
     def _scene_dir(self, scene_id: str) -> Path:
-        if scene_id not in self.manifest["scenes"]:
+        if scene_id not in self._inside and scene_id not in self._scene_set:
             raise KeyError(f"scene {brief(scene_id)} is not in corpus {self.root} (see Corpus.scenes)")
         if scene_id not in self._inside:  # ids were checked with the manifest; symbolic links are resolved here
             inside_root(self.root, f"{SCENES_DIR}/{scene_id}", str(self.root / MANIFEST_NAME))

@@ -73,10 +73,11 @@ def validate_corpus(root: str | os.PathLike, *, check_pixels: bool = True,
         return rep
     bad_entries = manifest_entry_errors(man, mpath)
     rep.errors.extend(bad_entries)
-    scenes = [s for s in man["scenes"] if _scene_id_error(s) is None]
+    scenes = list(dict.fromkeys(s for s in man["scenes"] if _scene_id_error(s) is None))  # unique, in order
+    scene_set = set(scenes)  # every membership test below is O(1): validate is linear in scenes and files
     rep.n_scenes = len(scenes)
     files: dict[str, str] = {rel: d for rel, d in man["files"].items()
-                             if _file_entry_error(rel, d, set(scenes)) is None}
+                             if _file_entry_error(rel, d, scene_set) is None}
     rep.n_files = len(man["files"])
     # checksums and presence of every listed file (only entries that stay inside the root)
     for rel, digest in files.items():
@@ -102,10 +103,10 @@ def validate_corpus(root: str | os.PathLike, *, check_pixels: bool = True,
                 err(f"{spath}: keys must be train, val, test; got {sorted(sp)}")
             if len(ids) != len(set(ids)):
                 err(f"{spath}: a scene appears in more than one split")
-            unknown = sorted(set(ids) - set(scenes))
+            unknown = sorted(set(ids) - scene_set)
             if unknown:
                 err(f"{spath}: scenes not in the manifest: {unknown[:5]}")
-            unsplit = sorted(set(scenes) - set(ids))
+            unsplit = sorted(scene_set - set(ids))
             if unsplit:
                 rep.warnings.append(f"{spath}: scenes in no split: {unsplit[:5]}")
         except CorpusError as exc:
@@ -118,10 +119,10 @@ def validate_corpus(root: str | os.PathLike, *, check_pixels: bool = True,
                 rel = p.relative_to(root).as_posix()
                 if p.name.startswith(TMP_PREFIX):
                     rep.warnings.append(f"{p}: temporary file of an interrupted run")
-                elif rel not in files and rel.split("/")[1] in scenes:
+                elif rel not in files and rel.split("/")[1] in scene_set:
                     rep.warnings.append(f"{p}: not in manifest")
         for d in sorted(sroot.iterdir()):
-            if d.is_dir() and d.name not in scenes:
+            if d.is_dir() and d.name not in scene_set:
                 rep.warnings.append(f"{d}: incomplete scene (not in manifest; re-run the render to finish it)")
     for i, sid in enumerate(sorted(scenes)):
         try:

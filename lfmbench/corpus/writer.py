@@ -6,9 +6,12 @@
 from __future__ import annotations
 
 import contextlib
+import errno
 import json
 import logging
 import os
+import re
+import socket
 import threading
 from concurrent.futures import Executor, ThreadPoolExecutor
 from pathlib import Path
@@ -21,13 +24,105 @@ from lfmbench.corpus.exr import encode_aux_exr, encode_lights_exr, encode_static
 from lfmbench.corpus.meta import _check_manifest, _empty_manifest, _load_json, make_splits, sha256_file, validate_meta
 from lfmbench.corpus.naming import (ATTR, FORMAT_VERSION, MANIFEST_NAME, SCENES_DIR, SPLITS_NAME, _group_bins,
                                     frame_dir, group_storage)
+from lfmbench.corpus.errors import CorpusError, CorpusLockedError
 from lfmbench.corpus.storage import DEFAULT_STORAGE, Storage, StorageStats, resolve_storage
 from lfmbench.fileio import TMP_PREFIX, atomic_write_bytes, atomic_write_json, json_default
 
 __all__ = ["CorpusWriter", "prune_scene_dir", "encode_scene", "write_files", "ThreadedSceneWriter",
-           "ENCODE_THREADS"]
+           "ENCODE_THREADS", "LOCK_NAME", "CorpusLockedError", "CorpusLock", "check_ours", "is_own_file"]
 
 log = logging.getLogger(__name__)
+
+#: The writer lock of a corpus root: a file locked with ``flock`` while a :class:`CorpusWriter` has the corpus
+#: open, holding ``pid <pid> host <host>`` of the holder (for the message a second writer gets). The kernel
+#: releases the lock when the holder exits, however it exits: a lock file left by a dead process is taken over.
+LOCK_NAME = ".lfmbench.lock"
+#: Files of a scene directory that the corpus format owns (``docs/corpus-format.md``): only these are ever
+#: deleted (when a re-render no longer writes them); anything else a user put there stays.
+_OWN_SCENE_FILE = re.compile(r"(scene\.json|meta\.json|f\d{3,}/[A-Za-z][A-Za-z0-9_]*\.exr)")
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+class CorpusLock:
+    """The one-writer lock of a corpus root (:data:`LOCK_NAME`): ``flock`` on the lock file, held until
+    :meth:`release` or process exit. Where the file system has no ``flock`` (some network mounts), the pid and
+    host in the file decide: a holder on this host whose pid is gone is stale and taken over."""
+
+    def __init__(self, root: str | os.PathLike) -> None:
+        self.path = Path(root) / LOCK_NAME
+        self.fd: int | None = None
+        fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            import fcntl  # noqa: PLC0415 - POSIX only
+
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                raise CorpusLockedError(self._busy(self._holder(fd))) from None
+            except OSError as exc:
+                if exc.errno not in (errno.ENOLCK, errno.EOPNOTSUPP, errno.ENOSYS):
+                    raise
+                self._check_pid(fd)
+        except BaseException:
+            os.close(fd)
+            raise
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, f"pid {os.getpid()} host {socket.gethostname()}\n".encode(), 0)
+        self.fd = fd
+
+    @staticmethod
+    def _holder(fd: int) -> str:
+        return os.pread(fd, 200, 0).decode("utf-8", "replace").strip() or "unknown holder"
+
+    def _busy(self, holder: str) -> str:
+        root = self.path.parent
+        return (f"corpus {root} is being written by another lfmbench process ({holder}; lock {self.path}): "
+                "wait for it to finish, or render into another --out folder")
+
+    def _check_pid(self, fd: int) -> None:
+        m = re.fullmatch(r"pid (\d+) host (\S+)", self._holder(fd))
+        if m and int(m.group(1)) != os.getpid() and (m.group(2) != socket.gethostname()
+                                                      or _pid_alive(int(m.group(1)))):
+            raise CorpusLockedError(self._busy(m.group(0)))
+
+    def release(self) -> None:
+        """Release the lock (the file stays; the next writer takes it over)."""
+        if self.fd is not None:
+            fd, self.fd = self.fd, None
+            with contextlib.suppress(OSError):
+                os.ftruncate(fd, 0)
+            os.close(fd)
+
+    def __del__(self) -> None:
+        self.release()
+
+
+def check_ours(root: Path) -> None:
+    """Refuse to write into a folder that is neither empty nor an lfmbench corpus: with no ``manifest.json``,
+    only the lock file and temporary files of a killed first run (:data:`TMP_PREFIX`) may be there.
+    ``CorpusError`` naming the folder and the first foreign entry."""
+    if (root / MANIFEST_NAME).exists() or not root.is_dir():
+        return
+    for p in sorted(root.iterdir()):
+        if p.name != LOCK_NAME and not p.name.startswith(TMP_PREFIX):
+            raise CorpusError(f"{root} is not empty and is not an lfmbench corpus (no {MANIFEST_NAME}; first "
+                              f"foreign entry: {p.name}): render into an empty or new folder, or into a corpus")
+
+
+def is_own_file(rel: str, scene_id: str) -> bool:
+    """True when ``rel`` (a path relative to the corpus root) is a file name the corpus format gives to files of
+    scene ``scene_id``: ``scenes/<id>/scene.json``, ``meta.json`` or ``f<NNN>/<group>.exr``."""
+    prefix = f"{SCENES_DIR}/{scene_id}/"
+    return rel.startswith(prefix) and _OWN_SCENE_FILE.fullmatch(rel[len(prefix):]) is not None
 
 
 class CorpusWriter:
@@ -54,7 +149,10 @@ class CorpusWriter:
         self.dtype = dtype
         if self.root.exists() and not self.root.is_dir():
             raise ValueError(f"corpus root {self.root} exists and is not a directory")
+        check_ours(self.root)
         self.root.mkdir(parents=True, exist_ok=True)
+        self._lock = CorpusLock(self.root)  # one writer per corpus; released by close() or at exit
+        check_ours(self.root)  # again under the lock: a folder filled meanwhile is still refused
         mpath = self.root / MANIFEST_NAME
         if mpath.exists():
             self.manifest = _check_manifest(_load_json(mpath, "manifest"), mpath)
@@ -76,15 +174,32 @@ class CorpusWriter:
         self.notes: list[str] = []
         self.cleanup_temp()
 
+    def close(self) -> None:
+        """Release the writer lock (also done at process exit)."""
+        self._lock.release()
+
+    def __enter__(self) -> "CorpusWriter":
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
     def cleanup_temp(self, scene_id: str | None = None) -> int:
-        """Remove temporary files left by an interrupted run (``scene_id``: only those of that scene's folder,
-        e.g. after its render worker died while others still write theirs); returns how many were removed."""
+        """Remove temporary files (our :data:`TMP_PREFIX` names) that an interrupted run left in the corpus root,
+        its scene directories and its cache (``scene_id``: only those of that scene's folder, e.g. after its render
+        worker died while others still write theirs); returns how many were removed. Nothing else is touched."""
         n = 0
-        top = self.root if scene_id is None else self.root / SCENES_DIR / check_scene_id(scene_id)
-        for p in top.rglob(TMP_PREFIX + "*"):
-            with contextlib.suppress(OSError):
-                p.unlink()
-                n += 1
+        if scene_id is None:
+            where = [self.root.glob(TMP_PREFIX + "*")] + [(self.root / d).rglob(TMP_PREFIX + "*")
+                                                          for d in (SCENES_DIR, ".cache") if (self.root / d).is_dir()]
+        else:
+            where = [(self.root / SCENES_DIR / check_scene_id(scene_id)).rglob(TMP_PREFIX + "*")]
+        for it in where:
+            for p in it:
+                if p.is_file() and not p.is_symlink():
+                    with contextlib.suppress(OSError):
+                        p.unlink()
+                        n += 1
         return n
 
     @property
@@ -166,18 +281,22 @@ class CorpusWriter:
 
 def prune_scene_dir(root: str | os.PathLike, scene_id: str, keep: Iterable[str]) -> list[str]:
     """Delete files under ``scenes/<scene_id>/`` whose relpath is not in ``keep`` (stale files of an earlier,
-    different render of the scene); returns the removed relpaths. Empty frame directories are removed too."""
+    different render of the scene) and that the corpus format owns (:func:`is_own_file`: ``scene.json``,
+    ``meta.json``, ``f<NNN>/<group>.exr``); returns the removed relpaths. Any other file (a user's) stays; frame
+    directories left empty are removed."""
     root = Path(root)
     sdir = root / SCENES_DIR / scene_id
     keep = set(keep)
     removed = []
-    if sdir.is_dir():
+    if sdir.is_dir() and not sdir.is_symlink():
         for p in sorted(sdir.rglob("*"), reverse=True):
             rel = p.relative_to(root).as_posix()
-            if p.is_file() and rel not in keep and not p.name.startswith(TMP_PREFIX):
+            if p.is_symlink():
+                continue
+            if p.is_file() and rel not in keep and is_own_file(rel, scene_id):
                 p.unlink()
                 removed.append(rel)
-            elif p.is_dir() and not any(p.iterdir()):
+            elif p.is_dir() and re.fullmatch(r"f\d{3,}", p.name) and not any(p.iterdir()):
                 p.rmdir()
     return removed
 

@@ -48,7 +48,7 @@ def load_runs(paths: Iterable[str | Path], skipped: list[str] | None = None) -> 
         except OSError as exc:
             raise ValueError(f"run file {p}: cannot read JSON ({exc.strerror or exc})") from None
         except InputFileError as exc:
-            raise ValueError(f"run file {exc} (cannot read JSON)") from None
+            raise ValueError(f"run file {exc}") from None
         if isinstance(d, dict) and d.get("format") == LEADERBOARD_FORMAT:
             if skipped is not None:
                 skipped.append(str(p))
