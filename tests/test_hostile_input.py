@@ -226,20 +226,30 @@ def test_prune_and_cleanup_remove_only_our_files(tmp_path):
 # ------------------------------------------------------------------- 3. one writer per corpus
 def test_second_writer_is_refused_and_a_stale_lock_is_taken_over(tmp_path, fake):
     import socket
+    import subprocess
+    import sys
 
     from lfmbench import corpus as C
     from tests.data.render.data import ARGS, run
 
     root = tmp_path / "c"
-    w = C.CorpusWriter(root)
-    with pytest.raises(C.CorpusLockedError, match=f"pid {os.getpid()} host {socket.gethostname()}"):
-        C.CorpusWriter(root)
-    out = _one_line(run("--out", str(root), "--scenes", "1", *ARGS))  # a second render: exit 2, names the holder
-    assert "being written by another lfmbench process" in out and f"pid {os.getpid()}" in out
-    assert not fake
-    w.close()
-    # a lock file left by a process that died (the kernel released its flock): taken over
-    (root / C.LOCK_NAME).write_text(f"pid 999999999 host {socket.gethostname()}\n")
+    holder = subprocess.Popen(  # another process with the corpus open for writing
+        [sys.executable, "-c", "import sys; from lfmbench import corpus as C; w = C.CorpusWriter(sys.argv[1]); "
+                               "print('locked', flush=True); sys.stdin.read()", str(root)],
+        stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == "locked"
+        with pytest.raises(C.CorpusLockedError, match=f"pid {holder.pid} host {socket.gethostname()}"):
+            C.CorpusWriter(root)
+        out = _one_line(run("--out", str(root), "--scenes", "1", *ARGS))  # a second render: exit 2, names it
+        assert "being written by another lfmbench process" in out and f"pid {holder.pid}" in out
+        assert not fake and C.Corpus(root).scenes == []
+    finally:
+        holder.stdin.close()
+        holder.wait(30)
+    # the holder is gone (the kernel released its flock); its pid is still in the file: taken over
+    assert f"pid {holder.pid}" in (root / C.LOCK_NAME).read_text() or (root / C.LOCK_NAME).read_text() == ""
+    (root / C.LOCK_NAME).write_text(f"pid {holder.pid} host {socket.gethostname()}\n")
     r = run("--out", str(root), "--scenes", "1", *ARGS)
     assert r.exit_code == 0, r.output
     assert C.Corpus(root).scenes == ["scene00000"]
@@ -345,3 +355,149 @@ def test_exr_bombs_are_refused_from_the_header(tmp_path):
         assert "exr_parts" not in str(e.value)
     finally:
         limits.set_limit("exr_parts", None)
+
+
+# ------------------------------------------------------------------- 7. numbers that can be ranked
+def _leaderboard(tmp_path, *files):
+    return CliRunner().invoke(app, ["leaderboard", *map(str, files), "--markdown", str(tmp_path / "lb.md"),
+                                    "--plot", str(tmp_path / "lb.png"), "--json", str(tmp_path / "lb.json")])
+
+
+def test_leaderboard_refuses_numbers_that_cannot_be_ranked(tmp_path):
+    from tests.data.evaluation.data import write_result
+
+    good = write_result(tmp_path / "good.json", (0.5, 0.6), method="good")
+    assert _leaderboard(tmp_path, good).exit_code == 0
+    cases = {"inf.json": ((float("inf"), 0.5), "cannot read JSON"),
+             "huge.json": ((1e308, 0.5), "field scenes[0].metrics.led_score = 1e+308 is outside the range of "
+                                         "led_score, [0, 1]"),
+             "neg.json": ((0.5, -0.25), "field scenes[1].metrics.led_score = -0.25 is outside the range"),
+             "digits.json": ('{"format": "lfmbench-eval", "x": ' + "7" * 5000 + "}", "cannot read JSON")}
+    for name, (scores, msg) in cases.items():
+        bad = write_result(tmp_path / name, scores, method=name)
+        out = _one_line(_leaderboard(tmp_path, good, bad))
+        assert f"{name}" in out and msg in out and len(out) < 600, (name, out[:700])
+        assert not (tmp_path / "lb.md").exists() or name  # nothing new written (checked below for one case)
+    agg = write_result(tmp_path / "agg.json", (0.5,), extra={"aggregate": {"led_score": 7.0}})
+    assert "aggregate.led_score = 7.0" in _one_line(_leaderboard(tmp_path, agg))
+    rt = write_result(tmp_path / "rt.json", (0.5,), extra={"runtime": {"ms_per_megapixel": -1}})
+    assert "runtime.ms_per_megapixel = -1 must be a finite number >= 0" in _one_line(_leaderboard(tmp_path, rt))
+    # a result file far larger than any real one: refused from its size, before it is parsed
+    limits.set_limit("json_bytes", 2000)
+    try:
+        big = write_result(tmp_path / "big.json", tuple([0.5] * 100), method="big")
+        out = _one_line(_leaderboard(tmp_path, big))
+        assert "big.json" in out and "json_bytes=2,000" in out
+    finally:
+        limits.set_limit("json_bytes", None)
+
+
+# ------------------------------------------------------------------- 9. identity = the draws used
+def test_results_with_identical_draws_stay_comparable_when_test_params_gains_draws(tmp_path):
+    from lfmbench.datasets import LFMCaptureDataset
+    from tests.data.corpus.data import make_corpus
+
+    root = make_corpus(tmp_path / "c", n_scenes=3)
+
+    def evaluate(out, method="lpd_only"):
+        r = CliRunner().invoke(app, ["evaluate", "--method", method, "--corpus", str(root), "--split", "test",
+                                     "--repeats", "1", "--warmup", "0", "--no-perceptual", "-o", str(out)])
+        assert r.exit_code == 0, r.output
+        return json.loads(out.read_text())
+
+    a = evaluate(tmp_path / "a.json")
+    before = (root / "test_params.json").read_bytes()
+    LFMCaptureDataset(root, split="test", samples_per_scene=3, cache_dir=False)  # another study: more draws
+    assert (root / "test_params.json").read_bytes() != before
+    b = evaluate(tmp_path / "b.json", "spd_only")
+    assert a["corpus"]["test_params_sha256"] != b["corpus"]["test_params_sha256"]
+    assert a["corpus"]["test_draws_sha256"] == b["corpus"]["test_draws_sha256"]
+    r = _leaderboard(tmp_path, tmp_path / "a.json", tmp_path / "b.json")
+    assert r.exit_code == 0, r.output
+    # different draws are still refused: 2 samples per scene use draws the 1-sample results did not
+    r = CliRunner().invoke(app, ["evaluate", "--method", "lpd_only", "--corpus", str(root), "--split", "test",
+                                 "--samples-per-scene", "2", "--repeats", "1", "--warmup", "0", "--no-perceptual",
+                                 "-o", str(tmp_path / "c2.json")])
+    assert r.exit_code == 0, r.output
+    out = _one_line(_leaderboard(tmp_path, tmp_path / "a.json", tmp_path / "c2.json"))
+    assert "corpus test draws sha256 differs" in out
+
+
+# ------------------------------------------------------------------- 13. hostile checkpoint
+class _Payload:
+    def __reduce__(self):
+        return (os.system, ("touch PWNED_BY_CHECKPOINT",))
+
+
+def test_hostile_checkpoint_is_bad_input_naming_the_file(tmp_path, monkeypatch):
+    import pickle
+
+    from lfmbench.baselines import learned
+    from tests.data.corpus.data import make_corpus
+
+    monkeypatch.chdir(tmp_path)
+    root = make_corpus(tmp_path / "c", n_scenes=1)
+    ck = tmp_path / "evil.pt"
+    ck.write_bytes(pickle.dumps({"format_version": 1, "w": _Payload()}))
+    monkeypatch.setenv(learned.CHECKPOINT_ENV, str(ck))
+    r = CliRunner().invoke(app, ["evaluate", "--method", "learned", "--corpus", str(root), "--split", "all",
+                                 "--repeats", "1", "--warmup", "0", "--no-perceptual", "-o", str(tmp_path / "r.json")])
+    out = _one_line(r)
+    assert "evil.pt" in out and "checkpoint" in out
+    assert not (tmp_path / "PWNED_BY_CHECKPOINT").exists() and not (tmp_path / "r.json").exists()
+
+
+# ------------------------------------------------------------------- 4. set_epoch reaches persistent workers
+def test_set_epoch_reaches_persistent_dataloader_workers(tmp_path):
+    import torch
+    from torch.utils.data import DataLoader
+
+    from lfmbench.datasets import LFMCaptureDataset
+    from lfmbench.datasets.loading import collate_samples
+    from tests.data.corpus.data import make_corpus
+
+    root = make_corpus(tmp_path / "c", n_scenes=1)
+    ds = LFMCaptureDataset(root, split="all", outputs=("gt",), noise=False, cache_dir=False)
+    loader = DataLoader(ds, batch_size=1, num_workers=1, persistent_workers=True, collate_fn=collate_samples)
+    seen = []
+    for epoch in range(3):
+        ds.set_epoch(epoch)
+        (batch,) = list(loader)
+        seen.append((batch["meta"]["epoch"], batch["meta"]["phase_s"][0].tolist()))
+    assert [int(torch.as_tensor(e).reshape(-1)[0]) for e, _ in seen] == [0, 1, 2]
+    assert seen[0][1] != seen[1][1] != seen[2][1]  # new PWM phases every epoch, as in the main process
+    ds.set_epoch(1)
+    assert ds[0]["meta"]["phase_s"].tolist() == seen[1][1]
+
+
+# ------------------------------------------------------------------- 12. arguments checked at the door
+@pytest.mark.parametrize("kw,exc,match", [
+    ({"seed": -1}, ValueError, "seed must be an integer >= 0, got -1"),
+    ({"seed": 1.5}, TypeError, "seed must be an integer, got 1.5"),
+    ({"cache_scenes": -1}, ValueError, "cache_scenes must be an integer >= 0, got -1"),
+    ({"max_lights": 10 ** 9}, ValueError, r"max_lights must be an integer in \[0, 4,096\], got 1000000000"),
+    ({"samples_per_scene": 2.5}, TypeError, "samples_per_scene must be an integer, got 2.5"),
+    ({"samples_per_scene": 0}, ValueError, "samples_per_scene must be an integer >= 1"),
+    ({"noise": "no"}, TypeError, "noise must be True or False"),
+    ({"line_time_s": -1e-5}, ValueError, "line_time_s must be None or a finite number > 0"),
+])
+def test_dataset_arguments_are_checked_at_construction(tmp_path_factory, kw, exc, match):
+    from lfmbench.datasets import LFMCaptureDataset
+    from tests.data.corpus.data import make_corpus
+
+    root = tmp_path_factory.getbasetemp() / "args-corpus"
+    if not (root / "manifest.json").exists():
+        make_corpus(root, n_scenes=1)
+    with pytest.raises(exc, match=match):
+        LFMCaptureDataset(root, split="all", cache_dir=False, **kw)
+
+
+def test_set_epoch_checks_its_argument(tmp_path):
+    from lfmbench.datasets import LFMCaptureDataset
+    from tests.data.corpus.data import make_corpus
+
+    ds = LFMCaptureDataset(make_corpus(tmp_path / "c", n_scenes=1), split="all", cache_dir=False)
+    for bad, exc in ((-5, ValueError), (1.5, TypeError), ("3", TypeError)):
+        with pytest.raises(exc, match="epoch must be an integer"):
+            ds.set_epoch(bad)
+    assert ds.epoch == 0

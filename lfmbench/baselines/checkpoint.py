@@ -12,6 +12,22 @@ from pathlib import Path
 import torch
 
 
+class CheckpointError(ValueError):
+    """A checkpoint file that cannot be used: unreadable, truncated, a pickle of code that ``weights_only``
+    refuses, or another format. Bad input (``lfmbench evaluate`` exits 2 naming the file), not a scene failure."""
+
+
+def read_weights(path: str | os.PathLike, map_location: str | torch.device = "cpu") -> object:
+    """``torch.load(path, weights_only=True)`` (tensors and plain data only: no code from a file runs); any failure
+    is a :class:`CheckpointError` naming ``path``."""
+    try:
+        return torch.load(path, map_location=map_location, weights_only=True)
+    except Exception as exc:  # noqa: BLE001 - truncated file, pickle of code, not a zip, ...
+        why = " ".join(str(exc).split())[:200]
+        raise CheckpointError(f"checkpoint {path}: cannot be read as weights ({type(exc).__name__}: {why})") \
+            from None
+
+
 class CheckpointedModel:
     """The weights of a registered learned method: the file named by environment variable ``env`` (default
     ``default``), loaded by ``load(path) -> torch.nn.Module`` (which raises a clear error naming the training

@@ -30,7 +30,7 @@ from typing import Any
 import torch
 import torch.nn as nn
 
-from lfmbench.baselines.checkpoint import checkpointed_method
+from lfmbench.baselines.checkpoint import CheckpointError, checkpointed_method, read_weights
 from lfmbench.baselines.classic import _captures, saturated_fusion
 from lfmbench.baselines.trainable import Trainable, TrainConfig, read_sections, read_yaml_config
 from lfmbench.fileio import atomic_torch_save
@@ -138,11 +138,16 @@ def load_checkpoint(path: str | Path, map_location: str | torch.device = "cpu") 
         raise CheckpointNotFoundError(
             f"no learned-fusion checkpoint at {path}; train one with `lfmbench train --method learned "
             f"--corpus DIR --out {path}` (or set ${CHECKPOINT_ENV})")
-    ck = torch.load(path, map_location=map_location, weights_only=True)
+    ck = read_weights(path, map_location)
     if not isinstance(ck, dict) or ck.get("format_version") != FORMAT_VERSION:
-        raise ValueError(f"checkpoint {path} is not a lfmbench learned-fusion checkpoint of format {FORMAT_VERSION}")
-    model = LearnedFusion(int(ck["width"]))
-    model.load_state_dict(ck["state_dict"])
+        raise CheckpointError(f"checkpoint {path} is not a lfmbench learned-fusion checkpoint of format "
+                              f"{FORMAT_VERSION}")
+    try:
+        model = LearnedFusion(int(ck["width"]))
+        model.load_state_dict(ck["state_dict"])
+    except (KeyError, RuntimeError, TypeError, ValueError) as exc:
+        why = " ".join(str(exc).split())[:200]
+        raise CheckpointError(f"checkpoint {path}: weights do not fit the learned-fusion network ({why})") from None
     return model.eval()
 
 

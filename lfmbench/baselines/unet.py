@@ -39,7 +39,7 @@ import torch.nn as nn
 import torch.nn.functional as F
 
 from lfmbench.limits import brief
-from lfmbench.baselines.checkpoint import checkpointed_method
+from lfmbench.baselines.checkpoint import CheckpointError, checkpointed_method, read_weights
 from lfmbench.baselines.classic import _captures, exposures_s, saturated_fusion
 from lfmbench.baselines.trainable import (ConfigError, Trainable, TrainConfig, count_parameters, read_sections,
                                           read_yaml_config)
@@ -274,12 +274,9 @@ def read_checkpoint(path: str | os.PathLike, map_location: str | torch.device = 
         raise CheckpointNotFoundError(
             f"no U-Net checkpoint at {path}; train one with `lfmbench train --method unet --corpus DIR --out {path}` "
             f"(or set ${CHECKPOINT_ENV})")
-    try:
-        ck = torch.load(path, map_location=map_location, weights_only=True)
-    except Exception as exc:  # noqa: BLE001 - truncated file, pickle of code, ...
-        raise ValueError(f"checkpoint {path}: cannot be read ({type(exc).__name__}: {exc})") from None
+    ck = read_weights(path, map_location)
     if not isinstance(ck, dict) or ck.get("format") != CHECKPOINT_FORMAT or ck.get("format_version") != FORMAT_VERSION:
-        raise ValueError(f"checkpoint {path} is not a {CHECKPOINT_FORMAT} checkpoint of format {FORMAT_VERSION}")
+        raise CheckpointError(f"checkpoint {path} is not a {CHECKPOINT_FORMAT} checkpoint of format {FORMAT_VERSION}")
     return ck
 
 
@@ -289,8 +286,9 @@ def load_checkpoint(path: str | os.PathLike, map_location: str | torch.device = 
     try:
         model = UNetFusion(config_from_dict({"model": ck["model_config"]}, f"checkpoint {path}").model)
         model.load_state_dict(ck["state_dict"])
-    except (KeyError, RuntimeError) as exc:
-        raise ValueError(f"checkpoint {path}: weights do not match its model config ({exc})") from None
+    except (KeyError, RuntimeError, TypeError, ValueError) as exc:
+        why = " ".join(str(exc).split())[:200]
+        raise CheckpointError(f"checkpoint {path}: weights do not match its model config ({why})") from None
     return model.eval()
 
 

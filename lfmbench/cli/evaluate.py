@@ -65,6 +65,7 @@ def register(app) -> None:
         from torch.utils.data import DataLoader
 
         from lfmbench.baselines import MethodNotFoundError, get_method
+        from lfmbench.baselines.checkpoint import CheckpointError
         from lfmbench.metrics import ScoreOptions
 
         try:
@@ -90,6 +91,8 @@ def register(app) -> None:
             raise typer.Exit(130) from None
         except (DataSourceError, EmptyDataError) as exc:
             fail(f"{exc} (partial results in {out})", 1)
+        except CheckpointError as exc:  # a hostile or broken weights file: bad input, named
+            fail(f"{exc}; nothing was scored")
         except OSError as exc:  # the result file could not be written (disk full, ...)
             fail(f"{exc.filename}: {exc.strerror or exc}" if exc.filename else (exc.strerror or str(exc)))
         agg = res["aggregate"]

@@ -256,29 +256,40 @@ _EXR_TYPE_BYTES = {0: 4, 1: 2, 2: 4}
 
 
 class _Reader:
-    """Bounded sequential reads of an EXR header (never more than the ``exr_header_bytes`` limit)."""
+    """Bounded sequential reads of an EXR header, buffered in 64 KiB blocks (never more than the
+    ``exr_header_bytes`` limit in all)."""
 
     def __init__(self, fh, path: Path):
-        self.fh, self.path, self.n, self.cap = fh, path, 0, limit("exr_header_bytes")
+        self.fh, self.path, self.cap = fh, path, limit("exr_header_bytes")
+        self.buf, self.pos, self.n = b"", 0, 0  # buffer, position in it, bytes read from the file
+
+    def _fill(self, need: int) -> None:
+        while len(self.buf) - self.pos < need:
+            if self.n >= self.cap:
+                raise LimitError(str(self.path), "EXR header of more bytes", None, "exr_header_bytes")
+            more = self.fh.read(min(max(need, 1 << 16), self.cap - self.n))
+            if not more:
+                raise CorpusFileError(f"EXR file {self.path} is truncated or corrupt: header ends early")
+            self.n += len(more)
+            self.buf = self.buf[self.pos:] + more
+            self.pos = 0
 
     def read(self, k: int) -> bytes:
-        if self.n + k > self.cap:
-            raise LimitError(str(self.path), "EXR header of more bytes", None, "exr_header_bytes")
-        b = self.fh.read(k)
-        self.n += len(b)
-        if len(b) != k:
-            raise CorpusFileError(f"EXR file {self.path} is truncated or corrupt: header ends early")
+        self._fill(k)
+        b = self.buf[self.pos:self.pos + k]
+        self.pos += k
         return b
 
     def cstr(self) -> bytes:
-        out = bytearray()
         while True:
-            c = self.read(1)
-            if c == b"\0":
-                return bytes(out)
-            out += c
-            if len(out) > 255:
+            j = self.buf.find(b"\0", self.pos, self.pos + 257)
+            if j >= 0:
+                s = self.buf[self.pos:j]
+                self.pos = j + 1
+                return s
+            if len(self.buf) - self.pos > 256:
                 raise CorpusFileError(f"EXR file {self.path} is corrupt: a header name longer than 255 bytes")
+            self._fill(len(self.buf) - self.pos + 1)
 
 
 def check_exr_header(path: str | os.PathLike) -> dict:
@@ -343,7 +354,9 @@ def check_exr_header(path: str | os.PathLike) -> dict:
                 if parts > max_parts:
                     raise LimitError(str(path), f"EXR file with more than {max_parts:,} parts", None, "exr_parts")
                 for key in ("displayWindow", "dataWindow"):
-                    x0, y0, x1, y1 = windows.get(key, (0, 0, 0, 0))
+                    if key not in windows:
+                        raise CorpusFileError(f"cannot read EXR file {path}: part {parts - 1} has no {key}")
+                    x0, y0, x1, y1 = windows[key]
                     w, h = x1 - x0 + 1, y1 - y0 + 1
                     if w < 1 or h < 1:
                         raise CorpusFileError(f"EXR file {path} part {parts - 1}: {key} {windows.get(key)} is empty "

@@ -285,19 +285,36 @@ def manifest_entry_errors(man: Mapping[str, Any], path: Path | str) -> list[str]
     return out
 
 
-def inside_root(root: Path, rel: str, what: str) -> Path:
+def inside_root(root: Path, rel: str, what: str, dirs: dict[str, Path] | None = None) -> Path:
     """``root / rel`` resolved (symbolic links followed); ``CorpusFileError`` naming ``what`` and ``rel`` when it
-    leaves the resolved corpus root."""
-    base = Path(root).resolve()
-    p = (base / rel).resolve()
+    leaves the resolved corpus root. ``dirs``: a cache of resolved directories (relative path -> resolved path)
+    shared by the calls of one pass over a corpus, so that each directory is resolved once and each file costs
+    one ``lstat`` (a pass over a corpus stays linear in its files)."""
+    if dirs is None:
+        dirs = {}
+    base = dirs.get("")
+    if base is None:
+        base = dirs[""] = Path(root).resolve()
+    parent, _, name = rel.rpartition("/")
+    pd = dirs.get(parent)
+    if pd is None:
+        pd = (base / parent).resolve() if parent else base
+        if pd != base and base not in pd.parents:
+            raise CorpusFileError(f"{what}: entry {brief(rel)} resolves to {pd / name}, outside the corpus root "
+                                  f"{base}")
+        dirs[parent] = pd
+    p = pd / name
+    if p.is_symlink() or name in ("", ".", ".."):
+        p = p.resolve()
     if p != base and base not in p.parents:
         raise CorpusFileError(f"{what}: entry {brief(rel)} resolves to {p}, outside the corpus root {base}")
     return p
 
 
-def check_splits(sp: Any, path: Path | str) -> dict[str, list[str]]:
+def check_splits(sp: Any, path: Path | str, *, disjoint: bool = True) -> dict[str, list[str]]:
     """``splits.json`` content checked: an object whose ``train``/``val``/``test`` are lists of scene ids
-    (:func:`check_scene_id`); ``CorpusFileError`` naming ``path`` and the entry otherwise."""
+    (:func:`check_scene_id`), each id in one split once (``disjoint``; :func:`validate_corpus` reports that
+    itself, with the other problems); ``CorpusFileError`` naming ``path`` and the entry otherwise."""
     if not isinstance(sp, dict):
         raise CorpusFileError(f"{path}: must be a JSON object {{\"train\": [...], \"val\": [...], \"test\": "
                               f"[...]}}, got a {type(sp).__name__}")
@@ -309,11 +326,11 @@ def check_splits(sp: Any, path: Path | str) -> dict[str, list[str]]:
             why = _scene_id_error(sid)
             if why is not None:
                 raise CorpusFileError(f"{path}: split {brief(k)} entry {brief(sid)} refused: {why}")
-            first = where.get(sid)
+            first = where.get(sid) if disjoint else None
             if first == k:
                 raise CorpusFileError(f"{path}: scene {brief(sid)} is listed twice in split {brief(k)}")
             if first is not None:
-                raise CorpusFileError(f"{path}: scene {brief(sid)} is in split {brief(first)} and in split "
-                                      f"{brief(k)} (a scene scored in the split it was trained on)")
+                raise CorpusFileError(f"{path}: a scene appears in more than one split: {brief(sid)} is in split "
+                                      f"{brief(first)} and in split {brief(k)} (scored where it was trained)")
             where[sid] = k
     return sp

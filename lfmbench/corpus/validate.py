@@ -80,9 +80,10 @@ def validate_corpus(root: str | os.PathLike, *, check_pixels: bool = True,
                              if _file_entry_error(rel, d, scene_set) is None}
     rep.n_files = len(man["files"])
     # checksums and presence of every listed file (only entries that stay inside the root)
+    dirs: dict[str, Path] = {}  # resolved directories, shared by every inside_root call of this pass
     for rel, digest in files.items():
         try:
-            p = inside_root(root, rel, str(mpath))
+            p = inside_root(root, rel, str(mpath), dirs)
         except CorpusFileError as exc:
             err(str(exc))
             continue
@@ -97,12 +98,15 @@ def validate_corpus(root: str | os.PathLike, *, check_pixels: bool = True,
         err(f"{spath}: missing")
     else:
         try:
-            sp = check_splits(_load_json(spath, "splits file"), spath)
+            sp = check_splits(_load_json(spath, "splits file"), spath, disjoint=False)
             ids = [s for k in ("train", "val", "test") for s in sp.get(k, [])]
             if set(sp) != {"train", "val", "test"}:
                 err(f"{spath}: keys must be train, val, test; got {sorted(sp)}")
             if len(ids) != len(set(ids)):
-                err(f"{spath}: a scene appears in more than one split")
+                try:
+                    check_splits(sp, spath)  # names the first scene listed twice, and its splits
+                except CorpusError as exc:
+                    err(str(exc))
             unknown = sorted(set(ids) - scene_set)
             if unknown:
                 err(f"{spath}: scenes not in the manifest: {unknown[:5]}")
@@ -126,7 +130,7 @@ def validate_corpus(root: str | os.PathLike, *, check_pixels: bool = True,
                 rep.warnings.append(f"{d}: incomplete scene (not in manifest; re-run the render to finish it)")
     for i, sid in enumerate(sorted(scenes)):
         try:
-            inside_root(root, f"{SCENES_DIR}/{sid}", str(mpath))
+            inside_root(root, f"{SCENES_DIR}/{sid}", str(mpath), dirs)
         except CorpusFileError as exc:
             err(str(exc))
             continue

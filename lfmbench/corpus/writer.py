@@ -52,14 +52,32 @@ def _pid_alive(pid: int) -> bool:
     return True
 
 
+#: Locks this process holds: resolved lock path -> [fd, number of CorpusLock objects sharing it]. The lock is
+#: one writer *process* per corpus; writers of one process (a library user, a test) share it.
+_HELD: dict[str, list] = {}
+_HELD_LOCK = threading.Lock()
+
+
 class CorpusLock:
     """The one-writer lock of a corpus root (:data:`LOCK_NAME`): ``flock`` on the lock file, held until
     :meth:`release` or process exit. Where the file system has no ``flock`` (some network mounts), the pid and
-    host in the file decide: a holder on this host whose pid is gone is stale and taken over."""
+    host in the file decide: a holder on this host whose pid is gone is stale and taken over. Writers in one
+    process share the lock (it keeps other processes out)."""
 
     def __init__(self, root: str | os.PathLike) -> None:
         self.path = Path(root) / LOCK_NAME
         self.fd: int | None = None
+        self._key = str(self.path.resolve())
+        with _HELD_LOCK:
+            held = _HELD.get(self._key)
+            if held is not None:
+                held[1] += 1
+                self.fd = held[0]
+                return
+            self._acquire()
+            _HELD[self._key] = [self.fd, 1]
+
+    def _acquire(self) -> None:
         fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
         try:
             import fcntl  # noqa: PLC0415 - POSIX only
@@ -96,8 +114,16 @@ class CorpusLock:
 
     def release(self) -> None:
         """Release the lock (the file stays; the next writer takes it over)."""
-        if self.fd is not None:
+        if self.fd is None:
+            return
+        with _HELD_LOCK:
             fd, self.fd = self.fd, None
+            held = _HELD.get(self._key)
+            if held is not None and held[0] == fd:
+                held[1] -= 1
+                if held[1] > 0:
+                    return
+                del _HELD[self._key]
             with contextlib.suppress(OSError):
                 os.ftruncate(fd, 0)
             os.close(fd)

@@ -10,6 +10,10 @@ holds it (:class:`SceneView`: layers, lights, static rates, light index, meta) t
 """
 from __future__ import annotations
 
+import hashlib
+import json
+import math
+
 import os
 from collections import OrderedDict
 from pathlib import Path
@@ -19,7 +23,7 @@ import numpy as np
 import torch
 from torch.utils.data import Dataset
 
-from lfmbench.limits import brief
+from lfmbench.limits import brief, limit
 from lfmbench import sensor as _sensor
 from lfmbench.corpus import Corpus
 from lfmbench.datasets.assembly import (NOISE_STREAMS, SENSOR_OUTPUTS, assemble_sample, check_line_time, compose_frame,
@@ -113,6 +117,16 @@ def _warm_cpu_kernels(noise: bool, preset) -> None:
 # ----------------------------------------------------------------------------------------------------------
 # dataset
 # ----------------------------------------------------------------------------------------------------------
+def _int_arg(name: str, v: Any, lo: int, hi: int | None = None) -> int:
+    """An integer argument (not a bool, not 2.5) within ``[lo, hi]``: ``TypeError`` / ``ValueError`` naming it."""
+    if isinstance(v, bool) or not isinstance(v, (int, np.integer)):
+        raise TypeError(f"{name} must be an integer, got {brief(v)}")
+    if v < lo or (hi is not None and v > hi):
+        rng = f">= {lo}" if hi is None else f"in [{lo}, {hi:,}]"
+        raise ValueError(f"{name} must be an integer {rng}, got {brief(v)}")
+    return int(v)
+
+
 class LFMCaptureDataset(Dataset):
     r"""Split-pixel HDR captures of an lfmbench corpus with random LED PWM, and flicker-free ground truth.
 
@@ -198,8 +212,17 @@ class LFMCaptureDataset(Dataset):
                                         or frame_start < 0):
             raise ValueError(f"frame_start must be an integer >= 0 or 'random', got {brief(frame_start)}")
         self.frame_start = frame_start
-        if samples_per_scene < 1:
-            raise ValueError(f"samples_per_scene must be >= 1, got {brief(samples_per_scene)}")
+        _int_arg("samples_per_scene", samples_per_scene, 1)
+        _int_arg("seed", seed, 0)
+        _int_arg("cache_scenes", cache_scenes, 0)
+        for name, v in (("noise", noise), ("optics", optics), ("pieces", pieces)):
+            if not isinstance(v, (bool, np.bool_)):
+                raise TypeError(f"{name} must be True or False, got {brief(v)}")
+        if line_time_s is not None and (isinstance(line_time_s, bool) or not isinstance(line_time_s, (int, float))
+                                        or not math.isfinite(line_time_s) or line_time_s <= 0):
+            raise ValueError(f"line_time_s must be None or a finite number > 0 (s), got {brief(line_time_s)}")
+        if max_lights is not None:
+            _int_arg("max_lights", max_lights, 0, limit("lights_per_scene"))
         self.split, self.shutter, self.seed = split, shutter, int(seed)
         self.frames, self.outputs = frames, tuple(outputs)
         if isinstance(groups, str):
@@ -260,7 +283,9 @@ class LFMCaptureDataset(Dataset):
         self._cache_scenes = int(cache_scenes)
         self._derived: dict[str, tuple[SceneLayers, dict]] = {}
         self._fpn: dict | None = None
-        self.epoch = 0
+        # the epoch lives in shared memory: DataLoader workers (also persistent ones, which keep their copy of the
+        # dataset across epochs) read the value set_epoch writes in the main process
+        self._epoch = torch.zeros((), dtype=torch.int64).share_memory_()
         self._frozen = self._load_or_freeze_test_params() if split == "test" else None
         _warm_cpu_kernels(self.noise, self.preset)
 
@@ -275,8 +300,15 @@ class LFMCaptureDataset(Dataset):
         return [s for s in splits[self.split] if s in complete]
 
     def set_epoch(self, epoch: int) -> None:
-        """Select the epoch whose draws ``__getitem__`` makes (call before iterating, like DistributedSampler)."""
-        self.epoch = int(epoch)
+        """Select the epoch whose draws ``__getitem__`` makes (call before iterating, like DistributedSampler).
+
+        The value is kept in shared memory, so DataLoader workers see it, also with ``persistent_workers=True``."""
+        self._epoch.fill_(_int_arg("epoch", epoch, 0))
+
+    @property
+    def epoch(self) -> int:
+        """The epoch set by :meth:`set_epoch` (0 at first)."""
+        return int(self._epoch)
 
     def __len__(self) -> int:
         return len(self.scene_ids) * self.samples_per_scene
@@ -328,6 +360,24 @@ class LFMCaptureDataset(Dataset):
         if added:
             atomic_write_json(path, data)
         return samples
+
+    def draws_fingerprint(self) -> str | None:
+        """What a test result's draws were: SHA-256 of the canonical JSON of the frozen entries
+        (``test_params.json``) of exactly the samples this dataset serves (its scenes x ``samples_per_scene``;
+        PWM per light and group, noise seed, and the window start when ``frame_start="random"``). Results made
+        with identical draws keep the same fingerprint when the file gains entries for other scenes or samples.
+        None outside the test split."""
+        if self._frozen is None:
+            return None
+        used = {}
+        for sid in self.scene_ids:
+            for s in range(self.samples_per_scene):
+                e = self._frozen[f"{sid}/{s}"]
+                rec = {k: e.get(k) for k in ("lights", "groups", "noise_seed")}
+                if self.frame_start == "random":
+                    rec["frame_u"] = e.get("frame_u")
+                used[f"{sid}/{s}"] = rec
+        return hashlib.sha256(json.dumps(used, sort_keys=True).encode("utf-8")).hexdigest()
 
     def _layers(self, sid: str) -> SceneLayers:
         if sid in self._cache:

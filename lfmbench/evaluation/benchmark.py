@@ -22,7 +22,10 @@ def corpus_run_inputs(corpus: str | Path, split: str, seed: int, crop: int | Non
     from lfmbench.evaluation.provenance import corpus_identity
 
     ds = make_dataset(corpus, split, seed=seed, crop=crop, samples_per_scene=samples_per_scene, **dataset_kw)
-    return ds, corpus_identity(corpus, list(ds.scene_ids)), corpus_scene_conditions(ds.corpus)
+    ident = corpus_identity(corpus, list(ds.scene_ids))
+    fp = getattr(ds, "draws_fingerprint", None)
+    ident["test_draws_sha256"] = fp() if callable(fp) else None  # the draws used, not the whole file
+    return ds, ident, corpus_scene_conditions(ds.corpus)
 
 
 def write_leaderboard(rows: list[dict], runs: list[dict], sort_by: str | None, markdown: str | Path,

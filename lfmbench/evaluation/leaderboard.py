@@ -62,11 +62,56 @@ def load_runs(paths: Iterable[str | Path], skipped: list[str] | None = None) -> 
                                  " (a truncated or hand-made result?)")
         if not isinstance(d["method"].get("spec"), str):
             raise ValueError(f"run file {p}: field 'method.spec' missing")
+        _check_numbers(d, p)
         d["_path"] = str(p)
         runs.append(d)
     if not runs:
         raise ValueError("no run files given")
     return runs
+
+
+def _check_numbers(d: dict, p: Path) -> None:
+    """Every number the leaderboard ranks or averages must be finite and within its metric's documented range
+    (:meth:`lfmbench.metrics.MetricSpec.value_error`); ``ValueError`` naming the file and the field otherwise
+    (a score of ``1e308`` or ``-3`` is not a result, whatever produced it)."""
+    from lfmbench.metrics import REGISTRY
+
+    def check(v: Any, field: str) -> None:
+        spec = REGISTRY.get(field.rsplit(".", 1)[-1])
+        why = spec.value_error(v) if spec is not None else None
+        if why is not None:
+            raise ValueError(f"run file {p}: field {field} = {brief(v)} {why}")
+
+    def weight(v: Any, field: str) -> None:
+        if v is None or v == "nan":
+            return
+        ok = isinstance(v, (int, float)) and not isinstance(v, bool)
+        try:
+            ok = ok and math.isfinite(float(v)) and float(v) >= 0
+        except OverflowError:
+            ok = False
+        if not ok:
+            raise ValueError(f"run file {p}: field {field} = {brief(v)} must be a finite number >= 0")
+
+    recs = d.get("scenes", [])
+    if not isinstance(recs, list):
+        raise ValueError(f"run file {p}: field 'scenes' must be a list of sample records")
+    weights = {s.weight for s in REGISTRY.values() if s.weight}
+    for i, rec in enumerate(recs):
+        if not isinstance(rec, dict):
+            raise ValueError(f"run file {p}: field scenes[{i}] must be an object")
+        m = rec.get("metrics")
+        if m is None:
+            continue
+        if not isinstance(m, dict):
+            raise ValueError(f"run file {p}: field scenes[{i}].metrics must be an object")
+        for k, v in m.items():
+            (weight if k in weights else check)(v, f"scenes[{i}].metrics.{k}")
+        weight(rec.get("call_ms"), f"scenes[{i}].call_ms")
+    for k, v in d["aggregate"].items():
+        if k in REGISTRY:
+            check(v, f"aggregate.{k}")
+    weight(d["runtime"].get("ms_per_megapixel"), "runtime.ms_per_megapixel")
 
 
 def incomplete_runs(runs: list[dict]) -> list[str]:
@@ -87,12 +132,21 @@ def identity(run: dict) -> dict[str, Any]:
         "corpus scenes sha256": (f"scenes {c['scenes_sha256']}" if c.get("scenes_sha256")
                                  else f"manifest {c['manifest_sha256']}" if c.get("manifest_sha256") else None),
         "corpus format version": c.get("format_version"),
-        "corpus test draws (test_params.json) sha256": c.get("test_params_sha256") if split == "test" else None,
+        "corpus test draws sha256": _draws(c) if split == "test" else None,
         "metric versions": (run.get("versions") or {}).get("metrics"),
         "split": split, "dataset seed": (run.get("seeds") or {}).get("dataset"), "crop": d.get("crop"),
         "samples per scene": d.get("samples_per_scene", 1), "frames per sample": d.get("frames", 3),
         "scoring options": {k: v for k, v in (run.get("options") or {}).items() if k != "perceptual"},
     }
+
+
+def _draws(c: dict) -> str | None:
+    """The test draws a result used: the fingerprint of the scored samples' frozen entries (results since issue
+    27: unchanged when ``test_params.json`` gains entries for other scenes or samples), else the SHA-256 of the
+    whole file (older results)."""
+    if c.get("test_draws_sha256"):
+        return f"draws {c['test_draws_sha256']}"
+    return f"test_params.json {c['test_params_sha256']}" if c.get("test_params_sha256") else None
 
 
 def _show(field: str, v: Any, run: dict) -> str:

@@ -20,6 +20,7 @@ from typing import Any
 
 import torch
 
+from lfmbench.baselines.checkpoint import CheckpointError
 from lfmbench.datasets.loading import EmptyDataError
 from lfmbench.evaluation import stats
 from lfmbench.evaluation.conditions import load_bins, sample_conditions
@@ -231,6 +232,8 @@ def _run_batches(fn, source, result: dict, output, dev, opts, warmup: int, repea
             sync(dev)
             call_ms = (time.perf_counter() - t0) * 1e3
             pred = check_output(pred, gt)
+        except CheckpointError:  # the method's weights file is bad input, not a scene failure: stop here
+            raise
         except (Exception, SystemExit) as exc:  # the method's failure is a result, not a crash
             status = "bad_output" if isinstance(exc, MethodOutputError) else "error"
             for i, sid in enumerate(ids):

@@ -51,6 +51,9 @@ class MetricSpec:
         needs: batch keys ``fn`` needs (the metric is skipped when one is missing).
         digits: decimals shown in tables.
         show: ``console`` (terminal table and Markdown), ``table`` (Markdown only), ``none`` (result file only).
+        valid: the documented range ``(lo, hi)`` of a value, in ``unit``; the leaderboard refuses a result file
+            holding a value outside it (or a non-finite one), naming the file and the field.
+        inf_ok: ``+inf`` is a valid value too (a PSNR of identical images).
     """
 
     name: str
@@ -68,6 +71,35 @@ class MetricSpec:
     needs: tuple[str, ...] = ()
     digits: int = 3
     show: str = "table"
+    valid: tuple[float, float] = (-math.inf, math.inf)
+    inf_ok: bool = False
+
+    def value_error(self, v: Any) -> str | None:
+        """Why ``v`` (a value read from a result file: a number, ``None`` or the strings ``"nan"``, ``"inf"``
+        that :func:`lfmbench.evaluation.results.jsonable` writes) is not a valid value of this metric, or None.
+        Missing values (``None``, NaN) are valid: a sample without LED regions has no LED score."""
+        if v is None or (isinstance(v, str) and v == "nan"):
+            return None
+        if isinstance(v, str) and v in ("inf", "-inf"):
+            x = math.inf if v == "inf" else -math.inf
+        elif isinstance(v, bool) or not isinstance(v, (int, float)):
+            return "is not a number"
+        else:
+            try:
+                x = float(v)
+            except OverflowError:
+                return "is not a finite number"
+        if math.isnan(x):
+            return None
+        if x == math.inf and self.inf_ok:
+            return None
+        lo, hi = self.valid
+        if not math.isfinite(x):
+            return "is not a finite number"
+        slack = 1e-6 * (1.0 + abs(x))  # float32 rounding of a value at a bound (an FMI of 1.0000001)
+        if not lo - slack <= x <= hi + slack:
+            return f"is outside the range of {self.name}, [{lo:g}, {hi:g}] {self.unit}"
+        return None
 
     @property
     def direction(self) -> str:
@@ -145,42 +177,42 @@ REGISTRY: dict[str, MetricSpec] = {s.name: s for s in [
     MetricSpec("led_score", "1.0", _DS80 + " of 1 - dropout (ISET-LFM Fig. 5), 1 - |dFMI| (IEEE P2020) and "
                "1 - LED brightness error", "1", True, "led", "LED score",
                derive=lambda v: led_score(v["dropout_rate"], v["fmi_abs_err"], v["led_rel_err"]),
-               inputs=("dropout_rate", "fmi_abs_err", "led_rel_err"), show="console"),
+               inputs=("dropout_rate", "fmi_abs_err", "led_rel_err"), show="console", valid=(0.0, 1.0)),
     MetricSpec("dropout_rate", "1.0", "ISET-LFM Fig. 5: region-frames with output < 0.5 GT", "1", False, "flicker",
-               "dropout", aggregate="pooled", weight="region_frames", show="console"),
+               "dropout", aggregate="pooled", weight="region_frames", show="console", valid=(0.0, 1.0)),
     MetricSpec("fmi_abs_err", "1.0", "|FMI(output) - FMI(GT)| per light", "1", False, "flicker", "abs dFMI",
-               show="console"),
+               show="console", valid=(0.0, math.inf)),
     MetricSpec("led_rel_err", "1.0", "min(1, |p - g| / g) of LED ROI means, mean over region-frames", "1", False,
-               "flicker", "LED err", aggregate="pooled", weight="region_frames", show="console"),
+               "flicker", "LED err", aggregate="pooled", weight="region_frames", show="console", valid=(0.0, 1.0)),
     MetricSpec("psnr_mu_led", "1.0", _KR17 + " over the LED region pixels", "dB", True, "led", "PSNR-mu LED",
-               fn=_psnr_mu_led, needs=("light_index",), digits=2),
+               fn=_psnr_mu_led, needs=("light_index",), digits=2, valid=(0.0, 1000.0), inf_ok=True),
     MetricSpec("psnr_mu", "1.0", _KR17 + " (mu = 5000)", "dB", True, "hdr", "PSNR-mu dB",
-               fn=lambda p, b, o: hdr.psnr_mu(p, b["gt"]), digits=2, show="console"),
+               fn=lambda p, b, o: hdr.psnr_mu(p, b["gt"]), digits=2, show="console", valid=(0.0, 1000.0), inf_ok=True),
     MetricSpec("psnr_l", "1.0", _KR17 + " (normalised by GT peak)", "dB", True, "hdr", "PSNR-L dB",
-               fn=lambda p, b, o: hdr.psnr_l(p, b["gt"]), digits=2),
+               fn=lambda p, b, o: hdr.psnr_l(p, b["gt"]), digits=2, valid=(0.0, 1000.0), inf_ok=True),
     MetricSpec("ssim_mu", "1.0", "Wang et al. IEEE TIP 2004 via kornia.metrics.ssim, on mu-law images", "1", True,
-               "hdr", "SSIM-mu", fn=lambda p, b, o: hdr.ssim_mu(p, b["gt"])),
+               "hdr", "SSIM-mu", fn=lambda p, b, o: hdr.ssim_mu(p, b["gt"]), valid=(-1.0, 1.0)),
     MetricSpec("pu21_psnr", "1.0", "Mantiuk & Azimi PCS 2021 via pycvvdp.pu_psnr_y", "dB", True, "perceptual",
-               "PU21 dB", digits=2),
+               "PU21 dB", digits=2, valid=(-1000.0, 1000.0), inf_ok=True),
     MetricSpec("cvvdp_jod", "1.0", "Mantiuk et al. ACM TOG 2024 (ColorVideoVDP) via pycvvdp", "JOD", True,
-               "perceptual", "JOD", show="console"),
-    MetricSpec("mmp_pred", "1.0", _P2020 + " (MMP, delta 0.1)", "1", True, "flicker", "MMP"),
+               "perceptual", "JOD", show="console", valid=(-1000.0, 10.0)),
+    MetricSpec("mmp_pred", "1.0", _P2020 + " (MMP, delta 0.1)", "1", True, "flicker", "MMP", valid=(0.0, 1.0)),
     MetricSpec("fdi_pred", "1.0", _P2020 + " (FDI, threshold 0.1, OFF level from a ring)", "1", True, "flicker",
-               "FDI"),
+               "FDI", valid=(0.0, 1.0)),
     MetricSpec("series_rel_rmse", "1.0", "relative RMS error of the ROI series vs GT", "1", False, "flicker",
-               "series err"),
+               "series err", valid=(0.0, math.inf)),
     MetricSpec("psnr_mu_outside", "1.0", _KR17 + " outside dilated LED regions", "dB", True, "region",
-               "PSNR-mu out", digits=2),
+               "PSNR-mu out", digits=2, valid=(0.0, 1000.0), inf_ok=True),
     MetricSpec("ghost_mae_mu", "1.0", "ISET-LFM Fig. 6: mean |mu-law error| in a band around LEDs", "1", False,
-               "region", "ghost", show="console"),
+               "region", "ghost", show="console", valid=(0.0, 1.0)),
     MetricSpec("comet_excess_mu", "1.0", "ISET-LFM Fig. 6: mean positive mu-law error around LEDs", "1", False,
-               "region", "comet", show="none"),
-    MetricSpec("fmi_pred", "1.0", _P2020 + " (FMI)", "1", False, "flicker", "FMI", show="none"),
-    MetricSpec("fmi_gt", "1.0", _P2020 + " (FMI of the GT)", "1", False, "flicker", "FMI GT", show="none"),
-    MetricSpec("mmp_gt", "1.0", _P2020 + " (MMP of the GT)", "1", True, "flicker", "MMP GT", show="none"),
-    MetricSpec("fdi_gt", "1.0", _P2020 + " (FDI of the GT)", "1", True, "flicker", "FDI GT", show="none"),
+               "region", "comet", show="none", valid=(0.0, 1.0)),
+    MetricSpec("fmi_pred", "1.0", _P2020 + " (FMI)", "1", False, "flicker", "FMI", show="none", valid=(-math.inf, math.inf)),
+    MetricSpec("fmi_gt", "1.0", _P2020 + " (FMI of the GT)", "1", False, "flicker", "FMI GT", show="none", valid=(0.0, 1.0)),
+    MetricSpec("mmp_gt", "1.0", _P2020 + " (MMP of the GT)", "1", True, "flicker", "MMP GT", show="none", valid=(0.0, 1.0)),
+    MetricSpec("fdi_gt", "1.0", _P2020 + " (FDI of the GT)", "1", True, "flicker", "FDI GT", show="none", valid=(0.0, 1.0)),
     MetricSpec("fsi_input", "1.0", "ISET-LFM eq. 2 via lfmbench.flicker.flicker_severity, LPD input", "1", False,
-               "flicker", "FSI in", show="none"),
+               "flicker", "FSI in", show="none", valid=(-math.inf, math.inf)),
 ]}
 
 #: Groups whose block also produces the ``region`` group's metrics (one pass over the LED regions).
