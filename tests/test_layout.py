@@ -18,8 +18,9 @@ PACKAGES = ("lfmbench", "render_tools")
 #: Each entry is a module or a package prefix (``lfmbench.sensor`` covers ``lfmbench.sensor.noise``), except the
 #: top-level ``lfmbench``, which names only its ``__init__``: a new module must be placed here.
 LAYERS = (
+    ("lfmbench.limits",),  # the input limits every reader checks (check and fileio quote and bound with it)
     ("lfmbench", "lfmbench.constants", "lfmbench.check", "lfmbench.fileio", "lfmbench.vocabulary",
-     "lfmbench.limits", "lfmbench.counter_rng"),
+     "lfmbench.counter_rng"),
     ("lfmbench.flicker",),
     ("lfmbench.corpus",),
     ("render_tools", "lfmbench.sensor"),
