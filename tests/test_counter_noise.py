@@ -112,7 +112,10 @@ def test_cuda_sensor_chain_with_seeds_matches_the_cpu_chain():
     gpu = simulate_split_pixel_electrons(le.cuda(), le.cuda() * 0.03, preset, 4e-3, 11e-3,
                                          fpn={k: v.cuda() for k, v in fpn.items()}, seeds=seeds.cuda())
     for k in cpu:
-        assert (gpu[k].cpu() != cpu[k]).double().mean() <= 1e-3, k   # a rare flip of a draw or of a DN rounding
+        g, c = gpu[k].cpu(), cpu[k]
+        if k.endswith("_e"):  # DN -> e- in float32: the GPU may round a division or a fused multiply-add otherwise
+            assert torch.allclose(g, c, rtol=1e-5, atol=1e-5 * float(c.abs().max())), k
+        assert (g.round() != c.round() if k.endswith("_e") else g != c).double().mean() <= 1e-3, k  # rare flips
 
 
 @pytest.mark.parametrize("dtype", [torch.float32, torch.float64])

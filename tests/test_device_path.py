@@ -91,7 +91,13 @@ def test_cuda_device_batches_match_the_cpu(corpus):
     gpu = next(iter(DeviceBatches(_ds(corpus), batch_size=9, device="cuda", seed=1)))
     for k in ("lpd_hcg", "spd_e", "gt", "light_index", "depth"):
         assert gpu[k].device.type == "cuda"
-        assert (gpu[k].cpu() != cpu[k]).double().mean() <= 2e-3, k
+        g, c = gpu[k].cpu(), cpu[k]
+        if g.is_floating_point() and k != "lpd_hcg":
+            # float32 sums in another order (index_add_ with atomics) and another rounding of divisions on the GPU
+            close = torch.isclose(g, c, rtol=1e-5, atol=1e-5 * float(c.abs().max()), equal_nan=True)
+            assert close.double().mean() >= 0.999, (k, float(close.double().mean()))
+        else:  # DN and indices: a composed mean that moved in its last bit can move a noise draw or a rounding
+            assert (g != c).double().mean() <= 2e-3, k
 
 
 def test_train_from_the_device_path(tmp_path, corpus):
@@ -107,3 +113,19 @@ def test_train_from_the_device_path(tmp_path, corpus):
     assert again["epoch_loss"] == hist["epoch_loss"]
     with pytest.raises(ValueError, match="data must be one of"):
         train("unet", corpus, tmp_path / "v.pt", device="cpu", data="gpu", **kw)
+
+
+def test_a_sample_without_lights_or_groups_in_its_crop_stays_on_the_device(tmp_path):
+    """A crop that shows no lamp (no pixel entries) still gives its empty entry tensors on the resident device."""
+    from tests.data.corpus.data import make_corpus
+
+    root = make_corpus(tmp_path / "c", n_scenes=1, groups={"headlights": {"flicker": False},
+                                                           "otherlights": {"flicker": True}})
+    ds = LFMCaptureDataset(root, split="all", frames=2, crop=(2, 2), outputs=OUTS)
+    res = ResidentScenes(ds, "meta")  # a device other than the CPU that needs no GPU: shapes only
+    sid, pl, pg, _crop, ns, start = ds.draws(0)
+    for crop in ((6, 20, 2, 2), (0, 0, 8, 8)):                  # no entries; entries of a lamp
+        p = capture_pieces(ds, sid, pl, pg, crop, ns, 0, start, resident=res)
+        for k in ("static", "entry_values", "entry_slot", "entry_pix", "light_index", "depth"):
+            assert p[k].device.type == "meta", (crop, k)
+    assert p["entry_values"].shape[2] > 0

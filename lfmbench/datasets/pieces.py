@@ -168,9 +168,10 @@ def capture_pieces(ds, scene_id: str, params: Mapping[int, Mapping], group_param
         out["entry_slot"] = torch.cat(slot_of)
         out["entry_pix"] = torch.cat(pix)
     else:
-        out["entry_values"] = torch.zeros(2, kmax, 0)
-        out["entry_slot"] = torch.zeros(0, dtype=torch.int32)
-        out["entry_pix"] = torch.zeros(0, dtype=torch.int32)
+        dev = None if src is None else src.static.device
+        out["entry_values"] = torch.zeros(2, kmax, 0, device=dev)
+        out["entry_slot"] = torch.zeros(0, dtype=torch.int32, device=dev)
+        out["entry_pix"] = torch.zeros(0, dtype=torch.int32, device=dev)
     meta_out = ds.sample_meta(view, index, params, (y0, x0, h, w), s0)
     if "light_index" in want:
         out["light_index"] = (view.light_index() if src is None else src.light_index)[s0:s0 + F, :, y0:y0 + h,
