@@ -47,6 +47,8 @@ bench: setup
 	DRJIT_LIBLLVM_PATH=$${DRJIT_LIBLLVM_PATH:-$$(ls $(LLVM) 2>/dev/null)} $(PY) benchmarks/bench_render.py
 	DRJIT_LIBLLVM_PATH=$${DRJIT_LIBLLVM_PATH:-$$(ls $(LLVM) 2>/dev/null)} $(PY) benchmarks/bench_crop_pad.py
 	DRJIT_LIBLLVM_PATH=$${DRJIT_LIBLLVM_PATH:-$$(ls $(LLVM) 2>/dev/null)} $(PY) benchmarks/bench_object_motion.py
+	$(PY) benchmarks/bench_sensor_device.py
+	$(PY) benchmarks/bench_device_path.py
 
 clean-venv:
 	rm -rf $(VENV)
