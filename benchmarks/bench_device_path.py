@@ -105,11 +105,11 @@ def time_loader(root, dev, batch, workers, batches, passes):
     return batch * batches / med
 
 
-def time_device(root, dev, batch, batches, passes, prefetch=2):
+def time_device(root, dev, batch, batches, passes):
     from lfmbench.datasets.device import DeviceBatches
 
     t0 = time.perf_counter()
-    db = DeviceBatches(_dataset(root, 256), batch, dev, seed=0, prefetch=prefetch)
+    db = DeviceBatches(_dataset(root, 256), batch, dev, seed=0)
     load_s = time.perf_counter() - t0
     if dev.type == "cuda":
         torch.cuda.reset_peak_memory_stats(dev)
@@ -166,8 +166,6 @@ def main(argv=None) -> int:
     ap.add_argument("--scenes", type=int, default=2)
     ap.add_argument("--workers", type=int, default=None, help="DataLoader workers (default: cores - 2, at least 1)")
     ap.add_argument("--corpus", type=Path, default=None, help="where the synthetic corpus is written / reused")
-    ap.add_argument("--rows", default="loader,device,step,train-loader,train-device",
-                    help="comma-separated rows to measure")
     ap.add_argument("--no-doc", action="store_true")
     ap.add_argument("--json", type=Path)
     args = ap.parse_args(argv)
@@ -190,24 +188,17 @@ def main(argv=None) -> int:
         if args.json:
             args.json.write_text(json.dumps({"rows": rows}, indent=1))
 
-    rows_wanted = set(args.rows.split(","))
     for b in batches:
-        if "loader" in rows_wanted:
-            add(path="loader", batch=b, workers=workers,
-                samples_per_s=time_loader(root, dev, b, workers, n_b, passes))
-        if "device" in rows_wanted:
-            for pf in (0, 2):
-                sps, load_s, per_scene, peak = time_device(root, dev, b, n_b, passes, pf)
-                add(path="device" if pf else "device (no prefetch)", batch=b, samples_per_s=sps, load_s=load_s,
-                    resident_bytes_per_scene=per_scene, peak_bytes=peak)
+        add(path="loader", batch=b, workers=workers, samples_per_s=time_loader(root, dev, b, workers, n_b, passes))
+        sps, load_s, per_scene, peak = time_device(root, dev, b, n_b, passes)
+        add(path="device", batch=b, samples_per_s=sps, load_s=load_s, resident_bytes_per_scene=per_scene,
+            peak_bytes=peak)
     step_b = 64 if gpu else 4
-    if "step" in rows_wanted:
-        add(path="step", batch=step_b, crop=128, samples_per_s=time_step(root, dev, step_b, 128, passes))
+    add(path="step", batch=step_b, crop=128, samples_per_s=time_step(root, dev, step_b, 128, passes))
     steps = 8 if args.quick else 16
     for data in ("loader", "device"):
-        if f"train-{data}" in rows_wanted:
-            add(path=f"train({data})", batch=step_b, crop=128, steps=steps,
-                samples_per_s=time_train(root, dev, data, steps, step_b, 128, workers))
+        add(path=f"train({data})", batch=step_b, crop=128, steps=steps,
+            samples_per_s=time_train(root, dev, data, steps, step_b, 128, workers))
     name = torch.cuda.get_device_name(dev) if gpu else (platform.processor() or platform.machine())
     text = report(rows, f"{name}, torch {torch.__version__}, {os.cpu_count()} CPU cores, {workers} loader workers",
                   gpu)

@@ -62,7 +62,7 @@ def test_device_batches_equal_the_per_sample_path_with_counter_noise(corpus):
 
 def test_device_batches_do_not_depend_on_the_batch_size(corpus):
     a = DeviceBatches(_ds(corpus), batch_size=2, device="cpu", seed=1)
-    b = DeviceBatches(_ds(corpus), batch_size=9, device="cpu", seed=1, prefetch=0)
+    b = DeviceBatches(_ds(corpus), batch_size=9, device="cpu", seed=1)
     big = next(iter(b))
     small = [x for x in a]
     for k in ("lpd_hcg", "spd_e", "gt", "light_index"):

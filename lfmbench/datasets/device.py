@@ -27,7 +27,7 @@ from typing import Iterator
 
 import torch
 
-from lfmbench.datasets.batched import collate_pieces, pieces_to, prefetch, simulate_batch
+from lfmbench.datasets.batched import collate_pieces, pieces_to, simulate_batch
 from lfmbench.datasets.pieces import _SceneEntries, capture_pieces
 from lfmbench.vocabulary import PHOTODIODES
 
@@ -146,15 +146,13 @@ class DeviceBatches:
         seed: the order of an epoch's samples is :func:`epoch_order` ``(len(ds), seed, epoch)``.
         budget_bytes: see :class:`ResidentScenes`.
         drop_last: drop an epoch's last incomplete batch.
-        prefetch: batches whose pieces a background thread makes ahead (host Python while the device simulates);
-            0 makes them in the loop. The batches do not depend on it.
 
     Iterating yields the per-sample path's sample dicts with a leading B (on ``device``; ``meta`` collated on the
     CPU), noise from counter-based streams. ``set_epoch(e)`` selects the draws and the order of epoch ``e``.
     """
 
     def __init__(self, ds, batch_size: int, device: torch.device | str, seed: int = 0,
-                 budget_bytes: int | None = None, drop_last: bool = False, prefetch: int = 2) -> None:
+                 budget_bytes: int | None = None, drop_last: bool = False) -> None:
         if isinstance(batch_size, bool) or not isinstance(batch_size, int) or batch_size < 1:
             raise ValueError(f"batch_size must be an integer >= 1, got {batch_size!r}")
         if getattr(ds, "pieces", False):
@@ -164,9 +162,6 @@ class DeviceBatches:
         self.device = torch.device(device)
         self.seed = int(seed)
         self.drop_last = bool(drop_last)
-        if isinstance(prefetch, bool) or not isinstance(prefetch, int) or prefetch < 0:
-            raise ValueError(f"prefetch must be an integer >= 0, got {prefetch!r}")
-        self.prefetch = prefetch
         self.epoch = 0
         self.resident = ResidentScenes(ds, self.device, budget_bytes)
 
@@ -178,20 +173,14 @@ class DeviceBatches:
         n = len(self.ds)
         return n // self.batch_size if self.drop_last else -(-n // self.batch_size)
 
-    def pieces(self, indices) -> dict:
-        """The collated pieces (on the device) of the dataset's samples ``indices``, drawn for the current epoch."""
-        pieces = [capture_pieces(self.ds, sid, pl, pg, crop, ns, int(i), start, resident=self.resident)
-                  for i in indices for sid, pl, pg, crop, ns, start in (self.ds.draws(int(i)),)]
-        return pieces_to(collate_pieces(pieces), self.device)
-
     def batch(self, indices) -> dict:
         """The simulated batch of the dataset's samples ``indices`` (drawn for the current epoch)."""
-        return simulate_batch(self.pieces(indices), self.ds.preset, noise_streams="counter")
+        pieces = [capture_pieces(self.ds, sid, pl, pg, crop, ns, int(i), start, resident=self.resident)
+                  for i in indices for sid, pl, pg, crop, ns, start in (self.ds.draws(int(i)),)]
+        batch = pieces_to(collate_pieces(pieces), self.device)
+        return simulate_batch(batch, self.ds.preset, noise_streams="counter")
 
     def __iter__(self) -> Iterator[dict]:
         order = epoch_order(len(self.ds), self.seed, self.epoch).tolist()
-        chunks = (order[b * self.batch_size:(b + 1) * self.batch_size] for b in range(len(self)))
-        # the next batch's pieces are made by a background thread (host Python) while this one is simulated
-        made = (self.pieces(c) for c in chunks)
-        for pieces in (prefetch(made, depth=self.prefetch) if self.prefetch else made):
-            yield simulate_batch(pieces, self.ds.preset, noise_streams="counter")
+        for b in range(len(self)):
+            yield self.batch(order[b * self.batch_size:(b + 1) * self.batch_size])
