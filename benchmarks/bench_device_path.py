@@ -166,6 +166,8 @@ def main(argv=None) -> int:
     ap.add_argument("--scenes", type=int, default=2)
     ap.add_argument("--workers", type=int, default=None, help="DataLoader workers (default: cores - 2, at least 1)")
     ap.add_argument("--corpus", type=Path, default=None, help="where the synthetic corpus is written / reused")
+    ap.add_argument("--rows", default="loader,device,step,train-loader,train-device",
+                    help="comma-separated rows to measure (default: all)")
     ap.add_argument("--no-doc", action="store_true")
     ap.add_argument("--json", type=Path)
     args = ap.parse_args(argv)
@@ -188,17 +190,23 @@ def main(argv=None) -> int:
         if args.json:
             args.json.write_text(json.dumps({"rows": rows}, indent=1))
 
+    wanted = set(args.rows.split(","))
     for b in batches:
-        add(path="loader", batch=b, workers=workers, samples_per_s=time_loader(root, dev, b, workers, n_b, passes))
-        sps, load_s, per_scene, peak = time_device(root, dev, b, n_b, passes)
-        add(path="device", batch=b, samples_per_s=sps, load_s=load_s, resident_bytes_per_scene=per_scene,
-            peak_bytes=peak)
+        if "loader" in wanted:
+            add(path="loader", batch=b, workers=workers,
+                samples_per_s=time_loader(root, dev, b, workers, n_b, passes))
+        if "device" in wanted:
+            sps, load_s, per_scene, peak = time_device(root, dev, b, n_b, passes)
+            add(path="device", batch=b, samples_per_s=sps, load_s=load_s, resident_bytes_per_scene=per_scene,
+                peak_bytes=peak)
     step_b = 64 if gpu else 4
-    add(path="step", batch=step_b, crop=128, samples_per_s=time_step(root, dev, step_b, 128, passes))
+    if "step" in wanted:
+        add(path="step", batch=step_b, crop=128, samples_per_s=time_step(root, dev, step_b, 128, passes))
     steps = 8 if args.quick else 16
     for data in ("loader", "device"):
-        add(path=f"train({data})", batch=step_b, crop=128, steps=steps,
-            samples_per_s=time_train(root, dev, data, steps, step_b, 128, workers))
+        if f"train-{data}" in wanted:
+            add(path=f"train({data})", batch=step_b, crop=128, steps=steps,
+                samples_per_s=time_train(root, dev, data, steps, step_b, 128, workers))
     name = torch.cuda.get_device_name(dev) if gpu else (platform.processor() or platform.machine())
     text = report(rows, f"{name}, torch {torch.__version__}, {os.cpu_count()} CPU cores, {workers} loader workers",
                   gpu)
