@@ -35,6 +35,8 @@ import torch
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+from _timing import write_device_doc  # noqa: E402
 DOC = ROOT / "docs" / "device-path-benchmark.md"
 #: Where a run without a GPU writes (the GPU figures of ``DOC`` are kept: they are not re-measured there).
 DOC_CPU = ROOT / "docs" / "device-path-benchmark-cpu.md"
@@ -212,9 +214,7 @@ def main(argv=None) -> int:
                   gpu)
     print(text)
     if not args.no_doc:
-        (DOC if args.device.startswith("cuda") else DOC_CPU).write_text(text)
-        if not args.device.startswith("cuda"):
-            print(f"no GPU here: the GPU figures were not run; CPU figures in {DOC_CPU.relative_to(ROOT)}")
+        write_device_doc(text, args.device, DOC, DOC_CPU, ROOT)
     return 0
 
 
