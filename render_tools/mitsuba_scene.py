@@ -30,7 +30,7 @@ import numpy as np
 from lfmbench.vocabulary import LIGHT_GROUPS
 
 from . import spectra
-from .scene import scene_groups
+from .scene_schema import scene_groups
 
 #: Path-tracing depth: Mitsuba ``max_depth`` 5 = 4 indirect bounces (upstream renders with 4 bounces).
 MAX_DEPTH = 5

@@ -34,9 +34,11 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from lfmbench.vocabulary import GROUPS
+
 from . import camera as cam_mod
 from . import mitsuba_scene as ms
-from .scene import GROUPS, scene_groups, validate_scene
+from .scene_schema import scene_groups, validate_scene
 
 #: Default spectral bands: centres 400..700 nm step 10 nm.
 DEFAULT_BANDS_NM = tuple(float(w) for w in range(400, 701, 10))

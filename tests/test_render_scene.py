@@ -354,3 +354,31 @@ def test_mitsuba_dict_cache_rebuilds_what_moves_and_equals_a_fresh_build():
         for x, y in zip(prepared[k] if k[0] == "light" else sum((m[1:] for m in prepared[k]), ()),
                         v if k[0] == "light" else sum((m[1:] for m in v), ())):
             np.testing.assert_array_equal(x, y, err_msg=str(k))
+
+
+def test_scene_parts_a_vehicle_kind_is_a_template_entry():
+    """Every vehicle kind of the vocabulary has exactly one template, and the generator's steps build any of them
+    with no kind-specific code: each kind gets its parts, lamps (head, tail, brake, indicator where the template
+    has one) and a validated scene."""
+    from lfmbench.vocabulary import VEHICLE_KINDS
+    from render_tools import scene_templates as T
+
+    assert set(T.VEHICLE_TEMPLATES) == set(VEHICLE_KINDS) and T.PARKED_KIND in VEHICLE_KINDS
+    cfg = scene.load_config()
+    for kind, t in T.VEHICLE_TEMPLATES.items():
+        b = scene.SceneBuilder(np.random.default_rng(0), cfg, "night")
+        road = scene.add_road(b)
+        n_obj = len(b.objects)
+        scene.add_vehicle(b, kind, 20.0, -road.lane_width_m / 2, 0.0, 10.0, lights_on=True, braking=True,
+                          indicator=True)
+        veh = b.objects[n_obj]
+        assert veh["kind"] == kind and veh["velocity_mps"] == [10.0, 0.0, 0.0]
+        n_wheels = sum(2 if wy > 0 else 1 for _, _, wy in t["wheels"])
+        assert len(veh["parts"]) == len(t["boxes"]) + len(t["spheres"]) + n_wheels
+        kinds = [lt["kind"] for lt in b.lights if lt["instance"] == veh["id"]]
+        sides = lambda lamps: sum(2 if p[1] != 0 else 1 for p, _ in lamps)  # noqa: E731
+        assert kinds.count("headlight") == sides(t["head"]) and kinds.count("tail") == sides(t["tail"])
+        assert kinds.count("brake") == sides(t["tail"]) + (t["cbrake"] is not None)
+        assert kinds.count("indicator") == (1 if t["ind"] else 0)
+    sc = scene.generate_scene(2, "night", overrides={"vehicles": {"require_kinds": list(VEHICLE_KINDS)}})
+    assert set(VEHICLE_KINDS) <= {o["kind"] for o in sc["objects"]}

@@ -59,7 +59,7 @@ def _street(scene_id: str, speed_mps: float, short_exposure_s: float) -> tuple[d
     sc["camera"].update({"position_m": [0.0, -1.75, 1.4], "pitch_deg": -1.0, "speed_mps": float(speed_mps),
                          "yaw_rate_rad_s": 0.0, "yaw_deg": 0.0})
     sc["timing"]["short_exposure_s"] = float(short_exposure_s)
-    b = S._Builder(np.random.default_rng(STREET_SEED), cfg, "night")
+    b = S.SceneBuilder(np.random.default_rng(STREET_SEED), cfg, "night")
     b.objects, b.lights, b.materials = sc["objects"], sc["lights"], sc["materials"]
     return sc, b
 
@@ -69,7 +69,7 @@ def _car(b, kind: str, x_m: float, y_m: float, heading_rad: float, braking: bool
     from render_tools import scene as S
 
     n0 = len(b.lights)
-    S._vehicle(b, kind, x_m, y_m, heading_rad, 0.0, lights_on=True, braking=braking, indicator=False)
+    S.add_vehicle(b, kind, x_m, y_m, heading_rad, 0.0, lights_on=True, braking=braking, indicator=False)
     for lt in b.lights[n0:]:
         lt["luminance_cd_m2"] = {"headlight": HEAD_CD_M2, "tail": TAIL_CD_M2, "brake": BRAKE_CD_M2}[lt["kind"]]
 
