@@ -36,7 +36,9 @@ from lfmbench.fileio import atomic_write_json
 
 from .workers import WorkerDied, run_supervised
 
-__all__ = ["PROFILES_FILE", "Backend", "default_backend", "load_profile", "scene_seed", "scene_id_for",
+__all__ = ["PROFILES_FILE", "Backend", "default_backend", "load_profile", "profile_names", "scene_seed",
+           "scene_id_for", "RenderRequest", "RenderRequestError", "RenderPlan", "plan_render", "CONFIRM_ABOVE",
+           "MAX_SCENES", "PROTOCOL_FIXED",
            "RenderJob", "make_jobs", "protocol_jobs", "write_splits", "run_job", "RunSummary", "run_jobs",
            "RenderInterrupted"]
 
@@ -72,6 +74,13 @@ def default_backend() -> Backend:
 
     validate = getattr(scene, "validate_scene", None)
     return Backend(scene.generate_scene, render.RenderOptions, render.scene_meta, render.render_frames, validate)
+
+
+def profile_names() -> list[str]:
+    """Names of the render profiles in :data:`PROFILES_FILE`, in file order (``--profile`` help, checks)."""
+    from lfmbench.fileio import load_yaml  # noqa: PLC0415
+
+    return list(load_yaml(PROFILES_FILE))
 
 
 def load_profile(profile: str | Path) -> dict:
@@ -435,3 +444,184 @@ def render_record(seed: int, options: Mapping[str, Any], dtype: str, scene_kw: M
     if protocol is not None:
         rec["protocol"] = dict(protocol)
     return json.loads(json.dumps(rec, default=str))
+
+
+# ------------------------------------------------------------------------------------- a render request
+#: Sizes above which a render asks for ``--yes`` (a typo such as ``--frames 1000`` would start a
+#: render of many hours per scene; ``--scenes 100000000`` would build a job list of gigabytes first).
+CONFIRM_ABOVE = {"scenes": 10_000, "frames": 300, "width": 7680, "height": 4320, "spp": 4096, "bins": 256}
+#: Largest ``--scenes`` accepted at all (even with ``--yes``).
+MAX_SCENES = 1_000_000
+#: Options that a protocol fixes: given together with ``--protocol`` they are refused (edit a copy of the
+#: protocol file instead, which changes its hash). ``--variant``, ``--workers``, ``--ray-address``,
+#: ``--no-resume`` and ``--yes`` change how, not what, is rendered and stay allowed.
+PROTOCOL_FIXED = ("scenes", "width", "height", "spp", "seed", "bins", "frames", "groups", "profile", "scene",
+                  "storage", "half")
+
+
+class RenderRequestError(ValueError):
+    """A render request that cannot run: one line naming the option (``lfmbench render`` exits 2 with it)."""
+
+
+@dataclass
+class RenderRequest:
+    """What ``lfmbench render`` was asked for (None: the default, or the protocol's value). Pixels, samples per
+    pixel, time bins, frames; ``groups`` and ``splits`` lists of names; ``scene_files`` scene JSON paths."""
+
+    out: Path
+    scenes: int | None = None
+    width: int | None = None
+    height: int | None = None
+    spp: int | None = None
+    seed: int | None = None
+    bins: int | None = None
+    frames: int | None = None
+    groups: list | None = None
+    profile: str | None = None
+    protocol: str | None = None
+    splits: list | None = None
+    workers: int = 1
+    scene_files: list | None = None
+    variant: str | None = None
+    storage: str | None = None
+    half: bool = False
+    yes: bool = False
+
+
+@dataclass
+class RenderPlan:
+    """The jobs of a request, the corpus writer they go to, the run seed, the fixed splits of a protocol (None:
+    drawn from the seed), the RenderOptions fields and the radiance storage."""
+
+    jobs: list
+    writer: Any
+    seed: int
+    splits: dict | None
+    options: dict
+    dtype: str
+
+
+def plan_render(req: RenderRequest, backend: Backend | None = None) -> RenderPlan:
+    """Resolve a request into its jobs, checking everything before anything is rendered: the profile or protocol,
+    option values and sanity limits, scene files, the Mitsuba variant, the storage (on resume: the corpus's own,
+    read from its ``manifest.json``).
+
+    Raises:
+        RenderRequestError: a bad option (the message names it). ValueError, CorpusError, CorpusWriteError,
+            OSError: from the profile, protocol or corpus (``--out`` not writable).
+    """
+    from lfmbench.corpus import STORAGES, CorpusWriter  # noqa: PLC0415
+    from lfmbench.fileio import InputFileError, load_json  # noqa: PLC0415
+
+    from render_tools import backend as B  # noqa: PLC0415
+
+    def fail(msg: str) -> None:
+        raise RenderRequestError(msg)
+
+    out, scenes, seed, profile, protocol = req.out, req.scenes, req.seed, req.profile, req.protocol
+    width, height, spp, bins, frames, variant = req.width, req.height, req.spp, req.bins, req.frames, req.variant
+    groups, scene_file, storage, half, yes, workers = (req.groups, req.scene_files, req.storage, req.half, req.yes,
+                                                       req.workers)
+    proto = None
+    splits_wanted = req.splits or None
+    if splits_wanted is not None:
+        if protocol is None:
+            fail("--split needs --protocol (a plain render's split is drawn from --seed after rendering)")
+        from render_tools.protocol import SPLITS  # noqa: PLC0415
+
+        bad = [s for s in splits_wanted if s not in SPLITS]
+        if bad:
+            fail(f"--split {bad[0]!r} is not a split; choose from {', '.join(SPLITS)}")
+    if protocol is not None:
+        given = {"scenes": scenes, "width": width, "height": height, "spp": spp, "seed": seed, "bins": bins,
+                 "frames": frames, "groups": groups, "profile": profile, "scene": scene_file, "storage": storage,
+                 "half": half or None}
+        clash = [f"--{k}" for k in PROTOCOL_FIXED if given[k] not in (None, [])]
+        if clash:
+            fail(f"{', '.join(clash)} cannot be combined with --protocol: the protocol fixes the scenes, splits "
+                 "and render settings (edit a copy of the protocol file with a new name or version and pass its "
+                 "path instead)")
+    scenes = 1 if scenes is None else scenes
+    seed = 0 if seed is None else seed
+    profile = "default" if profile is None else profile
+    if protocol is not None:
+        from render_tools.protocol import load_protocol  # noqa: PLC0415
+
+        proto = load_protocol(protocol)
+    options = dict(proto.render) if proto is not None else load_profile(profile)
+    given = {"width": width, "height": height, "spp": spp, "bins": bins, "frames": frames, "variant": variant}
+    options.update({k: v for k, v in given.items() if v is not None})
+    if groups:
+        options["groups"] = list(groups)
+    for k in ("width", "height", "spp", "bins", "frames"):
+        v = options.get(k)
+        if v is not None and (isinstance(v, bool) or not isinstance(v, int) or v < 1):
+            fail(f"--{k} must be an integer >= 1, got {v!r}")
+    if seed < 0:
+        fail(f"--seed must be >= 0, got {seed}")
+    if not scene_file and scenes < 1:
+        fail(f"--scenes must be an integer >= 1, got {scenes}")
+    if not scene_file and scenes > MAX_SCENES:
+        fail(f"--scenes {scenes} is above the limit of {MAX_SCENES:,} scenes per run")
+    sizes = dict(options, scenes=None if scene_file else scenes)
+    for k, limit in CONFIRM_ABOVE.items():
+        v = sizes.get(k)
+        if isinstance(v, int) and v > limit and not yes:
+            fail(f"--{k} {v} is above the sanity limit {limit:,} (a render of this size takes very long or "
+                 f"needs much memory); pass --yes if you mean it")
+    if workers < 1:
+        fail(f"--workers must be >= 1, got {workers}")
+    scene_dicts = None
+    if scene_file:
+        scene_dicts = []
+        for p in scene_file:
+            try:
+                sc = load_json(p, "scene file")
+            except OSError as exc:
+                fail(f"--scene {p}: cannot read scene JSON: {exc.strerror or exc}")
+            except InputFileError as exc:
+                fail(f"--scene {p}: cannot read scene JSON: {str(exc).removeprefix(f'{p}: cannot read JSON: ')}")
+            if not isinstance(sc, dict):
+                fail(f"--scene {p}: a scene file must hold a JSON object")
+            scene_dicts.append(sc)
+    backend = backend or default_backend()
+    # check options and scene files before anything is written (unknown fields, impossible values)
+    try:
+        backend.RenderOptions(**options, seed=0)
+    except TypeError as exc:  # an unknown field in the profile
+        if proto is not None:
+            fail(f"protocol file {proto.path}: render: {exc}")
+        fail(f"{profile if Path(profile).is_file() else PROFILES_FILE} (profile {profile!r}): {exc}")
+    # a forced variant (--variant, profile or LFMBENCH_VARIANT) that cannot run here: one line, exit 2
+    B.start_probes(options.get("variant"))  # the profile or protocol may name another variant
+    B.check_variant(options.get("variant"))
+    if scene_dicts and backend.validate_scene is not None:
+        for p, sc in zip(scene_file, scene_dicts):
+            try:
+                backend.validate_scene(sc)
+            except ValueError as exc:
+                fail(f"--scene {p}: {exc}")
+    if half and storage not in (None, "float16"):
+        fail(f"--half means --storage float16, but --storage {storage} was given")
+    dtype = "float16" if half else storage
+    if proto is not None:
+        dtype = proto.storage
+    if dtype is None:  # resume with the corpus's own storage, else the default of new corpora
+        try:
+            old = load_json(Path(out) / "manifest.json", "manifest", "manifest_bytes").get("render") or {}
+        except (OSError, ValueError, AttributeError):
+            old = {}
+        dtype = old.get("dtype") if old.get("dtype") in STORAGES else DEFAULT_STORAGE
+    if dtype not in STORAGES:
+        fail(f"--storage must be one of {', '.join(sorted(STORAGES))}, got {dtype!r}")
+    ids = [str(sc.get("scene_id") or Path(p).stem) for p, sc in zip(scene_file, scene_dicts)] \
+        if scene_dicts else None
+    if proto is not None:
+        job_list = protocol_jobs(out, proto, options=options, backend=backend, splits=splits_wanted)
+    else:
+        job_list = make_jobs(out, n_scenes=scenes, seed=seed, options=options, scenes=scene_dicts,
+                               scene_ids=ids, dtype=dtype, backend=backend)
+    writer = CorpusWriter(out, dtype=dtype, render=render_record(
+        seed, options, dtype, {}, protocol=None if proto is None else proto.record()))
+    fixed_splits = None if proto is None else proto.splits
+    return RenderPlan(job_list, writer, seed, fixed_splits, options, dtype)

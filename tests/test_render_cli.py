@@ -358,3 +358,27 @@ def test_a_job_that_does_not_pickle_is_refused_before_any_worker_starts(tmp_path
     s = J.run_jobs(J.make_jobs(out, n_scenes=1, seed=0, options={"width": 8, "height": 6}, backend=local), w,
                    isolate=False)
     assert s.rendered == ["scene00000"]
+
+
+def test_render_request_is_planned_without_the_command_line(tmp_path):
+    """``render_tools.jobs.plan_render`` turns a request into its jobs (seeds derived from the run seed, the
+    profile's options with the given ones on top) and refuses a bad request with a one-line error naming the
+    option, before any corpus is opened (the storage on resume: test_render_storage_default_and_resume)."""
+    be = fake_backend()
+    req = J.RenderRequest(out=tmp_path / "c", scenes=3, seed=7, width=24, height=16, profile="small",
+                          groups=["headlights"])
+    plan = J.plan_render(req, be)
+    assert [j.seed for j in plan.jobs] == [J.scene_seed(7, i) for i in range(3)]
+    assert [j.scene_id for j in plan.jobs] == [J.scene_id_for(i) for i in range(3)]
+    assert plan.options == {**J.load_profile("small"), "width": 24, "height": 16, "groups": ["headlights"]}
+    assert plan.seed == 7 and plan.splits is None and plan.dtype == C.DEFAULT_STORAGE
+    for bad, match in ((dict(scenes=0), "--scenes must be an integer >= 1"),
+                       (dict(width=0), "--width must be an integer >= 1"),
+                       (dict(frames=301), "--frames 301 is above the sanity limit"),
+                       (dict(splits=["test"]), "--split needs --protocol"),
+                       (dict(protocol="lfmbench-v1-mini", seed=1), "--seed cannot be combined with --protocol"),
+                       (dict(storage="nope"), "--storage must be one of")):
+        with pytest.raises(J.RenderRequestError, match=match):
+            J.plan_render(J.RenderRequest(out=tmp_path / "d", **bad), be)
+    assert J.plan_render(J.RenderRequest(out=tmp_path / "e", profile="small", half=True), be).dtype == "float16"
+    assert set(J.profile_names()) >= {"small", "default", "hq"}

@@ -13,18 +13,10 @@ from typing import List, Optional
 
 import typer
 
-__all__ = ["register", "render_cmd", "protocols_cmd", "CONFIRM_ABOVE", "MAX_SCENES", "PROTOCOL_FIXED"]
+from render_tools import jobs as J
+from render_tools.protocol import list_protocols
 
-#: Sizes above which ``lfmbench render`` asks for ``--yes`` (a typo such as ``--frames 1000`` would start a
-#: render of many hours per scene; ``--scenes 100000000`` would build a job list of gigabytes first).
-CONFIRM_ABOVE = {"scenes": 10_000, "frames": 300, "width": 7680, "height": 4320, "spp": 4096, "bins": 256}
-#: Largest ``--scenes`` accepted at all (even with ``--yes``).
-MAX_SCENES = 1_000_000
-#: Options that a protocol fixes: given together with ``--protocol`` they are refused (edit a copy of the
-#: protocol file instead, which changes its hash). ``--variant``, ``--workers``, ``--ray-address``,
-#: ``--no-resume`` and ``--yes`` change how, not what, is rendered and stay allowed.
-PROTOCOL_FIXED = ("scenes", "width", "height", "spp", "seed", "bins", "frames", "groups", "profile", "scene",
-                  "storage", "half")
+__all__ = ["register", "render_cmd", "protocols_cmd"]
 
 def _split_groups(groups: Optional[List[str]]) -> list[str] | None:
     if not groups:
@@ -48,9 +40,10 @@ def render_cmd(
                                                help="Light groups to render (repeatable or comma separated; "
                                                     "default: all a scene has)."),
     profile: Optional[str] = typer.Option(None, "--profile",
-                                          help="small | default | path to a YAML profile [default: default]."),
+                                          help=f"{' | '.join(J.profile_names())} | path to a YAML profile "
+                                               "[default: default]."),
     protocol: Optional[str] = typer.Option(None, "--protocol",
-                                           help="Render a benchmark protocol (name from `lfmbench protocols` or a "
+                                           help=f"Render a benchmark protocol ({', '.join(list_protocols())} or a "
                                                 "YAML path): its scenes, splits and settings; resumable."),
     split: Optional[List[str]] = typer.Option(None, "--split",
                                               help="With --protocol: render only these splits (train, val, "
@@ -85,9 +78,7 @@ def render_cmd(
     from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-    from lfmbench.corpus import DEFAULT_STORAGE, STORAGES, CorpusError, CorpusWriteError, CorpusWriter
-    from lfmbench.fileio import InputFileError, load_json
-    from render_tools import jobs as J
+    from lfmbench.corpus import CorpusError, CorpusWriteError
 
     console = Console(stderr=True, soft_wrap=True)
 
@@ -95,118 +86,19 @@ def render_cmd(
         console.print(f"[red]error[/]: {msg}", highlight=False)
         raise typer.Exit(code)
 
-    proto = None
-    splits_wanted = _split_groups(split)
-    if splits_wanted is not None:
-        if protocol is None:
-            fail("--split needs --protocol (a plain render's split is drawn from --seed after rendering)")
-        from render_tools.protocol import SPLITS  # noqa: PLC0415
-
-        bad = [s for s in splits_wanted if s not in SPLITS]
-        if bad:
-            fail(f"--split {bad[0]!r} is not a split; choose from {', '.join(SPLITS)}")
-    if protocol is not None:
-        given = {"scenes": scenes, "width": width, "height": height, "spp": spp, "seed": seed, "bins": bins,
-                 "frames": frames, "groups": groups, "profile": profile, "scene": scene_file, "storage": storage,
-                 "half": half or None}
-        clash = [f"--{k}" for k in PROTOCOL_FIXED if given[k] not in (None, [])]
-        if clash:
-            fail(f"{', '.join(clash)} cannot be combined with --protocol: the protocol fixes the scenes, splits "
-                 "and render settings (edit a copy of the protocol file with a new name or version and pass its "
-                 "path instead)")
-    scenes = 1 if scenes is None else scenes
-    seed = 0 if seed is None else seed
-    profile = "default" if profile is None else profile
+    req = J.RenderRequest(out=out, scenes=scenes, width=width, height=height, spp=spp, seed=seed, bins=bins,
+                          frames=frames, groups=_split_groups(groups), profile=profile, protocol=protocol,
+                          splits=_split_groups(split), workers=workers, scene_files=scene_file, variant=variant,
+                          storage=storage, half=half, yes=yes)
     try:
-        if protocol is not None:
-            from render_tools.protocol import load_protocol  # noqa: PLC0415
-
-            proto = load_protocol(protocol)
-        options = dict(proto.render) if proto is not None else J.load_profile(profile)
-        given = {"width": width, "height": height, "spp": spp, "bins": bins, "frames": frames, "variant": variant}
-        options.update({k: v for k, v in given.items() if v is not None})
-        gl = _split_groups(groups)
-        if gl is not None:
-            options["groups"] = gl
-        for k in ("width", "height", "spp", "bins", "frames"):
-            v = options.get(k)
-            if v is not None and (isinstance(v, bool) or not isinstance(v, int) or v < 1):
-                fail(f"--{k} must be an integer >= 1, got {v!r}")
-        if seed < 0:
-            fail(f"--seed must be >= 0, got {seed}")
-        if not scene_file and scenes < 1:
-            fail(f"--scenes must be an integer >= 1, got {scenes}")
-        if not scene_file and scenes > MAX_SCENES:
-            fail(f"--scenes {scenes} is above the limit of {MAX_SCENES:,} scenes per run")
-        sizes = dict(options, scenes=None if scene_file else scenes)
-        for k, limit in CONFIRM_ABOVE.items():
-            v = sizes.get(k)
-            if isinstance(v, int) and v > limit and not yes:
-                fail(f"--{k} {v} is above the sanity limit {limit:,} (a render of this size takes very long or "
-                     f"needs much memory); pass --yes if you mean it")
-        if workers < 1:
-            fail(f"--workers must be >= 1, got {workers}")
-        scene_dicts = None
-        if scene_file:
-            scene_dicts = []
-            for p in scene_file:
-                try:
-                    sc = load_json(p, "scene file")
-                except OSError as exc:
-                    fail(f"--scene {p}: cannot read scene JSON: {exc.strerror or exc}")
-                except InputFileError as exc:
-                    fail(f"--scene {p}: cannot read scene JSON: {str(exc).removeprefix(f'{p}: cannot read JSON: ')}")
-                if not isinstance(sc, dict):
-                    fail(f"--scene {p}: a scene file must hold a JSON object")
-                scene_dicts.append(sc)
-        backend = J.default_backend()
-        # check options and scene files before anything is written (unknown fields, impossible values)
-        try:
-            backend.RenderOptions(**options, seed=0)
-        except TypeError as exc:  # an unknown field in the profile
-            if proto is not None:
-                fail(f"protocol file {proto.path}: render: {exc}")
-            fail(f"{profile if Path(profile).is_file() else J.PROFILES_FILE} (profile {profile!r}): {exc}")
-        # a forced variant (--variant, profile or LFMBENCH_VARIANT) that cannot run here: one line, exit 2
-        B.start_probes(options.get("variant"))  # the profile or protocol may name another variant
-        B.check_variant(options.get("variant"))
-        if scene_dicts and backend.validate_scene is not None:
-            for p, sc in zip(scene_file, scene_dicts):
-                try:
-                    backend.validate_scene(sc)
-                except ValueError as exc:
-                    fail(f"--scene {p}: {exc}")
-        if half and storage not in (None, "float16"):
-            fail(f"--half means --storage float16, but --storage {storage} was given")
-        dtype = "float16" if half else storage
-        if proto is not None:
-            dtype = proto.storage
-        if dtype is None:  # resume with the corpus's own storage, else the default of new corpora
-            try:
-                old = load_json(Path(out) / "manifest.json", "manifest", "manifest_bytes").get("render") or {}
-            except (OSError, ValueError, AttributeError):
-                old = {}
-            dtype = old.get("dtype") if old.get("dtype") in STORAGES else DEFAULT_STORAGE
-        if dtype not in STORAGES:
-            fail(f"--storage must be one of {', '.join(sorted(STORAGES))}, got {dtype!r}")
-        ids = [str(sc.get("scene_id") or Path(p).stem) for p, sc in zip(scene_file, scene_dicts)] \
-            if scene_dicts else None
-        if proto is not None:
-            job_list = J.protocol_jobs(out, proto, options=options, backend=backend, splits=splits_wanted)
-        else:
-            job_list = J.make_jobs(out, n_scenes=scenes, seed=seed, options=options, scenes=scene_dicts,
-                                   scene_ids=ids, dtype=dtype, backend=backend)
-        writer = CorpusWriter(out, dtype=dtype, render=J.render_record(
-            seed, options, dtype, {}, protocol=None if proto is None else proto.record()))
-        fixed_splits = None if proto is None else proto.splits
-    except typer.Exit:
-        raise
+        plan = J.plan_render(req)
     except (ValueError, CorpusError) as exc:
         fail(str(exc))
     except CorpusWriteError as exc:
         fail(f"{exc.strerror or exc}")
     except OSError as exc:  # --out cannot be created or written (permissions, a file in the way, read-only)
         fail(f"--out {out}: cannot create or write the corpus there ({exc.strerror or exc})")
+    job_list, writer, seed, fixed_splits = plan.jobs, plan.writer, plan.seed, plan.splits
 
     with Progress(TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),
                   TimeElapsedColumn(), console=console) as prog:
