@@ -261,6 +261,15 @@ def _save(fig, path: Path, colors: int = 256) -> Path:
     return Path(path)
 
 
+def _finish(fig, title: str, path: Path, top: float, bottom: float = 0.01, right: float = 0.995) -> Path:
+    """A figure of Figs. 4-6: every axis off, the caption above (fontsize 10.5), tight margins, saved (:func:`_save`)."""
+    for ax in fig.axes:
+        ax.set_axis_off()
+    fig.suptitle(title, fontsize=10.5)
+    fig.subplots_adjust(left=0.005, right=right, top=top, bottom=bottom)
+    return _save(fig, path)
+
+
 # ------------------------------------------------------------------------------------------ Figs. 4-6
 @dataclass
 class Sequence46:
@@ -449,17 +458,13 @@ def fig4(corpus: str | Path, out_dir: str | Path, seq: Sequence46 | None = None)
             if c == 1:
                 note = ": sharp" if key == "lpd_lcg_e" else ": smeared over 11.1 ms"
             z.set_title(f"zoom, {what}{note}", fontsize=10)
-    for ax in fig.axes:
-        ax.set_axis_off()
     cam = seq.meta["camera"]
-    fig.suptitle(f"Fig. 4: two-frame sequence, {seq.meta['fps']:g} fps, ego {cam.get('speed_mps', 0):.0f} m/s, "
-                 f"global shutter (scene {seq.scene_id}).\nThe short LPD is sharp, but the braking car's lights "
-                 f"(cyan arrows; {f_hz:g} Hz, D = {duty:g}) are OFF for all of frame 1's exposure.\nThe long SPD "
-                 f"holds every light in every frame but smears what moves across the image (the "
-                 f"{seq.kinds.get(moving, 'vehicle')} near the edge, yellow). mu-law display, one scale.",
-                 fontsize=10.5)
-    fig.subplots_adjust(left=0.005, right=0.995, top=0.925, bottom=0.005)
-    return _save(fig, Path(out_dir) / "fig4_lpd_spd_sequence.png")
+    title = (f"Fig. 4: two-frame sequence, {seq.meta['fps']:g} fps, ego {cam.get('speed_mps', 0):.0f} m/s, "
+             f"global shutter (scene {seq.scene_id}).\nThe short LPD is sharp, but the braking car's lights "
+             f"(cyan arrows; {f_hz:g} Hz, D = {duty:g}) are OFF for all of frame 1's exposure.\nThe long SPD "
+             f"holds every light in every frame but smears what moves across the image (the "
+             f"{seq.kinds.get(moving, 'vehicle')} near the edge, yellow). mu-law display, one scale.")
+    return _finish(fig, title, Path(out_dir) / "fig4_lpd_spd_sequence.png", top=0.925, bottom=0.005)
 
 
 def fig5(corpus: str | Path, out_dir: str | Path, seq: Sequence46 | None = None) -> Path:
@@ -493,18 +498,15 @@ def fig5(corpus: str | Path, out_dir: str | Path, seq: Sequence46 | None = None)
         ax.imshow(_img(seq, key, 1), interpolation="nearest")
         _rect(ax, ys, xs)
         ax.set_title(f"{name}, frame 1 (full frame)", fontsize=10)
-    for ax in fig.axes:
-        ax.set_axis_off()
     f1, d1 = DROPOUT_PWM
     txt = (f"Fig. 5: the simple fusion prefers the unsaturated LPD, so a light caught OFF by the short exposure is "
            f"extinguished in the HDR output. Cyan: brake and tail lights ({f1:g} Hz, D = {d1:g}) OFF in frame 1")
     if seq.dropout2:
         f2, d2 = DROPOUT2_PWM
         txt += f";\nyellow: another car's tail lights ({f2:g} Hz, D = {d2:g}) OFF in frame 2"
-    fig.suptitle(txt + f". Scene {seq.scene_id}, {seq.meta['camera'].get('speed_mps', 0):.0f} m/s, "
-                 f"{seq.meta['fps']:g} fps; mu-law display.", fontsize=10.5)
-    fig.subplots_adjust(left=0.005, right=0.995, top=0.91, bottom=0.01)
-    return _save(fig, Path(out_dir) / "fig5_dropout_fusion.png")
+    txt += (f". Scene {seq.scene_id}, {seq.meta['camera'].get('speed_mps', 0):.0f} m/s, {seq.meta['fps']:g} fps; "
+            "mu-law display.")
+    return _finish(fig, txt, Path(out_dir) / "fig5_dropout_fusion.png", top=0.91)
 
 
 def fig6(corpus: str | Path, out_dir: str | Path, seq: Sequence46 | None = None) -> Path:
@@ -546,18 +548,15 @@ def fig6(corpus: str | Path, out_dir: str | Path, seq: Sequence46 | None = None)
     ax.imshow(_img(seq, "flicker_aware", frame), interpolation="nearest")
     _rect(ax, ys, xs)
     ax.set_title(f"flicker-aware fusion, frame {frame} (full frame)", fontsize=10)
-    for ax in fig.axes:
-        ax.set_axis_off()
     fc, dc = COMET_PWM
-    fig.suptitle(f"Fig. 6: motion-flicker trade-off, frame {frame}, the {seq.kinds.get(seq.comet[0], 'vehicle')} "
-                 f"near the image edge "
-                 f"({fc:g} Hz, D = {dc:g}; one pulse, ending as the long exposure closes).\n"
-                 f"The LPD records a short sharp head, the SPD a trail smeared over its 11.1 ms. A fusion that takes "
-                 f"the SPD where the LPD reads below it (flicker-aware) pastes\nthe trail onto the sharp LPD head: a "
-                 f"comet that no exposure of the scene shows. The simple fusion keeps the unsaturated LPD here. "
-                 f"Scene {seq.scene_id}, {seq.meta['camera'].get('speed_mps', 0):.0f} m/s.", fontsize=10.5)
-    fig.subplots_adjust(left=0.005, right=0.995, top=0.87, bottom=0.01)
-    return _save(fig, Path(out_dir) / "fig6_comet.png")
+    title = (f"Fig. 6: motion-flicker trade-off, frame {frame}, the {seq.kinds.get(seq.comet[0], 'vehicle')} "
+             f"near the image edge "
+             f"({fc:g} Hz, D = {dc:g}; one pulse, ending as the long exposure closes).\n"
+             f"The LPD records a short sharp head, the SPD a trail smeared over its 11.1 ms. A fusion that takes "
+             f"the SPD where the LPD reads below it (flicker-aware) pastes\nthe trail onto the sharp LPD head: a "
+             f"comet that no exposure of the scene shows. The simple fusion keeps the unsaturated LPD here. "
+             f"Scene {seq.scene_id}, {seq.meta['camera'].get('speed_mps', 0):.0f} m/s.")
+    return _finish(fig, title, Path(out_dir) / "fig6_comet.png", top=0.87)
 
 
 # ------------------------------------------------------------------------------------------ Fig. 7
