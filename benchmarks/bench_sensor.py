@@ -9,7 +9,7 @@ Measures, on this machine (CPU, float32 unless stated):
 3. shot noise: distribution error of the rounded-Gaussian approximation against exact Poisson (Kolmogorov and
    total-variation distance, computed exactly from the CDFs) and the sampling time of both;
 4. a photon-transfer curve (EMVA 1288) of the three ``ovt`` captures, and the spread over seeds of the
-   parameters that the photon-transfer analysis of ``tests/test_emva1288.py`` recovers.
+   parameters that the photon-transfer analysis of ``tests/sensor/test_emva1288.py`` recovers.
 
 Writes the tables between the ``<!-- bench_sensor:start -->`` / ``<!-- bench_sensor:end -->`` markers of
 ``docs/sensor.md`` (the rest of that file is hand-written) and the plots ``docs/img/sensor_*.png``.
@@ -257,7 +257,7 @@ def bench_ptc() -> Path:
 
 
 def bench_emva_seeds(n_seeds: int = 6) -> list[dict]:
-    """Relative errors of the EMVA 1288 estimates of tests/test_emva1288.py over ``n_seeds`` seeds."""
+    """Relative errors of the EMVA 1288 estimates of tests/sensor/test_emva1288.py over ``n_seeds`` seeds."""
     import importlib.util
 
     spec = importlib.util.spec_from_file_location("_emva", ROOT / "tests" / "test_emva1288.py")
@@ -330,7 +330,7 @@ def main() -> None:
         "### Shot noise: rounded Gaussian N(mu, mu) against exact Poisson",
         "",
         f"Distances computed exactly from the two CDFs; times for {SIZE * SIZE * 3} samples of one mean. Both exact "
-        "samplers draw the Poisson distribution (tests/test_poisson.py: chi-square against the pmf); "
+        "samplers draw the Poisson distribution (tests/sensor/test_poisson.py: chi-square against the pmf); "
         "`lfmbench.sensor.poisson` is what `shot_noise` uses on the CPU, `torch.poisson` on other devices. Below 1 e- the "
         "compiled sampler needs one uniform and one exp; between 1 and 10 e- its sequential search adds a few terms "
         "(evaluated four at a time, one branch per four terms); from 10 e- it is PTRS (two uniforms, a log only off "
@@ -352,7 +352,7 @@ def main() -> None:
         "",
         f"![PTC]({ptc_png.relative_to(ROOT / 'docs')})",
         "",
-        "### EMVA 1288 estimates over 6 seeds (tests/test_emva1288.py analysis, 128 x 128 flat fields)",
+        "### EMVA 1288 estimates over 6 seeds (tests/sensor/test_emva1288.py analysis, 128 x 128 flat fields)",
         "",
         "Relative error range (min .. max) against the configured value; saturation against the expected position "
         "of the variance maximum, which itself lies below the clip point.",

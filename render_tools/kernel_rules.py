@@ -19,7 +19,7 @@ Hence, in every function that builds a kernel, the divisor of an integer ``//`` 
 - a name bound in the same function from one of the above (``w = lane_divisor(g("w"))``),
 - an arithmetic expression of such operands.
 
-``tests/test_kernel_rules.py`` checks this over the abstract syntax tree of every module that imports
+``tests/render_tools/test_kernel_rules.py`` checks this over the abstract syntax tree of every module that imports
 ``drjit`` (:data:`HOST_INT_CALLS`, :data:`DIVISOR_HELPER` are what it accepts). Floating-point division needs no
 guard: IEEE division by 0 gives inf or NaN without a trap (floating-point exceptions are masked in Dr.Jit's
 kernels), and the kernels mask or ``dr.select`` such lanes away.

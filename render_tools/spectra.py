@@ -25,7 +25,7 @@ scipy), more than a render spends on all of its spectra. So the CIE 1931 colour-
 default configuration uses (``render_tools/configs/scene_defaults.yaml``, and D65 of
 :func:`render_tools.scene.empty_scene`) are stored in a small CSV file written from colour-science by
 ``python -m render_tools.spectra_table`` (:func:`render_tools.spectra_table.write_table`; exact float64 values). Any other spectrum, and the
-name check of a model not in the table, falls back to colour-science; ``tests/test_render_scene.py`` checks
+name check of a model not in the table, falls back to colour-science; ``tests/render_tools/test_render_scene.py`` checks
 the table against colour-science's own output.
 """
 from __future__ import annotations

@@ -16,7 +16,7 @@ set, drawn in proportion to an estimate of the light it brings to that point (in
 cosine, receiver cosine, inverse square distance: :meth:`Tracer._lamp_weights`), so that of 40 streetlights the
 few near the point get the samples (uniform or flux-proportional choice spent most of them on far lamps). By linearity of light transport in the emission this is exactly the image
 of the scene in which only set ``k`` emits (the previous per-group scenes; checked against Mitsuba's own
-``path`` integrator in tests/test_render_tracer.py).
+``path`` integrator in tests/render_tools/test_render_tracer.py).
 
 The path tracer follows Mitsuba 3's ``path`` integrator (and the primal loop of its Python ``prb``): unidirectional
 path tracing with next-event estimation for smooth BSDFs, multiple importance sampling with the balance
@@ -102,7 +102,7 @@ def pad_registry(mi, dr, loaded, bsdf) -> list:
     bound makes scenes of one class share a kernel.
 
     The dummies are never part of ``loaded``: nothing can hit or sample them, so the image is unchanged (bit for
-    bit; tests/test_render_tracer.py). Each kind gets at least one dummy of a fixed type (a ``spot`` emitter of the
+    bit; tests/render_tools/test_render_tracer.py). Each kind gets at least one dummy of a fixed type (a ``spot`` emitter of the
     beams' spectrum type, a one-triangle mesh with ``bsdf``, a ``diffuse`` BSDF), so the set of object types, which
     also enters the kernel, does not depend on whether a scene happens to fill its class or has beams.
     ``loaded``: the frame's ``mi.Scene``; ``bsdf``: a BSDF of the scene for the dummy meshes. Returns the dummies:

@@ -176,3 +176,12 @@ def test_import_reader(tmp_path, source, expected):
     p = tmp_path / "spectra.py"
     p.write_text(source)
     assert _imports("render_tools.spectra", p) == expected
+
+
+def test_tests_mirror_the_packages():
+    """Tests of a package live in the folder of that name (tests/sensor/ for lfmbench/sensor/, tests/render_tools/
+    for render_tools/); the cross-cutting ones (layout, checks, files, the flicker model, faults) at the top."""
+    tests = ROOT / "tests"
+    for d in sorted(p for p in tests.iterdir() if p.is_dir() and p.name not in ("data", "__pycache__")):
+        assert d.name in MODULES or f"lfmbench.{d.name}" in MODULES, f"tests/{d.name}/ names no package"
+        assert any(d.glob("test_*.py")), f"tests/{d.name}/ holds no test module"

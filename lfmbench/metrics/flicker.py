@@ -91,7 +91,7 @@ def fdi(series, x_off=None, contrast_threshold: float = FDI_CONTRAST_THRESHOLD, 
     sums the detections over all ROIs before dividing by T (on a DataFrame, as its demo, it is per ROI as here);
     here each ROI (every index but ``dim``) gets its own FDI. With ``start_index < 4`` and no ``x_off`` the
     reference averages no frame (NaN) and reports 0; here that is a ``ValueError`` (``x_off=nan`` gives 0).
-    Checked against the reference in ``tests/test_p2020_reference.py``.
+    Checked against the reference in ``tests/metrics/test_p2020_reference.py``.
     ``x_off = 0`` gives ``s_t = inf`` for a positive ``x_t`` (detected) and NaN for 0 (not detected), as numpy.
 
     Args:

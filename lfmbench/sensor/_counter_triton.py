@@ -5,7 +5,7 @@ GPU pays for in full: 64 search steps and 24 rejection rounds per draw. Here eac
 until its own pixels are done (a sequential search stops at the block's largest count, PTRS after its last
 acceptance: one or two rounds for most blocks), with the same arithmetic in the same order on the same streams,
 so the counts equal the torch form's (and the compiled CPU sampler's) wherever the float64 library functions
-agree (tests/test_counter_noise.py compares them on a GPU).
+agree (tests/sensor/test_counter_noise.py compares them on a GPU).
 
 Kernels take the 64-bit constants as arguments (Python ints above 2^63 are passed as uint64).
 """

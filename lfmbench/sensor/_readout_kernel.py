@@ -4,7 +4,7 @@ One pass per capture instead of about thirteen torch element-wise passes (read n
 gain, voltage swing, ADC, saturation flag, input referral): the same float operations in the same order and the
 same dtype as the torch chain of :func:`lfmbench.sensor.read_capture` and
 :func:`lfmbench.sensor.simulate_split_pixel_electrons`, so both give bit-identical outputs
-(``tests/test_sensor.py`` checks it). Module-level and ``cache=True`` so that DataLoader workers load it from
+(``tests/sensor/test_sensor.py`` checks it). Module-level and ``cache=True`` so that DataLoader workers load it from
 numba's on-disk cache (see :mod:`lfmbench.sensor._poisson_kernel`).
 """
 from __future__ import annotations

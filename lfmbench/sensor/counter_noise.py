@@ -6,7 +6,7 @@ its own SplitMix64 stream (key ``mix64(s) + i STRIDE``, :mod:`lfmbench.counter_r
 same algorithm on the same streams written as element-wise torch operations, so it runs on a GPU for a whole
 batch at once (one 64-bit seed per sample), and agrees with the compiled sampler draw for draw wherever the
 float64 ``exp``/``log``/``lgamma`` of the two libraries agree (they may differ in the last bit, which can move a
-draw across a decision boundary: tests/test_counter_noise.py bounds how often). :func:`normal` gives the standard
+draw across a decision boundary: tests/sensor/test_counter_noise.py bounds how often). :func:`normal` gives the standard
 normals of the read noise from the same kind of streams (Box-Muller).
 
 Algorithm (:mod:`lfmbench.sensor.poisson` for its references): mean ``mu < 10``: inversion by sequential search,

@@ -8,7 +8,7 @@
   ``p_0 = exp(-mu)``, ``p_k = p_{k-1} mu / k``, the smallest ``k`` with ``F(k) >= u``. Exact up to float64 rounding
   of the cumulative sum (about 1e-16); shot-noise means are mostly below 1 e-, where this costs one ``exp`` or
   none (``k = 0`` when ``u`` is below the lower bound ``1 - mu + mu^2/2 - mu^3/6`` of ``exp(-mu)``); the terms are
-  evaluated four at a time (the same products and sums, so the same ``k`` as one at a time: tests/test_poisson.py).
+  evaluated four at a time (the same products and sums, so the same ``k`` as one at a time: tests/sensor/test_poisson.py).
 - ``10 <= mu < gaussian_above``: **PTRS**, the transformed rejection with squeeze of [Hormann1993]_, the method
   of numpy's legacy ``random_poisson_ptrs`` (valid for mu >= 10, O(1) uniforms per draw, exact).
 - ``mu >= gaussian_above``: the rounded normal ``max(0, rint(mu + sqrt(mu) z))`` with ``z`` by Box-Muller,
@@ -21,7 +21,7 @@ sequence. A pixel's value therefore depends only on ``(seed, i, mu_i)``: not on 
 count or the order of evaluation, and the seed is drawn from the caller's ``torch.Generator`` so a sample
 stays a function of its own generator (the dataset's determinism contract, docs/datasets.md).
 
-``tests/test_poisson.py`` tests the distribution against the Poisson pmf (chi-square, 200 000 draws) at means
+``tests/sensor/test_poisson.py`` tests the distribution against the Poisson pmf (chi-square, 200 000 draws) at means
 from 0.01 to 1e5 including both sides of the branch edge at 10, the moments of mixed means (3e-4 to 1e5 e- in one
 call), independence of neighbouring pixels and seeds, and means from 5e-324 to 1e300; it also runs the EMVA 1288
 photon-transfer test of the sensor on both samplers. Speed against ``torch.poisson``: ``benchmarks/bench_sensor.py``.

@@ -4,7 +4,7 @@ The reference implementation is CARpublic/P2020-flicker (MIT License, Copyright 
 Research), https://github.com/CARpublic/P2020-flicker, file ``metrics/flicker.py`` at commit
 ``fbd3c4487d1c2793ccf47b88b1a30ce40cf60212``: ``calc_FMI``, ``calc_FDI``, ``calc_MMP``, ``saturation_warning``.
 Its code is NOT copied into lfmbench: this script imports it from a checkout and stores only the series and
-its outputs, which ``tests/test_p2020_reference.py`` compares with :mod:`lfmbench.metrics.flicker`.
+its outputs, which ``tests/metrics/test_p2020_reference.py`` compares with :mod:`lfmbench.metrics.flicker`.
 
 How ``reference.json`` was produced (Python 3.11, in a virtual environment holding the reference's pinned
 ``numpy~=1.24.3`` and ``pandas~=2.0.2`` from its ``requirements.txt``; numpy 1.24.4 and pandas 2.0.3 were used)::

@@ -117,7 +117,7 @@ def test_registry_and_method_specs():
             baselines.get_method(bad)
     b = make_batch(b=2, noise=True)
     for name, fn in baselines.REGISTRY.items():
-        if name in ("learned", "unet"):  # need checkpoints (tests/test_unet.py)
+        if name in ("learned", "unet"):  # need checkpoints (tests/baselines/test_unet.py)
             continue
         out = fn(b)
         assert out.shape == b["gt"].shape and bool(torch.isfinite(out).all()), name

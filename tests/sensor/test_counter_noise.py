@@ -1,6 +1,6 @@
 """lfmbench.sensor.counter_noise: the compiled Poisson sampler's algorithm and streams as tensor operations.
 
-Independent answers: the compiled sampler (tests/test_poisson.py holds it to the Poisson pmf), the Poisson pmf
+Independent answers: the compiled sampler (tests/sensor/test_poisson.py holds it to the Poisson pmf), the Poisson pmf
 itself (chi-square), the normal distribution's moments."""
 from __future__ import annotations
 

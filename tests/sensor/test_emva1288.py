@@ -116,7 +116,7 @@ TOL = {"K": 0.03, "sigma_d": 0.05, "sigma_d_emva": 0.12, "sat": 0.05, "R": 0.03}
 def test_photon_transfer_recovers_ovt_parameters(capture, backend, monkeypatch):
     # every shot-noise sampler must pass EMVA 1288: the compiled CPU one, torch.poisson (which CUDA uses), and
     # the counter-based streams (lfmbench.sensor.counter_noise; its torch chain gives the compiled chain's numbers:
-    # tests/test_counter_noise.py)
+    # tests/sensor/test_counter_noise.py)
     import lfmbench.sensor.poisson
 
     monkeypatch.setattr(lfmbench.sensor.poisson, "available", lambda: backend.endswith("numba"))

@@ -247,7 +247,7 @@ def test_training_example_in_docs_runs(tmp_path):
     from pathlib import Path
 
     root = make_corpus(tmp_path / "c", n_scenes=3)
-    text = (Path(__file__).resolve().parents[1] / "docs" / "datasets.md").read_text()
+    text = (Path(__file__).resolve().parents[2] / "docs" / "datasets.md").read_text()
     code = re.findall(r"```python\n(.*?)```", text, re.S)[-1]
     code = (code.replace('"demo_out/corpus"', repr(str(root))).replace("crop=128", "crop=8")
             .replace("range(3)", "range(2)").replace("split=\"train\"", "split=\"all\""))
@@ -275,7 +275,7 @@ def test_workers_forked_after_parent_openmp_do_not_deadlock(tmp_path):
 
     script = textwrap.dedent(f"""
         import sys, torch
-        sys.path.insert(0, {str(Path(__file__).resolve().parents[1])!r})
+        sys.path.insert(0, {str(Path(__file__).resolve().parents[2])!r})
         import tests.data.corpus.data as T
         from pathlib import Path
         T.H, T.W = 96, 128   # 3 frames x 96 x 128 > torch's parallel grain size: workers would enter OpenMP

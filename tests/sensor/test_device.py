@@ -3,7 +3,7 @@
 On CUDA the usual bug is a tensor made without ``device=`` (it lands on the default device, the CPU) meeting
 the CUDA inputs. Running the CPU pipeline inside ``with torch.device("meta")`` makes every such tensor a
 *meta* tensor instead, which raises when it meets a CPU input or shows up as a meta output. The same holds for
-users who call ``torch.set_default_device("cuda")``. ``tests/test_sensor.py::test_cuda_matches_cpu`` runs the
+users who call ``torch.set_default_device("cuda")``. ``tests/sensor/test_sensor.py::test_cuda_matches_cpu`` runs the
 real thing where a GPU exists.
 """
 from __future__ import annotations

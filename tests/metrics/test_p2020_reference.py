@@ -23,7 +23,7 @@ import torch
 
 from lfmbench.metrics import flicker as fm
 
-DATA = json.loads((Path(__file__).parent / "data" / "p2020" / "reference.json").read_text(encoding="utf-8"))
+DATA = json.loads((Path(__file__).resolve().parents[1] / "data" / "p2020" / "reference.json").read_text(encoding="utf-8"))
 CASES = DATA["cases"]
 FMI_RTOL = 1e-12
 

@@ -10,7 +10,7 @@ from lfmbench.datasets.device import DeviceBatches, ResidentMemoryError, Residen
 from lfmbench.datasets.pieces import capture_pieces
 
 OUTS = ("raw", "input_referred", "saturated", "gt", "light_index", "depth")
-#: (n - 1) eps of float32 sums of n <= 16 non-negative terms in two orders (tests/test_batched_capture.py)
+#: (n - 1) eps of float32 sums of n <= 16 non-negative terms in two orders (tests/datasets/test_batched_capture.py)
 SUM_ORDER_RTOL = 15 * torch.finfo(torch.float32).eps
 
 

@@ -1,6 +1,6 @@
 """The batched (on-device) capture path of lfmbench.datasets.batched against the per-sample path.
 
-Tiny generated corpora (``make_corpus`` of tests/test_datasets.py). Physics against independent answers: dense
+Tiny generated corpora (``make_corpus`` of tests/datasets/test_datasets.py). Physics against independent answers: dense
 time integration of the PWM waveform per row (rolling shutter) and the EMVA 1288 photon transfer (variance
 against mean slope = system gain) through the batched path.
 """
@@ -19,7 +19,7 @@ from lfmbench.datasets.assembly import bin_edges, row_window_starts, visible_lig
 from lfmbench.datasets.projection import build_layers
 from lfmbench.flicker import pwm_exposure
 from lfmbench.sensor import load_preset
-from tests.test_datasets import _brute_force_light, make_corpus
+from tests.datasets.test_datasets import _brute_force_light, make_corpus
 
 ALL = ("raw", "input_referred", "saturated", "gt", "light_index", "depth", "rgb")
 
@@ -394,7 +394,7 @@ def test_gpu_training_example_in_docs_runs(tmp_path):
     from pathlib import Path
 
     root = make_corpus(tmp_path / "c", n_scenes=2)
-    text = (Path(__file__).resolve().parents[1] / "docs" / "datasets.md").read_text()
+    text = (Path(__file__).resolve().parents[2] / "docs" / "datasets.md").read_text()
     section = text[text.index("## Captures on the GPU"):]
     code = re.findall(r"```python\n(.*?)```", section, re.S)[0]
     code = (code.replace('"demo_out/corpus"', repr(str(root))).replace("crop=128", "crop=8")
@@ -413,7 +413,7 @@ def test_cpu_configuration_example_in_docs_runs(tmp_path):
     from pathlib import Path
 
     root = make_corpus(tmp_path / "c", n_scenes=2)
-    text = (Path(__file__).resolve().parents[1] / "docs" / "datasets.md").read_text()
+    text = (Path(__file__).resolve().parents[2] / "docs" / "datasets.md").read_text()
     blocks = re.findall(r"```python\n(.*?)```", text[text.index("## Captures on the GPU"):], re.S)
     setup = (blocks[0].split("net = ")[0].replace('"demo_out/corpus"', repr(str(root))).replace("crop=128", "crop=8")
              .replace("split=\"train\"", "split=\"all\"").replace("num_workers=2", "num_workers=0")

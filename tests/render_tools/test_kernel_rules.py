@@ -11,7 +11,7 @@ import pytest
 
 from render_tools.kernel_rules import DIVISOR_HELPER, HOST_INT_CALLS, lane_divisor
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 PACKAGES = ("render_tools", "lfmbench")
 
 
@@ -163,7 +163,7 @@ import numpy as np
 sys.path.insert(0, {root!r})
 import drjit as dr
 import mitsuba as mi
-from tests.test_render_tracer import _street
+from tests.render_tools.test_render_tracer import _street
 from render_tools import backend, mitsuba_scene as ms, render, tracer
 s = _street()
 opts = render.RenderOptions(width=37, height=23, spp=3, light_spp=5, bins=3, frames=1, aux=False, seed=1)

@@ -100,7 +100,7 @@ def test_scene_generation_and_spectra_do_not_import_colour_science():
             "    [spectra.absolute_spectrum(lt['spectrum'], lt['luminance_cd_m2']) for lt in s['lights']]\n"
             "    spectra.absolute_spectrum(scene.empty_scene()['sky']['spectrum'], 1.0)\n"
             "assert 'colour' not in sys.modules, 'colour was imported'\n")
-    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))  # this checkout's render_tools
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # this checkout's render_tools
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=root)
     assert r.returncode == 0, r.stderr[-2000:]
 
