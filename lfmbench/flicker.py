@@ -440,6 +440,18 @@ def _affine_phase(base: ArrayLike, index: ArrayLike, step: ArrayLike, period: Ar
     return _mod_period(s, period, ops)
 
 
+def _checked_affine_phase(names: tuple[str, str, str, str], start: ArrayLike, index: ArrayLike, step: ArrayLike,
+                          period: ArrayLike) -> ArrayLike:
+    """``(start + index * step) mod period`` (s) after the checks of eqs. 3 and 4: finite values, ``index`` and
+    ``step`` >= 0, ``period`` > 0, shapes that broadcast; ``names`` name the four arguments in the messages."""
+    check_array(names[0], start)
+    check_array(names[1], index, lo=0.0)
+    check_array(names[2], step, lo=0.0)
+    check_array(names[3], period, lo=0.0, lo_open=True)
+    _check_broadcast(names, (start, index, step, period))
+    return _affine_phase(start, index, step, period)
+
+
 def frame_phase(phase0: ArrayLike, frame_index: ArrayLike, frame_time: ArrayLike, period: ArrayLike) -> ArrayLike:
     r"""Exposure-start phase of frame ``n`` (eq. 3, solved in closed form).
 
@@ -455,12 +467,8 @@ def frame_phase(phase0: ArrayLike, frame_index: ArrayLike, frame_time: ArrayLike
         Phase in [0, T) (s), broadcast shape. Unlike the recursion of eq. 3, ``n * t_f`` is split exactly, so
         frame :math:`10^9` is within a few ulp of :math:`T`.
     """
-    check_array("phase0", phase0)
-    check_array("frame_index", frame_index, lo=0.0)
-    check_array("frame_time", frame_time, lo=0.0)
-    check_array("period", period, lo=0.0, lo_open=True)
-    _check_broadcast(("phase0", "frame_index", "frame_time", "period"), (phase0, frame_index, frame_time, period))
-    return _affine_phase(phase0, frame_index, frame_time, period)
+    return _checked_affine_phase(("phase0", "frame_index", "frame_time", "period"),
+                                 phase0, frame_index, frame_time, period)
 
 
 def row_phase(phase: ArrayLike, row: ArrayLike, line_time: ArrayLike, period: ArrayLike) -> ArrayLike:
@@ -477,12 +485,7 @@ def row_phase(phase: ArrayLike, row: ArrayLike, line_time: ArrayLike, period: Ar
     Returns:
         Phase in [0, T) (s), broadcast shape (``phase[..., None]`` with ``row`` of shape (H,) gives (..., H)).
     """
-    check_array("phase", phase)
-    check_array("row", row, lo=0.0)
-    check_array("line_time", line_time, lo=0.0)
-    check_array("period", period, lo=0.0, lo_open=True)
-    _check_broadcast(("phase", "row", "line_time", "period"), (phase, row, line_time, period))
-    return _affine_phase(phase, row, line_time, period)
+    return _checked_affine_phase(("phase", "row", "line_time", "period"), phase, row, line_time, period)
 
 
 def bin_weights(edges: ArrayLike, period: ArrayLike, duty: ArrayLike, led_phase: ArrayLike = 0.0,
