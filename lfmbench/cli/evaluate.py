@@ -6,150 +6,156 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import typer
+
 from lfmbench.cli._common import check_minima, fail, torch_setup
 
+__all__ = ["register", "evaluate_cmd", "leaderboard_cmd"]
 
-def register(app) -> None:
+
+def evaluate_cmd(
+    method: str = typer.Option(..., "--method", "-m",
+                               help="registered name (e.g. lpd_only) or package.module:function"),
+    corpus: Path = typer.Option(..., "--corpus", help="corpus root directory"),
+    split: str = typer.Option("test", help="corpus split"),
+    output: Path = typer.Option(None, "--output", "-o", help="result JSON (default runs/<method>.json)"),
+    seed: int = typer.Option(0, help="dataset seed (PWM draws, noise)"),
+    max_scenes: int = typer.Option(None, help="evaluate at most this many scenes"),
+    crop: int = typer.Option(None, help="square crop in px passed to the dataset"),
+    frames: int = typer.Option(3, help="consecutive frames per sample (e.g. 24 or 100; <= the corpus frames)"),
+    samples_per_scene: int = typer.Option(1, help="PWM draws per scene (test draws frozen in the corpus)"),
+    repeats: int = typer.Option(5, help="timed calls after warm-up"),
+    warmup: int = typer.Option(1, help="untimed warm-up calls"),
+    perceptual: bool = typer.Option(True, help="also PU21-PSNR and ColorVideoVDP (needs cvvdp)"),
+    device: str = typer.Option("cpu", help="torch device, e.g. cpu or cuda"),
+    threads: int = typer.Option(None, help="torch CPU threads (default: torch's choice); recorded"),
+    cache_dir: Path = typer.Option(None, "--cache-dir",
+                                   help="projected-radiance cache directory (default <corpus>/.cache; "
+                                        "any writable directory for a read-only corpus)"),
+) -> None:
+    """Score a fusion method on a corpus split; write per-scene and aggregate metrics as JSON.
+
+    Exit status: 0 every scene scored, 1 some scenes failed or the data source failed (the result file
+    says which), 2 bad input, 130 interrupted (the result file has status "interrupted").
+    """
+    from lfmbench.datasets.loading import EmptyDataError, collate_samples  # noqa: PLC0415
+    from lfmbench.evaluation.benchmark import corpus_run_inputs, safe_name  # noqa: PLC0415
+    from lfmbench.evaluation.leaderboard import _fmt  # noqa: PLC0415
+    from lfmbench.evaluation.run import DataSourceError, EvaluationInterrupted, evaluate  # noqa: PLC0415
+
+    if threads is not None and threads < 1:
+        fail(f"--threads must be >= 1, got {threads}")
+    check_minima((("--max-scenes", max_scenes, 1), ("--samples-per-scene", samples_per_scene, 1),
+                  ("--frames", frames, 1), ("--repeats", repeats, 1), ("--warmup", warmup, 0), ("--crop", crop, 2)))
+    torch_setup(device, threads)
+    out = output or Path("runs") / f"{safe_name(method)}.json"
+    try:  # an unwritable --output is found before any work is done
+        if out.is_dir():
+            raise IsADirectoryError(21, "is a directory")
+        out.parent.mkdir(parents=True, exist_ok=True)
+        import tempfile
+
+        with tempfile.TemporaryFile(dir=out.parent):
+            pass
+    except OSError as exc:
+        fail(f"--output {out}: cannot write the result file there ({exc.strerror or exc})")
+    from itertools import islice
+
+    from torch.utils.data import DataLoader
+
+    from lfmbench.baselines import MethodNotFoundError, get_method
+    from lfmbench.baselines.checkpoint import CheckpointError
+    from lfmbench.metrics import ScoreOptions
+
+    try:
+        fn = get_method(method)
+        extra = {"frames": frames} if cache_dir is None else {"frames": frames, "cache_dir": cache_dir}
+        ds, ident, cond = corpus_run_inputs(corpus, split, seed, crop, samples_per_scene, **extra)
+    except (MethodNotFoundError, FileNotFoundError, EmptyDataError, RuntimeError, ValueError) as exc:
+        fail(str(exc))
+    n = len(ds) if max_scenes is None else min(len(ds), max_scenes)
+    loader = DataLoader(ds, batch_size=1, shuffle=False, num_workers=0, collate_fn=collate_samples)
+    try:
+        res = evaluate(fn, islice(loader, n), method_spec=method, output=out,
+                       options=ScoreOptions(perceptual=perceptual), warmup=warmup, repeats=repeats, device=device,
+                       seeds={"dataset": seed}, dataset={"corpus": str(corpus), "split": split, "scenes": n,
+                                                         "crop": crop, "samples_per_scene": samples_per_scene,
+                                                         "frames": frames},
+                       total=n, corpus=ident, scene_conditions=cond)
+    except EvaluationInterrupted as exc:
+        n_done = len(exc.result["scenes"])
+        typer.secho(f"interrupted: {n_done} scene(s) scored; {out} is marked status \"interrupted\" "
+                    "(the leaderboard skips it); run the command again for a complete result",
+                    fg=typer.colors.YELLOW, err=True)
+        raise typer.Exit(130) from None
+    except (DataSourceError, EmptyDataError) as exc:
+        fail(f"{exc} (partial results in {out})", 1)
+    except CheckpointError as exc:  # a hostile or broken weights file: bad input, named
+        fail(f"{exc}; nothing was scored")
+    except OSError as exc:  # the result file could not be written (disk full, ...)
+        fail(f"{exc.filename}: {exc.strerror or exc}" if exc.filename else (exc.strerror or str(exc)))
+    agg = res["aggregate"]
+    ci = agg.get("ci", {}).get("led_score") or [None, None]
+    typer.echo(f"{method}: {agg.get('scenes_ok', 0)}/{agg.get('scenes', 0)} scenes ok, LED score "
+               f"{_fmt(agg.get('led_score'))} [{_fmt(ci[0])}, {_fmt(ci[1])}], dropout "
+               f"{_fmt(agg.get('dropout_rate'))}, PSNR-mu {_fmt(agg.get('psnr_mu'), 2)} dB, "
+               f"{_fmt(res['runtime']['ms_per_megapixel'], 1)} ms/MP -> {out}")
+    bad = [sc for sc in res["scenes"] if sc.get("status") != "ok"]
+    if bad:
+        fail(f"{len(bad)} of {len(res['scenes'])} scenes failed (first: scene {bad[0].get('scene_id')}: "
+             f"{bad[0].get('error', bad[0].get('status'))}); see {out}", 1)
+
+
+
+def leaderboard_cmd(
+    runs: list[Path] = typer.Argument(..., help="evaluation JSON files, e.g. runs/*.json"),
+    sort_by: str = typer.Option("led_score", help="registered metric to rank by (default: the LED score, "
+                                                  "docs/metrics.md)"),
+    markdown: Path = typer.Option(Path("runs/leaderboard.md"), help="Markdown table output"),
+    plot: Path = typer.Option(Path("runs/leaderboard.png"), help="quality-vs-run-time PNG output"),
+    json_out: Path = typer.Option(Path("runs/leaderboard.json"), "--json",
+                                  help="leaderboard JSON output (rows, CIs, paired tests, breakdown)"),
+    conditions: Path = typer.Option(None, "--conditions",
+                                    help="condition bins YAML (default lfmbench/configs/conditions.yaml)"),
+    include_incomplete: bool = typer.Option(False, "--include-incomplete",
+                                            help="rank interrupted or failed runs too (marked in the table)"),
+) -> None:
+    """Rank evaluation results; print a table, write Markdown and a quality-vs-run-time plot.
+
+    Runs whose status is not "complete" (interrupted, failed, or killed while "running") are refused unless
+    --include-incomplete, which ranks them after the complete ones and marks them. Runs computed on
+    different corpora (manifest SHA-256, format version, test draws), with different metric versions or a
+    different protocol (split, seed, crop, samples per scene, scoring options) are refused.
+    """
+    from lfmbench.evaluation.benchmark import write_leaderboard  # noqa: PLC0415
+    from lfmbench.evaluation.leaderboard import (check_comparable, incomplete_runs,  # noqa: PLC0415
+                                                 leaderboard_rows, load_runs, print_leaderboard)
+
+    skipped: list[str] = []
+    try:
+        loaded = load_runs((p for p in runs if p.suffix == ".json"), skipped)
+        if skipped:
+            typer.echo(f"left out {len(skipped)} leaderboard file(s), not results: {', '.join(skipped[:3])}")
+        bad = incomplete_runs(loaded)
+        if bad and not include_incomplete:
+            raise ValueError(f"{len(bad)} run file(s) are not complete results ({'; '.join(bad[:3])}"
+                             f"{' ...' if len(bad) > 3 else ''}); re-run them, leave them out, or pass "
+                             "--include-incomplete to rank them marked")
+        check_comparable(loaded)
+        rows = leaderboard_rows(loaded, sort_by, conditions_file=conditions)
+    except ValueError as exc:
+        typer.secho(f"error: {exc}", fg=typer.colors.RED, err=True)
+        raise typer.Exit(2) from None
+    print_leaderboard(rows, sort_by, note=f"all columns in {markdown}")
+    try:
+        write_leaderboard(rows, loaded, sort_by, markdown, plot, json_out, conditions)
+    except OSError as exc:
+        typer.secho(f"error: {exc}", fg=typer.colors.RED, err=True)
+        raise typer.Exit(2) from None
+    typer.echo(f"wrote {markdown}, {json_out} and {plot}")
+
+
+def register(app: typer.Typer) -> None:
     """Add the ``evaluate`` and ``leaderboard`` commands to the typer ``app``."""
-    import typer
-
-    @app.command("evaluate")
-    def evaluate_cmd(
-        method: str = typer.Option(..., "--method", "-m",
-                                   help="registered name (e.g. lpd_only) or package.module:function"),
-        corpus: Path = typer.Option(..., "--corpus", help="corpus root directory"),
-        split: str = typer.Option("test", help="corpus split"),
-        output: Path = typer.Option(None, "--output", "-o", help="result JSON (default runs/<method>.json)"),
-        seed: int = typer.Option(0, help="dataset seed (PWM draws, noise)"),
-        max_scenes: int = typer.Option(None, help="evaluate at most this many scenes"),
-        crop: int = typer.Option(None, help="square crop in px passed to the dataset"),
-        frames: int = typer.Option(3, help="consecutive frames per sample (e.g. 24 or 100; <= the corpus frames)"),
-        samples_per_scene: int = typer.Option(1, help="PWM draws per scene (test draws frozen in the corpus)"),
-        repeats: int = typer.Option(5, help="timed calls after warm-up"),
-        warmup: int = typer.Option(1, help="untimed warm-up calls"),
-        perceptual: bool = typer.Option(True, help="also PU21-PSNR and ColorVideoVDP (needs cvvdp)"),
-        device: str = typer.Option("cpu", help="torch device, e.g. cpu or cuda"),
-        threads: int = typer.Option(None, help="torch CPU threads (default: torch's choice); recorded"),
-        cache_dir: Path = typer.Option(None, "--cache-dir",
-                                       help="projected-radiance cache directory (default <corpus>/.cache; "
-                                            "any writable directory for a read-only corpus)"),
-    ) -> None:
-        """Score a fusion method on a corpus split; write per-scene and aggregate metrics as JSON.
-
-        Exit status: 0 every scene scored, 1 some scenes failed or the data source failed (the result file
-        says which), 2 bad input, 130 interrupted (the result file has status "interrupted").
-        """
-        from lfmbench.datasets.loading import EmptyDataError, collate_samples  # noqa: PLC0415
-        from lfmbench.evaluation.benchmark import corpus_run_inputs, safe_name  # noqa: PLC0415
-        from lfmbench.evaluation.leaderboard import _fmt  # noqa: PLC0415
-        from lfmbench.evaluation.run import DataSourceError, EvaluationInterrupted, evaluate  # noqa: PLC0415
-
-        if threads is not None and threads < 1:
-            fail(f"--threads must be >= 1, got {threads}")
-        check_minima((("--max-scenes", max_scenes, 1), ("--samples-per-scene", samples_per_scene, 1),
-                      ("--frames", frames, 1), ("--repeats", repeats, 1), ("--warmup", warmup, 0), ("--crop", crop, 2)))
-        torch_setup(device, threads)
-        out = output or Path("runs") / f"{safe_name(method)}.json"
-        try:  # an unwritable --output is found before any work is done
-            if out.is_dir():
-                raise IsADirectoryError(21, "is a directory")
-            out.parent.mkdir(parents=True, exist_ok=True)
-            import tempfile
-
-            with tempfile.TemporaryFile(dir=out.parent):
-                pass
-        except OSError as exc:
-            fail(f"--output {out}: cannot write the result file there ({exc.strerror or exc})")
-        from itertools import islice
-
-        from torch.utils.data import DataLoader
-
-        from lfmbench.baselines import MethodNotFoundError, get_method
-        from lfmbench.baselines.checkpoint import CheckpointError
-        from lfmbench.metrics import ScoreOptions
-
-        try:
-            fn = get_method(method)
-            extra = {"frames": frames} if cache_dir is None else {"frames": frames, "cache_dir": cache_dir}
-            ds, ident, cond = corpus_run_inputs(corpus, split, seed, crop, samples_per_scene, **extra)
-        except (MethodNotFoundError, FileNotFoundError, EmptyDataError, RuntimeError, ValueError) as exc:
-            fail(str(exc))
-        n = len(ds) if max_scenes is None else min(len(ds), max_scenes)
-        loader = DataLoader(ds, batch_size=1, shuffle=False, num_workers=0, collate_fn=collate_samples)
-        try:
-            res = evaluate(fn, islice(loader, n), method_spec=method, output=out,
-                           options=ScoreOptions(perceptual=perceptual), warmup=warmup, repeats=repeats, device=device,
-                           seeds={"dataset": seed}, dataset={"corpus": str(corpus), "split": split, "scenes": n,
-                                                             "crop": crop, "samples_per_scene": samples_per_scene,
-                                                             "frames": frames},
-                           total=n, corpus=ident, scene_conditions=cond)
-        except EvaluationInterrupted as exc:
-            n_done = len(exc.result["scenes"])
-            typer.secho(f"interrupted: {n_done} scene(s) scored; {out} is marked status \"interrupted\" "
-                        "(the leaderboard skips it); run the command again for a complete result",
-                        fg=typer.colors.YELLOW, err=True)
-            raise typer.Exit(130) from None
-        except (DataSourceError, EmptyDataError) as exc:
-            fail(f"{exc} (partial results in {out})", 1)
-        except CheckpointError as exc:  # a hostile or broken weights file: bad input, named
-            fail(f"{exc}; nothing was scored")
-        except OSError as exc:  # the result file could not be written (disk full, ...)
-            fail(f"{exc.filename}: {exc.strerror or exc}" if exc.filename else (exc.strerror or str(exc)))
-        agg = res["aggregate"]
-        ci = agg.get("ci", {}).get("led_score") or [None, None]
-        typer.echo(f"{method}: {agg.get('scenes_ok', 0)}/{agg.get('scenes', 0)} scenes ok, LED score "
-                   f"{_fmt(agg.get('led_score'))} [{_fmt(ci[0])}, {_fmt(ci[1])}], dropout "
-                   f"{_fmt(agg.get('dropout_rate'))}, PSNR-mu {_fmt(agg.get('psnr_mu'), 2)} dB, "
-                   f"{_fmt(res['runtime']['ms_per_megapixel'], 1)} ms/MP -> {out}")
-        bad = [sc for sc in res["scenes"] if sc.get("status") != "ok"]
-        if bad:
-            fail(f"{len(bad)} of {len(res['scenes'])} scenes failed (first: scene {bad[0].get('scene_id')}: "
-                 f"{bad[0].get('error', bad[0].get('status'))}); see {out}", 1)
-
-    @app.command("leaderboard")
-    def leaderboard_cmd(
-        runs: list[Path] = typer.Argument(..., help="evaluation JSON files, e.g. runs/*.json"),
-        sort_by: str = typer.Option("led_score", help="registered metric to rank by (default: the LED score, "
-                                                      "docs/metrics.md)"),
-        markdown: Path = typer.Option(Path("runs/leaderboard.md"), help="Markdown table output"),
-        plot: Path = typer.Option(Path("runs/leaderboard.png"), help="quality-vs-run-time PNG output"),
-        json_out: Path = typer.Option(Path("runs/leaderboard.json"), "--json",
-                                      help="leaderboard JSON output (rows, CIs, paired tests, breakdown)"),
-        conditions: Path = typer.Option(None, "--conditions",
-                                        help="condition bins YAML (default lfmbench/configs/conditions.yaml)"),
-        include_incomplete: bool = typer.Option(False, "--include-incomplete",
-                                                help="rank interrupted or failed runs too (marked in the table)"),
-    ) -> None:
-        """Rank evaluation results; print a table, write Markdown and a quality-vs-run-time plot.
-
-        Runs whose status is not "complete" (interrupted, failed, or killed while "running") are refused unless
-        --include-incomplete, which ranks them after the complete ones and marks them. Runs computed on
-        different corpora (manifest SHA-256, format version, test draws), with different metric versions or a
-        different protocol (split, seed, crop, samples per scene, scoring options) are refused.
-        """
-        from lfmbench.evaluation.benchmark import write_leaderboard  # noqa: PLC0415
-        from lfmbench.evaluation.leaderboard import (check_comparable, incomplete_runs,  # noqa: PLC0415
-                                                     leaderboard_rows, load_runs, print_leaderboard)
-
-        skipped: list[str] = []
-        try:
-            loaded = load_runs((p for p in runs if p.suffix == ".json"), skipped)
-            if skipped:
-                typer.echo(f"left out {len(skipped)} leaderboard file(s), not results: {', '.join(skipped[:3])}")
-            bad = incomplete_runs(loaded)
-            if bad and not include_incomplete:
-                raise ValueError(f"{len(bad)} run file(s) are not complete results ({'; '.join(bad[:3])}"
-                                 f"{' ...' if len(bad) > 3 else ''}); re-run them, leave them out, or pass "
-                                 "--include-incomplete to rank them marked")
-            check_comparable(loaded)
-            rows = leaderboard_rows(loaded, sort_by, conditions_file=conditions)
-        except ValueError as exc:
-            typer.secho(f"error: {exc}", fg=typer.colors.RED, err=True)
-            raise typer.Exit(2) from None
-        print_leaderboard(rows, sort_by, note=f"all columns in {markdown}")
-        try:
-            write_leaderboard(rows, loaded, sort_by, markdown, plot, json_out, conditions)
-        except OSError as exc:
-            typer.secho(f"error: {exc}", fg=typer.colors.RED, err=True)
-            raise typer.Exit(2) from None
-        typer.echo(f"wrote {markdown}, {json_out} and {plot}")
+    app.command("evaluate")(evaluate_cmd)
+    app.command("leaderboard")(leaderboard_cmd)

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import typer
 
+from lfmbench.cli._common import fail
 from lfmbench.paper.fig3 import FIG3_EXPOSURES_S, fig3_series, plot_fig3
 from lfmbench.paper.figures import FIGURES, FigureInputError, make_figures, render_corpus
 
@@ -52,10 +53,6 @@ def _register_figures(app) -> None:
                                                        "scenes already there)"),
                       workers: int = typer.Option(1, "--workers", help="render processes (with --render)")) -> None:
         """Reproduce the ISET-LFM paper's Figs. 3-7 (docs/paper-figures.md)."""
-        def fail(msg: str) -> None:
-            typer.echo(f"error: {msg}", err=True)
-            raise typer.Exit(2)
-
         if fig not in FIGURES:
             fail(f"--fig must be one of {', '.join(FIGURES)}; got {fig!r}")
         if render:
