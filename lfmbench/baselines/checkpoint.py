@@ -28,6 +28,20 @@ def read_weights(path: str | os.PathLike, map_location: str | torch.device = "cp
             from None
 
 
+def build_from_state(path: str | os.PathLike, build: Callable[[], torch.nn.Module], state_dict: object,
+                     what: str) -> torch.nn.Module:
+    """``build()`` with the weights ``state_dict`` of the checkpoint ``path``, in eval mode; weights that do not fit
+    the network (missing or unexpected keys, wrong shapes, a config it cannot build) are a :class:`CheckpointError`
+    naming ``path`` and ``what`` they do not fit."""
+    try:
+        model = build()
+        model.load_state_dict(state_dict)
+    except (KeyError, RuntimeError, TypeError, ValueError) as exc:
+        why = " ".join(str(exc).split())[:200]
+        raise CheckpointError(f"checkpoint {path}: weights do not {what} ({why})") from None
+    return model.eval()
+
+
 class CheckpointedModel:
     """The weights of a registered learned method: the file named by environment variable ``env`` (default
     ``default``), loaded by ``load(path) -> torch.nn.Module`` (which raises a clear error naming the training

@@ -30,7 +30,7 @@ from typing import Any
 import torch
 import torch.nn as nn
 
-from lfmbench.baselines.checkpoint import CheckpointError, checkpointed_method, read_weights
+from lfmbench.baselines.checkpoint import CheckpointError, build_from_state, checkpointed_method, read_weights
 from lfmbench.baselines.classic import _captures, saturated_fusion
 from lfmbench.baselines.trainable import Trainable, TrainConfig, read_sections, read_yaml_config
 from lfmbench.fileio import atomic_torch_save
@@ -142,13 +142,8 @@ def load_checkpoint(path: str | Path, map_location: str | torch.device = "cpu") 
     if not isinstance(ck, dict) or ck.get("format_version") != FORMAT_VERSION:
         raise CheckpointError(f"checkpoint {path} is not a lfmbench learned-fusion checkpoint of format "
                               f"{FORMAT_VERSION}")
-    try:
-        model = LearnedFusion(int(ck["width"]))
-        model.load_state_dict(ck["state_dict"])
-    except (KeyError, RuntimeError, TypeError, ValueError) as exc:
-        why = " ".join(str(exc).split())[:200]
-        raise CheckpointError(f"checkpoint {path}: weights do not fit the learned-fusion network ({why})") from None
-    return model.eval()
+    return build_from_state(path, lambda: LearnedFusion(int(ck["width"])), ck.get("state_dict"),
+                            "fit the learned-fusion network")
 
 
 def _loss(model: LearnedFusion, batch: dict, cfg: LearnedConfig) -> tuple[torch.Tensor, dict]:

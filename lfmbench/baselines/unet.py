@@ -39,7 +39,7 @@ import torch.nn as nn
 import torch.nn.functional as F
 
 from lfmbench.limits import brief
-from lfmbench.baselines.checkpoint import CheckpointError, checkpointed_method, read_weights
+from lfmbench.baselines.checkpoint import CheckpointError, build_from_state, checkpointed_method, read_weights
 from lfmbench.baselines.classic import _captures, exposures_s, saturated_fusion
 from lfmbench.baselines.trainable import (ConfigError, Trainable, TrainConfig, count_parameters, read_sections,
                                           read_yaml_config)
@@ -283,13 +283,9 @@ def read_checkpoint(path: str | os.PathLike, map_location: str | torch.device = 
 def load_checkpoint(path: str | os.PathLike, map_location: str | torch.device = "cpu") -> UNetFusion:
     """Build a :class:`UNetFusion` (eval mode) from a checkpoint written by :func:`save_checkpoint`."""
     ck = read_checkpoint(path, map_location)
-    try:
-        model = UNetFusion(config_from_dict({"model": ck["model_config"]}, f"checkpoint {path}").model)
-        model.load_state_dict(ck["state_dict"])
-    except (KeyError, RuntimeError, TypeError, ValueError) as exc:
-        why = " ".join(str(exc).split())[:200]
-        raise CheckpointError(f"checkpoint {path}: weights do not match its model config ({why})") from None
-    return model.eval()
+    return build_from_state(
+        path, lambda: UNetFusion(config_from_dict({"model": ck["model_config"]}, f"checkpoint {path}").model),
+        ck.get("state_dict"), "match its model config")
 
 
 def _loss(model: UNetFusion, batch: dict, cfg: UNetConfig) -> tuple[torch.Tensor, dict]:
