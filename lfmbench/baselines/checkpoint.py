@@ -28,6 +28,18 @@ def read_weights(path: str | os.PathLike, map_location: str | torch.device = "cp
             from None
 
 
+def read_trained_weights(path: str | os.PathLike, map_location: str | torch.device, *, method: str, env: str,
+                         what: str, not_found: type[Exception] = FileNotFoundError) -> object:
+    """:func:`read_weights` of the checkpoint of a learned baseline; a missing file raises ``not_found`` naming the
+    training command (``lfmbench train --method METHOD``) and the environment variable ``env`` (``what``: the
+    network's name in the message)."""
+    path = Path(path)
+    if not path.is_file():
+        raise not_found(f"no {what} checkpoint at {path}; train one with `lfmbench train --method {method} "
+                        f"--corpus DIR --out {path}` (or set ${env})")
+    return read_weights(path, map_location)
+
+
 def build_from_state(path: str | os.PathLike, build: Callable[[], torch.nn.Module], state_dict: object,
                      what: str) -> torch.nn.Module:
     """``build()`` with the weights ``state_dict`` of the checkpoint ``path``, in eval mode; weights that do not fit

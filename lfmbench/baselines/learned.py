@@ -30,7 +30,8 @@ from typing import Any
 import torch
 import torch.nn as nn
 
-from lfmbench.baselines.checkpoint import CheckpointError, build_from_state, checkpointed_method, read_weights
+from lfmbench.baselines.checkpoint import (CheckpointError, build_from_state, checkpointed_method,
+                                           read_trained_weights)
 from lfmbench.baselines.classic import _captures, saturated_fusion
 from lfmbench.baselines.trainable import Trainable, TrainConfig, read_sections, read_yaml_config
 from lfmbench.fileio import atomic_torch_save
@@ -131,17 +132,20 @@ def save_checkpoint(model: LearnedFusion, path: str | Path, extra: dict | None =
                               "state_dict": model.state_dict(), **(extra or {})}, path)
 
 
-def load_checkpoint(path: str | Path, map_location: str | torch.device = "cpu") -> LearnedFusion:
-    """Build a :class:`LearnedFusion` from a checkpoint; clear errors for a missing or foreign file."""
-    path = Path(path)
-    if not path.is_file():
-        raise CheckpointNotFoundError(
-            f"no learned-fusion checkpoint at {path}; train one with `lfmbench train --method learned "
-            f"--corpus DIR --out {path}` (or set ${CHECKPOINT_ENV})")
-    ck = read_weights(path, map_location)
+def read_checkpoint(path: str | Path, map_location: str | torch.device = "cpu") -> dict:
+    """The checkpoint dict (tensors and plain data only); :class:`CheckpointNotFoundError` with the training command
+    for a missing file, :class:`CheckpointError` for a foreign one."""
+    ck = read_trained_weights(path, map_location, method="learned", env=CHECKPOINT_ENV, what="learned-fusion",
+                              not_found=CheckpointNotFoundError)
     if not isinstance(ck, dict) or ck.get("format_version") != FORMAT_VERSION:
         raise CheckpointError(f"checkpoint {path} is not a lfmbench learned-fusion checkpoint of format "
                               f"{FORMAT_VERSION}")
+    return ck
+
+
+def load_checkpoint(path: str | Path, map_location: str | torch.device = "cpu") -> LearnedFusion:
+    """Build a :class:`LearnedFusion` from a checkpoint; clear errors for a missing or foreign file."""
+    ck = read_checkpoint(path, map_location)
     return build_from_state(path, lambda: LearnedFusion(int(ck["width"])), ck.get("state_dict"),
                             "fit the learned-fusion network")
 
@@ -155,9 +159,6 @@ def _save(model: LearnedFusion, path: str | Path, cfg: LearnedConfig | None = No
     return save_checkpoint(model, path, {"config": cfg.to_dict() if cfg is not None else None, **(extra or {})})
 
 
-def _read(path: str | Path, map_location: str | torch.device = "cpu") -> dict:
-    load_checkpoint(path, map_location)  # the format checks, with their messages
-    return torch.load(path, map_location=map_location, weights_only=True)
 
 
 #: The registered method: :class:`LearnedFusion` with the weights at ``$LFMBENCH_LEARNED_CHECKPOINT`` or
@@ -169,5 +170,5 @@ checkpoint_path = learned.checkpoint_path
 #: generator seeded once (the order the published demo checkpoints were trained with).
 TRAINING = Trainable(name="learned", default_config=DEFAULT_CONFIG, load_config=load_config,
                      config_from_dict=config_from_dict, build_model=lambda cfg: LearnedFusion(cfg.model.width),
-                     loss=_loss, save_checkpoint=_save, read_checkpoint=_read, default_checkpoint=DEFAULT_CHECKPOINT,
+                     loss=_loss, save_checkpoint=_save, read_checkpoint=read_checkpoint, default_checkpoint=DEFAULT_CHECKPOINT,
                      checkpoint_env=CHECKPOINT_ENV, data_order="shuffle")

@@ -39,7 +39,8 @@ import torch.nn as nn
 import torch.nn.functional as F
 
 from lfmbench.limits import brief
-from lfmbench.baselines.checkpoint import CheckpointError, build_from_state, checkpointed_method, read_weights
+from lfmbench.baselines.checkpoint import (CheckpointError, build_from_state, checkpointed_method,
+                                           read_trained_weights)
 from lfmbench.baselines.classic import _captures, exposures_s, saturated_fusion
 from lfmbench.baselines.trainable import (ConfigError, Trainable, TrainConfig, count_parameters, read_sections,
                                           read_yaml_config)
@@ -269,12 +270,8 @@ def save_checkpoint(model: UNetFusion, path: str | os.PathLike, config: UNetConf
 def read_checkpoint(path: str | os.PathLike, map_location: str | torch.device = "cpu") -> dict:
     """The checkpoint dict (tensors and plain data only: ``weights_only=True``); clear errors for a missing or
     foreign file."""
-    path = Path(path)
-    if not path.is_file():
-        raise CheckpointNotFoundError(
-            f"no U-Net checkpoint at {path}; train one with `lfmbench train --method unet --corpus DIR --out {path}` "
-            f"(or set ${CHECKPOINT_ENV})")
-    ck = read_weights(path, map_location)
+    ck = read_trained_weights(path, map_location, method="unet", env=CHECKPOINT_ENV, what="U-Net",
+                              not_found=CheckpointNotFoundError)
     if not isinstance(ck, dict) or ck.get("format") != CHECKPOINT_FORMAT or ck.get("format_version") != FORMAT_VERSION:
         raise CheckpointError(f"checkpoint {path} is not a {CHECKPOINT_FORMAT} checkpoint of format {FORMAT_VERSION}")
     return ck
