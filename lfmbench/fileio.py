@@ -278,6 +278,17 @@ def load_json(path: str | os.PathLike, what: str = "JSON file", limit_name: str 
     return loads_json(raw, str(path))
 
 
+def load_json_input(path: str | os.PathLike, what: str) -> Any:
+    """:func:`load_json` of a user's input file (``what``: e.g. "run file", "scene file"), every failure a
+    ``ValueError`` whose one line names ``what`` and the file: unreadable, missing, malformed or above a limit."""
+    try:
+        return load_json(path, what)
+    except OSError as exc:
+        raise ValueError(f"{what} {path}: cannot read JSON ({exc.strerror or exc})") from None
+    except InputFileError as exc:
+        raise ValueError(f"{what} {exc}") from None
+
+
 def _yaml_loader():
     import yaml  # noqa: PLC0415
 

@@ -213,14 +213,9 @@ def scene_groups(scene: dict) -> dict:
 # -------------------------------------------------------------------------------------------------- I/O
 def load_scene(path: str | os.PathLike) -> dict:
     """Read and validate a scene JSON file; errors name the file."""
-    from lfmbench.fileio import InputFileError, load_json  # noqa: PLC0415
+    from lfmbench.fileio import load_json_input  # noqa: PLC0415
 
-    try:
-        scene = load_json(path, "scene file")
-    except OSError as exc:
-        raise ValueError(f"scene file {path}: cannot read JSON ({exc.strerror or exc})") from None
-    except InputFileError as exc:
-        raise ValueError(f"scene file {exc}") from None
+    scene = load_json_input(path, "scene file")
     try:
         return validate_scene(scene)
     except ValueError as exc:

@@ -23,7 +23,7 @@ from lfmbench.evaluation import stats
 from lfmbench.evaluation.conditions import bin_labels, load_bins
 from lfmbench.evaluation.results import (COMPLETE, RESULT_FORMAT, breakdown, jsonable, metric_summary, num,
                                          per_scene)
-from lfmbench.fileio import InputFileError, atomic_save_figure, load_json
+from lfmbench.fileio import atomic_save_figure, load_json_input
 
 LEADERBOARD_FORMAT = "lfmbench-leaderboard"
 LEADERBOARD_VERSION = 1
@@ -43,12 +43,7 @@ def load_runs(paths: Iterable[str | Path], skipped: list[str] | None = None) -> 
     runs = []
     for p in paths:
         p = Path(p)
-        try:
-            d = load_json(p, "run file")
-        except OSError as exc:
-            raise ValueError(f"run file {p}: cannot read JSON ({exc.strerror or exc})") from None
-        except InputFileError as exc:
-            raise ValueError(f"run file {exc}") from None
+        d = load_json_input(p, "run file")
         if isinstance(d, dict) and d.get("format") == LEADERBOARD_FORMAT:
             if skipped is not None:
                 skipped.append(str(p))
