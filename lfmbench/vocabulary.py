@@ -12,7 +12,7 @@ from types import MappingProxyType
 from typing import Mapping
 
 __all__ = ["GROUPS", "LIGHT_GROUPS", "LIGHT_KINDS", "VEHICLE_KINDS", "OBJECT_KINDS", "SPECTRUM_MODELS",
-           "PHOTODIODES", "CAPTURES", "LEARNED_BASELINES"]
+           "PHOTODIODES", "CAPTURES", "CLASSIC_BASELINES", "LEARNED_BASELINES"]
 
 #: Light groups (upstream ISET-LFM names + traffic signals); each group is one radiance layer of a corpus.
 GROUPS: tuple[str, ...] = ("headlights", "streetlights", "otherlights", "skymap", "signals")
@@ -40,6 +40,11 @@ SPECTRUM_MODELS: Mapping[str, Mapping[str, tuple[str, ...]]] = MappingProxyType(
 PHOTODIODES: tuple[str, ...] = ("lpd", "spd")
 #: Captures of the split pixel, in the order of the ``saturated`` channels (docs/contracts.md).
 CAPTURES: tuple[str, ...] = ("lpd_hcg", "lpd_lcg", "spd")
+#: Rule-based baselines, in leaderboard order: each a function of that name in :mod:`lfmbench.baselines.classic`
+#: (:data:`lfmbench.baselines.REGISTRY` is built from this list). Here, without torch, so that the command line can
+#: list them in its help.
+CLASSIC_BASELINES: tuple[str, ...] = ("lpd_only", "spd_only", "upstream_saturated", "saturated_exposure_corrected",
+                                      "flicker_aware", "flicker_aware_two_sided", "temporal")
 #: Learned baselines: name -> the module that defines the registered method ``name`` (backed by a checkpoint) and
 #: ``TRAINING`` (how ``lfmbench train --method NAME`` trains it); :data:`lfmbench.baselines.LEARNED`. Here, without
 #: torch, so that the command line can list them in its help.

@@ -9,10 +9,9 @@ from __future__ import annotations
 import importlib
 from collections.abc import Callable
 
+from lfmbench.baselines import classic
 from lfmbench.baselines.checkpoint import lazy_method
-from lfmbench.vocabulary import LEARNED_BASELINES
-from lfmbench.baselines.classic import (flicker_aware, flicker_aware_two_sided, lpd_only, saturated_exposure_corrected,
-                                        spd_only, temporal, upstream_saturated)
+from lfmbench.vocabulary import CLASSIC_BASELINES, LEARNED_BASELINES
 
 Method = Callable[[dict], "object"]
 
@@ -23,17 +22,13 @@ Method = Callable[[dict], "object"]
 #: one entry of :data:`lfmbench.vocabulary.LEARNED_BASELINES`.
 LEARNED = LEARNED_BASELINES
 
-#: Registered baselines, in leaderboard order.
+#: Registered baselines, in leaderboard order: the rule-based ones of :data:`lfmbench.vocabulary.CLASSIC_BASELINES`
+#: (functions of :mod:`lfmbench.baselines.classic`), then the learned ones.
 REGISTRY: dict[str, Method] = {
-    "lpd_only": lpd_only,
-    "spd_only": spd_only,
-    "upstream_saturated": upstream_saturated,
-    "saturated_exposure_corrected": saturated_exposure_corrected,
-    "flicker_aware": flicker_aware,
-    "flicker_aware_two_sided": flicker_aware_two_sided,
-    "temporal": temporal,
+    **{name: getattr(classic, name) for name in CLASSIC_BASELINES},
     **{name: lazy_method(module, name) for name, module in LEARNED.items()},
 }
+globals().update({name: REGISTRY[name] for name in CLASSIC_BASELINES})  # lfmbench.baselines.lpd_only, ...
 
 
 class MethodNotFoundError(ValueError):

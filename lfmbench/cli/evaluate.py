@@ -9,13 +9,15 @@ from pathlib import Path
 import typer
 
 from lfmbench.cli._common import check_minima, fail, torch_setup
+from lfmbench.vocabulary import CLASSIC_BASELINES, LEARNED_BASELINES
 
 __all__ = ["register", "evaluate_cmd", "leaderboard_cmd"]
 
 
 def evaluate_cmd(
     method: str = typer.Option(..., "--method", "-m",
-                               help="registered name (e.g. lpd_only) or package.module:function"),
+                               help=f"a baseline ({', '.join((*CLASSIC_BASELINES, *LEARNED_BASELINES))}) or "
+                                    "package.module:function"),
     corpus: Path = typer.Option(..., "--corpus", help="corpus root directory"),
     split: str = typer.Option("test", help="corpus split"),
     output: Path = typer.Option(None, "--output", "-o", help="result JSON (default runs/<method>.json)"),

@@ -155,3 +155,17 @@ def test_learned_without_checkpoint_has_clear_error(tmp_path, monkeypatch):
     with pytest.raises(ValueError, match="not a lfmbench"):
         learned.load_checkpoint(bad)
     assert math.isfinite(float(learned.fusion_loss(torch.ones(1, 4), torch.ones(1, 4))))
+
+
+def test_registry_and_help_list_the_same_baselines():
+    """The rule-based names live once (lfmbench.vocabulary.CLASSIC_BASELINES): the registry is built from them and
+    the help of `lfmbench evaluate --method` lists every registered baseline."""
+    from typer.testing import CliRunner
+
+    from lfmbench.cli import app
+    from lfmbench.vocabulary import CLASSIC_BASELINES, LEARNED_BASELINES
+
+    assert list(baselines.REGISTRY) == [*CLASSIC_BASELINES, *LEARNED_BASELINES]
+    assert all(callable(getattr(baselines.classic, n)) for n in CLASSIC_BASELINES)
+    text = " ".join(CliRunner().invoke(app, ["evaluate", "--help"], env={"COLUMNS": "400"}).output.split())
+    assert all(name in text for name in baselines.REGISTRY), text
