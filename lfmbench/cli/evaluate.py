@@ -51,16 +51,11 @@ def evaluate_cmd(
                   ("--frames", frames, 1), ("--repeats", repeats, 1), ("--warmup", warmup, 0), ("--crop", crop, 2)))
     torch_setup(device, threads)
     out = output or Path("runs") / f"{safe_name(method)}.json"
-    try:  # an unwritable --output is found before any work is done
-        if out.is_dir():
-            raise IsADirectoryError(21, "is a directory")
-        out.parent.mkdir(parents=True, exist_ok=True)
-        import tempfile
+    from lfmbench.fileio import writable_error  # noqa: PLC0415
 
-        with tempfile.TemporaryFile(dir=out.parent):
-            pass
-    except OSError as exc:
-        fail(f"--output {out}: cannot write the result file there ({exc.strerror or exc})")
+    why = writable_error(out)  # an unwritable --output is found before any work is done (the writer's own rule)
+    if why is not None:
+        fail(f"--output {out}: cannot write the result file there ({why})")
     from itertools import islice
 
     from torch.utils.data import DataLoader
