@@ -214,10 +214,16 @@ def read_bytes(path: str | os.PathLike, what: str = "file", limit_name: str = "j
         size = os.fstat(fh.fileno()).st_size
         if size > cap:
             raise LimitError(str(path), f"{what} of {size:,} bytes", size, limit_name)
-        raw = fh.read(cap + 1)  # a growing or non-regular file: never more than the limit
-    if len(raw) > cap:
-        raise LimitError(str(path), f"{what} of more than {cap:,} bytes", len(raw), limit_name)
-    return raw
+        chunks, total = [], 0
+        while True:  # the stated size first; a growing or non-regular file: never more than the limit
+            b = fh.read(max(size + 1, 1 << 16) if not chunks else 1 << 20)
+            if not b:
+                break
+            total += len(b)
+            if total > cap:
+                raise LimitError(str(path), f"{what} of more than {cap:,} bytes", total, limit_name)
+            chunks.append(b)
+    return b"".join(chunks) if len(chunks) != 1 else chunks[0]
 
 
 def _no_constant(name: str) -> Any:

@@ -501,3 +501,25 @@ def test_set_epoch_checks_its_argument(tmp_path):
         with pytest.raises(exc, match="epoch must be an integer"):
             ds.set_epoch(bad)
     assert ds.epoch == 0
+
+
+def test_validate_report_is_the_same_with_worker_processes(tmp_path):
+    """Big corpora are validated by several processes; the report (errors, warnings, their order) must not
+    depend on it. The 100,000-scene timing is benchmarks/bench_validate.py (docs/validate-benchmark.md)."""
+    from lfmbench import corpus as C
+    from lfmbench.corpus import validate as V
+    from tests.data.corpus.data import make_corpus
+
+    root = make_corpus(tmp_path / "c", n_scenes=3)
+    (root / "scenes/scene00001/f001/skymap.exr").write_bytes(b"v/1\x01" + b"\0" * 40)  # bad checksum, corrupt
+    (root / "scenes/scene00002/f000/aux.exr").unlink()
+    (root / "scenes/scene00000/notes.txt").write_text("mine")
+    one = C.validate_corpus(root, workers=1)
+    assert not one.ok and len(one.errors) >= 3 and one.warnings
+    chunk = V.CHUNK_SCENES
+    V.CHUNK_SCENES = 1  # three tasks over two processes
+    try:
+        two = C.validate_corpus(root, workers=2)
+    finally:
+        V.CHUNK_SCENES = chunk
+    assert two.to_dict() == one.to_dict()

@@ -19,6 +19,9 @@ def validate_cmd(
                                       help="Check checksums, files and channels but do not decode pixels."),
     as_json: bool = typer.Option(False, "--json", help="Print the report as JSON."),
     max_errors: int = typer.Option(50, "--max-errors", min=1, help="Errors printed (all are counted)."),
+    workers: Optional[int] = typer.Option(None, "--workers", min=1,
+                                          help="Processes that check scenes (default: the CPU count, at most 8, "
+                                               "for corpora of 2,000 scenes or more)."),
 ) -> None:
     """Check a corpus: missing files, bad SHA-256, wrong/missing channels vs meta.json, NaN/inf/negative
     radiance. Exit status 1 when anything is wrong."""
@@ -30,7 +33,7 @@ def validate_cmd(
     console = Console(stderr=True, soft_wrap=True)
     with Progress(console=console, transient=True, disable=as_json) as prog:
         task = prog.add_task("validating", total=None)
-        rep = validate_corpus(corpus, check_pixels=not headers_only,
+        rep = validate_corpus(corpus, check_pixels=not headers_only, workers=workers,
                               progress=lambda d, t: prog.update(task, completed=d, total=t))
     if as_json:
         typer.echo(json.dumps(rep.to_dict(), indent=1))

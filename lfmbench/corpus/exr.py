@@ -255,49 +255,12 @@ class ExrPart:
 _EXR_TYPE_BYTES = {0: 4, 1: 2, 2: 4}
 
 
-class _Reader:
-    """Bounded sequential reads of an EXR header, buffered in 64 KiB blocks (never more than the
-    ``exr_header_bytes`` limit in all)."""
-
-    def __init__(self, fh, path: Path):
-        self.fh, self.path, self.cap = fh, path, limit("exr_header_bytes")
-        self.buf, self.pos, self.n = b"", 0, 0  # buffer, position in it, bytes read from the file
-
-    def _fill(self, need: int) -> None:
-        while len(self.buf) - self.pos < need:
-            if self.n >= self.cap:
-                raise LimitError(str(self.path), "EXR header of more bytes", None, "exr_header_bytes")
-            more = self.fh.read(min(max(need, 1 << 16), self.cap - self.n))
-            if not more:
-                raise CorpusFileError(f"EXR file {self.path} is truncated or corrupt: header ends early")
-            self.n += len(more)
-            self.buf = self.buf[self.pos:] + more
-            self.pos = 0
-
-    def read(self, k: int) -> bytes:
-        self._fill(k)
-        b = self.buf[self.pos:self.pos + k]
-        self.pos += k
-        return b
-
-    def cstr(self) -> bytes:
-        while True:
-            j = self.buf.find(b"\0", self.pos, self.pos + 257)
-            if j >= 0:
-                s = self.buf[self.pos:j]
-                self.pos = j + 1
-                return s
-            if len(self.buf) - self.pos > 256:
-                raise CorpusFileError(f"EXR file {self.path} is corrupt: a header name longer than 255 bytes")
-            self._fill(len(self.buf) - self.pos + 1)
-
-
 def check_exr_header(path: str | os.PathLike) -> dict:
     """Read the headers of an EXR file (pure Python, nothing but the header bytes) and check what they declare
     against :mod:`lfmbench.limits` before any pixel buffer is allocated: number of parts (``exr_parts``),
-    channels per part (``exr_channels``), display / data window sides (``exr_side``; the data window must have
-    positive size) and the decoded size of all parts (``exr_bytes``). Deep and tiled-only layouts are allowed
-    through to OpenEXR, which reports them.
+    channels per part (``exr_channels``), display / data window sides (``exr_side``; both windows must have
+    positive size), the decoded size of all parts (``exr_bytes``) and the header bytes (``exr_header_bytes``).
+    Deep and tiled layouts are passed on to OpenEXR, which reports them.
 
     Returns:
         ``{"parts": n, "decoded_bytes": b}``.
@@ -307,74 +270,100 @@ def check_exr_header(path: str | os.PathLike) -> dict:
             limit and how to raise it).
     """
     path = Path(path)
+    cap_hdr = limit("exr_header_bytes")
+    max_parts, max_ch, max_side, max_bytes = (limit("exr_parts"), limit("exr_channels"), limit("exr_side"),
+                                              limit("exr_bytes"))
     try:
         with open(path, "rb") as fh:
-            r = _Reader(fh, path)
-            magic, flags = struct.unpack("<iI", r.read(8))
+            buf = fh.read(1 << 16)
+
+            def more(need: int) -> bytes:  # the buffer extended to ``need`` bytes (bounded by exr_header_bytes)
+                nonlocal buf
+                while len(buf) < need:
+                    if len(buf) >= cap_hdr:
+                        raise LimitError(str(path), "EXR header of more bytes", None, "exr_header_bytes")
+                    b = fh.read(min(max(need - len(buf), 1 << 20), cap_hdr - len(buf)))
+                    if not b:
+                        raise CorpusFileError(f"EXR file {path} is truncated or corrupt: header ends early")
+                    buf += b
+                return buf
+
+            def cstr(i: int) -> tuple[bytes, int]:
+                j = buf.find(b"\0", i, i + 257)
+                while j < 0:
+                    if len(buf) - i > 256:
+                        raise CorpusFileError(f"EXR file {path} is corrupt: a header name longer than 255 bytes")
+                    more(len(buf) + 1)
+                    j = buf.find(b"\0", i, i + 257)
+                return buf[i:j], j + 1
+
+            if len(buf) < 8:
+                more(8)
+            magic, flags = struct.unpack_from("<iI", buf, 0)
             if magic != 20000630:
                 raise CorpusFileError(f"cannot read EXR file {path}: not an OpenEXR file (bad magic number)")
             multipart = bool(flags & 0x1000)
-            parts, total = 0, 0
-            max_parts, max_ch, max_side = limit("exr_parts"), limit("exr_channels"), limit("exr_side")
+            i, parts, total = 8, 0, 0
             while True:
-                windows: dict[str, tuple[int, int, int, int]] = {}
-                n_ch, px_bytes, first = 0, 0, True
+                windows: dict[bytes, tuple[int, int, int, int]] = {}
+                n_ch, px_bytes, first = 0, 0.0, True
                 while True:
-                    name = r.cstr()
+                    name, i = cstr(i)
                     if not name:
                         break
                     first = False
-                    typ = r.cstr()
-                    (size,) = struct.unpack("<i", r.read(4))
+                    typ, i = cstr(i)
+                    if len(buf) < i + 4:
+                        more(i + 4)
+                    (size,) = struct.unpack_from("<i", buf, i)
+                    i += 4
                     if size < 0:
                         raise CorpusFileError(f"EXR file {path} is corrupt: negative attribute size")
+                    if len(buf) < i + size:
+                        more(i + size)
                     if typ == b"chlist":
-                        body = r.read(size)
-                        i = 0
-                        while i < len(body) and body[i] != 0:
-                            j = body.index(b"\0", i)
-                            (ptype,) = struct.unpack_from("<i", body, j + 1)
-                            xs, ys = struct.unpack_from("<ii", body, j + 9)
+                        k, end = i, i + size
+                        while k < end and buf[k] != 0:
+                            j = buf.index(b"\0", k, end)
+                            ptype, _, xs, ys = struct.unpack_from("<iIii", buf, j + 1)
                             n_ch += 1
                             if n_ch > max_ch:
                                 raise LimitError(str(path), f"EXR part {parts} with more than {max_ch:,} channels",
                                                  None, "exr_channels")
                             px_bytes += _EXR_TYPE_BYTES.get(ptype, 4) / max(1, xs) / max(1, ys)
-                            i = j + 17
-                    elif typ == b"box2i" and name in (b"dataWindow", b"displayWindow"):
-                        windows[name.decode()] = struct.unpack("<iiii", r.read(16)) if size == 16 else \
-                            (0, 0, -1, -1)
-                        if size != 16:
-                            r.read(size)
-                    else:
-                        r.read(size)
+                            k = j + 17
+                    elif typ == b"box2i" and size == 16 and name in (b"dataWindow", b"displayWindow"):
+                        windows[name] = struct.unpack_from("<iiii", buf, i)
+                    i += size
                 if first and multipart and parts:  # the empty header that ends a multi-part header list
                     break
                 parts += 1
                 if parts > max_parts:
                     raise LimitError(str(path), f"EXR file with more than {max_parts:,} parts", None, "exr_parts")
-                for key in ("displayWindow", "dataWindow"):
+                for key in (b"displayWindow", b"dataWindow"):
                     if key not in windows:
-                        raise CorpusFileError(f"cannot read EXR file {path}: part {parts - 1} has no {key}")
+                        raise CorpusFileError(f"cannot read EXR file {path}: part {parts - 1} has no "
+                                              f"{key.decode()}")
                     x0, y0, x1, y1 = windows[key]
                     w, h = x1 - x0 + 1, y1 - y0 + 1
                     if w < 1 or h < 1:
-                        raise CorpusFileError(f"EXR file {path} part {parts - 1}: {key} {windows.get(key)} is empty "
-                                              "or missing")
+                        raise CorpusFileError(f"EXR file {path} part {parts - 1}: {key.decode()} "
+                                              f"{windows[key]} is empty")
                     if max(w, h) > max_side:
-                        raise LimitError(str(path), f"EXR part {parts - 1} {key} side", max(w, h), "exr_side")
-                x0, y0, x1, y1 = windows["dataWindow"]
+                        raise LimitError(str(path), f"EXR part {parts - 1} {key.decode()} side", max(w, h),
+                                         "exr_side")
+                x0, y0, x1, y1 = windows[b"dataWindow"]
                 total += int((x1 - x0 + 1) * (y1 - y0 + 1) * px_bytes)
-                if total > limit("exr_bytes"):
+                if total > max_bytes:
                     raise LimitError(str(path), f"EXR file declaring {total:,} or more decoded pixel bytes", total,
                                      "exr_bytes")
                 if not multipart:
                     break
     except LimitError as exc:
         raise CorpusFileError(str(exc)) from None
+    except CorpusFileError:
+        raise
     except (OSError, struct.error, ValueError) as exc:
-        if isinstance(exc, CorpusFileError):
-            raise
         raise CorpusFileError(f"cannot read EXR file {path}: {exc}") from None
     return {"parts": parts, "decoded_bytes": total}
 
