@@ -95,6 +95,13 @@ def test_evaluate_output_symlink_and_device(tmp_path, monkeypatch):
         assert stat.S_ISCHR(os.stat("/dev/full").st_mode)
 
 
+
+@pytest.mark.skipif(not os.path.exists("/dev/full"), reason="needs Linux /dev/full")
+def test_figure_write_error_is_one_line():
+    r = CliRunner().invoke(app, ["flicker-report", "--frames", "4", "--plot", "/dev/full"])
+    out = _one_line(r)
+    assert "could not write /dev/full: disk full" in out
+
 # ------------------------------------------------------------------- 5. YAML: billion laughs, long values
 def _laughs(levels: int, width: int = 10) -> str:
     """A YAML "billion laughs": ``width ** levels`` strings after alias expansion, ``levels * width`` aliases."""

@@ -38,7 +38,11 @@ def _register_fig3(app) -> None:
         t.add_row("FSI", "", *(f"{s[('fsi', te)]:.3f}" for te in FIG3_EXPOSURES_S))
         Console().print(t)
         if plot:
-            typer.echo(f"wrote {plot_fig3(plot, freq_hz=freq_hz, duty=duty, fps=fps, frames=frames)}")
+            try:
+                typer.echo(f"wrote {plot_fig3(plot, freq_hz=freq_hz, duty=duty, fps=fps, frames=frames)}")
+            except OSError as exc:  # the PNG could not be written: one line naming it
+                typer.echo(f"error: {exc.strerror or exc}", err=True)
+                raise typer.Exit(2) from None
 
 
 def _register_figures(app) -> None:
@@ -66,6 +70,8 @@ def _register_figures(app) -> None:
             paths = make_figures(fig, corpus, out)
         except FigureInputError as exc:
             fail(str(exc))
+        except OSError as exc:  # a figure could not be written (disk full, ...): the message names the file
+            fail(exc.strerror or str(exc))
         for p in paths:
             typer.echo(f"wrote {p}")
 

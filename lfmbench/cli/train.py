@@ -51,15 +51,18 @@ def train_cmd(
     out = out if out is not None else trainable(method).default_checkpoint
     if out.is_dir():
         fail(f"--out {out} is a directory; give a file path such as {out / f'{method}_fusion.pt'}")
-    try:
-        out.parent.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        fail(f"--out {out}: cannot create its directory ({exc.strerror or exc})")
+    from lfmbench.fileio import writable_error  # noqa: PLC0415
+
+    why = writable_error(out)  # before any training: the writer's own rule (a symlink is written through)
+    if why is not None:
+        fail(f"--out {out}: cannot write the checkpoint there ({why})")
     try:
         model, hist = train(method, corpus, out, cfg, device=device, epochs=epochs, workers=workers, resume=resume,
                             crop=crop, batch_size=batch_size, data=data)
     except (FileNotFoundError, EmptyDataError, ValueError) as exc:
         fail(str(exc))
+    except OSError as exc:  # the checkpoint could not be written (disk full, ...): the message names the file
+        fail(exc.strerror or str(exc))
     secs = hist["epoch_seconds"]
     typer.echo(f"saved {out}: {count_parameters(model):,} parameters, {len(secs)} epochs, "
                f"final loss {hist['epoch_loss'][-1] if hist['epoch_loss'] else float('nan'):.4f}"
