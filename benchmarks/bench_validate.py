@@ -100,8 +100,9 @@ def main() -> None:
         return
     lines = ["# `lfmbench validate` at scale", "",
              "Written by `benchmarks/bench_validate.py` (tiny scenes: 1 frame, one 4x4 static group of 2 bands, "
-             "3 files per scene; the EXR is one hard-linked file). `validate_corpus` in one process, on "
-             f"{platform.processor() or platform.machine()} ({os.cpu_count()} cores), "
+             "3 files per scene; the EXR a hard link). `validate_corpus` with one process and with its default "
+             f"worker processes, on {platform.processor() or platform.machine()} ({os.cpu_count()} cores, load "
+             f"average {os.getloadavg()[0]:.1f} at the end: other jobs shared the cores), "
              f"{time.strftime('%Y-%m-%d')}.", "",
              "| scenes | worker processes | --headers-only, 1 process (s) | --headers-only (s) | pixels decoded, "
              "1 process (s) | pixels decoded (s) | us per scene (pixels, 1 process) |",
