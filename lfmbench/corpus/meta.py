@@ -287,27 +287,31 @@ def manifest_entry_errors(man: Mapping[str, Any], path: Path | str) -> list[str]
 
 def inside_root(root: Path, rel: str, what: str, dirs: dict[str, Path] | None = None) -> Path:
     """``root / rel`` resolved (symbolic links followed); ``CorpusFileError`` naming ``what`` and ``rel`` when it
-    leaves the resolved corpus root. ``dirs``: a cache of resolved directories (relative path -> resolved path)
-    shared by the calls of one pass over a corpus, so that each directory is resolved once and each file costs
-    one ``lstat`` (a pass over a corpus stays linear in its files)."""
+    leaves the resolved corpus root. ``dirs``: a cache of resolved paths (relative path -> resolved path) shared
+    by the calls of one pass over a corpus: each directory is resolved once, from its resolved parent, and a
+    component costs one ``lstat`` (a pass over a corpus stays linear in its files)."""
     if dirs is None:
         dirs = {}
     base = dirs.get("")
     if base is None:
         base = dirs[""] = Path(root).resolve()
-    parent, _, name = rel.rpartition("/")
-    pd = dirs.get(parent)
-    if pd is None:
-        pd = (base / parent).resolve() if parent else base
-        if pd != base and base not in pd.parents:
-            raise CorpusFileError(f"{what}: entry {brief(rel)} resolves to {pd / name}, outside the corpus root "
-                                  f"{base}")
-        dirs[parent] = pd
-    p = pd / name
-    if p.is_symlink() or name in ("", ".", ".."):
-        p = p.resolve()
-    if p != base and base not in p.parents:
+    p = _resolved(base, rel, dirs)
+    s, b = str(p), str(base)
+    if s != b and not s.startswith(b.rstrip(os.sep) + os.sep):
         raise CorpusFileError(f"{what}: entry {brief(rel)} resolves to {p}, outside the corpus root {base}")
+    return p
+
+
+def _resolved(base: Path, rel: str, dirs: dict[str, Path]) -> Path:
+    """``base / rel`` with symbolic links resolved, component by component from the cached parents."""
+    got = dirs.get(rel)
+    if got is not None:
+        return got
+    parent, _, name = rel.rpartition("/")
+    p = (_resolved(base, parent, dirs) if parent else base) / name
+    if name in ("", ".", "..") or p.is_symlink():
+        p = p.resolve()
+    dirs[rel] = p
     return p
 
 

@@ -68,7 +68,9 @@ def validate_corpus(root: str | os.PathLike, *, check_pixels: bool = True,
         progress: optional callable ``progress(done, total)`` called after each scene (each chunk of
             :data:`CHUNK_SCENES` scenes with several workers).
         workers: processes that check scenes (default: the CPU count, at most 8, from
-            :data:`PARALLEL_FROM_SCENES` scenes on; 1 below). The report is the same whatever the number.
+            :data:`PARALLEL_FROM_SCENES` scenes on; 1 below). The report is the same whatever the number. The
+            workers are spawned processes: a script that calls this with several workers needs the usual
+            ``if __name__ == "__main__":`` guard (or ``workers=1``).
 
     Every step is linear in the number of scenes and files (sets and dicts for every lookup, each directory
     resolved once): ``docs/validate-benchmark.md``.
@@ -122,7 +124,7 @@ def validate_corpus(root: str | os.PathLike, *, check_pixels: bool = True,
     # files on disk not in the manifest
     sroot = root / SCENES_DIR
     if sroot.is_dir():
-        for p in sorted(sroot.rglob("*")):
+        for p in sorted(sroot.rglob("*"), key=lambda q: q.parts):  # Path order, without Path.__lt__
             if p.is_file():
                 rel = p.relative_to(root).as_posix()
                 if p.name.startswith(TMP_PREFIX):
