@@ -15,8 +15,9 @@ every output but ``rgb``; capture rows at a 256 x 256 crop, training rows at cro
 bytes per scene and the peak device memory per batch.
 
 Writes ``docs/device-path-benchmark.md`` (``--no-doc``: only print; ``--json PATH``: the rows, written as they come).
-Run: ``.venv/bin/python benchmarks/bench_device_path.py --device cuda`` (without a GPU: the CPU rows, and the file
-says the GPU rows were not run).
+Run: ``.venv/bin/python benchmarks/bench_device_path.py`` (``--device auto``: CUDA where there is one). Without a GPU
+it measures the CPU rows into ``docs/device-path-benchmark-cpu.md``, says that the GPU rows were not run, and
+leaves the GPU figures of ``docs/device-path-benchmark.md`` as they are.
 """
 from __future__ import annotations
 

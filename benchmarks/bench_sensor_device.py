@@ -14,8 +14,9 @@ mean electrons already on the device, FPN maps on, every capture), timed three w
 
 Reports samples/s (median of ``--repeats`` timed calls after two warm-up calls; CUDA synchronised) and the peak
 device memory of a call, per batch size, and writes ``docs/sensor-device-benchmark.md`` (``--no-doc``: only print).
-The CPU rows are always measured (on a GPU machine: on its host CPU); without a GPU the file says that the GPU
-rows were not run.
+The CPU rows are always measured (on a GPU machine: on its host CPU); without a GPU they go to
+``docs/sensor-device-benchmark-cpu.md``, which says that the GPU rows were not run, and the GPU figures of
+``docs/sensor-device-benchmark.md`` stay as they are.
 
 Run: ``.venv/bin/python benchmarks/bench_sensor_device.py [--device cuda] [--quick]``.
 """
