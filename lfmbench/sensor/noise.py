@@ -31,10 +31,16 @@ __all__ = ["fixed_pattern", "shot_noise", "read_capture", "simulate_split_pixel_
 
 
 @functools.lru_cache(maxsize=8)
-def _fixed_pattern_cpu(seed: int, height: int, width: int) -> tuple[torch.Tensor, ...]:
+def _fixed_pattern_cpu(seed: int, height: int, width: int, n_photodiodes: int = 2) -> tuple[torch.Tensor, ...]:
     g = torch.Generator(device="cpu").manual_seed(int(seed))
-    # fixed draw order: lpd gain, lpd offset, spd gain, spd offset (standard normal, float64)
-    return tuple(torch.randn(height, width, generator=g, dtype=torch.float64) for _ in range(4))
+    # fixed draw order: per photodiode its gain, then its offset (standard normal, float64); split pixel: lpd, spd
+    return tuple(torch.randn(height, width, generator=g, dtype=torch.float64) for _ in range(2 * n_photodiodes))
+
+
+def photodiode_order(preset: SensorPreset) -> tuple[str, ...]:
+    """The photodiodes of ``preset`` in their fixed-pattern draw order: ``PHOTODIODES`` for a split pixel (whatever
+    the order in its file), the file's order otherwise."""
+    return PHOTODIODES if preset.architecture == "split_pixel" else tuple(preset.photodiodes)
 
 
 def fixed_pattern(preset: SensorPreset | str, height: int, width: int, device: torch.device | str | None = None,
@@ -45,13 +51,14 @@ def fixed_pattern(preset: SensorPreset | str, height: int, width: int, device: t
     For crops of one sensor, build the full-frame pattern once and crop it.
 
     Returns:
-        ``{"lpd_gain", "spd_gain"}``: PRNU gain maps 1 + prnu z (clipped >= 0), dimensionless;
-        ``{"lpd_offset_e", "spd_offset_e"}``: DSNU offset maps dsnu_e z in e-; each (H, W).
+        ``{"<pd>_gain"}``: PRNU gain maps 1 + prnu z (clipped >= 0), dimensionless, and ``{"<pd>_offset_e"}``:
+        DSNU offset maps dsnu_e z in e-, for every photodiode ``<pd>`` (split pixel: lpd, spd); each (H, W).
     """
     preset = load_preset(preset)
-    z = _fixed_pattern_cpu(preset.fpn_seed, int(height), int(width))
+    order = photodiode_order(preset)
+    z = _fixed_pattern_cpu(preset.fpn_seed, int(height), int(width), len(order))
     out = {}
-    for i, pd in enumerate(PHOTODIODES):
+    for i, pd in enumerate(order):
         spec = preset.photodiodes[pd]
         out[f"{pd}_gain"] = (1.0 + spec.prnu * z[2 * i]).clamp_min(0.0).to(device=device, dtype=dtype)
         out[f"{pd}_offset_e"] = (spec.dsnu_e * z[2 * i + 1]).to(device=device, dtype=dtype)

@@ -26,6 +26,7 @@ import torch
 from lfmbench.limits import brief
 from lfmbench.check import check_keys, get_number
 from lfmbench.sensor.optics import OpticsConfig
+from lfmbench.sensor.plan import ARCHITECTURES, Readout, check_plan, exposure_groups, parse_exposure, parse_readout
 from lfmbench.sensor.spectral_data import DATA_DIR, read_spectral_csv
 from lfmbench.vocabulary import CAPTURES, PHOTODIODES
 
@@ -83,24 +84,31 @@ class PhotodiodeSpec:
 
 @dataclass(frozen=True)
 class CaptureSpec:
-    """One read-out of a photodiode.
+    """One read-out of a photodiode: what it reads, over which time windows, how.
 
     Attributes:
-        photodiode: ``"lpd"`` or ``"spd"``.
+        photodiode: a key of ``SensorPreset.photodiodes``.
         conversion_gain_v_per_e: conversion gain in V/e-.
         voltage_swing_v: voltage swing (ADC input range) in V.
         read_noise_e: read noise standard deviation in e- (Gaussian).
+        exposure: ``"short"`` / ``"long"`` (a window the corpus stores: the short exposure centred in the long
+            one, or the long one) or a tuple of ``(start_s, length_s)`` windows relative to the frame start, s
+            (several: a chopped exposure integrating their union); :mod:`lfmbench.sensor.plan`.
+        readout: global or rolling shutter and line time (:class:`lfmbench.sensor.plan.Readout`; unset fields
+            come from the preset's ``readout``, then from the dataset).
     """
 
     photodiode: str
     conversion_gain_v_per_e: float
     voltage_swing_v: float
     read_noise_e: float
+    exposure: Any = "short"
+    readout: Readout = field(default_factory=Readout)
 
 
 @dataclass(frozen=True)
 class SensorPreset:
-    """A split-pixel camera: pixel, CFA, photodiodes, captures, ADC and lens. Load with :func:`load_preset`.
+    """A camera: pixel, CFA, photodiodes, capture plan, ADC and lens. Load with :func:`load_preset`.
 
     Attributes:
         name: preset name.
@@ -114,10 +122,17 @@ class SensorPreset:
         peak_qe: scale of the relative curves to absolute QE (e- per photon).
         shot_noise_gaussian_above_e: mean (e-) from which shot noise is drawn as a rounded Gaussian.
         fpn_seed: seed of the fixed DSNU/PRNU pattern.
-        photodiodes: ``{"lpd": PhotodiodeSpec, "spd": PhotodiodeSpec}``.
-        captures: ``{"lpd_hcg": CaptureSpec, "lpd_lcg": ..., "spd": ...}``.
+        photodiodes: ``{name: PhotodiodeSpec}`` (split pixel: ``lpd``, ``spd``).
+        captures: ``{name: CaptureSpec}`` in read-out order, the capture plan (split pixel: ``lpd_hcg``,
+            ``lpd_lcg``, ``spd``); names are the sample keys of the captures.
         optics: lens of the camera.
         source: file the preset was read from.
+        architecture: one of :data:`lfmbench.sensor.plan.ARCHITECTURES` (``split_pixel``, ``lofic``,
+            ``staggered``, ``chopped``, ``single``).
+        reference: the capture whose photodiode and windows define the ground truth and the input-referred
+            units of every ``*_e`` output.
+        readout: the preset's default readout (a capture's own ``readout`` fields take precedence).
+        frame_time_s: frame period the plan is made for, s (optional; windows must end within it).
     """
 
     name: str
@@ -135,6 +150,10 @@ class SensorPreset:
     captures: Mapping[str, CaptureSpec]
     optics: OpticsConfig = field(default_factory=OpticsConfig)
     source: str = "<dict>"
+    architecture: str = "split_pixel"
+    reference: str = "lpd_hcg"
+    readout: Readout = field(default_factory=Readout)
+    frame_time_s: float | None = None
 
     def __hash__(self) -> int:
         # equal presets have equal scalar fields; the mappings are left out (unhashable)
@@ -159,8 +178,25 @@ class SensorPreset:
 
     @property
     def sensitivity_ratio(self) -> float:
-        """LPD / SPD sensitivity (dimensionless): ratio of the fill factors (both share the spectral curves)."""
+        """LPD / SPD sensitivity (dimensionless): ratio of the fill factors (both share the spectral curves).
+        Split pixel only (``ValueError`` otherwise)."""
+        if self.architecture != "split_pixel":
+            raise ValueError(f"sensitivity_ratio is the LPD/SPD ratio of a split pixel; preset {self.name!r} is "
+                             f"{self.architecture}")
         return self.photodiodes["lpd"].fill_factor / self.photodiodes["spd"].fill_factor
+
+    @property
+    def exposures(self) -> dict[str, tuple[str, ...]]:
+        """``{exposure key: capture names}``: the captures grouped by the charge they read
+        (:func:`lfmbench.sensor.plan.exposure_groups`); split pixel: ``{"lpd_hcg": ("lpd_hcg", "lpd_lcg"),
+        "spd": ("spd",)}``."""
+        return exposure_groups(self.captures)
+
+    def capture_readout(self, capture: str) -> Readout:
+        """The readout of ``capture``: its own fields, else the preset's (fields may stay ``None``)."""
+        own, top = self.captures[capture].readout, self.readout
+        return Readout(own.shutter or top.shutter,
+                       own.line_time_s if own.line_time_s is not None else top.line_time_s)
 
     def dn_per_volt(self, capture: str) -> float:
         """ADC gain of ``capture`` in DN/V: (2^bits - 1 - black_level) / voltage_swing."""
@@ -230,18 +266,28 @@ def _load_preset_file(path: str, mtime_ns: int = 0) -> SensorPreset:
     return preset_from_dict(data, path)
 
 
-def _entries(data: Mapping[str, Any], section: str, names: Sequence[str], spec: type, source: str):
-    """Yield ``(name, fields, prefix)`` for each required entry ``name`` of ``data[section]``, after checking
+def _entries(data: Mapping[str, Any], section: str, names: Sequence[str] | None, spec: type, source: str):
+    """Yield ``(name, fields, prefix)`` for each entry of ``data[section]`` (``names``: the entries required, in
+    this order, and no others; None: any non-empty set of string-named entries, in file order), after checking
     that the section and every entry exist and hold only known keys (the fields of dataclass ``spec``)."""
     raw = data.get(section)
     if raw is None:
         raise ValueError(f"{source}: missing field '{section}'")
+    if names is None:
+        check_keys(raw, section, source, optional=None)
+        if not raw or len(raw) > MAX_ENTRIES:
+            raise ValueError(f"{source}: field '{section}' must hold 1 to {MAX_ENTRIES} entries, got {len(raw)}")
+        names = [str(k) for k in raw]
     check_keys(raw, section, source, optional=set(names))
     for name in names:
         if name not in raw:
             raise ValueError(f"{source}: missing field '{section}.{name}'")
         check_keys(raw[name], f"{section}.{name}", source, optional={f.name for f in fields(spec)})
         yield name, raw[name], f"{section}.{name}."
+
+
+#: Most photodiodes or captures of one preset.
+MAX_ENTRIES = 8
 
 
 def preset_from_dict(data: Mapping[str, Any], source: str = "<dict>") -> SensorPreset:
@@ -251,8 +297,15 @@ def preset_from_dict(data: Mapping[str, Any], source: str = "<dict>") -> SensorP
         ValueError: naming the offending field and ``source``.
     """
     top = {"name", "description", "pixel_pitch_m", "cfa", "adc_bits", "black_level_dn", "saturation_fraction",
-           "spectral", "shot_noise_gaussian_above_e", "fpn_seed", "photodiodes", "captures", "optics"}
+           "spectral", "shot_noise_gaussian_above_e", "fpn_seed", "photodiodes", "captures", "optics",
+           "architecture", "reference", "readout", "frame_time_s"}
     check_keys(data, "", source, optional=top)
+    arch = data.get("architecture", "split_pixel")
+    if arch not in ARCHITECTURES:
+        raise ValueError(f"{source}: field 'architecture' must be one of {list(ARCHITECTURES)}, got {brief(arch)}")
+    split = arch == "split_pixel"
+    frame_time = get_number(data, "frame_time_s", source, lo=0, lo_open=True, hi=1.0, default=None)
+    readout = parse_readout(data.get("readout"), "readout", source)
     name = data.get("name")
     if not isinstance(name, str) or not name:
         raise ValueError(f"{source}: field 'name' must be a non-empty string, got {brief(name)}")
@@ -296,7 +349,7 @@ def preset_from_dict(data: Mapping[str, Any], source: str = "<dict>") -> SensorP
                          f"got {names}")
 
     pds: dict[str, PhotodiodeSpec] = {}
-    for pd, d, pre in _entries(data, "photodiodes", PHOTODIODES, PhotodiodeSpec, source):
+    for pd, d, pre in _entries(data, "photodiodes", PHOTODIODES if split else None, PhotodiodeSpec, source):
         pds[pd] = PhotodiodeSpec(
             fill_factor=get_number(d, "fill_factor", source, pre, lo=0, lo_open=True, hi=1.0),
             full_well_e=get_number(d, "full_well_e", source, pre, lo=0, lo_open=True),
@@ -306,22 +359,32 @@ def preset_from_dict(data: Mapping[str, Any], source: str = "<dict>") -> SensorP
         )
 
     caps: dict[str, CaptureSpec] = {}
-    for cap, d, pre in _entries(data, "captures", CAPTURES, CaptureSpec, source):
+    for cap, d, pre in _entries(data, "captures", CAPTURES if split else None, CaptureSpec, source):
         pd = d.get("photodiode")
-        if pd not in PHOTODIODES:
-            raise ValueError(f"{source}: field '{pre}photodiode' must be one of {list(PHOTODIODES)}, got {brief(pd)}")
+        if pd not in pds:
+            raise ValueError(f"{source}: field '{pre}photodiode' must be one of {list(pds)}, got {brief(pd)}")
+        if "exposure" in d:
+            exposure = parse_exposure(d["exposure"], f"{pre}exposure", source, frame_time)
+        elif split:  # the split pixel's timing (docs/contracts.md): LPD the short window, SPD the long one
+            exposure = "short" if pd == "lpd" else "long"
+        else:
+            raise ValueError(f"{source}: missing field '{pre}exposure'")
         caps[cap] = CaptureSpec(
             photodiode=pd,
             conversion_gain_v_per_e=get_number(d, "conversion_gain_v_per_e", source, pre, lo=0, lo_open=True, hi=1e-2),
             voltage_swing_v=get_number(d, "voltage_swing_v", source, pre, lo=0, lo_open=True, hi=100.0),
             read_noise_e=get_number(d, "read_noise_e", source, pre, lo=0),
+            exposure=exposure,
+            readout=parse_readout(d.get("readout"), f"{pre}readout", source),
         )
-    if caps["lpd_hcg"].photodiode != "lpd" or caps["lpd_lcg"].photodiode != "lpd" or caps["spd"].photodiode != "spd":
-        raise ValueError(f"{source}: field 'captures': lpd_hcg and lpd_lcg must read photodiode 'lpd' and spd "
-                         "must read photodiode 'spd'")
+    check_plan(arch, pds, caps, source)
+    reference = data.get("reference", ARCHITECTURES[arch].reference(caps))
+    if reference not in caps:
+        raise ValueError(f"{source}: field 'reference' must name a capture ({list(caps)}), got {brief(reference)}")
     optics = OpticsConfig.from_mapping(data["optics"], source) if "optics" in data else OpticsConfig()
     return SensorPreset(name=name, description=description, pixel_pitch_m=pitch, cfa=cfa, adc_bits=bits,
                         black_level_dn=black, saturation_fraction=sat_frac, filters_path=fpath, peak_qe=peak_qe,
                         shot_noise_gaussian_above_e=gauss, fpn_seed=seed, photodiodes=MappingProxyType(pds),
                         captures=MappingProxyType(caps),
-                        optics=optics, source=source)
+                        optics=optics, source=source, architecture=arch, reference=reference, readout=readout,
+                        frame_time_s=frame_time)

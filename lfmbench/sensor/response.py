@@ -17,7 +17,7 @@ import torch
 
 from lfmbench.constants import M_PER_NM, PLANCK_TIMES_C_J_M
 from lfmbench.sensor.optics import check_radiometric
-from lfmbench.sensor.preset import PHOTODIODES, CFAPattern, SensorPreset, load_preset
+from lfmbench.sensor.preset import CFAPattern, SensorPreset, load_preset
 from lfmbench.sensor.spectral_data import band_widths_nm, read_spectral_csv, wavelengths_array
 
 __all__ = ["spectral_qe", "electron_weights", "mosaic", "ideal_electrons"]
@@ -53,8 +53,8 @@ def electron_weights(preset: SensorPreset | str, wavelengths_nm: Sequence[float]
         (3, C) tensor in e- per (J m^-2 nm^-1).
     """
     preset = load_preset(preset)
-    if photodiode not in PHOTODIODES:
-        raise ValueError(f"photodiode must be one of {list(PHOTODIODES)}, got {photodiode!r}")
+    if photodiode not in preset.photodiodes:
+        raise ValueError(f"photodiode must be one of {list(preset.photodiodes)}, got {photodiode!r:.40}")
     wl = wavelengths_array(wavelengths_nm)
     if bandwidths_nm is None:
         dl = band_widths_nm(wl)
@@ -95,7 +95,7 @@ def ideal_electrons(radiant_exposure: torch.Tensor, preset: SensorPreset | str,
             in W m^-2 nm^-1 integrated over the exposure in s).
         preset: sensor preset or its name.
         wavelengths_nm: C band centres in nm.
-        photodiode: ``"lpd"`` or ``"spd"``.
+        photodiode: a photodiode of the preset (split pixel: ``"lpd"`` or ``"spd"``).
         bandwidths_nm: band widths in nm (default: local spacing, see :func:`band_widths_nm`).
         mosaic_output: ``True``: (*, 1, H, W) through the CFA; ``False``: (*, 3, H, W) r, g, b electrons.
         check: validate the input (finite, >= 0).
