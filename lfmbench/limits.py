@@ -40,6 +40,10 @@ LIMITS: dict[str, tuple[int, str]] = {
     "lights_per_scene": (4096, "lights of one scene (meta.json, scene files, dataset max_lights): every light is "
                                "one EXR part per frame and group, one padded entry per sample and one frozen "
                                "draw per test sample; the busiest rendered scene has 66"),
+    "mesh_triangles": (2_000_000, "triangles of all meshes of one scene file (inline or user asset files, counted "
+                                  "from what a file declares before its arrays are read; a generated lfmbench-v2 "
+                                  "scene has < 60,000)"),
+    "mesh_file_bytes": (256 << 20, "size of one user mesh file (OBJ, PLY, glTF/GLB) a scene file references"),
 }
 
 #: Environment variable of explicit overrides: ``name=value`` pairs separated by commas.

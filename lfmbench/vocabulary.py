@@ -11,7 +11,7 @@ from __future__ import annotations
 from types import MappingProxyType
 from typing import Mapping
 
-__all__ = ["GROUPS", "LIGHT_GROUPS", "LIGHT_KINDS", "VEHICLE_KINDS", "OBJECT_KINDS", "SPECTRUM_MODELS",
+__all__ = ["GROUPS", "LIGHT_GROUPS", "LIGHT_KINDS", "VEHICLE_KINDS", "OBJECT_KINDS", "WEATHERS", "SPECTRUM_MODELS",
            "PHOTODIODES", "CAPTURES", "CLASSIC_BASELINES", "LEARNED_BASELINES"]
 
 #: Light groups (upstream ISET-LFM names + traffic signals); each group is one radiance layer of a corpus.
@@ -24,10 +24,15 @@ LIGHT_KINDS: Mapping[str, str] = MappingProxyType({
     "headlight": "headlights", "streetlight": "streetlights", "tail": "otherlights", "brake": "otherlights",
     "indicator": "otherlights", "billboard": "otherlights", "signal": "signals"})
 #: Vehicle kinds of the scene generator (``vehicles.kind_weights``, ``vehicles.require_kinds`` of a scene config).
-VEHICLE_KINDS: tuple[str, ...] = ("car", "truck", "motorcycle")
-#: Object kinds of a scene file: the static scene parts, the vehicles, the poles.
+VEHICLE_KINDS: tuple[str, ...] = ("car", "truck", "motorcycle", "van", "bus", "bicycle")
+#: Object kinds of a scene file: the static scene parts, the vehicles, the poles; people, trees and road
+#: furniture (scene generator 2, protocol lfmbench-v2) and a user's own mesh asset.
 OBJECT_KINDS: tuple[str, ...] = ("ground", "road", "marking", "sidewalk", "building", *VEHICLE_KINDS,
-                                 "streetlight_pole", "signal_pole")
+                                 "streetlight_pole", "signal_pole", "pedestrian", "cyclist", "tree", "bollard",
+                                 "traffic_sign", "bench", "asset")
+#: Road-surface weather of a scene (``scene.weather``): ``wet`` and ``rain`` put a water film (a rough dielectric
+#: over the asphalt) and puddles on the road, so lamps reflect in it.
+WEATHERS: tuple[str, ...] = ("dry", "wet", "rain")
 #: Emission-spectrum models (``spectrum["model"]`` of a scene light and of ``meta.json``) and their required and
 #: optional parameters (the models themselves: :mod:`render_tools.spectra`).
 SPECTRUM_MODELS: Mapping[str, Mapping[str, tuple[str, ...]]] = MappingProxyType({

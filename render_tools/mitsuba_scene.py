@@ -121,13 +121,21 @@ def _plane_mesh(shape: dict, offset) -> tuple[np.ndarray, np.ndarray]:
     return V, F
 
 
-def part_mesh(part: dict, offset=np.zeros(3)) -> tuple[np.ndarray, np.ndarray]:
+def part_mesh(part: dict, offset=np.zeros(3), meshes: dict | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Triangle mesh (V (n, 3) m, F (m, 3) int, outward counter-clockwise) of one primitive part, moved by
     ``offset`` (3,) m. Analytic Mitsuba shapes are slow in the LLVM backend (Embree user geometry), so every
-    primitive is tessellated and the parts of one object and material are merged into one mesh."""
+    primitive is tessellated and the parts of one object and material are merged into one mesh. ``meshes``: the
+    scene's ``meshes`` (needed by a ``mesh`` part: its vertices scaled per axis, turned by ``yaw_deg`` about z and
+    moved to ``center``)."""
     s = part["shape"]
     if s in ("rect", "disk"):
         return _plane_mesh(part, offset)
+    if s == "mesh":
+        m = (meshes or {})[part["mesh"]]
+        t = math.radians(part.get("yaw_deg", 0.0))
+        rz = np.array([[math.cos(t), -math.sin(t), 0], [math.sin(t), math.cos(t), 0], [0, 0, 1]])
+        V = (np.asarray(m["vertices"], dtype=float) * np.asarray(part.get("scale", (1.0, 1.0, 1.0)), dtype=float))
+        return V @ rz.T + (np.asarray(part["center"], dtype=float) + offset), np.asarray(m["faces"], dtype=np.int64)
     if s == "box":
         c = np.asarray(part["center"], dtype=float) + offset
         hx, hy, hz = (x / 2 for x in part["size"])
@@ -183,12 +191,13 @@ def _moves(scene: dict, instance: int) -> bool:
     return instance >= 0 and any(float(v) != 0.0 for v in scene["objects"][instance]["velocity_mps"])
 
 
-def _object_meshes(obj: dict, offset: np.ndarray) -> list[tuple[str, np.ndarray, np.ndarray]]:
+def _object_meshes(obj: dict, offset: np.ndarray, meshes: dict | None = None) -> list[tuple[str, np.ndarray, np.ndarray]]:
     """Meshes of one object moved by ``offset`` (3,) m, one per material sorted by name (the order of
-    :func:`shape_id`): ``[(material, V (n, 3) m, F (m, 3))]``, parts of a material merged."""
+    :func:`shape_id`): ``[(material, V (n, 3) m, F (m, 3))]``, parts of a material merged. ``meshes``: the scene's
+    ``meshes`` (for ``mesh`` parts)."""
     by_mat: dict = {}
     for part in obj["parts"]:
-        by_mat.setdefault(part["material"], []).append(part_mesh(part, offset))
+        by_mat.setdefault(part["material"], []).append(part_mesh(part, offset, meshes))
     out = []
     for mat, meshes in sorted(by_mat.items()):
         Vs, Fs, base = [], [], 0
@@ -217,9 +226,10 @@ def _bsdf(m: dict) -> dict:
     t = m["type"]
     if t == "diffuse":
         return {"type": "diffuse", "reflectance": {"type": "rgb", "value": list(m["rgb"])}}
-    if t == "roughplastic":
+    if t == "roughplastic":  # a rough dielectric coating (index ``ior``) over a diffuse base
         return {"type": "roughplastic", "distribution": "ggx", "alpha": float(m["alpha"]),
-                "diffuse_reflectance": {"type": "rgb", "value": list(m["rgb"])}}
+                "diffuse_reflectance": {"type": "rgb", "value": list(m["rgb"])},
+                **({"int_ior": float(m["ior"])} if "ior" in m else {})}
     return {"type": "roughconductor", "material": "Al", "distribution": "ggx", "alpha": float(m["alpha"])}
 
 
@@ -279,7 +289,7 @@ def prepare_geometry(scene: dict, cache: dict) -> dict:
     emission = cache.setdefault("emission", {})  # per light: spectrum dicts of its face and beam (strings)
     for o in scene["objects"]:
         if ("object", o["id"]) not in rest and not _moves(scene, o["id"]):
-            rest[("object", o["id"])] = _object_meshes(o, np.zeros(3))
+            rest[("object", o["id"])] = _object_meshes(o, np.zeros(3), scene.get("meshes"))
     for lt in scene["lights"]:
         if ("light", lt["id"]) not in rest and not _moves(scene, lt["instance"]):
             rest[("light", lt["id"])] = _plane_mesh(lt, np.zeros(3))
@@ -323,7 +333,8 @@ def mitsuba_dict(scene: dict, t: float, emit: str | None = None, lights: list[in
     rest, emission = cache["rest_meshes"], cache["emission"]
     for o in scene["objects"]:
         # a static object's arrays are the same every frame (offset 0, bit for bit what would be rebuilt)
-        meshes = rest.get(("object", o["id"])) or _object_meshes(o, object_offset(scene, o["id"], t))
+        meshes = rest.get(("object", o["id"])) or _object_meshes(o, object_offset(scene, o["id"], t),
+                                                                 scene.get("meshes"))
         for k, (mat, V, F) in enumerate(meshes):
             name = shape_id(o["id"], k)
             d[name] = _mesh(mi, name, V, F, bsdfs[mat])

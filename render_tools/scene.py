@@ -10,9 +10,14 @@ entry; a new scene element is a step.
 World frame: ISO 8855, metres: x forward along the road, y left, z up; the road surface is z = 0. Traffic
 drives on the right: the ego direction uses lanes at y < 0.
 
+Generators (:data:`GENERATORS`): generator 1 is the street of protocol lfmbench-v1 and stays as it is (its scenes
+are frozen: tests/render_tools/test_scene_v2.py); generator 2 (protocol lfmbench-v2) is where new content goes:
+the steps of generator 1, then those of :mod:`render_tools.street` (weather, trees, road furniture, people) on
+the defaults of ``scene_defaults.yaml`` merged with ``scene_generator_v2.yaml``; its scenes are scene version 2.
+
 Functions
-- :func:`load_config` -> generator defaults (``render_tools/configs/scene_defaults.yaml``).
-- :func:`generate_scene` -> a validated scene dict from a seed (day / dusk / night).
+- :func:`load_config` -> generator defaults (``render_tools/configs/scene_defaults.yaml``, + the v2 file).
+- :func:`generate_scene` -> a validated scene dict from a seed (day / dusk / night), of generator 1 or 2.
 - The scene file itself (re-exported from :mod:`render_tools.scene_schema`): :func:`validate_scene`,
   :func:`scene_groups`, :func:`load_scene`, :func:`save_scene`, :func:`empty_scene`.
 
@@ -32,14 +37,15 @@ from typing import Any, Mapping
 import numpy as np
 
 from lfmbench.limits import brief
-from lfmbench.vocabulary import GROUPS, LIGHT_KINDS, VEHICLE_KINDS
+from lfmbench.vocabulary import GROUPS, LIGHT_KINDS, VEHICLE_KINDS, WEATHERS
 
 from .scene_schema import (SCENE_FORMAT, SCENE_VERSION, TIMES_OF_DAY, empty_scene, load_scene, save_scene,
                            scene_groups, validate_scene)
 from .scene_templates import (BASE_MATERIALS, PARKED_KIND, VEHICLE_MATERIALS, VEHICLE_TEMPLATES, box, cylinder,
                               local_offset, rect)
+from . import street
 
-__all__ = ["DEFAULT_CONFIG", "SIGNAL_STATES", "load_config", "check_config", "apply_overrides", "SceneBuilder",
+__all__ = ["DEFAULT_CONFIG", "V2_CONFIG", "GENERATORS", "SIGNAL_STATES", "load_config", "check_config", "apply_overrides", "SceneBuilder",
            "Road", "add_road", "add_buildings", "place_camera", "add_vehicles", "add_vehicle", "add_streetlights",
            "add_signal", "make_sky", "generate_scene",
            # the scene file (render_tools.scene_schema)
@@ -48,18 +54,46 @@ __all__ = ["DEFAULT_CONFIG", "SIGNAL_STATES", "load_config", "check_config", "ap
 
 #: Default generator configuration file.
 DEFAULT_CONFIG = Path(__file__).with_name("configs") / "scene_defaults.yaml"
+#: What generator 2 changes and adds to :data:`DEFAULT_CONFIG` (merged key by key; new sections allowed).
+V2_CONFIG = Path(__file__).with_name("configs") / "scene_generator_v2.yaml"
+#: Scene generators: 1 (protocol lfmbench-v1, frozen) and 2 (lfmbench-v2: new content goes here).
+GENERATORS = (1, 2)
+#: Sections only generator 2 has (:data:`V2_CONFIG`).
+V2_SECTIONS = ("weather", "trees", "furniture", "people")
 
 
 # ----------------------------------------------------------------------------------------------- config
-def load_config(path: str | os.PathLike | None = None) -> dict:
-    """Generator defaults from YAML (default :data:`DEFAULT_CONFIG`); raises ``ValueError`` naming the file."""
+def _read_yaml(p: Path) -> Any:
     from lfmbench.fileio import load_yaml  # noqa: PLC0415
 
-    p = Path(path) if path is not None else DEFAULT_CONFIG
     try:
-        cfg = load_yaml(p, source=f"config file {p}")
+        return load_yaml(p, source=f"config file {p}")
     except OSError as exc:
         raise ValueError(f"config file {p}: cannot read ({exc.strerror or exc})") from None
+
+
+def _deep_merge(dst: dict, src: Mapping[str, Any]) -> dict:
+    """``dst`` with ``src`` merged in key by key (new keys allowed; a non-mapping value replaces)."""
+    for k, v in src.items():
+        if isinstance(v, Mapping) and isinstance(dst.get(k), dict):
+            _deep_merge(dst[k], v)
+        else:
+            dst[k] = copy.deepcopy(v)
+    return dst
+
+
+def load_config(path: str | os.PathLike | None = None, generator: int = 1) -> dict:
+    """Generator defaults from YAML (default :data:`DEFAULT_CONFIG`); raises ``ValueError`` naming the file.
+    ``generator`` 2: the file merged with :data:`V2_CONFIG` (generator 2's changes and new sections)."""
+    if generator not in GENERATORS:
+        raise ValueError(f"generator: {brief(generator)} is not one of {GENERATORS}")
+    p = Path(path) if path is not None else DEFAULT_CONFIG
+    cfg = _read_yaml(p)
+    if generator == 2 and isinstance(cfg, dict):
+        v2 = _read_yaml(V2_CONFIG)
+        if not isinstance(v2, dict):
+            raise ValueError(f"config file {V2_CONFIG}: expected a mapping")
+        cfg = _deep_merge(cfg, v2)
     return check_config(cfg, f"config file {p}")
 
 
@@ -100,6 +134,11 @@ def check_config(cfg: Any, source: str = "config") -> dict:
     if not isinstance(states, list) or any(st not in SIGNAL_STATES for st in states):
         raise ValueError(f"{source}: lights.signal_states must be a list of {SIGNAL_STATES} "
                          f"([] = no traffic signal), got {brief(states)}")
+    if "weather" in cfg:  # generator 2
+        conds = cfg["weather"].get("conditions") if isinstance(cfg["weather"], dict) else None
+        if not isinstance(conds, list) or not conds or any(c not in WEATHERS for c in conds):
+            raise ValueError(f"{source}: weather.conditions must be a non-empty list of {WEATHERS}, got "
+                             f"{brief(conds)}")
     return cfg
 
 
@@ -150,8 +189,9 @@ class SceneBuilder:
         rng: ``numpy.random.default_rng(seed)``. cfg: the generator configuration. tod: time of day.
     """
 
-    def __init__(self, rng: np.random.Generator, cfg: dict, tod: str):
-        self.rng, self.cfg, self.tod = rng, cfg, tod
+    def __init__(self, rng: np.random.Generator, cfg: dict, tod: str, generator: int = 1):
+        self.rng, self.cfg, self.tod, self.generator = rng, cfg, tod, generator
+        self.meshes: dict = {}  # generator 2: the scene's ``meshes`` (shared by the parts that use them)
         self.objects: list[dict] = []
         self.lights: list[dict] = []
         self.materials: dict = copy.deepcopy(BASE_MATERIALS)
@@ -423,6 +463,7 @@ def add_vehicles(b: SceneBuilder, road: Road, cam_y: float, dark: bool, seed: in
                     occupied.setdefault(ly, []).append((x, ln))
                     yy = ly + (rng.uniform(-0.25, 0.25) if moving else 0.0)
                     sp = b.u(vc["speed_mps"]) if moving else 0.0
+                    sp = min(sp, VEHICLE_TEMPLATES[kind].get("max_speed_mps", sp))
                     add_vehicle(b, kind, x, yy, heading, sp,
                                 lights_on=moving and (dark or VEHICLE_TEMPLATES[kind]["lights_by_day"]),
                                 braking=moving and rng.random() < vc["brake_probability"],
@@ -481,9 +522,11 @@ def make_sky(b: SceneBuilder) -> dict:
 
 
 def generate_scene(seed: int, time_of_day: str | None = None, config: dict | str | None = None,
-                   scene_id: str | None = None, overrides: Mapping[str, Any] | None = None) -> dict:
+                   scene_id: str | None = None, overrides: Mapping[str, Any] | None = None,
+                   generator: int = 1) -> dict:
     """Generate a driving scene: road, buildings, camera lane, vehicles, streetlights, signal, sky, camera
-    (the steps above, in that order, all drawing from one generator).
+    (the steps above, in that order, all drawing from one generator); generator 2 adds the steps of
+    :mod:`render_tools.street` after the signal.
 
     Args:
         seed: integer seed; every random draw of the scene comes from ``numpy.random.default_rng(seed)``.
@@ -494,6 +537,7 @@ def generate_scene(seed: int, time_of_day: str | None = None, config: dict | str
             {"speed_mps": [30.0, 30.0]}, "vehicles": {"require_kinds": ["truck"]}, "lights": {"signal_states":
             ["red"]}}`` pins the ego speed (m/s), a truck among the vehicles ahead and a red signal (the benchmark
             protocols of :mod:`render_tools.protocol` pin their conditions this way).
+        generator: 1 (protocol lfmbench-v1; frozen) or 2 (lfmbench-v2; :data:`GENERATORS`).
     Returns:
         A validated scene dict (see :func:`render_tools.scene_schema.validate_scene` for the schema).
 
@@ -502,7 +546,11 @@ def generate_scene(seed: int, time_of_day: str | None = None, config: dict | str
     """
     if not isinstance(seed, (int, np.integer)) or isinstance(seed, bool) or seed < 0:
         raise ValueError(f"seed: must be a non-negative integer, got {brief(seed)}")
-    cfg = config if isinstance(config, dict) else load_config(config)
+    if generator not in GENERATORS or isinstance(generator, bool):
+        raise ValueError(f"generator: {brief(generator)} is not one of {GENERATORS}")
+    cfg = config if isinstance(config, dict) else load_config(config, generator=generator)
+    if generator == 2 and not all(k in cfg for k in V2_SECTIONS):
+        raise ValueError(f"config: generator 2 needs the sections {V2_SECTIONS} (load_config(generator=2))")
     if overrides:
         cfg = apply_overrides(cfg, overrides)
     rng = np.random.default_rng(int(seed))
@@ -512,7 +560,7 @@ def generate_scene(seed: int, time_of_day: str | None = None, config: dict | str
         time_of_day = names[int(rng.choice(len(names), p=p / p.sum()))]
     if time_of_day not in TIMES_OF_DAY:
         raise ValueError(f"time_of_day: {brief(time_of_day)} not one of {TIMES_OF_DAY}")
-    b = SceneBuilder(rng, cfg, time_of_day)
+    b = SceneBuilder(rng, cfg, time_of_day, generator)
     dark = time_of_day != "day"
     road = add_road(b)
     add_buildings(b, road, dark)
@@ -523,12 +571,13 @@ def generate_scene(seed: int, time_of_day: str | None = None, config: dict | str
     states = list(cfg["lights"].get("signal_states", SIGNAL_STATES))
     if states:
         add_signal(b, road, states)
+    weather = street.add_street(b, road, cam_y, dark) if generator == 2 else None
     sky = make_sky(b)
     # step 8: the camera
     cc = cfg["camera"]
     yaw_rate = b.u(cc["yaw_rate_rad_s"])
     scene = {
-        "format": SCENE_FORMAT, "version": SCENE_VERSION,
+        "format": SCENE_FORMAT, "version": generator,
         "scene_id": scene_id or f"scene_{int(seed):06d}", "seed": int(seed), "time_of_day": time_of_day,
         "timing": {"short_exposure_s": b.u(cfg["timing"]["short_exposure_s"])},
         "camera": {"position_m": [0.0, cam_y, float(cc["height_m"])], "yaw_deg": 0.0,
@@ -540,4 +589,8 @@ def generate_scene(seed: int, time_of_day: str | None = None, config: dict | str
         "objects": b.objects,
         "lights": b.lights,
     }
+    if generator == 2:
+        scene["weather"] = weather
+        if b.meshes:  # a scene leaves out what it does not need
+            scene["meshes"] = b.meshes
     return validate_scene(json.loads(json.dumps(scene)))

@@ -1,7 +1,8 @@
 """The scene file: plain, editable JSON that fully describes what is rendered, and its validation.
 
 A scene is a dict (saved as JSON): geometry made of primitive parts (boxes, cylinders, rectangles, disks,
-spheres), materials, emitters (lights) with their group, spectrum model and luminance (cd/m^2), the sky, the ego
+spheres) and, from version 2, triangle meshes (part shape ``mesh``: an entry of the scene's ``meshes``, placed,
+turned and scaled), materials, emitters (lights) with their group, spectrum model and luminance (cd/m^2), the sky, the ego
 camera and the short-exposure time. Re-rendering a scene file gives the same images (up to Monte Carlo noise with
 a different seed). The procedural generator that writes such files is :mod:`render_tools.scene`; hand-made scenes
 start from :func:`empty_scene`.
@@ -18,24 +19,28 @@ Functions
 from __future__ import annotations
 
 import os
+from typing import Any
 
 import numpy as np
 
 from lfmbench.check import check_integer, check_keys, check_number, check_vector, fail, scene_id_error
 from lfmbench.fileio import atomic_write_json
-from lfmbench.limits import brief, lights_cap_message, limit
-from lfmbench.vocabulary import GROUPS, LIGHT_GROUPS, LIGHT_KINDS, OBJECT_KINDS
+from lfmbench.limits import LimitError, brief, lights_cap_message, limit
+from lfmbench.vocabulary import GROUPS, LIGHT_GROUPS, LIGHT_KINDS, OBJECT_KINDS, WEATHERS
 
 from . import spectra
 
-__all__ = ["SCENE_FORMAT", "SCENE_VERSION", "TIMES_OF_DAY", "PART_SHAPES", "MATERIAL_TYPES", "MAX_COORD_M",
-           "validate_scene", "scene_groups", "load_scene", "save_scene", "empty_scene"]
+__all__ = ["SCENE_FORMAT", "SCENE_VERSION", "SCENE_VERSIONS", "TIMES_OF_DAY", "PART_SHAPES", "MATERIAL_TYPES",
+           "MAX_COORD_M", "validate_scene", "validate_meshes", "mesh_triangles", "scene_groups", "load_scene", "save_scene", "empty_scene"]
 
 #: Scene file format name and version.
 SCENE_FORMAT = "lfmbench-scene"
 SCENE_VERSION = 1
+#: Versions this reader accepts. Version 2 (scene generator 2, protocol lfmbench-v2) adds ``weather``, ``meshes``
+#: and the part shape ``mesh``; a version-1 file may not use them (an older reader would refuse them).
+SCENE_VERSIONS = (1, 2)
 TIMES_OF_DAY = ("day", "dusk", "night")
-PART_SHAPES = ("box", "cylinder", "rect", "disk", "sphere")
+PART_SHAPES = ("box", "cylinder", "rect", "disk", "sphere", "mesh")
 MATERIAL_TYPES = ("diffuse", "roughplastic", "roughconductor")
 #: Largest coordinate magnitude accepted, m.
 MAX_COORD_M = 1.0e4
@@ -49,18 +54,23 @@ def _unit(v, path):
     return x
 
 
-def _part_or_light_shape(p, path, extra_req, extra_opt, materials=None):
+def _part_or_light_shape(p, path, extra_req, extra_opt, materials=None, meshes=None):
     shape = p.get("shape") if isinstance(p, dict) else None
     allowed = PART_SHAPES if materials is not None else ("rect", "disk")
     if shape not in allowed:
         fail(f"{path}.shape", f"{brief(shape)} not one of {allowed}")
     geo = {"box": (("center", "size"), ("yaw_deg",)), "cylinder": (("p0", "p1", "radius"), ()),
            "rect": (("center", "size", "normal"), ()), "disk": (("center", "radius", "normal"), ()),
-           "sphere": (("center", "radius"), ())}[shape]
+           "sphere": (("center", "radius"), ()), "mesh": (("mesh", "center"), ("yaw_deg", "scale"))}[shape]
     check_keys(p, path, required=("shape",) + geo[0] + extra_req, optional=geo[1] + extra_opt)
     for k in ("center", "p0", "p1"):
         if k in p:
             check_vector(p[k], f"{path}.{k}", lo=-MAX_COORD_M, hi=MAX_COORD_M)
+    if shape == "mesh":
+        if p["mesh"] not in (meshes or {}):
+            fail(f"{path}.mesh", f"{brief(p['mesh'])} is not defined in scene.meshes")
+        if "scale" in p:
+            check_vector(p["scale"], f"{path}.scale", lo=1e-3, hi=1e3)
     if "size" in p:
         check_vector(p["size"], f"{path}.size", n=3 if shape == "box" else 2, lo=0.0, hi=MAX_COORD_M)
         if min(p["size"]) <= 0:
@@ -81,23 +91,34 @@ def validate_scene(scene: dict) -> dict:
     """Validate a scene dict; returns it unchanged. Raises ``ValueError`` naming the first bad field.
 
     Schema (all lengths m, times s, angles deg unless named ``_rad``):
-    ``format`` ("lfmbench-scene"), ``version`` (1), ``scene_id`` (str, :func:`lfmbench.check.check_scene_id`),
+    ``format`` ("lfmbench-scene"), ``version`` (1 or 2; 2 only: ``weather``, ``meshes``, mesh parts), ``scene_id`` (str, :func:`lfmbench.check.check_scene_id`),
     ``seed`` (int >= 0),
     ``time_of_day`` (day|dusk|night), ``timing.short_exposure_s`` (> 0),
     ``camera`` {position_m [3], yaw_deg, pitch_deg (-89, 89), fov_x_deg (0, 180), speed_mps >= 0,
     yaw_rate_rad_s}, ``sky`` {model: sunsky {sun_elevation_deg [-5, 90], sun_azimuth_deg, turbidity [1, 10],
     scale > 0} | constant {spectrum, luminance_cd_m2 >= 0}}, ``groups`` {name in GROUPS: {flicker: bool}},
-    ``materials`` {name: {type: diffuse|roughplastic|roughconductor, rgb [3] in [0, 1], alpha (0, 1]}},
-    ``objects`` [{id (= index), kind, velocity_mps [3], parts [shape ...]}], ``lights`` [{id (= index),
+    ``materials`` {name: {type: diffuse|roughplastic|roughconductor, rgb [3] in [0, 1], alpha (0, 1], ior (1, 3]
+    (roughplastic only: the coating's index of refraction, default 1.49; water 1.33)}},
+    ``weather`` (optional, dry|wet|rain; absent = dry), ``meshes`` (optional) {name: {vertices [[x, y, z], ...] m
+    in the mesh's own frame, faces [[i, j, k], ...] counter-clockwise seen from outside}},
+    ``objects`` [{id (= index), kind, velocity_mps [3], parts [shape ...]}] (a ``mesh`` part: {mesh: name, center
+    [3] m: where the mesh's origin goes, yaw_deg: turn about z, scale [3]: per axis before the turn, material}), ``lights`` [{id (= index),
     group, kind, instance (object id), shape rect|disk, center, normal, size | radius, spread_deg (0, 90],
     spectrum (see :mod:`render_tools.spectra`), luminance_cd_m2 >= 0}].
     """
     check_keys(scene, "scene", required=("format", "version", "scene_id", "seed", "time_of_day", "timing", "camera",
-                                         "sky", "groups", "materials", "objects", "lights"))
+                                         "sky", "groups", "materials", "objects", "lights"),
+               optional=("weather", "meshes"))
     if scene["format"] != SCENE_FORMAT:
         fail("scene.format", f"expected {brief(SCENE_FORMAT)}, got {brief(scene['format'])}")
-    if scene["version"] != SCENE_VERSION:
-        fail("scene.version", f"unsupported version {brief(scene['version'])} (this reader: {SCENE_VERSION})")
+    if scene["version"] not in SCENE_VERSIONS or isinstance(scene["version"], bool):
+        fail("scene.version", f"unsupported version {brief(scene['version'])} (this reader: {SCENE_VERSIONS})")
+    for k in ("weather", "meshes"):
+        if k in scene and scene["version"] < 2:
+            fail(f"scene.{k}", "needs scene version 2 (set scene.version to 2)")
+    if "weather" in scene and scene["weather"] not in WEATHERS:
+        fail("scene.weather", f"{brief(scene['weather'])} is not one of {WEATHERS}")
+    meshes = validate_meshes(scene.get("meshes", {}), "scene.meshes")
     why = scene_id_error(scene["scene_id"])  # the corpus rule: the id becomes a corpus directory name
     if why is not None:
         fail("scene.scene_id", why)
@@ -150,7 +171,9 @@ def validate_scene(scene: dict) -> dict:
             fail(f"{p}.type", f"{brief(t)} not one of {MATERIAL_TYPES}")
         req = {"diffuse": ("type", "rgb"), "roughplastic": ("type", "rgb", "alpha"),
                "roughconductor": ("type", "alpha")}[t]
-        check_keys(m, p, required=req)
+        check_keys(m, p, required=req, optional=("ior",) if t == "roughplastic" else ())
+        if "ior" in m:
+            check_number(m["ior"], f"{p}.ior", lo=1.0, hi=3.0, lo_open=True)
         if "rgb" in m:
             check_vector(m["rgb"], f"{p}.rgb", n=3, lo=0.0, hi=1.0)
         if "alpha" in m:
@@ -169,7 +192,7 @@ def validate_scene(scene: dict) -> dict:
         if not isinstance(o["parts"], list) or not o["parts"]:
             fail(f"{p}.parts", "expected a non-empty list")
         for j, part in enumerate(o["parts"]):
-            _part_or_light_shape(part, f"{p}.parts[{j}]", ("material",), (), materials=mats)
+            _part_or_light_shape(part, f"{p}.parts[{j}]", ("material",), (), materials=mats, meshes=meshes)
     lights = scene["lights"]
     if not isinstance(lights, list):
         fail("scene.lights", "expected a list")
@@ -193,6 +216,44 @@ def validate_scene(scene: dict) -> dict:
         spectra.validate_spectrum(lt["spectrum"], f"{p}.spectrum")
         check_number(lt["luminance_cd_m2"], f"{p}.luminance_cd_m2", lo=0.0, hi=1e9)
     return scene
+
+
+def mesh_triangles(mesh: Any) -> int:
+    """Triangles a mesh entry declares (``len(faces)``; 0 when it has none), without reading its arrays."""
+    f = mesh.get("faces") if isinstance(mesh, dict) else None
+    return len(f) if isinstance(f, list) else 0
+
+
+def validate_meshes(meshes: Any, path: str = "scene.meshes") -> dict:
+    """Check a scene's ``meshes`` ({name: {vertices (n, 3) m, faces (m, 3) vertex indices}}); returns it.
+
+    The triangles of all meshes together are bounded by the limit ``mesh_triangles`` (:mod:`lfmbench.limits`),
+    counted before any array is converted. Raises ``ValueError`` naming the field (``scene.meshes.body_car.faces``).
+    """
+    if not isinstance(meshes, dict):
+        fail(path, "expected an object {name: {vertices, faces}}")
+    total = sum(mesh_triangles(m) for m in meshes.values())
+    if total > limit("mesh_triangles"):
+        raise LimitError(path, "triangles", total, "mesh_triangles")
+    for name, m in meshes.items():
+        p = f"{path}.{name}"
+        check_keys(m, p, required=("vertices", "faces"))
+        V, F = m["vertices"], m["faces"]
+        if not isinstance(V, list) or not V or not isinstance(F, list) or not F:
+            fail(p, "vertices and faces must be non-empty lists")
+        if len(V) > 3 * len(F) + 3:
+            fail(f"{p}.vertices", f"{len(V)} vertices for {len(F)} triangles (unused vertices)")
+        try:
+            va = np.asarray(V, dtype=np.float64)
+            fa = np.asarray(F, dtype=np.int64)
+        except (TypeError, ValueError, OverflowError):
+            fail(p, "vertices must be [[x, y, z], ...] numbers and faces [[i, j, k], ...] integers")
+        if va.shape != (len(V), 3) or not np.all(np.isfinite(va)) or np.abs(va).max() > MAX_COORD_M:
+            fail(f"{p}.vertices", f"must be [[x, y, z], ...] finite, |x| <= {MAX_COORD_M:g} m")
+        if fa.shape != (len(F), 3) or fa.min() < 0 or fa.max() >= len(V) or \
+                not all(isinstance(i, int) and not isinstance(i, bool) for i in F[0]):
+            fail(f"{p}.faces", f"must be [[i, j, k], ...] integer indices in [0, {len(V)})")
+    return meshes
 
 
 def scene_groups(scene: dict) -> dict:

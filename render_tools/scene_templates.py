@@ -34,7 +34,8 @@ VEHICLE_MATERIALS = {"glass": "glass", "rider": "rubber"}
 #: Vehicle templates. ``boxes``: ((centre), (size), material role); ``spheres``: ((centre), radius, role);
 #: ``wheels``: (x, radius, half track: 0 = one wheel on the axis); ``tail``/``head``/``ind``: ((centre), (w, h))
 #: lamps, mirrored to both sides unless y = 0; ``cbrake``: a centre brake lamp (x, y, z, w, h) or None; ``cargo``:
-#: a second drawn colour (a truck's box); ``lights_by_day``: lamps on whenever moving (motorcycles).
+#: a second drawn colour (a truck's box); ``lights_by_day``: lamps on whenever moving (motorcycles, buses);
+#: ``max_speed_mps`` (optional): the kind's top speed, m/s (a bicycle's drawn speed is capped at it).
 VEHICLE_TEMPLATES = {
     "car": {"length": 4.4, "boxes": [((0.0, 0.0, 0.68), (4.4, 1.8, 0.66), "paint"),
                                      ((-0.35, 0.0, 1.28), (2.3, 1.6, 0.56), "glass")],
@@ -54,6 +55,24 @@ VEHICLE_TEMPLATES = {
                    "wheels": [(0.75, 0.32, 0.0), (-0.75, 0.32, 0.0)], "wheel_w": 0.12,
                    "tail": [((-0.865, 0.0, 0.9), (0.14, 0.07))], "head": [((0.865, 0.0, 0.95), (0.16, 0.1))],
                    "cbrake": None, "ind": [], "cargo": False, "lights_by_day": True},
+    "van": {"length": 5.0, "boxes": [((0.0, 0.0, 1.15), (5.0, 1.95, 1.6), "paint"),
+                                     ((0.6, 0.0, 1.55), (3.0, 2.0, 0.5), "glass")],
+            "spheres": [], "wheels": [(1.7, 0.35, 0.85), (-1.7, 0.35, 0.85)], "wheel_w": 0.24,
+            "tail": [((-2.505, 0.8, 1.0), (0.2, 0.3))], "head": [((2.505, 0.72, 0.8), (0.3, 0.12))],
+            "cbrake": (-2.505, 0.0, 1.88, 0.4, 0.05), "ind": [((-2.505, 0.86, 0.72), (0.1, 0.08))],
+            "cargo": False, "lights_by_day": False},
+    "bus": {"length": 12.0, "boxes": [((0.0, 0.0, 1.75), (12.0, 2.55, 2.8), "paint"),
+                                      ((0.2, 0.0, 2.35), (11.2, 2.6, 1.0), "glass")],
+            "spheres": [], "wheels": [(3.9, 0.5, 1.05), (-3.4, 0.5, 1.05)], "wheel_w": 0.3,
+            "tail": [((-6.005, 1.05, 1.1), (0.2, 0.35))], "head": [((6.005, 0.95, 0.75), (0.3, 0.15))],
+            "cbrake": (-6.005, 0.0, 2.9, 0.6, 0.06), "ind": [((-6.005, 1.15, 1.45), (0.12, 0.1))],
+            "cargo": False, "lights_by_day": True},
+    "bicycle": {"length": 1.8, "boxes": [((0.0, 0.0, 0.75), (1.0, 0.06, 0.06), "paint"),
+                                         ((-0.15, 0.0, 1.2), (0.35, 0.4, 0.6), "rider")],
+                "spheres": [((-0.1, 0.0, 1.65), 0.12, "rider")],
+                "wheels": [(0.55, 0.34, 0.0), (-0.55, 0.34, 0.0)], "wheel_w": 0.04,
+                "tail": [((-0.905, 0.0, 0.75), (0.06, 0.04))], "head": [((0.905, 0.0, 0.95), (0.06, 0.05))],
+                "cbrake": None, "ind": [], "cargo": False, "lights_by_day": False, "max_speed_mps": 8.0},
 }
 
 #: The kind of the parked vehicles along the kerbs.

@@ -18,7 +18,7 @@ from render_tools import scene as S
 from tests.data.protocol.data import tiny_protocol_dict, write_protocol
 from tests.data.render.data import FAIL
 
-SHIPPED = ("lfmbench-v1", "lfmbench-v1-mini")
+SHIPPED = ("lfmbench-v1", "lfmbench-v1-mini", "lfmbench-v2", "lfmbench-v2-mini")
 
 
 @pytest.fixture(scope="module")
@@ -80,11 +80,14 @@ def _entries(names, splits):
 def test_pinned_conditions_hold(part, cfg):
     """Every test scene of the shipped protocols (and the mini's train / val scenes), generated from its seed
     and pins, meets every pinned condition (no rendering)."""
-    entries = _entries(SHIPPED, ("test",)) if part == "test" else _entries(("lfmbench-v1-mini",), ("train", "val"))
+    entries = _entries(SHIPPED, ("test",)) if part == "test" else \
+        _entries(("lfmbench-v1-mini", "lfmbench-v2-mini"), ("train", "val"))
     assert len(entries) >= 24
+    cfgs = {1: cfg, 2: S.load_config(generator=2)}
     for ps in entries:
-        sc = S.generate_scene(ps.seed, scene_id=ps.scene_id, config=cfg, **ps.scene_kw())
-        assert P.check_scene(sc, ps, cfg) == [], ps.scene_id
+        c = cfgs[ps.generator]
+        sc = S.generate_scene(ps.seed, scene_id=ps.scene_id, config=c, **ps.scene_kw())
+        assert P.check_scene(sc, ps, c) == [], ps.scene_id
 
 
 def test_check_scene_sees_a_missed_pin(cfg):
@@ -124,7 +127,7 @@ def test_default_overrides_change_nothing(cfg):
 
 @pytest.mark.parametrize("ov, msg", [
     ({"camera": {"sped_mps": [1, 1]}}, "unknown key 'camera.sped_mps'"),
-    ({"vehicles": {"require_kinds": ["bus"]}}, "vehicles.require_kinds"),
+    ({"vehicles": {"require_kinds": ["tram"]}}, "vehicles.require_kinds"),
     ({"lights": {"signal_states": ["blue"]}}, "lights.signal_states"),
     ({"camera": {"speed_mps": [30, 20]}}, "camera.speed_mps"),
     ({"camera": 3}, "camera must be a mapping"),
@@ -154,7 +157,7 @@ _DEL = object()
     (("version",), 0, "version"),
     (("scenes", "test"), _DEL, "scenes.test"),
     (("scenes", "test", 0, "time_of_day"), "noon", "scenes.test[0].time_of_day"),
-    (("scenes", "test", 0, "vehicle_kinds"), ["bus"], "scenes.test[0].vehicle_kinds"),
+    (("scenes", "test", 0, "vehicle_kinds"), ["tram"], "scenes.test[0].vehicle_kinds"),
     (("scenes", "test", 0, "signal"), "blue", "scenes.test[0].signal"),
     (("scenes", "test", 0, "ego_speed_mps"), -1, "scenes.test[0].ego_speed_mps"),
     (("scenes", "test", 0, "id"), "tr_a", "appears twice"),

@@ -1,0 +1,167 @@
+"""Scene generator 2 and protocol lfmbench-v2 (issue 23): generator 1 (lfmbench-v1) keeps generating the scenes
+it always did (hashes frozen from main before generator 2 existed), generator 2's scenes are scene version 2
+with their pinned weather, and the scene file's new fields are checked with one clear error each."""
+from __future__ import annotations
+
+import copy
+import hashlib
+import json
+
+import pytest
+
+from lfmbench.limits import set_limit
+from render_tools import protocol as P
+from render_tools import scene as S
+from render_tools import street
+
+#: SHA-256 (first 16 hex digits) of canonical scene JSON (floats to 9 significant digits: portable across CPUs
+#: and libm builds), computed on main at 3b10a67, before generator 2 existed.
+V1_PROTOCOL_HASHES = (("train_000", "2a6a3f80b9b5090b"), ("train_004", "84b5855b1e576a7a"),
+                      ("val_04", "45d249ae1f3d48ae"), ("test_00", "44b378800f5f4ef2"),
+                      ("test_17", "8f62c7cb7e7081e2"), ("test_47", "e4ef7b124069bd44"))
+V1_PLAIN_HASHES = ((0, "day", "e154d1c728d7f146"), (7, "night", "61dbd1046cc426e7"))
+
+
+def _canon(x):
+    if isinstance(x, float):
+        return float(f"{x:.9g}")
+    if isinstance(x, list):
+        return [_canon(v) for v in x]
+    if isinstance(x, dict):
+        return {k: _canon(v) for k, v in x.items()}
+    return x
+
+
+def scene_hash(scene: dict) -> str:
+    return hashlib.sha256(json.dumps(_canon(scene), sort_keys=True, separators=(",", ":")).encode()).hexdigest()[:16]
+
+
+@pytest.fixture(scope="module")
+def v1():
+    return P.load_protocol("lfmbench-v1")
+
+
+@pytest.mark.parametrize("sid,want", V1_PROTOCOL_HASHES)
+def test_v1_protocol_scenes_unchanged(v1, sid, want):
+    ps = next(s for s in v1.scenes if s.scene_id == sid)
+    assert "generator" not in ps.scene_kw()  # what v1 corpora recorded as scene_kw stays the same
+    assert scene_hash(S.generate_scene(ps.seed, scene_id=ps.scene_id, **ps.scene_kw())) == want
+
+
+@pytest.mark.parametrize("seed,tod,want", V1_PLAIN_HASHES)
+def test_v1_plain_scenes_unchanged(seed, tod, want):
+    assert scene_hash(S.generate_scene(seed, time_of_day=tod)) == want
+    assert scene_hash(S.generate_scene(seed, time_of_day=tod, generator=1)) == want
+
+
+def test_v2_protocols_use_generator_2():
+    for name in ("lfmbench-v2", "lfmbench-v2-mini"):
+        p = P.load_protocol(name)
+        assert p.generator == 2 and all(s.generator == 2 and s.weather in ("dry", "wet", "rain") for s in p.scenes)
+        cov = P.coverage(p, "test")
+        assert all(n >= 3 for n in cov["weather"].values()), cov
+        assert all(cov["vehicle_kinds"][k] >= 3 for k in ("van", "bus", "bicycle")), cov
+        assert all(s.scene_kw()["generator"] == 2 for s in p.scenes)
+    v2, mini = P.load_protocol("lfmbench-v2"), P.load_protocol("lfmbench-v2-mini")
+    for split in P.SPLITS:
+        a = [s for s in v2.scenes if s.split == split]
+        b = [s for s in mini.scenes if s.split == split]
+        assert b == a[:len(b)]
+
+
+def test_v2_pinned_conditions_hold():
+    """Every 4th test scene of lfmbench-v2-mini: its generated scene meets its pinned conditions, weather too."""
+    p = P.load_protocol("lfmbench-v2-mini")
+    cfg = S.load_config(generator=2)
+    for ps in [s for s in p.scenes if s.split == "test"][::4]:
+        sc = S.generate_scene(ps.seed, scene_id=ps.scene_id, **ps.scene_kw())
+        assert sc["version"] == 2 and sc["weather"] == ps.weather
+        assert P.check_scene(sc, ps, cfg) == []
+        wrong = copy.deepcopy(sc)
+        wrong["weather"] = "dry" if ps.weather != "dry" else "wet"
+        assert any("weather" in b for b in P.check_scene(wrong, ps, cfg))
+
+
+def test_weather_road_surface():
+    """A dry scene has no water film, puddles or meshes it does not need; wet and rain lay the film (a rough
+    dielectric of water's index over the asphalt) and puddles on the road."""
+    scenes = {w: S.generate_scene(11, "night", generator=2, overrides={"weather": {"conditions": [w]}})
+              for w in ("dry", "wet", "rain")}
+    dry = scenes["dry"]
+    assert dry["weather"] == "dry" and street.WET_ROAD_MATERIAL not in dry["materials"]
+    assert not any(p["material"] == street.PUDDLE_MATERIAL for o in dry["objects"] for p in o["parts"])
+    for w in ("wet", "rain"):
+        sc = scenes[w]
+        m = sc["materials"][street.WET_ROAD_MATERIAL]
+        assert m["type"] == "roughplastic" and m["ior"] == pytest.approx(1.33)
+        road = next(o for o in sc["objects"] if o["kind"] == "road")
+        assert road["parts"][0]["material"] == street.WET_ROAD_MATERIAL
+        puddles = [p for p in road["parts"] if p["material"] == street.PUDDLE_MATERIAL]
+        assert puddles and all(p["shape"] == "mesh" and p["mesh"] in sc["meshes"] for p in puddles)
+    assert sc["materials"][street.WET_ROAD_MATERIAL]["alpha"] < scenes["wet"]["materials"][
+        street.WET_ROAD_MATERIAL]["alpha"]  # rain: a smoother standing film (the configured ranges do not overlap)
+
+
+def test_generator_arguments():
+    with pytest.raises(ValueError, match="generator"):
+        S.generate_scene(1, generator=3)
+    with pytest.raises(ValueError, match="generator 2 needs"):
+        S.generate_scene(1, generator=2, config=S.load_config())
+    with pytest.raises(ValueError, match="unknown key 'weather"):
+        S.generate_scene(1, overrides={"weather": {"conditions": ["wet"]}})  # generator 1 has no weather
+    with pytest.raises(ValueError, match="weather.conditions"):
+        S.generate_scene(1, generator=2, overrides={"weather": {"conditions": ["snow"]}})
+
+
+# ------------------------------------------------------------------------------------------- scene file
+def _v2_scene():
+    sc = S.empty_scene("mesh_test")
+    sc["version"] = 2
+    sc["weather"] = "wet"
+    sc["materials"]["m"] = {"type": "roughplastic", "rgb": [0.1, 0.1, 0.1], "alpha": 0.1, "ior": 1.33}
+    sc["meshes"] = {"tri": {"vertices": [[0, 0, 0], [1, 0, 0], [0, 1, 0]], "faces": [[0, 1, 2]]}}
+    sc["objects"].append({"id": 0, "kind": "asset", "velocity_mps": [0, 0, 0],
+                          "parts": [{"shape": "mesh", "mesh": "tri", "center": [5, 0, 0], "yaw_deg": 90.0,
+                                     "scale": [2, 2, 2], "material": "m"}]})
+    return S.validate_scene(sc)
+
+
+@pytest.mark.parametrize("edit,field", [
+    (lambda s: s.update(version=1), "scene.weather"),
+    (lambda s: s.update(weather="snow"), "scene.weather"),
+    (lambda s: s["objects"][0]["parts"][0].update(mesh="nope"), "scene.objects[0].parts[0].mesh"),
+    (lambda s: s["meshes"]["tri"].update(faces=[[0, 1, 3]]), "scene.meshes.tri.faces"),
+    (lambda s: s["meshes"]["tri"].update(vertices=[[0, 0], [1, 0], [0, 1]]), "scene.meshes.tri.vertices"),
+    (lambda s: s["meshes"]["tri"].update(faces=[[0.5, 1, 2]]), "scene.meshes.tri.faces"),
+    (lambda s: s["materials"]["m"].update(ior=0.5), "scene.materials.m.ior"),
+    (lambda s: s["objects"][0]["parts"][0].update(scale=[0, 1, 1]), "scene.objects[0].parts[0].scale"),
+])
+def test_scene_v2_fields_checked(edit, field):
+    sc = _v2_scene()
+    edit(sc)
+    with pytest.raises(ValueError) as e:
+        S.validate_scene(sc)
+    assert field in str(e.value) and "\n" not in str(e.value)
+
+
+def test_mesh_triangle_limit():
+    sc = _v2_scene()
+    sc["meshes"]["big"] = {"vertices": [[0, 0, 0]] * 3, "faces": [[0, 1, 2]] * 50}
+    set_limit("mesh_triangles", 40)
+    try:
+        with pytest.raises(ValueError, match="mesh_triangles"):
+            S.validate_scene(sc)
+    finally:
+        set_limit("mesh_triangles", None)
+
+
+def test_mesh_part_placement():
+    """A mesh part's vertices are scaled per axis, turned by yaw about z and moved to its centre."""
+    import numpy as np
+
+    from render_tools import mitsuba_scene as ms
+
+    sc = _v2_scene()
+    V, F = ms.part_mesh(sc["objects"][0]["parts"][0], np.array([0.0, 0.0, 1.0]), sc["meshes"])
+    np.testing.assert_allclose(V, [[5, 0, 1], [5, 2, 1], [3, 0, 1]], atol=1e-12)
+    assert F.tolist() == [[0, 1, 2]]
