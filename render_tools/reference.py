@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import camera as cam_mod
-from .render import SceneGeometry, _film
+from .render import RenderOptions, SceneGeometry, _film
 
 class ReferenceRenderer(SceneGeometry):
     """Stock Mitsuba rendering of one scene: ``mi.render`` with the ``path`` integrator of a per-group Mitsuba

@@ -42,8 +42,7 @@ from lfmbench.limits import brief
 from lfmbench.baselines.checkpoint import (CheckpointError, build_from_state, checkpointed_method,
                                            read_trained_weights)
 from lfmbench.baselines.classic import _captures, exposures_s, saturated_fusion
-from lfmbench.baselines.trainable import (ConfigError, Trainable, TrainConfig, count_parameters, read_sections,
-                                          read_yaml_config)
+from lfmbench.baselines.trainable import ConfigError, Trainable, TrainConfig, read_sections, read_yaml_config
 from lfmbench.fileio import atomic_torch_save
 from lfmbench.metrics.flicker import region_series
 from lfmbench.metrics.hdr import MU_DEFAULT, mu_law, normalize_hdr

@@ -275,7 +275,7 @@ def _numba_kernel(size: int = PARALLEL_MIN_SIZE):
     global _NUMBA_KERNELS
     if _NUMBA_KERNELS is None:
         try:
-            import numba  # noqa: F401
+            __import__("numba")  # only whether it imports: the kernels import it where they are built
         except ImportError:  # pragma: no cover - numba is a dependency; the numpy path still works without it
             _NUMBA_KERNELS = {}
             return None

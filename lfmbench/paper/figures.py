@@ -345,7 +345,7 @@ def build_sequence46(corpus: str | Path, seed: int = 0, noise: bool = True) -> S
             return max((t for v in _vehicle_lights(ds, s, 1).values() for _i, _b, t in v), default=0.0)
         sid = max(ds.scene_ids, key=energy)
     meta = ds.corpus.meta(sid)
-    H, W, fps = meta["height"], meta["width"], float(meta["fps"])
+    W, fps = meta["width"], float(meta["fps"])
     tm = meta["timing"]
     ts, tl = float(tm["short_exposure_s"]), float(tm["long_exposure_s"])
     a0 = (tl - ts) / 2

@@ -10,6 +10,7 @@ from typer.testing import CliRunner
 from lfmbench import baselines
 from lfmbench import train as T
 from lfmbench.baselines import unet as U
+from lfmbench.baselines.trainable import count_parameters
 from lfmbench.cli import app
 from tests.data.metrics.data import make_batch
 
@@ -24,9 +25,9 @@ def _write_cfg(path, data=TINY):
 
 
 def test_default_config_parameter_budget_and_tiny_demo_config():
-    n = U.count_parameters(U.UNetFusion(U.load_config()))
+    n = count_parameters(U.UNetFusion(U.load_config()))
     assert 300_000 <= n <= 3_000_000, n
-    tiny = U.count_parameters(U.UNetFusion(U.load_config(U.TINY_CONFIG)))
+    tiny = count_parameters(U.UNetFusion(U.load_config(U.TINY_CONFIG)))
     assert tiny < 100_000 < n
     # the 640x360 protocol's config: the same network (its checkpoint loads into the default model), other crops
     v1 = U.load_config(U.DEFAULT_CONFIG.with_name("unet_v1.yaml"))
