@@ -36,6 +36,9 @@ from torch.utils.data import DataLoader
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+
+from lfmbench.fileio import atomic_write_text  # noqa: E402
+
 DOC = ROOT / "docs" / "dataset-benchmark.md"
 BEGIN, END = "<!-- batched-capture:begin -->", "<!-- batched-capture:end -->"
 #: Target of issue 10 on 2 CPU cores: 1.5 x the per-sample path's 52 samples/s (docs/dataset-benchmark.md).
@@ -332,8 +335,6 @@ def _keep_memory_run(dev: str, root: Path, *args: str):
 
 def write_section(text: str) -> None:
     """Replace (or append) the batched section of docs/dataset-benchmark.md."""
-    from lfmbench.fileio import atomic_write_text
-
     doc = DOC.read_text() if DOC.is_file() else ""
     if BEGIN in doc and END in doc:
         doc = doc[:doc.index(BEGIN)] + text.rstrip("\n") + doc[doc.index(END) + len(END):]
@@ -421,7 +422,7 @@ def main(argv=None) -> int:
     env["load_end"] = ", ".join(f"{x:.1f}" for x in os.getloadavg())
     res = {"device": dev, "device_name": torch.cuda.get_device_name(dev) if dev.startswith("cuda") else "CPU",
            "quick": q, "rows": rows, "sizes": sizes(root), "env": env, "stages": stages, "stages_keep": stages_keep}
-    (out / f"results_{dev.split(':')[0]}.json").write_text(json.dumps(res, indent=1))
+    atomic_write_text(out / f"results_{dev.split(':')[0]}.json", json.dumps(res, indent=1))
     text = report(res)
     print(text)
     if not a.no_doc:

@@ -23,6 +23,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
+from lfmbench.fileio import atomic_save_figure, atomic_write_text  # noqa: E402
 from lfmbench.flicker import pwm_exposure, pwm_level  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -154,7 +155,7 @@ def main() -> None:
     for N, err, serr, r in quad_rows:
         lines.append(f"| {N:,} | {err:.2e} | {serr:.2e} | {r / 1e6:.5f} |")
     lines += ["", "![error vs speed](img/flicker_error_vs_speed.png)", ""]
-    (ROOT / "docs" / "flicker-benchmark.md").write_text("\n".join(lines))
+    atomic_write_text(ROOT / "docs" / "flicker-benchmark.md", "\n".join(lines))
 
     # ---- plot
     fig, ax = plt.subplots(figsize=(7, 4.5))
@@ -169,7 +170,7 @@ def main() -> None:
            ylabel="max |error| / max(exposure, period)", title="PWM radiant exposure: error against run time")
     ax.legend(fontsize=7, loc="lower center", bbox_to_anchor=(0.42, 0.02))
     fig.tight_layout()
-    fig.savefig(ROOT / "docs" / "img" / "flicker_error_vs_speed.png", dpi=120)
+    atomic_save_figure(fig, ROOT / "docs" / "img" / "flicker_error_vs_speed.png", dpi=120)
     print("wrote docs/flicker-benchmark.md and docs/img/flicker_error_vs_speed.png")
 
 

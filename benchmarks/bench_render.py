@@ -23,7 +23,6 @@ import argparse
 import json
 import os
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -32,6 +31,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from lfmbench.fileio import atomic_save_figure, atomic_write_bytes, atomic_write_text  # noqa: E402
 from render_tools import preview, reference, render, scene, spectra  # noqa: E402
 
 BANDS = render.DEFAULT_BANDS_NM
@@ -143,8 +143,7 @@ def main() -> None:
         ref, t_ref = timed_frame(sc, render.RenderOptions(spp=ref_spp, light_spp=ref_light_spp, bins=k_ref,
                                                           **{**base, "seed": 999}))
         if cache is not None:
-            with open(cache, "wb") as fh:
-                pickle.dump((ref, t_ref), fh)
+            atomic_write_bytes(cache, pickle.dumps((ref, t_ref)))
     res["reference"] = {"spp": ref_spp, "light_spp": ref_light_spp, "bins": k_ref, "seconds": t_ref}
     tm = render.frame_timing(sc, render.RenderOptions(bins=k_ref, **base), 0)
     shape = (31, H, W)
@@ -283,11 +282,7 @@ def write_report(res: dict, out: Path) -> None:
     ax[2].set(xlabel="M (1 = continuous blur, else M sub-frames)", ylabel="relative RMSE, LED pixels",
               title="equal samples: continuous vs sub-frames")
     fig.tight_layout()
-    fd, tmp = tempfile.mkstemp(dir=out / "img", suffix=".png")
-    os.close(fd)
-    fig.savefig(tmp, dpi=110)
-    os.chmod(tmp, 0o644)
-    os.replace(tmp, out / "img" / "render-benchmark.png")
+    atomic_save_figure(fig, out / "img" / "render-benchmark.png", dpi=110)
 
     t = res["target"]
     lines = [
@@ -348,8 +343,8 @@ def write_report(res: dict, out: Path) -> None:
               "- Continuous blur: one render whatever the motion; M sub-frames need M renders (M kernel launches) for "
               "the same samples and add a discretisation (strobing) error that grows with the blur length.",
               ""]
-    (out / "render-benchmark.md").write_text("\n".join(lines))
-    (out / "render-benchmark.json").write_text(json.dumps(res, indent=1) + "\n")  # the numbers behind the report
+    atomic_write_text(out / "render-benchmark.md", "\n".join(lines))
+    atomic_write_text(out / "render-benchmark.json", json.dumps(res, indent=1) + "\n")  # the numbers behind the report
 
 
 if __name__ == "__main__":

@@ -36,6 +36,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 from _timing import write_device_doc  # noqa: E402
+from lfmbench.fileio import atomic_write_text  # noqa: E402
 DOC = ROOT / "docs" / "sensor-device-benchmark.md"
 #: Where a run without a GPU writes (the GPU figures of ``DOC`` are kept: they are not re-measured there).
 DOC_CPU = ROOT / "docs" / "sensor-device-benchmark-cpu.md"
@@ -150,11 +151,11 @@ def main(argv=None) -> int:
         print(f"{r['device']} {m:14s} batch {b:4d}: {r['samples_per_s']:9.1f} samples/s "
               f"(first call {r['first_call_s']:.2f} s, peak {peak})", flush=True)
         if args.json:  # after every row: a run stopped by a time limit keeps what it measured
-            args.json.write_text(json.dumps({"rows": rows}, indent=1))
+            atomic_write_text(args.json, json.dumps({"rows": rows}, indent=1))
     name = torch.cuda.get_device_name() if gpu else platform.processor() or platform.machine()
     machine = f"{name}, torch {torch.__version__}, {torch.get_num_threads()} CPU threads"
     if args.json:
-        args.json.write_text(json.dumps({"machine": machine, "rows": rows}, indent=1))
+        atomic_write_text(args.json, json.dumps({"machine": machine, "rows": rows}, indent=1))
     text = report(rows, machine, gpu)
     print(text)
     if not args.no_doc:

@@ -44,6 +44,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from lfmbench import corpus as C  # noqa: E402
+from lfmbench.fileio import atomic_write_bytes, atomic_write_text, load_json  # noqa: E402
 
 S = C.Storage
 #: (label, storage, note); the first entry is the reference (format version 1).
@@ -211,7 +212,7 @@ def exrheader_check(work: Path, results: list[dict], scene, meta, frames) -> dic
         data = C.encode_static_exr({w: a[:, :4, :4] for w, a in next(iter(frames[0]["static"].values())).items()},
                                    meta["bands_nm"], dtype=st)
         p = work / "h.exr"
-        p.write_bytes(data)
+        atomic_write_bytes(p, data)
         r = subprocess.run([tool, str(p)], capture_output=True, text=True)
         out["ok"][label] = r.returncode == 0 and "lfmbench_scale_short" in r.stdout
     return out
@@ -309,7 +310,7 @@ def write_doc(path: Path, info: dict, results: list[dict], chosen: dict | None) 
                      f"within 120 dB of the layer peak; decode {chosen['decode_ms_per_frame']:.0f} ms/frame vs "
                      f"{base['decode_ms_per_frame']:.0f}.")
     lines.append("")
-    path.write_text("\n".join(lines))
+    atomic_write_text(path, "\n".join(lines))
 
 
 def main(argv=None) -> int:
@@ -346,7 +347,7 @@ def main(argv=None) -> int:
     results = []
     part_path = a.out / "partial.json"
     key = f"{cpath.resolve()}|{sid}|{repeats}"
-    partial = json.loads(part_path.read_text()) if part_path.is_file() else {}
+    partial = load_json(part_path, "partial results") if part_path.is_file() else {}
     partial = partial if partial.get("key") == key else {"key": key, "results": {}}
     with tempfile.TemporaryDirectory(dir=a.out) as tmp:
         for label, st, _ in options:
@@ -355,7 +356,7 @@ def main(argv=None) -> int:
                 continue
             results.append(bench_one(label, st, scene, meta, frames, Path(tmp), repeats))
             partial["results"][label] = results[-1]
-            part_path.write_text(json.dumps(partial, default=str))
+            atomic_write_text(part_path, json.dumps(partial, default=str))
         eh = exrheader_check(Path(tmp), results, scene, meta, frames)
     chosen = choose(results)
     info = {"cmd": "`" + " ".join(["python benchmarks/bench_storage.py"] + (argv or sys.argv[1:])) + "`",
@@ -363,8 +364,8 @@ def main(argv=None) -> int:
             "corpus": str(cpath), "meta": meta, "render": corpus.manifest.get("render"), "repeats": repeats, "n_layers": len(lay),
             "n_values": sum(x.size for *_, x in lay), "input_storage": input_storage,
             "unscaled_half": unscaled_half_error(frames), "mc_difference": mc_difference(frames), "exrheader": eh}
-    (a.out / "results.json").write_text(json.dumps({"info": info, "results": results, "chosen": chosen},
-                                                   indent=1, default=str))
+    atomic_write_text(a.out / "results.json", json.dumps({"info": info, "results": results, "chosen": chosen},
+                                                        indent=1, default=str))
     write_doc(a.doc, info, results, chosen)
     print(f"chosen: {chosen['label'] if chosen else None}; wrote {a.doc} and {a.out / 'results.json'}")
     return 0
