@@ -165,6 +165,22 @@ def test_cli_limit_option_raises_a_limit_and_refuses_nonsense(tmp_path):
     assert r.exit_code == 2 and "positive integer" in r.output
 
 
+def test_debug_flag_shows_the_traceback_behind_a_one_line_error(tmp_path):
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"format":')
+    r = CliRunner().invoke(app, ["leaderboard", str(bad)])
+    assert "cannot read JSON" in _one_line(r)  # without --debug: one line, no traceback
+    r = CliRunner().invoke(app, ["--debug", "leaderboard", str(bad)])
+    assert r.exit_code == 2 and "error: run file" in r.output
+    assert "Traceback (most recent call last)" in r.output and "load_runs" in r.output  # where it failed
+    assert "InputFileError" in r.output  # hidden behind ``raise ... from None``, shown with --debug
+    assert r.output.index("error: run file") < r.output.index("Traceback")  # the one line stays first
+    r = CliRunner().invoke(app, ["--debug", "--limit", "nonsense=3", "protocols"])  # a check, no exception:
+    assert r.exit_code == 2 and "Traceback" in r.output and "_root" in r.output  # where the check failed
+    r = CliRunner().invoke(app, ["--debug", "protocols"])
+    assert r.exit_code == 0 and "Traceback" not in r.output
+
+
 # ------------------------------------------------------------------------------------------ 10. deep JSON
 def test_deep_json_manifest_and_results_are_one_line(tmp_path):
     from tests.data.corpus.data import make_corpus
