@@ -251,13 +251,17 @@ def json_depth_exceeds(obj: Any, cap: int) -> bool:
     return False
 
 
-def loads_json(raw: bytes | str, source: str) -> Any:
+def loads_json(raw: bytes | str, source: str, object_hook: Any = None) -> Any:
     """Parse JSON text from ``source`` (a file name, for the messages) strictly and within the depth limit:
     ``NaN``, ``Infinity`` and numbers that overflow to inf are refused; every refusal is an
-    :class:`InputFileError` naming ``source``."""
+    :class:`InputFileError` naming ``source``.
+
+    ``object_hook(dict) -> dict`` is called on each object as the parser completes it (:func:`json.loads`): a
+    reader can count what a file declares while it is parsed and stop it early by raising an exception that is
+    not a ``ValueError`` (which passes through unchanged)."""
     cap = limit("json_depth")
     try:
-        obj = json.loads(raw, parse_constant=_no_constant, parse_float=_finite_float)
+        obj = json.loads(raw, parse_constant=_no_constant, parse_float=_finite_float, object_hook=object_hook)
     except RecursionError:
         raise InputFileError(f"{source}: JSON nested deeper than the limit json_depth={cap} (raise it with "
                              f"`lfmbench --limit json_depth=N` if the file is trusted)") from None
@@ -270,8 +274,10 @@ def loads_json(raw: bytes | str, source: str) -> Any:
     return obj
 
 
-def load_json(path: str | os.PathLike, what: str = "JSON file", limit_name: str = "json_bytes") -> Any:
-    """Read and parse the JSON file ``path`` within the limits (:func:`read_bytes`, :func:`loads_json`).
+def load_json(path: str | os.PathLike, what: str = "JSON file", limit_name: str = "json_bytes",
+              object_hook: Any = None) -> Any:
+    """Read and parse the JSON file ``path`` within the limits (:func:`read_bytes`, :func:`loads_json`, which
+    passes ``object_hook`` on).
 
     Raises:
         InputFileError: malformed, too deep or too large (a ``ValueError`` naming ``path``).
@@ -281,7 +287,7 @@ def load_json(path: str | os.PathLike, what: str = "JSON file", limit_name: str 
         raw = read_bytes(path, what, limit_name)
     except LimitError as exc:
         raise InputFileError(str(exc)) from None
-    return loads_json(raw, str(path))
+    return loads_json(raw, str(path), object_hook)
 
 
 def load_json_input(path: str | os.PathLike, what: str) -> Any:

@@ -112,11 +112,12 @@ def set_limit(name: str, value: int | None) -> None:
     _overrides.update(parse_overrides(f"{name}={value}", "set_limit"))
 
 
-def lights_cap_message(n: int) -> str:
-    """The one message of the per-scene light cap (``lights_per_scene``) for a scene with ``n`` lights."""
-    return (f"has {n:,} lights, above the cap of {limit('lights_per_scene'):,} lights per scene (each light is an "
-            "EXR part per frame and group and a frozen draw per test sample; raise it with `lfmbench --limit "
-            "lights_per_scene=N` if you mean it)")
+def lights_cap_message(n: int, more: bool = False) -> str:
+    """The one message of the per-scene light cap (``lights_per_scene``) for a scene with ``n`` lights (``more``:
+    at least ``n``, where a reader stopped counting at the cap)."""
+    return (f"has {'more than ' if more else ''}{n:,} lights, above the cap of {limit('lights_per_scene'):,} "
+            "lights per scene (each light is an EXR part per frame and group and a frozen draw per test sample; "
+            "raise it with `lfmbench --limit lights_per_scene=N` if you mean it)")
 
 
 def brief(value: Any, n: int | None = None) -> str:

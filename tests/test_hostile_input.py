@@ -322,6 +322,37 @@ def test_scene_with_too_many_lights_is_refused_naming_the_cap(tmp_path):
         S.validate_scene(sc)
 
 
+def test_meta_json_with_too_many_lights_is_refused_while_it_is_parsed(tmp_path):
+    """The light cap is counted during the parse: a meta.json whose light cap+1 is followed by a broken tail is
+    refused for its lights (the parser never reached the tail); before, the whole file was parsed first (10^6
+    lights: 431 MB, 5 s) and here the tail's JSON error was all the user saw."""
+    from lfmbench import corpus as C
+    from tests.data.corpus.data import fake_meta, make_corpus
+
+    root = make_corpus(tmp_path / "c", n_scenes=1)
+    sid = C.Corpus(root).scenes[0]
+    mp = root / "scenes" / sid / "meta.json"
+    limits.set_limit("lights_per_scene", 8)
+    try:
+        m = fake_meta(sid)
+        m["lights"] = [{"id": i, "group": "otherlights"} for i in range(9)]
+        text = json.dumps(m)
+        mp.write_text(text[:text.index('{"id": 8')] + '{"id": 8, "group": "x"}, {"id": ')  # broken after light 9
+        r = CliRunner().invoke(app, ["validate", "--headers-only", str(root)])
+        out = " ".join(r.output.split())
+        assert r.exit_code == 1 and "meta.json: field 'lights' has more than 8 lights, above the cap of 8" in out
+        assert "cannot read JSON" not in out
+        with pytest.raises(C.CorpusFileError, match="has more than 8 lights"):
+            C.Corpus(root).meta(sid)
+        m = fake_meta(sid)  # objects that are no lights count too: 4 per light of the cap, plus 1,024
+        m["camera"]["junk"] = [{} for _ in range(4 * 8 + 1024)] + [{}]
+        mp.write_text(json.dumps(m))
+        with pytest.raises(C.CorpusFileError, match=r"more than 1,056 JSON objects"):
+            C.load_meta(mp)
+    finally:
+        limits.set_limit("lights_per_scene", None)
+
+
 # ------------------------------------------------------------------- 6. EXR bombs
 def _patch_window(path, name: bytes, box):
     import struct

@@ -41,7 +41,7 @@ from lfmbench.corpus.errors import (CorpusChannelError, CorpusError, CorpusFileE
 from lfmbench.corpus.exr import (ExrPart, check_exr_header, encode_aux_exr, encode_lights_exr, encode_static_exr, layer_scale,
                                  read_exr)
 from lfmbench.corpus.meta import (LIGHT_KINDS, SPECTRUM_MODELS, TIMING_RTOL, check_splits, inside_root, make_splits,
-                                  manifest_entry_errors, sha256_file, validate_meta)
+                                  load_meta, manifest_entry_errors, sha256_file, validate_meta)
 from lfmbench.corpus.naming import (ATTR, AUX_CHANNELS, EMPTY_PART, FORMAT_NAME, FORMAT_VERSION, MANIFEST_NAME,
                                     RADIANCE_MAX, RADIANCE_UNIT, READABLE_VERSIONS, SCENES_DIR, SPLITS_NAME,
                                     STATIC_WINDOWS, band_channel, bin_channels, bin_prefix, frame_dir, group_storage,
@@ -64,7 +64,7 @@ __all__ = [
     "CorpusError", "CorpusNotFoundError", "CorpusFileError", "CorpusChannelError", "CorpusValueError",
     "CorpusWriteError", "band_channel", "bin_prefix", "static_channels", "bin_channels", "frame_dir",
     "group_storage", "encode_static_exr", "encode_lights_exr", "encode_aux_exr", "read_exr", "sha256_file",
-    "atomic_write_bytes", "atomic_write_json", "make_splits", "validate_meta", "Corpus", "CorpusWriter",
+    "atomic_write_bytes", "atomic_write_json", "make_splits", "validate_meta", "load_meta", "Corpus", "CorpusWriter",
     "ValidationReport", "validate_corpus", "encode_scene", "write_files", "prune_scene_dir", "ExrPart",
     "check_scene_id", "manifest_entry_errors", "inside_root", "check_splits", "RADIANCE_MAX",
     "ThreadedSceneWriter", "float_to_half", "CorpusLockedError", "CorpusLock", "LOCK_NAME", "check_exr_header",

@@ -23,7 +23,7 @@ from lfmbench.corpus.naming import FORMAT_NAME, FORMAT_VERSION, SCENES_DIR, _che
 from lfmbench.vocabulary import LIGHT_KINDS, SPECTRUM_MODELS
 from lfmbench.fileio import InputFileError, load_json
 
-__all__ = ["TIMING_RTOL", "sha256_file", "make_splits", "validate_meta", "LIGHT_KINDS", "SPECTRUM_MODELS",
+__all__ = ["TIMING_RTOL", "sha256_file", "make_splits", "validate_meta", "load_meta", "LIGHT_KINDS", "SPECTRUM_MODELS",
            "manifest_entry_errors", "inside_root", "check_splits"]
 
 #: Relative tolerance of the timing consistency checks (s / s).
@@ -42,17 +42,66 @@ def sha256_file(path: str | os.PathLike, chunk: int = 1 << 20) -> str:
     return h.hexdigest()
 
 
-def _load_json(path: Path, what: str) -> Any:
+def _load_json(path: Path, what: str, object_hook: Any = None) -> Any:
     """A corpus JSON file through the one bounded reader (:func:`lfmbench.fileio.load_json`; a manifest has its
     own size limit ``manifest_bytes``); ``CorpusFileError`` naming the file."""
     try:
-        return load_json(path, what, "manifest_bytes" if what == "manifest" else "json_bytes")
+        return load_json(path, what, "manifest_bytes" if what == "manifest" else "json_bytes", object_hook)
     except FileNotFoundError:
         raise CorpusFileError(f"{what} is missing: {path}") from None
     except OSError as exc:
         raise CorpusFileError(f"{what} {path} cannot be read: {exc.strerror or exc}") from None
     except InputFileError as exc:
         raise CorpusFileError(f"{what} {exc}") from None
+
+
+#: JSON objects a ``meta.json`` may hold per light of the cap ``lights_per_scene``, plus
+#: :data:`META_OBJECTS_BASE` (a light is one object and its ``spectrum`` another; top level, timing, camera,
+#: storage and the groups are a few dozen): the bound :func:`load_meta` checks while it parses.
+META_OBJECTS_PER_LIGHT = 4
+META_OBJECTS_BASE = 1024
+
+
+class _TooMany(Exception):
+    """Raised inside the JSON parser to stop it (not a ``ValueError``: :func:`loads_json` lets it through)."""
+
+
+def load_meta(path: Path | str) -> dict:
+    """A scene's ``meta.json``, read through the bounded reader and checked (:func:`validate_meta`).
+
+    The light cap (limit ``lights_per_scene``) is counted while the file is parsed: the parser stops at the first
+    light (an object with an ``id`` or a ``group``) above the cap, or at the first object above
+    ``META_OBJECTS_PER_LIGHT * cap + META_OBJECTS_BASE``, so a file of 10^6 lights is refused after about
+    ``cap`` of them are built (its bytes are read first: ``json_bytes`` bounds them), not after all.
+
+    Raises:
+        CorpusFileError: missing, unreadable, malformed, above a limit, or more lights than the cap (naming
+            ``path``).
+        ValueError: content that :func:`validate_meta` refuses (naming ``path`` and the field).
+    """
+    path = Path(path)
+    cap = limit("lights_per_scene")
+    cap_objects = META_OBJECTS_PER_LIGHT * cap + META_OBJECTS_BASE
+    n = [0, 0]  # lights, objects
+
+    def count(obj: dict) -> dict:
+        n[1] += 1
+        if "id" in obj or "group" in obj:
+            n[0] += 1
+            if n[0] > cap:
+                raise _TooMany(f"{path}: field 'lights' {lights_cap_message(cap, more=True)}")
+        if n[1] > cap_objects:
+            raise _TooMany(f"{path}: more than {cap_objects:,} JSON objects, more than a scene within the cap "
+                           f"of {cap:,} lights per scene holds (raise the cap with `lfmbench --limit "
+                           "lights_per_scene=N` if you mean it)")
+        return obj
+
+    try:
+        m = _load_json(path, "scene metadata", count)
+    except _TooMany as exc:
+        raise CorpusFileError(str(exc)) from None
+    validate_meta(m, str(path))
+    return m
 
 
 def make_splits(scene_ids: Iterable[str], seed: int,

@@ -15,7 +15,7 @@ from lfmbench.limits import brief
 from lfmbench.corpus.errors import CorpusChannelError, CorpusNotFoundError
 from lfmbench.corpus.exr import ExrPart, _check_aux, _check_values, _stack, layer_scale, read_exr
 from lfmbench.corpus.meta import (_check_manifest, _check_meta_storage, _load_json, check_splits, inside_root,
-                                  validate_meta)
+                                  load_meta)
 from lfmbench.corpus.naming import (AUX_CHANNELS, EMPTY_PART, MANIFEST_NAME, SCENES_DIR, SPLITS_NAME, _group_bins,
                                     bin_channels, frame_dir, group_storage, static_channels)
 
@@ -81,8 +81,7 @@ class Corpus:
         """The scene's ``meta.json`` (camera, timing, bands, groups, lights)."""
         if scene_id not in self._meta:
             p = self._scene_dir(scene_id) / "meta.json"
-            m = _load_json(p, "scene metadata")
-            validate_meta(m, str(p))
+            m = load_meta(p)
             _check_meta_storage(m, p)
             self._meta[scene_id] = m
         return self._meta[scene_id]

@@ -15,7 +15,7 @@ from lfmbench.limits import brief
 from lfmbench.corpus.errors import CorpusError, CorpusFileError, CorpusValueError
 from lfmbench.corpus.exr import ExrPart, _check_aux, layer_scale, read_exr
 from lfmbench.corpus.meta import (_check_manifest, _check_meta_storage, _file_entry_error, _load_json, _scene_id_error,
-                                  check_splits, inside_root, manifest_entry_errors, sha256_file, validate_meta)
+                                  check_splits, inside_root, load_meta, manifest_entry_errors, sha256_file)
 from lfmbench.corpus.naming import (ATTR, AUX_CHANNELS, EMPTY_PART, MANIFEST_NAME, RADIANCE_MAX, RADIANCE_UNIT,
                                     SCENES_DIR, SPLITS_NAME, STATIC_WINDOWS, _group_bins, bin_channels, frame_dir,
                                     group_storage, static_channels)
@@ -218,8 +218,7 @@ def _validate_scene(root: Path, sid: str, files: Mapping[str, str], rep: Validat
             err(str(exc))
     mp = sdir / "meta.json"
     try:
-        meta = _load_json(mp, "scene metadata")
-        validate_meta(meta, str(mp))
+        meta = load_meta(mp)
         _check_meta_storage(meta, mp)
     except (CorpusError, ValueError) as exc:
         err(str(exc))
