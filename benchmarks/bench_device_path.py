@@ -108,12 +108,16 @@ def time_loader(root, dev, batch, workers, batches, passes):
     return batch * batches / med
 
 
-def time_device(root, dev, batch, batches, passes):
+def time_device(root, dev, batch, batches, passes, program=True):
+    """The device path; ``program=False``: its per-sample pieces (``capture_pieces`` from the resident layers, one
+    sample at a time on the host: the path before the batched program) for the ratio."""
     from lfmbench.datasets.device import DeviceBatches
 
     t0 = time.perf_counter()
     db = DeviceBatches(_dataset(root, 256), batch, dev, seed=0)
     load_s = time.perf_counter() - t0
+    if not program:
+        db.resident.program = None
     if dev.type == "cuda":
         torch.cuda.reset_peak_memory_stats(dev)
         base = torch.cuda.memory_allocated(dev)
@@ -125,7 +129,27 @@ def time_device(root, dev, batch, batches, passes):
     med, _ = _timed(run, passes, dev)
     peak = (torch.cuda.max_memory_allocated(dev) - base) if dev.type == "cuda" else None
     scenes = len(dict.fromkeys(db.ds.scene_ids))
-    return batch * batches / med, load_s, db.resident.bytes / scenes, peak
+    return batch * batches / med, load_s, db.resident.bytes / scenes, peak, count_syncs(db, dev)
+
+
+def count_syncs(db, dev) -> list | None:
+    """Host synchronisations of one batch on CUDA (``torch.cuda.set_sync_debug_mode``): [(count, where), ...]."""
+    if dev.type != "cuda":
+        return None
+    import collections
+    import warnings
+
+    torch.cuda.synchronize(dev)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        torch.cuda.set_sync_debug_mode("warn")
+        try:
+            db.batch(range(db.batch_size))
+        finally:
+            torch.cuda.set_sync_debug_mode("default")
+    where = collections.Counter(f"{Path(w.filename).name}:{w.lineno}" for w in caught
+                                if "synchroniz" in str(w.message))
+    return sorted(((n, k) for k, n in where.items()), reverse=True)
 
 
 def time_step(root, dev, batch, crop, passes):
@@ -169,7 +193,7 @@ def main(argv=None) -> int:
     ap.add_argument("--scenes", type=int, default=2)
     ap.add_argument("--workers", type=int, default=None, help="DataLoader workers (default: cores - 2, at least 1)")
     ap.add_argument("--corpus", type=Path, default=None, help="where the synthetic corpus is written / reused")
-    ap.add_argument("--rows", default="loader,device,step,train-loader,train-device",
+    ap.add_argument("--rows", default="loader,device,device-samplewise,step,train-loader,train-device",
                     help="comma-separated rows to measure (default: all)")
     ap.add_argument("--no-doc", action="store_true")
     ap.add_argument("--json", type=Path)
@@ -183,7 +207,7 @@ def main(argv=None) -> int:
     workers = args.workers if args.workers is not None else max(1, (os.cpu_count() or 2) - 2)
     root = make_corpus(args.corpus or Path(tempfile.mkdtemp()) / "corpus", args.scenes)
     gpu = dev.type == "cuda"
-    batches = (64, 256) if gpu else (8,)
+    batches = (64, 256, 1024) if gpu else (8, 64)
     n_b, passes = (2, 2) if args.quick else (4, 3)
     rows: list[dict] = []
 
@@ -195,13 +219,17 @@ def main(argv=None) -> int:
 
     wanted = set(args.rows.split(","))
     for b in batches:
-        if "loader" in wanted:
+        if "loader" in wanted and b <= 256:
             add(path="loader", batch=b, workers=workers,
                 samples_per_s=time_loader(root, dev, b, workers, n_b, passes))
         if "device" in wanted:
-            sps, load_s, per_scene, peak = time_device(root, dev, b, n_b, passes)
+            sps, load_s, per_scene, peak, syncs = time_device(root, dev, b, n_b, passes)
             add(path="device", batch=b, samples_per_s=sps, load_s=load_s, resident_bytes_per_scene=per_scene,
-                peak_bytes=peak)
+                peak_bytes=peak, syncs=syncs)
+        if "device-samplewise" in wanted:
+            sps, load_s, per_scene, peak, syncs = time_device(root, dev, b, n_b, passes, program=False)
+            add(path="device (pieces per sample)", batch=b, samples_per_s=sps, load_s=load_s,
+                resident_bytes_per_scene=per_scene, peak_bytes=peak)
     step_b = 64 if gpu else 4
     if "step" in wanted:
         add(path="step", batch=step_b, crop=128, samples_per_s=time_step(root, dev, step_b, 128, passes))
@@ -235,6 +263,8 @@ def report(rows, machine, gpu) -> str:
                          "per scene resident")
         if r.get("peak_bytes"):
             notes.append(f"peak {r['peak_bytes'] / 2**20:.0f} MiB per batch")
+        if r.get("syncs") is not None:
+            notes.append(f"{sum(n for n, _ in r['syncs'])} host synchronisations per batch")
         if "workers" in r:
             notes.append(f"{r['workers']} workers")
         if "steps" in r:

@@ -48,7 +48,7 @@ def _is_tensor(*xs) -> bool:
     return any(isinstance(x, torch.Tensor) for x in xs)
 
 
-def bin_edges(window_s, bins: int, like=None):
+def bin_edges(window_s, bins: int, like=None, kmax: int | None = None):
     r"""Edges (s) of ``bins`` equal time bins over ``[0, window_s]``, relative to the frame start.
 
     The one definition of the bin grid (``np.linspace(0, window_s, bins + 1)``, bit for bit: ``i * (window_s /
@@ -59,6 +59,8 @@ def bin_edges(window_s, bins: int, like=None):
     Args:
         window_s: capture window (s), scalar or (S,). bins: K >= 1, int or (S,) int tensor.
         like: ``None`` for numpy, else a tensor whose device is used (float64).
+        kmax: with tensors, a bound >= ``bins.max()`` known to the caller (the grid is then (S, kmax + 1), and
+            the device is not asked for the maximum: no host synchronisation).
 
     Returns:
         (K + 1,) float64 numpy array, or an (S, Kmax + 1) float64 tensor.
@@ -68,7 +70,8 @@ def bin_edges(window_s, bins: int, like=None):
     dev = like.device
     K = torch.as_tensor(bins, device=dev).reshape(-1).long()
     win = torch.as_tensor(window_s, dtype=torch.float64, device=dev).reshape(-1).expand(K.shape[0])
-    kmax = int(K.max()) if K.numel() else 1
+    if kmax is None:
+        kmax = int(K.max()) if K.numel() else 1
     i = torch.arange(kmax + 1, device=dev, dtype=torch.float64)
     step = win / K.clamp_min(1).to(torch.float64)                                  # (S,) s
     edges = i[None, :] * step[:, None] + 0.0                                       # numpy's linspace: i * step + 0

@@ -232,12 +232,14 @@ def pwm_weights(batch: Mapping[str, Any]) -> dict[str, torch.Tensor]:
     starts = window_starts(t0[:, None], t_s[:, None], t_l[:, None], shift)       # pd -> (S, R) s
     length = {"lpd": t_s, "spd": t_l}
     pw = {k: batch["slot_pwm"][:, i] for i, k in enumerate(PWM_FIELDS)}
-    pw3 = {k: v[:, None, None] for k, v in pw.items()}
+    if info.get("ideal_pulses"):    # the batch says no slot has ramps: the ideal-pulse formula, decided on the host
+        pw["rise_s"] = pw["fall_s"] = 0.0
+    pw3 = {k: (v[:, None, None] if torch.is_tensor(v) else v) for k, v in pw.items()}
     kmax = int(batch["entry_values"].shape[1])
     if S == 0:
         z = torch.zeros(0, shift.shape[1], kmax, dtype=torch.float64, device=dev)
         return {"lpd": z, "spd": z, "gt": z}
-    edges = t0[:, None] + bin_edges(cw, K.clamp_min(1), like=shift)              # (S, K'+1) s
+    edges = t0[:, None] + bin_edges(cw, K.clamp_min(1), like=shift, kmax=kmax)  # (S, Kmax+1) s
     if edges.shape[1] < kmax + 1:
         edges = torch.cat([edges, edges[:, -1:].expand(S, kmax + 1 - edges.shape[1])], 1)
     out = {}
@@ -245,7 +247,8 @@ def pwm_weights(batch: Mapping[str, Any]) -> dict[str, torch.Tensor]:
         out[key] = window_bin_exposure(edges, starts[pd], length[pd][:, None, None], pw3["period_s"], pw3["duty"],
                                        pw3["phase_s"], pw3["rise_s"], pw3["fall_s"], level, check=False)
     grp = K == 0
-    if bool(grp.any()):
+    # (a batch that says it has no group slots skips the test: bool() would wait for the device)
+    if info.get("group_slots", True) and bool(grp.any()):
         gi = grp.nonzero()[:, 0]
         p = {k: v[gi, None] for k, v in pw.items()}
         for key, pd in (("lpd", "lpd"), ("spd", "spd")):
@@ -337,10 +340,23 @@ class _FPNCache:
         self.maps: dict = {}
 
     def crops(self, preset, scene_hw: torch.Tensor, crop: torch.Tensor, dev, dtype,
-              keys: Sequence[str] | None = None) -> dict[str, torch.Tensor]:
-        """(B, 1, 1, h, w) crops of each sample's full-frame pattern (only the maps ``keys``; default all)."""
+              keys: Sequence[str] | None = None, uniform_hw: tuple[int, int] | None = None,
+              crop_hw: tuple[int, int] | None = None) -> dict[str, torch.Tensor]:
+        """(B, 1, 1, h, w) crops of each sample's full-frame pattern (only the maps ``keys``; default all).
+
+        ``uniform_hw``: the (H, W) px every sample's scene has, and ``crop_hw`` (h, w) px, when the caller knows
+        them: the crops are then one gather on the device, with no read of ``crop`` on the host."""
         if keys is not None and not keys:
             return {}
+        if uniform_hw is not None and crop_hw is not None:
+            H, W = (int(n) for n in uniform_hw)
+            h, w = (int(n) for n in crop_hw)
+            key = (preset.name, preset.fpn_seed, repr(preset), H, W, str(dev), dtype)
+            if key not in self.maps:
+                self.maps[key] = _sensor.fixed_pattern(preset, H, W, device=dev, dtype=dtype)
+            rows = (crop[:, 0:1] + torch.arange(h, device=dev))[:, :, None]          # (B, h, 1)
+            cols = (crop[:, 1:2] + torch.arange(w, device=dev))[:, None, :]          # (B, 1, w)
+            return {k: v[rows, cols][:, None, None] for k, v in self.maps[key].items() if keys is None or k in keys}
         hw = scene_hw.tolist()
         cr = crop.tolist()
         out: dict[str, list] = {}
@@ -406,7 +422,8 @@ def simulate_batch(batch: Mapping[str, Any], preset: Any, outputs: Sequence[str]
             # only the maps the chain reads (a PRNU gain where prnu > 0, a DSNU offset where dsnu > 0)
             used = [f"{pd}_{m}" for pd, spec in preset.photodiodes.items()
                     for m, on in (("gain", spec.prnu > 0), ("offset_e", spec.dsnu_e > 0)) if on]
-            fpn = (fpn_cache or _DEFAULT_FPN).crops(preset, batch["scene_hw"], batch["crop"], dev, lpd.dtype, used)
+            fpn = (fpn_cache or _DEFAULT_FPN).crops(preset, batch["scene_hw"], batch["crop"], dev, lpd.dtype, used,
+                                                    info.get("scene_hw"), info["crop_hw"])
         streams = info.get("noise_streams", "generator") if noise_streams is None else noise_streams
         if streams not in NOISE_STREAMS:
             raise ValueError(f"noise_streams must be one of {NOISE_STREAMS}, got {streams!r}")

@@ -26,6 +26,8 @@ from torch.utils.data import Dataset
 from lfmbench.limits import brief, limit
 from lfmbench import sensor as _sensor
 from lfmbench.corpus import Corpus
+from lfmbench.datasets.counter_draws import (SceneEntities, counter_scene_draw, crop_origin, noise_seeds,
+                                             place_uniforms, start_frame)
 from lfmbench.datasets.assembly import (NOISE_STREAMS, SENSOR_OUTPUTS, assemble_sample, check_line_time, compose_frame,
                                         light_index)
 from lfmbench.datasets.pieces import capture_pieces
@@ -166,10 +168,13 @@ class LFMCaptureDataset(Dataset):
             bins, PWM draws, noise seed, masks, depth, meta; :func:`lfmbench.datasets.batched.capture_pieces`),
             to be batched by :func:`~lfmbench.datasets.batched.collate_pieces` and simulated on the training
             device by :func:`~lfmbench.datasets.batched.simulate_batch` (docs/datasets.md, "Captures on the GPU").
-        noise_streams: ``"generator"`` (default; the numbers of the published results) or ``"counter"``: each
-            sample's sensor noise from counter-based streams of its noise seed, the numbers the device path
-            (:class:`lfmbench.datasets.device.DeviceBatches`) gives on any device and batch size
-            (:data:`lfmbench.datasets.assembly.NOISE_STREAMS`).
+        noise_streams: where a sample's random numbers come from (:data:`lfmbench.datasets.assembly.NOISE_STREAMS`):
+            ``"generator"`` (default; the numbers of the published results): PWM, crop and window start from a
+            numpy generator seeded ``(seed, epoch, index)``, the sensor noise from a torch generator seeded by the
+            noise seed; ``"counter"``: all of them from counter-based streams of ``(seed, epoch, index)``
+            (:mod:`lfmbench.datasets.counter_draws`, :mod:`lfmbench.sensor.counter_noise`), the numbers the
+            device path (:class:`lfmbench.datasets.device.DeviceBatches`) gives on any device and batch size.
+            The frozen draws of the test split are the same in both.
 
     Sample (F frames, crop h x w; batches add a leading B; see docs/contracts.md):
         ``lpd_hcg``, ``lpd_lcg``, ``spd``: (F, 1, h, w) DN; ``lpd_hcg_e``, ``lpd_lcg_e``, ``spd_e``: (F, 1, h, w)
@@ -194,6 +199,7 @@ class LFMCaptureDataset(Dataset):
         if noise_streams not in NOISE_STREAMS:
             raise ValueError(f"noise_streams must be one of {NOISE_STREAMS}, got {noise_streams!r:.40}")
         self.noise_streams = noise_streams
+        self._entities: dict[str, SceneEntities] = {}
         if not (self.root / "manifest.json").is_file():
             raise DatasetNotFoundError(
                 f"root: no lfmbench corpus at {self.root} (manifest.json missing). Render one with "
@@ -416,8 +422,7 @@ class LFMCaptureDataset(Dataset):
 
     def _start(self, sid: str, u: float) -> int:
         """First frame of a ``"random"`` window from ``u`` in [0, 1): uniform over the N - F + 1 starts."""
-        n_starts = int(self.corpus.meta(sid)["frames"]) - self.frames + 1
-        return min(int(u * n_starts), n_starts - 1)
+        return start_frame(u, int(self.corpus.meta(sid)["frames"]) - self.frames + 1)
 
     def _fixed_pattern(self, H: int, W: int) -> dict | None:
         if not self.noise:
@@ -435,8 +440,11 @@ class LFMCaptureDataset(Dataset):
             sample = self.simulate(sid, per_light, per_group, crop, noise_seed, index, start)
         return self.transforms(sample) if self.transforms else sample
 
-    def draws(self, index: int) -> tuple:
+    def draws(self, index: int, streams: str | None = None) -> tuple:
         """The random draws of sample ``index`` (functions of ``(seed, epoch, index)``; frozen for ``test``).
+
+        ``streams``: ``"generator"`` (a numpy generator seeded ``(seed, epoch, index)``) or ``"counter"``
+        (:mod:`lfmbench.datasets.counter_draws`); default the dataset's ``noise_streams``.
 
         Returns:
             ``(scene_id, per_light, per_group, crop, noise_seed, frame_start)``: PWM dicts by light id and by
@@ -448,7 +456,8 @@ class LFMCaptureDataset(Dataset):
         sub = index % self.samples_per_scene
         meta = self.corpus.meta(sid)
         H, W = meta["height"], meta["width"]
-        rng = np.random.default_rng([self.seed, self.epoch, index])
+        counter = (self.noise_streams if streams is None else streams) == "counter"
+        rng = None if counter else np.random.default_rng([self.seed, self.epoch, index])
         if self._frozen is not None:
             fr = self._frozen.get(f"{sid}/{sub}")
             if fr is None:
@@ -457,21 +466,39 @@ class LFMCaptureDataset(Dataset):
             per_group = fr["groups"]
             noise_seed = int(fr["noise_seed"])
             u = float(fr.get("frame_u", 0.0))
+        elif counter:
+            draw = counter_scene_draw(self.pwm, self.entities(sid), self.seed, self.epoch, index)
+            per_light, per_group = draw.to_dicts()
+            noise_seed = int(noise_seeds(self.seed, self.epoch, index))
+            u = None
         else:
             per_light, per_group = self._draw(sid, rng)
             noise_seed = int(rng.integers(2**62))
             u = None
         ch, cw = self.crop if self.crop is not None else (H, W)
+        place = place_uniforms(self.seed, self.epoch, index).tolist() if counter else None
         if self.crop is None or self.split == "test":
             y0, x0 = ((H - ch) // 2) & ~1, ((W - cw) // 2) & ~1
+        elif counter:
+            y0, x0 = crop_origin(place[0], H, ch), crop_origin(place[1], W, cw)
         else:
             y0 = 2 * int(rng.integers(0, (H - ch) // 2 + 1))
             x0 = 2 * int(rng.integers(0, (W - cw) // 2 + 1))
         if self.frame_start == "random":
-            start = self._start(sid, float(rng.random()) if u is None else u)  # drawn last: other draws unchanged
+            if u is None:
+                u = place[2] if counter else float(rng.random())  # drawn last: other draws unchanged
+            start = self._start(sid, u)
         else:
             start = self.frame_start
         return sid, per_light, per_group, (y0, x0, ch, cw), noise_seed, start
+
+    def entities(self, scene_id: str) -> SceneEntities:
+        """The PWM entities of scene ``scene_id`` under this dataset's PWM config and groups (the order of the
+        counter-based PWM draws; :class:`lfmbench.datasets.counter_draws.SceneEntities`)."""
+        ents = self._entities.get(scene_id)
+        if ents is None:
+            ents = self._entities[scene_id] = SceneEntities.of(self.pwm, self.corpus.meta(scene_id), self.groups)
+        return ents
 
     def simulate(self, scene_id: str, params: Mapping[int, Mapping], group_params: Mapping[str, Mapping] | None = None,
                  crop: tuple[int, int, int, int] | None = None, noise_seed: int = 0, index: int = -1,

@@ -25,10 +25,14 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Iterator
 
+import numpy as np
 import torch
 
+from lfmbench.counter_rng import uniforms
 from lfmbench.datasets.batched import collate_pieces, pieces_to, simulate_batch
-from lfmbench.datasets.pieces import _SceneEntries, capture_pieces
+from lfmbench.datasets.counter_draws import (PURPOSE_PWM, PWM_UNIFORMS, crop_origin, noise_seeds, place_uniforms,
+                                             pwm_from_uniforms, sample_keys, start_frame)
+from lfmbench.datasets.pieces import PWM_FIELDS, _SceneEntries, capture_pieces
 from lfmbench.vocabulary import PHOTODIODES
 
 __all__ = ["ResidentMemoryError", "ResidentScene", "ResidentScenes", "DeviceBatches", "epoch_order",
@@ -58,6 +62,8 @@ class ResidentScene:
     entries: list                  # per frame: (2, Kscene, N) rates of the pixel entries
     light_index: torch.Tensor | None
     depth: torch.Tensor | None
+    #: per frame, where entry i of the scene's ``_SceneEntries`` frame is in ``entries`` (None: at i)
+    entry_order: list | None = None
 
     def nbytes(self) -> int:
         ts = [self.static, self.light_index, self.depth, *self.entries,
@@ -84,8 +90,8 @@ class ResidentScenes:
         self.ds = ds
         want = set(ds.outputs)
         sids = list(dict.fromkeys(ds.scene_ids))
-        sizes = {sid: self.estimate_scene(ds, sid) for sid in sids}
-        need = sum(sizes.values())
+        packed = SplitProgram.supports(ds)
+        need = self.estimate(ds, packed)
         if budget_bytes is None and self.device.type == "cuda":
             free, _total = torch.cuda.mem_get_info(self.device)
             budget_bytes = int(DEFAULT_BUDGET_FRACTION * free)
@@ -98,6 +104,17 @@ class ResidentScenes:
                 f"max_scenes), or train from the DataLoader path (data='loader')")
         self.bytes = 0
         self._scenes: dict[str, ResidentScene] = {}
+        #: the batched program over the packed layers (None: the split cannot be packed; per-sample pieces)
+        self.program = SplitProgram(ds, self.device) if packed else None
+        if self.program is not None:
+            pr = self.program
+            for i, sid in enumerate(pr.sids):
+                self._scenes[sid] = ResidentScene(
+                    static=pr.static[i], group_static={}, entries=[pr.entries(i, f) for f in range(pr.Fs)],
+                    light_index=None if pr.light_index is None else pr.light_index[i],
+                    depth=None if pr.depth is None else pr.depth[i], entry_order=pr.order[i])
+            self.bytes = pr.nbytes()
+            return
         for sid in sids:
             view = ds.scene(sid)
             layers = view.layers
@@ -113,15 +130,33 @@ class ResidentScenes:
             self.bytes += sc.nbytes()
 
     @staticmethod
-    def estimate_scene(ds, scene_id: str) -> int:
-        """Bytes one scene's resident layers take (from its projected layers on the host)."""
+    def estimate(ds, packed: bool | None = None) -> int:
+        """Bytes the resident layers of the split of ``ds`` take (``packed``: as :class:`SplitProgram` holds them,
+        entries padded to the split's most bins plus 12 bytes of coordinates each; default: whether the split
+        can be packed)."""
+        sids = list(dict.fromkeys(ds.scene_ids))
+        packed = SplitProgram.supports(ds) if packed is None else packed
+        kall = None
+        if packed:
+            kall = max([int(fe.vals.shape[1]) for sid in sids
+                        for fe in ds.scene(sid).cached("pieces_entries", _SceneEntries).frames] + [1])
+        return sum(ResidentScenes.estimate_scene(ds, sid, kall) for sid in sids)
+
+    @staticmethod
+    def estimate_scene(ds, scene_id: str, kall: int | None = None) -> int:
+        """Bytes one scene's resident layers take (from its projected layers on the host); ``kall``: its entries
+        padded to ``kall`` bins with their coordinates (packed, :class:`SplitProgram`)."""
         view = ds.scene(scene_id)
         layers = view.layers
         want = set(ds.outputs)
         fs, _two, H, W = (int(n) for n in view.static_rates().shape)
         n = 4 * 2 * fs * H * W
         n += sum(4 * int(r[pd].numel()) for r in layers.group_static.values() for pd in PHOTODIODES)
-        n += sum(int(fe.vals.nbytes) for fe in view.cached("pieces_entries", _SceneEntries).frames)
+        frames = view.cached("pieces_entries", _SceneEntries).frames
+        if kall is None:
+            n += sum(int(fe.vals.nbytes) for fe in frames)
+        else:
+            n += sum((8 * kall + 12) * int(fe.y.shape[0]) for fe in frames)
         if "light_index" in want:
             n += int(view.light_index().numel()) * view.light_index().element_size()
         if "depth" in want:
@@ -173,14 +208,339 @@ class DeviceBatches:
         n = len(self.ds)
         return n // self.batch_size if self.drop_last else -(-n // self.batch_size)
 
+    def pieces(self, indices) -> dict:
+        """The collated pieces of the dataset's samples ``indices`` (counter draws of the current epoch) on the
+        device: by the batched program (:class:`SplitProgram`) when the split is packed, else sample by sample
+        (:func:`capture_pieces` from the resident layers)."""
+        if self.resident.program is not None:
+            return self.resident.program.pieces(indices)
+        pieces = [capture_pieces(self.ds, sid, pl, pg, crop, ns, int(i), start, resident=self.resident)
+                  for i in indices for sid, pl, pg, crop, ns, start in (self.ds.draws(int(i), streams="counter"),)]
+        return pieces_to(collate_pieces(pieces), self.device)
+
     def batch(self, indices) -> dict:
         """The simulated batch of the dataset's samples ``indices`` (drawn for the current epoch)."""
-        pieces = [capture_pieces(self.ds, sid, pl, pg, crop, ns, int(i), start, resident=self.resident)
-                  for i in indices for sid, pl, pg, crop, ns, start in (self.ds.draws(int(i)),)]
-        batch = pieces_to(collate_pieces(pieces), self.device)
-        return simulate_batch(batch, self.ds.preset, noise_streams="counter")
+        return simulate_batch(self.pieces(indices), self.ds.preset, noise_streams="counter")
 
     def __iter__(self) -> Iterator[dict]:
         order = epoch_order(len(self.ds), self.seed, self.epoch).tolist()
         for b in range(len(self)):
             yield self.batch(order[b * self.batch_size:(b + 1) * self.batch_size])
+
+
+#: PWM (PWM_FIELDS) of a padded slot (no light, or a light the crop does not show): any valid waveform; its
+#: entries are zero.
+_PAD_PWM = (0.01, 0.5, 0.0, 0.0, 0.0)
+
+
+class SplitProgram:
+    """A split's layers packed on one device, and the batched program that cuts, draws and composes a whole batch
+    from them with no Python per sample: the pieces of :func:`lfmbench.datasets.batched.collate_pieces` for
+    ``indices`` (the per-sample path's numbers, :func:`capture_pieces` with counter draws), made by a fixed number
+    of tensor operations.
+
+    Made by :class:`ResidentScenes` when the split allows it (:meth:`supports`): every scene of one size and one
+    number of loaded frames, and no flickering group stored without time bins (imported data; those take the
+    per-sample pieces path).
+
+    Tables (on ``device``; nS scenes, Fs frames, H x W px, Lf lights per frame at most, L = ``max_lights``,
+    N pixel entries of all lights of all frames, Kall bins):
+        ``static`` (nS, Fs, 2, H, W) float32 e-/s; ``light_index`` (nS, Fs, 1, H, W); ``depth`` (nS, Fs, H, W) m;
+        ``e_y``, ``e_x`` (N,) int32 px, ``e_pos`` (N,) int32 position of the entry's light in its frame's list,
+        ``e_vals`` (2, Kall, N) float32 e-/s; ``off`` (nS, Fs + 1) first entry of each (scene, frame) (host);
+        ``lt_lpos`` (nS, Fs, Lf) the light's position in the scene's ``meta`` light arrays (-1: padding),
+        ``lt_K`` (nS, Fs, Lf) bins, ``lt_box`` (nS, Fs, Lf, 4) (y0, x0, y1, x1) px half-open;
+        ``ids`` (nS, L) light ids (-1: padding), ``ent`` (nS, L) the light's PWM entity
+        (:class:`lfmbench.datasets.counter_draws.SceneEntities`; -1: not flickering);
+        ``timing`` (nS, 4) float64 (short, long exposure, line time, capture window; s), ``fps`` (nS,) Hz.
+    """
+
+    #: Tile size (px) of the entry order.
+    TILE = 16
+
+    @staticmethod
+    def supports(ds) -> bool:
+        """Whether the scenes of ``ds`` can be packed (one size, one number of frames, no groups without bins)."""
+        shapes = set()
+        for sid in dict.fromkeys(ds.scene_ids):
+            view = ds.scene(sid)
+            if view.layers.group_static:
+                return False
+            shapes.add(tuple(view.static_rates().shape))
+        return len(shapes) == 1
+
+    def __init__(self, ds, device: torch.device) -> None:
+        self.ds = ds
+        self.device = dev = torch.device(device)
+        self.sids = list(dict.fromkeys(ds.scene_ids))
+        pos = {sid: i for i, sid in enumerate(self.sids)}
+        self.scene_of = np.array([pos[s] for s in ds.scene_ids], dtype=np.int64)   # ds.scene_ids -> packed
+        want = set(ds.outputs)
+        views = [ds.scene(s) for s in self.sids]
+        nS = len(views)
+        Fs, _two, H, W = (int(n) for n in views[0].static_rates().shape)
+        self.H, self.W, self.Fs = H, W, Fs
+        self.static = torch.empty((nS, Fs, 2, H, W), dtype=torch.float32, device=dev)
+        li_dt = max((v.light_index().dtype for v in views), key=lambda d: torch.iinfo(d).bits) \
+            if "light_index" in want else None
+        self.light_index = torch.empty((nS, Fs, 1, H, W), dtype=li_dt, device=dev) if li_dt else None
+        self.depth = torch.empty((nS, Fs, H, W), dtype=torch.float32, device=dev) if "depth" in want else None
+        ents = [v.cached("pieces_entries", _SceneEntries) for v in views]
+        self.kall = max([int(fe.vals.shape[1]) for e in ents for fe in e.frames] + [1])
+        lf = max([len(fe.lights) for e in ents for fe in e.frames] + [1])
+        L = ds.max_lights
+        self.lt_lpos = np.full((nS, Fs, lf), -1, dtype=np.int64)
+        self.lt_K = np.ones((nS, Fs, lf), dtype=np.int64)
+        self.lt_box = np.zeros((nS, Fs, lf, 4), dtype=np.int64)
+        self.ids = np.full((nS, L), -1, dtype=np.int64)
+        self.ent = np.full((nS, L), -1, dtype=np.int64)
+        self.num_lights = np.zeros(nS, dtype=np.int64)
+        self.timing = np.zeros((nS, 4), dtype=np.float64)
+        self.fps = np.zeros(nS, dtype=np.float64)
+        self.n_frames = np.zeros(nS, dtype=np.int64)
+        counts = np.zeros((nS, Fs), dtype=np.int64)
+        self.n_entities = 1
+        for i, (sid, view, e) in enumerate(zip(self.sids, views, ents)):
+            self.static[i].copy_(view.static_rates())
+            if self.light_index is not None:
+                self.light_index[i].copy_(view.light_index())
+            if self.depth is not None:
+                self.depth[i].copy_(view.layers.aux["depth.Z"])
+            lights = view.lights
+            lpos = {int(lt["id"]): j for j, lt in enumerate(lights)}
+            self.ids[i, :len(lights)] = [int(lt["id"]) for lt in lights]
+            self.num_lights[i] = len(lights)
+            se = ds.entities(sid)
+            self.n_entities = max(self.n_entities, se.n_entities)
+            for j, lid in enumerate(se.light_ids):
+                if lid in lpos:
+                    self.ent[i, lpos[lid]] = se.entity[j]
+            meta = view.meta
+            tm = meta["timing"]
+            td = float(tm.get("line_time_s", 0.0)) if ds.line_time_s is None else float(ds.line_time_s)
+            self.timing[i] = (float(tm["short_exposure_s"]), float(tm["long_exposure_s"]), td,
+                              float(tm["capture_window_s"]))
+            self.fps[i] = float(meta["fps"])
+            self.n_frames[i] = int(meta["frames"])
+            for fr, fe in enumerate(e.frames):
+                counts[i, fr] = fe.y.shape[0]
+                for k, (lid, K, box) in enumerate(fe.lights):
+                    self.lt_lpos[i, fr, k] = lpos.get(lid, -1)
+                    self.lt_K[i, fr, k] = K
+                    self.lt_box[i, fr, k] = box
+        self.off = np.zeros((nS, Fs + 1), dtype=np.int64)
+        self.off[:, 1:] = np.cumsum(counts, 1)
+        self.off += np.concatenate([[0], np.cumsum(counts.sum(1))[:-1]])[:, None]
+        n_all = int(counts.sum())
+        # entries sorted by 16 x 16 px tile in each (scene, frame): a crop's entries are then one run per tile row
+        T = self.TILE
+        self.nty, self.ntx = -(-H // T), -(-W // T)
+        nt = self.nty * self.ntx
+        self.tile_off = np.zeros((nS, Fs, nt + 1), dtype=np.int64)
+        self.order: list[list[np.ndarray]] = []        # per scene and frame: _SceneEntries position -> run position
+        self.e_vals = torch.zeros((2, self.kall, n_all), dtype=torch.float32, device=dev)
+        ey, ex, ep = (np.empty(n_all, dtype=np.int32) for _ in range(3))
+        for i, e in enumerate(ents):
+            self.order.append([])
+            for fr, fe in enumerate(e.frames):
+                a, b = int(self.off[i, fr]), int(self.off[i, fr + 1])
+                tile = (fe.y // T).astype(np.int64) * self.ntx + fe.x // T
+                srt = np.argsort(tile, kind="stable")
+                inv = np.empty_like(srt)
+                inv[srt] = np.arange(srt.shape[0])
+                self.order[i].append(inv)
+                self.tile_off[i, fr] = a + np.concatenate([[0], np.cumsum(np.bincount(tile, minlength=nt))])
+                ey[a:b], ex[a:b], ep[a:b] = fe.y[srt], fe.x[srt], fe.pos[srt]
+                self.e_vals[:, :fe.vals.shape[1], a:b].copy_(torch.from_numpy(fe.vals[:, :, srt]))
+        t = lambda a: torch.from_numpy(a).to(dev)  # noqa: E731
+        self.e_y, self.e_x, self.e_pos = t(ey), t(ex), t(ep)
+        self.t_lpos, self.t_K, self.t_box = t(self.lt_lpos), t(self.lt_K), t(self.lt_box)
+        self.t_ids, self.t_ent, self.t_nl = t(self.ids), t(self.ent), t(self.num_lights)
+        self.t_timing, self.t_fps = t(self.timing), t(self.fps)
+        self.frozen = self._freeze() if ds.split == "test" else None
+        # constants made once: a tensor made from host values inside a step would wait for the device's queue
+        self._pad = torch.tensor(_PAD_PWM, dtype=torch.float64, device=dev)
+        ch, cw = ds.crop if ds.crop is not None else (H, W)
+        self._hw = torch.tensor([H, W, ch, cw], dtype=torch.int64, device=dev)
+        #: no light of the split has ramps (the PWM config draws rise and fall times of constant 0)
+        self.ideal_pulses = all(d.dist == "constant" and d.low == 0.0 for d in (ds.pwm.rise_time_s, ds.pwm.fall_time_s))
+        if self.frozen is not None:
+            self.ideal_pulses = self.ideal_pulses and not bool(self.frozen["ramps"])
+
+    def nbytes(self) -> int:
+        ts = [self.static, self.light_index, self.depth, self.e_vals, self.e_y, self.e_x, self.e_pos]
+        return sum(int(t.numel()) * t.element_size() for t in ts if t is not None)
+
+    def entries(self, scene: int, frame: int) -> torch.Tensor:
+        """(2, Kall, n) view of the rates of the entries of one scene's frame (what :class:`ResidentScene` holds),
+        in tile order (``order[scene][frame]`` maps a :class:`~lfmbench.datasets.pieces._SceneEntries` position
+        to its position here)."""
+        return self.e_vals[:, :, int(self.off[scene, frame]):int(self.off[scene, frame + 1])]
+
+    def _freeze(self) -> dict:
+        """The frozen draws of every sample of a test split as tables (read once through ``ds.draws``)."""
+        ds, n, L = self.ds, len(self.ds), self.ids.shape[1]
+        pwm = np.tile(np.asarray(_PAD_PWM + (100.0,)), (n, L, 1))            # PWM_FIELDS + freq_hz
+        valid = np.zeros((n, L), dtype=bool)
+        place = np.zeros((n, 3), dtype=np.int64)           # y0, x0, first frame
+        seeds = np.zeros(n, dtype=np.int64)
+        for i in range(n):
+            sid, per_light, _pg, crop, ns, start = ds.draws(i)
+            k = self.scene_of[i // ds.samples_per_scene]
+            for j, lid in enumerate(self.ids[k, :self.num_lights[k]]):
+                p = per_light.get(int(lid))
+                if p is not None:
+                    valid[i, j] = True
+                    pwm[i, j] = [float(p[f]) for f in PWM_FIELDS + ("freq_hz",)]
+            place[i] = (crop[0], crop[1], start)
+            seeds[i] = ns
+        t = lambda a: torch.from_numpy(a).to(self.device)  # noqa: E731
+        return {"pwm": t(pwm), "valid": t(valid), "place": t(place), "place_host": place, "seeds": t(seeds),
+                "ramps": bool((pwm[..., 3:5][valid] > 0).any())}
+
+    def pieces(self, indices) -> dict:
+        """The collated pieces of samples ``indices`` (their draws for the dataset's current epoch) on the device.
+
+        Args:
+            indices: B sample indices of the dataset (ints).
+
+        Returns:
+            :func:`~lfmbench.datasets.batched.collate_pieces`'s fields (slots B x F x Lf, padded slots with zero
+            entries; ``meta`` tensors on the device), ``info`` with ``noise_streams="counter"``.
+        """
+        ds, dev = self.ds, self.device
+        F = ds.frames
+        idx = np.asarray([int(i) for i in indices], dtype=np.int64)
+        B = int(idx.shape[0])
+        if B == 0 or idx.min() < 0 or idx.max() >= len(ds):
+            raise IndexError(f"indices: {B} sample indices, each must be in [0, {len(ds)})")
+        sc = self.scene_of[idx // ds.samples_per_scene]
+        fz = self.frozen
+        H, W = self.H, self.W
+        h, w = ds.crop if ds.crop is not None else (H, W)
+        # where the crops and windows are (host: they fix how many entries the batch has; counter draws on the
+        # CPU are the same numbers as on any device)
+        if fz is not None:
+            y0h, x0h, start = (fz["place_host"][idx, k] for k in range(3))
+        else:
+            place = place_uniforms(ds.seed, ds.epoch, torch.from_numpy(idx))                   # (B, 3)
+            if ds.crop is None or ds.split == "test":
+                y0h = np.full(B, ((H - h) // 2) & ~1, dtype=np.int64)
+                x0h = np.full(B, ((W - w) // 2) & ~1, dtype=np.int64)
+            else:
+                y0h = crop_origin(place[:, 0], H, h).numpy()
+                x0h = crop_origin(place[:, 1], W, w).numpy()
+            if ds.frame_start == "random":
+                start = start_frame(place[:, 2], torch.from_numpy(self.n_frames[sc] - F + 1)).numpy()
+            else:
+                start = np.full(B, ds.frame_start, dtype=np.int64)
+        fr = start[:, None] + np.arange(F)                                          # (B, F)
+        # the crop's entries: per (sample, frame) one run of tiles per tile row the crop touches
+        T = self.TILE
+        NR = -(-h // T) + 1
+        rows = y0h[:, None] // T + np.arange(NR)                                    # (B, NR) tile rows
+        live = (rows <= ((y0h + h - 1) // T)[:, None]) & (rows < self.nty)
+        rows = np.minimum(rows, self.nty - 1)
+        tx0, tx1 = x0h // T, (x0h + w - 1) // T
+        S3, F3, R3 = sc[:, None, None], fr[:, :, None], rows[:, None, :]
+        first = self.tile_off[S3, F3, R3 * self.ntx + tx0[:, None, None]]            # (B, F, NR)
+        cnt = (self.tile_off[S3, F3, R3 * self.ntx + tx1[:, None, None] + 1] - first) * live[:, None, :]
+        E = int(cnt.sum())
+        host = torch.from_numpy(np.concatenate([idx, sc, y0h, x0h, fr.reshape(-1), first.reshape(-1),
+                                                cnt.reshape(-1)]))
+        if dev.type == "cuda":
+            host = host.pin_memory()        # an asynchronous copy: the host goes on to queue the rest
+        host = host.to(dev, non_blocking=True)
+        idx_t, sc_t, y0, x0 = (host[k * B:(k + 1) * B] for k in range(4))
+        fr_t = host[4 * B:4 * B + B * F].view(B, F)
+        first_t, cnt_t = (host[4 * B + B * F + k * B * F * NR:4 * B + B * F + (k + 1) * B * F * NR] for k in range(2))
+        # draws
+        if fz is not None:
+            pwm, valid = fz["pwm"][idx_t], fz["valid"][idx_t]                    # (B, L, 6), (B, L)
+            seeds = fz["seeds"][idx_t]
+        else:
+            M = self.n_entities
+            u = uniforms(sample_keys(ds.seed, ds.epoch, idx_t, PURPOSE_PWM), PWM_UNIFORMS * M)
+            rec = pwm_from_uniforms(ds.pwm, u.view(B, M, PWM_UNIFORMS))                      # (B, M) each
+            ent = self.t_ent[sc_t]                                                           # (B, L)
+            valid = ent >= 0
+            e = ent.clamp_min(0)
+            pwm = torch.stack([rec[k].gather(1, e) for k in PWM_FIELDS + ("freq_hz",)], -1)  # (B, L, 6)
+            seeds = noise_seeds(ds.seed, ds.epoch, idx_t)
+        pad = self._pad
+        # slots: every light of every frame of a sample, shown or not (B, F, Lf)
+        at = (sc_t[:, None], fr_t)
+        lpos, K, box = self.t_lpos[at], self.t_K[at], self.t_box[at]
+        lp = lpos.clamp_min(0).view(B, -1)
+        shown = (lpos >= 0) & valid.gather(1, lp).view(lpos.shape)
+        Y0, X0 = y0[:, None, None], x0[:, None, None]
+        shown &= (torch.maximum(box[..., 0], Y0) < torch.minimum(box[..., 2], Y0 + h)) & \
+                 (torch.maximum(box[..., 1], X0) < torch.minimum(box[..., 3], X0 + w))
+        slot_pwm = torch.where(shown[..., None],
+                               pwm[..., :5].gather(1, lp[..., None].expand(-1, -1, 5)).view(*lpos.shape, 5), pad)
+        lf = lpos.shape[2]
+        out: dict = {
+            "slot_pwm": slot_pwm.view(-1, 5),
+            "slot_K": torch.where(shown, K, torch.ones_like(K)).view(-1),
+            "slot_frame": torch.arange(F, device=dev).view(1, F, 1).expand(B, F, lf).reshape(-1),
+            "slot_sample": torch.arange(B, device=dev).view(B, 1, 1).expand(B, F, lf).reshape(-1),
+        }
+        # entries: the runs of the global table, masked to the crop and the shown lights
+        run = torch.repeat_interleave(torch.arange(B * F * NR, device=dev), cnt_t, output_size=E)
+        before = torch.cumsum(cnt_t, 0) - cnt_t
+        gid = first_t[run] + torch.arange(E, device=dev) - before[run]
+        ey, ex = self.e_y[gid].long(), self.e_x[gid].long()
+        pair = run // NR
+        b, f = pair // F, pair % F
+        slot = pair * lf + self.e_pos[gid].long()
+        ok = shown.view(-1)[slot]
+        ok &= (ey >= y0[b]) & (ey < y0[b] + h) & (ex >= x0[b]) & (ex < x0[b] + w)
+        pix = f * (h * w) + (ey - y0[b]) * w + (ex - x0[b])
+        out["entry_pix"] = torch.where(ok, pix, torch.zeros_like(pix)).int()
+        out["entry_slot"] = slot.int()
+        out["entry_values"] = self.e_vals.index_select(2, gid) * ok.to(torch.float32)
+        # crops of the full-frame layers: one gather each on a GPU; slices on the CPU, where copying B x F
+        # rectangles is faster than an indexed gather (the same numbers)
+        layers = [("static", self.static), ("light_index", self.light_index), ("depth", self.depth)]
+        if dev.type == "cpu":
+            for key, full in layers:
+                if full is not None:
+                    out[key] = torch.stack([torch.stack([full[s_, f_, ..., a:a + h, c:c + w] for f_ in fs])
+                                            for s_, fs, a, c in zip(sc.tolist(), fr.tolist(), y0h.tolist(),
+                                                                    x0h.tolist())])
+        else:
+            rr = (y0[:, None] + torch.arange(h, device=dev))[:, None, :, None]                # (B, 1, h, 1)
+            cc = (x0[:, None] + torch.arange(w, device=dev))[:, None, None, :]                # (B, 1, 1, w)
+            S4, F4 = sc_t[:, None, None, None], fr_t[:, :, None, None]
+            out["static"] = self.static.permute(0, 1, 3, 4, 2)[S4, F4, rr, cc].permute(0, 1, 4, 2, 3).contiguous()
+            if self.light_index is not None:
+                out["light_index"] = self.light_index[:, :, 0][S4, F4, rr, cc][:, :, None]
+            if self.depth is not None:
+                out["depth"] = self.depth[S4, F4, rr, cc]
+        if self.depth is not None:
+            out["depth"] = out["depth"][:, :, None]
+        fps = self.t_fps[sc_t]
+        out["t0"] = fr_t.to(torch.float64) / fps[:, None]
+        tim = self.t_timing[sc_t]
+        out["timing"] = tim
+        hw = self._hw[None, 2:].expand(B, 2)
+        out["crop"] = torch.cat([y0[:, None], x0[:, None], hw], 1)
+        out["scene_hw"] = self._hw[None, :2].expand(B, 2).contiguous()
+        out["noise_seed"] = seeds
+        # meta, as default_collate makes it of the per-sample metas (tensors on the device)
+        ids = self.t_ids[sc_t]
+        inside = ids >= 0
+        flick = valid & inside
+        meta = {"scene_id": [self.sids[k] for k in sc.tolist()], "index": idx_t,
+                "epoch": torch.full((B,), int(ds.epoch), dtype=torch.int64, device=dev),
+                "num_lights": self.t_nl[sc_t], "light_id": ids, "flicker": flick}
+        for name, col, default in (("freq_hz", 5, 0.0), ("duty", 1, 1.0), ("phase_s", 2, 0.0)):
+            meta[name] = torch.where(flick, pwm[..., col], torch.where(inside, default, 0.0))
+        meta.update({"exposure_short_s": tim[:, 0], "exposure_long_s": tim[:, 1], "crop": out["crop"],
+                     "sensor": [ds.sensor_name] * B, "shutter": [ds.shutter] * B,
+                     "flicker_mode": ["bins"] * B, "frame_start": fr_t[:, 0]})
+        out["meta"] = meta
+        out["info"] = {"sensor": ds.sensor_name, "frames": F, "crop_hw": (h, w), "shutter": ds.shutter,
+                       "noise": ds.noise, "outputs": tuple(ds.outputs), "noise_streams": "counter",
+                       "group_slots": False, "scene_hw": (H, W), "ideal_pulses": self.ideal_pulses}
+        return out

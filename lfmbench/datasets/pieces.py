@@ -150,6 +150,8 @@ def capture_pieces(ds, scene_id: str, params: Mapping[int, Mapping], group_param
         parts = [torch.nn.functional.pad(torch.stack([vals[pd][j].reshape(-1) for pd in PHOTODIODES])[:, None],
                                          (0, 0, 0, kmax - 1)) for j in range(len(vals[PHOTODIODES[0]]))]
         for f, fe, idx, j in picks:
+            if src.entry_order is not None:        # the resident entries are stored in another order
+                idx = src.entry_order[s0 + f][idx]
             parts.append(src.entries[s0 + f][:, :kmax].index_select(2, torch.from_numpy(idx).to(dev)))
         out["entry_values"] = torch.cat(parts, 2)
         out["entry_slot"] = torch.cat(slot_of).to(dev)

@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 import numpy as np
+import torch
 
 from lfmbench.limits import brief
 from lfmbench.check import check_choice, check_keys, fail, where
@@ -44,6 +45,25 @@ class Distribution:
         if self.dist == "constant":
             return np.full(n, self.low)
         return rng.choice(np.asarray(self.values, dtype=np.float64), n)
+
+    def quantile(self, u):
+        """The value at the uniform ``u`` in (0, 1) (the inverse CDF; numpy array or torch tensor, float64, any
+        shape and device): what the counter-based draws (:mod:`lfmbench.datasets.counter_draws`) use. ``uniform``
+        is ``low + (high - low) u``, the formula of ``numpy.random.Generator.uniform``."""
+        lib = torch if torch.is_tensor(u) else np
+        if self.dist == "uniform":
+            return self.low + (self.high - self.low) * u
+        if self.dist == "loguniform":
+            lo, hi = np.log(self.low), np.log(self.high)
+            return lib.exp(lo + (hi - lo) * u)
+        if self.dist == "constant":
+            return u * 0.0 + self.low
+        vals = np.asarray(self.values, dtype=np.float64)
+        n = len(vals)
+        if lib is torch:
+            i = (u * n).long().clamp(0, n - 1)
+            return torch.as_tensor(vals, device=u.device)[i]
+        return vals[np.minimum((u * n).astype(np.int64), n - 1)]
 
     def to_dict(self) -> dict:
         if self.dist == "constant":
@@ -157,10 +177,23 @@ def draw_pwm(cfg: PWMConfig, rng: np.random.Generator, groups: list[str]) -> dic
     u = rng.uniform(0.0, 1.0, m)[idx]
     rise = cfg.rise_time_s.sample(rng, m)[idx]
     fall = cfg.fall_time_s.sample(rng, m)[idx]
+    return pwm_record(f, d, u, rise, fall)
+
+
+def pwm_record(f, d, u, rise, fall) -> dict:
+    """The PWM fields from drawn frequency ``f`` (Hz), duty ``d`` (1), phase fraction ``u`` in [0, 1), rise and
+    fall times (s): numpy arrays or torch tensors of one shape (the one rule both kinds of draws follow).
+
+    Rise and fall are scaled down together where they would overlap: ``(rise + fall) / 2 <= min(d, 1 - d) T``.
+
+    Returns:
+        ``{"freq_hz", "period_s" (s), "duty", "phase_s" (s, in [0, T)), "rise_s" (s), "fall_s" (s)}``.
+    """
+    lib = torch if torch.is_tensor(f) else np
     T = 1.0 / f
-    room = 2.0 * np.minimum(d, 1.0 - d) * T
+    room = 2.0 * lib.minimum(d, 1.0 - d) * T
     total = rise + fall
-    scale = np.where(total > room, room / np.where(total > 0, total, 1.0), 1.0)
+    scale = lib.where(total > room, room / lib.where(total > 0, total, lib.ones_like(total)), lib.ones_like(total))
     return {"freq_hz": f, "period_s": T, "duty": d, "phase_s": u * T, "rise_s": rise * scale, "fall_s": fall * scale}
 
 

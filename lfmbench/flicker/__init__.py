@@ -388,6 +388,9 @@ def _as_tensors(*xs: ArrayLike) -> list[torch.Tensor]:
     for x in xs:
         if isinstance(x, torch.Tensor):
             out.append(x.to(device=device, dtype=dtype))
+        elif isinstance(x, (int, float)) and not isinstance(x, bool):
+            # a fill on the device, not a copy from the host (a copy would wait for the device's queue)
+            out.append(torch.full((), float(x), dtype=dtype, device=device))
         else:
             out.append(torch.as_tensor(np.asarray(x, dtype=np.float64), device=device).to(dtype))
     return out

@@ -29,7 +29,10 @@ def test_resident_pieces_equal_the_host_pieces(corpus):
         for k, v in host.items():
             if torch.is_tensor(v):
                 assert v.dtype == dev[k].dtype and torch.equal(v, dev[k]), (i, k)
-    assert res.bytes == sum(ResidentScenes.estimate_scene(ds, s) for s in dict.fromkeys(ds.scene_ids))
+    assert res.program is not None and res.bytes == ResidentScenes.estimate(ds)
+    # packed: entries padded to the split's most bins plus 12 bytes of coordinates each
+    assert ResidentScenes.estimate(ds, packed=False) == sum(ResidentScenes.estimate_scene(ds, s)
+                                                            for s in dict.fromkeys(ds.scene_ids))
 
 
 def test_device_batches_equal_the_per_sample_path_with_counter_noise(corpus):
@@ -60,6 +63,83 @@ def test_device_batches_equal_the_per_sample_path_with_counter_noise(corpus):
     assert seen == len(ref)
 
 
+@pytest.fixture(scope="module")
+def long_corpus(tmp_path_factory):
+    """3 scenes of 6 frames: room for random window starts."""
+    from tests.data.corpus.data import make_corpus
+
+    return make_corpus(tmp_path_factory.mktemp("long"), frames=6)
+
+
+_CASES = {
+    "default": {},
+    "random-start-rolling": dict(frame_start="random", shutter="rolling"),
+    "test-split-frozen": dict(split="test", frame_start="random"),
+    "sync-group-other-dists": dict(pwm={"sync": "group", "frequency_hz": {"dist": "loguniform", "low": 90, "high": 480},
+                                        "duty": {"dist": "choice", "values": [0.1, 0.25, 0.5]},
+                                        "rise_time_s": {"dist": "uniform", "low": 0.0, "high": 1e-4}}),
+    "full-frame": dict(crop=None),
+}
+
+
+@pytest.mark.parametrize("case", sorted(_CASES))
+def test_the_batched_program_gives_the_per_sample_draws_and_captures(long_corpus, case):
+    """SplitProgram (one batched program, no Python per sample) against the per-sample path with counter streams,
+    sample for sample: every meta field (the draws: PWM per light, crop, first frame, epoch, index) identical,
+    integer outputs identical but for noise draws moved by a last-bit change, floats within the summation bound."""
+    kw = dict(split="all", frames=3, crop=(12, 16), samples_per_scene=3, outputs=OUTS, seed=7)
+    kw.update(_CASES[case])
+    if kw["split"] == "test":
+        kw["samples_per_scene"] = 5
+    ref = LFMCaptureDataset(long_corpus, noise_streams="counter", **kw)
+    db = DeviceBatches(LFMCaptureDataset(long_corpus, **kw), batch_size=5, device="cpu", seed=3)
+    assert db.resident.program is not None
+    db.set_epoch(4)
+    ref.set_epoch(4)
+    order = epoch_order(len(ref), 3, 4).tolist()
+    for b, batch in enumerate(db):
+        for j, i in enumerate(order[5 * b:5 * b + 5]):
+            want = ref[i]
+            for k, v in want["meta"].items():
+                got = batch["meta"][k][j]
+                if torch.is_tensor(got):   # (default_collate makes float64 of Python floats)
+                    v = v if torch.is_tensor(v) else torch.tensor(v, dtype=got.dtype)
+                    assert got.dtype == v.dtype and torch.equal(got, v), (case, i, k, got, v)
+                else:
+                    assert got == v, (case, i, k)
+            for k, v in want.items():
+                if k == "meta":
+                    continue
+                got = batch[k][j]
+                assert got.shape == v.shape and got.dtype == v.dtype, k
+                if v.is_floating_point():
+                    ok = torch.isclose(got, v, rtol=SUM_ORDER_RTOL, atol=0.0, equal_nan=True)
+                    assert ok.double().mean() >= 0.999, (case, k, float(ok.double().mean()))
+                else:
+                    assert (got != v).double().mean() <= 1e-3, (case, k)
+
+
+def test_counter_draws_differ_between_epochs_seeds_and_samples(long_corpus):
+    """The counter streams are not degenerate: other epochs, seeds and samples get other draws; the test split's
+    frozen draws do not change with the epoch or the seed."""
+    kw = dict(frames=3, crop=(12, 16), samples_per_scene=3, noise_streams="counter", frame_start="random")
+    a = LFMCaptureDataset(long_corpus, split="all", seed=1, **kw)
+    b = LFMCaptureDataset(long_corpus, split="all", seed=2, **kw)
+    d0 = [a.draws(i) for i in range(len(a))]
+    a.set_epoch(1)
+    d1 = [a.draws(i) for i in range(len(a))]
+    db = [b.draws(i) for i in range(len(b))]
+    for other in (d1, db):
+        assert sum(x[1] != y[1] for x, y in zip(d0, other)) == len(d0)          # PWM of every sample
+        assert len({x[4] for x in d0 + other}) == 2 * len(d0)                    # noise seeds
+    assert len({x[1][min(x[1])]["phase_s"] for x in d0}) == len(d0)               # samples of one scene differ
+    assert len({x[3][:2] for x in d0}) > 1 and len({x[5] for x in d0}) > 1       # crops and window starts vary
+    t = LFMCaptureDataset(long_corpus, split="test", seed=1, **kw)
+    before = [t.draws(i) for i in range(len(t))]
+    t.set_epoch(3)
+    assert before == [t.draws(i) for i in range(len(t))]
+
+
 def test_device_batches_do_not_depend_on_the_batch_size(corpus):
     a = DeviceBatches(_ds(corpus), batch_size=2, device="cpu", seed=1)
     b = DeviceBatches(_ds(corpus), batch_size=9, device="cpu", seed=1)
@@ -73,7 +153,7 @@ def test_device_batches_do_not_depend_on_the_batch_size(corpus):
 
 def test_split_that_does_not_fit_is_refused_before_copying(corpus):
     ds = _ds(corpus)
-    need = sum(ResidentScenes.estimate_scene(ds, s) for s in dict.fromkeys(ds.scene_ids))
+    need = ResidentScenes.estimate(ds)
     with pytest.raises(ResidentMemoryError, match=r"split 'all' .* scenes need .* GiB on cpu .* the budget is"):
         ResidentScenes(ds, "cpu", budget_bytes=need - 1)
     with pytest.raises(ValueError, match="batch_size"):
