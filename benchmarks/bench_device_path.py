@@ -133,23 +133,8 @@ def time_device(root, dev, batch, batches, passes, program=True):
 
 
 def count_syncs(db, dev) -> list | None:
-    """Host synchronisations of one batch on CUDA (``torch.cuda.set_sync_debug_mode``): [(count, where), ...]."""
-    if dev.type != "cuda":
-        return None
-    import collections
-    import warnings
-
-    torch.cuda.synchronize(dev)
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        torch.cuda.set_sync_debug_mode("warn")
-        try:
-            db.batch(range(db.batch_size))
-        finally:
-            torch.cuda.set_sync_debug_mode("default")
-    where = collections.Counter(f"{Path(w.filename).name}:{w.lineno}" for w in caught
-                                if "synchroniz" in str(w.message))
-    return sorted(((n, k) for k, n in where.items()), reverse=True)
+    """Host synchronisations of one device-path batch on CUDA."""
+    return _probe_syncs(lambda: db.batch(range(db.batch_size)), dev)
 
 
 def time_step(root, dev, batch, crop, passes):
@@ -172,7 +157,33 @@ def time_step(root, dev, batch, crop, passes):
             loss.backward()
             opt.step()
     med, _ = _timed(run, passes, dev)
-    return 5 * batch / med
+
+    def one_step():
+        opt.zero_grad(set_to_none=True)
+        loss, _terms = spec.loss(model, sample, cfg)
+        loss.backward()
+        opt.step()
+    return 5 * batch / med, _probe_syncs(one_step, dev)
+
+
+def _probe_syncs(fn, dev) -> list | None:
+    """Host synchronisations of ``fn()`` on CUDA (``torch.cuda.set_sync_debug_mode``): [(count, where), ...]."""
+    if dev.type != "cuda":
+        return None
+    import collections
+    import warnings
+
+    torch.cuda.synchronize(dev)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        torch.cuda.set_sync_debug_mode("warn")
+        try:
+            fn()
+        finally:
+            torch.cuda.set_sync_debug_mode("default")
+    where = collections.Counter(f"{Path(w.filename).name}:{w.lineno}" for w in caught
+                                if "synchroniz" in str(w.message))
+    return sorted(((n, k) for k, n in where.items()), reverse=True)
 
 
 def time_train(root, dev, data, steps, batch, crop, workers):
@@ -232,7 +243,8 @@ def main(argv=None) -> int:
                 resident_bytes_per_scene=per_scene, peak_bytes=peak)
     step_b = 64 if gpu else 4
     if "step" in wanted:
-        add(path="step", batch=step_b, crop=128, samples_per_s=time_step(root, dev, step_b, 128, passes))
+        sps, syncs = time_step(root, dev, step_b, 128, passes)
+        add(path="step", batch=step_b, crop=128, samples_per_s=sps, syncs=syncs)
     steps = 8 if args.quick else 16
     for data in ("loader", "device"):
         if f"train-{data}" in wanted:

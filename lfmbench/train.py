@@ -180,6 +180,20 @@ def fit(model: torch.nn.Module, opt: torch.optim.Optimizer, spec: Trainable, cfg
         sums: dict[str, float] = {}
         lr = cosine_lr(history["steps"], total_steps, t.lr, t.lr_min)
         n = 0
+        pending: list = []      # losses of steps not read yet: read one step late, so that reading never waits
+        #                         for the step just queued on a GPU (the host goes on to make the next batch)
+
+        done = [0]
+
+        def read(loss_t, terms) -> None:
+            value = float(loss_t)
+            history["step_loss"].append(value)
+            for k, v in {"loss": value, **terms}.items():
+                sums[k] = sums.get(k, 0.0) + float(v)
+            done[0] += 1
+            if progress:
+                it.set_postfix(loss=f"{sums['loss'] / done[0]:.4f}")
+
         for batch in it:
             batch = _to(batch, dev)
             loss, terms = spec.loss(model, batch, cfg)
@@ -194,14 +208,13 @@ def fit(model: torch.nn.Module, opt: torch.optim.Optimizer, spec: Trainable, cfg
             history["steps"] += 1
             steps_this_call += 1
             n += 1
-            value = float(loss.detach())
-            history["step_loss"].append(value)
-            for k, v in {"loss": value, **terms}.items():
-                sums[k] = sums.get(k, 0.0) + v
-            if progress:
-                it.set_postfix(loss=f"{sums['loss'] / n:.4f}")
+            pending.append((loss.detach(), terms))
+            if len(pending) > 1:
+                read(*pending.pop(0))
             if max_steps is not None and steps_this_call >= max_steps:
                 break
+        for p in pending:
+            read(*p)
         secs = time.perf_counter() - t0
         means = {k: v / max(n, 1) for k, v in sums.items()}
         history["epoch_loss"].append(means.get("loss", float("nan")))

@@ -224,35 +224,42 @@ class UNetFusion(nn.Module):
 
 # ------------------------------------------------------------------------------------------------------ loss
 def led_weighted_loss(pred: torch.Tensor, gt: torch.Tensor, light_index: torch.Tensor | None,
-                      loss: LossConfig | None = None, feature_scale_e: float = 100.0) -> tuple[torch.Tensor, dict]:
+                      loss: LossConfig | None = None, feature_scale_e: float = 100.0,
+                      num_lights: int | None = None) -> tuple[torch.Tensor, dict]:
     """Training loss favouring the LED regions (scalar, dimensionless) and its terms.
+
+    Written without a host synchronisation (no ``float()`` of a device value, no boolean indexing), so that a
+    training loop on a GPU can queue the next batch while this one runs.
 
     Args:
         pred, gt: (B, F, 1, H, W) e-.
         light_index: (B, F, 1, H, W) int, -1 off the lights (None: no LED terms).
         loss: weights and mu (:class:`LossConfig`).
         feature_scale_e: e-, scale of the log1p in the region term.
+        num_lights: length of the per-light arrays (at least the largest light index + 1; default: read from
+            ``light_index``, which waits for the device).
 
     Returns:
-        (total, {"mu_l1", "led_l1", "region_log"} floats).
+        (total, {"mu_l1", "led_l1", "region_log"}: detached 0-d tensors). Without LED pixels in the batch the LED
+        terms are 0 and the total is the mu-law L1 alone.
     """
     lc = loss or LossConfig()
     p, g = normalize_hdr(pred, gt, "max")
     err = (mu_law(p, lc.mu) - mu_law(g, lc.mu)).abs()
     total = err.mean()
-    terms = {"mu_l1": float(total.detach())}
+    terms = {"mu_l1": total.detach()}
     if light_index is not None and (lc.led_weight or lc.region_weight):
         led = (light_index >= 0).to(err.dtype)
-        n = led.sum()
-        if float(n) > 0:
-            led_l1 = (err * led).sum() / n
-            pm, cnt = region_series(pred, light_index)
-            gm, _ = region_series(gt, light_index)
-            ok = cnt > 0
-            reg = (torch.log1p(pm[ok].clamp_min(0) / feature_scale_e)
-                   - torch.log1p(gm[ok].clamp_min(0) / feature_scale_e)).abs().mean().to(err.dtype)
-            total = total + lc.led_weight * led_l1 + lc.region_weight * reg
-            terms.update(led_l1=float(led_l1.detach()), region_log=float(reg.detach()))
+        led_l1 = (err * led).sum() / led.sum().clamp_min(1)          # 0 without LED pixels (the sum is a count)
+        pm, cnt = region_series(pred, light_index, num_lights)
+        gm, _ = region_series(gt, light_index, num_lights)
+        ok = cnt > 0
+        zero = torch.zeros_like(pm)
+        d = (torch.log1p(torch.where(ok, pm, zero).clamp_min(0) / feature_scale_e)
+             - torch.log1p(torch.where(ok, gm, zero).clamp_min(0) / feature_scale_e)).abs()   # 0 where not ok
+        reg = (d.sum() / ok.sum().clamp_min(1)).to(err.dtype)
+        total = total + lc.led_weight * led_l1 + lc.region_weight * reg
+        terms.update(led_l1=led_l1.detach(), region_log=reg.detach())
     return total, terms
 
 
@@ -286,8 +293,10 @@ def load_checkpoint(path: str | os.PathLike, map_location: str | torch.device = 
 
 def _loss(model: UNetFusion, batch: dict, cfg: UNetConfig) -> tuple[torch.Tensor, dict]:
     """The training loss of a batch: :func:`led_weighted_loss` of the model's output."""
+    meta = batch.get("meta")
+    lights = meta.get("light_id") if isinstance(meta, dict) else None
     return led_weighted_loss(model(batch), batch["gt"], batch.get("light_index"), cfg.loss,
-                             cfg.model.feature_scale_e)
+                             cfg.model.feature_scale_e, None if lights is None else int(lights.shape[-1]))
 
 
 #: The registered method: :class:`UNetFusion` with the weights at ``$LFMBENCH_UNET_CHECKPOINT`` or

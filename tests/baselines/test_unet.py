@@ -93,6 +93,37 @@ def test_loss_weights_the_led_regions():
     assert U.led_weighted_loss(gt, gt, li, plain)[0] == 0.0
 
 
+def test_loss_equals_its_compacted_form_and_stays_finite_without_leds():
+    """The loss is written without host synchronisations (masked sums, not boolean indexing): it equals the
+    straightforward form (the LED terms over the LED pixels and the lights that have pixels) within float rounding;
+    a batch without LED pixels gives the mu-law L1 alone and finite gradients; num_lights larger than needed
+    changes nothing."""
+    from lfmbench.metrics.hdr import mu_law, normalize_hdr
+    from lfmbench.metrics.flicker import region_series
+
+    b = make_batch(b=2, noise=True, seed=3)
+    cfg = U.LossConfig(led_weight=4.0, region_weight=2.0)
+    pred = (b["gt"] * (0.7 + 0.6 * torch.rand_like(b["gt"]))).requires_grad_()
+    total, terms = U.led_weighted_loss(pred, b["gt"], b["light_index"], cfg)
+    p, g = normalize_hdr(pred, b["gt"], "max")
+    err = (mu_law(p, cfg.mu) - mu_law(g, cfg.mu)).abs()
+    led = b["light_index"] >= 0
+    pm, cnt = region_series(pred, b["light_index"])
+    gm, _ = region_series(b["gt"], b["light_index"])
+    ok = cnt > 0
+    reg = (torch.log1p(pm[ok].clamp_min(0) / 100.0) - torch.log1p(gm[ok].clamp_min(0) / 100.0)).abs().mean()
+    want = err.mean() + 4.0 * err[led].mean() + 2.0 * reg.float()
+    assert torch.isclose(total, want, rtol=1e-5), (float(total), float(want))
+    assert float(terms["led_l1"]) == pytest.approx(float(err[led].mean()), rel=1e-5)
+    more, _ = U.led_weighted_loss(pred, b["gt"], b["light_index"], cfg, num_lights=int(b["light_index"].max()) + 9)
+    assert torch.isclose(more, total, rtol=1e-6)
+    none = torch.full_like(b["light_index"], -1)
+    alone, t2 = U.led_weighted_loss(pred, b["gt"], none, cfg)
+    assert float(alone) == float(t2["mu_l1"]) and float(t2["led_l1"]) == 0.0 and float(t2["region_log"]) == 0.0
+    alone.backward()
+    assert torch.isfinite(pred.grad).all()
+
+
 def test_checkpoint_roundtrip_and_registered_method(tmp_path, monkeypatch):
     cfg = U.config_from_dict(TINY)
     torch.manual_seed(3)
