@@ -22,14 +22,17 @@ LIGHT_GROUPS: tuple[str, ...] = ("headlights", "streetlights", "otherlights", "s
 #: other kind names: ``meta.json`` treats ``kind`` as informative).
 LIGHT_KINDS: Mapping[str, str] = MappingProxyType({
     "headlight": "headlights", "streetlight": "streetlights", "tail": "otherlights", "brake": "otherlights",
-    "indicator": "otherlights", "billboard": "otherlights", "signal": "signals"})
+    "indicator": "otherlights", "billboard": "otherlights", "signal": "signals",
+    # lamp clusters and the flickering sources of issue 23 (their timing: lfmbench.flicker.waveforms)
+    "drl": "otherlights", "chmsl": "otherlights", "strobe": "otherlights", "message_sign": "otherlights",
+    "destination_display": "otherlights", "countdown": "signals"})
 #: Vehicle kinds of the scene generator (``vehicles.kind_weights``, ``vehicles.require_kinds`` of a scene config).
 VEHICLE_KINDS: tuple[str, ...] = ("car", "truck", "motorcycle", "van", "bus", "bicycle")
 #: Object kinds of a scene file: the static scene parts, the vehicles, the poles; people, trees and road
 #: furniture (scene generator 2, protocol lfmbench-v2) and a user's own mesh asset.
 OBJECT_KINDS: tuple[str, ...] = ("ground", "road", "marking", "sidewalk", "building", *VEHICLE_KINDS,
                                  "streetlight_pole", "signal_pole", "pedestrian", "cyclist", "tree", "bollard",
-                                 "traffic_sign", "bench", "asset")
+                                 "traffic_sign", "bench", "asset", "message_sign")
 #: Road-surface weather of a scene (``scene.weather``): ``wet`` and ``rain`` put a water film (a rough dielectric
 #: over the asphalt) and puddles on the road, so lamps reflect in it.
 WEATHERS: tuple[str, ...] = ("dry", "wet", "rain")

@@ -5,7 +5,8 @@ full scene (light transport is linear in the emission). Lights of other groups k
 a non-emissive lens material, so they still occlude and reflect as in the full scene.
 
 Emitters
-- Lamp faces are ``area`` emitters on ``rectangle`` / ``disk`` shapes with an absolute spectral radiance
+- Lamp faces are ``area`` emitters on ``rectangle`` / ``disk`` / ``dots`` (an LED matrix's lit dots,
+  :mod:`render_tools.led_matrix`) shapes with an absolute spectral radiance
   (W sr^-1 m^-2 nm^-1) from :mod:`render_tools.spectra`; Mitsuba's ``area`` emitter is Lambertian and
   one-sided, so the camera sees the lamp's luminance from every direction in front of it.
 - Beam-angle control (upstream "spread" < 90 deg, i.e. headlights 7.5-22.5 deg half-angle): the *illumination*
@@ -29,7 +30,7 @@ import numpy as np
 
 from lfmbench.vocabulary import LIGHT_GROUPS
 
-from . import spectra
+from . import led_matrix, spectra
 from .scene_schema import scene_groups
 
 #: Path-tracing depth: Mitsuba ``max_depth`` 5 = 4 indirect bounces (upstream renders with 4 bounces).
@@ -86,8 +87,11 @@ def _frame(normal, horizontal_if_up=(1.0, 0.0, 0.0)):
 
 
 def plane_corners(shape: dict) -> np.ndarray:
-    """World corners (4, 3) m of a rect, or 8 points on the rim of a disk (8, 3) m."""
+    """World corners (4, 3) m of a rect, 8 points on the rim of a disk (8, 3) m, or the corners of every lit dot
+    of a ``dots`` face (4P, 3) m."""
     u, v, n = _frame(shape["normal"])
+    if shape["shape"] == "dots":
+        return led_matrix.dots_mesh(shape, u, v, np.zeros(3))[0]
     c = np.asarray(shape["center"], dtype=float)
     if shape["shape"] == "rect":
         a, b = shape["size"][0] / 2, shape["size"][1] / 2
@@ -98,16 +102,20 @@ def plane_corners(shape: dict) -> np.ndarray:
 
 
 def plane_area(shape: dict) -> float:
-    """Area of a rect/disk lamp face, m^2."""
+    """Area of a rect/disk/dots lamp face, m^2."""
     if shape["shape"] == "rect":
         return shape["size"][0] * shape["size"][1]
+    if shape["shape"] == "dots":
+        return led_matrix.dots_area(shape)
     n = CIRCLE_SEGMENTS  # area of the inscribed polygon the disk is tessellated into
     return 0.5 * n * shape["radius"] ** 2 * math.sin(2 * math.pi / n)
 
 
 def _plane_mesh(shape: dict, offset) -> tuple[np.ndarray, np.ndarray]:
-    """Triangles of a rect / disk (normal side counter-clockwise, i.e. emitting towards ``normal``)."""
+    """Triangles of a rect / disk / dots face (normal side counter-clockwise, i.e. emitting towards ``normal``)."""
     u, v, n = _frame(shape["normal"])
+    if shape["shape"] == "dots":
+        return led_matrix.dots_mesh(shape, u, v, offset)
     c = np.asarray(shape["center"], dtype=float) + offset
     if shape["shape"] == "rect":
         a, b = shape["size"][0] / 2, shape["size"][1] / 2

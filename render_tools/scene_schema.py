@@ -25,13 +25,14 @@ import numpy as np
 
 from lfmbench.check import check_integer, check_keys, check_number, check_vector, fail, scene_id_error
 from lfmbench.fileio import atomic_write_json
+from lfmbench.flicker.waveforms import waveform_from_dict
 from lfmbench.limits import LimitError, brief, lights_cap_message, limit
 from lfmbench.vocabulary import GROUPS, LIGHT_GROUPS, LIGHT_KINDS, OBJECT_KINDS, WEATHERS
 
-from . import spectra
+from . import led_matrix, spectra
 
-__all__ = ["SCENE_FORMAT", "SCENE_VERSION", "SCENE_VERSIONS", "TIMES_OF_DAY", "PART_SHAPES", "MATERIAL_TYPES",
-           "MAX_COORD_M", "validate_scene", "validate_meshes", "mesh_triangles", "scene_groups", "load_scene", "save_scene", "empty_scene"]
+__all__ = ["SCENE_FORMAT", "SCENE_VERSION", "SCENE_VERSIONS", "TIMES_OF_DAY", "PART_SHAPES", "LIGHT_SHAPES",
+           "MATERIAL_TYPES", "MAX_COORD_M", "KIND_WAVEFORMS", "MAX_DISPLAY_PAGES", "MAX_TEXT_CHARS", "validate_scene", "validate_meshes", "mesh_triangles", "scene_groups", "load_scene", "save_scene", "empty_scene"]
 
 #: Scene file format name and version.
 SCENE_FORMAT = "lfmbench-scene"
@@ -41,6 +42,20 @@ SCENE_VERSION = 1
 SCENE_VERSIONS = (1, 2)
 TIMES_OF_DAY = ("day", "dusk", "night")
 PART_SHAPES = ("box", "cylinder", "rect", "disk", "sphere", "mesh")
+#: Shapes of a lamp face: a rectangle, a disk, or (version 2) the lit dots of an LED matrix
+#: (:mod:`render_tools.led_matrix`).
+LIGHT_SHAPES = ("rect", "disk", "dots")
+#: Waveform kinds (:data:`lfmbench.flicker.waveforms.WAVEFORMS`) a light kind may have; the first is the one a
+#: light without a ``waveform`` field has, ``None`` where the kind must state its waveform. Other kinds: ``pwm``.
+KIND_WAVEFORMS = {"indicator": ("pwm", "indicator"), "strobe": (None, "strobe"),
+                  "message_sign": (None, "scan_row"), "destination_display": (None, "destination_display"),
+                  "countdown": (None, "countdown")}
+#: Most texts (pages) one display may show.
+MAX_DISPLAY_PAGES = 16
+#: Longest text of one display page, characters.
+MAX_TEXT_CHARS = 160
+#: Fields of scene version 2 on lights (and the object field ``display``, the light shape ``dots``).
+_V2_LIGHT_FIELDS = ("waveform", "driver")
 MATERIAL_TYPES = ("diffuse", "roughplastic", "roughconductor")
 #: Largest coordinate magnitude accepted, m.
 MAX_COORD_M = 1.0e4
@@ -54,14 +69,80 @@ def _unit(v, path):
     return x
 
 
+def _grid(v, path) -> tuple[int, int]:
+    """An LED matrix size [columns, rows] within :data:`render_tools.led_matrix.MAX_GRID`."""
+    if not isinstance(v, (list, tuple)) or len(v) != 2:
+        fail(path, f"must be [columns, rows], got {brief(v)}")
+    return (check_integer(v[0], f"{path}[0]", lo=1, hi=led_matrix.MAX_GRID[0]),
+            check_integer(v[1], f"{path}[1]", lo=1, hi=led_matrix.MAX_GRID[1]))
+
+
+def _dots(p, path) -> None:
+    """The LED-matrix fields of a ``dots`` face: grid, dot share, lit cells (each once, inside the grid)."""
+    cols, rows = _grid(p["grid"], f"{path}.grid")
+    check_number(p["dot"], f"{path}.dot", lo=0.0, hi=1.0, lo_open=True)
+    cells = p["cells"]
+    if not isinstance(cells, list) or not cells or len(cells) > led_matrix.MAX_CELLS:
+        fail(f"{path}.cells", f"must be a list of 1 to {led_matrix.MAX_CELLS} [column, row] pairs, got "
+             f"{brief(cells) if not isinstance(cells, list) else f'{len(cells)} entries'}")
+    seen = set()
+    for k, c in enumerate(cells):
+        if not isinstance(c, list) or len(c) != 2:
+            fail(f"{path}.cells[{k}]", f"must be [column, row], got {brief(c)}")
+        cc = (check_integer(c[0], f"{path}.cells[{k}][0]", hi=cols - 1),
+              check_integer(c[1], f"{path}.cells[{k}][1]", hi=rows - 1))
+        if cc in seen:
+            fail(f"{path}.cells[{k}]", f"dot {list(cc)} is listed twice")
+        seen.add(cc)
+
+
+def _display(d, path) -> None:
+    """An object's ``display``: the texts an LED matrix shows (one per page) on its grid, and its 1/N scan."""
+    check_keys(d, path, required=("texts", "grid", "scan_lines"))
+    cols, rows = _grid(d["grid"], f"{path}.grid")
+    check_integer(d["scan_lines"], f"{path}.scan_lines", lo=1, hi=min(64, rows))
+    texts = d["texts"]
+    if not isinstance(texts, list) or not 1 <= len(texts) <= MAX_DISPLAY_PAGES:
+        fail(f"{path}.texts", f"must be a list of 1 to {MAX_DISPLAY_PAGES} texts (pages), got {brief(texts)}")
+    for k, t in enumerate(texts):
+        tp = f"{path}.texts[{k}]"
+        if not isinstance(t, str) or len(t) > MAX_TEXT_CHARS:
+            fail(tp, f"must be a text of at most {MAX_TEXT_CHARS} characters, got {brief(t)}")
+        bad = sorted({c for c in t if c not in led_matrix.FONT_5X7})
+        if bad:
+            fail(tp, f"characters {bad} are not in the 5x7 font (upper case, digits, {brief(' -.:!/<>')})")
+        need = led_matrix.text_columns(t)
+        if need > cols or rows < led_matrix.GLYPH_H:
+            fail(tp, f"{brief(t)} is too long for the sign: it needs {need} x {led_matrix.GLYPH_H} dots, the "
+                 f"matrix has {cols} x {rows} (at most {(cols + 1) // (led_matrix.GLYPH_W + 1)} characters fit)")
+
+
+def _light_timing(lt, path) -> None:
+    """A light's optional ``driver`` (lights of one driver share one PWM draw) and ``waveform``, which must be one
+    its kind may have (:data:`KIND_WAVEFORMS`)."""
+    if "driver" in lt and (not isinstance(lt["driver"], str) or not 1 <= len(lt["driver"]) <= 64):
+        fail(f"{path}.driver", f"must be a name of 1 to 64 characters, got {brief(lt['driver'])}")
+    allowed = KIND_WAVEFORMS.get(lt["kind"], ("pwm",))
+    if "waveform" not in lt:
+        if allowed[0] is None:
+            fail(f"{path}.waveform", f"is missing: a {lt['kind']} light states its timing (kind "
+                 f"{brief(allowed[1])}, lfmbench.flicker.waveforms)")
+        return
+    w = waveform_from_dict(lt["waveform"], f"{path}.waveform")
+    if w.kind not in allowed:
+        fail(f"{path}.waveform.kind", f"{brief(w.kind)} is not a waveform of a {lt['kind']} light "
+             f"(allowed: {[a for a in allowed if a]})")
+
+
 def _part_or_light_shape(p, path, extra_req, extra_opt, materials=None, meshes=None):
     shape = p.get("shape") if isinstance(p, dict) else None
-    allowed = PART_SHAPES if materials is not None else ("rect", "disk")
+    allowed = PART_SHAPES if materials is not None else LIGHT_SHAPES
     if shape not in allowed:
         fail(f"{path}.shape", f"{brief(shape)} not one of {allowed}")
     geo = {"box": (("center", "size"), ("yaw_deg",)), "cylinder": (("p0", "p1", "radius"), ()),
            "rect": (("center", "size", "normal"), ()), "disk": (("center", "radius", "normal"), ()),
-           "sphere": (("center", "radius"), ()), "mesh": (("mesh", "center"), ("yaw_deg", "scale"))}[shape]
+           "sphere": (("center", "radius"), ()), "mesh": (("mesh", "center"), ("yaw_deg", "scale")),
+           "dots": (("center", "size", "normal", "grid", "dot", "cells"), ())}[shape]
     check_keys(p, path, required=("shape",) + geo[0] + extra_req, optional=geo[1] + extra_opt)
     for k in ("center", "p0", "p1"):
         if k in p:
@@ -83,6 +164,8 @@ def _part_or_light_shape(p, path, extra_req, extra_opt, materials=None, meshes=N
         check_number(p["yaw_deg"], f"{path}.yaw_deg", lo=-720.0, hi=720.0)
     if shape == "cylinder" and np.allclose(p["p0"], p["p1"]):
         fail(f"{path}.p1", "cylinder end points coincide")
+    if shape == "dots":
+        _dots(p, path)
     if materials is not None and p.get("material") not in materials:
         fail(f"{path}.material", f"{brief(p.get('material'))} is not defined in scene.materials")
 
@@ -102,9 +185,14 @@ def validate_scene(scene: dict) -> dict:
     ``weather`` (optional, dry|wet|rain; absent = dry), ``meshes`` (optional) {name: {vertices [[x, y, z], ...] m
     in the mesh's own frame, faces [[i, j, k], ...] counter-clockwise seen from outside}},
     ``objects`` [{id (= index), kind, velocity_mps [3], parts [shape ...]}] (a ``mesh`` part: {mesh: name, center
-    [3] m: where the mesh's origin goes, yaw_deg: turn about z, scale [3]: per axis before the turn, material}), ``lights`` [{id (= index),
-    group, kind, instance (object id), shape rect|disk, center, normal, size | radius, spread_deg (0, 90],
-    spectrum (see :mod:`render_tools.spectra`), luminance_cd_m2 >= 0}].
+    [3] m: where the mesh's origin goes, yaw_deg: turn about z, scale [3]: per axis before the turn, material};
+    version 2: optional ``display`` {texts [str, one per page], grid [columns, rows], scan_lines}: what an LED
+    matrix on the object shows), ``lights`` [{id (= index),
+    group, kind, instance (object id), shape rect|disk|dots, center, normal, size | radius | (size, grid [columns,
+    rows], dot (0, 1], cells [[column, row], ...]: :mod:`render_tools.led_matrix`), spread_deg (0, 90],
+    spectrum (see :mod:`render_tools.spectra`), luminance_cd_m2 >= 0 (while ON); version 2, optional: waveform
+    ({kind, ...}, :mod:`lfmbench.flicker.waveforms`, one of :data:`KIND_WAVEFORMS`) and driver (a name: lights of
+    one driver share one PWM draw)}].
     """
     check_keys(scene, "scene", required=("format", "version", "scene_id", "seed", "time_of_day", "timing", "camera",
                                          "sky", "groups", "materials", "objects", "lights"),
@@ -183,7 +271,7 @@ def validate_scene(scene: dict) -> dict:
         fail("scene.objects", "expected a list")
     for i, o in enumerate(objs):
         p = f"scene.objects[{i}]"
-        check_keys(o, p, required=("id", "kind", "velocity_mps", "parts"))
+        check_keys(o, p, required=("id", "kind", "velocity_mps", "parts"), optional=("display",))
         if check_integer(o["id"], f"{p}.id") != i:
             fail(f"{p}.id", f"must equal its index {i}, got {o['id']}")
         if o["kind"] not in OBJECT_KINDS:
@@ -193,6 +281,10 @@ def validate_scene(scene: dict) -> dict:
             fail(f"{p}.parts", "expected a non-empty list")
         for j, part in enumerate(o["parts"]):
             _part_or_light_shape(part, f"{p}.parts[{j}]", ("material",), (), materials=mats, meshes=meshes)
+        if "display" in o:
+            if scene["version"] < 2:
+                fail(f"{p}.display", "needs scene version 2 (set scene.version to 2)")
+            _display(o["display"], f"{p}.display")
     lights = scene["lights"]
     if not isinstance(lights, list):
         fail("scene.lights", "expected a list")
@@ -201,7 +293,12 @@ def validate_scene(scene: dict) -> dict:
     for i, lt in enumerate(lights):
         p = f"scene.lights[{i}]"
         _part_or_light_shape(lt, p, ("id", "group", "kind", "instance", "spread_deg", "spectrum",
-                                     "luminance_cd_m2"), ())
+                                     "luminance_cd_m2"), _V2_LIGHT_FIELDS)
+        if scene["version"] < 2:
+            for k in _V2_LIGHT_FIELDS + ("grid",):
+                if k in lt:
+                    fail(f"{p}.{'shape' if k == 'grid' else k}",
+                         f"{'dots' if k == 'grid' else k} needs scene version 2 (set scene.version to 2)")
         if check_integer(lt["id"], f"{p}.id") != i:
             fail(f"{p}.id", f"must equal its index {i}, got {lt['id']}")
         if lt["group"] not in LIGHT_GROUPS:
@@ -210,6 +307,7 @@ def validate_scene(scene: dict) -> dict:
             fail(f"{p}.group", f"group {brief(lt['group'])} is not declared in scene.groups")
         if lt["kind"] not in LIGHT_KINDS:
             fail(f"{p}.kind", f"{brief(lt['kind'])} not one of {sorted(LIGHT_KINDS)}")
+        _light_timing(lt, p)
         if check_integer(lt["instance"], f"{p}.instance", lo=-1) >= len(objs):
             fail(f"{p}.instance", f"object {lt['instance']} does not exist (-1 = none)")
         check_number(lt["spread_deg"], f"{p}.spread_deg", lo=0.0, hi=90.0, lo_open=True)
