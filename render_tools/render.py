@@ -27,6 +27,7 @@ once and its K bins are exact copies.
 """
 from __future__ import annotations
 
+import copy
 import math
 import zlib
 from collections.abc import Iterator
@@ -313,6 +314,8 @@ def scene_meta(scene: dict, opts: RenderOptions) -> dict:
             bbs.append(None if bb is None else list(bb))
         lights.append({"id": lt["id"], "group": lt["group"], "kind": lt["kind"], "instance": lt["instance"],
                        "luminance_cd_m2": lt["luminance_cd_m2"], "spectrum": lt["spectrum"], "bbox": bbs})
+        # timing of scene version 2 (lfmbench.flicker.waveforms; lights of one driver share a PWM draw)
+        lights[-1].update({k: copy.deepcopy(lt[k]) for k in ("waveform", "driver") if k in lt})
     return {
         "scene_id": scene["scene_id"], "width": opts.width, "height": opts.height,
         "bands_nm": list(opts.bands_nm), "band_width_nm": opts.band_width_nm, "fps": opts.fps,

@@ -44,6 +44,7 @@ from .scene_schema import (SCENE_FORMAT, SCENE_VERSION, TIMES_OF_DAY, empty_scen
 from .scene_templates import (BASE_MATERIALS, PARKED_KIND, VEHICLE_MATERIALS, VEHICLE_TEMPLATES, box, cylinder,
                               local_offset, rect)
 from . import street
+from .lamps import add_displays, add_vehicle_lamps
 
 __all__ = ["DEFAULT_CONFIG", "V2_CONFIG", "GENERATORS", "SIGNAL_STATES", "load_config", "check_config", "apply_overrides", "SceneBuilder",
            "Road", "add_road", "add_buildings", "place_camera", "add_vehicles", "add_vehicle", "add_streetlights",
@@ -59,7 +60,7 @@ V2_CONFIG = Path(__file__).with_name("configs") / "scene_generator_v2.yaml"
 #: Scene generators: 1 (protocol lfmbench-v1, frozen) and 2 (lfmbench-v2: new content goes here).
 GENERATORS = (1, 2)
 #: Sections only generator 2 has (:data:`V2_CONFIG`).
-V2_SECTIONS = ("weather", "trees", "furniture", "people")
+V2_SECTIONS = ("weather", "trees", "furniture", "people", "lamps")
 
 
 # ----------------------------------------------------------------------------------------------- config
@@ -264,6 +265,9 @@ def add_vehicle(b: SceneBuilder, kind: str, x: float, y: float, heading: float, 
     back = (-fwd[0], -fwd[1], 0.0)
     speed_v = (speed * fwd[0], speed * fwd[1], 0.0)
     oid = b.obj(kind, parts, speed_v)
+    if b.generator >= 2:  # lamp clusters, each lamp with its own timing (render_tools.lamps)
+        add_vehicle_lamps(b, kind, t, oid, x, y, heading, speed, lights_on, braking, indicator)
+        return
     lc = b.cfg["lights"]
 
     def lamps(spec, where, normal, lamp_kind, lum, spread):
@@ -572,6 +576,8 @@ def generate_scene(seed: int, time_of_day: str | None = None, config: dict | str
     if states:
         add_signal(b, road, states)
     weather = street.add_street(b, road, cam_y, dark) if generator == 2 else None
+    if generator == 2:  # LED signal arrays, countdown, message signs (render_tools.lamps)
+        add_displays(b, road, dark)
     sky = make_sky(b)
     # step 8: the camera
     cc = cfg["camera"]
