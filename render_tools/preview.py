@@ -52,16 +52,22 @@ def compose_window(frame: dict, timing: dict, window: str = "short", shape=None)
     return acc
 
 
-def tonemap_srgb(img: np.ndarray, bands_nm, band_width_nm: float, key: float = KEY_VALUE) -> np.ndarray:
-    """Spectral radiance (C, H, W) -> display sRGB (H, W, 3) uint8 (see module docstring)."""
+def tonemap_srgb(img: np.ndarray, bands_nm, band_width_nm: float, key: float = KEY_VALUE,
+                 white_cd_m2: float | None = None) -> np.ndarray:
+    """Spectral radiance (C, H, W) -> display sRGB (H, W, 3) uint8 (see module docstring). ``white_cd_m2``: a
+    fixed linear exposure instead (luminance ``white_cd_m2`` cd/m^2 maps to display white), for close-ups of
+    lamps whose luminance the scene-adaptive mapping would clip."""
     import colour  # noqa: PLC0415
 
     xyz = spectra.spectral_to_xyz(img, bands_nm, band_width_nm)  # (3, H, W), Y in cd/m^2
     y = np.maximum(xyz[1], 0.0)
-    lw = float(np.exp(np.mean(np.log(LUM_EPS + y))))
-    lm = key * y / lw
-    lwhite = max(float(np.percentile(lm, 99.9)), 1e-9)
-    ld = lm * (1 + lm / lwhite**2) / (1 + lm)
+    if white_cd_m2 is not None:
+        ld = np.minimum(y / float(white_cd_m2), 1.0)
+    else:
+        lw = float(np.exp(np.mean(np.log(LUM_EPS + y))))
+        lm = key * y / lw
+        lwhite = max(float(np.percentile(lm, 99.9)), 1e-9)
+        ld = lm * (1 + lm / lwhite**2) / (1 + lm)
     scale = np.where(y > 0, ld / np.maximum(y, 1e-30), 0.0)
     xyz_d = (xyz * scale).transpose(1, 2, 0)
     rgb = colour.XYZ_to_sRGB(xyz_d, apply_cctf_encoding=False, chromatic_adaptation_transform=None)
@@ -83,9 +89,10 @@ def write_png(rgb8: np.ndarray, path: str | os.PathLike) -> None:
 
 
 def preview_png(img: np.ndarray, bands_nm, band_width_nm: float, path: str | os.PathLike,
-                key: float = KEY_VALUE) -> np.ndarray:
-    """Tone-map a spectral image (C, H, W) and write it to ``path``; returns the (H, W, 3) uint8 image."""
-    rgb = tonemap_srgb(img, bands_nm, band_width_nm, key)
+                key: float = KEY_VALUE, white_cd_m2: float | None = None) -> np.ndarray:
+    """Tone-map a spectral image (C, H, W) (:func:`tonemap_srgb`) and write it to ``path``; returns the
+    (H, W, 3) uint8 image."""
+    rgb = tonemap_srgb(img, bands_nm, band_width_nm, key, white_cd_m2)
     write_png(rgb, path)
     return rgb
 
