@@ -71,11 +71,15 @@ def _sync(dev: torch.device) -> None:
         torch.cuda.synchronize(dev)
 
 
-def _dataset(root: Path, crop: int, **kw):
+def _dataset(root: Path, crop: int, samples: int = 128, **kw):
+    """The benchmark's dataset with at least ``samples`` samples (3 frames, crop ``crop``)."""
     from lfmbench.datasets import LFMCaptureDataset
+    from lfmbench.corpus import Corpus
 
     kw.setdefault("outputs", OUTS)
-    return LFMCaptureDataset(root, split="all", frames=3, crop=crop, samples_per_scene=64, **kw)
+    scenes = len(Corpus(root).scenes)
+    return LFMCaptureDataset(root, split="all", frames=3, crop=crop, samples_per_scene=max(64, -(-samples // scenes)),
+                             **kw)
 
 
 def _timed(fn, passes: int, dev: torch.device) -> tuple[float, float]:
@@ -95,7 +99,7 @@ def time_loader(root, dev, batch, workers, batches, passes):
 
     from lfmbench.datasets.loading import collate_samples
 
-    ds = _dataset(root, 256)
+    ds = _dataset(root, 256, batch * batches)
     dl = DataLoader(ds, batch_size=batch, shuffle=False, num_workers=workers, collate_fn=collate_samples,
                     persistent_workers=workers > 0, pin_memory=dev.type == "cuda")
 
@@ -104,6 +108,7 @@ def time_loader(root, dev, batch, workers, batches, passes):
             {k: v.to(dev, non_blocking=True) for k, v in b.items() if torch.is_tensor(v)}
             if i + 1 >= batches:
                 break
+        assert i + 1 == batches, "the dataset is too small for the timed batches"
     med, _ = _timed(run, passes, dev)
     return batch * batches / med
 
@@ -114,7 +119,7 @@ def time_device(root, dev, batch, batches, passes, program=True):
     from lfmbench.datasets.device import DeviceBatches
 
     t0 = time.perf_counter()
-    db = DeviceBatches(_dataset(root, 256), batch, dev, seed=0)
+    db = DeviceBatches(_dataset(root, 256, batch * batches), batch, dev, seed=0)
     load_s = time.perf_counter() - t0
     if not program:
         db.resident.program = None
@@ -126,6 +131,7 @@ def time_device(root, dev, batch, batches, passes, program=True):
         for i, b in enumerate(db):
             if i + 1 >= batches:
                 break
+        assert i + 1 == batches and b["gt"].shape[0] == batch, "the dataset is too small for the timed batches"
     med, _ = _timed(run, passes, dev)
     peak = (torch.cuda.max_memory_allocated(dev) - base) if dev.type == "cuda" else None
     scenes = len(dict.fromkeys(db.ds.scene_ids))
@@ -191,9 +197,14 @@ def time_train(root, dev, data, steps, batch, crop, workers):
 
     with tempfile.TemporaryDirectory() as tmp:
         t0 = time.perf_counter()
-        train("unet", root, Path(tmp) / "u.pt", device=str(dev), data=data, epochs=1, max_steps=steps, crop=crop,
-              batch_size=batch, split="all", samples_per_scene=64, workers=workers, progress=False, log=None)
+        from lfmbench.corpus import Corpus
+
+        per_scene = max(64, -(-steps * batch // len(Corpus(root).scenes)))
+        _model, hist = train("unet", root, Path(tmp) / "u.pt", device=str(dev), data=data, epochs=1, max_steps=steps,
+                             crop=crop, batch_size=batch, split="all", samples_per_scene=per_scene, workers=workers,
+                             progress=False, log=None)
         _sync(dev)
+        assert hist["steps"] == steps, (hist["steps"], steps)
         return steps * batch / (time.perf_counter() - t0)
 
 

@@ -16,6 +16,8 @@ scene-file validator accept exactly the same ids.
 """
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import math
 import re
 from typing import Any, Iterable, Mapping, Sequence
@@ -25,9 +27,29 @@ from lfmbench.limits import brief
 
 __all__ = ["where", "fail", "check_number", "get_number", "check_integer", "check_vector", "check_keys",
            "check_choice", "check_array", "SCENE_ID_PATTERN", "SCENE_ID_MAX_LEN", "scene_id_error",
-           "check_scene_id", "torch_device"]
+           "check_scene_id", "torch_device", "value_checks", "trusted_values"]
 
 _MISSING = object()
+
+#: Whether value checks that read a tensor's values (finite, non-negative) run; type and shape checks always do.
+_VALUE_CHECKS: contextvars.ContextVar[bool] = contextvars.ContextVar("lfmbench_value_checks", default=True)
+
+
+def value_checks() -> bool:
+    """Whether checks of tensor values run here (False inside :func:`trusted_values`)."""
+    return _VALUE_CHECKS.get()
+
+
+@contextlib.contextmanager
+def trusted_values():
+    """Skip the checks that read tensor values (each one waits for a GPU to finish its queue) for tensors the
+    package made itself, e.g. the batched device program's composed electrons (finite and >= 0 by construction).
+    Type and shape checks still run."""
+    token = _VALUE_CHECKS.set(False)
+    try:
+        yield
+    finally:
+        _VALUE_CHECKS.reset(token)
 
 
 def where(field: str, source: str | None = None) -> str:

@@ -61,7 +61,8 @@ def _as_words(x, like: torch.Tensor | None = None) -> torch.Tensor:
         if x.dtype != torch.int64:
             raise TypeError(f"counter_rng: words must be int64 tensors, got {x.dtype}")
         return x
-    return torch.tensor(_signed(int(x)), dtype=torch.int64, device=None if like is None else like.device)
+    # a fill on the device, not a copy from the host (a copy would wait for the device's queue)
+    return torch.full((), _signed(int(x)), dtype=torch.int64, device=None if like is None else like.device)
 
 
 def mix64(z: torch.Tensor) -> torch.Tensor:

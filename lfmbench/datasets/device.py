@@ -542,5 +542,5 @@ class SplitProgram:
         out["meta"] = meta
         out["info"] = {"sensor": ds.sensor_name, "frames": F, "crop_hw": (h, w), "shutter": ds.shutter,
                        "noise": ds.noise, "outputs": tuple(ds.outputs), "noise_streams": "counter",
-                       "group_slots": False, "scene_hw": (H, W), "ideal_pulses": self.ideal_pulses}
+                       "group_slots": False, "scene_hw": (H, W), "ideal_pulses": self.ideal_pulses, "trusted": True}
         return out

@@ -148,6 +148,20 @@ def _consts():
     return (GAMMA, (GAMMA << STRIDE_LOG2) & ((1 << 64) - 1), MIX_MUL[0], MIX_MUL[1])
 
 
+_TABLES: dict = {}
+
+
+def _tables(device: torch.device, log_factorial, gaussian_above: float) -> tuple[torch.Tensor, torch.Tensor]:
+    """The log-factorial table and the limits on ``device``, copied there once (a copy per call would wait for
+    the device's queue)."""
+    key = (str(device), id(log_factorial), gaussian_above)
+    if key not in _TABLES:
+        _TABLES[key] = (torch.as_tensor(log_factorial, dtype=torch.float64, device=device),
+                        torch.tensor([gaussian_above, float(POISSON_EXACT_LIMIT)], dtype=torch.float64,
+                                     device=device))
+    return _TABLES[key]
+
+
 def poisson(mean: torch.Tensor, seed: torch.Tensor, gaussian_above: float, max_steps: int, max_rounds: int,
             log_factorial) -> torch.Tensor:
     """:func:`lfmbench.sensor.counter_noise.poisson` for (B, N) means and (B,) int64 seeds on one device
@@ -157,9 +171,7 @@ def poisson(mean: torch.Tensor, seed: torch.Tensor, gaussian_above: float, max_s
     out = torch.empty(B, N, dtype=torch.float64, device=mean.device)
     if B and N:
         g, s, m0, m1 = _consts()
-        table = torch.as_tensor(log_factorial, dtype=torch.float64, device=mean.device)
-        limits = torch.tensor([float(gaussian_above), float(POISSON_EXACT_LIMIT)], dtype=torch.float64,
-                              device=mean.device)
+        table, limits = _tables(mean.device, log_factorial, float(gaussian_above))
         _poisson_kernel[(triton.cdiv(N, _BLOCK), B)](mean, seed.contiguous(), out, table, table.numel(), limits, N,
                                                      g, s, m0, m1, max_steps, max_rounds, BLOCK=_BLOCK)
     return out

@@ -19,6 +19,7 @@ from typing import Mapping, Sequence
 import torch
 from torch import nn
 
+from lfmbench.check import value_checks
 from lfmbench.sensor import counter_noise as _cn
 from lfmbench.sensor import poisson as _poisson
 from lfmbench.sensor.fused import MEAN_CAP_FULL_WELLS, chain_fused, per_generator
@@ -109,7 +110,7 @@ def shot_noise(mean_e: torch.Tensor, generator: torch.Generator, gaussian_above_
 
 def _exposure(value: float | torch.Tensor, name: str, lead: torch.Size, ref: torch.Tensor) -> torch.Tensor:
     t = torch.as_tensor(value, dtype=ref.dtype, device=ref.device)
-    if not bool(torch.isfinite(t).all()) or bool((t <= 0).any()):
+    if value_checks() and (not bool(torch.isfinite(t).all()) or bool((t <= 0).any())):
         raise ValueError(f"{name} must be finite and > 0 (s), got {value!r}")
     if t.dim() > len(lead):
         raise ValueError(f"{name} must be a scalar or broadcastable to the leading shape {tuple(lead)}")

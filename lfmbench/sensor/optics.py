@@ -35,7 +35,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from lfmbench.check import check_integer, check_keys, check_number
+from lfmbench.check import check_integer, check_keys, check_number, value_checks
 from lfmbench.constants import AIRY_FIRST_ZERO_FACTOR, M_PER_NM
 
 __all__ = [
@@ -135,7 +135,7 @@ def check_radiometric(x: torch.Tensor, name: str, min_dim: int = 3) -> None:
         raise ValueError(f"{name} must be a floating-point tensor, got dtype {x.dtype}")
     if x.dim() < min_dim:
         raise ValueError(f"{name} must have at least {min_dim} dimensions (*, C, H, W), got shape {tuple(x.shape)}")
-    if x.numel() == 0:
+    if x.numel() == 0 or not value_checks():
         return
     lo, hi = torch.aminmax(x.detach())          # one pass; NaN propagates to both
     lo, hi = float(lo), float(hi)
