@@ -9,6 +9,8 @@ sRGB transfer function -> 8-bit PNG, written atomically.
 from __future__ import annotations
 
 import io
+import json
+import math
 import os
 from pathlib import Path
 
@@ -118,6 +120,40 @@ def render_previews(out_dir: str | os.PathLike, seed: int = 7, width: int = 640,
         scn.save_scene(sc, out / f"preview_{tod}_scene.json")
         paths.append(p)
     return paths
+
+
+def closeup_scene(kind: str, view: str = "rear", seed: int = 5) -> dict:
+    """A dusk scene (scene generator 2) for looking at one vehicle of ``kind`` from close by: the vehicle stands
+    in the camera's lane, ``view`` ``"rear"`` (heading away: tail, brake, indicator lamps) or ``"front"`` (facing
+    the camera: headlights), every lamp lit, 6 m of road between camera and vehicle; a pedestrian walks on the
+    sidewalk beside it and trees line the street."""
+    import numpy as np  # noqa: PLC0415
+
+    from . import scene as scn  # noqa: PLC0415
+    from . import street  # noqa: PLC0415
+    from .scene_templates import VEHICLE_TEMPLATES  # noqa: PLC0415
+
+    if view not in ("rear", "front"):
+        raise ValueError(f"view: {view!r} not 'rear' or 'front'")
+    cfg = scn.load_config(generator=2)
+    b = scn.SceneBuilder(np.random.default_rng(seed), cfg, "dusk", generator=2)
+    road = scn.add_road(b)
+    length = VEHICLE_TEMPLATES[kind]["length"]
+    x = 6.0 + length / 2
+    scn.add_vehicle(b, kind, x, -1.75, 0.0 if view == "rear" else math.pi, 0.0, lights_on=True, braking=True,
+                    indicator=True)
+    street.add_trees(b, road)
+    street.add_people(b, road, dark=True)
+    sky = scn.make_sky(b)
+    sky["scale"] = 0.05
+    sky["sun_elevation_deg"] = 3.0
+    sc = {"format": scn.SCENE_FORMAT, "version": 2, "scene_id": f"closeup_{kind}_{view}", "seed": seed,
+          "time_of_day": "dusk", "weather": "dry", "timing": {"short_exposure_s": 0.004},
+          "camera": {"position_m": [0.0, -1.75, 1.4], "yaw_deg": 0.0, "pitch_deg": -4.0, "fov_x_deg": 45.0,
+                     "speed_mps": 0.0, "yaw_rate_rad_s": 0.0},
+          "sky": sky, "groups": cfg["groups"], "materials": b.materials, "objects": b.objects, "lights": b.lights,
+          "meshes": b.meshes}
+    return scn.validate_scene(json.loads(json.dumps(sc)))
 
 
 if __name__ == "__main__":  # pragma: no cover - documentation helper

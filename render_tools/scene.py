@@ -248,14 +248,14 @@ def add_vehicle(b: SceneBuilder, kind: str, x: float, y: float, heading: float, 
         b.materials[paint + "c"] = {"type": "diffuse", "rgb": [round(float(c), 4) for c in rng.uniform(0.3, 0.8, 3)]}
     roles = {"paint": paint, "cargo": paint + "c", **VEHICLE_MATERIALS}
     deg = math.degrees(heading)
-    parts = []
-    for (cx, cy, cz), size, mat in t["boxes"]:
+    parts = street.vehicle_parts(b, kind, x, y, heading, roles) if b.generator >= 2 else []
+    for (cx, cy, cz), size, mat in t["boxes"] if b.generator < 2 else ():
         dx, dy = local_offset(cx, cy, heading)
         parts.append(box((x + dx, y + dy, cz), size, roles[mat], deg))
-    for (cx, cy, cz), radius, mat in t["spheres"]:
+    for (cx, cy, cz), radius, mat in t["spheres"] if b.generator < 2 else ():
         dx, dy = local_offset(cx, cy, heading)
         parts.append({"shape": "sphere", "center": [x + dx, y + dy, cz], "radius": radius, "material": roles[mat]})
-    for wx, r, wy in t["wheels"]:
+    for wx, r, wy in t["wheels"] if b.generator < 2 else ():
         for side in ((1, -1) if wy > 0 else (0,)):
             yy = side * wy
             a0, b0 = local_offset(wx, yy - t["wheel_w"] / 2, heading)

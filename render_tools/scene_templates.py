@@ -101,3 +101,159 @@ def local_offset(x, y, heading):
     """Vehicle-local (x fwd, y left) offset (m) -> world xy offset (m) for ``heading`` (rad)."""
     c, s = math.cos(heading), math.sin(heading)
     return c * x - s * y, s * x + c * y
+
+
+# ------------------------------------------------------------------------------ scene generator 2: shapes
+#: Scene generator 2's bodies (:func:`render_tools.shapes.body_meshes`): per kind the loft stations ``(x, z_bottom,
+#: z_belt, z_top, width_scale, side_glass, top_glass)`` (m, vehicle frame, rear to front), width (m), roof inset
+#: per side (m) and extra boxes ((centre), (size), role) such as a truck's cargo box or the roof spoiler that carries
+#: a car's centre brake lamp. Motorcycles and bicycles are rigs of tubes and rings (:func:`two_wheeler_parts`)
+#: with a small lofted body (motorcycle) and a rider. The lamps stay where :data:`VEHICLE_TEMPLATES` puts them:
+#: each body's ends are at +-length / 2, just behind the lamp faces.
+VEHICLE_BODIES = {
+    "car": {"stations": [(-2.20, 0.32, 0.95, 0.96, 0.94, 0, 0), (-2.05, 0.25, 0.98, 1.00, 1.0, 0, 1),
+                         (-1.45, 0.25, 0.98, 1.47, 1.0, 1, 0), (0.55, 0.25, 0.96, 1.45, 1.0, 1, 1),
+                         (1.35, 0.25, 0.92, 0.93, 1.0, 0, 0), (2.05, 0.27, 0.82, 0.83, 0.98, 0, 0),
+                         (2.20, 0.35, 0.78, 0.79, 0.92, 0, 0)],
+            "width": 1.8, "roof_inset": 0.2, "boxes": [((-1.43, 0.0, 1.52), (0.14, 0.7, 0.07), "paint")]},
+    "van": {"stations": [(-2.50, 0.35, 1.05, 1.88, 0.96, 0, 0), (-2.40, 0.30, 1.05, 1.95, 1.0, 1, 0),
+                         (1.35, 0.30, 1.05, 1.95, 1.0, 1, 1), (2.10, 0.30, 1.00, 1.02, 1.0, 0, 0),
+                         (2.50, 0.35, 0.92, 0.93, 0.95, 0, 0)],
+            "width": 1.95, "roof_inset": 0.12, "boxes": []},
+    "bus": {"stations": [(-6.0, 0.40, 1.35, 3.0, 0.97, 0, 0), (-5.85, 0.35, 1.35, 3.1, 1.0, 1, 0),
+                         (5.75, 0.35, 1.35, 3.1, 1.0, 1, 1), (6.0, 0.40, 1.30, 2.95, 0.97, 0, 0)],
+            "width": 2.55, "roof_inset": 0.1, "boxes": [],
+            "panes": [((6.004, 0.0, 2.05), (2.2, 1.3), 1), ((-6.004, 0.0, 2.3), (2.0, 0.9), -1)]},
+    "truck": {"stations": [(2.35, 0.55, 1.65, 3.0, 1.0, 0, 0), (3.40, 0.55, 1.65, 3.05, 1.0, 1, 0),
+                           (4.35, 0.55, 1.65, 3.0, 1.0, 1, 1), (4.75, 0.60, 1.55, 2.7, 0.97, 0, 0)],
+              "width": 2.4, "roof_inset": 0.08,
+              "boxes": [((-1.2, 0.0, 2.35), (7.1, 2.5, 3.3), "cargo"), ((0.0, 0.0, 0.62), (8.6, 1.0, 0.3), "chassis")]},
+    "motorcycle": {"stations": [(-0.85, 0.75, 0.90, 0.92, 0.6, 0, 0), (-0.35, 0.55, 0.85, 0.88, 0.8, 0, 0),
+                                (0.05, 0.45, 0.95, 1.05, 1.0, 0, 0), (0.45, 0.50, 0.95, 1.00, 0.9, 0, 0),
+                                (0.85, 0.75, 0.98, 1.00, 0.5, 0, 0)],
+                   "width": 0.4, "roof_inset": 0.05, "boxes": []},
+}
+
+
+def _lift(pts, x, y, heading, z0=0.0):
+    """Vehicle-frame points (n, 3) m -> world (n, 3) m for a body at (x, y) heading ``heading`` (rad), raised z0."""
+    out = []
+    for px, py, pz in pts:
+        dx, dy = local_offset(px, py, heading)
+        out.append((x + dx, y + dy, pz + z0))
+    return out
+
+
+def person_parts(x, y, heading, height, phase, mats, riding=None) -> list:
+    """A person as parts (articulated: limbs are tubes between joints, joints spheres), feet at (x, y, 0) m, facing
+    ``heading`` (rad), ``height`` m tall, gait ``phase`` (rad). ``mats``: {"top", "legs", "skin"} material names.
+    ``riding``: None (walking; torso the shared mesh ``torso``) or ``{"hip": (x, z), "hands": (x, z), "pedal":
+    (x, z), "lean": rad}`` in the vehicle frame (m) for a rider (torso a tube from hip to shoulders)."""
+    h = float(height)
+    parts = []
+    tube = lambda a, b, r, m: parts.append(cylinder(a, b, r, m))  # noqa: E731
+    ball = lambda c, r, m: parts.append({"shape": "sphere", "center": [float(v) for v in c], "radius": float(r),  # noqa: E731
+                                         "material": m})
+    s = 0.45 * math.sin(phase)
+    if riding is None:
+        hipz, shz = 0.50 * h, 0.80 * h
+        hip_x, sh_x = 0.0, 0.0
+        legs = []
+        for side, sw in ((1, s), (-1, -s)):
+            hy = side * 0.085 * h
+            knee = (hip_x + 0.24 * h * math.sin(sw), hy, hipz - 0.24 * h * math.cos(sw))
+            bend = 0.35 * max(0.0, math.sin(phase + (0 if side > 0 else math.pi) + 1.2))
+            ankle = (knee[0] + 0.23 * h * math.sin(sw - bend), hy, knee[2] - 0.23 * h * math.cos(sw - bend))
+            legs.append(((hip_x, hy, hipz), knee, ankle))
+        P = _lift([(0, 0, 0)], x, y, heading)[0]
+        parts.append({"shape": "mesh", "mesh": "torso", "center": [P[0], P[1], 0.0], "yaw_deg": math.degrees(heading),
+                      "scale": [h, h, h], "material": mats["top"]})
+        arm_swing = [-0.7 * s, 0.7 * s]
+    else:
+        hx, hz = riding["hip"]
+        lean = riding["lean"]
+        hipz, hip_x = hz, hx
+        sh_x, shz = hx + 0.30 * h * math.sin(lean), hz + 0.30 * h * math.cos(lean)
+        legs = []
+        px, pz = riding["pedal"]
+        for side, ph in ((1, phase), (-1, phase + math.pi)):
+            hy = side * 0.1 * h
+            foot = (px + 0.17 * math.cos(ph), hy + side * 0.05, pz + 0.17 * math.sin(ph))
+            d = math.dist((hip_x, hipz), (foot[0], foot[2]))
+            lt = 0.245 * h
+            mid = ((hip_x + foot[0]) / 2, (hipz + foot[2]) / 2)
+            up = math.sqrt(max(lt * lt - (d / 2) ** 2, 0.0))  # the knee bends forward and up
+            ux, uz = (foot[2] - hipz) / max(d, 1e-6), -(foot[0] - hip_x) / max(d, 1e-6)
+            if ux < 0:
+                ux, uz = -ux, -uz
+            knee = (mid[0] + up * ux, hy, mid[1] + up * uz)
+            legs.append(((hip_x, hy, hipz), knee, foot))
+        tube(*_lift([(hip_x, 0, hipz), (sh_x, 0, shz)], x, y, heading), 0.085 * h, mats["top"])
+        arm_swing = None
+    for hip, knee, ankle in legs:
+        a, k, an = _lift([hip, knee, ankle], x, y, heading)
+        tube(a, k, 0.038 * h, mats["legs"])
+        tube(k, an, 0.03 * h, mats["legs"])
+        ball(k, 0.03 * h, mats["legs"])
+        foot = _lift([(ankle[0] + 0.08 * h, ankle[1], ankle[2] - 0.01 * h)], x, y, heading)[0]
+        tube(an, foot, 0.025 * h, mats["legs"])
+    for k, side in enumerate((1, -1)):
+        sh = (sh_x, side * 0.125 * h, shz - 0.02 * h)
+        if arm_swing is not None:
+            a = arm_swing[k]
+            elbow = (sh[0] + 0.17 * h * math.sin(a), sh[1], sh[2] - 0.17 * h * math.cos(a))
+            wrist = (elbow[0] + 0.16 * h * math.sin(a + 0.35), sh[1], elbow[2] - 0.16 * h * math.cos(a + 0.35))
+        else:
+            hx2, hz2 = riding["hands"]
+            wrist = (hx2, side * 0.2 * h, hz2)
+            elbow = ((sh[0] + wrist[0]) / 2, side * 0.17 * h, (sh[2] + wrist[2]) / 2 - 0.03 * h)
+        s0, e0, w0 = _lift([sh, elbow, wrist], x, y, heading)
+        tube(s0, e0, 0.026 * h, mats["top"])
+        tube(e0, w0, 0.022 * h, mats["skin"])
+        ball(s0, 0.03 * h, mats["top"])
+    neck = _lift([(sh_x, 0, shz)], x, y, heading)[0]
+    head = _lift([(sh_x + (0.03 * h if riding else 0.0), 0, shz + 0.11 * h)], x, y, heading)[0]
+    tube(neck, (head[0], head[1], head[2] - 0.04 * h), 0.025 * h, mats["skin"])
+    ball(head, 0.065 * h, mats["helmet"] if riding and "helmet" in mats else mats["skin"])
+    return parts
+
+
+def two_wheeler_parts(kind, x, y, heading, roles, rider_mats, phase) -> list:
+    """Scene generator 2's motorcycle or bicycle with its rider, as parts in world coordinates (m): two wheel rings
+    (shared meshes ``wheel_<kind>``), frame tubes, for a motorcycle its lofted body, and the rider."""
+    w = VEHICLE_TEMPLATES[kind]["wheels"]
+    parts = []
+    for wx, r, _ in w:
+        c = _lift([(wx, 0.0, r)], x, y, heading)[0]
+        parts.append({"shape": "mesh", "mesh": f"wheel_{kind}", "center": list(c), "yaw_deg": math.degrees(heading),
+                      "material": "rubber"})
+        parts.append(cylinder(*_lift([(wx, -0.03, r), (wx, 0.03, r)], x, y, heading), 0.05, "metal"))
+    tube = lambda pts, rad, m: parts.append(cylinder(*_lift(pts, x, y, heading), rad, m))  # noqa: E731
+    if kind == "bicycle":
+        rear, front = (w[1][0], w[1][1]), (w[0][0], w[0][1])
+        bb, seat, head_t, bar = (-0.05, 0.32), (-0.22, 0.95), (0.38, 0.95), (0.42, 1.05)
+        for a, b in ((rear, bb), (rear, seat), (bb, seat), (seat, head_t), (bb, head_t), (head_t, front),
+                     (head_t, bar)):
+            tube([(a[0], 0, a[1]), (b[0], 0, b[1])], 0.018, roles["paint"])
+        tube([(bar[0], -0.25, bar[1]), (bar[0], 0.25, bar[1])], 0.014, "metal")
+        parts.append(box(_lift([(-0.7, 0.0, 0.8)], x, y, heading)[0], (0.4, 0.12, 0.02), "metal", math.degrees(heading)))
+        parts.append(box(_lift([(-0.885, 0.0, 0.75)], x, y, heading)[0], (0.02, 0.08, 0.12), "housing",
+                         math.degrees(heading)))
+        tube([(bar[0], 0, bar[1] - 0.05), (0.885, 0, 0.95)], 0.012, "metal")
+        parts.append(box(_lift([(0.89, 0.0, 0.95)], x, y, heading)[0], (0.02, 0.08, 0.07), "housing",
+                         math.degrees(heading)))
+        riding = {"hip": (seat[0] - 0.02, seat[1] + 0.07), "hands": (bar[0], bar[1]), "pedal": bb, "lean": 0.45}
+        height = 1.75
+    else:
+        rear, front = (w[1][0], w[1][1]), (w[0][0], w[0][1])
+        tube([(front[0], 0.08, front[1]), (0.55, 0.08, 1.0)], 0.025, "metal")
+        tube([(front[0], -0.08, front[1]), (0.55, -0.08, 1.0)], 0.025, "metal")
+        tube([(0.55, -0.35, 1.08), (0.55, 0.35, 1.08)], 0.015, "metal")
+        tube([(rear[0], 0.0, rear[1]), (-0.1, 0.0, 0.55)], 0.04, "metal")
+        tube([(-0.3, 0.12, 0.35), (-0.8, 0.12, 0.45)], 0.04, "metal")  # exhaust
+        parts.append({"shape": "mesh", "mesh": "body_motorcycle_paint", "center": [x, y, 0.0],
+                      "yaw_deg": math.degrees(heading), "material": roles["paint"]})
+        riding = {"hip": (-0.3, 1.0), "hands": (0.55, 1.08), "pedal": (0.0, 0.45), "lean": 0.35}
+        height = 1.78
+        phase = 0.0
+    return parts + person_parts(x, y, heading, height, phase, rider_mats, riding)

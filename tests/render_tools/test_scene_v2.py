@@ -165,3 +165,71 @@ def test_mesh_part_placement():
     V, F = ms.part_mesh(sc["objects"][0]["parts"][0], np.array([0.0, 0.0, 1.0]), sc["meshes"])
     np.testing.assert_allclose(V, [[5, 0, 1], [5, 2, 1], [3, 0, 1]], atol=1e-12)
     assert F.tolist() == [[0, 1, 2]]
+
+
+# ------------------------------------------------------------------------------------------------ shapes
+def _closed_outward(V, F):
+    """Every edge shared by exactly two faces in opposite directions (closed, consistently wound) and a positive
+    enclosed volume (outward)."""
+    import numpy as np
+
+    from render_tools import shapes
+
+    edges = {}
+    for a, b, c in F:
+        for e in ((a, b), (b, c), (c, a)):
+            edges[e] = edges.get(e, 0) + 1
+    assert all(n == 1 and edges.get((e[1], e[0])) == 1 for e, n in edges.items())
+    assert shapes.signed_volume(np.asarray(V), np.asarray(F)) > 0
+
+
+def test_shape_meshes_closed_and_outward():
+    import numpy as np
+
+    from render_tools import shapes
+    from render_tools.scene_templates import VEHICLE_BODIES
+
+    t = shapes.torso_mesh()
+    _closed_outward(t["vertices"], t["faces"])
+    r = shapes.ring_mesh(0.3, 0.03)
+    _closed_outward(r["vertices"], r["faces"])
+    c = shapes.crown_mesh(np.random.default_rng(0))
+    _closed_outward(c["vertices"], c["faces"])
+    V, F = shapes.icosphere(2)
+    assert np.allclose(np.linalg.norm(V, axis=1), 1) and shapes.signed_volume(V, F) == pytest.approx(4 * np.pi / 3, rel=0.04)  # inscribed: 3 % less
+    for kind, body in VEHICLE_BODIES.items():
+        m = shapes.body_meshes(body["stations"], body["width"], body["roof_inset"])
+        # paint and glass together: one closed surface (merge the two vertex lists by coordinate)
+        pts, faces = {}, []
+        for entry in m.values():
+            for f in entry["faces"]:
+                faces.append([pts.setdefault(tuple(entry["vertices"][i]), len(pts)) for i in f])
+        V = [p for p, _ in sorted(pts.items(), key=lambda kv: kv[1])]
+        _closed_outward(V, faces)
+        xs = np.asarray(V)[:, 0]
+        from render_tools.scene_templates import VEHICLE_TEMPLATES
+        L = VEHICLE_TEMPLATES[kind]["length"]
+        if kind in ("car", "van", "bus"):  # a truck body is its cab (cargo: a box), a motorcycle its tank and seat
+            assert xs.min() == pytest.approx(-L / 2, abs=0.06) and xs.max() == pytest.approx(L / 2, abs=0.06)
+        assert ("glass" in m) == (kind != "motorcycle")
+
+
+def test_v2_content_present():
+    """A generator-2 night scene has shaped vehicles (mesh bodies, no box bodies), people, trees and road
+    furniture; cyclists carry a lit rear LED on their own (moving) object."""
+    sc = S.generate_scene(3, "night", generator=2, overrides={
+        "vehicles": {"require_kinds": ["car", "van", "bus", "truck", "motorcycle", "bicycle"]},
+        "people": {"cyclists": [2, 2], "pedestrians": [6, 6]}})
+    kinds = [o["kind"] for o in sc["objects"]]
+    for k in ("pedestrian", "tree", "traffic_sign", "car", "van", "bus", "truck", "motorcycle", "bicycle"):
+        assert k in kinds, k
+    for o in sc["objects"]:
+        if o["kind"] in ("car", "van", "bus"):
+            assert any(p["shape"] == "mesh" and p["mesh"].startswith("body_") for p in o["parts"])
+            assert not any(p["shape"] == "box" and p["size"][0] > 3 for p in o["parts"])
+        if o["kind"] == "pedestrian":
+            assert any(p["shape"] == "mesh" and p["mesh"] == "torso" for p in o["parts"]) and any(o["velocity_mps"])
+    for lt in sc["lights"]:
+        if sc["objects"][lt["instance"]]["kind"] == "cyclist":
+            assert lt["kind"] == "tail" and lt["group"] == "otherlights"
+    assert S.validate_scene(sc) is sc
