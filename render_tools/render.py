@@ -39,6 +39,7 @@ from lfmbench.vocabulary import GROUPS
 
 from . import camera as cam_mod
 from . import mitsuba_scene as ms
+from . import reflections
 from .scene_schema import scene_groups, validate_scene
 
 #: Default spectral bands: centres 400..700 nm step 10 nm.
@@ -202,6 +203,7 @@ class SceneGeometry:
         self.ego = cam_mod.EgoMotion.from_scene(scene)
         self.fov = float(scene["camera"]["fov_x_deg"])
         self.K = cam_mod.intrinsics(opts.width, opts.height, self.fov)
+        self.wet = reflections.wet_road(scene)  # None: dry, no reflection region in any crop
 
     def facing(self, light: dict, t_obj: float, times, moving: bool = False) -> bool:
         """Whether the lamp face points towards the camera at any of ``times`` (s); ``moving``: the lamp moves
@@ -227,17 +229,25 @@ class SceneGeometry:
             return None
         pts = ms.light_points(self.scene, light, t_obj)
         v = self.object_velocity(light) if moving else np.zeros(3)
+        # a flickering light's crop also holds its reflection in a wet road (render_tools.reflections)
+        refl = reflections.glossy_points(pts, self.ego.position(t_obj), self.wet) if moving and self.wet else None
         uvs = []
         for t in times:
             pose = self.ego.pose_cv(t)
             pw = pts + v * (t - t_obj)
             uv, z = cam_mod.project(pw, pose, self.K)
+            if refl is not None and len(refl):
+                ruv, rz = cam_mod.project(refl + v * (t - t_obj), pose, self.K)
+                p = self.opts.pad_px
+                ok = (rz > MIN_DEPTH_M) & (ruv[:, 0] >= -p) & (ruv[:, 0] <= self.opts.width + p) & \
+                    (ruv[:, 1] >= -p) & (ruv[:, 1] <= self.opts.height + p)
+                uvs.append(ruv[ok])
             if np.all(z <= MIN_DEPTH_M):
                 continue
             if np.any(z <= MIN_DEPTH_M):  # straddles the camera plane: project the part in front of it
                 uv, _ = cam_mod.project(clip_near(pw, z, MIN_DEPTH_M), pose, self.K)
             uvs.append(uv)
-        if not uvs:
+        if not uvs or not any(len(u) for u in uvs):
             return None
         uv = np.concatenate(uvs)
         p = self.opts.pad_px

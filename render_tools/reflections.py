@@ -1,0 +1,89 @@
+"""Where a lamp's reflection in a wet road lands on screen (numpy only, no Mitsuba).
+
+A flickering light is rendered alone inside its own crop (:mod:`render_tools.render`), in time bins, so that the
+dataset can apply the light's PWM to every pixel of the crop. Its reflection in a wet road (scene ``weather``
+``wet`` or ``rain``: a rough dielectric water film, :mod:`render_tools.street`) is light of the same lamp, so it
+flickers with it: the crop must hold it too, or the light would be lost (it is in no other image). The crop of a
+flickering light in a wet scene is therefore grown by the glossy streak of its reflection: the road points ``R``
+whose half vector between the directions to the lamp and to the camera is tilted from the road normal by
+``tan theta_h <= GLOSS_TAN_FACTOR * alpha`` (``alpha``: the roughest GGX roughness of the road's wet materials).
+A GGX distribution puts the fraction ``1 / (1 + GLOSS_TAN_FACTOR**2)`` (3.8 % at 5) of its microfacet normals
+beyond that tilt; that light, spread thinly over the rest of the road, is left out of the crop, as the diffuse
+light a lamp throws on its surroundings outside its crop always was (docs/rendering.md). A dry scene's crops are
+unchanged (no reflection region).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["GLOSS_TAN_FACTOR", "wet_road", "glossy_points"]
+
+#: Half-vector tilt bound of the reflection region, in units of the wet film's GGX roughness.
+GLOSS_TAN_FACTOR = 5.0
+#: Grid of road points searched for the reflection region: along x (towards the lamp) and y.
+GRID = (64, 32)
+
+
+def wet_road(scene: dict) -> dict | None:
+    """The wet road of a scene: ``{"alpha": roughest GGX roughness of its wet materials, "x": (x0, x1) m, "y":
+    (y0, y1) m}`` (the road surface is z = 0), or None for a dry scene (no ``weather`` or ``dry``) or one without
+    a road or without a wet (``roughplastic`` with an ``ior``) material on its road."""
+    if scene.get("weather", "dry") == "dry":
+        return None
+    mats = scene["materials"]
+    alphas, box = [], None
+    for o in scene["objects"]:
+        if o["kind"] != "road":
+            continue
+        for p in o["parts"]:
+            m = mats[p["material"]]
+            if m["type"] == "roughplastic" and "ior" in m:
+                alphas.append(float(m["alpha"]))
+            if p["shape"] == "box" and box is None:
+                box = p
+    if not alphas or box is None:
+        return None
+    (cx, cy, _), (sx, sy, _) = box["center"], box["size"]
+    return {"alpha": max(alphas), "x": (cx - sx / 2, cx + sx / 2), "y": (cy - sy / 2, cy + sy / 2)}
+
+
+def glossy_points(lamp_points: np.ndarray, camera: np.ndarray, road: dict) -> np.ndarray:
+    """Road points (M, 3) m (z = 0) whose glossy reflection of any of ``lamp_points`` (P, 3) m is seen from
+    ``camera`` (3,) m: the half vector's tilt ``tan theta_h <= GLOSS_TAN_FACTOR * road["alpha"]`` (:func:`wet_road`),
+    on a :data:`GRID` of road points, grown by one grid cell (so the points' screen box holds the streak; a
+    caller keeps the points that project into the image: the streak runs under the camera, where its projection
+    would span the whole width). Empty (0, 3) when the lamps are below the road or nothing qualifies."""
+    L = np.asarray(lamp_points, dtype=np.float64).reshape(-1, 3)
+    C = np.asarray(camera, dtype=np.float64).reshape(3)
+    L = L[L[:, 2] > 0.0]
+    if not len(L) or C[2] <= 0.0:
+        return np.zeros((0, 3))
+    k = GLOSS_TAN_FACTOR * road["alpha"]
+    x0, x1 = road["x"]
+    y0, y1 = road["y"]
+    far = float(L[:, 0].max())
+    xa, xb = max(x0, min(C[0], L[:, 0].min()) - 1.0), min(x1, far + max(far - C[0], 1.0))
+    spread = k * (float(L[:, 2].max()) + C[2]) * 2.0 + 1.0
+    ya, yb = max(y0, min(C[1], L[:, 1].min()) - spread), min(y1, max(C[1], L[:, 1].max()) + spread)
+    if xb <= xa or yb <= ya:
+        return np.zeros((0, 3))
+    gx, gy = np.linspace(xa, xb, GRID[0]), np.linspace(ya, yb, GRID[1])
+    X, Y = np.meshgrid(gx, gy, indexing="ij")
+    R = np.stack([X, Y, np.zeros_like(X)], -1).reshape(-1, 3)
+    wo = C - R
+    wo /= np.linalg.norm(wo, axis=1, keepdims=True)
+    keep = np.zeros(len(R), dtype=bool)
+    for p in L:
+        wi = p - R
+        wi /= np.linalg.norm(wi, axis=1, keepdims=True)
+        h = wi + wo
+        keep |= np.hypot(h[:, 0], h[:, 1]) <= k * h[:, 2]
+    if not keep.any():
+        return np.zeros((0, 3))
+    k2 = keep.reshape(GRID)
+    grown = k2.copy()  # grown by one grid cell: the streak's edge lies between a kept point and the next one
+    grown[1:] |= k2[:-1]
+    grown[:-1] |= k2[1:]
+    grown[:, 1:] |= grown[:, :-1].copy()
+    grown[:, :-1] |= grown[:, 1:].copy()
+    return R[grown.ravel()]

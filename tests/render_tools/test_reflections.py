@@ -1,0 +1,102 @@
+"""Reflections of flickering lamps in a wet road (issue 23, item 4): the light a lamp sends through the road's water
+film into the camera is that lamp's light, so it must be in the lamp's own crop and time bins, where the
+dataset's per-light PWM applies to it; a dry scene's crops have no reflection region.
+
+Independent answer: the same scene rendered with the lamp's group as a *static* group (one full frame, nothing
+cropped) holds all of the lamp's light wherever it lands; the crop render must hold the same light."""
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+import pytest
+
+from lfmbench.datasets.assembly import window_bin_exposure
+from render_tools import reflections as RF
+from render_tools import render as R
+from render_tools import scene as S
+
+LAMP_BOX_M = (15.0, 0.0, 1.0)
+
+
+def lamp_over_road(weather: str, speed_mps: float = 0.0) -> dict:
+    """A red tail lamp (otherlights, 1000 cd/m^2, 0.4 x 0.2 m) 15 m ahead, 1 m above a road that is dry
+    (diffuse asphalt) or wet (a water film: roughplastic, GGX alpha 0.06, index 1.33); no other light."""
+    sc = S.empty_scene("refl", speed_mps=speed_mps, pitch_deg=-4.0)
+    sc["version"] = 2
+    sc["weather"] = weather
+    sc["materials"]["road"] = ({"type": "diffuse", "rgb": [0.09, 0.09, 0.095]} if weather == "dry" else
+                               {"type": "roughplastic", "rgb": [0.05, 0.05, 0.052], "alpha": 0.06, "ior": 1.33})
+    sc["objects"].append({"id": 0, "kind": "road", "velocity_mps": [0, 0, 0],
+                          "parts": [{"shape": "box", "center": [50, 0, -0.05], "size": [120, 14, 0.1],
+                                     "material": "road"}]})
+    sc["lights"].append({"id": 0, "group": "otherlights", "kind": "tail", "instance": -1, "shape": "rect",
+                         "center": list(LAMP_BOX_M), "normal": [-1, 0, 0], "size": [0.4, 0.2], "spread_deg": 90.0,
+                         "spectrum": {"model": "led", "peak_nm": 630.0, "fwhm_nm": 18.0}, "luminance_cd_m2": 1000.0})
+    return S.validate_scene(sc)
+
+
+OPTS = dict(width=160, height=90, spp=16, light_spp=64, bins=4, frames=1, aux=False, seed=3)
+
+
+def test_wet_road_region_and_dry_scene():
+    """The reflection region of the geometry: on the road between camera and lamp, narrow across; none when
+    dry (the crop is the lamp's own box)."""
+    wet, dry = lamp_over_road("wet"), lamp_over_road("dry")
+    road = RF.wet_road(wet)
+    assert RF.wet_road(dry) is None and road["alpha"] == 0.06
+    pts = RF.glossy_points(np.array([LAMP_BOX_M]), np.array([0.0, 0.0, 1.4]), road)
+    # mirror point of the lamp seen from the camera: x = 15 * 1.4 / (1.4 + 1.0) = 8.75 m
+    assert pts[:, 0].min() < 8.75 < pts[:, 0].max() <= 15.5 and np.abs(pts[:, 1]).max() < 1.0
+    gw, gd = R.SceneGeometry(wet, R.RenderOptions(**OPTS)), R.SceneGeometry(dry, R.RenderOptions(**OPTS))
+    lw = gw.light_bbox(wet["lights"][0], 0.01, 0.0, 0.02, moving=True)
+    ld = gd.light_bbox(dry["lights"][0], 0.01, 0.0, 0.02, moving=True)
+    assert ld == gd.light_bbox(dry["lights"][0], 0.01, 0.0, 0.02, moving=False)  # dry: no reflection region
+    assert lw[0] <= ld[0] and lw[1] <= ld[1] and lw[3] >= ld[3] and lw[2] > ld[2] + 20  # grown down the road
+    assert (lw[3] - lw[1]) < 0.5 * OPTS["width"]  # not the whole width (the streak is narrow)
+
+
+@pytest.mark.jit
+@pytest.mark.parametrize("weather", ["dry", "wet"])
+def test_reflection_is_in_the_lamps_crop(weather):
+    sc = lamp_over_road(weather)
+    frame = next(R.render_frames(sc, R.RenderOptions(**OPTS)))
+    (lid, (y0, x0, y1, x1), arr), = frame["lights"]["otherlights"]
+    static = copy.deepcopy(sc)
+    static["groups"]["otherlights"]["flicker"] = False
+    full = next(R.render_frames(static, R.RenderOptions(**OPTS)))["static"]["otherlights"]["short"]
+    lamp_only = R.SceneGeometry(sc, R.RenderOptions(**OPTS)).light_bbox(sc["lights"][0], 0.01, 0.0, 0.02)
+    ly0, lx0, ly1, lx1 = lamp_only
+    outside_lamp = full.sum() - full[:, ly0:ly1, lx0:lx1].sum()  # reflection and diffuse light on the road
+    in_crop = full[:, y0:y1, x0:x1].sum() - full[:, ly0:ly1, lx0:lx1].sum()
+    if weather == "wet":
+        assert outside_lamp > 0.1 * full[:, ly0:ly1, lx0:lx1].sum()  # the reflection is a fifth of the lamp
+        assert in_crop > 0.99 * outside_lamp  # measured 99.8 %: all of it is in the lamp's crop
+        # the crop render holds the same light as the full frame there (independent estimates: 2 % noise)
+        assert arr.mean(0).sum() == pytest.approx(full[:, y0:y1, x0:x1].sum(), rel=0.02)
+    else:
+        assert (y0, x0, y1, x1) == lamp_only  # no reflection region, no extra pixels
+        assert outside_lamp < 0.02 * full.sum()  # a dry road sends back little of it
+
+
+@pytest.mark.jit
+def test_lamp_and_reflection_share_every_bins_pwm_weight():
+    """Moving camera (bins differ): in every time bin the reflection carries the same fraction of the lamp's
+    light, so a PWM weight per bin scales both alike: the captured reflection / lamp ratio under a PWM equals
+    the always-on ratio."""
+    sc = lamp_over_road("wet", speed_mps=12.0)
+    opts = R.RenderOptions(**OPTS)
+    frame = next(R.render_frames(sc, opts))
+    (lid, (y0, x0, y1, x1), arr), = frame["lights"]["otherlights"]
+    geo = R.SceneGeometry(sc, opts)
+    ly1 = geo.light_bbox(sc["lights"][0], 0.01, 0.0, opts.capture_window_s, moving=False)[2] - y0
+    lamp = arr[:, :, :ly1].sum(axis=(1, 2, 3))  # (K,) the lamp's rows of the crop
+    refl = arr[:, :, ly1:].sum(axis=(1, 2, 3))  # (K,) the road below it
+    assert refl.min() > 0.05 * lamp.max()
+    ratio = refl / lamp
+    assert np.all(np.abs(ratio / ratio.mean() - 1) < 0.1), ratio  # same share of the lamp's light in every bin
+    tm = R.frame_timing(sc, opts, 0)
+    w = window_bin_exposure(np.asarray(tm["bin_edges"]), np.array([tm["short"][0]]), tm["short"][1] - tm["short"][0],
+                            1 / 97.0, 0.25, 0.0013)[0]  # (K,) s at level 1 per bin
+    assert w.std() > 0  # the PWM differs between bins
+    assert (w @ refl) / (w @ lamp) == pytest.approx(refl.sum() / lamp.sum(), rel=0.05)
