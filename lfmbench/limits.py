@@ -41,8 +41,8 @@ LIMITS: dict[str, tuple[int, str]] = {
                                "one EXR part per frame and group, one padded entry per sample and one frozen "
                                "draw per test sample; the busiest rendered scene has 66"),
     "mesh_triangles": (2_000_000, "triangles of all meshes of one scene file (inline or user asset files, counted "
-                                  "from what a file declares before its arrays are read; a generated lfmbench-v2 "
-                                  "scene has < 60,000)"),
+                                  "from what a file declares before its arrays are read; the meshes of a generated "
+                                  "lfmbench-v2 scene hold about 1,600)"),
     "mesh_file_bytes": (256 << 20, "size of one user mesh file (OBJ, PLY, glTF/GLB) a scene file references"),
 }
 
