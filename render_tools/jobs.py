@@ -583,6 +583,12 @@ def plan_render(req: RenderRequest, backend: Backend | None = None) -> RenderPla
                 fail(f"--scene {p}: cannot read scene JSON: {str(exc).removeprefix(f'{p}: cannot read JSON: ')}")
             if not isinstance(sc, dict):
                 fail(f"--scene {p}: a scene file must hold a JSON object")
+            try:  # the user's own mesh files (OBJ, PLY, glTF), resolved inside the scene file's folder
+                from render_tools.assets import expand_assets  # noqa: PLC0415
+
+                sc = expand_assets(sc, p)
+            except ValueError as exc:
+                fail(f"--scene {p}: {exc}")
             scene_dicts.append(sc)
     backend = backend or default_backend()
     # check options and scene files before anything is written (unknown fields, impossible values)
