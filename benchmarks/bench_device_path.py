@@ -192,6 +192,26 @@ def _probe_syncs(fn, dev) -> list | None:
     return sorted(((n, k) for k, n in where.items()), reverse=True)
 
 
+def profile_device(root, dev, batch: int, out: Path | None) -> None:
+    """Where the device path's GPU time goes: torch.profiler over one batch (after a warm-up), the top kernels."""
+    from torch.profiler import ProfilerActivity, profile
+
+    from lfmbench.datasets.device import DeviceBatches
+
+    db = DeviceBatches(_dataset(root, 256, batch), batch, dev, seed=0)
+    db.batch(range(batch))
+    _sync(dev)
+    with profile(activities=[ProfilerActivity.CPU, ProfilerActivity.CUDA]) as prof:
+        db.batch(range(batch))
+        _sync(dev)
+    table = prof.key_averages().table(sort_by="cuda_time_total", row_limit=25, max_name_column_width=60)
+    print(table)
+    if out is not None:
+        from lfmbench.fileio import atomic_write_text
+
+        atomic_write_text(out, table)
+
+
 def time_train(root, dev, data, steps, batch, crop, workers):
     from lfmbench.train import train
 
@@ -219,6 +239,8 @@ def main(argv=None) -> int:
                     help="comma-separated rows to measure (default: all)")
     ap.add_argument("--no-doc", action="store_true")
     ap.add_argument("--json", type=Path)
+    ap.add_argument("--profile", type=Path, default=None,
+                    help="also profile one batch of 256 on the device and write the kernel table here")
     args = ap.parse_args(argv)
     if args.device == "auto":
         args.device = "cuda" if torch.cuda.is_available() else "cpu"
@@ -252,6 +274,8 @@ def main(argv=None) -> int:
             sps, load_s, per_scene, peak, syncs = time_device(root, dev, b, n_b, passes, program=False)
             add(path="device (pieces per sample)", batch=b, samples_per_s=sps, load_s=load_s,
                 resident_bytes_per_scene=per_scene, peak_bytes=peak)
+    if args.profile is not None:
+        profile_device(root, dev, 256 if gpu else 8, args.profile)
     step_b = 64 if gpu else 4
     if "step" in wanted:
         sps, syncs = time_step(root, dev, step_b, 128, passes)

@@ -88,6 +88,9 @@ def exposures_s(batch: dict) -> tuple[torch.Tensor, torch.Tensor]:
     """
     meta = batch.get("meta", {})
     b = batch["gt"].shape[0] if "gt" in batch else _get(batch, "spd_e").shape[0]
+    fast = _device_exposures(meta, b)
+    if fast is not None:
+        return fast
     ts, tl = [], []
     for i in range(b):
         s, l_ = _meta_value(meta, _SHORT_KEYS, i), _meta_value(meta, _LONG_KEYS, i)
@@ -100,6 +103,21 @@ def exposures_s(batch: dict) -> tuple[torch.Tensor, torch.Tensor]:
         ts.append(float(s))
         tl.append(float(l_))
     return torch.tensor(ts, dtype=torch.float64), torch.tensor(tl, dtype=torch.float64)
+
+
+def _device_exposures(meta, b: int) -> tuple[torch.Tensor, torch.Tensor] | None:
+    """The exposures of a collated ``meta`` whose ``exposure_short_s``/``exposure_long_s`` are (B,) tensors on a
+    GPU (the device path's batches), kept there: read sample by sample they would wait for the device at every
+    value. Their positivity is asserted on the device (an error surfaces at the next synchronisation)."""
+    if not isinstance(meta, dict):
+        return None
+    s, l_ = meta.get("exposure_short_s"), meta.get("exposure_long_s")
+    if not (isinstance(s, torch.Tensor) and isinstance(l_, torch.Tensor) and s.device.type != "cpu"
+            and s.shape == (b,) and l_.shape == (b,)):
+        return None
+    s, l_ = s.to(torch.float64), l_.to(torch.float64).to(s.device)
+    torch._assert_async(torch.all((s > 0) & (l_ > 0)), "exposures must be > 0 s")
+    return s, l_
 
 
 def _bcast(v: torch.Tensor, like: torch.Tensor) -> torch.Tensor:

@@ -199,7 +199,8 @@ class UNetFusion(nn.Module):
         per_frame = torch.cat([self._log(hcg), self._log(lcg), self._log(spd), sat.to(hcg.dtype)], dim=2).float()
         nf = per_frame.shape[1]
         ctx = self.config.context_frames
-        frames = [per_frame[:, (torch.arange(nf) + d).clamp(0, nf - 1)] for d in range(-ctx, ctx + 1)]
+        at = torch.arange(nf, device=per_frame.device)
+        frames = [per_frame[:, (at + d).clamp(0, nf - 1)] for d in range(-ctx, ctx + 1)]
         ts, tl = exposures_s(batch)
         ratio = (torch.log(tl / ts) / math.log(100.0)).float().to(per_frame.device)
         ratio = ratio.reshape(-1, 1, 1, 1, 1).expand(per_frame.shape[0], nf, 1, *per_frame.shape[-2:])

@@ -123,7 +123,8 @@ def mu_law(h: torch.Tensor, mu: float = MU_DEFAULT) -> torch.Tensor:
     """
     if mu <= 0:
         raise ValueError(f"mu must be > 0, got {mu}")
-    return torch.log1p(mu * h) / torch.log1p(torch.tensor(mu, dtype=h.dtype, device=h.device))
+    # (a fill on the device, not a copy from the host: a copy would wait for the device's queue)
+    return torch.log1p(mu * h) / torch.log1p(torch.full((), mu, dtype=h.dtype, device=h.device))
 
 
 def psnr(pred: torch.Tensor, gt: torch.Tensor, peak: float | torch.Tensor = 1.0) -> torch.Tensor:
