@@ -12,7 +12,7 @@ from types import MappingProxyType
 from typing import Mapping
 
 __all__ = ["GROUPS", "LIGHT_GROUPS", "LIGHT_KINDS", "VEHICLE_KINDS", "OBJECT_KINDS", "WEATHERS", "SPECTRUM_MODELS",
-           "PHOTODIODES", "CAPTURES", "CLASSIC_BASELINES", "LEARNED_BASELINES"]
+           "PHOTODIODES", "CAPTURES", "CLASSIC_BASELINES", "PLAN_BASELINES", "LEARNED_BASELINES"]
 
 #: Light groups (upstream ISET-LFM names + traffic signals); each group is one radiance layer of a corpus.
 GROUPS: tuple[str, ...] = ("headlights", "streetlights", "otherlights", "skymap", "signals")
@@ -53,6 +53,10 @@ CAPTURES: tuple[str, ...] = ("lpd_hcg", "lpd_lcg", "spd")
 #: list them in its help.
 CLASSIC_BASELINES: tuple[str, ...] = ("lpd_only", "spd_only", "upstream_saturated", "saturated_exposure_corrected",
                                       "flicker_aware", "flicker_aware_two_sided", "temporal")
+#: Rule-based baselines of the other capture plans (LOFIC, staggered, chopped, single exposure): each a function of
+#: that name in :mod:`lfmbench.baselines.plan_merge`; the architecture registry
+#: (:data:`lfmbench.sensor.plan.ARCHITECTURES`) names the one that is each architecture's standard HDR merge.
+PLAN_BASELINES: tuple[str, ...] = ("exposure_select",)
 #: Learned baselines: name -> the module that defines the registered method ``name`` (backed by a checkpoint) and
 #: ``TRAINING`` (how ``lfmbench train --method NAME`` trains it); :data:`lfmbench.baselines.LEARNED`. Here, without
 #: torch, so that the command line can list them in its help.

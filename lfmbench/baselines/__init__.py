@@ -1,4 +1,5 @@
-"""Fusion baselines for split-pixel LED-flicker mitigation, registered by snake_case name.
+"""Fusion baselines for LED-flicker mitigation (split pixel and the other capture plans), registered by snake_case
+name (:func:`methods_for`: those of one architecture).
 
 A fusion method is any callable ``method(batch: dict) -> Tensor (B, F, 1, H, W)`` in the ``gt`` units
 (``docs/contracts.md`` section 3). :data:`REGISTRY` maps the built-in names to callables;
@@ -9,9 +10,9 @@ from __future__ import annotations
 import importlib
 from collections.abc import Callable
 
-from lfmbench.baselines import classic
+from lfmbench.baselines import classic, plan_merge
 from lfmbench.baselines.checkpoint import lazy_method
-from lfmbench.vocabulary import CLASSIC_BASELINES, LEARNED_BASELINES
+from lfmbench.vocabulary import CLASSIC_BASELINES, LEARNED_BASELINES, PLAN_BASELINES
 
 Method = Callable[[dict], "object"]
 
@@ -27,8 +28,21 @@ LEARNED = LEARNED_BASELINES
 REGISTRY: dict[str, Method] = {
     **{name: getattr(classic, name) for name in CLASSIC_BASELINES},
     **{name: lazy_method(module, name) for name, module in LEARNED.items()},
+    **{name: getattr(plan_merge, name) for name in PLAN_BASELINES},
 }
-globals().update({name: REGISTRY[name] for name in CLASSIC_BASELINES})  # lfmbench.baselines.lpd_only, ...
+globals().update({name: REGISTRY[name] for name in (*CLASSIC_BASELINES, *PLAN_BASELINES)})  # lpd_only, ...
+
+
+def methods_for(architecture: str) -> list[str]:
+    """The registered baselines that apply to a sensor architecture, in leaderboard order: the split-pixel ones
+    (rule-based and learned) for ``split_pixel``, the capture-plan merges (:data:`PLAN_BASELINES`) otherwise."""
+    from lfmbench.sensor.plan import ARCHITECTURES  # noqa: PLC0415
+
+    if architecture not in ARCHITECTURES:
+        raise ValueError(f"architecture must be one of {list(ARCHITECTURES)}, got {architecture!r:.40}")
+    if architecture == "split_pixel":
+        return [*CLASSIC_BASELINES, *LEARNED]
+    return list(PLAN_BASELINES)
 
 
 class MethodNotFoundError(ValueError):
@@ -71,5 +85,5 @@ def get_method(spec: str | Method) -> Method:
                               "or give 'package.module:function'")
 
 
-__all__ = ["REGISTRY", "LEARNED", "get_method", "MethodNotFoundError", "lpd_only", "spd_only", "upstream_saturated",
+__all__ = ["REGISTRY", "LEARNED", "get_method", "methods_for", "MethodNotFoundError", "exposure_select", "lpd_only", "spd_only", "upstream_saturated",
            "saturated_exposure_corrected", "flicker_aware", "flicker_aware_two_sided", "temporal"]

@@ -23,17 +23,19 @@ One definition each: the bin grid (:func:`bin_edges`), the window timing (:func:
 """
 from __future__ import annotations
 
-from typing import Any, Mapping, Sequence
+from typing import Any, Mapping, NamedTuple, Sequence
 
 import numpy as np
 import torch
 
 from lfmbench.datasets.projection import SceneLayers
 from lfmbench.flicker import pwm_exposure
+from lfmbench.sensor.plan import resolve_windows, total_length_s
 from lfmbench.vocabulary import PHOTODIODES
 
 __all__ = ["NOISE_STREAMS", "SENSOR_OUTPUTS", "bin_edges", "window_bin_exposure", "window_starts", "row_window_starts",
-           "check_line_time", "visible_lights", "compose_frame", "light_index", "add_rgb", "assemble_sample"]
+           "check_line_time", "visible_lights", "compose_frame", "light_index", "add_rgb", "assemble_sample",
+           "PlanExposure", "STORED_WINDOW_LAYER", "STATIC_WINDOW_RULES", "static_window_source", "plan_exposures", "compose_plan_frame"]
 
 #: Where a sample's sensor noise comes from: ``"generator"``, ``torch.Generator().manual_seed(noise_seed)`` (the
 #: numbers of every published benchmark result); ``"counter"``, counter-based streams of the noise seed
@@ -231,6 +233,171 @@ def compose_frame(layers: SceneLayers, meta: dict, frame: int, crop: tuple[int, 
     return out
 
 
+class PlanExposure(NamedTuple):
+    """One exposure of a capture plan, resolved for a scene (:func:`plan_exposures`).
+
+    key: the exposure key (:attr:`lfmbench.sensor.SensorPreset.exposures`). fill_factor: its photodiode's, 1.
+    windows: ``((start_s, length_s), ...)`` relative to the frame start, s. rolling: rows start ``y * line_time_s``
+    later. line_time_s: s.
+    """
+
+    key: str
+    fill_factor: float
+    windows: tuple
+    rolling: bool
+    line_time_s: float
+
+    @property
+    def length_s(self) -> float:
+        """Integration time, s (the summed window lengths)."""
+        return total_length_s(self.windows)
+
+
+#: Static windows a corpus stores, and the photodiode key under which a plan's projected layers hold each (the
+#: layers of a plan are projected with a unit fill factor: ``lpd`` the short window, ``spd`` the long one).
+STORED_WINDOW_LAYER = {"short": "lpd", "long": "spd"}
+
+
+def static_window_source(start_s: float, length_s: float, timing: Mapping[str, Any]) -> tuple[str, bool]:
+    """Which stored static window stands for the window ``[start_s, start_s + length_s)`` (s, from the frame start):
+    ``(name, exact)``. A window equal to the short or long one (to 1e-9 of its length) is exact; any other gets the
+    smallest stored window that contains it, else the long one (the ``nearest`` rule measured in
+    docs/sensor-architectures.md, "Static radiance for any window")."""
+    ts, tl = float(timing["short_exposure_s"]), float(timing["long_exposure_s"])
+    sa = (tl - ts) / 2.0
+    tol = 1e-9 * max(length_s, 1e-12)
+    if abs(start_s - sa) <= tol and abs(length_s - ts) <= tol:
+        return "short", True
+    if abs(start_s) <= tol and abs(length_s - tl) <= tol:
+        return "long", True
+    if start_s >= sa - tol and start_s + length_s <= sa + ts + tol:
+        return "short", False
+    return "long", False
+
+
+#: How a plan's window that a corpus does not store for its static groups is served (``LFMCaptureDataset``
+#: ``static_windows``): ``"nearest"``, the smallest stored window containing it (:func:`static_window_source`;
+#: error measured in docs/sensor-architectures.md), or ``"exact"``, an error naming preset and corpus.
+STATIC_WINDOW_RULES = ("nearest", "exact")
+
+
+def plan_exposures(preset, meta: Mapping[str, Any], shutter: str, line_time_s: float | None = None,
+                   source: str = "corpus", static_windows: str = "nearest") -> list[PlanExposure]:
+    """The exposures of ``preset``'s plan for a scene: windows resolved against ``meta["timing"]``, readout from the
+    capture, else the preset, else ``shutter`` / ``line_time_s`` (else the corpus's line time).
+
+    Raises:
+        ValueError: a window (with the rolling rows' delay) leaves the corpus's capture window, or
+            (``static_windows="exact"``) is not one the corpus stores for its static groups: naming the preset
+            file, the capture's field and ``source`` (the corpus).
+    """
+    if static_windows not in STATIC_WINDOW_RULES:
+        raise ValueError(f"static_windows must be one of {STATIC_WINDOW_RULES}, got {static_windows!r:.40}")
+    tm = meta["timing"]
+    cw = float(tm["capture_window_s"])
+    out = []
+    for key, caps in preset.exposures.items():
+        spec = preset.captures[key]
+        ro = preset.capture_readout(key)
+        rolling = (ro.shutter or shutter) == "rolling"
+        lt = ro.line_time_s if ro.line_time_s is not None else (
+            float(tm.get("line_time_s", 0.0)) if line_time_s is None else float(line_time_s))
+        wins = resolve_windows(spec.exposure, tm)
+        last = (int(meta["height"]) - 1) * lt if rolling else 0.0
+        for i, (a, n) in enumerate(wins):
+            if a + n + last > cw * (1 + 1e-9):
+                raise ValueError(f"{preset.source}: field 'captures.{key}.exposure' window {i} ends at "
+                                 f"{(a + n + last) * 1e3:.4g} ms{' (last row)' if rolling else ''}, after the capture "
+                                 f"window of {source} ({cw * 1e3:.4g} ms): the corpus has no radiance there")
+            if static_windows == "exact" and not static_window_source(a, n, tm)[1]:
+                raise ValueError(f"{preset.source}: field 'captures.{key}.exposure' window {i} "
+                                 f"[{a * 1e3:.4g}, {(a + n) * 1e3:.4g}) ms is not a window {source} stores for its "
+                                 "static groups (short or long); use static_windows='nearest' (the measured "
+                                 "approximation, docs/sensor-architectures.md) or a plan of stored windows")
+        out.append(PlanExposure(key, preset.photodiodes[spec.photodiode].fill_factor, wins, rolling, lt))
+    return out
+
+
+def compose_plan_frame(layers: SceneLayers, meta: dict, frame: int, crop: tuple[int, int, int, int],
+                       params: dict[int, dict], group_params: dict[str, dict], exposures: Sequence[PlanExposure],
+                       reference: str) -> dict:
+    r"""Mean photo-electrons of every exposure of a capture plan in one frame's crop, and the ground truth.
+
+    .. math:: \bar e_x(y, x) = FF_x \Big[\sum_w R^{static}_{s(w)}(y, x)\,|w|
+              + \sum_j \sum_k R^j_k(y, x) \sum_w \Phi_j\big([t_k, t_{k+1}) \cap (w + \delta_x(y))\big)\Big]
+
+    over the windows w of exposure x (a chopped exposure: the union), :math:`\delta_x(y) = y\,t_{line}` for a
+    rolling readout (0 global), :math:`s(w)` the stored static window standing for w
+    (:func:`static_window_source`), :math:`\Phi_j` the exact PWM exposure of light j. ``layers`` are projected with a
+    unit fill factor (:data:`STORED_WINDOW_LAYER`). Ground truth: the reference exposure with every light at its
+    time-averaged level (duty x ON), noise-free, unclipped.
+
+    Args:
+        layers, meta, frame, crop, params, group_params: as :func:`compose_frame`.
+        exposures: :func:`plan_exposures` of the scene. reference: the key of the reference exposure.
+
+    Returns:
+        ``{exposure key: (h, w), "gt": (h, w)}`` float32 tensors in e-.
+    """
+    tm = meta["timing"]
+    y0, x0, h, w = crop
+    t0 = frame / float(meta["fps"])
+    rows = np.arange(y0, y0 + h, dtype=np.float64)
+    crop_of = (slice(y0, y0 + h), slice(x0, x0 + w))
+    src = {x.key: [static_window_source(a, n, tm)[0] for a, n in x.windows] for x in exposures}
+    out: dict[str, torch.Tensor] = {}
+    for x in exposures:
+        acc = torch.zeros(h, w)
+        for (_a, n), s_ in zip(x.windows, src[x.key]):
+            acc += layers.static[STORED_WINDOW_LAYER[s_]][frame][crop_of] * float(n)
+        out[x.key] = acc
+    ref = next(x for x in exposures if x.key == reference)
+    out["gt"] = out[reference].clone()
+
+    def starts(x: PlanExposure) -> np.ndarray:
+        """(Wn, R) window starts (s, absolute): one row for a global readout."""
+        a = np.array([t0 + a_ for a_, _ in x.windows])[:, None]
+        return a + (rows[None, :] - 0.0) * x.line_time_s if x.rolling else a
+
+    for g, rates in layers.group_static.items():
+        p = group_params[g]
+        for x in exposures:
+            st = starts(x)
+            for i, ((_a, n), s_) in enumerate(zip(x.windows, src[x.key])):
+                wgt = pwm_exposure(st[i] - p["phase_s"], n, p["period_s"], p["duty"], rise_time=p["rise_s"],
+                                   fall_time=p["fall_s"])
+                r = rates[STORED_WINDOW_LAYER[s_]][frame][crop_of]
+                out[x.key] += r * torch.from_numpy(np.asarray(wgt, dtype=np.float64)).float().reshape(-1, 1)
+                if x.key == reference:
+                    out["gt"] += r * float(p["duty"] * n)
+    visible: dict[int, list] = {}
+    for _light_id, p, box0, inter, rates in visible_lights(layers, frame, crop, params):
+        visible.setdefault(int(rates["lpd"].shape[0]), []).append((p, box0, inter, rates))
+    for K, group in visible.items():
+        edges = t0 + bin_edges(float(tm["capture_window_s"]), K)
+        pa = {k: np.array([g_[0][k] for g_ in group], dtype=np.float64)[:, None, None, None]
+              for k in ("period_s", "duty", "phase_s", "rise_s", "fall_s")}
+        wts = {}
+        for key, x, level in [*((x.key, x, "pwm") for x in exposures), ("gt", ref, "mean")]:
+            length = np.array([n for _, n in x.windows], dtype=np.float64)[:, None, None]
+            wgt = window_bin_exposure(edges, starts(x), length, pa["period_s"], pa["duty"], pa["phase_s"],
+                                      pa["rise_s"], pa["fall_s"], level, check=False)     # (L, Wn, R, K) s
+            wts[key] = torch.from_numpy(np.ascontiguousarray(wgt.sum(1))).float()       # (L, R, K)
+        for i, (_p, (by0, bx0), (iy0, iy1, ix0, ix1), rates) in enumerate(group):
+            win = (slice(iy0 - y0, iy1 - y0), slice(ix0 - x0, ix1 - x0))
+            sub = rates["lpd"][:, iy0 - by0:iy1 - by0, ix0 - bx0:ix1 - bx0]               # (K, hh, ww) e-/s
+            for key, wt in wts.items():
+                x_ = ref if key == "gt" else next(e for e in exposures if e.key == key)
+                if x_.rolling:
+                    out[key][win] += torch.einsum("kyx,yk->yx", sub, wt[i, iy0 - y0:iy1 - y0])
+                else:
+                    out[key][win] += torch.tensordot(wt[i, 0], sub, dims=1)
+    for x in exposures:
+        out[x.key].mul_(x.fill_factor)
+    out["gt"].mul_(ref.fill_factor)
+    return out
+
+
 def light_index(mask: torch.Tensor, lights: Sequence[Mapping]) -> torch.Tensor:
     """Index into the sample's light list per pixel, -1 where no listed light.
 
@@ -251,16 +418,19 @@ def light_index(mask: torch.Tensor, lights: Sequence[Mapping]) -> torch.Tensor:
 
 def add_rgb(sample: dict, preset, want: set) -> None:
     """Add ``lpd_lcg_rgb``, ``spd_rgb``, ``gt_rgb`` (*, 3, h, w) to ``sample`` (in place) from its (*, 1, h, w)
-    ``lpd_lcg_e``, ``spd_e``, ``gt`` (any leading shape), then drop those the caller did not ask for."""
+    ``lpd_lcg_e``, ``spd_e``, ``gt`` (any leading shape; another capture plan: ``<capture>_rgb`` of every capture),
+    then drop those the caller did not ask for."""
     from kornia.color import raw_to_rgb
     cfa = preset.cfa.to_kornia()
+    # split pixel: LPD-LCG and SPD (as always); other plans: every capture
+    caps = ("lpd_lcg", "spd") if preset.architecture == "split_pixel" else tuple(preset.captures)
     # kornia's bilinear demosaic; crops start at even offsets, so the Bayer phase is the preset's
-    for src, dst in (("lpd_lcg_e", "lpd_lcg_rgb"), ("spd_e", "spd_rgb"), ("gt", "gt_rgb")):
+    for src, dst in (*((f"{c}_e", f"{c}_rgb") for c in caps), ("gt", "gt_rgb")):
         x = sample[src].float()
         sample[dst] = raw_to_rgb(x.reshape(-1, *x.shape[-3:]), cfa).reshape(*x.shape[:-3], 3, *x.shape[-2:])
     if "input_referred" not in want:
-        for k in ("lpd_hcg_e", "lpd_lcg_e", "spd_e"):
-            del sample[k]
+        for k in preset.captures:
+            del sample[f"{k}_e"]
     if "gt" not in want:
         del sample["gt"]
 
@@ -271,22 +441,23 @@ def assemble_sample(want: set, cap: Mapping[str, torch.Tensor] | None, gt: torch
 
     Args:
         want: the requested outputs (a subset of ``OUTPUTS`` of :mod:`lfmbench.datasets.capture`).
-        cap: the result of :func:`lfmbench.sensor.simulate_split_pixel_electrons` on (*, 1, h, w) inputs, or None
-            when no output in :data:`SENSOR_OUTPUTS` is requested.
+        cap: the result of :func:`lfmbench.sensor.simulate_plan_electrons` (or, split pixel,
+            :func:`lfmbench.sensor.simulate_split_pixel_electrons`) on (*, 1, h, w) inputs, or None when no output
+            in :data:`SENSOR_OUTPUTS` is requested.
         gt: (*, 1, h, w) ground truth, e-, or None when neither ``gt`` nor ``rgb`` is requested.
-        preset: the sensor preset (its CFA for ``rgb``).
+        preset: the sensor preset (its captures name the keys; its CFA for ``rgb``).
         light_index: (*, 1, h, w) int64, when requested. depth: (*, 1, h, w) m, when requested.
 
     Returns:
-        ``lpd_hcg``, ``lpd_lcg``, ``spd`` (DN), ``*_e`` (e-), ``saturated``, ``gt``, ``light_index``, ``depth``,
-        ``*_rgb``: those the request implies (``meta`` is added by the caller).
+        the captures by name (split pixel: ``lpd_hcg``, ``lpd_lcg``, ``spd``; DN), ``*_e`` (e-), ``saturated``,
+        ``gt``, ``light_index``, ``depth``, ``*_rgb``: those the request implies (``meta`` is added by the caller).
     """
     sample: dict[str, Any] = {}
     if cap is not None:
         if "raw" in want:
-            sample.update({k: cap[k] for k in ("lpd_hcg", "lpd_lcg", "spd")})
+            sample.update({k: cap[k] for k in preset.captures})
         if want & {"input_referred", "rgb"}:
-            sample.update({k: cap[k] for k in ("lpd_hcg_e", "lpd_lcg_e", "spd_e")})
+            sample.update({f"{k}_e": cap[f"{k}_e"] for k in preset.captures})
         if "saturated" in want:
             sample["saturated"] = cap["saturated"]
     if "gt" in want or "rgb" in want:

@@ -28,10 +28,11 @@ from lfmbench import sensor as _sensor
 from lfmbench.corpus import Corpus
 from lfmbench.datasets.counter_draws import (SceneEntities, counter_scene_draw, crop_origin, noise_seeds,
                                              place_uniforms, start_frame)
-from lfmbench.datasets.assembly import (NOISE_STREAMS, SENSOR_OUTPUTS, assemble_sample, check_line_time, compose_frame,
-                                        light_index)
+from lfmbench.datasets.assembly import (NOISE_STREAMS, SENSOR_OUTPUTS, STATIC_WINDOW_RULES, assemble_sample,
+                                        check_line_time, compose_frame, compose_plan_frame, light_index,
+                                        plan_exposures, static_window_source)
 from lfmbench.datasets.pieces import capture_pieces
-from lfmbench.datasets.projection import SceneLayers, aux_channels, load_or_build
+from lfmbench.datasets.projection import SceneLayers, aux_channels, load_or_build, unit_projection_preset
 from lfmbench.datasets.pwm import PWMConfig, draw_scene_pwm, frozen_test_rng, load_pwm_config
 from lfmbench.fileio import atomic_write_json, load_json
 from lfmbench.flicker import pwm_exposure
@@ -113,7 +114,8 @@ def _warm_cpu_kernels(noise: bool, preset) -> None:
     pwm_exposure(np.zeros(1), 1e-3, 1e-2, 0.5, check=False)
     if noise:
         _sensor.shot_noise(torch.zeros(1), torch.Generator().manual_seed(0))
-    warm_fused(preset, noise)         # the sensor chain's compiled passes (float32, the dataset's dtype)
+    if preset.architecture == "split_pixel":
+        warm_fused(preset, noise)     # the sensor chain's compiled passes (float32, the dataset's dtype)
 
 
 # ----------------------------------------------------------------------------------------------------------
@@ -135,7 +137,9 @@ class LFMCaptureDataset(Dataset):
     Args:
         root: corpus directory (``lfmbench render --out DIR`` or ``lfmbench import-isetlfm``).
         split: ``"train"``, ``"val"``, ``"test"`` (PWM draws frozen in ``<root>/test_params.json``) or ``"all"``.
-        sensor: preset name (``"ovt"``, ``"imx490"``), YAML path or :class:`lfmbench.sensor.SensorPreset`.
+        sensor: preset name (``"ovt"``, ``"imx490"``, ``"lofic"``, ``"staggered"``, ``"chopped"``, ``"single"``),
+            YAML path or :class:`lfmbench.sensor.SensorPreset`: its capture plan (docs/sensor.md) names the sample's
+            capture keys. Architectures other than the split pixel run on the per-sample path (not ``pieces``).
         frames: number of consecutive frames F per sample (<= the corpus frames).
         frame_start: which F consecutive frames of a longer sequence a sample shows: an int s (frames
             s .. s + F - 1 of every scene; default 0, the first F; only frames < s + F are read) or
@@ -168,6 +172,10 @@ class LFMCaptureDataset(Dataset):
             bins, PWM draws, noise seed, masks, depth, meta; :func:`lfmbench.datasets.batched.capture_pieces`),
             to be batched by :func:`~lfmbench.datasets.batched.collate_pieces` and simulated on the training
             device by :func:`~lfmbench.datasets.batched.simulate_batch` (docs/datasets.md, "Captures on the GPU").
+        static_windows: how a capture plan's window that the corpus does not store for its static groups (it
+            stores the short and long windows) is served: ``"nearest"`` (default: the smallest stored window
+            containing it, else the long one; error measured in docs/sensor-architectures.md; samples record it in
+            ``meta["static_windows"]``) or ``"exact"`` (such a plan is refused, naming preset and corpus).
         noise_streams: where a sample's random numbers come from (:data:`lfmbench.datasets.assembly.NOISE_STREAMS`):
             ``"generator"`` (default; the numbers of the published results): PWM, crop and window start from a
             numpy generator seeded ``(seed, epoch, index)``, the sensor noise from a torch generator seeded by the
@@ -183,8 +191,12 @@ class LFMCaptureDataset(Dataset):
         -1 none); ``depth``: (F, 1, h, w) m; ``rgb`` (on request): ``lpd_lcg_rgb``, ``spd_rgb``, ``gt_rgb``
         (F, 3, h, w) demosaiced (kornia bilinear); ``meta``: scene_id, index, epoch, num_lights, light_id,
         flicker, freq_hz, duty, phase_s (L,) padded, exposure_short_s, exposure_long_s (s), crop (y0, x0, h, w),
-        sensor, shutter, flicker_mode ("bins" or "per_frame_weight"), frame_start (index of the sample's first
-        frame in the scene's sequence).
+        sensor, architecture, shutter, static_windows ("exact" or "nearest"), flicker_mode ("bins" or
+        "per_frame_weight"), frame_start (index of the sample's first frame in the scene's sequence).
+        Another capture plan (``sensor="lofic"``, ...): its captures by name instead of ``lpd_hcg``, ``lpd_lcg``,
+        ``spd`` (DN), ``<capture>_e`` (e-, input-referred to the plan's reference capture, the ``gt`` units),
+        ``saturated`` (F, N, h, w) with one channel per capture in plan order, ``gt``: the reference capture's
+        photodiode over its windows with every LED at its time-averaged level.
     """
 
     def __init__(self, root: str | os.PathLike, split: str = "train", sensor: Any = "ovt", frames: int = 3,
@@ -193,13 +205,17 @@ class LFMCaptureDataset(Dataset):
                  samples_per_scene: int = 1, noise: bool = True, optics: bool = True, max_lights: int | None = None,
                  cache_dir: str | os.PathLike | bool | None = None, cache_scenes: int = 8,
                  line_time_s: float | None = None, transforms: Callable[[dict], dict] | None = None,
-                 frame_start: int | str = 0, pieces: bool = False, noise_streams: str = "generator") -> None:
+                 frame_start: int | str = 0, pieces: bool = False, noise_streams: str = "generator",
+                 static_windows: str = "nearest") -> None:
         self.root = Path(root)
         self.pieces = bool(pieces)
         if noise_streams not in NOISE_STREAMS:
             raise ValueError(f"noise_streams must be one of {NOISE_STREAMS}, got {noise_streams!r:.40}")
         self.noise_streams = noise_streams
         self._entities: dict[str, SceneEntities] = {}
+        if static_windows not in STATIC_WINDOW_RULES:
+            raise ValueError(f"static_windows must be one of {STATIC_WINDOW_RULES}, got {brief(static_windows)}")
+        self.static_windows = static_windows
         if not (self.root / "manifest.json").is_file():
             raise DatasetNotFoundError(
                 f"root: no lfmbench corpus at {self.root} (manifest.json missing). Render one with "
@@ -240,6 +256,13 @@ class LFMCaptureDataset(Dataset):
         self.transforms = transforms
         self.preset = _sensor.load_preset(sensor)
         self.sensor_name = self.preset.name
+        self.architecture = self.preset.architecture
+        # a capture plan other than the split pixel reads layers projected at unit fill factor (its own windows)
+        self._layer_preset = unit_projection_preset(self.preset)
+        if self.architecture != "split_pixel" and (pieces or noise_streams != "generator"):
+            raise ValueError(f"sensor: preset {self.sensor_name!r} ({self.architecture}) runs on the per-sample path "
+                             "only: pieces=True and noise_streams='counter' (simulate_batch, DeviceBatches) serve "
+                             "the split pixel")
         self.pwm: PWMConfig = load_pwm_config(pwm)
         def _is_int(v):
             return isinstance(v, (int, np.integer)) and not isinstance(v, bool)
@@ -281,6 +304,9 @@ class LFMCaptureDataset(Dataset):
                 raise ValueError(f"crop {self.crop} is larger than scene {brief(sid)} ({m['height']}x{m['width']})")
             if line_time_s is not None and shutter == "rolling":
                 check_line_time(m, line_time_s, m["height"])
+            if self.architecture != "split_pixel":  # every window inside the corpus's capture window
+                plan_exposures(self.preset, m, shutter, line_time_s, f"corpus {self.root} (scene {sid})",
+                               static_windows)
         self.line_time_s = line_time_s
         if cache_dir is None:
             cache_dir = self.root / ".cache"
@@ -389,7 +415,7 @@ class LFMCaptureDataset(Dataset):
         if sid in self._cache:
             self._cache.move_to_end(sid)
             return self._cache[sid]
-        layers = load_or_build(self.corpus, sid, self.preset, self.groups, self._frames_to_load(sid), self.optics,
+        layers = load_or_build(self.corpus, sid, self._layer_preset, self.groups, self._frames_to_load(sid), self.optics,
                                self.cache_dir, aux=aux_channels(self.outputs))
         if self._cache_scenes:
             self._cache[sid] = layers
@@ -527,15 +553,24 @@ class LFMCaptureDataset(Dataset):
         F = self.frames
         s0 = self.first_frame(scene_id, frame_start)
         layers = view.layers
-        frames = [compose_frame(layers, meta, f, crop, params, group_params, self.shutter, self.line_time_s)
-                  for f in range(s0, s0 + F)]
         tm = meta["timing"]
-        t_s, t_l = float(tm["short_exposure_s"]), float(tm["long_exposure_s"])
         want = set(self.outputs)
+        if self.architecture == "split_pixel":  # the split pixel's timing (docs/contracts.md), its exposures
+            frames = [compose_frame(layers, meta, f, crop, params, group_params, self.shutter, self.line_time_s)
+                      for f in range(s0, s0 + F)]
+            layer_of = {"lpd_hcg": "lpd", "spd": "spd"}
+            exposure_s = {"lpd_hcg": float(tm["short_exposure_s"]), "spd": float(tm["long_exposure_s"])}
+        else:                                    # any other capture plan: its exposures over their windows
+            exposures = plan_exposures(self.preset, meta, self.shutter, self.line_time_s, f"corpus {self.root}",
+                                       self.static_windows)
+            ref = next(k for k, caps in self.preset.exposures.items() if self.preset.reference in caps)
+            frames = [compose_plan_frame(layers, meta, f, crop, params, group_params, exposures, ref)
+                      for f in range(s0, s0 + F)]
+            layer_of = {x.key: x.key for x in exposures}
+            exposure_s = {x.key: x.length_s for x in exposures}
         cap = None
         if want & SENSOR_OUTPUTS:
-            lpd = torch.stack([fr_["lpd"] for fr_ in frames])[:, None]       # (F, 1, h, w) e-
-            spd = torch.stack([fr_["spd"] for fr_ in frames])[:, None]
+            mean_e = {k: torch.stack([fr_[v] for fr_ in frames])[:, None] for k, v in layer_of.items()}  # (F,1,h,w)
             fpn = self._fixed_pattern(H, W)
             if fpn is not None:
                 fpn = {k: v[..., y0:y0 + ch, x0:x0 + cw] for k, v in fpn.items()}
@@ -544,13 +579,12 @@ class LFMCaptureDataset(Dataset):
             try:
                 if counter:  # a batch of one: the sample's counter streams (what the device path draws)
                     cap = _sensor.simulate_split_pixel_electrons(
-                        lpd[None], spd[None], self.preset, t_s, t_l, noise=True,
-                        fpn=None if fpn is None else {k: v[None] for k, v in fpn.items()},
+                        mean_e["lpd_hcg"][None], mean_e["spd"][None], self.preset, exposure_s["lpd_hcg"],
+                        exposure_s["spd"], noise=True, fpn=None if fpn is None else {k: v[None] for k, v in fpn.items()},
                         seeds=torch.tensor([int(noise_seed)]))
                     cap = {k: v[0] for k, v in cap.items()}
                 else:
-                    cap = _sensor.simulate_split_pixel_electrons(lpd, spd, self.preset, t_s, t_l, generator=gen,
-                                                                 noise=self.noise, fpn=fpn)
+                    cap = _sensor.simulate_plan_electrons(mean_e, self.preset, exposure_s, gen, self.noise, fpn)
             except ValueError as exc:  # e.g. non-finite electrons from implausible radiance: name the scene
                 raise ValueError(f"scene {brief(scene_id)} of {self.root} (frames {s0}..{s0 + F - 1}): {exc}; check "
                                  f"the corpus with `lfmbench validate {self.root}`") from None
@@ -601,8 +635,18 @@ class LFMCaptureDataset(Dataset):
         return {"scene_id": view.scene_id, "index": index, "epoch": self.epoch, "num_lights": n,
                 "light_id": light_id, "flicker": flick, **arr, "exposure_short_s": float(tm["short_exposure_s"]),
                 "exposure_long_s": float(tm["long_exposure_s"]), "crop": torch.tensor(crop),
-                "sensor": self.sensor_name, "shutter": self.shutter, "flicker_mode": mode,
+                "sensor": self.sensor_name, "architecture": self.architecture, "shutter": self.shutter,
+                "static_windows": self._static_window_mode(tm), "flicker_mode": mode,
                 "frame_start": int(frame_start)}
+
+    def _static_window_mode(self, timing: Mapping[str, Any]) -> str:
+        """``"exact"`` when every window of the plan is one the corpus stores for its static groups (always for
+        the split pixel), else ``"nearest"`` (served by the measured approximation, :data:`STATIC_WINDOW_RULES`)."""
+        from lfmbench.sensor.plan import resolve_windows  # noqa: PLC0415
+
+        exact = all(static_window_source(a, n, timing)[1] for c in self.preset.captures.values()
+                    for a, n in resolve_windows(c.exposure, timing))
+        return "exact" if exact else "nearest"
 
     # -- display
     @staticmethod

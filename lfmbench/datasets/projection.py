@@ -125,6 +125,22 @@ class Projector:
         return pb, self.project(buf, pb)
 
 
+def unit_projection_preset(preset):
+    """The twin of a capture plan's preset whose projected layers every architecture reads: split-pixel shaped, both
+    photodiodes of fill factor 1, so ``static["lpd"]`` is the short stored window's rate and ``static["spd"]`` the
+    long one's, per unit fill factor (e-/s); a plan's exposure multiplies by its photodiode's fill factor
+    (:func:`lfmbench.datasets.assembly.compose_plan_frame`). A split-pixel preset is returned unchanged."""
+    import dataclasses  # noqa: PLC0415
+    from types import MappingProxyType  # noqa: PLC0415
+
+    if preset.architecture == "split_pixel":
+        return preset
+    unit = _sensor.PhotodiodeSpec(fill_factor=1.0, full_well_e=1.0)
+    return dataclasses.replace(preset, name=f"{preset.name}:unit", photodiodes=MappingProxyType(
+        {pd: unit for pd in PHOTODIODES}), captures=MappingProxyType({}), architecture="split_pixel",
+        reference="lpd_hcg")
+
+
 def cache_key(preset, meta: dict, groups: Sequence[str], frames: int, optics: bool,
               sources: Mapping[str, str] | None = None, aux: Sequence[str] = AUX_DEFAULT) -> str:
     """Hash of everything the projected layers depend on: preset, optics, bands, groups, frames, the aux

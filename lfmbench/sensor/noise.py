@@ -27,8 +27,8 @@ from lfmbench.sensor.optics import check_radiometric
 from lfmbench.sensor.preset import CAPTURES, PHOTODIODES, SensorPreset, load_preset
 from lfmbench.sensor.response import ideal_electrons
 
-__all__ = ["fixed_pattern", "shot_noise", "read_capture", "simulate_split_pixel_electrons", "simulate_split_pixel",
-           "SplitPixelSensor"]
+__all__ = ["fixed_pattern", "photodiode_order", "shot_noise", "read_capture", "simulate_split_pixel_electrons",
+           "simulate_split_pixel", "simulate_plan_electrons", "SplitPixelSensor"]
 
 
 @functools.lru_cache(maxsize=8)
@@ -296,6 +296,90 @@ def simulate_split_pixel_electrons(lpd_electrons: torch.Tensor, spd_electrons: t
         sats.append(r["saturated"])
     out["saturated"] = torch.cat(sats, dim=-3)
     return out
+
+
+def simulate_plan_electrons(mean_e: Mapping[str, torch.Tensor], preset: SensorPreset | str,
+                            exposure_s: Mapping[str, float], generator: torch.Generator | None = None,
+                            noise: bool = True, fpn: Mapping[str, torch.Tensor] | None = None,
+                            check: bool = True) -> dict[str, torch.Tensor]:
+    """Every capture of a preset's plan from the mean photo-electrons of its exposures (any architecture).
+
+    An *exposure* is one integration of one photodiode over its windows (:attr:`SensorPreset.exposures`: the
+    captures that read the same charge share it). Per exposure, in plan order: PRNU gain, dark signal
+    dark_current x T, shot noise (:func:`shot_noise`), full-well clip; then per capture, in plan order:
+    :func:`read_capture` (DSNU offset, read noise, conversion gain, swing, ADC) of its exposure's charge. A split
+    pixel goes through :func:`simulate_split_pixel_electrons` (its compiled CPU chain; same numbers as before).
+
+    Input referral (the ``*_e`` outputs): (DN - black) / K - dark_current x T, then x (FF_ref / FF_pd) x
+    (T_ref / T): electrons of the reference capture's photodiode over its windows (``preset.reference``), the units of
+    the ground truth; for the split pixel LPD-equivalent e- over the short window, as before.
+
+    Args:
+        mean_e: ``{exposure key: (*, 1, H, W)}`` mean photo-electrons of each exposure (CFA mosaic, the
+            photodiode's fill factor included, no dark current, no PRNU), e-.
+        preset: sensor preset or name.
+        exposure_s: ``{exposure key: integration time}`` in s (the summed window lengths): dark signal and input
+            referral.
+        generator: ``torch.Generator`` on the inputs' device (required when ``noise``).
+        noise: ``False``: noise-free chain (dark mean kept, no FPN, clipping and quantisation kept).
+        fpn: maps of :func:`fixed_pattern` (default: built for (H, W) from the preset when it has PRNU or DSNU).
+        check: validate the inputs (finite, >= 0, same shape).
+
+    Returns:
+        ``{capture: (*, 1, H, W) DN, f"{capture}_e": (*, 1, H, W) input-referred e-, "saturated": (*, N, H, W)
+        bool}`` for the N captures in plan order.
+    """
+    preset = load_preset(preset)
+    groups = preset.exposures
+    if set(mean_e) != set(groups) or set(exposure_s) != set(groups):
+        raise ValueError(f"mean_e and exposure_s need the exposures {list(groups)} of preset {preset.name!r}, got "
+                         f"{sorted(mean_e)} and {sorted(exposure_s)}")
+    first = mean_e[next(iter(groups))]
+    for k, x in mean_e.items():
+        if check:
+            check_radiometric(x, f"mean_e[{k!r}]")
+        if x.shape != first.shape or x.dtype != first.dtype or x.shape[-3] != 1:
+            raise ValueError(f"mean_e[{k!r}] must have the shape (*, 1, H, W) and dtype of the others, got "
+                             f"{tuple(x.shape)} {x.dtype}")
+    if preset.architecture == "split_pixel":
+        return simulate_split_pixel_electrons(mean_e["lpd_hcg"], mean_e["spd"], preset, exposure_s["lpd_hcg"],
+                                              exposure_s["spd"], generator, noise, fpn, check=False)
+    if noise and not isinstance(generator, torch.Generator):
+        raise ValueError("generator must be a torch.Generator when noise=True (no hidden global randomness)")
+    H, W = first.shape[-2:]
+    if fpn is None and noise and any(p.prnu > 0 or p.dsnu_e > 0 for p in preset.photodiodes.values()):
+        fpn = fixed_pattern(preset, H, W, device=first.device, dtype=first.dtype)
+    collected: dict[str, torch.Tensor] = {}
+    for key in groups:
+        pd = preset.captures[key].photodiode
+        spec = preset.photodiodes[pd]
+        cap = MEAN_CAP_FULL_WELLS * spec.full_well_e
+        mu = torch.nan_to_num(mean_e[key], nan=0.0, posinf=cap).clamp(0.0, cap)
+        if noise and fpn is not None and spec.prnu > 0:
+            mu.mul_(fpn[f"{pd}_gain"])
+        mu.add_(spec.dark_current_e_per_s * float(exposure_s[key]))
+        n = shot_noise(mu, generator, preset.shot_noise_gaussian_above_e) if noise else mu
+        collected[key] = n.clamp_(0.0, spec.full_well_e)
+    ref = preset.captures[preset.reference]
+    ref_key = next(k for k, caps in groups.items() if preset.reference in caps)
+    ff_ref, t_ref = preset.photodiodes[ref.photodiode].fill_factor, float(exposure_s[ref_key])
+    out: dict[str, torch.Tensor] = {}
+    sats = []
+    for key, caps in groups.items():
+        pd = preset.captures[key].photodiode
+        spec = preset.photodiodes[pd]
+        offset = fpn[f"{pd}_offset_e"] if (noise and fpn is not None and spec.dsnu_e > 0) else None
+        for c in caps:
+            r = read_capture(collected[key], preset, c, generator, noise, offset)
+            out[c] = r["dn"]
+            e = (r["dn"] - preset.black_level_dn).div_(preset.system_gain(c)).sub_(
+                spec.dark_current_e_per_s * float(exposure_s[key]))
+            out[f"{c}_e"] = e.mul_((ff_ref / spec.fill_factor) * (t_ref / float(exposure_s[key])))
+            sats.append((c, r["saturated"]))
+    order = list(preset.captures)
+    sats.sort(key=lambda cs: order.index(cs[0]))
+    out["saturated"] = torch.cat([s for _, s in sats], dim=-3)
+    return {**{c: out[c] for c in order}, **{f"{c}_e": out[f"{c}_e"] for c in order}, "saturated": out["saturated"]}
 
 
 def simulate_split_pixel(lpd_radiant_exposure: torch.Tensor, spd_radiant_exposure: torch.Tensor,

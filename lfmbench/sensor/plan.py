@@ -236,12 +236,12 @@ ARCHITECTURES: Mapping[str, Architecture] = MappingProxyType({a.name: a for a in
     Architecture("split_pixel", "large (LPD) and small (SPD) photodiode, LPD read at two conversion gains",
                  _split_pixel, lambda caps: "lpd_hcg", "saturated_exposure_corrected"),
     Architecture("lofic", "one photodiode with a lateral overflow capacitor, read at high and low conversion gain",
-                 _lofic, _first, "lofic_merge"),
+                 _lofic, _first, "exposure_select"),
     Architecture("staggered", "2-4 sequential exposures of one photodiode (DOL), line-interleaved readout",
-                 _staggered, _first, "staggered_merge"),
+                 _staggered, _first, "exposure_select"),
     Architecture("chopped", "one photodiode integrating a union of sub-windows spread over the frame",
-                 _chopped, _first, "chopped_merge"),
-    Architecture("single", "one conventional exposure of one photodiode", _single, _first, "single_exposure"),
+                 _chopped, _first, "exposure_select"),
+    Architecture("single", "one conventional exposure of one photodiode", _single, _first, "exposure_select"),
 )})
 
 

@@ -187,3 +187,54 @@ def test_photon_transfer_imx490_prnu_removed_by_difference():
     temporal = res["var"][15]
     expected_extra = (0.007 * mu_e * K_true) ** 2
     assert spatial - temporal == pytest.approx(expected_extra, rel=0.25)
+
+
+# ------------------------------------------------------------------ every capture of every other architecture
+def _plan_flat_field_pairs(preset, capture: str, levels_e: np.ndarray, seed: int):
+    """As :func:`_flat_field_pairs` through the capture-plan chain: the capture's exposure at each level (the
+    other exposures dark), (2, L, N) DN of the green pixels, and the green QE."""
+    from lfmbench.sensor import ideal_electrons, simulate_plan_electrons
+    from lfmbench.sensor.plan import resolve_windows, total_length_s
+
+    pd = preset.captures[capture].photodiode
+    wl_csv, _, vals = read_spectral_csv(preset.filters_path)
+    eta = preset.peak_qe * np.interp(WL_NM, wl_csv, vals[:, 1])
+    photons_per_j = (WL_NM * 1e-9) / (sc.h * sc.c)
+    e_per_unit = eta * preset.pixel_pitch_m ** 2 * preset.photodiodes[pd].fill_factor * BAND_NM * photons_per_j
+    H = torch.as_tensor(levels_e / e_per_unit, dtype=torch.float32).reshape(1, -1, 1, 1, 1).expand(
+        2, -1, 1, SIZE, SIZE).contiguous()
+    timing = {"short_exposure_s": 0.004, "long_exposure_s": 1 / 90}
+    key = next(k for k, caps in preset.exposures.items() if capture in caps)
+    e = ideal_electrons(H, preset, [WL_NM], pd, [BAND_NM])
+    mean_e = {k: (e if k == key else torch.zeros_like(e)) for k in preset.exposures}
+    t = {k: total_length_s(resolve_windows(preset.captures[k].exposure, timing)) for k in preset.exposures}
+    out = simulate_plan_electrons(mean_e, preset, t, torch.Generator().manual_seed(seed))
+    green = preset.cfa.index_map(SIZE, SIZE).numpy() == 1
+    return out[capture][:, :, 0].numpy()[..., green], eta, t[key]
+
+
+@pytest.mark.parametrize("name, capture", [("lofic", "hcg"), ("lofic", "lcg"), ("staggered", "long"),
+                                           ("staggered", "short"), ("chopped", "chopped"), ("single", "main")])
+def test_photon_transfer_of_every_architecture(name, capture):
+    """EMVA 1288 photon transfer of each capture of the LOFIC, staggered, chopped and single presets recovers the
+    configured system gain, dark noise (read + dark-current shot noise over the capture's own integration time),
+    saturation capacity and responsivity (PRNU 0.5 % removed by the pair difference)."""
+    preset = load_preset(name)
+    spec = preset.captures[capture]
+    pd = preset.photodiodes[spec.photodiode]
+    clip_e = spec.voltage_swing_v / spec.conversion_gain_v_per_e
+    sat_true = min(pd.full_well_e, clip_e)
+    levels = np.concatenate([[0.0], np.linspace(0.02, 0.7, 20) * sat_true, np.linspace(0.71, 1.15, 45) * sat_true])
+    y, eta, t_exp = _plan_flat_field_pairs(preset, capture, levels, seed=1288)
+    res = photon_transfer(y)
+    K_true = spec.conversion_gain_v_per_e * (2 ** preset.adc_bits - 1 - preset.black_level_dn) / spec.voltage_swing_v
+    sigma_d_true = np.sqrt(spec.read_noise_e ** 2 + pd.dark_current_e_per_s * t_exp)
+    assert res["fit"].sum() >= 15
+    assert res["K"] == pytest.approx(K_true, rel=TOL["K"])
+    assert res["sigma_d_exact"] == pytest.approx(sigma_d_true, rel=TOL["sigma_d"])
+    assert res["mu_e_sat"] == pytest.approx(expected_saturation_e(pd.full_well_e, clip_e, spec.read_noise_e),
+                                            rel=TOL["sat"])
+    assert 0.92 * sat_true <= res["mu_e_sat"] <= sat_true
+    photons = levels / eta
+    R = np.polyfit(photons[res["fit"]], res["mu"][res["fit"]] - res["mu_dark"], 1)[0]
+    assert R == pytest.approx(K_true * eta, rel=TOL["R"])

@@ -1,0 +1,144 @@
+"""Capture plans in the dataset: each exposure's electrons against brute-force integration of the time bins over its
+windows (global and rolling, chopped unions), the sample keys of every architecture, and bad plans for a corpus."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from lfmbench.datasets import LFMCaptureDataset
+from lfmbench.datasets.assembly import PlanExposure, compose_plan_frame, static_window_source
+from lfmbench.datasets.projection import SceneLayers
+from lfmbench.sensor import load_preset
+from tests.data.corpus.data import make_corpus
+
+H, W, K = 6, 7, 5
+FPS, TS, TL, LT = 60.0, 0.004, 1 / 90, 4e-4
+CW = TL + H * LT
+PWM = {"period_s": 1 / 331.0, "duty": 0.3, "phase_s": 0.0013, "rise_s": 0.0, "fall_s": 0.0}
+
+
+def _meta():
+    return {"fps": FPS, "height": H, "width": W, "timing": {"short_exposure_s": TS, "long_exposure_s": TL,
+                                                             "line_time_s": LT, "capture_window_s": CW, "bins": K}}
+
+
+def _layers(rng):
+    box = (1, 2, 5, 6)                                               # y0, x0, y1, x1
+    rates = torch.from_numpy(rng.random((K, 4, 4)).astype(np.float32) * 1e4)   # e-/s per bin
+    static = {"lpd": torch.full((2, H, W), 300.0), "spd": torch.full((2, H, W), 500.0)}
+    lights = [[(0, "otherlights", box, {"lpd": rates, "spd": rates})] for _ in range(2)]
+    return SceneLayers("s", static, {}, lights, {}), box, rates.numpy().astype(np.float64)
+
+
+def brute_force(windows, frame, rolling, rates, box, level="pwm", n=200_000):
+    """(H, W) e-: sum over windows of the integral of s(t) R_k(t) over each row's window, midpoint rule on n points,
+    the light's PWM square wave s and the bin k(t) = floor((t - t_n) K / W_c) written here from their definitions."""
+    out = np.zeros((H, W))
+    t0 = frame / FPS
+    y0, x0, y1, x1 = box
+    for y in range(y0, y1):
+        shift = y * LT if rolling else 0.0
+        acc = np.zeros(x1 - x0)
+        for a, length in windows:
+            dt = length / n
+            t = t0 + a + shift + (np.arange(n) + 0.5) * dt
+            if level == "pwm":
+                s = (np.mod(t - PWM["phase_s"], PWM["period_s"]) < PWM["duty"] * PWM["period_s"]).astype(float)
+            else:
+                s = np.full(n, PWM["duty"])
+            k = np.minimum(((t - t0) * K / CW).astype(int), K - 1)
+            w = np.bincount(k, weights=s * dt, minlength=K)                  # s at level 1 per bin
+            acc += w @ rates[:, y - y0, :]
+        out[y, x0:x1] = acc
+    return out
+
+
+@pytest.mark.parametrize("rolling", [False, True])
+@pytest.mark.parametrize("frame", [0, 1])
+def test_exposure_electrons_match_brute_force_integration(rolling, frame):
+    rng = np.random.default_rng(5)
+    layers, box, rates = _layers(rng)
+    chopped = ((0.0005, 0.0004), (0.0031, 0.0002), (0.0072, 0.0009))     # a union of three sub-windows
+    single = ((0.0100, 0.0011),)
+    ex = [PlanExposure("a", 0.5, chopped, rolling, LT), PlanExposure("b", 1.0, single, rolling, LT)]
+    out = compose_plan_frame(layers, _meta(), frame, (0, 0, H, W), {0: PWM}, {}, ex, "a")
+    for x, key in ((ex[0], "a"), (ex[1], "b")):
+        static = sum(n * (300.0 if static_window_source(a, n, _meta()["timing"])[0] == "short" else 500.0)
+                     for a, n in x.windows)
+        want = x.fill_factor * (brute_force(x.windows, frame, rolling, rates, box) + static)
+        np.testing.assert_allclose(out[key].numpy(), want, rtol=2e-4)
+    gt = 0.5 * (brute_force(chopped, frame, rolling, rates, box, level="mean")
+                + sum(n * (300.0 if static_window_source(a, n, _meta()["timing"])[0] == "short" else 500.0)
+                      for a, n in chopped))
+    np.testing.assert_allclose(out["gt"].numpy(), gt, rtol=2e-4)
+
+
+def test_static_window_rule():
+    tm = _meta()["timing"]
+    sa = (TL - TS) / 2
+    assert static_window_source(sa, TS, tm) == ("short", True)
+    assert static_window_source(0.0, TL, tm) == ("long", True)
+    assert static_window_source(sa + 1e-4, 1e-3, tm) == ("short", False)      # inside the short window
+    assert static_window_source(0.0, 1e-3, tm) == ("long", False)             # at the frame start: only the long
+
+
+@pytest.fixture(scope="module")
+def corpus(tmp_path_factory):
+    return make_corpus(tmp_path_factory.mktemp("plans") / "c", n_scenes=2, frames=2)
+
+
+@pytest.mark.parametrize("name", ["lofic", "staggered", "chopped", "single"])
+def test_dataset_yields_the_plan_captures(corpus, name):
+    p = load_preset(name)
+    ds = LFMCaptureDataset(corpus, split="all", sensor=name, frames=2, cache_dir=False)
+    s = ds[0]
+    for c in p.captures:
+        assert s[c].shape == (2, 1, 16, 24) and s[f"{c}_e"].shape == (2, 1, 16, 24)
+    assert s["saturated"].shape == (2, len(p.captures), 16, 24) and s["gt"].shape == (2, 1, 16, 24)
+    assert not {"lpd_hcg", "spd"} & set(s)
+    assert s["meta"]["architecture"] == p.architecture and s["meta"]["sensor"] == name
+    assert s["meta"]["static_windows"] == ("exact" if name == "single" else "nearest")
+    # input referral: every unsaturated capture estimates the ground truth (same reference units)
+    for c in p.captures:
+        ok = ~s["saturated"][:, list(p.captures).index(c):][:, :1]
+        rel = ((s[f"{c}_e"] - s["gt"])[ok].mean() / s["gt"][ok].mean()).abs()
+        assert rel < 0.1, (c, float(rel))
+
+
+def test_unit_projection_scales_by_fill_factor_and_pixel_area(corpus):
+    """``single`` reads the short window like the ovt LPD: its noise-free gt is ovt's x (FF A) ratio (no PSF)."""
+    kw = dict(split="all", frames=2, cache_dir=False, optics=False, noise=False, outputs=("gt",))
+    a = LFMCaptureDataset(corpus, sensor="single", **kw)[0]["gt"]
+    b = LFMCaptureDataset(corpus, sensor="ovt", **kw)[0]["gt"]
+    ratio = (0.9 * 3.0e-6 ** 2) / (1.0 * 2.8e-6 ** 2)
+    torch.testing.assert_close(a, b * ratio, rtol=1e-5, atol=1e-6)
+
+
+def test_a_window_outside_the_capture_window_names_preset_and_corpus(corpus, tmp_path):
+    import yaml
+
+    d = yaml.safe_load(open(load_preset("single").source))
+    d["captures"]["main"]["exposure"] = [[0.0105, 0.002]]                 # ends at 12.5 ms > 11.27 ms
+    d["spectral"]["filters"] = str(load_preset("single").filters_path)
+    f = tmp_path / "late.yaml"
+    f.write_text(yaml.safe_dump(d, sort_keys=False))
+    with pytest.raises(ValueError) as exc:
+        LFMCaptureDataset(corpus, split="all", sensor=f, frames=2, cache_dir=False)
+    msg = str(exc.value)
+    assert "late.yaml" in msg and "'captures.main.exposure'" in msg and str(corpus) in msg and "\n" not in msg
+
+
+def test_exact_static_windows_refuse_an_unstored_window(corpus):
+    with pytest.raises(ValueError, match=r"staggered\.yaml: field 'captures\.long\.exposure'.*static_windows"):
+        LFMCaptureDataset(corpus, split="all", sensor="staggered", frames=2, cache_dir=False, static_windows="exact")
+    ds = LFMCaptureDataset(corpus, split="all", sensor="single", frames=2, cache_dir=False, static_windows="exact")
+    assert ds[0]["meta"]["static_windows"] == "exact"
+    with pytest.raises(ValueError, match="static_windows"):
+        LFMCaptureDataset(corpus, split="all", sensor="single", frames=2, cache_dir=False, static_windows="bins")
+
+
+def test_batched_and_counter_paths_serve_the_split_pixel_only(corpus):
+    for kw in ({"pieces": True}, {"noise_streams": "counter"}):
+        with pytest.raises(ValueError, match="per-sample path"):
+            LFMCaptureDataset(corpus, split="all", sensor="lofic", frames=2, cache_dir=False, **kw)
