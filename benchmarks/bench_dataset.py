@@ -896,9 +896,10 @@ def main(argv=None) -> int:
     plots(res["tp"], res["bins"], res["psf"], res["rolling"])
     text = report(res["tp"], res["bins"], res["psf"], res["rolling"], env, q, note)
     old = DOC.read_text() if DOC.is_file() else ""
-    begin, end = "<!-- batched-capture:begin -->", "<!-- batched-capture:end -->"
-    if begin in old and end in old:  # the section of bench_batched_capture.py is that script's to rewrite
-        text = text.rstrip("\n") + "\n\n" + old[old.index(begin):old.index(end) + len(end)] + "\n"
+    for part in ("batched-capture", "architectures"):  # sections bench_batched_capture.py / bench_architectures.py
+        begin, end = f"<!-- {part}:begin -->", f"<!-- {part}:end -->"  # rewrite: kept as they are
+        if begin in old and end in old:
+            text = text.rstrip("\n") + "\n\n" + old[old.index(begin):old.index(end) + len(end)] + "\n"
     _atomic_write_text(DOC, text)
     _log(f"wrote {DOC} and {IMG}/dataset_*.png")
     return 0

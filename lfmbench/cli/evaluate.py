@@ -9,16 +9,19 @@ from pathlib import Path
 import typer
 
 from lfmbench.cli._common import check_minima, fail, torch_setup
-from lfmbench.vocabulary import CLASSIC_BASELINES, LEARNED_BASELINES
+from lfmbench.vocabulary import CLASSIC_BASELINES, LEARNED_BASELINES, PLAN_BASELINES
 
 __all__ = ["register", "evaluate_cmd", "leaderboard_cmd"]
 
 
 def evaluate_cmd(
     method: str = typer.Option(..., "--method", "-m",
-                               help=f"a baseline ({', '.join((*CLASSIC_BASELINES, *LEARNED_BASELINES))}) or "
+                               help=f"a baseline ({', '.join((*CLASSIC_BASELINES, *LEARNED_BASELINES, *PLAN_BASELINES))}) or "
                                     "package.module:function"),
     corpus: Path = typer.Option(..., "--corpus", help="corpus root directory"),
+    sensor: str = typer.Option("ovt", "--sensor",
+                               help="sensor preset (ovt, imx490, lofic, staggered, chopped, single) or a preset YAML; "
+                                    "its name and architecture are recorded in the result"),
     split: str = typer.Option("test", help="corpus split"),
     output: Path = typer.Option(None, "--output", "-o", help="result JSON (default runs/<method>.json)"),
     seed: int = typer.Option(0, help="dataset seed (PWM draws, noise)"),
@@ -66,10 +69,16 @@ def evaluate_cmd(
 
     try:
         fn = get_method(method)
-        extra = {"frames": frames} if cache_dir is None else {"frames": frames, "cache_dir": cache_dir}
+        extra = {"frames": frames, "sensor": sensor} if cache_dir is None else {"frames": frames, "sensor": sensor,
+                                                                                "cache_dir": cache_dir}
         ds, ident, cond = corpus_run_inputs(corpus, split, seed, crop, samples_per_scene, **extra)
     except (MethodNotFoundError, FileNotFoundError, EmptyDataError, RuntimeError, ValueError) as exc:
         fail(str(exc))
+    from lfmbench.baselines import REGISTRY, methods_for
+
+    if method in REGISTRY and method not in methods_for(ds.architecture):
+        fail(f"--method {method} does not apply to --sensor {sensor} ({ds.architecture}); its baselines: "
+             f"{', '.join(methods_for(ds.architecture))}")
     n = len(ds) if max_scenes is None else min(len(ds), max_scenes)
     loader = DataLoader(ds, batch_size=1, shuffle=False, num_workers=0, collate_fn=collate_samples)
     try:
@@ -77,7 +86,8 @@ def evaluate_cmd(
                        options=ScoreOptions(perceptual=perceptual), warmup=warmup, repeats=repeats, device=device,
                        seeds={"dataset": seed}, dataset={"corpus": str(corpus), "split": split, "scenes": n,
                                                          "crop": crop, "samples_per_scene": samples_per_scene,
-                                                         "frames": frames},
+                                                         "frames": frames, "sensor": ds.sensor_name,
+                                                         "architecture": ds.architecture},
                        total=n, corpus=ident, scene_conditions=cond)
     except EvaluationInterrupted as exc:
         n_done = len(exc.result["scenes"])
@@ -116,13 +126,17 @@ def leaderboard_cmd(
                                     help="condition bins YAML (default lfmbench/configs/conditions.yaml)"),
     include_incomplete: bool = typer.Option(False, "--include-incomplete",
                                             help="rank interrupted or failed runs too (marked in the table)"),
+    cross_sensor: bool = typer.Option(False, "--cross-sensor",
+                                      help="rank results of different sensors (architectures) together; each row "
+                                           "then names its sensor"),
 ) -> None:
     """Rank evaluation results; print a table, write Markdown and a quality-vs-run-time plot.
 
     Runs whose status is not "complete" (interrupted, failed, or killed while "running") are refused unless
     --include-incomplete, which ranks them after the complete ones and marks them. Runs computed on
-    different corpora (manifest SHA-256, format version, test draws), with different metric versions or a
-    different protocol (split, seed, crop, samples per scene, scoring options) are refused.
+    different corpora (manifest SHA-256, format version, test draws), with different metric versions, a
+    different protocol (split, seed, crop, samples per scene, scoring options) or, without --cross-sensor, different
+    sensor presets are refused.
     """
     from lfmbench.evaluation.benchmark import write_leaderboard  # noqa: PLC0415
     from lfmbench.evaluation.leaderboard import (check_comparable, incomplete_runs,  # noqa: PLC0415
@@ -138,7 +152,7 @@ def leaderboard_cmd(
             raise ValueError(f"{len(bad)} run file(s) are not complete results ({'; '.join(bad[:3])}"
                              f"{' ...' if len(bad) > 3 else ''}); re-run them, leave them out, or pass "
                              "--include-incomplete to rank them marked")
-        check_comparable(loaded)
+        check_comparable(loaded, cross_sensor)
         rows = leaderboard_rows(loaded, sort_by, conditions_file=conditions)
     except ValueError as exc:
         typer.secho(f"error: {exc}", fg=typer.colors.RED, err=True)

@@ -46,12 +46,13 @@ def benchmark(corpus: str | Path, methods: Iterable[str] | None = None, runs_dir
               split: str = "test", seed: int = 0, crop: int | None = None, max_scenes: int | None = None,
               perceptual: bool = True, repeats: int = 5, device: str = "cpu", sort_by: str | None = None,
               progress: bool = True, samples_per_scene: int = 1, cache_dir: str | Path | None = None,
-              frames: int = 3) -> list[dict]:
+              frames: int = 3, sensor: str = "ovt") -> list[dict]:
     """Evaluate several methods on one corpus split and build the leaderboard.
 
     Writes ``runs_dir/<method>.json`` per method, ``runs_dir/leaderboard.md``, ``leaderboard.json`` and
     ``leaderboard.png``, prints the table and returns the ranked rows (default ranking: the LED score).
-    ``methods`` defaults to every registered baseline. ``cache_dir``: the dataset's projection cache (default
+    ``methods`` defaults to every registered baseline of the sensor's architecture (``sensor``: a preset name or
+    YAML, :func:`lfmbench.baselines.methods_for`). ``cache_dir``: the dataset's projection cache (default
     ``<corpus>/.cache``; any writable directory for a read-only corpus). ``frames``: consecutive frames per
     sample, as ``lfmbench evaluate --frames`` (24 or more for the IEEE P2020 flicker metrics; <= the corpus's).
     """
@@ -59,24 +60,26 @@ def benchmark(corpus: str | Path, methods: Iterable[str] | None = None, runs_dir
 
     from torch.utils.data import DataLoader
 
-    from lfmbench.baselines import REGISTRY
+    from lfmbench.baselines import methods_for
     from lfmbench.datasets.loading import collate_samples
     from lfmbench.evaluation.leaderboard import check_comparable, leaderboard_rows, load_runs, print_leaderboard
     from lfmbench.evaluation.run import evaluate
     from lfmbench.metrics import ScoreOptions
 
     runs_dir = Path(runs_dir)
-    extra = {"frames": frames} if cache_dir is None else {"frames": frames, "cache_dir": cache_dir}
+    extra = {"frames": frames, "sensor": sensor} if cache_dir is None else {"frames": frames, "sensor": sensor,
+                                                                            "cache_dir": cache_dir}
     ds, ident, cond = corpus_run_inputs(corpus, split, seed, crop, samples_per_scene, **extra)
     n = len(ds) if max_scenes is None else min(len(ds), max_scenes)
     paths = []
-    for m in (list(methods) if methods is not None else list(REGISTRY)):
+    for m in (list(methods) if methods is not None else methods_for(ds.architecture)):
         loader = DataLoader(ds, batch_size=1, shuffle=False, num_workers=0, collate_fn=collate_samples)
         out = runs_dir / f"{safe_name(m)}.json"
         evaluate(m, islice(loader, n), method_spec=m, output=out, options=ScoreOptions(perceptual=perceptual),
                  repeats=repeats, device=device, seeds={"dataset": seed},
                  dataset={"corpus": str(corpus), "split": split, "scenes": n, "crop": crop,
-                          "samples_per_scene": samples_per_scene, "frames": frames}, progress=progress,
+                          "samples_per_scene": samples_per_scene, "frames": frames, "sensor": ds.sensor_name,
+                          "architecture": ds.architecture}, progress=progress,
                  total=n, corpus=ident, scene_conditions=cond)
         paths.append(out)
     runs = load_runs(paths)

@@ -118,8 +118,8 @@ def incomplete_runs(runs: list[dict]) -> list[str]:
 def identity(run: dict) -> dict[str, Any]:
     """What must agree between results ranked together: corpus (the scored scenes' files, or the manifest SHA-256
     in result files that do not record them; format version, frozen test draws), metric versions, split, dataset
-    seed, crop, samples per scene, frames per sample (3, the dataset's default, in files that do not record it)
-    and scoring options."""
+    seed, crop, samples per scene, frames per sample (3, the dataset's default, in files that do not record it),
+    scoring options and the sensor preset (its capture plan: :func:`run_sensor`)."""
     c = run.get("corpus") or {}
     d = run.get("dataset") or {}
     split = d.get("split")
@@ -132,7 +132,14 @@ def identity(run: dict) -> dict[str, Any]:
         "split": split, "dataset seed": (run.get("seeds") or {}).get("dataset"), "crop": d.get("crop"),
         "samples per scene": d.get("samples_per_scene", 1), "frames per sample": d.get("frames", 3),
         "scoring options": {k: v for k, v in (run.get("options") or {}).items() if k != "perceptual"},
+        "sensor": run_sensor(run),
     }
+
+
+def run_sensor(run: dict) -> str:
+    """The sensor preset a result was simulated with (``dataset.sensor``; ``ovt``, the only one before issue 22, in
+    files that do not record it)."""
+    return str((run.get("dataset") or {}).get("sensor", "ovt"))
 
 
 def _draws(c: dict) -> str | None:
@@ -159,11 +166,15 @@ def _names(paths: list[str], k: int = 3) -> str:
         (f" (+{len(paths) - k} more)" if len(paths) > k else "")
 
 
-def comparability_problems(runs: list[dict]) -> list[str]:
-    """One line per field on which the runs differ, naming the files of each value (empty: comparable)."""
+def comparability_problems(runs: list[dict], cross_sensor: bool = False) -> list[str]:
+    """One line per field on which the runs differ, naming the files of each value (empty: comparable).
+    ``cross_sensor``: results of different sensors (architectures) may be ranked together (a cross-architecture
+    comparison; everything else must still agree)."""
     ids = [identity(r) for r in runs]
     problems = []
     for field in ids[0]:
+        if cross_sensor and field == "sensor":
+            continue
         vals = [i[field] for i in ids]
         if all(v == vals[0] for v in vals):
             continue
@@ -187,14 +198,17 @@ def comparability_problems(runs: list[dict]) -> list[str]:
     return problems
 
 
-def check_comparable(runs: list[dict]) -> None:
+def check_comparable(runs: list[dict], cross_sensor: bool = False) -> None:
     """Raise :class:`IncomparableRunsError` (one message, one clause per differing field) unless every run was
-    computed on the same corpus, with the same metric versions and protocol."""
-    problems = comparability_problems(runs)
+    computed on the same corpus, with the same metric versions, protocol and sensor (``cross_sensor``: sensors may
+    differ, for a cross-architecture comparison)."""
+    problems = comparability_problems(runs, cross_sensor)
     if problems:
+        hint = "" if cross_sensor or not any(p.startswith("sensor differs") for p in problems) else \
+            " (to compare sensor architectures on purpose: lfmbench leaderboard --cross-sensor)"
         raise IncomparableRunsError("these results cannot be ranked together: " + "; ".join(problems)
                                     + ". Re-evaluate every method on one corpus with one lfmbench version, or rank "
-                                      "the groups separately")
+                                      "the groups separately" + hint)
 
 
 # --------------------------------------------------------------------------------------------------- ranking
@@ -247,11 +261,14 @@ def leaderboard_rows(runs: list[dict], sort_by: str | None = None, *, ci: bool =
     bins = load_bins(conditions_file)
     want_ci = {s.name for s in columns("table")} | {sort_by}
     rows = []
+    several = len({run_sensor(r) for r in runs}) > 1   # a cross-sensor ranking names each row's sensor
     for r in runs:
         agg = r.get("aggregate", {})
         records = r.get("scenes") if isinstance(r.get("scenes"), list) else []
         scenes = per_scene(records)
-        row = {"method": r["method"]["spec"], "path": r.get("_path"), "device": r["runtime"].get("device"),
+        name = r["method"]["spec"] + (f" @ {run_sensor(r)}" if several else "")
+        row = {"method": name, "sensor": run_sensor(r),
+               "architecture": (r.get("dataset") or {}).get("architecture", "split_pixel"), "path": r.get("_path"), "device": r["runtime"].get("device"),
                "ms_per_megapixel": num(r["runtime"].get("ms_per_megapixel")),
                "params": r["method"].get("params"), "macs_per_megapixel": r["method"].get("macs_per_megapixel"),
                "scenes": agg.get("scenes", 0), "failed": agg.get("scenes_failed", 0), "status": r.get("status"),

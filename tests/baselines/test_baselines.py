@@ -163,9 +163,9 @@ def test_registry_and_help_list_the_same_baselines():
     from typer.testing import CliRunner
 
     from lfmbench.cli import app
-    from lfmbench.vocabulary import CLASSIC_BASELINES, LEARNED_BASELINES
+    from lfmbench.vocabulary import CLASSIC_BASELINES, LEARNED_BASELINES, PLAN_BASELINES
 
-    assert list(baselines.REGISTRY) == [*CLASSIC_BASELINES, *LEARNED_BASELINES]
+    assert list(baselines.REGISTRY) == [*CLASSIC_BASELINES, *LEARNED_BASELINES, *PLAN_BASELINES]
     assert all(callable(getattr(baselines.classic, n)) for n in CLASSIC_BASELINES)
     text = " ".join(CliRunner().invoke(app, ["evaluate", "--help"], env={"COLUMNS": "400"}).output.split())
     assert all(name in text for name in baselines.REGISTRY), text

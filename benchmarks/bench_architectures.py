@@ -1,0 +1,141 @@
+"""Per-sample dataset cost of every sensor architecture against the split pixel (issue 22, target: within 1.5x).
+
+Same workload as section 1 of ``benchmarks/bench_dataset.py`` (the 2-scene 320 x 256 throughput corpus it renders,
+3 frames, 256 x 256 crops, every output but ``rgb``, noise on, layers warm in memory), one process, one torch thread
+(what a DataLoader worker runs): the median wall time of ``LFMCaptureDataset.__getitem__`` per sensor preset, its
+ratio to ``ovt`` (split pixel) and where it goes (composition of the exposures vs the sensor chain). The presets
+are timed in interleaved passes (ovt, imx490, lofic, staggered, chopped, single, then again), so the load of the
+shared machine falls on all of them alike.
+
+Writes its section of ``docs/dataset-benchmark.md`` (between the ``architectures`` markers; the rest of the file is
+``bench_dataset.py``'s). Run: ``.venv/bin/python benchmarks/bench_architectures.py [--passes 5] [--samples 16]``.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import statistics
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import bench_dataset as bd  # noqa: E402  (sets DRJIT_LIBLLVM_PATH, renders the throughput corpus)
+import torch  # noqa: E402
+
+from lfmbench.datasets import LFMCaptureDataset  # noqa: E402
+from lfmbench.datasets import capture as _capture  # noqa: E402
+from lfmbench.fileio import atomic_write_text  # noqa: E402
+
+PRESETS = ("ovt", "imx490", "lofic", "staggered", "chopped", "single")
+TARGET = 1.5
+BEGIN, END = "<!-- architectures:begin -->", "<!-- architectures:end -->"
+
+
+def timed_split(ds: LFMCaptureDataset, n: int) -> tuple[float, float, float]:
+    """(median s per sample, median s in composition, median s in the sensor chain) over ``n`` samples."""
+    comp, chain, tot = [], [], []
+    fns = {"compose": (_capture, ("compose_frame", "compose_plan_frame")),
+           "chain": (_capture._sensor, ("simulate_split_pixel_electrons", "simulate_plan_electrons"))}
+    acc = {"compose": 0.0, "chain": 0.0}
+    saved = []
+    depth = {"chain": 0}
+
+    def wrap(mod, name, key):
+        f = getattr(mod, name)
+
+        def g(*a, **k):
+            if key == "chain" and depth["chain"]:
+                return f(*a, **k)               # the plan chain calls the split-pixel one: count it once
+            t = time.perf_counter()
+            depth[key] = depth.get(key, 0) + 1
+            try:
+                return f(*a, **k)
+            finally:
+                depth[key] -= 1
+                acc[key] += time.perf_counter() - t
+        saved.append((mod, name, f))
+        setattr(mod, name, g)
+
+    for key, (mod, names) in fns.items():
+        for name in names:
+            wrap(mod, name, key)
+    try:
+        for i in range(n):
+            acc["compose"] = acc["chain"] = 0.0
+            t = time.perf_counter()
+            ds[i % len(ds)]
+            tot.append(time.perf_counter() - t)
+            comp.append(acc["compose"])
+            chain.append(acc["chain"])
+    finally:
+        for mod, name, f in saved:
+            setattr(mod, name, f)
+    return statistics.median(tot), statistics.median(comp), statistics.median(chain)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--passes", type=int, default=5)
+    ap.add_argument("--samples", type=int, default=16, help="samples per preset and pass")
+    ap.add_argument("--out", type=Path, default=bd.ROOT / "bench_out" / "dsbench")
+    a = ap.parse_args(argv)
+    torch.set_num_threads(1)
+    root = a.out.resolve() / "tp"
+    load0 = ", ".join(f"{x:.1f}" for x in os.getloadavg())
+    bd._render(root, {"width": bd.TP_SIZE[1], "height": bd.TP_SIZE[0], "spp": bd.TP_SPP, "bins": bd.TP_BINS,
+                      "frames": bd.TP_FRAMES}, bd.TP_SEED, scenes=2)
+    outputs = tuple(o for o in _capture.DEFAULT_OUTPUTS)
+    dss = {}
+    for name in PRESETS:
+        ds = LFMCaptureDataset(root, split="all", sensor=name, frames=bd.TP_FRAMES, crop=bd.TP_CROP, outputs=outputs,
+                               samples_per_scene=a.samples, seed=1)
+        for i in range(len(ds)):               # warm: layers projected and held, kernels compiled
+            ds[i]
+            if i >= 3:
+                break
+        dss[name] = ds
+    res = {n: [] for n in PRESETS}
+    for p in range(a.passes):
+        for name in PRESETS:
+            res[name].append(timed_split(dss[name], a.samples))
+        bd._log(f"pass {p + 1}/{a.passes}: " + ", ".join(f"{n} {res[n][-1][0] * 1e3:.1f} ms" for n in PRESETS))
+    load1 = ", ".join(f"{x:.1f}" for x in os.getloadavg())
+    med = {n: tuple(statistics.median(r[i] for r in res[n]) for i in range(3)) for n in PRESETS}
+    base = med["ovt"][0]
+    L = [BEGIN, "", "## Every sensor architecture (issue 22)", "",
+         f"Generated by `benchmarks/bench_architectures.py --passes {a.passes} --samples {a.samples}` on "
+         f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())} ({platform.machine()}, {os.cpu_count()} CPUs, torch "
+         f"{torch.__version__}, one torch thread). Load average {load0} at the start, {load1} at the end (shared "
+         f"machine). Workload of section 1: 3 frames, 256 x 256 crops of the 2-scene 320 x 256 corpus, every output "
+         "but `rgb`, noise on, layers warm; `LFMCaptureDataset.__getitem__` in one process. Medians over "
+         f"{a.passes} interleaved passes of the per-pass median of {a.samples} samples.", "",
+         "| preset | architecture | captures | ms / sample | x ovt | composition ms | sensor chain ms |",
+         "|---|---|---|---|---|---|---|"]
+    for n in PRESETS:
+        p = dss[n].preset
+        t, c, s = med[n]
+        L.append(f"| `{n}` | {p.architecture} | {len(p.captures)} | {t * 1e3:.1f} | {t / base:.2f} | {c * 1e3:.1f} | "
+                 f"{s * 1e3:.1f} |")
+    worst = max(PRESETS, key=lambda n: med[n][0])
+    ok = med[worst][0] / base <= TARGET
+    L += ["", f"Target: every architecture within {TARGET}x of the split pixel (`ovt`): "
+          + ("**reached**" if ok else "**not reached**") + f"; slowest `{worst}` at {med[worst][0] / base:.2f}x.",
+          "The split pixel runs its compiled sensor chain (`lfmbench.sensor.fused`); the other plans run the torch "
+          "chain of `simulate_plan_electrons` (shot noise through the same compiled sampler).", "", END]
+    doc = bd.DOC.read_text() if bd.DOC.is_file() else ""
+    sec = "\n".join(L)
+    if BEGIN in doc and END in doc:
+        doc = doc[:doc.index(BEGIN)] + sec + doc[doc.index(END) + len(END):]
+    else:
+        doc = doc.rstrip("\n") + "\n\n" + sec + "\n"
+    atomic_write_text(bd.DOC, doc)
+    print(sec)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
