@@ -191,8 +191,9 @@ class LFMCaptureDataset(Dataset):
         -1 none); ``depth``: (F, 1, h, w) m; ``rgb`` (on request): ``lpd_lcg_rgb``, ``spd_rgb``, ``gt_rgb``
         (F, 3, h, w) demosaiced (kornia bilinear); ``meta``: scene_id, index, epoch, num_lights, light_id,
         flicker, freq_hz, duty, phase_s (L,) padded, exposure_short_s, exposure_long_s (s), crop (y0, x0, h, w),
-        sensor, architecture, shutter, static_windows ("exact" or "nearest"), flicker_mode ("bins" or
-        "per_frame_weight"), frame_start (index of the sample's first frame in the scene's sequence).
+        sensor, shutter, flicker_mode ("bins" or "per_frame_weight"), frame_start (index of the sample's first
+        frame in the scene's sequence); another capture plan adds architecture and static_windows ("exact" or
+        "nearest").
         Another capture plan (``sensor="lofic"``, ...): its captures by name instead of ``lpd_hcg``, ``lpd_lcg``,
         ``spd`` (DN), ``<capture>_e`` (e-, input-referred to the plan's reference capture, the ``gt`` units),
         ``saturated`` (F, N, h, w) with one channel per capture in plan order, ``gt``: the reference capture's
@@ -632,12 +633,14 @@ class LFMCaptureDataset(Dataset):
         arr = {k: torch.tensor([(d if p is None else p[k]) for p in ps] + [0.0] * (L - n), dtype=torch.float64)
                for k, d in (("freq_hz", 0.0), ("duty", 1.0), ("phase_s", 0.0))}
         mode = "per_frame_weight" if view.layers.group_static else "bins"
-        return {"scene_id": view.scene_id, "index": index, "epoch": self.epoch, "num_lights": n,
-                "light_id": light_id, "flicker": flick, **arr, "exposure_short_s": float(tm["short_exposure_s"]),
-                "exposure_long_s": float(tm["long_exposure_s"]), "crop": torch.tensor(crop),
-                "sensor": self.sensor_name, "architecture": self.architecture, "shutter": self.shutter,
-                "static_windows": self._static_window_mode(tm), "flicker_mode": mode,
-                "frame_start": int(frame_start)}
+        out = {"scene_id": view.scene_id, "index": index, "epoch": self.epoch, "num_lights": n,
+               "light_id": light_id, "flicker": flick, **arr, "exposure_short_s": float(tm["short_exposure_s"]),
+               "exposure_long_s": float(tm["long_exposure_s"]), "crop": torch.tensor(crop),
+               "sensor": self.sensor_name, "shutter": self.shutter, "flicker_mode": mode,
+               "frame_start": int(frame_start)}
+        if self.architecture != "split_pixel":  # (the split pixel's meta is unchanged: the batched paths share it)
+            out.update(architecture=self.architecture, static_windows=self._static_window_mode(tm))
+        return out
 
     def _static_window_mode(self, timing: Mapping[str, Any]) -> str:
         """``"exact"`` when every window of the plan is one the corpus stores for its static groups (always for
