@@ -320,10 +320,14 @@ def compose_batch(batch: Mapping[str, Any], backend: str = "auto", threads: int 
         dest = batch["slot_sample"][slot] * (F * h * w) + pix
         R = wts["lpd"].shape[1]
         at = slot * R + (pix % (h * w)) // w if R > 1 else slot                      # (E,) row of (S * R, Kmax)
-        vals = batch["entry_values"].transpose(1, 2).contiguous()                    # (2, E, Kmax) e-/s
-        for key, c in (("lpd", 0), ("spd", 1), ("gt", 0)):
-            wk = wts[key].float().reshape(-1, wts[key].shape[-1]).index_select(0, at)  # (E, Kmax) s
-            contrib = (vals[c] * wk).sum(-1)                                          # (E,) e-
+        vals = batch["entry_values"].transpose(1, 2)                                 # (2, E, Kmax) e-/s
+        if vals.stride(-1) != 1:        # entries stored bin-major: make the bins of an entry adjacent
+            vals = vals.contiguous()
+        kx = wts["lpd"].shape[-1]
+        # the three weights of a row in one gather: (S * R, 3, Kmax) -> (E, 3, Kmax) s
+        w3 = torch.stack([wts[k].float().reshape(-1, kx) for k in ("lpd", "spd", "gt")], 1).index_select(0, at)
+        for j, (key, c) in enumerate((("lpd", 0), ("spd", 1), ("gt", 0))):
+            contrib = (vals[c] * w3[:, j]).sum(-1)                                    # (E,) e-
             comp[key].view(-1).index_add_(0, dest, contrib)
     return comp
 

@@ -247,7 +247,7 @@ class SplitProgram:
     N pixel entries of all lights of all frames, Kall bins):
         ``static`` (nS, Fs, 2, H, W) float32 e-/s; ``light_index`` (nS, Fs, 1, H, W); ``depth`` (nS, Fs, H, W) m;
         ``e_y``, ``e_x`` (N,) int32 px, ``e_pos`` (N,) int32 position of the entry's light in its frame's list,
-        ``e_vals`` (2, Kall, N) float32 e-/s; ``off`` (nS, Fs + 1) first entry of each (scene, frame) (host);
+        ``e_vals`` (N, 2, Kall) float32 e-/s (entry-major); ``off`` (nS, Fs + 1) first entry of each (scene, frame) (host);
         ``lt_lpos`` (nS, Fs, Lf) the light's position in the scene's ``meta`` light arrays (-1: padding),
         ``lt_K`` (nS, Fs, Lf) bins, ``lt_box`` (nS, Fs, Lf, 4) (y0, x0, y1, x1) px half-open;
         ``ids`` (nS, L) light ids (-1: padding), ``ent`` (nS, L) the light's PWM entity
@@ -338,7 +338,8 @@ class SplitProgram:
         nt = self.nty * self.ntx
         self.tile_off = np.zeros((nS, Fs, nt + 1), dtype=np.int64)
         self.order: list[list[np.ndarray]] = []        # per scene and frame: _SceneEntries position -> run position
-        self.e_vals = torch.zeros((2, self.kall, n_all), dtype=torch.float32, device=dev)
+        # entry-major (N, 2, Kall): a batch gathers whole rows of 2 x Kall rates (coalesced on a GPU)
+        self.e_vals = torch.zeros((n_all, 2, self.kall), dtype=torch.float32, device=dev)
         ey, ex, ep = (np.empty(n_all, dtype=np.int32) for _ in range(3))
         for i, e in enumerate(ents):
             self.order.append([])
@@ -351,7 +352,7 @@ class SplitProgram:
                 self.order[i].append(inv)
                 self.tile_off[i, fr] = a + np.concatenate([[0], np.cumsum(np.bincount(tile, minlength=nt))])
                 ey[a:b], ex[a:b], ep[a:b] = fe.y[srt], fe.x[srt], fe.pos[srt]
-                self.e_vals[:, :fe.vals.shape[1], a:b].copy_(torch.from_numpy(fe.vals[:, :, srt]))
+                self.e_vals[a:b, :, :fe.vals.shape[1]].copy_(torch.from_numpy(fe.vals[:, :, srt]).permute(2, 0, 1))
         t = lambda a: torch.from_numpy(a).to(dev)  # noqa: E731
         self.e_y, self.e_x, self.e_pos = t(ey), t(ex), t(ep)
         self.t_lpos, self.t_K, self.t_box = t(self.lt_lpos), t(self.lt_K), t(self.lt_box)
@@ -375,7 +376,7 @@ class SplitProgram:
         """(2, Kall, n) view of the rates of the entries of one scene's frame (what :class:`ResidentScene` holds),
         in tile order (``order[scene][frame]`` maps a :class:`~lfmbench.datasets.pieces._SceneEntries` position
         to its position here)."""
-        return self.e_vals[:, :, int(self.off[scene, frame]):int(self.off[scene, frame + 1])]
+        return self.e_vals[int(self.off[scene, frame]):int(self.off[scene, frame + 1])].permute(1, 2, 0)
 
     def _freeze(self) -> dict:
         """The frozen draws of every sample of a test split as tables (read once through ``ds.draws``)."""
@@ -498,7 +499,8 @@ class SplitProgram:
         pix = f * (h * w) + (ey - y0[b]) * w + (ex - x0[b])
         out["entry_pix"] = torch.where(ok, pix, torch.zeros_like(pix)).int()
         out["entry_slot"] = slot.int()
-        out["entry_values"] = self.e_vals.index_select(2, gid) * ok.to(torch.float32)
+        # (2, Kall, E) as a view of entry-major rows (compose_batch reads it without a copy)
+        out["entry_values"] = (self.e_vals.index_select(0, gid) * ok.to(torch.float32)[:, None, None]).permute(1, 2, 0)
         # crops of the full-frame layers: one gather each on a GPU; slices on the CPU, where copying B x F
         # rectangles is faster than an indexed gather (the same numbers)
         layers = [("static", self.static), ("light_index", self.light_index), ("depth", self.depth)]
