@@ -53,6 +53,7 @@ from lfmbench import sensor as _sensor
 from lfmbench.check import trusted_values
 from lfmbench.datasets.assembly import NOISE_STREAMS, SENSOR_OUTPUTS, assemble_sample, bin_edges, window_bin_exposure, window_starts
 from lfmbench.datasets.pieces import PWM_FIELDS, capture_pieces
+from lfmbench.datasets.row_gather import gather_rows
 from lfmbench.flicker import pwm_exposure
 from lfmbench.sensor.fused import map_samples
 
@@ -325,7 +326,7 @@ def compose_batch(batch: Mapping[str, Any], backend: str = "auto", threads: int 
             vals = vals.contiguous()
         kx = wts["lpd"].shape[-1]
         # the three weights of a row in one gather: (S * R, 3, Kmax) -> (E, 3, Kmax) s
-        w3 = torch.stack([wts[k].float().reshape(-1, kx) for k in ("lpd", "spd", "gt")], 1).index_select(0, at)
+        w3 = gather_rows(torch.stack([wts[k].float().reshape(-1, kx) for k in ("lpd", "spd", "gt")], 1), at)
         for j, (key, c) in enumerate((("lpd", 0), ("spd", 1), ("gt", 0))):
             contrib = (vals[c] * w3[:, j]).sum(-1)                                    # (E,) e-
             comp[key].view(-1).index_add_(0, dest, contrib)

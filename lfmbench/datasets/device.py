@@ -33,6 +33,7 @@ from lfmbench.datasets.batched import collate_pieces, pieces_to, simulate_batch
 from lfmbench.datasets.counter_draws import (PURPOSE_PWM, PWM_UNIFORMS, crop_origin, noise_seeds, place_uniforms,
                                              pwm_from_uniforms, sample_keys, start_frame)
 from lfmbench.datasets.pieces import PWM_FIELDS, _SceneEntries, capture_pieces
+from lfmbench.datasets.row_gather import gather_rows
 from lfmbench.vocabulary import PHOTODIODES
 
 __all__ = ["ResidentMemoryError", "ResidentScene", "ResidentScenes", "DeviceBatches", "epoch_order",
@@ -500,7 +501,7 @@ class SplitProgram:
         out["entry_pix"] = torch.where(ok, pix, torch.zeros_like(pix)).int()
         out["entry_slot"] = slot.int()
         # (2, Kall, E) as a view of entry-major rows (compose_batch reads it without a copy)
-        out["entry_values"] = (self.e_vals.index_select(0, gid) * ok.to(torch.float32)[:, None, None]).permute(1, 2, 0)
+        out["entry_values"] = (gather_rows(self.e_vals, gid) * ok.to(torch.float32)[:, None, None]).permute(1, 2, 0)
         # crops of the full-frame layers: one gather each on a GPU; slices on the CPU, where copying B x F
         # rectangles is faster than an indexed gather (the same numbers)
         layers = [("static", self.static), ("light_index", self.light_index), ("depth", self.depth)]

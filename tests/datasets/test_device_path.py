@@ -209,3 +209,17 @@ def test_a_sample_without_lights_or_groups_in_its_crop_stays_on_the_device(tmp_p
         for k in ("static", "entry_values", "entry_slot", "entry_pix", "light_index", "depth"):
             assert p[k].device.type == "meta", (crop, k)
     assert p["entry_values"].shape[2] > 0
+
+
+def test_gather_rows_equals_index_select():
+    """gather_rows (a Triton kernel on CUDA) returns index_select's rows, for any row width and index dtype."""
+    from lfmbench.datasets.row_gather import gather_rows
+
+    devs = ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])
+    for dev in devs:
+        for shape in ((50, 2, 8), (50, 3), (50, 1), (50, 2, 3)):
+            t = torch.rand(shape, device=dev)
+            for dt in (torch.int64, torch.int32):
+                i = torch.randint(0, 50, (37,), device=dev, dtype=dt)
+                assert torch.equal(gather_rows(t, i), t.index_select(0, i)), (dev, shape, dt)
+        assert gather_rows(torch.rand(4, 2, device=dev), torch.zeros(0, dtype=torch.long, device=dev)).shape == (0, 2)
