@@ -24,6 +24,7 @@ LAYERS = (
     ("lfmbench.flicker",),
     ("lfmbench.corpus",),
     ("render_tools", "lfmbench.sensor"),
+    ("lfmbench.isp",),  # a sensor's mosaic -> display sRGB (reads the preset's public fields)
     ("lfmbench.datasets",),
     ("lfmbench.metrics",),
     ("lfmbench.baselines",),
