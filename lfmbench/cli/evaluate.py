@@ -37,6 +37,9 @@ def evaluate_cmd(
     cache_dir: Path = typer.Option(None, "--cache-dir",
                                    help="projected-radiance cache directory (default <corpus>/.cache; "
                                         "any writable directory for a read-only corpus)"),
+    isp: str = typer.Option("default", "--isp",
+                            help="ISP pipeline of the display-referred columns psnr_srgb, ssim_srgb: a shipped name "
+                                 "(default, local) or a YAML path; 'none' skips them (docs/isp.md)"),
 ) -> None:
     """Score a fusion method on a corpus split; write per-scene and aggregate metrics as JSON.
 
@@ -65,15 +68,19 @@ def evaluate_cmd(
 
     from lfmbench.baselines import MethodNotFoundError, get_method
     from lfmbench.baselines.checkpoint import CheckpointError
+    from lfmbench.isp import load_pipeline
     from lfmbench.metrics import ScoreOptions
 
     try:
+        isp_name = None if isp.lower() == "none" else isp
+        if isp_name is not None:
+            load_pipeline(isp_name)  # a bad pipeline file is named before any work
         fn = get_method(method)
         extra = {"frames": frames, "sensor": sensor} if cache_dir is None else {"frames": frames, "sensor": sensor,
                                                                                 "cache_dir": cache_dir}
         ds, ident, cond = corpus_run_inputs(corpus, split, seed, crop, samples_per_scene, **extra)
     except (MethodNotFoundError, FileNotFoundError, EmptyDataError, RuntimeError, ValueError) as exc:
-        fail(str(exc))
+        fail(str(exc) if not str(exc).startswith("isp pipeline") else f"--isp: {exc}")
     from lfmbench.baselines import REGISTRY, methods_for
 
     if method in REGISTRY and method not in methods_for(ds.architecture):
@@ -83,7 +90,8 @@ def evaluate_cmd(
     loader = DataLoader(ds, batch_size=1, shuffle=False, num_workers=0, collate_fn=collate_samples)
     try:
         res = evaluate(fn, islice(loader, n), method_spec=method, output=out,
-                       options=ScoreOptions(perceptual=perceptual), warmup=warmup, repeats=repeats, device=device,
+                       options=ScoreOptions(perceptual=perceptual, isp=isp_name, sensor=ds.preset), warmup=warmup,
+                       repeats=repeats, device=device,
                        seeds={"dataset": seed}, dataset={"corpus": str(corpus), "split": split, "scenes": n,
                                                          "crop": crop, "samples_per_scene": samples_per_scene,
                                                          "frames": frames, "sensor": ds.sensor_name,

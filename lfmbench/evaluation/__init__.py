@@ -24,8 +24,8 @@ _WHERE = {
                     "lfmbench.evaluation.provenance"),
     **dict.fromkeys(["COMPLETE", "RESULT_FORMAT", "RESULT_VERSION", "num", "per_scene", "write_json_atomic"],
                     "lfmbench.evaluation.results"),
-    **dict.fromkeys(["DataSourceError", "EvaluationInterrupted", "MethodOutputError", "check_output", "evaluate"],
-                    "lfmbench.evaluation.run"),
+    **dict.fromkeys(["DataSourceError", "EvaluationInterrupted", "MethodOutputError", "check_output", "evaluate",
+                     "evaluate_methods"], "lfmbench.evaluation.run"),
 }
 
 

@@ -46,7 +46,8 @@ def benchmark(corpus: str | Path, methods: Iterable[str] | None = None, runs_dir
               split: str = "test", seed: int = 0, crop: int | None = None, max_scenes: int | None = None,
               perceptual: bool = True, repeats: int = 5, device: str = "cpu", sort_by: str | None = None,
               progress: bool = True, samples_per_scene: int = 1, cache_dir: str | Path | None = None,
-              frames: int = 3, sensor: str = "ovt") -> list[dict]:
+              frames: int = 3, sensor: str = "ovt", share_samples: bool = True, isp: str | None = "default"
+              ) -> list[dict]:
     """Evaluate several methods on one corpus split and build the leaderboard.
 
     Writes ``runs_dir/<method>.json`` per method, ``runs_dir/leaderboard.md``, ``leaderboard.json`` and
@@ -55,6 +56,11 @@ def benchmark(corpus: str | Path, methods: Iterable[str] | None = None, runs_dir
     YAML, :func:`lfmbench.baselines.methods_for`). ``cache_dir``: the dataset's projection cache (default
     ``<corpus>/.cache``; any writable directory for a read-only corpus). ``frames``: consecutive frames per
     sample, as ``lfmbench evaluate --frames`` (24 or more for the IEEE P2020 flicker metrics; <= the corpus's).
+    ``share_samples`` (default): every sample is simulated once and scored for all methods
+    (:func:`lfmbench.evaluation.run.evaluate_methods`, one sample in memory at a time; the scores equal those of
+    one pass per method, docs/evaluation-sharing-benchmark.md); False: one pass over the data per method (the
+    path before sharing, kept for comparison). ``isp``: the ISP pipeline (name or YAML path) of the
+    display-referred secondary columns, None for none (docs/isp.md).
     """
     from itertools import islice
 
@@ -63,7 +69,7 @@ def benchmark(corpus: str | Path, methods: Iterable[str] | None = None, runs_dir
     from lfmbench.baselines import methods_for
     from lfmbench.datasets.loading import collate_samples
     from lfmbench.evaluation.leaderboard import check_comparable, leaderboard_rows, load_runs, print_leaderboard
-    from lfmbench.evaluation.run import evaluate
+    from lfmbench.evaluation.run import evaluate, evaluate_methods
     from lfmbench.metrics import ScoreOptions
 
     runs_dir = Path(runs_dir)
@@ -71,17 +77,23 @@ def benchmark(corpus: str | Path, methods: Iterable[str] | None = None, runs_dir
                                                                             "cache_dir": cache_dir}
     ds, ident, cond = corpus_run_inputs(corpus, split, seed, crop, samples_per_scene, **extra)
     n = len(ds) if max_scenes is None else min(len(ds), max_scenes)
-    paths = []
-    for m in (list(methods) if methods is not None else methods_for(ds.architecture)):
-        loader = DataLoader(ds, batch_size=1, shuffle=False, num_workers=0, collate_fn=collate_samples)
-        out = runs_dir / f"{safe_name(m)}.json"
-        evaluate(m, islice(loader, n), method_spec=m, output=out, options=ScoreOptions(perceptual=perceptual),
-                 repeats=repeats, device=device, seeds={"dataset": seed},
-                 dataset={"corpus": str(corpus), "split": split, "scenes": n, "crop": crop,
-                          "samples_per_scene": samples_per_scene, "frames": frames, "sensor": ds.sensor_name,
-                          "architecture": ds.architecture}, progress=progress,
-                 total=n, corpus=ident, scene_conditions=cond)
-        paths.append(out)
+    names = list(methods) if methods is not None else methods_for(ds.architecture)
+    paths = [runs_dir / f"{safe_name(m)}.json" for m in names]
+    common = dict(options=ScoreOptions(perceptual=perceptual, isp=isp, sensor=ds.preset), repeats=repeats,
+                  device=device, seeds={"dataset": seed},
+                  dataset={"corpus": str(corpus), "split": split, "scenes": n, "crop": crop,
+                           "samples_per_scene": samples_per_scene, "frames": frames, "sensor": ds.sensor_name,
+                           "architecture": ds.architecture},
+                  progress=progress, total=n, corpus=ident, scene_conditions=cond)
+
+    def loader():
+        return islice(DataLoader(ds, batch_size=1, shuffle=False, num_workers=0, collate_fn=collate_samples), n)
+
+    if share_samples:
+        evaluate_methods(names, loader(), method_specs=names, outputs=paths, **common)
+    else:
+        for m, out in zip(names, paths):
+            evaluate(m, loader(), method_spec=m, output=out, **common)
     runs = load_runs(paths)
     check_comparable(runs)
     rows = leaderboard_rows(runs, sort_by)

@@ -119,20 +119,28 @@ def identity(run: dict) -> dict[str, Any]:
     """What must agree between results ranked together: corpus (the scored scenes' files, or the manifest SHA-256
     in result files that do not record them; format version, frozen test draws), metric versions, split, dataset
     seed, crop, samples per scene, frames per sample (3, the dataset's default, in files that do not record it),
-    scoring options and the sensor preset (its capture plan: :func:`run_sensor`)."""
+    scoring options, the sensor preset (its capture plan: :func:`run_sensor`) and the display ISP (pipeline and
+    secondary metric versions; compared only among the runs that scored display-referred columns)."""
+    from lfmbench.metrics import REGISTRY, SECONDARY_GROUPS
+
     c = run.get("corpus") or {}
     d = run.get("dataset") or {}
     split = d.get("split")
+    mv = (run.get("versions") or {}).get("metrics")
+    if isinstance(mv, dict):  # secondary metrics (added after a protocol was published) are compared on their own
+        mv = {k: v for k, v in mv.items() if k not in REGISTRY or REGISTRY[k].group not in SECONDARY_GROUPS}
+    opts = run.get("options") or {}
     return {
         "corpus scenes sha256": (f"scenes {c['scenes_sha256']}" if c.get("scenes_sha256")
                                  else f"manifest {c['manifest_sha256']}" if c.get("manifest_sha256") else None),
         "corpus format version": c.get("format_version"),
         "corpus test draws sha256": _draws(c) if split == "test" else None,
-        "metric versions": (run.get("versions") or {}).get("metrics"),
+        "metric versions": mv,
         "split": split, "dataset seed": (run.get("seeds") or {}).get("dataset"), "crop": d.get("crop"),
         "samples per scene": d.get("samples_per_scene", 1), "frames per sample": d.get("frames", 3),
-        "scoring options": {k: v for k, v in (run.get("options") or {}).items() if k != "perceptual"},
+        "scoring options": {k: v for k, v in opts.items() if k not in ("perceptual", "isp")},
         "sensor": run_sensor(run),
+        "display ISP": _display_identity(run),
     }
 
 
@@ -140,6 +148,25 @@ def run_sensor(run: dict) -> str:
     """The sensor preset a result was simulated with (``dataset.sensor``; ``ovt``, the only one before issue 22, in
     files that do not record it)."""
     return str((run.get("dataset") or {}).get("sensor", "ovt"))
+
+
+#: Fields of :func:`identity` compared only among the runs that record them: a result written before the
+#: secondary columns existed has none (an empty cell in the table), which is no conflict.
+_OPTIONAL_FIELDS = ("display ISP",)
+
+
+def _display_identity(run: dict) -> dict | None:
+    """The ISP pipeline and the secondary metrics' versions of a run that scored display-referred metrics, else
+    None."""
+    from lfmbench.metrics import REGISTRY, SECONDARY_GROUPS
+
+    isp = (run.get("options") or {}).get("isp")
+    if isp is None:
+        return None
+    mv = (run.get("versions") or {}).get("metrics") or {}
+    sec = {k: v for k, v in mv.items() if k in REGISTRY and REGISTRY[k].group in SECONDARY_GROUPS} \
+        if isinstance(mv, dict) else {}
+    return {"pipeline": isp, "metric versions": sec}
 
 
 def _draws(c: dict) -> str | None:
@@ -176,7 +203,11 @@ def comparability_problems(runs: list[dict], cross_sensor: bool = False) -> list
         if cross_sensor and field == "sensor":
             continue
         vals = [i[field] for i in ids]
-        if all(v == vals[0] for v in vals):
+        if field in _OPTIONAL_FIELDS:
+            present = [v for v in vals if v is not None]
+            if all(v == present[0] for v in present):
+                continue
+        elif all(v == vals[0] for v in vals):
             continue
         if field == "metric versions":
             names = sorted(set().union(*[set(v or {}) for v in vals]))

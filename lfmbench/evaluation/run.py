@@ -1,4 +1,6 @@
-"""Run one fusion method over a stream of batches and score it: :func:`evaluate`.
+"""Run fusion methods over a stream of batches and score them: :func:`evaluate` (one method) and
+:func:`evaluate_methods` (several methods on one pass over the data: each sample is read and simulated once and
+shared by all of them).
 
 The data source is injectable (any iterable of sample-dict batches, ``docs/contracts.md`` section 3). Every
 scene is scored with :func:`lfmbench.metrics.score_batch`; the method is timed (warm-up, then the median of
@@ -10,11 +12,13 @@ intervals over scenes and the breakdown of the primary score by condition (``doc
 """
 from __future__ import annotations
 
+import copy
+import dataclasses
 import datetime as _dt
 import statistics
 import sys
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -29,7 +33,7 @@ from lfmbench.evaluation.provenance import device_name, git_revision, versions
 from lfmbench.evaluation.results import (COMPLETE, RESULT_FORMAT, RESULT_VERSION, aggregate, breakdown, per_scene,
                                          write_json_atomic)
 
-__all__ = ["evaluate", "check_output", "MethodOutputError", "EmptyDataError", "DataSourceError",
+__all__ = ["evaluate", "evaluate_methods", "check_output", "MethodOutputError", "EmptyDataError", "DataSourceError",
            "EvaluationInterrupted"]
 
 
@@ -42,11 +46,13 @@ class DataSourceError(RuntimeError):
 
 
 class EvaluationInterrupted(KeyboardInterrupt):
-    """Ctrl-C during :func:`evaluate`; the partial result (``status: interrupted``) has been written."""
+    """Ctrl-C during :func:`evaluate`; the partial result (``status: interrupted``) has been written.
+    ``result``: the (first) method's partial result; ``results``: every method's (:func:`evaluate_methods`)."""
 
-    def __init__(self, result: dict):
+    def __init__(self, result: dict, results: list[dict] | None = None):
         super().__init__("interrupted")
         self.result = result
+        self.results = results if results is not None else [result]
 
 
 def _describe(exc: BaseException) -> str:
@@ -132,60 +138,95 @@ def evaluate(method: Callable | str, batches: Iterable[dict], *, method_spec: st
         EvaluationInterrupted: on Ctrl-C (a ``KeyboardInterrupt``).
         lfmbench.baselines.MethodNotFoundError: for an unknown spec.
     """
+    return evaluate_methods([method], batches, method_specs=[method_spec], outputs=[output], options=options,
+                            warmup=warmup, repeats=repeats, device=device, seeds=seeds, dataset=dataset,
+                            progress=progress, total=total, corpus=corpus, scene_conditions=scene_conditions,
+                            conditions_file=conditions_file)[0]
+
+
+def evaluate_methods(methods: Sequence[Callable | str], batches: Iterable[dict], *,
+                     method_specs: Sequence[str | None] | None = None,
+                     outputs: Sequence[str | Path | None] | None = None, options=None, warmup: int = 1,
+                     repeats: int = 5, device: str | torch.device = "cpu", seeds: dict | None = None,
+                     dataset: dict | None = None, progress: bool = True, total: int | None = None,
+                     corpus: dict | None = None, scene_conditions: Callable[[str], dict] | None = None,
+                     conditions_file: str | Path | None = None) -> list[dict]:
+    """Evaluate several fusion methods on ONE pass over the batches: each batch is read (simulated) once and
+    scored for every method, one batch in memory at a time.
+
+    Every method gets its own copy of the batch (``copy.deepcopy``, the last method the original), so a method that
+    edits its input cannot change what the next one sees; the scores are those of :func:`evaluate` run once per
+    method over the same data (a test compares them sample by sample). Arguments as :func:`evaluate`, per method
+    in ``method_specs`` and ``outputs`` (one result file each, rewritten after every batch).
+
+    Returns:
+        The result dicts, in the order of ``methods``.
+
+    Raises:
+        EmptyDataError, EvaluationInterrupted (its ``results`` holds every method's partial result),
+        DataSourceError (every method's partial result written first), MethodNotFoundError: as :func:`evaluate`.
+    """
     from lfmbench.baselines import get_method
     from lfmbench.metrics import PRIMARY, ScoreOptions, hdr
 
+    methods = list(methods)
+    if not methods:
+        raise ValueError("methods must name at least one method")
+    specs = list(method_specs) if method_specs is not None else [None] * len(methods)
+    outs = list(outputs) if outputs is not None else [None] * len(methods)
+    if len(specs) != len(methods) or len(outs) != len(methods):
+        raise ValueError(f"method_specs and outputs must have one entry per method ({len(methods)})")
     o = options or ScoreOptions()
-    spec = method_spec or (method if isinstance(method, str) else getattr(method, "__qualname__", repr(method)))
-    fn = get_method(method)
+    fns = [get_method(m) for m in methods]  # every method (and checkpoint) is found before any data is read
     bins = load_bins(conditions_file)
     dev = torch.device(device)
-    result: dict[str, Any] = {
-        "format": RESULT_FORMAT, "version": RESULT_VERSION,
-        "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
-        "method": {"spec": spec, "params": None, "macs_per_call": None, "macs_per_megapixel": None},
-        "dataset": dataset or {}, "corpus": corpus, "seeds": seeds or {},
-        "runtime": {"device": device_name(dev), "device_type": dev.type, "warmup": warmup, "repeats": repeats,
-                    "ms_per_megapixel": None, "median_ms": None, "times_ms": None, "megapixels_per_call": None},
-        "options": {"perceptual": o.perceptual, "fps": o.fps, "cd_per_unit": o.cd_per_unit,
-                    "region": vars(o.region), "margin_px": o.margin_px, "ring_px": o.ring_px},
-        "versions": versions(o.perceptual, o.cd_per_unit), "git": git_revision(),
-        "command": " ".join(sys.argv), "status": "running", "notes": [], "statistics": stats.settings(),
-        "aggregate": {}, "per_scene": [], "breakdown": {}, "scenes": [],
-    }
+    notes: list[str] = []
     perceptual = o.perceptual
     if perceptual:
         try:
             hdr.load_pycvvdp()
         except hdr.CvvdpUnavailableError as exc:
             perceptual = False
-            result["notes"].append(f"perceptual metrics skipped: {exc}")
-    opts = ScoreOptions(perceptual=perceptual, fps=o.fps, cd_per_unit=o.cd_per_unit, region=o.region,
-                        margin_px=o.margin_px, ring_px=o.ring_px)
+            notes.append(f"perceptual metrics skipped: {exc}")
+    opts = dataclasses.replace(o, perceptual=perceptual)
+    if o.isp is not None:  # a bad pipeline file is bad input, found before any data is read
+        from lfmbench.isp import load_pipeline
+
+        isp_id = load_pipeline(o.isp).identity()
+    else:
+        isp_id = None
+    runs = []
+    for m, fn, spec, out in zip(methods, fns, specs, outs):
+        spec = spec or (m if isinstance(m, str) else getattr(m, "__qualname__", repr(m)))
+        runs.append(_MethodRun(fn, spec, out, o, opts, warmup, repeats, dev, seeds, dataset, corpus, notes))
+        if isp_id is not None:
+            runs[-1].result["options"]["isp"] = isp_id
     it = batches
     if progress:
         from tqdm import tqdm
 
-        it = tqdm(batches, total=total, desc=f"evaluate {spec}", unit="batch")
+        desc = f"evaluate {runs[0].spec}" if len(runs) == 1 else f"evaluate {len(runs)} methods"
+        it = tqdm(batches, total=total, desc=desc, unit="batch")
     source = iter(it)
     try:
-        n_batches = _run_batches(fn, source, result, output, dev, opts, warmup, repeats, scene_conditions)
+        n_batches = _run_batches(runs, source, dev, scene_conditions)
     except KeyboardInterrupt:
-        result["status"] = "interrupted"
-        result["notes"].append(f"interrupted (Ctrl-C) after {len(result['scenes'])} scenes; not a complete result")
-        _finish(result, bins, PRIMARY)
-        if output is not None:
-            write_json_atomic(result, output)
-        raise EvaluationInterrupted(result) from None
+        for r in runs:
+            r.result["status"] = "interrupted"
+            r.result["notes"].append(f"interrupted (Ctrl-C) after {len(r.result['scenes'])} scenes; not a complete "
+                                     "result")
+            _finish(r.result, bins, PRIMARY)
+            r.write()
+        raise EvaluationInterrupted(runs[0].result, [r.result for r in runs]) from None
     if n_batches == 0:
         raise EmptyDataError("the data source yielded no batch (empty corpus split?)")
-    _finish(result, bins, PRIMARY)
-    result["status"] = COMPLETE if result["aggregate"]["scenes_ok"] else "failed"
-    if result["status"] == "failed":
-        result["notes"].append("no scene was scored: the method failed on every scene")
-    if output is not None:
-        write_json_atomic(result, output)
-    return result
+    for r in runs:
+        _finish(r.result, bins, PRIMARY)
+        r.result["status"] = COMPLETE if r.result["aggregate"]["scenes_ok"] else "failed"
+        if r.result["status"] == "failed":
+            r.result["notes"].append("no scene was scored: the method failed on every scene")
+        r.write()
+    return [r.result for r in runs]
 
 
 def _finish(result: dict, bins: dict, metric: str) -> None:
@@ -195,36 +236,43 @@ def _finish(result: dict, bins: dict, metric: str) -> None:
     result["breakdown"] = {"metric": metric, "bins": bins, "by": breakdown(result["scenes"], metric, bins)}
 
 
-def _run_batches(fn, source, result: dict, output, dev, opts, warmup: int, repeats: int,
-                 scene_conditions: Callable[[str], dict] | None) -> int:
-    """The loop of :func:`evaluate`: score every batch into ``result`` (rewritten to ``output`` after each,
-    without the bootstrap, which runs once at the end); returns the number of batches."""
-    from lfmbench.metrics import score_batch
+class _MethodRun:
+    """One method's part of an evaluation: its result dict (written to ``output`` after every batch), the timing
+    state, and :meth:`score` for one batch."""
 
-    timed = False
-    n_batches = 0
-    while True:
-        try:
-            batch = next(source)
-        except StopIteration:
-            break
-        except Exception as exc:  # the data source failed (corrupt file ...): save what we have, then stop
-            result["status"] = "failed"
-            result["notes"].append(f"data source failed after {n_batches} batches: {type(exc).__name__}: {exc}")
-            result["aggregate"] = aggregate(result["scenes"])
-            if output is not None:
-                write_json_atomic(result, output)
-            raise DataSourceError(f"reading batch {n_batches} failed: {type(exc).__name__}: {exc}") from exc
-        n_batches += 1
-        batch = _to(batch, dev)
-        if "gt" not in batch:
-            raise ValueError(f"batch {n_batches - 1} has no 'gt' key (keys: {sorted(batch)})")
-        gt = batch["gt"].clone()  # a method that edits its input in place must not change the reference
-        ids = _scene_ids(batch)
-        conds = sample_conditions(batch)
+    def __init__(self, fn, spec: str, output, o, opts, warmup: int, repeats: int, dev: torch.device,
+                 seeds: dict | None, dataset: dict | None, corpus: dict | None, notes: list[str]) -> None:
+        self.fn, self.spec, self.output, self.opts = fn, spec, output, opts
+        self.warmup, self.repeats, self.dev, self.timed = warmup, repeats, dev, False
+        self.result: dict[str, Any] = {
+            "format": RESULT_FORMAT, "version": RESULT_VERSION,
+            "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+            "method": {"spec": spec, "params": None, "macs_per_call": None, "macs_per_megapixel": None},
+            "dataset": dict(dataset or {}), "corpus": corpus, "seeds": dict(seeds or {}),
+            "runtime": {"device": device_name(dev), "device_type": dev.type, "warmup": warmup, "repeats": repeats,
+                        "ms_per_megapixel": None, "median_ms": None, "times_ms": None, "megapixels_per_call": None},
+            "options": {"perceptual": o.perceptual, "fps": o.fps, "cd_per_unit": o.cd_per_unit,
+                        "region": vars(o.region), "margin_px": o.margin_px, "ring_px": o.ring_px},
+            "versions": versions(o.perceptual, o.cd_per_unit), "git": git_revision(),
+            "command": " ".join(sys.argv), "status": "running", "notes": list(notes), "statistics": stats.settings(),
+            "aggregate": {}, "per_scene": [], "breakdown": {}, "scenes": [],
+        }
+
+    def write(self) -> None:
+        if self.output is not None:
+            write_json_atomic(self.result, self.output)
+
+    def _record(self, ids: list, conds: list[dict], **fields) -> None:
         for sid, c in zip(ids, conds):
-            if scene_conditions is not None and sid is not None:
-                c.update(scene_conditions(sid))
+            self.result["scenes"].append({"scene_id": sid, "index": len(self.result["scenes"]), **fields,
+                                          "conditions": dict(c)})
+
+    def score(self, batch: dict, ids: list, conds: list[dict]) -> None:
+        """Run the method on one batch (on the device), score it into the result and rewrite the file."""
+        from lfmbench.metrics import score_batch
+
+        fn, dev = self.fn, self.dev
+        gt = batch["gt"].clone()  # a method that edits its input in place must not change the reference
         t0 = time.perf_counter()
         try:
             with torch.no_grad():
@@ -236,40 +284,66 @@ def _run_batches(fn, source, result: dict, output, dev, opts, warmup: int, repea
             raise
         except (Exception, SystemExit) as exc:  # the method's failure is a result, not a crash
             status = "bad_output" if isinstance(exc, MethodOutputError) else "error"
-            for i, sid in enumerate(ids):
-                result["scenes"].append({"scene_id": sid, "index": len(result["scenes"]), "status": status,
-                                         "error": _describe(exc), "conditions": conds[i]})
+            self._record(ids, conds, status=status, error=_describe(exc))
         else:
             try:
-                scores = score_batch(pred, dict(batch, gt=gt), opts)
+                scores = score_batch(pred, dict(batch, gt=gt), self.opts)
             except Exception as exc:
-                scores = None
-                for i, sid in enumerate(ids):
-                    result["scenes"].append({"scene_id": sid, "index": len(result["scenes"]), "status": "metric_error",
-                                             "error": f"{type(exc).__name__}: {exc}", "conditions": conds[i]})
-            if scores is not None:
+                self._record(ids, conds, status="metric_error", error=f"{type(exc).__name__}: {exc}")
+            else:
                 mp = gt[0].numel() / 1e6
                 for sid, s, c in zip(ids, scores, conds):
-                    result["scenes"].append({"scene_id": sid, "index": len(result["scenes"]), "status": "ok",
-                                             "call_ms": call_ms / gt.shape[0], "megapixels": mp, "metrics": s,
-                                             "conditions": c})
-                if not timed:
-                    timed = True
-                    try:
-                        times = time_method(fn, batch, warmup=max(0, warmup - 1), repeats=repeats, device=dev)
-                        med = statistics.median(times) if times else call_ms
-                        mps = gt.numel() / 1e6
-                        result["runtime"].update(times_ms=times, median_ms=med, megapixels_per_call=mps,
-                                                 ms_per_megapixel=med / mps)
-                        module = method_module(fn)
-                        if module is not None:
-                            params, macs = count_params_macs(module, lambda: fn(dict(batch)))
-                            result["method"].update(params=params, macs_per_call=macs, macs_per_megapixel=macs / mps)
-                    except (Exception, SystemExit) as exc:
-                        result["notes"].append(f"timing failed: {_describe(exc)}")
-        result["aggregate"] = aggregate(result["scenes"])
-        if output is not None:
-            write_json_atomic(result, output)
+                    self.result["scenes"].append({"scene_id": sid, "index": len(self.result["scenes"]),
+                                                  "status": "ok", "call_ms": call_ms / gt.shape[0], "megapixels": mp,
+                                                  "metrics": s, "conditions": dict(c)})
+                if not self.timed:
+                    self.timed = True
+                    self._time(batch, call_ms, gt)
+        self.result["aggregate"] = aggregate(self.result["scenes"])
+        self.write()
+
+    def _time(self, batch: dict, call_ms: float, gt: torch.Tensor) -> None:
+        fn, res = self.fn, self.result
+        try:
+            times = time_method(fn, batch, warmup=max(0, self.warmup - 1), repeats=self.repeats, device=self.dev)
+            med = statistics.median(times) if times else call_ms
+            mps = gt.numel() / 1e6
+            res["runtime"].update(times_ms=times, median_ms=med, megapixels_per_call=mps, ms_per_megapixel=med / mps)
+            module = method_module(fn)
+            if module is not None:
+                params, macs = count_params_macs(module, lambda: fn(dict(batch)))
+                res["method"].update(params=params, macs_per_call=macs, macs_per_megapixel=macs / mps)
+        except (Exception, SystemExit) as exc:
+            res["notes"].append(f"timing failed: {_describe(exc)}")
+
+
+def _run_batches(runs: list[_MethodRun], source, dev, scene_conditions: Callable[[str], dict] | None) -> int:
+    """The loop of :func:`evaluate_methods`: read each batch once, score it for every method (each result
+    rewritten after each batch, without the bootstrap, which runs once at the end); returns the number of
+    batches."""
+    n_batches = 0
+    while True:
+        try:
+            batch = next(source)
+        except StopIteration:
+            break
+        except Exception as exc:  # the data source failed (corrupt file ...): save what we have, then stop
+            for r in runs:
+                r.result["status"] = "failed"
+                r.result["notes"].append(f"data source failed after {n_batches} batches: {type(exc).__name__}: {exc}")
+                r.result["aggregate"] = aggregate(r.result["scenes"])
+                r.write()
+            raise DataSourceError(f"reading batch {n_batches} failed: {type(exc).__name__}: {exc}") from exc
+        n_batches += 1
+        batch = _to(batch, dev)
+        if "gt" not in batch:
+            raise ValueError(f"batch {n_batches - 1} has no 'gt' key (keys: {sorted(batch)})")
+        ids = _scene_ids(batch)
+        conds = sample_conditions(batch)
+        for sid, c in zip(ids, conds):
+            if scene_conditions is not None and sid is not None:
+                c.update(scene_conditions(sid))
+        for i, r in enumerate(runs):
+            # each method its own copy (the last one the original): an in-place edit cannot reach the next method
+            r.score(batch if i == len(runs) - 1 else copy.deepcopy(batch), ids, conds)
     return n_batches
-
-

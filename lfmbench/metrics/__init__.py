@@ -2,8 +2,9 @@
 
 Modules: :mod:`~lfmbench.metrics.hdr` (PSNR-L, PSNR-mu, SSIM-mu, PU21-PSNR, ColorVideoVDP),
 :mod:`~lfmbench.metrics.flicker` (IEEE P2020 FMI / FDI / MMP per LED region, FSI, series error, light dropout,
-LED brightness error, saturation flag) and :mod:`~lfmbench.metrics.regions` (errors inside and outside the LED
-regions: ghosts and comets).
+LED brightness error, saturation flag), :mod:`~lfmbench.metrics.regions` (errors inside and outside the LED
+regions: ghosts and comets) and :mod:`~lfmbench.metrics.display` (display-referred PSNR / SSIM after the ISP:
+secondary columns, group ``display``; the primary metrics stay on linear values).
 
 Every metric is ONE entry of :data:`REGISTRY` (a :class:`MetricSpec`): name, version (bumped whenever its
 definition or defaults change, so results stay comparable), reference, unit, ranking direction, column
@@ -23,10 +24,10 @@ from typing import Any
 
 import torch
 
-from lfmbench.metrics import flicker, hdr, regions
+from lfmbench.metrics import display, flicker, hdr, regions
 
-__all__ = ["MetricSpec", "MetricBlock", "REGISTRY", "BLOCKS", "PRIMARY", "metric_versions", "score_batch",
-           "ScoreOptions", "led_score", "columns", "flicker", "hdr", "regions"]
+__all__ = ["MetricSpec", "MetricBlock", "REGISTRY", "BLOCKS", "PRIMARY", "SECONDARY_GROUPS", "metric_versions",
+           "score_batch", "ScoreOptions", "led_score", "columns", "display", "flicker", "hdr", "regions"]
 
 
 @dataclass(frozen=True)
@@ -39,8 +40,9 @@ class MetricSpec:
         reference: where the definition comes from.
         unit: unit of the value ("1" = dimensionless).
         higher_is_better: ranking direction.
-        group: ``hdr``, ``perceptual`` (only with ``ScoreOptions.perceptual``), ``flicker``, ``region``, ``led``;
-            a metric with neither ``fn`` nor ``derive`` is produced by the block of this name in :data:`BLOCKS`.
+        group: ``hdr``, ``perceptual`` (only with ``ScoreOptions.perceptual``), ``flicker``, ``region``, ``led``,
+            ``display`` (only with ``ScoreOptions.isp``; secondary: :data:`SECONDARY_GROUPS`); a metric with
+            neither ``fn`` nor ``derive`` is produced by the block of this name in :data:`BLOCKS`.
         header: leaderboard column header.
         aggregate: over scenes: ``mean`` (mean of the per-scene values) or ``pooled`` (sum of value x
             ``weight`` / sum of ``weight``, e.g. dropout over all region-frames).
@@ -163,11 +165,22 @@ def _perceptual_block(pred: torch.Tensor, batch: dict, o) -> list[dict]:
     return [{k: x[i] for k, x in v.items()} for i in range(pred.shape[0])]
 
 
+def _display_block(pred: torch.Tensor, batch: dict, o) -> list[dict]:
+    sensor = o.sensor if o.sensor is not None else display.sensor_of_batch(batch)
+    v = display.display_metrics(pred, batch["gt"], sensor, o.isp)
+    return [{k: x[i] for k, x in v.items()} for i in range(pred.shape[0])]
+
+
 #: Multi-metric blocks, by group name (each computed once per batch).
 BLOCKS: dict[str, MetricBlock] = {b.name: b for b in [
     MetricBlock("perceptual", _perceptual_block, on_error="record"),
     MetricBlock("flicker", _region_block, needs=("light_index",)),
+    MetricBlock("display", _display_block, on_error="record"),
 ]}
+
+#: Groups of secondary metrics, added after a protocol was published: they never enter the primary score, and a
+#: result file written before they existed lacks them (the leaderboard shows an empty cell, not a conflict).
+SECONDARY_GROUPS: tuple[str, ...] = ("display",)
 
 #: The metric the leaderboard ranks by unless told otherwise.
 PRIMARY = "led_score"
@@ -213,10 +226,16 @@ REGISTRY: dict[str, MetricSpec] = {s.name: s for s in [
     MetricSpec("fdi_gt", "1.0", _P2020 + " (FDI of the GT)", "1", True, "flicker", "FDI GT", show="none", valid=(0.0, 1.0)),
     MetricSpec("fsi_input", "1.0", "ISET-LFM eq. 2 via lfmbench.flicker.flicker_severity, LPD input", "1", False,
                "flicker", "FSI in", show="none", valid=(-math.inf, math.inf)),
+    MetricSpec("psnr_srgb", "1.0", "PSNR (peak 1) of display sRGB (IEC 61966-2-1) after the ISP pipeline of "
+               "ScoreOptions.isp (docs/isp.md), tone curve from the GT", "dB", True, "display", "PSNR sRGB dB",
+               digits=2, valid=(0.0, 1000.0), inf_ok=True),
+    MetricSpec("ssim_srgb", "1.0", "Wang et al. IEEE TIP 2004 via kornia.metrics.ssim, per channel and frame of "
+               "display sRGB after the ISP pipeline of ScoreOptions.isp", "1", True, "display", "SSIM sRGB",
+               valid=(-1.0, 1.0)),
 ]}
 
 #: Groups whose block also produces the ``region`` group's metrics (one pass over the LED regions).
-_BLOCK_OF_GROUP = {"perceptual": "perceptual", "flicker": "flicker", "region": "flicker"}
+_BLOCK_OF_GROUP = {"perceptual": "perceptual", "flicker": "flicker", "region": "flicker", "display": "display"}
 
 
 def _check_registry() -> None:
@@ -262,6 +281,10 @@ class ScoreOptions:
     region: flicker.RegionMetricOptions = field(default_factory=flicker.RegionMetricOptions)
     margin_px: int = regions.LED_MARGIN_PX
     ring_px: int = regions.GHOST_RING_PX
+    #: ISP pipeline (shipped name or YAML path) of the display-referred columns; None: no display metrics
+    isp: str | None = display.DEFAULT_PIPELINE
+    #: sensor preset (object, name or path) the samples were simulated with; None: ``meta["sensor"]`` of the batch
+    sensor: Any = None
 
 
 def _f(x) -> float:
@@ -270,7 +293,11 @@ def _f(x) -> float:
 
 
 def _enabled(group: str, o: ScoreOptions) -> bool:
-    return o.perceptual or group != "perceptual"
+    if group == "perceptual":
+        return o.perceptual
+    if group == "display":
+        return o.isp is not None
+    return True
 
 
 def score_batch(pred: torch.Tensor, batch: dict, options: ScoreOptions | None = None) -> list[dict]:

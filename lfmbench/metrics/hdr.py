@@ -5,7 +5,8 @@ Defines
 - :func:`normalize_hdr`: scale prediction and reference by the reference's peak (or 99th percentile + tanh).
 - :func:`mu_law`: the mu-law tone curve of the deghosting literature.
 - :func:`psnr`, :func:`psnr_l`, :func:`psnr_mu`: peak signal-to-noise ratio on linear / tone-mapped values.
-- :func:`ssim_mu`: SSIM on mu-law tone-mapped values (kornia's maintained implementation).
+- :func:`ssim_mu`: SSIM on mu-law tone-mapped values (kornia's maintained implementation); :func:`ssim_map`
+  the SSIM map of images in [0, 1].
 - :func:`bayer_luminance`: 2x2 GRBG quad average, a luminance proxy of a raw mosaic.
 - :func:`to_display_luminance`: input-referred sensor units -> absolute luminance on the reference display.
 - :func:`pu21_psnr`, :func:`cvvdp_jod`: the Mantiuk group's perceptual metrics through ``pycvvdp`` (optional);
@@ -197,14 +198,29 @@ def ssim_mu_map(pred: torch.Tensor, gt: torch.Tensor, mu: float = MU_DEFAULT, mo
         (B, N, H, W) with N the product of the dims between B and H, dimensionless in [-1, 1].
     """
     _check_pair(pred, gt, min_dim=3)
+    p, g = normalize_hdr(pred, gt, mode)
+    return ssim_map(mu_law(p, mu), mu_law(g, mu), window_size)
+
+
+def ssim_map(pred: torch.Tensor, gt: torch.Tensor, window_size: int = SSIM_WINDOW) -> torch.Tensor:
+    """Per-pixel SSIM map of images with data range 1 (Wang et al. 2004, ``kornia.metrics.ssim``: Gaussian window
+    sigma 1.5, K1 = 0.01, K2 = 0.03, reflect padding, eps = 0).
+
+    Args:
+        pred, gt: shape (B, *, H, W), values in [0, 1]; every leading dim after B is an independent
+            single-channel image (frames, channels).
+        window_size: odd number of Gaussian taps.
+
+    Returns:
+        (B, N, H, W) with N the product of the dims between B and H, dimensionless in [-1, 1].
+    """
     import kornia
 
-    p, g = normalize_hdr(pred, gt, mode)
-    p, g = mu_law(p, mu), mu_law(g, mu)
-    b, (h, w) = p.shape[0], p.shape[-2:]
+    _check_pair(pred, gt, min_dim=3)
+    b, (h, w) = pred.shape[0], pred.shape[-2:]
     if min(h, w) <= window_size // 2:
         raise ValueError(f"pred is too small for SSIM: H, W = {h}, {w} must exceed window_size // 2 = {window_size // 2}")
-    smap = kornia.metrics.ssim(p.reshape(-1, 1, h, w), g.reshape(-1, 1, h, w), window_size, max_val=1.0, eps=0.0)
+    smap = kornia.metrics.ssim(pred.reshape(-1, 1, h, w), gt.reshape(-1, 1, h, w), window_size, max_val=1.0, eps=0.0)
     return smap.reshape(b, -1, h, w)
 
 

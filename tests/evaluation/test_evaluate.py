@@ -268,3 +268,70 @@ def test_benchmark_runs_methods_and_writes_leaderboard(tmp_path, capsys):
     for f in ("lpd_only.json", "spd_only.json", "leaderboard.md", "leaderboard.png"):
         assert (tmp_path / "runs" / f).is_file(), f
     assert "lpd_only" in capsys.readouterr().out
+
+
+def _scores(result: dict) -> list[tuple]:
+    """(scene, index, status, metrics) of every sample record: what must not depend on sharing the samples."""
+    return [(s["scene_id"], s["index"], s["status"], s.get("metrics"), s["conditions"]) for s in result["scenes"]]
+
+
+def test_shared_samples_give_the_per_method_scores(tmp_path):
+    """benchmark(share_samples=True) simulates each sample once for all methods; every method's per-sample scores
+    equal those of one pass over the data per method (the path before sharing), so do the aggregates."""
+    from tests.data.corpus.data import make_corpus
+
+    corpus = make_corpus(tmp_path / "corpus", n_scenes=3)
+    methods = ["lpd_only", "flicker_aware", "temporal"]
+    kw = dict(split="all", perceptual=False, repeats=1, progress=False, samples_per_scene=2)
+    run_benchmark(corpus, methods, tmp_path / "old", share_samples=False, **kw)
+    run_benchmark(corpus, methods, tmp_path / "new", share_samples=True, **kw)
+    for m in methods:
+        old, new = (_strict_load(tmp_path / d / f"{m}.json") for d in ("old", "new"))
+        assert len(old["scenes"]) == 6 and _scores(old) == _scores(new), m
+        agg = {k: v for k, v in old["aggregate"].items()}
+        assert {k: v for k, v in new["aggregate"].items()} == agg, m
+        assert new["status"] == "complete" and new["dataset"] == old["dataset"] and new["corpus"] == old["corpus"]
+
+
+def test_shared_batch_is_not_changed_by_a_method_that_edits_it():
+    """A method that zeroes its input in place, evaluated first, must not change what the next method sees."""
+    def vandal(batch):
+        out = batch["gt"].clone()
+        for v in batch.values():
+            if isinstance(v, torch.Tensor) and v.is_floating_point():
+                v.mul_(0)
+        batch["meta"]["scene_id"] = ["x"]
+        return out
+
+    batches = _batches(2)
+    alone = ev.evaluate("lpd_only", [dict(b) for b in _batches(2)], repeats=1, progress=False)
+    both = ev.evaluate_methods([vandal, "lpd_only"], batches, method_specs=["vandal", "lpd_only"], repeats=1,
+                               progress=False)
+    assert _scores(both[1]) == _scores(alone)
+    assert both[0]["method"]["spec"] == "vandal" and both[0]["scenes"][0]["status"] == "ok"
+
+
+def test_shared_evaluation_failures_and_interrupts_reach_every_result(tmp_path):
+    def source():
+        yield make_batch(seed=0)
+        raise OSError("corrupt EXR scenes/x/f000/otherlights.exr")
+
+    outs = [tmp_path / "a.json", tmp_path / "b.json"]
+    with pytest.raises(ev.DataSourceError, match="corrupt EXR"):
+        ev.evaluate_methods(["lpd_only", "spd_only"], source(), outputs=outs, repeats=1, progress=False)
+    for o in outs:
+        d = _strict_load(o)
+        assert d["status"] == "failed" and d["aggregate"]["scenes_ok"] == 1
+
+    def interrupted():
+        yield make_batch(seed=0)
+        raise KeyboardInterrupt
+
+    with pytest.raises(ev.EvaluationInterrupted) as info:
+        ev.evaluate_methods(["lpd_only", "spd_only"], interrupted(), outputs=outs, repeats=1, progress=False)
+    assert [r["status"] for r in info.value.results] == ["interrupted", "interrupted"]
+    assert all(_strict_load(o)["status"] == "interrupted" for o in outs)
+    with pytest.raises(ValueError, match="one entry per method"):
+        ev.evaluate_methods(["lpd_only", "spd_only"], [make_batch(seed=0)], outputs=outs[:1], progress=False)
+    with pytest.raises(ev.EmptyDataError):
+        ev.evaluate_methods(["lpd_only", "spd_only"], [], progress=False)

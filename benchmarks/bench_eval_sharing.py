@@ -1,0 +1,99 @@
+"""An 8-method evaluation with and without sharing the simulated samples across methods
+(docs/evaluation-sharing-benchmark.md).
+
+    lfmbench demo                      # or any corpus; the demo's corpus and U-Net checkpoint are enough
+    python benchmarks/bench_eval_sharing.py --corpus demo_out/corpus --checkpoint demo_out/unet_fusion.pt
+
+Methods: the 7 rule-based baselines and the U-Net (the protocol leaderboard's set, benchmarks/leaderboard_protocol.py).
+Timed, one run each after a warm-up (a pass over the data that fills the projection cache, and both paths on two
+samples: imports, checkpoint loading, plotting): (1) the data alone (every sample read and
+simulated once, no method), (2) ``benchmark(share_samples=False)`` (one pass over the data per method: before),
+(3) ``benchmark(share_samples=True)`` (each sample simulated once for all methods: after). The per-sample scores
+of (2) and (3) are compared (they must be equal). Prints a Markdown table; ``--json`` writes the numbers.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--corpus", required=True, help="corpus root")
+    ap.add_argument("--checkpoint", required=True, help="U-Net checkpoint (lfmbench train --out, or the demo's)")
+    ap.add_argument("--split", default="all")
+    ap.add_argument("--samples-per-scene", type=int, default=2)
+    ap.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's choice)")
+    ap.add_argument("--json", default=None, help="write the numbers to this JSON file")
+    a = ap.parse_args()
+    if not os.path.isfile(a.checkpoint):
+        ap.error(f"--checkpoint {a.checkpoint}: no such file")
+    os.environ["LFMBENCH_UNET_CHECKPOINT"] = a.checkpoint
+    import torch
+
+    if a.threads:
+        torch.set_num_threads(a.threads)
+    from torch.utils.data import DataLoader
+
+    from lfmbench.baselines import REGISTRY
+    from lfmbench.datasets.loading import collate_samples
+    from lfmbench.evaluation.benchmark import benchmark, corpus_run_inputs
+
+    methods = [m for m in REGISTRY if m != "learned"]
+    ds, _, _ = corpus_run_inputs(a.corpus, a.split, 0, None, a.samples_per_scene, frames=3)
+    n = len(ds)
+
+    def data_pass() -> float:
+        t0 = time.perf_counter()
+        for _ in DataLoader(ds, batch_size=1, shuffle=False, num_workers=0, collate_fn=collate_samples):
+            pass
+        return time.perf_counter() - t0
+
+    data_pass()  # warm-up: fills the projection cache, loads the sensor kernels
+    t_data = data_pass()
+    kw = dict(split=a.split, perceptual=False, repeats=1, progress=False, samples_per_scene=a.samples_per_scene)
+    with tempfile.TemporaryDirectory() as tmp:
+        for share in (False, True):  # warm-up of both paths on 2 samples: imports, checkpoint, plotting
+            benchmark(a.corpus, methods, Path(tmp) / "warm", share_samples=share, max_scenes=2, **kw)
+        t0 = time.perf_counter()
+        benchmark(a.corpus, methods, Path(tmp) / "per_method", share_samples=False, **kw)
+        t_old = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        benchmark(a.corpus, methods, Path(tmp) / "shared", share_samples=True, **kw)
+        t_new = time.perf_counter() - t0
+        equal = True
+        for m in methods:
+            old, new = (json.loads((Path(tmp) / d / f"{m}.json").read_text()) for d in ("per_method", "shared"))
+            equal &= [(s["scene_id"], s.get("metrics")) for s in old["scenes"]] == \
+                     [(s["scene_id"], s.get("metrics")) for s in new["scenes"]]
+    k = len(methods)
+    res = {
+        "methods": methods, "samples": n, "split": a.split, "samples_per_scene": a.samples_per_scene,
+        "corpus": str(a.corpus), "torch_threads": torch.get_num_threads(), "cpu": platform.processor() or platform.machine(),
+        "cpus": os.cpu_count(), "load_avg_1min_after": os.getloadavg()[0],
+        "data_pass_s": t_data, "per_method_s": t_old, "shared_s": t_new, "ratio_shared_per_method": t_new / t_old,
+        "simulation_share_of_per_method": k * t_data / t_old,
+        "expected_shared_s": t_old - (k - 1) * t_data, "per_sample_scores_equal": equal,
+    }
+    print(f"| {k}-method evaluation, {n} samples | time (s) |\n|---|---|\n"
+          f"| data alone (read + simulate every sample once) | {t_data:.1f} |\n"
+          f"| before: one pass over the data per method | {t_old:.1f} |\n"
+          f"| after: each sample simulated once, shared | {t_new:.1f} |\n"
+          f"| ratio after / before | {t_new / t_old:.3f} |\n"
+          f"| simulation share of the before run ({k} x data alone / before) | {100 * k * t_data / t_old:.1f} % |\n"
+          f"| expected after (before - {k - 1} x data alone) | {t_old - (k - 1) * t_data:.1f} |\n"
+          f"| per-sample scores equal | {equal} |")
+    if a.json:
+        Path(a.json).write_text(json.dumps(res, indent=1))
+    if not equal:
+        sys.exit("per-sample scores differ between the two paths")
+
+
+if __name__ == "__main__":
+    main()
