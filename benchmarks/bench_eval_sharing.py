@@ -44,6 +44,7 @@ def main() -> None:
     from lfmbench.baselines import REGISTRY
     from lfmbench.datasets.loading import collate_samples
     from lfmbench.evaluation.benchmark import benchmark, corpus_run_inputs
+    from lfmbench.fileio import atomic_write_json
 
     methods = [m for m in REGISTRY if m != "learned"]
     ds, _, _ = corpus_run_inputs(a.corpus, a.split, 0, None, a.samples_per_scene, frames=3)
@@ -90,7 +91,7 @@ def main() -> None:
           f"| expected after (before - {k - 1} x data alone) | {t_old - (k - 1) * t_data:.1f} |\n"
           f"| per-sample scores equal | {equal} |")
     if a.json:
-        Path(a.json).write_text(json.dumps(res, indent=1))
+        atomic_write_json(a.json, res)
     if not equal:
         sys.exit("per-sample scores differ between the two paths")
 

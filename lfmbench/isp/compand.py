@@ -15,10 +15,10 @@ Units: codes are dimensionless integers (DN of the respective bit depth); :class
 
 References
 ----------
-- Sony Semiconductor Solutions, "IMX490 ... 5.4 Mega-pixel CMOS image sensor" product brief (2019): 24-bit
-  linear HDR output compressed to 12/16/20 bit by a programmable piecewise-linear compression.
-- onsemi, AR0820AT data sheet (2020), "HDR Companding": 24-bit linear data companded to 12, 14, 16 or 20 bit with
-  a piecewise-linear curve of programmable knee points, and the matching decompanding in the ISP.
+- Automotive HDR image sensors send a 20-24-bit linear HDR value companded to 12-16 bits by a programmable
+  piecewise-linear curve and expect the ISP to decompand it; see the data sheets and product briefs of e.g.
+  onsemi AR0820AT ("HDR companding") and Sony IMX490. The knee points are therefore data (the shipped curve is an
+  lfmbench choice, ``lfmbench/configs/isp/default.yaml``, ``docs/isp.md``).
 """
 from __future__ import annotations
 
