@@ -213,24 +213,23 @@ def profile_device(root, dev, batch: int, out: Path | None) -> None:
 
 
 def time_train(root, dev, data, steps, batch, crop, workers) -> tuple[float, float]:
-    """``train()`` for ``steps`` and for 4 x ``steps`` optimiser steps: (samples/s of the short run with its start-up,
-    samples/s of the 3 x ``steps`` steps the long run has more: the steady state)."""
+    """``train()`` for 3 epochs of ``steps`` optimiser steps: (samples/s of the whole call, start-up included;
+    samples/s of its later epochs, the median of epochs 2 and 3: the steady state, from ``epoch_seconds``)."""
     from lfmbench.corpus import Corpus
     from lfmbench.train import train
 
-    def run(n: int) -> float:
-        with tempfile.TemporaryDirectory() as tmp:
-            per_scene = max(64, -(-n * batch // len(Corpus(root).scenes)))
-            t0 = time.perf_counter()
-            _model, hist = train("unet", root, Path(tmp) / "u.pt", device=str(dev), data=data, epochs=1,
-                                 max_steps=n, crop=crop, batch_size=batch, split="all", samples_per_scene=per_scene,
-                                 workers=workers, progress=False, log=None)
-            _sync(dev)
-            assert hist["steps"] == n, (hist["steps"], n)
-            return time.perf_counter() - t0
-
-    short, long_ = run(steps), run(4 * steps)
-    return steps * batch / short, 3 * steps * batch / max(long_ - short, 1e-9)
+    scenes = len(Corpus(root).scenes)
+    per_scene = -(-steps * batch // scenes)
+    with tempfile.TemporaryDirectory() as tmp:
+        t0 = time.perf_counter()
+        _model, hist = train("unet", root, Path(tmp) / "u.pt", device=str(dev), data=data, epochs=3,
+                             crop=crop, batch_size=batch, split="all", samples_per_scene=per_scene, workers=workers,
+                             progress=False, log=None)
+        _sync(dev)
+        total = time.perf_counter() - t0
+    n = scenes * per_scene
+    assert hist["steps"] >= 3 * steps, (hist["steps"], steps)
+    return 3 * n / total, n / statistics.median(hist["epoch_seconds"][1:])
 
 
 def main(argv=None) -> int:
@@ -321,8 +320,8 @@ def report(rows, machine, gpu) -> str:
         if "workers" in r:
             notes.append(f"{r['workers']} workers")
         if "steps" in r:
-            notes.append(f"steady state (steps {r['steps'] + 1}-{4 * r['steps']}); the first {r['steps']} steps "
-                         f"with the start-up: {r['with_startup']:.0f} samples/s")
+            notes.append(f"steady state (median of epochs 2-3 of {r['steps']} steps); the whole call of 3 epochs "
+                         f"with its start-up: {r['with_startup']:.0f} samples/s")
         lines.append(f"| {r['path']} | {r['batch']} | {r['samples_per_s']:.0f} | {'; '.join(notes)} |")
     return "\n".join(lines) + "\n"
 
