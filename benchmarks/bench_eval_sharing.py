@@ -76,7 +76,8 @@ def main() -> None:
     k = len(methods)
     res = {
         "methods": methods, "samples": n, "split": a.split, "samples_per_scene": a.samples_per_scene,
-        "corpus": str(a.corpus), "torch_threads": torch.get_num_threads(), "cpu": platform.processor() or platform.machine(),
+        "corpus": str(a.corpus), "torch_threads": torch.get_num_threads(),
+        "cpu": platform.processor() or platform.machine(),
         "cpus": os.cpu_count(), "load_avg_1min_after": os.getloadavg()[0],
         "data_pass_s": t_data, "per_method_s": t_old, "shared_s": t_new, "ratio_shared_per_method": t_new / t_old,
         "simulation_share_of_per_method": k * t_data / t_old,

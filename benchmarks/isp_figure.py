@@ -59,16 +59,16 @@ def main() -> None:
         s = score_batch(pred, batch)[0]
         print(f"{sid} frame {f} {m}: psnr_srgb {s['psnr_srgb']:.2f} dB, ssim_srgb {s['ssim_srgb']:.3f}, "
               f"LED score {s.get('led_score', float('nan')):.3f}, psnr_mu {s['psnr_mu']:.2f} dB")
-        panels.append((f"{m}, default ISP\nPSNR sRGB {s['psnr_srgb']:.1f} dB, LED score {s.get('led_score', float('nan')):.2f}",
-                       show(p), None))
-    fig, axes = plt.subplots(2, 3, figsize=(13.5, 5.6))
+        led = s.get("led_score", float("nan"))
+        panels.append((f"{m}, default ISP\nPSNR sRGB {s['psnr_srgb']:.1f} dB, LED score {led:.2f}", show(p), None))
+    fig, axes = plt.subplots(2, 3, figsize=(13.5, 6.4))
     for ax, (title, img, cmap) in zip(axes.flat, panels):
         ax.imshow(img, cmap=cmap, interpolation="nearest")
         ax.set_title(title, fontsize=9)
         ax.axis("off")
     fig.suptitle(f"{sid} ({ds.preset.name}, {gt.shape[-1]}x{gt.shape[-2]}), frame {f}: one frame through the ISP",
                  fontsize=10)
-    fig.tight_layout()
+    fig.tight_layout(h_pad=2.0)
     atomic_save_figure(fig, a.out, dpi=110)
     print(f"wrote {a.out}")
 

@@ -19,7 +19,8 @@ metrics (:mod:`lfmbench.metrics.display`). See ``docs/isp.md``.
 from lfmbench.isp.color import (CCMFit, ColorCorrection, SRGBEncode, apply_ccm, camera_rgb, fit_ccm, luminance,
                                 srgb_decode, srgb_encode, white_balance_gains)
 from lfmbench.isp.compand import Compander, check_knees, compand, decompand
-from lfmbench.isp.demosaic import DEMOSAIC, Demosaic, demosaic, demosaic_bilinear, demosaic_malvar2004
+from lfmbench.isp.demosaic import (DEMOSAIC, Demosaic, clamp_to_neighbours, demosaic, demosaic_bilinear,
+                                   demosaic_malvar2004)
 from lfmbench.isp.pipeline import (ISP, STAGES, ISPPipeline, available_pipelines, load_pipeline,
                                    pipeline_from_dict)
 from lfmbench.isp.raw import (BlackLevel, WhiteBalance, cfa_channel_map, gray_world_gains, subtract_black_level,
@@ -29,8 +30,8 @@ from lfmbench.isp.tonemap import (TONEMAP, ToneMap, durand2002, durand2002_stats
 
 __all__ = ["CCMFit", "ColorCorrection", "SRGBEncode", "apply_ccm", "camera_rgb", "fit_ccm", "luminance",
            "srgb_decode", "srgb_encode", "white_balance_gains", "Compander", "check_knees", "compand", "decompand",
-           "DEMOSAIC", "Demosaic", "demosaic", "demosaic_bilinear", "demosaic_malvar2004", "ISP", "STAGES",
-           "ISPPipeline", "available_pipelines", "load_pipeline", "pipeline_from_dict", "BlackLevel", "WhiteBalance",
-           "cfa_channel_map", "gray_world_gains", "subtract_black_level", "white_balance_mosaic", "TONEMAP",
-           "ToneMap", "durand2002", "durand2002_stats", "exposure_clip", "reinhard2002", "reinhard2002_stats",
-           "tonemap"]
+           "DEMOSAIC", "Demosaic", "clamp_to_neighbours", "demosaic", "demosaic_bilinear", "demosaic_malvar2004",
+           "ISP", "STAGES", "ISPPipeline", "available_pipelines", "load_pipeline", "pipeline_from_dict", "BlackLevel",
+           "WhiteBalance", "cfa_channel_map", "gray_world_gains", "subtract_black_level", "white_balance_mosaic",
+           "TONEMAP", "ToneMap", "durand2002", "durand2002_stats", "exposure_clip", "reinhard2002",
+           "reinhard2002_stats", "tonemap"]

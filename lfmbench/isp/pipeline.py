@@ -35,7 +35,7 @@ from torch import nn
 from lfmbench.check import check_choice, check_keys, check_number, fail
 from lfmbench.isp import color, raw as _raw
 from lfmbench.isp.compand import Compander, check_knees
-from lfmbench.isp.demosaic import DEMOSAIC
+from lfmbench.isp.demosaic import DEMOSAIC, clamp_to_neighbours
 from lfmbench.isp.tonemap import TONEMAP
 from lfmbench.limits import brief
 
@@ -72,6 +72,14 @@ class Stage:
 
     def bind(self, preset) -> None:
         """Read what the stage needs from the preset (public fields only)."""
+
+    def _illuminant(self, fn, preset):
+        """``fn(preset, illuminant)`` with an unknown illuminant named as this stage's field."""
+        try:
+            return fn(preset, self.params["illuminant"])
+        except KeyError:
+            fail(f"{self.field}.illuminant", f"is not a colour-science illuminant: {brief(self.params['illuminant'])}",
+                 self.source)
 
     def stats(self, ref: torch.Tensor) -> dict[str, torch.Tensor] | None:
         """Statistics of the reference (the ground truth at this stage), applied to every image; None: none."""
@@ -151,11 +159,7 @@ class WhiteBalanceStage(Stage):
     def bind(self, preset) -> None:
         self.pattern = preset.cfa
         if self.params["method"] == "preset":
-            try:
-                self.gains = torch.as_tensor(color.white_balance_gains(preset, self.params["illuminant"]))
-            except KeyError:
-                fail(f"{self.field}.illuminant", f"is not a colour-science illuminant: {brief(self.params['illuminant'])}",
-                     self.source)
+            self.gains = torch.as_tensor(self._illuminant(color.white_balance_gains, preset))
 
     def stats(self, ref):
         if self.params["method"] != "gray_world":
@@ -173,22 +177,28 @@ class WhiteBalanceStage(Stage):
 
 @_register
 class DemosaicStage(Stage):
-    """``demosaic``: ``method`` a name of :data:`lfmbench.isp.demosaic.DEMOSAIC`; ``clip_negative`` (default true)
-    clips the overshoot of a linear demosaic below 0."""
+    """``demosaic``: ``method`` a name of :data:`lfmbench.isp.demosaic.DEMOSAIC`; ``clamp`` (default true) limits
+    every interpolated value to the range of its colour's samples in the 3x3 neighbourhood
+    (:func:`lfmbench.isp.demosaic.clamp_to_neighbours`: no overshoot around lamps); ``clip_negative`` (default
+    true) clips what is left below 0."""
 
-    op, domain, keys = "demosaic", "demosaic", {"method": "malvar2004", "clip_negative": True}
+    op, domain, keys = "demosaic", "demosaic", {"method": "malvar2004", "clamp": True, "clip_negative": True}
 
     def __init__(self, params, field, source):
         super().__init__(params, field, source)
         check_choice(self.params["method"], f"{field}.method", sorted(DEMOSAIC), source)
-        if not isinstance(self.params["clip_negative"], bool):
-            fail(f"{field}.clip_negative", "must be true or false", source)
+        for k in ("clamp", "clip_negative"):
+            if not isinstance(self.params[k], bool):
+                fail(f"{field}.{k}", f"must be true or false, got {brief(self.params[k])}", source)
 
     def bind(self, preset) -> None:
         self.pattern = preset.cfa
 
     def apply(self, x, stats):
-        rgb = DEMOSAIC[self.params["method"]](_flat(x), self.pattern)
+        flat = _flat(x)
+        rgb = DEMOSAIC[self.params["method"]](flat, self.pattern)
+        if self.params["clamp"]:
+            rgb = clamp_to_neighbours(rgb, flat, self.pattern)
         rgb = rgb.clamp_min(0.0) if self.params["clip_negative"] else rgb
         return rgb.reshape(x.shape[:2] + rgb.shape[-3:])
 
@@ -212,11 +222,7 @@ class CCMStage(Stage):
 
     def bind(self, preset) -> None:
         if self.params["matrix"] == "fit":
-            try:
-                self.matrix = torch.as_tensor(color.fit_ccm(preset, self.params["illuminant"]).matrix)
-            except KeyError:
-                fail(f"{self.field}.illuminant", f"is not a colour-science illuminant: {brief(self.params['illuminant'])}",
-                     self.source)
+            self.matrix = torch.as_tensor(self._illuminant(color.fit_ccm, preset).matrix)
         else:
             self.matrix = torch.tensor(self.params["matrix"], dtype=torch.float64)
 

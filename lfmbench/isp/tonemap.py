@@ -165,7 +165,8 @@ def durand2002_stats(reference: torch.Tensor, radius: int | None = None, eps: fl
     _check_rgb(reference, "reference")
     base = _base_layer(torch.log10(luminance(reference).clamp_min(0.0) + _DELTA), _radius(reference, radius), eps)
     if percentile <= 0:
-        return {"base_max": base.reshape(base.shape[0], -1).amax(1), "base_min": base.reshape(base.shape[0], -1).amin(1)}
+        flat = base.reshape(base.shape[0], -1)
+        return {"base_max": flat.amax(1), "base_min": flat.amin(1)}
     return {"base_max": _quantile_per_item(base, 1.0 - percentile / 100.0),
             "base_min": _quantile_per_item(base, percentile / 100.0)}
 
