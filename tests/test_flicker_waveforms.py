@@ -210,6 +210,23 @@ def test_destination_display_is_a_scan_row_during_its_page():
     assert float(w.exposure(0.5, 1.0, T, 0.6, 0.0)) == 0.0                         # page 0: this text is dark
 
 
+@pytest.mark.parametrize("kind", sorted(CASES))
+def test_trapezoidal_carrier_against_fine_sampling(kind):
+    """Ramped PWM edges (the draw's rise and fall times): the closed form against sampling the ramped level;
+    ramps too long for a row's duty D/N are scaled down (fit_ramps) the same way in both."""
+    w = CASES[kind]
+    T, D, ph, tr, tf = 1 / 110.0, 0.35, 0.002, 4e-4, 9e-4
+    for start, length in ((0.1234, 0.05), (1.0, 0.6)):
+        got = float(w.exposure(start, length, T, D, ph, tr, tf))
+        dt = length / 200_000
+        t = start + (np.arange(200_000) + 0.5) * dt
+        ref = float(w.level(t, T, D, ph, tr, tf).sum() * dt)
+        assert abs(got - ref) <= 4 * (length / 0.05 + 2) * dt + 1e-12
+    if kind == "pwm":
+        assert float(w.exposure(0.3, 0.02, T, D, ph, tr, tf)) == pytest.approx(
+            float(pwm_exposure(0.3 - ph, 0.02, T, D, rise_time=tr, fall_time=tf)))
+
+
 def test_gated_core_broadcasts():
     """(F, R) windows against (L, 1, 1) lights: one call, the shape of the broadcast."""
     starts = np.linspace(0.0, 1.0, 6)[:, None] + 1e-5 * np.arange(4)[None, :]       # (6, 4)

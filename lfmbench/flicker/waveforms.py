@@ -71,14 +71,13 @@ from lfmbench.check import check_integer, check_keys, check_number, fail
 from lfmbench.flicker import pwm_exposure, pwm_level
 from lfmbench.limits import brief
 
-__all__ = ["WAVEFORMS", "SEVEN_SEGMENTS", "MAX_GATE_INTERVALS", "Waveform", "PWM", "ScanRow", "GatedWaveform",
-           "Indicator", "Strobe", "CountdownSegment", "DestinationRow", "gated_pwm_exposure", "waveform_from_dict"]
+__all__ = ["WAVEFORMS", "SEVEN_SEGMENTS", "Waveform", "PWM", "ScanRow", "GatedWaveform",
+           "Indicator", "Strobe", "CountdownSegment", "DestinationRow", "gated_pwm_exposure", "fit_ramps",
+           "waveform_from_dict"]
 
 #: Segments lit per decimal digit on a seven-segment display (segments a-g clockwise from the top, g the middle).
 SEVEN_SEGMENTS: Mapping[int, str] = MappingProxyType({0: "abcdef", 1: "bc", 2: "abdeg", 3: "abcdg", 4: "bcfg",
                                                       5: "acdfg", 6: "acdefg", 7: "abc", 8: "abcdefg", 9: "abcdfg"})
-#: Most ON intervals one gate period may hold (bounds the memory of an exposure call: (..., 2 x M) PWM terms).
-MAX_GATE_INTERVALS = 256
 
 
 def _arrays(*xs):
@@ -92,8 +91,19 @@ def _mod(x: np.ndarray, period: float) -> np.ndarray:
     return np.where(a >= period, a - period, a)
 
 
-def gated_pwm_exposure(start, length, gate_period: float, on: np.ndarray, period, duty, phase, *,
-                       mean: bool = False) -> np.ndarray:
+def fit_ramps(period, duty, rise, fall):
+    """Rise and fall times (s) scaled down together where their ramps would overlap in a PWM of ``period`` (s) and
+    ``duty``: ``(rise + fall) / 2 <= min(duty, 1 - duty) * period`` (the rule of
+    :func:`lfmbench.datasets.pwm.pwm_record`, here for a carrier whose duty a waveform changes)."""
+    period, duty, rise, fall = _arrays(period, duty, rise, fall)
+    room = 2.0 * np.minimum(duty, 1.0 - duty) * period
+    total = rise + fall
+    scale = np.where(total > room, room / np.where(total > 0, total, 1.0), 1.0)
+    return rise * scale, fall * scale
+
+
+def gated_pwm_exposure(start, length, gate_period: float, on: np.ndarray, period, duty, phase, rise=0.0,
+                       fall=0.0, *, mean: bool = False) -> np.ndarray:
     r"""Exposure of a PWM enabled by a periodic gate, restarting at each ON interval's onset (module docstring).
 
     Args:
@@ -103,13 +113,15 @@ def gated_pwm_exposure(start, length, gate_period: float, on: np.ndarray, period
         on: (M, 2) ON intervals ``[s_i, e_i)`` of one gate period (s), ``0 <= s_i < e_i <= gate_period``, sorted,
             disjoint.
         period, duty, phase: the carrier PWM: period :math:`T > 0` (s), duty :math:`D \in [0, 1]`, rising edges at
-            ``onset + phase + m T`` (s).
+            ``onset + phase + m T`` (s). rise, fall: its ramp times (s, :func:`lfmbench.flicker.pwm_exposure`;
+            scaled by :func:`fit_ramps` where they would overlap).
         mean: the flicker-free exposure (carrier at its mean level :math:`D`).
 
     Returns:
         :math:`\Phi` (level x s), the broadcast shape of the inputs, float64 numpy.
     """
     start, length, period, duty, phase = _arrays(start, length, period, duty, phase)
+    rise, fall = fit_ramps(period, duty, rise, fall)
     on = np.asarray(on, dtype=np.float64).reshape(-1, 2)
     s, e = on[:, 0], on[:, 1]
     Tg = float(gate_period)
@@ -117,12 +129,12 @@ def gated_pwm_exposure(start, length, gate_period: float, on: np.ndarray, period
     r = np.fmod(length, Tg)
     n = np.round((length - r) / Tg)                    # whole gate periods (an integer value)
     r = r[..., None]
-    T, D, ph = period[..., None], duty[..., None], phase[..., None]
+    T, D, ph, tr, tf = period[..., None], duty[..., None], phase[..., None], rise[..., None], fall[..., None]
 
     def carrier(since, dur):                           # exposure of the restarted PWM over [since, since + dur)
         if mean:
             return D * dur
-        return pwm_exposure(since - ph, dur, T, D, check=False)
+        return pwm_exposure(since - ph, dur, T, D, rise_time=tr, fall_time=tf, check=False)
 
     whole = carrier(np.zeros_like(s), e - s).sum(-1)   # W: one gate period
     part = 0.0
@@ -134,16 +146,19 @@ def gated_pwm_exposure(start, length, gate_period: float, on: np.ndarray, period
     return np.asarray(n * whole + part)
 
 
-def _gate_level(t, gate_period: float, on: np.ndarray, period, duty, phase, *, mean: bool = False) -> np.ndarray:
+def _gate_level(t, gate_period: float, on: np.ndarray, period, duty, phase, rise=0.0, fall=0.0, *,
+                mean: bool = False) -> np.ndarray:
     """Instantaneous level of the gated PWM at gate time ``t`` (s): (broadcast shape)."""
     t, period, duty, phase = _arrays(t, period, duty, phase)
+    rise, fall = fit_ramps(period, duty, rise, fall)
     on = np.asarray(on, dtype=np.float64).reshape(-1, 2)
     u = _mod(t, float(gate_period))[..., None]
     inside = (u >= on[:, 0]) & (u < on[:, 1])          # (..., M)
     if mean:
         lv = np.broadcast_to(duty[..., None], inside.shape)
     else:
-        lv = pwm_level(u - on[:, 0] - phase[..., None], period[..., None], duty[..., None])
+        lv = pwm_level(u - on[:, 0] - phase[..., None], period[..., None], duty[..., None],
+                       rise_time=rise[..., None], fall_time=fall[..., None])
     return np.where(inside, lv, 0.0).sum(-1)
 
 
@@ -203,13 +218,13 @@ class Waveform:
         """Time-averaged level (1) for carrier duty ``duty``: the flicker-free level times the gate's ON share."""
         raise NotImplementedError
 
-    def exposure(self, start, length, period, duty, phase) -> np.ndarray:  # pragma: no cover - abstract
+    def exposure(self, start, length, period, duty, phase, rise=0.0, fall=0.0) -> np.ndarray:  # pragma: no cover
         raise NotImplementedError
 
     def mean_exposure(self, start, length, duty) -> np.ndarray:  # pragma: no cover - abstract
         raise NotImplementedError
 
-    def level(self, t, period, duty, phase) -> np.ndarray:  # pragma: no cover - abstract
+    def level(self, t, period, duty, phase, rise=0.0, fall=0.0) -> np.ndarray:  # pragma: no cover - abstract
         raise NotImplementedError
 
 
@@ -220,21 +235,24 @@ class PWM(Waveform):
 
     kind: ClassVar[str] = "pwm"
 
-    def exposure(self, start, length, period, duty, phase):
+    def exposure(self, start, length, period, duty, phase, rise=0.0, fall=0.0):
         """Radiant exposure (level x s) over ``[start, start + length)`` (s); carrier period (s), duty, phase:
-        a rising edge (s). Arrays broadcast."""
+        a rising edge (s), ramp times (s, scaled by :func:`fit_ramps`). Arrays broadcast."""
         start, phase = _arrays(start, phase)
-        return np.asarray(pwm_exposure(start - phase, length, period, duty, check=False))
+        rise, fall = fit_ramps(period, duty, rise, fall)
+        return np.asarray(pwm_exposure(start - phase, length, period, duty, rise_time=rise, fall_time=fall,
+                                       check=False))
 
     def mean_exposure(self, start, length, duty):
         """Flicker-free exposure (level x s): duty x length."""
         return np.asarray(np.asarray(duty, dtype=np.float64) * np.asarray(length, dtype=np.float64)
                           + 0.0 * np.asarray(start, dtype=np.float64))
 
-    def level(self, t, period, duty, phase):
+    def level(self, t, period, duty, phase, rise=0.0, fall=0.0):
         """Level (1) at time ``t`` (s)."""
         t, phase = _arrays(t, phase)
-        return np.asarray(pwm_level(t - phase, period, duty))
+        rise, fall = fit_ramps(period, duty, rise, fall)
+        return np.asarray(pwm_level(t - phase, period, duty, rise_time=rise, fall_time=fall))
 
     def mean_level(self, duty):
         return np.asarray(duty, dtype=np.float64)
@@ -262,14 +280,14 @@ class ScanRow(PWM):
         period, duty, phase = _arrays(period, duty, phase)
         return period, duty / self.scan_lines, phase + self.line * period / self.scan_lines
 
-    def exposure(self, start, length, period, duty, phase):
-        return super().exposure(start, length, *self.row_pwm(period, duty, phase))
+    def exposure(self, start, length, period, duty, phase, rise=0.0, fall=0.0):
+        return super().exposure(start, length, *self.row_pwm(period, duty, phase), rise, fall)
 
     def mean_exposure(self, start, length, duty):
         return super().mean_exposure(start, length, np.asarray(duty, dtype=np.float64) / self.scan_lines)
 
-    def level(self, t, period, duty, phase):
-        return super().level(t, *self.row_pwm(period, duty, phase))
+    def level(self, t, period, duty, phase, rise=0.0, fall=0.0):
+        return super().level(t, *self.row_pwm(period, duty, phase), rise, fall)
 
     def mean_level(self, duty):
         return np.asarray(duty, dtype=np.float64) / self.scan_lines
@@ -288,12 +306,12 @@ class GatedWaveform(Waveform):
         """The PWM under the gate (period s, duty 1, phase after the onset s) for the drawn carrier."""
         return _arrays(period, duty, phase)
 
-    def exposure(self, start, length, period, duty, phase):
+    def exposure(self, start, length, period, duty, phase, rise=0.0, fall=0.0):
         """Radiant exposure (level x s) over ``[start, start + length)`` (s, waveform time); carrier period (s),
-        duty, phase (s, a rising edge after each ON onset). Arrays broadcast."""
+        duty, phase (s, a rising edge after each ON onset), ramp times (s). Arrays broadcast."""
         Tg, on = self.gate()
         return gated_pwm_exposure(np.asarray(start, dtype=np.float64) - self.phase_s, length, Tg, on,
-                                  *self.carrier(period, duty, phase))
+                                  *self.carrier(period, duty, phase), rise, fall)
 
     def mean_exposure(self, start, length, duty):
         """Flicker-free exposure (level x s): the gate with the carrier at its mean level."""
@@ -302,11 +320,11 @@ class GatedWaveform(Waveform):
         return gated_pwm_exposure(np.asarray(start, dtype=np.float64) - self.phase_s, length, Tg, on, T, D, ph,
                                   mean=True)
 
-    def level(self, t, period, duty, phase):
+    def level(self, t, period, duty, phase, rise=0.0, fall=0.0):
         """Level (1) at time ``t`` (s)."""
         Tg, on = self.gate()
         return _gate_level(np.asarray(t, dtype=np.float64) - self.phase_s, Tg, on,
-                           *self.carrier(period, duty, phase))
+                           *self.carrier(period, duty, phase), rise, fall)
 
     def mean_level(self, duty):
         Tg, on = self.gate()
