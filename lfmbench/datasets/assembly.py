@@ -29,6 +29,7 @@ import numpy as np
 import torch
 
 from lfmbench.datasets.projection import SceneLayers
+from lfmbench.datasets.pwm import gated_lights
 from lfmbench.flicker import pwm_exposure
 from lfmbench.sensor.plan import resolve_windows, total_length_s
 from lfmbench.vocabulary import PHOTODIODES
@@ -82,7 +83,7 @@ def bin_edges(window_s, bins: int, like=None, kmax: int | None = None):
 
 
 def window_bin_exposure(edges, start, length, period, duty, led_phase, rise=0.0, fall=0.0, level: str = "pwm",
-                        check: bool = True):
+                        check: bool = True, waveform=None):
     r"""Time (s) at PWM level 1 that each bin contributes to an exposure window.
 
     Array-agnostic: numpy inputs take :func:`lfmbench.flicker.pwm_exposure`'s compiled kernel, torch tensors its
@@ -96,6 +97,8 @@ def window_bin_exposure(edges, start, length, period, duty, led_phase, rise=0.0,
             shape (L, 1, 1) for L lights at once (generally: broadcastable to (*, R, K)).
         level: ``"pwm"`` (the modulated source) or ``"mean"`` (constant at its duty cycle: ground truth).
         check: validate the PWM parameters (``False`` when they were validated when drawn).
+        waveform: a gated waveform of :mod:`lfmbench.flicker.waveforms` (one light, numpy only): the bins of its
+            exposure (carrier = the PWM parameters; ``level="mean"``: the gate with the carrier at its duty).
 
     Returns:
         (*, R, K), e.g. (R, K) or (L, R, K), float64:
@@ -109,6 +112,10 @@ def window_bin_exposure(edges, start, length, period, duty, led_phase, rise=0.0,
         lo = np.maximum(edges[..., None, :-1], start[..., :, None])
         hi = np.minimum(edges[..., None, 1:], start[..., :, None] + length)
         dur = np.maximum(hi - lo, 0.0)
+    if waveform is not None:
+        if level == "mean":
+            return waveform.mean_exposure(lo, dur, duty)
+        return waveform.exposure(lo, dur, period, duty, led_phase, rise, fall)
     if level == "mean":
         return dur * (duty if _is_tensor(duty) else np.asarray(duty))
     return pwm_exposure(lo - led_phase, dur, period, duty, rise_time=rise, fall_time=fall, check=check)
@@ -203,8 +210,11 @@ def compose_frame(layers: SceneLayers, meta: dict, frame: int, crop: tuple[int, 
     # flickering lights stored per light in K time bins (K from the stored layer: a group may override it).
     # All visible lights with the same K share one pwm_exposure call per capture: (L, R, K) weights.
     visible: dict[int, list] = {}
-    for _light_id, p, box0, inter, rates in visible_lights(layers, frame, crop, params):
+    ids: dict[int, list] = {}
+    for light_id, p, box0, inter, rates in visible_lights(layers, frame, crop, params):
         visible.setdefault(int(rates["lpd"].shape[0]), []).append((p, box0, inter, rates))
+        ids.setdefault(int(rates["lpd"].shape[0]), []).append(int(light_id))
+    gates = gated_lights(meta)   # indicators, strobes, countdowns, destination displays: their own waveform
     rolling = shutter == "rolling"
     for K, group in visible.items():
         edges = frame / float(meta["fps"]) + bin_edges(float(tm["capture_window_s"]), K)
@@ -216,6 +226,12 @@ def compose_frame(layers: SceneLayers, meta: dict, frame: int, crop: tuple[int, 
             w = window_bin_exposure(edges, st, t_len[pd], pa["period_s"], pa["duty"], pa["phase_s"],
                                     pa["rise_s"], pa["fall_s"], level, check=False)        # (L, R, K) s
             wts[key] = torch.from_numpy(np.ascontiguousarray(w)).float()
+            for i, lid in enumerate(ids[K]):
+                if lid in gates:
+                    p = group[i][0]
+                    w = window_bin_exposure(edges, st, t_len[pd], p["period_s"], p["duty"], p["phase_s"],
+                                            p["rise_s"], p["fall_s"], level, waveform=gates[lid])  # (R, K) s
+                    wts[key][i] = torch.from_numpy(np.ascontiguousarray(w)).float()
         if not rolling:
             # one weight vector per light and window: LPD and gt share the LPD bins, one (2, K) x (K, hh, ww)
             w_lpd_gt = torch.stack([wts["lpd"][:, 0], wts["gt"][:, 0]], dim=1)              # (L, 2, K) s

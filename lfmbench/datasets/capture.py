@@ -33,7 +33,7 @@ from lfmbench.datasets.assembly import (NOISE_STREAMS, SENSOR_OUTPUTS, STATIC_WI
                                         plan_exposures, static_window_source)
 from lfmbench.datasets.pieces import capture_pieces
 from lfmbench.datasets.projection import SceneLayers, aux_channels, load_or_build, unit_projection_preset
-from lfmbench.datasets.pwm import PWMConfig, draw_scene_pwm, frozen_test_rng, load_pwm_config
+from lfmbench.datasets.pwm import PWMConfig, apply_light_timing, draw_scene_pwm, frozen_test_rng, load_pwm_config
 from lfmbench.fileio import atomic_write_json, load_json
 from lfmbench.flicker import pwm_exposure
 from lfmbench.sensor.fused import warm_fused
@@ -495,7 +495,7 @@ class LFMCaptureDataset(Dataset):
             u = float(fr.get("frame_u", 0.0))
         elif counter:
             draw = counter_scene_draw(self.pwm, self.entities(sid), self.seed, self.epoch, index)
-            per_light, per_group = draw.to_dicts()
+            per_light, per_group = apply_light_timing(draw, meta).to_dicts()   # drivers, scan rows (v2 scenes)
             noise_seed = int(noise_seeds(self.seed, self.epoch, index))
             u = None
         else:

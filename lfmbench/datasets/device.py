@@ -34,6 +34,7 @@ from lfmbench.datasets.counter_draws import (PURPOSE_PWM, PWM_UNIFORMS, crop_ori
                                              pwm_from_uniforms, sample_keys, start_frame)
 from lfmbench.datasets.pieces import PWM_FIELDS, _SceneEntries, capture_pieces
 from lfmbench.datasets.row_gather import gather_rows
+from lfmbench.datasets.pwm import has_light_timing
 from lfmbench.vocabulary import PHOTODIODES
 
 __all__ = ["ResidentMemoryError", "ResidentScene", "ResidentScenes", "DeviceBatches", "epoch_order",
@@ -265,7 +266,7 @@ class SplitProgram:
         shapes = set()
         for sid in dict.fromkeys(ds.scene_ids):
             view = ds.scene(sid)
-            if view.layers.group_static:
+            if view.layers.group_static or has_light_timing(view.meta):   # v2 drivers, scan rows, gates
                 return False
             shapes.add(tuple(view.static_rates().shape))
         return len(shapes) == 1

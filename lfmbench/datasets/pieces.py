@@ -14,6 +14,7 @@ import numpy as np
 import torch
 
 from lfmbench.datasets.assembly import visible_lights
+from lfmbench.datasets.pwm import gated_lights
 from lfmbench.vocabulary import PHOTODIODES
 
 __all__ = ["PWM_FIELDS", "capture_pieces"]
@@ -88,6 +89,10 @@ def capture_pieces(ds, scene_id: str, params: Mapping[int, Mapping], group_param
     view = ds.scene(scene_id)
     meta = view.meta
     params = {int(k): v for k, v in params.items()}
+    gated = sorted(set(gated_lights(meta)) & set(params))
+    if gated:
+        raise ValueError(f"scene {scene_id}: lights {gated[:8]} have gated waveforms (indicator, strobe, countdown, "
+                         "destination display), which only the per-sample path composes (LFMCaptureDataset[i])")
     group_params = dict(group_params or {})
     F = ds.frames
     s0 = ds.first_frame(scene_id, frame_start)

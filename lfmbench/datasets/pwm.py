@@ -267,7 +267,70 @@ def draw_scene_pwm(cfg: PWMConfig, meta: Mapping[str, Any], rng: np.random.Gener
         per_light = {int(lt["id"]): per_group[lt["group"]] for lt in lights}
     else:
         per_light = {int(lt["id"]): rec[i] for i, lt in enumerate(lights)}
-    return SceneDraw(per_light, per_group)
+    return apply_light_timing(SceneDraw(per_light, per_group), meta)
+
+
+# ----------------------------------------------------------------------------------------------------------
+# the timing of lamp clusters and LED displays (scene version 2: meta.json lights with driver / waveform)
+# ----------------------------------------------------------------------------------------------------------
+def has_light_timing(meta: Mapping[str, Any]) -> bool:
+    """Whether any ``meta.json`` light states a ``driver`` or a ``waveform`` (scene version 2)."""
+    return any("driver" in lt or "waveform" in lt for lt in meta.get("lights", []))
+
+
+def light_waveforms(meta: Mapping[str, Any]) -> dict[int, Any]:
+    """``{light id: waveform}`` (:mod:`lfmbench.flicker.waveforms`) of the ``meta.json`` lights that state one
+    (scene version 2); a light without ``waveform`` is a plain PWM lamp and is left out."""
+    from lfmbench.flicker.waveforms import waveform_from_dict  # noqa: PLC0415
+
+    return {int(lt["id"]): waveform_from_dict(lt["waveform"], f"lights[{i}].waveform", "meta.json")
+            for i, lt in enumerate(meta.get("lights", [])) if "waveform" in lt}
+
+
+def gated_lights(meta: Mapping[str, Any]) -> dict[int, Any]:
+    """The lights whose waveform has a gate (indicator, strobe, countdown, destination display): ``{id:
+    waveform}``. Their exposure is not a PWM's alone, so the composition applies the waveform itself
+    (:func:`lfmbench.datasets.assembly.compose_frame`)."""
+    from lfmbench.flicker.waveforms import GatedWaveform  # noqa: PLC0415
+
+    if not has_light_timing(meta):
+        return {}
+    return {k: w for k, w in light_waveforms(meta).items() if isinstance(w, GatedWaveform)}
+
+
+def apply_light_timing(draw: SceneDraw, meta: Mapping[str, Any]) -> SceneDraw:
+    """The draw with the timing that ``meta.json`` states per light (identity for lights without ``driver`` and
+    ``waveform``, e.g. every scene of protocol lfmbench-v1):
+
+    - lights of one ``driver`` share one PWM: the draw of the driver's light of lowest id (the segments of a
+      lamp, the rows of a message sign, the bars of a countdown display);
+    - a multiplexed display row (waveform ``scan_row``) is its row's own PWM: duty ``D / N``, rising edges
+      ``line * T / N`` after the sign's, ramps scaled to fit (:meth:`lfmbench.flicker.waveforms.ScanRow.row_pwm`),
+      so every composition path applies it like any PWM light;
+    - a gated waveform keeps its carrier's draw here; the composition applies the gate (:func:`gated_lights`).
+    """
+    from lfmbench.flicker.waveforms import ScanRow, fit_ramps  # noqa: PLC0415
+
+    if not has_light_timing(meta):
+        return draw
+    lights = {int(lt["id"]): lt for lt in meta.get("lights", [])}
+    first: dict[str, int] = {}
+    for lid in sorted(draw.lights):
+        d = lights.get(lid, {}).get("driver")
+        if d is not None:
+            first.setdefault(d, lid)
+    wfs = light_waveforms(meta)
+    out = {}
+    for lid, p in draw.lights.items():
+        d = lights.get(lid, {}).get("driver")
+        p = draw.lights[first[d]] if d is not None else p
+        w = wfs.get(lid)
+        if isinstance(w, ScanRow):
+            T, D, ph = (float(x) for x in w.row_pwm(p.period_s, p.duty, p.phase_s))
+            rise, fall = (float(x) for x in fit_ramps(T, D, p.rise_s, p.fall_s))
+            p = PWMParams(period_s=T, duty=D, phase_s=ph % T, rise_s=rise, fall_s=fall, freq_hz=p.freq_hz)
+        out[lid] = p
+    return SceneDraw(out, dict(draw.groups))
 
 
 # ----------------------------------------------------------------------------------------------------------
