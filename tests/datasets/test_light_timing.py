@@ -117,3 +117,24 @@ def test_waveforms_in_meta_are_checked():
     with pytest.raises(ValueError, match=r"meta.json: field 'lights\[0\].waveform.flashes'"):
         gated_lights(meta)
     assert waveform_from_dict(STROBE).gate()[1].shape == (2, 2)
+
+
+def test_corpus_with_a_strobe_per_sample_path_composes_and_batched_path_refuses(tmp_path):
+    """End to end on a tiny written corpus whose meta.json lights carry a strobe and a driver: the per-sample
+    dataset composes it; the batched (pieces) path refuses with one line naming the scene and the lights."""
+    from lfmbench import corpus as C
+    from lfmbench.datasets import LFMCaptureDataset
+    from tests.data.corpus.data import H, W, fake_frames, fake_meta, fake_scene, scale_frames
+
+    w = C.CorpusWriter(tmp_path)
+    meta = fake_meta("scene00000", width=W, height=H, frames=2, bins=4, n_lights=2)
+    meta["lights"][0]["waveform"] = dict(STROBE)
+    meta["lights"][1]["driver"] = "o3.tail"
+    fr = scale_frames(fake_frames(meta, seed=0), 1e-3, 1e-3)
+    w.write_scene(meta["scene_id"], fake_scene(meta["scene_id"]), meta, fr)
+    w.write_splits(0)
+    kw = dict(split="all", frames=2, outputs=("input_referred", "gt"), seed=0)
+    sample = LFMCaptureDataset(tmp_path, **kw)[0]
+    assert torch.isfinite(sample["gt"]).all()
+    with pytest.raises(ValueError, match=r"scene scene00000: lights \[0\] have gated waveforms"):
+        LFMCaptureDataset(tmp_path, pieces=True, **kw)[0]
