@@ -437,8 +437,9 @@ class DestinationRow(GatedWaveform):
     phase_s: float = 0.0
 
     def _consistency(self):
-        if self.line >= self.scan_lines:
-            return "line", f"must be < scan_lines = {self.scan_lines}, got {self.line}"
+        why = ScanRow(scan_lines=self.scan_lines, line=self.line)._consistency()
+        if why is not None:
+            return why
         if self.page >= self.pages:
             return "page", f"must be < pages = {self.pages}, got {self.page}"
         return None
