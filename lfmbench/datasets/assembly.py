@@ -387,8 +387,11 @@ def compose_plan_frame(layers: SceneLayers, meta: dict, frame: int, crop: tuple[
                 if x.key == reference:
                     out["gt"] += r * float(p["duty"] * n)
     visible: dict[int, list] = {}
-    for _light_id, p, box0, inter, rates in visible_lights(layers, frame, crop, params):
+    ids: dict[int, list] = {}
+    for light_id, p, box0, inter, rates in visible_lights(layers, frame, crop, params):
         visible.setdefault(int(rates["lpd"].shape[0]), []).append((p, box0, inter, rates))
+        ids.setdefault(int(rates["lpd"].shape[0]), []).append(int(light_id))
+    gates = gated_lights(meta)   # indicators, strobes, countdowns, destination displays: their own waveform
     for K, group in visible.items():
         edges = t0 + bin_edges(float(tm["capture_window_s"]), K)
         pa = {k: np.array([g_[0][k] for g_ in group], dtype=np.float64)[:, None, None, None]
@@ -399,6 +402,12 @@ def compose_plan_frame(layers: SceneLayers, meta: dict, frame: int, crop: tuple[
             wgt = window_bin_exposure(edges, starts(x), length, pa["period_s"], pa["duty"], pa["phase_s"],
                                       pa["rise_s"], pa["fall_s"], level, check=False)     # (L, Wn, R, K) s
             wts[key] = torch.from_numpy(np.ascontiguousarray(wgt.sum(1))).float()       # (L, R, K)
+            for i, lid in enumerate(ids[K]):
+                if lid in gates:
+                    p = group[i][0]
+                    wg = window_bin_exposure(edges, starts(x), length, p["period_s"], p["duty"], p["phase_s"],
+                                             p["rise_s"], p["fall_s"], level, waveform=gates[lid])  # (Wn, R, K)
+                    wts[key][i] = torch.from_numpy(np.ascontiguousarray(wg.sum(0))).float()
         for i, (_p, (by0, bx0), (iy0, iy1, ix0, ix1), rates) in enumerate(group):
             win = (slice(iy0 - y0, iy1 - y0), slice(ix0 - x0, ix1 - x0))
             sub = rates["lpd"][:, iy0 - by0:iy1 - by0, ix0 - bx0:ix1 - bx0]               # (K, hh, ww) e-/s

@@ -33,8 +33,8 @@ from lfmbench.datasets.batched import collate_pieces, pieces_to, simulate_batch
 from lfmbench.datasets.counter_draws import (PURPOSE_PWM, PWM_UNIFORMS, crop_origin, noise_seeds, place_uniforms,
                                              pwm_from_uniforms, sample_keys, start_frame)
 from lfmbench.datasets.pieces import PWM_FIELDS, _SceneEntries, capture_pieces
-from lfmbench.datasets.row_gather import gather_rows
 from lfmbench.datasets.pwm import has_light_timing
+from lfmbench.datasets.row_gather import gather_rows
 from lfmbench.vocabulary import PHOTODIODES
 
 __all__ = ["ResidentMemoryError", "ResidentScene", "ResidentScenes", "DeviceBatches", "epoch_order",

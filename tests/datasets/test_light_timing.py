@@ -138,3 +138,30 @@ def test_corpus_with_a_strobe_per_sample_path_composes_and_batched_path_refuses(
     assert torch.isfinite(sample["gt"]).all()
     with pytest.raises(ValueError, match=r"scene scene00000: lights \[0\] have gated waveforms"):
         LFMCaptureDataset(tmp_path, pieces=True, **kw)[0]
+
+
+@pytest.mark.parametrize("rolling", [False, True])
+def test_capture_plan_exposures_apply_the_gate(rolling):
+    """A capture plan's chopped exposure (three sub-windows) of a strobe: the waveform's exposure summed over the
+    sub-windows of each row (the plan path, assembly.compose_plan_frame)."""
+    from lfmbench.datasets.assembly import PlanExposure, compose_plan_frame
+
+    meta = _meta([{"waveform": STROBE}])
+    K, H = 8, 3
+    ones = {pd: torch.ones((K, H, 2)) for pd in ("lpd", "spd")}
+    layers = SceneLayers("s", {pd: torch.zeros((4, H, 4)) for pd in ("lpd", "spd", "short", "long")}, {},
+                         [[(0, "otherlights", (0, 0, H, 2), ones)] for _ in range(4)])
+    chopped = ((0.0005, 0.0004), (0.0031, 0.0002), (0.0072, 0.0009))
+    lt = meta["timing"]["line_time_s"]
+    ex = [PlanExposure("a", 1.0, chopped, rolling, lt)]
+    p = _params(1, seed=4)[0]
+    wf = Strobe(**{k: v for k, v in STROBE.items() if k != "kind"})
+    for n in range(4):
+        out = compose_plan_frame(layers, meta, n, (0, 0, H, 4), {0: p.to_dict()}, {}, ex, "a")
+        t0 = n / meta["fps"]
+        for r in range(H):
+            sh = r * lt if rolling else 0.0
+            want = sum(float(wf.exposure(t0 + a + sh, ln, p.period_s, p.duty, p.phase_s)) for a, ln in chopped)
+            gt = sum(float(wf.mean_exposure(t0 + a + sh, ln, p.duty)) for a, ln in chopped)
+            assert float(out["a"][r, 0]) == pytest.approx(want, rel=1e-5, abs=1e-9)
+            assert float(out["gt"][r, 1]) == pytest.approx(gt, rel=1e-5, abs=1e-9)
