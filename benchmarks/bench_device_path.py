@@ -192,6 +192,26 @@ def _probe_syncs(fn, dev) -> list | None:
     return sorted(((n, k) for k, n in where.items()), reverse=True)
 
 
+def measure_fp16(root, dev, batch: int) -> dict:
+    """float16 against float32 residency on one batch (crop 256, noise off): the error of the composed ground
+    truth (relative, over pixels with signal), the DN that moved in the LPD-LCG capture, the bytes per scene."""
+    from lfmbench.datasets.device import DeviceBatches
+
+    out = {}
+    res = {}
+    for name, dt in (("float32", torch.float32), ("float16", torch.float16)):
+        db = DeviceBatches(_dataset(root, 256, batch, noise=False), batch, dev, seed=0, dtype=dt)
+        res[name] = db.batch(range(batch))
+        out[f"bytes_per_scene_{name}"] = db.resident.bytes / len(dict.fromkeys(db.ds.scene_ids))
+    a, h = res["float32"], res["float16"]
+    pos = a["gt"] > 0
+    rel = ((h["gt"] - a["gt"]).abs() / a["gt"].abs().clamp_min(1e-30))[pos].double()
+    out.update(gt_rel_max=float(rel.max()), gt_rel_rms=float(rel.square().mean().sqrt()),
+               lcg_dn_moved=float((h["lpd_lcg"] != a["lpd_lcg"]).double().mean()),
+               lcg_dn_max=float((h["lpd_lcg"].double() - a["lpd_lcg"].double()).abs().max()))
+    return out
+
+
 def profile_device(root, dev, batch: int, out: Path | None) -> None:
     """Where the device path's GPU time goes: torch.profiler over one batch (after a warm-up), the top kernels."""
     from torch.profiler import ProfilerActivity, profile
@@ -239,7 +259,7 @@ def main(argv=None) -> int:
     ap.add_argument("--scenes", type=int, default=2)
     ap.add_argument("--workers", type=int, default=None, help="DataLoader workers (default: cores - 2, at least 1)")
     ap.add_argument("--corpus", type=Path, default=None, help="where the synthetic corpus is written / reused")
-    ap.add_argument("--rows", default="loader,device,device-samplewise,step,train-loader,train-device",
+    ap.add_argument("--rows", default="loader,device,device-samplewise,fp16,step,train-loader,train-device",
                     help="comma-separated rows to measure (default: all)")
     ap.add_argument("--no-doc", action="store_true")
     ap.add_argument("--json", type=Path)
@@ -278,6 +298,8 @@ def main(argv=None) -> int:
             sps, load_s, per_scene, peak, syncs = time_device(root, dev, b, n_b, passes, program=False)
             add(path="device (pieces per sample)", batch=b, samples_per_s=sps, load_s=load_s,
                 resident_bytes_per_scene=per_scene, peak_bytes=peak)
+    if "fp16" in wanted:
+        add(path="fp16", batch=64 if gpu else 8, samples_per_s=float("nan"), **measure_fp16(root, dev, 64 if gpu else 8))
     if args.profile is not None:
         profile_device(root, dev, 256 if gpu else 8, args.profile)
     step_b = 64 if gpu else 4
@@ -322,6 +344,13 @@ def report(rows, machine, gpu) -> str:
         if "steps" in r:
             notes.append(f"steady state (median of epochs 2-3 of {r['steps']} steps); the whole call of 3 epochs "
                          f"with its start-up: {r['with_startup']:.0f} samples/s")
+        if r["path"] == "fp16":
+            notes.append(f"float16 residency against float32: ground truth relative error max {r['gt_rel_max']:.2e}, "
+                         f"rms {r['gt_rel_rms']:.2e}; LPD-LCG DN moved in {100 * r['lcg_dn_moved']:.3f} % of pixels "
+                         f"(at most {r['lcg_dn_max']:.0f} DN); {r['bytes_per_scene_float32'] / 2**20:.1f} -> "
+                         f"{r['bytes_per_scene_float16'] / 2**20:.1f} MiB per scene")
+            lines.append(f"| fp16 | {r['batch']} | - | {'; '.join(notes)} |")
+            continue
         lines.append(f"| {r['path']} | {r['batch']} | {r['samples_per_s']:.0f} | {'; '.join(notes)} |")
     return "\n".join(lines) + "\n"
 

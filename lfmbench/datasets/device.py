@@ -22,6 +22,7 @@ anything is loaded to the device (docs/datasets.md, "Corpus on the device": scen
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Iterator
 
@@ -37,8 +38,12 @@ from lfmbench.datasets.pwm import has_light_timing
 from lfmbench.datasets.row_gather import gather_rows
 from lfmbench.vocabulary import PHOTODIODES
 
-__all__ = ["ResidentMemoryError", "ResidentScene", "ResidentScenes", "DeviceBatches", "epoch_order",
+__all__ = ["STORAGE_DTYPES", "ResidentMemoryError", "ResidentScene", "ResidentScenes", "DeviceBatches", "epoch_order",
            "DEFAULT_BUDGET_FRACTION"]
+
+#: Storage types of the resident rates: float32, or float16 (scaled per scene by a power of two; half the memory,
+#: relative error at most 2^-11 of a rate; docs/datasets.md, "Corpus on the device").
+STORAGE_DTYPES = (torch.float32, torch.float16)
 
 #: Share of the device's free memory a resident split may take by default (the rest: the batch, the network).
 DEFAULT_BUDGET_FRACTION = 0.5
@@ -87,13 +92,19 @@ class ResidentScenes:
             bytes per scene and how many scenes would fit); nothing has been copied to the device then.
     """
 
-    def __init__(self, ds, device: torch.device | str, budget_bytes: int | None = None) -> None:
+    def __init__(self, ds, device: torch.device | str, budget_bytes: int | None = None,
+                 dtype: torch.dtype = torch.float32) -> None:
         self.device = torch.device(device)
         self.ds = ds
+        if dtype not in STORAGE_DTYPES:
+            raise ValueError(f"dtype must be one of {STORAGE_DTYPES}, got {dtype!r:.40}")
         want = set(ds.outputs)
         sids = list(dict.fromkeys(ds.scene_ids))
         packed = SplitProgram.supports(ds)
-        need = self.estimate(ds, packed)
+        if dtype != torch.float32 and not packed:
+            raise ValueError(f"dtype={dtype}: float16 layers need a split whose scenes share one size and frame "
+                             "count and store every flickering group in time bins; this one does not (use float32)")
+        need = self.estimate(ds, packed, dtype)
         if budget_bytes is None and self.device.type == "cuda":
             free, _total = torch.cuda.mem_get_info(self.device)
             budget_bytes = int(DEFAULT_BUDGET_FRACTION * free)
@@ -107,7 +118,10 @@ class ResidentScenes:
         self.bytes = 0
         self._scenes: dict[str, ResidentScene] = {}
         #: the batched program over the packed layers (None: the split cannot be packed; per-sample pieces)
-        self.program = SplitProgram(ds, self.device) if packed else None
+        self.program = SplitProgram(ds, self.device, dtype) if packed else None
+        if self.program is not None and dtype != torch.float32:
+            self.bytes = self.program.nbytes()      # scaled float16 layers: only the program reads them
+            return
         if self.program is not None:
             pr = self.program
             for i, sid in enumerate(pr.sids):
@@ -132,33 +146,34 @@ class ResidentScenes:
             self.bytes += sc.nbytes()
 
     @staticmethod
-    def estimate(ds, packed: bool | None = None) -> int:
+    def estimate(ds, packed: bool | None = None, dtype: torch.dtype = torch.float32) -> int:
         """Bytes the resident layers of the split of ``ds`` take (``packed``: as :class:`SplitProgram` holds them,
         entries padded to the split's most bins plus 12 bytes of coordinates each; default: whether the split
-        can be packed)."""
+        can be packed; ``dtype``: of the rates, float32 or float16)."""
         sids = list(dict.fromkeys(ds.scene_ids))
         packed = SplitProgram.supports(ds) if packed is None else packed
         kall = None
         if packed:
             kall = max([int(fe.vals.shape[1]) for sid in sids
                         for fe in ds.scene(sid).cached("pieces_entries", _SceneEntries).frames] + [1])
-        return sum(ResidentScenes.estimate_scene(ds, sid, kall) for sid in sids)
+        return sum(ResidentScenes.estimate_scene(ds, sid, kall, dtype) for sid in sids)
 
     @staticmethod
-    def estimate_scene(ds, scene_id: str, kall: int | None = None) -> int:
+    def estimate_scene(ds, scene_id: str, kall: int | None = None, dtype: torch.dtype = torch.float32) -> int:
         """Bytes one scene's resident layers take (from its projected layers on the host); ``kall``: its entries
-        padded to ``kall`` bins with their coordinates (packed, :class:`SplitProgram`)."""
+        padded to ``kall`` bins with their coordinates (packed, :class:`SplitProgram`); ``dtype``: of the rates."""
+        rb = torch.empty((), dtype=dtype).element_size()
         view = ds.scene(scene_id)
         layers = view.layers
         want = set(ds.outputs)
         fs, _two, H, W = (int(n) for n in view.static_rates().shape)
-        n = 4 * 2 * fs * H * W
+        n = rb * 2 * fs * H * W
         n += sum(4 * int(r[pd].numel()) for r in layers.group_static.values() for pd in PHOTODIODES)
         frames = view.cached("pieces_entries", _SceneEntries).frames
         if kall is None:
             n += sum(int(fe.vals.nbytes) for fe in frames)
         else:
-            n += sum((8 * kall + 12) * int(fe.y.shape[0]) for fe in frames)
+            n += sum((2 * rb * kall + 12) * int(fe.y.shape[0]) for fe in frames)
         if "light_index" in want:
             n += int(view.light_index().numel()) * view.light_index().element_size()
         if "depth" in want:
@@ -189,7 +204,7 @@ class DeviceBatches:
     """
 
     def __init__(self, ds, batch_size: int, device: torch.device | str, seed: int = 0,
-                 budget_bytes: int | None = None, drop_last: bool = False) -> None:
+                 budget_bytes: int | None = None, drop_last: bool = False, dtype: torch.dtype = torch.float32) -> None:
         if isinstance(batch_size, bool) or not isinstance(batch_size, int) or batch_size < 1:
             raise ValueError(f"batch_size must be an integer >= 1, got {batch_size!r}")
         if getattr(ds, "pieces", False):
@@ -200,7 +215,7 @@ class DeviceBatches:
         self.seed = int(seed)
         self.drop_last = bool(drop_last)
         self.epoch = 0
-        self.resident = ResidentScenes(ds, self.device, budget_bytes)
+        self.resident = ResidentScenes(ds, self.device, budget_bytes, dtype)
 
     def set_epoch(self, epoch: int) -> None:
         self.ds.set_epoch(epoch)
@@ -271,9 +286,10 @@ class SplitProgram:
             shapes.add(tuple(view.static_rates().shape))
         return len(shapes) == 1
 
-    def __init__(self, ds, device: torch.device) -> None:
+    def __init__(self, ds, device: torch.device, dtype: torch.dtype = torch.float32) -> None:
         self.ds = ds
         self.device = dev = torch.device(device)
+        self.dtype = dtype
         self.sids = list(dict.fromkeys(ds.scene_ids))
         pos = {sid: i for i, sid in enumerate(self.sids)}
         self.scene_of = np.array([pos[s] for s in ds.scene_ids], dtype=np.int64)   # ds.scene_ids -> packed
@@ -282,7 +298,9 @@ class SplitProgram:
         nS = len(views)
         Fs, _two, H, W = (int(n) for n in views[0].static_rates().shape)
         self.H, self.W, self.Fs = H, W, Fs
-        self.static = torch.empty((nS, Fs, 2, H, W), dtype=torch.float32, device=dev)
+        self.static = torch.empty((nS, Fs, 2, H, W), dtype=dtype, device=dev)
+        # float16: each scene's rates divided by a power of two (exact) so that its largest is at most 2^14
+        self.scale = np.ones(nS, dtype=np.float32)
         li_dt = max((v.light_index().dtype for v in views), key=lambda d: torch.iinfo(d).bits) \
             if "light_index" in want else None
         self.light_index = torch.empty((nS, Fs, 1, H, W), dtype=li_dt, device=dev) if li_dt else None
@@ -303,7 +321,10 @@ class SplitProgram:
         counts = np.zeros((nS, Fs), dtype=np.int64)
         self.n_entities = 1
         for i, (sid, view, e) in enumerate(zip(self.sids, views, ents)):
-            self.static[i].copy_(view.static_rates())
+            if dtype != torch.float32:
+                top = max([float(view.static_rates().max())] + [float(fe.vals.max()) for fe in e.frames if fe.vals.size])
+                self.scale[i] = 2.0 ** max(0, math.ceil(math.log2(max(top, 1.0) / 2.0 ** 14)))
+            self.static[i].copy_(view.static_rates() / float(self.scale[i]))
             if self.light_index is not None:
                 self.light_index[i].copy_(view.light_index())
             if self.depth is not None:
@@ -341,7 +362,7 @@ class SplitProgram:
         self.tile_off = np.zeros((nS, Fs, nt + 1), dtype=np.int64)
         self.order: list[list[np.ndarray]] = []        # per scene and frame: _SceneEntries position -> run position
         # entry-major (N, 2, Kall): a batch gathers whole rows of 2 x Kall rates (coalesced on a GPU)
-        self.e_vals = torch.zeros((n_all, 2, self.kall), dtype=torch.float32, device=dev)
+        self.e_vals = torch.zeros((n_all, 2, self.kall), dtype=dtype, device=dev)
         ey, ex, ep = (np.empty(n_all, dtype=np.int32) for _ in range(3))
         for i, e in enumerate(ents):
             self.order.append([])
@@ -354,12 +375,13 @@ class SplitProgram:
                 self.order[i].append(inv)
                 self.tile_off[i, fr] = a + np.concatenate([[0], np.cumsum(np.bincount(tile, minlength=nt))])
                 ey[a:b], ex[a:b], ep[a:b] = fe.y[srt], fe.x[srt], fe.pos[srt]
-                self.e_vals[a:b, :, :fe.vals.shape[1]].copy_(torch.from_numpy(fe.vals[:, :, srt]).permute(2, 0, 1))
+                self.e_vals[a:b, :, :fe.vals.shape[1]].copy_(
+                    torch.from_numpy(fe.vals[:, :, srt]).permute(2, 0, 1) / float(self.scale[i]))
         t = lambda a: torch.from_numpy(a).to(dev)  # noqa: E731
         self.e_y, self.e_x, self.e_pos = t(ey), t(ex), t(ep)
         self.t_lpos, self.t_K, self.t_box = t(self.lt_lpos), t(self.lt_K), t(self.lt_box)
         self.t_ids, self.t_ent, self.t_nl = t(self.ids), t(self.ent), t(self.num_lights)
-        self.t_timing, self.t_fps = t(self.timing), t(self.fps)
+        self.t_timing, self.t_fps, self.t_scale = t(self.timing), t(self.fps), t(self.scale)
         self.frozen = self._freeze() if ds.split == "test" else None
         # constants made once: a tensor made from host values inside a step would wait for the device's queue
         self._pad = torch.tensor(_PAD_PWM, dtype=torch.float64, device=dev)
@@ -502,7 +524,10 @@ class SplitProgram:
         out["entry_pix"] = torch.where(ok, pix, torch.zeros_like(pix)).int()
         out["entry_slot"] = slot.int()
         # (2, Kall, E) as a view of entry-major rows (compose_batch reads it without a copy)
-        out["entry_values"] = (gather_rows(self.e_vals, gid) * ok.to(torch.float32)[:, None, None]).permute(1, 2, 0)
+        ev = gather_rows(self.e_vals, gid).float() * ok.to(torch.float32)[:, None, None]
+        if self.dtype != torch.float32:
+            ev = ev * self.t_scale[sc_t][b][:, None, None]
+        out["entry_values"] = ev.permute(1, 2, 0)
         # crops of the full-frame layers: one gather each on a GPU; slices on the CPU, where copying B x F
         # rectangles is faster than an indexed gather (the same numbers)
         layers = [("static", self.static), ("light_index", self.light_index), ("depth", self.depth)]
@@ -523,6 +548,8 @@ class SplitProgram:
                 out["depth"] = self.depth[S4, F4, rr, cc]
         if self.depth is not None:
             out["depth"] = out["depth"][:, :, None]
+        if self.dtype != torch.float32:
+            out["static"] = out["static"].float() * self.t_scale[sc_t][:, None, None, None, None]
         fps = self.t_fps[sc_t]
         out["t0"] = fr_t.to(torch.float64) / fps[:, None]
         tim = self.t_timing[sc_t]

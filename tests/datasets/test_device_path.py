@@ -223,3 +223,25 @@ def test_gather_rows_equals_index_select():
                 i = torch.randint(0, 50, (37,), device=dev, dtype=dt)
                 assert torch.equal(gather_rows(t, i), t.index_select(0, i)), (dev, shape, dt)
         assert gather_rows(torch.rand(4, 2, device=dev), torch.zeros(0, dtype=torch.long, device=dev)).shape == (0, 2)
+
+
+def test_float16_residency_halves_the_rates_within_its_error_bound(long_corpus):
+    """Layers stored as float16 (each scene scaled by a power of two): the bytes of the rates halve; the composed
+    ground truth and captures' means stay within 2^-11 relative of the float32 path (float16 keeps 11 significant
+    bits; a sum of non-negative terms keeps the largest relative error of its terms), the masks and depth exact."""
+    kw = dict(split="all", frames=3, crop=(12, 16), samples_per_scene=3, outputs=OUTS, noise=False)
+    a = DeviceBatches(LFMCaptureDataset(long_corpus, **kw), batch_size=9, device="cpu", seed=2)
+    h = DeviceBatches(LFMCaptureDataset(long_corpus, **kw), batch_size=9, device="cpu", seed=2, dtype=torch.float16)
+    assert h.resident.program.static.dtype == torch.float16
+    assert h.resident.bytes < 0.75 * a.resident.bytes
+    assert h.resident.bytes == ResidentScenes.estimate(h.ds, dtype=torch.float16)
+    for x, y in zip(a, h):
+        assert torch.equal(x["light_index"], y["light_index"]) and torch.equal(x["depth"], y["depth"])
+        rel = (y["gt"] - x["gt"]).abs() / x["gt"].abs().clamp_min(1e-30)
+        assert float(rel.max()) <= 2.0 ** -11 + 1e-6, float(rel.max())
+        for k in ("lpd_hcg", "lpd_lcg", "spd"):       # DN: a mean moved by 2^-11 crosses at most that many steps
+            d = (y[k].double() - x[k].double()).abs()
+            assert bool((d <= 1 + 2.0 ** -11 * x[k].double()).all()), (k, float(d.max()))
+        assert not torch.equal(x["gt"], y["gt"])          # it is float16 storage, not a copy of the float32 one
+    with pytest.raises(ValueError, match="dtype must be one of"):
+        ResidentScenes(a.ds, "cpu", dtype=torch.bfloat16)
