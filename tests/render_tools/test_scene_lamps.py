@@ -235,3 +235,53 @@ def test_text_on_the_font_and_grid():
     with pytest.raises(ValueError, match="needs 23 x 7 dots"):
         LM.text_cells("SLOW", (20, 7))
     assert len(LM.disk_cells(13)) < 13 * 13 and [6, 0] in LM.disk_cells(13) and [0, 0] not in LM.disk_cells(13)
+
+
+# ------------------------------------------------------------------------------------------------ rendering
+def _dots_scene(dot, cells, grid=(4, 4), size=(0.2, 0.2), center=(3.0, 0.0, 3.0), normal=(0, 0, -1)):
+    from tests.data.render.data import HPS
+
+    s = S.empty_scene(position_m=(3.0, 0.0, 2.0), pitch_deg=-89.0, fov_x_deg=4.0)
+    s["version"] = 2
+    s["materials"]["grey"] = {"type": "diffuse", "rgb": [0.5, 0.5, 0.5]}
+    s["objects"].append({"id": 0, "kind": "ground", "velocity_mps": [0, 0, 0],
+                         "parts": [{"shape": "rect", "center": [0, 0, 0], "size": [200, 200], "normal": [0, 0, 1],
+                                    "material": "grey"}]})
+    s["lights"].append({"id": 0, "group": "streetlights", "kind": "streetlight", "instance": -1, "shape": "dots",
+                        "center": list(center), "normal": list(normal), "size": list(size), "grid": list(grid),
+                        "dot": dot, "cells": cells, "spread_deg": 90.0, "spectrum": HPS, "luminance_cd_m2": 3e4})
+    return S.validate_scene(s), HPS
+
+
+@pytest.mark.jit
+def test_dots_lamp_lights_a_plane_as_its_lit_area():
+    """A 4 x 4 LED array (dot 0.5: a quarter of the face lit) 3 m above a grey plane: the plane's radiance is
+    rho L A_dots / (pi h^2) (small Lambertian source), A_dots = 16 (0.5 x 0.05 m)^2 = 0.01 m^2."""
+    from render_tools import render, spectra
+
+    s, spec = _dots_scene(0.5, [[c, r] for r in range(4) for c in range(4)])
+    assert MS.plane_area(s["lights"][0]) == pytest.approx(0.01)
+    opts = render.RenderOptions(width=6, height=4, spp=64, frames=1, aux=False)
+    img = next(render.render_frames(s, opts))["static"]["streetlights"]["short"]
+    exp = 0.5 * spectra.band_means(spectra.absolute_spectrum(spec, 3e4), opts.bands_nm, opts.band_width_nm) \
+        * 0.01 / (math.pi * 3.0 ** 2)
+    assert np.allclose(img.mean((1, 2)), exp, rtol=0.04, atol=0.02 * exp.max())
+
+
+@pytest.mark.jit
+def test_directly_viewed_dots_face_has_its_luminance():
+    """A camera looking straight up at a 2 x 2 m matrix of 8 x 8 dots that tile it (dot 1) filling its view: every
+    pixel inside sees the face's luminance L (the dots' quads are one-sided emitters facing the camera)."""
+    from render_tools import render, spectra
+
+    cells = [[c, r] for r in range(8) for c in range(8)]
+    s, spec = _dots_scene(1.0, cells, grid=(8, 8), size=(2.0, 2.0), center=(3.0, 0.0, 2.5))
+    s["camera"].update({"position_m": [3.0, 0.0, 0.1], "pitch_deg": 89.0, "fov_x_deg": 60.0})
+    s["objects"] = []
+    s = S.validate_scene(s)
+    opts = render.RenderOptions(width=64, height=36, spp=8, frames=1, aux=False)
+    img = next(render.render_frames(s, opts))["static"]["streetlights"]["short"]
+    L = spectra.band_means(spectra.absolute_spectrum(spec, 3e4), opts.bands_nm, opts.band_width_nm)
+    mid = img[:, 6:30, 20:44]                       # well inside the face (it spans ~2.3 m at 2.4 m, 60 deg)
+    peak = L > 0.2 * L.max()
+    assert np.allclose(mid.mean((1, 2))[peak], L[peak], rtol=0.02)
