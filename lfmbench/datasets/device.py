@@ -93,18 +93,18 @@ class ResidentScenes:
     """
 
     def __init__(self, ds, device: torch.device | str, budget_bytes: int | None = None,
-                 dtype: torch.dtype = torch.float32) -> None:
+                 dtype: torch.dtype = torch.float32, scenes: list | None = None) -> None:
         self.device = torch.device(device)
         self.ds = ds
         if dtype not in STORAGE_DTYPES:
             raise ValueError(f"dtype must be one of {STORAGE_DTYPES}, got {dtype!r:.40}")
         want = set(ds.outputs)
-        sids = list(dict.fromkeys(ds.scene_ids))
-        packed = SplitProgram.supports(ds)
+        sids = list(dict.fromkeys(ds.scene_ids if scenes is None else scenes))
+        packed = SplitProgram.supports(ds, sids)
         if dtype != torch.float32 and not packed:
             raise ValueError(f"dtype={dtype}: float16 layers need a split whose scenes share one size and frame "
                              "count and store every flickering group in time bins; this one does not (use float32)")
-        need = self.estimate(ds, packed, dtype)
+        need = self.estimate(ds, packed, dtype, sids)
         if budget_bytes is None and self.device.type == "cuda":
             free, _total = torch.cuda.mem_get_info(self.device)
             budget_bytes = int(DEFAULT_BUDGET_FRACTION * free)
@@ -113,12 +113,13 @@ class ResidentScenes:
             raise ResidentMemoryError(
                 f"split {ds.split!r} of {ds.root}: its {len(sids)} scenes need {need / 2**30:.2f} GiB on {self.device} "
                 f"({per / 2**20:.0f} MiB per scene), the budget is {budget_bytes / 2**30:.2f} GiB (about "
-                f"{int(budget_bytes // per)} scenes): pass budget_bytes, use fewer scenes (a smaller split or "
-                f"max_scenes), or train from the DataLoader path (data='loader')")
+                f"{int(budget_bytes // per)} scenes): pass budget_bytes, stream the split in chunks "
+                f"(DeviceBatches(..., chunk_scenes={max(1, int(budget_bytes // per))})), store float16 layers "
+                f"(dtype=torch.float16), or train from the DataLoader path (data='loader')")
         self.bytes = 0
         self._scenes: dict[str, ResidentScene] = {}
         #: the batched program over the packed layers (None: the split cannot be packed; per-sample pieces)
-        self.program = SplitProgram(ds, self.device, dtype) if packed else None
+        self.program = SplitProgram(ds, self.device, dtype, sids) if packed else None
         if self.program is not None and dtype != torch.float32:
             self.bytes = self.program.nbytes()      # scaled float16 layers: only the program reads them
             return
@@ -146,12 +147,12 @@ class ResidentScenes:
             self.bytes += sc.nbytes()
 
     @staticmethod
-    def estimate(ds, packed: bool | None = None, dtype: torch.dtype = torch.float32) -> int:
+    def estimate(ds, packed: bool | None = None, dtype: torch.dtype = torch.float32, scenes: list | None = None) -> int:
         """Bytes the resident layers of the split of ``ds`` take (``packed``: as :class:`SplitProgram` holds them,
         entries padded to the split's most bins plus 12 bytes of coordinates each; default: whether the split
-        can be packed; ``dtype``: of the rates, float32 or float16)."""
-        sids = list(dict.fromkeys(ds.scene_ids))
-        packed = SplitProgram.supports(ds) if packed is None else packed
+        can be packed; ``dtype``: of the rates, float32 or float16; ``scenes``: only these)."""
+        sids = list(dict.fromkeys(ds.scene_ids if scenes is None else scenes))
+        packed = SplitProgram.supports(ds, sids) if packed is None else packed
         kall = None
         if packed:
             kall = max([int(fe.vals.shape[1]) for sid in sids
@@ -196,15 +197,22 @@ class DeviceBatches:
         batch_size: samples per batch (the last batch of an epoch may be smaller unless ``drop_last``).
         device: torch device of the layers, the simulation and the yielded tensors.
         seed: the order of an epoch's samples is :func:`epoch_order` ``(len(ds), seed, epoch)``.
-        budget_bytes: see :class:`ResidentScenes`.
-        drop_last: drop an epoch's last incomplete batch.
+        budget_bytes: see :class:`ResidentScenes` (with ``chunk_scenes``: the budget of one chunk).
+        drop_last: drop an epoch's last incomplete batch (of each chunk, when streaming).
+        dtype: storage of the resident rates, float32 or float16 (:data:`STORAGE_DTYPES`).
+        chunk_scenes: stream the split ``chunk_scenes`` scenes at a time (for a split that does not fit): per epoch
+            the scenes are taken in the order :func:`epoch_order` ``(n_scenes, seed, epoch)``, a chunk is loaded,
+            its samples are served in an order of ``(seed, epoch, chunk)``, then the next chunk replaces it. The
+            samples themselves (draws of ``(seed, epoch, index)``) are the same as without chunks.
 
-    Iterating yields the per-sample path's sample dicts with a leading B (on ``device``; ``meta`` collated on the
-    CPU), noise from counter-based streams. ``set_epoch(e)`` selects the draws and the order of epoch ``e``.
+    Iterating yields the per-sample path's sample dicts with a leading B (on ``device``, ``meta`` too when the
+    batched program makes them), noise from counter-based streams. ``set_epoch(e)`` selects the draws and the order
+    of epoch ``e``.
     """
 
     def __init__(self, ds, batch_size: int, device: torch.device | str, seed: int = 0,
-                 budget_bytes: int | None = None, drop_last: bool = False, dtype: torch.dtype = torch.float32) -> None:
+                 budget_bytes: int | None = None, drop_last: bool = False, dtype: torch.dtype = torch.float32,
+                 chunk_scenes: int | None = None) -> None:
         if isinstance(batch_size, bool) or not isinstance(batch_size, int) or batch_size < 1:
             raise ValueError(f"batch_size must be an integer >= 1, got {batch_size!r}")
         if getattr(ds, "pieces", False):
@@ -215,15 +223,33 @@ class DeviceBatches:
         self.seed = int(seed)
         self.drop_last = bool(drop_last)
         self.epoch = 0
-        self.resident = ResidentScenes(ds, self.device, budget_bytes, dtype)
+        if chunk_scenes is not None and (isinstance(chunk_scenes, bool) or not isinstance(chunk_scenes, int)
+                                         or chunk_scenes < 1):
+            raise ValueError(f"chunk_scenes must be None or an integer >= 1, got {chunk_scenes!r:.40}")
+        self.chunk_scenes = chunk_scenes
+        self.budget_bytes, self.dtype = budget_bytes, dtype
+        self._sids = list(dict.fromkeys(ds.scene_ids))
+        if chunk_scenes is not None and len(self._sids) != len(ds.scene_ids):
+            raise ValueError(f"ds: the split lists a scene twice ({len(ds.scene_ids)} ids, {len(self._sids)} scenes)")
+        # the whole split, or (chunks) the first chunk: its budget is checked now
+        first = None if chunk_scenes is None else self._sids[:chunk_scenes]
+        self.resident = ResidentScenes(ds, self.device, budget_bytes, dtype, first)
 
     def set_epoch(self, epoch: int) -> None:
         self.ds.set_epoch(epoch)
         self.epoch = int(epoch)
 
     def __len__(self) -> int:
-        n = len(self.ds)
-        return n // self.batch_size if self.drop_last else -(-n // self.batch_size)
+        sizes = [len(self.ds)] if self.chunk_scenes is None else [
+            len(c) * self.ds.samples_per_scene for c in self._chunks()]
+        return sum(n // self.batch_size if self.drop_last else -(-n // self.batch_size) for n in sizes)
+
+    def _chunks(self) -> list[list[int]]:
+        """The scene positions of each chunk of the current epoch (scenes in the order ``epoch_order`` of the
+        number of scenes, ``chunk_scenes`` at a time)."""
+        order = epoch_order(len(self._sids), self.seed, self.epoch).tolist()
+        c = self.chunk_scenes
+        return [order[i:i + c] for i in range(0, len(order), c)]
 
     def pieces(self, indices) -> dict:
         """The collated pieces of the dataset's samples ``indices`` (counter draws of the current epoch) on the
@@ -240,9 +266,25 @@ class DeviceBatches:
         return simulate_batch(self.pieces(indices), self.ds.preset, noise_streams="counter")
 
     def __iter__(self) -> Iterator[dict]:
-        order = epoch_order(len(self.ds), self.seed, self.epoch).tolist()
-        for b in range(len(self)):
-            yield self.batch(order[b * self.batch_size:(b + 1) * self.batch_size])
+        B = self.batch_size
+        if self.chunk_scenes is None:
+            order = epoch_order(len(self.ds), self.seed, self.epoch).tolist()
+            for b in range(len(self)):
+                yield self.batch(order[b * B:(b + 1) * B])
+            return
+        # streamed: one chunk of scenes resident at a time, its samples in an order of (seed, epoch, chunk)
+        sps = self.ds.samples_per_scene
+        for c, chunk in enumerate(self._chunks()):
+            sids = [self._sids[p] for p in chunk]
+            if set(self.resident.program.sids if self.resident.program is not None else self.resident._scenes) \
+                    != set(sids):
+                self.resident = None            # free the previous chunk before loading the next
+                self.resident = ResidentScenes(self.ds, self.device, self.budget_bytes, self.dtype, sids)
+            idx = [p * sps + s for p in chunk for s in range(sps)]
+            perm = epoch_order(len(idx), self.seed + 7919 * (c + 1), self.epoch).tolist()
+            n = len(idx) // B if self.drop_last else -(-len(idx) // B)
+            for b in range(n):
+                yield self.batch([idx[j] for j in perm[b * B:(b + 1) * B]])
 
 
 #: PWM (PWM_FIELDS) of a padded slot (no light, or a light the crop does not show): any valid waveform; its
@@ -276,23 +318,25 @@ class SplitProgram:
     TILE = 16
 
     @staticmethod
-    def supports(ds) -> bool:
-        """Whether the scenes of ``ds`` can be packed (one size, one number of frames, no groups without bins)."""
+    def supports(ds, scenes: list | None = None) -> bool:
+        """Whether the scenes of ``ds`` (or ``scenes`` of them) can be packed (one size, one number of frames, no
+        groups without bins, no light with its own timing)."""
         shapes = set()
-        for sid in dict.fromkeys(ds.scene_ids):
+        for sid in dict.fromkeys(ds.scene_ids if scenes is None else scenes):
             view = ds.scene(sid)
             if view.layers.group_static or has_light_timing(view.meta):   # v2 drivers, scan rows, gates
                 return False
             shapes.add(tuple(view.static_rates().shape))
         return len(shapes) == 1
 
-    def __init__(self, ds, device: torch.device, dtype: torch.dtype = torch.float32) -> None:
+    def __init__(self, ds, device: torch.device, dtype: torch.dtype = torch.float32, scenes: list | None = None) -> None:
         self.ds = ds
         self.device = dev = torch.device(device)
         self.dtype = dtype
-        self.sids = list(dict.fromkeys(ds.scene_ids))
+        self.sids = list(dict.fromkeys(ds.scene_ids if scenes is None else scenes))
         pos = {sid: i for i, sid in enumerate(self.sids)}
-        self.scene_of = np.array([pos[s] for s in ds.scene_ids], dtype=np.int64)   # ds.scene_ids -> packed
+        # ds.scene_ids -> packed scene (-1: not held, a chunk of the split)
+        self.scene_of = np.array([pos.get(s, -1) for s in ds.scene_ids], dtype=np.int64)
         want = set(ds.outputs)
         views = [ds.scene(s) for s in self.sids]
         nS = len(views)
@@ -410,8 +454,10 @@ class SplitProgram:
         place = np.zeros((n, 3), dtype=np.int64)           # y0, x0, first frame
         seeds = np.zeros(n, dtype=np.int64)
         for i in range(n):
-            sid, per_light, _pg, crop, ns, start = ds.draws(i)
             k = self.scene_of[i // ds.samples_per_scene]
+            if k < 0:          # a scene another chunk holds
+                continue
+            sid, per_light, _pg, crop, ns, start = ds.draws(i)
             for j, lid in enumerate(self.ids[k, :self.num_lights[k]]):
                 p = per_light.get(int(lid))
                 if p is not None:
@@ -440,6 +486,8 @@ class SplitProgram:
         if B == 0 or idx.min() < 0 or idx.max() >= len(ds):
             raise IndexError(f"indices: {B} sample indices, each must be in [0, {len(ds)})")
         sc = self.scene_of[idx // ds.samples_per_scene]
+        if (sc < 0).any():
+            raise IndexError(f"indices: sample {int(idx[sc < 0][0])} is of a scene this chunk does not hold")
         fz = self.frozen
         H, W = self.H, self.W
         h, w = ds.crop if ds.crop is not None else (H, W)

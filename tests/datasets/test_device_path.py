@@ -245,3 +245,31 @@ def test_float16_residency_halves_the_rates_within_its_error_bound(long_corpus):
         assert not torch.equal(x["gt"], y["gt"])          # it is float16 storage, not a copy of the float32 one
     with pytest.raises(ValueError, match="dtype must be one of"):
         ResidentScenes(a.ds, "cpu", dtype=torch.bfloat16)
+
+
+def test_a_split_streamed_in_chunks_serves_every_sample_once_with_the_same_numbers(long_corpus):
+    """chunk_scenes: a budget that holds one scene refuses the whole split (naming chunk_scenes) but streams it one
+    scene at a time; every sample of the epoch comes exactly once, each equal to the whole-split batch's sample."""
+    kw = dict(split="all", frames=3, crop=(12, 16), samples_per_scene=3, outputs=OUTS)
+    ds = LFMCaptureDataset(long_corpus, **kw)
+    one = max(ResidentScenes.estimate_scene(ds, s, kall=4) for s in ds.scene_ids)
+    with pytest.raises(ResidentMemoryError, match=r"chunk_scenes=1"):
+        DeviceBatches(ds, 4, "cpu", budget_bytes=one + 1)
+    whole = DeviceBatches(LFMCaptureDataset(long_corpus, **kw), batch_size=len(ds), device="cpu", seed=4)
+    whole.set_epoch(1)
+    ref = next(iter(whole))
+    at = {i: j for j, i in enumerate(ref["meta"]["index"].tolist())}
+    st = DeviceBatches(LFMCaptureDataset(long_corpus, **kw), batch_size=2, device="cpu", seed=4, chunk_scenes=1,
+                       budget_bytes=one + 1)
+    st.set_epoch(1)
+    seen = []
+    batches = list(st)
+    assert len(batches) == len(st) == 3 * 2                      # 3 chunks of 3 samples: batches of 2 and 1
+    for batch in batches:
+        for j, i in enumerate(batch["meta"]["index"].tolist()):
+            seen.append(i)
+            for k in ("gt", "lpd_hcg", "light_index"):
+                assert torch.equal(batch[k][j], ref[k][at[i]]), (i, k)
+    assert sorted(seen) == list(range(len(ds)))
+    with pytest.raises(ValueError, match="chunk_scenes"):
+        DeviceBatches(ds, 2, "cpu", chunk_scenes=0)
