@@ -113,10 +113,16 @@ def make_loader(corpus: str | os.PathLike, spec: Trainable, cfg: Any, workers: i
 DATA_SOURCES = ("auto", "loader", "device")
 
 
-def make_device_batches(corpus: str | os.PathLike, spec: Trainable, cfg: Any,
-                        device: torch.device | str) -> tuple[Any, Callable[[int], None]]:
+#: Storage of the resident rates on the device path (``train(resident_dtype=...)``).
+RESIDENT_DTYPES = {"float32": torch.float32, "float16": torch.float16}
+
+
+def make_device_batches(corpus: str | os.PathLike, spec: Trainable, cfg: Any, device: torch.device | str,
+                        resident_dtype: str = "float32",
+                        chunk_scenes: int | None = None) -> tuple[Any, Callable[[int], None]]:
     """:class:`~lfmbench.datasets.device.DeviceBatches` of the training split on ``device`` (epoch order
-    :func:`~lfmbench.datasets.device.epoch_order` of ``(seed, epoch)``) and its ``set_epoch``."""
+    :func:`~lfmbench.datasets.device.epoch_order` of ``(seed, epoch)``; ``resident_dtype`` a key of
+    :data:`RESIDENT_DTYPES`; ``chunk_scenes``: stream the split that many scenes at a time) and its ``set_epoch``."""
     from lfmbench.datasets.device import DeviceBatches
     from lfmbench.datasets.loading import make_dataset
 
@@ -124,7 +130,10 @@ def make_device_batches(corpus: str | os.PathLike, spec: Trainable, cfg: Any,
     extra = {} if spec.outputs is None else {"outputs": spec.outputs}
     ds = make_dataset(corpus, t.split, seed=t.seed, crop=t.crop, samples_per_scene=t.samples_per_scene,
                       frames=t.frames, sensor=t.sensor, noise_streams="counter", **extra)
-    batches = DeviceBatches(ds, t.batch_size, device, seed=t.seed)
+    if resident_dtype not in RESIDENT_DTYPES:
+        raise ValueError(f"resident_dtype must be one of {tuple(RESIDENT_DTYPES)}, got {resident_dtype!r:.40}")
+    batches = DeviceBatches(ds, t.batch_size, device, seed=t.seed, dtype=RESIDENT_DTYPES[resident_dtype],
+                            chunk_scenes=chunk_scenes)
     return batches, batches.set_epoch
 
 
@@ -238,7 +247,8 @@ def fit(model: torch.nn.Module, opt: torch.optim.Optimizer, spec: Trainable, cfg
 def train(method: str | Trainable, corpus: str | os.PathLike, out: str | os.PathLike, cfg: Any = None, *,
           device: str = "cpu", epochs: int | None = None, workers: int | None = None, resume: bool = True,
           max_steps: int | None = None, progress: bool = True,
-          log: Callable[[str], None] | None = print, data: str = "auto",
+          log: Callable[[str], None] | None = print, data: str = "auto", resident_dtype: str = "float32",
+          chunk_scenes: int | None = None,
           **train_overrides: Any) -> tuple[torch.nn.Module, dict]:
     """Train the baseline ``method`` on ``corpus`` and write the checkpoint ``out`` after every epoch (atomically).
 
@@ -257,6 +267,8 @@ def train(method: str | Trainable, corpus: str | os.PathLike, out: str | os.Path
         data: where the batches come from, one of :data:`DATA_SOURCES` (``"device"``: the corpus resident on
             ``device``, sample order :func:`~lfmbench.datasets.device.epoch_order`, counter-based noise; a split
             that does not fit raises :class:`~lfmbench.datasets.device.ResidentMemoryError`).
+        resident_dtype, chunk_scenes: the device path's storage (``"float32"`` or ``"float16"``, docs/datasets.md)
+            and streaming (that many scenes resident at a time; None: the whole split).
         train_overrides: other keys of the ``train`` section (``crop``, ``batch_size``, ``seed``, ...).
 
     Returns:
@@ -297,7 +309,7 @@ def train(method: str | Trainable, corpus: str | os.PathLike, out: str | os.Path
             log(f"resuming {out} after epoch {start}/{t.epochs}")
     on_device = data == "device" or (data == "auto" and dev.type == "cuda")
     if on_device:
-        loader, set_epoch = make_device_batches(corpus, spec, cfg, dev)
+        loader, set_epoch = make_device_batches(corpus, spec, cfg, dev, resident_dtype, chunk_scenes)
     else:
         loader, set_epoch = make_loader(corpus, spec, cfg, workers, dev)
     gen = loader.generator if spec.data_order == "shuffle" and not on_device else None

@@ -30,6 +30,10 @@ def train_cmd(
     data: str = typer.Option("auto", help="where batches come from: loader (DataLoader workers on the CPU), "
                                           "device (the corpus resident on --device, batches simulated there), "
                                           "auto (device on CUDA, else loader)"),
+    resident_dtype: str = typer.Option("float32", help="device path: storage of the resident layers, float32 or "
+                                                       "float16 (half the memory, 2^-11 relative error)"),
+    chunk_scenes: int = typer.Option(None, help="device path: stream the split this many scenes at a time (a split "
+                                                "that does not fit the device)"),
 ) -> None:
     """Train a learned fusion baseline; checkpoint written atomically after every epoch (resumable).
 
@@ -42,7 +46,9 @@ def train_cmd(
     if method not in LEARNED:
         fail(f"--method {method!r} is not a trainable baseline; trainable: {', '.join(LEARNED)}")
     check_minima((("--epochs", epochs, 1), ("--workers", workers, 0), ("--crop", crop, 8),
-                  ("--batch-size", batch_size, 1)))
+                  ("--batch-size", batch_size, 1), ("--chunk-scenes", chunk_scenes, 1)))
+    if resident_dtype not in ("float32", "float16"):
+        fail(f"--resident-dtype must be float32 or float16, got {resident_dtype!r:.40}")
     torch_setup(device, threads)
     try:
         cfg = load_config(method, config)
@@ -58,7 +64,8 @@ def train_cmd(
         fail(f"--out {out}: cannot write the checkpoint there ({why})")
     try:
         model, hist = train(method, corpus, out, cfg, device=device, epochs=epochs, workers=workers, resume=resume,
-                            crop=crop, batch_size=batch_size, data=data)
+                            crop=crop, batch_size=batch_size, data=data, resident_dtype=resident_dtype,
+                            chunk_scenes=chunk_scenes)
     except (FileNotFoundError, EmptyDataError, ValueError) as exc:
         fail(str(exc))
     except OSError as exc:  # the checkpoint could not be written (disk full, ...): the message names the file

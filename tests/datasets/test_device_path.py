@@ -273,3 +273,16 @@ def test_a_split_streamed_in_chunks_serves_every_sample_once_with_the_same_numbe
     assert sorted(seen) == list(range(len(ds)))
     with pytest.raises(ValueError, match="chunk_scenes"):
         DeviceBatches(ds, 2, "cpu", chunk_scenes=0)
+
+
+def test_train_on_float16_layers_streamed_in_chunks(tmp_path, corpus):
+    """train(data="device") with float16 layers and the split streamed 2 scenes at a time: it runs, the loss is
+    finite; an unknown storage type is refused naming the argument."""
+    from lfmbench.train import train
+
+    kw = dict(epochs=1, crop=16, batch_size=4, samples_per_scene=2, split="all", progress=False, log=None,
+              device="cpu", data="device")
+    _model, hist = train("unet", corpus, tmp_path / "u.pt", resident_dtype="float16", chunk_scenes=2, **kw)
+    assert hist["steps"] == 2 and all(torch.isfinite(torch.tensor(hist["step_loss"])))   # chunks of 4 and 2 samples
+    with pytest.raises(ValueError, match="resident_dtype"):
+        train("unet", corpus, tmp_path / "v.pt", resident_dtype="bf16", **kw)
