@@ -206,10 +206,12 @@ def atomic_torch_save(obj: Any, path: str | os.PathLike) -> Path:
 
 
 # --------------------------------------------------------------------------------------------------- reading
-def read_bytes(path: str | os.PathLike, what: str = "file", limit_name: str = "json_bytes") -> bytes:
+def read_bytes(path: str | os.PathLike, what: str = "file", limit_name: str = "json_bytes",
+               max_bytes: int | None = None) -> bytes:
     """The bytes of ``path``, refused (:class:`lfmbench.limits.LimitError`, naming it) above limit ``limit_name``
-    before they are read. ``OSError`` (missing, unreadable) propagates."""
-    cap = limit(limit_name)
+    (or ``max_bytes``, a tighter bound the caller derives, e.g. from a manifest) before they are read.
+    ``OSError`` (missing, unreadable) propagates."""
+    cap = limit(limit_name) if max_bytes is None else min(max_bytes, limit(limit_name))
     with open(path, "rb") as fh:
         size = os.fstat(fh.fileno()).st_size
         if size > cap:

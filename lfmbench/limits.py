@@ -19,7 +19,7 @@ import os
 import reprlib
 from typing import Any
 
-__all__ = ["LIMITS", "LimitError", "limit", "set_limit", "parse_overrides", "brief", "QUOTE_CHARS", "ENV",
+__all__ = ["LIMITS", "LimitError", "limit", "limits_of", "set_limit", "parse_overrides", "brief", "QUOTE_CHARS", "ENV",
            "lights_cap_message"]
 
 #: name -> (default, what it bounds and why the default). Bytes are bytes of the file or of decoded pixels.
@@ -93,13 +93,27 @@ def limit(name: str) -> int:
         return _overrides[name]
     env = os.environ.get(ENV)
     if env:
-        try:
-            v = parse_overrides(env).get(name)
-        except ValueError:
-            v = None  # reported once by the CLI; a bad variable must not break library calls
+        if _env_seen[0] != env:  # parsed once per value of the variable (readers ask per file)
+            try:
+                _env_seen[:] = [env, parse_overrides(env)]
+            except ValueError:
+                _env_seen[:] = [env, {}]  # reported once by the CLI; a bad variable must not break library calls
+        v = _env_seen[1].get(name)
         if v is not None:
             return v
     return LIMITS[name][0]
+
+
+_env_seen: list = [None, {}]  # the last value of ENV and its parsed overrides
+
+
+def limits_of(*names: str) -> tuple[int, ...]:
+    """:func:`limit` of each of ``names``, the environment read once (a reader asks for several per file)."""
+    env = os.environ.get(ENV)
+    if env and _env_seen[0] != env:
+        limit(names[0])
+    extra = _env_seen[1] if env else {}
+    return tuple(_overrides.get(n, extra.get(n, LIMITS[n][0])) for n in names)
 
 
 def set_limit(name: str, value: int | None) -> None:

@@ -22,9 +22,19 @@ def validate_cmd(
     workers: Optional[int] = typer.Option(None, "--workers", min=1,
                                           help="Processes that check scenes (default: the CPU count, at most 8, "
                                                "for corpora of 2,000 scenes or more)."),
+    no_cache: bool = typer.Option(False, "--no-cache",
+                                  help="Hash every file and check every scene, even those unchanged since an "
+                                       "earlier validate found them clean."),
+    cache_file: Optional[Path] = typer.Option(None, "--cache-file",
+                                              help="Where validate records what it found (default "
+                                                   "CORPUS/.cache/validate.bin; give one for a read-only corpus)."),
 ) -> None:
     """Check a corpus: missing files, bad SHA-256, wrong/missing channels vs meta.json, NaN/inf/negative
-    radiance. Exit status 1 when anything is wrong."""
+    radiance. Exit status 1 when anything is wrong.
+
+    Files and scenes unchanged since an earlier validate found them clean (same size, mtime, ctime and inode;
+    same validator code and limits) are not hashed or checked again; --no-cache checks everything
+    (docs/validate-benchmark.md)."""
     from rich.console import Console
     from rich.progress import Progress
 
@@ -34,7 +44,8 @@ def validate_cmd(
     with Progress(console=console, transient=True, disable=as_json) as prog:
         task = prog.add_task("validating", total=None)
         rep = validate_corpus(corpus, check_pixels=not headers_only, workers=workers,
-                              progress=lambda d, t: prog.update(task, completed=d, total=t))
+                              progress=lambda d, t: prog.update(task, completed=d, total=t),
+                              cache=False if no_cache else (cache_file or True))
     if as_json:
         typer.echo(json.dumps(rep.to_dict(), indent=1))
     else:
@@ -45,7 +56,10 @@ def validate_cmd(
         if len(rep.errors) > max_errors:
             console.print(f"... and {len(rep.errors) - max_errors} more errors")
         status = "OK" if rep.ok else f"{len(rep.errors)} error(s)"
-        typer.echo(f"{corpus}: {rep.n_scenes} scenes, {rep.n_files} files, {len(rep.warnings)} warning(s): {status}")
+        cached = (f" ({rep.cached_scenes} scenes unchanged since an earlier validate found them clean: not checked "
+                  "again; --no-cache checks them)" if rep.cached_scenes else "")
+        typer.echo(f"{corpus}: {rep.n_scenes} scenes, {rep.n_files} files, {len(rep.warnings)} warning(s): "
+                   f"{status}{cached}")
     raise typer.Exit(0 if rep.ok else 1)
 
 

@@ -23,12 +23,12 @@ import numpy as np
 from lfmbench.corpus.errors import CorpusChannelError, CorpusFileError, CorpusValueError
 from lfmbench.corpus.naming import (ATTR, AUX_CHANNELS, EMPTY_PART, FORMAT_VERSION, RADIANCE_MAX, RADIANCE_UNIT,
                                     STATIC_WINDOWS, _check_version, bin_channels, static_channels)
-from lfmbench.limits import LimitError, limit
+from lfmbench.limits import LimitError, limits_of
 from lfmbench.corpus.storage import (COMPRESSIONS, DEFAULT_STORAGE, EXTRA_COMPRESSIONS, LayerStore, SCALE_EXP_RANGE,
                                      Storage, StorageStats, resolve_storage, scale_attr, store_layer)
 
 __all__ = ["encode_static_exr", "encode_lights_exr", "encode_aux_exr", "ExrPart", "read_exr", "layer_scale",
-           "check_exr_header"]
+           "check_exr_header", "exr_headers", "ExrHeaders"]
 
 
 def _exr():
@@ -253,139 +253,200 @@ class ExrPart:
 
 #: Bytes per pixel of the EXR pixel types UINT, HALF, FLOAT (OpenEXR file layout).
 _EXR_TYPE_BYTES = {0: 4, 1: 2, 2: 4}
+#: Attribute types whose values :func:`exr_headers` decodes (struct format; ``string``: the bytes as UTF-8).
+_ATTR_FORMATS = {b"int": "<i", b"float": "<f", b"double": "<d"}
+#: Version-field flags (OpenEXR file layout): single-part tiled, long names, non-image (deep), multi-part.
+_TILED, _LONG_NAMES, _DEEP, _MULTIPART = 0x200, 0x400, 0x800, 0x1000
+#: Bytes of an EXR file read at first for its headers.
+HEAD_BYTES = 1 << 16
 
 
-def check_exr_header(path: str | os.PathLike) -> dict:
-    """Read the headers of an EXR file (pure Python, nothing but the header bytes) and check what they declare
+@dataclass
+class ExrHeaders:
+    """The headers of an EXR file as :func:`exr_headers` parsed them: per part its ``name`` (``""`` when the file
+    has none, as OpenEXR reports it), the decoded ``int``/``float``/``double``/``string`` attributes and the
+    windows (``attrs``), data window ``(y0, x0, y1, x1)`` and display size ``(H, W)`` (px), channel names in file
+    order; ``plain``: a scanline image of a layout :func:`read_exr` can describe header-only by itself (not
+    tiled, not deep)."""
+
+    parts: list[dict]
+    decoded_bytes: int
+    plain: bool
+
+
+def exr_headers(path: str | os.PathLike, head: bytes | None = None) -> ExrHeaders:
+    """Parse the headers of an EXR file (pure Python, nothing but the header bytes) and check what they declare
     against :mod:`lfmbench.limits` before any pixel buffer is allocated: number of parts (``exr_parts``),
     channels per part (``exr_channels``), display / data window sides (``exr_side``; both windows must have
     positive size), the decoded size of all parts (``exr_bytes``) and the header bytes (``exr_header_bytes``).
-    Deep and tiled layouts are passed on to OpenEXR, which reports them.
 
-    Returns:
-        ``{"parts": n, "decoded_bytes": b}``.
+    Args:
+        path: the file (named in every message; opened only when ``head`` does not hold the whole header).
+        head: the first bytes of the file, when the caller has read them already (e.g. while hashing it).
 
     Raises:
         CorpusFileError: naming ``path``: not an EXR, truncated header, or a limit exceeded (the message names the
             limit and how to raise it).
     """
-    path = Path(path)
-    cap_hdr = limit("exr_header_bytes")
-    max_parts, max_ch, max_side, max_bytes = (limit("exr_parts"), limit("exr_channels"), limit("exr_side"),
-                                              limit("exr_bytes"))
+    path = os.fspath(path)  # (text: a Path per file costs more than this parse of a small header)
+    cap_hdr, max_parts, max_ch, max_side, max_bytes = limits_of("exr_header_bytes", "exr_parts", "exr_channels",
+                                                                "exr_side", "exr_bytes")
+    fh = None
+    buf = b""
     try:
-        with open(path, "rb") as fh:
-            buf = fh.read(1 << 16)
+        if head is None:
+            fh = open(path, "rb")
+            buf = fh.read(HEAD_BYTES)
+        else:
+            buf = bytes(head)
 
-            def more(need: int) -> bytes:  # the buffer extended to ``need`` bytes (bounded by exr_header_bytes)
-                nonlocal buf
-                while len(buf) < need:
-                    if len(buf) >= cap_hdr:
-                        raise LimitError(str(path), "EXR header of more bytes", None, "exr_header_bytes")
-                    b = fh.read(min(max(need - len(buf), 1 << 20), cap_hdr - len(buf)))
-                    if not b:
-                        raise CorpusFileError(f"EXR file {path} is truncated or corrupt: header ends early")
-                    buf += b
-                return buf
+        def more(need: int) -> bytes:  # the buffer extended to ``need`` bytes (bounded by exr_header_bytes)
+            nonlocal buf, fh
+            while len(buf) < need:
+                if len(buf) >= cap_hdr:
+                    raise LimitError(str(path), "EXR header of more bytes", None, "exr_header_bytes")
+                if fh is None:
+                    fh = open(path, "rb")
+                    fh.seek(len(buf))
+                b = fh.read(min(max(need - len(buf), 1 << 20), cap_hdr - len(buf)))
+                if not b:
+                    raise CorpusFileError(f"EXR file {path} is truncated or corrupt: header ends early")
+                buf += b
+            return buf
 
-            def cstr(i: int) -> tuple[bytes, int]:
+        def cstr(i: int) -> tuple[bytes, int]:
+            j = buf.find(b"\0", i, i + 257)
+            while j < 0:
+                if len(buf) - i > 256:
+                    raise CorpusFileError(f"EXR file {path} is corrupt: a header name longer than 255 bytes")
+                more(len(buf) + 1)
                 j = buf.find(b"\0", i, i + 257)
-                while j < 0:
-                    if len(buf) - i > 256:
-                        raise CorpusFileError(f"EXR file {path} is corrupt: a header name longer than 255 bytes")
-                    more(len(buf) + 1)
-                    j = buf.find(b"\0", i, i + 257)
-                return buf[i:j], j + 1
+            return buf[i:j], j + 1
 
-            if len(buf) < 8:
-                more(8)
-            magic, flags = struct.unpack_from("<iI", buf, 0)
-            if magic != 20000630:
-                raise CorpusFileError(f"cannot read EXR file {path}: not an OpenEXR file (bad magic number)")
-            multipart = bool(flags & 0x1000)
-            i, parts, total = 8, 0, 0
+        if len(buf) < 8:
+            more(8)
+        magic, flags = struct.unpack_from("<iI", buf, 0)
+        if magic != 20000630:
+            raise CorpusFileError(f"cannot read EXR file {path}: not an OpenEXR file (bad magic number)")
+        multipart = bool(flags & _MULTIPART)
+        plain = not flags & (_TILED | _DEEP)
+        i, total = 8, 0
+        parts: list[dict] = []
+        while True:
+            windows: dict[bytes, tuple[int, int, int, int]] = {}
+            attrs: dict[str, Any] = {}
+            names: list[str] = []
+            n_ch, px_bytes, first = 0, 0.0, True
             while True:
-                windows: dict[bytes, tuple[int, int, int, int]] = {}
-                n_ch, px_bytes, first = 0, 0.0, True
-                while True:
-                    name, i = cstr(i)
-                    if not name:
-                        break
-                    first = False
-                    typ, i = cstr(i)
-                    if len(buf) < i + 4:
-                        more(i + 4)
-                    (size,) = struct.unpack_from("<i", buf, i)
-                    i += 4
-                    if size < 0:
-                        raise CorpusFileError(f"EXR file {path} is corrupt: negative attribute size")
-                    if len(buf) < i + size:
-                        more(i + size)
-                    if typ == b"chlist":
-                        k, end = i, i + size
-                        while k < end and buf[k] != 0:
-                            j = buf.index(b"\0", k, end)
-                            ptype, _, xs, ys = struct.unpack_from("<iIii", buf, j + 1)
-                            n_ch += 1
-                            if n_ch > max_ch:
-                                raise LimitError(str(path), f"EXR part {parts} with more than {max_ch:,} channels",
-                                                 None, "exr_channels")
-                            px_bytes += _EXR_TYPE_BYTES.get(ptype, 4) / max(1, xs) / max(1, ys)
-                            k = j + 17
-                    elif typ == b"box2i" and size == 16 and name in (b"dataWindow", b"displayWindow"):
-                        windows[name] = struct.unpack_from("<iiii", buf, i)
-                    i += size
-                if first and multipart and parts:  # the empty header that ends a multi-part header list
+                name, i = cstr(i)
+                if not name:
                     break
-                parts += 1
-                if parts > max_parts:
-                    raise LimitError(str(path), f"EXR file with more than {max_parts:,} parts", None, "exr_parts")
-                for key in (b"displayWindow", b"dataWindow"):
-                    if key not in windows:
-                        raise CorpusFileError(f"cannot read EXR file {path}: part {parts - 1} has no "
-                                              f"{key.decode()}")
-                    x0, y0, x1, y1 = windows[key]
-                    w, h = x1 - x0 + 1, y1 - y0 + 1
-                    if w < 1 or h < 1:
-                        raise CorpusFileError(f"EXR file {path} part {parts - 1}: {key.decode()} "
-                                              f"{windows[key]} is empty")
-                    if max(w, h) > max_side:
-                        raise LimitError(str(path), f"EXR part {parts - 1} {key.decode()} side", max(w, h),
-                                         "exr_side")
-                x0, y0, x1, y1 = windows[b"dataWindow"]
-                total += int((x1 - x0 + 1) * (y1 - y0 + 1) * px_bytes)
-                if total > max_bytes:
-                    raise LimitError(str(path), f"EXR file declaring {total:,} or more decoded pixel bytes", total,
-                                     "exr_bytes")
-                if not multipart:
-                    break
+                first = False
+                typ, i = cstr(i)
+                if len(buf) < i + 4:
+                    more(i + 4)
+                (size,) = struct.unpack_from("<i", buf, i)
+                i += 4
+                if size < 0:
+                    raise CorpusFileError(f"EXR file {path} is corrupt: negative attribute size")
+                if len(buf) < i + size:
+                    more(i + size)
+                if typ == b"chlist":
+                    k, end = i, i + size
+                    while k < end and buf[k] != 0:
+                        j = buf.index(b"\0", k, end)
+                        ptype, _, xs, ys = struct.unpack_from("<iIii", buf, j + 1)
+                        n_ch += 1
+                        if n_ch > max_ch:
+                            raise LimitError(str(path), f"EXR part {len(parts)} with more than {max_ch:,} channels",
+                                             None, "exr_channels")
+                        names.append(buf[k:j].decode("utf-8", "replace"))
+                        px_bytes += _EXR_TYPE_BYTES.get(ptype, 4) / max(1, xs) / max(1, ys)
+                        k = j + 17
+                elif typ == b"box2i" and size == 16 and name in (b"dataWindow", b"displayWindow"):
+                    windows[name] = struct.unpack_from("<iiii", buf, i)
+                elif typ in _ATTR_FORMATS and size == struct.calcsize(_ATTR_FORMATS[typ]):
+                    (attrs[name.decode("utf-8", "replace")],) = struct.unpack_from(_ATTR_FORMATS[typ], buf, i)
+                elif typ == b"string":
+                    attrs[name.decode("utf-8", "replace")] = buf[i:i + size].decode("utf-8", "replace")
+                i += size
+            if first and multipart and parts:  # the empty header that ends a multi-part header list
+                break
+            if len(parts) >= max_parts:
+                raise LimitError(str(path), f"EXR file with more than {max_parts:,} parts", None, "exr_parts")
+            for key in (b"displayWindow", b"dataWindow"):
+                if key not in windows:
+                    raise CorpusFileError(f"cannot read EXR file {path}: part {len(parts)} has no "
+                                          f"{key.decode()}")
+                x0, y0, x1, y1 = windows[key]
+                w, h = x1 - x0 + 1, y1 - y0 + 1
+                if w < 1 or h < 1:
+                    raise CorpusFileError(f"EXR file {path} part {len(parts)}: {key.decode()} "
+                                          f"{windows[key]} is empty")
+                if max(w, h) > max_side:
+                    raise LimitError(str(path), f"EXR part {len(parts)} {key.decode()} side", max(w, h),
+                                     "exr_side")
+            x0, y0, x1, y1 = windows[b"dataWindow"]
+            total += int((x1 - x0 + 1) * (y1 - y0 + 1) * px_bytes)
+            if total > max_bytes:
+                raise LimitError(str(path), f"EXR file declaring {total:,} or more decoded pixel bytes", total,
+                                 "exr_bytes")
+            wx0, wy0, wx1, wy1 = windows[b"displayWindow"]
+            plain = plain and attrs.pop("type", "scanlineimage") == "scanlineimage"  # OpenEXR's is an enum
+            attrs["dataWindow"], attrs["displayWindow"] = ((x0, y0), (x1, y1)), ((wx0, wy0), (wx1, wy1))
+            parts.append({"name": attrs.get("name", ""), "attrs": attrs, "channels": names,
+                          "window": (y0, x0, y1 + 1, x1 + 1), "size": (wy1 - wy0 + 1, wx1 - wx0 + 1)})
+            if not multipart:
+                break
     except LimitError as exc:
         raise CorpusFileError(str(exc)) from None
     except CorpusFileError:
         raise
     except (OSError, struct.error, ValueError) as exc:
         raise CorpusFileError(f"cannot read EXR file {path}: {exc}") from None
-    return {"parts": parts, "decoded_bytes": total}
+    finally:
+        if fh is not None:
+            fh.close()
+    return ExrHeaders(parts, total, plain)
 
 
-def read_exr(path: str | os.PathLike, *, header_only: bool = False) -> list[ExrPart]:
+def check_exr_header(path: str | os.PathLike, head: bytes | None = None) -> dict:
+    """:func:`exr_headers` of ``path``, summed up: ``{"parts": n, "decoded_bytes": b}``. Deep and tiled layouts
+    are passed on to OpenEXR, which reports them. Raises ``CorpusFileError`` as :func:`exr_headers`."""
+    h = exr_headers(path, head)
+    return {"parts": len(h.parts), "decoded_bytes": h.decoded_bytes}
+
+
+def read_exr(path: str | os.PathLike, *, header_only: bool = False, head: bytes | None = None) -> list[ExrPart]:
     """Decode every part of an EXR file (OpenEXR 3.x reads whole files: all parts, all channels).
 
-    The headers are checked first (:func:`check_exr_header`): a file that declares more parts, channels,
+    The headers are parsed and checked first (:func:`exr_headers`): a file that declares more parts, channels,
     pixels or decoded bytes than :mod:`lfmbench.limits` allows is refused before OpenEXR allocates anything.
+    ``header_only``: the parts are described from that parse alone (no second read of the header by OpenEXR);
+    ``ExrPart.header`` then holds the ``int``/``float``/``double``/``string`` attributes and the two windows
+    (tiled and deep files, which lfmbench does not write, go through OpenEXR's full header instead).
+    ``head``: the file's first bytes, when the caller has read them already.
 
     Raises :class:`CorpusFileError` naming ``path`` when it is missing, not an EXR, truncated (a part whose
     pixels cannot be read, detected by comparing with the part count of the header) or above a limit.
     """
-    exr = _exr()
-    path = Path(path)
-    if not path.is_file():
+    path = os.fspath(path)
+    if head is None and not os.path.isfile(path):
         raise CorpusFileError(f"EXR file is missing: {path}")
-    check_exr_header(path)
+    hdrs = exr_headers(path, head)
+    if header_only and hdrs.plain:
+        out = []
+        for p in hdrs.parts:
+            h = p["attrs"]
+            if ATTR["version"] in h:
+                _check_version(h[ATTR["version"]], f"EXR file {path} part {p['name']!r} ({ATTR['version']})")
+            out.append(ExrPart(name=p["name"], header=h, window=p["window"], size=p["size"],
+                               channel_names=p["channels"]))
+        return out
+    exr = _exr()
+    n_parts = len(hdrs.parts)
     try:
-        hdr = exr.File(str(path), header_only=True)
-        n_parts = len(hdr.parts)
-        f = hdr if header_only else exr.File(str(path), separate_channels=True)
+        f = exr.File(str(path), header_only=header_only, separate_channels=True)
     except Exception as exc:  # RuntimeError from the C++ library
         raise CorpusFileError(f"cannot read EXR file {path}: {exc}") from exc
     if len(f.parts) != n_parts:

@@ -21,7 +21,7 @@ from lfmbench.check import scene_id_error
 from lfmbench.corpus.errors import CorpusFileError
 from lfmbench.corpus.naming import FORMAT_NAME, FORMAT_VERSION, SCENES_DIR, _check_version
 from lfmbench.vocabulary import LIGHT_KINDS, SPECTRUM_MODELS
-from lfmbench.fileio import InputFileError, load_json
+from lfmbench.fileio import InputFileError, load_json, loads_json
 
 __all__ = ["TIMING_RTOL", "sha256_file", "make_splits", "validate_meta", "load_meta", "LIGHT_KINDS", "SPECTRUM_MODELS",
            "manifest_entry_errors", "inside_root", "check_splits"]
@@ -42,10 +42,13 @@ def sha256_file(path: str | os.PathLike, chunk: int = 1 << 20) -> str:
     return h.hexdigest()
 
 
-def _load_json(path: Path, what: str, object_hook: Any = None) -> Any:
+def _load_json(path: Path, what: str, object_hook: Any = None, raw: bytes | None = None) -> Any:
     """A corpus JSON file through the one bounded reader (:func:`lfmbench.fileio.load_json`; a manifest has its
-    own size limit ``manifest_bytes``); ``CorpusFileError`` naming the file."""
+    own size limit ``manifest_bytes``); ``CorpusFileError`` naming the file. ``raw``: the file's bytes, when the
+    caller has read them already (within the same size limit)."""
     try:
+        if raw is not None:
+            return loads_json(raw, str(path), object_hook)
         return load_json(path, what, "manifest_bytes" if what == "manifest" else "json_bytes", object_hook)
     except FileNotFoundError:
         raise CorpusFileError(f"{what} is missing: {path}") from None
@@ -66,8 +69,9 @@ class _TooMany(Exception):
     """Raised inside the JSON parser to stop it (not a ``ValueError``: :func:`loads_json` lets it through)."""
 
 
-def load_meta(path: Path | str) -> dict:
-    """A scene's ``meta.json``, read through the bounded reader and checked (:func:`validate_meta`).
+def load_meta(path: Path | str, raw: bytes | None = None) -> dict:
+    """A scene's ``meta.json``, read through the bounded reader and checked (:func:`validate_meta`); ``raw``: its
+    bytes, when the caller has read them already (within the limit ``json_bytes``).
 
     The light cap (limit ``lights_per_scene``) is counted while the file is parsed: the parser stops at the first
     light (an object with an ``id`` or a ``group``) above the cap, or at the first object above
@@ -79,7 +83,6 @@ def load_meta(path: Path | str) -> dict:
             ``path``).
         ValueError: content that :func:`validate_meta` refuses (naming ``path`` and the field).
     """
-    path = Path(path)
     cap = limit("lights_per_scene")
     cap_objects = META_OBJECTS_PER_LIGHT * cap + META_OBJECTS_BASE
     n = [0, 0]  # lights, objects
@@ -97,7 +100,7 @@ def load_meta(path: Path | str) -> dict:
         return obj
 
     try:
-        m = _load_json(path, "scene metadata", count)
+        m = _load_json(path, "scene metadata", count, raw)
     except _TooMany as exc:
         raise CorpusFileError(str(exc)) from None
     validate_meta(m, str(path))
@@ -290,30 +293,38 @@ def _scene_id_error(scene_id: Any) -> str | None:
     return None if why is None else f"scene_id {why}"
 
 
-def _file_entry_error(rel: Any, digest: Any, scenes: set) -> str | None:
+_DRIVE = re.compile(r"[A-Za-z]:")
+_SHA256_HEX = re.compile(r"[0-9a-f]{64}")
+
+
+def _file_entry_error(rel: Any, digest: Any, scenes: set, good_ids: set | None = None) -> str | None:
     """Why a manifest file entry is refused (None if it is fine): a relative POSIX path
-    ``scenes/<scene id>/...`` without ``.``/``..`` components, of a listed scene, with a SHA-256 hex digest."""
+    ``scenes/<scene id>/...`` without ``.``/``..`` components, of a listed scene, with a SHA-256 hex digest.
+    ``good_ids``: scene ids found valid by earlier calls of one pass (each id is checked once)."""
     if not isinstance(rel, str) or not rel:
         return "file path must be a non-empty string"
-    if rel.startswith("/") or "\\" in rel or re.match(r"[A-Za-z]:", rel):
+    if rel.startswith("/") or "\\" in rel or _DRIVE.match(rel):
         return "absolute file path (must be relative to the corpus root)"
     parts = rel.split("/")
     if any(p in ("", ".", "..") for p in parts):
         return "file path with an empty, '.' or '..' component (must stay inside the corpus root)"
-    if len(parts) < 3 or parts[0] != SCENES_DIR or _scene_id_error(parts[1]) is not None:
+    if len(parts) < 3 or parts[0] != SCENES_DIR or (
+            (good_ids is None or parts[1] not in good_ids) and _scene_id_error(parts[1]) is not None):
         return f"file path must lie under {SCENES_DIR}/<scene id>/"
+    if good_ids is not None:
+        good_ids.add(parts[1])
     if parts[1] not in scenes:
         return f"file of scene {brief(parts[1])}, which is not in 'scenes'"
-    if not isinstance(digest, str) or not re.fullmatch(r"[0-9a-f]{64}", digest):
+    if not isinstance(digest, str) or not _SHA256_HEX.fullmatch(digest):
         return "SHA-256 must be 64 lowercase hex digits"
     return None
 
 
-def manifest_entry_errors(man: Mapping[str, Any], path: Path | str) -> list[str]:
+def manifest_entry_errors(man: Mapping[str, Any], path: Path | str, valid: dict[str, str] | None = None) -> list[str]:
     """Errors (each naming ``path`` and the entry) for manifest scene ids that are not safe directory names
     (:func:`check_scene_id`, the rule used when writing) and file entries that could leave the corpus root
     (absolute, ``..``) or are malformed. Used by :class:`Corpus` (raises on the first) and
-    :func:`validate_corpus` (reports all)."""
+    :func:`validate_corpus` (reports all; ``valid`` receives the file entries that are fine)."""
     out = []
     seen: dict[str, str] = {}  # casefolded id -> id: ids that one case-insensitive file system cannot tell apart
     for sid in man["scenes"]:
@@ -327,10 +338,13 @@ def manifest_entry_errors(man: Mapping[str, Any], path: Path | str) -> list[str]
                        f"{path}: scene ids {brief(other)} and {brief(sid)} differ only in case (one folder on a "
                        "case-insensitive file system)")
     scenes = {s for s in man["scenes"] if isinstance(s, str)}
+    good_ids: set[str] = set()  # ids checked once (a scene has several files)
     for rel, digest in man["files"].items():
-        why = _file_entry_error(rel, digest, scenes)
+        why = _file_entry_error(rel, digest, scenes, good_ids)
         if why is not None:
             out.append(f"{path}: file entry {brief(rel)} refused: {why}")
+        elif valid is not None:
+            valid[rel] = digest
     return out
 
 

@@ -3,8 +3,10 @@ radiance, metadata consistency), used by ``lfmbench validate``.
 """
 from __future__ import annotations
 
+import hashlib
 import os
 import re
+import stat
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
@@ -13,9 +15,9 @@ import numpy as np
 
 from lfmbench.limits import brief
 from lfmbench.corpus.errors import CorpusError, CorpusFileError, CorpusValueError
-from lfmbench.corpus.exr import ExrPart, _check_aux, layer_scale, read_exr
-from lfmbench.corpus.meta import (_check_manifest, _check_meta_storage, _file_entry_error, _load_json, _scene_id_error,
-                                  check_splits, inside_root, load_meta, manifest_entry_errors, sha256_file)
+from lfmbench.corpus.exr import HEAD_BYTES, ExrPart, _check_aux, layer_scale, read_exr
+from lfmbench.corpus.meta import (_check_manifest, _check_meta_storage, _load_json, _scene_id_error, check_splits,
+                                  inside_root, load_meta, manifest_entry_errors)
 from lfmbench.corpus.naming import (ATTR, AUX_CHANNELS, EMPTY_PART, MANIFEST_NAME, RADIANCE_MAX, RADIANCE_UNIT,
                                     SCENES_DIR, SPLITS_NAME, STATIC_WINDOWS, _group_bins, bin_channels, frame_dir,
                                     group_storage, static_channels)
@@ -27,13 +29,17 @@ __all__ = ["ValidationReport", "validate_corpus"]
 
 @dataclass
 class ValidationReport:
-    """Result of :func:`validate_corpus`: ``errors`` (each names a file), ``warnings``, counters."""
+    """Result of :func:`validate_corpus`: ``errors`` (each names a file), ``warnings``, counters (``cached_files``:
+    files not hashed again, ``cached_scenes``: scenes not checked again, as an earlier run found them in the
+    same state: :mod:`lfmbench.corpus.validate_cache`)."""
 
     root: str
     errors: list[str] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
     n_scenes: int = 0
     n_files: int = 0
+    cached_files: int = 0
+    cached_scenes: int = 0
 
     @property
     def ok(self) -> bool:
@@ -41,6 +47,7 @@ class ValidationReport:
 
     def to_dict(self) -> dict:
         return {"root": self.root, "ok": self.ok, "n_scenes": self.n_scenes, "n_files": self.n_files,
+                "cached_files": self.cached_files, "cached_scenes": self.cached_scenes,
                 "errors": self.errors, "warnings": self.warnings}
 
 
@@ -49,10 +56,13 @@ class ValidationReport:
 PARALLEL_FROM_SCENES = 2000
 #: Scenes per task of a worker process.
 CHUNK_SCENES = 500
+#: Hash in chunks of this many bytes (files larger than the first chunk are read in several).
+_CHUNK = 1 << 20
 
 
 def validate_corpus(root: str | os.PathLike, *, check_pixels: bool = True,
-                    progress: Any = None, workers: int | None = None) -> ValidationReport:
+                    progress: Any = None, workers: int | None = None,
+                    cache: bool | str | os.PathLike = False) -> ValidationReport:
     """Check a whole corpus; never raises for corpus problems, collects them in the report.
 
     Checks: manifest format; ``splits.json`` (ids known, disjoint); per scene ``scene.json`` / ``meta.json``
@@ -71,10 +81,15 @@ def validate_corpus(root: str | os.PathLike, *, check_pixels: bool = True,
             :data:`PARALLEL_FROM_SCENES` scenes on; 1 below). The report is the same whatever the number. The
             workers are spawned processes: a script that calls this with several workers needs the usual
             ``if __name__ == "__main__":`` guard (or ``workers=1``).
+        cache: re-check only what changed since an earlier run (:mod:`lfmbench.corpus.validate_cache`): True
+            for the corpus's own cache file ``<root>/.cache/validate.bin``, a path for another one (a read-only
+            corpus), False for none (every file hashed and every scene checked). The report is the same.
 
-    Every step is linear in the number of scenes and files (sets and dicts for every lookup, each directory
-    resolved once): ``docs/validate-benchmark.md``.
+    Every step is linear in the number of scenes and files (sets and dicts for every lookup, one directory
+    listing per folder, each file read once): ``docs/validate-benchmark.md``.
     """
+    from lfmbench.corpus import validate_cache as VC  # noqa: PLC0415
+
     root = Path(root)
     rep = ValidationReport(str(root))
     err = rep.errors.append
@@ -87,13 +102,11 @@ def validate_corpus(root: str | os.PathLike, *, check_pixels: bool = True,
     except CorpusError as exc:
         err(str(exc))
         return rep
-    bad_entries = manifest_entry_errors(man, mpath)
-    rep.errors.extend(bad_entries)
+    files: dict[str, str] = {}  # the well-formed file entries
+    rep.errors.extend(manifest_entry_errors(man, mpath, files))
     scenes = list(dict.fromkeys(s for s in man["scenes"] if _scene_id_error(s) is None))  # unique, in order
     scene_set = set(scenes)  # every membership test below is O(1): validate is linear in scenes and files
     rep.n_scenes = len(scenes)
-    files: dict[str, str] = {rel: d for rel, d in man["files"].items()
-                             if _file_entry_error(rel, d, scene_set) is None}
     rep.n_files = len(man["files"])
     by_scene: dict[str, dict[str, str]] = {s: {} for s in scenes}  # the listed files of each scene
     for rel, digest in files.items():
@@ -121,104 +134,253 @@ def validate_corpus(root: str | os.PathLike, *, check_pixels: bool = True,
                 rep.warnings.append(f"{spath}: scenes in no split: {unsplit[:5]}")
         except CorpusError as exc:
             err(str(exc))
-    # files on disk not in the manifest
+    # files on disk not in the manifest, outside the scene folders of the manifest (those: per scene, below)
     sroot = root / SCENES_DIR
     if sroot.is_dir():
-        for p in sorted(sroot.rglob("*"), key=lambda q: q.parts):  # Path order, without Path.__lt__
-            if p.is_file():
-                rel = p.relative_to(root).as_posix()
-                if p.name.startswith(TMP_PREFIX):
-                    rep.warnings.append(f"{p}: temporary file of an interrupted run")
-                elif rel not in files and rel.split("/")[1] in scene_set:
-                    rep.warnings.append(f"{p}: not in manifest")
-        for d in sorted(sroot.iterdir()):
-            if d.is_dir() and d.name not in scene_set:
-                rep.warnings.append(f"{d}: incomplete scene (not in manifest; re-run the render to finish it)")
+        with os.scandir(sroot) as it:
+            top = sorted(it, key=lambda e: e.name)
+        for e in top:
+            if e.is_dir(follow_symlinks=False) and e.name in scene_set:
+                continue
+            if e.is_dir(follow_symlinks=False):
+                for rel, kind in _walk(e.path, f"{SCENES_DIR}/{e.name}"):
+                    if kind in "fl" and rel.rpartition("/")[2].startswith(TMP_PREFIX) and \
+                            os.path.isfile(root / rel):
+                        rep.warnings.append(f"{root / rel}: temporary file of an interrupted run")
+            elif e.is_file():
+                if e.name.startswith(TMP_PREFIX):
+                    rep.warnings.append(f"{e.path}: temporary file of an interrupted run")
+                elif e.name in scene_set:
+                    rep.warnings.append(f"{e.path}: not in manifest")
+        for e in top:
+            if e.is_dir() and e.name not in scene_set:
+                rep.warnings.append(f"{e.path}: incomplete scene (not in manifest; re-run the render to finish it)")
     # per scene: checksums of its listed files, then its own checks (in scene order, whatever the workers)
     order = sorted(scenes)
     n_workers = workers if workers is not None else (min(os.cpu_count() or 1, 8)
                                                      if len(order) >= PARALLEL_FROM_SCENES else 1)
+    cpath = None if cache is False else (VC.default_cache_path(root) if cache is True else Path(cache))
+    vc = VC.ValidateCache(cpath, VC.max_cache_bytes(len(files), len(scenes)))
+    ctx = VC.context() if cpath is not None else b""
     if n_workers <= 1:
         dirs: dict[str, Path] = {}  # resolved directories, shared by every inside_root call of this pass
         for i, sid in enumerate(order):
-            _check_scene(root, mpath, sid, by_scene[sid], rep, check_pixels, dirs)
+            _check_scene(root, mpath, sid, by_scene[sid], rep, check_pixels, dirs, vc if cpath else None, ctx)
             if progress is not None:
                 progress(i + 1, len(order))
+        vc.save()
         return rep
     import multiprocessing  # noqa: PLC0415
     from concurrent.futures import ProcessPoolExecutor  # noqa: PLC0415
 
     chunks = [order[k:k + CHUNK_SCENES] for k in range(0, len(order), CHUNK_SCENES)]
     lim = {name: limit(name) for name in LIMITS}  # limits raised in this process hold in the workers too
-    with ProcessPoolExecutor(n_workers, mp_context=multiprocessing.get_context("spawn")) as ex:
-        futs = [ex.submit(_check_chunk, str(root), ch, {s: by_scene[s] for s in ch}, check_pixels, lim)
+    with ProcessPoolExecutor(n_workers, mp_context=multiprocessing.get_context("spawn"), initializer=_init_worker,
+                             initargs=(lim, vc.keys if cpath else None, vc.fresh_ns, ctx)) as ex:
+        futs = [ex.submit(_check_chunk, str(root), ch, {s: by_scene[s] for s in ch}, check_pixels)
                 for ch in chunks]
         done = 0
         for ch, fut in zip(chunks, futs):
-            errors, warnings = fut.result()
+            errors, warnings, used, added, counts = fut.result()
             rep.errors.extend(errors)
             rep.warnings.extend(warnings)
+            rep.cached_files += counts[0]
+            rep.cached_scenes += counts[1]
+            vc.merge(used, added)
             done += len(ch)
             if progress is not None:
                 progress(done, len(order))
+    vc.save()
     return rep
 
 
-def _check_chunk(root: str, sids: list[str], listed: dict[str, dict[str, str]], check_pixels: bool,
-                 lim: dict[str, int]) -> tuple[list[str], list[str]]:
-    """:func:`_check_scene` of scenes ``sids`` in a worker process: ``(errors, warnings)``."""
+_WORKER: dict[str, Any] = {}
+
+
+def _init_worker(lim: dict[str, int], keys: set[bytes] | None, fresh_ns: int, ctx: bytes) -> None:
+    """A worker process of :func:`validate_corpus`: the run's limits, and its cache keys (None: no cache)."""
+    from lfmbench.corpus.validate_cache import ValidateCache  # noqa: PLC0415
+
     for name, v in lim.items():
         set_limit(name, v)
+    vc = None
+    if keys is not None:
+        vc = ValidateCache(None, keys=keys)
+        vc.fresh_ns = fresh_ns
+    _WORKER.update(cache=vc, ctx=ctx)
+
+
+def _check_chunk(root: str, sids: list[str], listed: dict[str, dict[str, str]],
+                 check_pixels: bool) -> tuple[list[str], list[str], list[bytes], list[bytes], tuple[int, int]]:
+    """:func:`_check_scene` of scenes ``sids`` in a worker process: ``(errors, warnings, used keys, added keys,
+    (cached files, cached scenes))``."""
     rep = ValidationReport(root)
     dirs: dict[str, Path] = {}
+    vc = _WORKER.get("cache")
+    if vc is not None:
+        vc.used, vc.added = set(), set()
     for sid in sids:
-        _check_scene(Path(root), Path(root) / MANIFEST_NAME, sid, listed[sid], rep, check_pixels, dirs)
-    return rep.errors, rep.warnings
+        _check_scene(Path(root), Path(root) / MANIFEST_NAME, sid, listed[sid], rep, check_pixels, dirs, vc,
+                     _WORKER.get("ctx", b""))
+    return (rep.errors, rep.warnings, list(vc.used) if vc else [], list(vc.added) if vc else [],
+            (rep.cached_files, rep.cached_scenes))
+
+
+def _walk(top: str, rel: str) -> list[tuple[str, str]]:
+    """Every entry under folder ``top`` (corpus path ``rel``) as ``(corpus path, kind)``, kind ``d`` folder, ``f``
+    regular file, ``l`` symbolic link, ``o`` anything else; in path order (as a sort by path components), one
+    directory listing per folder, no ``stat``. Folders behind symbolic links are not entered."""
+    out: list[tuple[str, str]] = []
+    try:
+        with os.scandir(top) as it:
+            entries = sorted(it, key=lambda e: e.name)
+    except OSError:
+        return out
+    for e in entries:
+        r = f"{rel}/{e.name}"
+        if e.is_dir(follow_symlinks=False):
+            out.append((r, "d"))
+            out.extend(_walk(e.path, r))
+        else:
+            out.append((r, "l" if e.is_symlink() else "f" if e.is_file(follow_symlinks=False) else "o"))
+    return out
+
+
+def _hash_head(path: str, size: int, keep: int) -> tuple[str, bytes]:
+    """SHA-256 (hex) of the file ``path`` of ``size`` bytes and its first ``keep`` bytes, in one pass over it (one
+    ``read`` call for a file of at most 1 MiB)."""
+    h = hashlib.sha256()
+    head = b""
+    with open(path, "rb", buffering=0) as fh:
+        b = fh.read(size + 1 if size < _CHUNK else _CHUNK)
+        while b:
+            h.update(b)
+            if len(head) < keep:
+                head += b[:keep - len(head)]
+            if len(b) == size < _CHUNK:  # asked for one byte more than its size: the end of the file
+                break
+            b = fh.read(_CHUNK)
+    return h.hexdigest(), head
 
 
 def _check_scene(root: Path, mpath: Path, sid: str, listed: Mapping[str, str], rep: ValidationReport,
-                 check_pixels: bool, dirs: dict[str, Path]) -> None:
-    """The listed files of scene ``sid`` (inside the root, present, their SHA-256), then its own checks."""
+                 check_pixels: bool, dirs: dict[str, Path], cache: Any = None, ctx: bytes = b"") -> None:
+    """Scene ``sid``: its folder listed once (files not in the manifest: warnings), its listed files (inside the
+    root, present, their SHA-256: skipped for a file whose key ``cache`` holds), then its own checks (skipped
+    when ``cache`` holds the scene's key: nothing in its folder changed since a run found it clean)."""
     err = rep.errors.append
-    for rel, digest in listed.items():
-        try:
-            inside_root(root, rel, str(mpath), dirs)
-        except CorpusFileError as exc:
-            err(str(exc))
-            continue
-        p = root / rel
-        if not p.is_file():
-            err(f"{p}: missing (listed in manifest)")
-        elif sha256_file(p) != digest:
-            err(f"{p}: bad checksum (SHA-256 differs from manifest)")
+    n_err = len(rep.errors)
+    rel0 = f"{SCENES_DIR}/{sid}"
+    rs = str(root)  # paths as text: the same names as Path gives, without its cost per scene
+    sdir = f"{rs}/{SCENES_DIR}/{sid}"
+    tree: dict[str, str] | None = None  # corpus path -> kind, for a scene folder that is a real folder
     try:
-        inside_root(root, f"{SCENES_DIR}/{sid}", str(mpath), dirs)
+        if stat.S_ISDIR(os.lstat(sdir).st_mode):
+            inside_root(root, rel0, str(mpath), dirs)  # (the root or scenes/ may be links)
+            tree = dict(_walk(sdir, rel0))
+    except (OSError, CorpusFileError):
+        pass  # the slow path below reports it, file by file as before
+    if tree is not None:
+        for rel, kind in tree.items():
+            if kind in "fl" and (kind == "f" or os.path.isfile(f"{rs}/{rel}")):
+                if rel.rpartition("/")[2].startswith(TMP_PREFIX):
+                    rep.warnings.append(f"{rs}/{rel}: temporary file of an interrupted run")
+                elif rel not in listed:
+                    rep.warnings.append(f"{rs}/{rel}: not in manifest")
+    heads: dict[str, bytes] = {}  # corpus path -> the bytes read while hashing (JSON whole, EXR the first 64 KiB)
+    keys: list[bytes] | None = [] if cache is not None and tree is not None else None
+    json_cap = limit("json_bytes")
+    for rel, digest in listed.items():
+        p = f"{rs}/{rel}"
+        if tree is not None and tree.get(rel) == "f":  # found by the listing: inside the checked scene folder
+            try:
+                st = os.lstat(p)
+            except OSError:
+                st = None
+        else:
+            keys = None  # a link, or not there: the slow path, and no scene verdict from the cache
+            try:
+                inside_root(root, rel, str(mpath), dirs)
+            except CorpusFileError as exc:
+                err(str(exc))
+                continue
+            st = os.stat(p) if os.path.isfile(p) else None
+        if st is None:
+            err(f"{p}: missing (listed in manifest)")
+            keys = None
+            continue
+        key = cache.file_key(rel, st, digest) if cache is not None else None
+        if key is not None and cache.has(key):
+            rep.cached_files += 1
+            if keys is not None:
+                keys.append(key)
+            continue
+        try:
+            got, head = _hash_head(p, st.st_size, json_cap if rel.endswith(".json") else HEAD_BYTES)
+        except OSError as exc:
+            err(f"{p}: cannot be read ({exc.strerror or exc})")
+            keys = None
+            continue
+        if got != digest:
+            err(f"{p}: bad checksum (SHA-256 differs from manifest)")
+            keys = None
+            continue
+        if rel.endswith(".exr") or len(head) == st.st_size:  # a JSON file: only whole (and within json_bytes)
+            heads[rel] = head
+        if key is not None and cache.settled(st):
+            cache.add(key)
+            if keys is not None:
+                keys.append(key)
+        else:
+            keys = None
+    try:
+        inside_root(root, rel0, str(mpath), dirs)
     except CorpusFileError as exc:
         err(str(exc))
         return
-    _validate_scene(root, sid, listed, rep, check_pixels)
+    level = "pixels" if check_pixels else "headers"
+    skey = None
+    if keys is not None and len(rep.errors) == n_err:
+        skey = cache.scene_key(ctx, level, sid, keys, (f"{r}\0{k}" for r, k in tree.items()))
+        if cache.has(skey) or (not check_pixels and cache.has(cache.scene_key(ctx, "pixels", sid, keys, (
+                f"{r}\0{k}" for r, k in tree.items())))):
+            rep.cached_scenes += 1
+            return
+    _validate_scene(root, sid, listed, rep, check_pixels, tree, heads)
+    if skey is not None and len(rep.errors) == n_err:
+        cache.add(skey)
 
 
 def _validate_scene(root: Path, sid: str, files: Mapping[str, str], rep: ValidationReport,
-                    check_pixels: bool) -> None:
+                    check_pixels: bool, tree: Mapping[str, str] | None = None,
+                    heads: Mapping[str, bytes] | None = None) -> None:
+    """The checks of one scene against its ``meta.json``. ``tree``: its folder's entries (corpus path -> kind,
+    :func:`_walk`), so that a present file costs no ``stat``; ``heads``: bytes of its files read already."""
     err = rep.errors.append
-    sdir = root / SCENES_DIR / sid
+    heads = heads or {}
+    rs = str(root)
+    sdir = f"{rs}/{SCENES_DIR}/{sid}"
     rel0 = f"{SCENES_DIR}/{sid}"
+
+    def present(rel: str) -> bool:
+        kind = tree.get(rel) if tree is not None else "?"
+        return kind == "f" or (kind in ("l", "?") and os.path.isfile(f"{rs}/{rel}"))
+
     for name in ("scene.json", "meta.json"):
         if f"{rel0}/{name}" not in files:
-            err(f"{sdir / name}: not in manifest")
-    if not (sdir / "scene.json").is_file():
-        err(f"{sdir / 'scene.json'}: missing")
+            err(f"{sdir}/{name}: not in manifest")
+    if not present(f"{rel0}/scene.json"):
+        err(f"{sdir}/scene.json: missing")
     else:
         try:
-            sc = _load_json(sdir / "scene.json", "scene description")
+            sc = _load_json(Path(f"{sdir}/scene.json"), "scene description", raw=heads.get(f"{rel0}/scene.json"))
             if not isinstance(sc, dict):
-                err(f"{sdir / 'scene.json'}: must hold a JSON object (free-form content), got a {type(sc).__name__}")
+                err(f"{sdir}/scene.json: must hold a JSON object (free-form content), got a {type(sc).__name__}")
         except CorpusError as exc:
             err(str(exc))
-    mp = sdir / "meta.json"
+    mp = f"{sdir}/meta.json"
     try:
-        meta = load_meta(mp)
+        meta = load_meta(mp, heads.get(f"{rel0}/meta.json"))
         _check_meta_storage(meta, mp)
     except (CorpusError, ValueError) as exc:
         err(str(exc))
@@ -227,7 +389,7 @@ def _validate_scene(root: Path, sid: str, files: Mapping[str, str], rep: Validat
         err(f"{mp}: scene_id {brief(meta['scene_id'])} != directory name {brief(sid)}")
     H, W, bands = meta["height"], meta["width"], meta["bands_nm"]
     aux_frames = [n for n in range(meta["frames"]) if f"{rel0}/{frame_dir(n)}/aux.exr" in files
-                  or (sdir / frame_dir(n) / "aux.exr").is_file()]
+                  or present(f"{rel0}/{frame_dir(n)}/aux.exr")]
     if aux_frames and len(aux_frames) != meta["frames"]:
         miss = sorted(set(range(meta["frames"])) - set(aux_frames))
         err(f"{sdir}: aux.exr missing for frames {miss}")
@@ -239,16 +401,16 @@ def _validate_scene(root: Path, sid: str, files: Mapping[str, str], rep: Validat
             bbox_of[lt["id"]] = lt["bbox"]
     for n in range(meta["frames"]):
         for g in list(meta["groups"]) + (["aux"] if n in aux_frames else []):
-            p = sdir / frame_dir(n) / f"{g}.exr"
-            rel = p.relative_to(root).as_posix()
-            if not p.is_file():
+            rel = f"{rel0}/{frame_dir(n)}/{g}.exr"
+            p = f"{rs}/{rel}"
+            if not present(rel):
                 if rel not in files:  # listed-but-missing files were already reported
                     err(f"{p}: missing")
                 continue
             if rel not in files:
                 err(f"{p}: not in manifest")
             try:
-                parts = read_exr(p, header_only=not check_pixels)
+                parts = read_exr(p, header_only=not check_pixels, head=heads.get(rel))
             except CorpusError as exc:
                 err(str(exc))
                 continue
@@ -312,7 +474,7 @@ def _validate_scene(root: Path, sid: str, files: Mapping[str, str], rep: Validat
                             f"'light{lid}' (null bbox = not visible)")
 
 
-def _validate_channels(p: Path, part: ExrPart, want: set[str], rep: ValidationReport) -> None:
+def _validate_channels(p: str | Path, part: ExrPart, want: set[str], rep: ValidationReport) -> None:
     have = set(part.channel_names)
     missing, extra = sorted(want - have), sorted(have - want)
     if missing:
@@ -323,7 +485,7 @@ def _validate_channels(p: Path, part: ExrPart, want: set[str], rep: ValidationRe
                           f"{' ...' if len(extra) > 4 else ''} ({len(extra)} in all)")
 
 
-def _validate_storage_attrs(p: Path, part: ExrPart, window: str | None, rep: ValidationReport) -> None:
+def _validate_storage_attrs(p: str | Path, part: ExrPart, window: str | None, rep: ValidationReport) -> None:
     """Format-version-2 attributes: the layer's scale (a power of two) and ``lfmbench_mantissa_bits``."""
     try:
         layer_scale(part, window, p)
@@ -335,7 +497,7 @@ def _validate_storage_attrs(p: Path, part: ExrPart, window: str | None, rep: Val
                           "in [1, 23]")
 
 
-def _validate_pixels(p: Path, part: ExrPart, rep: ValidationReport, check_pixels: bool) -> None:
+def _validate_pixels(p: str | Path, part: ExrPart, rep: ValidationReport, check_pixels: bool) -> None:
     if not check_pixels or part.channels is None:
         return
     n_nan = n_inf = n_neg = n_big = 0
