@@ -330,15 +330,31 @@ def run_jobs(jobs: Sequence[RenderJob], writer: CorpusWriter, *, workers: int = 
         raise ValueError(f"workers must be an integer >= 1, got {workers!r}")
     summary = RunSummary()
     todo = []
+    root = writer.root.resolve()
     for j in jobs:
-        if Path(j.out).resolve() != writer.root.resolve():
+        if Path(j.out).resolve() != root:
             raise ValueError(f"job {j.scene_id}: out {j.out} is not the writer's corpus {writer.root}")
+    hook = writer.on_compact
+    # splits.json follows the manifest: rewritten with it (at most O(1) amortized per scene, see CorpusWriter)
+    writer.on_compact = lambda: write_splits(writer, split_seed, splits)
+    try:
+        return _run_jobs(jobs, writer, workers, ray_address, on_start, on_done, resume, isolate, summary, todo)
+    finally:
+        try:
+            writer.flush()  # the scenes committed since the last manifest rewrite (also after Ctrl-C or an error)
+        finally:
+            writer.on_compact = hook
+
+
+def _run_jobs(jobs, writer, workers, ray_address, on_start, on_done, resume, isolate, summary, todo) -> RunSummary:
+    """The body of :func:`run_jobs`, with ``writer.on_compact`` writing the splits."""
+    for j in jobs:
         if resume and writer.is_complete(j.scene_id):
             summary.skipped.append(j.scene_id)
         else:
             writer.forget_scene(j.scene_id)
             todo.append(j)
-    write_splits(writer, split_seed, splits)
+    writer.write_manifest()  # the manifest and splits.json after the resume check
     if on_start is not None:
         on_start(len(todo), len(summary.skipped))
     hit: list[bool] = []
@@ -356,8 +372,7 @@ def run_jobs(jobs: Sequence[RenderJob], writer: CorpusWriter, *, workers: int = 
             if on_done is not None:
                 on_done(job.scene_id, "failed")
             return
-        writer.commit_scene(job.scene_id, res["hashes"])
-        write_splits(writer, split_seed, splits)
+        writer.commit_scene(job.scene_id, res["hashes"])  # the manifest and splits follow (CorpusWriter)
         summary.rendered.append(job.scene_id)
         summary.seconds[job.scene_id] = float(res["seconds"])
         summary.notes.extend(res.get("notes", []))

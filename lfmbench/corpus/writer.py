@@ -1,7 +1,8 @@
 """Writing a corpus: :func:`encode_scene` (pure encoding, usable in render workers), :func:`write_files`
 (atomic writes: temporary name in the same directory, then :func:`os.replace`), :class:`ThreadedSceneWriter`
 (both in a worker thread, fed one frame at a time while the caller renders the next) and :class:`CorpusWriter`
-(a manifest that is rewritten atomically after each finished scene, resume support).
+(finished scenes recorded in an append-only journal that is folded into the manifest, rewritten atomically, as
+the corpus grows; resume support).
 """
 from __future__ import annotations
 
@@ -29,7 +30,8 @@ from lfmbench.corpus.storage import DEFAULT_STORAGE, Storage, StorageStats, reso
 from lfmbench.fileio import TMP_PREFIX, atomic_write_bytes, atomic_write_json, json_default
 
 __all__ = ["CorpusWriter", "prune_scene_dir", "encode_scene", "write_files", "ThreadedSceneWriter",
-           "ENCODE_THREADS", "LOCK_NAME", "CorpusLockedError", "CorpusLock", "check_ours", "is_own_file"]
+           "ENCODE_THREADS", "LOCK_NAME", "JOURNAL_NAME", "COMPACT_FRACTION", "CorpusLockedError", "CorpusLock",
+           "check_ours", "is_own_file"]
 
 log = logging.getLogger(__name__)
 
@@ -37,6 +39,16 @@ log = logging.getLogger(__name__)
 #: open, holding ``pid <pid> host <host>`` of the holder (for the message a second writer gets). The kernel
 #: releases the lock when the holder exits, however it exits: a lock file left by a dead process is taken over.
 LOCK_NAME = ".lfmbench.lock"
+#: The manifest journal of a corpus root: one JSON line per scene committed (``{"commit": id, "files": {path:
+#: sha256}}``) or forgotten (``{"forget": id}``) since ``manifest.json`` was last written, appended and fsync'ed
+#: per scene by :class:`CorpusWriter`, folded into the manifest (and removed) by
+#: :meth:`CorpusWriter.write_manifest`.
+#: Left behind only by a killed writer; the next writer replays it (a torn last line, from a kill in the middle
+#: of an append, is a scene not committed).
+JOURNAL_NAME = ".lfmbench.journal"
+#: The manifest is rewritten once the journal holds this fraction of the manifest's scenes (at least one
+#: scene): each rewrite costs O(scenes), so a scene costs O(1) amortized, whatever the size of the corpus.
+COMPACT_FRACTION = 1 / 8
 #: Files of a scene directory that the corpus format owns (``docs/corpus-format.md``): only these are ever
 #: deleted (when a re-render no longer writes them); anything else a user put there stays.
 _OWN_SCENE_FILE = re.compile(r"(scene\.json|meta\.json|f\d{3,}/[A-Za-z][A-Za-z0-9_]*\.exr)")
@@ -155,9 +167,17 @@ class CorpusWriter:
     """Write an lfmbench corpus atomically, scene by scene.
 
     Every file goes through :func:`atomic_write_bytes` (temp file in the same directory + :func:`os.replace`);
-    a scene enters ``manifest.json`` (rewritten atomically) only after all its files are on disk, so a crash or
-    Ctrl-C leaves the corpus valid: the unfinished scene is simply absent and is redone on resume. Stray
-    temporary files of a killed run are removed when a writer opens the corpus.
+    a scene is committed only after all its files are on disk, so a crash or Ctrl-C leaves the corpus valid: the
+    unfinished scene is simply absent and is redone on resume. Stray temporary files of a killed run are removed
+    when a writer opens the corpus.
+
+    A commit appends one line to the journal :data:`JOURNAL_NAME` (fsync'ed); ``manifest.json`` is rewritten
+    (atomically, then ``on_compact()`` is called, e.g. to rewrite ``splits.json``) when the journal holds
+    :data:`COMPACT_FRACTION` of the manifest's scenes, and by :meth:`write_manifest` / :meth:`close`. So a
+    scene costs the same whatever the corpus's size (the manifest of a 100,000-scene corpus is not rewritten per
+    scene), and small corpora still get a manifest rewrite per scene. A writer killed at any point leaves
+    ``manifest.json`` describing complete scenes (at most 1/8 of the corpus behind) and the journal with the
+    rest; the next writer (a resume) replays the journal first.
 
     Args:
         root: corpus directory (created if needed).
@@ -180,29 +200,111 @@ class CorpusWriter:
         self._lock = CorpusLock(self.root)  # one writer per corpus; released by close() or at exit
         check_ours(self.root)  # again under the lock: a folder filled meanwhile is still refused
         mpath = self.root / MANIFEST_NAME
+        self.on_compact: Any = None
+        self._journal = self.root / JOURNAL_NAME
+        self._pending = 0  # journal lines since the manifest was written
         if mpath.exists():
-            self.manifest = _check_manifest(_load_json(mpath, "manifest"), mpath)
+            man = _check_manifest(_load_json(mpath, "manifest"), mpath)
             # version-2 readers read version-1 files: new scenes may join an old corpus, which becomes version 2
-            self.manifest["version"] = FORMAT_VERSION
+            man["version"] = FORMAT_VERSION
         else:
-            self.manifest = _empty_manifest()
-            self.write_manifest()  # an empty corpus is a valid corpus
+            man = _empty_manifest()
+        self._head = {k: v for k, v in man.items() if k not in ("scenes", "files")}  # format, version, render
+        self._index: dict[str, dict[str, str]] = {sid: {} for sid in man["scenes"]}  # scene -> its files
+        for rel, digest in man["files"].items():
+            self._index.setdefault(rel.split("/", 2)[1], {})[rel] = digest
+        replayed = self._replay()
+        if replayed or not mpath.exists():
+            self.write_manifest()  # an empty corpus is a valid corpus; a killed writer's journal is folded in
         if render is not None:
             render = json.loads(json.dumps(dict(render), default=json_default))
-            old = self.manifest.get("render")
+            old = self._head.get("render")
             if old is not None and old != render:
                 diff = sorted(k for k in set(old) | set(render) if old.get(k) != render.get(k))
                 raise ValueError(f"corpus {self.root} was rendered with different options ({', '.join(diff)}); "
                                  "use a new --out directory or the original options to resume")
             if old is None:
-                self.manifest["render"] = render
+                self._head["render"] = render
                 self.write_manifest()
         self.notes: list[str] = []
         self.cleanup_temp()
 
     def close(self) -> None:
-        """Release the writer lock (also done at process exit)."""
-        self._lock.release()
+        """Fold the journal into the manifest (:meth:`flush`) and release the writer lock (the lock is also
+        released at process exit; a journal left then is replayed by the next writer)."""
+        try:
+            self.flush()
+        finally:
+            self._lock.release()
+
+    def flush(self) -> None:
+        """:meth:`write_manifest` if the journal holds scenes the manifest does not."""
+        if self._pending:
+            self.write_manifest()
+
+    @property
+    def manifest(self) -> dict:
+        """The manifest as :meth:`write_manifest` writes it now (scenes and files sorted; a new dict)."""
+        files = {rel: d for sid in self._index for rel, d in self._index[sid].items()}
+        return {**self._head, "scenes": sorted(self._index), "files": dict(sorted(files.items()))}
+
+    def _replay(self) -> int:
+        """Apply the journal of a killed writer to the scene index; returns the number of lines applied. A torn
+        last line is dropped (its scene was not committed); a bad line before it is a ``CorpusError`` naming the
+        journal (the file is kept for inspection)."""
+        if not self._journal.is_file() or self._journal.is_symlink():
+            return 0
+        from lfmbench.corpus.meta import _file_entry_error  # noqa: PLC0415
+        from lfmbench.fileio import InputFileError, loads_json, read_bytes  # noqa: PLC0415
+        from lfmbench.limits import LimitError  # noqa: PLC0415
+
+        try:
+            raw = read_bytes(self._journal, "manifest journal", "manifest_bytes")
+        except (OSError, LimitError) as exc:
+            raise CorpusError(f"{self._journal}: cannot read the manifest journal of an earlier run ({exc})") \
+                from None
+        lines = raw.split(b"\n")
+        complete, torn = lines[:-1], lines[-1]  # a last line without its newline was cut by a kill
+        n = 0
+        for k, line in enumerate(complete):
+            try:
+                e = loads_json(line, f"{self._journal} line {k + 1}")
+                sid = e.get("commit", e.get("forget")) if isinstance(e, dict) else None
+                check_scene_id(sid, "scene id", f"{self._journal} line {k + 1}")
+                if "commit" in e:
+                    files = e.get("files")
+                    bad = next((f"{rel}: {why}" for rel, d in (files.items() if isinstance(files, dict) else ())
+                                if (why := _file_entry_error(rel, d, {sid})) is not None
+                                or not rel.startswith(f"{SCENES_DIR}/{sid}/")), None)
+                    if not isinstance(files, dict) or not files or bad:
+                        raise ValueError(f"{self._journal} line {k + 1}: bad file entries ({bad or files!r:.80})")
+                    self._index[sid] = dict(files)
+                else:
+                    self._index.pop(sid, None)
+            except (ValueError, InputFileError) as exc:
+                raise CorpusError(f"{exc} (the manifest journal of a killed writer; move it away to start the "
+                                  "scenes it lists again)") from None
+            n += 1
+        return n + (1 if torn else 0)
+
+    def _log(self, entry: Mapping[str, Any]) -> None:
+        """Append ``entry`` to the journal (one line, fsync'ed), then rewrite the manifest when the journal holds
+        :data:`COMPACT_FRACTION` of its scenes."""
+        from lfmbench.fileio import AtomicWriteError, _why  # noqa: PLC0415
+
+        line = (json.dumps(entry, separators=(",", ":")) + "\n").encode()
+        try:
+            fd = os.open(self._journal, os.O_WRONLY | os.O_APPEND | os.O_CREAT | os.O_NOFOLLOW, 0o644)
+            try:
+                os.write(fd, line)  # one write of a few KB: appended whole, or torn (a kill) and dropped on replay
+                os.fsync(fd)
+            finally:
+                os.close(fd)
+        except OSError as exc:
+            raise AtomicWriteError(exc.errno, f"could not write {self._journal}: {_why(exc)}") from None
+        self._pending += 1
+        if self._pending >= max(1, int(len(self._index) * COMPACT_FRACTION)):
+            self.write_manifest()
 
     def __enter__(self) -> "CorpusWriter":
         return self
@@ -230,17 +332,14 @@ class CorpusWriter:
 
     @property
     def scenes(self) -> list[str]:
-        return sorted(self.manifest["scenes"])
+        return sorted(self._index)
 
     def _rel(self, path: Path) -> str:
         return path.relative_to(self.root).as_posix()
 
     def is_complete(self, scene_id: str, *, verify: bool = True) -> bool:
-        """True when the scene is in the manifest and (``verify``) all its files exist with their SHA-256."""
-        if scene_id not in self.manifest["scenes"]:
-            return False
-        prefix = f"{SCENES_DIR}/{scene_id}/"
-        files = {k: v for k, v in self.manifest["files"].items() if k.startswith(prefix)}
+        """True when the scene is committed and (``verify``) all its files exist with their SHA-256."""
+        files = self._index.get(scene_id)
         if not files:
             return False
         if not verify:
@@ -252,10 +351,17 @@ class CorpusWriter:
         return True
 
     def write_manifest(self) -> None:
-        """Rewrite ``manifest.json`` atomically (scenes and files sorted)."""
-        self.manifest["scenes"] = sorted(set(self.manifest["scenes"]))
-        self.manifest["files"] = dict(sorted(self.manifest["files"].items()))
+        """Rewrite ``manifest.json`` atomically (scenes and files sorted) from the committed scenes, remove the
+        journal it now holds, then call ``on_compact()`` if set. A kill between the rewrite and the removal
+        leaves a journal whose replay changes nothing (each line sets or drops one scene)."""
         atomic_write_json(self.root / MANIFEST_NAME, self.manifest)
+        if self._pending or self._journal.is_file():
+            with contextlib.suppress(FileNotFoundError):
+                if not self._journal.is_symlink():
+                    self._journal.unlink()
+        self._pending = 0
+        if self.on_compact is not None:
+            self.on_compact()
 
     def encode_scene(self, scene_id: str, scene: Mapping[str, Any], meta: Mapping[str, Any],
                      frames: Iterable[Mapping[str, Any]]) -> Iterator[tuple[str, bytes]]:
@@ -267,23 +373,19 @@ class CorpusWriter:
         return write_files(self.root, files)
 
     def commit_scene(self, scene_id: str, hashes: Mapping[str, str]) -> None:
-        """Record a finished scene and its files' SHA-256 in the manifest (written atomically)."""
+        """Record a finished scene and its files' SHA-256 (a journal line; the manifest follows, see the class)."""
         check_scene_id(scene_id)
         prefix = f"{SCENES_DIR}/{scene_id}/"
         if not hashes or any(not k.startswith(prefix) for k in hashes):
             raise ValueError(f"commit_scene: file paths must lie under {prefix}")
-        self.manifest["files"] = {k: v for k, v in self.manifest["files"].items() if not k.startswith(prefix)}
-        self.manifest["files"].update(hashes)
-        self.manifest["scenes"] = sorted(set(self.manifest["scenes"]) | {scene_id})
-        self.write_manifest()
+        self._index[scene_id] = dict(hashes)
+        self._log({"commit": scene_id, "files": dict(hashes)})
 
     def forget_scene(self, scene_id: str) -> None:
         """Drop a scene from the manifest (before re-rendering it); its files stay until overwritten."""
-        prefix = f"{SCENES_DIR}/{scene_id}/"
-        if scene_id in self.manifest["scenes"]:
-            self.manifest["scenes"].remove(scene_id)
-            self.manifest["files"] = {k: v for k, v in self.manifest["files"].items() if not k.startswith(prefix)}
-            self.write_manifest()
+        if scene_id in self._index:
+            del self._index[scene_id]
+            self._log({"forget": scene_id})
 
     def write_scene(self, scene_id: str, scene: Mapping[str, Any], meta: Mapping[str, Any],
                     frames: Iterable[Mapping[str, Any]]) -> dict[str, str]:
@@ -299,8 +401,10 @@ class CorpusWriter:
         return hashes
 
     def write_splits(self, seed: int, fractions: Sequence[float] = (0.6, 0.2, 0.2)) -> dict[str, list[str]]:
-        """Write ``splits.json`` from the manifest's scenes (see :func:`make_splits`)."""
-        splits = make_splits(self.manifest["scenes"], seed, fractions)
+        """Write ``splits.json`` from the manifest's scenes (see :func:`make_splits`; the manifest is brought up to
+        date first, :meth:`flush`)."""
+        self.flush()
+        splits = make_splits(self._index, seed, fractions)
         atomic_write_json(self.root / SPLITS_NAME, splits)
         return splits
 
