@@ -40,6 +40,7 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import _llvm  # noqa: E402,F401 - sets DRJIT_LIBLLVM_PATH
+from lfmbench.fileio import atomic_write_text  # noqa: E402
 
 N_FINE = 64
 SHORT = (24, 40)                 # fine bins of the short window (T_S = T_L / 4, centred)
@@ -177,7 +178,7 @@ def main(argv=None) -> None:
         print(f"| {k} {'(the samples of today: short + rest)' if k == 2 else 'bins'} | {np.mean(v):.2f} | "
               f"{np.mean(v) / base:.2f} | {k / 2:.1f} |")
     if args.json:
-        Path(args.json).write_text(json.dumps({"rows": rows, "costs": costs}))
+        atomic_write_text(args.json, json.dumps({"rows": rows, "costs": costs}))
 
 
 if __name__ == "__main__":
