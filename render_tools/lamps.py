@@ -9,7 +9,8 @@ timing (:mod:`lfmbench.flicker.waveforms`).
   A lamp's segments share one ``driver`` (one PWM draw) unless the vehicle's segments are unsynchronised
   (``lamps.unsynchronised_segments``): then each segment draws its own PWM.
 - :func:`add_displays`: the street's LED sources: message signs (``message_sign``: a pixel matrix showing a
-  text, one light per pixel row with its scan line's phase, :class:`lfmbench.flicker.waveforms.ScanRow`),
+  text, one light per scan line (the rows it drives) with that line's phase,
+  :class:`lfmbench.flicker.waveforms.ScanRow`),
   a countdown display under the traffic signal (``countdown``: a light per seven-segment bar) and the signal
   aspects as LED arrays (a disk of LED dots).
 - :func:`add_message_sign`, :func:`add_destination_display`, :func:`add_countdown`: the single elements, also for
@@ -201,26 +202,31 @@ def _matrix_face(center, normal, grid, pitch_m) -> dict:
 def add_message_sign(b, oid: int, center, normal, text: str, grid=(60, 9), pitch_m: float = 0.05,
                      scan_lines: int = 8, luminance: float = 5000.0, spectrum=None, dot: float = 0.7) -> list[int]:
     """A row-multiplexed LED message sign on object ``oid`` showing ``text``: the object gets its ``display``
-    (texts, grid, scan_lines), and each pixel row with lit dots becomes one ``message_sign`` light (a ``dots``
-    face of that row's dots, waveform ``scan_row`` with scan line = row mod ``scan_lines``, one driver: the rows
-    share the sign's PWM draw and differ in phase).
+    (texts, grid, scan_lines), and each scan line with lit dots becomes one ``message_sign`` light (a ``dots``
+    face of the dots of the rows it drives, rows ``line``, ``line + scan_lines``, ...: they are ON at the same
+    times; waveform ``scan_row``; one driver: the lines share the sign's PWM draw and differ in phase).
 
     Args:
         center: (3,) m centre of the matrix. normal: (3,) horizontal facing direction. grid: (columns, rows).
         pitch_m: dot pitch, m. luminance: cd/m^2 of a dot while ON. spectrum: default the config's amber LED.
     Returns:
-        The light ids, top row first.
+        The light ids, scan line 0 first.
     """
     spectrum = spectrum or b.cfg["lights"]["led_amber"]
     b.objects[oid]["display"] = {"texts": [text], "grid": [int(grid[0]), int(grid[1])], "scan_lines": int(scan_lines)}
-    cells = led_matrix.text_cells(text, grid)
-    face = _matrix_face(center, normal, grid, pitch_m)
+    return _scan_lights(b, "message_sign", oid, led_matrix.text_cells(text, grid),
+                        _matrix_face(center, normal, grid, pitch_m), dot, int(scan_lines), spectrum, luminance,
+                        lambda line: {"kind": "scan_row", "scan_lines": int(scan_lines), "line": line},
+                        f"o{oid}.sign")
+
+
+def _scan_lights(b, kind, oid, cells, face, dot, scan_lines, spectrum, luminance, waveform, driver) -> list[int]:
+    """One light per scan line of a multiplexed matrix: the lit ``cells`` of the rows that line drives (row mod
+    ``scan_lines``), waveform ``waveform(line)``, all on ``driver``. Returns the light ids."""
     ids = []
-    for row in sorted({r for _, r in cells}):
-        shape = {"shape": "dots", **face, "dot": dot, "cells": [c for c in cells if c[1] == row]}
-        ids.append(_light(b, "message_sign", oid, shape, spectrum, luminance,
-                          waveform={"kind": "scan_row", "scan_lines": int(scan_lines), "line": row % scan_lines},
-                          driver=f"o{oid}.sign"))
+    for line in sorted({r % scan_lines for _, r in cells}):
+        shape = {"shape": "dots", **face, "dot": dot, "cells": [c for c in cells if c[1] % scan_lines == line]}
+        ids.append(_light(b, kind, oid, shape, spectrum, luminance, waveform=waveform(line), driver=driver))
     return ids
 
 
@@ -228,7 +234,7 @@ def add_destination_display(b, oid: int, center, normal, texts: list[str], grid=
                             scan_lines: int = 4, luminance: float = 2000.0, page_s: float = 3.0,
                             spectrum=None, dot: float = 0.7, name: str = "display") -> list[int]:
     """A bus destination display on object ``oid``: an LED matrix like :func:`add_message_sign` showing
-    ``texts`` in turn, ``page_s`` s each (waveform ``destination_display``); one light per page and row, all on
+    ``texts`` in turn, ``page_s`` s each (waveform ``destination_display``); one light per page and scan line, all on
     driver ``o<oid>.<name>``. Texts that do not fit the grid are shortened at the end; the object's ``display``
     records the first display placed on it. Returns the light ids."""
     spectrum = spectrum or b.cfg["lights"]["led_amber"]
@@ -239,13 +245,12 @@ def add_destination_display(b, oid: int, center, normal, texts: list[str], grid=
     face = _matrix_face(center, normal, grid, pitch_m)
     ids = []
     for page, text in enumerate(texts):
-        cells = led_matrix.text_cells(text, grid)
-        for row in sorted({r for _, r in cells}):
-            shape = {"shape": "dots", **face, "dot": dot, "cells": [c for c in cells if c[1] == row]}
-            wf = {"kind": "destination_display", "scan_lines": int(scan_lines), "line": row % scan_lines,
-                  "pages": len(texts), "page": page, "page_s": float(page_s), "phase_s": 0.0}
-            ids.append(_light(b, "destination_display", oid, shape, spectrum, luminance, waveform=wf,
-                              driver=f"o{oid}.{name}"))
+        ids += _scan_lights(b, "destination_display", oid, led_matrix.text_cells(text, grid), face, dot,
+                            int(scan_lines), spectrum, luminance,
+                            lambda line, page=page: {"kind": "destination_display", "scan_lines": int(scan_lines),
+                                                     "line": line, "pages": len(texts), "page": page,
+                                                     "page_s": float(page_s), "phase_s": 0.0},
+                            f"o{oid}.{name}")
     return ids
 
 

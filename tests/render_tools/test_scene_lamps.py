@@ -41,9 +41,9 @@ def test_v1_scenes_have_none_of_the_version_2_light_fields():
     assert all("waveform" not in lt and "driver" not in lt and lt["shape"] != "dots" for lt in sc["lights"])
 
 
-def test_message_sign_rows_carry_the_text_and_their_scan_phase(v2_scenes):
-    """Every message-sign light is one pixel row of its sign's text; the rows share one driver; the scan line is
-    the row index mod the sign's scan_lines; together they are exactly the text's dots."""
+def test_message_sign_lines_carry_the_text_and_their_scan_phase(v2_scenes):
+    """Every message-sign light is one scan line of its sign: the dots of the text's rows that line drives (row
+    mod scan_lines); the lines share one driver; together they are exactly the text's dots."""
     seen = 0
     for sc in v2_scenes:
         by_obj = collections.defaultdict(list)
@@ -57,10 +57,10 @@ def test_message_sign_rows_carry_the_text_and_their_scan_phase(v2_scenes):
             assert got == want
             assert len({lt["driver"] for lt in rows}) == 1
             for lt in rows:
-                r = {c[1] for c in lt["cells"]}
-                assert len(r) == 1
-                assert lt["waveform"] == {"kind": "scan_row", "scan_lines": disp["scan_lines"],
-                                          "line": r.pop() % disp["scan_lines"]}
+                lines = {c[1] % disp["scan_lines"] for c in lt["cells"]}
+                assert len(lines) == 1
+                assert lt["waveform"] == {"kind": "scan_row", "scan_lines": disp["scan_lines"], "line": lines.pop()}
+            assert len(rows) == len({c[1] % disp["scan_lines"] for c in want})
             seen += 1
     assert seen >= 2
 
