@@ -285,3 +285,19 @@ def test_directly_viewed_dots_face_has_its_luminance():
     mid = img[:, 6:30, 20:44]                       # well inside the face (it spans ~2.3 m at 2.4 m, 60 deg)
     peak = L > 0.2 * L.max()
     assert np.allclose(mid.mean((1, 2))[peak], L[peak], rtol=0.02)
+
+
+def test_render_command_refuses_a_too_long_sign_text(tmp_path):
+    """``lfmbench render --scene`` with a sign text that does not fit: exit 2, one line naming the file and the
+    field, no traceback, nothing written."""
+    from tests.data.render.data import ARGS, run
+
+    sc = _scene_with_sign()
+    _edit_text_too_long(sc)
+    p = tmp_path / "sign.json"
+    p.write_text(json.dumps(sc))
+    out = tmp_path / "corpus"
+    r = run("--out", str(out), "--scene", str(p), *ARGS)
+    assert r.exit_code == 2, r.output
+    assert f"--scene {p}: field 'scene.objects[" in r.output and "is too long for the sign" in r.output
+    assert "Traceback" not in r.output and not out.exists()
