@@ -8,26 +8,15 @@ the same values (a gather copies, it does not compute).
 """
 from __future__ import annotations
 
-import warnings
-
 import torch
+
+from lfmbench.triton_kernels import TritonKernels
 
 __all__ = ["gather_rows", "USE_TRITON"]
 
 #: On CUDA, gather with the Triton kernel where Triton is importable (False: ``index_select`` everywhere).
 USE_TRITON = True
-_TRITON = None
-
-
-def _triton():
-    global _TRITON
-    if _TRITON is None:
-        try:
-            from lfmbench.datasets import _row_gather_triton as T  # noqa: PLC0415 - needs triton and a GPU
-        except ImportError:
-            T = False
-        _TRITON = T
-    return _TRITON or None
+_KERNELS = TritonKernels("lfmbench.datasets._row_gather_triton", "gather_rows", "index_select")
 
 
 def gather_rows(table: torch.Tensor, index: torch.Tensor) -> torch.Tensor:
@@ -41,13 +30,10 @@ def gather_rows(table: torch.Tensor, index: torch.Tensor) -> torch.Tensor:
     """
     global USE_TRITON
     if (USE_TRITON and table.is_cuda and table.is_floating_point() and index.dim() == 1 and table.dim() >= 1
-            and _triton() is not None):
+            and _KERNELS.module() is not None):
         flat = table.contiguous().reshape(table.shape[0], -1)
-        try:
-            return _triton().gather_rows(flat, index).reshape(index.shape[0], *table.shape[1:])
-        except Exception as exc:  # noqa: BLE001 - a compiler error of any kind: fall back once, same values
-            warnings.warn(f"gather_rows: the Triton kernel failed ({type(exc).__name__}: "
-                          f"{str(exc).splitlines()[0][:200] if str(exc) else ''}); using index_select (same values, "
-                          "slower)", RuntimeWarning, stacklevel=2)
-            USE_TRITON = False
+        out = _KERNELS.call("gather_rows", flat, index)
+        if out is not None:
+            return out.reshape(index.shape[0], *table.shape[1:])
+        USE_TRITON = False
     return table.index_select(0, index)

@@ -29,13 +29,13 @@ Functions
 from __future__ import annotations
 
 import math
-import warnings
 
 import numpy as np
 import torch
 
 from lfmbench.constants import POISSON_EXACT_LIMIT
 from lfmbench.counter_rng import GAMMA, STRIDE_LOG2, _signed, derive_key, mix64, uniform_at
+from lfmbench.triton_kernels import TritonKernels
 
 __all__ = ["INVERSION_STEPS", "PTRS_ROUNDS", "LOG_FACTORIAL", "log_factorial", "pixel_keys", "poisson", "normal",
            "shot_seed", "read_seed", "check_seeds"]
@@ -67,37 +67,21 @@ def log_factorial(k: torch.Tensor) -> torch.Tensor:
 #: On CUDA, draw with the Triton kernels of :mod:`lfmbench.sensor._counter_triton` (each block of pixels stops
 #: when its own draws are done) where Triton is importable; False: the torch form everywhere (tests compare them).
 USE_TRITON = True
-_TRITON = None
-
-
-def _triton():
-    """The Triton kernels' module, or None where Triton is not importable."""
-    global _TRITON
-    if _TRITON is None:
-        try:
-            from lfmbench.sensor import _counter_triton as T  # noqa: PLC0415 - needs triton and a GPU
-        except ImportError:
-            T = False
-        _TRITON = T
-    return _TRITON or None
+_KERNELS = TritonKernels("lfmbench.sensor._counter_triton", "counter noise", "the torch form")
 
 
 def _use_triton(t: torch.Tensor) -> bool:
-    return USE_TRITON and t.is_cuda and _triton() is not None
+    return USE_TRITON and t.is_cuda and _KERNELS.module() is not None
 
 
 def _run_triton(name: str, *args):
-    """The Triton kernel ``name``, or None after turning the kernels off with one warning when it cannot be
-    compiled here (an unsupported GPU or Triton version): the torch form then gives the same numbers."""
+    """The Triton kernel ``name``, or None after turning the kernels off (one warning) when it cannot be compiled
+    here: the torch form then gives the same numbers."""
     global USE_TRITON
-    try:
-        return getattr(_triton(), name)(*args)
-    except Exception as exc:  # noqa: BLE001 - a compiler error of any kind: fall back to the torch form once
-        warnings.warn(f"counter noise: the Triton kernel {name} failed ({type(exc).__name__}: "
-                      f"{str(exc).splitlines()[0][:200] if str(exc) else ''}); using the torch form (same numbers, "
-                      "slower)", RuntimeWarning, stacklevel=3)
+    out = _KERNELS.call(name, *args)
+    if out is None:
         USE_TRITON = False
-        return None
+    return out
 
 
 #: Purpose words of :func:`lfmbench.counter_rng.derive_key` for the two kinds of sensor noise.
