@@ -177,6 +177,18 @@ def visible_lights(layers: SceneLayers, frame: int, crop: tuple[int, int, int, i
         yield light_id, p, (by0, bx0), (iy0, iy1, ix0, ix1), rates
 
 
+def _visible_by_bins(layers: SceneLayers, frame: int, crop: tuple[int, int, int, int],
+                     params: Mapping[int, dict]) -> tuple[dict[int, list], dict[int, list]]:
+    """The lights of :func:`visible_lights` grouped by their bin count K: ``({K: [(pwm, box origin, intersection,
+    rates)]}, {K: [light id]})`` in the stored order."""
+    visible: dict[int, list] = {}
+    ids: dict[int, list] = {}
+    for light_id, p, box0, inter, rates in visible_lights(layers, frame, crop, params):
+        visible.setdefault(int(rates["lpd"].shape[0]), []).append((p, box0, inter, rates))
+        ids.setdefault(int(rates["lpd"].shape[0]), []).append(int(light_id))
+    return visible, ids
+
+
 def compose_frame(layers: SceneLayers, meta: dict, frame: int, crop: tuple[int, int, int, int],
                   params: dict[int, dict], group_params: dict[str, dict], shutter: str = "global",
                   line_time_s: float | None = None) -> dict:
@@ -209,11 +221,7 @@ def compose_frame(layers: SceneLayers, meta: dict, frame: int, crop: tuple[int, 
         out["gt"] = out["gt"] + rates["lpd"][frame, y0:y0 + h, x0:x0 + w] * float(p["duty"] * t_len["lpd"])
     # flickering lights stored per light in K time bins (K from the stored layer: a group may override it).
     # All visible lights with the same K share one pwm_exposure call per capture: (L, R, K) weights.
-    visible: dict[int, list] = {}
-    ids: dict[int, list] = {}
-    for light_id, p, box0, inter, rates in visible_lights(layers, frame, crop, params):
-        visible.setdefault(int(rates["lpd"].shape[0]), []).append((p, box0, inter, rates))
-        ids.setdefault(int(rates["lpd"].shape[0]), []).append(int(light_id))
+    visible, ids = _visible_by_bins(layers, frame, crop, params)
     gates = gated_lights(meta)   # indicators, strobes, countdowns, destination displays: their own waveform
     rolling = shutter == "rolling"
     for K, group in visible.items():
@@ -386,11 +394,7 @@ def compose_plan_frame(layers: SceneLayers, meta: dict, frame: int, crop: tuple[
                 out[x.key] += r * torch.from_numpy(np.asarray(wgt, dtype=np.float64)).float().reshape(-1, 1)
                 if x.key == reference:
                     out["gt"] += r * float(p["duty"] * n)
-    visible: dict[int, list] = {}
-    ids: dict[int, list] = {}
-    for light_id, p, box0, inter, rates in visible_lights(layers, frame, crop, params):
-        visible.setdefault(int(rates["lpd"].shape[0]), []).append((p, box0, inter, rates))
-        ids.setdefault(int(rates["lpd"].shape[0]), []).append(int(light_id))
+    visible, ids = _visible_by_bins(layers, frame, crop, params)
     gates = gated_lights(meta)   # indicators, strobes, countdowns, destination displays: their own waveform
     for K, group in visible.items():
         edges = t0 + bin_edges(float(tm["capture_window_s"]), K)
