@@ -184,10 +184,11 @@ def write_doc(rows: list[dict]) -> None:
         lines.append(f"| {r['scenes']:,} | {r['workers']} | " + " | ".join(cell(r, k) for k in (
             "headers_1_s", "headers_s", "full_1_s", "full_s", "first_s", "again_s"))
             + f" | {r['us_per_scene_1']:.0f} | {r['load_start']:.1f} - {r['load_end']:.1f} |")
-    if any(r.get("cache_mode") == "headers" for r in rows):
-        lines += ["", "`-`: not run (`--pixels-up-to`: the machine was too busy to decode every pixel of the "
-                  "largest corpus four times); (h): the cached runs of that corpus with `--headers-only`; us per "
-                  "scene from `--headers-only` there."]
+    if any(r.get("cache_mode") == "headers" or "again_cpu_s" not in r for r in rows):
+        lines += ["", "`-`: not measured in that run (a run with `--pixels-up-to`, for a machine too busy to decode "
+                  "every pixel of the largest corpus four times, runs only its header modes; a row without CPU "
+                  "seconds comes from a run before they were recorded); (h): that corpus's cached runs with "
+                  "`--headers-only`, and its us per scene from `--headers-only`."]
     lines += ["", "CPU seconds of the same runs (all processes: this one and its workers), less sensitive to the "
               "other jobs than the wall times above; on 2 idle cores a run cannot take less than half its CPU "
               "seconds (plus the worker start-up, about 0.5 s), so this is a lower bound for such a machine, not "
