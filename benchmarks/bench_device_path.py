@@ -38,6 +38,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 from _timing import write_device_doc  # noqa: E402
+from lfmbench.fileio import atomic_write_text  # noqa: E402
 DOC = ROOT / "docs" / "device-path-benchmark.md"
 #: Where a run without a GPU writes (the GPU figures of ``DOC`` are kept: they are not re-measured there).
 DOC_CPU = ROOT / "docs" / "device-path-benchmark-cpu.md"
@@ -227,8 +228,6 @@ def profile_device(root, dev, batch: int, out: Path | None) -> None:
     table = prof.key_averages().table(sort_by="cuda_time_total", row_limit=25, max_name_column_width=60)
     print(table)
     if out is not None:
-        from lfmbench.fileio import atomic_write_text
-
         atomic_write_text(out, table)
 
 
@@ -283,7 +282,7 @@ def main(argv=None) -> int:
         rows.append(r)
         print(json.dumps(r), flush=True)
         if args.json:
-            args.json.write_text(json.dumps({"rows": rows}, indent=1))
+            atomic_write_text(args.json, json.dumps({"rows": rows}, indent=1))
 
     wanted = set(args.rows.split(","))
     for b in batches:

@@ -50,8 +50,6 @@ def test_figure_and_torch_round_trip(tmp_path):
 SCRATCH_WRITES = {
     ("bench_validate.py", "make_corpus"): "the 300,000-file fixture corpus in the benchmark's own temporary "
                                           "folder (an fsync per file would be most of the run)",
-    ("bench_device_path.py", "add"): "issue 28 rewrites this script in the session of 2026-11-26; its --json "
-                                      "write is to go through atomic_write_text there",
 }
 
 
