@@ -429,7 +429,8 @@ def test_non_finite_sensor_output_names_the_scene(one, monkeypatch):
     def boom(*a, **k):
         raise ValueError("lpd_electrons contains non-finite values (0 NaN, 3 inf)")
 
-    monkeypatch.setattr(sensor, "simulate_split_pixel_electrons", boom)
+    for name in ("simulate_split_pixel_electrons", "simulate_plan_electrons"):   # the chains a sample may take
+        monkeypatch.setattr(sensor, name, boom)
     with pytest.raises(ValueError, match=r"scene 'scene00000' of .*lpd_electrons contains non-finite"):
         LFMCaptureDataset(one, split="all", cache_dir=False)[0]
 
