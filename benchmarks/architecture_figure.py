@@ -57,7 +57,7 @@ def main(argv=None) -> int:
         from kornia.color import raw_to_rgb  # noqa: PLC0415
 
         rgb = raw_to_rgb(est.float(), ds.preset.cfa.to_kornia())[0]
-        rows.append((name, ds.architecture, method, rgb, s["gt_rgb"][0], s["meta"]["static_windows"]))
+        rows.append((name, ds.architecture, method, rgb, s["gt_rgb"][0], s["meta"].get("static_windows", "exact")))
     scale = float(rows[0][4].mean(0).median()) or 1.0
 
     def tone(x: torch.Tensor, ref: float):

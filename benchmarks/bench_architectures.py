@@ -30,7 +30,11 @@ from lfmbench.datasets import LFMCaptureDataset  # noqa: E402
 from lfmbench.datasets import capture as _capture  # noqa: E402
 from lfmbench.fileio import atomic_write_text  # noqa: E402
 
-PRESETS = ("ovt", "imx490", "lofic", "staggered", "chopped", "single")
+#: (label, preset, dataset shutter); a preset's own readout (staggered: rolling) takes precedence over the shutter.
+RUNS = (("ovt", "ovt", "global"), ("ovt rolling", "ovt", "rolling"), ("imx490", "imx490", "global"),
+        ("lofic", "lofic", "global"), ("staggered", "staggered", "global"), ("chopped", "chopped", "global"),
+        ("single", "single", "global"))
+PRESETS = tuple(r[0] for r in RUNS)
 TARGET = 1.5
 BEGIN, END = "<!-- architectures:begin -->", "<!-- architectures:end -->"
 
@@ -90,9 +94,9 @@ def main(argv=None) -> int:
                       "frames": bd.TP_FRAMES}, bd.TP_SEED, scenes=2)
     outputs = tuple(o for o in _capture.DEFAULT_OUTPUTS)
     dss = {}
-    for name in PRESETS:
-        ds = LFMCaptureDataset(root, split="all", sensor=name, frames=bd.TP_FRAMES, crop=bd.TP_CROP, outputs=outputs,
-                               samples_per_scene=a.samples, seed=1)
+    for name, preset, shutter in RUNS:
+        ds = LFMCaptureDataset(root, split="all", sensor=preset, frames=bd.TP_FRAMES, crop=bd.TP_CROP, outputs=outputs,
+                               samples_per_scene=a.samples, seed=1, shutter=shutter)
         for i in range(len(ds)):               # warm: layers projected and held, kernels compiled
             ds[i]
             if i >= 3:
@@ -113,17 +117,24 @@ def main(argv=None) -> int:
          f"machine). Workload of section 1: 3 frames, 256 x 256 crops of the 2-scene 320 x 256 corpus, every output "
          "but `rgb`, noise on, layers warm; `LFMCaptureDataset.__getitem__` in one process. Medians over "
          f"{a.passes} interleaved passes of the per-pass median of {a.samples} samples.", "",
-         "| preset | architecture | captures | ms / sample | x ovt | composition ms | sensor chain ms |",
-         "|---|---|---|---|---|---|---|"]
+         "| preset | architecture | readout | captures | ms / sample | x ovt global | x ovt, same readout | "
+         "composition ms | sensor chain ms |",
+         "|---|---|---|---|---|---|---|---|---|"]
+    same = {}
     for n in PRESETS:
-        p = dss[n].preset
+        ds = dss[n]
+        p = ds.preset
+        rolling = any((p.capture_readout(c).shutter or ds.shutter) == "rolling" for c in p.captures)
+        ref = med["ovt rolling" if rolling else "ovt"][0]
         t, c, s = med[n]
-        L.append(f"| `{n}` | {p.architecture} | {len(p.captures)} | {t * 1e3:.1f} | {t / base:.2f} | {c * 1e3:.1f} | "
-                 f"{s * 1e3:.1f} |")
-    worst = max(PRESETS, key=lambda n: med[n][0])
-    ok = med[worst][0] / base <= TARGET
-    L += ["", f"Target: every architecture within {TARGET}x of the split pixel (`ovt`): "
-          + ("**reached**" if ok else "**not reached**") + f"; slowest `{worst}` at {med[worst][0] / base:.2f}x.",
+        same[n] = t / ref
+        L.append(f"| `{n}` | {p.architecture} | {'rolling' if rolling else 'global'} | {len(p.captures)} | "
+                 f"{t * 1e3:.1f} | {t / base:.2f} | {t / ref:.2f} | {c * 1e3:.1f} | {s * 1e3:.1f} |")
+    worst = max(PRESETS, key=lambda n: same[n])
+    ok = same[worst] <= TARGET
+    L += ["", f"Target: every architecture within {TARGET}x of the split pixel (`ovt`) with the same readout: "
+          + ("**reached**" if ok else "**not reached**") + f"; the largest ratio `{worst}` at {same[worst]:.2f}x "
+          "(a rolling readout composes the flickering lamps per row, for every architecture alike).",
           "The split pixel runs its compiled sensor chain (`lfmbench.sensor.fused`); the other plans run the torch "
           "chain of `simulate_plan_electrons` (shot noise through the same compiled sampler).", "", END]
     doc = bd.DOC.read_text() if bd.DOC.is_file() else ""

@@ -400,27 +400,34 @@ def compose_plan_frame(layers: SceneLayers, meta: dict, frame: int, crop: tuple[
         edges = t0 + bin_edges(float(tm["capture_window_s"]), K)
         pa = {k: np.array([g_[0][k] for g_ in group], dtype=np.float64)[:, None, None, None]
               for k in ("period_s", "duty", "phase_s", "rise_s", "fall_s")}
-        wts = {}
+        # weights of every output (exposures, then gt) by readout: one einsum / tensordot per light and readout
+        by_mode: dict[bool, tuple[list, list]] = {}
         for key, x, level in [*((x.key, x, "pwm") for x in exposures), ("gt", ref, "mean")]:
             length = np.array([n for _, n in x.windows], dtype=np.float64)[:, None, None]
             wgt = window_bin_exposure(edges, starts(x), length, pa["period_s"], pa["duty"], pa["phase_s"],
                                       pa["rise_s"], pa["fall_s"], level, check=False)     # (L, Wn, R, K) s
-            wts[key] = torch.from_numpy(np.ascontiguousarray(wgt.sum(1))).float()       # (L, R, K)
+            wsum = wgt.sum(1)                                                              # (L, R, K)
             for i, lid in enumerate(ids[K]):
                 if lid in gates:
                     p = group[i][0]
                     wg = window_bin_exposure(edges, starts(x), length, p["period_s"], p["duty"], p["phase_s"],
                                              p["rise_s"], p["fall_s"], level, waveform=gates[lid])  # (Wn, R, K)
-                    wts[key][i] = torch.from_numpy(np.ascontiguousarray(wg.sum(0))).float()
+                    wsum[i] = wg.sum(0)
+            keys, ws = by_mode.setdefault(x.rolling, ([], []))
+            keys.append(key)
+            ws.append(wsum)
+        stacked = {m: (keys, torch.from_numpy(np.ascontiguousarray(np.stack(ws, 1))).float())  # (L, E, R, K)
+                   for m, (keys, ws) in by_mode.items()}
         for i, (_p, (by0, bx0), (iy0, iy1, ix0, ix1), rates) in enumerate(group):
             win = (slice(iy0 - y0, iy1 - y0), slice(ix0 - x0, ix1 - x0))
             sub = rates["lpd"][:, iy0 - by0:iy1 - by0, ix0 - bx0:ix1 - bx0]               # (K, hh, ww) e-/s
-            for key, wt in wts.items():
-                x_ = ref if key == "gt" else next(e for e in exposures if e.key == key)
-                if x_.rolling:
-                    out[key][win] += torch.einsum("kyx,yk->yx", sub, wt[i, iy0 - y0:iy1 - y0])
+            for rolling, (keys, wt) in stacked.items():
+                if rolling:
+                    add = torch.einsum("kyx,eyk->eyx", sub, wt[i, :, iy0 - y0:iy1 - y0])    # (E, hh, ww) e-
                 else:
-                    out[key][win] += torch.tensordot(wt[i, 0], sub, dims=1)
+                    add = torch.tensordot(wt[i, :, 0], sub, dims=1)
+                for j, key in enumerate(keys):
+                    out[key][win] += add[j]
     for x in exposures:
         out[x.key].mul_(x.fill_factor)
     out["gt"].mul_(ref.fill_factor)

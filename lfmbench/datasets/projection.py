@@ -136,9 +136,13 @@ def unit_projection_preset(preset):
     if preset.architecture == "split_pixel":
         return preset
     unit = _sensor.PhotodiodeSpec(fill_factor=1.0, full_well_e=1.0)
-    return dataclasses.replace(preset, name=f"{preset.name}:unit", photodiodes=MappingProxyType(
-        {pd: unit for pd in PHOTODIODES}), captures=MappingProxyType({}), architecture="split_pixel",
-        reference="lpd_hcg")
+    # only what the projection reads is kept (pitch, CFA, spectral curves, peak QE, optics): plans with the same
+    # pixel and lens share one cache entry (its key is the repr of this preset)
+    return dataclasses.replace(preset, name="unit-fill-factor", description="", adc_bits=12, black_level_dn=0.0,
+                               saturation_fraction=0.95, shot_noise_gaussian_above_e=1000.0, fpn_seed=0,
+                               photodiodes=MappingProxyType({pd: unit for pd in PHOTODIODES}),
+                               captures=MappingProxyType({}), source="<unit>", architecture="split_pixel",
+                               reference="lpd_hcg", readout=_sensor.plan.Readout(), frame_time_s=None)
 
 
 def cache_key(preset, meta: dict, groups: Sequence[str], frames: int, optics: bool,
