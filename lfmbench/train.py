@@ -285,6 +285,14 @@ def train(method: str | Trainable, corpus: str | os.PathLike, out: str | os.Path
         d = cfg.to_dict()
         cfg = spec.config_from_dict({**d, "train": {**d["train"], **over}}, "the command-line options")
     t = cfg.train
+    from lfmbench.baselines import methods_for  # noqa: PLC0415
+    from lfmbench.sensor import load_preset  # noqa: PLC0415
+
+    arch = load_preset(t.sensor).architecture
+    if spec.name not in methods_for(arch):
+        raise ValueError(f"train.sensor: {spec.name} reads split-pixel captures, and sensor {t.sensor!r} is a "
+                         f"{arch} sensor; its baselines are {methods_for(arch)} (learned fusion for other "
+                         "architectures is not built yet)")
     dev = torch.device(device)
     out = Path(out)
     torch.manual_seed(t.seed)

@@ -286,3 +286,14 @@ def test_train_on_float16_layers_streamed_in_chunks(tmp_path, corpus):
     assert hist["steps"] == 2 and all(torch.isfinite(torch.tensor(hist["step_loss"])))   # chunks of 4 and 2 samples
     with pytest.raises(ValueError, match="resident_dtype"):
         train("unet", corpus, tmp_path / "v.pt", resident_dtype="bf16", **kw)
+
+
+def test_training_a_split_pixel_network_on_another_architecture_is_refused_at_once(tmp_path, corpus):
+    """The learned baselines read split-pixel captures: train.sensor of another architecture is refused before
+    any work, naming the sensor and its baselines."""
+    from lfmbench.train import train
+
+    with pytest.raises(ValueError, match=r"train.sensor: unet .* 'lofic' is a lofic sensor; its baselines"):
+        train("unet", corpus, tmp_path / "u.pt", sensor="lofic", epochs=1, crop=16, batch_size=2, split="all",
+              progress=False, log=None)
+    assert not (tmp_path / "u.pt").exists()
