@@ -113,7 +113,10 @@ def main() -> None:
                      f"{n['kernels'] / N_NEW:.2f} | {c['mb']:.0f} |")
     lines += ["", "Run again with `python benchmarks/bench_render_scale.py` (7-12 minutes).", ""]
     out = Path(a.out) / "render-scale-benchmark.md"
-    atomic_write_text(out, "\n".join(lines))
+    keep = "## Scene generator 2 against generator 1"  # benchmarks/bench_render_v2.py's section stays
+    old = out.read_text() if out.exists() else ""
+    tail = old[old.index(keep):] if keep in old else ""
+    atomic_write_text(out, "\n".join(lines) + ("\n" + tail if tail else ""))
     print(out.read_text())
 
 

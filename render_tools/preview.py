@@ -122,6 +122,57 @@ def render_previews(out_dir: str | os.PathLike, seed: int = 7, width: int = 640,
     return paths
 
 
+#: The gallery of docs/scenes.md: (file stem, time of day, weather) of the street scenes.
+GALLERY = (("v2_day", "day", "dry"), ("v2_dusk", "dusk", "dry"), ("v2_night", "night", "dry"),
+           ("v2_wet_night", "night", "wet"))
+
+
+def render_gallery(out_dir: str | os.PathLike, seed: int = 7, profile: str = "default",
+                   closeup_size=(320, 180), closeup_spp: int = 4) -> list[Path]:
+    """docs/scenes.md's pictures: frame 0 (short exposure, every LED on) of scene generator 2's street at
+    ``seed`` for each entry of :data:`GALLERY`, rendered with the render ``profile``'s options (frames and AOVs
+    aside), and ``v2_vehicles.png``, a sheet of :func:`closeup_scene` renders (every vehicle kind, rear then
+    front, lamps lit; ``closeup_size`` px each at ``closeup_spp``). Returns the PNG paths; prints seconds."""
+    import time  # noqa: PLC0415
+
+    from . import render as rnd  # noqa: PLC0415
+    from . import scene as scn  # noqa: PLC0415
+    from .jobs import load_profile  # noqa: PLC0415
+    from lfmbench.vocabulary import VEHICLE_KINDS  # noqa: PLC0415
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    prof = dict(load_profile(profile), frames=1, aux=False, seed=seed)
+    paths = []
+
+    def shot(sc, opts, path):
+        t = time.perf_counter()
+        frame = next(rnd.render_frames(sc, opts))
+        img = compose_window(frame, rnd.frame_timing(sc, opts, 0), "short",
+                             shape=(len(opts.bands_nm), opts.height, opts.width))
+        print(f"{path.name}: {time.perf_counter() - t:.1f} s", flush=True)
+        return tonemap_srgb(img, opts.bands_nm, opts.band_width_nm)
+
+    for stem, tod, weather in GALLERY:
+        sc = scn.generate_scene(seed, tod, generator=2, overrides={"weather": {"conditions": [weather]}})
+        p = out / f"{stem}.png"
+        write_png(shot(sc, rnd.RenderOptions(**prof), p), p)
+        paths.append(p)
+    w, h = closeup_size
+    opts = rnd.RenderOptions(width=w, height=h, spp=closeup_spp, light_spp=max(16, closeup_spp), frames=1, bins=4,
+                             aux=False, seed=seed)
+    tiles = [shot(closeup_scene(k, v), opts, Path(f"{k}_{v}")) for k in VEHICLE_KINDS for v in ("rear", "front")]
+    cols = 4
+    rows = -(-len(tiles) // cols)
+    sheet = np.zeros((rows * h, cols * w, 3), dtype=np.uint8)
+    for i, t in enumerate(tiles):
+        sheet[(i // cols) * h:(i // cols + 1) * h, (i % cols) * w:(i % cols + 1) * w] = t
+    p = out / "v2_vehicles.png"
+    write_png(sheet, p)
+    paths.append(p)
+    return paths
+
+
 def closeup_scene(kind: str, view: str = "rear", seed: int = 5) -> dict:
     """A dusk scene (scene generator 2) for looking at one vehicle of ``kind`` from close by: the vehicle stands
     in the camera's lane, ``view`` ``"rear"`` (heading away: tail, brake, indicator lamps) or ``"front"`` (facing
@@ -165,6 +216,8 @@ if __name__ == "__main__":  # pragma: no cover - documentation helper
     ap.add_argument("--width", type=int, default=640)
     ap.add_argument("--height", type=int, default=360)
     ap.add_argument("--spp", type=int, default=8)
+    ap.add_argument("--gallery", action="store_true", help="docs/scenes.md's scene generator 2 gallery instead")
     a = ap.parse_args()
-    for path in render_previews(a.out, a.seed, a.width, a.height, a.spp):
+    for path in (render_gallery(a.out, a.seed) if a.gallery else
+                 render_previews(a.out, a.seed, a.width, a.height, a.spp)):
         print(path)

@@ -7,10 +7,12 @@ flickers with it: the crop must hold it too, or the light would be lost (it is i
 flickering light in a wet scene is therefore grown by the glossy streak of its reflection: the road points ``R``
 whose half vector between the directions to the lamp and to the camera is tilted from the road normal by
 ``tan theta_h <= GLOSS_TAN_FACTOR * alpha`` (``alpha``: the roughest GGX roughness of the road's wet materials).
-A GGX distribution puts the fraction ``1 / (1 + GLOSS_TAN_FACTOR**2)`` (3.8 % at 5) of its microfacet normals
-beyond that tilt; that light, spread thinly over the rest of the road, is left out of the crop, as the diffuse
-light a lamp throws on its surroundings outside its crop always was (docs/rendering.md). A dry scene's crops are
-unchanged (no reflection region).
+A GGX distribution puts the fraction ``1 / (1 + GLOSS_TAN_FACTOR**2)`` (20 % at 2) of its microfacet normals
+beyond that tilt, but the light they send to the camera is spread thinly over the rest of the road: measured
+(tests/render_tools/test_reflections.py, alpha 0.06), the region holds 99.2 / 99.4 / 99.5 / 99.75 % of the
+reflection at factors 1.5 / 2 / 3 / 5, with crops of 1,508 / 1,740 / 1,972 / 3,364 px at 160x90. The rest is left
+out of the crop, as the diffuse light a lamp throws on its surroundings outside its crop always was
+(docs/rendering.md). A dry scene's crops are unchanged (no reflection region).
 """
 from __future__ import annotations
 
@@ -18,8 +20,9 @@ import numpy as np
 
 __all__ = ["GLOSS_TAN_FACTOR", "wet_road", "glossy_points"]
 
-#: Half-vector tilt bound of the reflection region, in units of the wet film's GGX roughness.
-GLOSS_TAN_FACTOR = 5.0
+#: Half-vector tilt bound of the reflection region, in units of the wet film's GGX roughness (module docstring:
+#: 99.4 % of the reflection at 2, at half the crop of 5).
+GLOSS_TAN_FACTOR = 2.0
 #: Grid of road points searched for the reflection region: along x (towards the lamp) and y.
 GRID = (64, 32)
 

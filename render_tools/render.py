@@ -219,18 +219,21 @@ class SceneGeometry:
         """(3,) world velocity (m/s) of the object a light is mounted on (zeros for a static light)."""
         return ms.object_offset(self.scene, light["instance"], 1.0)
 
-    def light_bbox(self, light: dict, t_obj: float, t_a: float, t_b: float, moving: bool = False):
+    def light_bbox(self, light: dict, t_obj: float, t_a: float, t_b: float, moving: bool = False,
+                   reflection: bool = True):
         """Screen bbox (y0, x0, y1, x1) px (end exclusive) of a light's face over [t_a, t_b] s, padded and
         clipped; None when not visible (behind the camera, outside the image or facing away). ``moving``: the
         lamp moves with its object over the interval (as per-light renders show it), else it is held at its
-        ``t_obj`` position (as full-frame renders show it)."""
+        ``t_obj`` position (as full-frame renders show it). In a wet scene a moving (flickering) light's box also
+        holds its reflection in the road (:mod:`render_tools.reflections`) unless ``reflection`` is False."""
         times = np.linspace(t_a, t_b, BBOX_TIME_SAMPLES)
         if not self.facing(light, t_obj, times, moving):
             return None
         pts = ms.light_points(self.scene, light, t_obj)
         v = self.object_velocity(light) if moving else np.zeros(3)
         # a flickering light's crop also holds its reflection in a wet road (render_tools.reflections)
-        refl = reflections.glossy_points(pts, self.ego.position(t_obj), self.wet) if moving and self.wet else None
+        refl = reflections.glossy_points(pts, self.ego.position(t_obj), self.wet) \
+            if moving and reflection and self.wet else None
         uvs = []
         for t in times:
             pose = self.ego.pose_cv(t)
@@ -407,7 +410,8 @@ def plan_frame(scene: dict, opts: RenderOptions, n: int, sets, geo: SceneGeometr
     same pixels, the crop one with less variance where the HDR peaks are); the long window is assembled as
     ``frac * short + (1 - frac) * rest`` (plan window ``"rest"``, ``frac`` = T_S / T_L). Flickering groups:
     each visible light alone in its crop, K bins over the capture window, at ``light_spp`` (one bin repeated K
-    times when neither the camera nor the lamp moves). ``sets``: the frame's :class:`tracer.LightSets` (or any
+    times when neither the camera nor the lamp moves); in a wet scene a crop grown by the light's reflection is
+    traced at ``spp`` and the lamp's own box again at ``light_spp`` (plan kind ``"light_refine"``, pasted over it). ``sets``: the frame's :class:`tracer.LightSets` (or any
     mapping from set name to index). Returns (tiles, plan, visible light ids); plan entries are
     (kind, group, window or light id, crop, tile index, repeat).
     """
@@ -458,13 +462,21 @@ def plan_frame(scene: dict, opts: RenderOptions, n: int, sets, geo: SceneGeometr
                 continue
             visible.add(lt["id"])
             k = sets[f"light:{lt['id']}"]
-            if geo.ego.moving or np.any(v != 0.0):
-                plan.append(("light", g, lt["id"], bb, len(tiles), 1))
-                tiles.append(Tile(bb, opts.bins, edges[0], (edges[-1] - edges[0]) / opts.bins, light_spp, k,
-                                  tuple(float(x) for x in v), t_obj, key=_seed("light", lt["id"])))
-            else:  # static camera and lamp inside the frame: all bins are the same image
-                plan.append(("light", g, lt["id"], bb, len(tiles), opts.bins))
-                tiles.append(Tile(bb, 1, edges[0], edges[-1] - edges[0], light_spp, k, key=_seed("light", lt["id"])))
+            # wet road: the box holds the lamp's reflection too; that dim, smooth light is traced at ``spp`` and
+            # the lamp's own box again at ``light_spp`` over it (both unbiased: the "refine" of static groups)
+            lamp_bb = geo.light_bbox(lt, t_obj, *tm["window"], moving=True, reflection=False) if geo.wet else bb
+            crops = [("light", bb, light_spp if lamp_bb == bb else opts.spp, ())]
+            if lamp_bb is not None and lamp_bb != bb:
+                crops.append(("light_refine", lamp_bb, light_spp, ("lamp",)))
+            for kind, crop, n_s, extra in crops:
+                key = _seed("light", lt["id"], *(("reflection",) if kind == "light" and lamp_bb != bb else extra))
+                if geo.ego.moving or np.any(v != 0.0):
+                    plan.append((kind, g, lt["id"], crop, len(tiles), 1))
+                    tiles.append(Tile(crop, opts.bins, edges[0], (edges[-1] - edges[0]) / opts.bins, n_s, k,
+                                      tuple(float(x) for x in v), t_obj, key=key))
+                else:  # static camera and lamp inside the frame: all bins are the same image
+                    plan.append((kind, g, lt["id"], crop, len(tiles), opts.bins))
+                    tiles.append(Tile(crop, 1, edges[0], edges[-1] - edges[0], n_s, k, key=key))
     return tiles, plan, visible
 
 
@@ -528,6 +540,10 @@ def render_frames(scene: dict, opts: RenderOptions) -> Iterator[dict]:
             elif kind == "refine":
                 y0, x0, y1, x1 = bb
                 out["static"][g][key][:, y0:y1, x0:x1] = img[0]
+            elif kind == "light_refine":  # the lamp's own box at light_spp over its reflection crop
+                lid, (by0, bx0, _, _), arr = out["lights"][g][-1]
+                y0, x0, y1, x1 = bb
+                arr[:, :, y0 - by0:y1 - by0, x0 - bx0:x1 - bx0] = np.repeat(img, rep, axis=0) if rep > 1 else img
             else:
                 out["lights"].setdefault(g, []).append((key, bb, np.repeat(img, rep, axis=0) if rep > 1 else img))
         frac = (tm["short"][1] - tm["short"][0]) / (tm["long"][1] - tm["long"][0])

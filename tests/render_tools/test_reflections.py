@@ -71,7 +71,7 @@ def test_reflection_is_in_the_lamps_crop(weather):
     in_crop = full[:, y0:y1, x0:x1].sum() - full[:, ly0:ly1, lx0:lx1].sum()
     if weather == "wet":
         assert outside_lamp > 0.1 * full[:, ly0:ly1, lx0:lx1].sum()  # the reflection is a fifth of the lamp
-        assert in_crop > 0.99 * outside_lamp  # measured 99.8 %: all of it is in the lamp's crop
+        assert in_crop > 0.98 * outside_lamp  # measured 99.4 %: (almost) all of it is in the lamp's crop
         # the crop render holds the same light as the full frame there (independent estimates: 2 % noise)
         assert arr.mean(0).sum() == pytest.approx(full[:, y0:y1, x0:x1].sum(), rel=0.02)
     else:
