@@ -175,7 +175,7 @@ def protocols_cmd(
     if check:
         from render_tools.scene import generate_scene, load_config  # noqa: PLC0415
 
-        cfg, bad = load_config(), 0
+        cfg, bad = load_config(generator=p.generator), 0
         for ps in p.scenes:
             try:
                 miss = P.check_scene(generate_scene(ps.seed, scene_id=ps.scene_id, config=cfg, **ps.scene_kw()),

@@ -270,6 +270,18 @@ def test_protocols_command(tmp_path):
     d["scenes"]["test"][0]["signal"] = "purple"
     r = _run("protocols", str(write_protocol(tmp_path / "bad.yaml", d)))
     assert r.exit_code == 2 and str(tmp_path / "bad.yaml") in r.output and "signal" in r.output
+    # a generator-2 protocol: checked with generator 2's defaults, its weather pinned
+    d2 = copy.deepcopy(tiny_protocol_dict())
+    d2["generator"] = 2
+    for split in d2["scenes"].values():
+        for e in split:
+            e["weather"] = "rain"
+    r = _run("protocols", str(write_protocol(tmp_path / "v2.yaml", d2)), "--check")
+    assert r.exit_code == 0 and "3 of 3 scenes meet their pinned conditions" in r.output, r.output
+    assert "| weather | dry 0, wet 0, rain 1 |" in r.output
+    del d2["scenes"]["test"][0]["weather"]
+    r = _run("protocols", str(write_protocol(tmp_path / "v2bad.yaml", d2)))
+    assert r.exit_code == 2 and "weather" in r.output
 
 
 def test_render_protocol_one_split_then_the_rest(tmp_path, fake):
