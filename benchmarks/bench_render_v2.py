@@ -55,7 +55,7 @@ def main() -> None:
                 kw = {"generator": 2, "overrides": {"weather": {"conditions": [weather]}}} if gen == 2 else {}
                 sc = S.generate_scene(seed, tod, scene_id=f"g{gen}_{tod}_{seed}", **kw)
                 f = tmp / f"g{gen}_{seed}.json"
-                f.write_text(json.dumps(sc))
+                atomic_write_text(f, json.dumps(sc))
                 home = tmp / f"home_{gen}_{seed}"
                 home.mkdir()
                 extra = ("--scene", str(f))
