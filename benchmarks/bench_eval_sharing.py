@@ -8,8 +8,9 @@ Methods: the 7 rule-based baselines and the U-Net (the protocol leaderboard's se
 Timed, one run each after a warm-up (a pass over the data that fills the projection cache, and both paths on two
 samples: imports, checkpoint loading, plotting): (1) the data alone (every sample read and
 simulated once, no method), (2) ``benchmark(share_samples=False)`` (one pass over the data per method: before),
-(3) ``benchmark(share_samples=True)`` (each sample simulated once for all methods: after). The per-sample scores
-of (2) and (3) are compared (they must be equal). Prints a Markdown table; ``--json`` writes the numbers.
+(3) ``benchmark(share_samples=True)`` (each sample simulated once for all methods: after); with ``--repeats N`` each
+path N times in the order ABBA, the fastest kept. The per-sample scores of (2) and (3) are compared (they must be
+equal). Prints a Markdown table; ``--json`` writes the numbers.
 """
 from __future__ import annotations
 
@@ -23,6 +24,10 @@ import time
 from pathlib import Path
 
 
+def _runs(ts: list[float]) -> str:
+    return ", ".join(f"{t:.1f}" for t in ts)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--corpus", required=True, help="corpus root")
@@ -30,6 +35,8 @@ def main() -> None:
     ap.add_argument("--split", default="all")
     ap.add_argument("--samples-per-scene", type=int, default=2)
     ap.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's choice)")
+    ap.add_argument("--isp", default="default", help="ISP pipeline of the display columns, or 'none'")
+    ap.add_argument("--repeats", type=int, default=1, help="timed runs of each path, in the order ABBA (min kept)")
     ap.add_argument("--json", default=None, help="write the numbers to this JSON file")
     a = ap.parse_args()
     if not os.path.isfile(a.checkpoint):
@@ -58,35 +65,39 @@ def main() -> None:
 
     data_pass()  # warm-up: fills the projection cache, loads the sensor kernels
     t_data = data_pass()
-    kw = dict(split=a.split, perceptual=False, repeats=1, progress=False, samples_per_scene=a.samples_per_scene)
+    kw = dict(split=a.split, perceptual=False, repeats=1, progress=False, samples_per_scene=a.samples_per_scene,
+              isp=None if a.isp == "none" else a.isp)
+    times: dict[bool, list[float]] = {False: [], True: []}
+    equal = True
     with tempfile.TemporaryDirectory() as tmp:
         for share in (False, True):  # warm-up of both paths on 2 samples: imports, checkpoint, plotting
             benchmark(a.corpus, methods, Path(tmp) / "warm", share_samples=share, max_scenes=2, **kw)
-        t0 = time.perf_counter()
-        benchmark(a.corpus, methods, Path(tmp) / "per_method", share_samples=False, **kw)
-        t_old = time.perf_counter() - t0
-        t0 = time.perf_counter()
-        benchmark(a.corpus, methods, Path(tmp) / "shared", share_samples=True, **kw)
-        t_new = time.perf_counter() - t0
-        equal = True
+        order = [False, True, True, False] * ((a.repeats + 1) // 2)  # ABBA: a drifting machine load cancels
+        for share in order[:2 * a.repeats]:
+            out = Path(tmp) / ("shared" if share else "per_method")
+            t0 = time.perf_counter()
+            benchmark(a.corpus, methods, out, share_samples=share, **kw)
+            times[share].append(time.perf_counter() - t0)
         for m in methods:
             old, new = (json.loads((Path(tmp) / d / f"{m}.json").read_text()) for d in ("per_method", "shared"))
             equal &= [(s["scene_id"], s.get("metrics")) for s in old["scenes"]] == \
                      [(s["scene_id"], s.get("metrics")) for s in new["scenes"]]
+    t_old, t_new = min(times[False]), min(times[True])
     k = len(methods)
     res = {
-        "methods": methods, "samples": n, "split": a.split, "samples_per_scene": a.samples_per_scene,
+        "methods": methods, "samples": n, "isp": a.isp, "split": a.split, "samples_per_scene": a.samples_per_scene,
         "corpus": str(a.corpus), "torch_threads": torch.get_num_threads(),
         "cpu": platform.processor() or platform.machine(),
         "cpus": os.cpu_count(), "load_avg_1min_after": os.getloadavg()[0],
-        "data_pass_s": t_data, "per_method_s": t_old, "shared_s": t_new, "ratio_shared_per_method": t_new / t_old,
+        "data_pass_s": t_data, "per_method_s": t_old, "shared_s": t_new, "per_method_runs_s": times[False],
+        "shared_runs_s": times[True], "ratio_shared_per_method": t_new / t_old,
         "simulation_share_of_per_method": k * t_data / t_old,
         "expected_shared_s": t_old - (k - 1) * t_data, "per_sample_scores_equal": equal,
     }
     print(f"| {k}-method evaluation, {n} samples | time (s) |\n|---|---|\n"
           f"| data alone (read + simulate every sample once) | {t_data:.1f} |\n"
-          f"| before: one pass over the data per method | {t_old:.1f} |\n"
-          f"| after: each sample simulated once, shared | {t_new:.1f} |\n"
+          f"| before: one pass over the data per method | {t_old:.1f} (runs: {_runs(times[False])}) |\n"
+          f"| after: each sample simulated once, shared | {t_new:.1f} (runs: {_runs(times[True])}) |\n"
           f"| ratio after / before | {t_new / t_old:.3f} |\n"
           f"| simulation share of the before run ({k} x data alone / before) | {100 * k * t_data / t_old:.1f} % |\n"
           f"| expected after (before - {k - 1} x data alone) | {t_old - (k - 1) * t_data:.1f} |\n"

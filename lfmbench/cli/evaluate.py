@@ -71,16 +71,19 @@ def evaluate_cmd(
     from lfmbench.isp import load_pipeline
     from lfmbench.metrics import ScoreOptions
 
-    try:
-        isp_name = None if isp.lower() == "none" else isp
-        if isp_name is not None:
+    isp_name = None if isp.lower() == "none" else isp
+    if isp_name is not None:
+        try:
             load_pipeline(isp_name)  # a bad pipeline file is named before any work
+        except ValueError as exc:
+            fail(f"--isp: {exc}")
+    try:
         fn = get_method(method)
         extra = {"frames": frames, "sensor": sensor} if cache_dir is None else {"frames": frames, "sensor": sensor,
                                                                                 "cache_dir": cache_dir}
         ds, ident, cond = corpus_run_inputs(corpus, split, seed, crop, samples_per_scene, **extra)
     except (MethodNotFoundError, FileNotFoundError, EmptyDataError, RuntimeError, ValueError) as exc:
-        fail(str(exc) if not str(exc).startswith("isp pipeline") else f"--isp: {exc}")
+        fail(str(exc))
     from lfmbench.baselines import REGISTRY, methods_for
 
     if method in REGISTRY and method not in methods_for(ds.architecture):

@@ -342,12 +342,7 @@ class ISP(nn.Module):
 
     @staticmethod
     def _shape(x: torch.Tensor, name: str) -> torch.Tensor:
-        if not isinstance(x, torch.Tensor):
-            raise TypeError(f"{name} must be a torch.Tensor, got {type(x).__name__}")
-        if x.ndim < 3 or x.shape[-3] != 1:
-            raise ValueError(f"{name} must be a Bayer mosaic of shape (*, 1, H, W), got {tuple(x.shape)}")
-        if not x.is_floating_point():
-            raise ValueError(f"{name} must be floating point, got {x.dtype}")
+        _raw._check_mosaic(x, name)
         n = x.shape[0] if x.ndim > 3 else 1
         return x.reshape((n, max(1, math.prod(x.shape[1:-3]) if x.ndim > 3 else 1)) + x.shape[-3:])
 

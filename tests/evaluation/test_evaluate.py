@@ -217,8 +217,22 @@ def test_cli_evaluate_on_tiny_corpus(tmp_path):
     assert d["dataset"]["corpus"] == str(corpus) and d["seeds"] == {"dataset": 0}
     assert {s["scene_id"] for s in d["scenes"]} == {"scene00000", "scene00001", "scene00002"}
     assert math.isfinite(d["aggregate"]["psnr_mu"]) and d["runtime"]["ms_per_megapixel"] > 0
+    assert math.isfinite(d["aggregate"]["psnr_srgb"]) and d["options"]["isp"]["name"] == "default"
     r = CliRunner().invoke(app, ["evaluate", "--method", "lpd_only", "--corpus", str(corpus), "--split", "nope"])
     assert r.exit_code == 2 and "split" in r.output
+    bad = tmp_path / "my_isp.yaml"
+    bad.write_text("format: lfmbench-isp\nname: mine\nsteps: [{op: demosaic, methd: x}]\n")
+    r = CliRunner().invoke(app, ["evaluate", "--method", "lpd_only", "--corpus", str(corpus), "--split", "all",
+                                 "--output", str(tmp_path / "x.json"), "--isp", str(bad)])
+    assert r.exit_code == 2 and "--isp" in r.output and "my_isp.yaml" in r.output and "steps[0].methd" in r.output
+    assert r.exception is None or isinstance(r.exception, SystemExit)
+    assert not (tmp_path / "x.json").exists()  # refused before any work
+    r = CliRunner().invoke(app, ["evaluate", "--method", "lpd_only", "--corpus", str(corpus), "--split", "all",
+                                 "--output", str(tmp_path / "y.json"), "--isp", "none", "--repeats", "1",
+                                 "--no-perceptual"])
+    assert r.exit_code == 0, r.output
+    d = _strict_load(tmp_path / "y.json")
+    assert "psnr_srgb" not in d["aggregate"] and "isp" not in d["options"]
 
 
 def test_method_editing_its_input_cannot_change_the_reference():
