@@ -150,15 +150,9 @@ def _load(path: Path, kind: str, folder: Path) -> list[tuple[str, np.ndarray, np
     for g in loaded.dump(concatenate=False):
         mat = getattr(getattr(g.visual, "material", None), "name", None) or g.metadata.get("name") or "default"
         out.setdefault(str(mat), []).append((np.asarray(g.vertices, dtype=np.float64), np.asarray(g.faces)))
-    res = []
-    for mat, parts in sorted(out.items()):
-        Vs, Fs, n0 = [], [], 0
-        for V, F in parts:
-            Vs.append(V)
-            Fs.append(F + n0)
-            n0 += len(V)
-        res.append((mat, np.vstack(Vs), np.vstack(Fs)))
-    return res
+    from .mitsuba_scene import merge_meshes  # noqa: PLC0415
+
+    return [(mat, *merge_meshes(parts)) for mat, parts in sorted(out.items())]
 
 
 def _lamp_tags(entry: dict, folder: Path, field: str) -> dict:

@@ -206,15 +206,17 @@ def _object_meshes(obj: dict, offset: np.ndarray, meshes: dict | None = None) ->
     by_mat: dict = {}
     for part in obj["parts"]:
         by_mat.setdefault(part["material"], []).append(part_mesh(part, offset, meshes))
-    out = []
-    for mat, meshes in sorted(by_mat.items()):
-        Vs, Fs, base = [], [], 0
-        for V, F in meshes:
-            Vs.append(V)
-            Fs.append(F + base)
-            base += len(V)
-        out.append((mat, np.vstack(Vs), np.vstack(Fs)))
-    return out
+    return [(mat, *merge_meshes(meshes)) for mat, meshes in sorted(by_mat.items())]
+
+
+def merge_meshes(meshes) -> tuple[np.ndarray, np.ndarray]:
+    """One mesh (V (n, 3), F (m, 3)) of several ``[(V_i, F_i), ...]``: vertices stacked, faces renumbered."""
+    Vs, Fs, base = [], [], 0
+    for V, F in meshes:
+        Vs.append(V)
+        Fs.append(F + base)
+        base += len(V)
+    return np.vstack(Vs), np.vstack(Fs)
 
 
 def _mesh(mi, name: str, V: np.ndarray, F: np.ndarray, bsdf, emitter=None):
