@@ -186,6 +186,9 @@ class ResidentScenes:
         try:
             return self._scenes[scene_id]
         except KeyError:
+            if self.program is not None and self.program.dtype != torch.float32:
+                raise KeyError(f"scene {scene_id!r}: float16 layers (scaled per scene) are read only by the batched "
+                               "program (DeviceBatches), not per scene") from None
             raise KeyError(f"scene {scene_id!r} is not resident on {self.device}") from None
 
 
