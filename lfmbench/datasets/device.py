@@ -1,24 +1,26 @@
-"""Captures from a corpus resident on the training device (issue 28, first part): the projected layers of a
-split's scenes are loaded onto the device once, and every batch is cut, composed and simulated there.
+"""Captures from a corpus resident on the training device (issue 28): the projected layers of a split's scenes are
+loaded onto the device once, and every batch is cut, drawn, composed and simulated there.
 
 The per-sample DataLoader path builds each sample's pieces in CPU workers (4 MiB of crops and gathered rates per
 3-frame 256 x 256 sample) and copies them to the device. Here (:class:`DeviceBatches`):
 
-1. :class:`ResidentScenes` holds, per scene, the static rates (Fs, 2, H, W), the flickering groups stored without
-   bins, the per-light entries of every frame (2, K, N) (:class:`lfmbench.datasets.pieces._SceneEntries`), the
-   full-frame ``light_index`` and ``depth``, all on the device (float32), within a stated memory budget: a split that
-   does not fit raises :class:`ResidentMemoryError` before anything is copied.
-2. Per sample, the host makes only the draws (``LFMCaptureDataset.draws``: functions of (seed, epoch, index)) and
-   the small tables of :func:`lfmbench.datasets.pieces.capture_pieces` (slots, entry positions); the crops and the
-   gathers of the rates run on the device, from the resident layers, by the same function and rules.
+1. :class:`ResidentScenes` checks the split against a memory budget (:class:`ResidentMemoryError` before anything is
+   copied) and packs it (:class:`SplitProgram`): static rates (nS, Fs, 2, H, W), ``light_index``, ``depth`` and
+   every lamp pixel entry of every frame in one entry-major table sorted by tile, float32 or float16 (scaled per
+   scene by a power of two). Splits that cannot be packed (scenes of several sizes, groups stored without bins,
+   lights with their own timing) keep per-scene layers and take :func:`lfmbench.datasets.pieces.capture_pieces`
+   sample by sample. ``chunk_scenes`` streams a split that does not fit.
+2. A batch is one program of tensor operations (:meth:`SplitProgram.pieces`): the draws of every sample as tensors
+   of counter uniforms of (seed, epoch, index) (:mod:`lfmbench.datasets.counter_draws`: the numbers the per-sample
+   path draws with ``noise_streams="counter"``), slots for every lamp of every frame with a visibility mask, the
+   crop's entries as runs of tiles, one gather per layer, ``meta`` as device tensors; no Python per sample and no
+   host synchronisation.
 3. The batch is composed and simulated on the device by :func:`lfmbench.datasets.batched.simulate_batch` with
-   counter-based noise (``noise_streams="counter"``: each sample's noise from its noise seed alone, no generator
-   object per sample; :mod:`lfmbench.sensor.counter_noise`), the numbers the per-sample path gives with
-   ``LFMCaptureDataset(..., noise_streams="counter")``.
+   counter-based noise (:mod:`lfmbench.sensor.counter_noise`).
 
-Memory: a scene holds 4 bytes x (2 + 2) x Fs x H x W of static rates, light index (int16) and depth, plus 8 bytes x K
-x (pixels inside its lamps' boxes) per frame; :meth:`ResidentScenes.estimate` gives the bytes of a split before
-anything is loaded to the device (docs/datasets.md, "Corpus on the device": scenes per GB at 640x360 and 1920x1080).
+Memory: per pixel and frame 4 (or 2) bytes x 2 of static rates, 2 of light index, 4 of depth, plus (8 x K + 12)
+bytes (float16: 4 x K + 12) per pixel inside a lamp's box; :meth:`ResidentScenes.estimate` gives the bytes of a split
+before anything is loaded to the device (docs/datasets.md, "Corpus on the device").
 """
 from __future__ import annotations
 
