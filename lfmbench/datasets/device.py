@@ -118,6 +118,8 @@ class ResidentScenes:
                 f"{int(budget_bytes // per)} scenes): pass budget_bytes, stream the split in chunks "
                 f"(DeviceBatches(..., chunk_scenes={max(1, int(budget_bytes // per))})), store float16 layers "
                 f"(dtype=torch.float16), or train from the DataLoader path (data='loader')")
+        #: the scenes held
+        self.scene_ids = sids
         self.bytes = 0
         self._scenes: dict[str, ResidentScene] = {}
         #: the batched program over the packed layers (None: the split cannot be packed; per-sample pieces)
@@ -236,8 +238,8 @@ class DeviceBatches:
         self._sids = list(dict.fromkeys(ds.scene_ids))
         if chunk_scenes is not None and len(self._sids) != len(ds.scene_ids):
             raise ValueError(f"ds: the split lists a scene twice ({len(ds.scene_ids)} ids, {len(self._sids)} scenes)")
-        # the whole split, or (chunks) the first chunk: its budget is checked now
-        first = None if chunk_scenes is None else self._sids[:chunk_scenes]
+        # the whole split, or (chunks) the first chunk of epoch 0, which iterating that epoch then starts from
+        first = None if chunk_scenes is None else [self._sids[p] for p in self._chunks()[0]]
         self.resident = ResidentScenes(ds, self.device, budget_bytes, dtype, first)
 
     def set_epoch(self, epoch: int) -> None:
@@ -281,8 +283,7 @@ class DeviceBatches:
         sps = self.ds.samples_per_scene
         for c, chunk in enumerate(self._chunks()):
             sids = [self._sids[p] for p in chunk]
-            if set(self.resident.program.sids if self.resident.program is not None else self.resident._scenes) \
-                    != set(sids):
+            if set(self.resident.scene_ids) != set(sids):
                 self.resident = None            # free the previous chunk before loading the next
                 self.resident = ResidentScenes(self.ds, self.device, self.budget_bytes, self.dtype, sids)
             idx = [p * sps + s for p in chunk for s in range(sps)]

@@ -270,6 +270,10 @@ def test_a_split_streamed_in_chunks_serves_every_sample_once_with_the_same_numbe
     assert sorted(seen) == list(range(len(ds)))
     with pytest.raises(ValueError, match="chunk_scenes"):
         DeviceBatches(ds, 2, "cpu", chunk_scenes=0)
+    fresh = DeviceBatches(LFMCaptureDataset(long_corpus, **kw), batch_size=2, device="cpu", seed=4, chunk_scenes=1)
+    held = fresh.resident                    # epoch 0 starts from the chunk loaded (and budget-checked) at init
+    next(iter(fresh))
+    assert fresh.resident is held
 
 
 def test_train_on_float16_layers_streamed_in_chunks(tmp_path, corpus):
