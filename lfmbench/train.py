@@ -290,9 +290,9 @@ def train(method: str | Trainable, corpus: str | os.PathLike, out: str | os.Path
 
     arch = load_preset(t.sensor).architecture
     if spec.name not in methods_for(arch):
+        fits = [m for m in methods_for(arch) if m in LEARNED]
         raise ValueError(f"train.sensor: {spec.name} reads split-pixel captures, and sensor {t.sensor!r} is a "
-                         f"{arch} sensor; its baselines are {methods_for(arch)} (learned fusion for other "
-                         "architectures is not built yet)")
+                         f"{arch} sensor; its baselines are {methods_for(arch)} (trainable: {', '.join(fits)})")
     dev = torch.device(device)
     out = Path(out)
     torch.manual_seed(t.seed)

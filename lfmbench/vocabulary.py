@@ -12,7 +12,8 @@ from types import MappingProxyType
 from typing import Mapping
 
 __all__ = ["GROUPS", "LIGHT_GROUPS", "LIGHT_KINDS", "VEHICLE_KINDS", "OBJECT_KINDS", "WEATHERS", "SPECTRUM_MODELS",
-           "PHOTODIODES", "CAPTURES", "CLASSIC_BASELINES", "PLAN_BASELINES", "LEARNED_BASELINES"]
+           "PHOTODIODES", "CAPTURES", "CLASSIC_BASELINES", "PLAN_BASELINES", "LEARNED_BASELINES",
+           "PLAN_LEARNED_BASELINES"]
 
 #: Light groups (upstream ISET-LFM names + traffic signals); each group is one radiance layer of a corpus.
 GROUPS: tuple[str, ...] = ("headlights", "streetlights", "otherlights", "skymap", "signals")
@@ -64,3 +65,6 @@ LEARNED_BASELINES: Mapping[str, str] = MappingProxyType({
     "learned": "lfmbench.baselines.learned",
     "unet": "lfmbench.baselines.unet",
 })
+#: The learned baselines whose network takes any capture plan (trained per sensor: ``lfmbench train --method NAME
+#: --sensor PRESET``); the others read the split pixel's captures only.
+PLAN_LEARNED_BASELINES: tuple[str, ...] = ("unet",)

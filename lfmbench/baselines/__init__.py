@@ -12,7 +12,7 @@ from collections.abc import Callable
 
 from lfmbench.baselines import classic, plan_merge
 from lfmbench.baselines.checkpoint import lazy_method
-from lfmbench.vocabulary import CLASSIC_BASELINES, LEARNED_BASELINES, PLAN_BASELINES
+from lfmbench.vocabulary import CLASSIC_BASELINES, LEARNED_BASELINES, PLAN_BASELINES, PLAN_LEARNED_BASELINES
 
 Method = Callable[[dict], "object"]
 
@@ -35,14 +35,16 @@ globals().update({name: REGISTRY[name] for name in (*CLASSIC_BASELINES, *PLAN_BA
 
 def methods_for(architecture: str) -> list[str]:
     """The registered baselines that apply to a sensor architecture, in leaderboard order: the split-pixel ones
-    (rule-based and learned) for ``split_pixel``, the capture-plan merges (:data:`PLAN_BASELINES`) otherwise."""
+    (rule-based and learned) for ``split_pixel``, otherwise the capture-plan merges (:data:`PLAN_BASELINES`) and
+    the learned baselines trained per sensor (:data:`PLAN_LEARNED_BASELINES`: the U-Net, whose checkpoint must
+    be one trained for that sensor)."""
     from lfmbench.sensor.plan import ARCHITECTURES  # noqa: PLC0415
 
     if architecture not in ARCHITECTURES:
         raise ValueError(f"architecture must be one of {list(ARCHITECTURES)}, got {architecture!r:.40}")
     if architecture == "split_pixel":
         return [*CLASSIC_BASELINES, *LEARNED]
-    return list(PLAN_BASELINES)
+    return [*PLAN_BASELINES, *PLAN_LEARNED_BASELINES]
 
 
 class MethodNotFoundError(ValueError):

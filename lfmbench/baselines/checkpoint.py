@@ -81,8 +81,9 @@ class CheckpointedModel:
     def run(self, batch: dict) -> torch.Tensor:
         """The module on ``batch`` (on the batch's device, no gradients): (B, F, 1, H, W) e-."""
         model = self.model()
+        dev = next((v.device for k, v in batch.items() if k.endswith("_e") and isinstance(v, torch.Tensor)), None)
         with torch.no_grad():
-            return model.to(batch["spd_e"].device)(batch)
+            return (model if dev is None else model.to(dev))(batch)
 
 
 def checkpointed_method(name: str, env: str, default: str | os.PathLike,

@@ -16,6 +16,17 @@ so an untrained model is a fixed blend leaning on the first candidate (weight 0.
 ``init_bias = 2``); the output stays non-negative and within a factor ``exp(gain_range)`` of the candidates'
 range. The per-pixel gain, predicted from a neighbourhood, also lets the network denoise.
 
+Other capture plans (LOFIC, staggered, chopped, single exposure; :data:`lfmbench.sensor.plan.ARCHITECTURES`): the
+network is built for one sensor's plan (:func:`build_for_sensor`, what ``lfmbench train --method unet --sensor
+NAME`` does). Its input per frame is the plan's captures in plan order, each input-referred to the plan's
+reference exposure (``<capture>_e``, the ``gt`` units: the normalisation of every plan baseline,
+:func:`lfmbench.baselines.plan_merge.plan_captures`), in the same log domain, plus one saturation flag per capture,
+with the same temporal context, and the log of the frame mean of ``exposure_select`` (channel count
+``2 N (2 context_frames + 1) + 1`` for N captures; no exposure-ratio plane: one network per plan). Its candidates
+are :func:`plan_candidates`: E = ``exposure_select``, each capture (when the plan has more than one) and T = the
+frame mean of E (``model.candidates`` names the split pixel's and is not used). The checkpoint records the sensor,
+its architecture and captures; a batch of another sensor is refused (:class:`SensorMismatchError`, one line).
+
 Loss (:func:`led_weighted_loss`): L1 of the mu-law images normalised by the GT peak (the PSNR-mu convention),
 plus ``led_weight`` x the same L1 averaged over LED pixels only (``light_index >= 0``), plus ``region_weight`` x
 the mean ``|log1p(P_j / s) - log1p(G_j / s)|`` of the region means P_j, G_j of every light and frame (what the
@@ -41,7 +52,8 @@ import torch.nn.functional as F
 from lfmbench.limits import brief
 from lfmbench.baselines.checkpoint import (CheckpointError, build_from_state, checkpointed_method,
                                            read_trained_weights)
-from lfmbench.baselines.classic import _captures, exposures_s, saturated_fusion
+from lfmbench.baselines.classic import _CAPTURES as _CAPTURE_KEYS, _captures, exposures_s, saturated_fusion
+from lfmbench.baselines.plan_merge import exposure_select, plan_captures
 from lfmbench.baselines.trainable import ConfigError, Trainable, TrainConfig, read_sections, read_yaml_config
 from lfmbench.fileio import atomic_torch_save
 from lfmbench.metrics.flicker import region_series
@@ -56,13 +68,26 @@ DEFAULT_CHECKPOINT = Path("runs") / "unet_fusion.pt"
 CHECKPOINT_ENV = "LFMBENCH_UNET_CHECKPOINT"
 CHECKPOINT_FORMAT = "lfmbench-unet-fusion"
 FORMAT_VERSION = 1
-#: Blend candidates the config may list (``model.candidates``).
+#: Blend candidates the config may list (``model.candidates``; the split pixel's).
 CANDIDATES = {"H": "lpd_only: HCG where unsaturated, else LCG", "L": "saturated_exposure_corrected",
               "S": "spd_only (spd_e)", "T": "frame mean of L"}
+#: Blend candidates of a network for another capture plan (:func:`plan_candidates`), besides the captures.
+PLAN_CANDIDATES = {"E": "exposure_select (the plan's standard merge)", "T": "frame mean of E"}
+
+
+def plan_candidates(captures: list[str] | tuple[str, ...]) -> list[str]:
+    """Candidate names of a plan network: ``E``, then every capture of the plan in plan order (only when there are
+    several: with one capture E is that capture), then ``T`` (:data:`PLAN_CANDIDATES`)."""
+    return ["E", *captures, "T"] if len(captures) > 1 else ["E", "T"]
 
 
 class CheckpointNotFoundError(FileNotFoundError):
     """No trained U-Net weights."""
+
+
+class SensorMismatchError(CheckpointError):
+    """A U-Net built (trained) for one sensor was given the samples of another sensor (other captures, or another
+    preset of the same architecture): its weights do not apply. Bad input, one line."""
 
 
 # --------------------------------------------------------------------------------------------- configuration
@@ -162,21 +187,38 @@ class UNet(nn.Module):
 
 
 class UNetFusion(nn.Module):
-    """Fusion network: features of the split-pixel captures -> blend weights and gain (see the module doc).
+    """Fusion network: features of a sensor's captures -> blend weights and gain (see the module doc).
 
     Args:
         config: :class:`ModelConfig` (or a :class:`UNetConfig`, whose ``model`` is used).
+        captures: the capture names of the plan in plan order, for a plan other than the split pixel; None: the
+            split pixel (``lpd_hcg``, ``lpd_lcg``, ``spd``; the network of format 1, unchanged).
+        sensor, architecture: the preset the network is for (recorded in its checkpoint; a batch whose
+            ``meta["sensor"]`` names another preset is refused); None: not recorded, not checked.
 
-    Input: batch dict with ``lpd_hcg_e``, ``lpd_lcg_e``, ``spd_e`` (B, F, 1, H, W) input-referred e-,
-    ``saturated`` (B, F, 3, H, W) bool and ``meta`` exposures (s). Output: (B, F, 1, H, W) e-, dtype of ``spd_e``.
+    Input: batch dict. Split pixel: ``lpd_hcg_e``, ``lpd_lcg_e``, ``spd_e`` (B, F, 1, H, W) input-referred e-,
+    ``saturated`` (B, F, 3, H, W) bool and ``meta`` exposures (s). Another plan: ``<capture>_e`` (B, F, 1, H, W) e-
+    for its N captures in plan order and ``saturated`` (B, F, N, H, W). Output: (B, F, 1, H, W) e-, dtype of the
+    captures.
     """
 
-    def __init__(self, config: ModelConfig | UNetConfig | None = None):
+    def __init__(self, config: ModelConfig | UNetConfig | None = None, captures: list[str] | None = None,
+                 sensor: str | None = None, architecture: str | None = None):
         super().__init__()
         cfg = config.model if isinstance(config, UNetConfig) else (config or ModelConfig())
         self.config = cfg
-        self.in_channels = 6 * (2 * cfg.context_frames + 1) + 2
-        self.n_candidates = k = len(cfg.candidates)
+        self.captures = None if captures is None else list(captures)
+        self.sensor, self.architecture = sensor, architecture
+        self.source: str | None = None      # the checkpoint it was loaded from (messages)
+        if self.captures is None:
+            self.candidate_names = list(cfg.candidates)
+            self.in_channels = 6 * (2 * cfg.context_frames + 1) + 2
+        else:
+            if not self.captures:
+                raise ValueError("captures: a plan network needs at least one capture")
+            self.candidate_names = plan_candidates(self.captures)
+            self.in_channels = 2 * len(self.captures) * (2 * cfg.context_frames + 1) + 1
+        self.n_candidates = k = len(self.candidate_names)
         self.unet = UNet(4 * self.in_channels, 4 * (k + 1), cfg.base_channels, cfg.depth)
         with torch.no_grad():  # start as a fixed blend leaning on L, gain 1
             self.unet.head.weight.zero_()
@@ -188,9 +230,46 @@ class UNetFusion(nn.Module):
         c = self.config
         return torch.log1p(x.clamp_min(0.0) / c.feature_scale_e) / math.log1p(c.feature_max_e / c.feature_scale_e)
 
+    def _context(self, per_frame: torch.Tensor) -> list[torch.Tensor]:
+        """``per_frame`` (B, F, C, H, W) of each frame's ``context_frames`` neighbours on each side (edges
+        repeated), in order -context .. +context."""
+        nf = per_frame.shape[1]
+        ctx = self.config.context_frames
+        at = torch.arange(nf, device=per_frame.device)
+        return [per_frame[:, (at + d).clamp(0, nf - 1)] for d in range(-ctx, ctx + 1)]
+
+    def check_sensor(self, sensor: str | None, captures: list[str] | tuple[str, ...]) -> None:
+        """Refuse the samples of another sensor: :class:`SensorMismatchError` (one line naming the checkpoint, the
+        sensor it was trained for and the one given) when ``captures`` (plan order) are not this network's, or
+        ``sensor`` is not the preset it was built for (both known)."""
+        want = [c[:-2] for c in _CAPTURE_KEYS] if self.captures is None else self.captures
+        if list(captures) == want and (sensor is None or self.sensor is None or sensor == self.sensor):
+            return
+        src = f"U-Net checkpoint {self.source}" if self.source else "this U-Net"
+        mine = (f"sensor {self.sensor!r} ({self.architecture})" if self.sensor else
+                ("a split-pixel sensor" if self.captures is None else "a sensor"))
+        other = f"sensor {sensor!r}" if sensor else "a sensor"
+        raise SensorMismatchError(
+            f"{src} was trained for {mine}, captures {', '.join(want)}; the data is from {other}, captures "
+            f"{', '.join(captures) or '(none)'}: evaluate it with --sensor {self.sensor or 'ovt'}, or train one for "
+            f"this sensor with `lfmbench train --method unet --sensor {sensor or 'NAME'}`")
+
+    def _check_batch(self, batch: dict) -> None:
+        meta = batch.get("meta")
+        sensor = meta.get("sensor") if isinstance(meta, dict) else None
+        if isinstance(sensor, (list, tuple)):
+            sensor = sensor[0] if sensor and all(s == sensor[0] for s in sensor) else None
+        have = [k[:-2] for k in batch if k.endswith("_e")]
+        if self.captures is None and all(k in batch for k in _CAPTURE_KEYS):
+            have = [c[:-2] for c in _CAPTURE_KEYS]   # split pixel: the three reads (other keys may ride along)
+        self.check_sensor(sensor if isinstance(sensor, str) else None, have)
+
     def candidates(self, batch: dict) -> tuple[torch.Tensor, torch.Tensor]:
-        """Blend candidates (B, F, K, H, W) e- (``config.candidates`` in order) and input features
+        """Blend candidates (B, F, K, H, W) e- (``candidate_names`` in order) and input features
         (B, F, C_in, H, W) float32."""
+        self._check_batch(batch)
+        if self.captures is not None:
+            return self._plan_candidates(batch)
         hcg, lcg, spd, sat = _captures(batch)
         lo = saturated_fusion(hcg, lcg, spd, sat)
         t = lo.mean(dim=1, keepdim=True).expand_as(lo)
@@ -198,13 +277,22 @@ class UNetFusion(nn.Module):
         cand = torch.cat([pool[c] for c in self.config.candidates], dim=2)
         per_frame = torch.cat([self._log(hcg), self._log(lcg), self._log(spd), sat.to(hcg.dtype)], dim=2).float()
         nf = per_frame.shape[1]
-        ctx = self.config.context_frames
-        at = torch.arange(nf, device=per_frame.device)
-        frames = [per_frame[:, (at + d).clamp(0, nf - 1)] for d in range(-ctx, ctx + 1)]
+        frames = self._context(per_frame)
         ts, tl = exposures_s(batch)
         ratio = (torch.log(tl / ts) / math.log(100.0)).float().to(per_frame.device)
         ratio = ratio.reshape(-1, 1, 1, 1, 1).expand(per_frame.shape[0], nf, 1, *per_frame.shape[-2:])
         feats = torch.cat(frames + [self._log(t).float(), ratio], dim=2)
+        return cand, feats
+
+    def _plan_candidates(self, batch: dict) -> tuple[torch.Tensor, torch.Tensor]:
+        """:meth:`candidates` of a plan network: E, the captures (several), T; features of the captures."""
+        e = exposure_select(batch)                  # checks the captures' and flags' shapes
+        xs = [batch[f"{c}_e"] for c in plan_captures(batch)]
+        t = e.mean(dim=1, keepdim=True).expand_as(e)
+        cand = torch.cat([e, *(xs if len(xs) > 1 else []), t], dim=2)
+        sat = batch["saturated"].to(e.dtype)
+        per_frame = torch.cat([*(self._log(x) for x in xs), sat], dim=2).float()
+        feats = torch.cat(self._context(per_frame) + [self._log(t).float()], dim=2)
         return cand, feats
 
     def forward(self, batch: dict) -> torch.Tensor:
@@ -267,11 +355,14 @@ def led_weighted_loss(pred: torch.Tensor, gt: torch.Tensor, light_index: torch.T
 # ----------------------------------------------------------------------------------------------- checkpoints
 def save_checkpoint(model: UNetFusion, path: str | os.PathLike, config: UNetConfig | None = None,
                     extra: dict | None = None) -> Path:
-    """Write ``{format, format_version, model_config, config, state_dict, **extra}`` atomically (temp + rename)."""
+    """Write ``{format, format_version, model_config, config, state_dict, sensor, architecture, captures,
+    **extra}`` atomically (temp + rename); ``captures`` None: the split-pixel network (``sensor`` and
+    ``architecture`` None: not recorded, as in checkpoints written before they were)."""
     return atomic_torch_save({"format": CHECKPOINT_FORMAT, "format_version": FORMAT_VERSION,
                               "model_config": asdict(model.config),
                               "config": config.to_dict() if config is not None else None,
-                              "state_dict": model.state_dict(), **(extra or {})}, path)
+                              "state_dict": model.state_dict(), "sensor": model.sensor,
+                              "architecture": model.architecture, "captures": model.captures, **(extra or {})}, path)
 
 
 def read_checkpoint(path: str | os.PathLike, map_location: str | torch.device = "cpu") -> dict:
@@ -287,9 +378,27 @@ def read_checkpoint(path: str | os.PathLike, map_location: str | torch.device = 
 def load_checkpoint(path: str | os.PathLike, map_location: str | torch.device = "cpu") -> UNetFusion:
     """Build a :class:`UNetFusion` (eval mode) from a checkpoint written by :func:`save_checkpoint`."""
     ck = read_checkpoint(path, map_location)
-    return build_from_state(
-        path, lambda: UNetFusion(config_from_dict({"model": ck["model_config"]}, f"checkpoint {path}").model),
+    caps, sensor, arch = ck.get("captures"), ck.get("sensor"), ck.get("architecture")
+    if (caps is not None and not (isinstance(caps, list) and caps and all(isinstance(c, str) for c in caps))) \
+            or not all(v is None or isinstance(v, str) for v in (sensor, arch)):
+        raise CheckpointError(f"checkpoint {path}: 'captures' must be a list of capture names and 'sensor', "
+                              f"'architecture' names (got {brief(caps)}, {brief(sensor)}, {brief(arch)})")
+    model = build_from_state(
+        path, lambda: UNetFusion(config_from_dict({"model": ck["model_config"]}, f"checkpoint {path}").model,
+                                 caps, sensor, arch),
         ck.get("state_dict"), "match its model config")
+    model.source = str(path)
+    return model
+
+
+def build_for_sensor(cfg: UNetConfig) -> UNetFusion:
+    """The network for ``cfg.train.sensor`` (a preset name or YAML): the split-pixel network for a split pixel,
+    else a plan network over that preset's captures; both record the preset's name and architecture."""
+    from lfmbench.sensor import load_preset  # noqa: PLC0415
+
+    preset = load_preset(cfg.train.sensor)
+    caps = None if preset.architecture == "split_pixel" else list(preset.captures)
+    return UNetFusion(cfg.model, caps, preset.name, preset.architecture)
 
 
 def _loss(model: UNetFusion, batch: dict, cfg: UNetConfig) -> tuple[torch.Tensor, dict]:
@@ -307,7 +416,7 @@ checkpoint_path = unet.checkpoint_path
 
 #: How ``lfmbench train --method unet`` trains it (:mod:`lfmbench.train`).
 TRAINING = Trainable(name="unet", default_config=DEFAULT_CONFIG, load_config=load_config,
-                     config_from_dict=config_from_dict, build_model=UNetFusion, loss=_loss,
+                     config_from_dict=config_from_dict, build_model=build_for_sensor, loss=_loss,
                      save_checkpoint=save_checkpoint, read_checkpoint=read_checkpoint,
                      default_checkpoint=DEFAULT_CHECKPOINT, checkpoint_env=CHECKPOINT_ENV,
                      outputs=("input_referred", "saturated", "gt", "light_index"))

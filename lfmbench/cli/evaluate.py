@@ -89,6 +89,12 @@ def evaluate_cmd(
     if method in REGISTRY and method not in methods_for(ds.architecture):
         fail(f"--method {method} does not apply to --sensor {sensor} ({ds.architecture}); its baselines: "
              f"{', '.join(methods_for(ds.architecture))}")
+    check = _checkpoint_sensor_check(fn)
+    if check is not None:  # a network trained for another sensor is refused before any work
+        try:
+            check(ds.sensor_name, list(ds.preset.captures))
+        except CheckpointError as exc:
+            fail(str(exc))
     n = len(ds) if max_scenes is None else min(len(ds), max_scenes)
     loader = DataLoader(ds, batch_size=1, shuffle=False, num_workers=0, collate_fn=collate_samples)
     try:
@@ -123,6 +129,18 @@ def evaluate_cmd(
         fail(f"{len(bad)} of {len(res['scenes'])} scenes failed (first: scene {bad[0].get('scene_id')}: "
              f"{bad[0].get('error', bad[0].get('status'))}); see {out}", 1)
 
+
+
+def _checkpoint_sensor_check(fn):
+    """``check_sensor(sensor, captures)`` of a checkpoint-backed method's network (the U-Net), or None: no such
+    method, or its weights are missing or unreadable (the evaluation reports that as before)."""
+    module = getattr(fn, "torch_module", None)
+    if module is None:
+        return None
+    try:
+        return getattr(module(), "check_sensor", None)
+    except (OSError, ValueError):
+        return None
 
 
 def leaderboard_cmd(

@@ -25,6 +25,10 @@ def train_cmd(
     workers: int = typer.Option(None, help="DataLoader workers (overrides train.workers)"),
     crop: int = typer.Option(None, help="square training crop in px, even (overrides train.crop)"),
     batch_size: int = typer.Option(None, "--batch-size", help="batch size (overrides train.batch_size)"),
+    sensor: str = typer.Option(None, "--sensor",
+                               help="sensor preset (ovt, imx490, lofic, staggered, chopped, single) or a preset YAML "
+                                    "to train for (overrides train.sensor); the U-Net takes any capture plan, "
+                                    "the checkpoint records the sensor and serves only it"),
     threads: int = typer.Option(None, help="torch CPU threads (default: torch's choice)"),
     resume: bool = typer.Option(True, help="continue from --out when it holds a checkpoint of this config"),
     data: str = typer.Option("auto", help="where batches come from: loader (DataLoader workers on the CPU), "
@@ -37,7 +41,8 @@ def train_cmd(
 ) -> None:
     """Train a learned fusion baseline; checkpoint written atomically after every epoch (resumable).
 
-    Evaluate it with LFMBENCH_<METHOD>_CHECKPOINT=OUT lfmbench evaluate --method <method> --corpus DIR.
+    Evaluate it with LFMBENCH_<METHOD>_CHECKPOINT=OUT lfmbench evaluate --method <method> --corpus DIR (with the
+    same --sensor it was trained for).
     """
     from lfmbench.baselines.trainable import ConfigError, count_parameters  # noqa: PLC0415
     from lfmbench.datasets.loading import EmptyDataError  # noqa: PLC0415
@@ -64,7 +69,7 @@ def train_cmd(
         fail(f"--out {out}: cannot write the checkpoint there ({why})")
     try:
         model, hist = train(method, corpus, out, cfg, device=device, epochs=epochs, workers=workers, resume=resume,
-                            crop=crop, batch_size=batch_size, data=data, resident_dtype=resident_dtype,
+                            crop=crop, batch_size=batch_size, sensor=sensor, data=data, resident_dtype=resident_dtype,
                             chunk_scenes=chunk_scenes)
     except (FileNotFoundError, EmptyDataError, ValueError) as exc:
         fail(str(exc))

@@ -290,11 +290,12 @@ def test_train_on_float16_layers_streamed_in_chunks(tmp_path, corpus):
 
 
 def test_training_a_split_pixel_network_on_another_architecture_is_refused_at_once(tmp_path, corpus):
-    """The learned baselines read split-pixel captures: train.sensor of another architecture is refused before
-    any work, naming the sensor and its baselines."""
+    """The small learned baseline reads split-pixel captures: train.sensor of another architecture is refused
+    before any work, naming the sensor, its baselines and what trains for it (the U-Net takes any plan)."""
     from lfmbench.train import train
 
-    with pytest.raises(ValueError, match=r"train.sensor: unet .* 'lofic' is a lofic sensor; its baselines"):
-        train("unet", corpus, tmp_path / "u.pt", sensor="lofic", epochs=1, crop=16, batch_size=2, split="all",
+    with pytest.raises(ValueError, match=r"train.sensor: learned .* 'lofic' is a lofic sensor; its baselines .*"
+                                         r"\(trainable: unet\)"):
+        train("learned", corpus, tmp_path / "u.pt", sensor="lofic", epochs=1, crop=16, batch_size=2, split="all",
               progress=False, log=None)
     assert not (tmp_path / "u.pt").exists()
