@@ -15,7 +15,8 @@ import importlib
 #: :mod:`lfmbench.cli.evaluate` to register the commands does not import torch and the dataset.
 _WHERE = {
     **dict.fromkeys(["EmptyDataError", "collate_samples", "make_dataset"], "lfmbench.datasets.loading"),
-    **dict.fromkeys(["benchmark", "safe_name", "write_leaderboard"], "lfmbench.evaluation.benchmark"),
+    **dict.fromkeys(["benchmark", "benchmark_sensors", "safe_name", "write_leaderboard"],
+                    "lfmbench.evaluation.benchmark"),
     **dict.fromkeys(["count_params_macs", "method_module", "time_method"], "lfmbench.evaluation.cost"),
     **dict.fromkeys(["IncomparableRunsError", "check_comparable", "comparability_problems", "incomplete_runs",
                      "leaderboard_json", "leaderboard_markdown", "leaderboard_rows", "load_runs",

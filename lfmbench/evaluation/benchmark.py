@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 import re
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from pathlib import Path
 
 from lfmbench.fileio import atomic_write_text
@@ -99,5 +99,70 @@ def benchmark(corpus: str | Path, methods: Iterable[str] | None = None, runs_dir
     rows = leaderboard_rows(runs, sort_by)
     write_leaderboard(rows, runs, sort_by, runs_dir / "leaderboard.md", runs_dir / "leaderboard.png",
                       runs_dir / "leaderboard.json")
+    print_leaderboard(rows, sort_by, note=f"all columns in {runs_dir / 'leaderboard.md'}")
+    return rows
+
+
+def benchmark_sensors(corpus: str | Path, sensors: Mapping[str, Iterable[str] | None], runs_dir: str | Path = "runs",
+                      *, checkpoints: Mapping[str, Mapping[str, str | Path]] | None = None,
+                      sort_by: str | None = None, conditions_file: str | Path | None = None,
+                      progress: bool = True, **kw) -> list[dict]:
+    """The cross-sensor benchmark (``lfmbench leaderboard --cross-sensor`` as one call): :func:`benchmark` of every
+    sensor (its methods share each simulated sample) into ``runs_dir/<sensor>/``, then one leaderboard of all
+    their runs, sensors mixed on purpose, in ``runs_dir/leaderboard.{md,json,png}``.
+
+    Args:
+        sensors: preset name (or YAML) -> its methods (None: every registered baseline of its architecture,
+            :func:`lfmbench.baselines.methods_for`).
+        checkpoints: preset -> {learned method: checkpoint file} for that sensor's runs (a U-Net is trained per
+            sensor; each file's environment variable is set for that sensor only, then restored).
+        kw: the other arguments of :func:`benchmark` (split, seed, samples_per_scene, perceptual, repeats, isp ...),
+            the same for every sensor.
+
+    Returns:
+        the ranked rows of the cross-sensor leaderboard.
+    """
+    import importlib
+    import os
+
+    from lfmbench.baselines import LEARNED, methods_for
+    from lfmbench.evaluation.leaderboard import check_comparable, leaderboard_rows, load_runs, print_leaderboard
+    from lfmbench.sensor import load_preset
+
+    runs_dir = Path(runs_dir)
+    checkpoints = checkpoints or {}
+    unknown = sorted(set(checkpoints) - set(sensors))
+    if unknown:
+        raise ValueError(f"checkpoints: sensors {unknown} are not among the sensors {list(sensors)}")
+    envs: dict[str, dict[str, str]] = {}
+    for sensor, given in checkpoints.items():           # every argument checked before any work
+        for method, path in given.items():
+            if method not in LEARNED:
+                raise ValueError(f"checkpoints[{sensor!r}]: {method!r} is not a learned baseline ({', '.join(LEARNED)})")
+            if not Path(path).is_file():
+                raise ValueError(f"checkpoints[{sensor!r}][{method!r}]: no such file {path}")
+            env = importlib.import_module(LEARNED[method]).TRAINING.checkpoint_env
+            envs.setdefault(sensor, {})[env] = str(path)
+    paths: list[Path] = []
+    for sensor, methods in sensors.items():
+        env = envs.get(sensor, {})
+        before = {k: os.environ.get(k) for k in env}
+        os.environ.update(env)
+        try:
+            names = list(methods) if methods is not None else methods_for(load_preset(sensor).architecture)
+            sub = runs_dir / safe_name(sensor)
+            benchmark(corpus, names, sub, sensor=sensor, sort_by=sort_by, progress=progress, **kw)
+        finally:
+            for k, v in before.items():
+                if v is None:
+                    os.environ.pop(k, None)
+                else:
+                    os.environ[k] = v
+        paths += [sub / f"{safe_name(m)}.json" for m in names]
+    runs = load_runs(paths)
+    check_comparable(runs, cross_sensor=True)
+    rows = leaderboard_rows(runs, sort_by, conditions_file=conditions_file)
+    write_leaderboard(rows, runs, sort_by, runs_dir / "leaderboard.md", runs_dir / "leaderboard.png",
+                      runs_dir / "leaderboard.json", conditions_file)
     print_leaderboard(rows, sort_by, note=f"all columns in {runs_dir / 'leaderboard.md'}")
     return rows
