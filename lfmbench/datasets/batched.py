@@ -55,7 +55,7 @@ from lfmbench.datasets.assembly import NOISE_STREAMS, SENSOR_OUTPUTS, assemble_s
 from lfmbench.datasets.pieces import PWM_FIELDS, capture_pieces
 from lfmbench.datasets.row_gather import gather_rows
 from lfmbench.flicker import pwm_exposure
-from lfmbench.sensor.fused import map_samples
+from lfmbench.sensor.fused import PatternCrops, map_samples
 
 __all__ = ["capture_pieces", "collate_pieces", "pieces_to", "prefetch", "simulate_batch", "BatchedCaptureSimulator",
            "piece_bytes", "pwm_weights", "compose_batch", "PWM_FIELDS"]
@@ -352,7 +352,8 @@ class _FPNCache:
         """(B, 1, 1, h, w) crops of each sample's full-frame pattern (only the maps ``keys``; default all).
 
         ``uniform_hw``: the (H, W) px every sample's scene has, and ``crop_hw`` (h, w) px, when the caller knows
-        them: the crops are then one gather on the device, with no read of ``crop`` on the host."""
+        them: the crops are then a :class:`lfmbench.sensor.fused.PatternCrops` (one gather on the device when a
+        map is read, no read of ``crop`` on the host; the Triton chain reads the whole frame in place)."""
         if keys is not None and not keys:
             return {}
         if uniform_hw is not None and crop_hw is not None:
@@ -361,9 +362,9 @@ class _FPNCache:
             key = (preset.name, preset.fpn_seed, repr(preset), H, W, str(dev), dtype)
             if key not in self.maps:
                 self.maps[key] = _sensor.fixed_pattern(preset, H, W, device=dev, dtype=dtype)
-            rows = (crop[:, 0:1] + torch.arange(h, device=dev))[:, :, None]          # (B, h, 1)
-            cols = (crop[:, 1:2] + torch.arange(w, device=dev))[:, None, :]          # (B, 1, w)
-            return {k: v[rows, cols][:, None, None] for k, v in self.maps[key].items() if keys is None or k in keys}
+            # cut when read (the torch and numba chains); the Triton chain reads the whole frame at each origin
+            return PatternCrops({k: v for k, v in self.maps[key].items() if keys is None or k in keys},
+                                crop[:, :2], (h, w))
         hw = scene_hw.tolist()
         cr = crop.tolist()
         out: dict[str, list] = {}

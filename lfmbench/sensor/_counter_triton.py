@@ -20,7 +20,7 @@ import triton.language as tl
 from lfmbench.constants import POISSON_EXACT_LIMIT
 from lfmbench.counter_rng import GAMMA, MIX_MUL, STRIDE_LOG2
 
-__all__ = ["poisson", "normal"]
+__all__ = ["poisson", "normal", "collect", "readout"]
 
 _BLOCK = 256
 
@@ -70,14 +70,9 @@ def _log_factorial(k, table_ptr, n_table):
 
 
 @triton.jit
-def _poisson_kernel(mean_ptr, seed_ptr, out_ptr, table_ptr, n_table, limits_ptr, N, gamma, stride,
-                    m0, m1, max_steps, max_rounds, BLOCK: tl.constexpr):
-    b = tl.program_id(1)
-    offs = tl.program_id(0) * BLOCK + tl.arange(0, BLOCK)
-    inside = offs < N
-    mu = tl.load(mean_ptr + b.to(tl.int64) * N + offs, mask=inside, other=0.0).to(tl.float64)
-    seed = tl.load(seed_ptr + b).to(tl.uint64)
-    key = _mix(seed, m0, m1) + offs.to(tl.uint64) * stride
+def _poisson_draw(mu, key, inside, table_ptr, n_table, limits_ptr, gamma, m0, m1, max_steps, max_rounds):
+    """Poisson counts (float64) of float64 means ``mu`` from the streams ``key`` (one per pixel of the block;
+    ``inside``: the block's pixels that exist): the algorithm of :func:`lfmbench.sensor.counter_noise.poisson`."""
     gaussian_above = tl.load(limits_ptr)          # float64 (a scalar argument would be float32)
     exact_limit = tl.load(limits_ptr + 1)
     gauss = (mu >= gaussian_above) | (mu >= exact_limit)
@@ -127,7 +122,19 @@ def _poisson_kernel(mean_ptr, seed_ptr, out_ptr, table_ptr, n_table, limits_ptr,
         kr = tl.where(acc, kk, kr)
         todo = todo & (~acc)
         r += 1
-    res = tl.where(big & (~todo), kr, res)
+    return tl.where(big & (~todo), kr, res)
+
+
+@triton.jit
+def _poisson_kernel(mean_ptr, seed_ptr, out_ptr, table_ptr, n_table, limits_ptr, N, gamma, stride,
+                    m0, m1, max_steps, max_rounds, BLOCK: tl.constexpr):
+    b = tl.program_id(1)
+    offs = tl.program_id(0) * BLOCK + tl.arange(0, BLOCK)
+    inside = offs < N
+    mu = tl.load(mean_ptr + b.to(tl.int64) * N + offs, mask=inside, other=0.0).to(tl.float64)
+    seed = tl.load(seed_ptr + b).to(tl.uint64)
+    key = _mix(seed, m0, m1) + offs.to(tl.uint64) * stride
+    res = _poisson_draw(mu, key, inside, table_ptr, n_table, limits_ptr, gamma, m0, m1, max_steps, max_rounds)
     tl.store(out_ptr + b.to(tl.int64) * N + offs, res, mask=inside)
 
 
@@ -142,6 +149,75 @@ def _normal_kernel(seed_ptr, out_ptr, N, gamma, stride, m0, m1, BLOCK: tl.conste
     u2 = _unit(_mix(key + gamma + gamma, m0, m1))
     z = _box_muller(u1, u2)
     tl.store(out_ptr + b.to(tl.int64) * N + offs, z, mask=inside)
+
+
+@triton.jit
+def _rint32(x):
+    """Round half to even of float32 values, exactly (``torch.round``): floor, then the exact fraction decides."""
+    r = tl.floor(x)
+    d = x - r                                      # exact: the fraction bits of x
+    odd = (r - 2.0 * tl.floor(r * 0.5)) != 0.0
+    return tl.where((d > 0.5) | ((d == 0.5) & odd), r + 1.0, r)
+
+
+@triton.jit
+def _map_at(ptr, row_off_ptr, row, j, stride, w, inside):
+    """Pixel j (of rows w px wide) of row ``row`` of a fixed-pattern map: ``ptr[row_off[row] + (j // w) stride +
+    j % w]``: a whole-frame map read at a crop's origin, or one plane per row, without cutting crops first."""
+    base = tl.load(row_off_ptr + row)
+    return tl.load(ptr + base + (j // w).to(tl.int64) * stride + (j % w), mask=inside, other=0.0)
+
+
+@triton.jit
+def _collect_kernel(mu_ptr, out_ptr, seed_ptr, gain_ptr, goff_ptr, gstride, dark_ptr, cap, full_well, per, P, w,
+                    table_ptr, n_table, limits_ptr, gamma, stride, m0, m1, max_steps, max_rounds,
+                    USE_GAIN: tl.constexpr, BLOCK: tl.constexpr):
+    row = tl.program_id(1)
+    j = tl.program_id(0) * BLOCK + tl.arange(0, BLOCK)
+    inside = j < P
+    at = row.to(tl.int64) * P + j
+    x = tl.load(mu_ptr + at, mask=inside, other=0.0)
+    x = tl.where(x != x, 0.0, x)                   # nan_to_num(nan=0, posinf=cap), clamp(0, cap)
+    x = tl.minimum(tl.maximum(x, 0.0), cap)
+    if USE_GAIN:
+        x = x * _map_at(gain_ptr, goff_ptr, row, j, gstride, w, inside)
+    x = x + tl.load(dark_ptr + row)
+    b = row // per
+    seed = tl.load(seed_ptr + b).to(tl.uint64)
+    i = (row - b * per).to(tl.uint64) * P + j.to(tl.uint64)          # pixel index within the sample
+    key = _mix(seed, m0, m1) + i * stride
+    n = _poisson_draw(x.to(tl.float64), key, inside, table_ptr, n_table, limits_ptr, gamma, m0, m1, max_steps,
+                      max_rounds).to(tl.float32)
+    n = tl.minimum(tl.maximum(n, 0.0), full_well)
+    tl.store(out_ptr + at, n, mask=inside)
+
+
+@triton.jit
+def _readout_kernel(n_ptr, dn_ptr, e_ptr, sat_ptr, seed_ptr, rn, off_ptr, ooff_ptr, ostride, cg, swing, dpv, bl,
+                    max_dn, sat_v, gain_k, sub_ptr, mul_ptr, c, n_caps, per, P, w, gamma, stride, m0, m1,
+                    USE_Z: tl.constexpr, USE_OFF: tl.constexpr, USE_MUL: tl.constexpr, BLOCK: tl.constexpr):
+    row = tl.program_id(1)
+    j = tl.program_id(0) * BLOCK + tl.arange(0, BLOCK)
+    inside = j < P
+    at = row.to(tl.int64) * P + j
+    v = tl.load(n_ptr + at, mask=inside, other=0.0)
+    if USE_Z:
+        b = row // per
+        seed = tl.load(seed_ptr + b).to(tl.uint64)
+        i = (row - b * per).to(tl.uint64) * P + j.to(tl.uint64)
+        key = _mix(seed, m0, m1) + i * stride
+        z = _box_muller(_unit(_mix(key + gamma, m0, m1)), _unit(_mix(key + gamma + gamma, m0, m1)))
+        v = z.to(tl.float32) * rn + v
+    if USE_OFF:
+        v = v + _map_at(off_ptr, ooff_ptr, row, j, ostride, w, inside)
+    v = tl.minimum(v * cg, swing)
+    d = tl.minimum(tl.maximum(_rint32(v * dpv + bl), 0.0), max_dn)
+    tl.store(dn_ptr + at, d, mask=inside)
+    tl.store(sat_ptr + (row.to(tl.int64) * n_caps + c) * P + j, v >= sat_v, mask=inside)
+    e = tl.div_rn(d - bl, gain_k) - tl.load(sub_ptr + row)
+    if USE_MUL:
+        e = e * tl.load(mul_ptr + row)
+    tl.store(e_ptr + at, e, mask=inside)
 
 
 def _consts():
@@ -185,3 +261,53 @@ def normal(seed: torch.Tensor, n: int) -> torch.Tensor:
         g, s, m0, m1 = _consts()
         _normal_kernel[(triton.cdiv(n, _BLOCK), B)](seed.contiguous(), out, n, g, s, m0, m1, BLOCK=_BLOCK)
     return out
+
+
+#: Compile option of the chain kernels: no fused multiply-adds, so that every float32 step rounds as the torch
+#: chain's separate element-wise passes do.
+_EXACT = {"enable_fp_fusion": False}
+
+
+def collect(mu: torch.Tensor, seed: torch.Tensor, per: int, gain, dark: torch.Tensor, cap: float, full_well: float,
+            width: int, gaussian_above: float, max_steps: int, max_rounds: int, log_factorial) -> torch.Tensor:
+    """One photodiode's collected charge in one pass: clip to [0, cap], x PRNU gain, + dark signal, Poisson from
+    the counter streams of the sample's shot seed, clip to the full well.
+
+    Args: ``mu`` (L, P) float32 mean e-, rows of P px (crops ``width`` px wide), ``per`` rows per sample;
+    ``seed`` (B,) int64 shot seeds; ``gain`` None or ``(map, row_offsets (L,) int64, row_stride)``; ``dark``
+    (L,) float32 mean dark signal per row, e-; ``cap``, ``full_well`` e-. Returns (L, P) float32 e-.
+    """
+    L, P = mu.shape
+    out = torch.empty_like(mu)
+    if L and P:
+        g, s, m0, m1 = _consts()
+        table, limits = _tables(mu.device, log_factorial, float(gaussian_above))
+        gmap, goff, gstride = gain if gain is not None else (mu, dark, 0)
+        _collect_kernel[(triton.cdiv(P, _BLOCK), L)](
+            mu, out, seed, gmap, goff, gstride, dark, cap, full_well, per, P, width, table, table.numel(), limits,
+            g, s, m0, m1, max_steps, max_rounds, USE_GAIN=gain is not None, BLOCK=_BLOCK, **_EXACT)
+    return out
+
+
+def readout(n: torch.Tensor, seed, per: int, read_noise_e: float, offset, conversion_gain: float, swing: float,
+            dn_per_volt: float, black: float, max_dn: float, sat_v: float, gain_k: float, sub: torch.Tensor, mul,
+            width: int, dn: torch.Tensor, e: torch.Tensor, sat: torch.Tensor, c: int) -> bool:
+    """One capture's read-out in one pass: read noise (counter normals of the sample's read seed, or none when
+    ``seed`` is None), DSNU offset, conversion gain, swing, ADC, saturation flag, input referral.
+
+    Args: ``n`` (L, P) float32 collected e-; ``offset`` None or ``(map, row_offsets, row_stride)`` e-; ``sub``
+    (L,) float32 mean dark signal e-; ``mul`` None or (L,) float32 LPD-equivalence factor; outputs ``dn``, ``e``
+    (L, P) float32 and ``sat`` (L, C, P) bool, written in channel ``c``; scalars in V, DN, e- as the preset's.
+    Returns True (a caller's sign that the kernel ran).
+    """
+    L, P = n.shape
+    if not (L and P):
+        return True
+    g, s, m0, m1 = _consts()
+    omap, ooff, ostride = offset if offset is not None else (n, sub, 0)
+    _readout_kernel[(triton.cdiv(P, _BLOCK), L)](
+        n, dn, e, sat, seed if seed is not None else sub, read_noise_e, omap, ooff, ostride, conversion_gain, swing,
+        dn_per_volt, black, max_dn, sat_v, gain_k, sub, mul if mul is not None else sub, c, sat.shape[1], per, P,
+        width, g, s, m0, m1, USE_Z=seed is not None, USE_OFF=offset is not None, USE_MUL=mul is not None,
+        BLOCK=_BLOCK, **_EXACT)
+    return True

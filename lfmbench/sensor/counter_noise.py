@@ -74,6 +74,18 @@ def _use_triton(t: torch.Tensor) -> bool:
     return USE_TRITON and t.is_cuda and _KERNELS.module() is not None
 
 
+def kernels_ready(t: torch.Tensor) -> bool:
+    """Whether the Triton kernels of this module (and of the fused chain, :func:`lfmbench.sensor.fused.chain_triton`)
+    run for tensors like ``t``: CUDA, Triton importable, not turned off."""
+    return _use_triton(t)
+
+
+def run_kernel(name: str, *args):
+    """Kernel ``name`` of :mod:`lfmbench.sensor._counter_triton` applied to ``args``, or None (the kernels then stay
+    off, after one warning) where it cannot be compiled here."""
+    return _run_triton(name, *args)
+
+
 def _run_triton(name: str, *args):
     """The Triton kernel ``name``, or None after turning the kernels off (one warning) when it cannot be compiled
     here: the torch form then gives the same numbers."""

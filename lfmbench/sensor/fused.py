@@ -1,16 +1,19 @@
-"""The sensor chain's CPU machinery: the chain in compiled passes, and the Python threads that run per-sample work.
+"""The sensor chain in compiled passes (CPU: numba; CUDA: Triton), and the Python threads that run per-sample work.
 
 :func:`chain_fused` is :func:`lfmbench.sensor.noise.simulate_split_pixel_electrons` (backend ``"numba"``) as one
 compiled pass per photodiode (:func:`lfmbench.sensor._poisson_kernel.collect`) and one per capture
-(:func:`lfmbench.sensor._readout_kernel.readout`); :func:`map_samples` runs ``fn(b)`` for every sample by a pool
-of threads (the kernels and torch's samplers release the GIL); :func:`warm_fused` compiles the kernels ahead of
-a fork.
+(:func:`lfmbench.sensor._readout_kernel.readout`); :func:`chain_triton` is the same two kinds of pass as Triton
+kernels for a batch on a GPU with counter-based noise (:func:`lfmbench.sensor._counter_triton.collect` and
+``readout``: no float64 noise tensors, no fixed-pattern crops cut, ~5 passes over the batch instead of ~40);
+:func:`map_samples` runs ``fn(b)`` for every sample by a pool of threads (the kernels and torch's samplers release
+the GIL); :func:`warm_fused` compiles the kernels ahead of a fork.
 """
 from __future__ import annotations
 
 import os
 import threading
-from typing import Any, Mapping
+from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
 import torch
@@ -19,7 +22,8 @@ from lfmbench.sensor import poisson as _poisson
 from lfmbench.sensor import counter_noise as _cn
 from lfmbench.sensor.preset import CAPTURES, PHOTODIODES, SensorPreset, load_preset
 
-__all__ = ["MEAN_CAP_FULL_WELLS", "map_samples", "per_generator", "chain_fused", "warm_fused"]
+__all__ = ["MEAN_CAP_FULL_WELLS", "PatternCrops", "map_samples", "per_generator", "chain_fused", "chain_triton",
+           "warm_fused"]
 
 #: Mean electrons are capped at this multiple of the full well before noise: everything above the full well
 #: clips anyway, and the cap keeps sun-in-view inputs finite in float32 (both backends of the chain).
@@ -184,6 +188,116 @@ def chain_fused(lpd_e: torch.Tensor, spd_e: torch.Tensor, preset: SensorPreset, 
         map_samples(lambda b: run(b * per, (b + 1) * per, generator[b], lpd_e.shape[1:]), len(generator), threads)
     else:
         run(0, L, generator, lpd_e.shape)
+    out["saturated"] = sat
+    return out
+
+
+class PatternCrops(Mapping):
+    """Per-sample crops of whole-frame fixed-pattern maps, cut only when a map is read.
+
+    A mapping ``{key: (B, 1, 1, h, w)}`` like the crops it stands for (the torch and numba chains read it so);
+    :func:`chain_triton` reads the whole-frame maps at each sample's origin instead, without cutting crops.
+
+    Args:
+        maps: ``{key: (H, W)}`` whole-frame maps (:func:`lfmbench.sensor.fixed_pattern`).
+        origin: (B, 2) int64 crop origins (row, column) in px, on the maps' device.
+        hw: (h, w) crop size in px.
+    """
+
+    def __init__(self, maps: Mapping[str, torch.Tensor], origin: torch.Tensor, hw: tuple[int, int]) -> None:
+        self.maps = dict(maps)
+        self.origin = origin
+        self.hw = (int(hw[0]), int(hw[1]))
+        self._cut: dict[str, torch.Tensor] = {}
+
+    def __getitem__(self, key: str) -> torch.Tensor:
+        if key not in self._cut:
+            m = self.maps[key]
+            h, w = self.hw
+            rows = (self.origin[:, 0:1] + torch.arange(h, device=m.device))[:, :, None]     # (B, h, 1)
+            cols = (self.origin[:, 1:2] + torch.arange(w, device=m.device))[:, None, :]     # (B, 1, w)
+            self._cut[key] = m[rows, cols][:, None, None]
+        return self._cut[key]
+
+    def __iter__(self):
+        return iter(self.maps)
+
+    def __len__(self) -> int:
+        return len(self.maps)
+
+    def to(self, device, dtype) -> "PatternCrops":
+        """The same crops with the maps on ``device`` in ``dtype``."""
+        return PatternCrops({k: v.to(device=device, dtype=dtype) for k, v in self.maps.items()},
+                            self.origin.to(device), self.hw)
+
+
+def _map_reader(m, key: str, lead: torch.Size, H: int, W: int, L: int):
+    """``(map, row_offsets (L,) int64, row_stride)``: where the Triton kernels read map ``key`` for each of the L
+    input rows (planes of H x W px): a whole-frame map at the sample's crop origin (:class:`PatternCrops`), or
+    the plane of a map broadcastable to the inputs."""
+    if isinstance(m, PatternCrops):
+        full = m.maps[key].contiguous()
+        off = m.origin[:, 0] * full.shape[-1] + m.origin[:, 1]                              # (B,)
+        return full, off.repeat_interleave(L // off.shape[0]), full.shape[-1]
+    base = m[key].reshape(-1, H * W).contiguous()
+    idx = torch.arange(base.shape[0], device=base.device).reshape(m[key].shape[:-2])
+    row = torch.broadcast_to(idx, (*lead, 1)).reshape(-1)
+    return base, row * (H * W), W
+
+
+def chain_triton(lpd_e: torch.Tensor, spd_e: torch.Tensor, preset: SensorPreset, t_s: torch.Tensor,
+                 t_l: torch.Tensor, seeds: torch.Tensor, fpn: Mapping[str, torch.Tensor] | None) -> dict | None:
+    """The chain of :func:`simulate_split_pixel_electrons` with counter noise (``seeds``) as Triton kernels on a
+    GPU: one pass per photodiode, one per capture; None where the kernels cannot run here (the caller then takes
+    the torch chain: the same numbers).
+
+    Args: ``lpd_e``, ``spd_e`` (B, *, 1, H, W) float32 mean e- on a CUDA device; ``t_s``, ``t_l`` (B, *, 1, 1, 1)
+    exposures in s; ``seeds`` (B,) int64 noise seeds; ``fpn`` maps broadcastable to the inputs or a
+    :class:`PatternCrops`, or None. Returns what the torch chain returns, equal to it but where the float64
+    library functions of the noise round differently (tests/sensor/test_counter_noise.py).
+    """
+    lead, (H, W) = lpd_e.shape[:-3], lpd_e.shape[-2:]
+    P = H * W
+    L = int(np.prod(lead, dtype=np.int64)) if len(lead) else 1
+    B = seeds.shape[0]
+    per = L // max(B, 1)
+    t_pd = {"lpd": t_s, "spd": t_l}
+
+    def per_row(v: torch.Tensor) -> torch.Tensor:
+        return torch.broadcast_to(v, (*lead, 1, 1, 1)).reshape(L).contiguous()
+
+    dark = {pd: per_row(preset.photodiodes[pd].dark_current_e_per_s * t_pd[pd]) for pd in PHOTODIODES}
+    spd_factor = per_row(preset.sensitivity_ratio * t_s / t_l)
+    use_fpn = fpn is not None
+    collected = {}
+    for i_pd, pd in enumerate(PHOTODIODES):
+        spec = preset.photodiodes[pd]
+        gain = _map_reader(fpn, f"{pd}_gain", lead, H, W, L) if use_fpn and spec.prnu > 0 else None
+        mu = (lpd_e if pd == "lpd" else spd_e).reshape(L, P).contiguous()
+        n = _cn.run_kernel("collect", mu, _cn.shot_seed(seeds, i_pd), per, gain, dark[pd],
+                           MEAN_CAP_FULL_WELLS * spec.full_well_e, spec.full_well_e, W,
+                           float(preset.shot_noise_gaussian_above_e), _cn.INVERSION_STEPS, _cn.PTRS_ROUNDS,
+                           _cn.LOG_FACTORIAL)
+        if n is None:
+            return None
+        collected[pd] = n
+    dev, dtype = lpd_e.device, lpd_e.dtype
+    out = {k: torch.empty(*lead, 1, H, W, dtype=dtype, device=dev) for k in (*CAPTURES, *(f"{c}_e" for c in CAPTURES))}
+    sat = torch.empty(*lead, len(CAPTURES), H, W, dtype=torch.bool, device=dev)
+    for c, cap in enumerate(CAPTURES):
+        spec = preset.captures[cap]
+        pd = spec.photodiode
+        offset = (_map_reader(fpn, f"{pd}_offset_e", lead, H, W, L)
+                  if use_fpn and preset.photodiodes[pd].dsnu_e > 0 else None)
+        done = _cn.run_kernel(
+            "readout", collected[pd], _cn.read_seed(seeds, c) if spec.read_noise_e > 0 else None, per,
+            float(spec.read_noise_e), offset, float(spec.conversion_gain_v_per_e), float(spec.voltage_swing_v),
+            float(preset.dn_per_volt(cap)), float(preset.black_level_dn), float(preset.max_dn),
+            float(preset.saturation_fraction * spec.voltage_swing_v), float(preset.system_gain(cap)), dark[pd],
+            spd_factor if pd == "spd" else None, W, out[cap].view(L, P), out[f"{cap}_e"].view(L, P),
+            sat.view(L, len(CAPTURES), P), c)
+        if done is None:
+            return None
     out["saturated"] = sat
     return out
 

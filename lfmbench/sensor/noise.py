@@ -22,7 +22,7 @@ from torch import nn
 from lfmbench.check import value_checks
 from lfmbench.sensor import counter_noise as _cn
 from lfmbench.sensor import poisson as _poisson
-from lfmbench.sensor.fused import MEAN_CAP_FULL_WELLS, chain_fused, per_generator
+from lfmbench.sensor.fused import MEAN_CAP_FULL_WELLS, PatternCrops, chain_fused, chain_triton, per_generator
 from lfmbench.sensor.optics import check_radiometric
 from lfmbench.sensor.preset import CAPTURES, PHOTODIODES, SensorPreset, load_preset
 from lfmbench.sensor.response import ideal_electrons
@@ -192,15 +192,18 @@ def simulate_split_pixel_electrons(lpd_electrons: torch.Tensor, spd_electrons: t
         noise: ``False``: noise-free chain (dark current mean kept, no FPN, clipping and quantisation kept).
         fpn: fixed-pattern maps (H, W) from :func:`fixed_pattern` (default: built for (H, W) from the preset),
             or maps broadcastable to the inputs whose last two dimensions are (H, W) (e.g. (B, 1, 1, H, W): one
-            crop of the pattern per sample).
+            crop of the pattern per sample), or a :class:`lfmbench.sensor.fused.PatternCrops` (whole-frame maps
+            and per-sample crop origins: the Triton chain reads them in place).
         check: validate the inputs (finite, >= 0, matching shapes).
         backend: ``"torch"``: the chain as torch element-wise operations (any device; shot noise by
             :func:`shot_noise`'s ``"auto"`` backend); ``"numba"`` (CPU, float32/float64, needs numba): the same
             operations compiled into one pass per photodiode (clipping, PRNU, dark signal, shot noise, full
             well: :func:`lfmbench.sensor._poisson_kernel.collect`) and one per capture (the read-out:
             :func:`lfmbench.sensor._readout_kernel.readout`), bit-identical to ``"torch"`` on the CPU with a fraction of
-            its memory passes (docs/dataset-benchmark.md); ``"auto"``: ``"numba"`` where it applies, else
-            ``"torch"``.
+            its memory passes (docs/dataset-benchmark.md); ``"auto"``: ``"numba"`` where it applies, on a GPU
+            with ``seeds`` the Triton chain (:func:`lfmbench.sensor.fused.chain_triton`: the same passes as
+            Triton kernels, the numbers of ``"torch"`` but where float64 library functions round differently),
+            else ``"torch"``.
         seeds: instead of ``generator``: a (B,) int64 tensor, one noise seed per index of the leading (sample)
             dimension. Sample b then draws its shot and read noise from counter-based streams of ``seeds[b]``
             (:mod:`lfmbench.sensor.counter_noise`): the same numbers on the CPU (compiled or torch) and on a GPU,
@@ -244,6 +247,11 @@ def simulate_split_pixel_electrons(lpd_electrons: torch.Tensor, spd_electrons: t
     t_l = _exposure(exposure_long_s, "exposure_long_s", lead, x)
     if fpn is None and noise and any(p.prnu > 0 or p.dsnu_e > 0 for p in preset.photodiodes.values()):
         fpn = fixed_pattern(preset, H, W, device=x.device, dtype=x.dtype)
+    elif isinstance(fpn, PatternCrops):
+        if fpn.hw != (H, W) or fpn.origin.shape != (x.shape[0], 2):
+            raise ValueError(f"fpn: crops of {fpn.hw} px at {tuple(fpn.origin.shape)} origins, expected ({H}, {W}) "
+                             f"and ({x.shape[0]}, 2)")
+        fpn = fpn.to(x.device, x.dtype)
     elif fpn is not None:
         fpn = {k: v.to(device=x.device, dtype=x.dtype) for k, v in fpn.items()}
         for k, v in fpn.items():
@@ -256,6 +264,10 @@ def simulate_split_pixel_electrons(lpd_electrons: torch.Tensor, spd_electrons: t
         return chain_fused(lpd_electrons, spd_electrons, preset, t_s, t_l, generator, noise, fpn, threads,
                            seeds if noise else None)
     counter = noise and seeds is not None
+    if counter and backend != "torch" and x.dtype == torch.float32 and x.dim() >= 4 and _cn.kernels_ready(x):
+        out = chain_triton(lpd_electrons, spd_electrons, preset, t_s, t_l, seeds, fpn)
+        if out is not None:
+            return out
 
     pd_inputs = {"lpd": (lpd_electrons, t_s), "spd": (spd_electrons, t_l)}
     collected: dict[str, torch.Tensor] = {}

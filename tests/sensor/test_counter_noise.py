@@ -153,3 +153,63 @@ def test_sensor_chain_with_seeds_is_the_same_in_torch_and_compiled_and_alone_or_
         simulate_split_pixel_electrons(le, se, preset, 4e-3, 11e-3, g, seeds=seeds)
     with pytest.raises(ValueError, match="2 seeds for a batch of 3"):
         simulate_split_pixel_electrons(le, se, preset, 4e-3, 11e-3, seeds=seeds[:2])
+
+
+def _chain_inputs():
+    """A batch of 3 samples x 2 frames of 12 x 10 px crops of a 30 x 40 px sensor: dark to bright means per sample,
+    a NaN, an inf and a huge mean, per-sample exposures, per-sample crop origins (incl. the frame's corners)."""
+    from lfmbench.sensor import fixed_pattern, load_preset
+    from lfmbench.sensor.fused import PatternCrops
+
+    preset = load_preset("ovt")
+    g = torch.Generator().manual_seed(1)
+    scale = torch.tensor([0.3, 30.0, 3000.0]).view(3, 1, 1, 1, 1)
+    lpd = torch.rand(3, 2, 1, 12, 10, generator=g) * scale
+    lpd[0, 0, 0, 0, 0], lpd[0, 0, 0, 0, 1], lpd[1, 0, 0, 0, 0] = float("nan"), float("inf"), 1e9
+    spd = torch.rand(3, 2, 1, 12, 10, generator=g) * scale * 20
+    origin = torch.tensor([[0, 0], [5, 7], [18, 30]])
+    crops = PatternCrops(fixed_pattern(preset, 30, 40), origin, (12, 10))
+    ts, tl_ = torch.tensor([1e-3, 2e-3, 5e-3])[:, None], torch.tensor([11e-3, 11e-3, 10e-3])[:, None]
+    return preset, lpd, spd, ts, tl_, crops, derive_key(9, torch.arange(3))
+
+
+def test_pattern_crops_cut_the_whole_frame_maps_at_each_origin():
+    """PatternCrops reads as the (B, 1, 1, h, w) crops cut by hand, and the chain gives the same numbers with it
+    as with those crops."""
+    from lfmbench.sensor import simulate_split_pixel_electrons
+
+    preset, lpd, spd, ts, tl_, crops, seeds = _chain_inputs()
+    by_hand = {k: torch.stack([m[y:y + 12, x:x + 10] for y, x in crops.origin.tolist()])[:, None, None]
+               for k, m in crops.maps.items()}
+    assert set(crops) == set(by_hand) and all(torch.equal(crops[k], by_hand[k]) for k in by_hand)
+    a = simulate_split_pixel_electrons(lpd.clone(), spd.clone(), preset, ts, tl_, fpn=crops, seeds=seeds, check=False)
+    b = simulate_split_pixel_electrons(lpd.clone(), spd.clone(), preset, ts, tl_, fpn=by_hand, seeds=seeds,
+                                       check=False)
+    assert all(torch.equal(a[k], b[k]) for k in a)
+    with pytest.raises(ValueError, match="fpn: crops"):
+        simulate_split_pixel_electrons(lpd[:2], spd[:2], preset, ts[:2], tl_[:2], fpn=crops, seeds=seeds[:2],
+                                       check=False)
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs CUDA")
+def test_cuda_triton_chain_equals_the_torch_chain():
+    """The fused Triton chain (one pass per photodiode and per capture, whole-frame maps read at each origin)
+    against the torch chain on the same GPU: the same float32 steps without fused multiply-adds, so outputs
+    agree but where the two float64 noise implementations round a library function differently (<= 1e-3 of the
+    values, as the CPU comparison above allows)."""
+    from lfmbench.sensor import simulate_split_pixel_electrons
+
+    preset, lpd, spd, ts, tl_, crops, seeds = _chain_inputs()
+    dev = torch.device("cuda")
+    args = (preset, ts.to(dev), tl_.to(dev))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # a Triton kernel that fails to compile must fail this test
+        fused = simulate_split_pixel_electrons(lpd.to(dev), spd.to(dev), *args, fpn=crops.to(dev, torch.float32),
+                                               seeds=seeds.to(dev), check=False)
+    torch_chain = simulate_split_pixel_electrons(lpd.to(dev), spd.to(dev), *args, fpn=crops.to(dev, torch.float32),
+                                                 seeds=seeds.to(dev), check=False, backend="torch")
+    assert CN.USE_TRITON
+    for k in torch_chain:
+        f, t = fused[k].cpu(), torch_chain[k].cpu()
+        assert f.shape == t.shape and f.dtype == t.dtype, k
+        assert (f != t).double().mean() <= 1e-3, k
