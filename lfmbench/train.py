@@ -31,8 +31,8 @@ from lfmbench.baselines import LEARNED
 from lfmbench.datasets.device import epoch_order
 from lfmbench.baselines.trainable import Trainable, count_parameters
 
-__all__ = ["trainable", "load_config", "make_loader", "fit", "train", "train_batches", "EpochSampler",
-           "EpochIndexed", "cosine_lr"]
+__all__ = ["trainable", "load_config", "make_loader", "make_optimizer", "fit", "train", "train_batches",
+           "GraphedStep", "CUDA_GRAPH_MODES", "EpochSampler", "EpochIndexed", "cosine_lr"]
 
 
 def trainable(method: str | Trainable) -> Trainable:
@@ -137,6 +137,124 @@ def make_device_batches(corpus: str | os.PathLike, spec: Trainable, cfg: Any, de
     return batches, batches.set_epoch
 
 
+#: CUDA graphs of the training step (:class:`GraphedStep`): ``"auto"`` captures the step on CUDA devices, ``"off"``
+#: runs every step eagerly.
+CUDA_GRAPH_MODES = ("auto", "off")
+
+
+def make_optimizer(model: torch.nn.Module, cfg: Any, device: torch.device, graph: bool = False) -> torch.optim.Adam:
+    """Adam over ``model``'s parameters with ``cfg.train``'s learning rate and weight decay: on the CPU the
+    default implementation; on CUDA the fused one, or (``graph``) the capturable one with the learning rate as a
+    device tensor, so that a captured step reads the schedule's rate (:class:`GraphedStep`)."""
+    t = cfg.train
+    if device.type != "cuda":
+        return torch.optim.Adam(model.parameters(), lr=t.lr, weight_decay=t.weight_decay)
+    if graph:
+        return torch.optim.Adam(model.parameters(), lr=torch.tensor(float(t.lr), device=device),
+                                weight_decay=t.weight_decay, capturable=True)
+    return torch.optim.Adam(model.parameters(), lr=t.lr, weight_decay=t.weight_decay, fused=True)
+
+
+def _set_lr(opt: torch.optim.Optimizer, lr: float) -> None:
+    for g in opt.param_groups:
+        if isinstance(g["lr"], torch.Tensor):
+            g["lr"].fill_(lr)           # a kernel, no copy from the host: a captured step reads it
+        else:
+            g["lr"] = lr
+
+
+def _eager_step(model, opt, spec, cfg, batch: dict, lr: float):
+    """One optimiser step on ``batch``: (loss, terms), both still on the device."""
+    loss, terms = spec.loss(model, batch, cfg)
+    _set_lr(opt, lr)
+    opt.zero_grad(set_to_none=True)
+    loss.backward()
+    if cfg.train.grad_clip > 0:
+        torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.train.grad_clip)
+    opt.step()
+    return loss, terms
+
+
+def _tensor_leaves(batch: dict, prefix: tuple = ()) -> Iterator[tuple[tuple, torch.Tensor]]:
+    for k, v in batch.items():
+        if isinstance(v, torch.Tensor):
+            yield prefix + (k,), v
+        elif isinstance(v, dict):
+            yield from _tensor_leaves(v, prefix + (k,))
+
+
+class GraphedStep:
+    """The training step (loss, backward, gradient clipping, Adam) captured once as a CUDA graph and replayed for
+    every batch of the same shapes: the host launches one graph instead of the step's ~1,000 kernels, so it can
+    keep ahead of the GPU while it also queues the next batch's simulation.
+
+    The first ``warmup`` steps (and every batch whose tensors differ in shape or dtype from the captured one, such
+    as an epoch's last, smaller batch) run eagerly; then the step is captured on the next batch (each batch's
+    tensors are copied into the graph's inputs before a replay). The optimiser must be capturable with a tensor
+    learning rate (:func:`make_optimizer` with ``graph=True``). Where capturing fails (an operation that cannot be
+    captured), one warning names the error and every later step runs eagerly: the same training, slower.
+
+    Call: ``step(batch, lr) -> (loss, terms)``, copies of the graph's outputs (the next replay overwrites them).
+    """
+
+    def __init__(self, model, opt, spec, cfg, warmup: int = 3) -> None:
+        self.model, self.opt, self.spec, self.cfg, self.warmup = model, opt, spec, cfg, int(warmup)
+        self.graph = None
+        self.failed = False
+        self.eager_steps = 0
+        self.replays = 0
+        self.sig = None
+
+    @staticmethod
+    def _signature(batch: dict) -> tuple:
+        return tuple((path, tuple(t.shape), t.dtype, t.device) for path, t in _tensor_leaves(batch))
+
+    def _capture(self, batch: dict) -> None:
+        import warnings
+
+        def clone(d: dict) -> dict:
+            return {k: (v.clone() if isinstance(v, torch.Tensor) else clone(v) if isinstance(v, dict) else v)
+                    for k, v in d.items()}
+
+        static = clone(batch)
+        graph = torch.cuda.CUDAGraph()
+        self.opt.zero_grad(set_to_none=True)
+        try:
+            with torch.cuda.graph(graph):
+                loss, terms = self.spec.loss(self.model, static, self.cfg)
+                loss.backward()
+                if self.cfg.train.grad_clip > 0:
+                    torch.nn.utils.clip_grad_norm_(self.model.parameters(), self.cfg.train.grad_clip)
+                self.opt.step()
+        except Exception as exc:  # noqa: BLE001 - any capture error: train eagerly
+            self.failed = True
+            first = str(exc).splitlines()[0][:200] if str(exc) else ""
+            warnings.warn(f"CUDA graph of the training step: capture failed ({type(exc).__name__}: {first}); "
+                          "training without it (--cuda-graph off skips the attempt)", RuntimeWarning, stacklevel=3)
+            self.opt.zero_grad(set_to_none=True)
+            return
+        self.graph, self.static, self.out = graph, static, (loss, terms)
+        self.inputs = dict(_tensor_leaves(static))
+
+    def __call__(self, batch: dict, lr: float):
+        sig = self._signature(batch)
+        if self.sig is None:
+            self.sig = sig              # the shapes of the first batch: the ones captured
+        if sig == self.sig and self.graph is None and not self.failed and self.eager_steps >= self.warmup:
+            self._capture(batch)
+        if self.graph is None or sig != self.sig:
+            self.eager_steps += sig == self.sig
+            return _eager_step(self.model, self.opt, self.spec, self.cfg, batch, lr)
+        for path, t in _tensor_leaves(batch):
+            self.inputs[path].copy_(t, non_blocking=True)
+        _set_lr(self.opt, lr)
+        self.graph.replay()
+        self.replays += 1
+        loss, terms = self.out
+        return loss.detach().clone(), {k: (v.detach().clone() if isinstance(v, torch.Tensor) else v)
+                                       for k, v in terms.items()}
+
+
 def cosine_lr(step: int, total: int, lr: float, lr_min: float) -> float:
     """Learning rate of optimiser step ``step`` of ``total``: cosine from ``lr`` to ``lr_min``."""
     frac = min(step, total) / max(total, 1)
@@ -151,7 +269,8 @@ def fit(model: torch.nn.Module, opt: torch.optim.Optimizer, spec: Trainable, cfg
         device: str | torch.device = "cpu", out: str | os.PathLike | None = None, start: int = 0,
         history: dict | None = None, set_epoch: Callable[[int], None] | None = None,
         checkpoint_extra: Callable[[], dict] | None = None, max_steps: int | None = None, progress: bool = True,
-        log: Callable[[str], None] | None = print, corpus: str | os.PathLike | None = None) -> dict:
+        log: Callable[[str], None] | None = print, corpus: str | os.PathLike | None = None,
+        step: Callable[[dict, float], tuple] | None = None) -> dict:
     """The training loop: epochs ``start .. cfg.train.epochs - 1`` over ``batches``, the checkpoint ``out`` written
     (atomically, by ``spec.save_checkpoint``) after every epoch with the optimiser state and the history.
 
@@ -165,6 +284,7 @@ def fit(model: torch.nn.Module, opt: torch.optim.Optimizer, spec: Trainable, cfg
         checkpoint_extra: more fields for every checkpoint (e.g. the data order's generator state).
         max_steps: stop after this many optimiser steps in this call; the checkpoint is still written.
         progress: show a tqdm bar per epoch. log: one line per epoch (None: silent).
+        step: ``step(batch, lr) -> (loss, terms)`` instead of the eager step (e.g. a :class:`GraphedStep`).
 
     Returns:
         the history: ``epoch_loss`` and ``epoch_seconds`` per epoch, ``terms`` (mean loss terms per epoch),
@@ -205,15 +325,9 @@ def fit(model: torch.nn.Module, opt: torch.optim.Optimizer, spec: Trainable, cfg
 
         for batch in it:
             batch = _to(batch, dev)
-            loss, terms = spec.loss(model, batch, cfg)
             lr = cosine_lr(history["steps"], total_steps, t.lr, t.lr_min)
-            for g in opt.param_groups:
-                g["lr"] = lr
-            opt.zero_grad(set_to_none=True)
-            loss.backward()
-            if t.grad_clip > 0:
-                torch.nn.utils.clip_grad_norm_(model.parameters(), t.grad_clip)
-            opt.step()
+            loss, terms = (step(batch, lr) if step is not None
+                           else _eager_step(model, opt, spec, cfg, batch, lr))
             history["steps"] += 1
             steps_this_call += 1
             n += 1
@@ -248,7 +362,7 @@ def train(method: str | Trainable, corpus: str | os.PathLike, out: str | os.Path
           device: str = "cpu", epochs: int | None = None, workers: int | None = None, resume: bool = True,
           max_steps: int | None = None, progress: bool = True,
           log: Callable[[str], None] | None = print, data: str = "auto", resident_dtype: str = "float32",
-          chunk_scenes: int | None = None,
+          chunk_scenes: int | None = None, cuda_graph: str = "auto",
           **train_overrides: Any) -> tuple[torch.nn.Module, dict]:
     """Train the baseline ``method`` on ``corpus`` and write the checkpoint ``out`` after every epoch (atomically).
 
@@ -269,6 +383,8 @@ def train(method: str | Trainable, corpus: str | os.PathLike, out: str | os.Path
             that does not fit raises :class:`~lfmbench.datasets.device.ResidentMemoryError`).
         resident_dtype, chunk_scenes: the device path's storage (``"float32"`` or ``"float16"``, docs/datasets.md)
             and streaming (that many scenes resident at a time; None: the whole split).
+        cuda_graph: one of :data:`CUDA_GRAPH_MODES`: ``"auto"`` replays the training step as a CUDA graph on a
+            CUDA device (:class:`GraphedStep`; the same training, less host time per step), ``"off"`` never.
         train_overrides: other keys of the ``train`` section (``crop``, ``batch_size``, ``seed``, ...).
 
     Returns:
@@ -293,11 +409,14 @@ def train(method: str | Trainable, corpus: str | os.PathLike, out: str | os.Path
         fits = [m for m in methods_for(arch) if m in LEARNED]
         raise ValueError(f"train.sensor: {spec.name} reads split-pixel captures, and sensor {t.sensor!r} is a "
                          f"{arch} sensor; its baselines are {methods_for(arch)} (trainable: {', '.join(fits)})")
+    if cuda_graph not in CUDA_GRAPH_MODES:
+        raise ValueError(f"cuda_graph must be one of {CUDA_GRAPH_MODES}, got {cuda_graph!r:.40}")
     dev = torch.device(device)
+    graph = cuda_graph == "auto" and dev.type == "cuda"
     out = Path(out)
     torch.manual_seed(t.seed)
     model = spec.build_model(cfg).to(dev)
-    opt = torch.optim.Adam(model.parameters(), lr=t.lr, weight_decay=t.weight_decay)
+    opt = make_optimizer(model, cfg, dev, graph)
     history, start, data_rng = None, 0, None
     if resume and out.exists():
         ck = spec.read_checkpoint(out, map_location=dev)
@@ -310,6 +429,9 @@ def train(method: str | Trainable, corpus: str | os.PathLike, out: str | os.Path
                              "(it is overwritten) or choose another --out")
         model.load_state_dict(ck["state_dict"])
         opt.load_state_dict(ck["optimizer"])
+        if graph:       # a checkpoint of an uncaptured run holds the rate as a number: the graph reads a tensor
+            for g in opt.param_groups:
+                g["lr"] = torch.as_tensor(g["lr"], dtype=torch.float32).to(dev)
         history = ck["history"]
         start = int(ck["epochs_done"])
         data_rng = ck.get("data_rng")
@@ -325,7 +447,8 @@ def train(method: str | Trainable, corpus: str | os.PathLike, out: str | os.Path
         gen.set_state(data_rng)
     history = fit(model, opt, spec, cfg, loader, device=dev, out=out, start=start, history=history,
                   set_epoch=set_epoch, checkpoint_extra=(lambda: {"data_rng": gen.get_state()}) if gen else None,
-                  max_steps=max_steps, progress=progress, log=log, corpus=corpus)
+                  max_steps=max_steps, progress=progress, log=log, corpus=corpus,
+                  step=GraphedStep(model, opt, spec, cfg) if graph else None)
     return model.eval(), history
 
 
@@ -343,7 +466,7 @@ def train_batches(method: str | Trainable, batches: Iterable[dict], cfg: Any = N
     cfg = spec.load_config(None) if cfg is None else cfg
     torch.manual_seed(cfg.train.seed)
     model = spec.build_model(cfg).to(device)
-    opt = torch.optim.Adam(model.parameters(), lr=cfg.train.lr, weight_decay=cfg.train.weight_decay)
+    opt = make_optimizer(model, cfg, torch.device(device))
     dataset = getattr(batches, "dataset", None)
     history = fit(model, opt, spec, cfg, batches, device=device, out=out,
                   set_epoch=getattr(dataset, "set_epoch", None), max_steps=max_steps, progress=progress, log=log)

@@ -38,6 +38,8 @@ def train_cmd(
                                                        "float16 (half the memory, 2^-11 relative error)"),
     chunk_scenes: int = typer.Option(None, help="device path: stream the split this many scenes at a time (a split "
                                                 "that does not fit the device)"),
+    cuda_graph: str = typer.Option("auto", "--cuda-graph", help="auto: replay the training step as a CUDA graph on "
+                                                               "a CUDA device; off: never"),
 ) -> None:
     """Train a learned fusion baseline; checkpoint written atomically after every epoch (resumable).
 
@@ -54,6 +56,8 @@ def train_cmd(
                   ("--batch-size", batch_size, 1), ("--chunk-scenes", chunk_scenes, 1)))
     if resident_dtype not in ("float32", "float16"):
         fail(f"--resident-dtype must be float32 or float16, got {resident_dtype!r:.40}")
+    if cuda_graph not in ("auto", "off"):
+        fail(f"--cuda-graph must be auto or off, got {cuda_graph!r:.40}")
     torch_setup(device, threads)
     try:
         cfg = load_config(method, config)
@@ -70,7 +74,7 @@ def train_cmd(
     try:
         model, hist = train(method, corpus, out, cfg, device=device, epochs=epochs, workers=workers, resume=resume,
                             crop=crop, batch_size=batch_size, sensor=sensor, data=data, resident_dtype=resident_dtype,
-                            chunk_scenes=chunk_scenes)
+                            chunk_scenes=chunk_scenes, cuda_graph=cuda_graph)
     except (FileNotFoundError, EmptyDataError, ValueError) as exc:
         fail(str(exc))
     except OSError as exc:  # the checkpoint could not be written (disk full, ...): the message names the file

@@ -299,3 +299,44 @@ def test_training_a_split_pixel_network_on_another_architecture_is_refused_at_on
         train("learned", corpus, tmp_path / "u.pt", sensor="lofic", epochs=1, crop=16, batch_size=2, split="all",
               progress=False, log=None)
     assert not (tmp_path / "u.pt").exists()
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs CUDA")
+def test_cuda_graphed_training_step_trains_as_the_eager_step(tmp_path, corpus):
+    """train() on CUDA with the step replayed as a CUDA graph (after 3 eager warm-up steps; an epoch's smaller last
+    batch eagerly) against cuda_graph="off": the same step losses and weights within float32 noise of cuDNN's
+    kernels (same data, same initial weights, same optimiser arithmetic)."""
+    import warnings
+
+    from lfmbench.train import GraphedStep, train
+
+    kw = dict(epochs=2, crop=16, batch_size=4, samples_per_scene=5, split="all", progress=False, log=None,
+              device="cuda", data="device")
+    replays = []
+    real_call = GraphedStep.__call__
+
+    def spy(self, batch, lr):
+        out = real_call(self, batch, lr)
+        replays.append(self.replays)
+        return out
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")          # a failed capture must fail this test
+        GraphedStep.__call__ = spy
+        try:
+            m_g, h_g = train("unet", corpus, tmp_path / "g.pt", cuda_graph="auto", **kw)
+        finally:
+            GraphedStep.__call__ = real_call
+    m_e, h_e = train("unet", corpus, tmp_path / "e.pt", cuda_graph="off", **kw)
+    assert replays and replays[-1] >= 3                                          # the graph ran
+    assert torch.allclose(torch.tensor(h_g["step_loss"]), torch.tensor(h_e["step_loss"]), rtol=1e-3, atol=1e-5)
+    for (k, a), b in zip(m_g.state_dict().items(), m_e.state_dict().values()):
+        assert torch.allclose(a.float(), b.float(), rtol=1e-3, atol=1e-4), k
+
+
+def test_cuda_graph_mode_is_checked(tmp_path, corpus):
+    from lfmbench.train import train
+
+    with pytest.raises(ValueError, match="cuda_graph must be one of"):
+        train("unet", corpus, tmp_path / "u.pt", device="cpu", cuda_graph="on", epochs=1, crop=16, batch_size=4,
+              samples_per_scene=1, split="all", progress=False, log=None)
