@@ -144,32 +144,32 @@ def count_syncs(db, dev) -> list | None:
     return _probe_syncs(lambda: db.batch(range(db.batch_size)), dev)
 
 
-def time_step(root, dev, batch, crop, passes):
-    """The U-Net (unet_v1) optimiser step alone on one device-path batch already on the device."""
+def time_step(root, dev, batch, crop, passes, graph: bool = False):
+    """The U-Net (unet_v1) optimiser step alone on one device-path batch already on the device: the step
+    ``train()`` runs (its optimiser, :func:`lfmbench.train.make_optimizer`; ``graph``: replayed as a CUDA graph,
+    :class:`lfmbench.train.GraphedStep`)."""
     from lfmbench.datasets.device import DeviceBatches
-    from lfmbench.train import load_config, trainable
+    from lfmbench.train import GraphedStep, _eager_step, load_config, make_optimizer, trainable
 
     spec = trainable("unet")
     cfg = load_config("unet", ROOT / "lfmbench" / "configs" / "unet_v1.yaml")
     model = spec.build_model(cfg).to(dev)
-    opt = torch.optim.Adam(model.parameters(), lr=1e-3)
+    opt = make_optimizer(model, cfg, dev, graph)
     kw = {} if spec.outputs is None else {"outputs": spec.outputs}
     ds = _dataset(root, crop, noise_streams="counter", **kw)
     sample = next(iter(DeviceBatches(ds, batch, dev, seed=0)))
+    step = GraphedStep(model, opt, spec, cfg) if graph else None
+
+    def one_step():
+        if step is not None:
+            return step(sample, 1e-3)
+        return _eager_step(model, opt, spec, cfg, sample, 1e-3)
 
     def run():
         for _ in range(5):
-            opt.zero_grad(set_to_none=True)
-            loss, _terms = spec.loss(model, sample, cfg)
-            loss.backward()
-            opt.step()
+            one_step()
     med, _ = _timed(run, passes, dev)
-
-    def one_step():
-        opt.zero_grad(set_to_none=True)
-        loss, _terms = spec.loss(model, sample, cfg)
-        loss.backward()
-        opt.step()
+    assert step is None or step.replays > 0, "the step was not captured"
     return 5 * batch / med, _probe_syncs(one_step, dev)
 
 
@@ -231,7 +231,7 @@ def profile_device(root, dev, batch: int, out: Path | None) -> None:
         atomic_write_text(out, table)
 
 
-def time_train(root, dev, data, steps, batch, crop, workers) -> tuple[float, float]:
+def time_train(root, dev, data, steps, batch, crop, workers, cuda_graph: str = "auto") -> tuple[float, float]:
     """``train()`` for 3 epochs of ``steps`` optimiser steps: (samples/s of the whole call, start-up included;
     samples/s of its later epochs, the median of epochs 2 and 3: the steady state, from ``epoch_seconds``)."""
     from lfmbench.corpus import Corpus
@@ -243,7 +243,7 @@ def time_train(root, dev, data, steps, batch, crop, workers) -> tuple[float, flo
         t0 = time.perf_counter()
         _model, hist = train("unet", root, Path(tmp) / "u.pt", device=str(dev), data=data, epochs=3,
                              crop=crop, batch_size=batch, split="all", samples_per_scene=per_scene, workers=workers,
-                             progress=False, log=None)
+                             progress=False, log=None, cuda_graph=cuda_graph)
         _sync(dev)
         total = time.perf_counter() - t0
     n = scenes * per_scene
@@ -258,7 +258,8 @@ def main(argv=None) -> int:
     ap.add_argument("--scenes", type=int, default=2)
     ap.add_argument("--workers", type=int, default=None, help="DataLoader workers (default: cores - 2, at least 1)")
     ap.add_argument("--corpus", type=Path, default=None, help="where the synthetic corpus is written / reused")
-    ap.add_argument("--rows", default="loader,device,device-samplewise,fp16,step,train-loader,train-device",
+    ap.add_argument("--rows", default="loader,device,device-samplewise,fp16,step,step-graph,train-loader,train-device,"
+                                      "train-device-eager",
                     help="comma-separated rows to measure (default: all)")
     ap.add_argument("--no-doc", action="store_true")
     ap.add_argument("--json", type=Path)
@@ -305,12 +306,20 @@ def main(argv=None) -> int:
     if "step" in wanted:
         sps, syncs = time_step(root, dev, step_b, 128, passes)
         add(path="step", batch=step_b, crop=128, samples_per_s=sps, syncs=syncs)
-    steps = 8 if args.quick else 16
+    if "step-graph" in wanted and gpu:
+        sps, syncs = time_step(root, dev, step_b, 128, passes, graph=True)
+        add(path="step (CUDA graph)", batch=step_b, crop=128, samples_per_s=sps, syncs=syncs)
+    # epochs of 64 steps on a GPU: an epoch's start and end (the queue drains) cost about one step each
+    steps = 8 if args.quick else (64 if gpu else 16)
     for data in ("loader", "device"):
         if f"train-{data}" in wanted:
             first, steady = time_train(root, dev, data, steps, step_b, 128, workers)
             add(path=f"train({data})", batch=step_b, crop=128, steps=steps, samples_per_s=steady,
                 with_startup=first)
+    if "train-device-eager" in wanted and gpu:
+        first, steady = time_train(root, dev, "device", steps, step_b, 128, workers, cuda_graph="off")
+        add(path="train(device, no CUDA graph)", batch=step_b, crop=128, steps=steps, samples_per_s=steady,
+            with_startup=first)
     name = torch.cuda.get_device_name(dev) if gpu else (platform.processor() or platform.machine())
     text = report(rows, f"{name}, torch {torch.__version__}, {os.cpu_count()} CPU cores, {workers} loader workers",
                   gpu)

@@ -7,8 +7,10 @@ mean electrons already on the device, FPN maps on, every capture), timed three w
   ``torch.poisson`` / ``torch.randn`` launch per sample and capture);
 - ``seeds``: one int64 noise seed per sample, noise from counter-based streams (:mod:`lfmbench.sensor.counter_noise`):
   the batch in one set of tensor operations,
-  on CUDA the Triton kernels of :mod:`lfmbench.sensor._counter_triton` (a block of pixels stops when its draws
-  are done);
+  on CUDA the fused Triton chain (:func:`lfmbench.sensor.fused.chain_triton`: one pass per photodiode, one per
+  capture, noise drawn inside the kernels of :mod:`lfmbench.sensor._counter_triton`);
+- ``seeds-unfused`` (CUDA): the same numbers from the torch element-wise chain with only the Poisson and normal
+  draws as Triton kernels (the chain before the fused kernels);
 - ``seeds-torch`` (CUDA): the same numbers from the torch form (every branch and rejection round for every pixel);
 - ``seeds+compile`` (CUDA, ``--compile``): the torch form fused by ``torch.compile``.
 
@@ -76,7 +78,9 @@ def time_mode(mode: str, batch: int, device: str, repeats: int) -> dict:
                 gens = [torch.Generator(device=device).manual_seed(1000 * i + b) for b in range(batch)]
                 return simulate_split_pixel_electrons(lpd, spd, preset, 4e-3, 11e-3, gens, fpn=fpn, check=False)
             seeds = derive_key(i, torch.arange(batch)).to(device)
-            return simulate_split_pixel_electrons(lpd, spd, preset, 4e-3, 11e-3, fpn=fpn, check=False, seeds=seeds)
+            backend = "torch" if mode == "seeds-unfused" else "auto"
+            return simulate_split_pixel_electrons(lpd, spd, preset, 4e-3, 11e-3, fpn=fpn, check=False, seeds=seeds,
+                                                  backend=backend)
 
         t0 = time.perf_counter()
         call(0)
@@ -141,7 +145,7 @@ def main(argv=None) -> int:
     # the CPU rows always (on a GPU machine: its host CPU), the GPU rows with --device cuda
     plan = [("cpu", b, m) for b in ((2,) if args.quick else (2, 8)) for m in ("generators", "seeds")]
     if gpu:
-        modes = ("generators", "seeds", "seeds-torch") + (("seeds+compile",) if args.compile else ())
+        modes = ("generators", "seeds", "seeds-unfused", "seeds-torch") + (("seeds+compile",) if args.compile else ())
         plan += [(args.device, b, m) for b in (64, 256) for m in modes]
     rows = []
     for dev, b, m in plan:

@@ -204,6 +204,7 @@ class GraphedStep:
         self.eager_steps = 0
         self.replays = 0
         self.sig = None
+        self.side = torch.cuda.Stream() if torch.cuda.is_available() else None
 
     @staticmethod
     def _signature(batch: dict) -> tuple:
@@ -242,8 +243,17 @@ class GraphedStep:
             self.sig = sig              # the shapes of the first batch: the ones captured
         if sig == self.sig and self.graph is None and not self.failed and self.eager_steps >= self.warmup:
             self._capture(batch)
+        if self.graph is None and sig == self.sig and not self.failed:
+            # warm-up on a side stream, as capturing a backward pass needs (the autograd engine then runs the
+            # leaves' gradient accumulation on a stream the capture may depend on; "CUDA Graphs", PyTorch docs)
+            self.eager_steps += 1
+            main = torch.cuda.current_stream()
+            self.side.wait_stream(main)
+            with torch.cuda.stream(self.side):
+                out = _eager_step(self.model, self.opt, self.spec, self.cfg, batch, lr)
+            main.wait_stream(self.side)
+            return out
         if self.graph is None or sig != self.sig:
-            self.eager_steps += sig == self.sig
             return _eager_step(self.model, self.opt, self.spec, self.cfg, batch, lr)
         for path, t in _tensor_leaves(batch):
             self.inputs[path].copy_(t, non_blocking=True)

@@ -212,4 +212,6 @@ def test_cuda_triton_chain_equals_the_torch_chain():
     for k in torch_chain:
         f, t = fused[k].cpu(), torch_chain[k].cpu()
         assert f.shape == t.shape and f.dtype == t.dtype, k
-        assert (f != t).double().mean() <= 1e-3, k
+        if k.endswith("_e"):  # torch divides by a scalar as a product with its reciprocal on a GPU: 1 float32 ulp
+            assert torch.allclose(f, t, rtol=2.5e-7, atol=2.5e-7 * float(t.abs().max())), k
+        assert (f.round() != t.round() if k.endswith("_e") else f != t).double().mean() <= 1e-3, k
