@@ -172,7 +172,8 @@ def _eager_step(model, opt, spec, cfg, batch: dict, lr: float):
     if cfg.train.grad_clip > 0:
         torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.train.grad_clip)
     opt.step()
-    return loss, terms
+    # detached: a term kept for reading one step late must not keep this step's autograd graph alive
+    return loss, {k: (v.detach() if isinstance(v, torch.Tensor) else v) for k, v in terms.items()}
 
 
 def _tensor_leaves(batch: dict, prefix: tuple = ()) -> Iterator[tuple[tuple, torch.Tensor]]:

@@ -273,32 +273,6 @@ class DeviceBatches:
         return simulate_batch(self.pieces(indices), self.ds.preset, noise_streams="counter")
 
     def __iter__(self) -> Iterator[dict]:
-        """The epoch's batches. On CUDA each batch is made on a side stream one batch ahead: the next batch's
-        program is queued before the caller's work on the current one, so the two overlap on the GPU (the main
-        stream waits only for the batch it takes; its tensors are marked as used there, so that their memory is
-        not reused before that work is done)."""
-        if self.device.type != "cuda":
-            yield from self._batches()
-            return
-        side, main = torch.cuda.Stream(self.device), torch.cuda.current_stream(self.device)
-        side.wait_stream(main)          # the layers were loaded on the main stream
-        it = self._batches()
-
-        def ahead():
-            with torch.cuda.stream(side):
-                b = next(it, None)
-                return None if b is None else (b, side.record_event())
-
-        nxt = ahead()
-        while nxt is not None:
-            cur, ready = nxt
-            nxt = ahead()
-            main.wait_event(ready)
-            for t in _tensors(cur):
-                t.record_stream(main)
-            yield cur
-
-    def _batches(self) -> Iterator[dict]:
         B = self.batch_size
         if self.chunk_scenes is None:
             order = epoch_order(len(self.ds), self.seed, self.epoch).tolist()
@@ -317,14 +291,6 @@ class DeviceBatches:
             n = len(idx) // B if self.drop_last else -(-len(idx) // B)
             for b in range(n):
                 yield self.batch([idx[j] for j in perm[b * B:(b + 1) * B]])
-
-
-def _tensors(d: dict) -> Iterator[torch.Tensor]:
-    for v in d.values():
-        if isinstance(v, torch.Tensor):
-            yield v
-        elif isinstance(v, dict):
-            yield from _tensors(v)
 
 
 #: PWM (PWM_FIELDS) of a padded slot (no light, or a light the crop does not show): any valid waveform; its
