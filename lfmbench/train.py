@@ -176,6 +176,31 @@ def _eager_step(model, opt, spec, cfg, batch: dict, lr: float):
     return loss, {k: (v.detach() if isinstance(v, torch.Tensor) else v) for k, v in terms.items()}
 
 
+def _stash(loss: torch.Tensor, terms: dict):
+    """A step's loss and terms, to be read later without waiting for more than that step: on a GPU one
+    asynchronous copy into pinned host memory and an event (``float()`` of a device value would wait for everything
+    queued after it too, so the host could never run ahead of the device)."""
+    if not loss.is_cuda:
+        return loss.detach(), terms
+    keys = [k for k, v in terms.items() if isinstance(v, torch.Tensor)]
+    vals = torch.stack([loss.detach().double().reshape(())] + [terms[k].detach().double().reshape(()) for k in keys])
+    host = torch.empty(vals.shape, dtype=torch.float64, pin_memory=True)
+    host.copy_(vals, non_blocking=True)
+    done = torch.cuda.Event()
+    done.record()
+    return (host, done, keys), terms
+
+
+def _unstash(stashed, terms: dict) -> tuple[float, dict]:
+    """(loss, {term: value}) as floats from :func:`_stash`'s record (waits for that step only)."""
+    if isinstance(stashed, torch.Tensor):
+        return float(stashed), {k: float(v) for k, v in terms.items()}
+    host, done, keys = stashed
+    done.synchronize()
+    vals = host.tolist()
+    return vals[0], {**{k: float(v) for k, v in terms.items() if k not in keys}, **dict(zip(keys, vals[1:]))}
+
+
 def _tensor_leaves(batch: dict, prefix: tuple = ()) -> Iterator[tuple[tuple, torch.Tensor]]:
     for k, v in batch.items():
         if isinstance(v, torch.Tensor):
@@ -320,13 +345,14 @@ def fit(model: torch.nn.Module, opt: torch.optim.Optimizer, spec: Trainable, cfg
         sums: dict[str, float] = {}
         lr = cosine_lr(history["steps"], total_steps, t.lr, t.lr_min)
         n = 0
-        pending: list = []      # losses of steps not read yet: read one step late, so that reading never waits
-        #                         for the step just queued on a GPU (the host goes on to make the next batch)
+        pending: list = []      # losses of steps not read yet: read one step late, each from its own copy and
+        #                         event (_stash), so that reading never waits for the step just queued on a GPU
+        #                         (the host goes on to make the next batch)
 
         done = [0]
 
         def read(loss_t, terms) -> None:
-            value = float(loss_t)
+            value, terms = _unstash(loss_t, terms)
             history["step_loss"].append(value)
             for k, v in {"loss": value, **terms}.items():
                 sums[k] = sums.get(k, 0.0) + float(v)
@@ -342,7 +368,7 @@ def fit(model: torch.nn.Module, opt: torch.optim.Optimizer, spec: Trainable, cfg
             history["steps"] += 1
             steps_this_call += 1
             n += 1
-            pending.append((loss.detach(), terms))
+            pending.append(_stash(loss, terms))
             if len(pending) > 1:
                 read(*pending.pop(0))
             if max_steps is not None and steps_this_call >= max_steps:

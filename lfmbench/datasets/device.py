@@ -525,27 +525,34 @@ class SplitProgram:
         first = self.tile_off[S3, F3, R3 * self.ntx + tx0[:, None, None]]            # (B, F, NR)
         cnt = (self.tile_off[S3, F3, R3 * self.ntx + tx1[:, None, None] + 1] - first) * live[:, None, :]
         E = int(cnt.sum())
-        host = torch.from_numpy(np.concatenate([idx, sc, y0h, x0h, fr.reshape(-1), first.reshape(-1),
+        # the draws on the host too (B x M x 5 uniforms: a few dozen small CPU operations instead of ~100
+        # kernel launches; the same functions, on the CPU as the per-sample path runs them)
+        M = self.n_entities
+        if fz is None:
+            idx_c = torch.from_numpy(idx)
+            u = uniforms(sample_keys(ds.seed, ds.epoch, idx_c, PURPOSE_PWM), PWM_UNIFORMS * M)
+            rec = pwm_from_uniforms(ds.pwm, u.view(B, M, PWM_UNIFORMS))                      # (B, M) each
+            rec_h = torch.stack([rec[k] for k in PWM_FIELDS + ("freq_hz",)], -1)             # (B, M, 6)
+            seeds_h = noise_seeds(ds.seed, ds.epoch, idx_c).numpy()
+        else:
+            rec_h, seeds_h = torch.zeros(B, M, 6, dtype=torch.float64), np.zeros(B, dtype=np.int64)
+        host = torch.from_numpy(np.concatenate([idx, sc, y0h, x0h, seeds_h, fr.reshape(-1), first.reshape(-1),
                                                 cnt.reshape(-1)]))
         if dev.type == "cuda":
-            host = host.pin_memory()        # an asynchronous copy: the host goes on to queue the rest
-        host = host.to(dev, non_blocking=True)
-        idx_t, sc_t, y0, x0 = (host[k * B:(k + 1) * B] for k in range(4))
-        fr_t = host[4 * B:4 * B + B * F].view(B, F)
-        first_t, cnt_t = (host[4 * B + B * F + k * B * F * NR:4 * B + B * F + (k + 1) * B * F * NR] for k in range(2))
+            # asynchronous copies: the host goes on to queue the rest
+            host, rec_h = host.pin_memory(), rec_h.pin_memory()
+        host, rec_t = host.to(dev, non_blocking=True), rec_h.to(dev, non_blocking=True)
+        idx_t, sc_t, y0, x0, seeds = (host[k * B:(k + 1) * B] for k in range(5))
+        fr_t = host[5 * B:5 * B + B * F].view(B, F)
+        first_t, cnt_t = (host[5 * B + B * F + k * B * F * NR:5 * B + B * F + (k + 1) * B * F * NR] for k in range(2))
         # draws
         if fz is not None:
             pwm, valid = fz["pwm"][idx_t], fz["valid"][idx_t]                    # (B, L, 6), (B, L)
             seeds = fz["seeds"][idx_t]
         else:
-            M = self.n_entities
-            u = uniforms(sample_keys(ds.seed, ds.epoch, idx_t, PURPOSE_PWM), PWM_UNIFORMS * M)
-            rec = pwm_from_uniforms(ds.pwm, u.view(B, M, PWM_UNIFORMS))                      # (B, M) each
             ent = self.t_ent[sc_t]                                                           # (B, L)
             valid = ent >= 0
-            e = ent.clamp_min(0)
-            pwm = torch.stack([rec[k].gather(1, e) for k in PWM_FIELDS + ("freq_hz",)], -1)  # (B, L, 6)
-            seeds = noise_seeds(ds.seed, ds.epoch, idx_t)
+            pwm = rec_t.gather(1, ent.clamp_min(0)[..., None].expand(-1, -1, 6))             # (B, L, 6)
         pad = self._pad
         # slots: every light of every frame of a sample, shown or not (B, F, Lf)
         at = (sc_t[:, None], fr_t)

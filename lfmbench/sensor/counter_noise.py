@@ -24,7 +24,8 @@ Functions
   On CUDA both run as Triton kernels (:mod:`lfmbench.sensor._counter_triton`) where Triton is importable: the same
   draws, but each block of pixels loops only until its own draws are done.
 - :func:`shot_seed`, :func:`read_seed` -> the seeds of a sample's shot noise (per photodiode) and read noise (per
-  capture), derived from its one noise seed, so that every path draws a capture's noise from the same streams.
+  capture), derived from its one noise seed, so that every path draws a capture's noise from the same streams;
+  :func:`chain_seeds` -> all of them at once.
 """
 from __future__ import annotations
 
@@ -38,7 +39,7 @@ from lfmbench.counter_rng import GAMMA, STRIDE_LOG2, _signed, derive_key, mix64,
 from lfmbench.triton_kernels import TritonKernels
 
 __all__ = ["INVERSION_STEPS", "PTRS_ROUNDS", "LOG_FACTORIAL", "log_factorial", "pixel_keys", "poisson", "normal",
-           "shot_seed", "read_seed", "check_seeds"]
+           "shot_seed", "read_seed", "chain_seeds", "check_seeds"]
 
 #: Steps of the sequential search (means below 10): the search ends by step 64 except with probability < 1e-15.
 INVERSION_STEPS = 64
@@ -117,6 +118,30 @@ def shot_seed(seeds: torch.Tensor, photodiode: int) -> torch.Tensor:
 def read_seed(seeds: torch.Tensor, capture: int) -> torch.Tensor:
     """(B,) seeds of the read noise of capture ``capture`` (its index in ``CAPTURES``)."""
     return derive_key(seeds, READ_PURPOSE, capture)
+
+
+def chain_seeds(seeds: torch.Tensor, photodiodes: int, captures: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """All the noise seeds of a capture set at once: ``(shot, read)``, (P, B) seeds of :func:`shot_seed` for
+    photodiodes 0..P-1 and (C, B) of :func:`read_seed` for captures 0..C-1, element for element their values, as
+    one broadcast :func:`~lfmbench.counter_rng.derive_key` (a GPU runs one set of element-wise kernels, not one
+    per seed)."""
+    purpose = torch.tensor([SHOT_PURPOSE] * photodiodes + [READ_PURPOSE] * captures, dtype=torch.int64)
+    which = torch.tensor(list(range(photodiodes)) + list(range(captures)), dtype=torch.int64)
+    if seeds.device.type != "cpu":     # constants made on the device: a copy would wait for the device's queue
+        purpose = _on_device(purpose, seeds.device)
+        which = _on_device(which, seeds.device)
+    k = derive_key(seeds[None, :], purpose[:, None], which[:, None]).contiguous()         # (P + C, B)
+    return k[:photodiodes], k[photodiodes:]
+
+
+_CONSTANTS: dict = {}
+
+
+def _on_device(t: torch.Tensor, device: torch.device) -> torch.Tensor:
+    key = (str(device), tuple(t.tolist()))
+    if key not in _CONSTANTS:
+        _CONSTANTS[key] = t.to(device)
+    return _CONSTANTS[key]
 
 
 def pixel_keys(seed: torch.Tensor, n: int) -> torch.Tensor:

@@ -269,12 +269,13 @@ def chain_triton(lpd_e: torch.Tensor, spd_e: torch.Tensor, preset: SensorPreset,
     dark = {pd: per_row(preset.photodiodes[pd].dark_current_e_per_s * t_pd[pd]) for pd in PHOTODIODES}
     spd_factor = per_row(preset.sensitivity_ratio * t_s / t_l)
     use_fpn = fpn is not None
+    shot_seeds, read_seeds = _cn.chain_seeds(seeds, len(PHOTODIODES), len(CAPTURES))
     collected = {}
     for i_pd, pd in enumerate(PHOTODIODES):
         spec = preset.photodiodes[pd]
         gain = _map_reader(fpn, f"{pd}_gain", lead, H, W, L) if use_fpn and spec.prnu > 0 else None
         mu = (lpd_e if pd == "lpd" else spd_e).reshape(L, P).contiguous()
-        n = _cn.run_kernel("collect", mu, _cn.shot_seed(seeds, i_pd), per, gain, dark[pd],
+        n = _cn.run_kernel("collect", mu, shot_seeds[i_pd], per, gain, dark[pd],
                            MEAN_CAP_FULL_WELLS * spec.full_well_e, spec.full_well_e, W,
                            float(preset.shot_noise_gaussian_above_e), _cn.INVERSION_STEPS, _cn.PTRS_ROUNDS,
                            _cn.LOG_FACTORIAL)
@@ -290,7 +291,7 @@ def chain_triton(lpd_e: torch.Tensor, spd_e: torch.Tensor, preset: SensorPreset,
         offset = (_map_reader(fpn, f"{pd}_offset_e", lead, H, W, L)
                   if use_fpn and preset.photodiodes[pd].dsnu_e > 0 else None)
         done = _cn.run_kernel(
-            "readout", collected[pd], _cn.read_seed(seeds, c) if spec.read_noise_e > 0 else None, per,
+            "readout", collected[pd], read_seeds[c] if spec.read_noise_e > 0 else None, per,
             float(spec.read_noise_e), offset, float(spec.conversion_gain_v_per_e), float(spec.voltage_swing_v),
             float(preset.dn_per_volt(cap)), float(preset.black_level_dn), float(preset.max_dn),
             float(preset.saturation_fraction * spec.voltage_swing_v), float(preset.system_gain(cap)), dark[pd],

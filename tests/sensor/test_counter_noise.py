@@ -215,3 +215,13 @@ def test_cuda_triton_chain_equals_the_torch_chain():
         if k.endswith("_e"):  # torch divides by a scalar as a product with its reciprocal on a GPU: 1 float32 ulp
             assert torch.allclose(f, t, rtol=2.5e-7, atol=2.5e-7 * float(t.abs().max())), k
         assert (f.round() != t.round() if k.endswith("_e") else f != t).double().mean() <= 1e-3, k
+
+
+def test_chain_seeds_are_the_shot_and_read_seeds():
+    seeds = derive_key(11, torch.arange(5))
+    shot, read = CN.chain_seeds(seeds, 2, 3)
+    assert shot.shape == (2, 5) and read.shape == (3, 5)
+    for p in range(2):
+        assert torch.equal(shot[p], CN.shot_seed(seeds, p))
+    for c in range(3):
+        assert torch.equal(read[c], CN.read_seed(seeds, c))
