@@ -88,13 +88,18 @@ def _scratch(name: str, rows: int, cols: int, dtype) -> np.ndarray:
     return b[:n].reshape(rows, cols)
 
 
-def _map_rows(m: torch.Tensor, lead: torch.Size, H: int, W: int) -> tuple[np.ndarray, np.ndarray]:
+def _plane_rows(m: torch.Tensor, lead: torch.Size, H: int, W: int) -> tuple[torch.Tensor, torch.Tensor]:
     """A map (..., H, W) broadcastable to inputs ``lead + (1, H, W)`` as ``(base, row)``: ``base`` (M, H*W) its
-    distinct planes (C-contiguous numpy), ``row`` (L,) int64 the plane each of the L = prod(lead) input planes
-    reads (no copy of the map per input plane)."""
+    distinct planes (C-contiguous), ``row`` (L,) int64 the plane each of the L = prod(lead) input planes reads (no
+    copy of the map per input plane)."""
     base = m.reshape(-1, H * W).contiguous()
     idx = torch.arange(base.shape[0], device=m.device).reshape(m.shape[:-2])
-    row = torch.broadcast_to(idx, (*lead, 1)).reshape(-1).contiguous()
+    return base, torch.broadcast_to(idx, (*lead, 1)).reshape(-1).contiguous()
+
+
+def _map_rows(m: torch.Tensor, lead: torch.Size, H: int, W: int) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_plane_rows` as numpy arrays (the numba kernels' arguments)."""
+    base, row = _plane_rows(m, lead, H, W)
     return base.numpy(), row.numpy()
 
 
@@ -239,9 +244,7 @@ def _map_reader(m, key: str, lead: torch.Size, H: int, W: int, L: int):
         full = m.maps[key].contiguous()
         off = m.origin[:, 0] * full.shape[-1] + m.origin[:, 1]                              # (B,)
         return full, off.repeat_interleave(L // off.shape[0]), full.shape[-1]
-    base = m[key].reshape(-1, H * W).contiguous()
-    idx = torch.arange(base.shape[0], device=base.device).reshape(m[key].shape[:-2])
-    row = torch.broadcast_to(idx, (*lead, 1)).reshape(-1)
+    base, row = _plane_rows(m[key], lead, H, W)
     return base, row * (H * W), W
 
 
