@@ -75,6 +75,13 @@ class RenderOptions:
     full frames of the static groups are traced: ``"union"`` (default: one camera path per sample records every
     static group, next-event estimation draws from all their lamps, :class:`render_tools.tracer.LightSets`) or
     ``"per_group"`` (one path per group and sample, as before 2026-11-23); both are unbiased per group.
+    reflection_bins: time bins of the reflection part of a flickering light's crop in a wet scene (a divisor of
+    ``bins``; None = ``bins``, exact): the grown crop is traced in ``reflection_bins`` bins, each repeated
+    ``bins / reflection_bins`` times, and the lamp's own box again in all ``bins`` at ``light_spp`` over it. The
+    PWM still applies bin by bin (the dataset weights every bin), so the reflection flickers exactly with its
+    lamp; what is approximated is the reflection's motion inside a longer bin (1: its average over the capture
+    window, 14.7 ms at 640x360). Cost of the reflection part: ``reflection_bins / bins`` of the exact one
+    (docs/render-scale-benchmark.md; error in docs/render-benchmark.md). No effect on dry scenes.
     """
 
     width: int = 640
@@ -94,6 +101,7 @@ class RenderOptions:
     light_spp: int | None = None
     pad_px: int = 2
     static_pass: str = "union"
+    reflection_bins: int | None = 1
 
     def __post_init__(self):
         self.bands_nm = tuple(float(b) for b in self.bands_nm)
@@ -109,6 +117,10 @@ class RenderOptions:
                 raise ValueError(f"{name}: must be an integer >= 1, got {v!r}")
         if self.light_spp is not None and (not isinstance(self.light_spp, (int, np.integer)) or self.light_spp < 1):
             raise ValueError(f"light_spp: must be None or an integer >= 1, got {self.light_spp!r}")
+        rb = self.reflection_bins
+        if rb is not None and (isinstance(rb, bool) or not isinstance(rb, (int, np.integer)) or rb < 1
+                               or self.bins % rb):
+            raise ValueError(f"reflection_bins: must be None or a divisor of bins ({self.bins}), got {rb!r}")
         if self.static_pass not in STATIC_PASSES:
             raise ValueError(f"static_pass: must be one of {STATIC_PASSES}, got {self.static_pass!r}")
         if not isinstance(self.pad_px, (int, np.integer)) or self.pad_px < 0:
@@ -344,7 +356,8 @@ def scene_meta(scene: dict, opts: RenderOptions) -> dict:
         "groups": groups,
         "lights": lights,
         "render": {"spp": opts.spp, "light_spp": opts.light_spp or opts.spp, "seed": opts.seed,
-                   "pad_px": opts.pad_px, "static_pass": opts.static_pass},
+                   "pad_px": opts.pad_px, "static_pass": opts.static_pass,
+                   **({"reflection_bins": opts.reflection_bins or opts.bins} if helper.wet else {})},
     }
 
 
@@ -411,9 +424,11 @@ def plan_frame(scene: dict, opts: RenderOptions, n: int, sets, geo: SceneGeometr
     ``frac * short + (1 - frac) * rest`` (plan window ``"rest"``, ``frac`` = T_S / T_L). Flickering groups:
     each visible light alone in its crop, K bins over the capture window, at ``light_spp`` (one bin repeated K
     times when neither the camera nor the lamp moves); in a wet scene a crop grown by the light's reflection is
-    traced at ``spp`` and the lamp's own box again at ``light_spp`` (plan kind ``"light_refine"``, pasted over it). ``sets``: the frame's :class:`tracer.LightSets` (or any
+    traced at ``spp`` in ``opts.reflection_bins`` bins and the lamp's own box again at ``light_spp`` in K bins
+    (plan kind ``"light_refine"``, pasted over it). ``sets``: the frame's :class:`tracer.LightSets` (or any
     mapping from set name to index). Returns (tiles, plan, visible light ids); plan entries are
-    (kind, group, window or light id, crop, tile index, repeat).
+    (kind, group, window or light id, crop, tile index, repeat): a tile of K / repeat bins, each bin repeated
+    ``repeat`` times in a row to make the K bins.
     """
     from .tracer import Tile  # noqa: PLC0415
 
@@ -465,14 +480,17 @@ def plan_frame(scene: dict, opts: RenderOptions, n: int, sets, geo: SceneGeometr
             # wet road: the box holds the lamp's reflection too; that dim, smooth light is traced at ``spp`` and
             # the lamp's own box again at ``light_spp`` over it (both unbiased: the "refine" of static groups)
             lamp_bb = geo.light_bbox(lt, t_obj, *tm["window"], moving=True, reflection=False) if geo.wet else bb
-            crops = [("light", bb, light_spp if lamp_bb == bb else opts.spp, ())]
-            if lamp_bb is not None and lamp_bb != bb:
-                crops.append(("light_refine", lamp_bb, light_spp, ("lamp",)))
-            for kind, crop, n_s, extra in crops:
-                key = _seed("light", lt["id"], *(("reflection",) if kind == "light" and lamp_bb != bb else extra))
+            grown = lamp_bb != bb
+            # the reflection crop in opts.reflection_bins bins, each repeated (RenderOptions.reflection_bins)
+            kb = (opts.reflection_bins or opts.bins) if grown else opts.bins
+            crops = [("light", bb, opts.spp if grown else light_spp, kb, ())]
+            if lamp_bb is not None and grown:
+                crops.append(("light_refine", lamp_bb, light_spp, opts.bins, ("lamp",)))
+            for kind, crop, n_s, nb, extra in crops:
+                key = _seed("light", lt["id"], *(("reflection",) if kind == "light" and grown else extra))
                 if geo.ego.moving or np.any(v != 0.0):
-                    plan.append((kind, g, lt["id"], crop, len(tiles), 1))
-                    tiles.append(Tile(crop, opts.bins, edges[0], (edges[-1] - edges[0]) / opts.bins, n_s, k,
+                    plan.append((kind, g, lt["id"], crop, len(tiles), opts.bins // nb))
+                    tiles.append(Tile(crop, nb, edges[0], (edges[-1] - edges[0]) / nb, n_s, k,
                                       tuple(float(x) for x in v), t_obj, key=key))
                 else:  # static camera and lamp inside the frame: all bins are the same image
                     plan.append((kind, g, lt["id"], crop, len(tiles), opts.bins))

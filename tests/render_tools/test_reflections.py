@@ -80,12 +80,13 @@ def test_reflection_is_in_the_lamps_crop(weather):
 
 
 @pytest.mark.jit
-def test_lamp_and_reflection_share_every_bins_pwm_weight():
+@pytest.mark.parametrize("reflection_bins", [None, 1])
+def test_lamp_and_reflection_share_every_bins_pwm_weight(reflection_bins):
     """Moving camera (bins differ): in every time bin the reflection carries the same fraction of the lamp's
     light, so a PWM weight per bin scales both alike: the captured reflection / lamp ratio under a PWM equals
-    the always-on ratio."""
+    the always-on ratio. With the reflection traced in K bins (None) and in one bin repeated K times (1)."""
     sc = lamp_over_road("wet", speed_mps=12.0)
-    opts = R.RenderOptions(**OPTS)
+    opts = R.RenderOptions(**OPTS, reflection_bins=reflection_bins)
     frame = next(R.render_frames(sc, opts))
     (lid, (y0, x0, y1, x1), arr), = frame["lights"]["otherlights"]
     geo = R.SceneGeometry(sc, opts)
@@ -100,3 +101,56 @@ def test_lamp_and_reflection_share_every_bins_pwm_weight():
                             1 / 97.0, 0.25, 0.0013)[0]  # (K,) s at level 1 per bin
     assert w.std() > 0  # the PWM differs between bins
     assert (w @ refl) / (w @ lamp) == pytest.approx(refl.sum() / lamp.sum(), rel=0.05)
+
+
+def _tiles_by_kind(sc, opts):
+    class Sets(dict):
+        def __missing__(self, k):
+            return 0
+
+    tiles, plan, _ = R.plan_frame(sc, opts, 0, Sets())
+    return {e[0]: (t, e[5]) for e, t in zip(plan, tiles)}, tiles
+
+
+def test_reflection_bins_plan_and_options():
+    """The reflection crop is one tile of ``reflection_bins`` bins, each repeated K / reflection_bins times; the
+    lamp's own box keeps K bins at light_spp; a dry scene (every lfmbench-v1 scene) plans the same tiles whatever
+    ``reflection_bins`` is; a value that does not divide K is refused, naming the option."""
+    wet = lamp_over_road("wet", speed_mps=12.0)
+    for rb, n in [(None, 4), (1, 1), (2, 2)]:
+        by, _ = _tiles_by_kind(wet, R.RenderOptions(**OPTS, reflection_bins=rb))
+        (refl, rep), (lamp, lrep) = by["light"], by["light_refine"]
+        assert (refl.bins, rep, refl.spp) == (n, 4 // n, OPTS["spp"])
+        assert (lamp.bins, lrep, lamp.spp) == (4, 1, OPTS["light_spp"])
+        assert refl.bins * refl.bin_len == pytest.approx(R.RenderOptions(**OPTS).capture_window_s)
+    dry = lamp_over_road("dry", speed_mps=12.0)
+    assert _tiles_by_kind(dry, R.RenderOptions(**OPTS, reflection_bins=1))[1] == \
+        _tiles_by_kind(dry, R.RenderOptions(**OPTS, reflection_bins=None))[1]
+    with pytest.raises(ValueError, match="reflection_bins"):
+        R.RenderOptions(**{**OPTS, "bins": 8}, reflection_bins=3)
+
+
+@pytest.mark.jit
+def test_reflection_in_one_bin_is_the_time_average():
+    """reflection_bins 1 (moving camera): outside the lamp's box the K bins are one image repeated, and that image
+    is the time average of the exact (K-bin) reflection, summed over the road below the lamp to 3 % (independent
+    renders at 16 spp: the sums of four renders spread by 2 %); the lamp's own box keeps its K bins, the very tile
+    of the exact render."""
+    sc = lamp_over_road("wet", speed_mps=12.0)
+    out = {}
+    for rb in (None, 1):
+        opts = R.RenderOptions(**OPTS, reflection_bins=rb)
+        (lid, bb, arr), = next(R.render_frames(sc, opts))["lights"]["otherlights"]
+        out[rb] = (bb, arr)
+    (bb, exact), (bb1, one) = out[None], out[1]
+    assert bb == bb1
+    geo = R.SceneGeometry(sc, R.RenderOptions(**OPTS))
+    lb = geo.light_bbox(sc["lights"][0], 0.5 * R.RenderOptions(**OPTS).capture_window_s, 0.0,
+                        R.RenderOptions(**OPTS).capture_window_s, moving=True, reflection=False)
+    ly1 = lb[2] - bb[0]
+    road = one[:, :, ly1:]
+    assert np.all(road == road[:1])  # one image repeated in every bin
+    assert not np.all(exact[:, :, ly1:] == exact[:1, :, ly1:])  # the exact bins differ (moving camera)
+    assert road[0].sum() == pytest.approx(exact[:, :, ly1:].mean(0).sum(), rel=0.03)
+    assert np.ptp(one[:, :, :ly1].sum(axis=(1, 2, 3))) > 0  # the lamp's box: K bins of its own, the same tile
+    assert np.array_equal(one[:, :, :ly1], exact[:, :, :ly1])  # (same key) as in the exact render
