@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["GLOSS_TAN_FACTOR", "wet_road", "glossy_points"]
+__all__ = ["GLOSS_TAN_FACTOR", "wet_road", "glossy_points", "glossy_cells"]
 
 #: Half-vector tilt bound of the reflection region, in units of the wet film's GGX roughness (module docstring:
 #: 99.4 % of the reflection at 2, at half the crop of 5).
@@ -50,17 +50,15 @@ def wet_road(scene: dict) -> dict | None:
     return {"alpha": max(alphas), "x": (cx - sx / 2, cx + sx / 2), "y": (cy - sy / 2, cy + sy / 2)}
 
 
-def glossy_points(lamp_points: np.ndarray, camera: np.ndarray, road: dict) -> np.ndarray:
-    """Road points (M, 3) m (z = 0) whose glossy reflection of any of ``lamp_points`` (P, 3) m is seen from
-    ``camera`` (3,) m: the half vector's tilt ``tan theta_h <= GLOSS_TAN_FACTOR * road["alpha"]`` (:func:`wet_road`),
-    on a :data:`GRID` of road points, grown by one grid cell (so the points' screen box holds the streak; a
-    caller keeps the points that project into the image: the streak runs under the camera, where its projection
-    would span the whole width). Empty (0, 3) when the lamps are below the road or nothing qualifies."""
+def _glossy_grid(lamp_points: np.ndarray, camera: np.ndarray, road: dict):
+    """The :data:`GRID` of road points (GX, GY, 3) m searched for the reflection region and the mask (GX, GY) of
+    the points in it, grown by one grid cell (:func:`glossy_points`); None when the lamps are below the road or
+    nothing qualifies."""
     L = np.asarray(lamp_points, dtype=np.float64).reshape(-1, 3)
     C = np.asarray(camera, dtype=np.float64).reshape(3)
     L = L[L[:, 2] > 0.0]
     if not len(L) or C[2] <= 0.0:
-        return np.zeros((0, 3))
+        return None
     k = GLOSS_TAN_FACTOR * road["alpha"]
     x0, x1 = road["x"]
     y0, y1 = road["y"]
@@ -69,10 +67,11 @@ def glossy_points(lamp_points: np.ndarray, camera: np.ndarray, road: dict) -> np
     spread = k * (float(L[:, 2].max()) + C[2]) * 2.0 + 1.0
     ya, yb = max(y0, min(C[1], L[:, 1].min()) - spread), min(y1, max(C[1], L[:, 1].max()) + spread)
     if xb <= xa or yb <= ya:
-        return np.zeros((0, 3))
+        return None
     gx, gy = np.linspace(xa, xb, GRID[0]), np.linspace(ya, yb, GRID[1])
     X, Y = np.meshgrid(gx, gy, indexing="ij")
-    R = np.stack([X, Y, np.zeros_like(X)], -1).reshape(-1, 3)
+    G = np.stack([X, Y, np.zeros_like(X)], -1)
+    R = G.reshape(-1, 3)
     wo = C - R
     wo /= np.linalg.norm(wo, axis=1, keepdims=True)
     keep = np.zeros(len(R), dtype=bool)
@@ -82,11 +81,39 @@ def glossy_points(lamp_points: np.ndarray, camera: np.ndarray, road: dict) -> np
         h = wi + wo
         keep |= np.hypot(h[:, 0], h[:, 1]) <= k * h[:, 2]
     if not keep.any():
-        return np.zeros((0, 3))
+        return None
     k2 = keep.reshape(GRID)
     grown = k2.copy()  # grown by one grid cell: the streak's edge lies between a kept point and the next one
     grown[1:] |= k2[:-1]
     grown[:-1] |= k2[1:]
     grown[:, 1:] |= grown[:, :-1].copy()
     grown[:, :-1] |= grown[:, 1:].copy()
-    return R[grown.ravel()]
+    return G, grown
+
+
+def glossy_points(lamp_points: np.ndarray, camera: np.ndarray, road: dict) -> np.ndarray:
+    """Road points (M, 3) m (z = 0) whose glossy reflection of any of ``lamp_points`` (P, 3) m is seen from
+    ``camera`` (3,) m: the half vector's tilt ``tan theta_h <= GLOSS_TAN_FACTOR * road["alpha"]`` (:func:`wet_road`),
+    on a :data:`GRID` of road points, grown by one grid cell (so the points' screen box holds the streak; a
+    caller keeps the points that project into the image: the streak runs under the camera, where its projection
+    would span the whole width). Empty (0, 3) when the lamps are below the road or nothing qualifies."""
+    g = _glossy_grid(lamp_points, camera, road)
+    if g is None:
+        return np.zeros((0, 3))
+    G, grown = g
+    return G[grown]
+
+
+def glossy_cells(lamp_points: np.ndarray, camera: np.ndarray, road: dict) -> np.ndarray:
+    """The grid cells (M, 4, 3) m (their corners, z = 0) that make up the reflection region of
+    :func:`glossy_points`: every cell of the :data:`GRID` with a corner in it. Together they cover the region
+    without gaps (the points alone are samples of it, up to metres apart near the camera), so the screen
+    rows a reflection covers can be bounded cell by cell (:meth:`render_tools.render.SceneGeometry.reflection_tiles`).
+    Empty (0, 4, 3) when there is no region."""
+    g = _glossy_grid(lamp_points, camera, road)
+    if g is None:
+        return np.zeros((0, 4, 3))
+    G, m = g
+    cell = m[:-1, :-1] | m[1:, :-1] | m[:-1, 1:] | m[1:, 1:]
+    i, j = np.nonzero(cell)
+    return np.stack([G[i, j], G[i + 1, j], G[i + 1, j + 1], G[i, j + 1]], axis=1)

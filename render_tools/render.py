@@ -53,6 +53,9 @@ BBOX_TIME_SAMPLES = 17
 CROP_QUANTUM_PX = 1
 #: Minimum depth of a projected point treated as in front of the camera, m.
 MIN_DEPTH_M = 0.05
+#: Height of the row bands a reflection crop is traced in, px (:meth:`SceneGeometry.reflection_tiles`): each band
+#: only as wide as the reflection region in its rows (and the rows next to it).
+REFLECTION_BAND_PX = 16
 #: Ways of tracing the static groups' full frames (:class:`RenderOptions` ``static_pass``).
 STATIC_PASSES = ("union", "per_group")
 
@@ -82,6 +85,11 @@ class RenderOptions:
     lamp; what is approximated is the reflection's motion inside a longer bin (1: its average over the capture
     window, 14.7 ms at 640x360). Cost of the reflection part: ``reflection_bins / bins`` of the exact one
     (docs/render-scale-benchmark.md; error in docs/render-benchmark.md). No effect on dry scenes.
+    reflection_min_lux: a flickering light's reflection in a wet road is traced only when the illuminance it
+    sends to the camera, E = I / d^2 lux (I: its luminance x face area, cd; d: lamp to camera, m, at mid capture
+    window), is at least this; a dimmer light keeps only its own box (its reflection left out, as the light it
+    throws on its surroundings outside its crop always was). 0: every light's reflection. Measured: below 2e-3 lux
+    a reflection averages under 2 % of a lit night road's luminance (docs/render-benchmark.md).
     """
 
     width: int = 640
@@ -102,6 +110,7 @@ class RenderOptions:
     pad_px: int = 2
     static_pass: str = "union"
     reflection_bins: int | None = 1
+    reflection_min_lux: float = 2e-3
 
     def __post_init__(self):
         self.bands_nm = tuple(float(b) for b in self.bands_nm)
@@ -121,6 +130,10 @@ class RenderOptions:
         if rb is not None and (isinstance(rb, bool) or not isinstance(rb, (int, np.integer)) or rb < 1
                                or self.bins % rb):
             raise ValueError(f"reflection_bins: must be None or a divisor of bins ({self.bins}), got {rb!r}")
+        lux = self.reflection_min_lux
+        if isinstance(lux, bool) or not isinstance(lux, (int, float, np.integer, np.floating)) \
+                or not (math.isfinite(lux) and lux >= 0):
+            raise ValueError(f"reflection_min_lux: must be a number >= 0 lux, got {lux!r}")
         if self.static_pass not in STATIC_PASSES:
             raise ValueError(f"static_pass: must be one of {STATIC_PASSES}, got {self.static_pass!r}")
         if not isinstance(self.pad_px, (int, np.integer)) or self.pad_px < 0:
@@ -231,13 +244,84 @@ class SceneGeometry:
         """(3,) world velocity (m/s) of the object a light is mounted on (zeros for a static light)."""
         return ms.object_offset(self.scene, light["instance"], 1.0)
 
+    def reflected(self, light: dict, t_obj: float) -> bool:
+        """Whether a flickering light's reflection in the wet road is traced (:class:`RenderOptions`
+        ``reflection_min_lux``): a wet scene, and the illuminance I / d^2 (lux) the lamp sends to the camera at
+        ``t_obj`` (s) at least the option's."""
+        if self.wet is None:
+            return False
+        c = np.asarray(light["center"], float) + ms.object_offset(self.scene, light["instance"], t_obj)
+        d2 = float(np.sum((c - self.ego.position(t_obj)) ** 2))
+        e = float(light["luminance_cd_m2"]) * ms.plane_area(light) / max(d2, 1e-12)
+        return e >= self.opts.reflection_min_lux
+
+    def _reflection_uv(self, light: dict, t_obj: float, t: float, pts: np.ndarray) -> np.ndarray:
+        """Screen points (N, 2) px at time ``t`` (s) of road points ``pts`` (N, 3) m (moving with the light's
+        object from its ``t_obj`` position) that lie in front of the camera and within the padded image."""
+        v = self.object_velocity(light)
+        ruv, rz = cam_mod.project(pts + v * (t - t_obj), self.ego.pose_cv(t), self.K)
+        p = self.opts.pad_px
+        ok = (rz > MIN_DEPTH_M) & (ruv[:, 0] >= -p) & (ruv[:, 0] <= self.opts.width + p) & \
+            (ruv[:, 1] >= -p) & (ruv[:, 1] <= self.opts.height + p)
+        return ruv[ok]
+
+    def reflection_tiles(self, light: dict, t_obj: float, t_a: float, t_b: float, bbox) -> list[tuple]:
+        """The crops (y0, x0, y1, x1) px that hold a flickering light's reflection inside its grown ``bbox``
+        (:meth:`light_bbox`) over [t_a, t_b] s: the box cut into row bands of :data:`REFLECTION_BAND_PX`, each
+        only as wide as the reflection region's cells (:func:`render_tools.reflections.glossy_cells`) that reach
+        into the band or the bands next to it, at any of the time samples, padded by ``pad_px``; bands the region
+        does not reach are left out. Disjoint; their union holds every region point of :meth:`light_bbox`. A cell
+        reaching behind the camera covers its band and every band below (the streak runs under the camera).
+        Empty when the light has no reflection region."""
+        if not self.reflected(light, t_obj):
+            return []
+        cells = reflections.glossy_cells(ms.light_points(self.scene, light, t_obj), self.ego.position(t_obj),
+                                         self.wet)
+        if not len(cells):
+            return []
+        y0, x0, y1, x1 = bbox
+        B, p = REFLECTION_BAND_PX, self.opts.pad_px
+        nb = -(-(y1 - y0) // B)
+        lo = np.full(nb, np.inf)
+        hi = np.full(nb, -np.inf)
+        v = self.object_velocity(light)
+        flat = cells.reshape(-1, 3)
+        band = np.arange(nb)
+        for t in np.linspace(t_a, t_b, BBOX_TIME_SAMPLES):
+            uv, z = cam_mod.project(flat + v * (t - t_obj), self.ego.pose_cv(t), self.K)
+            uv, z = uv.reshape(-1, 4, 2), z.reshape(-1, 4)
+            front = z > MIN_DEPTH_M
+            some, every = front.any(1), front.all(1)
+            u, w = np.where(front, uv[..., 0], np.nan), np.where(front, uv[..., 1], np.nan)
+            with np.errstate(invalid="ignore"):
+                ya, yb = np.nanmin(w[some], 1), np.nanmax(w[some], 1)
+                xa, xb = np.nanmin(u[some], 1), np.nanmax(u[some], 1)
+            # a cell reaching behind the camera: its rows down to the image's bottom, the box's full width
+            part = ~every[some]
+            yb[part], xa[part], xb[part] = math.inf, -math.inf, math.inf
+            ba = np.maximum(np.floor((ya - y0) / B) - 1, 0)
+            bz = np.where(np.isfinite(yb), np.floor((yb - y0) / B) + 1, nb - 1)
+            hit = (ba[None, :] <= band[:, None]) & (band[:, None] <= bz[None, :])  # (bands, cells)
+            lo = np.minimum(lo, np.where(hit, xa[None, :], np.inf).min(1, initial=np.inf))
+            hi = np.maximum(hi, np.where(hit, xb[None, :], -np.inf).max(1, initial=-np.inf))
+        out = []
+        for i in range(nb):
+            if not hi[i] >= lo[i]:
+                continue
+            a = max(x0, int(math.floor(lo[i])) - p) if math.isfinite(lo[i]) else x0
+            b = min(x1, int(math.ceil(hi[i])) + p) if math.isfinite(hi[i]) else x1
+            if b > a:
+                out.append((y0 + i * B, a, min(y1, y0 + (i + 1) * B), b))
+        return out
+
     def light_bbox(self, light: dict, t_obj: float, t_a: float, t_b: float, moving: bool = False,
                    reflection: bool = True):
         """Screen bbox (y0, x0, y1, x1) px (end exclusive) of a light's face over [t_a, t_b] s, padded and
         clipped; None when not visible (behind the camera, outside the image or facing away). ``moving``: the
         lamp moves with its object over the interval (as per-light renders show it), else it is held at its
         ``t_obj`` position (as full-frame renders show it). In a wet scene a moving (flickering) light's box also
-        holds its reflection in the road (:mod:`render_tools.reflections`) unless ``reflection`` is False."""
+        holds its reflection in the road (:mod:`render_tools.reflections`) unless ``reflection`` is False or the
+        light is too dim for its reflection to be traced (:meth:`reflected`)."""
         times = np.linspace(t_a, t_b, BBOX_TIME_SAMPLES)
         if not self.facing(light, t_obj, times, moving):
             return None
@@ -245,18 +329,14 @@ class SceneGeometry:
         v = self.object_velocity(light) if moving else np.zeros(3)
         # a flickering light's crop also holds its reflection in a wet road (render_tools.reflections)
         refl = reflections.glossy_points(pts, self.ego.position(t_obj), self.wet) \
-            if moving and reflection and self.wet else None
+            if moving and reflection and self.reflected(light, t_obj) else None
         uvs = []
         for t in times:
             pose = self.ego.pose_cv(t)
             pw = pts + v * (t - t_obj)
             uv, z = cam_mod.project(pw, pose, self.K)
             if refl is not None and len(refl):
-                ruv, rz = cam_mod.project(refl + v * (t - t_obj), pose, self.K)
-                p = self.opts.pad_px
-                ok = (rz > MIN_DEPTH_M) & (ruv[:, 0] >= -p) & (ruv[:, 0] <= self.opts.width + p) & \
-                    (ruv[:, 1] >= -p) & (ruv[:, 1] <= self.opts.height + p)
-                uvs.append(ruv[ok])
+                uvs.append(self._reflection_uv(light, t_obj, t, refl))
             if np.all(z <= MIN_DEPTH_M):
                 continue
             if np.any(z <= MIN_DEPTH_M):  # straddles the camera plane: project the part in front of it
@@ -423,9 +503,10 @@ def plan_frame(scene: dict, opts: RenderOptions, n: int, sets, geo: SceneGeometr
     same pixels, the crop one with less variance where the HDR peaks are); the long window is assembled as
     ``frac * short + (1 - frac) * rest`` (plan window ``"rest"``, ``frac`` = T_S / T_L). Flickering groups:
     each visible light alone in its crop, K bins over the capture window, at ``light_spp`` (one bin repeated K
-    times when neither the camera nor the lamp moves); in a wet scene a crop grown by the light's reflection is
-    traced at ``spp`` in ``opts.reflection_bins`` bins and the lamp's own box again at ``light_spp`` in K bins
-    (plan kind ``"light_refine"``, pasted over it). ``sets``: the frame's :class:`tracer.LightSets` (or any
+    times when neither the camera nor the lamp moves); in a wet scene a crop grown by the light's reflection
+    (plan kind ``"light_box"``: zeros, no tile) gets the reflection's row bands (:meth:`SceneGeometry.
+    reflection_tiles`) traced at ``spp`` in ``opts.reflection_bins`` bins and the lamp's own box at ``light_spp``
+    in K bins pasted over them (plan kind ``"light_part"``). ``sets``: the frame's :class:`tracer.LightSets` (or any
     mapping from set name to index). Returns (tiles, plan, visible light ids); plan entries are
     (kind, group, window or light id, crop, tile index, repeat): a tile of K / repeat bins, each bin repeated
     ``repeat`` times in a row to make the K bins.
@@ -480,14 +561,18 @@ def plan_frame(scene: dict, opts: RenderOptions, n: int, sets, geo: SceneGeometr
             # wet road: the box holds the lamp's reflection too; that dim, smooth light is traced at ``spp`` and
             # the lamp's own box again at ``light_spp`` over it (both unbiased: the "refine" of static groups)
             lamp_bb = geo.light_bbox(lt, t_obj, *tm["window"], moving=True, reflection=False) if geo.wet else bb
-            grown = lamp_bb != bb
-            # the reflection crop in opts.reflection_bins bins, each repeated (RenderOptions.reflection_bins)
-            kb = (opts.reflection_bins or opts.bins) if grown else opts.bins
-            crops = [("light", bb, opts.spp if grown else light_spp, kb, ())]
-            if lamp_bb is not None and grown:
-                crops.append(("light_refine", lamp_bb, light_spp, opts.bins, ("lamp",)))
+            if lamp_bb == bb:  # no reflection region: the lamp's box alone
+                crops = [("light", bb, light_spp, opts.bins, ())]
+            else:  # the grown box (zeros) holds the reflection's row bands at spp in opts.reflection_bins bins,
+                # each repeated, and the lamp's own box at light_spp in K bins pasted over them
+                plan.append(("light_box", g, lt["id"], bb, None, opts.bins))
+                kb = opts.reflection_bins or opts.bins
+                crops = [("light_part", c, opts.spp, kb, ("reflection", c[0]))
+                         for c in geo.reflection_tiles(lt, t_obj, *tm["window"], bb)]
+                if lamp_bb is not None:
+                    crops.append(("light_part", lamp_bb, light_spp, opts.bins, ("lamp",)))
             for kind, crop, n_s, nb, extra in crops:
-                key = _seed("light", lt["id"], *(("reflection",) if kind == "light" and grown else extra))
+                key = _seed("light", lt["id"], *extra)
                 if geo.ego.moving or np.any(v != 0.0):
                     plan.append((kind, g, lt["id"], crop, len(tiles), opts.bins // nb))
                     tiles.append(Tile(crop, nb, edges[0], (edges[-1] - edges[0]) / nb, n_s, k,
@@ -547,6 +632,11 @@ def render_frames(scene: dict, opts: RenderOptions) -> Iterator[dict]:
         imgs = tr.render(tiles, _seed(opts.seed, n, "frame")) if tiles else []
         out = {"frame": n, "static": {}, "lights": {}, "aux": {}}
         for kind, g, key, bb, ti, rep in plan:
+            if kind == "light_box":  # a grown crop: zeros where no band of its reflection is traced
+                y0, x0, y1, x1 = bb
+                out["lights"].setdefault(g, []).append(
+                    (key, bb, np.zeros((rep, len(opts.bands_nm), y1 - y0, x1 - x0), np.float32)))
+                continue
             if kind == "union":  # one image per static group (slot), in the union's order
                 for j, gj in enumerate(g):
                     out["static"].setdefault(gj, {})[key] = backend.clamp_roundoff(
@@ -558,7 +648,7 @@ def render_frames(scene: dict, opts: RenderOptions) -> Iterator[dict]:
             elif kind == "refine":
                 y0, x0, y1, x1 = bb
                 out["static"][g][key][:, y0:y1, x0:x1] = img[0]
-            elif kind == "light_refine":  # the lamp's own box at light_spp over its reflection crop
+            elif kind == "light_part":  # a reflection band or the lamp's own box inside its grown crop
                 lid, (by0, bx0, _, _), arr = out["lights"][g][-1]
                 y0, x0, y1, x1 = bb
                 arr[:, :, y0 - by0:y1 - by0, x0 - bx0:x1 - bx0] = np.repeat(img, rep, axis=0) if rep > 1 else img

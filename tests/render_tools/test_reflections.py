@@ -56,24 +56,46 @@ def test_wet_road_region_and_dry_scene():
     assert (lw[3] - lw[1]) < 0.5 * OPTS["width"]  # not the whole width (the streak is narrow)
 
 
+def _traced(sc, opts, lid=0) -> np.ndarray:
+    """(H, W) bool: the pixels of frame 0 that light ``lid``'s tiles trace (its crop, or its reflection bands
+    and lamp box)."""
+    class Sets(dict):
+        def __missing__(self, k):
+            return 0
+
+    tiles, plan, _ = R.plan_frame(sc, opts, 0, Sets())
+    m = np.zeros((opts.height, opts.width), bool)
+    for kind, g, key, bb, ti, rep in plan:
+        if key == lid and ti is not None and kind in ("light", "light_part"):
+            y0, x0, y1, x1 = bb
+            m[y0:y1, x0:x1] = True
+    return m
+
+
 @pytest.mark.jit
 @pytest.mark.parametrize("weather", ["dry", "wet"])
 def test_reflection_is_in_the_lamps_crop(weather):
     sc = lamp_over_road(weather)
-    frame = next(R.render_frames(sc, R.RenderOptions(**OPTS)))
+    opts = R.RenderOptions(**OPTS)
+    frame = next(R.render_frames(sc, opts))
     (lid, (y0, x0, y1, x1), arr), = frame["lights"]["otherlights"]
     static = copy.deepcopy(sc)
     static["groups"]["otherlights"]["flicker"] = False
-    full = next(R.render_frames(static, R.RenderOptions(**OPTS)))["static"]["otherlights"]["short"]
-    lamp_only = R.SceneGeometry(sc, R.RenderOptions(**OPTS)).light_bbox(sc["lights"][0], 0.01, 0.0, 0.02)
+    full = next(R.render_frames(static, opts))["static"]["otherlights"]["short"]
+    lamp_only = R.SceneGeometry(sc, opts).light_bbox(sc["lights"][0], 0.01, 0.0, 0.02)
     ly0, lx0, ly1, lx1 = lamp_only
+    traced = _traced(sc, opts)  # the reflection's bands and the lamp's box
     outside_lamp = full.sum() - full[:, ly0:ly1, lx0:lx1].sum()  # reflection and diffuse light on the road
-    in_crop = full[:, y0:y1, x0:x1].sum() - full[:, ly0:ly1, lx0:lx1].sum()
+    lamp_px = np.zeros_like(traced)
+    lamp_px[ly0:ly1, lx0:lx1] = True
+    in_crop = full[:, traced & ~lamp_px].sum()
     if weather == "wet":
         assert outside_lamp > 0.1 * full[:, ly0:ly1, lx0:lx1].sum()  # the reflection is a fifth of the lamp
-        assert in_crop > 0.98 * outside_lamp  # measured 99.4 %: (almost) all of it is in the lamp's crop
-        # the crop render holds the same light as the full frame there (independent estimates: 2 % noise)
-        assert arr.mean(0).sum() == pytest.approx(full[:, y0:y1, x0:x1].sum(), rel=0.02)
+        assert in_crop > 0.98 * outside_lamp  # measured 99.4 %: (almost) all of it is in the traced bands
+        # the crop render holds the same light as the full frame there (independent estimates: 2 % noise), and
+        # nothing outside the traced pixels
+        assert arr.mean(0).sum() == pytest.approx(full[:, traced].sum(), rel=0.02)
+        assert not arr[:, :, ~traced[y0:y1, x0:x1]].any()
     else:
         assert (y0, x0, y1, x1) == lamp_only  # no reflection region, no extra pixels
         assert outside_lamp < 0.02 * full.sum()  # a dry road sends back little of it
@@ -103,31 +125,93 @@ def test_lamp_and_reflection_share_every_bins_pwm_weight(reflection_bins):
     assert (w @ refl) / (w @ lamp) == pytest.approx(refl.sum() / lamp.sum(), rel=0.05)
 
 
-def _tiles_by_kind(sc, opts):
-    class Sets(dict):
-        def __missing__(self, k):
-            return 0
-
-    tiles, plan, _ = R.plan_frame(sc, opts, 0, Sets())
-    return {e[0]: (t, e[5]) for e, t in zip(plan, tiles)}, tiles
+class _Sets(dict):
+    def __missing__(self, k):
+        return 0
 
 
 def test_reflection_bins_plan_and_options():
-    """The reflection crop is one tile of ``reflection_bins`` bins, each repeated K / reflection_bins times; the
-    lamp's own box keeps K bins at light_spp; a dry scene (every lfmbench-v1 scene) plans the same tiles whatever
-    ``reflection_bins`` is; a value that does not divide K is refused, naming the option."""
+    """A grown crop is a box of zeros (no tile) with the reflection's row bands in ``reflection_bins`` bins at
+    spp, each repeated K / reflection_bins times, and the lamp's own box in K bins at light_spp; a dry scene
+    (every lfmbench-v1 scene) plans the same tiles whatever ``reflection_bins`` and ``reflection_min_lux`` are;
+    a value that does not divide K is refused, naming the option."""
     wet = lamp_over_road("wet", speed_mps=12.0)
     for rb, n in [(None, 4), (1, 1), (2, 2)]:
-        by, _ = _tiles_by_kind(wet, R.RenderOptions(**OPTS, reflection_bins=rb))
-        (refl, rep), (lamp, lrep) = by["light"], by["light_refine"]
-        assert (refl.bins, rep, refl.spp) == (n, 4 // n, OPTS["spp"])
-        assert (lamp.bins, lrep, lamp.spp) == (4, 1, OPTS["light_spp"])
-        assert refl.bins * refl.bin_len == pytest.approx(R.RenderOptions(**OPTS).capture_window_s)
+        opts = R.RenderOptions(**OPTS, reflection_bins=rb)
+        tiles, plan, _ = R.plan_frame(wet, opts, 0, _Sets())
+        (box,) = [e for e in plan if e[0] == "light_box"]
+        assert box[4] is None and box[5] == 4
+        parts = [(tiles[e[4]], e[5], e[3]) for e in plan if e[0] == "light_part"]
+        refl = [(t, rep, c) for t, rep, c in parts if t.spp == OPTS["spp"]]
+        (lamp, lrep, _), = [x for x in parts if x[0].spp == OPTS["light_spp"]]
+        assert len(refl) >= 2 and all((t.bins, rep) == (n, 4 // n) for t, rep, _ in refl)
+        assert all(t.bins * t.bin_len == pytest.approx(opts.capture_window_s) for t, _, _ in refl)
+        assert (lamp.bins, lrep) == (4, 1)
+        y0, x0, y1, x1 = box[3]
+        m = np.zeros((opts.height, opts.width), int)
+        for _, _, (a, b, c, d) in refl:
+            assert y0 <= a < c <= y1 and x0 <= b < d <= x1
+            m[a:c, b:d] += 1
+        assert m.max() == 1  # disjoint bands
     dry = lamp_over_road("dry", speed_mps=12.0)
-    assert _tiles_by_kind(dry, R.RenderOptions(**OPTS, reflection_bins=1))[1] == \
-        _tiles_by_kind(dry, R.RenderOptions(**OPTS, reflection_bins=None))[1]
+    assert R.plan_frame(dry, R.RenderOptions(**OPTS, reflection_bins=1, reflection_min_lux=1.0), 0, _Sets())[0] == \
+        R.plan_frame(dry, R.RenderOptions(**OPTS, reflection_bins=None, reflection_min_lux=0.0), 0, _Sets())[0]
     with pytest.raises(ValueError, match="reflection_bins"):
         R.RenderOptions(**{**OPTS, "bins": 8}, reflection_bins=3)
+    with pytest.raises(ValueError, match="reflection_min_lux"):
+        R.RenderOptions(**OPTS, reflection_min_lux=-1.0)
+
+
+def test_reflection_bands_cover_the_region_and_threshold():
+    """Every point of the reflection region (render_tools.reflections.glossy_points) that the grown box was
+    made from lies inside the row bands (or the lamp's box), at every time sample, for every flickering light of
+    a generated wet night (lfmbench-v2 generator); the bands are disjoint, inside the box and smaller than it.
+    A light whose illuminance at the camera is below ``reflection_min_lux`` keeps its own box only."""
+    sc = S.generate_scene(101, "night", scene_id="wet", generator=2, overrides={"weather": {"conditions": ["wet"]}})
+    opts = R.RenderOptions(width=320, height=180, frames=1, reflection_min_lux=0.0)
+    geo = R.SceneGeometry(sc, opts)
+    tm = R.frame_timing(sc, opts, 0)
+    t_obj = 0.5 * (tm["window"][0] + tm["window"][1])
+    n_grown, band_px, box_px = 0, 0, 0
+    for lt in sc["lights"]:
+        if not sc["groups"][lt["group"]]["flicker"]:
+            continue
+        bb = geo.light_bbox(lt, t_obj, *tm["window"], moving=True)
+        lamp = geo.light_bbox(lt, t_obj, *tm["window"], moving=True, reflection=False)
+        if bb is None or bb == lamp:
+            continue
+        n_grown += 1
+        bands = geo.reflection_tiles(lt, t_obj, *tm["window"], bb)
+        m = np.zeros((opts.height, opts.width), int)
+        for a, b, c, d in bands:
+            assert bb[0] <= a < c <= bb[2] and bb[1] <= b < d <= bb[3]
+            m[a:c, b:d] += 1
+        assert m.max() == 1
+        band_px += int(m.sum())
+        box_px += (bb[2] - bb[0]) * (bb[3] - bb[1])
+        if lamp is not None:
+            m[lamp[0]:lamp[2], lamp[1]:lamp[3]] = 1
+        pts = RF.glossy_points(R.ms.light_points(sc, lt, t_obj), geo.ego.position(t_obj), geo.wet)
+        for t in np.linspace(*tm["window"], R.BBOX_TIME_SAMPLES):
+            uv = geo._reflection_uv(lt, t_obj, t, pts)
+            i = np.clip(np.floor(uv[:, 1]).astype(int), 0, opts.height - 1)
+            j = np.clip(np.floor(uv[:, 0]).astype(int), 0, opts.width - 1)
+            inside = (uv[:, 1] >= bb[0]) & (uv[:, 1] < bb[2]) & (uv[:, 0] >= bb[1]) & (uv[:, 0] < bb[3])
+            assert m[i[inside], j[inside]].all(), (lt["id"], t)
+    assert n_grown >= 10 and band_px < 0.85 * box_px
+    # the threshold: the dimmest of these lights loses its reflection region above its illuminance
+    e = {lt["id"]: lt["luminance_cd_m2"] * R.ms.plane_area(lt) / np.sum(
+        (np.asarray(lt["center"]) + R.ms.object_offset(sc, lt["instance"], t_obj) - geo.ego.position(t_obj)) ** 2)
+        for lt in sc["lights"] if sc["groups"][lt["group"]]["flicker"]}
+    lid = min((k for k in e if geo.reflection_tiles(sc["lights"][k], t_obj, *tm["window"], (0, 0, 180, 320))),
+              key=e.get)
+    lt = sc["lights"][lid]
+    high = R.SceneGeometry(sc, R.RenderOptions(width=320, height=180, frames=1, reflection_min_lux=1.01 * e[lid]))
+    low = R.SceneGeometry(sc, R.RenderOptions(width=320, height=180, frames=1, reflection_min_lux=0.99 * e[lid]))
+    assert not high.reflected(lt, t_obj) and low.reflected(lt, t_obj)
+    assert high.light_bbox(lt, t_obj, *tm["window"], moving=True) == \
+        high.light_bbox(lt, t_obj, *tm["window"], moving=True, reflection=False)
+    assert high.reflection_tiles(lt, t_obj, *tm["window"], (0, 0, 180, 320)) == []
 
 
 @pytest.mark.jit
