@@ -437,7 +437,8 @@ def scene_meta(scene: dict, opts: RenderOptions) -> dict:
         "lights": lights,
         "render": {"spp": opts.spp, "light_spp": opts.light_spp or opts.spp, "seed": opts.seed,
                    "pad_px": opts.pad_px, "static_pass": opts.static_pass,
-                   **({"reflection_bins": opts.reflection_bins or opts.bins} if helper.wet else {})},
+                   **({"reflection_bins": opts.reflection_bins or opts.bins,
+                       "reflection_min_lux": opts.reflection_min_lux} if helper.wet else {})},
     }
 
 

@@ -153,7 +153,10 @@ def test_reflection_bins_plan_and_options():
             assert y0 <= a < c <= y1 and x0 <= b < d <= x1
             m[a:c, b:d] += 1
         assert m.max() == 1  # disjoint bands
+        meta = R.scene_meta(wet, opts)
+        assert meta["render"]["reflection_bins"] == n and meta["lights"][0]["bbox"][0] == list(box[3])
     dry = lamp_over_road("dry", speed_mps=12.0)
+    assert "reflection_bins" not in R.scene_meta(dry, R.RenderOptions(**OPTS))["render"]
     assert R.plan_frame(dry, R.RenderOptions(**OPTS, reflection_bins=1, reflection_min_lux=1.0), 0, _Sets())[0] == \
         R.plan_frame(dry, R.RenderOptions(**OPTS, reflection_bins=None, reflection_min_lux=0.0), 0, _Sets())[0]
     with pytest.raises(ValueError, match="reflection_bins"):
