@@ -301,3 +301,28 @@ def test_render_command_refuses_a_too_long_sign_text(tmp_path):
     assert r.exit_code == 2, r.output
     assert f"--scene {p}: field 'scene.objects[" in r.output and "is too long for the sign" in r.output
     assert "Traceback" not in r.output and not out.exists()
+
+
+def test_centre_brake_lamp_sits_on_the_body_under_the_roof_line():
+    """Every template's centre high-mounted stop lamp (``cbrake``) has its top at least 1 cm under the roof line of
+    its generator-2 body (the highest loft station within 0.11 m of it) and lies on a body face: at most 1 cm
+    behind the rear face of the rearmost loft station or of an extra box (a car's roof lip), which covers the
+    lamp's whole width and height (it neither floats above the roof nor hangs in the air)."""
+    from render_tools.scene_templates import VEHICLE_BODIES, VEHICLE_TEMPLATES
+
+    checked = 0
+    for kind, t in VEHICLE_TEMPLATES.items():
+        if t["cbrake"] is None:
+            continue
+        cx, cy, cz, w, h = t["cbrake"]
+        body = VEHICLE_BODIES[kind]
+        st = np.asarray(body["stations"], dtype=float)
+        roof = st[np.abs(st[:, 0] - cx) <= 0.11, 3].max()
+        assert cz + h / 2 <= roof - 0.01, kind
+        faces = [(st[0, 0], st[0, 1], st[0, 3], body["width"] * st[0, 4] / 2 - body["roof_inset"])]
+        faces += [(bx - sx / 2, bz - sz / 2, bz + sz / 2, sy / 2) for (bx, by, bz), (sx, sy, sz), _ in body["boxes"]]
+        on = [f for f in faces if -0.01 <= f[0] - cx <= 0.01 and f[1] <= cz - h / 2 and cz + h / 2 <= f[2]
+              and abs(cy) + w / 2 <= f[3]]
+        assert on, (kind, faces)
+        checked += 1
+    assert checked == 3  # car, van, bus
