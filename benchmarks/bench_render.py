@@ -36,6 +36,9 @@ from render_tools import preview, reference, render, scene, spectra  # noqa: E40
 
 BANDS = render.DEFAULT_BANDS_NM
 
+#: Heading of benchmarks/bench_render_v2_error.py's section of docs/render-benchmark.md (kept when this script
+#: rewrites the file).
+V2_SECTION = "## Scene generator 2 (issue 23)"
 #: Share of a crop's maximum above which a pixel counts as an LED pixel of that light.
 LED_THRESHOLD = 0.05
 
@@ -343,7 +346,9 @@ def write_report(res: dict, out: Path) -> None:
               "- Continuous blur: one render whatever the motion; M sub-frames need M renders (M kernel launches) for "
               "the same samples and add a discretisation (strobing) error that grows with the blur length.",
               ""]
-    atomic_write_text(out / "render-benchmark.md", "\n".join(lines))
+    old = (out / "render-benchmark.md").read_text() if (out / "render-benchmark.md").exists() else ""
+    keep = old[old.index(V2_SECTION):] if V2_SECTION in old else ""  # bench_render_v2_error.py's section
+    atomic_write_text(out / "render-benchmark.md", "\n".join(lines) + ("\n" + keep if keep else ""))
     atomic_write_text(out / "render-benchmark.json", json.dumps(res, indent=1) + "\n")  # the numbers behind the report
 
 

@@ -41,20 +41,28 @@ NEW_SEED = 7000
 
 
 def run_case(home: Path, out: Path, profile: str, seed: int, scenes: int = 1, extra=()) -> dict:
-    """One ``lfmbench render`` of ``scenes`` scenes; returns seconds (the whole run), kernels compiled, MB written
-    (the whole corpus)."""
+    """One ``lfmbench render`` of ``scenes`` scenes; returns seconds (the whole run), CPU seconds of the child
+    processes (user + system: less sensitive than wall time to other jobs on the machine), kernels compiled, MB
+    written (the whole corpus)."""
+    import resource  # noqa: PLC0415
+
+    def cpu():
+        r = resource.getrusage(resource.RUSAGE_CHILDREN)
+        return r.ru_utime + r.ru_stime
+
     env = dict(os.environ, HOME=str(home), PYTHONUNBUFFERED="1")
     cache = home / ".drjit"
     before = len(list(cache.glob("*"))) if cache.is_dir() else 0
     cmd = [sys.executable, "-m", "lfmbench.cli", "render", "--out", str(out), "--scenes", str(scenes), "--profile",
            profile, "--seed", str(seed), "--workers", "1", *extra]
-    t = time.perf_counter()
+    t, c = time.perf_counter(), cpu()
     res = subprocess.run(cmd, env=env, capture_output=True, text=True, cwd=str(ROOT))
-    dt = time.perf_counter() - t
+    dt, dc = time.perf_counter() - t, cpu() - c
     if res.returncode != 0:
         raise RuntimeError(f"{' '.join(cmd)} failed:\n{res.stdout[-2000:]}\n{res.stderr[-4000:]}")
     after = len(list(cache.glob("*"))) if cache.is_dir() else 0
-    return {"profile": profile, "seed": seed, "seconds": dt, "kernels": after - before, "mb": _du_mb(out)}
+    return {"profile": profile, "seed": seed, "seconds": dt, "cpu_s": dc, "kernels": after - before,
+            "mb": _du_mb(out)}
 
 
 def _time_of_day(out: Path) -> str:
