@@ -1,7 +1,8 @@
 """Error of the ``default`` render profile on scene generator 2 (lfmbench-v2) scenes against a high-spp reference
 (issue 23): writes the section "Scene generator 2 (issue 23)" of docs/render-benchmark.md.
 
-For each case (seed, time of day, generator 2's weather; default: a day, a dry night and a wet night) frame 0 is
+For each case (seed, time of day, generator 2's weather, or ``v1`` for the generator-1 scene of that seed and time of
+day, measured the same way for comparison; default: a day, a dry night and a wet night of generator 2) frame 0 is
 rendered at 640x360 with the ``default`` profile's options (render_tools/configs/render_profiles.yaml, every other
 field at its :class:`render_tools.render.RenderOptions` default, seed 11) and as a reference with spp
 :data:`REF_SPP`, light_spp :data:`REF_LIGHT_SPP`, the same K, every reflection traced in all K bins
@@ -47,8 +48,8 @@ from bench_render import led_sel, lum, median_rel_error, rel_mse_pixels, rel_rms
 
 from lfmbench.fileio import atomic_write_bytes, atomic_write_text, load_yaml  # noqa: E402
 
-#: Default cases: seed, time of day, generator 2's weather (the scenes of docs/render-scale-benchmark.md's v2 rows).
-CASES = ("202:day:dry", "101:night:dry", "101:night:wet")
+#: Default cases: seed, time of day, generator 2's weather or v1 (the scenes of docs/render-scale-benchmark.md).
+CASES = ("202:day:v1", "202:day:dry", "101:night:v1", "101:night:dry", "101:night:wet")
 #: Reference sample counts (per band pass): full frames, lamp crops.
 REF_SPP, REF_LIGHT_SPP = 4, 256
 #: Share of a pixel's reference luminance above which the flickering layers' light outside the lamps' own boxes
@@ -139,7 +140,8 @@ def main() -> None:
     from render_tools import render, scene  # noqa: PLC0415
 
     ap = argparse.ArgumentParser()
-    ap.add_argument("--cases", nargs="+", default=list(CASES), help="seed:time of day:generator 2's weather")
+    ap.add_argument("--cases", nargs="+", default=list(CASES),
+                    help="seed:time of day:generator 2's weather, or seed:time of day:v1 (a generator-1 scene)")
     ap.add_argument("--cache", default=None, help="folder for the rendered frames (pickles), reused when there")
     ap.add_argument("--out", default=str(ROOT / "docs"))
     ap.add_argument("--quick", action="store_true", help="160x90, reference spp 2 / light_spp 32 (smoke run)")
@@ -160,8 +162,8 @@ def main() -> None:
     load0 = os.getloadavg()[0]
     for c in a.cases:
         seed, tod, weather = c.split(":")
-        sc = scene.generate_scene(int(seed), tod, scene_id=f"v2_{tod}_{seed}_{weather}", generator=2,
-                                  overrides={"weather": {"conditions": [weather]}})
+        kw = {} if weather == "v1" else {"generator": 2, "overrides": {"weather": {"conditions": [weather]}}}
+        sc = scene.generate_scene(int(seed), tod, scene_id=f"{tod}_{seed}_{weather}", **kw)
         t = time.perf_counter()
         ref, ref_cpu = _frame(sc, refo, cache, f"ref_{c.replace(':', '_')}")
         print(c, "reference", f"{time.perf_counter() - t:.0f} s", flush=True)
@@ -201,7 +203,7 @@ def write_section(rows: list, out: Path, load0: float, load1: float, size=SIZE,
              f"{ref[1]}, K 8 with exact reflections (errors are upper bounds: the reference's own noise is in them). Targets (issue 23): LED pixels <= 2 % relative RMSE, all-pixel "
              "median <= 10 %. Reflection px: where the reference's flickering layers outside the lamps' own boxes "
              f"bring more than {REFLECTION_SHARE:.0%} of the pixel's luminance.", "",
-             "| scene (seed:time:weather) | setting | CPU s / frame (reference) | rel. RMSE LED bins | rel. RMSE LED px "
+             "| scene (seed:time:weather or v1) | setting | CPU s / frame (reference) | rel. RMSE LED bins | rel. RMSE LED px "
              "(short composite) | all px relMSE^0.5 | all px median rel. error (short) | (long) | reflection px: "
              "median rel. error (count) |",
              "|---|---|---|---|---|---|---|---|---|"]

@@ -88,8 +88,9 @@ class RenderOptions:
     reflection_min_lux: a flickering light's reflection in a wet road is traced only when the illuminance it
     sends to the camera, E = I / d^2 lux (I: its luminance x face area, cd; d: lamp to camera, m, at mid capture
     window), is at least this; a dimmer light keeps only its own box (its reflection left out, as the light it
-    throws on its surroundings outside its crop always was). 0: every light's reflection. Measured: below 2e-3 lux
-    a reflection averages under 2 % of a lit night road's luminance (docs/render-benchmark.md).
+    throws on its surroundings outside its crop always was). 0: every light's reflection. Measured on a wet night:
+    below 2e-3 lux a reflection averaged under 2 % of the lit road's luminance over its crop (docs/rendering.md,
+    "Wet roads").
     """
 
     width: int = 640
