@@ -31,9 +31,29 @@ def jit_unavailable() -> str | None:
     return NO_JIT
 
 
+def torch_threads_per_worker(environ=os.environ) -> int | None:
+    """Torch threads for one pytest-xdist worker: this machine's cores shared out between the workers (at least
+    1), or None outside xdist and where the caller chose (``OMP_NUM_THREADS`` set).
+
+    Why: each worker's torch otherwise starts one OpenMP thread per core, so ``-n 2`` on 2 cores runs 4 busy
+    threads whose spin-waits compete for 2 cores; on this suite's tiny tensors that tripled the CPU time of the
+    torch-heavy tests (session 11: tests/datasets, evaluation, sensor, baselines 187 s of CPU -> 55 s). Tests that
+    need several threads ask for them (``threads=3``, ``--threads``) and still get them."""
+    workers = environ.get("PYTEST_XDIST_WORKER_COUNT")
+    if not workers or environ.get("OMP_NUM_THREADS"):
+        return None
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    return max(1, cores // max(1, int(workers)))
+
+
 def pytest_configure(config):
     config.addinivalue_line("markers", "jit: renders with Mitsuba's JIT back end (skipped, with one line saying "
                                        "why, where no libLLVM 19 works; never skipped in CI)")
+    threads = torch_threads_per_worker()
+    if threads is not None:
+        import torch
+
+        torch.set_num_threads(threads)
 
 
 def pytest_runtest_setup(item):
