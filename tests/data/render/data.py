@@ -17,8 +17,9 @@ from render_tools import scene
 
 CALLS: list[str] = []
 FAIL: dict[str, type] = {}  # scene_id -> exception type raised after its first frame
-#: Environment variable ``scene_id:SIGNAME``: the fake render of that scene kills its process with that signal
-#: after the first frame (a native crash, as Dr.Jit's SIGFPE; reaches spawned worker processes too).
+#: Environment variable ``scene_id:SIGNAME[,scene_id:SIGNAME...]``: the fake render of each named scene kills its
+#: process with that signal after the first frame (a native crash, as Dr.Jit's SIGFPE; reaches spawned worker
+#: processes too).
 CRASH_ENV = "LFMBENCH_TEST_CRASH"
 
 
@@ -33,9 +34,9 @@ def fake_render_frames(scene, opts):
     for n in range(opts.frames):
         if n == 1 and scene["scene_id"] in FAIL:
             raise FAIL[scene["scene_id"]]("simulated failure")
-        crash = os.environ.get(CRASH_ENV, "").split(":")
-        if n == 1 and crash[0] == scene["scene_id"]:
-            os.kill(os.getpid(), getattr(signal, crash[1]))
+        crash = dict(c.split(":") for c in os.environ.get(CRASH_ENV, "").split(",") if c)
+        if n == 1 and scene["scene_id"] in crash:
+            os.kill(os.getpid(), getattr(signal, crash[scene["scene_id"]]))
         static, lights = {}, {}
         for g, v in meta["groups"].items():
             if v["flicker"]:
