@@ -27,3 +27,19 @@ def write_device_doc(text: str, device: str, gpu_doc, cpu_doc, root) -> None:
     atomic_write_text(gpu_doc if on_gpu else cpu_doc, text)
     if not on_gpu:
         print(f"no GPU here: the GPU figures were not run; CPU figures in {cpu_doc.relative_to(root)}")
+
+
+def replace_section(path, heading: str, lines: list[str]) -> None:
+    """Write ``lines`` (starting with ``heading``, a ``## `` line) as that section of the Markdown file ``path``:
+    what is before the heading stays, the old section (up to the next ``## `` heading) is replaced, later sections
+    stay; a file without the heading gets the section at its end."""
+    from pathlib import Path  # noqa: PLC0415
+
+    from lfmbench.fileio import atomic_write_text  # noqa: PLC0415 - the timing helpers need no lfmbench
+
+    path = Path(path)
+    old = path.read_text() if path.exists() else ""
+    head = old.split(heading)[0].rstrip() + "\n\n" if old else ""
+    rest = old.split(heading, 1)[1] if heading in old else ""
+    tail = rest[rest.index("\n## "):].lstrip("\n") if "\n## " in rest else ""
+    atomic_write_text(path, head + "\n".join(lines) + ("\n" + tail if tail else ""))

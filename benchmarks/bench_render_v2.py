@@ -26,6 +26,7 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import _llvm  # noqa: E402,F401 - sets DRJIT_LIBLLVM_PATH
+from _timing import replace_section  # noqa: E402
 from bench_render_scale import run_case  # noqa: E402
 
 from lfmbench.fileio import atomic_write_text  # noqa: E402
@@ -95,12 +96,7 @@ def main() -> None:
             f"({w2['cpu_s'] / w1['cpu_s']:.2f}) | {c1['kernels']} / {c2['kernels']} | "
             f"{c1['mb']:.0f} / {c2['mb']:.0f} |")
     lines += ["", "Run again with `python benchmarks/bench_render_v2.py`.", ""]
-    out = Path(a.out) / "render-scale-benchmark.md"
-    old = out.read_text() if out.exists() else ""
-    head_txt = old.split(SECTION)[0].rstrip() + "\n\n" if old else ""
-    rest = old.split(SECTION, 1)[1] if SECTION in old else ""
-    tail = rest[rest.index("\n## "):].lstrip("\n") if "\n## " in rest else ""  # later sections are kept
-    atomic_write_text(out, head_txt + "\n".join(lines) + ("\n" + tail if tail else ""))
+    replace_section(Path(a.out) / "render-scale-benchmark.md", SECTION, lines)
     print("\n".join(lines))
 
 

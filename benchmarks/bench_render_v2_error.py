@@ -43,10 +43,11 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import _llvm  # noqa: E402,F401 - sets DRJIT_LIBLLVM_PATH
+from _timing import replace_section  # noqa: E402
 from bench_render import V2_SECTION as SECTION  # noqa: E402
 from bench_render import led_sel, lum, median_rel_error, rel_mse_pixels, rel_rmse  # noqa: E402
 
-from lfmbench.fileio import atomic_write_bytes, atomic_write_text, load_yaml  # noqa: E402
+from lfmbench.fileio import atomic_write_bytes, load_yaml  # noqa: E402
 
 #: Default cases: seed, time of day, generator 2's weather or v1 (the scenes of docs/render-scale-benchmark.md).
 CASES = ("202:day:v1", "202:day:dry", "101:night:v1", "101:night:dry", "101:night:wet")
@@ -215,12 +216,7 @@ def write_section(rows: list, out: Path, load0: float, load1: float, size=SIZE,
                      f"{refl} |")
     lines += ["", "Run again with `python benchmarks/bench_render_v2_error.py --cache /tmp/v2err` (references "
               "are the bulk of the time).", ""]
-    path = out / "render-benchmark.md"
-    old = path.read_text() if path.exists() else ""
-    head = old.split(SECTION)[0].rstrip() + "\n\n" if old else ""
-    rest = old.split(SECTION, 1)[1] if SECTION in old else ""
-    tail = rest[rest.index("\n## "):].lstrip("\n") if "\n## " in rest else ""  # later sections are kept
-    atomic_write_text(path, head + "\n".join(lines) + ("\n" + tail if tail else ""))
+    replace_section(out / "render-benchmark.md", SECTION, lines)
     print("\n".join(lines))
 
 
