@@ -29,7 +29,7 @@ import numpy as np
 from lfmbench.flicker.waveforms import CountdownSegment
 
 from . import led_matrix
-from .scene_templates import local_offset
+from .scene_templates import VEHICLE_BODIES, local_offset
 
 __all__ = ["add_vehicle_lamps", "add_displays", "add_message_sign", "add_destination_display", "add_countdown",
            "led_array_signals", "segment_faces"]
@@ -145,8 +145,9 @@ def add_vehicle_lamps(b, kind: str, t: dict, oid: int, x: float, y: float, headi
                 for face in segment_faces(_at(x, y, heading, lx - 0.003, s * ly, lz + h * 0.3), (w, h * 0.3),
                                           back, segs if w >= 0.1 else 1, sync):
                     _light(b, "brake", oid, face, lc["led_red"], lum, tail_spread, driver=drv("brake"))
-        if t["cbrake"] is not None:
-            cx, cy, cz, w, h = t["cbrake"]
+        cbrake = VEHICLE_BODIES.get(kind, {}).get("chmsl", t["cbrake"])  # on generator 2's body
+        if cbrake is not None:
+            cx, cy, cz, w, h = cbrake
             _light(b, "chmsl", oid, _strip(_at(x, y, heading, cx, cy, cz), w, h, back), lc["led_red"], lum,
                    tail_spread, driver=drv("brake"))
     if indicator and t["ind"]:

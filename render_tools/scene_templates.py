@@ -33,9 +33,8 @@ VEHICLE_MATERIALS = {"glass": "glass", "rider": "rubber"}
 
 #: Vehicle templates. ``boxes``: ((centre), (size), material role); ``spheres``: ((centre), radius, role);
 #: ``wheels``: (x, radius, half track: 0 = one wheel on the axis); ``tail``/``head``/``ind``: ((centre), (w, h))
-#: lamps, mirrored to both sides unless y = 0; ``cbrake``: a centre brake lamp (x, y, z, w, h) or None, its top at
-#: least 1 cm under the body's roof line (:data:`VEHICLE_BODIES`); ``cargo``:
-#: a second drawn colour (a truck's box); ``lights_by_day``: lamps on whenever moving (motorcycles, buses);
+#: lamps, mirrored to both sides unless y = 0; ``cbrake``: a centre brake lamp (x, y, z, w, h) or None (generator 2
+#: puts it where its body's ``chmsl`` says, :data:`VEHICLE_BODIES`); ``cargo``: a second drawn colour (a truck's box); ``lights_by_day``: lamps on whenever moving (motorcycles, buses);
 #: ``max_speed_mps`` (optional): the kind's top speed, m/s (a bicycle's drawn speed is capped at it).
 #: Scene generator 1's centre brake lamps (x, y, z, w, h), as lfmbench-v1 published them (a car's and a van's float
 #: 1-2 cm above their box roof; kept so that v1 scenes never change: tests/render_tools/test_scene_v2.py); generator
@@ -47,7 +46,7 @@ VEHICLE_TEMPLATES = {
                                      ((-0.35, 0.0, 1.28), (2.3, 1.6, 0.56), "glass")],
             "spheres": [], "wheels": [(1.35, 0.33, 0.8), (-1.35, 0.33, 0.8)], "wheel_w": 0.22,
             "tail": [((-2.205, 0.62, 0.86), (0.32, 0.12))], "head": [((2.205, 0.62, 0.72), (0.26, 0.11))],
-            "cbrake": (-1.505, 0.0, 1.44, 0.5, 0.04), "ind": [((-2.205, 0.82, 0.72), (0.1, 0.07))],
+            "cbrake": (-1.52, 0.0, 1.54, 0.5, 0.06), "ind": [((-2.205, 0.82, 0.72), (0.1, 0.07))],
             "cargo": False, "lights_by_day": False},
     "truck": {"length": 9.5, "boxes": [((3.55, 0.0, 1.85), (2.4, 2.4, 2.6), "paint"),
                                        ((-1.2, 0.0, 2.35), (7.1, 2.5, 3.3), "cargo"),
@@ -65,7 +64,7 @@ VEHICLE_TEMPLATES = {
                                      ((0.6, 0.0, 1.55), (3.0, 2.0, 0.5), "glass")],
             "spheres": [], "wheels": [(1.7, 0.35, 0.85), (-1.7, 0.35, 0.85)], "wheel_w": 0.24,
             "tail": [((-2.505, 0.8, 1.0), (0.2, 0.3))], "head": [((2.505, 0.72, 0.8), (0.3, 0.12))],
-            "cbrake": (-2.505, 0.0, 1.84, 0.4, 0.05), "ind": [((-2.505, 0.86, 0.72), (0.1, 0.08))],
+            "cbrake": (-2.505, 0.0, 1.88, 0.4, 0.05), "ind": [((-2.505, 0.86, 0.72), (0.1, 0.08))],
             "cargo": False, "lights_by_day": False},
     "bus": {"length": 12.0, "boxes": [((0.0, 0.0, 1.75), (12.0, 2.55, 2.8), "paint"),
                                       ((0.2, 0.0, 2.35), (11.2, 2.6, 1.0), "glass")],
@@ -112,20 +111,23 @@ def local_offset(x, y, heading):
 # ------------------------------------------------------------------------------ scene generator 2: shapes
 #: Scene generator 2's bodies (:func:`render_tools.shapes.body_meshes`): per kind the loft stations ``(x, z_bottom,
 #: z_belt, z_top, width_scale, side_glass, top_glass)`` (m, vehicle frame, rear to front), width (m), roof inset
-#: per side (m) and extra boxes ((centre), (size), role) such as a truck's cargo box or a car's roof lip (over the
-#: roof's rear edge and the top of the rear window) that carries its centre brake lamp under the roof line. Motorcycles and bicycles are rigs of tubes and rings (:func:`two_wheeler_parts`)
-#: with a small lofted body (motorcycle) and a rider. The lamps stay where :data:`VEHICLE_TEMPLATES` puts them:
-#: each body's ends are at +-length / 2, just behind the lamp faces.
+#: per side (m), extra boxes ((centre), (size), role) such as a truck's cargo box or a car's roof lip (over the
+#: roof's rear edge and the top of the rear window), and ``chmsl``: the centre brake lamp (x, y, z, w, h) where it
+#: differs from the template's ``cbrake`` (generator 1 keeps that one: lfmbench-v1's scenes do not change), its
+#: top at least 1 cm under the roof line, on a body face. Motorcycles and bicycles are rigs of tubes and rings
+#: (:func:`two_wheeler_parts`) with a small lofted body (motorcycle) and a rider. The lamps stay where
+#: :data:`VEHICLE_TEMPLATES` puts them: each body's ends are at +-length / 2, just behind the lamp faces.
 VEHICLE_BODIES = {
     "car": {"stations": [(-2.20, 0.32, 0.95, 0.96, 0.94, 0, 0), (-2.05, 0.25, 0.98, 1.00, 1.0, 0, 1),
                          (-1.45, 0.25, 0.98, 1.47, 1.0, 1, 0), (0.55, 0.25, 0.96, 1.45, 1.0, 1, 1),
                          (1.35, 0.25, 0.92, 0.93, 1.0, 0, 0), (2.05, 0.27, 0.82, 0.83, 0.98, 0, 0),
                          (2.20, 0.35, 0.78, 0.79, 0.92, 0, 0)],
-            "width": 1.8, "roof_inset": 0.2, "boxes": [((-1.43, 0.0, 1.45), (0.14, 0.7, 0.08), "paint")]},
+            "width": 1.8, "roof_inset": 0.2, "boxes": [((-1.43, 0.0, 1.45), (0.14, 0.7, 0.08), "paint")],
+            "chmsl": (-1.505, 0.0, 1.44, 0.5, 0.04)},
     "van": {"stations": [(-2.50, 0.35, 1.05, 1.88, 0.96, 0, 0), (-2.40, 0.30, 1.05, 1.95, 1.0, 1, 0),
                          (1.35, 0.30, 1.05, 1.95, 1.0, 1, 1), (2.10, 0.30, 1.00, 1.02, 1.0, 0, 0),
                          (2.50, 0.35, 0.92, 0.93, 0.95, 0, 0)],
-            "width": 1.95, "roof_inset": 0.12, "boxes": []},
+            "width": 1.95, "roof_inset": 0.12, "boxes": [], "chmsl": (-2.505, 0.0, 1.84, 0.4, 0.05)},
     "bus": {"stations": [(-6.0, 0.40, 1.35, 3.0, 0.97, 0, 0), (-5.85, 0.35, 1.35, 3.1, 1.0, 1, 0),
                          (5.75, 0.35, 1.35, 3.1, 1.0, 1, 1), (6.0, 0.40, 1.30, 2.95, 0.97, 0, 0)],
             "width": 2.55, "roof_inset": 0.1, "boxes": [],

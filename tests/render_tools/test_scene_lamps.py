@@ -304,18 +304,20 @@ def test_render_command_refuses_a_too_long_sign_text(tmp_path):
 
 
 def test_centre_brake_lamp_sits_on_the_body_under_the_roof_line():
-    """Every template's centre high-mounted stop lamp (``cbrake``) has its top at least 1 cm under the roof line of
-    its generator-2 body (the highest loft station within 0.11 m of it) and lies on a body face: at most 1 cm
-    behind the rear face of the rearmost loft station or of an extra box (a car's roof lip), which covers the
-    lamp's whole width and height (it neither floats above the roof nor hangs in the air)."""
+    """Generator 2's centre high-mounted stop lamp (a body's ``chmsl``, else the template's ``cbrake``) has its top
+    at least 1 cm under the roof line of its body (the highest loft station within 0.11 m of it) and lies on a body
+    face: at most 1 cm behind the rear face of the rearmost loft station or of an extra box (a car's roof lip),
+    which covers the lamp's whole width and height (it neither floats above the roof nor hangs in the air); the
+    generated car's ``chmsl`` light is that lamp."""
     from render_tools.scene_templates import VEHICLE_BODIES, VEHICLE_TEMPLATES
 
     checked = 0
     for kind, t in VEHICLE_TEMPLATES.items():
-        if t["cbrake"] is None:
+        body = VEHICLE_BODIES.get(kind, {})
+        place = body.get("chmsl", t["cbrake"])
+        if place is None:
             continue
-        cx, cy, cz, w, h = t["cbrake"]
-        body = VEHICLE_BODIES[kind]
+        cx, cy, cz, w, h = place
         st = np.asarray(body["stations"], dtype=float)
         roof = st[np.abs(st[:, 0] - cx) <= 0.11, 3].max()
         assert cz + h / 2 <= roof - 0.01, kind
@@ -326,3 +328,6 @@ def test_centre_brake_lamp_sits_on_the_body_under_the_roof_line():
         assert on, (kind, faces)
         checked += 1
     assert checked == 3  # car, van, bus
+    sc = closeup_scene()  # a car with generator 2's lamps
+    (chmsl,) = [lt for lt in sc["lights"] if lt["kind"] == "chmsl"]
+    assert chmsl["center"][2] == pytest.approx(VEHICLE_BODIES["car"]["chmsl"][2])
