@@ -41,8 +41,8 @@ from lfmbench.vocabulary import GROUPS, LIGHT_KINDS, VEHICLE_KINDS, WEATHERS
 
 from .scene_schema import (SCENE_FORMAT, SCENE_VERSION, TIMES_OF_DAY, empty_scene, load_scene, save_scene,
                            scene_groups, validate_scene)
-from .scene_templates import (BASE_MATERIALS, PARKED_KIND, V1_CENTRE_BRAKE, VEHICLE_MATERIALS, VEHICLE_TEMPLATES, box,
-                              cylinder, local_offset, rect)
+from .scene_templates import (BASE_MATERIALS, PARKED_KIND, VEHICLE_MATERIALS, VEHICLE_TEMPLATES, box, cylinder,
+                              local_offset, rect)
 from . import street
 from .lamps import add_displays, add_vehicle_lamps
 
@@ -284,9 +284,8 @@ def add_vehicle(b: SceneBuilder, kind: str, x: float, y: float, heading: float, 
     if braking:
         lum = max(b.other_luminance(), b.other_luminance()) * 3.0
         lum = min(lum, b.head_peak * lc["other_ratio_log"][1])
-        cbrake = V1_CENTRE_BRAKE.get(kind, t["cbrake"])
-        if cbrake is not None:
-            cx, cy, cz, w, h = cbrake
+        if t["cbrake"] is not None:
+            cx, cy, cz, w, h = t["cbrake"]
             dx, dy = local_offset(cx, cy, heading)
             b.light("brake", oid, {"shape": "rect", "center": [x + dx, y + dy, cz], "normal": list(back),
                                    "size": [w, h]}, lc["led_red"], lum, lc["tail_spread_deg"])

@@ -36,11 +36,6 @@ VEHICLE_MATERIALS = {"glass": "glass", "rider": "rubber"}
 #: lamps, mirrored to both sides unless y = 0; ``cbrake``: a centre brake lamp (x, y, z, w, h) or None (generator 2
 #: puts it where its body's ``chmsl`` says, :data:`VEHICLE_BODIES`); ``cargo``: a second drawn colour (a truck's box); ``lights_by_day``: lamps on whenever moving (motorcycles, buses);
 #: ``max_speed_mps`` (optional): the kind's top speed, m/s (a bicycle's drawn speed is capped at it).
-#: Scene generator 1's centre brake lamps (x, y, z, w, h), as lfmbench-v1 published them (a car's and a van's float
-#: 1-2 cm above their box roof; kept so that v1 scenes never change: tests/render_tools/test_scene_v2.py); generator
-#: 2 reads ``cbrake`` of :data:`VEHICLE_TEMPLATES`, under its bodies' roof lines.
-V1_CENTRE_BRAKE = {"car": (-1.52, 0.0, 1.54, 0.5, 0.06), "van": (-2.505, 0.0, 1.88, 0.4, 0.05)}
-
 VEHICLE_TEMPLATES = {
     "car": {"length": 4.4, "boxes": [((0.0, 0.0, 0.68), (4.4, 1.8, 0.66), "paint"),
                                      ((-0.35, 0.0, 1.28), (2.3, 1.6, 0.56), "glass")],
