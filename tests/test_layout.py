@@ -186,3 +186,19 @@ def test_tests_mirror_the_packages():
     for d in sorted(p for p in tests.iterdir() if p.is_dir() and p.name not in ("data", "__pycache__")):
         assert d.name in MODULES or f"lfmbench.{d.name}" in MODULES, f"tests/{d.name}/ names no package"
         assert any(d.glob("test_*.py")), f"tests/{d.name}/ holds no test module"
+
+
+def test_xdist_workers_share_the_cores_as_torch_threads():
+    """tests/conftest.py: under pytest-xdist each worker's torch gets this machine's cores // workers threads (at
+    least 1), so `make test`'s 2 workers on 2 cores do not run 4 spinning OpenMP threads; outside xdist, or with
+    OMP_NUM_THREADS set by the caller, torch keeps its own choice."""
+    import os
+
+    from conftest import torch_threads_per_worker
+
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    assert torch_threads_per_worker({}) is None
+    assert torch_threads_per_worker({"PYTEST_XDIST_WORKER_COUNT": "2", "OMP_NUM_THREADS": "3"}) is None
+    assert torch_threads_per_worker({"PYTEST_XDIST_WORKER_COUNT": "2"}) == max(1, cores // 2)
+    assert torch_threads_per_worker({"PYTEST_XDIST_WORKER_COUNT": "1"}) == cores
+    assert torch_threads_per_worker({"PYTEST_XDIST_WORKER_COUNT": str(cores + 5)}) == 1
