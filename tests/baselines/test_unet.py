@@ -148,8 +148,16 @@ def test_checkpoint_roundtrip_and_registered_method(tmp_path, monkeypatch):
         U.load_checkpoint(bad)
 
 
-def test_train_command_writes_loadable_checkpoint_and_resumes_deterministically(corpus, tmp_path):
+@pytest.fixture
+def one_thread():
+    """torch on one thread for the test (determinism of the resumed runs), the worker's setting restored after."""
+    before = torch.get_num_threads()
     torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(before)
+
+
+def test_train_command_writes_loadable_checkpoint_and_resumes_deterministically(corpus, tmp_path, one_thread):
     cfg = _write_cfg(tmp_path / "tiny.yaml")
     a, b = tmp_path / "a.pt", tmp_path / "b.pt"
     r = CliRunner().invoke(app, ["train", "--corpus", str(corpus), "--config", str(cfg), "--out", str(a),
@@ -219,13 +227,12 @@ def test_epoch_sampler_depends_only_on_seed_and_epoch():
     assert T.cosine_lr(0, 10, 1e-2, 1e-4) == pytest.approx(1e-2) and T.cosine_lr(10, 10, 1e-2, 1e-4) == 1e-4
 
 
-def test_train_command_trains_the_learned_baseline_and_resumes_its_shuffled_order(corpus, tmp_path):
+def test_train_command_trains_the_learned_baseline_and_resumes_its_shuffled_order(corpus, tmp_path, one_thread):
     """``lfmbench train --method learned`` goes through the same loop; its order is a DataLoader shuffled by one
     generator seeded once, whose state the checkpoint keeps, so a resumed run ends with the weights of an
     uninterrupted one (without it, a resumed epoch 2 would replay epoch 1's order)."""
     from lfmbench.baselines import learned as L
 
-    torch.set_num_threads(1)
     cfg = _write_cfg(tmp_path / "learned.yaml", {"train": {"epochs": 2, "batch_size": 2, "crop": 8,
                                                            "samples_per_scene": 2, "workers": 0, "lr": 1e-2,
                                                            "lr_min": 1e-2, "grad_clip": 0.0}})

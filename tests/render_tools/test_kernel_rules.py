@@ -163,7 +163,7 @@ import numpy as np
 sys.path.insert(0, {root!r})
 import drjit as dr
 import mitsuba as mi
-from tests.render_tools.test_render_tracer import _street
+from tests.data.render.data import street as _street
 from render_tools import backend, mitsuba_scene as ms, render, tracer
 s = _street()
 opts = render.RenderOptions(width=37, height=23, spp=3, light_spp=5, bins=3, frames=1, aux=False, seed=1)

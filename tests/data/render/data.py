@@ -1,6 +1,7 @@
 """Fake render data: a ``render_frames`` stand-in (seeded random radiance of the right shapes, from the real
 ``scene_meta``) for testing the render orchestration without Mitsuba, the options of a tiny render, and a small
-hand-made scene (two lamp panels) for the physics tests.
+hand-made scene (two lamp panels) for the physics tests, and :func:`street` (a ground and wall lit by a tail lamp and a
+streetlight) for the tracer tests.
 """
 from __future__ import annotations
 
@@ -82,4 +83,25 @@ def wall_scene(speed=0.0):
     s = scene.empty_scene(speed_mps=speed)
     s["lights"].append(light(0, "otherlights", (5.0, 2.0, 1.4), (-1, 0, 0), (4.0, 6.0), LED, 800.0))
     s["lights"].append(light(1, "streetlights", (5.0, -2.0, 1.4), (-1, 0, 0), (4.0, 6.0), HPS, 2e4))
+    return scene.validate_scene(s)
+
+
+def street():
+    """A grey ground and wall lit by a tail lamp (otherlights, on a moving car) and an HPS streetlight."""
+    s = scene.empty_scene(speed_mps=10.0, fov_x_deg=50.0)
+    s["materials"]["grey"] = {"type": "diffuse", "rgb": [0.4, 0.4, 0.4]}
+    s["objects"].append({"id": 0, "kind": "ground", "velocity_mps": [0, 0, 0],
+                         "parts": [{"shape": "rect", "center": [10, 0, 0], "size": [60, 30], "normal": [0, 0, 1],
+                                    "material": "grey"},
+                                   {"shape": "rect", "center": [14, 0, 2], "size": [30, 6], "normal": [-1, 0, 0],
+                                    "material": "grey"}]})
+    s["objects"].append({"id": 1, "kind": "car", "velocity_mps": [8.0, 0, 0],
+                         "parts": [{"shape": "box", "center": [9.0, 0.8, 0.7], "size": [1.0, 1.6, 1.0],
+                                    "yaw_deg": 0.0, "material": "grey"}]})
+    base = {"shape": "rect", "normal": [-1, 0, 0], "spread_deg": 90.0}
+    s["lights"].append({**base, "id": 0, "group": "otherlights", "kind": "tail", "instance": 1,
+                        "center": [8.49, 0.4, 0.9], "size": [0.3, 0.2], "spectrum": LED, "luminance_cd_m2": 3e3})
+    s["lights"].append({**base, "id": 1, "group": "streetlights", "kind": "streetlight", "instance": -1,
+                        "center": [9.0, -2.0, 4.0], "normal": [0, 0, -1], "size": [0.4, 0.4], "spectrum": HPS,
+                        "luminance_cd_m2": 5e4})
     return scene.validate_scene(s)
