@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import time
+from pathlib import Path
 
 #: The methods of each sensor (the U-Net is added where a checkpoint is given).
 METHODS = {"ovt": ["saturated_exposure_corrected", "flicker_aware_two_sided", "lpd_only"],
@@ -27,12 +28,61 @@ METHODS = {"ovt": ["saturated_exposure_corrected", "flicker_aware_two_sided", "l
            "single": ["exposure_select"]}
 
 
+def _f(v, nd=3) -> str:
+    return "-" if v is None or v != v else f"{v:.{nd}f}"
+
+
+def _ci(row: dict, key: str, nd: int = 3) -> str:
+    lo, hi = (row.get("ci") or {}).get(key) or [None, None]
+    return f"{_f(row.get(key), nd)} [{_f(lo, nd)}, {_f(hi, nd)}]"
+
+
+def tables(leaderboard_json: str | Path) -> str:
+    """The comparison's Markdown tables (docs/sensor-architectures.md) from a cross-sensor ``leaderboard.json``: the
+    ranking with 95 % intervals, then the LED score by condition (time of day with its interval; PWM miss probability
+    and ego speed: value and scenes)."""
+    import json
+
+    d = json.loads(Path(leaderboard_json).read_text())
+    rows = d["rows"]
+    out = ["| # | sensor: method | LED score [95 % CI] | diff vs best [95 % CI] | p Holm | dropout [95 % CI] | "
+           "abs dFMI | LED err | PSNR-mu dB [95 % CI] | ghost [95 % CI] | ms/MP |", "|---" * 11 + "|"]
+    for r in rows:
+        vb = r.get("vs_best")
+        diff = "best" if not vb else f"{_f(vb['mean_diff'])} [{_f(vb['ci'][0])}, {_f(vb['ci'][1])}]"
+        p = "-" if not vb else ("< 0.001" if vb["p_holm"] < 1e-3 else _f(vb["p_holm"]))
+        method, _, sensor = r["method"].partition(" @ ")
+        out.append(f"| {r['rank']} | {sensor}: `{method}` | {_ci(r, 'led_score')} | {diff} | {p} | "
+                   f"{_ci(r, 'dropout_rate')} | {_f(r.get('fmi_abs_err'))} | {_f(r.get('led_rel_err'))} | "
+                   f"{_ci(r, 'psnr_mu', 2)} | {_ci(r, 'ghost_mae_mu')} | {_f(r.get('ms_per_megapixel'), 1)} |")
+    heads, cols = [], []
+    for cond in ("time_of_day", "pwm_miss_prob", "ego_speed_mps"):
+        for b in (rows[0].get("breakdown") or {}).get(cond, {}):
+            heads.append(b if cond == "time_of_day" else f"{cond} {b}")
+            cols.append((cond, b))
+    out += ["", "| sensor: method | " + " | ".join(heads) + " |", "|---" * (len(heads) + 1) + "|"]
+    for r in rows:
+        cells = []
+        for cond, b in cols:
+            x = r["breakdown"][cond].get(b)
+            if x is None:
+                cells.append("-")
+            elif cond == "time_of_day":
+                cells.append(f"{_f(x['value'])} [{_f(x['ci'][0])}, {_f(x['ci'][1])}] ({x['n']})")
+            else:
+                cells.append(f"{_f(x['value'])} ({x['n']})")
+        method, _, sensor = r["method"].partition(" @ ")
+        out.append(f"| {sensor}: `{method}` | " + " | ".join(cells) + " |")
+    return "\n".join(out) + "\n"
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--corpus", required=True, help="corpus root (a protocol's test split)")
+    ap.add_argument("--corpus", help="corpus root (a protocol's test split; required unless --tables-only)")
     ap.add_argument("--runs", default="runs/architectures", help="output directory")
     ap.add_argument("--samples-per-scene", type=int, default=2, help="frozen PWM draws per test scene")
     ap.add_argument("--max-scenes", type=int, default=None, help="score the first N scenes of the split")
+    ap.add_argument("--tables-only", action="store_true", help="only rewrite --runs/tables.md from its leaderboard")
     ap.add_argument("--unet", action="append", default=[], metavar="SENSOR=CHECKPOINT",
                     help="a U-Net trained for SENSOR (lfmbench train --method unet --sensor SENSOR); repeatable")
     a = ap.parse_args()
@@ -42,6 +92,11 @@ def main() -> None:
         if not sep or sensor not in METHODS:
             ap.error(f"--unet {item!r}: give SENSOR=CHECKPOINT with SENSOR one of {', '.join(METHODS)}")
         unets[sensor] = path
+    if a.tables_only:
+        print(tables(Path(a.runs) / "leaderboard.json"))
+        return
+    if not a.corpus:
+        ap.error("--corpus is required")
     from lfmbench.evaluation.benchmark import benchmark_sensors
 
     sensors = {s: [*m, *(["unet"] if s in unets else [])] for s, m in METHODS.items()}
@@ -53,6 +108,11 @@ def main() -> None:
     except ValueError as exc:
         ap.error(str(exc))
     print(f"evaluation took {time.perf_counter() - t:.0f} s")
+    from lfmbench.fileio import atomic_write_text
+
+    md = Path(a.runs) / "tables.md"
+    atomic_write_text(md, tables(Path(a.runs) / "leaderboard.json"))
+    print(f"tables for docs/sensor-architectures.md: {md}")
 
 
 if __name__ == "__main__":
