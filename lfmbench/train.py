@@ -109,7 +109,7 @@ def make_loader(corpus: str | os.PathLike, spec: Trainable, cfg: Any, workers: i
 #: Where training batches come from (``train(data=...)``): ``"loader"``, the per-sample dataset in a DataLoader
 #: (CPU workers; generator noise); ``"device"``, :class:`lfmbench.datasets.device.DeviceBatches` (the corpus
 #: resident on the training device, batches cut and simulated there; counter noise); ``"auto"``: ``"device"`` on
-#: CUDA, else ``"loader"``.
+#: CUDA for a split-pixel sensor (the only plan that path serves), else ``"loader"``.
 DATA_SOURCES = ("auto", "loader", "device")
 
 
@@ -474,7 +474,8 @@ def train(method: str | Trainable, corpus: str | os.PathLike, out: str | os.Path
         data_rng = ck.get("data_rng")
         if log:
             log(f"resuming {out} after epoch {start}/{t.epochs}")
-    on_device = data == "device" or (data == "auto" and dev.type == "cuda")
+    # auto: the device path on CUDA for the split pixel (the other plans run on the per-sample path only)
+    on_device = data == "device" or (data == "auto" and dev.type == "cuda" and arch == "split_pixel")
     if on_device:
         loader, set_epoch = make_device_batches(corpus, spec, cfg, dev, resident_dtype, chunk_scenes)
     else:

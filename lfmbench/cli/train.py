@@ -33,7 +33,7 @@ def train_cmd(
     resume: bool = typer.Option(True, help="continue from --out when it holds a checkpoint of this config"),
     data: str = typer.Option("auto", help="where batches come from: loader (DataLoader workers on the CPU), "
                                           "device (the corpus resident on --device, batches simulated there), "
-                                          "auto (device on CUDA, else loader)"),
+                                          "auto (device on CUDA for a split-pixel sensor, else loader)"),
     resident_dtype: str = typer.Option("float32", help="device path: storage of the resident layers, float32 or "
                                                        "float16 (half the memory, 2^-11 relative error)"),
     chunk_scenes: int = typer.Option(None, help="device path: stream the split this many scenes at a time (a split "
