@@ -83,6 +83,9 @@ def main() -> None:
     ap.add_argument("--samples-per-scene", type=int, default=2, help="frozen PWM draws per test scene")
     ap.add_argument("--max-scenes", type=int, default=None, help="score the first N scenes of the split")
     ap.add_argument("--tables-only", action="store_true", help="only rewrite --runs/tables.md from its leaderboard")
+    ap.add_argument("--sensor", action="append", default=[], choices=list(METHODS),
+                    help="only these sensors (repeatable; default all): parts run in parallel, ranked together by "
+                         "lfmbench leaderboard RUNS/*/*.json --cross-sensor")
     ap.add_argument("--unet", action="append", default=[], metavar="SENSOR=CHECKPOINT",
                     help="a U-Net trained for SENSOR (lfmbench train --method unet --sensor SENSOR); repeatable")
     a = ap.parse_args()
@@ -99,7 +102,7 @@ def main() -> None:
         ap.error("--corpus is required")
     from lfmbench.evaluation.benchmark import benchmark_sensors
 
-    sensors = {s: [*m, *(["unet"] if s in unets else [])] for s, m in METHODS.items()}
+    sensors = {s: [*m, *(["unet"] if s in unets else [])] for s, m in METHODS.items() if s in (a.sensor or METHODS)}
     t = time.perf_counter()
     try:
         benchmark_sensors(a.corpus, sensors, a.runs, checkpoints={s: {"unet": p} for s, p in unets.items()},
