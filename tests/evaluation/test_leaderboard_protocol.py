@@ -1,0 +1,87 @@
+"""benchmarks/leaderboard_protocol.py: a second U-Net scored on the same samples as ``unet`` (``--unet-also``), the
+LED score by scene-file field (``weather``) and the paired comparison of the two networks."""
+from __future__ import annotations
+
+import importlib.util
+import json
+import os
+import sys
+from pathlib import Path
+
+import pytest
+
+from tests.data.evaluation.data import make_led_corpus, write_result
+
+SCRIPT = Path(__file__).resolve().parents[2] / "benchmarks" / "leaderboard_protocol.py"
+
+
+@pytest.fixture(scope="module")
+def lp():
+    spec = importlib.util.spec_from_file_location("leaderboard_protocol_script", SCRIPT)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_extra_names_are_checked(lp, tmp_path):
+    ck = tmp_path / "u.pt"
+    ck.write_bytes(b"x")
+    assert lp.parse_extra([f"unet_v1trained={ck}"], {"unet": None}) == {"unet_v1trained": str(ck)}
+    for bad in (f"unet={ck}", f"Bad-Name={ck}", str(ck), "unet_b=" + str(tmp_path / "missing.pt")):
+        with pytest.raises(ValueError, match="--unet-also"):
+            lp.parse_extra([bad], {"unet": None})
+    with pytest.raises(ValueError, match="new snake_case"):
+        lp.parse_extra([f"a={ck}", f"a={ck}"], {})
+
+
+def test_field_tables_and_paired_difference(lp, tmp_path):
+    from lfmbench.evaluation.leaderboard import load_runs
+
+    ref = [0.9, 0.8, 0.7, 0.6]
+    other = [0.8, 0.8, 0.5, 0.3]                                  # differences -0.1, 0, -0.2, -0.3
+    paths = [write_result(tmp_path / "unet.json", ref, method="unet"),
+             write_result(tmp_path / "u1.json", other, method="u1")]
+    fields = {f"scene{i:05d}": {"weather": w} for i, w in enumerate(("dry", "wet", "dry", "wet"))}
+    text = lp.scene_field_tables(load_runs(paths), fields, ["u1"])
+    rows = {ln.split("|")[1].strip(): ln for ln in text.splitlines() if ln.startswith("| `")}
+    assert rows["`unet`"].split("|")[3].strip().startswith("0.800 ")        # dry: mean(0.9, 0.7)
+    assert rows["`u1`"].split("|")[4].strip().startswith("0.550 ")          # wet: mean(0.8, 0.3)
+    diffs = {ln.split("|")[1].strip(): ln.split("|")[2].strip() for ln in text.splitlines()
+             if ln.startswith("| all") or ln.startswith("| weather")}
+    assert diffs["all"].startswith("-0.150 ")
+    assert diffs["weather = dry"].startswith("-0.150 ") and diffs["weather = wet"].startswith("-0.150 ")
+
+
+def test_a_second_copy_of_the_same_network_scores_the_same(lp, tmp_path, monkeypatch):
+    """The extra network sees the very samples ``unet`` sees: the same weights give every scene the same score
+    (paired difference 0 exactly), and the weather of each scene file is found."""
+    import torch
+
+    from lfmbench import baselines
+    from lfmbench.baselines import unet as U
+    from lfmbench.corpus import Corpus
+
+    corpus = make_led_corpus(tmp_path / "corpus", n_scenes=4)
+    c = Corpus(corpus)
+    test_ids = json.loads((corpus / "splits.json").read_text())["test"]
+    assert test_ids
+    for i, sid in enumerate(test_ids):                               # give the test scenes a weather
+        p = corpus / "scenes" / sid / "scene.json"
+        p.write_text(json.dumps(dict(c.scene(sid), weather=("dry", "wet")[i % 2])))
+    torch.manual_seed(0)
+    cfg = U.config_from_dict({"model": {"base_channels": 2, "depth": 1}})
+    ck = U.save_checkpoint(U.build_for_sensor(cfg), tmp_path / "u.pt", cfg)
+    monkeypatch.setattr(sys, "argv", ["lp", "--corpus", str(corpus), "--checkpoint", str(ck), "--unet-also",
+                                      f"unet_copy={ck}", "--runs", str(tmp_path / "runs"), "--samples-per-scene", "1"])
+    monkeypatch.setenv(U.CHECKPOINT_ENV, str(ck))
+    monkeypatch.setenv("LFMBENCH_UNET_COPY_CHECKPOINT", "")  # restored afterwards
+    # two methods instead of every registered one (time); the script registers the copy in this dict only
+    monkeypatch.setattr(baselines, "REGISTRY", {m: baselines.REGISTRY[m] for m in ("lpd_only", "unet")})
+    lp.main()
+    assert "unet_copy" in baselines.REGISTRY and os.environ["LFMBENCH_UNET_COPY_CHECKPOINT"] == str(ck)
+    a, b = (json.loads((tmp_path / "runs" / f"{m}.json").read_text()) for m in ("unet", "unet_copy"))
+    sa = {r["scene_id"]: r["metrics"]["led_score"] for r in a["scenes"]}
+    assert sa and sa == {r["scene_id"]: r["metrics"]["led_score"] for r in b["scenes"]}
+    text = (tmp_path / "runs" / "scene_fields.md").read_text()
+    assert "by scene `weather`" in text and "| all | +0.000 [" in text
+    assert "`unet_copy`" in (tmp_path / "runs" / "leaderboard.md").read_text()
