@@ -138,7 +138,7 @@ def main() -> None:
         ap.error(f"--checkpoint {a.checkpoint}: no such file (make it with lfmbench train)")
     os.environ["LFMBENCH_UNET_CHECKPOINT"] = a.checkpoint
     from lfmbench.baselines import REGISTRY
-    from lfmbench.evaluation import benchmark
+    from lfmbench.evaluation.benchmark import benchmark, safe_name  # the module, not the package's lazy name
     from lfmbench.evaluation.leaderboard import load_runs
     from lfmbench.fileio import atomic_write_text
 
@@ -152,8 +152,6 @@ def main() -> None:
     benchmark(a.corpus, methods=[*methods, *extra], runs_dir=a.runs, split="test", seed=0,
               perceptual=False, repeats=1, samples_per_scene=a.samples_per_scene, progress=False)
     print(f"evaluation took {time.perf_counter() - t:.0f} s")
-    from lfmbench.evaluation.benchmark import safe_name
-
     runs = load_runs([Path(a.runs) / f"{safe_name(m)}.json" for m in [*methods, *extra]])
     ids = {s.get("scene_id") for r in runs for s in (r.get("scenes") or []) if s.get("scene_id") is not None}
     text = scene_field_tables(runs, scene_fields(a.corpus, sorted(ids)), list(extra))
