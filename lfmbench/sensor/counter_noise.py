@@ -71,25 +71,15 @@ USE_TRITON = True
 _KERNELS = TritonKernels("lfmbench.sensor._counter_triton", "counter noise", "the torch form")
 
 
-def _use_triton(t: torch.Tensor) -> bool:
-    return USE_TRITON and t.is_cuda and _KERNELS.module() is not None
-
-
 def kernels_ready(t: torch.Tensor) -> bool:
     """Whether the Triton kernels of this module (and of the fused chain, :func:`lfmbench.sensor.fused.chain_triton`)
     run for tensors like ``t``: CUDA, Triton importable, not turned off."""
-    return _use_triton(t)
+    return USE_TRITON and t.is_cuda and _KERNELS.module() is not None
 
 
 def run_kernel(name: str, *args):
-    """Kernel ``name`` of :mod:`lfmbench.sensor._counter_triton` applied to ``args``, or None (the kernels then stay
-    off, after one warning) where it cannot be compiled here."""
-    return _run_triton(name, *args)
-
-
-def _run_triton(name: str, *args):
-    """The Triton kernel ``name``, or None after turning the kernels off (one warning) when it cannot be compiled
-    here: the torch form then gives the same numbers."""
+    """Kernel ``name`` of :mod:`lfmbench.sensor._counter_triton` applied to ``args``, or None after turning the
+    kernels off (one warning) where it cannot be compiled here: the torch form then gives the same numbers."""
     global USE_TRITON
     out = _KERNELS.call(name, *args)
     if out is None:
@@ -125,23 +115,18 @@ def chain_seeds(seeds: torch.Tensor, photodiodes: int, captures: int) -> tuple[t
     photodiodes 0..P-1 and (C, B) of :func:`read_seed` for captures 0..C-1, element for element their values, as
     one broadcast :func:`~lfmbench.counter_rng.derive_key` (a GPU runs one set of element-wise kernels, not one
     per seed)."""
-    purpose = torch.tensor([SHOT_PURPOSE] * photodiodes + [READ_PURPOSE] * captures, dtype=torch.int64)
-    which = torch.tensor(list(range(photodiodes)) + list(range(captures)), dtype=torch.int64)
-    if seeds.device.type != "cpu":     # constants made on the device: a copy would wait for the device's queue
-        purpose = _on_device(purpose, seeds.device)
-        which = _on_device(which, seeds.device)
-    k = derive_key(seeds[None, :], purpose[:, None], which[:, None]).contiguous()         # (P + C, B)
+    key = (str(seeds.device), photodiodes, captures)
+    if key not in _SEED_WORDS:      # made once per device: a copy to a GPU in every batch would wait for its queue
+        _SEED_WORDS[key] = (
+            torch.tensor([SHOT_PURPOSE] * photodiodes + [READ_PURPOSE] * captures, device=seeds.device)[:, None],
+            torch.tensor([*range(photodiodes), *range(captures)], device=seeds.device)[:, None])
+    purpose, which = _SEED_WORDS[key]
+    k = derive_key(seeds[None, :], purpose, which).contiguous()                          # (P + C, B)
     return k[:photodiodes], k[photodiodes:]
 
 
-_CONSTANTS: dict = {}
-
-
-def _on_device(t: torch.Tensor, device: torch.device) -> torch.Tensor:
-    key = (str(device), tuple(t.tolist()))
-    if key not in _CONSTANTS:
-        _CONSTANTS[key] = t.to(device)
-    return _CONSTANTS[key]
+#: The purpose and index words of :func:`chain_seeds` per (device, photodiodes, captures).
+_SEED_WORDS: dict = {}
 
 
 def pixel_keys(seed: torch.Tensor, n: int) -> torch.Tensor:
@@ -176,8 +161,8 @@ def normal(seed: torch.Tensor, n: int) -> torch.Tensor:
     Returns:
         (B, n) float64 standard normals.
     """
-    if _use_triton(seed):
-        out = _run_triton("normal", seed, n)
+    if kernels_ready(seed):
+        out = run_kernel("normal", seed, n)
         if out is not None:
             return out
     keys = pixel_keys(seed, n)
@@ -200,8 +185,8 @@ def poisson(mean: torch.Tensor, seed: torch.Tensor, gaussian_above: float = math
     """
     if mean.dim() != 2 or seed.shape != mean.shape[:1]:
         raise ValueError(f"mean must be (B, N) and seed (B,), got {tuple(mean.shape)} and {tuple(seed.shape)}")
-    if _use_triton(mean):
-        out = _run_triton("poisson", mean, seed, gaussian_above, INVERSION_STEPS, PTRS_ROUNDS, LOG_FACTORIAL)
+    if kernels_ready(mean):
+        out = run_kernel("poisson", mean, seed, gaussian_above, INVERSION_STEPS, PTRS_ROUNDS, LOG_FACTORIAL)
         if out is not None:
             return out
     mu = mean.to(torch.float64)
