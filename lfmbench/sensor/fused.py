@@ -103,6 +103,19 @@ def _map_rows(m: torch.Tensor, lead: torch.Size, H: int, W: int) -> tuple[np.nda
     return base.numpy(), row.numpy()
 
 
+def _row_scalars(preset: SensorPreset, t_s: torch.Tensor, t_l: torch.Tensor, lead: torch.Size,
+                 L: int) -> tuple[dict, torch.Tensor]:
+    """Per input row (L = prod(lead) planes) the mean dark signal of each photodiode, ``{pd: (L,)}`` e-, and the
+    SPD's LPD-equivalence factor (L,), by the torch chain's own expressions (so every compiled chain reads the
+    same float values)."""
+    def per_row(v: torch.Tensor) -> torch.Tensor:
+        return torch.broadcast_to(v, (*lead, 1, 1, 1)).reshape(L).contiguous()
+
+    t_pd = {"lpd": t_s, "spd": t_l}
+    return ({pd: per_row(preset.photodiodes[pd].dark_current_e_per_s * t_pd[pd]) for pd in PHOTODIODES},
+            per_row(preset.sensitivity_ratio * t_s / t_l))
+
+
 def chain_fused(lpd_e: torch.Tensor, spd_e: torch.Tensor, preset: SensorPreset, t_s: torch.Tensor,
                  t_l: torch.Tensor, generator, noise: bool, fpn: Mapping[str, torch.Tensor] | None,
                  threads: int | None = None, seeds: torch.Tensor | None = None) -> dict:
@@ -125,13 +138,9 @@ def chain_fused(lpd_e: torch.Tensor, spd_e: torch.Tensor, preset: SensorPreset, 
     L = int(np.prod(lead, dtype=np.int64)) if len(lead) else 1
     dtype = lpd_e.dtype
     nt = np.float32 if dtype == torch.float32 else np.float64
-    t_pd = {"lpd": t_s, "spd": t_l}
     rows = {pd: (lpd_e if pd == "lpd" else spd_e).detach().reshape(L, P).contiguous().numpy() for pd in PHOTODIODES}
-    def per_row(v: torch.Tensor) -> np.ndarray:
-        return torch.broadcast_to(v, (*lead, 1, 1, 1)).reshape(L).contiguous().numpy()
-
-    dark = {pd: per_row(preset.photodiodes[pd].dark_current_e_per_s * t_pd[pd]) for pd in PHOTODIODES}
-    spd_factor = per_row(preset.sensitivity_ratio * t_s / t_l)
+    dark, spd_factor = _row_scalars(preset, t_s, t_l, lead, L)
+    dark, spd_factor = {pd: v.numpy() for pd, v in dark.items()}, spd_factor.numpy()
     empty = np.zeros((0, P), dtype=nt)
     no_factor = np.zeros(0, dtype=nt)
     none_row = np.zeros(L, dtype=np.int64)
@@ -264,14 +273,11 @@ def chain_triton(lpd_e: torch.Tensor, spd_e: torch.Tensor, preset: SensorPreset,
     L = int(np.prod(lead, dtype=np.int64)) if len(lead) else 1
     B = seeds.shape[0]
     per = L // max(B, 1)
-    t_pd = {"lpd": t_s, "spd": t_l}
-
-    def per_row(v: torch.Tensor) -> torch.Tensor:
-        return torch.broadcast_to(v, (*lead, 1, 1, 1)).reshape(L).contiguous()
-
-    dark = {pd: per_row(preset.photodiodes[pd].dark_current_e_per_s * t_pd[pd]) for pd in PHOTODIODES}
-    spd_factor = per_row(preset.sensitivity_ratio * t_s / t_l)
+    dark, spd_factor = _row_scalars(preset, t_s, t_l, lead, L)
     use_fpn = fpn is not None
+    # where each photodiode's DSNU offsets are read (shared by the captures of one photodiode)
+    offsets = {pd: (_map_reader(fpn, f"{pd}_offset_e", lead, H, W, L) if use_fpn and spec.dsnu_e > 0 else None)
+               for pd, spec in preset.photodiodes.items()}
     shot_seeds, read_seeds = _cn.chain_seeds(seeds, len(PHOTODIODES), len(CAPTURES))
     collected = {}
     for i_pd, pd in enumerate(PHOTODIODES):
@@ -291,11 +297,9 @@ def chain_triton(lpd_e: torch.Tensor, spd_e: torch.Tensor, preset: SensorPreset,
     for c, cap in enumerate(CAPTURES):
         spec = preset.captures[cap]
         pd = spec.photodiode
-        offset = (_map_reader(fpn, f"{pd}_offset_e", lead, H, W, L)
-                  if use_fpn and preset.photodiodes[pd].dsnu_e > 0 else None)
         done = _cn.run_kernel(
             "readout", collected[pd], read_seeds[c] if spec.read_noise_e > 0 else None, per,
-            float(spec.read_noise_e), offset, float(spec.conversion_gain_v_per_e), float(spec.voltage_swing_v),
+            float(spec.read_noise_e), offsets[pd], float(spec.conversion_gain_v_per_e), float(spec.voltage_swing_v),
             float(preset.dn_per_volt(cap)), float(preset.black_level_dn), float(preset.max_dn),
             float(preset.saturation_fraction * spec.voltage_swing_v), float(preset.system_gain(cap)), dark[pd],
             spd_factor if pd == "spd" else None, W, out[cap].view(L, P), out[f"{cap}_e"].view(L, P),
