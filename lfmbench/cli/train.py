@@ -48,16 +48,16 @@ def train_cmd(
     """
     from lfmbench.baselines.trainable import ConfigError, count_parameters  # noqa: PLC0415
     from lfmbench.datasets.loading import EmptyDataError  # noqa: PLC0415
-    from lfmbench.train import load_config, train, trainable  # noqa: PLC0415
+    from lfmbench.train import CUDA_GRAPH_MODES, RESIDENT_DTYPES, load_config, train, trainable  # noqa: PLC0415
 
     if method not in LEARNED:
         fail(f"--method {method!r} is not a trainable baseline; trainable: {', '.join(LEARNED)}")
     check_minima((("--epochs", epochs, 1), ("--workers", workers, 0), ("--crop", crop, 8),
                   ("--batch-size", batch_size, 1), ("--chunk-scenes", chunk_scenes, 1)))
-    if resident_dtype not in ("float32", "float16"):
-        fail(f"--resident-dtype must be float32 or float16, got {resident_dtype!r:.40}")
-    if cuda_graph not in ("auto", "off"):
-        fail(f"--cuda-graph must be auto or off, got {cuda_graph!r:.40}")
+    if resident_dtype not in RESIDENT_DTYPES:
+        fail(f"--resident-dtype must be {' or '.join(RESIDENT_DTYPES)}, got {resident_dtype!r:.40}")
+    if cuda_graph not in CUDA_GRAPH_MODES:
+        fail(f"--cuda-graph must be {' or '.join(CUDA_GRAPH_MODES)}, got {cuda_graph!r:.40}")
     torch_setup(device, threads)
     try:
         cfg = load_config(method, config)
