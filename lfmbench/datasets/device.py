@@ -10,9 +10,10 @@ The per-sample DataLoader path builds each sample's pieces in CPU workers (4 MiB
    scene by a power of two). Splits that cannot be packed (scenes of several sizes, groups stored without bins,
    lights with their own timing) keep per-scene layers and take :func:`lfmbench.datasets.pieces.capture_pieces`
    sample by sample. ``chunk_scenes`` streams a split that does not fit.
-2. A batch is one program of tensor operations (:meth:`SplitProgram.pieces`): the draws of every sample as tensors
-   of counter uniforms of (seed, epoch, index) (:mod:`lfmbench.datasets.counter_draws`: the numbers the per-sample
-   path draws with ``noise_streams="counter"``), slots for every lamp of every frame with a visibility mask, the
+2. A batch is one program of tensor operations (:meth:`SplitProgram.pieces`): the draws of every sample from
+   counter uniforms of (seed, epoch, index) (:mod:`lfmbench.datasets.counter_draws`: the numbers the per-sample
+   path draws with ``noise_streams="counter"``; made on the host, a few small CPU operations, and copied with the
+   batch's indices), slots for every lamp of every frame with a visibility mask, the
    crop's entries as runs of tiles, one gather per layer, ``meta`` as device tensors; no Python per sample and no
    host synchronisation.
 3. The batch is composed and simulated on the device by :func:`lfmbench.datasets.batched.simulate_batch` with
@@ -527,21 +528,23 @@ class SplitProgram:
         E = int(cnt.sum())
         # the draws on the host too (B x M x 5 uniforms: a few dozen small CPU operations instead of ~100
         # kernel launches; the same functions, on the CPU as the per-sample path runs them)
-        M = self.n_entities
+        rec_h = None        # a frozen test split's draws are tables on the device already
+        seeds_h = np.zeros(B, dtype=np.int64)
         if fz is None:
+            M = self.n_entities
             idx_c = torch.from_numpy(idx)
             u = uniforms(sample_keys(ds.seed, ds.epoch, idx_c, PURPOSE_PWM), PWM_UNIFORMS * M)
             rec = pwm_from_uniforms(ds.pwm, u.view(B, M, PWM_UNIFORMS))                      # (B, M) each
             rec_h = torch.stack([rec[k] for k in PWM_FIELDS + ("freq_hz",)], -1)             # (B, M, 6)
             seeds_h = noise_seeds(ds.seed, ds.epoch, idx_c).numpy()
-        else:
-            rec_h, seeds_h = torch.zeros(B, M, 6, dtype=torch.float64), np.zeros(B, dtype=np.int64)
         host = torch.from_numpy(np.concatenate([idx, sc, y0h, x0h, seeds_h, fr.reshape(-1), first.reshape(-1),
                                                 cnt.reshape(-1)]))
-        if dev.type == "cuda":
-            # asynchronous copies: the host goes on to queue the rest
-            host, rec_h = host.pin_memory(), rec_h.pin_memory()
-        host, rec_t = host.to(dev, non_blocking=True), rec_h.to(dev, non_blocking=True)
+
+        def to_device(t: torch.Tensor) -> torch.Tensor:
+            # pinned on CUDA: an asynchronous copy, the host goes on to queue the rest
+            return (t.pin_memory() if dev.type == "cuda" else t).to(dev, non_blocking=True)
+
+        host = to_device(host)
         idx_t, sc_t, y0, x0, seeds = (host[k * B:(k + 1) * B] for k in range(5))
         fr_t = host[5 * B:5 * B + B * F].view(B, F)
         first_t, cnt_t = (host[5 * B + B * F + k * B * F * NR:5 * B + B * F + (k + 1) * B * F * NR] for k in range(2))
@@ -552,7 +555,7 @@ class SplitProgram:
         else:
             ent = self.t_ent[sc_t]                                                           # (B, L)
             valid = ent >= 0
-            pwm = rec_t.gather(1, ent.clamp_min(0)[..., None].expand(-1, -1, 6))             # (B, L, 6)
+            pwm = to_device(rec_h).gather(1, ent.clamp_min(0)[..., None].expand(-1, -1, 6))  # (B, L, 6)
         pad = self._pad
         # slots: every light of every frame of a sample, shown or not (B, F, Lf)
         at = (sc_t[:, None], fr_t)
