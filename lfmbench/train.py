@@ -28,6 +28,7 @@ import torch
 from torch.utils.data import DataLoader, Dataset, Sampler
 
 from lfmbench.baselines import LEARNED
+from lfmbench.datasets.batched import tensor_leaves
 from lfmbench.datasets.device import epoch_order
 from lfmbench.baselines.trainable import Trainable, count_parameters
 
@@ -119,10 +120,11 @@ RESIDENT_DTYPES = {"float32": torch.float32, "float16": torch.float16}
 
 def make_device_batches(corpus: str | os.PathLike, spec: Trainable, cfg: Any, device: torch.device | str,
                         resident_dtype: str = "float32",
-                        chunk_scenes: int | None = None) -> tuple[Any, Callable[[int], None]]:
+                        chunk_scenes: int | None = None, prefetch: bool = True) -> tuple[Any, Callable[[int], None]]:
     """:class:`~lfmbench.datasets.device.DeviceBatches` of the training split on ``device`` (epoch order
     :func:`~lfmbench.datasets.device.epoch_order` of ``(seed, epoch)``; ``resident_dtype`` a key of
-    :data:`RESIDENT_DTYPES`; ``chunk_scenes``: stream the split that many scenes at a time) and its ``set_epoch``."""
+    :data:`RESIDENT_DTYPES`; ``chunk_scenes``: stream the split that many scenes at a time; ``prefetch``: on CUDA
+    each batch is made on a side stream while the previous step runs) and its ``set_epoch``."""
     from lfmbench.datasets.device import DeviceBatches
     from lfmbench.datasets.loading import make_dataset
 
@@ -133,7 +135,7 @@ def make_device_batches(corpus: str | os.PathLike, spec: Trainable, cfg: Any, de
     if resident_dtype not in RESIDENT_DTYPES:
         raise ValueError(f"resident_dtype must be one of {tuple(RESIDENT_DTYPES)}, got {resident_dtype!r:.40}")
     batches = DeviceBatches(ds, t.batch_size, device, seed=t.seed, dtype=RESIDENT_DTYPES[resident_dtype],
-                            chunk_scenes=chunk_scenes)
+                            chunk_scenes=chunk_scenes, prefetch=prefetch)
     return batches, batches.set_epoch
 
 
@@ -201,14 +203,6 @@ def _unstash(stashed, terms: dict) -> tuple[float, dict]:
     return vals[0], {**{k: float(v) for k, v in terms.items() if k not in keys}, **dict(zip(keys, vals[1:]))}
 
 
-def _tensor_leaves(batch: dict, prefix: tuple = ()) -> Iterator[tuple[tuple, torch.Tensor]]:
-    for k, v in batch.items():
-        if isinstance(v, torch.Tensor):
-            yield prefix + (k,), v
-        elif isinstance(v, dict):
-            yield from _tensor_leaves(v, prefix + (k,))
-
-
 class GraphedStep:
     """The training step (loss, backward, gradient clipping, Adam) captured once as a CUDA graph and replayed for
     every batch of the same shapes: the host launches one graph instead of the step's ~1,000 kernels, so it can
@@ -234,7 +228,7 @@ class GraphedStep:
 
     @staticmethod
     def _signature(batch: dict) -> tuple:
-        return tuple((path, tuple(t.shape), t.dtype, t.device) for path, t in _tensor_leaves(batch))
+        return tuple((path, tuple(t.shape), t.dtype, t.device) for path, t in tensor_leaves(batch))
 
     def _capture(self, batch: dict) -> None:
         import warnings
@@ -261,7 +255,7 @@ class GraphedStep:
             self.opt.zero_grad(set_to_none=True)
             return
         self.graph, self.static, self.out = graph, static, (loss, terms)
-        self.inputs = dict(_tensor_leaves(static))
+        self.inputs = dict(tensor_leaves(static))
 
     def __call__(self, batch: dict, lr: float):
         sig = self._signature(batch)
@@ -281,7 +275,7 @@ class GraphedStep:
             return out
         if self.graph is None or sig != self.sig:
             return _eager_step(self.model, self.opt, self.spec, self.cfg, batch, lr)
-        for path, t in _tensor_leaves(batch):
+        for path, t in tensor_leaves(batch):
             self.inputs[path].copy_(t, non_blocking=True)
         _set_lr(self.opt, lr)
         self.graph.replay()

@@ -58,7 +58,7 @@ from lfmbench.flicker import pwm_exposure
 from lfmbench.sensor.fused import PatternCrops, map_samples
 
 __all__ = ["capture_pieces", "collate_pieces", "pieces_to", "prefetch", "simulate_batch", "BatchedCaptureSimulator",
-           "piece_bytes", "pwm_weights", "compose_batch", "PWM_FIELDS"]
+           "piece_bytes", "pwm_weights", "compose_batch", "tensor_leaves", "PWM_FIELDS"]
 
 #: Consistency fields of ``info``: a batch must agree on all of them.
 _INFO_FIELDS = ("sensor", "frames", "crop_hw", "shutter", "noise", "outputs")
@@ -135,6 +135,16 @@ def collate_pieces(samples: Sequence[Mapping[str, Any]]) -> dict:
 def pieces_to(batch: Mapping[str, Any], device: torch.device | str, non_blocking: bool = False) -> dict:
     """``batch`` (from :func:`collate_pieces`) with its tensors on ``device`` (``meta`` stays where it is)."""
     return {k: (v.to(device, non_blocking=non_blocking) if torch.is_tensor(v) else v) for k, v in batch.items()}
+
+
+def tensor_leaves(batch: Mapping[str, Any], prefix: tuple = ()) -> Iterator[tuple[tuple, torch.Tensor]]:
+    """``(path, tensor)`` of every tensor of a batch dict, nested dicts (``meta``) included; ``path`` is the tuple
+    of keys."""
+    for k, v in batch.items():
+        if isinstance(v, torch.Tensor):
+            yield prefix + (k,), v
+        elif isinstance(v, dict):
+            yield from tensor_leaves(v, prefix + (k,))
 
 
 def prefetch(iterable: Iterable, depth: int = 1) -> Iterator:

@@ -33,7 +33,7 @@ import numpy as np
 import torch
 
 from lfmbench.counter_rng import uniforms
-from lfmbench.datasets.batched import collate_pieces, pieces_to, simulate_batch
+from lfmbench.datasets.batched import collate_pieces, pieces_to, simulate_batch, tensor_leaves
 from lfmbench.datasets.counter_draws import (PURPOSE_PWM, PWM_UNIFORMS, crop_origin, noise_seeds, place_uniforms,
                                              pwm_from_uniforms, sample_keys, start_frame)
 from lfmbench.datasets.pieces import PWM_FIELDS, _SceneEntries, capture_pieces
@@ -212,6 +212,9 @@ class DeviceBatches:
             the scenes are taken in the order :func:`epoch_order` ``(n_scenes, seed, epoch)``, a chunk is loaded,
             its samples are served in an order of ``(seed, epoch, chunk)``, then the next chunk replaces it. The
             samples themselves (draws of ``(seed, epoch, index)``) are the same as without chunks.
+        prefetch: on CUDA, make each batch on a side stream one batch ahead, so that its program runs on the GPU
+            while the caller's work on the previous batch (a training step) runs (the same batches; one batch more
+            in memory). Ignored on other devices.
 
     Iterating yields the per-sample path's sample dicts with a leading B (on ``device``, ``meta`` too when the
     batched program makes them), noise from counter-based streams. ``set_epoch(e)`` selects the draws and the order
@@ -220,7 +223,7 @@ class DeviceBatches:
 
     def __init__(self, ds, batch_size: int, device: torch.device | str, seed: int = 0,
                  budget_bytes: int | None = None, drop_last: bool = False, dtype: torch.dtype = torch.float32,
-                 chunk_scenes: int | None = None) -> None:
+                 chunk_scenes: int | None = None, prefetch: bool = False) -> None:
         if isinstance(batch_size, bool) or not isinstance(batch_size, int) or batch_size < 1:
             raise ValueError(f"batch_size must be an integer >= 1, got {batch_size!r}")
         if getattr(ds, "pieces", False):
@@ -230,6 +233,7 @@ class DeviceBatches:
         self.device = torch.device(device)
         self.seed = int(seed)
         self.drop_last = bool(drop_last)
+        self.prefetch = bool(prefetch)
         self.epoch = 0
         if chunk_scenes is not None and (isinstance(chunk_scenes, bool) or not isinstance(chunk_scenes, int)
                                          or chunk_scenes < 1):
@@ -274,6 +278,30 @@ class DeviceBatches:
         return simulate_batch(self.pieces(indices), self.ds.preset, noise_streams="counter")
 
     def __iter__(self) -> Iterator[dict]:
+        if not (self.prefetch and self.device.type == "cuda"):
+            yield from self._batches()
+            return
+        # one batch ahead on a side stream: the main stream waits only for the batch it takes, and each of the
+        # batch's tensors is marked as used there (its memory is not reused before that work is done)
+        side, main = torch.cuda.Stream(self.device), torch.cuda.current_stream(self.device)
+        it = self._batches()
+
+        def ahead():
+            side.wait_stream(main)      # the layers (a new chunk) and the memory freed on the main stream
+            with torch.cuda.stream(side):
+                b = next(it, None)
+                return None if b is None else (b, side.record_event())
+
+        nxt = ahead()
+        while nxt is not None:
+            cur, ready = nxt
+            nxt = ahead()
+            main.wait_event(ready)
+            for _path, t in tensor_leaves(cur):
+                t.record_stream(main)
+            yield cur
+
+    def _batches(self) -> Iterator[dict]:
         B = self.batch_size
         if self.chunk_scenes is None:
             order = epoch_order(len(self.ds), self.seed, self.epoch).tolist()

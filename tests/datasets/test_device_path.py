@@ -177,6 +177,35 @@ def test_cuda_device_batches_match_the_cpu(corpus):
             assert (g != c).double().mean() <= 2e-3, k
 
 
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs CUDA")
+def test_cuda_prefetched_batches_are_the_same_batches(corpus):
+    """prefetch=True makes each batch on a side stream one batch ahead: the same batches in the same order (the
+    same kernels on the same inputs: equal bit for bit), whole epochs of them, and a second epoch again."""
+    from lfmbench.datasets.batched import tensor_leaves
+
+    plain = DeviceBatches(_ds(corpus), batch_size=5, device="cuda", seed=2)
+    ahead = DeviceBatches(_ds(corpus), batch_size=5, device="cuda", seed=2, prefetch=True)
+    for epoch in (0, 1):
+        plain.set_epoch(epoch)
+        ahead.set_epoch(epoch)
+        a, b = list(plain), list(ahead)
+        assert len(a) == len(b) == len(plain) > 1
+        for x, y in zip(a, b):
+            xs, ys = dict(tensor_leaves(x)), dict(tensor_leaves(y))
+            assert xs.keys() == ys.keys()
+            for k in xs:
+                assert torch.equal(xs[k], ys[k]), (epoch, k)
+
+
+def test_prefetch_is_ignored_off_cuda(corpus):
+    """On the CPU prefetch=True changes nothing (no side stream there)."""
+    plain = list(DeviceBatches(_ds(corpus), batch_size=5, device="cpu", seed=2))
+    ahead = list(DeviceBatches(_ds(corpus), batch_size=5, device="cpu", seed=2, prefetch=True))
+    assert len(plain) == len(ahead) > 1
+    for x, y in zip(plain, ahead):
+        assert torch.equal(x["lpd_hcg"], y["lpd_hcg"]) and torch.equal(x["gt"], y["gt"])
+
+
 def test_train_from_the_device_path(tmp_path, corpus):
     """train(..., data="device") runs the one training loop on DeviceBatches: it learns (the loss moves), writes
     its checkpoint and resumes like the loader path; an unknown data source is refused."""
