@@ -56,6 +56,7 @@ from lfmbench.datasets.pieces import PWM_FIELDS, capture_pieces
 from lfmbench.datasets.row_gather import gather_rows
 from lfmbench.flicker import pwm_exposure
 from lfmbench.sensor.fused import PatternCrops, map_samples
+from lfmbench.triton_kernels import TritonKernels
 
 __all__ = ["capture_pieces", "collate_pieces", "pieces_to", "prefetch", "simulate_batch", "BatchedCaptureSimulator",
            "piece_bytes", "pwm_weights", "compose_batch", "tensor_leaves", "PWM_FIELDS"]
@@ -282,7 +283,9 @@ def compose_batch(batch: Mapping[str, Any], backend: str = "auto", threads: int 
         backend: ``"torch"`` (any device), ``"numba"`` (CPU, numba: one pass over the static rates and one
             over the entries, :mod:`lfmbench.datasets._compose_kernel`; the same products, sums in float32 in
             another order, so equal to ``"torch"`` up to float32 rounding) or ``"auto"`` (``"numba"`` on the CPU
-            when numba is importable).
+            when numba is importable; on CUDA the entries in one Triton kernel,
+            :mod:`lfmbench.datasets._compose_triton`, where Triton is importable: also equal to ``"torch"`` up to
+            float32 rounding of the sums).
         threads: CPU threads composing samples in parallel (``"numba"`` backend; default
             ``torch.get_num_threads()``; the result does not depend on it).
 
@@ -326,6 +329,15 @@ def compose_batch(batch: Mapping[str, Any], backend: str = "auto", threads: int 
     comp["gt"] = comp["lpd"].clone()
     if int(batch["entry_pix"].shape[0]):
         wts = pwm_weights(batch)
+        if backend != "torch" and _compose_triton_ready(batch["entry_values"]):
+            global _COMPOSE_TRITON
+            if _COMPOSE_KERNELS.call("compose_entries", comp, batch["slot_sample"], batch["entry_slot"],
+                                     batch["entry_pix"], batch["entry_values"], wts, h, w) is not None:
+                return comp
+            _COMPOSE_TRITON = False     # failed to compile here (one warning): the torch form below
+            comp["lpd"] = batch["static"][:, :, 0] * t_s.float()[:, None, None, None]
+            comp["spd"] = batch["static"][:, :, 1] * t_l.float()[:, None, None, None]
+            comp["gt"] = comp["lpd"].clone()
         slot = batch["entry_slot"].long()
         pix = batch["entry_pix"].long()
         dest = batch["slot_sample"][slot] * (F * h * w) + pix
@@ -341,6 +353,17 @@ def compose_batch(batch: Mapping[str, Any], backend: str = "auto", threads: int 
             contrib = (vals[c] * w3[:, j]).sum(-1)                                    # (E,) e-
             comp[key].view(-1).index_add_(0, dest, contrib)
     return comp
+
+
+#: On CUDA, add the lamp entries with one Triton kernel (:mod:`lfmbench.datasets._compose_triton`) where Triton is
+#: importable (False: the torch form everywhere).
+_COMPOSE_TRITON = True
+_COMPOSE_KERNELS = TritonKernels("lfmbench.datasets._compose_triton", "compose_batch", "the torch composition")
+
+
+def _compose_triton_ready(values: torch.Tensor) -> bool:
+    return (_COMPOSE_TRITON and values.is_cuda and values.dtype == torch.float32
+            and _COMPOSE_KERNELS.module() is not None)
 
 
 def _numba_available() -> bool:

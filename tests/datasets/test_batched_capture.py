@@ -388,6 +388,29 @@ def test_cuda_matches_cpu(corpus, shutter):
         assert abs(float(d.mean())) < 6 * ref_sd * np.sqrt(2.0 / n), k
 
 
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")
+@pytest.mark.parametrize("shutter", ["global", "rolling"])
+def test_cuda_triton_composition_matches_the_torch_form(corpus, shutter):
+    """On CUDA compose_batch adds the lamp entries with one Triton kernel: the torch form's float32 products,
+    summed over the bins and scattered in another order, so equal within float32 rounding of those sums."""
+    import warnings
+
+    import lfmbench.datasets.batched as bt
+
+    if bt._COMPOSE_KERNELS.module() is None:
+        pytest.skip("Triton is not importable")
+    _, ds = _pair(corpus, shutter=shutter, frames=3, crop=(24, 32), samples_per_scene=8, outputs=ALL)
+    batch = pieces_to(_batch(ds, range(len(ds))), "cuda")
+    assert batch["entry_pix"].shape[0] > 0
+    ref = compose_batch(batch, backend="torch")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)      # a kernel that fails to compile warns: an error here
+        out = compose_batch(batch)
+    assert bt._COMPOSE_TRITON
+    for k in ref:
+        torch.testing.assert_close(out[k], ref[k], rtol=1e-5, atol=1e-6 * float(ref[k].abs().max()))
+
+
 def test_gpu_training_example_in_docs_runs(tmp_path):
     """The batched training loop of docs/datasets.md ("Captures on the GPU") runs (on the CPU here)."""
     import re
