@@ -39,6 +39,7 @@ from lfmbench.datasets.counter_draws import (PURPOSE_PWM, PWM_UNIFORMS, crop_ori
 from lfmbench.datasets.pieces import PWM_FIELDS, _SceneEntries, capture_pieces
 from lfmbench.datasets.pwm import has_light_timing
 from lfmbench.datasets.row_gather import gather_rows
+from lfmbench.triton_kernels import TritonKernels
 from lfmbench.vocabulary import PHOTODIODES
 
 __all__ = ["STORAGE_DTYPES", "ResidentMemoryError", "ResidentScene", "ResidentScenes", "DeviceBatches", "epoch_order",
@@ -320,6 +321,21 @@ class DeviceBatches:
             n = len(idx) // B if self.drop_last else -(-len(idx) // B)
             for b in range(n):
                 yield self.batch([idx[j] for j in perm[b * B:(b + 1) * B]])
+
+
+#: On CUDA, cut the crops' lamp entries with one Triton kernel (:mod:`lfmbench.datasets._device_triton`) where
+#: Triton is importable (False: the torch form everywhere; the same numbers).
+USE_TRITON = True
+_ENTRY_KERNELS = TritonKernels("lfmbench.datasets._device_triton", "the device program", "the torch form")
+
+
+def _entries_triton_ready(t: torch.Tensor) -> bool:
+    return USE_TRITON and t.is_cuda and _ENTRY_KERNELS.module() is not None
+
+
+def _no_entry_kernel() -> None:
+    global USE_TRITON
+    USE_TRITON = False
 
 
 #: PWM (PWM_FIELDS) of a padded slot (no light, or a light the crop does not show): any valid waveform; its
@@ -605,20 +621,30 @@ class SplitProgram:
         # entries: the runs of the global table, masked to the crop and the shown lights
         run = torch.repeat_interleave(torch.arange(B * F * NR, device=dev), cnt_t, output_size=E)
         before = torch.cumsum(cnt_t, 0) - cnt_t
-        gid = first_t[run] + torch.arange(E, device=dev) - before[run]
-        ey, ex = self.e_y[gid].long(), self.e_x[gid].long()
-        pair = run // NR
-        b, f = pair // F, pair % F
-        slot = pair * lf + self.e_pos[gid].long()
-        ok = shown.view(-1)[slot]
-        ok &= (ey >= y0[b]) & (ey < y0[b] + h) & (ex >= x0[b]) & (ex < x0[b] + w)
-        pix = f * (h * w) + (ey - y0[b]) * w + (ex - x0[b])
-        out["entry_pix"] = torch.where(ok, pix, torch.zeros_like(pix)).int()
-        out["entry_slot"] = slot.int()
+        fused = None
+        if self.dtype == torch.float32 and _entries_triton_ready(self.e_vals):
+            # one kernel for all of the below (the same numbers, bit for bit)
+            fused = _ENTRY_KERNELS.call("crop_entries", run, first_t, before, self.e_y, self.e_x, self.e_pos,
+                                        shown.view(-1), y0, x0, self.e_vals, NR, F, lf, h, w)
+            if fused is None:
+                _no_entry_kernel()
+        if fused is not None:
+            out["entry_pix"], out["entry_slot"], ev = fused
+        else:
+            gid = first_t[run] + torch.arange(E, device=dev) - before[run]
+            ey, ex = self.e_y[gid].long(), self.e_x[gid].long()
+            pair = run // NR
+            b, f = pair // F, pair % F
+            slot = pair * lf + self.e_pos[gid].long()
+            ok = shown.view(-1)[slot]
+            ok &= (ey >= y0[b]) & (ey < y0[b] + h) & (ex >= x0[b]) & (ex < x0[b] + w)
+            pix = f * (h * w) + (ey - y0[b]) * w + (ex - x0[b])
+            out["entry_pix"] = torch.where(ok, pix, torch.zeros_like(pix)).int()
+            out["entry_slot"] = slot.int()
+            ev = gather_rows(self.e_vals, gid).float() * ok.to(torch.float32)[:, None, None]
+            if self.dtype != torch.float32:
+                ev = ev * self.t_scale[sc_t][b][:, None, None]
         # (2, Kall, E) as a view of entry-major rows (compose_batch reads it without a copy)
-        ev = gather_rows(self.e_vals, gid).float() * ok.to(torch.float32)[:, None, None]
-        if self.dtype != torch.float32:
-            ev = ev * self.t_scale[sc_t][b][:, None, None]
         out["entry_values"] = ev.permute(1, 2, 0)
         # crops of the full-frame layers: one gather each on a GPU; slices on the CPU, where copying B x F
         # rectangles is faster than an indexed gather (the same numbers)

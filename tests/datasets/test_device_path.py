@@ -178,6 +178,31 @@ def test_cuda_device_batches_match_the_cpu(corpus):
 
 
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="needs CUDA")
+def test_cuda_entry_kernel_cuts_the_torch_forms_entries(corpus):
+    """On CUDA the crops' lamp entries come from one Triton kernel: the torch form's entries bit for bit (the same
+    integer arithmetic; the rates are copied and multiplied by the same 1.0 or 0.0)."""
+    import warnings
+
+    import lfmbench.datasets.device as D
+
+    if D._ENTRY_KERNELS.module() is None:
+        pytest.skip("Triton is not importable")
+    db = DeviceBatches(_ds(corpus), batch_size=9, device="cuda", seed=1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)      # a kernel that fails to compile warns: an error here
+        a = db.pieces(range(9))
+    assert D.USE_TRITON
+    D.USE_TRITON = False
+    try:
+        b = db.pieces(range(9))
+    finally:
+        D.USE_TRITON = True
+    assert a["entry_pix"].shape[0] > 0
+    for k in ("entry_pix", "entry_slot", "entry_values"):
+        assert torch.equal(a[k], b[k]), k
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs CUDA")
 def test_cuda_prefetched_batches_are_the_same_batches(corpus):
     """prefetch=True makes each batch on a side stream one batch ahead: the same batches in the same order (the
     same kernels on the same inputs: equal bit for bit), whole epochs of them, and a second epoch again."""
