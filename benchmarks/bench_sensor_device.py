@@ -14,6 +14,10 @@ mean electrons already on the device, FPN maps on, every capture), timed three w
 - ``seeds-torch`` (CUDA): the same numbers from the torch form (every branch and rejection round for every pixel);
 - ``seeds+compile`` (CUDA, ``--compile``): the torch form fused by ``torch.compile``.
 
+``--sweep-launch`` (CUDA) first times the fused chain at batch 256 with each candidate launch shape of its two
+kernels (pixels per program, warps; :data:`lfmbench.sensor._counter_triton.COLLECT_LAUNCH` / ``READOUT_LAUNCH``:
+the counts do not depend on them), takes the fastest for the rows that follow, and reports the sweep.
+
 Reports samples/s (median of ``--repeats`` timed calls after two warm-up calls; CUDA synchronised) and the peak
 device memory of a call, per batch size, and writes ``docs/sensor-device-benchmark.md`` (``--no-doc``: only print).
 The CPU rows are always measured (on a GPU machine: on its host CPU); without a GPU they go to
@@ -105,7 +109,32 @@ def time_mode(mode: str, batch: int, device: str, repeats: int) -> dict:
             "first_call_s": first, "peak_bytes": peak}
 
 
-def report(rows: list[dict], machine: dict, gpu_run: bool) -> str:
+#: Candidate launch shapes (pixels per program, warps per program) of the fused chain's kernels.
+COLLECT_CANDIDATES = ((256, 4), (256, 8), (128, 4), (128, 2), (64, 2), (64, 1), (32, 1))
+READOUT_CANDIDATES = ((256, 4), (512, 4), (1024, 8), (128, 2))
+
+
+def sweep_launch(device: str, repeats: int) -> list[dict]:
+    """Time the fused chain (``seeds``, batch 256) with each candidate launch shape, one kernel at a time (the
+    other at its current shape); leaves the fastest of each set in the kernel module. Returns the sweep rows."""
+    from lfmbench.sensor import _counter_triton as T
+
+    rows = []
+    for name, cands, table in (("collect", COLLECT_CANDIDATES, T.COLLECT_LAUNCH),
+                               ("readout", READOUT_CANDIDATES, T.READOUT_LAUNCH)):
+        best = None
+        for block, warps in cands:
+            table.update(BLOCK=block, num_warps=warps)
+            r = time_mode("seeds", 256, device, repeats)
+            rows.append({"kernel": name, "BLOCK": block, "num_warps": warps, "samples_per_s": r["samples_per_s"]})
+            print(f"launch {name} BLOCK {block:4d} warps {warps}: {r['samples_per_s']:9.1f} samples/s", flush=True)
+            if best is None or r["samples_per_s"] > best[0]:
+                best = (r["samples_per_s"], block, warps)
+        table.update(BLOCK=best[1], num_warps=best[2])
+    return rows
+
+
+def report(rows: list[dict], machine: dict, gpu_run: bool, sweep: list[dict] | None = None) -> str:
     lines = ["# Sensor simulation alone: per-sample generators against counter seeds", "",
              "Written by `benchmarks/bench_sensor_device.py` (rerun: `.venv/bin/python "
              "benchmarks/bench_sensor_device.py --device cuda`, and without `--device` for the CPU rows). "
@@ -122,6 +151,15 @@ def report(rows: list[dict], machine: dict, gpu_run: bool) -> str:
         per = "" if r["peak_bytes"] is None else f"{r['peak_bytes'] / 2**20 / r['batch']:.1f}"
         lines.append(f"| {r['device']} | {r['mode']} | {r['batch']} | {r['samples_per_s']:.0f} | "
                      f"{r['first_call_s']:.2f} | {pk} | {per} |")
+    if sweep:
+        from lfmbench.sensor import _counter_triton as T
+
+        lines += ["", "Launch shapes of the fused chain's kernels (`--sweep-launch`; `seeds`, batch 256, one kernel "
+                  "varied at a time; the rows above ran with collect "
+                  f"{T.COLLECT_LAUNCH['BLOCK']} px / {T.COLLECT_LAUNCH['num_warps']} warps, read-out "
+                  f"{T.READOUT_LAUNCH['BLOCK']} px / {T.READOUT_LAUNCH['num_warps']} warps):", "",
+                  "| kernel | px per program | warps | samples/s |", "|---|---|---|---|"]
+        lines += [f"| {r['kernel']} | {r['BLOCK']} | {r['num_warps']} | {r['samples_per_s']:.0f} |" for r in sweep]
     return "\n".join(lines) + "\n"
 
 
@@ -134,6 +172,9 @@ def main(argv=None) -> int:
                                                            "about 100 s of compilation)")
     ap.add_argument("--no-doc", action="store_true")
     ap.add_argument("--json", type=Path, help="also write the rows as JSON here")
+    ap.add_argument("--sweep-launch", action="store_true", help="CUDA: time the fused chain's candidate launch "
+                                                                 "shapes first and use the fastest")
+    ap.add_argument("--modes", default=None, help="comma-separated GPU modes (default: all)")
     args = ap.parse_args(argv)
     if args.device == "auto":
         args.device = "cuda" if torch.cuda.is_available() else "cpu"
@@ -147,6 +188,10 @@ def main(argv=None) -> int:
     if gpu:
         modes = ("generators", "seeds", "seeds-unfused", "seeds-torch") + (("seeds+compile",) if args.compile else ())
         plan += [(args.device, b, m) for b in (64, 256) for m in modes]
+    if gpu and args.modes:
+        keep = set(args.modes.split(","))
+        plan = [p for p in plan if p[0] == "cpu" or p[2] in keep]
+    sweep = sweep_launch(args.device, repeats) if gpu and args.sweep_launch else None
     rows = []
     for dev, b, m in plan:
         r = time_mode(m, b, dev, repeats)
@@ -159,8 +204,8 @@ def main(argv=None) -> int:
     name = torch.cuda.get_device_name() if gpu else platform.processor() or platform.machine()
     machine = f"{name}, torch {torch.__version__}, {torch.get_num_threads()} CPU threads"
     if args.json:
-        atomic_write_text(args.json, json.dumps({"machine": machine, "rows": rows}, indent=1))
-    text = report(rows, machine, gpu)
+        atomic_write_text(args.json, json.dumps({"machine": machine, "rows": rows, "sweep": sweep}, indent=1))
+    text = report(rows, machine, gpu, sweep)
     print(text)
     if not args.no_doc:
         write_device_doc(text, args.device, DOC, DOC_CPU, ROOT)

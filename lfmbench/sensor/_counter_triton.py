@@ -263,6 +263,12 @@ def normal(seed: torch.Tensor, n: int) -> torch.Tensor:
     return out
 
 
+#: Launch shape of the chain kernels (pixels per program, warps per program). The counts do not depend on it (each
+#: pixel's draw is its own stream's; a block only decides how long its loops run), only the speed does:
+#: benchmarks/bench_sensor_device.py --sweep-launch measures the candidates.
+COLLECT_LAUNCH = {"BLOCK": 256, "num_warps": 4}
+READOUT_LAUNCH = {"BLOCK": 256, "num_warps": 4}
+
 #: Compile option of the chain kernels: no fused multiply-adds, so that every float32 step rounds as the torch
 #: chain's separate element-wise passes do.
 _EXACT = {"enable_fp_fusion": False}
@@ -283,9 +289,10 @@ def collect(mu: torch.Tensor, seed: torch.Tensor, per: int, gain, dark: torch.Te
         g, s, m0, m1 = _consts()
         table, limits = _tables(mu.device, log_factorial, float(gaussian_above))
         gmap, goff, gstride = gain if gain is not None else (mu, dark, 0)
-        _collect_kernel[(triton.cdiv(P, _BLOCK), L)](
+        lc = COLLECT_LAUNCH
+        _collect_kernel[(triton.cdiv(P, lc["BLOCK"]), L)](
             mu, out, seed, gmap, goff, gstride, dark, cap, full_well, per, P, width, table, table.numel(), limits,
-            g, s, m0, m1, max_steps, max_rounds, USE_GAIN=gain is not None, BLOCK=_BLOCK, **_EXACT)
+            g, s, m0, m1, max_steps, max_rounds, USE_GAIN=gain is not None, **lc, **_EXACT)
     return out
 
 
@@ -305,9 +312,10 @@ def readout(n: torch.Tensor, seed, per: int, read_noise_e: float, offset, conver
         return True
     g, s, m0, m1 = _consts()
     omap, ooff, ostride = offset if offset is not None else (n, sub, 0)
-    _readout_kernel[(triton.cdiv(P, _BLOCK), L)](
+    lc = READOUT_LAUNCH
+    _readout_kernel[(triton.cdiv(P, lc["BLOCK"]), L)](
         n, dn, e, sat, seed if seed is not None else sub, read_noise_e, omap, ooff, ostride, conversion_gain, swing,
         dn_per_volt, black, max_dn, sat_v, gain_k, sub, mul if mul is not None else sub, c, sat.shape[1], per, P,
         width, g, s, m0, m1, USE_Z=seed is not None, USE_OFF=offset is not None, USE_MUL=mul is not None,
-        BLOCK=_BLOCK, **_EXACT)
+        **lc, **_EXACT)
     return True

@@ -217,6 +217,30 @@ def test_cuda_triton_chain_equals_the_torch_chain():
         assert (f.round() != t.round() if k.endswith("_e") else f != t).double().mean() <= 1e-3, k
 
 
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs CUDA")
+def test_cuda_launch_shape_does_not_change_the_chain():
+    """The fused chain's kernels draw each pixel from its own stream: the pixels per program and warps (what
+    bench_sensor_device --sweep-launch tunes) change how long a block's loops run, never a count."""
+    from lfmbench.sensor import _counter_triton as T
+    from lfmbench.sensor import simulate_split_pixel_electrons
+
+    preset, lpd, spd, ts, tl_, crops, seeds = _chain_inputs()
+    dev = torch.device("cuda")
+    args = (lpd.to(dev), spd.to(dev), preset, ts.to(dev), tl_.to(dev))
+    kw = dict(fpn=crops.to(dev, torch.float32), seeds=seeds.to(dev), check=False)
+    ref = simulate_split_pixel_electrons(*args, **kw)
+    saved = dict(T.COLLECT_LAUNCH), dict(T.READOUT_LAUNCH)
+    try:
+        for (bc, wc), (br, wr) in (((32, 1), (64, 1)), ((128, 2), (1024, 8))):
+            T.COLLECT_LAUNCH.update(BLOCK=bc, num_warps=wc)
+            T.READOUT_LAUNCH.update(BLOCK=br, num_warps=wr)
+            out = simulate_split_pixel_electrons(*args, **kw)
+            assert all(torch.equal(out[k], ref[k]) for k in ref), (bc, wc, br, wr)
+    finally:
+        T.COLLECT_LAUNCH.update(saved[0])
+        T.READOUT_LAUNCH.update(saved[1])
+
+
 def test_chain_seeds_are_the_shot_and_read_seeds():
     seeds = derive_key(11, torch.arange(5))
     shot, read = CN.chain_seeds(seeds, 2, 3)
