@@ -1,6 +1,13 @@
-"""The lamp-entry pass of :func:`lfmbench.datasets.batched.compose_batch` as one Triton kernel (CUDA; imported
-lazily).
+"""The composition of :mod:`lfmbench.datasets.batched` on CUDA as Triton kernels (imported lazily): the PWM
+weights of every slot, row and bin (:func:`pwm_weights`), and the lamp-entry pass (:func:`compose_entries`).
 
+**Weights.** The torch form of :func:`lfmbench.datasets.batched.pwm_weights` is about 180 small element-wise
+launches (the window starts, the bin grid and, per window, :func:`lfmbench.flicker.pwm_exposure`'s compensated
+arithmetic). Here one kernel computes the three windows of an element from the slot's draws: the same float64
+operations in the same order (compiled without fused multiply-adds; ``fmod`` from exact operations,
+:mod:`lfmbench._triton_math`), so the weights equal the torch form's (zeros may differ in sign).
+
+**Entries.**
 The torch form gathers each entry's three weight rows, multiplies them with the entry's rates, sums over the bins
 and scatters with three ``index_add_`` calls: about a dozen passes over E x Kmax values (E entries, 1.8 M in a
 128 x 128 batch of 64 three-frame samples). Here one pass reads each entry's rates and weight rows once and adds its
@@ -13,7 +20,101 @@ import torch
 import triton
 import triton.language as tl
 
+from lfmbench._triton_math import _d, fmod, rint, two_prod, two_sum
+
 _BLOCK = 256
+#: Compile option of the weights kernel: no fused multiply-adds (each float64 step rounds as torch's does).
+_EXACT = {"enable_fp_fusion": False}
+
+
+@triton.jit
+def _pulse(ph, te, T, D):
+    """ON time (s) of an ideal PWM pulse over ``[ph, ph + te)`` (:func:`lfmbench.flicker._pulse_core`, ideal)."""
+    r = fmod(te, T)
+    n = rint((te - r) / T)
+    p, e = two_prod(D, T)
+    full = n * p + n * e
+    a = fmod(ph, T)
+    zero = r * _d(0.0)
+    s, se = two_sum(T, -a)
+    o1 = tl.maximum(tl.minimum(r, (p - a) + e), zero)
+    o2 = tl.maximum(tl.minimum((r - s) - se, p + e), zero)
+    q, qe = two_sum(p, -T)
+    m1 = tl.maximum(tl.minimum(r, (q - a) + (qe + e)), zero)
+    m2 = tl.maximum(tl.minimum(r + a, p + e), zero)
+    return full + tl.where(a < _d(0.0), m1 + m2, o1 + o2)
+
+
+@triton.jit
+def _window(e_lo, e_hi, start, length, ph0, T, D):
+    """A bin's overlap (s) with a window, and its time at PWM level 1 (s): :func:`window_bin_exposure`."""
+    lo = tl.maximum(e_lo, start)
+    hi = tl.minimum(e_hi, start + length)
+    dur = tl.maximum(hi - lo, _d(0.0))
+    return dur, _d(1.0) * _pulse(lo - ph0, dur, T, D) + _d(0.0) * dur
+
+
+@triton.jit
+def _weights_kernel(sample_ptr, frame_ptr, k_ptr, pwm_ptr, timing_ptr, t0_ptr, crop_ptr, lpd_ptr, spd_ptr, gt_ptr,
+                    N, R, F, KMAX, ROLLING: tl.constexpr, BLOCK: tl.constexpr):
+    i = tl.program_id(0).to(tl.int64) * BLOCK + tl.arange(0, BLOCK)
+    m = i < N
+    k = i % KMAX
+    t = i // KMAX
+    r = t % R
+    s = t // R
+    sb = tl.load(sample_ptr + s, mask=m, other=0)
+    fr = tl.load(frame_ptr + s, mask=m, other=0)
+    ks = tl.load(k_ptr + s, mask=m, other=1)
+    t_s = tl.load(timing_ptr + sb * 4, mask=m, other=1.0)
+    t_l = tl.load(timing_ptr + sb * 4 + 1, mask=m, other=1.0)
+    td = tl.load(timing_ptr + sb * 4 + 2, mask=m, other=0.0)
+    cw = tl.load(timing_ptr + sb * 4 + 3, mask=m, other=1.0)
+    t0 = tl.load(t0_ptr + sb * F + fr, mask=m, other=0.0)
+    T = tl.load(pwm_ptr + s * 5, mask=m, other=1.0)
+    D = tl.load(pwm_ptr + s * 5 + 1, mask=m, other=0.5)
+    ph0 = tl.load(pwm_ptr + s * 5 + 2, mask=m, other=0.0)
+    if ROLLING:
+        shift = (tl.load(crop_ptr + sb * 4, mask=m, other=0).to(tl.float64) + r.to(tl.float64)) * td
+    else:
+        shift = tl.zeros_like(t0)
+    st_l = (t0 + (t_l - t_s) / _d(2.0)) + shift          # window_starts
+    st_s = t0 + shift
+    kc = tl.maximum(ks, 1).to(tl.float64)                         # bin_edges of K.clamp_min(1)
+    step = cw / kc
+    kf = k.to(tl.float64)
+    k1 = kf + _d(1.0)
+    e_lo = t0 + tl.where(kf >= kc, cw, kf * step + _d(0.0))
+    e_hi = t0 + tl.where(k1 >= kc, cw, k1 * step + _d(0.0))
+    dur_l, w_l = _window(e_lo, e_hi, st_l, t_s, ph0, T, D)
+    _dur_s, w_s = _window(e_lo, e_hi, st_s, t_l, ph0, T, D)
+    tl.store(lpd_ptr + i, w_l, mask=m)
+    tl.store(spd_ptr + i, w_s, mask=m)
+    tl.store(gt_ptr + i, dur_l * D, mask=m)
+
+
+def pwm_weights(batch: dict, R: int, kmax: int) -> dict:
+    """:func:`lfmbench.datasets.batched.pwm_weights` of a batch of ideal pulses without group slots, on CUDA.
+
+    Args:
+        batch: a :func:`~lfmbench.datasets.batched.collate_pieces` batch (float64 ``slot_pwm``, ``timing``, ``t0``).
+        R: rows (the crop's height for a rolling shutter, else 1). kmax: bins.
+
+    Returns:
+        ``{"lpd", "spd", "gt"}``: (S, R, kmax) float64 s.
+    """
+    S = int(batch["slot_sample"].shape[0])
+    dev = batch["slot_pwm"].device
+    out = {k: torch.empty(S, R, kmax, dtype=torch.float64, device=dev) for k in ("lpd", "spd", "gt")}
+    N = S * R * kmax
+    if N:
+        F = int(batch["t0"].shape[1])
+        _weights_kernel[(triton.cdiv(N, _BLOCK),)](
+            batch["slot_sample"].contiguous(), batch["slot_frame"].contiguous(), batch["slot_K"].contiguous(),
+            batch["slot_pwm"].contiguous(), batch["timing"].contiguous(), batch["t0"].contiguous(),
+            batch["crop"].contiguous(), out["lpd"], out["spd"], out["gt"], N, R, F, kmax,
+            ROLLING=R > 1, BLOCK=_BLOCK, **_EXACT)
+    return out
 
 
 @triton.jit

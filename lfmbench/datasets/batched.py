@@ -130,6 +130,10 @@ def collate_pieces(samples: Sequence[Mapping[str, Any]]) -> dict:
     out["slot_sample"] = torch.repeat_interleave(torch.arange(len(samples)), torch.tensor(n_slots, dtype=torch.long))
     out["meta"] = default_collate([s["meta"] for s in samples])
     out["info"] = dict(info0)
+    if out["slot_pwm"].device.type == "cpu":
+        # decided here on the host, so that pwm_weights never has to ask a device (the same formulas either way)
+        out["info"]["ideal_pulses"] = not bool(out["slot_pwm"][:, 3:5].any())
+        out["info"]["group_slots"] = bool((out["slot_K"] == 0).any())
     return out
 
 
@@ -227,7 +231,9 @@ def pwm_weights(batch: Mapping[str, Any]) -> dict[str, torch.Tensor]:
         ``{"lpd", "spd", "gt"}``: (S, R, Kmax) float64 s; R = h rows for a rolling shutter, 1 for a global one
         (row-independent). Bins past a slot's own K weigh 0; a ``K = 0`` slot (a group without bins) has its
         whole-window weight in bin 0. These are the per-sample path's numbers (same functions, same order of
-        operations; bit-identical on the CPU).
+        operations; bit-identical on the CPU). On CUDA, for a batch of ideal pulses without group slots
+        (``info["ideal_pulses"]``, ``info["group_slots"]``), one Triton kernel computes them with the same float64
+        operations (:mod:`lfmbench.datasets._compose_triton`; equal, zeros up to their sign).
     """
     dev = _check_batch(batch)
     info = batch["info"]
@@ -235,6 +241,14 @@ def pwm_weights(batch: Mapping[str, Any]) -> dict[str, torch.Tensor]:
     sb = batch["slot_sample"]
     S = int(sb.shape[0])
     K = batch["slot_K"]
+    if (S and info.get("ideal_pulses") and not info.get("group_slots", True)
+            and batch["slot_pwm"].dtype == torch.float64 and _compose_triton_ready(batch["static"])):
+        # CUDA: one kernel, the same numbers (lfmbench.datasets._compose_triton)
+        R = h if info["shutter"] == "rolling" else 1
+        out = _COMPOSE_KERNELS.call("pwm_weights", batch, R, int(batch["entry_values"].shape[1]))
+        if out is not None:
+            return out
+        _compose_triton_off()
     tim = batch["timing"][sb]                                                     # (S, 4) s
     t_s, t_l, td, cw = tim.unbind(-1)
     t0 = batch["t0"][sb, batch["slot_frame"]]                                     # (S,) s
@@ -264,7 +278,7 @@ def pwm_weights(batch: Mapping[str, Any]) -> dict[str, torch.Tensor]:
     # (a batch that says it has no group slots skips the test: bool() would wait for the device)
     if info.get("group_slots", True) and bool(grp.any()):
         gi = grp.nonzero()[:, 0]
-        p = {k: v[gi, None] for k, v in pw.items()}
+        p = {k: (v[gi, None] if torch.is_tensor(v) else v) for k, v in pw.items()}
         for key, pd in (("lpd", "lpd"), ("spd", "spd")):
             wg = pwm_exposure(starts[pd][gi] - p["phase_s"], length[pd][gi, None], p["period_s"], p["duty"],
                               rise_time=p["rise_s"], fall_time=p["fall_s"])                    # (G, R) s
@@ -330,11 +344,10 @@ def compose_batch(batch: Mapping[str, Any], backend: str = "auto", threads: int 
     if int(batch["entry_pix"].shape[0]):
         wts = pwm_weights(batch)
         if backend != "torch" and _compose_triton_ready(batch["entry_values"]):
-            global _COMPOSE_TRITON
             if _COMPOSE_KERNELS.call("compose_entries", comp, batch["slot_sample"], batch["entry_slot"],
                                      batch["entry_pix"], batch["entry_values"], wts, h, w) is not None:
                 return comp
-            _COMPOSE_TRITON = False     # failed to compile here (one warning): the torch form below
+            _compose_triton_off()       # failed to compile here (one warning): the torch form below
             comp["lpd"] = batch["static"][:, :, 0] * t_s.float()[:, None, None, None]
             comp["spd"] = batch["static"][:, :, 1] * t_l.float()[:, None, None, None]
             comp["gt"] = comp["lpd"].clone()
@@ -355,15 +368,19 @@ def compose_batch(batch: Mapping[str, Any], backend: str = "auto", threads: int 
     return comp
 
 
-#: On CUDA, add the lamp entries with one Triton kernel (:mod:`lfmbench.datasets._compose_triton`) where Triton is
-#: importable (False: the torch form everywhere).
+#: On CUDA, compute the PWM weights and add the lamp entries with Triton kernels
+#: (:mod:`lfmbench.datasets._compose_triton`) where Triton is importable (False: the torch form everywhere).
 _COMPOSE_TRITON = True
 _COMPOSE_KERNELS = TritonKernels("lfmbench.datasets._compose_triton", "compose_batch", "the torch composition")
 
 
-def _compose_triton_ready(values: torch.Tensor) -> bool:
-    return (_COMPOSE_TRITON and values.is_cuda and values.dtype == torch.float32
-            and _COMPOSE_KERNELS.module() is not None)
+def _compose_triton_ready(t: torch.Tensor) -> bool:
+    return _COMPOSE_TRITON and t.is_cuda and t.dtype == torch.float32 and _COMPOSE_KERNELS.module() is not None
+
+
+def _compose_triton_off() -> None:
+    global _COMPOSE_TRITON
+    _COMPOSE_TRITON = False
 
 
 def _numba_available() -> bool:

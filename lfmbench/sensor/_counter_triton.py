@@ -17,6 +17,7 @@ import torch
 import triton
 import triton.language as tl
 
+from lfmbench._triton_math import _d, rint
 from lfmbench.constants import POISSON_EXACT_LIMIT
 from lfmbench.counter_rng import GAMMA, MIX_MUL, STRIDE_LOG2
 
@@ -33,12 +34,6 @@ def _mix(z, m0, m1):
 
 
 @triton.jit
-def _d(x: tl.constexpr):
-    """The float64 constant ``x`` (a bare Python float would be a float32 constant)."""
-    return tl.full([], x, tl.float64)
-
-
-@triton.jit
 def _unit(z):
     return ((z >> 11).to(tl.float64) + _d(0.5)) * _d(1.0 / 9007199254740992.0)
 
@@ -46,15 +41,6 @@ def _unit(z):
 @triton.jit
 def _box_muller(u1, u2):
     return tl.sqrt(_d(-2.0) * tl.log(u1)) * tl.cos(_d(2.0 * math.pi) * u2)
-
-
-@triton.jit
-def _rint(x):
-    """Round half to even (``numpy.rint``, ``torch.round``)."""
-    r = tl.floor(x + _d(0.5))
-    tie = (r - x) == _d(0.5)
-    odd = (r - _d(2.0) * tl.floor(r * _d(0.5))) != _d(0.0)
-    return tl.where(tie & odd, r - _d(1.0), r)
 
 
 @triton.jit
@@ -82,7 +68,7 @@ def _poisson_draw(mu, key, inside, table_ptr, n_table, limits_ptr, gamma, m0, m1
     u1 = _unit(_mix(key + gamma, m0, m1))
     u2 = _unit(_mix(key + gamma + gamma, m0, m1))
     z = _box_muller(u1, u2)
-    res = tl.maximum(_rint(mu + tl.sqrt(mu) * z), _d(0.0))
+    res = tl.maximum(rint(mu + tl.sqrt(mu) * z), _d(0.0))
     # inversion by sequential search (mu < 10), draw 0
     zero = _d(0.0)
     mus = tl.where(small, mu, zero)

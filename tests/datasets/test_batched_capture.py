@@ -391,8 +391,9 @@ def test_cuda_matches_cpu(corpus, shutter):
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")
 @pytest.mark.parametrize("shutter", ["global", "rolling"])
 def test_cuda_triton_composition_matches_the_torch_form(corpus, shutter):
-    """On CUDA compose_batch adds the lamp entries with one Triton kernel: the torch form's float32 products,
-    summed over the bins and scattered in another order, so equal within float32 rounding of those sums."""
+    """On CUDA the PWM weights of ideal pulses come from one Triton kernel (the torch form's float64 operations:
+    equal), and compose_batch adds the lamp entries with another: the torch form's float32 products, summed over
+    the bins and scattered in another order, so equal within float32 rounding of those sums."""
     import warnings
 
     import lfmbench.datasets.batched as bt
@@ -400,13 +401,23 @@ def test_cuda_triton_composition_matches_the_torch_form(corpus, shutter):
     if bt._COMPOSE_KERNELS.module() is None:
         pytest.skip("Triton is not importable")
     _, ds = _pair(corpus, shutter=shutter, frames=3, crop=(24, 32), samples_per_scene=8, outputs=ALL)
-    batch = pieces_to(_batch(ds, range(len(ds))), "cuda")
+    batch = _batch(ds, range(len(ds)))
+    batch["slot_pwm"][:, 3:5] = 0.0                 # ideal pulses (the weights kernel's case)
+    batch["info"]["ideal_pulses"] = True
+    assert not batch["info"]["group_slots"]
+    batch = pieces_to(batch, "cuda")
     assert batch["entry_pix"].shape[0] > 0
-    ref = compose_batch(batch, backend="torch")
+    bt._COMPOSE_TRITON = False
+    try:
+        ref_w, ref = pwm_weights(batch), compose_batch(batch, backend="torch")
+    finally:
+        bt._COMPOSE_TRITON = True
     with warnings.catch_warnings():
         warnings.simplefilter("error", RuntimeWarning)      # a kernel that fails to compile warns: an error here
-        out = compose_batch(batch)
+        w, out = pwm_weights(batch), compose_batch(batch)
     assert bt._COMPOSE_TRITON
+    for k in ref_w:     # the same float64 operations in the same order: equal (zeros up to their sign)
+        assert torch.equal(w[k], ref_w[k]), k
     for k in ref:
         torch.testing.assert_close(out[k], ref[k], rtol=1e-5, atol=1e-6 * float(ref[k].abs().max()))
 
