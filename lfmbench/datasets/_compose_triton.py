@@ -118,7 +118,7 @@ def pwm_weights(batch: dict, R: int, kmax: int) -> dict:
 
 
 @triton.jit
-def _entries_kernel(lpd, spd, gt, slot_sample, entry_slot, entry_pix, vals, sv_c, sv_k, sv_e, w_lpd, w_spd, w_gt,
+def _compose_entries_kernel(lpd, spd, gt, slot_sample, entry_slot, entry_pix, vals, sv_c, sv_k, sv_e, w_lpd, w_spd, w_gt,
                     E, R, w, hw, fhw, K: tl.constexpr, BLOCK: tl.constexpr):
     e = tl.program_id(0) * BLOCK + tl.arange(0, BLOCK)
     m = e < E
@@ -159,7 +159,7 @@ def compose_entries(comp: dict, slot_sample: torch.Tensor, entry_slot: torch.Ten
     S, R, K = (int(n) for n in weights["lpd"].shape)
     B, F = (int(n) for n in comp["lpd"].shape[:2])
     wl, ws, wg = (weights[k].contiguous() for k in ("lpd", "spd", "gt"))
-    _entries_kernel[(triton.cdiv(E, _BLOCK),)](
+    _compose_entries_kernel[(triton.cdiv(E, _BLOCK),)](
         comp["lpd"], comp["spd"], comp["gt"], slot_sample.contiguous(), entry_slot.contiguous(),
         entry_pix.contiguous(), values, values.stride(0), values.stride(1), values.stride(2), wl, ws, wg,
         E, R, w, h * w, F * h * w, K=K, BLOCK=_BLOCK)

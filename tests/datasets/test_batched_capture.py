@@ -400,7 +400,7 @@ def test_cuda_triton_composition_matches_the_torch_form(corpus, shutter):
 
     if bt._COMPOSE_KERNELS.module() is None:
         pytest.skip("Triton is not importable")
-    _, ds = _pair(corpus, shutter=shutter, frames=3, crop=(24, 32), samples_per_scene=8, outputs=ALL)
+    _, ds = _pair(corpus, shutter=shutter, frames=3, crop=(12, 16), samples_per_scene=8, outputs=ALL)
     batch = _batch(ds, range(len(ds)))
     batch["slot_pwm"][:, 3:5] = 0.0                 # ideal pulses (the weights kernel's case)
     batch["info"]["ideal_pulses"] = True
