@@ -9,7 +9,9 @@ Timed, one run each after a warm-up (a pass over the data that fills the project
 samples: imports, checkpoint loading, plotting): (1) the data alone (every sample read and
 simulated once, no method), (2) ``benchmark(share_samples=False)`` (one pass over the data per method: before),
 (3) ``benchmark(share_samples=True)`` (each sample simulated once for all methods: after); with ``--repeats N`` each
-path N times in the order ABBA, the fastest kept. The per-sample scores of (2) and (3) are compared (they must be
+path N times in the order ABBA, the fastest kept. Wall time and process CPU time are both recorded: with
+``--threads 1`` the CPU time is what a shared machine's load hardly moves (the saving to compare with the
+simulation's share). The per-sample scores of (2) and (3) are compared (they must be
 equal). Prints a Markdown table; ``--json`` writes the numbers.
 """
 from __future__ import annotations
@@ -57,17 +59,18 @@ def main() -> None:
     ds, _, _ = corpus_run_inputs(a.corpus, a.split, 0, None, a.samples_per_scene, frames=3)
     n = len(ds)
 
-    def data_pass() -> float:
-        t0 = time.perf_counter()
+    def data_pass() -> tuple[float, float]:
+        t0, c0 = time.perf_counter(), time.process_time()
         for _ in DataLoader(ds, batch_size=1, shuffle=False, num_workers=0, collate_fn=collate_samples):
             pass
-        return time.perf_counter() - t0
+        return time.perf_counter() - t0, time.process_time() - c0
 
     data_pass()  # warm-up: fills the projection cache, loads the sensor kernels
-    t_data = data_pass()
+    t_data, c_data = data_pass()
     kw = dict(split=a.split, perceptual=False, repeats=1, progress=False, samples_per_scene=a.samples_per_scene,
               isp=None if a.isp == "none" else a.isp)
     times: dict[bool, list[float]] = {False: [], True: []}
+    cpu: dict[bool, list[float]] = {False: [], True: []}   # process CPU time: what the machine's load hardly moves
     equal = True
     with tempfile.TemporaryDirectory() as tmp:
         for share in (False, True):  # warm-up of both paths on 2 samples: imports, checkpoint, plotting
@@ -75,14 +78,16 @@ def main() -> None:
         order = [False, True, True, False] * ((a.repeats + 1) // 2)  # ABBA: a drifting machine load cancels
         for share in order[:2 * a.repeats]:
             out = Path(tmp) / ("shared" if share else "per_method")
-            t0 = time.perf_counter()
+            t0, c0 = time.perf_counter(), time.process_time()
             benchmark(a.corpus, methods, out, share_samples=share, **kw)
             times[share].append(time.perf_counter() - t0)
+            cpu[share].append(time.process_time() - c0)
         for m in methods:
             old, new = (json.loads((Path(tmp) / d / f"{m}.json").read_text()) for d in ("per_method", "shared"))
             equal &= [(s["scene_id"], s.get("metrics")) for s in old["scenes"]] == \
                      [(s["scene_id"], s.get("metrics")) for s in new["scenes"]]
     t_old, t_new = min(times[False]), min(times[True])
+    c_old, c_new = min(cpu[False]), min(cpu[True])
     k = len(methods)
     res = {
         "methods": methods, "samples": n, "isp": a.isp, "split": a.split, "samples_per_scene": a.samples_per_scene,
@@ -93,6 +98,9 @@ def main() -> None:
         "shared_runs_s": times[True], "ratio_shared_per_method": t_new / t_old,
         "simulation_share_of_per_method": k * t_data / t_old,
         "expected_shared_s": t_old - (k - 1) * t_data, "per_sample_scores_equal": equal,
+        "cpu_data_pass_s": c_data, "cpu_per_method_s": c_old, "cpu_shared_s": c_new,
+        "cpu_per_method_runs_s": cpu[False], "cpu_shared_runs_s": cpu[True],
+        "cpu_saving": 1.0 - c_new / c_old, "cpu_simulation_share_of_per_method": k * c_data / c_old,
     }
     print(f"| {k}-method evaluation, {n} samples | time (s) |\n|---|---|\n"
           f"| data alone (read + simulate every sample once) | {t_data:.1f} |\n"
@@ -102,6 +110,10 @@ def main() -> None:
           f"| simulation share of the before run ({k} x data alone / before) | {100 * k * t_data / t_old:.1f} % |\n"
           f"| expected after (before - {k - 1} x data alone) | {t_old - (k - 1) * t_data:.1f} |\n"
           f"| per-sample scores equal | {equal} |")
+    print(f"\n| process CPU time (s) | data alone | before | after | saving | simulation share of before |\n"
+          f"|---|---|---|---|---|---|\n| {k} methods, {n} samples | {c_data:.1f} | {c_old:.1f} "
+          f"({_runs(cpu[False])}) | {c_new:.1f} ({_runs(cpu[True])}) | {100 * (1 - c_new / c_old):.1f} % | "
+          f"{100 * k * c_data / c_old:.1f} % |")
     if a.json:
         atomic_write_json(a.json, res)
     if not equal:
