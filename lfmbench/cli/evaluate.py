@@ -25,7 +25,7 @@ def evaluate_cmd(
     split: str = typer.Option("test", help="corpus split"),
     output: Path = typer.Option(None, "--output", "-o", help="result JSON (default runs/<method>.json)"),
     seed: int = typer.Option(0, help="dataset seed (PWM draws, noise)"),
-    max_scenes: int = typer.Option(None, help="evaluate at most this many scenes"),
+    max_scenes: int = typer.Option(None, help="evaluate the first N scenes (all their --samples-per-scene draws)"),
     crop: int = typer.Option(None, help="square crop in px passed to the dataset"),
     frames: int = typer.Option(3, help="consecutive frames per sample (e.g. 24 or 100; <= the corpus frames)"),
     samples_per_scene: int = typer.Option(1, help="PWM draws per scene (test draws frozen in the corpus)"),
@@ -47,7 +47,7 @@ def evaluate_cmd(
     says which), 2 bad input, 130 interrupted (the result file has status "interrupted").
     """
     from lfmbench.datasets.loading import EmptyDataError, collate_samples  # noqa: PLC0415
-    from lfmbench.evaluation.benchmark import corpus_run_inputs, safe_name  # noqa: PLC0415
+    from lfmbench.evaluation.benchmark import corpus_run_inputs, safe_name, samples_to_score  # noqa: PLC0415
     from lfmbench.evaluation.leaderboard import _fmt  # noqa: PLC0415
     from lfmbench.evaluation.run import DataSourceError, EvaluationInterrupted, evaluate  # noqa: PLC0415
 
@@ -95,7 +95,7 @@ def evaluate_cmd(
             check(ds.sensor_name, list(ds.preset.captures))
         except CheckpointError as exc:
             fail(str(exc))
-    n = len(ds) if max_scenes is None else min(len(ds), max_scenes)
+    n = samples_to_score(ds, max_scenes)
     loader = DataLoader(ds, batch_size=1, shuffle=False, num_workers=0, collate_fn=collate_samples)
     try:
         res = evaluate(fn, islice(loader, n), method_spec=method, output=out,

@@ -28,6 +28,14 @@ def corpus_run_inputs(corpus: str | Path, split: str, seed: int, crop: int | Non
     return ds, ident, corpus_scene_conditions(ds.corpus)
 
 
+def samples_to_score(ds, max_scenes: int | None) -> int:
+    """How many samples of ``ds`` an evaluation scores: all, or those of its first ``max_scenes`` scenes (a
+    dataset serves its samples scene by scene, ``samples_per_scene`` each; ``max_scenes`` counts scenes, not
+    samples, so every scene scored has all its draws)."""
+    n = len(ds)
+    return n if max_scenes is None else min(n, int(max_scenes) * int(getattr(ds, "samples_per_scene", 1)))
+
+
 def write_leaderboard(rows: list[dict], runs: list[dict], sort_by: str | None, markdown: str | Path,
                       plot: str | Path, json_path: str | Path | None = None,
                       conditions_file: str | Path | None = None) -> list[Path]:
@@ -60,7 +68,8 @@ def benchmark(corpus: str | Path, methods: Iterable[str] | None = None, runs_dir
     (:func:`lfmbench.evaluation.run.evaluate_methods`, one sample in memory at a time; the scores equal those of
     one pass per method, docs/evaluation-sharing-benchmark.md); False: one pass over the data per method (the
     path before sharing, kept for comparison). ``isp``: the ISP pipeline (name or YAML path) of the
-    display-referred secondary columns, None for none (docs/isp.md).
+    display-referred secondary columns, None for none (docs/isp.md). ``max_scenes``: score only the first N scenes
+    of the split, each with all its ``samples_per_scene`` draws (:func:`samples_to_score`).
     """
     from itertools import islice
 
@@ -76,7 +85,7 @@ def benchmark(corpus: str | Path, methods: Iterable[str] | None = None, runs_dir
     extra = {"frames": frames, "sensor": sensor} if cache_dir is None else {"frames": frames, "sensor": sensor,
                                                                             "cache_dir": cache_dir}
     ds, ident, cond = corpus_run_inputs(corpus, split, seed, crop, samples_per_scene, **extra)
-    n = len(ds) if max_scenes is None else min(len(ds), max_scenes)
+    n = samples_to_score(ds, max_scenes)
     names = list(methods) if methods is not None else methods_for(ds.architecture)
     paths = [runs_dir / f"{safe_name(m)}.json" for m in names]
     common = dict(options=ScoreOptions(perceptual=perceptual, isp=isp, sensor=ds.preset), repeats=repeats,

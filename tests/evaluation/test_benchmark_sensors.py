@@ -49,3 +49,26 @@ def test_bad_checkpoint_arguments_are_refused_before_any_work(tmp_path):
         benchmark_sensors(corpus, {"ovt": ["unet"]}, tmp_path / "r", checkpoints={"ovt": {"unet": tmp_path / "no"}},
                           **kw)
     assert not (tmp_path / "r").exists()
+
+
+def test_max_scenes_counts_scenes_with_all_their_draws(tmp_path):
+    """``max_scenes`` scores whole scenes: with 2 draws per scene, ``max_scenes=2`` is the first 2 scenes' 4 samples
+    (it used to be the first 2 samples, i.e. one scene), in the API and in ``lfmbench evaluate``."""
+    from typer.testing import CliRunner
+
+    from lfmbench.cli import app
+
+    corpus = make_led_corpus(tmp_path / "corpus", n_scenes=3)
+    benchmark_sensors(corpus, {"ovt": ["lpd_only"]}, tmp_path / "runs", samples_per_scene=2, max_scenes=2, **KW)
+    res = json.loads((tmp_path / "runs" / "ovt" / "lpd_only.json").read_text())
+    ids = [(s["scene_id"], s["index"]) for s in res["scenes"]]
+    assert len(ids) == 4 and len({sid for sid, _ in ids}) == 2 and [i for _, i in ids] == [0, 1, 2, 3]
+    out = tmp_path / "cli.json"
+    r = CliRunner().invoke(app, ["evaluate", "--method", "lpd_only", "--corpus", str(corpus), "--split", "all",
+                                 "--max-scenes", "2", "--samples-per-scene", "2", "--repeats", "1", "--warmup", "0",
+                                 "--no-perceptual", "--isp", "none", "-o", str(out)])
+    assert r.exit_code == 0, r.output
+    assert [(s["scene_id"], s["index"]) for s in json.loads(out.read_text())["scenes"]] == ids
+    # more scenes than the split holds: every sample, once
+    benchmark_sensors(corpus, {"ovt": ["lpd_only"]}, tmp_path / "all", samples_per_scene=2, max_scenes=9, **KW)
+    assert len(json.loads((tmp_path / "all" / "ovt" / "lpd_only.json").read_text())["scenes"]) == 6
