@@ -646,16 +646,28 @@ class SplitProgram:
                 ev = ev * self.t_scale[sc_t][b][:, None, None]
         # (2, Kall, E) as a view of entry-major rows (compose_batch reads it without a copy)
         out["entry_values"] = ev.permute(1, 2, 0)
-        # crops of the full-frame layers: one gather each on a GPU; slices on the CPU, where copying B x F
-        # rectangles is faster than an indexed gather (the same numbers)
+        # crops of the full-frame layers: on a GPU one row-copy kernel each (Triton; else one indexed gather each);
+        # slices on the CPU, where copying B x F rectangles is faster than an indexed gather (the same numbers)
         layers = [("static", self.static), ("light_index", self.light_index), ("depth", self.depth)]
+        crops = None
         if dev.type == "cpu":
             for key, full in layers:
                 if full is not None:
                     out[key] = torch.stack([torch.stack([full[s_, f_, ..., a:a + h, c:c + w] for f_ in fs])
                                             for s_, fs, a, c in zip(sc.tolist(), fr.tolist(), y0h.tolist(),
                                                                     x0h.tolist())])
-        else:
+        elif _entries_triton_ready(self.static):
+            crops = {}
+            for key, full in layers:
+                if full is not None and crops is not None:
+                    crops[key] = _ENTRY_KERNELS.call("crop_planes", full if full.dim() == 5 else full[:, :, None],
+                                                     sc_t, fr_t, y0, x0, h, w)
+                    if crops[key] is None:
+                        _no_entry_kernel()
+                        crops = None
+            if crops is not None:
+                out.update(crops)
+        if dev.type != "cpu" and crops is None:
             rr = (y0[:, None] + torch.arange(h, device=dev))[:, None, :, None]                # (B, 1, h, 1)
             cc = (x0[:, None] + torch.arange(w, device=dev))[:, None, None, :]                # (B, 1, 1, w)
             S4, F4 = sc_t[:, None, None, None], fr_t[:, :, None, None]
@@ -663,8 +675,8 @@ class SplitProgram:
             if self.light_index is not None:
                 out["light_index"] = self.light_index[:, :, 0][S4, F4, rr, cc][:, :, None]
             if self.depth is not None:
-                out["depth"] = self.depth[S4, F4, rr, cc]
-        if self.depth is not None:
+                out["depth"] = self.depth[S4, F4, rr, cc][:, :, None]
+        if dev.type == "cpu" and self.depth is not None:
             out["depth"] = out["depth"][:, :, None]
         if self.dtype != torch.float32:
             out["static"] = out["static"].float() * self.t_scale[sc_t][:, None, None, None, None]

@@ -180,7 +180,8 @@ def test_cuda_device_batches_match_the_cpu(corpus):
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="needs CUDA")
 def test_cuda_entry_kernel_cuts_the_torch_forms_entries(corpus):
     """On CUDA the crops' lamp entries come from one Triton kernel: the torch form's entries bit for bit (the same
-    integer arithmetic; the rates are copied and multiplied by the same 1.0 or 0.0)."""
+    integer arithmetic; the rates are copied and multiplied by the same 1.0 or 0.0); the crops of the static,
+    light-index and depth layers from a row-copy kernel: the torch form's gathers, bit for bit."""
     import warnings
 
     import lfmbench.datasets.device as D
@@ -197,9 +198,11 @@ def test_cuda_entry_kernel_cuts_the_torch_forms_entries(corpus):
         b = db.pieces(range(9))
     finally:
         D.USE_TRITON = True
-    assert a["entry_pix"].shape[0] > 0
-    for k in ("entry_pix", "entry_slot", "entry_values"):
-        assert torch.equal(a[k], b[k]), k
+    assert a["entry_pix"].shape[0] > 0 and "static" in a
+    for k in ("entry_pix", "entry_slot", "entry_values", "static", "light_index", "depth"):
+        if k in b:
+            assert a[k].shape == b[k].shape and a[k].dtype == b[k].dtype, k
+            assert torch.equal(a[k], b[k]), k
 
 
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="needs CUDA")
