@@ -285,10 +285,10 @@ class DeviceBatches:
         # one batch ahead on a side stream: the main stream waits only for the batch it takes, and each of the
         # batch's tensors is marked as used there (its memory is not reused before that work is done)
         side, main = torch.cuda.Stream(self.device), torch.cuda.current_stream(self.device)
+        side.wait_stream(main)          # the layers, loaded on the main stream (a new chunk loads on the side one)
         it = self._batches()
 
         def ahead():
-            side.wait_stream(main)      # the layers (a new chunk) and the memory freed on the main stream
             with torch.cuda.stream(side):
                 b = next(it, None)
                 return None if b is None else (b, side.record_event())
