@@ -33,6 +33,10 @@ def evaluate_cmd(
     warmup: int = typer.Option(1, help="untimed warm-up calls"),
     perceptual: bool = typer.Option(True, help="also PU21-PSNR and ColorVideoVDP (needs cvvdp)"),
     device: str = typer.Option("cpu", help="torch device, e.g. cpu or cuda"),
+    simulate: str = typer.Option("host", "--simulate",
+                                 help="where the captures are simulated: host (the per-sample path, generator noise: "
+                                      "the published lfmbench-v1 numbers) or device (the device program on --device, "
+                                      "counter noise: the same draws, other noise numbers; ranked apart)"),
     threads: int = typer.Option(None, help="torch CPU threads (default: torch's choice); recorded"),
     cache_dir: Path = typer.Option(None, "--cache-dir",
                                    help="projected-radiance cache directory (default <corpus>/.cache; "
@@ -46,8 +50,9 @@ def evaluate_cmd(
     Exit status: 0 every scene scored, 1 some scenes failed or the data source failed (the result file
     says which), 2 bad input, 130 interrupted (the result file has status "interrupted").
     """
-    from lfmbench.datasets.loading import EmptyDataError, collate_samples  # noqa: PLC0415
-    from lfmbench.evaluation.benchmark import corpus_run_inputs, safe_name, samples_to_score  # noqa: PLC0415
+    from lfmbench.datasets.loading import EmptyDataError  # noqa: PLC0415
+    from lfmbench.evaluation.benchmark import (SIMULATE, corpus_run_inputs, run_dataset_record,  # noqa: PLC0415
+                                               safe_name, samples_to_score, score_batches)
     from lfmbench.evaluation.leaderboard import _fmt  # noqa: PLC0415
     from lfmbench.evaluation.run import DataSourceError, EvaluationInterrupted, evaluate  # noqa: PLC0415
 
@@ -55,6 +60,8 @@ def evaluate_cmd(
         fail(f"--threads must be >= 1, got {threads}")
     check_minima((("--max-scenes", max_scenes, 1), ("--samples-per-scene", samples_per_scene, 1),
                   ("--frames", frames, 1), ("--repeats", repeats, 1), ("--warmup", warmup, 0), ("--crop", crop, 2)))
+    if simulate not in SIMULATE:
+        fail(f"--simulate must be one of {', '.join(SIMULATE)}, got {simulate!r:.40}")
     torch_setup(device, threads)
     out = output or Path("runs") / f"{safe_name(method)}.json"
     from lfmbench.fileio import writable_error  # noqa: PLC0415
@@ -62,10 +69,6 @@ def evaluate_cmd(
     why = writable_error(out)  # an unwritable --output is found before any work is done (the writer's own rule)
     if why is not None:
         fail(f"--output {out}: cannot write the result file there ({why})")
-    from itertools import islice
-
-    from torch.utils.data import DataLoader
-
     from lfmbench.baselines import MethodNotFoundError, get_method
     from lfmbench.baselines.checkpoint import CheckpointError
     from lfmbench.isp import load_pipeline
@@ -79,8 +82,9 @@ def evaluate_cmd(
             fail(f"--isp: {exc}")
     try:
         fn = get_method(method)
-        extra = {"frames": frames, "sensor": sensor} if cache_dir is None else {"frames": frames, "sensor": sensor,
-                                                                                "cache_dir": cache_dir}
+        extra = {"frames": frames, "sensor": sensor, "noise_streams": SIMULATE[simulate]}
+        if cache_dir is not None:
+            extra["cache_dir"] = cache_dir
         ds, ident, cond = corpus_run_inputs(corpus, split, seed, crop, samples_per_scene, **extra)
     except (MethodNotFoundError, FileNotFoundError, EmptyDataError, RuntimeError, ValueError) as exc:
         fail(str(exc))
@@ -96,15 +100,12 @@ def evaluate_cmd(
         except CheckpointError as exc:
             fail(str(exc))
     n = samples_to_score(ds, max_scenes)
-    loader = DataLoader(ds, batch_size=1, shuffle=False, num_workers=0, collate_fn=collate_samples)
     try:
-        res = evaluate(fn, islice(loader, n), method_spec=method, output=out,
+        res = evaluate(fn, score_batches(ds, n, simulate, device), method_spec=method, output=out,
                        options=ScoreOptions(perceptual=perceptual, isp=isp_name, sensor=ds.preset), warmup=warmup,
                        repeats=repeats, device=device,
-                       seeds={"dataset": seed}, dataset={"corpus": str(corpus), "split": split, "scenes": n,
-                                                         "crop": crop, "samples_per_scene": samples_per_scene,
-                                                         "frames": frames, "sensor": ds.sensor_name,
-                                                         "architecture": ds.architecture},
+                       seeds={"dataset": seed},
+                       dataset=run_dataset_record(ds, corpus, split, n, crop, samples_per_scene, frames),
                        total=n, corpus=ident, scene_conditions=cond)
     except EvaluationInterrupted as exc:
         n_done = len(exc.result["scenes"])

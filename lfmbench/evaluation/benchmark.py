@@ -28,6 +28,50 @@ def corpus_run_inputs(corpus: str | Path, split: str, seed: int, crop: int | Non
     return ds, ident, corpus_scene_conditions(ds.corpus)
 
 
+#: Where an evaluation simulates its samples: ``"host"``, the per-sample path on the CPU with the dataset's
+#: generator noise (the numbers of every published result); ``"device"``, the device program
+#: (:class:`lfmbench.datasets.device.DeviceBatches`) on the evaluation's device with counter-based noise: the same
+#: frozen draws, other noise numbers from the same distribution, the same on any device. Results record it
+#: (``dataset.noise_streams``), and the leaderboard ranks runs of one noise only.
+SIMULATE = {"host": "generator", "device": "counter"}
+
+
+def check_simulate(simulate: str) -> str:
+    """``simulate`` if it is a key of :data:`SIMULATE`, else ValueError naming the choices."""
+    if simulate not in SIMULATE:
+        raise ValueError(f"simulate must be one of {tuple(SIMULATE)}, got {simulate!r:.40}")
+    return simulate
+
+
+def score_batches(ds, n: int, simulate: str = "host", device: str = "cpu") -> Iterable[dict]:
+    """The first ``n`` samples of ``ds`` as batches of one, in order: simulated on the host by a DataLoader (no
+    workers), or (``simulate="device"``; ``ds`` made with ``noise_streams="counter"``) cut and simulated on
+    ``device`` by the device program, its split loaded there once."""
+    from itertools import islice
+
+    check_simulate(simulate)
+    if simulate == "host":
+        from torch.utils.data import DataLoader
+
+        from lfmbench.datasets.loading import collate_samples
+
+        return islice(DataLoader(ds, batch_size=1, shuffle=False, num_workers=0, collate_fn=collate_samples), n)
+    if ds.noise_streams != SIMULATE[simulate]:
+        raise ValueError(f"simulate='device' needs a dataset with noise_streams='counter', got "
+                         f"{ds.noise_streams!r}")
+    from lfmbench.datasets.device import DeviceBatches
+
+    db = DeviceBatches(ds, 1, device)
+    return (db.batch([i]) for i in range(n))
+
+
+def run_dataset_record(ds, corpus, split: str, n: int, crop, samples_per_scene: int, frames: int) -> dict:
+    """The ``dataset`` field of a result: what was scored and how its samples were simulated."""
+    return {"corpus": str(corpus), "split": split, "scenes": n, "crop": crop, "samples_per_scene": samples_per_scene,
+            "frames": frames, "sensor": ds.sensor_name, "architecture": ds.architecture,
+            "noise_streams": ds.noise_streams}
+
+
 def samples_to_score(ds, max_scenes: int | None) -> int:
     """How many samples of ``ds`` an evaluation scores: all, or those of its first ``max_scenes`` scenes (a
     dataset serves its samples scene by scene, ``samples_per_scene`` each; ``max_scenes`` counts scenes, not
@@ -54,8 +98,8 @@ def benchmark(corpus: str | Path, methods: Iterable[str] | None = None, runs_dir
               split: str = "test", seed: int = 0, crop: int | None = None, max_scenes: int | None = None,
               perceptual: bool = True, repeats: int = 5, device: str = "cpu", sort_by: str | None = None,
               progress: bool = True, samples_per_scene: int = 1, cache_dir: str | Path | None = None,
-              frames: int = 3, sensor: str = "ovt", share_samples: bool = True, isp: str | None = "default"
-              ) -> list[dict]:
+              frames: int = 3, sensor: str = "ovt", share_samples: bool = True, isp: str | None = "default",
+              simulate: str = "host") -> list[dict]:
     """Evaluate several methods on one corpus split and build the leaderboard.
 
     Writes ``runs_dir/<method>.json`` per method, ``runs_dir/leaderboard.md``, ``leaderboard.json`` and
@@ -69,34 +113,30 @@ def benchmark(corpus: str | Path, methods: Iterable[str] | None = None, runs_dir
     one pass per method, docs/evaluation-sharing-benchmark.md); False: one pass over the data per method (the
     path before sharing, kept for comparison). ``isp``: the ISP pipeline (name or YAML path) of the
     display-referred secondary columns, None for none (docs/isp.md). ``max_scenes``: score only the first N scenes
-    of the split, each with all its ``samples_per_scene`` draws (:func:`samples_to_score`).
+    of the split, each with all its ``samples_per_scene`` draws (:func:`samples_to_score`). ``simulate``:
+    ``"host"`` (the published results' generator noise) or ``"device"`` (the device program on ``device``, counter
+    noise; :data:`SIMULATE`).
     """
-    from itertools import islice
-
-    from torch.utils.data import DataLoader
-
     from lfmbench.baselines import methods_for
-    from lfmbench.datasets.loading import collate_samples
     from lfmbench.evaluation.leaderboard import check_comparable, leaderboard_rows, load_runs, print_leaderboard
     from lfmbench.evaluation.run import evaluate, evaluate_methods
     from lfmbench.metrics import ScoreOptions
 
     runs_dir = Path(runs_dir)
-    extra = {"frames": frames, "sensor": sensor} if cache_dir is None else {"frames": frames, "sensor": sensor,
-                                                                            "cache_dir": cache_dir}
+    extra = {"frames": frames, "sensor": sensor, "noise_streams": SIMULATE[check_simulate(simulate)]}
+    if cache_dir is not None:
+        extra["cache_dir"] = cache_dir
     ds, ident, cond = corpus_run_inputs(corpus, split, seed, crop, samples_per_scene, **extra)
     n = samples_to_score(ds, max_scenes)
     names = list(methods) if methods is not None else methods_for(ds.architecture)
     paths = [runs_dir / f"{safe_name(m)}.json" for m in names]
     common = dict(options=ScoreOptions(perceptual=perceptual, isp=isp, sensor=ds.preset), repeats=repeats,
                   device=device, seeds={"dataset": seed},
-                  dataset={"corpus": str(corpus), "split": split, "scenes": n, "crop": crop,
-                           "samples_per_scene": samples_per_scene, "frames": frames, "sensor": ds.sensor_name,
-                           "architecture": ds.architecture},
+                  dataset=run_dataset_record(ds, corpus, split, n, crop, samples_per_scene, frames),
                   progress=progress, total=n, corpus=ident, scene_conditions=cond)
 
     def loader():
-        return islice(DataLoader(ds, batch_size=1, shuffle=False, num_workers=0, collate_fn=collate_samples), n)
+        return score_batches(ds, n, simulate, device)
 
     if share_samples:
         evaluate_methods(names, loader(), method_specs=names, outputs=paths, **common)

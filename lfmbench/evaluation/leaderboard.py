@@ -119,7 +119,9 @@ def identity(run: dict) -> dict[str, Any]:
     """What must agree between results ranked together: corpus (the scored scenes' files, or the manifest SHA-256
     in result files that do not record them; format version, frozen test draws), metric versions, split, dataset
     seed, crop, samples per scene, frames per sample (3, the dataset's default, in files that do not record it),
-    scoring options, the sensor preset (its capture plan: :func:`run_sensor`) and the display ISP (pipeline and
+    scoring options, the sensor preset (its capture plan: :func:`run_sensor`), the sensor noise's streams
+    (``generator``, the host simulation of every published result, in files that do not record it; ``counter``,
+    ``lfmbench evaluate --simulate device``) and the display ISP (pipeline and
     secondary metric versions; compared only among the runs that scored display-referred columns)."""
     from lfmbench.metrics import REGISTRY, SECONDARY_GROUPS
 
@@ -140,6 +142,7 @@ def identity(run: dict) -> dict[str, Any]:
         "samples per scene": d.get("samples_per_scene", 1), "frames per sample": d.get("frames", 3),
         "scoring options": {k: v for k, v in opts.items() if k not in ("perceptual", "isp")},
         "sensor": run_sensor(run),
+        "sensor noise": d.get("noise_streams", "generator"),
         "display ISP": _display_identity(run),
     }
 
