@@ -82,3 +82,21 @@ def test_cli_simulate_device_records_its_noise_and_is_ranked_apart(corpus, tmp_p
     old = dict(host, dataset={k: v for k, v in host["dataset"].items() if k != "noise_streams"})
     assert comparability_problems([host, old]) == []      # files from before the field: generator noise
     assert r_bad.exit_code == 2 and "--simulate" in r_bad.output and not (tmp_path / "bad.json").exists()
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs CUDA")
+def test_cuda_simulate_device_scores_as_the_cpu_device_program(corpus, tmp_path):
+    """On a GPU the device program gives the CPU program's samples (counter noise: the same numbers but for
+    float32 sums in another order), so the scores agree within that."""
+    ds, ident, cond = _ds(corpus)
+    n = len(ds)
+    aggs = []
+    for dev in ("cpu", "cuda"):
+        res = evaluate("flicker_aware", score_batches(ds, n, "device", dev), output=tmp_path / f"{dev}.json",
+                       options=ScoreOptions(perceptual=False), repeats=1, progress=False, device=dev,
+                       dataset=run_dataset_record(ds, corpus, "all", n, None, 2, 3), total=n, corpus=ident,
+                       scene_conditions=cond)
+        aggs.append(res["aggregate"])
+    assert aggs[0]["scenes_ok"] == aggs[1]["scenes_ok"] == n
+    for k in ("led_score", "psnr_mu", "dropout_rate"):
+        assert math.isclose(aggs[0][k], aggs[1][k], rel_tol=1e-3, abs_tol=1e-4), (k, aggs[0][k], aggs[1][k])
