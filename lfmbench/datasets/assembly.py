@@ -189,6 +189,41 @@ def _visible_by_bins(layers: SceneLayers, frame: int, crop: tuple[int, int, int,
     return visible, ids
 
 
+def _box_rows(group: Sequence, y0: int) -> tuple[np.ndarray, np.ndarray]:
+    """(light, row) index pairs (two (P,) arrays): every crop row (from the crop's top ``y0``) that the box of each
+    light of ``group`` (:func:`_visible_by_bins`) covers."""
+    boxes = [(i, iy0 - y0, iy1 - y0) for i, (_p, _b, (iy0, iy1, _x0, _x1), _r) in enumerate(group)]
+    li = np.concatenate([np.full(b - a, i, dtype=np.int64) for i, a, b in boxes] + [np.zeros(0, np.int64)])
+    ri = np.concatenate([np.arange(a, b, dtype=np.int64) for _i, a, b in boxes] + [np.zeros(0, np.int64)])
+    return li, ri
+
+
+def _rolling_bin_exposure(edges, starts, length, pa: dict, level: str, rows: tuple[np.ndarray, np.ndarray],
+                          n_lights: int) -> np.ndarray:
+    """:func:`window_bin_exposure` of ``n_lights`` lights for a rolling readout, computed only at the (light, row)
+    pairs ``rows`` (:func:`_box_rows`: the rows a light can reach), zero elsewhere: the same numbers there (an
+    element-wise formula of the same inputs), at the cost of the lamps' rows instead of every row of the crop.
+
+    Args:
+        edges: (K+1,) bin edges (s). starts: (*W, R) window starts per row (s). length: window length(s) (s),
+            broadcastable to (*W, 1, 1). pa: PWM parameters, each (n_lights, 1, ...) (s, 1, s, s, s).
+        level: ``"pwm"`` or ``"mean"``. rows: (P,) light and (P,) row indices.
+
+    Returns:
+        (n_lights, *W, R, K) float64 s.
+    """
+    li, ri = rows
+    lead = starts.shape[:-1]
+    shape = (1,) * len(lead) + (li.shape[0], 1)
+    p = {k: np.asarray(v, dtype=np.float64).reshape(n_lights)[li].reshape(shape) for k, v in pa.items()}
+    wp = window_bin_exposure(edges, starts[..., ri], length, p["period_s"], p["duty"], p["phase_s"], p["rise_s"],
+                             p["fall_s"], level, check=False)                             # (*W, P, K)
+    out = np.zeros((n_lights,) + tuple(starts.shape) + (wp.shape[-1],), dtype=np.float64)
+    idx = (li,) + (slice(None),) * len(lead) + (ri,)
+    out[idx] = np.moveaxis(wp, -2, 0)
+    return out
+
+
 def compose_frame(layers: SceneLayers, meta: dict, frame: int, crop: tuple[int, int, int, int],
                   params: dict[int, dict], group_params: dict[str, dict], shutter: str = "global",
                   line_time_s: float | None = None) -> dict:
@@ -229,10 +264,14 @@ def compose_frame(layers: SceneLayers, meta: dict, frame: int, crop: tuple[int, 
         pa = {k: np.array([g[0][k] for g in group], dtype=np.float64)[:, None, None]
               for k in ("period_s", "duty", "phase_s", "rise_s", "fall_s")}
         wts = {}
+        pairs = _box_rows(group, y0) if rolling else None
         for key, pd, level in (("lpd", "lpd", "pwm"), ("spd", "spd", "pwm"), ("gt", "lpd", "mean")):
             st = starts[pd] if rolling else starts[pd][:1]
-            w = window_bin_exposure(edges, st, t_len[pd], pa["period_s"], pa["duty"], pa["phase_s"],
-                                    pa["rise_s"], pa["fall_s"], level, check=False)        # (L, R, K) s
+            if rolling:     # only the rows each lamp covers (the einsum below reads no others)
+                w = _rolling_bin_exposure(edges, st, t_len[pd], pa, level, pairs, len(group))    # (L, R, K) s
+            else:
+                w = window_bin_exposure(edges, st, t_len[pd], pa["period_s"], pa["duty"], pa["phase_s"],
+                                        pa["rise_s"], pa["fall_s"], level, check=False)    # (L, 1, K) s
             wts[key] = torch.from_numpy(np.ascontiguousarray(w)).float()
             for i, lid in enumerate(ids[K]):
                 if lid in gates:
@@ -402,10 +441,14 @@ def compose_plan_frame(layers: SceneLayers, meta: dict, frame: int, crop: tuple[
               for k in ("period_s", "duty", "phase_s", "rise_s", "fall_s")}
         # weights of every output (exposures, then gt) by readout: one einsum / tensordot per light and readout
         by_mode: dict[bool, tuple[list, list]] = {}
+        pairs = _box_rows(group, y0)
         for key, x, level in [*((x.key, x, "pwm") for x in exposures), ("gt", ref, "mean")]:
             length = np.array([n for _, n in x.windows], dtype=np.float64)[:, None, None]
-            wgt = window_bin_exposure(edges, starts(x), length, pa["period_s"], pa["duty"], pa["phase_s"],
-                                      pa["rise_s"], pa["fall_s"], level, check=False)     # (L, Wn, R, K) s
+            if x.rolling:   # only the rows each lamp covers (the einsum below reads no others)
+                wgt = _rolling_bin_exposure(edges, starts(x), length, pa, level, pairs, len(group))  # (L, Wn, R, K)
+            else:
+                wgt = window_bin_exposure(edges, starts(x), length, pa["period_s"], pa["duty"], pa["phase_s"],
+                                          pa["rise_s"], pa["fall_s"], level, check=False)  # (L, Wn, 1, K) s
             wsum = wgt.sum(1)                                                              # (L, R, K)
             for i, lid in enumerate(ids[K]):
                 if lid in gates:

@@ -142,3 +142,32 @@ def test_batched_and_counter_paths_serve_the_split_pixel_only(corpus):
     for kw in ({"pieces": True}, {"noise_streams": "counter"}):
         with pytest.raises(ValueError, match="per-sample path"):
             LFMCaptureDataset(corpus, split="all", sensor="lofic", frames=2, cache_dir=False, **kw)
+
+
+def test_rolling_weights_at_the_lamps_rows_are_the_full_computations():
+    """A rolling readout's bin weights are computed only at the rows each lamp's box covers (_rolling_bin_exposure):
+    there they equal window_bin_exposure over every row bit for bit (the same element-wise formula), elsewhere 0."""
+    import numpy as np
+
+    from lfmbench.datasets.assembly import _box_rows, _rolling_bin_exposure, bin_edges, window_bin_exposure
+
+    rng = np.random.default_rng(3)
+    L, Wn, R, y0 = 4, 3, 40, 100
+    edges = 0.02 + bin_edges(0.0123, 8)
+    starts = 0.02 + rng.uniform(0, 0.004, (Wn, 1)) + np.arange(R)[None, :] * 2e-5         # (Wn, R) s
+    length = rng.uniform(1e-4, 8e-3, (Wn, 1, 1))
+    pa = {"period_s": 1 / rng.uniform(90, 2000, L), "duty": rng.uniform(0, 1, L), "phase_s": rng.uniform(0, 0.01, L),
+          "rise_s": np.zeros(L), "fall_s": np.zeros(L)}
+    pa = {k: v.reshape(L, 1, 1, 1) for k, v in pa.items()}
+    group = [(None, (0, 0), (y0 + a, y0 + b, 0, 5), None) for a, b in ((0, 3), (10, 40), (5, 6), (12, 30))]
+    pairs = _box_rows(group, y0)
+    for level in ("pwm", "mean"):
+        full = window_bin_exposure(edges, starts, length, pa["period_s"], pa["duty"], pa["phase_s"], pa["rise_s"],
+                                   pa["fall_s"], level, check=False)                      # (L, Wn, R, K)
+        part = _rolling_bin_exposure(edges, starts, length, pa, level, pairs, L)
+        assert part.shape == full.shape
+        mask = np.zeros((L, R), dtype=bool)
+        mask[pairs] = True
+        assert np.array_equal(part.transpose(0, 2, 1, 3)[mask], full.transpose(0, 2, 1, 3)[mask])
+        assert not part.transpose(0, 2, 1, 3)[~mask].any()
+        assert mask.sum() == 3 + 30 + 1 + 18
