@@ -7,6 +7,9 @@ extent), ``grid`` [columns, rows], ``dot`` (the lit share of the pitch, (0, 1]) 
 ``dot * w / columns`` x ``dot * h / rows`` m centred on its cell. One light per pixel row of a message sign
 (each row its own scan phase), or a disk of dots for a traffic signal's LED array.
 
+:func:`filled_cells`: the same light with each lit dot spread over its whole cell at ``dot``^2 of its luminance
+(the renderer's stand-in for a face whose dots are smaller than a pixel, :func:`render_tools.render.dots_lod`).
+
 Font: the 5x7 dot-matrix glyphs of the Hitachi HD44780 character ROM (A00 table; Hitachi, "HD44780U (LCD-II)
 dot matrix liquid crystal display controller/driver", datasheet, character codes 0x20-0x5A), upper case, digits
 and a few signs; one blank column between glyphs.
@@ -19,7 +22,7 @@ from typing import Mapping
 import numpy as np
 
 __all__ = ["FONT_5X7", "GLYPH_W", "GLYPH_H", "MAX_GRID", "MAX_CELLS", "text_columns", "text_cells",
-           "disk_cells", "dot_centers", "dots_area", "dots_mesh"]
+           "disk_cells", "dot_centers", "dots_area", "dots_mesh", "filled_cells"]
 
 GLYPH_W, GLYPH_H = 5, 7
 #: Largest matrix a ``dots`` face may declare: (columns, rows).
@@ -118,3 +121,15 @@ def dots_mesh(face: dict, u: np.ndarray, v: np.ndarray, offset) -> tuple[np.ndar
     base = 4 * np.arange(len(c))[:, None]
     F = np.concatenate([base + [0, 1, 2], base + [0, 2, 3]], axis=1).reshape(-1, 3)
     return V, F
+
+
+def filled_cells(light: dict) -> dict:
+    """A copy of a ``dots`` light whose lit dots each fill their whole cell (``dot`` 1) at ``dot``^2 of the
+    light's luminance (cd/m^2): the same luminous intensity (cd: luminance x emitting area, and per cell, so a
+    text or a disk keeps its shape) and the same spectrum, waveform and driver, without the dark gaps between
+    the dots. The renderer's stand-in for a face whose dot pitch projects under a pixel
+    (:func:`render_tools.render.dots_lod`): a pixel then sees the cells' mean instead of a few sub-pixel dots
+    whose covered share the Monte Carlo estimate has to find (the moire of the dots against the pixel grid is
+    left out: docs/render-benchmark.md, "LED dot faces")."""
+    d = float(light["dot"])
+    return {**light, "dot": 1.0, "luminance_cd_m2": float(light["luminance_cd_m2"]) * d * d}

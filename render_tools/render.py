@@ -91,6 +91,15 @@ class RenderOptions:
     throws on its surroundings outside its crop always was). 0: every light's reflection. Measured on a wet night:
     below 2e-3 lux a reflection averaged under 2 % of the lit road's luminance over its crop (docs/rendering.md,
     "Wet roads").
+    dots_lod_px: a ``dots`` face (an LED matrix, a segmented lamp, scene version 2) whose dot pitch projects under
+    this many px (in both directions, at every frame's capture window: :meth:`SceneGeometry.dots_pitch_px`) is
+    rendered with its lit dots filling their cells at ``dot``^2 of the luminance
+    (:func:`render_tools.led_matrix.filled_cells`: the same intensity per cell; the light keeps its id, waveform
+    and driver, so a multiplexed sign's rows keep their own phases). Why: sub-pixel dots left each lamp pixel's
+    covered share to ~256 camera samples, 8-19 % relative error in the LED bins at the ``default`` profile; the
+    filled cells leave out the dots' moire against the pixel grid instead (4-10 % per LED pixel where the pitch
+    is 0.3-0.6 px; docs/render-benchmark.md, "LED dot faces"). 0: every dot face as it is. Scenes without dot
+    faces (every lfmbench-v1 scene) render the same whatever it is.
     """
 
     width: int = 640
@@ -112,6 +121,7 @@ class RenderOptions:
     static_pass: str = "union"
     reflection_bins: int | None = 1
     reflection_min_lux: float = 2e-3
+    dots_lod_px: float = 1.0
 
     def __post_init__(self):
         self.bands_nm = tuple(float(b) for b in self.bands_nm)
@@ -135,6 +145,10 @@ class RenderOptions:
         if isinstance(lux, bool) or not isinstance(lux, (int, float, np.integer, np.floating)) \
                 or not (math.isfinite(lux) and lux >= 0):
             raise ValueError(f"reflection_min_lux: must be a number >= 0 lux, got {lux!r}")
+        lod = self.dots_lod_px
+        if isinstance(lod, bool) or not isinstance(lod, (int, float, np.integer, np.floating)) \
+                or not (math.isfinite(lod) and lod >= 0):
+            raise ValueError(f"dots_lod_px: must be a number >= 0 px, got {lod!r}")
         if self.static_pass not in STATIC_PASSES:
             raise ValueError(f"static_pass: must be one of {STATIC_PASSES}, got {self.static_pass!r}")
         if not isinstance(self.pad_px, (int, np.integer)) or self.pad_px < 0:
@@ -315,6 +329,25 @@ class SceneGeometry:
                 out.append((y0 + i * B, a, min(y1, y0 + (i + 1) * B), b))
         return out
 
+    def dots_pitch_px(self, light: dict, times) -> float:
+        """Largest screen distance (px) between neighbouring dot centres of a ``dots`` face, along its columns
+        or its rows, at the face's four corners and any of ``times`` (s; the lamp moving with its object);
+        inf where a corner is at or behind the camera plane (:data:`MIN_DEPTH_M`)."""
+        u, v, _ = ms._frame(light["normal"])  # the frame its dots are laid out in
+        (w, h), (cols, rows) = light["size"], light["grid"]
+        c = np.asarray(light["center"], dtype=float)
+        corners = np.array([c + a * w / 2 * u + b * h / 2 * v for a in (-1, 1) for b in (-1, 1)])
+        pts = np.concatenate([corners, corners + u * (w / cols), corners + v * (h / rows)])  # (12, 3) m
+        best = 0.0
+        for t in np.asarray(times, dtype=np.float64).reshape(-1):
+            uv, z = cam_mod.project(pts + ms.object_offset(self.scene, light["instance"], t), self.ego.pose_cv(t),
+                                    self.K)
+            if np.any(z <= MIN_DEPTH_M):
+                return math.inf
+            step = np.linalg.norm(uv[4:].reshape(2, 4, 2) - uv[:4][None], axis=-1)  # (2, 4) px
+            best = max(best, float(step.max()))
+        return best
+
     def light_bbox(self, light: dict, t_obj: float, t_a: float, t_b: float, moving: bool = False,
                    reflection: bool = True):
         """Screen bbox (y0, x0, y1, x1) px (end exclusive) of a light's face over [t_a, t_b] s, padded and
@@ -374,6 +407,28 @@ def clip_near(points: np.ndarray, z: np.ndarray, near: float) -> np.ndarray:
     return np.concatenate([pf, cross.reshape(-1, 3)])
 
 
+def dots_lod(scene: dict, opts: RenderOptions) -> tuple[dict, list[int]]:
+    """The scene as the renderer draws it with ``opts``: each ``dots`` light whose dot pitch stays under
+    ``opts.dots_lod_px`` px over every frame's capture window (:meth:`SceneGeometry.dots_pitch_px`, sampled at
+    :data:`BBOX_TIME_SAMPLES` times) replaced by :func:`render_tools.led_matrix.filled_cells` (same id, group,
+    waveform and driver). Returns (scene, ids of the lights replaced); ``scene`` itself (not a copy) when none
+    is. One decision per light for the whole sequence, so a light never switches form between frames."""
+    from . import led_matrix  # noqa: PLC0415
+
+    if not opts.dots_lod_px or not any(lt["shape"] == "dots" for lt in scene["lights"]):
+        return scene, []
+    geo = SceneGeometry(scene, opts)
+    times = np.concatenate([np.linspace(*frame_timing(scene, opts, n)["window"], BBOX_TIME_SAMPLES)
+                            for n in range(opts.frames)])
+    ids = [lt["id"] for lt in scene["lights"]
+           if lt["shape"] == "dots" and geo.dots_pitch_px(lt, times) < opts.dots_lod_px]
+    if not ids:
+        return scene, []
+    out = dict(scene)
+    out["lights"] = [led_matrix.filled_cells(lt) if lt["id"] in ids else lt for lt in scene["lights"]]
+    return out, ids
+
+
 def _round_span(a: int, b: int, n: int) -> tuple[int, int]:
     """Grow [a, b) to a multiple of :data:`CROP_QUANTUM_PX`, kept inside [0, n)."""
     a, b = max(a, 0), min(b, n)
@@ -403,19 +458,20 @@ def scene_meta(scene: dict, opts: RenderOptions) -> dict:
     """
     validate_scene(scene)
     opts.validate()
+    drawn, lod_ids = dots_lod(scene, opts)  # crops as render_frames draws the lights
     ego = cam_mod.EgoMotion.from_scene(scene)
     fov = float(scene["camera"]["fov_x_deg"])
     K = cam_mod.intrinsics(opts.width, opts.height, fov)
     groups = _selected_groups(scene, opts)
     timings = [frame_timing(scene, opts, n) for n in range(opts.frames)]
-    helper = SceneGeometry(scene, opts)
+    helper = SceneGeometry(drawn, opts)
     lights = []
-    for lt in scene["lights"]:
+    for lt, lt_drawn in zip(scene["lights"], drawn["lights"]):
         if lt["group"] not in groups:
             continue
         bbs = []
         for tm in timings:
-            bb = helper.light_bbox(lt, 0.5 * (tm["window"][0] + tm["window"][1]), *tm["window"],
+            bb = helper.light_bbox(lt_drawn, 0.5 * (tm["window"][0] + tm["window"][1]), *tm["window"],
                                    moving=groups[lt["group"]]["flicker"])  # as render_frames crops it
             bbs.append(None if bb is None else list(bb))
         lights.append({"id": lt["id"], "group": lt["group"], "kind": lt["kind"], "instance": lt["instance"],
@@ -439,7 +495,9 @@ def scene_meta(scene: dict, opts: RenderOptions) -> dict:
         "render": {"spp": opts.spp, "light_spp": opts.light_spp or opts.spp, "seed": opts.seed,
                    "pad_px": opts.pad_px, "static_pass": opts.static_pass,
                    **({"reflection_bins": opts.reflection_bins or opts.bins,
-                       "reflection_min_lux": opts.reflection_min_lux} if helper.wet else {})},
+                       "reflection_min_lux": opts.reflection_min_lux} if helper.wet else {}),
+                   **({"dots_lod_px": opts.dots_lod_px, "dots_lod": lod_ids}
+                      if any(lt["shape"] == "dots" for lt in scene["lights"]) else {})},
     }
 
 
@@ -605,6 +663,7 @@ def render_frames(scene: dict, opts: RenderOptions) -> Iterator[dict]:
     validate_scene(scene)
     opts.validate()
     timings = [frame_timing(scene, opts, n) for n in range(opts.frames)]  # validates exposures up front
+    scene = dots_lod(scene, opts)[0]  # sub-pixel LED dots as filled cells (RenderOptions.dots_lod_px)
     groups = _selected_groups(scene, opts)
     from . import backend  # noqa: PLC0415
 
