@@ -151,7 +151,10 @@ class Tile:
     gap_len) minus the gap (a long exposure without the short one inside it). The tile's output is (K, C, h, w)
     float32 radiance, W sr^-1 m^-2 nm^-1, each bin the time average over its interval. slots: the number of
     images the tile records, 1, or for a tile of a *union* set (:class:`LightSets`) its number of member groups:
-    the output is then (slots, K, C, h, w), one image per group in the union's order.
+    the output is then (slots, K, C, h, w), one image per group in the union's order. pass_spp: samples per
+    pixel and bin of each band pass (P integers >= 1, powers of two to keep the strata; P = ceil(C / 4)) instead
+    of ``spp`` in every pass: band c is the mean of pass c mod P's samples, so each band stays unbiased whatever
+    the split (:func:`render_tools.render.lamp_pass_spp` gives a lamp's passes samples by its spectrum).
     """
 
     crop: tuple
@@ -166,6 +169,7 @@ class Tile:
     gap_at: float = math.inf
     gap_len: float = 0.0
     slots: int = 1
+    pass_spp: tuple | None = None
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -415,12 +419,21 @@ class Tracer:
                 raise ValueError(f"tiles[{i}]: slots {t.slots} not in [1, {self.S}] (the light sets' union has "
                                  f"{self.S} group(s))")
             outs.append((size, (t.slots, t.bins, C, h, w) if t.slots > 1 else (t.bins, C, h, w)))
-            n_split = max(1, -(-h * w * t.bins * P * t.spp // MAX_LANES))
-            base, extra = divmod(t.spp, n_split)
-            for j in range(n_split):
-                sp = base + (j < extra)
-                if sp:
-                    parts.append((i, sp, 1.0 / t.spp, size, j))
+            if t.pass_spp is None:
+                n_split = max(1, -(-h * w * t.bins * P * t.spp // MAX_LANES))
+                base, extra = divmod(t.spp, n_split)
+                for j in range(n_split):
+                    sp = base + (j < extra)
+                    if sp:
+                        parts.append((i, sp, 1.0 / t.spp, size, j))
+            else:  # per pass counts: every part has every pass's lanes, a pass out of samples weighs 0
+                ps = [int(n) for n in t.pass_spp]
+                if len(ps) != P or min(ps) < 1:
+                    raise ValueError(f"tiles[{i}]: pass_spp needs {P} counts >= 1, got {t.pass_spp}")
+                n_split = max(1, -(-h * w * t.bins * sum(ps) // MAX_LANES))
+                for j in range(min(n_split, max(ps))):
+                    sp = tuple(n // n_split + (j < n % n_split) for n in ps)
+                    parts.append((i, sp, tuple(1.0 / n if c else 0.0 for n, c in zip(ps, sp)), size, j))
             size += t.slots * t.bins * C * h * w
         buf = dr.zeros(mi.Float, max(size, 1))
         batch, lanes = [], 0
@@ -428,7 +441,8 @@ class Tracer:
         for part in parts:
             t = tiles[part[0]]
             h, w = t.shape
-            n = h * w * t.bins * P * part[1]  # samples (the launch's work), lanes = samples / spp
+            n = h * w * t.bins * (P * part[1] if isinstance(part[1], int) else sum(max(c, 1) for c in part[1]))
+            # samples (the launch's work), lanes = samples / spp
             if batch and lanes + n > MAX_LANES:
                 self._launch(buf, tiles, batch, seed + launch)
                 launch += 1
@@ -442,23 +456,28 @@ class Tracer:
 
     def _launch(self, buf, tiles, parts, seed: int) -> None:
         mi, dr = self.mi, self.dr
-        rows = []
+        rows, per_pass = [], []
         off = 0
         for i, sp, wgt, out, j in parts:
             t = tiles[i]
             y0, x0, y1, x1 = t.crop
             key = (int(t.key) * 0x9E3779B1 + j * 0x85EBCA77) & 0xFFFFFFFF
-            rows.append((off, y0, x0, y1 - y0, x1 - x0, t.bins, sp, t.light_set, out, t.t_start, t.bin_len, wgt,
+            sp_p = (sp,) * self.P if isinstance(sp, int) else sp  # samples of each band pass
+            wgt_p = (wgt,) * self.P if isinstance(wgt, float) else wgt
+            per_pass += [(max(n, 1), w_) for n, w_ in zip(sp_p, wgt_p)]  # a pass without samples: 1 of weight 0
+            rows.append((off, y0, x0, y1 - y0, x1 - x0, t.bins, 0, t.light_set, out, t.t_start, t.bin_len, 0.0,
                          *[float(v) for v in t.velocity], t.t_ref, key, min(t.gap_at, 3e38), t.gap_len, t.slots))
             off += (y1 - y0) * (x1 - x0) * t.bins * self.P
         # a dummy last row: no table has a single entry (Dr.Jit loads size-1 arrays as scalars with an alignment
         # that depends on the allocation, which changes the kernel's hash and forces a recompile)
         a = np.array(rows + [rows[-1]], dtype=np.float64)
+        pp = np.array(per_pass + per_pass[-self.P:], dtype=np.float64)  # (rows + 1) x P, row-major
         U = lambda c: mi.UInt32(a[:, c].astype(np.uint32))  # noqa: E731
         F = lambda c: mi.Float(a[:, c].astype(np.float32))  # noqa: E731
         tab = {"off": mi.UInt32(np.append(a[:-1, 0], off).astype(np.uint32)), "y0": U(1), "x0": U(2), "h": U(3),
-               "w": U(4), "K": U(5), "spp": U(6), "set": U(7), "out": U(8), "t0": F(9), "dt": F(10), "wgt": F(11),
-               "vx": F(12), "vy": F(13), "vz": F(14), "tref": F(15), "key": U(16), "gap": F(17), "gap_len": F(18), "slots": U(19)}
+               "w": U(4), "K": U(5), "set": U(7), "out": U(8), "t0": F(9), "dt": F(10),
+               "vx": F(12), "vy": F(13), "vz": F(14), "tref": F(15), "key": U(16), "gap": F(17), "gap_len": F(18), "slots": U(19),
+               "spp": mi.UInt32(pp[:, 0].astype(np.uint32)), "wgt": mi.Float(pp[:, 1].astype(np.float32))}
         n_tiles = dr.opaque(mi.UInt32, len(rows))
         self._trace(buf, tab, n_tiles, off, seed)
         dr.eval(buf)
@@ -478,7 +497,7 @@ class Tracer:
         ti = lo
         g = lambda k, T=mi.UInt32: dr.gather(T, tab[k], ti)  # noqa: E731
         # divisors clamped to >= 1: the masked tail lanes of the last packet gather 0 (kernel_rules)
-        w, h, K, spp = (lane_divisor(g(k)) for k in ("w", "h", "K", "spp"))
+        w, h, K = (lane_divisor(g(k)) for k in ("w", "h", "K"))
         local = lane - g("off")
         x = local % w
         r = local // w
@@ -486,6 +505,8 @@ class Tracer:
         r = r // h
         k = r % K
         p = r // K
+        pass_row = ti * self.n_pass + p  # the tile's entry for band pass p in the per-pass tables
+        spp = lane_divisor(dr.gather(mi.UInt32, tab["spp"], pass_row))
         seed_o = dr.opaque(mi.UInt32, seed)
         tkey = mi.sample_tea_32(g("key"), seed_o)[0]
         v0, v1 = mi.sample_tea_32(tkey, local)
@@ -498,7 +519,7 @@ class Tracer:
         L = self._pixel(sampler, spp, rot, mi.sample_tea_32(local, tkey + 0x3C6EF372)[0], mi.Float(g("x0") + x), mi.Float(g("y0") + y),
                         g("t0", mi.Float) + mi.Float(k) * g("dt", mi.Float), g("dt", mi.Float), vel,
                         g("tref", mi.Float), lo_nm, g("set"), g("gap", mi.Float), g("gap_len", mi.Float))
-        wgt = g("wgt", mi.Float)
+        wgt = dr.gather(mi.Float, tab["wgt"], pass_row)
         out0 = g("out")
         n_slots = g("slots")
         stride = K * self.n_bands * h * w  # one image of the tile (a slot)
