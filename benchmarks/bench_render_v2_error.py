@@ -73,8 +73,10 @@ SIZE = (640, 360)
 LED_CASES = ("202:day:dry", "101:night:dry")
 LED_REF_LIGHT_SPP, LED_REF_SEEDS = 1024, (1001, 1002)
 LED_SECTION = "## LED dot faces (issue 23)"
-#: ``--led`` settings: name, light_spp, dots_lod_px.
-LED_SETTINGS = (("dots (before)", 32, 0.0), ("dots, light_spp x4", 128, 0.0), ("filled cells (default)", 32, 1.0))
+#: ``--led`` settings: name, light_spp, dots_lod_px, lamp_pass_spp.
+LED_SETTINGS = (("dots (before)", 32, 0.0, "uniform"), ("dots, light_spp x4", 128, 0.0, "uniform"),
+                ("dots, passes by spectrum", 32, 0.0, "spectrum"), ("filled cells", 32, 1.0, "uniform"),
+                ("filled cells, passes by spectrum (default)", 32, 1.0, "spectrum"))
 
 
 def _frame(sc, opts, cache: Path | None, tag: str):
@@ -334,21 +336,23 @@ def led_main(cache: Path | None, out: Path, quick: bool) -> None:
         sc = scene.generate_scene(int(seed), tod, scene_id=f"{tod}_{seed}_{weather}", generator=2,
                                   overrides={"weather": {"conditions": [weather]}})
 
-        def opts(light_spp, lod, s):
+        def opts(light_spp, lod, s, passes="auto"):
             return render.RenderOptions(width=W, height=H, spp=1, light_spp=light_spp, bins=8, frames=1, seed=s,
-                                        groups=groups, aux=False, dots_lod_px=lod)
+                                        groups=groups, aux=False, dots_lod_px=lod, lamp_pass_spp=passes)
 
         tag = c.replace(":", "_")
         refs = {lod: [_frame(sc, opts(ref_spp, lod, s), cache, f"led_ref{lod:g}_{ref_spp}_{s}_{W}_{tag}")[0]
                       for s in LED_REF_SEEDS] for lod in (0.0, 1.0)}
         n_lod = len(render.dots_lod(sc, opts(32, 1.0, 0))[1])
         next(render.render_frames(sc, opts(1, 1.0, 0)))  # warm-up: the timed settings find their kernels compiled
-        settings = [(n, o, lod, 11) for n, o, lod in LED_SETTINGS] + [("filled cells, reference", ref_spp, 1.0, 0)]
-        for name, light_spp, lod, s in settings:
+        settings = [(n, o, lod, ps, 11) for n, o, lod, ps in LED_SETTINGS] + \
+            [("filled cells, reference", ref_spp, 1.0, "auto", 0)]
+        for name, light_spp, lod, passes, s in settings:
             if s == 0:  # the filled-cells reference itself against the dots: the moire alone
                 fr, cpu = refs[1.0][0], float("nan")
             else:
-                fr, cpu = _frame(sc, opts(light_spp, lod, s), cache, f"led_{lod:g}_{light_spp}_{W}_{tag}")
+                fr, cpu = _frame(sc, opts(light_spp, lod, s, passes), cache,
+                                 f"led_{lod:g}_{light_spp}_{passes}_{W}_{tag}")
             r = {"case": c, "setting": name, "light_spp": light_spp, "cpu_s": cpu, "n_lod": n_lod,
                  "vs_dots": led_error(fr, *refs[0.0], sc),
                  "vs_fill": led_error(fr, *refs[1.0], sc) if lod and s else None}
@@ -369,7 +373,9 @@ def write_led_section(rows, model, out: Path, load0: float, load1: float, size, 
              "(otherlights, signals: every light in its crop, K 8 bins), against two references of light_spp "
              f"{ref_spp} (seeds {LED_REF_SEEDS[0]}, {LED_REF_SEEDS[1]}) with the dots as they are "
              "(`dots_lod_px` 0) and two with sub-pixel dot faces as filled cells (`dots_lod_px` 1), the error "
-             "corrected for the references' noise (module docstring). LED bins: relative RMSE of luminance over "
+             "corrected for the references' noise (module docstring). Passes by spectrum: `lamp_pass_spp` "
+             "`spectrum` (a lamp box's light_spp x 8 samples shared among the band passes by its spectrum), else "
+             "`uniform` (light_spp in each). LED bins: relative RMSE of luminance over "
              "the LED pixels of every light's bins, pooled; per kind: the lights of one kind pooled. CPU: the "
              "lamp crops of the frame (user + system s, in one process after a warm-up render of the scene, so no "
              "kernel compilation is in them).", "",

@@ -431,8 +431,9 @@ class Tracer:
                 if len(ps) != P or min(ps) < 1:
                     raise ValueError(f"tiles[{i}]: pass_spp needs {P} counts >= 1, got {t.pass_spp}")
                 n_split = max(1, -(-h * w * t.bins * sum(ps) // MAX_LANES))
+                shares = [divmod(n, n_split) for n in ps]  # (base, extra) of each pass, as for spp above
                 for j in range(min(n_split, max(ps))):
-                    sp = tuple(n // n_split + (j < n % n_split) for n in ps)
+                    sp = tuple(b + (j < e) for b, e in shares)
                     parts.append((i, sp, tuple(1.0 / n if c else 0.0 for n, c in zip(ps, sp)), size, j))
             size += t.slots * t.bins * C * h * w
         buf = dr.zeros(mi.Float, max(size, 1))
