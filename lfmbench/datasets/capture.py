@@ -192,8 +192,9 @@ class LFMCaptureDataset(Dataset):
         (F, 3, h, w) demosaiced (kornia bilinear); ``meta``: scene_id, index, epoch, num_lights, light_id,
         flicker, freq_hz, duty, phase_s (L,) padded, exposure_short_s, exposure_long_s (s), crop (y0, x0, h, w),
         sensor, shutter, flicker_mode ("bins" or "per_frame_weight"), frame_start (index of the sample's first
-        frame in the scene's sequence); another capture plan adds architecture and static_windows ("exact" or
-        "nearest").
+        frame in the scene's sequence); another capture plan adds architecture, static_windows ("exact" or
+        "nearest") and readout ({capture: "global" or "rolling"}, what each capture was read with: its own or the
+        preset's readout, else ``shutter``, the dataset's argument).
         Another capture plan (``sensor="lofic"``, ...): its captures by name instead of ``lpd_hcg``, ``lpd_lcg``,
         ``spd`` (DN), ``<capture>_e`` (e-, input-referred to the plan's reference capture, the ``gt`` units),
         ``saturated`` (F, N, h, w) with one channel per capture in plan order, ``gt``: the reference capture's
@@ -639,7 +640,9 @@ class LFMCaptureDataset(Dataset):
                "sensor": self.sensor_name, "shutter": self.shutter, "flicker_mode": mode,
                "frame_start": int(frame_start)}
         if self.architecture != "split_pixel":  # (the split pixel's meta is unchanged: the batched paths share it)
-            out.update(architecture=self.architecture, static_windows=self._static_window_mode(tm))
+            out.update(architecture=self.architecture, static_windows=self._static_window_mode(tm),
+                       readout={k: self.preset.capture_readout(k).shutter or self.shutter
+                                for k in self.preset.captures})
         return out
 
     def _static_window_mode(self, timing: Mapping[str, Any]) -> str:

@@ -99,6 +99,10 @@ def test_dataset_yields_the_plan_captures(corpus, name):
     assert not {"lpd_hcg", "spd"} & set(s)
     assert s["meta"]["architecture"] == p.architecture and s["meta"]["sensor"] == name
     assert s["meta"]["static_windows"] == ("exact" if name == "single" else "nearest")
+    # the readout each capture was read with: the staggered plan's own rolling shutter (the dataset's shutter
+    # argument, "global", is only the default of captures and presets that set none)
+    want = "rolling" if name == "staggered" else "global"
+    assert s["meta"]["shutter"] == "global" and s["meta"]["readout"] == {c: want for c in p.captures}
     # input referral: every unsaturated capture estimates the ground truth (same reference units)
     for c in p.captures:
         ok = ~s["saturated"][:, list(p.captures).index(c):][:, :1]
