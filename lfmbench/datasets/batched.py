@@ -59,7 +59,7 @@ from lfmbench.sensor.fused import PatternCrops, map_samples
 from lfmbench.triton_kernels import TritonKernels
 
 __all__ = ["capture_pieces", "collate_pieces", "pieces_to", "prefetch", "simulate_batch", "BatchedCaptureSimulator",
-           "piece_bytes", "pwm_weights", "compose_batch", "tensor_leaves", "PWM_FIELDS"]
+           "piece_bytes", "pwm_weights", "compose_batch", "tensor_leaves", "batch_item", "PWM_FIELDS"]
 
 #: Consistency fields of ``info``: a batch must agree on all of them.
 _INFO_FIELDS = ("sensor", "frames", "crop_hw", "shutter", "noise", "outputs")
@@ -150,6 +150,18 @@ def tensor_leaves(batch: Mapping[str, Any], prefix: tuple = ()) -> Iterator[tupl
             yield prefix + (k,), v
         elif isinstance(v, dict):
             yield from tensor_leaves(v, prefix + (k,))
+
+
+def batch_item(batch: Mapping[str, Any], j: int) -> dict:
+    """Sample ``j`` of a batch dict as a batch of one: every tensor (and list) with a leading B sliced to
+    ``[j:j+1]`` (views), nested dicts (``meta``) alike, other values as they are."""
+    def cut(v):
+        if isinstance(v, torch.Tensor) or isinstance(v, list):
+            return v[j:j + 1]
+        if isinstance(v, Mapping):
+            return {k: cut(x) for k, x in v.items()}
+        return v
+    return {k: cut(v) for k, v in batch.items()}
 
 
 def prefetch(iterable: Iterable, depth: int = 1) -> Iterator:

@@ -43,10 +43,11 @@ def check_simulate(simulate: str) -> str:
     return simulate
 
 
-def score_batches(ds, n: int, simulate: str = "host", device: str = "cpu") -> Iterable[dict]:
+def score_batches(ds, n: int, simulate: str = "host", device: str = "cpu", chunk: int = 16) -> Iterable[dict]:
     """The first ``n`` samples of ``ds`` as batches of one, in order: simulated on the host by a DataLoader (no
     workers), or (``simulate="device"``; ``ds`` made with ``noise_streams="counter"``) cut and simulated on
-    ``device`` by the device program, its split loaded there once."""
+    ``device`` by the device program, its split loaded there once, ``chunk`` samples per program call (each
+    sample's numbers do not depend on the others of its call)."""
     from itertools import islice
 
     check_simulate(simulate)
@@ -61,8 +62,19 @@ def score_batches(ds, n: int, simulate: str = "host", device: str = "cpu") -> It
                          f"{ds.noise_streams!r}")
     from lfmbench.datasets.device import DeviceBatches
 
-    db = DeviceBatches(ds, 1, device)
-    return (db.batch([i]) for i in range(n))
+    from lfmbench.datasets.batched import batch_item
+
+    if isinstance(chunk, bool) or not isinstance(chunk, int) or chunk < 1:
+        raise ValueError(f"chunk must be an integer >= 1, got {chunk!r:.40}")
+    db = DeviceBatches(ds, chunk, device)
+
+    def batches():
+        for a in range(0, n, chunk):
+            big = db.batch(list(range(a, min(n, a + chunk))))
+            for j in range(min(n, a + chunk) - a):
+                yield batch_item(big, j)
+
+    return batches()
 
 
 def run_dataset_record(ds, corpus, split: str, n: int, crop, samples_per_scene: int, frames: int) -> dict:

@@ -44,6 +44,26 @@ def test_device_batches_are_the_host_batches(corpus):
         assert (d["lpd_hcg"] != h["lpd_hcg"]).double().mean() <= 2e-3
 
 
+def test_device_batches_do_not_depend_on_the_chunk(corpus):
+    """The device program simulates ``chunk`` samples per call and hands them out one by one: the same samples
+    bit for bit for any chunk (on the CPU each sample is composed and simulated on its own), a last partial chunk
+    included; a bad chunk is refused."""
+    from lfmbench.datasets.batched import tensor_leaves
+
+    ds, _, _ = _ds(corpus)
+    n = len(ds) - 1
+    one = list(score_batches(ds, n, "device", "cpu", chunk=1))
+    four = list(score_batches(ds, n, "device", "cpu", chunk=4))
+    assert len(one) == len(four) == n and n % 4
+    for a, b in zip(one, four):
+        ta, tb = dict(tensor_leaves(a)), dict(tensor_leaves(b))
+        assert ta.keys() == tb.keys() and a["meta"]["scene_id"] == b["meta"]["scene_id"]
+        for k in ta:
+            assert ta[k].shape[0] == 1 and torch.equal(ta[k], tb[k]), k
+    with pytest.raises(ValueError, match="chunk"):
+        score_batches(ds, n, "device", "cpu", chunk=0)
+
+
 def test_an_evaluation_scores_the_same_from_both_sources(corpus, tmp_path):
     ds, ident, cond = _ds(corpus)
     n = len(ds)
