@@ -79,3 +79,18 @@ def test_every_band_stays_its_radiance(monkeypatch, split):
     peak = exp > (0.3 if split else 0.05) * exp.max()
     assert np.allclose(got[peak], exp[peak], rtol=0.02)
     assert np.abs(got - exp).max() < 0.02 * exp.max()
+
+
+@pytest.mark.jit
+def test_equal_counts_per_pass_render_the_old_tiles_bit_for_bit(monkeypatch):
+    """Tiles that give every pass light_spp through the per-pass tables render exactly (bit for bit) what tiles
+    without ``pass_spp`` render: the tables carry the same counts and weights to the same kernel, so a lamp's
+    passes by spectrum change nothing but its counts (and lfmbench-v1, which never has them, renders as before)."""
+    s = _wall_scene()
+    base = dict(width=12, height=8, spp=1, light_spp=16, bins=2, frames=1, aux=False, groups=("otherlights",))
+    old = next(render.render_frames(s, render.RenderOptions(**base, lamp_pass_spp="uniform")))
+    monkeypatch.setattr(render, "lamp_pass_spp", lambda light, opts: (16,) * camera.n_passes(31))
+    new = next(render.render_frames(s, render.RenderOptions(**base, lamp_pass_spp="spectrum")))
+    (_, bb0, a), = old["lights"]["otherlights"]
+    (_, bb1, b), = new["lights"]["otherlights"]
+    assert bb0 == bb1 and np.array_equal(a, b)
