@@ -36,8 +36,12 @@ third way the issue named (2-D stratified pixel positions in lamp tiles): the co
 pattern estimated with random, today's per-dimension (Latin hypercube) and 2-D jittered positions (numpy, no
 rendering; :func:`stratification_model`).
 
+Generator-2 cases are also rendered with ``--static-spp`` (default 2 and 4): the ``default`` profile with more
+samples in the static full frames (light_spp unchanged), what a v2-only choice against the all-pixel median
+would cost (the table's CPU column against the v1 scene of that seed and time of day).
+
 Usage: ``python benchmarks/bench_render_v2_error.py [--cases 202:day:dry 101:night:dry 101:night:wet]
-[--cache DIR] [--quick] [--led]``.
+[--cache DIR] [--quick] [--led] [--static-spp 2 4]``.
 """
 from __future__ import annotations
 
@@ -167,6 +171,9 @@ def main() -> None:
     ap.add_argument("--out", default=str(ROOT / "docs"))
     ap.add_argument("--quick", action="store_true", help="160x90, reference spp 2 / light_spp 32 (smoke run)")
     ap.add_argument("--led", action="store_true", help="the section \"LED dot faces\" (lamp crops alone)")
+    ap.add_argument("--static-spp", nargs="*", type=int, default=[2, 4],
+                    help="also render generator-2 cases with these spp (the static full frames; light_spp as the "
+                         "default) to see what the all-pixel median would cost")
     a = ap.parse_args()
     cache = Path(a.cache) if a.cache else None
     if cache is not None:
@@ -195,10 +202,13 @@ def main() -> None:
         tm = render.frame_timing(sc, refo, 0)
         ref_short = preview_short(sc, ref, refo, tm)
         refl_px = reflection_pixels(sc, ref, refo, ref_short) if wet else None
-        settings = [("default", default)] + ([("default, exact reflections", exact_default)] if wet else [])
+        settings = [("default", default)] + ([("default, exact reflections", exact_default)] if wet else []) + \
+            [(f"default, spp {n}", render.RenderOptions(**{**base, "spp": n, "light_spp": prof["light_spp"]}))
+             for n in (a.static_spp if weather != "v1" else ())]
         for name, opts in settings:
-            fr, cpu = _frame(sc, opts, cache, f"{name.split(',')[0]}{'_exact' if ',' in name else ''}_"
-                                               f"{c.replace(':', '_')}")
+            tag = {"default": "default", "default, exact reflections": "default_exact"}.get(
+                name, name.replace(", ", "_").replace(" ", ""))
+            fr, cpu = _frame(sc, opts, cache, f"{tag}_{c.replace(':', '_')}")
             r = {"case": c, "setting": name, "cpu_s": cpu, "ref_cpu_s": ref_cpu, **evaluate(sc, fr, ref, opts,
                                                                                               refl_px)}
             rows.append(r)
