@@ -237,6 +237,7 @@ def write_section(rows: list, out: Path, load0: float, load1: float, size=SIZE,
              f"light_spp {ref[1]}, K 8 with exact reflections (errors are upper bounds: the reference's own noise "
              "is in them). Both draw LED dot faces whose pitch projects under 1 px as filled cells "
              "(`dots_lod_px`; the error this leaves out, the dots' moire, is in \"LED dot faces\" below). "
+             "`default, spp N`: the same with spp N in the static full frames (`--static-spp`). "
              "Targets (issue 23): LED pixels <= 2 % relative RMSE, all-pixel "
              "median <= 10 %. Reflection px: where the reference's flickering layers outside the lamps' own boxes "
              f"bring more than {REFLECTION_SHARE:.0%} of the pixel's luminance.", "",
