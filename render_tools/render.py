@@ -99,10 +99,10 @@ class RenderOptions:
     rendered with its lit dots filling their cells at ``dot``^2 of the luminance
     (:func:`render_tools.led_matrix.filled_cells`: the same intensity per cell; the light keeps its id, waveform
     and driver, so a multiplexed sign's rows keep their own phases). Why: sub-pixel dots left each lamp pixel's
-    covered share to ~256 camera samples, 8-19 % relative error in the LED bins at the ``default`` profile; the
-    filled cells leave out the dots' moire against the pixel grid instead (4-10 % per LED pixel where the pitch
-    is 0.3-0.6 px; docs/render-benchmark.md, "LED dot faces"). 0: every dot face as it is. Scenes without dot
-    faces (every lfmbench-v1 scene) render the same whatever it is.
+    covered share to ~256 camera samples, 7-21 % relative error per lamp kind in the LED bins at the
+    ``default`` profile; the filled cells leave out the dots' moire against the pixel grid instead (4-10 % per
+    LED pixel where the pitch is 0.3-0.6 px; docs/render-benchmark.md, "LED dot faces"). 0: every dot face as it
+    is. Scenes without dot faces (every lfmbench-v1 scene) render the same whatever it is.
     lamp_pass_spp: how a flickering lamp's own box shares its light_spp x P samples per pixel and bin among the P
     band passes: ``"uniform"`` (light_spp each, as before), ``"spectrum"`` (by the lamp's spectral radiance,
     :func:`lamp_pass_spp`: a narrow-band LED's few passes get most samples; every band stays unbiased) or
