@@ -1,6 +1,7 @@
 """Every sensor architecture on the same test scenes, ranked together (docs/sensor-architectures.md): the split
 pixel (``ovt``) with three of its rule-based fusions, LOFIC, staggered, chopped and single exposure with their
-standard merge (``exposure_select``), and each with a U-Net trained for that sensor when its checkpoint is given.
+standard merge (``exposure_select``; staggered also bounded below by its saturated captures,
+``exposure_select_bounded``), and each with a U-Net trained for that sensor when its checkpoint is given.
 
     lfmbench render --protocol lfmbench-v1 --split test --out v1 --workers 1
     lfmbench render --out demo --scenes 8 --profile small --seed 0          # the demo's corpus: its train split
@@ -26,7 +27,8 @@ from pathlib import Path
 
 #: The methods of each sensor (the U-Net is added where a checkpoint is given).
 METHODS = {"ovt": ["saturated_exposure_corrected", "flicker_aware_two_sided", "lpd_only"],
-           "lofic": ["exposure_select"], "staggered": ["exposure_select"], "chopped": ["exposure_select"],
+           "lofic": ["exposure_select"], "staggered": ["exposure_select", "exposure_select_bounded"],
+           "chopped": ["exposure_select"],
            "single": ["exposure_select"]}
 
 

@@ -57,7 +57,7 @@ CLASSIC_BASELINES: tuple[str, ...] = ("lpd_only", "spd_only", "upstream_saturate
 #: Rule-based baselines of the other capture plans (LOFIC, staggered, chopped, single exposure): each a function of
 #: that name in :mod:`lfmbench.baselines.plan_merge`; the architecture registry
 #: (:data:`lfmbench.sensor.plan.ARCHITECTURES`) names the one that is each architecture's standard HDR merge.
-PLAN_BASELINES: tuple[str, ...] = ("exposure_select",)
+PLAN_BASELINES: tuple[str, ...] = ("exposure_select", "exposure_select_bounded")
 #: Learned baselines: name -> the module that defines the registered method ``name`` (backed by a checkpoint) and
 #: ``TRAINING`` (how ``lfmbench train --method NAME`` trains it); :data:`lfmbench.baselines.LEARNED`. Here, without
 #: torch, so that the command line can list them in its help.

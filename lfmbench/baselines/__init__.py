@@ -35,7 +35,8 @@ globals().update({name: REGISTRY[name] for name in (*CLASSIC_BASELINES, *PLAN_BA
 
 def methods_for(architecture: str) -> list[str]:
     """The registered baselines that apply to a sensor architecture, in leaderboard order: the split-pixel ones
-    (rule-based and learned) for ``split_pixel``, otherwise the capture-plan merges (:data:`PLAN_BASELINES`) and
+    (rule-based and learned) for ``split_pixel``, otherwise the architecture's standard merge and its other
+    capture-plan merges (its :data:`lfmbench.sensor.plan.ARCHITECTURES` entry, of :data:`PLAN_BASELINES`) and
     the learned baselines trained per sensor (:data:`PLAN_LEARNED_BASELINES`: the U-Net, whose checkpoint must
     be one trained for that sensor)."""
     from lfmbench.sensor.plan import ARCHITECTURES  # noqa: PLC0415
@@ -44,7 +45,8 @@ def methods_for(architecture: str) -> list[str]:
         raise ValueError(f"architecture must be one of {list(ARCHITECTURES)}, got {architecture!r:.40}")
     if architecture == "split_pixel":
         return [*CLASSIC_BASELINES, *LEARNED]
-    return [*PLAN_BASELINES, *PLAN_LEARNED_BASELINES]
+    arch = ARCHITECTURES[architecture]
+    return [arch.baseline, *arch.others, *PLAN_LEARNED_BASELINES]
 
 
 class MethodNotFoundError(ValueError):
@@ -87,5 +89,5 @@ def get_method(spec: str | Method) -> Method:
                               "or give 'package.module:function'")
 
 
-__all__ = ["REGISTRY", "LEARNED", "get_method", "methods_for", "MethodNotFoundError", "exposure_select", "lpd_only", "spd_only", "upstream_saturated",
+__all__ = ["REGISTRY", "LEARNED", "get_method", "methods_for", "MethodNotFoundError", "exposure_select", "exposure_select_bounded", "lpd_only", "spd_only", "upstream_saturated",
            "saturated_exposure_corrected", "flicker_aware", "flicker_aware_two_sided", "temporal"]

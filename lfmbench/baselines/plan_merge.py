@@ -12,6 +12,12 @@ electrons below saturation, hence the best SNR), the last one where all are.
   multi-exposure HDR, e.g. P. Debevec and J. Malik, "Recovering High Dynamic Range Radiance Maps from Photographs",
   SIGGRAPH 1997, with hat weights reduced to 0/1).
 - Chopped, single: the one capture (clipped where saturated).
+
+Plans whose captures integrate different windows (staggered) also have :func:`exposure_select_bounded`: exposure
+selection bounded below by every saturated capture. A saturated capture's input-referred value is a lower bound
+of its exposure (the charge was at least the saturation level); where the longest exposure saturates on a bright
+LED and selection falls back to a short window that missed the PWM pulse, the bound keeps the lamp lit. It is the
+capture-plan counterpart of the split pixel's ``flicker_aware`` (the SPD bounds the LPD from below; docs/baselines.md).
 """
 from __future__ import annotations
 
@@ -19,7 +25,7 @@ import torch
 
 from lfmbench.baselines.classic import BatchError, _get
 
-__all__ = ["plan_captures", "exposure_select"]
+__all__ = ["plan_captures", "exposure_select", "exposure_select_bounded"]
 
 
 def plan_captures(batch: dict) -> list[str]:
@@ -51,4 +57,23 @@ def exposure_select(batch: dict) -> torch.Tensor:
     out = xs[-1].clone()
     for i in range(len(xs) - 2, -1, -1):                       # earlier (more sensitive) captures win
         out = torch.where(sat[:, :, i:i + 1], out, xs[i])
+    return out
+
+
+def exposure_select_bounded(batch: dict) -> torch.Tensor:
+    """Exposure selection bounded below by the saturated captures: per pixel ``max(exposure_select, max over the
+    saturated captures c of c_e)`` (a saturated capture's input-referred value is a lower bound of its exposure).
+
+    Args:
+        batch: as :func:`exposure_select`.
+
+    Returns:
+        (B, F, 1, H, W) estimate in the ``gt`` units (e-); equal to :func:`exposure_select` where no capture
+        saturates, never below it.
+    """
+    out = exposure_select(batch)                                # checks the shapes
+    sat = _get(batch, "saturated").bool()
+    for i, c in enumerate(plan_captures(batch)):
+        x = _get(batch, f"{c}_e")
+        out = torch.where(sat[:, :, i:i + 1], torch.maximum(out, x), out)
     return out

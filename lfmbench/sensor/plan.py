@@ -156,6 +156,8 @@ class Architecture:
             structure (None: it does).
         reference: the capture whose photodiode and windows define the ground truth by default.
         baseline: the registered fusion baseline that is this architecture's standard HDR merge.
+        others: further registered rule-based baselines that apply (the capture-plan ones; the split pixel's are
+            all of :data:`lfmbench.vocabulary.CLASSIC_BASELINES`).
     """
 
     name: str
@@ -163,6 +165,7 @@ class Architecture:
     check: Callable[[Mapping[str, Any], Mapping[str, Any]], str | None]
     reference: Callable[[Mapping[str, Any]], str]
     baseline: str
+    others: tuple[str, ...] = ()
 
 
 def _one_pd(pds, caps) -> str | None:
@@ -238,7 +241,7 @@ ARCHITECTURES: Mapping[str, Architecture] = MappingProxyType({a.name: a for a in
     Architecture("lofic", "one photodiode with a lateral overflow capacitor, read at high and low conversion gain",
                  _lofic, _first, "exposure_select"),
     Architecture("staggered", "2-4 sequential exposures of one photodiode (DOL), line-interleaved readout",
-                 _staggered, _first, "exposure_select"),
+                 _staggered, _first, "exposure_select", ("exposure_select_bounded",)),
     Architecture("chopped", "one photodiode integrating a union of sub-windows spread over the frame",
                  _chopped, _first, "exposure_select"),
     Architecture("single", "one conventional exposure of one photodiode", _single, _first, "exposure_select"),

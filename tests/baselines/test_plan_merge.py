@@ -72,3 +72,43 @@ def test_every_architecture_names_a_registered_baseline():
     assert "exposure_select" not in methods_for("split_pixel") and "lpd_only" in methods_for("split_pixel")
     with pytest.raises(ValueError, match="architecture"):
         methods_for("quantum")
+
+
+def test_bounded_selection_is_selection_bounded_below_by_the_saturated_captures():
+    """Per pixel max(exposure_select, the saturated captures' values): equal to exposure_select where nothing
+    saturates, never below it, and the saturated long capture's value where a short one missed the pulse."""
+    from lfmbench.baselines import exposure_select_bounded
+
+    e = {"long_e": torch.tensor([5.0, 9.0, 9.0, 9.0]), "medium_e": torch.tensor([5.0, 0.0, 20.0, 0.0]),
+         "short_e": torch.tensor([5.0, 0.0, 0.0, 12.0])}
+    e = {k: v.reshape(1, 1, 1, 1, 4) for k, v in e.items()}
+    sat = torch.tensor([[0, 0, 0], [1, 0, 0], [1, 0, 0], [1, 1, 0]], dtype=torch.bool).T.reshape(1, 1, 3, 1, 4)
+    b = {**e, "saturated": sat}
+    assert exposure_select(b).flatten().tolist() == [5.0, 0.0, 20.0, 12.0]
+    assert exposure_select_bounded(b).flatten().tolist() == [5.0, 9.0, 20.0, 12.0]
+    assert "exposure_select_bounded" in methods_for("staggered")
+    for arch in ("lofic", "chopped", "single", "split_pixel"):       # one window per photodiode: nothing to bound
+        assert "exposure_select_bounded" not in methods_for(arch)
+    for name, arch in ARCHITECTURES.items():
+        assert all(o in REGISTRY and o in methods_for(name) for o in arch.others)
+
+
+def test_bounded_selection_keeps_a_lamp_the_short_exposures_missed():
+    """The staggered plan simulated (its own noise chain): an LED ON through the 10 ms exposure and OFF during the
+    1 ms and 0.1 ms ones (their windows missed the pulse), 3x the long exposure's full well. exposure_select reads
+    the unsaturated medium capture (about 0: a dropout); the bounded merge keeps at least the long capture's
+    saturation level, below the truth (the long exposure's mean, the gt units)."""
+    from lfmbench.baselines import exposure_select_bounded
+
+    p = load_preset("staggered")
+    full = p.photodiodes[p.captures["long"].photodiode].full_well_e
+    x = {"long": torch.full(SHAPE, 3.0 * full, dtype=torch.float64), "medium": torch.zeros(SHAPE, dtype=torch.float64),
+         "short": torch.zeros(SHAPE, dtype=torch.float64)}
+    out = simulate_plan_electrons(x, p, {"long": 0.010, "medium": 0.001, "short": 0.0001},
+                                  torch.Generator().manual_seed(5))
+    b = {k: v for k, v in out.items() if k.endswith("_e") or k == "saturated"}
+    assert b["saturated"][:, :, 0].all() and not b["saturated"][:, :, 1:].any()
+    sel, bnd = exposure_select(b), exposure_select_bounded(b)
+    assert float(sel.abs().mean()) < 0.01 * full                               # the dropout
+    assert float(bnd.min()) >= 0.8 * full and float(bnd.max()) <= 3.0 * full   # bounded below, still below truth
+    assert torch.equal(bnd, torch.maximum(sel, b["long_e"]))
