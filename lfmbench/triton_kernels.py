@@ -24,6 +24,12 @@ class TritonKernels:
     def __init__(self, module: str, label: str, fallback: str) -> None:
         self.module_name, self.label, self.fallback = module, label, fallback
         self._mod: Any = None
+        #: False: the caller takes its fallback (after a kernel failed here, or set by hand, e.g. in a test).
+        self.enabled = True
+
+    def ready(self, t: Any) -> bool:
+        """Whether the kernels run for tensors like ``t``: enabled, ``t`` on CUDA, the module importable."""
+        return self.enabled and bool(getattr(t, "is_cuda", False)) and self.module() is not None
 
     def module(self) -> Any:
         """The kernel module, or None where it cannot be imported (no Triton)."""
@@ -36,10 +42,11 @@ class TritonKernels:
 
     def call(self, name: str, *args) -> Any:
         """Kernel ``name`` applied to ``args``; None (after one warning) when it fails to compile or run here:
-        the caller then turns its kernels off and takes its fallback."""
+        the kernels are then disabled (:meth:`ready` is False) and the caller takes its fallback."""
         try:
             return getattr(self.module(), name)(*args)
         except Exception as exc:  # noqa: BLE001 - a compiler error of any kind: fall back, same numbers
+            self.enabled = False
             first = str(exc).splitlines()[0][:200] if str(exc) else ""
             warnings.warn(f"{self.label}: the Triton kernel {name} failed ({type(exc).__name__}: {first}); using "
                           f"{self.fallback} (same numbers, slower)", RuntimeWarning, stacklevel=3)

@@ -254,13 +254,13 @@ def pwm_weights(batch: Mapping[str, Any]) -> dict[str, torch.Tensor]:
     S = int(sb.shape[0])
     K = batch["slot_K"]
     if (S and info.get("ideal_pulses") and not info.get("group_slots", True)
-            and batch["slot_pwm"].dtype == torch.float64 and _compose_triton_ready(batch["static"])):
+            and batch["slot_pwm"].dtype == torch.float64 and batch["static"].dtype == torch.float32
+            and _COMPOSE_KERNELS.ready(batch["static"])):
         # CUDA: one kernel, the same numbers (lfmbench.datasets._compose_triton)
         R = h if info["shutter"] == "rolling" else 1
         out = _COMPOSE_KERNELS.call("pwm_weights", batch, R, int(batch["entry_values"].shape[1]))
         if out is not None:
             return out
-        _compose_triton_off()
     tim = batch["timing"][sb]                                                     # (S, 4) s
     t_s, t_l, td, cw = tim.unbind(-1)
     t0 = batch["t0"][sb, batch["slot_frame"]]                                     # (S,) s
@@ -355,14 +355,12 @@ def compose_batch(batch: Mapping[str, Any], backend: str = "auto", threads: int 
     comp["gt"] = comp["lpd"].clone()
     if int(batch["entry_pix"].shape[0]):
         wts = pwm_weights(batch)
-        if backend != "torch" and _compose_triton_ready(batch["entry_values"]):
+        if (backend != "torch" and batch["entry_values"].dtype == torch.float32
+                and _COMPOSE_KERNELS.ready(batch["entry_values"])):
+            # None: it failed to compile (before any launch, so ``comp`` holds the static part only): torch below
             if _COMPOSE_KERNELS.call("compose_entries", comp, batch["slot_sample"], batch["entry_slot"],
                                      batch["entry_pix"], batch["entry_values"], wts, h, w) is not None:
                 return comp
-            _compose_triton_off()       # failed to compile here (one warning): the torch form below
-            comp["lpd"] = batch["static"][:, :, 0] * t_s.float()[:, None, None, None]
-            comp["spd"] = batch["static"][:, :, 1] * t_l.float()[:, None, None, None]
-            comp["gt"] = comp["lpd"].clone()
         slot = batch["entry_slot"].long()
         pix = batch["entry_pix"].long()
         dest = batch["slot_sample"][slot] * (F * h * w) + pix
@@ -381,18 +379,9 @@ def compose_batch(batch: Mapping[str, Any], backend: str = "auto", threads: int 
 
 
 #: On CUDA, compute the PWM weights and add the lamp entries with Triton kernels
-#: (:mod:`lfmbench.datasets._compose_triton`) where Triton is importable (False: the torch form everywhere).
-_COMPOSE_TRITON = True
+#: (:mod:`lfmbench.datasets._compose_triton`) where Triton is importable (``_COMPOSE_KERNELS.enabled = False``:
+#: the torch form everywhere).
 _COMPOSE_KERNELS = TritonKernels("lfmbench.datasets._compose_triton", "compose_batch", "the torch composition")
-
-
-def _compose_triton_ready(t: torch.Tensor) -> bool:
-    return _COMPOSE_TRITON and t.is_cuda and t.dtype == torch.float32 and _COMPOSE_KERNELS.module() is not None
-
-
-def _compose_triton_off() -> None:
-    global _COMPOSE_TRITON
-    _COMPOSE_TRITON = False
 
 
 def _numba_available() -> bool:

@@ -323,19 +323,9 @@ class DeviceBatches:
                 yield self.batch([idx[j] for j in perm[b * B:(b + 1) * B]])
 
 
-#: On CUDA, cut the crops' lamp entries with one Triton kernel (:mod:`lfmbench.datasets._device_triton`) where
-#: Triton is importable (False: the torch form everywhere; the same numbers).
-USE_TRITON = True
+#: On CUDA, the crops and their lamp entries by Triton kernels (:mod:`lfmbench.datasets._device_triton`) where
+#: Triton is importable (``_ENTRY_KERNELS.enabled = False``: the torch form everywhere; the same numbers).
 _ENTRY_KERNELS = TritonKernels("lfmbench.datasets._device_triton", "the device program", "the torch form")
-
-
-def _entries_triton_ready(t: torch.Tensor) -> bool:
-    return USE_TRITON and t.is_cuda and _ENTRY_KERNELS.module() is not None
-
-
-def _no_entry_kernel() -> None:
-    global USE_TRITON
-    USE_TRITON = False
 
 
 #: PWM (PWM_FIELDS) of a padded slot (no light, or a light the crop does not show): any valid waveform; its
@@ -622,12 +612,10 @@ class SplitProgram:
         run = torch.repeat_interleave(torch.arange(B * F * NR, device=dev), cnt_t, output_size=E)
         before = torch.cumsum(cnt_t, 0) - cnt_t
         fused = None
-        if self.dtype == torch.float32 and _entries_triton_ready(self.e_vals):
-            # one kernel for all of the below (the same numbers, bit for bit)
+        if self.dtype == torch.float32 and _ENTRY_KERNELS.ready(self.e_vals):
+            # one kernel for all of the below (the same numbers, bit for bit; None: it failed, the torch form)
             fused = _ENTRY_KERNELS.call("crop_entries", run, first_t, before, self.e_y, self.e_x, self.e_pos,
                                         shown.view(-1), y0, x0, self.e_vals, NR, F, lf, h, w)
-            if fused is None:
-                _no_entry_kernel()
         if fused is not None:
             out["entry_pix"], out["entry_slot"], ev = fused
         else:
@@ -656,14 +644,13 @@ class SplitProgram:
                     out[key] = torch.stack([torch.stack([full[s_, f_, ..., a:a + h, c:c + w] for f_ in fs])
                                             for s_, fs, a, c in zip(sc.tolist(), fr.tolist(), y0h.tolist(),
                                                                     x0h.tolist())])
-        elif _entries_triton_ready(self.static):
+        elif _ENTRY_KERNELS.ready(self.static):
             crops = {}
             for key, full in layers:
                 if full is not None and crops is not None:
                     crops[key] = _ENTRY_KERNELS.call("crop_planes", full if full.dim() == 5 else full[:, :, None],
                                                      sc_t, fr_t, y0, x0, h, w)
-                    if crops[key] is None:
-                        _no_entry_kernel()
+                    if crops[key] is None:      # failed to compile here: the torch form below
                         crops = None
             if crops is not None:
                 out.update(crops)

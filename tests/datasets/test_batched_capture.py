@@ -407,15 +407,15 @@ def test_cuda_triton_composition_matches_the_torch_form(corpus, shutter):
     assert not batch["info"]["group_slots"]
     batch = pieces_to(batch, "cuda")
     assert batch["entry_pix"].shape[0] > 0
-    bt._COMPOSE_TRITON = False
+    bt._COMPOSE_KERNELS.enabled = False
     try:
         ref_w, ref = pwm_weights(batch), compose_batch(batch, backend="torch")
     finally:
-        bt._COMPOSE_TRITON = True
+        bt._COMPOSE_KERNELS.enabled = True
     with warnings.catch_warnings():
         warnings.simplefilter("error", RuntimeWarning)      # a kernel that fails to compile warns: an error here
         w, out = pwm_weights(batch), compose_batch(batch)
-    assert bt._COMPOSE_TRITON
+    assert bt._COMPOSE_KERNELS.enabled
     for k in ref_w:     # the same float64 operations in the same order: equal (zeros up to their sign)
         assert torch.equal(w[k], ref_w[k]), k
     for k in ref:

@@ -192,12 +192,12 @@ def test_cuda_entry_kernel_cuts_the_torch_forms_entries(corpus):
     with warnings.catch_warnings():
         warnings.simplefilter("error", RuntimeWarning)      # a kernel that fails to compile warns: an error here
         a = db.pieces(range(9))
-    assert D.USE_TRITON
-    D.USE_TRITON = False
+    assert D._ENTRY_KERNELS.enabled
+    D._ENTRY_KERNELS.enabled = False
     try:
         b = db.pieces(range(9))
     finally:
-        D.USE_TRITON = True
+        D._ENTRY_KERNELS.enabled = True
     assert a["entry_pix"].shape[0] > 0 and "static" in a
     for k in ("entry_pix", "entry_slot", "entry_values", "static", "light_index", "depth"):
         if k in b:
