@@ -51,8 +51,8 @@ def evaluate_cmd(
     says which), 2 bad input, 130 interrupted (the result file has status "interrupted").
     """
     from lfmbench.datasets.loading import EmptyDataError  # noqa: PLC0415
-    from lfmbench.evaluation.benchmark import (SIMULATE, corpus_run_inputs, run_dataset_record,  # noqa: PLC0415
-                                               safe_name, samples_to_score, score_batches)
+    from lfmbench.evaluation.benchmark import (SIMULATE, check_simulate, corpus_run_inputs,  # noqa: PLC0415
+                                               run_dataset_record, safe_name, samples_to_score, score_batches)
     from lfmbench.evaluation.leaderboard import _fmt  # noqa: PLC0415
     from lfmbench.evaluation.run import DataSourceError, EvaluationInterrupted, evaluate  # noqa: PLC0415
 
@@ -60,8 +60,10 @@ def evaluate_cmd(
         fail(f"--threads must be >= 1, got {threads}")
     check_minima((("--max-scenes", max_scenes, 1), ("--samples-per-scene", samples_per_scene, 1),
                   ("--frames", frames, 1), ("--repeats", repeats, 1), ("--warmup", warmup, 0), ("--crop", crop, 2)))
-    if simulate not in SIMULATE:
-        fail(f"--simulate must be one of {', '.join(SIMULATE)}, got {simulate!r:.40}")
+    try:
+        check_simulate(simulate)
+    except ValueError as exc:
+        fail(f"--{exc}")
     torch_setup(device, threads)
     out = output or Path("runs") / f"{safe_name(method)}.json"
     from lfmbench.fileio import writable_error  # noqa: PLC0415
