@@ -39,13 +39,13 @@ from lfmbench.check import check_scene_id
 from lfmbench.corpus.errors import (CorpusChannelError, CorpusError, CorpusFileError, CorpusNotFoundError,
                                     CorpusLockedError, CorpusValueError, CorpusWriteError)
 from lfmbench.corpus.exr import (ExrPart, check_exr_header, encode_aux_exr, encode_lights_exr, encode_static_exr, layer_scale,
-                                 read_exr)
+                                 read_exr, split_steady)
 from lfmbench.corpus.meta import (LIGHT_KINDS, SPECTRUM_MODELS, TIMING_RTOL, check_splits, inside_root, make_splits,
                                   load_meta, manifest_entry_errors, sha256_file, validate_meta)
 from lfmbench.corpus.naming import (ATTR, AUX_CHANNELS, EMPTY_PART, FORMAT_NAME, FORMAT_VERSION, MANIFEST_NAME,
                                     RADIANCE_MAX, RADIANCE_UNIT, READABLE_VERSIONS, SCENES_DIR, SPLITS_NAME,
-                                    STATIC_WINDOWS, band_channel, bin_channels, bin_prefix, frame_dir, group_storage,
-                                    static_channels)
+                                    STATIC_WINDOWS, STEADY_PREFIX, band_channel, bin_channels, bin_prefix, frame_dir,
+                                    group_storage, light_part_name, parse_light_part, static_channels, steady_channels)
 from lfmbench.corpus.reader import Corpus
 from lfmbench.corpus.storage import (COMPRESSIONS, DEFAULT_STORAGE, EXTRA_COMPRESSIONS, HALF_MAX, HALF_MIN_NORMAL,
                                      HALF_PRECISION_RANGE_LOG2, HALF_UNDERFLOW_ERROR_FRACTION, MANTISSA_BITS,
@@ -68,4 +68,5 @@ __all__ = [
     "ValidationReport", "validate_corpus", "encode_scene", "write_files", "prune_scene_dir", "ExrPart",
     "check_scene_id", "manifest_entry_errors", "inside_root", "check_splits", "RADIANCE_MAX",
     "ThreadedSceneWriter", "float_to_half", "CorpusLockedError", "CorpusLock", "LOCK_NAME", "check_exr_header",
+    "split_steady", "STEADY_PREFIX", "steady_channels", "light_part_name", "parse_light_part",
 ]

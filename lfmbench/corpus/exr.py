@@ -22,13 +22,14 @@ import numpy as np
 
 from lfmbench.corpus.errors import CorpusChannelError, CorpusFileError, CorpusValueError
 from lfmbench.corpus.naming import (ATTR, AUX_CHANNELS, EMPTY_PART, FORMAT_VERSION, RADIANCE_MAX, RADIANCE_UNIT,
-                                    STATIC_WINDOWS, _check_version, bin_channels, static_channels)
+                                    STATIC_WINDOWS, _check_version, bin_channels, light_part_name, static_channels,
+                                    steady_channels)
 from lfmbench.limits import LimitError, limits_of
 from lfmbench.corpus.storage import (COMPRESSIONS, DEFAULT_STORAGE, EXTRA_COMPRESSIONS, LayerStore, SCALE_EXP_RANGE,
                                      Storage, StorageStats, resolve_storage, scale_attr, store_layer)
 
 __all__ = ["encode_static_exr", "encode_lights_exr", "encode_aux_exr", "ExrPart", "read_exr", "layer_scale",
-           "check_exr_header", "exr_headers", "ExrHeaders"]
+           "check_exr_header", "exr_headers", "ExrHeaders", "split_steady"]
 
 
 def _exr():
@@ -147,22 +148,60 @@ def _clip_box(box: Sequence[int], height: int, width: int, what: str) -> tuple[i
     return y0, x0, y1, x1
 
 
+def _bounding_box(mask: np.ndarray) -> tuple[int, int, int, int] | None:
+    """Half-open (y0, x0, y1, x1) of the True pixels of a (h, w) mask, None when there are none."""
+    rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
+    if rows.size == 0:
+        return None
+    return int(rows[0]), int(cols[0]), int(rows[-1]) + 1, int(cols[-1]) + 1
+
+
+def split_steady(arr: np.ndarray) -> tuple[tuple[int, int, int, int], tuple[int, int, int, int] | None, np.ndarray]:
+    """Where a light's bins change and where they do not (format version 3, ``docs/corpus-format.md`` 6.2).
+
+    Args:
+        arr: (K, C, h, w) a light's bins over its box, any units (exact float comparisons, no tolerance).
+
+    Returns:
+        ``(bins_box, steady_box, steady)``, boxes half-open (y0, x0, y1, x1) relative to the light's box:
+        ``bins_box`` bounds the pixels whose value differs between two bins in some band (the 1x1 box at the
+        origin when none does); ``steady`` (C, h, w) is bin 0 outside ``bins_box`` and 0 inside it, and
+        ``steady_box`` bounds its non-zero pixels (None when it is all zero). So for every bin k,
+        ``arr[k] == steady + (arr[k] inside bins_box, 0 outside)`` exactly. Why: a wet road's reflection of a
+        lamp is traced once and holds the same value in all K bins (``RenderOptions.reflection_bins`` 1), in a box
+        many times the lamp's own; stored once instead of K times, the group's file shrinks by up to K x.
+    """
+    K, _, h, w = arr.shape
+    varies = np.zeros((h, w), bool)
+    for k in range(1, K):
+        varies |= (arr[k] != arr[0]).any(axis=0)
+    bins_box = _bounding_box(varies) or (0, 0, 1, 1)
+    steady = arr[0].copy()
+    y0, x0, y1, x1 = bins_box
+    steady[:, y0:y1, x0:x1] = 0.0
+    return bins_box, _bounding_box(steady.any(axis=0)), steady
+
+
 def encode_lights_exr(lights: Sequence[tuple[int, Sequence[int], np.ndarray]], bands_nm: Sequence[float],
                       bins: int, height: int, width: int, *, dtype: str | Storage = DEFAULT_STORAGE,
                       attrs: Mapping[str, Any] | None = None, what: str = "flickering group",
-                      notes: list[str] | None = None, stats: StorageStats | None = None) -> bytes:
-    """Encode a flickering group as a multi-part EXR: one part ``light<id>`` per light, sparse data windows.
+                      notes: list[str] | None = None, stats: StorageStats | None = None,
+                      steady: bool = True) -> bytes:
+    """Encode a flickering group as a multi-part EXR: per light a part ``light<id>`` (its K bins) and, where some
+    of its pixels hold the same value in every bin, a part ``steady<id>`` (those pixels once); sparse data windows.
 
     Args:
         lights: ``[(light_id, (y0, x0, y1, x1), bins_array)]`` with ``bins_array`` of shape (K, C, h, w),
             h = y1 - y0, w = x1 - x0, spectral radiance W sr^-1 m^-2 nm^-1 time-averaged over each bin with the
-            light at PWM level 1. Boxes are half-open pixel ranges inside the H x W image.
+            light at PWM level 1. Boxes are half-open pixel ranges inside the H x W image (meta.json ``bbox``).
         bands_nm: the C band centres (nm).
         bins: K, the number of time bins.
         height, width: full image size H, W (the display window).
-        dtype: storage as in :func:`encode_static_exr`; each light (K x C bins) is one layer with its own
-            scale, attribute ``lfmbench_scale`` of its part.
+        dtype: storage as in :func:`encode_static_exr`; each part (K x C bins, or the C steady bands) is one layer
+            with its own scale, attribute ``lfmbench_scale`` of its part.
         notes, stats: as in :func:`encode_static_exr`.
+        steady: split each light by :func:`split_steady` (format version 3); False stores every light's K bins
+            over its whole box (the version-2 layout, still valid).
 
     A group with no visible light is stored as one placeholder part named ``empty`` (1x1, channel ``empty``,
     attribute ``lfmbench_nparts = 0``) because an EXR file needs at least one part.
@@ -186,24 +225,36 @@ def encode_lights_exr(lights: Sequence[tuple[int, Sequence[int], np.ndarray]], b
         if a.shape != (bins, len(bands_nm), y1 - y0, x1 - x0):
             raise ValueError(f"{pw}: expected shape (K={bins}, C={len(bands_nm)}, {y1 - y0}, {x1 - x0}) "
                              f"for bbox {(y0, x0, y1, x1)}, got {a.shape}")
-        ls = store_layer(a, st, pw)
-        _note_layer(ls, pw, notes, stats)
-        channels = {names[k][c]: ls.data[k, c] for k in range(bins) for c in range(len(bands_nm))}
-        header = _base_header(width, height, (y0, x0, y1, x1), st.compression)
-        header.update(attrs or {})
-        header.update({ATTR["kind"]: "lights", ATTR["light"]: lid, ATTR["bins"]: int(bins),
-                       ATTR["units"]: RADIANCE_UNIT, ATTR["stored"]: ls.pixel_type, scale_attr(None): ls.scale,
-                       ATTR["mantissa"]: st.bits})
-        parts.append((lid, header, channels))
+        layers = [(False, (0, 0, y1 - y0, x1 - x0), a)]
+        if steady and bins > 1:
+            bb, sb, sa = split_steady(a)
+            if bb != layers[0][1]:  # some pixels are the same in every bin: the bins' box shrinks
+                layers = [(False, bb, a[:, :, bb[0]:bb[2], bb[1]:bb[3]])]
+                if sb is not None:
+                    layers.append((True, sb, sa[:, sb[0]:sb[2], sb[1]:sb[3]]))
+        for is_steady, (by0, bx0, by1, bx1), data in layers:
+            name = light_part_name(lid, is_steady)
+            ls = store_layer(data, st, f"{what} {name}")
+            _note_layer(ls, f"{what} {name}", notes, stats)
+            if is_steady:
+                channels = {n: ls.data[c] for c, n in enumerate(steady_channels(bands_nm))}
+            else:
+                channels = {names[k][c]: ls.data[k, c] for k in range(bins) for c in range(len(bands_nm))}
+            header = _base_header(width, height, (y0 + by0, x0 + bx0, y0 + by1, x0 + bx1), st.compression)
+            header.update(attrs or {})
+            header.update({ATTR["kind"]: "lights", ATTR["light"]: lid, ATTR["bins"]: int(bins),
+                           ATTR["units"]: RADIANCE_UNIT, ATTR["stored"]: ls.pixel_type, scale_attr(None): ls.scale,
+                           ATTR["mantissa"]: st.bits})
+            parts.append(((lid, is_steady), header, channels, name))
     if not parts:
         header = _base_header(width, height, (0, 0, 1, 1), st.compression)
         header.update(attrs or {})
         header.update({ATTR["kind"]: "lights", ATTR["nparts"]: 0, ATTR["bins"]: int(bins)})
         return _encode([exr.Part(header, {EMPTY_PART: np.zeros((1, 1), np.float32)}, EMPTY_PART)], what)
     out = []
-    for lid, header, channels in sorted(parts, key=lambda p: p[0]):
+    for _, header, channels, name in sorted(parts, key=lambda p: p[0]):
         header[ATTR["nparts"]] = len(parts)
-        out.append(exr.Part(header, channels, f"light{lid}"))
+        out.append(exr.Part(header, channels, name))
     return _encode(out, what)
 
 

@@ -10,21 +10,25 @@ Units: wavelengths in nm, spectral radiance in W sr^-1 m^-2 nm^-1.
 from __future__ import annotations
 
 import math
+import re
 from typing import Any, Mapping, Sequence
 
 from lfmbench.limits import brief
 from lfmbench.corpus.errors import CorpusFileError
 
 __all__ = ["FORMAT_NAME", "FORMAT_VERSION", "READABLE_VERSIONS", "MANIFEST_NAME", "SPLITS_NAME", "SCENES_DIR",
-           "STATIC_WINDOWS", "AUX_CHANNELS", "RADIANCE_UNIT", "RADIANCE_MAX", "EMPTY_PART", "ATTR", "band_channel",
-           "bin_prefix", "static_channels", "bin_channels", "frame_dir", "group_storage"]
+           "STATIC_WINDOWS", "AUX_CHANNELS", "RADIANCE_UNIT", "RADIANCE_MAX", "EMPTY_PART", "STEADY_PREFIX", "ATTR",
+           "band_channel", "bin_prefix", "static_channels", "bin_channels", "steady_channels", "light_part_name",
+           "parse_light_part", "frame_dir", "group_storage"]
 
 #: ``manifest.json`` "format" value and format version written by this module. Version 2 (HALF x 2^e layers,
-#: codecs and mantissa rounding, ``docs/corpus-format.md``) reads every version-1 file unchanged.
+#: codecs and mantissa rounding, ``docs/corpus-format.md``) reads every version-1 file unchanged; version 3 (a
+#: light's bins stored over the pixels that change from bin to bin, plus an optional ``steady<id>`` part for the
+#: pixels that are the same in every bin, section 6.2) reads every version-2 file unchanged.
 FORMAT_NAME = "lfmbench-corpus"
-FORMAT_VERSION = 2
+FORMAT_VERSION = 3
 #: Format versions this module reads.
-READABLE_VERSIONS = (1, 2)
+READABLE_VERSIONS = (1, 2, 3)
 MANIFEST_NAME = "manifest.json"
 SPLITS_NAME = "splits.json"
 SCENES_DIR = "scenes"
@@ -40,6 +44,10 @@ RADIANCE_UNIT = "W sr^-1 m^-2 nm^-1"
 RADIANCE_MAX = 1e9
 #: Name and channel of the placeholder part of a flickering-group EXR in which no light is visible.
 EMPTY_PART = "empty"
+#: Channel prefix of a light's steady part (format version 3): radiance that is the same in every time bin.
+STEADY_PREFIX = "steady"
+#: Part names of a flickering-group EXR: ``light<id>`` (the K bins) and ``steady<id>`` (version 3, optional).
+_LIGHT_PART = re.compile(r"(light|steady)(\d+)")
 #: Header attribute names (all prefixed ``lfmbench_``).
 ATTR = {
     "kind": "lfmbench_kind", "scene": "lfmbench_scene_id", "frame": "lfmbench_frame",
@@ -83,6 +91,22 @@ def static_channels(window: str, bands_nm: Sequence[float]) -> list[str]:
 def bin_channels(bins: int, bands_nm: Sequence[float]) -> list[list[str]]:
     """Channel names of a per-light part: ``[k][c]`` -> ``bin{k}.{wl_c}nm``."""
     return [[band_channel(bin_prefix(k, bins), wl) for wl in bands_nm] for k in range(bins)]
+
+
+def steady_channels(bands_nm: Sequence[float]) -> list[str]:
+    """Channel names of a light's steady part (format version 3): ``steady.{wl_c}nm`` in band order."""
+    return [band_channel(STEADY_PREFIX, wl) for wl in bands_nm]
+
+
+def light_part_name(light_id: int, steady: bool = False) -> str:
+    """EXR part name of a light's bins (``light<id>``) or of its steady part (``steady<id>``); decimal id."""
+    return f"{'steady' if steady else 'light'}{int(light_id)}"
+
+
+def parse_light_part(name: str) -> tuple[int, bool] | None:
+    """``(light id, steady)`` of a part name made by :func:`light_part_name`, else None."""
+    m = _LIGHT_PART.fullmatch(name)
+    return None if m is None else (int(m.group(2)), m.group(1) == "steady")
 
 
 def frame_dir(frame: int) -> str:

@@ -4,7 +4,6 @@ only when asked for), with a small cache so that reading ``short`` then ``long``
 from __future__ import annotations
 
 import os
-import re
 from collections import OrderedDict
 from pathlib import Path
 from typing import Sequence
@@ -17,7 +16,8 @@ from lfmbench.corpus.exr import ExrPart, _check_aux, _check_values, _stack, laye
 from lfmbench.corpus.meta import (_check_manifest, _check_meta_storage, _load_json, check_splits, inside_root,
                                   load_meta)
 from lfmbench.corpus.naming import (AUX_CHANNELS, EMPTY_PART, MANIFEST_NAME, SCENES_DIR, SPLITS_NAME, _group_bins,
-                                    bin_channels, frame_dir, group_storage, static_channels)
+                                    bin_channels, frame_dir, group_storage, parse_light_part, static_channels,
+                                    steady_channels)
 
 __all__ = ["Corpus"]
 
@@ -167,6 +167,9 @@ class Corpus:
             ``[(light_id, (y0, x0, y1, x1), ndarray (K, C, h, w) float32)]`` sorted by light id; boxes are
             half-open pixel ranges; values are spectral radiance (W sr^-1 m^-2 nm^-1) averaged over each of the
             K bins of the capture window with the light at PWM level 1. Empty list when no light is visible.
+            The box is the light's meta.json ``bbox`` of the frame (its part's data window when meta.json
+            does not list the light); a version-3 light's ``light<id>`` bins and ``steady<id>`` part (the same
+            value in every bin) are assembled into it, zeros elsewhere (``docs/corpus-format.md`` 6.2).
         """
         m, path = self._frame_group(scene_id, frame, group)
         if group_storage(m, group) != "lights":
@@ -175,21 +178,50 @@ class Corpus:
         k = _group_bins(m, group)
         bl = self._band_list(m, bands)
         names = [n for row in bin_channels(k, bl) for n in row]
-        out = []
+        found: dict[int, dict[bool, tuple]] = {}
         for p in self._parts(path):
             if p.name == EMPTY_PART:
                 continue
-            mt = re.fullmatch(r"light(\d+)", p.name)
-            if mt is None:
-                raise CorpusChannelError(f"EXR file {path}: unexpected part {brief(p.name)} (want light<id>)")
-            arr = _stack(p, names, path).reshape(k, len(bl), p.window[2] - p.window[0], p.window[3] - p.window[1])
+            kind = parse_light_part(p.name)
+            if kind is None:
+                raise CorpusChannelError(f"EXR file {path}: unexpected part {brief(p.name)} (want light<id> or "
+                                         "steady<id>)")
+            lid, steady = kind
+            chans = steady_channels(bl) if steady else names
+            arr = _stack(p, chans, path)
+            if not steady:
+                arr = arr.reshape(k, len(bl), p.window[2] - p.window[0], p.window[3] - p.window[1])
             scale = layer_scale(p, None, path)
             if scale != 1.0:
                 arr /= np.float32(scale)  # exact: a power of two
             if self.check_values:
                 _check_values(arr, path, f"part {brief(p.name)}")
-            out.append((int(mt.group(1)), p.window, arr))
-        return sorted(out, key=lambda t: t[0])
+            found.setdefault(lid, {})[steady] = (p.window, arr)
+        boxes = {int(lt["id"]): lt.get("bbox") for lt in m.get("lights", [])}
+        out = []
+        for lid, got in sorted(found.items()):
+            if False not in got:
+                raise CorpusChannelError(f"EXR file {path}: part 'steady{lid}' without its part 'light{lid}'")
+            bb = (boxes.get(lid) or [None] * (frame + 1))[frame]
+            wins = [w for w, _ in got.values()]
+            box = tuple(int(v) for v in bb) if bb is not None else (
+                min(w[0] for w in wins), min(w[1] for w in wins), max(w[2] for w in wins), max(w[3] for w in wins))
+            y0, x0, y1, x1 = box
+            if any(not (y0 <= w[0] and x0 <= w[1] and w[2] <= y1 and w[3] <= x1) for w in wins):
+                raise CorpusChannelError(f"EXR file {path}: a data window of light {lid} {wins} is not inside its "
+                                         f"box {box} (meta.json bbox[{frame}])")
+            (bw, barr) = got[False]
+            if len(got) == 1 and bw == box:  # the whole box in bins (format versions 1 and 2, most v3 lights)
+                out.append((lid, box, barr))
+                continue
+            full = np.zeros((k, len(bl), y1 - y0, x1 - x0), np.float32)
+            if True in got:  # the same value in every bin; zero where the bins part lies (split_steady)
+                (sy0, sx0, sy1, sx1), sarr = got[True]
+                full[:, :, sy0 - y0:sy1 - y0, sx0 - x0:sx1 - x0] = sarr
+            by0, bx0, by1, bx1 = bw
+            full[:, :, by0 - y0:by1 - y0, bx0 - x0:bx1 - x0] += barr
+            out.append((lid, box, full))
+        return out
 
     def read_aux(self, scene_id: str, frame: int, names: Sequence[str] | None = None) -> dict[str, np.ndarray]:
         """Aux channels of a frame: ``{name: (H, W) float32}``; depth in m (+inf: no surface), ids -1 = none.

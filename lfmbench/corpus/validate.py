@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import hashlib
 import os
-import re
 import stat
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -20,7 +19,7 @@ from lfmbench.corpus.meta import (_check_manifest, _check_meta_storage, _load_js
                                   inside_root, load_meta, manifest_entry_errors)
 from lfmbench.corpus.naming import (ATTR, AUX_CHANNELS, EMPTY_PART, MANIFEST_NAME, RADIANCE_MAX, RADIANCE_UNIT,
                                     SCENES_DIR, SPLITS_NAME, STATIC_WINDOWS, _group_bins, bin_channels, frame_dir,
-                                    group_storage, static_channels)
+                                    group_storage, parse_light_part, static_channels, steady_channels)
 from lfmbench.fileio import TMP_PREFIX
 from lfmbench.limits import LIMITS, limit, set_limit
 
@@ -69,8 +68,8 @@ def validate_corpus(root: str | os.PathLike, *, check_pixels: bool = True,
     (:func:`validate_meta`); every expected EXR present (each frame x group, ``aux.exr`` all or none) and in
     the manifest; every manifest file present with the right SHA-256; files on disk not in the manifest
     (warning); per EXR: display window = meta size, parts / channels exactly as meta.json announces
-    (``short``/``long`` x bands, or ``light<id>`` parts with K bins x bands, data windows inside the image,
-    ids of that group), and (``check_pixels``) NaN / inf / negative radiance and invalid aux values.
+    (``short``/``long`` x bands, or ``light<id>`` parts with K bins x bands and optional ``steady<id>`` parts
+    with the bands, data windows inside the light's meta.json bbox and the image, ids of that group), and (``check_pixels``) NaN / inf / negative radiance and invalid aux values.
 
     Args:
         root: corpus directory.
@@ -446,27 +445,31 @@ def _validate_scene(root: Path, sid: str, files: Mapping[str, str], rep: Validat
                     if shown:
                         err(f"{p}: no light is stored but meta.json bbox[{n}] of lights {shown} is not null")
                     continue
-                have_parts = set()
+                have_parts, have_steady = set(), set()
                 for part in parts:
-                    mt = re.fullmatch(r"light(\d+)", part.name)
-                    if mt is None:
-                        err(f"{p}: unexpected part name {brief(part.name)} (want light<id>)")
+                    kind = parse_light_part(part.name)
+                    if kind is None:
+                        err(f"{p}: unexpected part name {brief(part.name)} (want light<id> or steady<id>)")
                         continue
-                    if int(mt.group(1)) not in ids:
+                    lid, steady = kind
+                    if lid not in ids:
                         err(f"{p}: part {brief(part.name)} is not a light of group {brief(g)} in meta.json")
-                    have_parts.add(int(mt.group(1)))
-                    bbs = bbox_of.get(int(mt.group(1)))
+                    (have_steady if steady else have_parts).add(lid)
+                    bbs = bbox_of.get(lid)
+                    y0, x0, y1, x1 = part.window
                     if bbs is not None and bbs[n] is None:
                         err(f"{p}: part {brief(part.name)} is stored but meta.json bbox[{n}] is null (not visible)")
-                    elif bbs is not None and tuple(bbs[n]) != tuple(part.window):
-                        err(f"{p}: part {brief(part.name)} data window {part.window} != meta.json bbox[{n}] {bbs[n]} "
-                            "(half-open (y0, x0, y1, x1))")
-                    y0, x0, y1, x1 = part.window
+                    elif bbs is not None and not (bbs[n][0] <= y0 and bbs[n][1] <= x0 and y1 <= bbs[n][2]
+                                                  and x1 <= bbs[n][3]):
+                        err(f"{p}: part {brief(part.name)} data window {part.window} is not inside meta.json "
+                            f"bbox[{n}] {bbs[n]} (half-open (y0, x0, y1, x1))")
                     if not (0 <= y0 < y1 <= H and 0 <= x0 < x1 <= W):
                         err(f"{p}: part {brief(part.name)} data window {part.window} outside the {H}x{W} image")
-                    _validate_channels(p, part, want, rep)
+                    _validate_channels(p, part, set(steady_channels(bands)) if steady else want, rep)
                     _validate_storage_attrs(p, part, None, rep)
                     _validate_pixels(p, part, rep, check_pixels)
+                for lid in sorted(have_steady - have_parts):
+                    err(f"{p}: part 'steady{lid}' without its part 'light{lid}'")
                 for lid in sorted(ids - have_parts):
                     bb = bbox_of.get(lid, [None] * (n + 1))[n]
                     if bb is not None:

@@ -183,13 +183,13 @@ def test_compact_corpus_round_trip_and_independent_reader(tmp_path):
     st = C.STORAGES["compact"]
     c = C.Corpus(tmp_path)
     sid = meta["scene_id"]
-    assert c.manifest["version"] == C.FORMAT_VERSION == 2
+    assert c.manifest["version"] == C.FORMAT_VERSION == 3
     assert c.meta(sid)["storage"]["mantissa_bits"] == st.bits
     path = c.path(sid, 1, "headlights")
     f = OpenEXR.File(str(path), separate_channels=True)
     part = f.parts[0]
     assert part.header["compression"] == getattr(OpenEXR, C.COMPRESSIONS[st.compression])
-    assert part.header["lfmbench_format_version"] == 2
+    assert part.header["lfmbench_format_version"] == 3
     for win in ("short", "long"):
         ref = frames[1]["static"]["headlights"][win]
         scale = part.header[f"lfmbench_scale_{win}"]
@@ -254,12 +254,12 @@ def test_old_version_1_corpus_still_reads(tmp_path):
                                   frames[0]["lights"]["otherlights"][1][2])
     rep = C.validate_corpus(tmp_path)
     assert rep.ok, rep.errors
-    # a new writer may add scenes to it; the corpus becomes version 2 and both scenes read
+    # a new writer may add scenes to it; the corpus becomes version 3 and both scenes read
     m2 = fake_meta("scene00001")
     w = C.CorpusWriter(tmp_path)
     w.write_scene("scene00001", fake_scene("scene00001"), m2, fake_frames(m2, seed=5))
     c2 = C.Corpus(tmp_path)
-    assert c2.manifest["version"] == 2 and c2.scenes == ["scene00000", "scene00001"]
+    assert c2.manifest["version"] == 3 and c2.scenes == ["scene00000", "scene00001"]
     np.testing.assert_array_equal(c2.read_static(sid, 1, "skymap", "short"), frames[1]["static"]["skymap"]["short"])
 
 
@@ -267,11 +267,11 @@ def test_newer_version_refused_naming_file(tmp_path):
     meta, _, _ = _write(tmp_path, "compact")
     mpath = tmp_path / "manifest.json"
     man = json.loads(mpath.read_text())
-    mpath.write_text(json.dumps(dict(man, version=3)))
-    with pytest.raises(C.CorpusFileError, match=r"manifest\.json.*version 3 is newer"):
+    mpath.write_text(json.dumps(dict(man, version=4)))
+    with pytest.raises(C.CorpusFileError, match=r"manifest\.json.*version 4 is newer"):
         C.Corpus(tmp_path)
     rep = C.validate_corpus(tmp_path)
-    assert not rep.ok and "version 3" in rep.errors[0] and "manifest.json" in rep.errors[0]
+    assert not rep.ok and "version 4" in rep.errors[0] and "manifest.json" in rep.errors[0]
     with pytest.raises(C.CorpusFileError, match="unsupported corpus format version 'x'"):
         mpath.write_text(json.dumps(dict(man, version="x")))
         C.Corpus(tmp_path)

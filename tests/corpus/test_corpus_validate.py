@@ -171,10 +171,10 @@ def test_invalid_meta_reported(good):
     assert "short_exposure_s = 0.05 s is longer than long_exposure_s" in _errors(good)
 
 
-def test_bbox_must_match_the_part_data_window(good):
+def test_bbox_must_hold_the_part_data_window(good):
     mp = good / "scenes" / "scene00000" / "meta.json"
     meta = json.loads(mp.read_text())
-    meta["lights"][0]["bbox"][1] = [1, 1, 4, 4]  # the part light0 of frame 1 is (1, 1, 4, 3)
+    meta["lights"][0]["bbox"][1] = [1, 1, 4, 2]  # the part light0 of frame 1 is (1, 1, 4, 3): not inside
     meta["lights"][1]["bbox"][0] = None           # the part light1 of frame 0 exists
     mp.write_text(json.dumps(meta))
     _rehash(good, mp)

@@ -57,7 +57,9 @@ def test_header_only_parts_equal_openexrs_header(tmp_path):
             assert {k: v for k, v in a.header.items() if not k.endswith("Window")} == simple
             assert {type(v) for v in a.header.values()} <= {int, float, str, tuple}
     full = C.read_exr(tmp_path / "lights.exr")  # the full read agrees on the parts it names
-    assert [p.name for p in full] == ["light3", "light5"] and full[1].channels["bin01.600nm"].shape == (3, 4)
+    # every bin the same (format version 3): each light's bins shrink to one pixel, its steady part holds the rest
+    assert [p.name for p in full] == ["light3", "steady3", "light5", "steady5"]
+    assert full[2].channels["bin01.600nm"].shape == (1, 1) and full[3].channels["steady.600nm"].shape == (3, 4)
     with pytest.raises(C.CorpusFileError, match="EXR file is missing"):
         C.read_exr(tmp_path / "nothing.exr")
 
