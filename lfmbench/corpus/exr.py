@@ -45,12 +45,15 @@ def _check_radiance(arr: np.ndarray, what: str) -> np.ndarray:
     arr = np.asarray(arr)
     if not np.issubdtype(arr.dtype, np.floating):
         raise ValueError(f"{what}: radiance must be a floating-point array, got dtype {arr.dtype}")
-    if arr.size and not np.isfinite(arr).all():
+    if not arr.size:
+        return arr
+    lo, hi = float(arr.min()), float(arr.max())  # NaN propagates through both; +-inf shows in one of them
+    if not (math.isfinite(lo) and math.isfinite(hi)):
         raise CorpusValueError(f"{what}: radiance contains NaN or inf")
-    if arr.size and float(arr.min()) < 0:
-        raise CorpusValueError(f"{what}: radiance contains negative values (min {float(arr.min()):.3g})")
-    if arr.size and float(arr.max()) > RADIANCE_MAX:
-        raise CorpusValueError(f"{what}: radiance {float(arr.max()):.3g} {RADIANCE_UNIT} exceeds the plausibility "
+    if lo < 0:
+        raise CorpusValueError(f"{what}: radiance contains negative values (min {lo:.3g})")
+    if hi > RADIANCE_MAX:
+        raise CorpusValueError(f"{what}: radiance {hi:.3g} {RADIANCE_UNIT} exceeds the plausibility "
                                f"ceiling RADIANCE_MAX = {RADIANCE_MAX:.0e} (50x the sun's disc): a unit or scale error")
     return arr
 

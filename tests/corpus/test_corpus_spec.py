@@ -71,6 +71,26 @@ def test_independent_writer_following_the_spec(tmp_path):
     np.testing.assert_array_equal(arr, led.astype(np.float32))
     assert arr.dtype == np.float32
 
+    # version 3 (section 6.2): the bins over part of the box, a steady part (the same in every bin) overlapping it
+    bins = rng.random((K, 2, 1, 2)).astype(np.float32)       # window (1, 3, 2, 5)
+    steady = rng.random((2, 2, 2)).astype(np.float32)        # window (1, 2, 3, 4)
+    _exr(sdir / "f000" / "leds.exr", [
+        _part("light12", {f"bin{k:02d}.{format(b, '.6g')}nm": bins[k, c].copy() for k in range(K)
+                          for c, b in enumerate(BANDS)}, box=(1, 3, 2, 5)),
+        _part("steady12", {f"steady.{format(b, '.6g')}nm": steady[c].copy() for c, b in enumerate(BANDS)},
+              box=(1, 2, 3, 4))])
+    files["scenes/ext-1/f000/leds.exr"] = hashlib.sha256((sdir / "f000" / "leds.exr").read_bytes()).hexdigest()
+    (root / "manifest.json").write_text(json.dumps({"format": "lfmbench-corpus", "version": 3,
+                                                    "scenes": ["ext-1"], "files": files}))
+    rep = validate_corpus(root)
+    assert rep.ok, rep.errors
+    want = np.zeros((K, 2, 2, 3), np.float32)                # the box (1, 2, 3, 5)
+    want[:, :, 0:1, 1:3] += bins
+    want[:, :, 0:2, 0:2] += steady
+    [(lid, box, arr)] = Corpus(root).read_light_bins("ext-1", 0, "leds")
+    assert (lid, box) == (12, (1, 2, 3, 5))
+    np.testing.assert_array_equal(arr, want)
+
 
 def _meta_with_light(**light):
     meta = {"scene_id": "s", "width": W, "height": H, "bands_nm": BANDS, "fps": 30.0, "frames": 2,
