@@ -61,6 +61,8 @@ STATIC_PASSES = ("union", "per_group")
 #: Ways of sharing a flickering lamp's crop samples among the band passes (:class:`RenderOptions`
 #: ``lamp_pass_spp``, :func:`lamp_pass_spp`).
 LAMP_PASS_SPP = ("auto", "spectrum", "uniform")
+#: Ways of placing a pixel's samples in x, y and time (:class:`RenderOptions` ``pixel_samples``).
+PIXEL_SAMPLES = ("auto", "sobol", "strata")
 
 
 @dataclass
@@ -107,6 +109,17 @@ class RenderOptions:
     band passes: ``"uniform"`` (light_spp each, as before), ``"spectrum"`` (by the lamp's spectral radiance,
     :func:`lamp_pass_spp`: a narrow-band LED's few passes get most samples; every band stays unbiased) or
     ``"auto"`` (default: ``spectrum`` on scene version 2, ``uniform`` on version 1, whose renders are frozen).
+    filled_spp_factor: light_spp multiplier (a power of two) of the flickering lights drawn as filled cells
+    (``dots_lod_px``: signals' LED arrays, message signs, countdowns, destination displays): their lit shapes
+    (a sign's scan lines, a disk's rim, a digit's bars) are thinner than a pixel, so their pixels' covered share is
+    what the lamp samples estimate; at the ``default`` profile these lights carried 86 % of a night scene's LED-bin
+    error for a small part of its lamp pixels (docs/render-benchmark.md, "LED dot faces"). 1: as other lights.
+    Scenes without dot faces (every lfmbench-v1 scene) render the same whatever it is.
+    pixel_samples: where a pixel's samples lie in x, y and time (:class:`render_tools.tracer.Tile` ``sobol``):
+    ``"strata"`` (each dimension stratified on its own, the strata of the dimensions paired at random),
+    ``"sobol"`` (a randomly shifted Sobol' sequence: also stratified jointly, which an edge moving across the
+    pixel during a bin needs; both unbiased) or ``"auto"`` (default: ``sobol`` on scene version 2, ``strata``
+    on version 1, whose renders are frozen).
     """
 
     width: int = 640
@@ -130,6 +143,8 @@ class RenderOptions:
     reflection_min_lux: float = 2e-3
     dots_lod_px: float = 1.0
     lamp_pass_spp: str = "auto"
+    filled_spp_factor: int = 2
+    pixel_samples: str = "auto"
 
     def __post_init__(self):
         self.bands_nm = tuple(float(b) for b in self.bands_nm)
@@ -159,6 +174,11 @@ class RenderOptions:
             raise ValueError(f"dots_lod_px: must be a number >= 0 px, got {lod!r}")
         if self.lamp_pass_spp not in LAMP_PASS_SPP:
             raise ValueError(f"lamp_pass_spp: must be one of {LAMP_PASS_SPP}, got {self.lamp_pass_spp!r}")
+        if self.pixel_samples not in PIXEL_SAMPLES:
+            raise ValueError(f"pixel_samples: must be one of {PIXEL_SAMPLES}, got {self.pixel_samples!r}")
+        f = self.filled_spp_factor
+        if isinstance(f, bool) or not isinstance(f, (int, np.integer)) or f < 1 or f & (f - 1):
+            raise ValueError(f"filled_spp_factor: must be a power of two >= 1, got {f!r}")
         if self.static_pass not in STATIC_PASSES:
             raise ValueError(f"static_pass: must be one of {STATIC_PASSES}, got {self.static_pass!r}")
         if not isinstance(self.pad_px, (int, np.integer)) or self.pad_px < 0:
@@ -424,7 +444,14 @@ def spectral_lamp_passes(scene: dict, opts: RenderOptions) -> bool:
     return mode == "spectrum" or (mode == "auto" and int(scene.get("version", 1)) >= 2)
 
 
-def lamp_pass_spp(light: dict, opts: RenderOptions) -> tuple | None:
+def sobol_pixel_samples(scene: dict, opts: RenderOptions) -> bool:
+    """Whether the tiles place their samples by Sobol' points (``opts.pixel_samples``; ``auto``: scene version 2
+    and later)."""
+    mode = opts.pixel_samples
+    return mode == "sobol" or (mode == "auto" and int(scene.get("version", 1)) >= 2)
+
+
+def lamp_pass_spp(light: dict, opts: RenderOptions, light_spp: int | None = None) -> tuple | None:
     """Samples per pixel and bin of each band pass (P counts, powers of two) for ``light``'s own crop: its
     light_spp x P samples shared in proportion to the light's spectral radiance in each pass's bands (the sum
     over bands c = p, p + P, ... of its band means), rounded to powers of two (the strata of
@@ -436,10 +463,11 @@ def lamp_pass_spp(light: dict, opts: RenderOptions) -> tuple | None:
 
     Why: a narrow-band LED's light lies in 2-4 of the 8 passes; with light_spp in each, the passes that carry it
     got a quarter of the lamp's samples. Measured on a night scene (docs/render-benchmark.md, "LED dot faces"):
-    the LED bins' error 4.5 % -> 3.2 % for the same or fewer samples."""
+    the LED bins' error 4.5 % -> 3.2 % for the same or fewer samples. ``light_spp``: the lamp's own count
+    (:func:`lamp_light_spp`; default ``opts.light_spp``)."""
     from . import spectra  # noqa: PLC0415
 
-    n0 = opts.light_spp or opts.spp
+    n0 = light_spp or opts.light_spp or opts.spp
     if n0 & (n0 - 1):
         return None
     P = cam_mod.n_passes(len(opts.bands_nm))
@@ -458,6 +486,13 @@ def lamp_pass_spp(light: dict, opts: RenderOptions) -> tuple | None:
             break
         n[int(np.argmax(gain))] *= 2
     return tuple(int(v) for v in n)
+
+
+def lamp_light_spp(light: dict, opts: RenderOptions, filled: frozenset | set = frozenset()) -> int:
+    """Samples per pixel, bin and band pass of a flickering light's own box: ``light_spp`` (else ``spp``), times
+    ``opts.filled_spp_factor`` for the lights drawn as filled cells (ids ``filled``, from :func:`dots_lod`)."""
+    n = opts.light_spp or opts.spp
+    return n * opts.filled_spp_factor if light["id"] in filled else n
 
 
 def dots_lod(scene: dict, opts: RenderOptions) -> tuple[dict, list[int]]:
@@ -549,9 +584,11 @@ def scene_meta(scene: dict, opts: RenderOptions) -> dict:
                    "pad_px": opts.pad_px, "static_pass": opts.static_pass,
                    **({"reflection_bins": opts.reflection_bins or opts.bins,
                        "reflection_min_lux": opts.reflection_min_lux} if helper.wet else {}),
-                   **({"dots_lod_px": opts.dots_lod_px, "dots_lod": lod_ids}
+                   **({"dots_lod_px": opts.dots_lod_px, "dots_lod": lod_ids,
+                       "filled_spp_factor": opts.filled_spp_factor}
                       if any(lt["shape"] == "dots" for lt in scene["lights"]) else {}),
-                   **({"lamp_pass_spp": "spectrum" if spectral_lamp_passes(scene, opts) else "uniform"}
+                   **({"lamp_pass_spp": "spectrum" if spectral_lamp_passes(scene, opts) else "uniform",
+                       "pixel_samples": "sobol" if sobol_pixel_samples(scene, opts) else "strata"}
                       if int(scene.get("version", 1)) >= 2 else {})},
     }
 
@@ -609,7 +646,8 @@ def rest_spp(spp: int, frac: float) -> int:
     return max(1, math.ceil(spp * (1.0 - frac) / (1.0 + frac) - 1e-9))
 
 
-def plan_frame(scene: dict, opts: RenderOptions, n: int, sets, geo: SceneGeometry | None = None):
+def plan_frame(scene: dict, opts: RenderOptions, n: int, sets, geo: SceneGeometry | None = None,
+               filled: frozenset | set = frozenset()):
     """The tiles of frame ``n`` (:class:`render_tools.tracer.Tile`) and how to assemble them.
 
     Static groups: two full-frame tiles, the short window at ``spp`` and the rest of the long window (long minus
@@ -622,7 +660,8 @@ def plan_frame(scene: dict, opts: RenderOptions, n: int, sets, geo: SceneGeometr
     (plan kind ``"light_box"``: zeros, no tile) gets the reflection's row bands (:meth:`SceneGeometry.
     reflection_tiles`) traced at ``spp`` in ``opts.reflection_bins`` bins and the lamp's own box at ``light_spp``
     in K bins pasted over them (plan kind ``"light_part"``). ``sets``: the frame's :class:`tracer.LightSets` (or any
-    mapping from set name to index). Returns (tiles, plan, visible light ids); plan entries are
+    mapping from set name to index). ``filled``: ids of the lights :func:`dots_lod` drew as filled cells (their own
+    boxes get :func:`lamp_light_spp`). Returns (tiles, plan, visible light ids); plan entries are
     (kind, group, window or light id, crop, tile index, repeat): a tile of K / repeat bins, each bin repeated
     ``repeat`` times in a row to make the K bins.
     """
@@ -640,13 +679,14 @@ def plan_frame(scene: dict, opts: RenderOptions, n: int, sets, geo: SceneGeometr
     wins = [("short", sa, sb - sa, math.inf, 0.0, 1.0)]
     if (lb - la) - (sb - sa) > 1e-12 * (lb - la):
         wins.append(("rest", la, (lb - la) - (sb - sa), sa, sb - sa, (sb - sa) / (lb - la)))
+    qmc = sobol_pixel_samples(scene, opts)
     union = list(getattr(sets, "union", ()) or ())
     if union:  # the static groups' full frames: one tile per window records all of them (one image per slot)
         for win, t0, dt, gap_at, gap_len, frac in wins:
             plan.append(("union", tuple(union), win, full, len(tiles), 1))
             tiles.append(Tile(full, 1, t0, dt, opts.spp if win == "short" else rest_spp(opts.spp, frac),
                               sets["union:static"], gap_at=gap_at, gap_len=gap_len, slots=len(union),
-                              key=_seed("union", "long" if win == "rest" else win)))
+                              key=_seed("union", "long" if win == "rest" else win), sobol=qmc))
     for g, info in _selected_groups(scene, opts).items():
         lamps = [lt for lt in scene["lights"] if lt["group"] == g]
         if not info["flicker"]:
@@ -662,7 +702,7 @@ def plan_frame(scene: dict, opts: RenderOptions, n: int, sets, geo: SceneGeometr
                     spp = n_s if win == "short" else rest_spp(n_s, frac)
                     tiles.append(Tile(crop, 1, t0, dt, spp, k, gap_at=gap_at, gap_len=gap_len,
                                       key=_seed(kind, g, "long" if win == "rest" else win,
-                                                *(() if key is None else (key,)))))
+                                                *(() if key is None else (key,))), sobol=qmc))
             visible |= {lt["id"] for lt in lamps if geo.light_bbox(lt, t_obj, *tm["window"]) is not None}
             continue
         edges = tm["bin_edges"]
@@ -672,14 +712,15 @@ def plan_frame(scene: dict, opts: RenderOptions, n: int, sets, geo: SceneGeometr
             bb = geo.light_bbox(lt, t_obj, *tm["window"], moving=True)
             if bb is None:
                 continue
-            ps = lamp_pass_spp(lt, opts) if spectral else None  # the lamp's own box: samples by spectrum
+            own_spp = lamp_light_spp(lt, opts, filled)
+            ps = lamp_pass_spp(lt, opts, own_spp) if spectral else None  # the lamp's own box: samples by spectrum
             visible.add(lt["id"])
             k = sets[f"light:{lt['id']}"]
             # wet road: the box holds the lamp's reflection too; that dim, smooth light is traced at ``spp`` and
             # the lamp's own box again at ``light_spp`` over it (both unbiased: the "refine" of static groups)
             lamp_bb = geo.light_bbox(lt, t_obj, *tm["window"], moving=True, reflection=False) if geo.wet else bb
             if lamp_bb == bb:  # no reflection region: the lamp's box alone
-                crops = [("light", bb, light_spp, opts.bins, ())]
+                crops = [("light", bb, own_spp, opts.bins, ())]
             else:  # the grown box (zeros) holds the reflection's row bands at spp in opts.reflection_bins bins,
                 # each repeated, and the lamp's own box at light_spp in K bins pasted over them
                 plan.append(("light_box", g, lt["id"], bb, None, opts.bins))
@@ -687,17 +728,18 @@ def plan_frame(scene: dict, opts: RenderOptions, n: int, sets, geo: SceneGeometr
                 crops = [("light_part", c, opts.spp, kb, ("reflection", c[0]))
                          for c in geo.reflection_tiles(lt, t_obj, *tm["window"], bb)]
                 if lamp_bb is not None:
-                    crops.append(("light_part", lamp_bb, light_spp, opts.bins, ("lamp",)))
+                    crops.append(("light_part", lamp_bb, own_spp, opts.bins, ("lamp",)))
             for kind, crop, n_s, nb, extra in crops:
                 key = _seed("light", lt["id"], *extra)
                 own = None if extra[:1] == ("reflection",) else ps
                 if geo.ego.moving or np.any(v != 0.0):
                     plan.append((kind, g, lt["id"], crop, len(tiles), opts.bins // nb))
                     tiles.append(Tile(crop, nb, edges[0], (edges[-1] - edges[0]) / nb, n_s, k,
-                                      tuple(float(x) for x in v), t_obj, key=key, pass_spp=own))
+                                      tuple(float(x) for x in v), t_obj, key=key, pass_spp=own, sobol=qmc))
                 else:  # static camera and lamp inside the frame: all bins are the same image
                     plan.append((kind, g, lt["id"], crop, len(tiles), opts.bins))
-                    tiles.append(Tile(crop, 1, edges[0], edges[-1] - edges[0], n_s, k, key=key, pass_spp=own))
+                    tiles.append(Tile(crop, 1, edges[0], edges[-1] - edges[0], n_s, k, key=key, pass_spp=own,
+                                      sobol=qmc))
     return tiles, plan, visible
 
 
@@ -721,7 +763,8 @@ def render_frames(scene: dict, opts: RenderOptions) -> Iterator[dict]:
     validate_scene(scene)
     opts.validate()
     timings = [frame_timing(scene, opts, n) for n in range(opts.frames)]  # validates exposures up front
-    scene = dots_lod(scene, opts)[0]  # sub-pixel LED dots as filled cells (RenderOptions.dots_lod_px)
+    scene, filled = dots_lod(scene, opts)  # sub-pixel LED dots as filled cells (RenderOptions.dots_lod_px)
+    filled = frozenset(filled)
     groups = _selected_groups(scene, opts)
     from . import backend  # noqa: PLC0415
 
@@ -747,7 +790,7 @@ def render_frames(scene: dict, opts: RenderOptions) -> Iterator[dict]:
         sets = tracer.LightSets(mi, dr, loaded, scene, list(groups), union=static_union(groups, opts))
         tr = tracer.Tracer(mi, dr, loaded, sets, geo.ego, geo.fov, (opts.width, opts.height), opts.bands_nm,
                            opts.band_width_nm, sky_scale=ms.sky_scale(scene))
-        tiles, plan, visible = plan_frame(scene, opts, n, sets, geo)
+        tiles, plan, visible = plan_frame(scene, opts, n, sets, geo, filled)
         imgs = tr.render(tiles, _seed(opts.seed, n, "frame")) if tiles else []
         out = {"frame": n, "static": {}, "lights": {}, "aux": {}}
         for kind, g, key, bb, ti, rep in plan:

@@ -154,7 +154,9 @@ class Tile:
     the output is then (slots, K, C, h, w), one image per group in the union's order. pass_spp: samples per
     pixel and bin of each band pass (P integers >= 1, powers of two to keep the strata; P = ceil(C / 4)) instead
     of ``spp`` in every pass: band c is the mean of pass c mod P's samples, so each band stays unbiased whatever
-    the split (:func:`render_tools.render.lamp_pass_spp` gives a lamp's passes samples by its spectrum).
+    the split (:func:`render_tools.render.lamp_pass_spp` gives a lamp's passes samples by its spectrum). sobol:
+    pixel x, y and time of a pixel's samples from a randomly shifted Sobol' sequence (:func:`sobol_points`)
+    instead of per-dimension strata paired at random (scene version 2; ``RenderOptions.pixel_samples``).
     """
 
     crop: tuple
@@ -170,6 +172,7 @@ class Tile:
     gap_len: float = 0.0
     slots: int = 1
     pass_spp: tuple | None = None
+    sobol: bool = False
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -310,6 +313,58 @@ def _permute(i, key, dim: int, mask):
     i = (i ^ (k >> 7)) & mask
     i = (i * 0x297A2D39) & mask
     return i ^ (i >> 1)
+
+
+def _sobol_directions(s: int, a: int, m: tuple, bits: int = 32) -> tuple[int, ...]:
+    """Direction numbers v_1..v_bits (32-bit integers) of one Sobol' dimension from its primitive polynomial of
+    degree ``s`` with coefficients ``a`` and initial numbers ``m`` (S. Joe, F. Y. Kuo, "Constructing Sobol
+    sequences with better two-dimensional projections", SIAM J. Sci. Comput. 30(5), 2008; their table
+    new-joe-kuo-6.21201: dimension 2: s 1, a 0, m 1; dimension 3: s 2, a 1, m 1 3)."""
+    v = [0] * bits
+    for i, mi_ in enumerate(m):
+        v[i] = mi_ << (31 - i)
+    for i in range(len(m), bits):
+        x = v[i - s] ^ (v[i - s] >> s)
+        for k in range(1, s):
+            if (a >> (s - 1 - k)) & 1:
+                x ^= v[i - k]
+        v[i] = x
+    return tuple(v)
+
+
+#: Direction numbers of the Sobol' dimensions used for pixel x, pixel y and time: the van der Corput sequence
+#: (dimension 1) and dimensions 2 and 3 of Joe and Kuo; their first 2^m points are a (0, m, 2)-net in (x, y).
+SOBOL_DIRECTIONS = (tuple(1 << (31 - i) for i in range(32)), _sobol_directions(1, 0, (1,)),
+                    _sobol_directions(2, 1, (1, 3)))
+#: Index bits of a Sobol' point the kernel reads (samples of a pixel beyond 2^SOBOL_BITS repeat its points; each
+#: point is still uniform through its random shift, so the estimate stays unbiased).
+SOBOL_BITS = 16
+
+
+def sobol_points(index: np.ndarray, shifts: np.ndarray) -> np.ndarray:
+    """Reference (numpy) of the kernel's Sobol' points: ``index`` (n,) non-negative integers, ``shifts`` (3,) or
+    (3, n) 32-bit random digital shifts -> (3, n) float64 in [0, 1): dimension d of point i is (the i-th point of
+    Sobol' dimension d, as 32 bits, XOR shift_d) / 2^32, truncated to 24 bits as the kernel's float32. A random
+    digital shift makes each point uniform on [0, 1)^3 (unbiased estimates) and keeps the net's strata: of 2^m
+    points, each of the 2^m cells [i / 2^a, (i + 1) / 2^a) x [j / 2^b, (j + 1) / 2^b), a + b = m, of (x, y) holds
+    exactly one (I. M. Sobol', USSR Comput. Math. Math. Phys. 7(4), 1967; A. B. Owen, "Monte Carlo and quasi-Monte
+    Carlo for statistics", 2009, on randomized nets)."""
+    index = np.asarray(index, np.uint64)
+    out = np.zeros((3, index.size), np.uint64)
+    for d, V in enumerate(SOBOL_DIRECTIONS):
+        for j in range(SOBOL_BITS):
+            out[d] ^= np.where((index >> np.uint64(j)) & np.uint64(1), np.uint64(V[j]), np.uint64(0))
+    out ^= np.asarray(shifts, np.uint64).reshape(3, -1)
+    return ((out & np.uint64(0xFFFFFFFF)) >> np.uint64(8)).astype(np.float64) / 2.0 ** 24
+
+
+def _sobol_dim(i, shift, d: int):
+    """Dimension ``d`` of Sobol' point ``i`` (UInt32 per lane) XOR ``shift`` (UInt32), as Float in [0, 1) (24 bits)."""
+    acc = mi.UInt32(shift)
+    for j in range(SOBOL_BITS):
+        bit = (i >> j) & 1
+        acc ^= mi.UInt32(SOBOL_DIRECTIONS[d][j]) & (mi.UInt32(0) - bit)
+    return mi.Float(acc >> 8) * (1.0 / (1 << 24))
 
 
 def _mis_weight(pdf_a, pdf_b):
@@ -467,7 +522,8 @@ class Tracer:
             wgt_p = (wgt,) * self.P if isinstance(wgt, float) else wgt
             per_pass += [(max(n, 1), w_) for n, w_ in zip(sp_p, wgt_p)]  # a pass without samples: 1 of weight 0
             rows.append((off, y0, x0, y1 - y0, x1 - x0, t.bins, 0, t.light_set, out, t.t_start, t.bin_len, 0.0,
-                         *[float(v) for v in t.velocity], t.t_ref, key, min(t.gap_at, 3e38), t.gap_len, t.slots))
+                         *[float(v) for v in t.velocity], t.t_ref, key, min(t.gap_at, 3e38), t.gap_len, t.slots,
+                         float(bool(t.sobol))))
             off += (y1 - y0) * (x1 - x0) * t.bins * self.P
         # a dummy last row: no table has a single entry (Dr.Jit loads size-1 arrays as scalars with an alignment
         # that depends on the allocation, which changes the kernel's hash and forces a recompile)
@@ -477,7 +533,7 @@ class Tracer:
         F = lambda c: mi.Float(a[:, c].astype(np.float32))  # noqa: E731
         tab = {"off": mi.UInt32(np.append(a[:-1, 0], off).astype(np.uint32)), "y0": U(1), "x0": U(2), "h": U(3),
                "w": U(4), "K": U(5), "set": U(7), "out": U(8), "t0": F(9), "dt": F(10),
-               "vx": F(12), "vy": F(13), "vz": F(14), "tref": F(15), "key": U(16), "gap": F(17), "gap_len": F(18), "slots": U(19),
+               "vx": F(12), "vy": F(13), "vz": F(14), "tref": F(15), "key": U(16), "gap": F(17), "gap_len": F(18), "slots": U(19), "sobol": U(20),
                "spp": mi.UInt32(pp[:, 0].astype(np.uint32)), "wgt": mi.Float(pp[:, 1].astype(np.float32))}
         n_tiles = dr.opaque(mi.UInt32, len(rows))
         self._trace(buf, tab, n_tiles, off, seed)
@@ -519,7 +575,8 @@ class Tracer:
         vel = mi.Vector3f(g("vx", mi.Float), g("vy", mi.Float), g("vz", mi.Float))
         L = self._pixel(sampler, spp, rot, mi.sample_tea_32(local, tkey + 0x3C6EF372)[0], mi.Float(g("x0") + x), mi.Float(g("y0") + y),
                         g("t0", mi.Float) + mi.Float(k) * g("dt", mi.Float), g("dt", mi.Float), vel,
-                        g("tref", mi.Float), lo_nm, g("set"), g("gap", mi.Float), g("gap_len", mi.Float))
+                        g("tref", mi.Float), lo_nm, g("set"), g("gap", mi.Float), g("gap_len", mi.Float),
+                        g("sobol") != 0)
         wgt = dr.gather(mi.Float, tab["wgt"], pass_row)
         out0 = g("out")
         n_slots = g("slots")
@@ -533,7 +590,7 @@ class Tracer:
                                   (bands[j] < self.n_bands) & (sl < n_slots), mode=dr.ReduceMode.Local)
 
     @dr.syntax
-    def _pixel(self, sampler, spp, rot, key, x0, y0, t0, dt, vel, t_ref, lo_nm, lset, gap_at, gap_len):
+    def _pixel(self, sampler, spp, rot, key, x0, y0, t0, dt, vel, t_ref, lo_nm, lset, gap_at, gap_len, sobol):
         """Sum over ``spp`` samples (UInt32 per lane) of the radiance through pixel [x0, x0 + 1) x [y0, y0 + 1)
         (px) at uniform times in [t0, t0 + dt) (s), times at or after ``gap_at`` moved on by ``gap_len`` (s);
         wavelength j of a sample is uniform in [lo_nm[j],
@@ -541,9 +598,15 @@ class Tracer:
         time are stratified too, each through its own permutation of the strata keyed by ``key`` (UInt32 per
         lane; :func:`_permute`), so that the strata of different dimensions are paired at random: one rotation
         per dimension would pair them along diagonals, which for a lamp moving across a pixel aliased and
-        raised the variance several times. Non-finite samples are dropped (counted as 0). Returns one sum per
-        slot (list of :attr:`S` ``mi.Spectrum``)."""
+        raised the variance several times. ``sobol`` (Bool per lane): x, y and time from the Sobol' points of
+        :func:`sobol_points` instead, randomly shifted per lane (from ``key``): a moving lamp edge crossing a pixel
+        is an indicator in (x, y, t), which strata paired at random stratify only along each axis (measured in
+        docs/render-benchmark.md, "Pixel samples"). The strata's random numbers are drawn either way, so a lane's
+        other dimensions see the same random stream. Non-finite samples are dropped (counted as 0). Returns one
+        sum per slot (list of :attr:`S` ``mi.Spectrum``)."""
         acc = [mi.Spectrum(0.0) for _ in range(self.S)]
+        sh0, sh1 = mi.sample_tea_32(key, mi.UInt32(0x1B873593))
+        sh2 = mi.sample_tea_32(key, mi.UInt32(0xCC9E2D51))[0]
         spp = lane_divisor(spp)  # a divisor below (kernel_rules); the caller's is clamped already
         s = mi.UInt32(0)
         inv = dr.rcp(mi.Float(spp))
@@ -556,8 +619,11 @@ class Tracer:
                                 sampler.next_float32())
             py = y0 + dr.select(pow2, (mi.Float(_permute(s, key, 2, mask)) + sampler.next_float32()) * inv,
                                 sampler.next_float32())
-            t = t0 + dt * dr.select(pow2, (mi.Float(_permute(s, key, 3, mask)) + sampler.next_float32()) * inv,
-                                    sampler.next_float32())
+            ut = dr.select(pow2, (mi.Float(_permute(s, key, 3, mask)) + sampler.next_float32()) * inv,
+                           sampler.next_float32())
+            px = dr.select(sobol, x0 + _sobol_dim(s, sh0, 0), px)
+            py = dr.select(sobol, y0 + _sobol_dim(s, sh1, 1), py)
+            t = t0 + dt * dr.select(sobol, _sobol_dim(s, sh2, 2), ut)
             t = dr.select(t >= gap_at, t + gap_len, t)
             ray = self.camera_ray(px, py, t, vel, t_ref)
             u = (mi.Float((s + rot) % spp) + sampler.next_float32()) * inv
