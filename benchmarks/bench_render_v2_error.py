@@ -40,8 +40,13 @@ Generator-2 cases are also rendered with ``--static-spp`` (default 2 and 4): the
 samples in the static full frames (light_spp unchanged), what a v2-only choice against the all-pixel median
 would cost (the table's CPU column against the v1 scene of that seed and time of day).
 
+``--pixel-samples`` writes the section "Pixel samples (issue 23)": the LED bins as ``--led`` (its filled-cells
+references, shared through ``--cache``) with the pixel samples placed by per-dimension strata or by Sobol' points
+(``RenderOptions.pixel_samples``) and more lamp samples for the lights drawn as filled cells
+(``filled_spp_factor``), per light kind, with a numpy model of moving edges (:func:`edge_model`).
+
 Usage: ``python benchmarks/bench_render_v2_error.py [--cases 202:day:dry 101:night:dry 101:night:wet]
-[--cache DIR] [--quick] [--led] [--static-spp 2 4]``.
+[--cache DIR] [--quick] [--led | --pixel-samples] [--static-spp 2 4]``.
 """
 from __future__ import annotations
 
@@ -171,6 +176,9 @@ def main() -> None:
     ap.add_argument("--out", default=str(ROOT / "docs"))
     ap.add_argument("--quick", action="store_true", help="160x90, reference spp 2 / light_spp 32 (smoke run)")
     ap.add_argument("--led", action="store_true", help="the section \"LED dot faces\" (lamp crops alone)")
+    ap.add_argument("--pixel-samples", action="store_true",
+                    help="the section \"Pixel samples\": strata against Sobol' points, more samples for filled cells "
+                         f"(cases default {' '.join(PXS_CASES)})")
     ap.add_argument("--static-spp", nargs="*", type=int, default=[2, 4],
                     help="also render generator-2 cases with these spp (the static full frames; light_spp as the "
                          "default) to see what the all-pixel median would cost")
@@ -180,6 +188,9 @@ def main() -> None:
         cache.mkdir(parents=True, exist_ok=True)
     if a.led:
         return led_main(cache, Path(a.out), a.quick)
+    if a.pixel_samples:
+        cases = a.cases if a.cases != list(CASES) else list(PXS_CASES)
+        return pixel_samples_main(cases, cache, Path(a.out), a.quick)
     prof = load_yaml(ROOT / "render_tools" / "configs" / "render_profiles.yaml")["default"]
     W, H = (160, 90) if a.quick else SIZE
     ref_spp, ref_light_spp = (2, 32) if a.quick else (REF_SPP, REF_LIGHT_SPP)
@@ -347,9 +358,10 @@ def led_main(cache: Path | None, out: Path, quick: bool) -> None:
         sc = scene.generate_scene(int(seed), tod, scene_id=f"{tod}_{seed}_{weather}", generator=2,
                                   overrides={"weather": {"conditions": [weather]}})
 
-        def opts(light_spp, lod, s, passes="auto"):
+        def opts(light_spp, lod, s, passes="auto"):  # the samples as when this section was made (strata, x1)
             return render.RenderOptions(width=W, height=H, spp=1, light_spp=light_spp, bins=8, frames=1, seed=s,
-                                        groups=groups, aux=False, dots_lod_px=lod, lamp_pass_spp=passes)
+                                        groups=groups, aux=False, dots_lod_px=lod, lamp_pass_spp=passes,
+                                        pixel_samples="strata", filled_spp_factor=1)
 
         tag = c.replace(":", "_")
         refs = {lod: [_frame(sc, opts(ref_spp, lod, s), cache, f"led_ref{lod:g}_{ref_spp}_{s}_{W}_{tag}")[0]
@@ -372,6 +384,118 @@ def led_main(cache: Path | None, out: Path, quick: bool) -> None:
                   r["vs_fill"]["all"] if r["vs_fill"] else "", flush=True)
     model = stratification_model()
     write_led_section(rows, model, out, load0, os.getloadavg()[0], (W, H), ref_spp)
+
+
+#: ``--pixel-samples``: cases, the section written, and the settings (name, pixel_samples, filled_spp_factor).
+PXS_CASES = ("101:night:dry", "202:day:dry", "101:night:wet")
+PXS_SECTION = "## Pixel samples (issue 23)"
+PXS_SETTINGS = (("strata, x1 (before)", "strata", 1), ("strata, filled x4", "strata", 4),
+                ("strata, filled x8", "strata", 8), ("Sobol', x1", "sobol", 1),
+                ("Sobol', filled x2 (default)", "sobol", 2))
+
+
+def pixel_samples_main(cases, cache: Path | None, out: Path, quick: bool) -> None:
+    """``--pixel-samples``: the LED bins of the flickering groups alone (as ``--led``) with the pixel samples
+    placed by per-dimension strata or by Sobol' points (``RenderOptions.pixel_samples``) and more samples for the
+    lights drawn as filled cells (``filled_spp_factor``), against the two light_spp-1024 filled-cells references
+    of ``--led`` (shared through ``--cache``); error per light kind and its share of the squared error; CPU of the
+    lamp crops. Writes the section "Pixel samples (issue 23)" with the numpy model of :func:`edge_model`."""
+    from render_tools import render, scene  # noqa: PLC0415
+
+    W, H = (160, 90) if quick else SIZE
+    ref_spp = 64 if quick else LED_REF_LIGHT_SPP
+    load0 = os.getloadavg()[0]
+    rows = []
+    for c in cases:
+        seed, tod, weather = c.split(":")
+        sc = scene.generate_scene(int(seed), tod, scene_id=f"{tod}_{seed}_{weather}", generator=2,
+                                  overrides={"weather": {"conditions": [weather]}})
+
+        def opts(light_spp, s, mode="strata", factor=1):
+            return render.RenderOptions(width=W, height=H, spp=1, light_spp=light_spp, bins=8, frames=1, seed=s,
+                                        groups=("otherlights", "signals"), aux=False, dots_lod_px=1.0,
+                                        pixel_samples=mode, filled_spp_factor=factor)
+
+        tag = c.replace(":", "_")
+        refs = [_frame(sc, opts(ref_spp, s), cache, f"led_ref1_{ref_spp}_{s}_{W}_{tag}")[0] for s in LED_REF_SEEDS]
+        next(render.render_frames(sc, opts(1, 0, "sobol")))  # warm-up: both placements' kernel compiled
+        for name, mode, factor in PXS_SETTINGS:
+            fr, cpu = _frame(sc, opts(32, 11, mode, factor), cache, f"pxs_{mode}_{factor}_{W}_{tag}")
+            rows.append({"case": c, "setting": name, "cpu_s": cpu, "err": led_error(fr, *refs, sc)})
+            print(c, name, f"{cpu:.1f} s", rows[-1]["err"]["all"], flush=True)
+    write_pxs_section(rows, edge_model(), out, load0, os.getloadavg()[0], (W, H), ref_spp)
+
+
+def edge_model(seed: int = 0, trials: int = 300, ref_n: int = 1 << 18) -> list[tuple]:
+    """Relative RMS error of a pixel's lit share estimated from n samples in (x, y, t) (pixel x, y in [0, 1),
+    time in the bin [0, 1)), per-dimension strata paired at random and Sobol' points with a random digital shift
+    (:func:`render_tools.tracer.sobol_points`), both divided by random sampling's: a lit row 0.4 px tall at
+    rest and moving 0.5 px over the bin (a sign's scan line), a disk of radius 0.8 px moving (a signal's lamp),
+    filled cells 0.4 px apart moving 0.3 px. Each trial draws the feature's position and velocity; the truth is
+    a 2^18-sample estimate. Returns (n, feature, strata, Sobol')."""
+    from render_tools.tracer import sobol_points  # noqa: PLC0415
+
+    rng = np.random.default_rng(seed)
+
+    def strata(n):
+        return np.stack([(rng.permutation(n) + rng.random(n)) / n for _ in range(3)])
+
+    feats = {
+        "row 0.4 px, at rest": lambda: (lambda P, y0=rng.random(): np.abs(P[1] - y0) < 0.2),
+        "row 0.4 px, moving 0.5 px": lambda: (lambda P, y0=rng.random(), v=0.5 * rng.standard_normal():
+                                              np.abs(P[1] - v * (P[2] - 0.5) - y0) < 0.2),
+        "disk r 0.8 px, moving": lambda: (lambda P, c=rng.random(2) * 2 - 0.5, v=0.5 * rng.standard_normal(2):
+                                          (P[0] - v[0] * (P[2] - 0.5) - c[0]) ** 2
+                                          + (P[1] - v[1] * (P[2] - 0.5) - c[1]) ** 2 < 0.64),
+        "cells 0.4 px, moving": lambda: (lambda P, o=rng.random(2), v=0.3 * rng.standard_normal(2):
+                                         (np.mod((P[0] - v[0] * (P[2] - 0.5) - o[0]) / 0.4, 1) < 0.5)
+                                         & (np.mod((P[1] - v[1] * (P[2] - 0.5) - o[1]) / 0.4, 1) < 0.5)),
+    }
+    out = []
+    for n in (32, 128):
+        for name, mk in feats.items():
+            e = {"random": [], "strata": [], "sobol": []}
+            for _ in range(trials):
+                f = mk()
+                truth = f(rng.random((3, ref_n))).mean()
+                e["random"].append(f(rng.random((3, n))).mean() - truth)
+                e["strata"].append(f(strata(n)).mean() - truth)
+                e["sobol"].append(f(sobol_points(np.arange(n), rng.integers(0, 2 ** 32, 3, dtype=np.uint64))).mean()
+                                  - truth)
+            r = {k: float(np.sqrt(np.mean(np.square(v)))) for k, v in e.items()}
+            out.append((n, name, r["strata"] / r["random"], r["sobol"] / r["random"]))
+    return out
+
+
+def write_pxs_section(rows, model, out: Path, load0: float, load1: float, size, ref_spp: int) -> None:
+    kinds = ("message_sign", "signal", "countdown", "chmsl", "brake", "tail")
+
+    def cell(d, k):
+        return f"{d[k][0]:.3f} ({d[k][1]:.2f})" if k in d else "-"
+
+    lines = [PXS_SECTION, "",
+             f"Generated by `benchmarks/bench_render_v2_error.py --pixel-samples` (1-minute load average {load0:.1f} "
+             f"at the start, {load1:.1f} at the end): frame 0 at {size[0]}x{size[1]}, the flickering groups alone "
+             "(otherlights, signals; K 8 bins, light_spp 32, lamp samples by spectrum, sub-pixel dot faces as filled "
+             f"cells), against the two light_spp-{ref_spp} filled-cells references of "LED dot faces" (error "
+             "corrected for their noise, as there). `strata`: each of pixel x, y and time stratified on its own, the "
+             "strata paired at random (scene version 1, and version 2 before); `Sobol'`: the first N points of a "
+             "Sobol' sequence in (x, y, t) with a random digital shift per pixel (`RenderOptions.pixel_samples`, "
+             "`render_tools.tracer.sobol_points`); `filled xF`: light_spp x F for the lights drawn as filled cells "
+             "(`filled_spp_factor`). LED bins: relative RMSE over every light's LED pixels and bins, pooled; per "
+             "kind: error (share of the squared error). CPU: the lamp crops of the frame, user + system s, one "
+             "process after a warm-up render.", "",
+             "| scene | setting | CPU s (lamp crops) | LED bins | " + " | ".join(kinds) + " |",
+             "|---|---|---|---|" + "---|" * len(kinds)]
+    for r in rows:
+        lines.append(f"| {r['case']} | {r['setting']} | {r['cpu_s']:.1f} | {r['err']['all'][0]:.3f} | "
+                     + " | ".join(cell(r["err"], k) for k in kinds) + " |")
+    lines += ["", "Model (numpy, no rendering; `edge_model`): relative RMS error of a pixel's lit share from n "
+              "samples, against random sampling's.", "",
+              "| n | feature | strata | Sobol' |", "|---|---|---|---|"]
+    lines += [f"| {n} | {name} | {a:.2f} | {b:.2f} |" for n, name, a, b in model]
+    replace_section(out / "render-benchmark.md", PXS_SECTION, lines)
+    print("\n".join(lines))
 
 
 def write_led_section(rows, model, out: Path, load0: float, load1: float, size, ref_spp: int) -> None:

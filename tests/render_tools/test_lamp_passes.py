@@ -89,7 +89,7 @@ def test_equal_counts_per_pass_render_the_old_tiles_bit_for_bit(monkeypatch):
     s = _wall_scene()
     base = dict(width=12, height=8, spp=1, light_spp=16, bins=2, frames=1, aux=False, groups=("otherlights",))
     old = next(render.render_frames(s, render.RenderOptions(**base, lamp_pass_spp="uniform")))
-    monkeypatch.setattr(render, "lamp_pass_spp", lambda light, opts: (16,) * camera.n_passes(31))
+    monkeypatch.setattr(render, "lamp_pass_spp", lambda light, opts, n=None: (16,) * camera.n_passes(31))
     new = next(render.render_frames(s, render.RenderOptions(**base, lamp_pass_spp="spectrum")))
     (_, bb0, a), = old["lights"]["otherlights"]
     (_, bb1, b), = new["lights"]["otherlights"]
