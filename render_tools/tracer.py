@@ -332,29 +332,35 @@ def _sobol_directions(s: int, a: int, m: tuple, bits: int = 32) -> tuple[int, ..
     return tuple(v)
 
 
-#: Direction numbers of the Sobol' dimensions used for pixel x, pixel y and time: the van der Corput sequence
-#: (dimension 1) and dimensions 2 and 3 of Joe and Kuo; their first 2^m points are a (0, m, 2)-net in (x, y).
+#: Direction numbers of the Sobol' dimensions used for pixel x, pixel y, time and the first vertex's light sample
+#: (2-D): the van der Corput sequence (dimension 1) and dimensions 2-5 of Joe and Kuo (new-joe-kuo-6.21201: d 4:
+#: s 3, a 1, m 1 3 1; d 5: s 3, a 2, m 1 1 1); their first 2^m points are a (0, m, 2)-net in (x, y).
 SOBOL_DIRECTIONS = (tuple(1 << (31 - i) for i in range(32)), _sobol_directions(1, 0, (1,)),
-                    _sobol_directions(2, 1, (1, 3)))
+                    _sobol_directions(2, 1, (1, 3)), _sobol_directions(3, 1, (1, 3, 1)),
+                    _sobol_directions(3, 2, (1, 1, 1)))
+#: Sobol' dimensions: pixel x, pixel y, time, then the 2-D sample of the first vertex's next-event estimation.
+SOBOL_X, SOBOL_Y, SOBOL_T, SOBOL_LIGHT = 0, 1, 2, 3
 #: Index bits of a Sobol' point the kernel reads (samples of a pixel beyond 2^SOBOL_BITS repeat its points; each
 #: point is still uniform through its random shift, so the estimate stays unbiased).
 SOBOL_BITS = 16
 
 
 def sobol_points(index: np.ndarray, shifts: np.ndarray) -> np.ndarray:
-    """Reference (numpy) of the kernel's Sobol' points: ``index`` (n,) non-negative integers, ``shifts`` (3,) or
-    (3, n) 32-bit random digital shifts -> (3, n) float64 in [0, 1): dimension d of point i is (the i-th point of
+    """Reference (numpy) of the kernel's Sobol' points: ``index`` (n,) non-negative integers, ``shifts`` (D,) or
+    (D, n) 32-bit random digital shifts, D <= 5 dimensions -> (D, n) float64 in [0, 1): dimension d of point i is (the i-th point of
     Sobol' dimension d, as 32 bits, XOR shift_d) / 2^32, truncated to 24 bits as the kernel's float32. A random
     digital shift makes each point uniform on [0, 1)^3 (unbiased estimates) and keeps the net's strata: of 2^m
     points, each of the 2^m cells [i / 2^a, (i + 1) / 2^a) x [j / 2^b, (j + 1) / 2^b), a + b = m, of (x, y) holds
     exactly one (I. M. Sobol', USSR Comput. Math. Math. Phys. 7(4), 1967; A. B. Owen, "Monte Carlo and quasi-Monte
     Carlo for statistics", 2009, on randomized nets)."""
     index = np.asarray(index, np.uint64)
-    out = np.zeros((3, index.size), np.uint64)
-    for d, V in enumerate(SOBOL_DIRECTIONS):
+    shifts = np.asarray(shifts, np.uint64)
+    D = shifts.shape[0]
+    out = np.zeros((D, index.size), np.uint64)
+    for d, V in enumerate(SOBOL_DIRECTIONS[:D]):
         for j in range(SOBOL_BITS):
             out[d] ^= np.where((index >> np.uint64(j)) & np.uint64(1), np.uint64(V[j]), np.uint64(0))
-    out ^= np.asarray(shifts, np.uint64).reshape(3, -1)
+    out ^= shifts.reshape(D, -1)
     return ((out & np.uint64(0xFFFFFFFF)) >> np.uint64(8)).astype(np.float64) / 2.0 ** 24
 
 
@@ -523,7 +529,7 @@ class Tracer:
             per_pass += [(max(n, 1), w_) for n, w_ in zip(sp_p, wgt_p)]  # a pass without samples: 1 of weight 0
             rows.append((off, y0, x0, y1 - y0, x1 - x0, t.bins, 0, t.light_set, out, t.t_start, t.bin_len, 0.0,
                          *[float(v) for v in t.velocity], t.t_ref, key, min(t.gap_at, 3e38), t.gap_len, t.slots,
-                         float(bool(t.sobol))))
+                         float(bool(t.sobol)), max(sp_p)))
             off += (y1 - y0) * (x1 - x0) * t.bins * self.P
         # a dummy last row: no table has a single entry (Dr.Jit loads size-1 arrays as scalars with an alignment
         # that depends on the allocation, which changes the kernel's hash and forces a recompile)
@@ -533,7 +539,7 @@ class Tracer:
         F = lambda c: mi.Float(a[:, c].astype(np.float32))  # noqa: E731
         tab = {"off": mi.UInt32(np.append(a[:-1, 0], off).astype(np.uint32)), "y0": U(1), "x0": U(2), "h": U(3),
                "w": U(4), "K": U(5), "set": U(7), "out": U(8), "t0": F(9), "dt": F(10),
-               "vx": F(12), "vy": F(13), "vz": F(14), "tref": F(15), "key": U(16), "gap": F(17), "gap_len": F(18), "slots": U(19), "sobol": U(20),
+               "vx": F(12), "vy": F(13), "vz": F(14), "tref": F(15), "key": U(16), "gap": F(17), "gap_len": F(18), "slots": U(19), "sobol": U(20), "nmax": U(21),
                "spp": mi.UInt32(pp[:, 0].astype(np.uint32)), "wgt": mi.Float(pp[:, 1].astype(np.float32))}
         n_tiles = dr.opaque(mi.UInt32, len(rows))
         self._trace(buf, tab, n_tiles, off, seed)
@@ -576,7 +582,8 @@ class Tracer:
         L = self._pixel(sampler, spp, rot, mi.sample_tea_32(local, tkey + 0x3C6EF372)[0], mi.Float(g("x0") + x), mi.Float(g("y0") + y),
                         g("t0", mi.Float) + mi.Float(k) * g("dt", mi.Float), g("dt", mi.Float), vel,
                         g("tref", mi.Float), lo_nm, g("set"), g("gap", mi.Float), g("gap_len", mi.Float),
-                        g("sobol") != 0)
+                        g("sobol") != 0, mi.sample_tea_32(local % (K * h * w), tkey + 0x61C88647)[0], p,
+                        g("nmax"))
         wgt = dr.gather(mi.Float, tab["wgt"], pass_row)
         out0 = g("out")
         n_slots = g("slots")
@@ -590,7 +597,8 @@ class Tracer:
                                   (bands[j] < self.n_bands) & (sl < n_slots), mode=dr.ReduceMode.Local)
 
     @dr.syntax
-    def _pixel(self, sampler, spp, rot, key, x0, y0, t0, dt, vel, t_ref, lo_nm, lset, gap_at, gap_len, sobol):
+    def _pixel(self, sampler, spp, rot, key, x0, y0, t0, dt, vel, t_ref, lo_nm, lset, gap_at, gap_len, sobol,
+               pkey, p, nmax):
         """Sum over ``spp`` samples (UInt32 per lane) of the radiance through pixel [x0, x0 + 1) x [y0, y0 + 1)
         (px) at uniform times in [t0, t0 + dt) (s), times at or after ``gap_at`` moved on by ``gap_len`` (s);
         wavelength j of a sample is uniform in [lo_nm[j],
@@ -598,15 +606,22 @@ class Tracer:
         time are stratified too, each through its own permutation of the strata keyed by ``key`` (UInt32 per
         lane; :func:`_permute`), so that the strata of different dimensions are paired at random: one rotation
         per dimension would pair them along diagonals, which for a lamp moving across a pixel aliased and
-        raised the variance several times. ``sobol`` (Bool per lane): x, y and time from the Sobol' points of
-        :func:`sobol_points` instead, randomly shifted per lane (from ``key``): a moving lamp edge crossing a pixel
-        is an indicator in (x, y, t), which strata paired at random stratify only along each axis (measured in
-        docs/render-benchmark.md, "Pixel samples"). The strata's random numbers are drawn either way, so a lane's
-        other dimensions see the same random stream. Non-finite samples are dropped (counted as 0). Returns one
-        sum per slot (list of :attr:`S` ``mi.Spectrum``)."""
+        raised the variance several times. ``sobol`` (Bool per lane): x, y and time, and the first vertex's light
+        sample, from the Sobol' points of :func:`sobol_points` instead: point p ``nmax`` + s for sample s of band
+        pass p (``nmax``: the most samples of any pass of the tile, a power of two like each pass's count),
+        shifted by random 32-bit XORs drawn from ``pkey`` (UInt32, the same for every pass of a pixel and bin). A
+        block of 2^m points starting at a multiple of 2^m is a net, so each pass's samples are one (a band sees its
+        pass's samples only), and with equal counts all passes' together are the first P nmax points, one net too
+        (the static frames' one sample per pass: the pixel's 8 samples stratified): a moving lamp edge crossing a
+        pixel is an indicator in (x, y, t), which strata paired at random stratify only along each axis, and the
+        sky or lamp light at the first hit is then sampled in stratified directions (docs/render-benchmark.md,
+        "Pixel samples"). The strata's random numbers are drawn either way, so a lane's other dimensions see the
+        same random stream. Non-finite samples are dropped (counted as 0). Returns one sum per slot (list of
+        :attr:`S` ``mi.Spectrum``)."""
         acc = [mi.Spectrum(0.0) for _ in range(self.S)]
-        sh0, sh1 = mi.sample_tea_32(key, mi.UInt32(0x1B873593))
-        sh2 = mi.sample_tea_32(key, mi.UInt32(0xCC9E2D51))[0]
+        sh0, sh1 = mi.sample_tea_32(pkey, mi.UInt32(0x1B873593))
+        sh2, sh3 = mi.sample_tea_32(pkey, mi.UInt32(0xCC9E2D51))
+        sh4 = mi.sample_tea_32(pkey, mi.UInt32(0xE6546B64))[0]
         spp = lane_divisor(spp)  # a divisor below (kernel_rules); the caller's is clamped already
         s = mi.UInt32(0)
         inv = dr.rcp(mi.Float(spp))
@@ -621,15 +636,17 @@ class Tracer:
                                 sampler.next_float32())
             ut = dr.select(pow2, (mi.Float(_permute(s, key, 3, mask)) + sampler.next_float32()) * inv,
                            sampler.next_float32())
-            px = dr.select(sobol, x0 + _sobol_dim(s, sh0, 0), px)
-            py = dr.select(sobol, y0 + _sobol_dim(s, sh1, 1), py)
-            t = t0 + dt * dr.select(sobol, _sobol_dim(s, sh2, 2), ut)
+            i = p * nmax + s  # this sample's point: pass p's block of the pixel's sequence
+            px = dr.select(sobol, x0 + _sobol_dim(i, sh0, SOBOL_X), px)
+            py = dr.select(sobol, y0 + _sobol_dim(i, sh1, SOBOL_Y), py)
+            t = t0 + dt * dr.select(sobol, _sobol_dim(i, sh2, SOBOL_T), ut)
             t = dr.select(t >= gap_at, t + gap_len, t)
             ray = self.camera_ray(px, py, t, vel, t_ref)
             u = (mi.Float((s + rot) % spp) + sampler.next_float32()) * inv
             ray.wavelengths = mi.Spectrum(lo_nm[0] + u * self.band_w, lo_nm[1] + u * self.band_w,
                                           lo_nm[2] + u * self.band_w, lo_nm[3] + u * self.band_w)
-            L = self._radiance(sampler, ray, lset)
+            u_light = mi.Point2f(_sobol_dim(i, sh3, SOBOL_LIGHT), _sobol_dim(i, sh4, SOBOL_LIGHT + 1))
+            L = self._radiance(sampler, ray, lset, sobol, u_light)
             acc = [acc[j] + mi.Spectrum(dr.select(dr.isfinite(L[j]), L[j], 0.0)) for j in range(self.S)]
             s += 1
         return acc
@@ -710,11 +727,12 @@ class Tracer:
         return row, beam, member, slot
 
     @dr.syntax
-    def _radiance(self, sampler, ray, lset):
+    def _radiance(self, sampler, ray, lset, sobol=False, u_light=None):
         """Radiance (one ``mi.Spectrum`` per slot, W sr^-1 m^-2 nm^-1 at the ray's 4 wavelengths) arriving along
         ``ray`` from the emitters of light set ``lset`` (UInt32 per lane): Mitsuba's ``path`` integrator restricted
         to a set, the light of a union set's groups kept apart by slot. ``sampler``: a ``mi.PCG32`` with one
-        stream per lane."""
+        stream per lane. ``sobol`` (Bool per lane): the first vertex's light sample (the 2-D point of
+        ``sample_direction``) is ``u_light`` (Point2f) instead of the sampler's (which are drawn all the same)."""
         S = self.sets
         n_slots = self.S
         ctx = mi.BSDFContext()
@@ -755,8 +773,10 @@ class Tracer:
             # at this point (:meth:`_choose_light`)
             active_em = active_next & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
             em, pmf_em, wsum, slot_em = self._choose_light(sampler, start, cnt, si.p, si.n, active_em)
-            ds_em, w_em = em.sample_direction(si, mi.Point2f(sampler.next_float32(), sampler.next_float32()),
-                                              active_em)
+            u_em = mi.Point2f(sampler.next_float32(), sampler.next_float32())
+            if u_light is not None:
+                u_em = dr.select(sobol & (depth == 0), u_light, u_em)
+            ds_em, w_em = em.sample_direction(si, u_em, active_em)
             w_em = dr.maximum(w_em, EMISSION_FLOOR)  # as above: the clamped sky, an unbiased estimate of it
             w_em *= dr.select(dr.reinterpret_array(mi.UInt32, em) == self.env_id, self.sky_scale, 1.0)
             active_em &= (ds_em.pdf != 0.0) & (pmf_em > 0)

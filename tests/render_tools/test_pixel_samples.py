@@ -40,6 +40,24 @@ def test_shifted_points_keep_the_nets_strata(m):
             assert np.array_equal(np.sort(np.floor(p[d] * n).astype(int)), np.arange(n))
 
 
+def test_each_pass_block_is_a_net():
+    """The kernel gives sample s of band pass p the point p * nmax + s (nmax: the most samples of any of the tile's
+    passes): a pass with n | nmax samples holds a block of n points starting at a multiple of n, stratified in
+    each axis and in (x, y) as the sequence's first n points are; with equal counts the passes together hold the
+    first P nmax points (the static frames: 8 passes x 1 sample, stratified over the pixel)."""
+    rng = np.random.default_rng(7)
+    nmax = 16
+    for p in range(8):
+        for n in (1, 4, 16):
+            pts = tracer.sobol_points(p * nmax + np.arange(n), rng.integers(0, 2 ** 32, 3, dtype=np.uint64))
+            for d in range(3):
+                assert np.array_equal(np.sort(np.floor(pts[d] * n).astype(int)), np.arange(n)), (p, n, d)
+    every = tracer.sobol_points(np.arange(8) * 1, rng.integers(0, 2 ** 32, 3, dtype=np.uint64))  # nmax 1
+    for a in range(4):
+        cells = np.floor(every[0] * 2 ** a).astype(int) * 2 ** (3 - a) + np.floor(every[1] * 2 ** (3 - a)).astype(int)
+        assert np.array_equal(np.sort(cells), np.arange(8))
+
+
 def test_shifted_points_are_uniform():
     """Over random shifts each point is uniform on [0, 1): mean 1/2, variance 1/12 and a flat histogram
     (binomial bounds, 5 standard deviations) for a few point indices."""
