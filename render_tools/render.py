@@ -120,6 +120,12 @@ class RenderOptions:
     ``"sobol"`` (a randomly shifted Sobol' sequence: also stratified jointly, which an edge moving across the
     pixel during a bin needs; both unbiased) or ``"auto"`` (default: ``sobol`` on scene version 2, ``strata``
     on version 1, whose renders are frozen).
+    reflection_block_px: 1 or 2 (:data:`render_tools.tracer.BLOCK`): a wet road's reflection bands are traced
+    with one lane per block of that many px squared, its samples spread over the block and its mean written to
+    each pixel of it (:class:`render_tools.tracer.Tile` ``block``): the reflection's image box-blurred over the
+    block (its light in the block kept) for a quarter of its camera samples. A lamp's reflection in a glossy
+    film is itself a blur many px wide (docs/rendering.md, "Wet roads"; error in docs/render-benchmark.md). 1:
+    every pixel traced. No effect on dry scenes.
     """
 
     width: int = 640
@@ -145,6 +151,7 @@ class RenderOptions:
     lamp_pass_spp: str = "auto"
     filled_spp_factor: int = 2
     pixel_samples: str = "auto"
+    reflection_block_px: int = 2
 
     def __post_init__(self):
         self.bands_nm = tuple(float(b) for b in self.bands_nm)
@@ -174,6 +181,8 @@ class RenderOptions:
             raise ValueError(f"dots_lod_px: must be a number >= 0 px, got {lod!r}")
         if self.lamp_pass_spp not in LAMP_PASS_SPP:
             raise ValueError(f"lamp_pass_spp: must be one of {LAMP_PASS_SPP}, got {self.lamp_pass_spp!r}")
+        if self.reflection_block_px not in (1, 2) or isinstance(self.reflection_block_px, bool):
+            raise ValueError(f"reflection_block_px: must be 1 or 2, got {self.reflection_block_px!r}")
         if self.pixel_samples not in PIXEL_SAMPLES:
             raise ValueError(f"pixel_samples: must be one of {PIXEL_SAMPLES}, got {self.pixel_samples!r}")
         f = self.filled_spp_factor
@@ -583,7 +592,8 @@ def scene_meta(scene: dict, opts: RenderOptions) -> dict:
         "render": {"spp": opts.spp, "light_spp": opts.light_spp or opts.spp, "seed": opts.seed,
                    "pad_px": opts.pad_px, "static_pass": opts.static_pass,
                    **({"reflection_bins": opts.reflection_bins or opts.bins,
-                       "reflection_min_lux": opts.reflection_min_lux} if helper.wet else {}),
+                       "reflection_min_lux": opts.reflection_min_lux,
+                       "reflection_block_px": opts.reflection_block_px} if helper.wet else {}),
                    **({"dots_lod_px": opts.dots_lod_px, "dots_lod": lod_ids,
                        "filled_spp_factor": opts.filled_spp_factor}
                       if any(lt["shape"] == "dots" for lt in scene["lights"]) else {}),
@@ -731,15 +741,17 @@ def plan_frame(scene: dict, opts: RenderOptions, n: int, sets, geo: SceneGeometr
                     crops.append(("light_part", lamp_bb, own_spp, opts.bins, ("lamp",)))
             for kind, crop, n_s, nb, extra in crops:
                 key = _seed("light", lt["id"], *extra)
-                own = None if extra[:1] == ("reflection",) else ps
+                refl = extra[:1] == ("reflection",)
+                own, blk = (None, opts.reflection_block_px) if refl else (ps, 1)
                 if geo.ego.moving or np.any(v != 0.0):
                     plan.append((kind, g, lt["id"], crop, len(tiles), opts.bins // nb))
                     tiles.append(Tile(crop, nb, edges[0], (edges[-1] - edges[0]) / nb, n_s, k,
-                                      tuple(float(x) for x in v), t_obj, key=key, pass_spp=own, sobol=qmc))
+                                      tuple(float(x) for x in v), t_obj, key=key, pass_spp=own, sobol=qmc,
+                                      block=blk))
                 else:  # static camera and lamp inside the frame: all bins are the same image
                     plan.append((kind, g, lt["id"], crop, len(tiles), opts.bins))
                     tiles.append(Tile(crop, 1, edges[0], edges[-1] - edges[0], n_s, k, key=key, pass_spp=own,
-                                      sobol=qmc))
+                                      sobol=qmc, block=blk))
     return tiles, plan, visible
 
 

@@ -54,6 +54,8 @@ MAX_LANES = 1 << 28
 #: Path vertex from which Russian roulette may end a path (Mitsuba's ``rr_depth``, whose default 5 never acts at
 #: ``max_depth`` 5): vertices 3-5 cost 40 % of a night frame's time and carry little of its light.
 RR_DEPTH = 2
+#: Side (px) of the pixel blocks a :class:`Tile` with ``block`` > 1 traces as one (the only such size).
+BLOCK = 2
 #: Index value meaning "no set" in the per-emitter lookup tables.
 NO_SET = 0xFFFFFFFF
 #: Beam cut-off cosine entries of a :class:`LightSets` row meaning "a lamp without a beam" and "the environment".
@@ -156,7 +158,10 @@ class Tile:
     of ``spp`` in every pass: band c is the mean of pass c mod P's samples, so each band stays unbiased whatever
     the split (:func:`render_tools.render.lamp_pass_spp` gives a lamp's passes samples by its spectrum). sobol:
     pixel x, y and time of a pixel's samples from a randomly shifted Sobol' sequence (:func:`sobol_points`)
-    instead of per-dimension strata paired at random (scene version 2; ``RenderOptions.pixel_samples``).
+    instead of per-dimension strata paired at random (scene version 2; ``RenderOptions.pixel_samples``). block:
+    1, or :data:`BLOCK` to trace one lane per BLOCK x BLOCK pixels (its samples spread over the block, its mean
+    written to each of them: the block's average light, a box blur of the tile's image at 1 / BLOCK^2 the
+    samples; ``RenderOptions.reflection_block_px``).
     """
 
     crop: tuple
@@ -173,6 +178,7 @@ class Tile:
     slots: int = 1
     pass_spp: tuple | None = None
     sobol: bool = False
+    block: int = 1
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -476,12 +482,15 @@ class Tracer:
             if t.gap_len < 0 or (t.gap_len > 0 and t.bins != 1):
                 raise ValueError(f"tiles[{i}]: a time gap needs gap_len >= 0 s and one bin, got {t.gap_len} s, "
                                  f"{t.bins} bins")
+            if t.block not in (1, BLOCK):
+                raise ValueError(f"tiles[{i}]: block must be 1 or {BLOCK}, got {t.block}")
             if not 1 <= t.slots <= self.S:
                 raise ValueError(f"tiles[{i}]: slots {t.slots} not in [1, {self.S}] (the light sets' union has "
                                  f"{self.S} group(s))")
             outs.append((size, (t.slots, t.bins, C, h, w) if t.slots > 1 else (t.bins, C, h, w)))
+            lh, lw = -(-h // t.block), -(-w // t.block)  # the lane grid: one lane per block
             if t.pass_spp is None:
-                n_split = max(1, -(-h * w * t.bins * P * t.spp // MAX_LANES))
+                n_split = max(1, -(-lh * lw * t.bins * P * t.spp // MAX_LANES))
                 base, extra = divmod(t.spp, n_split)
                 for j in range(n_split):
                     sp = base + (j < extra)
@@ -491,7 +500,7 @@ class Tracer:
                 ps = [int(n) for n in t.pass_spp]
                 if len(ps) != P or min(ps) < 1:
                     raise ValueError(f"tiles[{i}]: pass_spp needs {P} counts >= 1, got {t.pass_spp}")
-                n_split = max(1, -(-h * w * t.bins * sum(ps) // MAX_LANES))
+                n_split = max(1, -(-lh * lw * t.bins * sum(ps) // MAX_LANES))
                 shares = [divmod(n, n_split) for n in ps]  # (base, extra) of each pass, as for spp above
                 for j in range(min(n_split, max(ps))):
                     sp = tuple(b + (j < e) for b, e in shares)
@@ -503,6 +512,7 @@ class Tracer:
         for part in parts:
             t = tiles[part[0]]
             h, w = t.shape
+            h, w = -(-h // t.block), -(-w // t.block)
             n = h * w * t.bins * (P * part[1] if isinstance(part[1], int) else sum(max(c, 1) for c in part[1]))
             # samples (the launch's work), lanes = samples / spp
             if batch and lanes + n > MAX_LANES:
@@ -529,8 +539,8 @@ class Tracer:
             per_pass += [(max(n, 1), w_) for n, w_ in zip(sp_p, wgt_p)]  # a pass without samples: 1 of weight 0
             rows.append((off, y0, x0, y1 - y0, x1 - x0, t.bins, 0, t.light_set, out, t.t_start, t.bin_len, 0.0,
                          *[float(v) for v in t.velocity], t.t_ref, key, min(t.gap_at, 3e38), t.gap_len, t.slots,
-                         float(bool(t.sobol)), max(sp_p)))
-            off += (y1 - y0) * (x1 - x0) * t.bins * self.P
+                         float(bool(t.sobol)), max(sp_p), t.block))
+            off += -(-(y1 - y0) // t.block) * -(-(x1 - x0) // t.block) * t.bins * self.P
         # a dummy last row: no table has a single entry (Dr.Jit loads size-1 arrays as scalars with an alignment
         # that depends on the allocation, which changes the kernel's hash and forces a recompile)
         a = np.array(rows + [rows[-1]], dtype=np.float64)
@@ -539,7 +549,7 @@ class Tracer:
         F = lambda c: mi.Float(a[:, c].astype(np.float32))  # noqa: E731
         tab = {"off": mi.UInt32(np.append(a[:-1, 0], off).astype(np.uint32)), "y0": U(1), "x0": U(2), "h": U(3),
                "w": U(4), "K": U(5), "set": U(7), "out": U(8), "t0": F(9), "dt": F(10),
-               "vx": F(12), "vy": F(13), "vz": F(14), "tref": F(15), "key": U(16), "gap": F(17), "gap_len": F(18), "slots": U(19), "sobol": U(20), "nmax": U(21),
+               "vx": F(12), "vy": F(13), "vz": F(14), "tref": F(15), "key": U(16), "gap": F(17), "gap_len": F(18), "slots": U(19), "sobol": U(20), "nmax": U(21), "block": U(22),
                "spp": mi.UInt32(pp[:, 0].astype(np.uint32)), "wgt": mi.Float(pp[:, 1].astype(np.float32))}
         n_tiles = dr.opaque(mi.UInt32, len(rows))
         self._trace(buf, tab, n_tiles, off, seed)
@@ -561,13 +571,17 @@ class Tracer:
         g = lambda k, T=mi.UInt32: dr.gather(T, tab[k], ti)  # noqa: E731
         # divisors clamped to >= 1: the masked tail lanes of the last packet gather 0 (kernel_rules)
         w, h, K = (lane_divisor(g(k)) for k in ("w", "h", "K"))
+        b = lane_divisor(g("block"))  # 1, or BLOCK: the lane grid has one lane per b x b pixels
+        lw, lh = (w + b - 1) // b, (h + b - 1) // b
         local = lane - g("off")
-        x = local % w
-        r = local // w
-        y = r % h
-        r = r // h
+        bx = local % lw
+        r = local // lw
+        by = r % lh
+        r = r // lh
         k = r % K
         p = r // K
+        x, y = bx * b, by * b  # the block's first pixel in the tile
+        fw, fh = dr.minimum(b, w - x), dr.minimum(b, h - y)  # its size inside the tile, px
         pass_row = ti * self.n_pass + p  # the tile's entry for band pass p in the per-pass tables
         spp = lane_divisor(dr.gather(mi.UInt32, tab["spp"], pass_row))
         seed_o = dr.opaque(mi.UInt32, seed)
@@ -579,28 +593,34 @@ class Tracer:
         bands = [p + j * self.n_pass for j in range(N_LAMBDA)]
         lo_nm = [dr.gather(mi.Float, self.band_lo, b) for b in bands]
         vel = mi.Vector3f(g("vx", mi.Float), g("vy", mi.Float), g("vz", mi.Float))
-        L = self._pixel(sampler, spp, rot, mi.sample_tea_32(local, tkey + 0x3C6EF372)[0], mi.Float(g("x0") + x), mi.Float(g("y0") + y),
-                        g("t0", mi.Float) + mi.Float(k) * g("dt", mi.Float), g("dt", mi.Float), vel,
-                        g("tref", mi.Float), lo_nm, g("set"), g("gap", mi.Float), g("gap_len", mi.Float),
-                        g("sobol") != 0, mi.sample_tea_32(local % (K * h * w), tkey + 0x61C88647)[0], p,
-                        g("nmax"))
+        L = self._pixel(sampler, spp, rot, mi.sample_tea_32(local, tkey + 0x3C6EF372)[0], mi.Float(g("x0") + x),
+                        mi.Float(g("y0") + y), g("t0", mi.Float) + mi.Float(k) * g("dt", mi.Float),
+                        g("dt", mi.Float), vel, g("tref", mi.Float), lo_nm, g("set"), g("gap", mi.Float),
+                        g("gap_len", mi.Float), g("sobol") != 0,
+                        mi.sample_tea_32(local % (K * lh * lw), tkey + 0x61C88647)[0], p, g("nmax"),
+                        mi.Float(fw), mi.Float(fh))
         wgt = dr.gather(mi.Float, tab["wgt"], pass_row)
         out0 = g("out")
         n_slots = g("slots")
         stride = K * self.n_bands * h * w  # one image of the tile (a slot)
         for sl in range(self.S):
             for j in range(N_LAMBDA):
-                idx = out0 + sl * stride + ((k * self.n_bands + bands[j]) * h + y) * w + x
-                # mode Local, not Auto: Auto expands a buffer of <= 1 M values per thread with the buffer's size
-                # as a kernel literal (a new kernel per size); frames of 160x90 and more got Local already
-                dr.scatter_reduce(dr.ReduceOp.Add, buf, L[sl][j] * wgt, idx,
-                                  (bands[j] < self.n_bands) & (sl < n_slots), mode=dr.ReduceMode.Local)
+                for dy in range(BLOCK):  # every pixel of the block (one of them when b is 1) gets the lane's mean
+                    for dx in range(BLOCK):
+                        idx = out0 + sl * stride + ((k * self.n_bands + bands[j]) * h + y + dy) * w + x + dx
+                        # mode Local, not Auto: Auto expands a buffer of <= 1 M values per thread with the buffer's
+                        # size as a kernel literal (a new kernel per size); frames of 160x90 and more got Local
+                        on = (bands[j] < self.n_bands) & (sl < n_slots)
+                        if dx or dy:
+                            on &= (dx < fw) & (dy < fh)
+                        dr.scatter_reduce(dr.ReduceOp.Add, buf, L[sl][j] * wgt, idx, on,
+                                          mode=dr.ReduceMode.Local)
 
     @dr.syntax
     def _pixel(self, sampler, spp, rot, key, x0, y0, t0, dt, vel, t_ref, lo_nm, lset, gap_at, gap_len, sobol,
-               pkey, p, nmax):
-        """Sum over ``spp`` samples (UInt32 per lane) of the radiance through pixel [x0, x0 + 1) x [y0, y0 + 1)
-        (px) at uniform times in [t0, t0 + dt) (s), times at or after ``gap_at`` moved on by ``gap_len`` (s);
+               pkey, p, nmax, fw, fh):
+        """Sum over ``spp`` samples (UInt32 per lane) of the radiance through the footprint [x0, x0 + fw) x [y0,
+        y0 + fh) (px; a pixel, or a block of pixels: ``fw``, ``fh`` Float) at uniform times in [t0, t0 + dt) (s), times at or after ``gap_at`` moved on by ``gap_len`` (s);
         wavelength j of a sample is uniform in [lo_nm[j],
         lo_nm[j] + band width) (nm), stratified over the samples (stratum (s + rot) mod spp). Pixel x, y and
         time are stratified too, each through its own permutation of the strata keyed by ``key`` (UInt32 per
@@ -630,15 +650,15 @@ class Tracer:
         while s < spp:
             # pixel x, y and time: each stratified over the samples by its own keyed permutation of the strata
             # (a power of two spp; else independent uniform draws)
-            px = x0 + dr.select(pow2, (mi.Float(_permute(s, key, 1, mask)) + sampler.next_float32()) * inv,
-                                sampler.next_float32())
-            py = y0 + dr.select(pow2, (mi.Float(_permute(s, key, 2, mask)) + sampler.next_float32()) * inv,
-                                sampler.next_float32())
+            px = x0 + fw * dr.select(pow2, (mi.Float(_permute(s, key, 1, mask)) + sampler.next_float32()) * inv,
+                                     sampler.next_float32())
+            py = y0 + fh * dr.select(pow2, (mi.Float(_permute(s, key, 2, mask)) + sampler.next_float32()) * inv,
+                                     sampler.next_float32())
             ut = dr.select(pow2, (mi.Float(_permute(s, key, 3, mask)) + sampler.next_float32()) * inv,
                            sampler.next_float32())
             i = p * nmax + s  # this sample's point: pass p's block of the pixel's sequence
-            px = dr.select(sobol, x0 + _sobol_dim(i, sh0, SOBOL_X), px)
-            py = dr.select(sobol, y0 + _sobol_dim(i, sh1, SOBOL_Y), py)
+            px = dr.select(sobol, x0 + fw * _sobol_dim(i, sh0, SOBOL_X), px)
+            py = dr.select(sobol, y0 + fh * _sobol_dim(i, sh1, SOBOL_Y), py)
             t = t0 + dt * dr.select(sobol, _sobol_dim(i, sh2, SOBOL_T), ut)
             t = dr.select(t >= gap_at, t + gap_len, t)
             ray = self.camera_ray(px, py, t, vel, t_ref)
