@@ -89,6 +89,15 @@ LED_SETTINGS = (("dots (before)", 32, 0.0, "uniform"), ("dots, light_spp x4", 12
                 ("filled cells, passes by spectrum (default)", 32, 1.0, "spectrum"))
 
 
+def _v2_scene(case: str) -> dict:
+    """The generator-2 scene of a case ``seed:time of day:weather``."""
+    from render_tools import scene  # noqa: PLC0415
+
+    seed, tod, weather = case.split(":")
+    return scene.generate_scene(int(seed), tod, scene_id=f"{tod}_{seed}_{weather}", generator=2,
+                                overrides={"weather": {"conditions": [weather]}})
+
+
 def _frame(sc, opts, cache: Path | None, tag: str):
     """Frame 0 of ``sc`` rendered with ``opts`` (from ``cache``/``tag``.pkl when there); returns (frame, CPU s)."""
     import resource  # noqa: PLC0415
@@ -352,7 +361,7 @@ def stratification_model(seed: int = 1, trials: int = 400, grid: int = 400) -> l
 
 def led_main(cache: Path | None, out: Path, quick: bool) -> None:
     """``--led``: render, measure and write the section "LED dot faces (issue 23)"."""
-    from render_tools import render, scene  # noqa: PLC0415
+    from render_tools import render  # noqa: PLC0415
 
     W, H = (160, 90) if quick else SIZE
     ref_spp = 64 if quick else LED_REF_LIGHT_SPP
@@ -360,9 +369,7 @@ def led_main(cache: Path | None, out: Path, quick: bool) -> None:
     load0 = os.getloadavg()[0]
     rows = []
     for c in LED_CASES:
-        seed, tod, weather = c.split(":")
-        sc = scene.generate_scene(int(seed), tod, scene_id=f"{tod}_{seed}_{weather}", generator=2,
-                                  overrides={"weather": {"conditions": [weather]}})
+        sc = _v2_scene(c)
 
         def opts(light_spp, lod, s, passes="auto"):  # the samples as when this section was made (strata, x1)
             return render.RenderOptions(width=W, height=H, spp=1, light_spp=light_spp, bins=8, frames=1, seed=s,
@@ -406,16 +413,14 @@ def pixel_samples_main(cases, cache: Path | None, out: Path, quick: bool) -> Non
     lights drawn as filled cells (``filled_spp_factor``), against the two light_spp-1024 filled-cells references
     of ``--led`` (shared through ``--cache``); error per light kind and its share of the squared error; CPU of the
     lamp crops. Writes the section "Pixel samples (issue 23)" with the numpy model of :func:`edge_model`."""
-    from render_tools import render, scene  # noqa: PLC0415
+    from render_tools import render  # noqa: PLC0415
 
     W, H = (160, 90) if quick else SIZE
     ref_spp = 64 if quick else LED_REF_LIGHT_SPP
     load0 = os.getloadavg()[0]
     rows = []
     for c in cases:
-        seed, tod, weather = c.split(":")
-        sc = scene.generate_scene(int(seed), tod, scene_id=f"{tod}_{seed}_{weather}", generator=2,
-                                  overrides={"weather": {"conditions": [weather]}})
+        sc = _v2_scene(c)
 
         def opts(light_spp, s, mode="strata", factor=1):
             return render.RenderOptions(width=W, height=H, spp=1, light_spp=light_spp, bins=8, frames=1, seed=s,
