@@ -379,6 +379,11 @@ def _sobol_dim(i, shift, d: int):
     return mi.Float(acc >> 8) * (1.0 / (1 << 24))
 
 
+def _lane_grid(h: int, w: int, block: int) -> tuple[int, int]:
+    """Rows and columns of lanes of an h x w px tile traced in ``block`` x ``block`` px blocks (host integers)."""
+    return -(-h // block), -(-w // block)
+
+
 def _mis_weight(pdf_a, pdf_b):
     """Balance heuristic pdf_a / (pdf_a + pdf_b) (0 where both are 0), as Mitsuba's ``mis_weight``."""
     w = pdf_a / (pdf_a + pdf_b)
@@ -488,7 +493,7 @@ class Tracer:
                 raise ValueError(f"tiles[{i}]: slots {t.slots} not in [1, {self.S}] (the light sets' union has "
                                  f"{self.S} group(s))")
             outs.append((size, (t.slots, t.bins, C, h, w) if t.slots > 1 else (t.bins, C, h, w)))
-            lh, lw = -(-h // t.block), -(-w // t.block)  # the lane grid: one lane per block
+            lh, lw = _lane_grid(h, w, t.block)  # one lane per block
             if t.pass_spp is None:
                 n_split = max(1, -(-lh * lw * t.bins * P * t.spp // MAX_LANES))
                 base, extra = divmod(t.spp, n_split)
@@ -511,8 +516,7 @@ class Tracer:
         launch = 0
         for part in parts:
             t = tiles[part[0]]
-            h, w = t.shape
-            h, w = -(-h // t.block), -(-w // t.block)
+            h, w = _lane_grid(*t.shape, t.block)
             n = h * w * t.bins * (P * part[1] if isinstance(part[1], int) else sum(max(c, 1) for c in part[1]))
             # samples (the launch's work), lanes = samples / spp
             if batch and lanes + n > MAX_LANES:
@@ -540,7 +544,8 @@ class Tracer:
             rows.append((off, y0, x0, y1 - y0, x1 - x0, t.bins, 0, t.light_set, out, t.t_start, t.bin_len, 0.0,
                          *[float(v) for v in t.velocity], t.t_ref, key, min(t.gap_at, 3e38), t.gap_len, t.slots,
                          float(bool(t.sobol)), max(sp_p), t.block))
-            off += -(-(y1 - y0) // t.block) * -(-(x1 - x0) // t.block) * t.bins * self.P
+            lh, lw = _lane_grid(y1 - y0, x1 - x0, t.block)
+            off += lh * lw * t.bins * self.P
         # a dummy last row: no table has a single entry (Dr.Jit loads size-1 arrays as scalars with an alignment
         # that depends on the allocation, which changes the kernel's hash and forces a recompile)
         a = np.array(rows + [rows[-1]], dtype=np.float64)
@@ -572,7 +577,7 @@ class Tracer:
         # divisors clamped to >= 1: the masked tail lanes of the last packet gather 0 (kernel_rules)
         w, h, K = (lane_divisor(g(k)) for k in ("w", "h", "K"))
         b = lane_divisor(g("block"))  # 1, or BLOCK: the lane grid has one lane per b x b pixels
-        lw, lh = (w + b - 1) // b, (h + b - 1) // b
+        lw, lh = lane_divisor((w + b - 1) // b), lane_divisor((h + b - 1) // b)
         local = lane - g("off")
         bx = local % lw
         r = local // lw
