@@ -379,6 +379,25 @@ def _sobol_dim(i, shift, d: int):
     return mi.Float(acc >> 8) * (1.0 / (1 << 24))
 
 
+def _sobol_shifts(pkey):
+    """The 5 random 32-bit digital shifts (UInt32) of a pixel's Sobol' points, from its key ``pkey`` (UInt32)."""
+    sh0, sh1 = mi.sample_tea_32(pkey, mi.UInt32(0x1B873593))
+    sh2, sh3 = mi.sample_tea_32(pkey, mi.UInt32(0xCC9E2D51))
+    return sh0, sh1, sh2, sh3, mi.sample_tea_32(pkey, mi.UInt32(0xE6546B64))[0]
+
+
+def _sobol_sample(qmc, shifts, s, ux, uy, ut):
+    """Sample ``s`` of a lane's pass: (x, y, t in [0, 1), the first vertex's light sample Point2f) from the shifted
+    Sobol' point p nmax + s where the lane's ``sobol`` flag is set, else ``ux``, ``uy``, ``ut`` and the Sobol'
+    light sample unused. ``qmc`` = (sobol Bool, pkey, p, nmax) as :meth:`Tracer._pixel` takes it."""
+    sobol, _, p, nmax = qmc
+    i = p * nmax + s  # pass p's block of the pixel's sequence
+    return (dr.select(sobol, _sobol_dim(i, shifts[0], SOBOL_X), ux),
+            dr.select(sobol, _sobol_dim(i, shifts[1], SOBOL_Y), uy),
+            dr.select(sobol, _sobol_dim(i, shifts[2], SOBOL_T), ut),
+            mi.Point2f(_sobol_dim(i, shifts[3], SOBOL_LIGHT), _sobol_dim(i, shifts[4], SOBOL_LIGHT + 1)))
+
+
 def _lane_grid(h: int, w: int, block: int) -> tuple[int, int]:
     """Rows and columns of lanes of an h x w px tile traced in ``block`` x ``block`` px blocks (host integers)."""
     return -(-h // block), -(-w // block)
@@ -557,12 +576,18 @@ class Tracer:
                "vx": F(12), "vy": F(13), "vz": F(14), "tref": F(15), "key": U(16), "gap": F(17), "gap_len": F(18), "slots": U(19), "sobol": U(20), "nmax": U(21), "block": U(22),
                "spp": mi.UInt32(pp[:, 0].astype(np.uint32)), "wgt": mi.Float(pp[:, 1].astype(np.float32))}
         n_tiles = dr.opaque(mi.UInt32, len(rows))
-        self._trace(buf, tab, n_tiles, off, seed)
+        # Sobol' points and pixel blocks are compiled in only when a tile of the launch asks for them: the kernels of
+        # scenes without them (every lfmbench-v1 scene) stay the code, and the cost, they were
+        self._trace(buf, tab, n_tiles, off, seed, any(tiles[i].sobol for i, *_ in parts),
+                    any(tiles[i].block > 1 for i, *_ in parts))
         dr.eval(buf)
 
-    def _trace(self, buf, tab, n_tiles, n_lanes: int, seed: int) -> None:
-        """One lane per (tile, band pass, bin, pixel): it loops over the pixel's samples and writes its 4 bands
-        once, so no two lanes of a launch add to the same value (deterministic sums, no atomics)."""
+    def _trace(self, buf, tab, n_tiles, n_lanes: int, seed: int, use_sobol: bool = False,
+               use_block: bool = False) -> None:
+        """One lane per (tile, band pass, bin, pixel or block of pixels): it loops over its samples and writes its
+        4 bands once (to each pixel of its block), so no two lanes of a launch add to the same value
+        (deterministic sums, no atomics). ``use_sobol`` / ``use_block``: compile in the per-tile Sobol' points /
+        pixel blocks (some tile of the launch has them)."""
         mi, dr = self.mi, self.dr
         lane = dr.arange(mi.UInt32, n_lanes)
         # tile of each lane: binary search over the lane offsets (fixed 20 steps: up to 2^20 tiles)
@@ -576,17 +601,26 @@ class Tracer:
         g = lambda k, T=mi.UInt32: dr.gather(T, tab[k], ti)  # noqa: E731
         # divisors clamped to >= 1: the masked tail lanes of the last packet gather 0 (kernel_rules)
         w, h, K = (lane_divisor(g(k)) for k in ("w", "h", "K"))
-        b = lane_divisor(g("block"))  # 1, or BLOCK: the lane grid has one lane per b x b pixels
-        lw, lh = lane_divisor((w + b - 1) // b), lane_divisor((h + b - 1) // b)
         local = lane - g("off")
-        bx = local % lw
-        r = local // lw
-        by = r % lh
-        r = r // lh
+        if use_block:
+            b = lane_divisor(g("block"))  # 1, or BLOCK: the lane grid has one lane per b x b pixels
+            lw, lh = lane_divisor((w + b - 1) // b), lane_divisor((h + b - 1) // b)
+            bx = local % lw
+            r = local // lw
+            by = r % lh
+            r = r // lh
+            x, y = bx * b, by * b  # the block's first pixel in the tile
+            fw, fh = dr.minimum(b, w - x), dr.minimum(b, h - y)  # its size inside the tile, px
+            foot = (mi.Float(fw), mi.Float(fh))
+        else:
+            lw, lh = w, h
+            x = local % w
+            r = local // w
+            y = r % h
+            r = r // h
+            foot = None
         k = r % K
         p = r // K
-        x, y = bx * b, by * b  # the block's first pixel in the tile
-        fw, fh = dr.minimum(b, w - x), dr.minimum(b, h - y)  # its size inside the tile, px
         pass_row = ti * self.n_pass + p  # the tile's entry for band pass p in the per-pass tables
         spp = lane_divisor(dr.gather(mi.UInt32, tab["spp"], pass_row))
         seed_o = dr.opaque(mi.UInt32, seed)
@@ -601,17 +635,18 @@ class Tracer:
         L = self._pixel(sampler, spp, rot, mi.sample_tea_32(local, tkey + 0x3C6EF372)[0], mi.Float(g("x0") + x),
                         mi.Float(g("y0") + y), g("t0", mi.Float) + mi.Float(k) * g("dt", mi.Float),
                         g("dt", mi.Float), vel, g("tref", mi.Float), lo_nm, g("set"), g("gap", mi.Float),
-                        g("gap_len", mi.Float), g("sobol") != 0,
-                        mi.sample_tea_32(local % (K * lh * lw), tkey + 0x61C88647)[0], p, g("nmax"),
-                        mi.Float(fw), mi.Float(fh))
+                        g("gap_len", mi.Float),
+                        (g("sobol") != 0, mi.sample_tea_32(local % (K * lh * lw), tkey + 0x61C88647)[0], p,
+                         g("nmax")) if use_sobol else None, foot)
         wgt = dr.gather(mi.Float, tab["wgt"], pass_row)
         out0 = g("out")
         n_slots = g("slots")
         stride = K * self.n_bands * h * w  # one image of the tile (a slot)
+        span = BLOCK if use_block else 1
         for sl in range(self.S):
             for j in range(N_LAMBDA):
-                for dy in range(BLOCK):  # every pixel of the block (one of them when b is 1) gets the lane's mean
-                    for dx in range(BLOCK):
+                for dy in range(span):  # every pixel of the block (one of them when b is 1) gets the lane's mean
+                    for dx in range(span):
                         idx = out0 + sl * stride + ((k * self.n_bands + bands[j]) * h + y + dy) * w + x + dx
                         # mode Local, not Auto: Auto expands a buffer of <= 1 M values per thread with the buffer's
                         # size as a kernel literal (a new kernel per size); frames of 160x90 and more got Local
@@ -622,16 +657,18 @@ class Tracer:
                                           mode=dr.ReduceMode.Local)
 
     @dr.syntax
-    def _pixel(self, sampler, spp, rot, key, x0, y0, t0, dt, vel, t_ref, lo_nm, lset, gap_at, gap_len, sobol,
-               pkey, p, nmax, fw, fh):
-        """Sum over ``spp`` samples (UInt32 per lane) of the radiance through the footprint [x0, x0 + fw) x [y0,
-        y0 + fh) (px; a pixel, or a block of pixels: ``fw``, ``fh`` Float) at uniform times in [t0, t0 + dt) (s), times at or after ``gap_at`` moved on by ``gap_len`` (s);
+    def _pixel(self, sampler, spp, rot, key, x0, y0, t0, dt, vel, t_ref, lo_nm, lset, gap_at, gap_len, qmc=None,
+               foot=None):
+        """Sum over ``spp`` samples (UInt32 per lane) of the radiance through the pixel [x0, x0 + 1) x [y0, y0 + 1)
+        (px; ``foot`` = (fw, fh) Float: the block [x0, x0 + fw) x [y0, y0 + fh) instead) at uniform times in
+        [t0, t0 + dt) (s), times at or after ``gap_at`` moved on by ``gap_len`` (s);
         wavelength j of a sample is uniform in [lo_nm[j],
         lo_nm[j] + band width) (nm), stratified over the samples (stratum (s + rot) mod spp). Pixel x, y and
         time are stratified too, each through its own permutation of the strata keyed by ``key`` (UInt32 per
         lane; :func:`_permute`), so that the strata of different dimensions are paired at random: one rotation
         per dimension would pair them along diagonals, which for a lamp moving across a pixel aliased and
-        raised the variance several times. ``sobol`` (Bool per lane): x, y and time, and the first vertex's light
+        raised the variance several times. ``qmc`` = (sobol, pkey, p, nmax), where ``sobol`` (Bool per lane) is
+        set: x, y and time, and the first vertex's light
         sample, from the Sobol' points of :func:`sobol_points` instead: point p ``nmax`` + s for sample s of band
         pass p (``nmax``: the most samples of any pass of the tile, a power of two like each pass's count),
         shifted by random 32-bit XORs drawn from ``pkey`` (UInt32, the same for every pass of a pixel and bin). A
@@ -644,9 +681,8 @@ class Tracer:
         same random stream. Non-finite samples are dropped (counted as 0). Returns one sum per slot (list of
         :attr:`S` ``mi.Spectrum``)."""
         acc = [mi.Spectrum(0.0) for _ in range(self.S)]
-        sh0, sh1 = mi.sample_tea_32(pkey, mi.UInt32(0x1B873593))
-        sh2, sh3 = mi.sample_tea_32(pkey, mi.UInt32(0xCC9E2D51))
-        sh4 = mi.sample_tea_32(pkey, mi.UInt32(0xE6546B64))[0]
+        shifts = None if qmc is None else _sobol_shifts(qmc[1])  # (no `if` statements: @dr.syntax would trace them)
+        fw, fh = foot if foot is not None else (1.0, 1.0)
         spp = lane_divisor(spp)  # a divisor below (kernel_rules); the caller's is clamped already
         s = mi.UInt32(0)
         inv = dr.rcp(mi.Float(spp))
@@ -655,23 +691,23 @@ class Tracer:
         while s < spp:
             # pixel x, y and time: each stratified over the samples by its own keyed permutation of the strata
             # (a power of two spp; else independent uniform draws)
-            px = x0 + fw * dr.select(pow2, (mi.Float(_permute(s, key, 1, mask)) + sampler.next_float32()) * inv,
-                                     sampler.next_float32())
-            py = y0 + fh * dr.select(pow2, (mi.Float(_permute(s, key, 2, mask)) + sampler.next_float32()) * inv,
-                                     sampler.next_float32())
+            ux = dr.select(pow2, (mi.Float(_permute(s, key, 1, mask)) + sampler.next_float32()) * inv,
+                           sampler.next_float32())
+            uy = dr.select(pow2, (mi.Float(_permute(s, key, 2, mask)) + sampler.next_float32()) * inv,
+                           sampler.next_float32())
             ut = dr.select(pow2, (mi.Float(_permute(s, key, 3, mask)) + sampler.next_float32()) * inv,
                            sampler.next_float32())
-            i = p * nmax + s  # this sample's point: pass p's block of the pixel's sequence
-            px = dr.select(sobol, x0 + fw * _sobol_dim(i, sh0, SOBOL_X), px)
-            py = dr.select(sobol, y0 + fh * _sobol_dim(i, sh1, SOBOL_Y), py)
-            t = t0 + dt * dr.select(sobol, _sobol_dim(i, sh2, SOBOL_T), ut)
+            ux, uy, ut, u_light = (ux, uy, ut, None) if qmc is None else _sobol_sample(qmc, shifts, s, ux, uy, ut)
+            px = x0 + ux if foot is None else x0 + fw * ux
+            py = y0 + uy if foot is None else y0 + fh * uy
+            t = t0 + dt * ut
             t = dr.select(t >= gap_at, t + gap_len, t)
             ray = self.camera_ray(px, py, t, vel, t_ref)
             u = (mi.Float((s + rot) % spp) + sampler.next_float32()) * inv
             ray.wavelengths = mi.Spectrum(lo_nm[0] + u * self.band_w, lo_nm[1] + u * self.band_w,
                                           lo_nm[2] + u * self.band_w, lo_nm[3] + u * self.band_w)
-            u_light = mi.Point2f(_sobol_dim(i, sh3, SOBOL_LIGHT), _sobol_dim(i, sh4, SOBOL_LIGHT + 1))
-            L = self._radiance(sampler, ray, lset, sobol, u_light)
+            L = self._radiance(sampler, ray, lset) if qmc is None else \
+                self._radiance(sampler, ray, lset, qmc[0], u_light)
             acc = [acc[j] + mi.Spectrum(dr.select(dr.isfinite(L[j]), L[j], 0.0)) for j in range(self.S)]
             s += 1
         return acc
