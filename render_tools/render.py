@@ -112,8 +112,9 @@ class RenderOptions:
     filled_spp_factor: light_spp multiplier (a power of two) of the flickering lights drawn as filled cells
     (``dots_lod_px``: signals' LED arrays, message signs, countdowns, destination displays): their lit shapes
     (a sign's scan lines, a disk's rim, a digit's bars) are thinner than a pixel, so their pixels' covered share is
-    what the lamp samples estimate; at the ``default`` profile these lights carried 86 % of a night scene's LED-bin
-    error for a small part of its lamp pixels (docs/render-benchmark.md, "LED dot faces"). 1: as other lights.
+    what the lamp samples estimate; at the ``default`` profile these lights (signals, message signs) carried two
+    thirds of a night scene's LED-bin error for a fifth of its lamp samples (docs/render-benchmark.md, "Pixel
+    samples"). 1: as other lights.
     Scenes without dot faces (every lfmbench-v1 scene) render the same whatever it is.
     pixel_samples: where a pixel's samples lie in x, y and time (:class:`render_tools.tracer.Tile` ``sobol``):
     ``"strata"`` (each dimension stratified on its own, the strata of the dimensions paired at random),
