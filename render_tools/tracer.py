@@ -31,7 +31,9 @@ P = ceil(C / 4)); each sample adds its radiance at lambda_j straight to band p +
 radiance is the expectation of L at a uniform wavelength in the band), so no film or sensitivity function is
 involved. Sample dimensions of the camera (pixel x, y, time, wavelength) are stratified over a pixel's ``spp``
 samples (each dimension its own random rotation of the strata, so each is uniform and independent of the others
-in expectation).
+in expectation); tiles with ``sobol`` (scene version 2) take pixel x, y, time and the first vertex's light sample
+from randomly shifted Sobol' points instead (:func:`sobol_points`), and tiles with ``block`` trace one lane per
+2 x 2 px block (wet-road reflections).
 """
 from __future__ import annotations
 
