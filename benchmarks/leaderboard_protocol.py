@@ -133,6 +133,9 @@ def main() -> None:
                     help="another U-Net checkpoint, scored on the same samples as method NAME; repeatable")
     ap.add_argument("--runs", default="runs/protocol", help="output directory")
     ap.add_argument("--samples-per-scene", type=int, default=8)
+    ap.add_argument("--only-unets", action="store_true",
+                    help="score only the U-Nets (--checkpoint as `unet`, and --unet-also), not the rule-based methods "
+                         "(e.g. a second training seed on draws the rules were scored on already)")
     a = ap.parse_args()
     if not os.path.isfile(a.checkpoint):
         ap.error(f"--checkpoint {a.checkpoint}: no such file (make it with lfmbench train)")
@@ -146,7 +149,7 @@ def main() -> None:
         extra = parse_extra(a.unet_also, REGISTRY)
     except ValueError as exc:
         ap.error(str(exc))
-    methods = [m for m in REGISTRY if m != "learned"]
+    methods = ["unet"] if a.only_unets else [m for m in REGISTRY if m != "learned"]
     register_unets(extra)
     t = time.perf_counter()
     benchmark(a.corpus, methods=[*methods, *extra], runs_dir=a.runs, split="test", seed=0,

@@ -85,3 +85,13 @@ def test_a_second_copy_of_the_same_network_scores_the_same(lp, tmp_path, monkeyp
     text = (tmp_path / "runs" / "scene_fields.md").read_text()
     assert "by scene `weather`" in text and "| all | +0.000 [" in text
     assert "`unet_copy`" in (tmp_path / "runs" / "leaderboard.md").read_text()
+    # --only-unets: the networks alone (a second training seed scored on draws the rules have been scored on)
+    monkeypatch.setenv("LFMBENCH_UNET_COPY2_CHECKPOINT", "")  # restored afterwards
+    monkeypatch.setattr(sys, "argv", ["lp", "--corpus", str(corpus), "--checkpoint", str(ck), "--unet-also",
+                                      f"unet_copy2={ck}", "--runs", str(tmp_path / "only"), "--samples-per-scene",
+                                      "1", "--only-unets"])
+    lp.main()
+    made = sorted(p.name for p in (tmp_path / "only").glob("*.json"))
+    assert "unet.json" in made and "unet_copy2.json" in made and "lpd_only.json" not in made
+    c = json.loads((tmp_path / "only" / "unet.json").read_text())
+    assert {r["scene_id"]: r["metrics"]["led_score"] for r in c["scenes"]} == sa  # the same frozen draws
