@@ -447,18 +447,22 @@ def clip_near(points: np.ndarray, z: np.ndarray, near: float) -> np.ndarray:
     return np.concatenate([pf, cross.reshape(-1, 3)])
 
 
+def _on_from_version_2(mode: str, on: str, scene: dict) -> bool:
+    """An ``auto`` option's rule: ``mode`` is ``on``, or ``auto`` on scene version 2 and later (version 1's renders
+    are frozen)."""
+    return mode == on or (mode == "auto" and int(scene.get("version", 1)) >= 2)
+
+
 def spectral_lamp_passes(scene: dict, opts: RenderOptions) -> bool:
     """Whether flickering lamps share their samples among band passes by spectrum (``opts.lamp_pass_spp``;
     ``auto``: scene version 2 and later)."""
-    mode = opts.lamp_pass_spp
-    return mode == "spectrum" or (mode == "auto" and int(scene.get("version", 1)) >= 2)
+    return _on_from_version_2(opts.lamp_pass_spp, "spectrum", scene)
 
 
 def sobol_pixel_samples(scene: dict, opts: RenderOptions) -> bool:
     """Whether the tiles place their samples by Sobol' points (``opts.pixel_samples``; ``auto``: scene version 2
     and later)."""
-    mode = opts.pixel_samples
-    return mode == "sobol" or (mode == "auto" and int(scene.get("version", 1)) >= 2)
+    return _on_from_version_2(opts.pixel_samples, "sobol", scene)
 
 
 def lamp_pass_spp(light: dict, opts: RenderOptions, light_spp: int | None = None) -> tuple | None:

@@ -669,9 +669,9 @@ class Tracer:
         time are stratified too, each through its own permutation of the strata keyed by ``key`` (UInt32 per
         lane; :func:`_permute`), so that the strata of different dimensions are paired at random: one rotation
         per dimension would pair them along diagonals, which for a lamp moving across a pixel aliased and
-        raised the variance several times. ``qmc`` = (sobol, pkey, p, nmax), where ``sobol`` (Bool per lane) is
-        set: x, y and time, and the first vertex's light
-        sample, from the Sobol' points of :func:`sobol_points` instead: point p ``nmax`` + s for sample s of band
+        raised the variance several times. ``qmc`` = (sobol, pkey, p, nmax): where ``sobol`` (Bool per lane) is
+        set, x, y and time, and the first vertex's light sample, come from the Sobol' points of
+        :func:`sobol_points` instead: point p ``nmax`` + s for sample s of band
         pass p (``nmax``: the most samples of any pass of the tile, a power of two like each pass's count),
         shifted by random 32-bit XORs drawn from ``pkey`` (UInt32, the same for every pass of a pixel and bin). A
         block of 2^m points starting at a multiple of 2^m is a net, so each pass's samples are one (a band sees its
@@ -684,7 +684,6 @@ class Tracer:
         :attr:`S` ``mi.Spectrum``)."""
         acc = [mi.Spectrum(0.0) for _ in range(self.S)]
         shifts = None if qmc is None else _sobol_shifts(qmc[1])  # (no `if` statements: @dr.syntax would trace them)
-        fw, fh = foot if foot is not None else (1.0, 1.0)
         spp = lane_divisor(spp)  # a divisor below (kernel_rules); the caller's is clamped already
         s = mi.UInt32(0)
         inv = dr.rcp(mi.Float(spp))
@@ -700,8 +699,7 @@ class Tracer:
             ut = dr.select(pow2, (mi.Float(_permute(s, key, 3, mask)) + sampler.next_float32()) * inv,
                            sampler.next_float32())
             ux, uy, ut, u_light = (ux, uy, ut, None) if qmc is None else _sobol_sample(qmc, shifts, s, ux, uy, ut)
-            px = x0 + ux if foot is None else x0 + fw * ux
-            py = y0 + uy if foot is None else y0 + fh * uy
+            px, py = (x0 + ux, y0 + uy) if foot is None else (x0 + foot[0] * ux, y0 + foot[1] * uy)
             t = t0 + dt * ut
             t = dr.select(t >= gap_at, t + gap_len, t)
             ray = self.camera_ray(px, py, t, vel, t_ref)

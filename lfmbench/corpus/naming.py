@@ -19,7 +19,7 @@ from lfmbench.corpus.errors import CorpusFileError
 __all__ = ["FORMAT_NAME", "FORMAT_VERSION", "READABLE_VERSIONS", "MANIFEST_NAME", "SPLITS_NAME", "SCENES_DIR",
            "STATIC_WINDOWS", "AUX_CHANNELS", "RADIANCE_UNIT", "RADIANCE_MAX", "EMPTY_PART", "STEADY_PREFIX", "ATTR",
            "band_channel", "bin_prefix", "static_channels", "bin_channels", "steady_channels", "light_part_name",
-           "parse_light_part", "frame_dir", "group_storage"]
+           "parse_light_part", "box_inside", "frame_dir", "group_storage"]
 
 #: ``manifest.json`` "format" value and format version written by this module. Version 2 (HALF x 2^e layers,
 #: codecs and mantissa rounding, ``docs/corpus-format.md``) reads every version-1 file unchanged; version 3 (a
@@ -107,6 +107,12 @@ def parse_light_part(name: str) -> tuple[int, bool] | None:
     """``(light id, steady)`` of a part name made by :func:`light_part_name`, else None."""
     m = _LIGHT_PART.fullmatch(name)
     return None if m is None else (int(m.group(2)), m.group(1) == "steady")
+
+
+def box_inside(inner: Sequence[int], outer: Sequence[int]) -> bool:
+    """Whether the half-open pixel box ``inner`` (y0, x0, y1, x1) lies inside ``outer`` (a light part's data window
+    inside its meta.json bbox, section 6.2 of ``docs/corpus-format.md``)."""
+    return outer[0] <= inner[0] and outer[1] <= inner[1] and inner[2] <= outer[2] and inner[3] <= outer[3]
 
 
 def frame_dir(frame: int) -> str:

@@ -16,8 +16,8 @@ from lfmbench.corpus.exr import ExrPart, _check_aux, _check_values, _stack, laye
 from lfmbench.corpus.meta import (_check_manifest, _check_meta_storage, _load_json, check_splits, inside_root,
                                   load_meta)
 from lfmbench.corpus.naming import (AUX_CHANNELS, EMPTY_PART, MANIFEST_NAME, SCENES_DIR, SPLITS_NAME, _group_bins,
-                                    bin_channels, frame_dir, group_storage, parse_light_part, static_channels,
-                                    steady_channels)
+                                    bin_channels, box_inside, frame_dir, group_storage, parse_light_part,
+                                    static_channels, steady_channels)
 
 __all__ = ["Corpus"]
 
@@ -207,7 +207,7 @@ class Corpus:
             box = tuple(int(v) for v in bb) if bb is not None else (
                 min(w[0] for w in wins), min(w[1] for w in wins), max(w[2] for w in wins), max(w[3] for w in wins))
             y0, x0, y1, x1 = box
-            if any(not (y0 <= w[0] and x0 <= w[1] and w[2] <= y1 and w[3] <= x1) for w in wins):
+            if not all(box_inside(w, box) for w in wins):
                 raise CorpusChannelError(f"EXR file {path}: a data window of light {lid} {wins} is not inside its "
                                          f"box {box} (meta.json bbox[{frame}])")
             (bw, barr) = got[False]

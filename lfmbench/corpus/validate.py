@@ -19,7 +19,7 @@ from lfmbench.corpus.meta import (_check_manifest, _check_meta_storage, _load_js
                                   inside_root, load_meta, manifest_entry_errors)
 from lfmbench.corpus.naming import (ATTR, AUX_CHANNELS, EMPTY_PART, MANIFEST_NAME, RADIANCE_MAX, RADIANCE_UNIT,
                                     SCENES_DIR, SPLITS_NAME, STATIC_WINDOWS, _group_bins, bin_channels, frame_dir,
-                                    group_storage, parse_light_part, static_channels, steady_channels)
+                                    box_inside, group_storage, parse_light_part, static_channels, steady_channels)
 from lfmbench.fileio import TMP_PREFIX
 from lfmbench.limits import LIMITS, limit, set_limit
 
@@ -459,8 +459,7 @@ def _validate_scene(root: Path, sid: str, files: Mapping[str, str], rep: Validat
                     y0, x0, y1, x1 = part.window
                     if bbs is not None and bbs[n] is None:
                         err(f"{p}: part {brief(part.name)} is stored but meta.json bbox[{n}] is null (not visible)")
-                    elif bbs is not None and not (bbs[n][0] <= y0 and bbs[n][1] <= x0 and y1 <= bbs[n][2]
-                                                  and x1 <= bbs[n][3]):
+                    elif bbs is not None and not box_inside(part.window, bbs[n]):
                         err(f"{p}: part {brief(part.name)} data window {part.window} is not inside meta.json "
                             f"bbox[{n}] {bbs[n]} (half-open (y0, x0, y1, x1))")
                     if not (0 <= y0 < y1 <= H and 0 <= x0 < x1 <= W):
