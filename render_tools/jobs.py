@@ -18,6 +18,7 @@ split instead; ``splits.json`` then comes from the protocol, not from :func:`lfm
 from __future__ import annotations
 
 import contextlib
+import functools
 import json
 import logging
 import pickle
@@ -73,7 +74,9 @@ def default_backend() -> Backend:
     from render_tools import render, scene  # noqa: PLC0415
 
     validate = getattr(scene, "validate_scene", None)
-    return Backend(scene.generate_scene, render.RenderOptions, render.scene_meta, render.render_frames, validate)
+    # the corpus writer takes a wet road's grown light crops as SteadyBins (no K copies of a reflection in memory)
+    frames = functools.partial(render.render_frames, steady_bins=True)
+    return Backend(scene.generate_scene, render.RenderOptions, render.scene_meta, frames, validate)
 
 
 def profile_names() -> list[str]:

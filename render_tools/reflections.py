@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["GLOSS_TAN_FACTOR", "wet_road", "glossy_points", "glossy_cells"]
+__all__ = ["GLOSS_TAN_FACTOR", "wet_road", "glossy_grid", "glossy_points", "glossy_cells"]
 
 #: Half-vector tilt bound of the reflection region, in units of the wet film's GGX roughness (module docstring:
 #: 99.4 % of the reflection at 2, at half the crop of 5).
@@ -50,7 +50,7 @@ def wet_road(scene: dict) -> dict | None:
     return {"alpha": max(alphas), "x": (cx - sx / 2, cx + sx / 2), "y": (cy - sy / 2, cy + sy / 2)}
 
 
-def _glossy_grid(lamp_points: np.ndarray, camera: np.ndarray, road: dict):
+def glossy_grid(lamp_points: np.ndarray, camera: np.ndarray, road: dict):
     """The :data:`GRID` of road points (GX, GY, 3) m searched for the reflection region and the mask (GX, GY) of
     the points in it, grown by one grid cell (:func:`glossy_points`); None when the lamps are below the road or
     nothing qualifies."""
@@ -91,26 +91,27 @@ def _glossy_grid(lamp_points: np.ndarray, camera: np.ndarray, road: dict):
     return G, grown
 
 
-def glossy_points(lamp_points: np.ndarray, camera: np.ndarray, road: dict) -> np.ndarray:
+def glossy_points(lamp_points: np.ndarray, camera: np.ndarray, road: dict, grid=False) -> np.ndarray:
     """Road points (M, 3) m (z = 0) whose glossy reflection of any of ``lamp_points`` (P, 3) m is seen from
     ``camera`` (3,) m: the half vector's tilt ``tan theta_h <= GLOSS_TAN_FACTOR * road["alpha"]`` (:func:`wet_road`),
     on a :data:`GRID` of road points, grown by one grid cell (so the points' screen box holds the streak; a
     caller keeps the points that project into the image: the streak runs under the camera, where its projection
-    would span the whole width). Empty (0, 3) when the lamps are below the road or nothing qualifies."""
-    g = _glossy_grid(lamp_points, camera, road)
+    would span the whole width). Empty (0, 3) when the lamps are below the road or nothing qualifies. ``grid``:
+    :func:`glossy_grid` of the same arguments when the caller has it already (None included)."""
+    g = glossy_grid(lamp_points, camera, road) if grid is False else grid
     if g is None:
         return np.zeros((0, 3))
     G, grown = g
     return G[grown]
 
 
-def glossy_cells(lamp_points: np.ndarray, camera: np.ndarray, road: dict) -> np.ndarray:
+def glossy_cells(lamp_points: np.ndarray, camera: np.ndarray, road: dict, grid=False) -> np.ndarray:
     """The grid cells (M, 4, 3) m (their corners, z = 0) that make up the reflection region of
     :func:`glossy_points`: every cell of the :data:`GRID` with a corner in it. Together they cover the region
     without gaps (the points alone are samples of it, up to metres apart near the camera), so the screen
     rows a reflection covers can be bounded cell by cell (:meth:`render_tools.render.SceneGeometry.reflection_tiles`).
-    Empty (0, 4, 3) when there is no region."""
-    g = _glossy_grid(lamp_points, camera, road)
+    Empty (0, 4, 3) when there is no region. ``grid``: as for :func:`glossy_points`."""
+    g = glossy_grid(lamp_points, camera, road) if grid is False else grid
     if g is None:
         return np.zeros((0, 4, 3))
     G, m = g

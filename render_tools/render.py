@@ -284,6 +284,16 @@ class SceneGeometry:
         self.fov = float(scene["camera"]["fov_x_deg"])
         self.K = cam_mod.intrinsics(opts.width, opts.height, self.fov)
         self.wet = reflections.wet_road(scene)  # None: dry, no reflection region in any crop
+        self._grids: dict = {}  # (light id, t_obj) -> reflections.glossy_grid: a light's bbox and bands share it
+
+    def _glossy_grid(self, light: dict, t_obj: float):
+        """:func:`render_tools.reflections.glossy_grid` of a light at ``t_obj`` (s), computed once per light and
+        time (a frame's plan asks for it up to three times per light)."""
+        key = (light["id"], float(t_obj))
+        if key not in self._grids:
+            self._grids[key] = reflections.glossy_grid(ms.light_points(self.scene, light, t_obj),
+                                                        self.ego.position(t_obj), self.wet)
+        return self._grids[key]
 
     def facing(self, light: dict, t_obj: float, times, moving: bool = False) -> bool:
         """Whether the lamp face points towards the camera at any of ``times`` (s); ``moving``: the lamp moves
@@ -330,8 +340,7 @@ class SceneGeometry:
         Empty when the light has no reflection region."""
         if not self.reflected(light, t_obj):
             return []
-        cells = reflections.glossy_cells(ms.light_points(self.scene, light, t_obj), self.ego.position(t_obj),
-                                         self.wet)
+        cells = reflections.glossy_cells(None, None, self.wet, grid=self._glossy_grid(light, t_obj))
         if not len(cells):
             return []
         y0, x0, y1, x1 = bbox
@@ -402,7 +411,7 @@ class SceneGeometry:
         pts = ms.light_points(self.scene, light, t_obj)
         v = self.object_velocity(light) if moving else np.zeros(3)
         # a flickering light's crop also holds its reflection in a wet road (render_tools.reflections)
-        refl = reflections.glossy_points(pts, self.ego.position(t_obj), self.wet) \
+        refl = reflections.glossy_points(None, None, self.wet, grid=self._glossy_grid(light, t_obj)) \
             if moving and reflection and self.reflected(light, t_obj) else None
         uvs = []
         for t in times:
@@ -760,7 +769,24 @@ def plan_frame(scene: dict, opts: RenderOptions, n: int, sets, geo: SceneGeometr
     return tiles, plan, visible
 
 
-def render_frames(scene: dict, opts: RenderOptions) -> Iterator[dict]:
+def _grown_crop(steady: np.ndarray, parts: list, K: int, as_steady_bins: bool):
+    """The (K, C, h, w) bins of a light's grown crop (wet road) from its parts: ``steady`` (C, h, w) holds the parts
+    that are the same in every bin (the reflection bands), ``parts`` the others as (y0, x0, y1, x1) relative box and
+    (K, C, bh, bw) bins, pasted in order over it. ``as_steady_bins``: a :class:`lfmbench.corpus.SteadyBins` when one
+    part varies (the lamp's own box), else the array."""
+    from lfmbench.corpus import SteadyBins  # noqa: PLC0415
+
+    if as_steady_bins and len(parts) <= 1:
+        box, bins = parts[0] if parts else ((0, 0, 0, 0), np.zeros((K, steady.shape[0], 0, 0), np.float32))
+        return SteadyBins(steady, box, bins)
+    arr = np.empty((K, *steady.shape), np.float32)
+    arr[:] = steady
+    for (y0, x0, y1, x1), bins in parts:
+        arr[:, :, y0:y1, x0:x1] = bins
+    return arr
+
+
+def render_frames(scene: dict, opts: RenderOptions, steady_bins: bool = False) -> Iterator[dict]:
     """Render every frame of ``scene``; yields one dict per frame (see module docstring)::
 
         {"frame": n,
@@ -772,6 +798,9 @@ def render_frames(scene: dict, opts: RenderOptions) -> Iterator[dict]:
     Each frame: its Mitsuba scene is loaded once with every emitter on, and all of its tiles
     (:func:`plan_frame`) are rendered by :class:`render_tools.tracer.Tracer` in one kernel launch (more when
     it exceeds :data:`render_tools.tracer.MAX_LANES`), then the AOVs in a second, small one.
+    ``steady_bins``: a wet road's grown light crops (the lamp's K bins over its reflection, the same in every bin)
+    as :class:`lfmbench.corpus.SteadyBins` instead of (K, C, h, w) arrays (what the corpus writer takes: the same
+    files without K copies of the reflection in memory).
     Raises ``ValueError`` for an invalid scene or options (e.g. short exposure longer than the long one),
     ``RuntimeError`` when no JIT variant (LLVM or CUDA) of Mitsuba works.
     """
@@ -810,11 +839,12 @@ def render_frames(scene: dict, opts: RenderOptions) -> Iterator[dict]:
         tiles, plan, visible = plan_frame(scene, opts, n, sets, geo, filled)
         imgs = tr.render(tiles, _seed(opts.seed, n, "frame")) if tiles else []
         out = {"frame": n, "static": {}, "lights": {}, "aux": {}}
+        grown = {}  # (group, light id) -> [steady (C, h, w), varying parts, K] of a grown crop
         for kind, g, key, bb, ti, rep in plan:
             if kind == "light_box":  # a grown crop: zeros where no band of its reflection is traced
                 y0, x0, y1, x1 = bb
-                out["lights"].setdefault(g, []).append(
-                    (key, bb, np.zeros((rep, len(opts.bands_nm), y1 - y0, x1 - x0), np.float32)))
+                grown[g, key] = [np.zeros((len(opts.bands_nm), y1 - y0, x1 - x0), np.float32), [], rep]
+                out["lights"].setdefault(g, []).append((key, bb, None))  # filled in below
                 continue
             if kind == "union":  # one image per static group (slot), in the union's order
                 for j, gj in enumerate(g):
@@ -828,11 +858,20 @@ def render_frames(scene: dict, opts: RenderOptions) -> Iterator[dict]:
                 y0, x0, y1, x1 = bb
                 out["static"][g][key][:, y0:y1, x0:x1] = img[0]
             elif kind == "light_part":  # a reflection band or the lamp's own box inside its grown crop
-                lid, (by0, bx0, _, _), arr = out["lights"][g][-1]
+                lid, (by0, bx0, _, _), _ = out["lights"][g][-1]
+                steady, parts, _ = grown[g, lid]
                 y0, x0, y1, x1 = bb
-                arr[:, :, y0 - by0:y1 - by0, x0 - bx0:x1 - bx0] = np.repeat(img, rep, axis=0) if rep > 1 else img
+                rel = (y0 - by0, x0 - bx0, y1 - by0, x1 - bx0)
+                if len(img) == 1 and not parts:  # the same in every bin, under no varying part yet
+                    steady[:, rel[0]:rel[2], rel[1]:rel[3]] = img[0]
+                else:
+                    parts.append((rel, np.repeat(img, rep, axis=0) if rep > 1 else img))
             else:
                 out["lights"].setdefault(g, []).append((key, bb, np.repeat(img, rep, axis=0) if rep > 1 else img))
+        for g, items in out["lights"].items():
+            for i, (lid, bb, arr) in enumerate(items):
+                if arr is None:
+                    items[i] = (lid, bb, _grown_crop(*grown[g, lid], steady_bins))
         frac = (tm["short"][1] - tm["short"][0]) / (tm["long"][1] - tm["long"][0])
         for g, wins in out["static"].items():  # long = frac * short + (1 - frac) * rest (:func:`rest_spp`)
             rest = wins.pop("rest", None)

@@ -39,7 +39,7 @@ from lfmbench.check import check_scene_id
 from lfmbench.corpus.errors import (CorpusChannelError, CorpusError, CorpusFileError, CorpusNotFoundError,
                                     CorpusLockedError, CorpusValueError, CorpusWriteError)
 from lfmbench.corpus.exr import (ExrPart, check_exr_header, encode_aux_exr, encode_lights_exr, encode_static_exr, layer_scale,
-                                 read_exr, split_steady)
+                                 read_exr, split_steady, SteadyBins)
 from lfmbench.corpus.meta import (LIGHT_KINDS, SPECTRUM_MODELS, TIMING_RTOL, check_splits, inside_root, make_splits,
                                   load_meta, manifest_entry_errors, sha256_file, validate_meta)
 from lfmbench.corpus.naming import (ATTR, AUX_CHANNELS, EMPTY_PART, FORMAT_NAME, FORMAT_VERSION, MANIFEST_NAME,
@@ -68,5 +68,5 @@ __all__ = [
     "ValidationReport", "validate_corpus", "encode_scene", "write_files", "prune_scene_dir", "ExrPart",
     "check_scene_id", "manifest_entry_errors", "inside_root", "check_splits", "RADIANCE_MAX",
     "ThreadedSceneWriter", "float_to_half", "CorpusLockedError", "CorpusLock", "LOCK_NAME", "check_exr_header",
-    "split_steady", "STEADY_PREFIX", "steady_channels", "light_part_name", "parse_light_part",
+    "split_steady", "SteadyBins", "STEADY_PREFIX", "steady_channels", "light_part_name", "parse_light_part",
 ]

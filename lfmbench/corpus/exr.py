@@ -29,7 +29,7 @@ from lfmbench.corpus.storage import (COMPRESSIONS, DEFAULT_STORAGE, EXTRA_COMPRE
                                      Storage, StorageStats, resolve_storage, scale_attr, store_layer)
 
 __all__ = ["encode_static_exr", "encode_lights_exr", "encode_aux_exr", "ExrPart", "read_exr", "layer_scale",
-           "check_exr_header", "exr_headers", "ExrHeaders", "split_steady"]
+           "check_exr_header", "exr_headers", "ExrHeaders", "split_steady", "SteadyBins"]
 
 
 def _exr():
@@ -42,6 +42,10 @@ def _exr():
 
 
 def _check_radiance(arr: np.ndarray, what: str) -> np.ndarray:
+    if isinstance(arr, SteadyBins):  # every value it stands for is in one of its two arrays
+        _check_radiance(arr.steady, what)
+        _check_radiance(arr.bins, what)
+        return arr
     arr = np.asarray(arr)
     if not np.issubdtype(arr.dtype, np.floating):
         raise ValueError(f"{what}: radiance must be a floating-point array, got dtype {arr.dtype}")
@@ -159,6 +163,73 @@ def _bounding_box(mask: np.ndarray) -> tuple[int, int, int, int] | None:
     return int(rows[0]), int(cols[0]), int(rows[-1]) + 1, int(cols[-1]) + 1
 
 
+@dataclass(frozen=True)
+class SteadyBins:
+    """A light's K bins over its box given as one steady image plus the bins of a sub-box: bin k is ``steady``
+    outside ``box`` and ``bins[k]`` inside it (what :func:`split_steady` finds, known beforehand).
+
+    Why: a wet road's reflection of a lamp is traced once (``RenderOptions.reflection_bins`` 1) in a box many
+    times the lamp's own; written out as K equal copies, a 640x360 wet night's grown boxes take about a GB per
+    frame, whose first writes cost about 1.3 CPU s per frame (page faults) before :func:`split_steady` finds the
+    copies again. The renderer hands this form to the corpus writer instead (``render_frames(steady_bins=True)``),
+    which encodes the same bytes from it. ``np.asarray(x)`` gives the (K, C, h, w) array.
+
+    Attributes:
+        steady: (C, h, w) float32 radiance (W sr^-1 m^-2 nm^-1) of every bin outside ``box`` (values inside
+            ``box`` are not used).
+        box: (y0, x0, y1, x1) half-open, relative to the light's box; (0, 0, 0, 0) when no pixel changes.
+        bins: (K, C, y1 - y0, x1 - x0) float32 radiance of each bin inside ``box``.
+    """
+
+    steady: np.ndarray
+    box: tuple
+    bins: np.ndarray
+
+    def __post_init__(self):
+        y0, x0, y1, x1 = self.box
+        c, h, w = self.steady.shape
+        if self.bins.ndim != 4 or self.bins.shape[1:] != (c, y1 - y0, x1 - x0) or not (
+                0 <= y0 <= y1 <= h and 0 <= x0 <= x1 <= w):
+            raise ValueError(f"SteadyBins: bins {self.bins.shape} and box {self.box} do not fit steady "
+                             f"{self.steady.shape}")
+
+    @property
+    def shape(self) -> tuple[int, int, int, int]:
+        return (self.bins.shape[0], *self.steady.shape)
+
+    @property
+    def dtype(self) -> np.dtype:
+        return np.result_type(self.steady, self.bins)
+
+    def window(self, y0: int, x0: int, y1: int, x1: int) -> np.ndarray:
+        """The (K, C, y1 - y0, x1 - x0) bins of a window of the light's box (relative, half-open)."""
+        out = np.empty((self.shape[0], self.shape[1], y1 - y0, x1 - x0), self.dtype)
+        out[:] = self.steady[None, :, y0:y1, x0:x1]
+        by0, bx0, by1, bx1 = self.box
+        a, b, c, d = max(y0, by0), max(x0, bx0), min(y1, by1), min(x1, bx1)
+        if a < c and b < d:
+            out[:, :, a - y0:c - y0, b - x0:d - x0] = self.bins[:, :, a - by0:c - by0, b - bx0:d - bx0]
+        return out
+
+    def __array__(self, dtype=None, copy=None):
+        out = self.window(0, 0, *self.steady.shape[1:])
+        return out if dtype is None else out.astype(dtype, copy=False)
+
+    def split(self) -> tuple[tuple[int, int, int, int], tuple[int, int, int, int] | None, np.ndarray]:
+        """:func:`split_steady` of the (K, C, h, w) array, the same boxes and values, without building it: the
+        bins can differ inside ``box`` only."""
+        y0, x0, y1, x1 = self.box
+        varies = np.zeros(self.steady.shape[1:], bool)
+        for k in range(1, self.bins.shape[0]):
+            varies[y0:y1, x0:x1] |= (self.bins[k] != self.bins[0]).any(axis=0)
+        bins_box = _bounding_box(varies) or (0, 0, 1, 1)
+        steady = self.steady.copy()
+        steady[:, y0:y1, x0:x1] = self.bins[0]
+        a, b, c, d = bins_box
+        steady[:, a:c, b:d] = 0.0
+        return bins_box, _bounding_box(steady.any(axis=0)), steady
+
+
 def split_steady(arr: np.ndarray) -> tuple[tuple[int, int, int, int], tuple[int, int, int, int] | None, np.ndarray]:
     """Where a light's bins change and where they do not (format version 3, ``docs/corpus-format.md`` 6.2).
 
@@ -174,6 +245,8 @@ def split_steady(arr: np.ndarray) -> tuple[tuple[int, int, int, int], tuple[int,
         lamp is traced once and holds the same value in all K bins (``RenderOptions.reflection_bins`` 1), in a box
         many times the lamp's own; stored once instead of K times, the group's file shrinks by up to K x.
     """
+    if isinstance(arr, SteadyBins):
+        return arr.split()
     K, _, h, w = arr.shape
     varies = np.zeros((h, w), bool)
     for k in range(1, K):
@@ -228,13 +301,16 @@ def encode_lights_exr(lights: Sequence[tuple[int, Sequence[int], np.ndarray]], b
         if a.shape != (bins, len(bands_nm), y1 - y0, x1 - x0):
             raise ValueError(f"{pw}: expected shape (K={bins}, C={len(bands_nm)}, {y1 - y0}, {x1 - x0}) "
                              f"for bbox {(y0, x0, y1, x1)}, got {a.shape}")
-        layers = [(False, (0, 0, y1 - y0, x1 - x0), a)]
+        whole = (0, 0, y1 - y0, x1 - x0)
+        layers = [(False, whole, a)]
         if steady and bins > 1:
             bb, sb, sa = split_steady(a)
-            if bb != layers[0][1]:  # some pixels are the same in every bin: the bins' box shrinks
-                layers = [(False, bb, a[:, :, bb[0]:bb[2], bb[1]:bb[3]])]
+            if bb != whole:  # some pixels are the same in every bin: the bins' box shrinks
+                layers = [(False, bb, a.window(*bb) if isinstance(a, SteadyBins) else a[:, :, bb[0]:bb[2], bb[1]:bb[3]])]
                 if sb is not None:
                     layers.append((True, sb, sa[:, sb[0]:sb[2], sb[1]:sb[3]]))
+        if isinstance(layers[0][2], SteadyBins):  # stored whole: the (K, C, h, w) array
+            layers[0] = (False, whole, np.asarray(a))
         for is_steady, (by0, bx0, by1, bx1), data in layers:
             name = light_part_name(lid, is_steady)
             ls = store_layer(data, st, f"{what} {name}")

@@ -77,6 +77,53 @@ def _parts(path):
     return {p.name(): p for p in OpenEXR.File(str(path), separate_channels=True).parts}
 
 
+def _steady_bins(rng, h=7, w=9, box=(1, 2, 3, 5), vary=True):
+    """A SteadyBins (what the renderer hands the writer for a wet road's grown crop) and its (K, C, h, w) array
+    built independently: steady outside ``box``, the bins inside it."""
+    C_ = len(BANDS)
+    steady = (rng.random((C_, h, w)) * 0.3).astype(np.float32)
+    steady[:, :2, :2] = 0.0  # a zero corner (the grown box's padding)
+    y0, x0, y1, x1 = box
+    bins = (1 + rng.random((K, C_, y1 - y0, x1 - x0))).astype(np.float32)
+    if not vary:
+        bins[:] = bins[:1]
+    arr = np.repeat(steady[None], K, axis=0)
+    arr[:, :, y0:y1, x0:x1] = bins
+    return C.SteadyBins(steady, box, bins), arr
+
+
+@pytest.mark.parametrize("box,vary", [((1, 2, 3, 5), True), ((0, 0, 7, 9), True), ((4, 6, 7, 9), True),
+                                      ((2, 3, 4, 4), False), ((0, 0, 0, 0), True)])
+def test_steady_bins_stand_for_their_array_and_encode_the_same_bytes(box, vary):
+    """SteadyBins (the renderer's form of a grown crop) is the array it stands for, splits as split_steady splits
+    that array (same boxes, same values) and encodes to the same bytes, in both storages."""
+    rng = np.random.default_rng(sum(box) + vary)
+    sb, arr = _steady_bins(rng, box=box, vary=vary)
+    assert sb.shape == arr.shape and sb.dtype == np.float32
+    np.testing.assert_array_equal(np.asarray(sb), arr)
+    np.testing.assert_array_equal(sb.window(2, 1, 6, 8), arr[:, :, 2:6, 1:8])
+    got, want = sb.split(), C.split_steady(arr)
+    assert got[:2] == want[:2]
+    np.testing.assert_array_equal(got[2], want[2])
+    for dtype in ("float32", "compact"):
+        assert C.encode_lights_exr([(3, (2, 4, 9, 13), sb)], BANDS, K, 12, 16, dtype=dtype) == \
+            C.encode_lights_exr([(3, (2, 4, 9, 13), arr)], BANDS, K, 12, 16, dtype=dtype)
+
+
+def test_steady_bins_checked_like_arrays():
+    rng = np.random.default_rng(5)
+    for where in ("steady", "bins"):
+        sb, _ = _steady_bins(rng)
+        getattr(sb, where)[0, 1, 1] = np.nan
+        with pytest.raises(C.CorpusValueError, match="light3: radiance contains NaN"):
+            C.encode_lights_exr([(3, (2, 4, 9, 13), sb)], BANDS, K, 12, 16)
+    sb, _ = _steady_bins(rng)
+    with pytest.raises(ValueError, match=r"expected shape \(K=4"):
+        C.encode_lights_exr([(3, (2, 4, 9, 14), sb)], BANDS, K, 12, 16)
+    with pytest.raises(ValueError, match="do not fit"):
+        C.SteadyBins(sb.steady, (1, 2, 3, 6), sb.bins)
+
+
 def test_float32_round_trip_is_exact_and_stores_fewer_values(tmp_path):
     rng = np.random.default_rng(0)
     meta, frames = _meta_frames(rng)

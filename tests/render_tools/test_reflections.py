@@ -125,6 +125,25 @@ def test_lamp_and_reflection_share_every_bins_pwm_weight(reflection_bins):
     assert (w @ refl) / (w @ lamp) == pytest.approx(refl.sum() / lamp.sum(), rel=0.05)
 
 
+@pytest.mark.jit
+@pytest.mark.parametrize("reflection_bins", [None, 1])
+def test_steady_bins_frames_hold_the_same_crops(reflection_bins):
+    """``render_frames(steady_bins=True)`` (what ``lfmbench render`` hands the corpus writer) gives a grown crop
+    as SteadyBins when its reflection is traced once (``reflection_bins`` 1), else the array: the same values as
+    the default frames, bit for bit (same seed), and the same steady split."""
+    from lfmbench.corpus import SteadyBins, split_steady
+
+    sc = lamp_over_road("wet", speed_mps=12.0)
+    opts = R.RenderOptions(**OPTS, reflection_bins=reflection_bins)
+    (_, bb, arr), = next(R.render_frames(sc, opts))["lights"]["otherlights"]
+    (_, bb2, sb), = next(R.render_frames(sc, opts, steady_bins=True))["lights"]["otherlights"]
+    assert bb2 == bb and isinstance(sb, SteadyBins) == (reflection_bins == 1)
+    np.testing.assert_array_equal(np.asarray(sb), arr)
+    got, want = split_steady(sb), split_steady(arr)
+    assert got[:2] == want[:2] and got[0] != (0, 0, bb[2] - bb[0], bb[3] - bb[1])  # the bins' box shrank
+    np.testing.assert_array_equal(got[2], want[2])
+
+
 class _Sets(dict):
     def __missing__(self, k):
         return 0
