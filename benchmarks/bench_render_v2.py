@@ -9,14 +9,25 @@ steadier under load. A generator-1 scene of the same seed and time of day is ren
 generator-2 weather of it. Writes the section "Scene generator 2 against generator 1" of
 docs/render-scale-benchmark.md (what is before it is :mod:`bench_render_scale`'s; later sections are kept).
 
+Warm renders are repeated (``--repeats``, default 3), generator 1 and 2 alternating, and their medians reported: one
+render's CPU seconds moved by 5-10 % from run to run on the 2-core machine (session 14).
+
+A one-scene command also pays the command's fixed cost (Python start, imports, the worker process, the probe: about
+5 s wall and 4-6 CPU s on the 2-core machine, the same for both generators), which a corpus of many scenes pays
+once: ``--marginal N`` (default 3) also renders N copies of each scene (other scene ids) in one command with the warm
+``HOME`` and reports the cost of each scene after the first, (t_N - t_1) / (N - 1), t_1 the warm median.
+
 Usage: ``python benchmarks/bench_render_v2.py [--profile default] [--cases 101:night:wet 101:night:dry
-202:day:dry]`` (seed:time of day:generator 2's weather).
+202:day:dry] [--repeats 3] [--marginal 3] [--variant cuda_ad_spectral]`` (seed:time of day:generator 2's weather;
+``--variant`` is passed to ``lfmbench render``, default auto; ``--marginal 0``: no N-scene runs).
 """
 from __future__ import annotations
 
 import argparse
 import json
 import os
+import shutil
+import statistics
 import sys
 import tempfile
 from pathlib import Path
@@ -48,7 +59,14 @@ def main() -> None:
     ap.add_argument("--profile", default="default")
     ap.add_argument("--cases", nargs="+", default=list(CASES), help="seed:time of day:generator 2's weather")
     ap.add_argument("--out", default=str(ROOT / "docs"))
+    ap.add_argument("--repeats", type=int, default=3, help="warm renders per scene (median reported)")
+    ap.add_argument("--variant", default=None, help="Mitsuba variant passed to lfmbench render (default: auto)")
+    ap.add_argument("--marginal", type=int, default=3, help="scenes of the N-scene runs (0: none)")
     a = ap.parse_args()
+    if a.repeats < 1:
+        ap.error("--repeats must be >= 1")
+    if a.marginal == 1 or a.marginal < 0:
+        ap.error("--marginal must be 0 or >= 2")
     cases = []
     for c in a.cases:
         seed, tod, weather = c.split(":")
@@ -58,7 +76,9 @@ def main() -> None:
     with tempfile.TemporaryDirectory(prefix="lfm_v2_") as tmp:
         tmp = Path(tmp)
 
-        def run(gen, seed, tod, weather):
+        extra_v = ("--variant", a.variant) if a.variant else ()
+
+        def prepare(gen, seed, tod, weather):
             kw = {"generator": 2, "overrides": {"weather": {"conditions": [weather]}}} if gen == 2 else {}
             sc = S.generate_scene(seed, tod, scene_id=f"g{gen}_{tod}_{seed}", **kw)
             tag = f"g{gen}_{seed}_{tod}_{weather if gen == 2 else 'v1'}"
@@ -66,34 +86,74 @@ def main() -> None:
             atomic_write_text(f, json.dumps(sc))
             home = tmp / f"home_{tag}"
             home.mkdir()
-            extra = ("--scene", str(f))
-            cold = run_case(home, tmp / f"c_{tag}", a.profile, seed, extra=extra)
-            warm = run_case(home, tmp / f"w_{tag}", a.profile, seed, extra=extra)
-            print(tag, cold, warm, f"load {os.getloadavg()[0]:.1f}", flush=True)
-            return cold, warm, _objects(sc)
+            copies = []
+            for i in range(a.marginal):  # the same scene under other ids, for the N-scene run
+                g = tmp / f"{tag}_copy{i}.json"
+                atomic_write_text(g, json.dumps({**sc, "scene_id": f"{sc['scene_id']}_{i}"}))
+                copies += ["--scene", str(g)]
+            return {"tag": tag, "home": home, "extra": ("--scene", str(f), *extra_v), "seed": seed,
+                    "objects": _objects(sc), "warm": [], "copies": (*copies, *extra_v)}
+
+        def render(case, kind):
+            out = tmp / f"{kind}_{case['tag']}"
+            extra = case["copies"] if kind == "many" else case["extra"]
+            r = run_case(case["home"], out, a.profile, case["seed"], extra=extra)
+            shutil.rmtree(out)  # a 640x360 corpus is 50-130 MB
+            print(case["tag"], kind, r, f"load {os.getloadavg()[0]:.1f}", flush=True)
+            return r
+
+        def median(runs):
+            return {"seconds": statistics.median(r["seconds"] for r in runs),
+                    "cpu_s": statistics.median(r["cpu_s"] for r in runs), "kernels": runs[0]["kernels"],
+                    "mb": runs[0]["mb"]}
 
         for seed, tod, weather in cases:
-            if (seed, tod) not in v1:
-                v1[seed, tod] = run(1, seed, tod, None)
-            rows.append((seed, tod, weather, v1[seed, tod], run(2, seed, tod, weather)))
+            new1 = (seed, tod) not in v1
+            if new1:
+                v1[seed, tod] = prepare(1, seed, tod, None)
+            c1, c2 = v1[seed, tod], prepare(2, seed, tod, weather)
+            if new1:
+                c1["cold"] = render(c1, "cold")
+            c2["cold"] = render(c2, "cold")
+            for _ in range(a.repeats):  # alternating, so that a change of load hits both alike
+                if new1:
+                    c1["warm"].append(render(c1, "warm"))
+                c2["warm"].append(render(c2, "warm"))
+            for c in (c1, c2) if new1 else (c2,):
+                c["many"] = render(c, "many") if a.marginal else None
+            rows.append((seed, tod, weather, (c1["cold"], median(c1["warm"]), c1["objects"], c1["many"]),
+                         (c2["cold"], median(c2["warm"]), c2["objects"], c2["many"])))
     load1 = os.getloadavg()[0]
     lines = [SECTION, "",
              f"Generated by `benchmarks/bench_render_v2.py` (1-minute load average {load0:.1f} at the start, "
              f"{load1:.1f} at the end): the same seed and time of day from generator 1 (lfmbench-v1) and generator 2 "
              "(lfmbench-v2), one scene file each, `lfmbench render --scene FILE --profile "
-             f"{a.profile} --workers 1` in a child process; cold: a new empty `HOME` (kernel cache), warm: the same "
-             "scene again with that `HOME`. Seconds: wall (CPU of the child, user + system). Target (issue 23): v2 "
-             "at most 1.5x v1.", "",
+             f"{a.profile} --workers 1{' --variant ' + a.variant if a.variant else ''}` in a child process; cold: a "
+             "new empty `HOME` (kernel cache), warm: the same scene again with that `HOME`, the median of "
+             f"{a.repeats} renders (generators alternating). Seconds: wall (CPU of the child, user + system). "
+             + (f" Per extra scene: (t_{a.marginal} - t_1) / {a.marginal - 1} of a {a.marginal}-scene run of copies "
+                "of the scene (warm), t_1 the warm median: what each scene of a corpus costs." if a.marginal else "")
+             + " Target (issue 23): v2 at most 1.5x v1.", "",
              "| seed | time of day | v2 weather | v1 scene | v2 scene | v1 cold (s) | v2 cold (s) | cold ratio wall "
-             "(CPU) | v1 warm (s) | v2 warm (s) | warm ratio wall (CPU) | kernels cold v1 / v2 | corpus MB v1 / v2 |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
-    for seed, tod, weather, (c1, w1, o1), (c2, w2, o2) in rows:
+             "(CPU) | v1 warm (s) | v2 warm (s) | warm ratio wall (CPU) | per extra scene v1 / v2 (s) | its ratio "
+             "wall (CPU) | kernels cold v1 / v2 | corpus MB v1 / v2 |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+
+    def extra_scene(w, many):
+        if many is None:
+            return None
+        return {k: (many[k] - w[k]) / (a.marginal - 1) for k in ("seconds", "cpu_s")}
+
+    for seed, tod, weather, (c1, w1, o1, n1), (c2, w2, o2, n2) in rows:
+        m1, m2 = extra_scene(w1, n1), extra_scene(w2, n2)
+        marg = (f"{m1['seconds']:.1f} ({m1['cpu_s']:.1f}) / {m2['seconds']:.1f} ({m2['cpu_s']:.1f}) | "
+                f"{m2['seconds'] / m1['seconds']:.2f} ({m2['cpu_s'] / m1['cpu_s']:.2f})") if m1 else "- | -"
         lines.append(
             f"| {seed} | {tod} | {weather} | {o1} | {o2} | {c1['seconds']:.1f} ({c1['cpu_s']:.1f}) | "
             f"{c2['seconds']:.1f} ({c2['cpu_s']:.1f}) | {c2['seconds'] / c1['seconds']:.2f} "
             f"({c2['cpu_s'] / c1['cpu_s']:.2f}) | {w1['seconds']:.1f} ({w1['cpu_s']:.1f}) | "
             f"{w2['seconds']:.1f} ({w2['cpu_s']:.1f}) | {w2['seconds'] / w1['seconds']:.2f} "
-            f"({w2['cpu_s'] / w1['cpu_s']:.2f}) | {c1['kernels']} / {c2['kernels']} | "
+            f"({w2['cpu_s'] / w1['cpu_s']:.2f}) | {marg} | {c1['kernels']} / {c2['kernels']} | "
             f"{c1['mb']:.0f} / {c2['mb']:.0f} |")
     lines += ["", "Run again with `python benchmarks/bench_render_v2.py`.", ""]
     replace_section(Path(a.out) / "render-scale-benchmark.md", SECTION, lines)

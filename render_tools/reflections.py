@@ -75,11 +75,11 @@ def glossy_grid(lamp_points: np.ndarray, camera: np.ndarray, road: dict):
     wo = C - R
     wo /= np.linalg.norm(wo, axis=1, keepdims=True)
     keep = np.zeros(len(R), dtype=bool)
-    for p in L:
-        wi = p - R
-        wi /= np.linalg.norm(wi, axis=1, keepdims=True)
+    for i in range(0, len(L), 32):  # 32 lamp points at a time: (32, N, 3) arrays, the same arithmetic per value
+        wi = L[i:i + 32, None, :] - R[None]
+        wi /= np.sqrt(np.add.reduce(wi * wi, axis=-1))[..., None]  # = np.linalg.norm(wi, axis=-1)
         h = wi + wo
-        keep |= np.hypot(h[:, 0], h[:, 1]) <= k * h[:, 2]
+        keep |= (np.hypot(h[..., 0], h[..., 1]) <= k * h[..., 2]).any(axis=0)
     if not keep.any():
         return None
     k2 = keep.reshape(GRID)

@@ -285,6 +285,15 @@ class SceneGeometry:
         self.K = cam_mod.intrinsics(opts.width, opts.height, self.fov)
         self.wet = reflections.wet_road(scene)  # None: dry, no reflection region in any crop
         self._grids: dict = {}  # (light id, t_obj) -> reflections.glossy_grid: a light's bbox and bands share it
+        self._poses: dict = {}  # t -> camera pose: every light of a frame is projected at the same time samples
+
+    def pose_cv(self, t: float) -> np.ndarray:
+        """:meth:`render_tools.camera.EgoMotion.pose_cv` at ``t`` (s), computed once per time (read-only)."""
+        t = float(t)
+        if t not in self._poses:
+            self._poses[t] = self.ego.pose_cv(t)
+            self._poses[t].flags.writeable = False
+        return self._poses[t]
 
     def _glossy_grid(self, light: dict, t_obj: float):
         """:func:`render_tools.reflections.glossy_grid` of a light at ``t_obj`` (s), computed once per light and
@@ -324,7 +333,7 @@ class SceneGeometry:
         """Screen points (N, 2) px at time ``t`` (s) of road points ``pts`` (N, 3) m (moving with the light's
         object from its ``t_obj`` position) that lie in front of the camera and within the padded image."""
         v = self.object_velocity(light)
-        ruv, rz = cam_mod.project(pts + v * (t - t_obj), self.ego.pose_cv(t), self.K)
+        ruv, rz = cam_mod.project(pts + v * (t - t_obj), self.pose_cv(t), self.K)
         p = self.opts.pad_px
         ok = (rz > MIN_DEPTH_M) & (ruv[:, 0] >= -p) & (ruv[:, 0] <= self.opts.width + p) & \
             (ruv[:, 1] >= -p) & (ruv[:, 1] <= self.opts.height + p)
@@ -352,7 +361,7 @@ class SceneGeometry:
         flat = cells.reshape(-1, 3)
         band = np.arange(nb)
         for t in np.linspace(t_a, t_b, BBOX_TIME_SAMPLES):
-            uv, z = cam_mod.project(flat + v * (t - t_obj), self.ego.pose_cv(t), self.K)
+            uv, z = cam_mod.project(flat + v * (t - t_obj), self.pose_cv(t), self.K)
             uv, z = uv.reshape(-1, 4, 2), z.reshape(-1, 4)
             front = z > MIN_DEPTH_M
             some, every = front.any(1), front.all(1)
@@ -389,7 +398,7 @@ class SceneGeometry:
         pts = np.concatenate([corners, corners + u * (w / cols), corners + v * (h / rows)])  # (12, 3) m
         best = 0.0
         for t in np.asarray(times, dtype=np.float64).reshape(-1):
-            uv, z = cam_mod.project(pts + ms.object_offset(self.scene, light["instance"], t), self.ego.pose_cv(t),
+            uv, z = cam_mod.project(pts + ms.object_offset(self.scene, light["instance"], t), self.pose_cv(t),
                                     self.K)
             if np.any(z <= MIN_DEPTH_M):
                 return math.inf
@@ -415,7 +424,7 @@ class SceneGeometry:
             if moving and reflection and self.reflected(light, t_obj) else None
         uvs = []
         for t in times:
-            pose = self.ego.pose_cv(t)
+            pose = self.pose_cv(t)
             pw = pts + v * (t - t_obj)
             uv, z = cam_mod.project(pw, pose, self.K)
             if refl is not None and len(refl):
