@@ -46,8 +46,14 @@ references, shared through ``--cache``) with the pixel samples placed by per-dim
 (``RenderOptions.pixel_samples``) and more lamp samples for the lights drawn as filled cells
 (``filled_spp_factor``), per light kind, with a numpy model of moving edges (:func:`edge_model`).
 
+``--pad-samples`` writes the section "Pad ring samples (issue 23)": the flickering groups alone with a lamp's
+``pad_px`` ring traced at ``light_spp`` (``RenderOptions.pad_samples`` "light") and at ``spp`` ("spp", scene
+version 2's default), against two references of different seeds (light_spp :data:`PAD_REF_LIGHT_SPP`, the ring
+at light_spp): the LED bins as above and the whole crops (every pixel of every light's bins, the ring included),
+both corrected for the references' noise, with the ring's share of the crops' light and the lamp crops' CPU.
+
 Usage: ``python benchmarks/bench_render_v2_error.py [--cases 202:day:dry 101:night:dry 101:night:wet]
-[--cache DIR] [--quick] [--led | --pixel-samples] [--static-spp 2 4]``.
+[--cache DIR] [--quick] [--led | --pixel-samples | --pad-samples] [--static-spp 2 4]``.
 """
 from __future__ import annotations
 
@@ -189,6 +195,9 @@ def main() -> None:
     ap.add_argument("--pixel-samples", action="store_true",
                     help="the section \"Pixel samples\": strata against Sobol' points, more samples for filled cells "
                          f"(cases default {' '.join(PXS_CASES)})")
+    ap.add_argument("--pad-samples", action="store_true",
+                    help="the section \"Pad ring samples\": a lamp's pad ring at light_spp against spp (cases default "
+                         f"{' '.join(PAD_CASES)})")
     ap.add_argument("--static-spp", nargs="*", type=int, default=[2, 4],
                     help="also render generator-2 cases with these spp (the static full frames; light_spp as the "
                          "default) to see what the all-pixel median would cost")
@@ -201,6 +210,9 @@ def main() -> None:
     if a.pixel_samples:
         cases = a.cases if a.cases != list(CASES) else list(PXS_CASES)
         return pixel_samples_main(cases, cache, Path(a.out), a.quick)
+    if a.pad_samples:
+        cases = a.cases if a.cases != list(CASES) else list(PAD_CASES)
+        return pad_samples_main(cases, cache, Path(a.out), a.quick)
     prof = load_yaml(ROOT / "render_tools" / "configs" / "render_profiles.yaml")["default"]
     W, H = (160, 90) if a.quick else SIZE
     ref_spp, ref_light_spp = (2, 32) if a.quick else (REF_SPP, REF_LIGHT_SPP)
@@ -435,6 +447,78 @@ def pixel_samples_main(cases, cache: Path | None, out: Path, quick: bool) -> Non
             rows.append({"case": c, "setting": name, "cpu_s": cpu, "err": led_error(fr, *refs, sc)})
             print(c, name, f"{cpu:.1f} s", rows[-1]["err"]["all"], flush=True)
     write_pxs_section(rows, edge_model(), out, load0, os.getloadavg()[0], (W, H), ref_spp)
+
+
+PAD_CASES = ("101:night:dry", "101:night:wet")
+PAD_SECTION = "## Pad ring samples (issue 23)"
+PAD_REF_LIGHT_SPP, PAD_REF_SEEDS = 256, (2001, 2002)
+
+
+def crop_error(frame: dict, ref_a: dict, ref_b: dict) -> tuple[float, float]:
+    """Relative RMSE of every pixel of every light's bins (the whole crops, pooled) against the mean of two
+    references, corrected for their noise as :func:`led_error`; and the share of the references' crop light
+    (luminance summed over bins and pixels) outside the LED pixels (:func:`led_error`'s selection)."""
+    T, A, B = ({lid: (bb, b) for items in f["lights"].values() for lid, bb, b in items} for f in (frame, ref_a, ref_b))
+    num = noise = den = led_light = light = 0.0
+    for lid in A:
+        boxes = [X[lid][0] for X in (T, A, B) if lid in X]
+        box = (min(b[0] for b in boxes), min(b[1] for b in boxes), max(b[2] for b in boxes), max(b[3] for b in boxes))
+        a, b = _led_canvas(A, lid, box), _led_canvas(B, lid, box)
+        t = _led_canvas(T, lid, box) if lid in T else np.zeros_like(a)
+        m = 0.5 * (a + b)
+        e = m.mean(0)
+        sel = e > 0.05 * e.max() if e.max() > 0 else np.zeros(e.shape, bool)
+        num += float(np.sum((t - m) ** 2))
+        noise += float(np.sum((0.5 * (a - b)) ** 2))
+        den += float(np.sum(m ** 2))
+        light += float(m.sum())
+        led_light += float(m[:, sel].sum())
+    return float(np.sqrt(max(num - noise, 0.0) / den)), 1.0 - led_light / light
+
+
+def pad_samples_main(cases, cache: Path | None, out: Path, quick: bool) -> None:
+    """``--pad-samples``: the flickering groups alone with the pad ring at light_spp and at spp, against two
+    references; writes the section "Pad ring samples (issue 23)" of docs/render-benchmark.md."""
+    from render_tools import render  # noqa: PLC0415
+
+    W, H = (160, 90) if quick else SIZE
+    ref_spp = 64 if quick else PAD_REF_LIGHT_SPP
+    load0 = os.getloadavg()[0]
+    rows = []
+    for c in cases:
+        sc = _v2_scene(c)
+
+        def opts(light_spp, s, pad="spp"):
+            return render.RenderOptions(width=W, height=H, spp=1, light_spp=light_spp, bins=8, frames=1, seed=s,
+                                        groups=("otherlights", "signals"), aux=False, pad_samples=pad)
+
+        tag = c.replace(":", "_")
+        refs = [_frame(sc, opts(ref_spp, s, "light"), cache, f"pad_ref_{ref_spp}_{s}_{W}_{tag}")[0]
+                for s in PAD_REF_SEEDS]
+        next(render.render_frames(sc, opts(1, 0)))  # warm-up: the timed settings find their kernels compiled
+        for name, pad in (("ring at light_spp (before)", "light"), ("ring at spp (default)", "spp")):
+            fr, cpu = _frame(sc, opts(32, 11, pad), cache, f"pad_{pad}_{W}_{tag}")
+            crop, ring_share = crop_error(fr, *refs)
+            rows.append({"case": c, "setting": name, "cpu_s": cpu, "led": led_error(fr, *refs, sc)["all"][0],
+                         "crop": crop, "ring_share": ring_share})
+            print(rows[-1], flush=True)
+    lines = [PAD_SECTION, "",
+             f"Generated by `benchmarks/bench_render_v2_error.py --pad-samples` (1-minute load average {load0:.1f} at "
+             f"the start, {os.getloadavg()[0]:.1f} at the end): frame 0 at {W}x{H}, the flickering groups alone "
+             "(otherlights, signals; K 8, light_spp 32, the `default` profile's other options), a lamp's `pad_px` "
+             "ring traced at light_spp (`pad_samples` \"light\", scene version 1's way and version 2's before) or at "
+             "spp 1 (\"spp\", version 2's default), against two references of other seeds (light_spp "
+             f"{ref_spp}, ring at light_spp). LED bins: relative RMSE of the LED pixels' bins, pooled; whole crops: "
+             "the same over every pixel of the crops (the ring included); both corrected for the references' noise "
+             "(module docstring). Light outside the LED pixels: its share of the crops' light in the references. "
+             "CPU: the lamp crops of the frame, user + system s, one process after a warm-up render.", "",
+             "| scene | setting | CPU s (lamp crops) | LED bins | whole crops | light outside the LED pixels |",
+             "|---|---|---|---|---|---|"]
+    lines += [f"| {r['case']} | {r['setting']} | {r['cpu_s']:.1f} | {r['led']:.3f} | {r['crop']:.3f} | "
+              f"{r['ring_share']:.3f} |" for r in rows]
+    lines += ["", "Run again with `python benchmarks/bench_render_v2_error.py --pad-samples`.", ""]
+    replace_section(out / "render-benchmark.md", PAD_SECTION, lines)
+    print("\n".join(lines))
 
 
 def edge_model(seed: int = 0, trials: int = 300, ref_n: int = 1 << 18) -> list[tuple]:

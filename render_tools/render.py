@@ -63,6 +63,8 @@ STATIC_PASSES = ("union", "per_group")
 LAMP_PASS_SPP = ("auto", "spectrum", "uniform")
 #: Ways of placing a pixel's samples in x, y and time (:class:`RenderOptions` ``pixel_samples``).
 PIXEL_SAMPLES = ("auto", "sobol", "strata")
+#: ``RenderOptions.pad_samples`` values.
+PAD_SAMPLES = ("auto", "spp", "light")
 
 
 @dataclass
@@ -127,6 +129,12 @@ class RenderOptions:
     block (its light in the block kept) for a quarter of its camera samples. A lamp's reflection in a glossy
     film is itself a blur many px wide (docs/rendering.md, "Wet roads"; error in docs/render-benchmark.md). 1:
     every pixel traced. No effect on dry scenes.
+    pad_samples: samples of the ``pad_px`` ring around a lamp in its crop: ``"light"`` (``light_spp``, as the lamp
+    itself), ``"spp"`` (``spp``, as the full frame: the ring holds no part of the lamp's face, only the light it
+    throws on what is next to it; the lamp's own box keeps ``light_spp``; both unbiased) or ``"auto"`` (default:
+    ``spp`` on scene version 2, ``light`` on version 1, whose renders are frozen). The ring held two thirds of a
+    generator-2 night's lamp-crop samples (37.9 M of a scene's 3 frames, 12.6 M without it; docs/render-scale-
+    benchmark.md). A static group's lamp refines its own box only (the ring keeps the full frame's estimate).
     """
 
     width: int = 640
@@ -153,6 +161,7 @@ class RenderOptions:
     filled_spp_factor: int = 2
     pixel_samples: str = "auto"
     reflection_block_px: int = 2
+    pad_samples: str = "auto"
 
     def __post_init__(self):
         self.bands_nm = tuple(float(b) for b in self.bands_nm)
@@ -184,6 +193,8 @@ class RenderOptions:
             raise ValueError(f"lamp_pass_spp: must be one of {LAMP_PASS_SPP}, got {self.lamp_pass_spp!r}")
         if self.reflection_block_px not in (1, 2) or isinstance(self.reflection_block_px, bool):
             raise ValueError(f"reflection_block_px: must be 1 or 2, got {self.reflection_block_px!r}")
+        if self.pad_samples not in PAD_SAMPLES:
+            raise ValueError(f"pad_samples: must be one of {PAD_SAMPLES}, got {self.pad_samples!r}")
         if self.pixel_samples not in PIXEL_SAMPLES:
             raise ValueError(f"pixel_samples: must be one of {PIXEL_SAMPLES}, got {self.pixel_samples!r}")
         f = self.filled_spp_factor
@@ -407,13 +418,14 @@ class SceneGeometry:
         return best
 
     def light_bbox(self, light: dict, t_obj: float, t_a: float, t_b: float, moving: bool = False,
-                   reflection: bool = True):
+                   reflection: bool = True, pad: int | None = None):
         """Screen bbox (y0, x0, y1, x1) px (end exclusive) of a light's face over [t_a, t_b] s, padded and
         clipped; None when not visible (behind the camera, outside the image or facing away). ``moving``: the
         lamp moves with its object over the interval (as per-light renders show it), else it is held at its
         ``t_obj`` position (as full-frame renders show it). In a wet scene a moving (flickering) light's box also
         holds its reflection in the road (:mod:`render_tools.reflections`) unless ``reflection`` is False or the
-        light is too dim for its reflection to be traced (:meth:`reflected`)."""
+        light is too dim for its reflection to be traced (:meth:`reflected`). ``pad``: px around the box (None:
+        ``opts.pad_px``)."""
         times = np.linspace(t_a, t_b, BBOX_TIME_SAMPLES)
         if not self.facing(light, t_obj, times, moving):
             return None
@@ -437,7 +449,7 @@ class SceneGeometry:
         if not uvs or not any(len(u) for u in uvs):
             return None
         uv = np.concatenate(uvs)
-        p = self.opts.pad_px
+        p = self.opts.pad_px if pad is None else pad
         x0, y0 = np.floor(uv.min(0)).astype(int) - p
         x1, y1 = np.ceil(uv.max(0)).astype(int) + p
         if x1 <= 0 or y1 <= 0 or x0 >= self.opts.width or y0 >= self.opts.height:
@@ -481,6 +493,31 @@ def sobol_pixel_samples(scene: dict, opts: RenderOptions) -> bool:
     """Whether the tiles place their samples by Sobol' points (``opts.pixel_samples``; ``auto``: scene version 2
     and later)."""
     return _on_from_version_2(opts.pixel_samples, "sobol", scene)
+
+
+def pad_at_spp(scene: dict, opts: RenderOptions) -> bool:
+    """Whether a lamp's ``pad_px`` ring is traced at ``spp`` rather than ``light_spp`` (``opts.pad_samples``;
+    ``auto``: scene version 2 and later)."""
+    return _on_from_version_2(opts.pad_samples, "spp", scene)
+
+
+def ring_boxes(outer: tuple, inner: tuple | None) -> list[tuple]:
+    """The boxes (y0, x0, y1, x1), half-open, that cover ``outer`` less ``inner`` (a box inside it, or None:
+    nothing): top and bottom rows full width, left and right between them; empty ones left out. Disjoint."""
+    if inner is None:
+        return [tuple(outer)]
+    oy0, ox0, oy1, ox1 = outer
+    iy0, ix0, iy1, ix1 = inner
+    boxes = [(oy0, ox0, iy0, ox1), (iy1, ox0, oy1, ox1), (iy0, ox0, iy1, ix0), (iy0, ix1, iy1, ox1)]
+    return [b for b in boxes if b[2] > b[0] and b[3] > b[1]]
+
+
+def _inside(box: tuple | None, outer: tuple) -> tuple | None:
+    """``box`` clipped to ``outer`` (both (y0, x0, y1, x1)); None when nothing is left."""
+    if box is None:
+        return None
+    b = (max(box[0], outer[0]), max(box[1], outer[1]), min(box[2], outer[2]), min(box[3], outer[3]))
+    return b if b[2] > b[0] and b[3] > b[1] else None
 
 
 def lamp_pass_spp(light: dict, opts: RenderOptions, light_spp: int | None = None) -> tuple | None:
@@ -621,7 +658,8 @@ def scene_meta(scene: dict, opts: RenderOptions) -> dict:
                        "filled_spp_factor": opts.filled_spp_factor}
                       if any(lt["shape"] == "dots" for lt in scene["lights"]) else {}),
                    **({"lamp_pass_spp": "spectrum" if spectral_lamp_passes(scene, opts) else "uniform",
-                       "pixel_samples": "sobol" if sobol_pixel_samples(scene, opts) else "strata"}
+                       "pixel_samples": "sobol" if sobol_pixel_samples(scene, opts) else "strata",
+                       "pad_samples": "spp" if pad_at_spp(scene, opts) else "light"}
                       if int(scene.get("version", 1)) >= 2 else {})},
     }
 
@@ -713,6 +751,8 @@ def plan_frame(scene: dict, opts: RenderOptions, n: int, sets, geo: SceneGeometr
     if (lb - la) - (sb - sa) > 1e-12 * (lb - la):
         wins.append(("rest", la, (lb - la) - (sb - sa), sa, sb - sa, (sb - sa) / (lb - la)))
     qmc = sobol_pixel_samples(scene, opts)
+    ring_spp = pad_at_spp(scene, opts)  # a lamp's pad ring at spp, its own box at light_spp
+    rpad = 0 if ring_spp else None  # a static group's lamp refines its own box, the ring keeps the full frame
     union = list(getattr(sets, "union", ()) or ())
     if union:  # the static groups' full frames: one tile per window records all of them (one image per slot)
         for win, t0, dt, gap_at, gap_len, frac in wins:
@@ -726,8 +766,8 @@ def plan_frame(scene: dict, opts: RenderOptions, n: int, sets, geo: SceneGeometr
             k = sets[f"group:{g}"]
             for win, t0, dt, gap_at, gap_len, frac in wins:
                 for kind, crop, n_s, key in [("static", full, opts.spp, None)] * (g not in union) + [
-                        ("refine", geo.light_bbox(lt, t_obj, la, lb) if win == "rest" else
-                         geo.light_bbox(lt, t_obj, sa, sb), light_spp, lt["id"])
+                        ("refine", geo.light_bbox(lt, t_obj, la, lb, pad=rpad) if win == "rest" else
+                         geo.light_bbox(lt, t_obj, sa, sb, pad=rpad), light_spp, lt["id"])
                         for lt in (lamps if light_spp > opts.spp else ())]:
                     if crop is None:
                         continue
@@ -752,20 +792,27 @@ def plan_frame(scene: dict, opts: RenderOptions, n: int, sets, geo: SceneGeometr
             # wet road: the box holds the lamp's reflection too; that dim, smooth light is traced at ``spp`` and
             # the lamp's own box again at ``light_spp`` over it (both unbiased: the "refine" of static groups)
             lamp_bb = geo.light_bbox(lt, t_obj, *tm["window"], moving=True, reflection=False) if geo.wet else bb
-            if lamp_bb == bb:  # no reflection region: the lamp's box alone
+            # pad_samples "spp": the lamp's padded box = its own (unpadded) box at light_spp + the ring at spp
+            inner = _inside(geo.light_bbox(lt, t_obj, *tm["window"], moving=True, reflection=False, pad=0),
+                            lamp_bb) if ring_spp and lamp_bb is not None else lamp_bb
+            if lamp_bb == bb and inner == lamp_bb:  # no reflection region, no ring: the lamp's box alone
                 crops = [("light", bb, own_spp, opts.bins, ())]
             else:  # the grown box (zeros) holds the reflection's row bands at spp in opts.reflection_bins bins,
-                # each repeated, and the lamp's own box at light_spp in K bins pasted over them
+                # each repeated, the ring at spp in K bins and the lamp's own box at light_spp in K bins over them
                 plan.append(("light_box", g, lt["id"], bb, None, opts.bins))
                 kb = opts.reflection_bins or opts.bins
                 crops = [("light_part", c, opts.spp, kb, ("reflection", c[0]))
-                         for c in geo.reflection_tiles(lt, t_obj, *tm["window"], bb)]
-                if lamp_bb is not None:
-                    crops.append(("light_part", lamp_bb, own_spp, opts.bins, ("lamp",)))
+                         for c in (geo.reflection_tiles(lt, t_obj, *tm["window"], bb) if lamp_bb != bb else ())]
+                if lamp_bb is not None and inner != lamp_bb:
+                    crops += [("light_part", c, opts.spp, opts.bins, ("ring", c[0], c[1]))
+                              for c in ring_boxes(lamp_bb, inner)]
+                if inner is not None:
+                    crops.append(("light_part", inner, own_spp, opts.bins, ("lamp",)))
             for kind, crop, n_s, nb, extra in crops:
                 key = _seed("light", lt["id"], *extra)
                 refl = extra[:1] == ("reflection",)
-                own, blk = (None, opts.reflection_block_px) if refl else (ps, 1)
+                own, blk = (None, opts.reflection_block_px) if refl else ((None, 1) if extra[:1] == ("ring",) else
+                                                                          (ps, 1))
                 if geo.ego.moving or np.any(v != 0.0):
                     plan.append((kind, g, lt["id"], crop, len(tiles), opts.bins // nb))
                     tiles.append(Tile(crop, nb, edges[0], (edges[-1] - edges[0]) / nb, n_s, k,
@@ -779,15 +826,25 @@ def plan_frame(scene: dict, opts: RenderOptions, n: int, sets, geo: SceneGeometr
 
 
 def _grown_crop(steady: np.ndarray, parts: list, K: int, as_steady_bins: bool):
-    """The (K, C, h, w) bins of a light's grown crop (wet road) from its parts: ``steady`` (C, h, w) holds the parts
-    that are the same in every bin (the reflection bands), ``parts`` the others as (y0, x0, y1, x1) relative box and
-    (K, C, bh, bw) bins, pasted in order over it. ``as_steady_bins``: a :class:`lfmbench.corpus.SteadyBins` when one
-    part varies (the lamp's own box), else the array."""
+    """The (K, C, h, w) bins of a light's crop made of parts (a wet road's reflection, a lamp's pad ring): ``steady``
+    (C, h, w) holds the parts that are the same in every bin (the reflection bands), ``parts`` the others as
+    (y0, x0, y1, x1) relative box and (K, C, bh, bw) bins, pasted in order over it. ``as_steady_bins``: a
+    :class:`lfmbench.corpus.SteadyBins` (the steady image and the bins over the box bounding the varying parts),
+    else the array."""
     from lfmbench.corpus import SteadyBins  # noqa: PLC0415
 
-    if as_steady_bins and len(parts) <= 1:
-        box, bins = parts[0] if parts else ((0, 0, 0, 0), np.zeros((K, steady.shape[0], 0, 0), np.float32))
-        return SteadyBins(steady, box, bins)
+    if as_steady_bins:
+        if not parts:
+            return SteadyBins(steady, (0, 0, 0, 0), np.zeros((K, steady.shape[0], 0, 0), np.float32))
+        if len(parts) == 1:
+            return SteadyBins(steady, *parts[0])
+        y0, x0 = min(b[0] for b, _ in parts), min(b[1] for b, _ in parts)
+        y1, x1 = max(b[2] for b, _ in parts), max(b[3] for b, _ in parts)
+        bins = np.empty((K, steady.shape[0], y1 - y0, x1 - x0), np.float32)
+        bins[:] = steady[:, y0:y1, x0:x1]
+        for (a, b, c, d), v in parts:
+            bins[:, :, a - y0:c - y0, b - x0:d - x0] = v
+        return SteadyBins(steady, (y0, x0, y1, x1), bins)
     arr = np.empty((K, *steady.shape), np.float32)
     arr[:] = steady
     for (y0, x0, y1, x1), bins in parts:

@@ -143,7 +143,8 @@ def test_moving_edge_same_light_less_spread():
 def test_wet_reflection_bands_are_traced_in_blocks():
     """Plan: a wet scene's reflection bands (traced at spp) get block 2, lamps' own boxes block 1; 1 turns it off;
     a dry scene has no block tile; meta.json records it for wet scenes."""
-    opts = render.RenderOptions(width=160, height=90, spp=1, light_spp=16, frames=1)
+    # the lamps' pad rings (also at spp on scene version 2, block 1) left at light_spp: the bands alone at spp
+    opts = render.RenderOptions(width=160, height=90, spp=1, light_spp=16, frames=1, pad_samples="light")
     sets = type("Sets", (dict,), {"__missing__": lambda self, k: 0, "union": []})()
     wet = scene.generate_scene(101, time_of_day="night", generator=2, overrides={"weather": {"conditions": ["wet"]}})
     tiles, plan, _ = render.plan_frame(wet, opts, 0, sets)

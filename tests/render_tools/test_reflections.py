@@ -129,15 +129,16 @@ def test_lamp_and_reflection_share_every_bins_pwm_weight(reflection_bins):
 @pytest.mark.parametrize("reflection_bins", [None, 1])
 def test_steady_bins_frames_hold_the_same_crops(reflection_bins):
     """``render_frames(steady_bins=True)`` (what ``lfmbench render`` hands the corpus writer) gives a grown crop
-    as SteadyBins when its reflection is traced once (``reflection_bins`` 1), else the array: the same values as
-    the default frames, bit for bit (same seed), and the same steady split."""
+    as SteadyBins, its reflection traced once (``reflection_bins`` 1: in the steady image) or in every bin (None:
+    the bands, the lamp's pad ring and its own box are varying parts, bounded by one box): the same values as the
+    default frames, bit for bit (same seed), and the same steady split."""
     from lfmbench.corpus import SteadyBins, split_steady
 
     sc = lamp_over_road("wet", speed_mps=12.0)
     opts = R.RenderOptions(**OPTS, reflection_bins=reflection_bins)
     (_, bb, arr), = next(R.render_frames(sc, opts))["lights"]["otherlights"]
     (_, bb2, sb), = next(R.render_frames(sc, opts, steady_bins=True))["lights"]["otherlights"]
-    assert bb2 == bb and isinstance(sb, SteadyBins) == (reflection_bins == 1)
+    assert bb2 == bb and isinstance(sb, SteadyBins)
     np.testing.assert_array_equal(np.asarray(sb), arr)
     got, want = split_steady(sb), split_steady(arr)
     assert got[:2] == want[:2] and got[0] != (0, 0, bb[2] - bb[0], bb[3] - bb[1])  # the bins' box shrank
@@ -155,8 +156,8 @@ def test_reflection_bins_plan_and_options():
     (every lfmbench-v1 scene) plans the same tiles whatever ``reflection_bins`` and ``reflection_min_lux`` are;
     a value that does not divide K is refused, naming the option."""
     wet = lamp_over_road("wet", speed_mps=12.0)
-    for rb, n in [(None, 4), (1, 1), (2, 2)]:
-        opts = R.RenderOptions(**OPTS, reflection_bins=rb)
+    for rb, n in [(None, 4), (1, 1), (2, 2)]:  # the lamp's pad ring at light_spp: only the bands at spp
+        opts = R.RenderOptions(**OPTS, reflection_bins=rb, pad_samples="light")
         tiles, plan, _ = R.plan_frame(wet, opts, 0, _Sets())
         (box,) = [e for e in plan if e[0] == "light_box"]
         assert box[4] is None and box[5] == 4
