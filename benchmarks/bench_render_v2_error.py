@@ -305,13 +305,12 @@ def _led_canvas(items: dict, lid: int, box) -> np.ndarray:
     return out
 
 
-def led_error(frame: dict, ref_a: dict, ref_b: dict, sc: dict) -> dict:
-    """Relative RMSE of the LED bins of ``frame`` against the mean of two references of different seeds,
-    corrected for the references' noise (module docstring), pooled over every light (``all``) and per light kind:
-    {kind: (error, share of the squared error)}. Each light's crops are compared on the union of its three
-    boxes (a filled face's box may be a pixel larger)."""
+def _light_canvases(frame: dict, ref_a: dict, ref_b: dict):
+    """Per light of the references: (id, t, a, b, m, sel): the (K, h, w) luminance of ``frame``, the two references
+    and their mean on the union of the light's three boxes (a filled face's box may be a pixel larger; zeros where a
+    crop does not reach), and its LED pixels (h, w) (the mean's bin-mean over 5 % of its maximum,
+    bench_render.led_sel)."""
     T, A, B = ({lid: (bb, b) for items in f["lights"].values() for lid, bb, b in items} for f in (frame, ref_a, ref_b))
-    acc: dict = {}
     for lid in A:
         boxes = [X[lid][0] for X in (T, A, B) if lid in X]
         box = (min(b[0] for b in boxes), min(b[1] for b in boxes), max(b[2] for b in boxes), max(b[3] for b in boxes))
@@ -319,7 +318,16 @@ def led_error(frame: dict, ref_a: dict, ref_b: dict, sc: dict) -> dict:
         t = _led_canvas(T, lid, box) if lid in T else np.zeros_like(a)
         m = 0.5 * (a + b)
         e = m.mean(0)
-        sel = e > 0.05 * e.max() if e.max() > 0 else np.zeros(e.shape, bool)  # bench_render.led_sel
+        yield lid, t, a, b, m, (e > 0.05 * e.max() if e.max() > 0 else np.zeros(e.shape, bool))
+
+
+def led_error(frame: dict, ref_a: dict, ref_b: dict, sc: dict) -> dict:
+    """Relative RMSE of the LED bins of ``frame`` against the mean of two references of different seeds,
+    corrected for the references' noise (module docstring), pooled over every light (``all``) and per light kind:
+    {kind: (error, share of the squared error)}. Each light's crops are compared on the union of its three
+    boxes (a filled face's box may be a pixel larger)."""
+    acc: dict = {}
+    for lid, t, a, b, m, sel in _light_canvases(frame, ref_a, ref_b):
         num, noise, den = (float(np.sum(x[:, sel] ** 2)) for x in (t - m, 0.5 * (a - b), m))
         for k in ("all", sc["lights"][lid]["kind"]):
             acc[k] = acc.get(k, np.zeros(3)) + (num, noise, den)
@@ -458,16 +466,8 @@ def crop_error(frame: dict, ref_a: dict, ref_b: dict) -> tuple[float, float]:
     """Relative RMSE of every pixel of every light's bins (the whole crops, pooled) against the mean of two
     references, corrected for their noise as :func:`led_error`; and the share of the references' crop light
     (luminance summed over bins and pixels) outside the LED pixels (:func:`led_error`'s selection)."""
-    T, A, B = ({lid: (bb, b) for items in f["lights"].values() for lid, bb, b in items} for f in (frame, ref_a, ref_b))
     num = noise = den = led_light = light = 0.0
-    for lid in A:
-        boxes = [X[lid][0] for X in (T, A, B) if lid in X]
-        box = (min(b[0] for b in boxes), min(b[1] for b in boxes), max(b[2] for b in boxes), max(b[3] for b in boxes))
-        a, b = _led_canvas(A, lid, box), _led_canvas(B, lid, box)
-        t = _led_canvas(T, lid, box) if lid in T else np.zeros_like(a)
-        m = 0.5 * (a + b)
-        e = m.mean(0)
-        sel = e > 0.05 * e.max() if e.max() > 0 else np.zeros(e.shape, bool)
+    for _, t, a, b, m, sel in _light_canvases(frame, ref_a, ref_b):
         num += float(np.sum((t - m) ** 2))
         noise += float(np.sum((0.5 * (a - b)) ** 2))
         den += float(np.sum(m ** 2))
