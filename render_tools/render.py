@@ -730,8 +730,10 @@ def plan_frame(scene: dict, opts: RenderOptions, n: int, sets, geo: SceneGeometr
     times when neither the camera nor the lamp moves); in a wet scene a crop grown by the light's reflection
     (plan kind ``"light_box"``: zeros, no tile) gets the reflection's row bands (:meth:`SceneGeometry.
     reflection_tiles`) traced at ``spp`` in ``opts.reflection_bins`` bins and the lamp's own box at ``light_spp``
-    in K bins pasted over them (plan kind ``"light_part"``). ``sets``: the frame's :class:`tracer.LightSets` (or any
-    mapping from set name to index). ``filled``: ids of the lights :func:`dots_lod` drew as filled cells (their own
+    in K bins pasted over them (plan kind ``"light_part"``); with ``pad_samples`` at spp (scene version 2) a lamp's
+    ``pad_px`` ring is such parts too, traced at ``spp`` in K bins (:func:`ring_boxes`), its own unpadded box at
+    ``light_spp`` over them, and a static group's lamp refines its unpadded box. ``sets``: the frame's
+    :class:`tracer.LightSets` (or any mapping from set name to index). ``filled``: ids of the lights :func:`dots_lod` drew as filled cells (their own
     boxes get :func:`lamp_light_spp`). Returns (tiles, plan, visible light ids); plan entries are
     (kind, group, window or light id, crop, tile index, repeat): a tile of K / repeat bins, each bin repeated
     ``repeat`` times in a row to make the K bins.
