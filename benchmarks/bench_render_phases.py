@@ -147,7 +147,9 @@ def main() -> None:
              "`HOME` (empty `~/.drjit`, no probe verdict), warm = the same scene again with the same `HOME`. "
              "Seconds of wall time of the main thread; *outside* = wall - tracing, split into the columns after "
              "it (*other*: Python start and imports, tile planning, AOV maps, ...). *encode (threads)*: EXR "
-             "encoding in the writer's threads, summed over threads, overlapping the tracing. user / sys: CPU "
+             "encoding in the writer's threads, wall time in them summed over threads, overlapping the tracing "
+             "(on 2 cores the tracer's threads stretch it: one v1 night frame encodes in 1.0 CPU s alone, session "
+             "14). user / sys: CPU "
              "seconds of the child. load: 1-minute load average of this shared 2-core machine before the case.", "",
              "| seed | case | wall | user | sys | tracing | outside | probe wait | scene + meta | Mitsuba dicts | "
              "load_dict | writer wait | other | encode (threads) | load |",
