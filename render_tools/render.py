@@ -297,6 +297,7 @@ class SceneGeometry:
         self.wet = reflections.wet_road(scene)  # None: dry, no reflection region in any crop
         self._grids: dict = {}  # (light id, t_obj) -> reflections.glossy_grid: a light's bbox and bands share it
         self._poses: dict = {}  # t -> camera pose: every light of a frame is projected at the same time samples
+        self._extents: dict = {}  # light_bbox's screen extents (:meth:`_extent`)
 
     def pose_cv(self, t: float) -> np.ndarray:
         """:meth:`render_tools.camera.EgoMotion.pose_cv` at ``t`` (s), computed once per time (read-only)."""
@@ -426,6 +427,27 @@ class SceneGeometry:
         holds its reflection in the road (:mod:`render_tools.reflections`) unless ``reflection`` is False or the
         light is too dim for its reflection to be traced (:meth:`reflected`). ``pad``: px around the box (None:
         ``opts.pad_px``)."""
+        ext = self._extent(light, t_obj, t_a, t_b, moving, reflection)
+        if ext is None:
+            return None
+        p = self.opts.pad_px if pad is None else pad
+        x0, y0 = np.floor(ext[0]).astype(int) - p
+        x1, y1 = np.ceil(ext[1]).astype(int) + p
+        if x1 <= 0 or y1 <= 0 or x0 >= self.opts.width or y0 >= self.opts.height:
+            return None
+        x0, x1 = _round_span(x0, x1, self.opts.width)
+        y0, y1 = _round_span(y0, y1, self.opts.height)
+        return (int(y0), int(x0), int(y1), int(x1))
+
+    def _extent(self, light: dict, t_obj: float, t_a: float, t_b: float, moving: bool, reflection: bool):
+        """(min (x, y), max (x, y)) px of the screen points behind :meth:`light_bbox` (None: none visible),
+        computed once per light and arguments (a lamp's padded and unpadded boxes share it)."""
+        key = (light["id"], float(t_obj), float(t_a), float(t_b), bool(moving), bool(reflection))
+        if key not in self._extents:
+            self._extents[key] = self._project_extent(light, t_obj, t_a, t_b, moving, reflection)
+        return self._extents[key]
+
+    def _project_extent(self, light: dict, t_obj: float, t_a: float, t_b: float, moving: bool, reflection: bool):
         times = np.linspace(t_a, t_b, BBOX_TIME_SAMPLES)
         if not self.facing(light, t_obj, times, moving):
             return None
@@ -449,14 +471,7 @@ class SceneGeometry:
         if not uvs or not any(len(u) for u in uvs):
             return None
         uv = np.concatenate(uvs)
-        p = self.opts.pad_px if pad is None else pad
-        x0, y0 = np.floor(uv.min(0)).astype(int) - p
-        x1, y1 = np.ceil(uv.max(0)).astype(int) + p
-        if x1 <= 0 or y1 <= 0 or x0 >= self.opts.width or y0 >= self.opts.height:
-            return None
-        x0, x1 = _round_span(x0, x1, self.opts.width)
-        y0, y1 = _round_span(y0, y1, self.opts.height)
-        return (int(y0), int(x0), int(y1), int(x1))
+        return uv.min(0), uv.max(0)
 
 
 def clip_near(points: np.ndarray, z: np.ndarray, near: float) -> np.ndarray:
