@@ -379,22 +379,34 @@ def stratification_model(seed: int = 1, trials: int = 400, grid: int = 400) -> l
     return rows
 
 
+def _lamp_study(quick: bool, ref_light_spp: int):
+    """Frame size (W, H), reference light_spp and a RenderOptions maker of the lamp-crop studies (``--led``,
+    ``--pixel-samples``, ``--pad-samples``): frame 0, the flickering groups alone (otherlights, signals), spp 1, K 8,
+    no AOVs; ``--quick``: 160x90 and references of light_spp 64."""
+    from render_tools import render  # noqa: PLC0415
+
+    W, H = (160, 90) if quick else SIZE
+
+    def opts(light_spp: int, seed: int, **kw):
+        return render.RenderOptions(width=W, height=H, spp=1, light_spp=light_spp, bins=8, frames=1, seed=seed,
+                                    groups=("otherlights", "signals"), aux=False, **kw)
+
+    return (W, H), 64 if quick else ref_light_spp, opts
+
+
 def led_main(cache: Path | None, out: Path, quick: bool) -> None:
     """``--led``: render, measure and write the section "LED dot faces (issue 23)"."""
     from render_tools import render  # noqa: PLC0415
 
-    W, H = (160, 90) if quick else SIZE
-    ref_spp = 64 if quick else LED_REF_LIGHT_SPP
-    groups = ("otherlights", "signals")
+    (W, H), ref_spp, study = _lamp_study(quick, LED_REF_LIGHT_SPP)
     load0 = os.getloadavg()[0]
     rows = []
     for c in LED_CASES:
         sc = _v2_scene(c)
 
-        def opts(light_spp, lod, s, passes="auto"):  # the samples as when this section was made (strata, x1)
-            return render.RenderOptions(width=W, height=H, spp=1, light_spp=light_spp, bins=8, frames=1, seed=s,
-                                        groups=groups, aux=False, dots_lod_px=lod, lamp_pass_spp=passes,
-                                        pixel_samples="strata", filled_spp_factor=1)
+        def opts(light_spp, lod, s, passes="auto"):  # the samples as when this section was made (strata, x1, ring)
+            return study(light_spp, s, dots_lod_px=lod, lamp_pass_spp=passes, pixel_samples="strata",
+                         filled_spp_factor=1, pad_samples="light")
 
         tag = c.replace(":", "_")
         refs = {lod: [_frame(sc, opts(ref_spp, lod, s), cache, f"led_ref{lod:g}_{ref_spp}_{s}_{W}_{tag}")[0]
@@ -435,17 +447,15 @@ def pixel_samples_main(cases, cache: Path | None, out: Path, quick: bool) -> Non
     lamp crops. Writes the section "Pixel samples (issue 23)" with the numpy model of :func:`edge_model`."""
     from render_tools import render  # noqa: PLC0415
 
-    W, H = (160, 90) if quick else SIZE
-    ref_spp = 64 if quick else LED_REF_LIGHT_SPP
+    (W, H), ref_spp, study = _lamp_study(quick, LED_REF_LIGHT_SPP)
     load0 = os.getloadavg()[0]
     rows = []
     for c in cases:
         sc = _v2_scene(c)
 
-        def opts(light_spp, s, mode="strata", factor=1):
-            return render.RenderOptions(width=W, height=H, spp=1, light_spp=light_spp, bins=8, frames=1, seed=s,
-                                        groups=("otherlights", "signals"), aux=False, dots_lod_px=1.0,
-                                        pixel_samples=mode, filled_spp_factor=factor)
+        def opts(light_spp, s, mode="strata", factor=1):  # the lamps' pad rings as when this section was made
+            return study(light_spp, s, dots_lod_px=1.0, pixel_samples=mode, filled_spp_factor=factor,
+                         pad_samples="light")
 
         tag = c.replace(":", "_")
         refs = [_frame(sc, opts(ref_spp, s), cache, f"led_ref1_{ref_spp}_{s}_{W}_{tag}")[0] for s in LED_REF_SEEDS]
@@ -481,16 +491,14 @@ def pad_samples_main(cases, cache: Path | None, out: Path, quick: bool) -> None:
     references; writes the section "Pad ring samples (issue 23)" of docs/render-benchmark.md."""
     from render_tools import render  # noqa: PLC0415
 
-    W, H = (160, 90) if quick else SIZE
-    ref_spp = 64 if quick else PAD_REF_LIGHT_SPP
+    (W, H), ref_spp, study = _lamp_study(quick, PAD_REF_LIGHT_SPP)
     load0 = os.getloadavg()[0]
     rows = []
     for c in cases:
         sc = _v2_scene(c)
 
         def opts(light_spp, s, pad="spp"):
-            return render.RenderOptions(width=W, height=H, spp=1, light_spp=light_spp, bins=8, frames=1, seed=s,
-                                        groups=("otherlights", "signals"), aux=False, pad_samples=pad)
+            return study(light_spp, s, pad_samples=pad)
 
         tag = c.replace(":", "_")
         refs = [_frame(sc, opts(ref_spp, s, "light"), cache, f"pad_ref_{ref_spp}_{s}_{W}_{tag}")[0]
