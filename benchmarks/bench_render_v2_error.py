@@ -6,7 +6,10 @@ day, measured the same way for comparison; default: a day, a dry night and a wet
 rendered at 640x360 with the ``default`` profile's options (render_tools/configs/render_profiles.yaml, every other
 field at its :class:`render_tools.render.RenderOptions` default, seed 11) and as a reference with spp
 :data:`REF_SPP`, light_spp :data:`REF_LIGHT_SPP`, the same K, every reflection traced in all K bins
-(``reflection_bins=None``, ``reflection_min_lux=0``, ``reflection_block_px=1``: no approximation of the wet road).
+(``reflection_bins=None``, ``reflection_min_lux=0``, ``reflection_block_px=1``: no approximation of the wet road),
+whose static groups are rendered again on their own at spp :data:`REF_STATIC_SPP` (none of it denoised:
+``static_denoise="off"``). Generator-2 cases are also rendered with ``static_denoise="off"`` (the traced estimate,
+what the denoiser is measured against).
 In a wet scene the default options are also rendered with the reflections traced per pixel and with exact
 reflections, so that the error of the approximations (``reflection_block_px``; ``reflection_bins``,
 ``reflection_min_lux``) is seen apart from the Monte Carlo noise.
@@ -21,8 +24,9 @@ Errors, on luminance Y as :mod:`bench_render` computes them (the same functions)
 - wet scenes: the median relative error of the short composite over the *reflection pixels*: where the reference's
   flickering layers outside the lamps' own boxes bring more than 5 % of the pixel's luminance.
 
-The reference has its own noise (spp 4 against 1: the static part's measured error is up to sqrt(1 + 1/4) = 1.12
-times the true one, less for the LED pixels); the errors are upper bounds. References are kept in ``--cache`` (a
+The reference has its own noise (its static frames spp 256 against 1: the traced static part's measured error is
+sqrt(1 + 1/256) = 1.002 times the true one; its light crops spp 4 in the pad rings and reflections, light_spp 256
+in the lamps); the errors are upper bounds. References are kept in ``--cache`` (a
 folder of pickles) so that a re-run only renders what changed.
 
 ``--led`` writes the section "LED dot faces (issue 23)" instead: the error of the LED bins alone (the flickering
@@ -37,9 +41,9 @@ third way the issue named (2-D stratified pixel positions in lamp tiles): the co
 pattern estimated with random, today's per-dimension (Latin hypercube) and 2-D jittered positions (numpy, no
 rendering; :func:`stratification_model`).
 
-Generator-2 cases are also rendered with ``--static-spp`` (default 2 and 4): the ``default`` profile with more
-samples in the static full frames (light_spp unchanged), what a v2-only choice against the all-pixel median
-would cost (the table's CPU column against the v1 scene of that seed and time of day).
+Generator-2 cases are also rendered with ``--static-spp`` (default 2): the ``default`` profile with more
+samples in the static full frames (light_spp unchanged, denoised), what more samples would buy against the
+all-pixel median (the table's CPU column against the v1 scene of that seed and time of day).
 
 ``--pixel-samples`` writes the section "Pixel samples (issue 23)": the LED bins as ``--led`` (its filled-cells
 references, shared through ``--cache``) with the pixel samples placed by per-dimension strata or by Sobol' points
@@ -53,7 +57,7 @@ at light_spp): the LED bins as above and the whole crops (every pixel of every l
 both corrected for the references' noise, with the ring's share of the crops' light and the lamp crops' CPU.
 
 Usage: ``python benchmarks/bench_render_v2_error.py [--cases 202:day:dry 101:night:dry 101:night:wet]
-[--cache DIR] [--quick] [--led | --pixel-samples | --pad-samples] [--static-spp 2 4]``.
+[--cache DIR] [--quick] [--led | --pixel-samples | --pad-samples] [--static-spp 2]``.
 """
 from __future__ import annotations
 
@@ -81,6 +85,11 @@ from lfmbench.fileio import atomic_write_bytes, load_yaml  # noqa: E402
 CASES = ("202:day:v1", "202:day:dry", "101:night:v1", "101:night:dry", "101:night:wet")
 #: Reference sample counts (per band pass): full frames, lamp crops.
 REF_SPP, REF_LIGHT_SPP = 4, 256
+#: spp of the reference's static full frames (the static groups rendered on their own, not denoised): at spp 64 a
+#: wet night's road still sparkled (its median per-pixel error against spp 256: 6.8 %), and so did the measured
+#: error of a denoised frame (11.9 % against it, 9.4 % against spp 256); spp 4 (before) left up to half of the
+#: measured error of the traced frames (session 13's fit).
+REF_STATIC_SPP = 256
 #: Share of a pixel's reference luminance above which the flickering layers' light outside the lamps' own boxes
 #: makes it a reflection pixel.
 REFLECTION_SHARE = 0.05
@@ -198,7 +207,7 @@ def main() -> None:
     ap.add_argument("--pad-samples", action="store_true",
                     help="the section \"Pad ring samples\": a lamp's pad ring at light_spp against spp (cases default "
                          f"{' '.join(PAD_CASES)})")
-    ap.add_argument("--static-spp", nargs="*", type=int, default=[2, 4],
+    ap.add_argument("--static-spp", nargs="*", type=int, default=[2],
                     help="also render generator-2 cases with these spp (the static full frames; light_spp as the "
                          "default) to see what the all-pixel median would cost")
     a = ap.parse_args()
@@ -215,14 +224,17 @@ def main() -> None:
         return pad_samples_main(cases, cache, Path(a.out), a.quick)
     prof = load_yaml(ROOT / "render_tools" / "configs" / "render_profiles.yaml")["default"]
     W, H = (160, 90) if a.quick else SIZE
-    ref_spp, ref_light_spp = (2, 32) if a.quick else (REF_SPP, REF_LIGHT_SPP)
+    ref_spp, ref_light_spp, ref_static_spp = (2, 32, 8) if a.quick else (REF_SPP, REF_LIGHT_SPP, REF_STATIC_SPP)
     base = dict(width=W, height=H, frames=1, seed=11, bins=prof["bins"])
     default = render.RenderOptions(**{**base, "spp": prof["spp"], "light_spp": prof["light_spp"]})
     exact = {"reflection_bins": None, "reflection_min_lux": 0.0, "reflection_block_px": 1}
     exact_default = render.RenderOptions(**{**base, "spp": prof["spp"], "light_spp": prof["light_spp"], **exact})
     blocks1 = render.RenderOptions(**{**base, "spp": prof["spp"], "light_spp": prof["light_spp"],
                                       "reflection_block_px": 1})
-    refo = render.RenderOptions(**{**base, "spp": ref_spp, "light_spp": ref_light_spp, "seed": 999, **exact})
+    not_denoised = render.RenderOptions(**{**base, "spp": prof["spp"], "light_spp": prof["light_spp"],
+                                           "static_denoise": "off"})
+    refo = render.RenderOptions(**{**base, "spp": ref_spp, "light_spp": ref_light_spp, "seed": 999, **exact,
+                                   "static_denoise": "off"})
     rows = []
     load0 = os.getloadavg()[0]
     for c in a.cases:
@@ -231,18 +243,27 @@ def main() -> None:
         sc = scene.generate_scene(int(seed), tod, scene_id=f"{tod}_{seed}_{weather}", **kw)
         t = time.perf_counter()
         ref, ref_cpu = _frame(sc, refo, cache, f"ref_{c.replace(':', '_')}")
+        static = [g for g, i in render.scene_groups(sc).items() if not i["flicker"]]
+        ref_static, cpu_s = _frame(sc, render.RenderOptions(**{**base, "spp": ref_static_spp, "seed": 998,
+                                                                "light_spp": ref_light_spp, "groups": static,
+                                                                "static_denoise": "off"}),
+                                   cache, f"refstatic_{c.replace(':', '_')}")
+        ref = {**ref, "static": ref_static["static"]}
+        ref_cpu += cpu_s
         print(c, "reference", f"{time.perf_counter() - t:.0f} s", flush=True)
         wet = render.SceneGeometry(sc, default).wet is not None
         tm = render.frame_timing(sc, refo, 0)
         ref_short = preview_short(sc, ref, refo, tm)
         refl_px = reflection_pixels(sc, ref, refo, ref_short) if wet else None
-        settings = [("default", default)] + ([("default, reflections per pixel", blocks1),
+        settings = [("default", default)] + ([("default, not denoised", not_denoised)] if weather != "v1" else []) + \
+            ([("default, reflections per pixel", blocks1),
                                               ("default, exact reflections", exact_default)] if wet else []) + \
             [(f"default, spp {n}", render.RenderOptions(**{**base, "spp": n, "light_spp": prof["light_spp"]}))
              for n in (a.static_spp if weather != "v1" else ())]
         for name, opts in settings:
             tag = {"default": "default", "default, exact reflections": "default_exact",
-                   "default, reflections per pixel": "default_blocks1"}.get(
+                   "default, reflections per pixel": "default_blocks1",
+                   "default, not denoised": "default_noden"}.get(
                 name, name.replace(", ", "_").replace(" ", ""))
             fr, cpu = _frame(sc, opts, cache, f"{tag}_{c.replace(':', '_')}")
             r = {"case": c, "setting": name, "cpu_s": cpu, "ref_cpu_s": ref_cpu, **evaluate(sc, fr, ref, opts,
@@ -250,7 +271,7 @@ def main() -> None:
             rows.append(r)
             print(r, flush=True)
     load1 = os.getloadavg()[0]
-    write_section(rows, Path(a.out), load0, load1, (W, H), (ref_spp, ref_light_spp))
+    write_section(rows, Path(a.out), load0, load1, (W, H), (ref_spp, ref_light_spp, ref_static_spp))
 
 
 def preview_short(sc, frame, opts, tm) -> np.ndarray:
@@ -260,7 +281,7 @@ def preview_short(sc, frame, opts, tm) -> np.ndarray:
 
 
 def write_section(rows: list, out: Path, load0: float, load1: float, size=SIZE,
-                  ref=(REF_SPP, REF_LIGHT_SPP)) -> None:
+                  ref=(REF_SPP, REF_LIGHT_SPP, REF_STATIC_SPP)) -> None:
     def f(r, k):
         return f"{r[k]:.3f}" if k in r else "-"
 
@@ -272,10 +293,13 @@ def write_section(rows: list, out: Path, load0: float, load1: float, size=SIZE,
              "2, pixel samples from Sobol' points on generator 2, per-dimension strata on generator 1), and in wet "
              "scenes the same with the reflections traced per pixel (reflection_block_px 1) and with exact "
              "reflections (also reflection_bins = K, reflection_min_lux 0), against a reference of spp "
-             f"{ref[0]}, light_spp {ref[1]}, K 8 with exact reflections (errors are upper bounds: the reference's "
-             "own noise is in them). Both draw LED dot faces whose pitch projects under 1 px as filled cells "
+             f"{ref[0]}, light_spp {ref[1]}, K 8 with exact reflections whose static groups are rendered on their own "
+             f"at spp {ref[2]} (light_spp {ref[1]} in their lamps' boxes), none of it denoised (errors are upper "
+             "bounds: the reference's own noise is in them). Scene version 2 frames have their static full frames "
+             "denoised (`static_denoise` auto, docs/rendering.md); `default, not denoised`: `static_denoise` off, "
+             "the traced estimate. Both draw LED dot faces whose pitch projects under 1 px as filled cells "
              "(`dots_lod_px`; the error this leaves out, the dots' moire, is in \"LED dot faces\" below). "
-             "`default, spp N`: the same with spp N in the static full frames (`--static-spp`). "
+             "`default, spp N`: the same with spp N in the static full frames (`--static-spp`), denoised. "
              "Targets (issue 23): LED pixels <= 2 % relative RMSE, all-pixel "
              "median <= 10 %. Reflection px: where the reference's flickering layers outside the lamps' own boxes "
              f"bring more than {REFLECTION_SHARE:.0%} of the pixel's luminance.", "",

@@ -65,6 +65,8 @@ LAMP_PASS_SPP = ("auto", "spectrum", "uniform")
 PIXEL_SAMPLES = ("auto", "sobol", "strata")
 #: ``RenderOptions.pad_samples`` values.
 PAD_SAMPLES = ("auto", "spp", "light")
+#: ``RenderOptions.static_denoise`` values (:mod:`render_tools.denoise`).
+STATIC_DENOISE = ("auto", "oidn", "off")
 
 
 @dataclass
@@ -135,6 +137,14 @@ class RenderOptions:
     ``spp`` on scene version 2, ``light`` on version 1, whose renders are frozen). The ring held two thirds of a
     generator-2 night's lamp-crop samples (37.9 M of a scene's 3 frames, 12.6 M without it; docs/render-scale-
     benchmark.md). A static group's lamp refines its own box only (the ring keeps the full frame's estimate).
+    static_denoise: the static groups' short and long full frames of each frame denoised after tracing, the static
+    groups' lamp boxes kept as traced (:mod:`render_tools.denoise`: Intel Open Image Denoise on three broad bands,
+    split back among groups and bands by their local shares): ``"oidn"``, ``"off"`` (the traced estimate,
+    unbiased) or ``"auto"`` (default: ``oidn`` on scene version 2, ``off`` on version 1, whose renders are frozen).
+    At the ``default`` profile the median per-pixel error of a 640x360 v2 frame went from 25 / 12 / 31 % (day, dry
+    night, wet night) to 4 / 3 / 9.5 % for 0.8-0.9 CPU s per frame (docs/render-benchmark.md, "Scene generator
+    2"); not unbiased (a wet road's static reflections are blurred: docs/rendering.md, "Static frames denoised");
+    the flickering layers are never denoised.
     """
 
     width: int = 640
@@ -162,6 +172,7 @@ class RenderOptions:
     pixel_samples: str = "auto"
     reflection_block_px: int = 2
     pad_samples: str = "auto"
+    static_denoise: str = "auto"
 
     def __post_init__(self):
         self.bands_nm = tuple(float(b) for b in self.bands_nm)
@@ -195,6 +206,8 @@ class RenderOptions:
             raise ValueError(f"reflection_block_px: must be 1 or 2, got {self.reflection_block_px!r}")
         if self.pad_samples not in PAD_SAMPLES:
             raise ValueError(f"pad_samples: must be one of {PAD_SAMPLES}, got {self.pad_samples!r}")
+        if self.static_denoise not in STATIC_DENOISE:
+            raise ValueError(f"static_denoise: must be one of {STATIC_DENOISE}, got {self.static_denoise!r}")
         if self.pixel_samples not in PIXEL_SAMPLES:
             raise ValueError(f"pixel_samples: must be one of {PIXEL_SAMPLES}, got {self.pixel_samples!r}")
         f = self.filled_spp_factor
@@ -516,6 +529,32 @@ def pad_at_spp(scene: dict, opts: RenderOptions) -> bool:
     return _on_from_version_2(opts.pad_samples, "spp", scene)
 
 
+def static_denoised(scene: dict, opts: RenderOptions) -> bool:
+    """Whether the static groups' full frames are denoised (``opts.static_denoise``; ``auto``: scene version 2 and
+    later)."""
+    return _on_from_version_2(opts.static_denoise, "oidn", scene)
+
+
+def static_lamp_boxes(scene: dict, opts: RenderOptions, n: int, geo: SceneGeometry | None = None) -> list[tuple]:
+    """Boxes (y0, x0, y1, x1) px of the static groups' lamps in frame ``n``, over the short and the long window, as
+    :func:`plan_frame` refines them: what :func:`render_tools.denoise.denoise_static` keeps as traced."""
+    geo = geo or SceneGeometry(scene, opts)
+    tm = frame_timing(scene, opts, n)
+    t_obj = 0.5 * (tm["window"][0] + tm["window"][1])
+    rpad = 0 if pad_at_spp(scene, opts) else None
+    boxes = []
+    for g, info in _selected_groups(scene, opts).items():
+        if info["flicker"]:
+            continue
+        for lt in scene["lights"]:
+            if lt["group"] == g:
+                for a, b in (tm["short"], tm["long"]):
+                    bb = geo.light_bbox(lt, t_obj, a, b, pad=rpad)
+                    if bb is not None:
+                        boxes.append(tuple(int(v) for v in bb))
+    return sorted(set(boxes))
+
+
 def ring_boxes(outer: tuple, inner: tuple | None) -> list[tuple]:
     """The boxes (y0, x0, y1, x1), half-open, that cover ``outer`` less ``inner`` (a box inside it, or None:
     nothing): top and bottom rows full width, left and right between them; empty ones left out. Disjoint."""
@@ -674,7 +713,8 @@ def scene_meta(scene: dict, opts: RenderOptions) -> dict:
                       if any(lt["shape"] == "dots" for lt in scene["lights"]) else {}),
                    **({"lamp_pass_spp": "spectrum" if spectral_lamp_passes(scene, opts) else "uniform",
                        "pixel_samples": "sobol" if sobol_pixel_samples(scene, opts) else "strata",
-                       "pad_samples": "spp" if pad_at_spp(scene, opts) else "light"}
+                       "pad_samples": "spp" if pad_at_spp(scene, opts) else "light",
+                       "static_denoise": "oidn" if static_denoised(scene, opts) else "off"}
                       if int(scene.get("version", 1)) >= 2 else {})},
     }
 
@@ -960,6 +1000,14 @@ def render_frames(scene: dict, opts: RenderOptions, steady_bins: bool = False) -
             rest = wins.pop("rest", None)
             wins["long"] = wins["short"].copy() if rest is None else \
                 (frac * wins["short"] + (1.0 - frac) * rest).astype(np.float32)
+        if out["static"] and static_denoised(scene, opts):  # render_tools.denoise; lamp boxes kept as traced
+            from . import denoise  # noqa: PLC0415
+
+            boxes = static_lamp_boxes(scene, opts, n, geo)
+            for win in ("short", "long"):
+                done = denoise.denoise_static({g: w[win] for g, w in out["static"].items()}, boxes)
+                for g, img in done.items():
+                    out["static"][g][win] = img
         for g, info in groups.items():
             if info["flicker"]:
                 out["lights"].setdefault(g, [])

@@ -261,7 +261,7 @@ def test_dots_lamp_lights_a_plane_as_its_lit_area():
 
     s, spec = _dots_scene(0.5, [[c, r] for r in range(4) for c in range(4)])
     assert MS.plane_area(s["lights"][0]) == pytest.approx(0.01)
-    opts = render.RenderOptions(width=6, height=4, spp=64, frames=1, aux=False)
+    opts = render.RenderOptions(width=6, height=4, spp=64, frames=1, aux=False, static_denoise="off")  # the tracer
     img = next(render.render_frames(s, opts))["static"]["streetlights"]["short"]
     exp = 0.5 * spectra.band_means(spectra.absolute_spectrum(spec, 3e4), opts.bands_nm, opts.band_width_nm) \
         * 0.01 / (math.pi * 3.0 ** 2)
@@ -279,7 +279,7 @@ def test_directly_viewed_dots_face_has_its_luminance():
     s["camera"].update({"position_m": [3.0, 0.0, 0.1], "pitch_deg": 89.0, "fov_x_deg": 60.0})
     s["objects"] = []
     s = S.validate_scene(s)
-    opts = render.RenderOptions(width=64, height=36, spp=8, frames=1, aux=False)
+    opts = render.RenderOptions(width=64, height=36, spp=8, frames=1, aux=False, static_denoise="off")  # the tracer
     img = next(render.render_frames(s, opts))["static"]["streetlights"]["short"]
     L = spectra.band_means(spectra.absolute_spectrum(spec, 3e4), opts.bands_nm, opts.band_width_nm)
     mid = img[:, 6:30, 20:44]                       # well inside the face (it spans ~2.3 m at 2.4 m, 60 deg)

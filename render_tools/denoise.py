@@ -1,0 +1,205 @@
+"""Denoising of the static groups' full frames (scene version 2, :class:`render_tools.render.RenderOptions`
+``static_denoise``).
+
+Why: the static groups' full frames are traced at ``spp`` 1 per band pass (8 camera samples a pixel at the
+``default`` profile); their Monte Carlo noise left a median per-pixel luminance error of the static light of 25 %
+(day), 12 % (dry night) and 33 % (wet night) against spp-64/256 renders of 640x360 generator-2 frames, over the
+10 % issue 23 asks for of the whole frame, and changing from frame to frame; more samples cost what the profile
+cannot pay (spp 4: 1.8-2x the frame, still 18-20 % by day and on a wet night; docs/render-benchmark.md). The
+flickering layers (the lamps' crops at ``light_spp``: every LED pixel) are not touched.
+
+What (one capture window of one frame; ``S[g, c]``: group g's spectral radiance in band c, (H, W)):
+
+1. The lamps of the static groups (refined in their boxes at ``light_spp``, 10^3-10^5 times brighter than what is
+   next to them) are *kept out*: inside their boxes the denoiser's input holds the mean of the ring around the box,
+   and the output keeps the traced values there. (Fed as they are, the denoiser spread them over their neighbours:
+   the LED pixels' error went from 1.6 % to 36 % on a night scene.)
+2. The C bands are summed over the groups and into :data:`BROAD_BANDS` contiguous broad bands (thirds of the band
+   list: 400-500, 500-600, 600-700 nm for the 31 default bands), each of which sums samples of every band pass;
+   this 3-channel image is denoised by Intel Open Image Denoise's ``RT`` filter for HDR colour (A. T. Afra,
+   "Intel Open Image Denoise", 2024, https://www.openimagedenoise.org; the ``pyoidn`` binding,
+   https://github.com/Hyiker/pyoidn), on the CPU, without auxiliary images.
+3. Each broad band's denoised value is split among the groups by their shares in a (2 r + 1)^2 px box around the
+   pixel (r = :data:`SHARE_RADIUS_PX`) and within a group among its bands by their shares in a box of radius
+   :data:`SHAPE_RADIUS_PX` (lamp boxes left out of both): for c in broad band k,
+   ``S'[g, c] = B'[k] * box_r(S[g, k]) / box_r(B[k]) * box_R(S[g, c]) / box_R(S[g, k])``. The shares sum to 1,
+   so the groups and bands of a pixel add up to the denoised broad band; within the boxes the split between
+   groups and the spectral shape inside a broad band are averaged (an edge between differently coloured
+   surfaces, or between what two groups light, is blurred over r or R px in those ratios only).
+
+Not unbiased: the filter's output is its own estimate; edges and texture finer than the noise are smoothed, and light
+it takes for outliers is removed. Measured on 640x360 frames of the ``default`` profile against spp-64/256
+references (docs/render-benchmark.md): the light outside the lamp boxes is kept within 1.2 % on a dry night and by
+day, but a wet road's glossy reflections of the static lamps are sparse bright samples at spp 1, and the filter
+blurs them: their brightest tenth loses 25 % of its light, the rest of the road gains 7 %, the frame's light
+outside the lamp boxes -12 %. Scaling the output back to the traced light (over the frame, or in boxes of 8-64
+px) was tried and not taken: over the frame it brightened everything else by 12 % (median error 9.4 -> 16.4 %), in
+boxes it left square blotches where a single bright sample sat. ``static_denoise: off`` keeps the traced
+(unbiased) estimate.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+#: Channels the denoiser sees: the band list cut into this many contiguous broad bands (Open Image Denoise
+#: filters 3-channel colour).
+BROAD_BANDS = 3
+#: Radius (px) of the box over which a broad band's split among the groups is measured (step 3 above).
+SHARE_RADIUS_PX = 2
+#: Radius (px) of the box over which the split of a group's broad band among its bands (the spectral shape) is
+#: measured: at 2 px the sparse samples of a wet road's reflections left colour blotches (hue of 5 x 5 px squares);
+#: at 16 px none were seen, and the median error was the same (docs/render-benchmark.md).
+SHAPE_RADIUS_PX = 16
+#: Side (px) of the blocks on which the spectral shape's box means are taken (they vary over SHAPE_RADIUS_PX, so a
+#: block grid 4 px apart holds them; interpolated back bilinearly): 16x fewer pixels for the C bands' box means.
+SHAPE_BLOCK_PX = 4
+#: Width (px) of the ring around a lamp box whose mean stands in for the box in the denoiser's input.
+FILL_RING_PX = 2
+#: Open Image Denoise's quality setting: ``fast`` (its smaller network). Measured on 640x360 frames of the
+#: ``default`` profile (docs/render-benchmark.md): against ``high`` +0.1 to +0.5 points of median error (day 4.0 ->
+#: 4.1 %, dry night 2.6 -> 3.1 %, wet night 9.1 -> 9.5 %) for 0.8-0.9 instead of 1.2-1.3 CPU s per frame (two
+#: windows, 2 cores), which the v2 render cost (at most 1.5x v1's, issue 23) needs.
+QUALITY = "fast"
+
+
+def broad_bands(n_bands: int, n: int = BROAD_BANDS) -> list[slice]:
+    """``n`` contiguous slices covering ``range(n_bands)`` as evenly as rounding allows (thirds by default)."""
+    if n_bands < 1:
+        raise ValueError(f"n_bands: must be >= 1, got {n_bands}")
+    e = np.linspace(0, n_bands, min(n, n_bands) + 1).round().astype(int)
+    return [slice(int(a), int(b)) for a, b in zip(e[:-1], e[1:])]
+
+
+def _box_mean(x: np.ndarray, r: int) -> np.ndarray:
+    """(N, H, W) -> (N, H, W) float32: the mean over the (2r+1)^2 px box of each pixel, over the pixels of the box
+    inside the image (only ratios of two such means are used, and both see the same pixels)."""
+    import torch  # noqa: PLC0415
+
+    t = torch.from_numpy(np.ascontiguousarray(x, np.float32))[None]
+    return torch.nn.functional.avg_pool2d(t, 2 * r + 1, 1, r, count_include_pad=False)[0].numpy()
+
+
+def _block_mean(x: np.ndarray, f: int) -> np.ndarray:
+    """(N, H, W) -> (N, ceil(H / f), ceil(W / f)) float32: means over f x f px blocks (a block cut by the image's
+    edge: over its pixels inside)."""
+    import torch  # noqa: PLC0415
+
+    t = torch.from_numpy(np.ascontiguousarray(x, np.float32))[None]
+    return torch.nn.functional.avg_pool2d(t, f, f, ceil_mode=True)[0].numpy()
+
+
+def _upsample(x: np.ndarray, f: int, shape: tuple) -> np.ndarray:
+    """(N, h, w) block values -> (N, H, W) float32: bilinear between the blocks' centres (edges held), cut to
+    ``shape`` (H, W)."""
+    import torch  # noqa: PLC0415
+
+    t = torch.from_numpy(np.ascontiguousarray(x, np.float32))[None]
+    up = torch.nn.functional.interpolate(t, scale_factor=f, mode="bilinear", align_corners=False)[0]
+    return up[:, :shape[0], :shape[1]].numpy()
+
+
+def keep_mask(shape: tuple, boxes) -> np.ndarray:
+    """(H, W) bool: False inside any of ``boxes`` ((y0, x0, y1, x1) px, end exclusive, clipped to the image)."""
+    keep = np.ones(shape, bool)
+    for y0, x0, y1, x1 in boxes:
+        keep[max(y0, 0):max(y1, 0), max(x0, 0):max(x1, 0)] = False
+    return keep
+
+
+def _fill_boxes(b: np.ndarray, keep: np.ndarray, boxes) -> np.ndarray:
+    """Broad bands (k, H, W) with each lamp box replaced by the mean of the kept pixels of the
+    :data:`FILL_RING_PX` ring around it (0 where the ring holds none)."""
+    out = b.copy()
+    H, W = keep.shape
+    for y0, x0, y1, x1 in boxes:
+        ya, xa, yb, xb = max(y0, 0), max(x0, 0), min(y1, H), min(x1, W)
+        if ya >= yb or xa >= xb:
+            continue
+        ra, rb = max(ya - FILL_RING_PX, 0), min(yb + FILL_RING_PX, H)
+        ca, cb = max(xa - FILL_RING_PX, 0), min(xb + FILL_RING_PX, W)
+        ring = keep[ra:rb, ca:cb]
+        vals = b[:, ra:rb, ca:cb][:, ring]
+        out[:, ya:yb, xa:xb] = (vals.mean(axis=1) if vals.size else np.zeros(len(b)))[:, None, None]
+    return out
+
+
+def oidn_rgb(img: np.ndarray) -> np.ndarray:
+    """Open Image Denoise's ``RT`` filter on an HDR image (3, H, W) >= 0 (any linear unit) -> (3, H, W) float32
+    >= 0. The image is divided by its mean level (channels summed) before and multiplied after: the filter's own
+    exposure estimate ignores values under about 1e-8 and returned noise of that absolute size for darker images
+    (a night sky's radiance is ~1e-6 W sr^-1 m^-2 nm^-1); an all-black image is returned black. Raises
+    ``RuntimeError`` when the ``pyoidn`` package is not installed."""
+    try:
+        import pyoidn  # noqa: PLC0415
+    except ImportError as e:  # pragma: no cover - pyoidn is a dependency
+        raise RuntimeError("static_denoise: 'oidn' needs the pyoidn package (Intel Open Image Denoise): "
+                           "pip install pyoidn, or render with static_denoise: off") from e
+    img = np.asarray(img, np.float32)
+    level = float(img.sum(0).mean())  # the filter's exposure estimate ignores values under ~1e-8: scale to ~1
+    if not (level > 0 and np.isfinite(level)):
+        return np.zeros_like(img) if level == 0 else img.copy()
+    x = np.ascontiguousarray(np.moveaxis(img * np.float32(1.0 / level), 0, -1))
+    y = pyoidn.denoise(x, hdr=True, quality=QUALITY)
+    return np.maximum(np.moveaxis(np.asarray(y, np.float32), -1, 0), 0.0) * np.float32(level)
+
+
+def denoise_static(images: dict, boxes=(), radius: int = SHARE_RADIUS_PX, shape_radius: int | None = None,
+                   denoiser=oidn_rgb) -> dict:
+    """Denoise the static groups' images of one window (module docstring).
+
+    Args:
+        images: group -> (C, H, W) float32 spectral radiance (W sr^-1 m^-2 nm^-1) >= 0, the same shape for all.
+        boxes: lamp boxes (y0, x0, y1, x1) px, end exclusive: left out of the denoiser and kept as they are.
+        radius: :data:`SHARE_RADIUS_PX`.
+        denoiser: (k, H, W) -> (k, H, W), k = :data:`BROAD_BANDS` (:func:`oidn_rgb`; tests pass others).
+
+    Returns:
+        group -> (C, H, W) float32: per pixel and broad band, the groups' bands sum to the denoised broad band
+        outside the boxes; inside them the input values.
+    """
+    shape_radius = SHAPE_RADIUS_PX if shape_radius is None else shape_radius
+    groups = list(images)
+    if not groups:
+        return {}
+    first = np.asarray(images[groups[0]])
+    C, H, W = first.shape
+    G = len(groups)
+    keep = keep_mask((H, W), boxes)
+    parts = broad_bands(C)
+    B = np.zeros((max(len(parts), BROAD_BANDS), H, W), np.float32)  # zero channels pad fewer than 3 bands
+    per_group = []  # each group's broad bands (k, H, W)
+    for g in groups:
+        x = np.asarray(images[g], np.float32)
+        if x.shape != first.shape:
+            raise ValueError(f"images[{g!r}]: shape {x.shape}, expected {first.shape} as {groups[0]!r}")
+        per_group.append(np.stack([x[p].sum(0) for p in parts]))
+        B[:len(parts)] += per_group[-1]
+    k = len(parts)
+    filled = _fill_boxes(B, keep, boxes)
+    Bd = np.asarray(denoiser(filled), np.float32)[:k]
+    kf = keep.astype(np.float32)
+    den = _box_mean(B[:k] * kf, radius)  # (k, H, W): box means of the broad bands, all groups
+    ok = den > 0
+    scale = np.where(ok, Bd / np.where(ok, den, 1.0), 0.0)  # B'[k] / box_r(B[k])
+    even = Bd / G  # no kept light near: B' split evenly among the groups (B' is ~0 there)
+    f = SHAPE_BLOCK_PX
+    out = {}
+    for g, xk in zip(groups, per_group):
+        x = np.asarray(images[g], np.float32)
+        xk = xk * kf
+        share = np.where(ok, _box_mean(xk, radius) * scale, even)  # (k, H, W): the group's part of B'[k]
+        # band c's share of the group's broad band, box_R(S[g, c]) / box_R(S[g, k]): smooth over R px, so
+        # measured on f x f px blocks (box radius R / f) and interpolated back
+        lo, klo = _block_mean(x * kf, f), _block_mean(xk, f)
+        rb = max(1, round(shape_radius / f))
+        lo, klo = _box_mean(lo, rb), _box_mean(klo, rb)
+        shape_lo = np.empty_like(lo)
+        for j, p in enumerate(parts):
+            d = klo[j]
+            shape_lo[p] = np.where(d > 0, lo[p] / np.where(d > 0, d, 1.0), 1.0 / (p.stop - p.start))
+        y = _upsample(shape_lo, f, (H, W))
+        for j, p in enumerate(parts):
+            y[p] *= share[j]
+        y[:, ~keep] = x[:, ~keep]
+        out[g] = y
+    return out

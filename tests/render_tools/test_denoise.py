@@ -1,0 +1,189 @@
+"""The static groups' full frames denoised (``RenderOptions.static_denoise``, :mod:`render_tools.denoise`): the
+split back among groups and bands is exact where the spectral shape is uniform (analytic case), conserves each
+broad band, leaves the lamp boxes as traced; Open Image Denoise lowers the error of a Monte Carlo image of a known
+scene and stays finite on extreme ranges; scene version 2 renders denoised, version 1 as before."""
+from __future__ import annotations
+
+import sys
+
+import numpy as np
+import pytest
+
+from render_tools import denoise, render, scene
+
+
+def _identity(b):
+    return b
+
+
+def test_broad_bands_cover_the_band_list():
+    for n in (1, 2, 3, 7, 31):
+        parts = denoise.broad_bands(n)
+        got = [i for p in parts for i in range(p.start, p.stop)]
+        assert got == list(range(n)) and len(parts) == min(3, n) and all(p.stop > p.start for p in parts)
+    assert [(p.start, p.stop) for p in denoise.broad_bands(31)] == [(0, 10), (10, 21), (21, 31)]
+    with pytest.raises(ValueError, match="n_bands"):
+        denoise.broad_bands(0)
+
+
+def _two_groups(rng, H=40, W=60, C=31):
+    """Two groups whose spectra are fixed (shape s_g) times a spatially varying level L_g(x)."""
+    yy, xx = np.mgrid[0:H, 0:W] / max(H, W)
+    s = rng.uniform(0.2, 1.0, (2, C)).astype(np.float32)
+    L = np.stack([1.0 + 0.5 * np.sin(6 * xx) * np.cos(4 * yy), 0.3 + yy * xx]).astype(np.float32)
+    return {"headlights": s[0][:, None, None] * L[0], "streetlights": s[1][:, None, None] * L[1]}
+
+
+def test_split_is_exact_for_a_uniform_shape_and_conserves_the_broad_bands():
+    """One group with a spectrum that is the same everywhere (level varying): with an identity denoiser the output
+    is the input (the local shares are the true ones); two groups with different spectra: per broad band the groups'
+    bands add up to the input broad band (what the denoiser returned) outside the lamp boxes, and the boxes are the
+    input bit for bit."""
+    rng = np.random.default_rng(0)
+    imgs = _two_groups(rng)
+    one = {"headlights": imgs["headlights"]}
+    out = denoise.denoise_static(one, (), denoiser=_identity)
+    np.testing.assert_allclose(out["headlights"], one["headlights"], rtol=2e-5, atol=0)
+    boxes = [(5, 7, 12, 15), (30, 50, 45, 70)]  # the second one runs off the image
+    imgs["streetlights"][:, 5:12, 7:15] = 1e4  # a bright lamp face
+    out = denoise.denoise_static(imgs, boxes, denoiser=_identity)
+    keep = denoise.keep_mask((40, 60), boxes)
+    for p in denoise.broad_bands(31):
+        got = sum(out[g][p].sum(0) for g in out)
+        want = sum(imgs[g][p].sum(0) for g in imgs)
+        np.testing.assert_allclose(got[keep], want[keep], rtol=2e-5)
+    for g in imgs:
+        np.testing.assert_array_equal(out[g][:, ~keep], imgs[g][:, ~keep])
+        assert out[g].dtype == np.float32 and out[g].shape == imgs[g].shape
+    # next to the lamp the shares hold no trace of its spectrum or level (the box is left out of them)
+    assert np.abs(out["streetlights"][:, 3:14, 16:19] - imgs["streetlights"][:, 3:14, 16:19]).max() < 1e-3 * 1e4
+
+
+def test_the_lamp_box_is_filled_from_its_ring():
+    """What the denoiser sees inside a lamp box: the mean of the kept pixels of the 2 px ring around it (3 bands:
+    the broad bands are the bands)."""
+    b = np.ones((3, 20, 20), np.float32)
+    b[:, 8:12, 8:12] = 1e6
+    b[:, 6:8, 6:14] = 3.0  # the ring's upper side: 16 of its 48 px
+    seen = {}
+
+    def spy(x):
+        seen["x"] = x.copy()
+        return x
+
+    denoise.denoise_static({"g": b}, [(8, 8, 12, 12)], denoiser=spy)
+    np.testing.assert_allclose(seen["x"][:, 8:12, 8:12], (16 * 3.0 + 32 * 1.0) / 48, rtol=1e-6)
+    np.testing.assert_array_equal(seen["x"][:, :8], b[:, :8])
+
+
+def _mc_image(rng, spp: int, H=96, W=160):
+    """A known scene (smooth shading, a darker disk, a bright lamp box) and a Monte Carlo estimate of it: each of
+    ``spp`` samples a pixel is the clean value times an exponential variate (mean 1, CV 1: about the per-sample
+    noise of the static frames at the ``default`` profile), the same in every band (one path carries them)."""
+    yy, xx = np.mgrid[0:H, 0:W]
+    level = 0.2 + 0.8 * xx / W
+    level = np.where((yy - 48) ** 2 + (xx - 60) ** 2 < 20 ** 2, 0.3 * level, level)
+    s = np.linspace(0.5, 1.5, 31)[:, None, None]
+    clean = (s * level).astype(np.float32)
+    clean[:, 10:14, 120:126] = 5e4
+    noisy = clean * rng.exponential(1.0, (spp, 1, H, W)).mean(0).astype(np.float32)
+    noisy[:, 10:14, 120:126] = clean[:, 10:14, 120:126]  # the lamp refined at light_spp: exact here
+    return clean, noisy, [(10, 120, 14, 126)]
+
+
+def _median_rel(x, ref):
+    y, yr = x.sum(0), ref.sum(0)
+    return float(np.median(np.abs(y - yr) / yr))
+
+
+def test_oidn_lowers_the_error_of_a_monte_carlo_image():
+    """Against the known scene: the median per-pixel error of the band sum drops by more than 3x, the mean level is
+    kept within 2 %, the lamp box is as traced and the pixels around it are not lit by it."""
+    rng = np.random.default_rng(1)
+    clean, noisy, boxes = _mc_image(rng, spp=8)
+    out = denoise.denoise_static({"streetlights": noisy}, boxes)["streetlights"]
+    e0, e1 = _median_rel(noisy, clean), _median_rel(out, clean)
+    assert e0 > 0.1 and e1 < e0 / 3, (e0, e1)
+    keep = denoise.keep_mask(clean.shape[1:], boxes)
+    assert out[:, keep].sum() == pytest.approx(clean[:, keep].sum(), rel=0.02)
+    np.testing.assert_array_equal(out[:, 10:14, 120:126], clean[:, 10:14, 120:126])
+    near = (slice(None), slice(6, 18), slice(116, 130))
+    ring = ~np.pad(np.ones((4, 6), bool), 4)[:12, :14]
+    assert np.all(out[near][:, ring] < 3 * clean[near][:, ring].max())
+
+
+@pytest.mark.parametrize("case", ["zeros", "tiny", "huge", "firefly"])
+def test_extreme_inputs_stay_finite(case):
+    """Stiff cases: an all-black frame stays black; radiance at 1e-12 and 1e12 of the usual scale is denoised as
+    at the usual scale (the filter's own exposure estimate); a single firefly 1e8 times the image does not make
+    NaN, Inf or negative values."""
+    rng = np.random.default_rng(2)
+    _, noisy, boxes = _mc_image(rng, spp=8)
+    if case == "zeros":
+        out = denoise.denoise_static({"g": np.zeros_like(noisy)}, boxes)["g"]
+        assert not out.any()
+        return
+    ref = denoise.denoise_static({"g": noisy}, boxes)["g"]
+    if case in ("tiny", "huge"):
+        k = np.float32(1e-12 if case == "tiny" else 1e12)
+        out = denoise.denoise_static({"g": noisy * k}, boxes)["g"] / k
+        assert np.all(np.isfinite(out))
+        assert _median_rel(out, ref) < 0.02
+        return
+    noisy[:, 30, 40] = 1e8 * noisy.max()
+    out = denoise.denoise_static({"g": noisy}, boxes)["g"]
+    assert np.all(np.isfinite(out)) and out.min() >= 0
+
+
+def test_missing_pyoidn_names_the_option(monkeypatch):
+    monkeypatch.setitem(sys.modules, "pyoidn", None)  # import pyoidn -> ImportError
+    with pytest.raises(RuntimeError, match="static_denoise.*pyoidn"):
+        denoise.oidn_rgb(np.zeros((3, 4, 4), np.float32))
+
+
+def test_option_values_and_meta():
+    with pytest.raises(ValueError, match="static_denoise"):
+        render.RenderOptions(static_denoise="yes")
+    opts = render.RenderOptions(width=160, height=90, frames=1)
+    v2 = scene.generate_scene(101, time_of_day="night", generator=2)
+    v1 = scene.generate_scene(101, time_of_day="night")
+    assert render.static_denoised(v2, opts) and not render.static_denoised(v1, opts)
+    assert render.scene_meta(v2, opts)["render"]["static_denoise"] == "oidn"
+    assert "static_denoise" not in render.scene_meta(v1, opts)["render"]
+    off = render.RenderOptions(width=160, height=90, frames=1, static_denoise="off")
+    assert render.scene_meta(v2, off)["render"]["static_denoise"] == "off"
+    boxes = render.static_lamp_boxes(v2, opts, 0)
+    assert boxes and all(0 <= y0 < y1 <= 90 and 0 <= x0 < x1 <= 160 for y0, x0, y1, x1 in boxes)
+
+
+@pytest.mark.jit
+def test_v2_render_is_denoised_and_v1_is_not():
+    """A version-2 night at 96x54: the denoised static frames keep the static lamps' boxes as traced (the same
+    seed: bit for bit), about the traced light of each broad band outside them, and are smoother than the traced
+    ones (less pixel-to-pixel variation); a version-1 scene renders the same with ``auto`` as with ``off``."""
+    base = dict(width=96, height=54, spp=1, light_spp=8, bins=2, frames=1, seed=5)
+    v2 = scene.generate_scene(101, time_of_day="night", generator=2)
+    on = next(render.render_frames(v2, render.RenderOptions(**base)))
+    off = next(render.render_frames(v2, render.RenderOptions(**base, static_denoise="off")))
+    keep = denoise.keep_mask((54, 96), render.static_lamp_boxes(v2, render.RenderOptions(**base), 0))
+    assert set(on["static"]) == set(off["static"]) and (~keep).any()
+    rough = {}
+    both = keep[:, 1:] & keep[:, :-1]
+    for name, fr in (("on", on), ("off", off)):
+        tot = sum(w["short"] for w in fr["static"].values()).sum(0)
+        rough[name] = float(np.abs(np.diff(tot, axis=1))[both].sum() / tot[keep].sum())
+    for win in ("short", "long"):
+        for g in on["static"]:
+            np.testing.assert_array_equal(on["static"][g][win][:, ~keep], off["static"][g][win][:, ~keep])
+            a, b = on["static"][g][win][:, keep].sum(), off["static"][g][win][:, keep].sum()
+            assert a == pytest.approx(b, rel=0.15)  # each group's light: its split of the broad bands
+        for p in denoise.broad_bands(31):  # all groups: the traced light of each broad band, less what the filter
+            a, b = (sum(fr["static"][g][win][p][:, keep].sum(dtype=np.float64) for g in fr["static"])  # takes for
+                    for fr in (on, off))  # outliers (3-11 % of a group at this size, 1 % at 640x360)
+            assert a == pytest.approx(b, rel=0.12)
+    assert rough["on"] < 0.7 * rough["off"]
+    v1 = scene.generate_scene(101, time_of_day="night")
+    a = next(render.render_frames(v1, render.RenderOptions(**base)))
+    b = next(render.render_frames(v1, render.RenderOptions(**base, static_denoise="off")))
+    for g in a["static"]:
+        np.testing.assert_array_equal(a["static"][g]["short"], b["static"][g]["short"])
