@@ -152,7 +152,8 @@ def denoise_static(images: dict, boxes=(), radius: int = SHARE_RADIUS_PX, shape_
     Args:
         images: group -> (C, H, W) float32 spectral radiance (W sr^-1 m^-2 nm^-1) >= 0, the same shape for all.
         boxes: lamp boxes (y0, x0, y1, x1) px, end exclusive: left out of the denoiser and kept as they are.
-        radius: :data:`SHARE_RADIUS_PX`.
+        radius: px, the box radius of the groups' shares (:data:`SHARE_RADIUS_PX`).
+        shape_radius: px, the box radius of the spectral shape inside a broad band (None: :data:`SHAPE_RADIUS_PX`).
         denoiser: (k, H, W) -> (k, H, W), k = :data:`BROAD_BANDS` (:func:`oidn_rgb`; tests pass others).
 
     Returns:
