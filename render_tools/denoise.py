@@ -27,17 +27,17 @@ What (one capture window of one frame; ``S[g, c]``: group g's spectral radiance 
    groups and the spectral shape inside a broad band are averaged (an edge between differently coloured
    surfaces, or between what two groups light, is blurred over r or R px in those ratios only).
 
-Not unbiased: the filter's output is its own estimate; edges and texture finer than the noise are smoothed, and light
-it takes for outliers is removed. Measured on 640x360 frames of the ``default`` profile against spp-64/256
-references (docs/render-benchmark.md): the light outside the lamp boxes is kept within 1.2 % on a dry night and by
+Not unbiased: the filter's output is its own estimate; edges and texture finer than the noise are smoothed, and
+light it takes for outliers is removed. Measured on 640x360 frames of the ``default`` profile against spp-64/256
+references (docs/render-benchmark.md): the light outside the lamp boxes is kept within 1.7 % on a dry night and by
 day, but a wet road's glossy reflections of the static lamps are sparse bright samples at spp 1, and the filter
-blurs them: their brightest tenth loses 25 % of its light, the rest of the road gains 7 %, the frame's light
-outside the lamp boxes -12 %. Smaller frames lose more (the same scenes, short window, all static groups' light
-outside the lamp boxes: 320x180 at spp 1 dry night -3.6 %, wet -18 %, day -0.2 %; 160x90 at spp 2, the mini
-protocols' size, -4.1 / -18 / -0.5 %). Scaling the output back to the traced light (over the frame, or in boxes
-of 8-64 px) was tried and not taken: over the frame it brightened everything else by 12 % (median error 9.4 ->
-16.4 %), in boxes it left square blotches where a single bright sample sat. ``static_denoise: off`` keeps the traced
-(unbiased) estimate.
+blurs them: their brightest tenth loses about a quarter of its light, the rest of the road gains 7 %, the frame's
+light outside the lamp boxes -15 % (short window; long -8 %). Smaller frames lose more (the same scenes, short
+window, all static groups' light outside the lamp boxes: 320x180 at spp 1 dry night -3.6 %, wet -18 %, day -0.2 %;
+160x90 at spp 2, the mini protocols' size, -4.1 / -18 / -0.5 %). Scaling the output back to the traced light (over
+the frame, or in boxes of 8-64 px) was tried and not taken: over the frame it brightened everything else by 12 %
+(median error 9.4 -> 16.4 %), in boxes it left square blotches where a single bright sample sat. ``static_denoise:
+off`` keeps the traced (unbiased) estimate.
 """
 from __future__ import annotations
 
