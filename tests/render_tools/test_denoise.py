@@ -114,9 +114,9 @@ def test_oidn_lowers_the_error_of_a_monte_carlo_image():
 
 @pytest.mark.parametrize("case", ["zeros", "tiny", "huge", "firefly"])
 def test_extreme_inputs_stay_finite(case):
-    """Stiff cases: an all-black frame stays black; radiance at 1e-12 and 1e12 of the usual scale is denoised as
-    at the usual scale (the filter's own exposure estimate); a single firefly 1e8 times the image does not make
-    NaN, Inf or negative values."""
+    """Stiff cases: an all-black frame stays black; radiance at 1e-12 and 1e12 of the usual scale is denoised as at
+    the usual scale (oidn_rgb divides by the image's mean level first); a single firefly 1e8 times the image does
+    not make NaN, Inf or negative values."""
     rng = np.random.default_rng(2)
     _, noisy, boxes = _mc_image(rng, spp=8)
     if case == "zeros":
