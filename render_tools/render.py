@@ -535,13 +535,20 @@ def static_denoised(scene: dict, opts: RenderOptions) -> bool:
     return _on_from_version_2(opts.static_denoise, "oidn", scene)
 
 
+def refine_pad(scene: dict, opts: RenderOptions) -> int | None:
+    """The padding (px) of the box a static group's lamp is refined in (``light_bbox`` ``pad``): 0 (its own box, the
+    pad ring keeping the full frame's estimate) when the ring is traced at spp (:func:`pad_at_spp`), else None
+    (``opts.pad_px``)."""
+    return 0 if pad_at_spp(scene, opts) else None
+
+
 def static_lamp_boxes(scene: dict, opts: RenderOptions, n: int, geo: SceneGeometry | None = None) -> list[tuple]:
     """Boxes (y0, x0, y1, x1) px of the static groups' lamps in frame ``n``, over the short and the long window, as
     :func:`plan_frame` refines them: what :func:`render_tools.denoise.denoise_static` keeps as traced."""
     geo = geo or SceneGeometry(scene, opts)
     tm = frame_timing(scene, opts, n)
     t_obj = 0.5 * (tm["window"][0] + tm["window"][1])
-    rpad = 0 if pad_at_spp(scene, opts) else None
+    rpad = refine_pad(scene, opts)
     boxes = []
     for g, info in _selected_groups(scene, opts).items():
         if info["flicker"]:
@@ -809,7 +816,7 @@ def plan_frame(scene: dict, opts: RenderOptions, n: int, sets, geo: SceneGeometr
         wins.append(("rest", la, (lb - la) - (sb - sa), sa, sb - sa, (sb - sa) / (lb - la)))
     qmc = sobol_pixel_samples(scene, opts)
     ring_spp = pad_at_spp(scene, opts)  # a lamp's pad ring at spp, its own box at light_spp
-    rpad = 0 if ring_spp else None  # a static group's lamp refines its own box, the ring keeps the full frame
+    rpad = refine_pad(scene, opts)  # a static group's lamp refines its own box, the ring keeps the full frame
     union = list(getattr(sets, "union", ()) or ())
     if union:  # the static groups' full frames: one tile per window records all of them (one image per slot)
         for win, t0, dt, gap_at, gap_len, frac in wins:
