@@ -1,6 +1,6 @@
 """Point drjit at Debian's libLLVM 19 before Mitsuba loads, unless the user set ``DRJIT_LIBLLVM_PATH``.
 
-LLVM 15 crashes in code generation on this machine's AVX-512 CPUs (docs/rendering.md); the benchmark scripts
+LLVM 15 crashes in code generation on this machine's AVX-512 CPUs (docs/guide/rendering.md); the benchmark scripts
 that render import this module first (``import _llvm``; run them as ``python benchmarks/<script>.py``).
 """
 from __future__ import annotations

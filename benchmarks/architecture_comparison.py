@@ -1,4 +1,4 @@
-"""Every sensor architecture on the same test scenes, ranked together (docs/sensor-architectures.md): the split
+"""Every sensor architecture on the same test scenes, ranked together (docs/results/sensor-architectures.md): the split
 pixel (``ovt``) with three of its rule-based fusions, LOFIC, staggered, chopped and single exposure with their
 standard merge (``exposure_select``; staggered also bounded below by its saturated captures,
 ``exposure_select_bounded``), and each with a U-Net trained for that sensor when its checkpoint is given.
@@ -17,7 +17,7 @@ sample (runs in ``--runs/<sensor>/``), then one cross-sensor leaderboard (``--ru
 no perceptual metrics and no ISP columns (secondary; minutes at 640x360). ``--max-scenes N`` scores the first N
 scenes of the split, each with all its draws (the first 24 of ``lfmbench-v1``'s test split are 8 day, 8 dusk,
 8 night). The whole ``lfmbench-v1`` test split (48 scenes x 2 draws, 12 method runs) took 50 min wall, 34 min CPU on
-the shared 2-core machine (docs/sensor-architectures.md).
+the shared 2-core machine (docs/results/sensor-architectures.md).
 """
 from __future__ import annotations
 
@@ -42,7 +42,7 @@ def _ci(row: dict, key: str, nd: int = 3) -> str:
 
 
 def tables(leaderboard_json: str | Path) -> str:
-    """The comparison's Markdown tables (docs/sensor-architectures.md) from a cross-sensor ``leaderboard.json``: the
+    """The comparison's Markdown tables (docs/results/sensor-architectures.md) from a cross-sensor ``leaderboard.json``: the
     ranking with 95 % intervals, then the LED score by condition (time of day with its interval; PWM miss probability
     and ego speed: value and scenes)."""
     import json
@@ -119,7 +119,7 @@ def main() -> None:
 
     md = Path(a.runs) / "tables.md"
     atomic_write_text(md, tables(Path(a.runs) / "leaderboard.json"))
-    print(f"tables for docs/sensor-architectures.md: {md}")
+    print(f"tables for docs/results/sensor-architectures.md: {md}")
 
 
 if __name__ == "__main__":

@@ -7,7 +7,7 @@ ratio to ``ovt`` (split pixel) and where it goes (composition of the exposures v
 are timed in interleaved passes (ovt, imx490, lofic, staggered, chopped, single, then again), so the load of the
 shared machine falls on all of them alike.
 
-Writes its section of ``docs/dataset-benchmark.md`` (between the ``architectures`` markers; the rest of the file is
+Writes its section of ``docs/benchmarks/dataset.md`` (between the ``architectures`` markers; the rest of the file is
 ``bench_dataset.py``'s). Run: ``.venv/bin/python benchmarks/bench_architectures.py [--passes 5] [--samples 16]``.
 """
 from __future__ import annotations

@@ -6,14 +6,14 @@ Times, in samples/s (median over timed passes after one warm-up pass), reading i
   ``num_workers`` 0 or 2), each batch moved to ``--device`` (:func:`pieces_to`, ``non_blocking``) and simulated
   there by :class:`BatchedCaptureSimulator` (on CUDA: synchronised at the end of each pass);
 - **per_sample**: today's path under the same conditions (``LFMCaptureDataset`` in a ``DataLoader`` with 2
-  workers, batch 1 and 4), the reference of docs/dataset-benchmark.md section 1.
+  workers, batch 1 and 4), the reference of docs/benchmarks/dataset.md section 1.
 
 Workload: the throughput corpus of ``benchmarks/bench_dataset.py`` (2 rendered scenes of 320x256 px, 31 bands,
 K = 8; rendered into ``<out>/tp`` with that script's renderer and settings when ``--corpus`` is not given),
 3 frames, 256x256 crops, all outputs except ``rgb``, noise on, warm per-sensor cache (projected layers in memory).
 Also reports the host-to-device bytes per sample (the pieces' tensors) and the bytes of one simulated sample.
 
-Writes ``<out>/results.json`` and the "Batched path" section of ``docs/dataset-benchmark.md`` (between the
+Writes ``<out>/results.json`` and the "Batched path" section of ``docs/benchmarks/dataset.md`` (between the
 ``batched-capture`` markers; ``bench_dataset.py`` keeps that section when it rewrites the file). The last line
 printed is ``samples/s=N``: the best batched configuration's median.
 
@@ -41,7 +41,7 @@ from lfmbench.fileio import atomic_write_text  # noqa: E402
 
 DOC = ROOT / "docs" / "dataset-benchmark.md"
 BEGIN, END = "<!-- batched-capture:begin -->", "<!-- batched-capture:end -->"
-#: Target of issue 10 on 2 CPU cores: 1.5 x the per-sample path's 52 samples/s (docs/dataset-benchmark.md).
+#: Target of issue 10 on 2 CPU cores: 1.5 x the per-sample path's 52 samples/s (docs/benchmarks/dataset.md).
 CPU_TARGET = 1.5 * 52.0
 GPU_TARGET = 5000.0
 #: glibc malloc settings of the "keep freed memory" rows: allocations up to 256 MiB from the heap, which is
@@ -334,7 +334,7 @@ def _keep_memory_run(dev: str, root: Path, *args: str):
 
 
 def write_section(text: str) -> None:
-    """Replace (or append) the batched section of docs/dataset-benchmark.md."""
+    """Replace (or append) the batched section of docs/benchmarks/dataset.md."""
     doc = DOC.read_text() if DOC.is_file() else ""
     if BEGIN in doc and END in doc:
         doc = doc[:doc.index(BEGIN)] + text.rstrip("\n") + doc[doc.index(END) + len(END):]
@@ -349,7 +349,7 @@ def main(argv=None) -> int:
     ap.add_argument("--quick", action="store_true", help="fewer samples and passes, fewer configurations")
     ap.add_argument("--corpus", type=Path, help="corpus to read (default: render the throughput corpus)")
     ap.add_argument("--out", type=Path, default=ROOT / "bench_out" / "batched", help="render and results directory")
-    ap.add_argument("--no-doc", action="store_true", help="do not rewrite docs/dataset-benchmark.md")
+    ap.add_argument("--no-doc", action="store_true", help="do not rewrite docs/benchmarks/dataset.md")
     ap.add_argument("--report-only", action="store_true", help="only rewrite the doc section from "
                     "<out>/results_<device>.json")
     ap.add_argument("--one-config", help=argparse.SUPPRESS)   # "batch,workers,threads,sim_threads,prefetch,n,passes"

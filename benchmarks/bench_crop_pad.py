@@ -1,7 +1,7 @@
 """Per-light crop padding: energy a flickering light throws outside its stored crop against render time.
 
 A flickering light is rendered alone inside its screen bounding box over the capture window, padded by
-``RenderOptions.pad_px`` (docs/rendering.md). What it illuminates beyond that box (road, its own car body) is
+``RenderOptions.pad_px`` (docs/guide/rendering.md). What it illuminates beyond that box (road, its own car body) is
 not stored, so the flickering layer loses that energy. This script measures, on the benchmark night scene of
 ``bench_render.py`` (640 x 360, 31 bands, frame 0, flickering group ``otherlights``, lamps moving with their
 vehicles):
@@ -12,7 +12,7 @@ vehicles):
 - the wall time of rendering all those lights' crops in K = 8 bins at light_spp 32 (the default profile), i.e.
   the render cost of each padding; medians of 3 runs.
 
-Writes ``docs/crop-pad-benchmark.md`` and ``docs/img/crop_pad.png``.
+Writes ``docs/benchmarks/crop-pad.md`` and ``docs/img/crop_pad.png``.
 Run: ``.venv/bin/python benchmarks/bench_crop_pad.py [--quick]`` (``--quick``: 320 x 180, fewer pads).
 """
 from __future__ import annotations

@@ -29,7 +29,7 @@ Measures on this machine (CPU; shared with other jobs, so every time is an upper
    each instant, Riemann sum): relative RMSE of the flickering part of LPD and SPD over the frame vs N, and the
    time of both.
 
-Writes ``docs/dataset-benchmark.md`` (whole file), ``docs/img/dataset_*.png`` and raw numbers to
+Writes ``docs/benchmarks/dataset.md`` (whole file), ``docs/img/dataset_*.png`` and raw numbers to
 ``<out>/results.json``. Renders go to ``<out>`` (default ``bench_out/dsbench``, git-ignored); the throughput
 corpus is reused when complete (its render time is not a result), the K renders are redone every run (their
 time is).
@@ -720,7 +720,7 @@ def report(tp: dict, bins: dict, psf: dict, rs: dict, env: dict, quick: bool, pr
           "shared-memory segment, so the per-tensor cost is paid per sample at batch 1 and per 4 samples at "
           "batch 4. On two cores that CPU is taken from the workers. Mode **warm_fs** is the warm mode with "
           "`torch.multiprocessing.set_sharing_strategy(\"file_system\")` (tensors cross by shared-memory name, "
-          "not by file descriptor), a process-wide setting a training script may choose (docs/datasets.md): "
+          "not by file descriptor), a process-wide setting a training script may choose (docs/guide/datasets.md): "
           "it roughly halves that main-process cost.", "",
           "Where the time of one warm sample goes (cProfile of `__getitem__` in one process with one torch "
           "thread, as in a DataLoader worker; cumulative time, so nested rows overlap):", "",
@@ -801,7 +801,7 @@ def report(tp: dict, bins: dict, psf: dict, rs: dict, env: dict, quick: bool, pr
           f"{rs['global_vs_rolling_lpd']:.3f} (LPD, flickering part): the effect is not negligible.", "",
           "## Notes", "",
           "- Static layers keep their global-shutter motion blur under a rolling shutter (documented in "
-          "docs/datasets.md); not measured here.",
+          "docs/guide/datasets.md); not measured here.",
           "- Renders are small (few lights, few pixels); errors are for these scenes, not a bound."]
     return "\n".join(L) + "\n"
 

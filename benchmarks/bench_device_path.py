@@ -14,10 +14,10 @@ Workload: a synthetic corpus written here (``--scenes`` scenes of 640 x 360 px, 
 every output but ``rgb``; capture rows at a 256 x 256 crop, training rows at crop 128. Also reports the resident
 bytes per scene and the peak device memory per batch.
 
-Writes ``docs/device-path-benchmark.md`` (``--no-doc``: only print; ``--json PATH``: the rows, written as they come).
+Writes ``docs/benchmarks/device-path.md`` (``--no-doc``: only print; ``--json PATH``: the rows, written as they come).
 Run: ``.venv/bin/python benchmarks/bench_device_path.py`` (``--device auto``: CUDA where there is one). Without a GPU
-it measures the CPU rows into ``docs/device-path-benchmark-cpu.md``, says that the GPU rows were not run, and
-leaves the GPU figures of ``docs/device-path-benchmark.md`` as they are.
+it measures the CPU rows into ``docs/benchmarks/device-path-cpu.md``, says that the GPU rows were not run, and
+leaves the GPU figures of ``docs/benchmarks/device-path.md`` as they are.
 """
 from __future__ import annotations
 

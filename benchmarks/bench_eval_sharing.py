@@ -1,5 +1,5 @@
 """An 8-method evaluation with and without sharing the simulated samples across methods
-(docs/evaluation-sharing-benchmark.md).
+(docs/benchmarks/evaluation-sharing.md).
 
     lfmbench demo                      # or any corpus; the demo's corpus and U-Net checkpoint are enough
     python benchmarks/bench_eval_sharing.py --corpus demo_out/corpus --checkpoint demo_out/unet_fusion.pt

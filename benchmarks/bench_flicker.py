@@ -2,7 +2,7 @@
 
 Compares every closed-form implementation of :func:`lfmbench.flicker.pwm_exposure` and numerical integration
 of the sampled waveform (midpoint rule, N = 10 .. 10^6 samples per exposure) against exact rational
-arithmetic (``fractions.Fraction`` on the float inputs). Writes ``docs/flicker-benchmark.md`` and
+arithmetic (``fractions.Fraction`` on the float inputs). Writes ``docs/benchmarks/flicker.md`` and
 ``docs/img/flicker_error_vs_speed.png``.
 
 Run: ``make bench`` (or ``.venv/bin/python benchmarks/bench_flicker.py``).
@@ -171,7 +171,7 @@ def main() -> None:
     ax.legend(fontsize=7, loc="lower center", bbox_to_anchor=(0.42, 0.02))
     fig.tight_layout()
     atomic_save_figure(fig, ROOT / "docs" / "img" / "flicker_error_vs_speed.png", dpi=120)
-    print("wrote docs/flicker-benchmark.md and docs/img/flicker_error_vs_speed.png")
+    print("wrote docs/benchmarks/flicker.md and docs/img/flicker_error_vs_speed.png")
 
 
 if __name__ == "__main__":

@@ -1,7 +1,7 @@
 """Lamps on moving vehicles: relative-motion per-light renders against a brute force that moves the objects.
 
 A flickering light's crop is rendered with the scene held at mid capture window and the camera moved by
-``-v_vehicle (t - t_mid)`` on top of the ego motion (docs/rendering.md). That is exact for the lamp and its own
+``-v_vehicle (t - t_mid)`` on top of the ego motion (docs/guide/rendering.md). That is exact for the lamp and its own
 vehicle but moves the static surroundings with it. The brute force here re-loads the scene with every object at
 its true position at M instants across the capture window and renders each instant (bin length 0, ego camera
 at that instant), averaging the M renders: the true motion of everything, up to the M-step time sampling.
@@ -15,7 +15,7 @@ Measured on the benchmark night scene of ``bench_render.py`` (640 x 360, 31 band
 - the Monte Carlo floor: relative motion with two seeds;
 - wall time of each.
 
-Writes ``docs/object-motion-benchmark.md``. Run: ``.venv/bin/python benchmarks/bench_object_motion.py [--quick]``.
+Writes ``docs/benchmarks/object-motion.md``. Run: ``.venv/bin/python benchmarks/bench_object_motion.py [--quick]``.
 """
 from __future__ import annotations
 

@@ -7,7 +7,7 @@ minus that of the scene finished before it (the first scene includes Python star
 first kernel compilations). ``--analyze DIR`` reports on an already rendered corpus without rendering.
 
 Usage: ``python benchmarks/bench_protocol.py [--protocol lfmbench-v1-mini] [--corpus DIR]`` (prints Markdown for
-docs/benchmark-protocol.md); ``python benchmarks/bench_protocol.py --analyze /tmp/v1mini``.
+docs/guide/protocols.md); ``python benchmarks/bench_protocol.py --analyze /tmp/v1mini``.
 """
 from __future__ import annotations
 

@@ -5,7 +5,7 @@ with a warm Dr.Jit kernel cache (one scene rendered first into a scratch corpus,
 same cache; the first scene of each case still compiles the kernel of its own scene layouts if they are new).
 Cases: ``--workers 1`` (one process, Dr.Jit's thread pool on every core), ``--workers W`` (a process pool) and
 ``--ray-address local --workers W`` (Ray starts a local instance with W CPUs). Reports wall time, scenes per hour
-and the ratio to the one-process run, and writes docs/ray-benchmark.md.
+and the ratio to the one-process run, and writes docs/benchmarks/ray.md.
 
 Usage: ``python benchmarks/bench_ray.py [--scenes 6] [--profile small] [--workers 2] [--out docs]``.
 """
@@ -80,7 +80,7 @@ def main() -> None:
     lines += [f"| {n} | {dt:.1f} | {sph:.0f} | {sph / base:.2f} |" for n, dt, sph in rows]
     if not have_ray:
         lines += ["", "Ray is not installed here (`pip install 'lfmbench[distributed]'`): its row is missing."]
-    lines += ["", "One process runs Dr.Jit's kernels on every core, but part of a small new scene is single-threaded: scene generation, Mitsuba scene loading, the last frame's encoding, and the LLVM compile of a kernel class's first scene (docs/rendering.md; until 2026-11-24 every new scene compiled its own kernel, and the process pool was 2.2x one process, as two workers overlapped those compiles; with the compiles gone the rendering, which already uses both cores, is most of the time). Ray pays for its start-up (a local instance, a few s) and task dispatch. On a cluster, Ray's scenes per hour scale with its nodes: each worker renders whole scenes and writes them atomically into the shared corpus folder (which every node must see).", ""]
+    lines += ["", "One process runs Dr.Jit's kernels on every core, but part of a small new scene is single-threaded: scene generation, Mitsuba scene loading, the last frame's encoding, and the LLVM compile of a kernel class's first scene (docs/guide/rendering.md; until 2026-11-24 every new scene compiled its own kernel, and the process pool was 2.2x one process, as two workers overlapped those compiles; with the compiles gone the rendering, which already uses both cores, is most of the time). Ray pays for its start-up (a local instance, a few s) and task dispatch. On a cluster, Ray's scenes per hour scale with its nodes: each worker renders whole scenes and writes them atomically into the shared corpus folder (which every node must see).", ""]
     out = Path(a.out) / "ray-benchmark.md"
     atomic_write_text(out, "\n".join(lines))
     print(f"wrote {out}")

@@ -1,4 +1,4 @@
-"""Render error against run time: writes docs/render-benchmark.md and docs/img/render-benchmark.png.
+"""Render error against run time: writes docs/benchmarks/render.md and docs/img/render-benchmark.png.
 
 Measures, on one generated night scene (the groups with the most lights) at 640x360, 31 bands:
 1. static groups: relative RMSE of the short-window composite against a high-spp reference, over all pixels
@@ -36,7 +36,7 @@ from render_tools import preview, reference, render, scene, spectra  # noqa: E40
 
 BANDS = render.DEFAULT_BANDS_NM
 
-#: Heading of benchmarks/bench_render_v2_error.py's section of docs/render-benchmark.md (kept when this script
+#: Heading of benchmarks/bench_render_v2_error.py's section of docs/benchmarks/render.md (kept when this script
 #: rewrites the file).
 V2_SECTION = "## Scene generator 2 (issue 23)"
 #: Share of a crop's maximum above which a pixel counts as an LED pixel of that light.
@@ -313,7 +313,7 @@ def write_report(res: dict, out: Path) -> None:
         "## Short-window composite against spp and the static pass (light_spp 32, K 8; one frame)",
         "",
         "`static_pass`: `union` traces one camera path per sample for all static groups together (one "
-        "next-event estimation over all their lamps, docs/rendering.md), `per_group` one path per group.",
+        "next-event estimation over all their lamps, docs/guide/rendering.md), `per_group` one path per group.",
         "",
         "| static pass | spp | s / frame | CPU s / frame | all px relMSE^0.5 | all px median rel. error "
         "| rel. RMSE LED px |",
@@ -334,7 +334,7 @@ def write_report(res: dict, out: Path) -> None:
               f"Full-frame solo renders of lights {o['lights']} over the capture window: share of their energy "
               f"outside the stored crop = {', '.join(f'{x:.4f}' for x in o['fraction'])} "
               "(the light's illumination of the street; it is lost from the flickering layer; "
-              "docs/crop-pad-benchmark.md shows where it goes and that padding the crop does not recover it).", ""]
+              "docs/benchmarks/crop-pad.md shows where it goes and that padding the crop does not recover it).", ""]
     lines += ["## Reading the numbers", "",
               "- LED pixels of static groups are re-rendered at light_spp inside each lamp's crop, so their error "
               "does not depend on spp; spp buys the rest of the image.",

@@ -13,7 +13,7 @@ The child renders in its own process (``render_tools.jobs.ISOLATE_RENDERS`` off)
 process, its start and its imports, are not in the timeline.
 
 Usage: ``python benchmarks/bench_render_phases.py [--seeds 101,202] [--profile default] [--out docs]`` (writes
-docs/render-phases-benchmark.md; about 3 minutes on a quiet machine).
+docs/benchmarks/render-phases.md; about 3 minutes on a quiet machine).
 """
 from __future__ import annotations
 

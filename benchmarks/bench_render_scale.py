@@ -8,7 +8,7 @@ corpus (every kernel a cache hit), and :data:`N_NEW` scenes never rendered befor
 first scene has filled the cache. Reports wall time per scene, the number of LLVM kernels compiled (files added
 to ``~/.drjit``) and the corpus size on disk.
 
-Usage: ``python benchmarks/bench_render_scale.py [--quick] [--out docs]`` (writes docs/render-scale-benchmark.md).
+Usage: ``python benchmarks/bench_render_scale.py [--quick] [--out docs]`` (writes docs/benchmarks/render-scale.md).
 ``--quick``: the 160x90 ``small`` profile only.
 """
 from __future__ import annotations

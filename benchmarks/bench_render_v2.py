@@ -7,7 +7,7 @@ warm the same scene again with that ``HOME``. Generator 1 and generator 2 altern
 load hits both alike; wall and CPU seconds (user + system of the child) are both reported, CPU seconds being the
 steadier under load. A generator-1 scene of the same seed and time of day is rendered once and compared with every
 generator-2 weather of it. Writes the section "Scene generator 2 against generator 1" of
-docs/render-scale-benchmark.md (what is before it is :mod:`bench_render_scale`'s; later sections are kept).
+docs/benchmarks/render-scale.md (what is before it is :mod:`bench_render_scale`'s; later sections are kept).
 
 Warm renders are repeated (``--repeats``, default 3), generator 1 and 2 alternating, and their medians reported: one
 render's CPU seconds moved by 5-10 % from run to run on the 2-core machine (session 14).
@@ -42,7 +42,7 @@ from bench_render_scale import run_case  # noqa: E402
 
 from lfmbench.fileio import atomic_write_text  # noqa: E402
 
-#: Heading of this script's section of docs/render-scale-benchmark.md.
+#: Heading of this script's section of docs/benchmarks/render-scale.md.
 SECTION = "## Scene generator 2 against generator 1 (issue 23)"
 #: The default cases: seed, time of day, generator 2's weather.
 CASES = ("101:night:wet", "101:night:dry", "202:day:dry")

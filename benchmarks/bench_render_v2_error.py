@@ -1,5 +1,5 @@
 """Error of the ``default`` render profile on scene generator 2 (lfmbench-v2) scenes against a high-spp reference
-(issue 23): writes the section "Scene generator 2 (issue 23)" of docs/render-benchmark.md.
+(issue 23): writes the section "Scene generator 2 (issue 23)" of docs/benchmarks/render.md.
 
 For each case (seed, time of day, generator 2's weather, or ``v1`` for the generator-1 scene of that seed and time of
 day, measured the same way for comparison; default: a day, a dry night and a wet night of generator 2) frame 0 is
@@ -81,7 +81,7 @@ from bench_render import led_sel, lum, median_rel_error, rel_mse_pixels, rel_rms
 
 from lfmbench.fileio import atomic_write_bytes, load_yaml  # noqa: E402
 
-#: Default cases: seed, time of day, generator 2's weather or v1 (the scenes of docs/render-scale-benchmark.md).
+#: Default cases: seed, time of day, generator 2's weather or v1 (the scenes of docs/benchmarks/render-scale.md).
 CASES = ("202:day:v1", "202:day:dry", "101:night:v1", "101:night:dry", "101:night:wet")
 #: Reference sample counts (per band pass): full frames, lamp crops.
 REF_SPP, REF_LIGHT_SPP = 4, 256
@@ -296,7 +296,7 @@ def write_section(rows: list, out: Path, load0: float, load1: float, size=SIZE,
              f"{ref[0]}, light_spp {ref[1]}, K 8 with exact reflections whose static groups are rendered on their own "
              f"at spp {ref[2]} (light_spp {ref[1]} in their lamps' boxes), none of it denoised (errors are upper "
              "bounds: the reference's own noise is in them). Scene version 2 frames have their static full frames "
-             "denoised (`static_denoise` auto, docs/rendering.md); `default, not denoised`: `static_denoise` off, "
+             "denoised (`static_denoise` auto, docs/guide/rendering.md); `default, not denoised`: `static_denoise` off, "
              "the traced estimate. Both draw LED dot faces whose pitch projects under 1 px as filled cells "
              "(`dots_lod_px`; the error this leaves out, the dots' moire, is in \"LED dot faces\" below). "
              "`default, spp N`: the same with spp N in the static full frames (`--static-spp`), denoised. "
@@ -512,7 +512,7 @@ def crop_error(frame: dict, ref_a: dict, ref_b: dict) -> tuple[float, float]:
 
 def pad_samples_main(cases, cache: Path | None, out: Path, quick: bool) -> None:
     """``--pad-samples``: the flickering groups alone with the pad ring at light_spp and at spp, against two
-    references; writes the section "Pad ring samples (issue 23)" of docs/render-benchmark.md."""
+    references; writes the section "Pad ring samples (issue 23)" of docs/benchmarks/render.md."""
     from render_tools import render  # noqa: PLC0415
 
     (W, H), ref_spp, study = _lamp_study(quick, PAD_REF_LIGHT_SPP)

@@ -12,7 +12,7 @@ Measures, on this machine (CPU, float32 unless stated):
    parameters that the photon-transfer analysis of ``tests/sensor/test_emva1288.py`` recovers.
 
 Writes the tables between the ``<!-- bench_sensor:start -->`` / ``<!-- bench_sensor:end -->`` markers of
-``docs/sensor.md`` (the rest of that file is hand-written) and the plots ``docs/img/sensor_*.png``.
+``docs/guide/sensors.md`` (the rest of that file is hand-written) and the plots ``docs/img/sensor_*.png``.
 Run: ``.venv/bin/python benchmarks/bench_sensor.py``.
 """
 from __future__ import annotations

@@ -19,10 +19,10 @@ kernels (pixels per program, warps; :data:`lfmbench.sensor._counter_triton.COLLE
 the counts do not depend on them), takes the fastest for the rows that follow, and reports the sweep.
 
 Reports samples/s (median of ``--repeats`` timed calls after two warm-up calls; CUDA synchronised) and the peak
-device memory of a call, per batch size, and writes ``docs/sensor-device-benchmark.md`` (``--no-doc``: only print).
+device memory of a call, per batch size, and writes ``docs/benchmarks/sensor-device.md`` (``--no-doc``: only print).
 The CPU rows are always measured (on a GPU machine: on its host CPU); without a GPU they go to
-``docs/sensor-device-benchmark-cpu.md``, which says that the GPU rows were not run, and the GPU figures of
-``docs/sensor-device-benchmark.md`` stay as they are.
+``docs/benchmarks/sensor-device-cpu.md``, which says that the GPU rows were not run, and the GPU figures of
+``docs/benchmarks/sensor-device.md`` stay as they are.
 
 Run: ``.venv/bin/python benchmarks/bench_sensor_device.py [--device cuda] [--quick]``.
 """

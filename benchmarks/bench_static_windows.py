@@ -1,5 +1,5 @@
 """Radiance of the static groups for any exposure window: error of each option against its storage and render cost
-(issue 22 item 3; docs/sensor-architectures.md, "Static radiance for any window").
+(issue 22 item 3; docs/results/sensor-architectures.md, "Static radiance for any window").
 
 A corpus stores its static groups (headlights, streetlights, skymap: everything but the flickering lamps) as two
 time averages per frame, over the short window (centred) and the long window [0, T_L); a staggered 0.1 ms exposure

@@ -19,7 +19,7 @@ its FLOAT fallback), and the energy-weighted difference between the short and lo
 (two independent Monte Carlo estimates, plus motion blur: an upper bound of the render noise that rounding must
 stay far below).
 
-Writes ``docs/storage-benchmark.md`` (whole file) and ``<out>/results.json``.
+Writes ``docs/benchmarks/storage.md`` (whole file) and ``<out>/results.json``.
 
 Run: ``.venv/bin/python benchmarks/bench_storage.py --corpus DIR [--scene ID]`` (about 20 min for a 640x360
 scene on 2 shared cores) or ``--quick`` (renders a small 160x90 scene into ``<out>/corpus`` unless there, fewer
@@ -272,7 +272,7 @@ def write_doc(path: Path, info: dict, results: list[dict], chosen: dict | None) 
         "- `mN`: mantissas rounded to N explicit bits before compression (relative error <= 2^-(N+1) per value "
         "in the precision range); m10 = plain HALF.",
         "- HALF layers are scaled by a power of two so that their peak lies in [2^(P-1), 2^P), P = 20 - 23 + N: "
-        "values down to 2^-20 of the peak keep N bits (`docs/corpus-format.md` section 6).",
+        "values down to 2^-20 of the peak keep N bits (`docs/guide/corpus-format.md` section 6).",
         "- Not in the default run (to keep it near 20 min on 2 cores): ZIPS, DWAA, DWAB, PXR24 on HALF, HTJ2K and "
         "more mantissa widths; add them to `FULL` in the script to measure them.",
         "",

@@ -1,4 +1,4 @@
-"""``lfmbench validate`` at scale: seconds for corpora of 1,000 to 100,000 tiny scenes (docs/validate-benchmark.md).
+"""``lfmbench validate`` at scale: seconds for corpora of 1,000 to 100,000 tiny scenes (docs/benchmarks/validate.md).
 
 Each scene is the smallest valid one (1 frame, one static group of 4x4 px and 2 bands, no lights; its EXR is a hard
 link to one of a few copies of one file, so 100,000 scenes take 300,000 inodes and little data): what is timed is validate's
@@ -8,7 +8,7 @@ per-scene bookkeeping and file checks, which must grow linearly with the number 
 Timed per corpus: ``--headers-only`` and with pixels, in one process and with the default worker processes, each
 with no cache (every file hashed, every scene checked: ``--no-cache``); then the command's default (pixels, default
 workers, the cache on) twice: the first run on the corpus (the cache file is written) and a second run on the
-unchanged corpus (``docs/validate-benchmark.md``; :mod:`lfmbench.corpus.validate_cache`).
+unchanged corpus (``docs/benchmarks/validate.md``; :mod:`lfmbench.corpus.validate_cache`).
 
 Usage: ``python benchmarks/bench_validate.py [--scenes 1000 10000 100000] [--work DIR] [--no-doc]``.
 """
@@ -160,7 +160,7 @@ def main() -> None:
 
 
 def write_doc(rows: list[dict]) -> None:
-    """docs/validate-benchmark.md from the measured ``rows`` (one per corpus size)."""
+    """docs/benchmarks/validate.md from the measured ``rows`` (one per corpus size)."""
     lines = ["# `lfmbench validate` at scale", "",
              "Written by `benchmarks/bench_validate.py` (tiny scenes: 1 frame, one 4x4 static group of 2 bands, "
              "3 files per scene; the EXR a hard link). `validate_corpus` with one process and with its default "

@@ -1,4 +1,4 @@
-"""The figure of docs/isp.md: one frame of a real corpus scene through the ISP (docs/img/isp_pipeline.png).
+"""The figure of docs/guide/isp.md: one frame of a real corpus scene through the ISP (docs/img/isp_pipeline.png).
 
     lfmbench demo                                       # renders demo_out/corpus (160x90)
     python benchmarks/isp_figure.py --corpus demo_out/corpus --scene scene00002

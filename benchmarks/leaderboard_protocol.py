@@ -1,5 +1,5 @@
-"""Leaderboard of the classical baselines and the U-Net on a protocol corpus's test split (docs/leaderboard-v1.md,
-docs/leaderboard-v1-mini.md, docs/leaderboard-v2-mini.md).
+"""Leaderboard of the classical baselines and the U-Net on a protocol corpus's test split (docs/results/leaderboard-v1.md,
+docs/results/leaderboard-v1-mini.md, docs/results/leaderboard-v2-mini.md).
 
     lfmbench render --protocol lfmbench-v1-mini --out v1mini --workers 2
     lfmbench train --corpus v1mini --config lfmbench/configs/unet.yaml --out runs/unet_fusion.pt --epochs 16

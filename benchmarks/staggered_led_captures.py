@@ -1,5 +1,5 @@
 """Which capture the staggered plan's merge takes on the LEDs, and which captures drop them
-(docs/sensor-architectures.md, "Why staggered drops in daylight").
+(docs/results/sensor-architectures.md, "Why staggered drops in daylight").
 
     python benchmarks/staggered_led_captures.py --corpus v1 --scenes test_00 test_03 test_08 test_16 [--json out.json]
 

@@ -6,7 +6,7 @@ For every run: mean PSNR-mu (dB), light dropout rate (pooled over region-frames)
 series_rel_rmse (relative RMS error of the LED-region series, an LED-region quality), each with a percentile
 bootstrap CI that resamples *scenes* (all frozen draws of a resampled scene go together, since draws of one
 scene are correlated). Every run must cover the same scenes; the same resampled scene sets are used for all
-runs. Prints a Markdown table (docs/baselines.md, "U-Net baseline"); with ``--against NAME`` also the paired
+runs. Prints a Markdown table (docs/guide/baselines.md, "U-Net baseline"); with ``--against NAME`` also the paired
 differences ``NAME - other`` per metric (same resampled scenes for both, so scene difficulty cancels) with their
 CIs. Used to report numbers, not a timed test.
 """

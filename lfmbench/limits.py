@@ -1,5 +1,5 @@
 """Input limits: the one table of sizes, depths and counts that every reader of user files checks before it
-allocates (docs/fault-catalogue.md, "Limits").
+allocates (docs/guide/fault-catalogue.md, "Limits").
 
 A file may claim anything (a 1.9 MB EXR can declare a 6 GB image, a 300-byte YAML file can expand to a billion
 nodes, a results file can nest 100,000 arrays): readers compare what a file declares with these limits first

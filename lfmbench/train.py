@@ -6,7 +6,7 @@ Data flow: :class:`~lfmbench.datasets.LFMCaptureDataset` (random crops, PWM draw
 (:class:`lfmbench.baselines.trainable.Trainable`) -> Adam with a cosine learning-rate schedule (constant when
 ``lr_min = lr``) and optional gradient clipping.
 
-Deterministic given the seed: a sample depends only on ``(seed, epoch, index)`` (docs/datasets.md), the weights are
+Deterministic given the seed: a sample depends only on ``(seed, epoch, index)`` (docs/guide/datasets.md), the weights are
 initialised after ``torch.manual_seed(seed)``, and the order of an epoch's samples is either a permutation that
 depends only on ``(seed, epoch)`` (:class:`EpochSampler`; the sampler hands ``(epoch, index)`` pairs to the
 workers, so persistent workers still draw the right epoch) or a DataLoader shuffled by one generator seeded once
@@ -412,7 +412,7 @@ def train(method: str | Trainable, corpus: str | os.PathLike, out: str | os.Path
         data: where the batches come from, one of :data:`DATA_SOURCES` (``"device"``: the corpus resident on
             ``device``, sample order :func:`~lfmbench.datasets.device.epoch_order`, counter-based noise; a split
             that does not fit raises :class:`~lfmbench.datasets.device.ResidentMemoryError`).
-        resident_dtype, chunk_scenes: the device path's storage (``"float32"`` or ``"float16"``, docs/datasets.md)
+        resident_dtype, chunk_scenes: the device path's storage (``"float32"`` or ``"float16"``, docs/guide/datasets.md)
             and streaming (that many scenes resident at a time; None: the whole split).
         cuda_graph: one of :data:`CUDA_GRAPH_MODES`: ``"auto"`` replays the training step as a CUDA graph on a
             CUDA device (:class:`GraphedStep`; the same training, less host time per step), ``"off"`` never.

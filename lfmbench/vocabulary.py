@@ -47,7 +47,7 @@ SPECTRUM_MODELS: Mapping[str, Mapping[str, tuple[str, ...]]] = MappingProxyType(
 })
 #: Photodiodes of the split pixel: large (LPD, short exposure) and small (SPD, long exposure).
 PHOTODIODES: tuple[str, ...] = ("lpd", "spd")
-#: Captures of the split pixel, in the order of the ``saturated`` channels (docs/contracts.md).
+#: Captures of the split pixel, in the order of the ``saturated`` channels (docs/guide/contracts.md).
 CAPTURES: tuple[str, ...] = ("lpd_hcg", "lpd_lcg", "spd")
 #: Rule-based baselines, in leaderboard order: each a function of that name in :mod:`lfmbench.baselines.classic`
 #: (:data:`lfmbench.baselines.REGISTRY` is built from this list). Here, without torch, so that the command line can

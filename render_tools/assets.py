@@ -1,6 +1,6 @@
 """The user's own mesh assets in a scene file (``--scene``): OBJ, PLY and glTF/GLB files read with trimesh, lamps
 tagged by the file's material names, expanded into a plain version-2 scene (inline ``meshes``, ``mesh`` parts,
-rectangular lights) before anything is rendered. docs/rendering.md, "Your own meshes".
+rectangular lights) before anything is rendered. docs/guide/rendering.md, "Your own meshes".
 
 In the scene file, a ``meshes`` entry may name a file instead of holding vertices and faces::
 

@@ -1,7 +1,7 @@
 """Mitsuba 3 variant selection: ``cuda_ad_spectral`` where a CUDA device works, else the fast
 ``llvm_ad_spectral`` path where a working libLLVM exists, else ``scalar_spectral`` with a warning.
 
-Facts this relies on (measured on this project's machines; docs/rendering.md): drjit's LLVM backend loads the shared
+Facts this relies on (measured on this project's machines; docs/guide/rendering.md): drjit's LLVM backend loads the shared
 library named by ``DRJIT_LIBLLVM_PATH``; LLVM 15 crashes inside code generation on AVX-512 CPUs (a segfault
 that cannot be caught in-process), while Debian's ``libllvm19`` works and is 5-10x faster than the scalar
 variant. A candidate library is therefore *probed in a child process* (render of a tiny scene) before the
@@ -458,7 +458,7 @@ def check_variant(variant: str | None = None) -> None:
     if v == LLVM_VARIANT and not any(probe_llvm(lib) for lib in find_libllvm()):
         raise VariantUnavailableError(f"variant: {LLVM_VARIANT} requested but no working libLLVM was found "
                                       "(install Debian's libllvm19 and set DRJIT_LIBLLVM_PATH; see "
-                                      "docs/rendering.md)")
+                                      "docs/guide/rendering.md)")
 
 
 def _set_llvm(mi) -> bool:
@@ -531,7 +531,7 @@ def select_variant(variant: str | None = None) -> str:
     if variant == LLVM_VARIANT:
         raise VariantUnavailableError("variant: llvm_ad_spectral requested but no working libLLVM was found "
                                       "(install Debian's libllvm19 and set DRJIT_LIBLLVM_PATH; see "
-                                      "docs/rendering.md)")
+                                      "docs/guide/rendering.md)")
     warnings.warn("no working libLLVM found (LLVM 15 crashes on these CPUs; install libllvm19 and set "
                   "DRJIT_LIBLLVM_PATH): rendering with the slow scalar_spectral variant", RuntimeWarning,
                   stacklevel=2)

@@ -20,7 +20,7 @@ origin: each ray sampled at time ``t`` (drawn by the integrator uniformly in [sh
 shutter_open + shutter_open_time], s) is moved by the pose at ``t``, so one render integrates the blur over
 the shutter interval continuously instead of averaging sub-frames. It renders an *atlas*: K time bins of a
 crop side by side along x and the ceil(C / 4) band passes along y; in pass p the 4 wavelengths of a sample
-lie one in each of bands p + j * ceil(C / 4) (no random band counts: see docs/rendering.md).
+lie one in each of bands p + j * ceil(C / 4) (no random band counts: see docs/guide/rendering.md).
 """
 from __future__ import annotations
 

@@ -5,7 +5,7 @@ Why: the static groups' full frames are traced at ``spp`` 1 per band pass (8 cam
 ``default`` profile); their Monte Carlo noise left a median per-pixel luminance error of the static light of 25 %
 (day), 12 % (dry night) and 33 % (wet night) against spp-64/256 renders of 640x360 generator-2 frames, over the
 10 % issue 23 asks for of the whole frame, and changing from frame to frame; more samples cost what the profile
-cannot pay (spp 4: 1.8-2x the frame, still 18-20 % by day and on a wet night; docs/render-benchmark.md). The
+cannot pay (spp 4: 1.8-2x the frame, still 18-20 % by day and on a wet night; docs/benchmarks/render.md). The
 flickering layers (the lamps' crops at ``light_spp``: every LED pixel) are not touched.
 
 What (one capture window of one frame; ``S[g, c]``: group g's spectral radiance in band c, (H, W)):
@@ -29,7 +29,7 @@ What (one capture window of one frame; ``S[g, c]``: group g's spectral radiance 
 
 Not unbiased: the filter's output is its own estimate; edges and texture finer than the noise are smoothed, and
 light it takes for outliers is removed. Measured on 640x360 frames of the ``default`` profile against spp-64/256
-references (docs/render-benchmark.md): the light outside the lamp boxes is kept within 1.7 % on a dry night and by
+references (docs/benchmarks/render.md): the light outside the lamp boxes is kept within 1.7 % on a dry night and by
 day, but a wet road's glossy reflections of the static lamps are sparse bright samples at spp 1, and the filter
 blurs them: their brightest tenth loses about a quarter of its light, the rest of the road gains 7 %, the frame's
 light outside the lamp boxes -15 % (short window; long -8 %). Smaller frames lose more (the same scenes, short
@@ -50,7 +50,7 @@ BROAD_BANDS = 3
 SHARE_RADIUS_PX = 2
 #: Radius (px) of the box over which the split of a group's broad band among its bands (the spectral shape) is
 #: measured: at 2 px the sparse samples of a wet road's reflections left colour blotches (hue of 5 x 5 px squares);
-#: at 16 px none were seen, and the median error was the same (docs/render-benchmark.md).
+#: at 16 px none were seen, and the median error was the same (docs/benchmarks/render.md).
 SHAPE_RADIUS_PX = 16
 #: Side (px) of the blocks on which the spectral shape's box means are taken (they vary over SHAPE_RADIUS_PX, so a
 #: block grid 4 px apart holds them; interpolated back bilinearly): 16x fewer pixels for the C bands' box means.
@@ -58,7 +58,7 @@ SHAPE_BLOCK_PX = 4
 #: Width (px) of the ring around a lamp box whose mean stands in for the box in the denoiser's input.
 FILL_RING_PX = 2
 #: Open Image Denoise's quality setting: ``fast`` (its smaller network). Measured on 640x360 frames of the
-#: ``default`` profile (docs/render-benchmark.md): against ``high`` +0.1 to +0.5 points of median error (day 4.0 ->
+#: ``default`` profile (docs/benchmarks/render.md): against ``high`` +0.1 to +0.5 points of median error (day 4.0 ->
 #: 4.1 %, dry night 2.6 -> 3.1 %, wet night 9.1 -> 9.5 %) for 0.8-0.9 instead of 1.2-1.3 CPU s per frame (two
 #: windows, 2 cores), which the v2 render cost (at most 1.5x v1's, issue 23) needs.
 QUALITY = "fast"

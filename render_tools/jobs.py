@@ -267,7 +267,7 @@ def _sigint_flag(hit: list):
     """Append ``True`` to ``hit`` when SIGINT arrives while the block runs (the previous handler still runs, so
     Ctrl-C still raises ``KeyboardInterrupt`` where Python code is running). Only in the main thread. A process
     that was started with SIGINT ignored (a background job of a non-interactive shell, ``nohup ... &``) keeps
-    ignoring it, as Unix programs do: stop such a run with SIGTERM (the corpus stays valid, docs/corpus-format.md)."""
+    ignoring it, as Unix programs do: stop such a run with SIGTERM (the corpus stays valid, docs/guide/corpus-format.md)."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return

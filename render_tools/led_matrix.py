@@ -130,6 +130,6 @@ def filled_cells(light: dict) -> dict:
     the dots. The renderer's stand-in for a face whose dot pitch projects under a pixel
     (:func:`render_tools.render.dots_lod`): a pixel then sees the cells' mean instead of a few sub-pixel dots
     whose covered share the Monte Carlo estimate has to find (the moire of the dots against the pixel grid is
-    left out: docs/render-benchmark.md, "LED dot faces")."""
+    left out: docs/benchmarks/render.md, "LED dot faces")."""
     d = float(light["dot"])
     return {**light, "dot": 1.0, "luminance_cd_m2": float(light["luminance_cd_m2"]) * d * d}

@@ -14,7 +14,7 @@ Emitters
   smooth fall-off from 0.75 * spread, and on-axis spectral intensity I = L * A (W sr^-1 nm^-1; the on-axis
   intensity of the face itself, A = face area in m^2). The face stays Lambertian for direct view (a camera
   looking into a beam from outside its cone sees the face slightly too bright; documented in
-  docs/rendering.md). A spread of 90 deg (tail lamps, streetlights, signals) is the face alone.
+  docs/guide/rendering.md). A spread of 90 deg (tail lamps, streetlights, signals) is the face alone.
 - Sky (group ``skymap``): Mitsuba's ``sunsky`` (Hosek-Wilkie sky + sun; z-up, matches the scene frame) scaled
   by ``sky.scale``, or a ``constant`` environment with an absolute spectrum (night).
 

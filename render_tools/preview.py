@@ -122,14 +122,14 @@ def render_previews(out_dir: str | os.PathLike, seed: int = 7, width: int = 640,
     return paths
 
 
-#: The gallery of docs/scenes.md: (file stem, time of day, weather) of the street scenes.
+#: The gallery of docs/guide/scenes.md: (file stem, time of day, weather) of the street scenes.
 GALLERY = (("v2_day", "day", "dry"), ("v2_dusk", "dusk", "dry"), ("v2_night", "night", "dry"),
            ("v2_wet_night", "night", "wet"))
 
 
 def render_gallery(out_dir: str | os.PathLike, seed: int = 7, profile: str = "default",
                    closeup_size=(320, 180), closeup_spp: int = 4) -> list[Path]:
-    """docs/scenes.md's pictures: frame 0 (short exposure, every LED on) of scene generator 2's street at
+    """docs/guide/scenes.md's pictures: frame 0 (short exposure, every LED on) of scene generator 2's street at
     ``seed`` for each entry of :data:`GALLERY`, rendered with the render ``profile``'s options (frames and AOVs
     aside), and ``v2_vehicles.png``, a sheet of :func:`closeup_scene` renders (every vehicle kind, rear then
     front, lamps lit; ``closeup_size`` px each at ``closeup_spp``). Returns the PNG paths; prints seconds."""
@@ -216,7 +216,7 @@ if __name__ == "__main__":  # pragma: no cover - documentation helper
     ap.add_argument("--width", type=int, default=640)
     ap.add_argument("--height", type=int, default=360)
     ap.add_argument("--spp", type=int, default=8)
-    ap.add_argument("--gallery", action="store_true", help="docs/scenes.md's scene generator 2 gallery instead")
+    ap.add_argument("--gallery", action="store_true", help="docs/guide/scenes.md's scene generator 2 gallery instead")
     a = ap.parse_args()
     for path in (render_gallery(a.out, a.seed) if a.gallery else
                  render_previews(a.out, a.seed, a.width, a.height, a.spp)):

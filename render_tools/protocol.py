@@ -1,5 +1,5 @@
 """Benchmark protocols: a fixed, versioned list of scenes (seed + pinned conditions per split) and render
-settings, as plain YAML files in ``render_tools/configs/protocols/`` (see docs/benchmark-protocol.md).
+settings, as plain YAML files in ``render_tools/configs/protocols/`` (see docs/guide/protocols.md).
 
 A protocol pins everything that decides the radiance corpus: the render options (a profile), the storage, the
 scene generator (``generator``: 1, the default, for lfmbench-v1; 2 for lfmbench-v2, :data:`render_tools.scene.

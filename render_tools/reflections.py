@@ -12,7 +12,7 @@ beyond that tilt, but the light they send to the camera is spread thinly over th
 (tests/render_tools/test_reflections.py, alpha 0.06), the region holds 99.2 / 99.4 / 99.5 / 99.75 % of the
 reflection at factors 1.5 / 2 / 3 / 5, with crops of 1,508 / 1,740 / 1,972 / 3,364 px at 160x90. The rest is left
 out of the crop, as the diffuse light a lamp throws on its surroundings outside its crop always was
-(docs/rendering.md). A dry scene's crops are unchanged (no reflection region).
+(docs/guide/rendering.md). A dry scene's crops are unchanged (no reflection region).
 """
 from __future__ import annotations
 

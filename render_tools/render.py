@@ -1,6 +1,6 @@
 """Render a scene into per-frame, per-group spectral radiance: the entry point of the corpus writer.
 
-:func:`render_frames` yields, for each frame n of a sequence (timing of ``docs/contracts.md`` section 1):
+:func:`render_frames` yields, for each frame n of a sequence (timing of ``docs/guide/contracts.md`` section 1):
 
 - static groups (default headlights, streetlights, skymap): the time-averaged spectral radiance over the short
   (LPD) and long (SPD) exposure windows, (C, H, W) float32, W sr^-1 m^-2 nm^-1; the full frame is rendered at
@@ -93,12 +93,12 @@ class RenderOptions:
     PWM still applies bin by bin (the dataset weights every bin), so the reflection flickers exactly with its
     lamp; what is approximated is the reflection's motion inside a longer bin (1: its average over the capture
     window, 14.7 ms at 640x360). Cost of the reflection part: ``reflection_bins / bins`` of the exact one
-    (docs/render-scale-benchmark.md; error in docs/render-benchmark.md). No effect on dry scenes.
+    (docs/benchmarks/render-scale.md; error in docs/benchmarks/render.md). No effect on dry scenes.
     reflection_min_lux: a flickering light's reflection in a wet road is traced only when the illuminance it
     sends to the camera, E = I / d^2 lux (I: its luminance x face area, cd; d: lamp to camera, m, at mid capture
     window), is at least this; a dimmer light keeps only its own box (its reflection left out, as the light it
     throws on its surroundings outside its crop always was). 0: every light's reflection. Measured on a wet night:
-    below 2e-3 lux a reflection averaged under 2 % of the lit road's luminance over its crop (docs/rendering.md,
+    below 2e-3 lux a reflection averaged under 2 % of the lit road's luminance over its crop (docs/guide/rendering.md,
     "Wet roads").
     dots_lod_px: a ``dots`` face (an LED matrix, a segmented lamp, scene version 2) whose dot pitch projects under
     this many px (in both directions, at every frame's capture window: :meth:`SceneGeometry.dots_pitch_px`) is
@@ -107,7 +107,7 @@ class RenderOptions:
     and driver, so a multiplexed sign's rows keep their own phases). Why: sub-pixel dots left each lamp pixel's
     covered share to ~256 camera samples, 7-21 % relative error per lamp kind in the LED bins at the
     ``default`` profile; the filled cells leave out the dots' moire against the pixel grid instead (4-10 % per
-    LED pixel where the pitch is 0.3-0.6 px; docs/render-benchmark.md, "LED dot faces"). 0: every dot face as it
+    LED pixel where the pitch is 0.3-0.6 px; docs/benchmarks/render.md, "LED dot faces"). 0: every dot face as it
     is. Scenes without dot faces (every lfmbench-v1 scene) render the same whatever it is.
     lamp_pass_spp: how a flickering lamp's own box shares its light_spp x P samples per pixel and bin among the P
     band passes: ``"uniform"`` (light_spp each, as before), ``"spectrum"`` (by the lamp's spectral radiance,
@@ -117,7 +117,7 @@ class RenderOptions:
     (``dots_lod_px``: signals' LED arrays, message signs, countdowns, destination displays): their lit shapes
     (a sign's scan lines, a disk's rim, a digit's bars) are thinner than a pixel, so their pixels' covered share is
     what the lamp samples estimate; at the ``default`` profile these lights (signals, message signs) carried two
-    thirds of a night scene's LED-bin error for a fifth of its lamp samples (docs/render-benchmark.md, "Pixel
+    thirds of a night scene's LED-bin error for a fifth of its lamp samples (docs/benchmarks/render.md, "Pixel
     samples"). 1: as other lights.
     Scenes without dot faces (every lfmbench-v1 scene) render the same whatever it is.
     pixel_samples: where a pixel's samples lie in x, y and time (:class:`render_tools.tracer.Tile` ``sobol``):
@@ -129,7 +129,7 @@ class RenderOptions:
     with one lane per block of that many px squared, its samples spread over the block and its mean written to
     each pixel of it (:class:`render_tools.tracer.Tile` ``block``): the reflection's image box-blurred over the
     block (its light in the block kept) for a quarter of its camera samples. A lamp's reflection in a glossy
-    film is itself a blur many px wide (docs/rendering.md, "Wet roads"; error in docs/render-benchmark.md). 1:
+    film is itself a blur many px wide (docs/guide/rendering.md, "Wet roads"; error in docs/benchmarks/render.md). 1:
     every pixel traced. No effect on dry scenes.
     pad_samples: samples of the ``pad_px`` ring around a lamp in its crop: ``"light"`` (``light_spp``, as the lamp
     itself), ``"spp"`` (``spp``, as the full frame: the ring holds no part of the lamp's face, only the light it
@@ -142,8 +142,8 @@ class RenderOptions:
     split back among groups and bands by their local shares): ``"oidn"``, ``"off"`` (the traced estimate,
     unbiased) or ``"auto"`` (default: ``oidn`` on scene version 2, ``off`` on version 1, whose renders are frozen).
     At the ``default`` profile the median per-pixel error of a 640x360 v2 frame went from 25 / 12 / 31 % (day, dry
-    night, wet night) to 4 / 3 / 9.5 % for 0.8-0.9 CPU s per frame (docs/render-benchmark.md, "Scene generator
-    2"); not unbiased (a wet road's static reflections are blurred: docs/rendering.md, "Static frames denoised");
+    night, wet night) to 4 / 3 / 9.5 % for 0.8-0.9 CPU s per frame (docs/benchmarks/render.md, "Scene generator
+    2"); not unbiased (a wet road's static reflections are blurred: docs/guide/rendering.md, "Static frames denoised");
     the flickering layers are never denoised.
     """
 
@@ -234,7 +234,7 @@ class RenderOptions:
         if not (math.isfinite(self.line_time_s) and self.line_time_s >= 0):
             raise ValueError(f"line_time_s: must be >= 0 s, got {self.line_time_s}")
         # an exposure cannot outlast the frame; the capture window T_L + readout may (rolling-shutter frames
-        # overlap in time: row y of frame n+1 starts at (n+1)/fps + y * line_time_s, docs/corpus-format.md)
+        # overlap in time: row y of frame n+1 starts at (n+1)/fps + y * line_time_s, docs/guide/corpus-format.md)
         if self.long_exposure_s > 1.0 / self.fps * (1 + 1e-9):
             raise ValueError(f"long_exposure_s: {self.long_exposure_s:.6g} s is longer than the frame time "
                              f"1/fps = {1.0 / self.fps:.6g} s")
@@ -267,7 +267,7 @@ class RenderOptions:
 
 
 def frame_timing(scene: dict, opts: RenderOptions, n: int) -> dict:
-    """Windows of frame ``n`` (s, absolute, from the sequence start) per ``docs/contracts.md`` section 1.
+    """Windows of frame ``n`` (s, absolute, from the sequence start) per ``docs/guide/contracts.md`` section 1.
 
     Returns dict with ``t0``, ``long`` (a, b), ``short`` (a, b) (centre-aligned with long), ``window`` (a, b),
     ``bin_edges`` (K+1,) and ``t_aux`` (mid short exposure).
@@ -592,7 +592,7 @@ def lamp_pass_spp(light: dict, opts: RenderOptions, light_spp: int | None = None
     (its samples are not stratified) or the light emits nothing.
 
     Why: a narrow-band LED's light lies in 2-4 of the 8 passes; with light_spp in each, the passes that carry it
-    got a quarter of the lamp's samples. Measured on a night scene (docs/render-benchmark.md, "LED dot faces"):
+    got a quarter of the lamp's samples. Measured on a night scene (docs/benchmarks/render.md, "LED dot faces"):
     the LED bins' error 4.5 % -> 3.2 % for the same or fewer samples. ``light_spp``: the lamp's own count
     (:func:`lamp_light_spp`; default ``opts.light_spp``)."""
     from . import spectra  # noqa: PLC0415
@@ -951,7 +951,7 @@ def render_frames(scene: dict, opts: RenderOptions, steady_bins: bool = False) -
     if variant.startswith("scalar"):
         raise RuntimeError("variant: rendering needs a JIT variant of Mitsuba (llvm_ad_spectral or "
                            f"cuda_ad_spectral), got {variant}: install libllvm19 and set DRJIT_LIBLLVM_PATH "
-                           "(docs/rendering.md)")
+                           "(docs/guide/rendering.md)")
     import drjit as dr  # noqa: PLC0415
     import mitsuba as mi  # noqa: PLC0415
 

@@ -1,13 +1,13 @@
 """Batched light-set path tracing: every window, light group, light crop and time bin of a frame in few launches.
 
-Why (docs/render-benchmark.md, "Where the time goes"): with one ``mi.render`` per window, group and light, a
+Why (docs/benchmarks/render.md, "Where the time goes"): with one ``mi.render`` per window, group and light, a
 new scene cost 44 renders per frame, each traced anew in Python and, whenever anything scene-dependent was a
 literal in the kernel (shutter length, film size, group layout), compiled anew by LLVM (3-5 s each). Here a
 frame is a list of :class:`Tile` s (a crop of the image, a time window split into K bins, a sample count and a
 *light set*: the emitters whose light this tile records) and one Dr.Jit kernel renders any list of tiles:
 everything that differs between tiles, frames and scenes is data (gathered from opaque arrays), so the kernel
 is traced once per launch and compiled once per (variant, kind of sky, number of static groups): a new scene of a
-class already compiled is a cache hit (:func:`pad_registry`, docs/rendering.md).
+class already compiled is a cache hit (:func:`pad_registry`, docs/guide/rendering.md).
 
 Light sets replace per-group and per-light Mitsuba scenes. The scene is loaded once per frame with every
 emitter on; a lane of set ``k`` counts only emission of the emitters in ``k`` (a light group, or one light's
@@ -206,7 +206,7 @@ class LightSets:
     (:class:`Tile` ``slots``): emission hits go to the slot of the emitter hit, and next-event estimation draws
     one emitter of the whole union (:meth:`Tracer._choose_light`). By linearity each slot's image is the image of
     the scene in which only that group emits, as with one set per group, at about a third of the camera paths and
-    shadow rays for three groups (docs/rendering.md, "Static groups in one pass").
+    shadow rays for three groups (docs/guide/rendering.md, "Static groups in one pass").
     """
 
     def __init__(self, mi, dr, loaded, scene: dict, groups, union=()):
@@ -678,7 +678,7 @@ class Tracer:
         pass's samples only), and with equal counts all passes' together are the first P nmax points, one net too
         (the static frames' one sample per pass: the pixel's 8 samples stratified): a moving lamp edge crossing a
         pixel is an indicator in (x, y, t), which strata paired at random stratify only along each axis, and the
-        sky or lamp light at the first hit is then sampled in stratified directions (docs/render-benchmark.md,
+        sky or lamp light at the first hit is then sampled in stratified directions (docs/benchmarks/render.md,
         "Pixel samples"). The strata's random numbers are drawn either way, so a lane's other dimensions see the
         same random stream. Non-finite samples are dropped (counted as 0). Returns one sum per slot (list of
         :attr:`S` ``mi.Spectrum``)."""

@@ -38,7 +38,7 @@ __all__ = ["SIGNAL_HINTS", "WorkerDied", "crash_site", "exit_reason", "run_super
 #: What a worker killed by a signal most likely met (the hint of :class:`WorkerDied`'s message).
 SIGNAL_HINTS = {
     signal.SIGFPE: "an integer division by zero in native code; on AVX-512 CPUs Dr.Jit kernels that divided by "
-                   "the 0 of masked lanes did this (docs/fault-catalogue.md): report it with your CPU model "
+                   "the 0 of masked lanes did this (docs/guide/fault-catalogue.md): report it with your CPU model "
                    "(lscpu) and libLLVM version",
     signal.SIGSEGV: "a crash in native code (Mitsuba, Dr.Jit or LLVM); libLLVM 15 crashes on AVX-512 CPUs: install "
                     "Debian's libllvm19 (README, 'System dependency')",

@@ -1,4 +1,4 @@
-"""Fault catalogue (docs/fault-catalogue.md): hostile or broken corpora, interrupted runs, absurd arguments.
+"""Fault catalogue (docs/guide/fault-catalogue.md): hostile or broken corpora, interrupted runs, absurd arguments.
 
 Tiny generated corpora only (no rendering, no network, no GPU).
 """

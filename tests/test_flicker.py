@@ -339,7 +339,7 @@ def test_torch_float32_error_is_documented_bound():
     assert got.dtype == torch.float32
     ref = pwm_exposure(*(np.float32(x).astype(np.float64) for x in (ph, te, T, D)))
     err = np.abs(got.double().numpy() - ref) / np.maximum(te, T)
-    assert err.max() <= 2e-6  # docs/flicker.md: float32 error is of order 1e-6 of max(te, T)
+    assert err.max() <= 2e-6  # docs/guide/flicker.md: float32 error is of order 1e-6 of max(te, T)
 
 
 # ---------------------------------------------------------------------------------------------------------

@@ -1,4 +1,4 @@
-"""Hostile and unlucky input, second round (issue 27; docs/fault-catalogue.md): outputs that are not regular files,
+"""Hostile and unlucky input, second round (issue 27; docs/guide/fault-catalogue.md): outputs that are not regular files,
 billion-laughs YAML, deep JSON, EXR bombs, foreign folders, two writers, untrustworthy scores, scale limits.
 
 Tiny generated files only; nothing here renders, and nothing allocates more than a few MB.
@@ -559,7 +559,7 @@ def test_set_epoch_checks_its_argument(tmp_path):
 
 def test_validate_report_is_the_same_with_worker_processes(tmp_path):
     """Big corpora are validated by several processes; the report (errors, warnings, their order) must not
-    depend on it. The 100,000-scene timing is benchmarks/bench_validate.py (docs/validate-benchmark.md)."""
+    depend on it. The 100,000-scene timing is benchmarks/bench_validate.py (docs/benchmarks/validate.md)."""
     from lfmbench import corpus as C
     from lfmbench.corpus import validate as V
     from tests.data.corpus.data import make_corpus

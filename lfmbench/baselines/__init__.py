@@ -2,8 +2,8 @@
 name (:func:`methods_for`: those of one architecture).
 
 A fusion method is any callable ``method(batch: dict) -> Tensor (B, F, 1, H, W)`` in the ``gt`` units
-(``docs/contracts.md`` section 3). :data:`REGISTRY` maps the built-in names to callables;
-:func:`get_method` also resolves ``package.module:function``. See ``docs/baselines.md``.
+(``docs/guide/contracts.md`` section 3). :data:`REGISTRY` maps the built-in names to callables;
+:func:`get_method` also resolves ``package.module:function``. See ``docs/guide/baselines.md``.
 """
 from __future__ import annotations
 

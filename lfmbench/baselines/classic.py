@@ -1,6 +1,6 @@
 """Classic split-pixel fusion baselines: LPD only, SPD only, saturation fusion, flicker-aware and temporal fusion.
 
-Every method takes the sample dict of ``docs/contracts.md`` section 3 (a batch: leading B) and returns the HDR
+Every method takes the sample dict of ``docs/guide/contracts.md`` section 3 (a batch: leading B) and returns the HDR
 estimate (B, F, 1, H, W) in the ``gt`` units: input-referred electrons, i.e. LPD-equivalent e- over the short
 exposure. The sample's ``*_e`` keys are already in those units: ``lpd_hcg_e`` / ``lpd_lcg_e`` are the LPD
 electrons, and ``spd_e`` = SPD electrons x sensitivity ratio (LPD/SPD, 100 for ``ovt``) x T_short / T_long.

@@ -17,7 +17,7 @@ Plans whose captures integrate different windows (staggered) also have :func:`ex
 selection bounded below by every saturated capture. A saturated capture's input-referred value is a lower bound
 of its exposure (the charge was at least the saturation level); where the longest exposure saturates on a bright
 LED and selection falls back to a short window that missed the PWM pulse, the bound keeps the lamp lit. It is the
-capture-plan counterpart of the split pixel's ``flicker_aware`` (the SPD bounds the LPD from below; docs/baselines.md).
+capture-plan counterpart of the split pixel's ``flicker_aware`` (the SPD bounds the LPD from below; docs/guide/baselines.md).
 """
 from __future__ import annotations
 

@@ -59,7 +59,7 @@ app = typer.Typer(cls=_Group, help="LED-flicker datasets and flicker-mitigation 
 def _root(ctx: typer.Context, limit: Optional[List[str]] = typer.Option(
         None, "--limit", metavar="NAME=N",
         help="Raise an input limit for this run (repeatable), e.g. --limit exr_bytes=8e9; names and defaults: "
-             "docs/fault-catalogue.md (\"Limits\"). Only for files you trust."),
+             "docs/guide/fault-catalogue.md (\"Limits\"). Only for files you trust."),
         debug: bool = typer.Option(False, "--debug", help="After a one-line error, also print the traceback "
                                                          "behind it (for bug reports).")) -> None:
     """LED-flicker datasets and flicker-mitigation benchmark."""

@@ -34,7 +34,7 @@ def validate_cmd(
 
     Files and scenes unchanged since an earlier validate found them clean (same size, mtime, ctime and inode;
     same validator code and limits) are not hashed or checked again; --no-cache checks everything
-    (docs/validate-benchmark.md)."""
+    (docs/benchmarks/validate.md)."""
     from rich.console import Console
     from rich.progress import Progress
 
@@ -69,7 +69,7 @@ def import_isetlfm_cmd(
     scene: Optional[List[str]] = typer.Option(None, "--scene", help="Scene id to import (repeatable; default all)."),
     seed: int = typer.Option(0, "--seed", help="Seed of the train/val/test split."),
     half: bool = typer.Option(False, "--half", help="Store EXR HALF x per-layer 2^e (lossless ZIP; default: "
-                                                    "FLOAT, an exact copy; docs/corpus-format.md)."),
+                                                    "FLOAT, an exact copy; docs/guide/corpus-format.md)."),
     repair: bool = typer.Option(False, "--repair", help="Set NaN/inf/negative radiance to 0 instead of failing."),
     no_resume: bool = typer.Option(False, "--no-resume", help="Re-import scenes that are already complete."),
 ) -> None:

@@ -43,7 +43,7 @@ def evaluate_cmd(
                                         "any writable directory for a read-only corpus)"),
     isp: str = typer.Option("default", "--isp",
                             help="ISP pipeline of the display-referred columns psnr_srgb, ssim_srgb: a shipped name "
-                                 "(default, local) or a YAML path; 'none' skips them (docs/isp.md)"),
+                                 "(default, local) or a YAML path; 'none' skips them (docs/guide/isp.md)"),
 ) -> None:
     """Score a fusion method on a corpus split; write per-scene and aggregate metrics as JSON.
 
@@ -149,7 +149,7 @@ def _checkpoint_sensor_check(fn):
 def leaderboard_cmd(
     runs: list[Path] = typer.Argument(..., help="evaluation JSON files, e.g. runs/*.json"),
     sort_by: str = typer.Option("led_score", help="registered metric to rank by (default: the LED score, "
-                                                  "docs/metrics.md)"),
+                                                  "docs/guide/metrics.md)"),
     markdown: Path = typer.Option(Path("runs/leaderboard.md"), help="Markdown table output"),
     plot: Path = typer.Option(Path("runs/leaderboard.png"), help="quality-vs-run-time PNG output"),
     json_out: Path = typer.Option(Path("runs/leaderboard.json"), "--json",

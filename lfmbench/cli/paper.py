@@ -56,7 +56,7 @@ def _register_figures(app) -> None:
                                                   help="first render the figure scenes into --corpus (skips "
                                                        "scenes already there)"),
                       workers: int = typer.Option(1, "--workers", help="render processes (with --render)")) -> None:
-        """Reproduce the ISET-LFM paper's Figs. 3-7 (docs/paper-figures.md)."""
+        """Reproduce the ISET-LFM paper's Figs. 3-7 (docs/guide/paper-figures.md)."""
         if fig not in FIGURES:
             fail(f"--fig must be one of {', '.join(FIGURES)}; got {fig!r}")
         if render:

@@ -1,6 +1,6 @@
-"""``lfmbench render``: render procedural driving scenes into an lfmbench corpus (see docs/corpus-format.md);
+"""``lfmbench render``: render procedural driving scenes into an lfmbench corpus (see docs/guide/corpus-format.md);
 ``lfmbench render --protocol NAME`` renders a benchmark protocol, ``lfmbench protocols`` lists and checks them
-(docs/benchmark-protocol.md).
+(docs/guide/protocols.md).
 
 ``register(app)`` adds the command to :mod:`lfmbench.cli`; Mitsuba and Ray are imported only when it runs.
 Exit status: 0 all scenes done, 1 some scenes failed (the others are in the corpus), 2 bad input or write
@@ -63,7 +63,7 @@ def render_cmd(
                                           help="Radiance storage: compact (HALF x 2^e, 5 mantissa bits, PIZ; "
                                                "default for a new corpus), float16 (HALF x 2^e, ZIP) or float32 "
                                                "(lossless FLOAT, format version 1). Default on resume: the "
-                                               "corpus's own (docs/corpus-format.md, docs/storage-benchmark.md)."),
+                                               "corpus's own (docs/guide/corpus-format.md, docs/benchmarks/storage.md)."),
     half: bool = typer.Option(False, "--half", help="Same as --storage float16."),
     no_resume: bool = typer.Option(False, "--no-resume", help="Re-render scenes that are already complete."),
     yes: bool = typer.Option(False, "--yes", help="Confirm sizes above the sanity limits (e.g. --frames > 300, "

@@ -1,7 +1,7 @@
 """The lfmbench radiance corpus: OpenEXR files + JSON metadata + a SHA-256 manifest.
 
-This package defines the on-disk format specified in ``docs/corpus-format.md`` (and summarised in
-``docs/contracts.md`` section 2) and everything that touches it. Data flow one way through its modules
+This package defines the on-disk format specified in ``docs/guide/corpus-format.md`` (and summarised in
+``docs/guide/contracts.md`` section 2) and everything that touches it. Data flow one way through its modules
 (each imports only those above it):
 
 * :mod:`~lfmbench.corpus.errors`: :class:`CorpusError` and its subclasses (each message names the file at fault);
@@ -28,7 +28,7 @@ package patches it in the module that uses it (e.g. ``lfmbench.corpus.reader.rea
 Units: spectral radiance in W sr^-1 m^-2 nm^-1, wavelengths in nm, times in s, depth in m, bounding boxes in
 pixels as half-open ``(y0, x0, y1, x1)`` (rows y0..y1-1, columns x0..x1-1).
 
-Timing convention (``docs/contracts.md`` section 1): frame n starts at n / fps; the long window is
+Timing convention (``docs/guide/contracts.md`` section 1): frame n starts at n / fps; the long window is
 ``[t_n, t_n + T_L)``, the short window is centred in it, and flickering groups are stored in K equal bins over
 the capture window ``[t_n, t_n + T_L + readout_s)``.
 

@@ -1,5 +1,5 @@
 """Errors of the corpus format: every corpus problem is a :class:`CorpusError` whose message names the file
-or argument at fault (``docs/corpus-format.md``).
+or argument at fault (``docs/guide/corpus-format.md``).
 """
 from __future__ import annotations
 

@@ -231,7 +231,7 @@ class SteadyBins:
 
 
 def split_steady(arr: np.ndarray) -> tuple[tuple[int, int, int, int], tuple[int, int, int, int] | None, np.ndarray]:
-    """Where a light's bins change and where they do not (format version 3, ``docs/corpus-format.md`` 6.2).
+    """Where a light's bins change and where they do not (format version 3, ``docs/guide/corpus-format.md`` 6.2).
 
     Args:
         arr: (K, C, h, w) a light's bins over its box, any units (exact float comparisons, no tolerance).
@@ -605,7 +605,7 @@ def read_exr(path: str | os.PathLike, *, header_only: bool = False, head: bytes 
 
 def layer_scale(part: ExrPart, window: str | None, path: str | os.PathLike) -> float:
     """The scale 2^e by which a layer's stored values exceed the radiance (format version 2, section 6 of
-    ``docs/corpus-format.md``): header attribute :func:`scale_attr` of ``window`` (``None``: a light part),
+    ``docs/guide/corpus-format.md``): header attribute :func:`scale_attr` of ``window`` (``None``: a light part),
     1.0 when absent (version 1). ``CorpusFileError`` naming the file unless it is a power of two 2^e,
     e in :data:`SCALE_EXP_RANGE`."""
     key = scale_attr(window)

@@ -13,14 +13,14 @@ Source layout (the upstream ISET-LFM repository, https://github.com/AyushJam/ise
 upstream's 100 cd/m^2 normalisation happens only when ISETCam loads a file). Depth from ``P.X, P.Y, P.Z``
 (older files ``Px, Py, Pz``): z-depth = |P.Z|, range = |P| (m); pixels with P = 0 (no surface) get +inf.
 
-Mapping to the lfmbench format (``docs/corpus-format.md``): every group becomes a statically stored group with
+Mapping to the lfmbench format (``docs/guide/corpus-format.md``): every group becomes a statically stored group with
 ``short`` = the LPD render and ``long`` = the SPD render of that frame. Upstream renders no time bins, so the
 flickering ``otherlights`` group is flagged ``{"flicker": true, "bins": 0}``: datasets fall back to one PWM
 weight per frame and exposure (upstream's Option B). There are no per-light layers or ids upstream, so
 ``meta.json`` has no lights and ``mask.light`` is -1; ``mask.instance`` comes from an ``InstanceId`` channel, else
 the ``.mat`` instanceMap, else -1. Timing from the ``.mat`` (defaults when missing, with a warning:
 T_S = 4 ms, T_L = 1/90 s, 60 fps, speed unknown); the short window is centred in the long one as in
-``docs/contracts.md`` (upstream starts both at the frame start; the centring is our convention).
+``docs/guide/contracts.md`` (upstream starts both at the frame start; the centring is our convention).
 """
 from __future__ import annotations
 
@@ -51,7 +51,7 @@ ISET_DEFAULTS = {
     "fps": 60.0,                  # frames / s
     "cameraSpeed": None,          # m/s, unknown without the .mat
     "fov_x_deg": 40.0,            # deg, ISET horizontal field of view (upstream.md "Optics and ISP")
-    "line_time_s": 10e-6,         # s, default rolling-shutter line time (docs/contracts.md)
+    "line_time_s": 10e-6,         # s, default rolling-shutter line time (docs/guide/contracts.md)
 }
 #: Channel name of one band: ``S0.400,000nm`` (PBRT / ISET3D), also ``S0.400nm``.
 _BAND_RE = re.compile(r"^S0\.(\d+)(?:[,.](\d+))?nm$")

@@ -228,7 +228,7 @@ def validate_meta(meta: Mapping[str, Any], where: str = "meta.json") -> None:
 
 
 def _check_light_fields(light: Mapping[str, Any], name: str, where: str, frames: int, H: int, W: int) -> None:
-    """The optional, informative fields of a ``meta.json`` light (``docs/corpus-format.md`` section 4):
+    """The optional, informative fields of a ``meta.json`` light (``docs/guide/corpus-format.md`` section 4):
     ``kind`` non-empty str, ``instance`` int >= -1, ``luminance_cd_m2`` finite number >= 0 (cd/m^2),
     ``spectrum`` object with a str ``model``, ``bbox`` list of ``frames`` entries, each null or a half-open
     ``[y0, x0, y1, x1]`` of ints with ``0 <= y0 < y1 <= H`` and ``0 <= x0 < x1 <= W`` (px)."""

@@ -1,4 +1,4 @@
-"""Format constants and channel / file naming of the lfmbench corpus (``docs/corpus-format.md``).
+"""Format constants and channel / file naming of the lfmbench corpus (``docs/guide/corpus-format.md``).
 
 Format name and versions (:func:`_check_version`), file and directory names, the header attribute names
 (:data:`ATTR`), the radiance unit and plausibility ceiling, channel names (:func:`band_channel`,
@@ -22,7 +22,7 @@ __all__ = ["FORMAT_NAME", "FORMAT_VERSION", "READABLE_VERSIONS", "MANIFEST_NAME"
            "parse_light_part", "box_inside", "frame_dir", "group_storage"]
 
 #: ``manifest.json`` "format" value and format version written by this module. Version 2 (HALF x 2^e layers,
-#: codecs and mantissa rounding, ``docs/corpus-format.md``) reads every version-1 file unchanged; version 3 (a
+#: codecs and mantissa rounding, ``docs/guide/corpus-format.md``) reads every version-1 file unchanged; version 3 (a
 #: light's bins stored over the pixels that change from bin to bin, plus an optional ``steady<id>`` part for the
 #: pixels that are the same in every bin, section 6.2) reads every version-2 file unchanged.
 FORMAT_NAME = "lfmbench-corpus"
@@ -111,7 +111,7 @@ def parse_light_part(name: str) -> tuple[int, bool] | None:
 
 def box_inside(inner: Sequence[int], outer: Sequence[int]) -> bool:
     """Whether the half-open pixel box ``inner`` (y0, x0, y1, x1) lies inside ``outer`` (a light part's data window
-    inside its meta.json bbox, section 6.2 of ``docs/corpus-format.md``)."""
+    inside its meta.json bbox, section 6.2 of ``docs/guide/corpus-format.md``)."""
     return outer[0] <= inner[0] and outer[1] <= inner[1] and inner[2] <= outer[2] and inner[3] <= outer[3]
 
 

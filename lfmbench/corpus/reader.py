@@ -23,7 +23,7 @@ __all__ = ["Corpus"]
 
 
 class Corpus:
-    """Read an lfmbench corpus (see ``docs/corpus-format.md``).
+    """Read an lfmbench corpus (see ``docs/guide/corpus-format.md``).
 
     Files are decoded only when a method asks for them; the last ``cache_size`` decoded EXR files are kept in
     memory (so ``read_static(..., "short")`` then ``(..., "long")`` decodes once). OpenEXR 3.x decodes whole
@@ -169,7 +169,7 @@ class Corpus:
             K bins of the capture window with the light at PWM level 1. Empty list when no light is visible.
             The box is the light's meta.json ``bbox`` of the frame (its part's data window when meta.json
             does not list the light); a version-3 light's ``light<id>`` bins and ``steady<id>`` part (the same
-            value in every bin) are assembled into it, zeros elsewhere (``docs/corpus-format.md`` 6.2).
+            value in every bin) are assembled into it, zeros elsewhere (``docs/guide/corpus-format.md`` 6.2).
         """
         m, path = self._frame_group(scene_id, frame, group)
         if group_storage(m, group) != "lights":

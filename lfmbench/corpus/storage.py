@@ -1,4 +1,4 @@
-"""How radiance layers are stored in format version 2 (``docs/corpus-format.md`` section 6): EXR pixel
+"""How radiance layers are stored in format version 2 (``docs/guide/corpus-format.md`` section 6): EXR pixel
 type, per-layer power-of-two scale for HALF, mantissa rounding and compression (:class:`Storage`,
 :data:`STORAGES`), and the encoding of one layer (:func:`store_layer`, no I/O).
 
@@ -29,7 +29,7 @@ HALF_MAX = 65504.0
 #: EXR compressions a corpus file may use, by name -> ``OpenEXR`` enum member. All are readable by OpenEXR 2.2
 #: and later; every one of them is lossless on the channels lfmbench writes except PXR24 on FLOAT channels
 #: (rounded to 24 bits, <= 2^-16 relative): DWAA/DWAB compress lossily only channels named R, G, B, Y, BY, RY
-#: (and ``*.R`` ...), never ``short.400nm`` (checked in ``docs/storage-benchmark.md``).
+#: (and ``*.R`` ...), never ``short.400nm`` (checked in ``docs/benchmarks/storage.md``).
 COMPRESSIONS = {"none": "NO_COMPRESSION", "rle": "RLE_COMPRESSION", "zips": "ZIPS_COMPRESSION",
                 "zip": "ZIP_COMPRESSION", "piz": "PIZ_COMPRESSION", "pxr24": "PXR24_COMPRESSION",
                 "dwaa": "DWAA_COMPRESSION", "dwab": "DWAB_COMPRESSION"}
@@ -56,7 +56,7 @@ HALF_UNDERFLOW_ERROR_FRACTION = 0.25
 #: Explicit mantissa bits of the EXR pixel types.
 MANTISSA_BITS = {"float16": 10, "float32": 23}
 #: Values per chunk of :func:`store_layer`'s HALF encoding (256 Ki float32 = 1 MiB): its dozen temporaries stay
-#: in the CPU cache instead of making a dozen passes over a 28 MB layer (measured in docs/rendering.md).
+#: in the CPU cache instead of making a dozen passes over a 28 MB layer (measured in docs/guide/rendering.md).
 ENCODE_CHUNK = 1 << 18
 
 
@@ -114,7 +114,7 @@ class Storage:
 
 
 #: Named storages (``lfmbench render --storage NAME``). ``compact`` is the default of new corpora (chosen in
-#: ``docs/storage-benchmark.md``); ``float32`` stores the pixels as format version 1 did (lossless FLOAT, ZIP).
+#: ``docs/benchmarks/storage.md``); ``float32`` stores the pixels as format version 1 did (lossless FLOAT, ZIP).
 STORAGES = {
     "compact": Storage("float16", "piz", 5),
     "float16": Storage("float16", "zip", None),
@@ -333,7 +333,7 @@ def _encode_half(x: np.ndarray, e: int, mantissa_bits: int | None, total: float
 
 
 def store_layer(arr: np.ndarray, storage: str | Storage, what: str = "layer") -> LayerStore:
-    """Encode one radiance layer for storage (no I/O): the scale rule of ``docs/corpus-format.md`` section 6.
+    """Encode one radiance layer for storage (no I/O): the scale rule of ``docs/guide/corpus-format.md`` section 6.
 
     Args:
         arr: radiance, any shape (e.g. (C, H, W) or (K, C, h, w)), W sr^-1 m^-2 nm^-1, finite and >= 0.

@@ -85,7 +85,7 @@ def validate_corpus(root: str | os.PathLike, *, check_pixels: bool = True,
             corpus), False for none (every file hashed and every scene checked). The report is the same.
 
     Every step is linear in the number of scenes and files (sets and dicts for every lookup, one directory
-    listing per folder, each file read once): ``docs/validate-benchmark.md``.
+    listing per folder, each file read once): ``docs/benchmarks/validate.md``.
     """
     from lfmbench.corpus import validate_cache as VC  # noqa: PLC0415
 

@@ -1,5 +1,5 @@
 """What a previous ``lfmbench validate`` found, so that the next run re-checks only what changed
-(:func:`lfmbench.corpus.validate_corpus`, ``cache=``; ``docs/validate-benchmark.md``).
+(:func:`lfmbench.corpus.validate_corpus`, ``cache=``; ``docs/benchmarks/validate.md``).
 
 Two kinds of 16-byte keys (BLAKE2b, RFC 7693), kept as one set in one file that the program writes (atomically,
 :func:`lfmbench.fileio.atomic_write_bytes`) and owns, by default ``<corpus>/.cache/validate.bin``:

@@ -49,7 +49,7 @@ JOURNAL_NAME = ".lfmbench.journal"
 #: The manifest is rewritten once the journal holds this fraction of the manifest's scenes (at least one
 #: scene): each rewrite costs O(scenes), so a scene costs O(1) amortized, whatever the size of the corpus.
 COMPACT_FRACTION = 1 / 8
-#: Files of a scene directory that the corpus format owns (``docs/corpus-format.md``): only these are ever
+#: Files of a scene directory that the corpus format owns (``docs/guide/corpus-format.md``): only these are ever
 #: deleted (when a re-render no longer writes them); anything else a user put there stays.
 _OWN_SCENE_FILE = re.compile(r"(scene\.json|meta\.json|f\d{3,}/[A-Za-z][A-Za-z0-9_]*\.exr)")
 

@@ -1,7 +1,7 @@
 r"""Sample assembly: the composition and timing rules of a capture, and the sample dict, for the per-sample path
 (:class:`lfmbench.datasets.LFMCaptureDataset`) and the batched path (:mod:`lfmbench.datasets.batched`) alike.
 
-Exposure composition (timing of ``docs/contracts.md``; frame n starts at :math:`t_n = n/\text{fps}`):
+Exposure composition (timing of ``docs/guide/contracts.md``; frame n starts at :math:`t_n = n/\text{fps}`):
 
 .. math:: \bar e_{pd}(y,x) = R^{static}_{pd}(y,x)\,t_{pd}
           + \sum_j \sum_k R^{j}_{pd,k}(y,x)\;\Phi_j\big([t_k, t_{k+1}) \cap [a_{pd}(y), a_{pd}(y) + t_{pd})\big)
@@ -12,7 +12,7 @@ LPD window is the short exposure :math:`[t_n + (T_L - T_S)/2, +T_S)`, the SPD wi
 :math:`[t_n, t_n + T_L)`; under a rolling shutter row y starts ``y * line_time`` later (flickering layers
 only; static layers keep their global-shutter motion, a documented approximation).
 
-Ground truth ``gt`` (docs/datasets.md): the mean LPD electrons of the short exposure with every LED at its
+Ground truth ``gt`` (docs/guide/datasets.md): the mean LPD electrons of the short exposure with every LED at its
 time-averaged level (duty cycle x ON level), noise-free and unclipped, in the input-referred units of the
 ``*_e`` outputs (LPD-equivalent e- over the short exposure).
 
@@ -124,7 +124,7 @@ def window_bin_exposure(edges, start, length, period, duty, led_phase, rise=0.0,
 def window_starts(t0, t_short, t_long, shift) -> dict:
     """Window start times (s) of the LPD (short, centred in the long one) and SPD (long) windows.
 
-    The one definition of the capture timing (docs/contracts.md), array-agnostic (numpy or torch, broadcasting).
+    The one definition of the capture timing (docs/guide/contracts.md), array-agnostic (numpy or torch, broadcasting).
 
     Args:
         t0: frame start(s) (s). t_short, t_long: exposure times (s). shift: per-row delay ``row * line_time``
@@ -325,7 +325,7 @@ def static_window_source(start_s: float, length_s: float, timing: Mapping[str, A
     """Which stored static window stands for the window ``[start_s, start_s + length_s)`` (s, from the frame start):
     ``(name, exact)``. A window equal to the short or long one (to 1e-9 of its length) is exact; any other gets the
     smallest stored window that contains it, else the long one (the ``nearest`` rule measured in
-    docs/sensor-architectures.md, "Static radiance for any window")."""
+    docs/results/sensor-architectures.md, "Static radiance for any window")."""
     ts, tl = float(timing["short_exposure_s"]), float(timing["long_exposure_s"])
     sa = (tl - ts) / 2.0
     tol = 1e-9 * max(length_s, 1e-12)
@@ -340,7 +340,7 @@ def static_window_source(start_s: float, length_s: float, timing: Mapping[str, A
 
 #: How a plan's window that a corpus does not store for its static groups is served (``LFMCaptureDataset``
 #: ``static_windows``): ``"nearest"``, the smallest stored window containing it (:func:`static_window_source`;
-#: error measured in docs/sensor-architectures.md), or ``"exact"``, an error naming preset and corpus.
+#: error measured in docs/results/sensor-architectures.md), or ``"exact"``, an error naming preset and corpus.
 STATIC_WINDOW_RULES = ("nearest", "exact")
 
 
@@ -376,7 +376,7 @@ def plan_exposures(preset, meta: Mapping[str, Any], shutter: str, line_time_s: f
                 raise ValueError(f"{preset.source}: field 'captures.{key}.exposure' window {i} "
                                  f"[{a * 1e3:.4g}, {(a + n) * 1e3:.4g}) ms is not a window {source} stores for its "
                                  "static groups (short or long); use static_windows='nearest' (the measured "
-                                 "approximation, docs/sensor-architectures.md) or a plan of stored windows")
+                                 "approximation, docs/results/sensor-architectures.md) or a plan of stored windows")
         out.append(PlanExposure(key, preset.photodiodes[spec.photodiode].fill_factor, wins, rolling, lt))
     return out
 

@@ -109,7 +109,7 @@ def _warm_cpu_kernels(noise: bool, preset) -> None:
 
     DataLoader workers are forked from here and inherit them, instead of each worker loading them at its first
     sample (0.3-0.8 s per worker and epoch with the default ``persistent_workers=False``). Only the serial
-    kernels: they start no threading layer, so forking after them is safe (docs/flicker.md).
+    kernels: they start no threading layer, so forking after them is safe (docs/guide/flicker.md).
     """
     pwm_exposure(np.zeros(1), 1e-3, 1e-2, 0.5, check=False)
     if noise:
@@ -138,7 +138,7 @@ class LFMCaptureDataset(Dataset):
         root: corpus directory (``lfmbench render --out DIR`` or ``lfmbench import-isetlfm``).
         split: ``"train"``, ``"val"``, ``"test"`` (PWM draws frozen in ``<root>/test_params.json``) or ``"all"``.
         sensor: preset name (``"ovt"``, ``"imx490"``, ``"lofic"``, ``"staggered"``, ``"chopped"``, ``"single"``),
-            YAML path or :class:`lfmbench.sensor.SensorPreset`: its capture plan (docs/sensor.md) names the sample's
+            YAML path or :class:`lfmbench.sensor.SensorPreset`: its capture plan (docs/guide/sensors.md) names the sample's
             capture keys. Architectures other than the split pixel run on the per-sample path (not ``pieces``).
         frames: number of consecutive frames F per sample (<= the corpus frames).
         frame_start: which F consecutive frames of a longer sequence a sample shows: an int s (frames
@@ -171,10 +171,10 @@ class LFMCaptureDataset(Dataset):
         pieces: return the unsimulated pieces of a sample instead (projected rates of the crop, per-light time
             bins, PWM draws, noise seed, masks, depth, meta; :func:`lfmbench.datasets.batched.capture_pieces`),
             to be batched by :func:`~lfmbench.datasets.batched.collate_pieces` and simulated on the training
-            device by :func:`~lfmbench.datasets.batched.simulate_batch` (docs/datasets.md, "Captures on the GPU").
+            device by :func:`~lfmbench.datasets.batched.simulate_batch` (docs/guide/datasets.md, "Captures on the GPU").
         static_windows: how a capture plan's window that the corpus does not store for its static groups (it
             stores the short and long windows) is served: ``"nearest"`` (default: the smallest stored window
-            containing it, else the long one; error measured in docs/sensor-architectures.md; samples record it in
+            containing it, else the long one; error measured in docs/results/sensor-architectures.md; samples record it in
             ``meta["static_windows"]``) or ``"exact"`` (such a plan is refused, naming preset and corpus).
         noise_streams: where a sample's random numbers come from (:data:`lfmbench.datasets.assembly.NOISE_STREAMS`):
             ``"generator"`` (default; the numbers of the published results): PWM, crop and window start from a
@@ -184,7 +184,7 @@ class LFMCaptureDataset(Dataset):
             device path (:class:`lfmbench.datasets.device.DeviceBatches`) gives on any device and batch size.
             The frozen draws of the test split are the same in both.
 
-    Sample (F frames, crop h x w; batches add a leading B; see docs/contracts.md):
+    Sample (F frames, crop h x w; batches add a leading B; see docs/guide/contracts.md):
         ``lpd_hcg``, ``lpd_lcg``, ``spd``: (F, 1, h, w) DN; ``lpd_hcg_e``, ``lpd_lcg_e``, ``spd_e``: (F, 1, h, w)
         input-referred LPD-equivalent e- over the short exposure; ``saturated``: (F, 3, h, w) bool;
         ``gt``: (F, 1, h, w) e-; ``light_index``: (F, 1, h, w) int64 (index into the ``meta`` light arrays,
@@ -557,7 +557,7 @@ class LFMCaptureDataset(Dataset):
         layers = view.layers
         tm = meta["timing"]
         want = set(self.outputs)
-        if self.architecture == "split_pixel":  # the split pixel's timing (docs/contracts.md), its exposures
+        if self.architecture == "split_pixel":  # the split pixel's timing (docs/guide/contracts.md), its exposures
             frames = [compose_frame(layers, meta, f, crop, params, group_params, self.shutter, self.line_time_s)
                       for f in range(s0, s0 + F)]
             layer_of = {"lpd_hcg": "lpd", "spd": "spd"}

@@ -21,7 +21,7 @@ The per-sample DataLoader path builds each sample's pieces in CPU workers (4 MiB
 
 Memory: per pixel and frame 4 (or 2) bytes x 2 of static rates, 2 of light index, 4 of depth, plus (8 x K + 12)
 bytes (float16: 4 x K + 12) per pixel inside a lamp's box; :meth:`ResidentScenes.estimate` gives the bytes of a split
-before anything is loaded to the device (docs/datasets.md, "Corpus on the device").
+before anything is loaded to the device (docs/guide/datasets.md, "Corpus on the device").
 """
 from __future__ import annotations
 
@@ -46,7 +46,7 @@ __all__ = ["STORAGE_DTYPES", "ResidentMemoryError", "ResidentScene", "ResidentSc
            "DEFAULT_BUDGET_FRACTION"]
 
 #: Storage types of the resident rates: float32, or float16 (scaled per scene by a power of two; half the memory,
-#: relative error at most 2^-11 of a rate; docs/datasets.md, "Corpus on the device").
+#: relative error at most 2^-11 of a rate; docs/guide/datasets.md, "Corpus on the device").
 STORAGE_DTYPES = (torch.float32, torch.float16)
 
 #: Share of the device's free memory a resident split may take by default (the rest: the batch, the network).

@@ -1,5 +1,5 @@
 """The unsimulated pieces of a sample (``LFMCaptureDataset(..., pieces=True)``), simulated in batches by
-:mod:`lfmbench.datasets.batched` (docs/datasets.md, "Captures on the GPU").
+:mod:`lfmbench.datasets.batched` (docs/guide/datasets.md, "Captures on the GPU").
 
 :func:`capture_pieces` reads the dataset only through its public view of a scene
 (:meth:`lfmbench.datasets.LFMCaptureDataset.scene`), :meth:`~lfmbench.datasets.LFMCaptureDataset.first_frame`

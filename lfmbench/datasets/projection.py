@@ -161,7 +161,7 @@ def aux_channels(outputs: Sequence[str]) -> tuple[str, ...]:
     """The ``aux.exr`` channels a dataset needs for ``outputs``: ``mask.light`` for ``light_index``,
     ``depth.Z`` for ``depth``, nothing otherwise.
 
-    This is the one rule for the optional ``aux.exr`` (``docs/corpus-format.md`` section 6.3): it is read only
+    This is the one rule for the optional ``aux.exr`` (``docs/guide/corpus-format.md`` section 6.3): it is read only
     when one of these outputs is asked for, so a corpus without it serves every other output.
 
     >>> aux_channels(("input_referred", "gt"))

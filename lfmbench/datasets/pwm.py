@@ -230,7 +230,7 @@ class PWMParams:
 class SceneDraw:
     """One PWM draw for a scene: ``lights`` (light id -> :class:`PWMParams`, the flickering lights of the
     groups in use) and ``groups`` (flickering group name -> :class:`PWMParams`, used by groups stored without
-    time bins, ``docs/corpus-format.md`` section 4)."""
+    time bins, ``docs/guide/corpus-format.md`` section 4)."""
 
     lights: dict[int, PWMParams]
     groups: dict[str, PWMParams]

@@ -2,7 +2,7 @@
 
 On a GPU, torch's row gathers (``index_select``, ``table[index]``, ``embedding``) moved 212 GB/s for rows of 64
 bytes on an H200 (torch 2.11, CUDA 13), a plain Triton kernel 5.4 TB/s (5.7 M rows from a 12.8 MB table;
-docs/device-path-benchmark.md). :func:`gather_rows` takes the Triton kernel
+docs/benchmarks/device-path.md). :func:`gather_rows` takes the Triton kernel
 (:mod:`lfmbench.datasets._row_gather_triton`) on CUDA where Triton is importable and ``index_select`` elsewhere:
 the same values (a gather copies, it does not compute).
 """

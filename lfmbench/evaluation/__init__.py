@@ -7,7 +7,7 @@ PWM, ego speed and their bins), :mod:`~lfmbench.evaluation.stats` (bootstrap CIs
 :mod:`~lfmbench.evaluation.results` (the result file: per-scene values, aggregates, breakdown),
 :mod:`~lfmbench.evaluation.run` (:func:`evaluate`), :mod:`~lfmbench.evaluation.leaderboard` (ranking and
 tables), :mod:`~lfmbench.evaluation.benchmark` (several methods on one corpus) and
-:mod:`~lfmbench.cli.evaluate` (the two commands). Result format: ``docs/metrics.md`` ("Result files").
+:mod:`~lfmbench.cli.evaluate` (the two commands). Result format: ``docs/guide/metrics.md`` ("Result files").
 """
 import importlib
 

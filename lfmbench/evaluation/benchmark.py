@@ -122,9 +122,9 @@ def benchmark(corpus: str | Path, methods: Iterable[str] | None = None, runs_dir
     sample, as ``lfmbench evaluate --frames`` (24 or more for the IEEE P2020 flicker metrics; <= the corpus's).
     ``share_samples`` (default): every sample is simulated once and scored for all methods
     (:func:`lfmbench.evaluation.run.evaluate_methods`, one sample in memory at a time; the scores equal those of
-    one pass per method, docs/evaluation-sharing-benchmark.md); False: one pass over the data per method (the
+    one pass per method, docs/benchmarks/evaluation-sharing.md); False: one pass over the data per method (the
     path before sharing, kept for comparison). ``isp``: the ISP pipeline (name or YAML path) of the
-    display-referred secondary columns, None for none (docs/isp.md). ``max_scenes``: score only the first N scenes
+    display-referred secondary columns, None for none (docs/guide/isp.md). ``max_scenes``: score only the first N scenes
     of the split, each with all its ``samples_per_scene`` draws (:func:`samples_to_score`). ``simulate``:
     ``"host"`` (the published results' generator noise) or ``"device"`` (the device program on ``device``, counter
     noise; :data:`SIMULATE`).

@@ -2,13 +2,13 @@
 :func:`evaluate_methods` (several methods on one pass over the data: each sample is read and simulated once and
 shared by all of them).
 
-The data source is injectable (any iterable of sample-dict batches, ``docs/contracts.md`` section 3). Every
+The data source is injectable (any iterable of sample-dict batches, ``docs/guide/contracts.md`` section 3). Every
 scene is scored with :func:`lfmbench.metrics.score_batch`; the method is timed (warm-up, then the median of
 repeated synchronised calls, in ms per output megapixel) and its parameters and MACs counted when it is an
 ``nn.Module``; versions, seeds, device, git revision and the corpus identity are recorded; the JSON result is
 written atomically after every batch. A method that raises, returns a wrong shape, NaN or inf is recorded per
 scene (``status``) and the run goes on. At the end the result gets per-scene values, bootstrap confidence
-intervals over scenes and the breakdown of the primary score by condition (``docs/metrics.md``).
+intervals over scenes and the breakdown of the primary score by condition (``docs/guide/metrics.md``).
 """
 from __future__ import annotations
 

@@ -41,7 +41,7 @@ a rising edge rather than being rounded onto it.
 transformations (Dekker's TwoProduct, Knuth's TwoSum), so in float64 the result is within a few units in the
 last place of the exact value for the given (binary) inputs, also when it is tiny (an exposure of
 :math:`10^{-9}T` straddling an edge). In float32 the same formula holds with relative errors of order
-:math:`10^{-6}` of :math:`\max(t_e, T)` (``docs/flicker.md``).
+:math:`10^{-6}` of :math:`\max(t_e, T)` (``docs/guide/flicker.md``).
 
 Trapezoidal pulses: each edge is a linear ramp of width ``rise_time`` (``fall_time``) centred on the ideal
 edge, so that ``duty`` stays the duty cycle at half amplitude and the mean level stays

@@ -14,7 +14,7 @@ plain data (``lfmbench/configs/isp/*.yaml``). Modules, in the order the data flo
   (a pipeline bound to a preset; :meth:`ISP.pair` maps an estimate and its ground truth the same way).
 
 The LED score and the other primary metrics stay on linear values; the ISP feeds the display-referred secondary
-metrics (:mod:`lfmbench.metrics.display`). See ``docs/isp.md``.
+metrics (:mod:`lfmbench.metrics.display`). See ``docs/guide/isp.md``.
 """
 from lfmbench.isp.color import (CCMFit, ColorCorrection, SRGBEncode, apply_ccm, camera_rgb, fit_ccm, luminance,
                                 srgb_decode, srgb_encode, white_balance_gains)

@@ -18,7 +18,7 @@ References
 - Automotive HDR image sensors send a 20-24-bit linear HDR value companded to 12-16 bits by a programmable
   piecewise-linear curve and expect the ISP to decompand it; see the data sheets and product briefs of e.g.
   onsemi AR0820AT ("HDR companding") and Sony IMX490. The knee points are therefore data (the shipped curve is an
-  lfmbench choice, ``lfmbench/configs/isp/default.yaml``, ``docs/isp.md``).
+  lfmbench choice, ``lfmbench/configs/isp/default.yaml``, ``docs/guide/isp.md``).
 """
 from __future__ import annotations
 

@@ -7,7 +7,7 @@ Defines
   5x5 filters whose bilinear estimate is corrected by the Laplacian of the known channel (gains 1/2, 5/8, 3/4).
 - :func:`clamp_to_neighbours`: limit every interpolated value to the range of the samples of its colour in the
   3x3 neighbourhood (the taps a bilinear estimate averages): removes the overshoot of a gradient-corrected
-  demosaic next to a point light 1000x brighter than its surroundings (an lfmbench choice, ``docs/isp.md``).
+  demosaic next to a point light 1000x brighter than its surroundings (an lfmbench choice, ``docs/guide/isp.md``).
 - :data:`DEMOSAIC`: the registry, name -> function; :func:`demosaic` dispatches by name (colour-science style).
 - :class:`Demosaic`: the thin ``nn.Module`` wrapper.
 

@@ -18,7 +18,7 @@ every sensor architecture. Shapes: input ``(*, 1, H, W)`` (a Bayer mosaic in a l
 e- as the samples' ``gt`` and a fusion estimate), output ``(*, 3, H, W)`` (encoded sRGB in [0, 1] when the last
 stage is ``srgb_encode``). Image statistics (grey-world gains, the tone curve) are taken per item of the first
 dim over all the other dims: a ``(B, F, 1, H, W)`` sample batch gets one tone curve per sample, fixed over its
-frames. See ``docs/isp.md``.
+frames. See ``docs/guide/isp.md``.
 """
 from __future__ import annotations
 

@@ -13,7 +13,7 @@ header, aggregation over scenes, and how it is computed: its own function ``fn(p
 :class:`MetricBlock` of :data:`BLOCKS` that computes several metrics in one pass (the P2020 region block,
 the perceptual block: pycvvdp is loaded and luminance converted once per batch). :func:`score_batch`,
 ``lfmbench evaluate`` and ``lfmbench leaderboard`` all read this registry; :func:`metric_versions` is stored
-with every result. The primary ranking score is :data:`PRIMARY` (``led_score``). See ``docs/metrics.md``.
+with every result. The primary ranking score is :data:`PRIMARY` (``led_score``). See ``docs/guide/metrics.md``.
 """
 from __future__ import annotations
 
@@ -227,7 +227,7 @@ REGISTRY: dict[str, MetricSpec] = {s.name: s for s in [
     MetricSpec("fsi_input", "1.0", "ISET-LFM eq. 2 via lfmbench.flicker.flicker_severity, LPD input", "1", False,
                "flicker", "FSI in", show="none", valid=(-math.inf, math.inf)),
     MetricSpec("psnr_srgb", "1.0", "PSNR (peak 1) of display sRGB (IEC 61966-2-1) after the ISP pipeline of "
-               "ScoreOptions.isp (docs/isp.md), tone curve from the GT", "dB", True, "display", "PSNR sRGB dB",
+               "ScoreOptions.isp (docs/guide/isp.md), tone curve from the GT", "dB", True, "display", "PSNR sRGB dB",
                digits=2, valid=(0.0, 1000.0), inf_ok=True),
     MetricSpec("ssim_srgb", "1.0", "Wang et al. IEEE TIP 2004 via kornia.metrics.ssim, per channel and frame of "
                "display sRGB after the ISP pipeline of ScoreOptions.isp", "1", True, "display", "SSIM sRGB",
@@ -305,7 +305,7 @@ def score_batch(pred: torch.Tensor, batch: dict, options: ScoreOptions | None = 
 
     Args:
         pred: fused estimate, (B, F, 1, H, W), in the units of ``batch['gt']`` (input-referred e-).
-        batch: sample dict (``docs/contracts.md`` section 3) with ``gt`` and ``light_index``; ``saturated`` and
+        batch: sample dict (``docs/guide/contracts.md`` section 3) with ``gt`` and ``light_index``; ``saturated`` and
             ``lpd_lcg_e`` are used when present. Metrics whose ``needs`` are missing are left out.
         options: see :class:`ScoreOptions`.
 

@@ -13,7 +13,7 @@ Defines
   :func:`perceptual_metrics` computes both in one pass (one luminance conversion per sample).
 
 Units: the HDR tensors are in the ground truth's units (input-referred LPD-equivalent e- over the short
-exposure, see ``docs/contracts.md`` section 3); PSNR values are in dB; luminance in cd m^-2.
+exposure, see ``docs/guide/contracts.md`` section 3); PSNR values are in dB; luminance in cd m^-2.
 
 References
 ----------

@@ -6,5 +6,5 @@
 - :mod:`~lfmbench.paper.figures`: Figs. 4-7 from a rendered corpus through the dataset and the baselines.
 
 This package sits above the pipeline (it uses the renderer, the datasets and the baselines), beside the command
-layer :mod:`lfmbench.cli`; no pipeline stage imports it. Details: docs/paper-figures.md.
+layer :mod:`lfmbench.cli`; no pipeline stage imports it. Details: docs/guide/paper-figures.md.
 """

@@ -31,7 +31,7 @@ Signal chain of one capture (per pixel, e- unless stated):
 6. Input-referred: (DN - black_level) / K - dark_current * T in e- (the mean dark signal is removed, as optical-black
    clamping does, so its expectation is :func:`ideal_electrons` below saturation); SPD additionally
    x sensitivity_ratio x T_short / T_long, i.e. LPD-equivalent electrons over the short exposure
-   (docs/contracts.md, section 3).
+   (docs/guide/contracts.md, section 3).
 
 References
 ----------

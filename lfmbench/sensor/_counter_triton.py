@@ -253,7 +253,7 @@ def normal(seed: torch.Tensor, n: int) -> torch.Tensor:
 #: pixel's draw is its own stream's; a block only decides how long its loops run), only the speed does:
 #: benchmarks/bench_sensor_device.py --sweep-launch measures the candidates. One warp of 32 px for the collection
 #: (its search and rejection loops run until the slowest pixel of a block is done, and a warp needs no barrier to
-#: know that): 24,398 samples/s on an H100 against 16,352 with 256 px / 4 warps (docs/sensor-device-benchmark.md).
+#: know that): 24,398 samples/s on an H100 against 16,352 with 256 px / 4 warps (docs/benchmarks/sensor-device.md).
 COLLECT_LAUNCH = {"BLOCK": 32, "num_warps": 1}
 READOUT_LAUNCH = {"BLOCK": 256, "num_warps": 4}
 

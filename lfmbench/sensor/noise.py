@@ -102,7 +102,7 @@ def shot_noise(mean_e: torch.Tensor, generator: torch.Generator, gaussian_above_
     out = torch.round(mean_e + torch.sqrt(mean_e) * z).clamp_min(0.0)
     if n_small:
         # Poisson where the mean is small; a masked gather/scatter costs more than drawing Poisson(0) elsewhere
-        # (14.5 -> 10.5 ms for a 3-frame 256x256 split-pixel sample, docs/dataset-benchmark.md)
+        # (14.5 -> 10.5 ms for a 3-frame 256x256 split-pixel sample, docs/benchmarks/dataset.md)
         pois = torch.poisson(torch.where(small, mean_e, torch.zeros_like(mean_e)), generator=generator)
         out = torch.where(small, pois, out)
     return out
@@ -200,7 +200,7 @@ def simulate_split_pixel_electrons(lpd_electrons: torch.Tensor, spd_electrons: t
             operations compiled into one pass per photodiode (clipping, PRNU, dark signal, shot noise, full
             well: :func:`lfmbench.sensor._poisson_kernel.collect`) and one per capture (the read-out:
             :func:`lfmbench.sensor._readout_kernel.readout`), bit-identical to ``"torch"`` on the CPU with a fraction of
-            its memory passes (docs/dataset-benchmark.md); ``"auto"``: ``"numba"`` where it applies, on a GPU
+            its memory passes (docs/benchmarks/dataset.md); ``"auto"``: ``"numba"`` where it applies, on a GPU
             with ``seeds`` the Triton chain (:func:`lfmbench.sensor.fused.chain_triton`: the same passes as
             Triton kernels, the numbers of ``"torch"`` but where float64 library functions round differently),
             else ``"torch"``.

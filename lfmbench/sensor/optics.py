@@ -55,7 +55,7 @@ __all__ = [
 PsfMethod = Literal["auto", "fft", "conv"]
 
 #: Kernel size (2R+1) from which ``apply_psf(method="auto")`` switches from direct convolution to FFT
-#: (measured crossover on 2 CPU cores, see docs/sensor.md).
+#: (measured crossover on 2 CPU cores, see docs/guide/sensors.md).
 FFT_CROSSOVER_KERNEL_SIZE: int = 25
 
 

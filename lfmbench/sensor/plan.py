@@ -3,7 +3,7 @@ registry of sensor architectures (``SensorPreset.architecture``).
 
 A capture's *exposure* is one or more time windows relative to the frame start (a chopped exposure is one
 capture integrating the union of its sub-windows), or the name of a window the corpus stores (``"short"``: the
-short exposure centred in the long one; ``"long"``: ``[0, T_L)``; docs/contracts.md), resolved against a scene's
+short exposure centred in the long one; ``"long"``: ``[0, T_L)``; docs/guide/contracts.md), resolved against a scene's
 ``meta.json`` timing by :func:`resolve_windows`. Captures that read the same photodiode over the same windows read
 the same collected charge (dual conversion gain: split-pixel LPD-HCG/LCG, LOFIC); captures of one photodiode over
 different windows are separate integrations, which must not overlap in time (one photodiode holds one charge).
@@ -38,7 +38,7 @@ __all__ = ["CORPUS_WINDOWS", "SHUTTERS", "Readout", "Architecture", "ARCHITECTUR
            "parse_readout", "resolve_windows", "exposure_groups", "check_plan", "windows_overlap",
            "CAPTURE_NAME_PATTERN", "RESERVED_KEYS", "MAX_WINDOWS", "total_length_s"]
 
-#: Windows a corpus stores for its static groups, by name (docs/corpus-format.md section 4).
+#: Windows a corpus stores for its static groups, by name (docs/guide/corpus-format.md section 4).
 CORPUS_WINDOWS = ("short", "long")
 #: Readout modes.
 SHUTTERS = ("global", "rolling")

@@ -1,8 +1,8 @@
 """Exact Poisson sampling of shot noise on the CPU: a compiled, counter-based sampler (numba).
 
 ``torch.poisson`` costs about 13-60 ns a draw on this machine's CPU and was half of a dataset sample's time
-(docs/dataset-benchmark.md). This module draws the same distribution 1.4-1.8x faster at a fixed mean and
-1.6-2.3x faster on a dataset sample's mixed means (docs/sensor.md), in one compiled loop:
+(docs/benchmarks/dataset.md). This module draws the same distribution 1.4-1.8x faster at a fixed mean and
+1.6-2.3x faster on a dataset sample's mixed means (docs/guide/sensors.md), in one compiled loop:
 
 - mean ``mu < 10``: **inversion** by sequential search from ``k = 0`` [Devroye1986]_ (X.3.3): one uniform ``u``,
   ``p_0 = exp(-mu)``, ``p_k = p_{k-1} mu / k``, the smallest ``k`` with ``F(k) >= u``. Exact up to float64 rounding
@@ -19,7 +19,7 @@ Randomness is **counter-based**: pixel ``i`` reads its own SplitMix64 stream [St
 ``mix(seed) + i * 2^20 * gamma`` (gamma the golden-ratio increment), a disjoint 2^20-draw slice of one SplitMix64
 sequence. A pixel's value therefore depends only on ``(seed, i, mu_i)``: not on the array length, the thread
 count or the order of evaluation, and the seed is drawn from the caller's ``torch.Generator`` so a sample
-stays a function of its own generator (the dataset's determinism contract, docs/datasets.md).
+stays a function of its own generator (the dataset's determinism contract, docs/guide/datasets.md).
 
 ``tests/sensor/test_poisson.py`` tests the distribution against the Poisson pmf (chi-square, 200 000 draws) at means
 from 0.01 to 1e5 including both sides of the branch edge at 10, the moments of mixed means (3e-4 to 1e5 e- in one

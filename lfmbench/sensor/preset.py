@@ -365,7 +365,7 @@ def preset_from_dict(data: Mapping[str, Any], source: str = "<dict>") -> SensorP
             raise ValueError(f"{source}: field '{pre}photodiode' must be one of {list(pds)}, got {brief(pd)}")
         if "exposure" in d:
             exposure = parse_exposure(d["exposure"], f"{pre}exposure", source, frame_time)
-        elif split:  # the split pixel's timing (docs/contracts.md): LPD the short window, SPD the long one
+        elif split:  # the split pixel's timing (docs/guide/contracts.md): LPD the short window, SPD the long one
             exposure = "short" if pd == "lpd" else "long"
         else:
             raise ValueError(f"{source}: missing field '{pre}exposure'")

@@ -1,4 +1,4 @@
-"""The manifest journal of ``CorpusWriter`` (``docs/corpus-format.md`` section 7): a commit costs the same
+"""The manifest journal of ``CorpusWriter`` (``docs/guide/corpus-format.md`` section 7): a commit costs the same
 whatever the corpus's size, and a writer killed at any point leaves a corpus that validates and resumes."""
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""docs/corpus-format.md is enough to write a compatible corpus: an independent writer (bare OpenEXR + json +
+"""docs/guide/corpus-format.md is enough to write a compatible corpus: an independent writer (bare OpenEXR + json +
 hashlib, no lfmbench code) following only that document produces a corpus that validates and reads back."""
 from __future__ import annotations
 

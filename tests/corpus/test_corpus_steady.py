@@ -2,7 +2,7 @@
 for the pixels that hold the same value in every bin (a wet road's reflection traced once, a lamp's padded box).
 
 The reader must give back exactly what the writer was given (FLOAT storage), or that within the HALF rounding
-bound (compact storage); the split must be the one ``docs/corpus-format.md`` 6.2 defines (checked pixel by pixel
+bound (compact storage); the split must be the one ``docs/guide/corpus-format.md`` 6.2 defines (checked pixel by pixel
 against a brute-force loop); version-2 layouts keep reading; ``lfmbench validate`` names a broken layout.
 """
 from __future__ import annotations

@@ -423,7 +423,7 @@ def test_cuda_triton_composition_matches_the_torch_form(corpus, shutter):
 
 
 def test_gpu_training_example_in_docs_runs(tmp_path):
-    """The batched training loop of docs/datasets.md ("Captures on the GPU") runs (on the CPU here)."""
+    """The batched training loop of docs/guide/datasets.md ("Captures on the GPU") runs (on the CPU here)."""
     import re
     from pathlib import Path
 
@@ -435,13 +435,13 @@ def test_gpu_training_example_in_docs_runs(tmp_path):
             .replace("range(3)", "range(2)").replace("split=\"train\"", "split=\"all\"")
             .replace("num_workers=2", "num_workers=0").replace(", persistent_workers=True", ""))
     ns: dict = {}
-    exec(compile(code, "docs/datasets.md", "exec"), ns)
+    exec(compile(code, "docs/guide/datasets.md", "exec"), ns)
     assert torch.isfinite(ns["loss"]) and ns["loss"].requires_grad
     assert ns["batch"]["lpd_hcg_e"].shape[1:] == (3, 1, 8, 8) and ns["ds"].epoch == 1
 
 
 def test_cpu_configuration_example_in_docs_runs(tmp_path):
-    """The CPU configuration of docs/datasets.md (one torch thread, simulation threads, prefetch) runs after the
+    """The CPU configuration of docs/guide/datasets.md (one torch thread, simulation threads, prefetch) runs after the
     section's training example and gives the batches of a plain loop."""
     import re
     from pathlib import Path
@@ -456,7 +456,7 @@ def test_cpu_configuration_example_in_docs_runs(tmp_path):
     threads = torch.get_num_threads()
     ns: dict = {}
     try:
-        exec(compile(setup + cpu, "docs/datasets.md", "exec"), ns)
+        exec(compile(setup + cpu, "docs/guide/datasets.md", "exec"), ns)
     finally:
         torch.set_num_threads(threads)
     ref = simulate_batch(_batch(ns["ds"], range(len(ns["ds"]) - 8, len(ns["ds"]))), ns["ds"].preset)

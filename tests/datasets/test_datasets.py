@@ -242,7 +242,7 @@ def test_plot_returns_figure(corpus):
 
 
 def test_training_example_in_docs_runs(tmp_path):
-    """The DataLoader training loop of docs/datasets.md runs (2 workers) and updates the network."""
+    """The DataLoader training loop of docs/guide/datasets.md runs (2 workers) and updates the network."""
     import re
     from pathlib import Path
 
@@ -252,7 +252,7 @@ def test_training_example_in_docs_runs(tmp_path):
     code = (code.replace('"demo_out/corpus"', repr(str(root))).replace("crop=128", "crop=8")
             .replace("range(3)", "range(2)").replace("split=\"train\"", "split=\"all\""))
     ns: dict = {}
-    exec(compile(code, "docs/datasets.md", "exec"), ns)
+    exec(compile(code, "docs/guide/datasets.md", "exec"), ns)
     assert torch.isfinite(ns["loss"]) and ns["loss"].requires_grad
     assert ns["ds"].epoch == 1
 
@@ -310,7 +310,7 @@ def test_frozen_test_params_grow_without_changing_existing_draws(tmp_path):
 
 
 def test_corpus_without_aux_serves_every_output_but_depth_and_light_index(tmp_path):
-    """aux.exr is optional (docs/corpus-format.md 6.3): read only for ``light_index`` / ``depth``."""
+    """aux.exr is optional (docs/guide/corpus-format.md 6.3): read only for ``light_index`` / ``depth``."""
     root = tmp_path / "c"
     w = C.CorpusWriter(root)
     meta = fake_meta("scene00000", width=W, height=H, frames=2, bins=4)

@@ -98,7 +98,7 @@ def test_compander_module_quantises_and_passes_gradient():
 
 # ----------------------------------------------------------------------------------------------- colour, CCM
 def test_ccm_fit_error_on_colorchecker_is_bounded():
-    """docs/isp.md states the fit's error: mean CIE dE2000 1.09, max 4.15 on the 24 patches (ovt, imx490 share
+    """docs/guide/isp.md states the fit's error: mean CIE dE2000 1.09, max 4.15 on the 24 patches (ovt, imx490 share
     the Nikon D5100 curves). Bounds with some room for colour-science data updates."""
     fit = fit_ccm("ovt")
     assert fit.de2000.shape == (24,) and len(fit.patches) == 24

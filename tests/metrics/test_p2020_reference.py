@@ -69,7 +69,7 @@ def test_fdi_matches_the_reference(case):
         ours = float(fm.fdi(x, contrast_threshold=case["contrast_threshold"], start_index=s))
         assert ours == r["fdi"], (ours, r["fdi"])
     else:
-        # Documented difference (docs/metrics.md): with no baseline frame the reference averages an empty slice
+        # Documented difference (docs/guide/metrics.md): with no baseline frame the reference averages an empty slice
         # (x_off = NaN, a RuntimeWarning) and reports FDI 0; lfmbench refuses instead. Given that NaN OFF
         # level explicitly, it returns the reference's value.
         assert any("Mean of empty slice" in w for w in r["warnings"])

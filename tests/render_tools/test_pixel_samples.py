@@ -120,7 +120,7 @@ def _edge_scene():
 def test_moving_edge_same_light_less_spread():
     """The lamp's bins summed over its box (the light it sends) from 6 seeds with each placement: the means agree
     within 4 standard errors (both unbiased), and the Sobol' points' spread per pixel is below 0.85 of the
-    strata's (numpy model of such edges in docs/render-benchmark.md "Pixel samples": 0.5-0.7)."""
+    strata's (numpy model of such edges in docs/benchmarks/render.md "Pixel samples": 0.5-0.7)."""
     sc, lid = _edge_scene()
     res = {}
     for mode in ("strata", "sobol"):

@@ -1,7 +1,7 @@
 """Fake corpus data: tiny seeded renderer output in the exact shape of ``render_tools.render``, and whole corpora.
 
 ``fake_meta`` / ``fake_frames`` build a ``meta.json`` dict and frame dicts as documented in
-``docs/contracts.md`` and ``docs/corpus-format.md``; the radiance is random but known, so tests can compare
+``docs/guide/contracts.md`` and ``docs/guide/corpus-format.md``; the radiance is random but known, so tests can compare
 what the reader returns with what went in. ``make_corpus`` writes a corpus of such scenes with
 :class:`lfmbench.corpus.CorpusWriter` (for the dataset, evaluation and fault tests).
 

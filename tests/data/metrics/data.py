@@ -1,4 +1,4 @@
-"""Tiny synthetic batches in the sample-dict layout of docs/contracts.md section 3 (for the metrics,
+"""Tiny synthetic batches in the sample-dict layout of docs/guide/contracts.md section 3 (for the metrics,
 baselines and evaluate tests; no corpus needed).
 
 Scene: a horizontal radiance gradient, a moving bright LED disc (light 0) and a static LED disc (light 1).
