@@ -4,7 +4,7 @@
     lfmbench demo                      # or any corpus; the demo's corpus and U-Net checkpoint are enough
     python benchmarks/bench_eval_sharing.py --corpus demo_out/corpus --checkpoint demo_out/unet_fusion.pt
 
-Methods: the 7 rule-based baselines and the U-Net (the protocol leaderboard's set, benchmarks/leaderboard_protocol.py).
+Methods: the 7 rule-based baselines and the U-Net (the protocol leaderboard's set, lfmbench.evaluation.protocol_run).
 Timed, one run each after a warm-up (a pass over the data that fills the projection cache, and both paths on two
 samples: imports, checkpoint loading, plotting): (1) the data alone (every sample read and
 simulated once, no method), (2) ``benchmark(share_samples=False)`` (one pass over the data per method: before),

@@ -36,7 +36,7 @@ from render_tools import preview, reference, render, scene, spectra  # noqa: E40
 
 BANDS = render.DEFAULT_BANDS_NM
 
-#: Heading of benchmarks/bench_render_v2_error.py's section of docs/benchmarks/render.md (kept when this script
+#: Heading of benchmarks/studies/bench_render_v2_error.py's section of docs/benchmarks/render.md (kept when this script
 #: rewrites the file).
 V2_SECTION = "## Scene generator 2 (issue 23)"
 #: Share of a crop's maximum above which a pixel counts as an LED pixel of that light.

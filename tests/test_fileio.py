@@ -95,6 +95,6 @@ def test_benchmarks_write_their_reports_through_the_safe_writer():
     from pathlib import Path  # noqa: PLC0415
 
     bench = Path(__file__).resolve().parents[1] / "benchmarks"
-    found = [f"{p.name}:{line} {call} (in {fn})" for p in sorted(bench.glob("*.py"))
+    found = [f"{p.name}:{line} {call} (in {fn})" for p in sorted(bench.rglob("*.py"))
              for fn, line, call in _unsafe_writes(p.read_text()) if (p.name, fn) not in SCRATCH_WRITES]
     assert found == []

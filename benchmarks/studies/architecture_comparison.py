@@ -9,7 +9,7 @@ standard merge (``exposure_select``; staggered also bounded below by its saturat
       lfmbench train --method unet --sensor $s --corpus demo --config lfmbench/configs/unet_tiny.yaml --epochs 6 \
           --out runs/unet_$s.pt
     done
-    python benchmarks/architecture_comparison.py --corpus v1 --runs runs/arch_v1 --samples-per-scene 2 \
+    python benchmarks/studies/architecture_comparison.py --corpus v1 --runs runs/arch_v1 --samples-per-scene 2 \
         --unet ovt=runs/unet_ovt.pt --unet lofic=runs/unet_lofic.pt ...      # [--max-scenes 24]
 
 One :func:`lfmbench.evaluation.benchmark.benchmark_sensors` call: per sensor its methods share each simulated

@@ -7,7 +7,7 @@ fuses each with its architecture's standard merge (split pixel: ``saturated_expo
 same global tone curve, log(1 + x / s) with s the median of the split pixel's ground truth, so the LED dropouts,
 clipping and motion blur can be compared. Writes ``docs/img/sensor_architectures.png``.
 
-Run: ``.venv/bin/python benchmarks/architecture_figure.py [--width 640 --height 360 --seed 101]``.
+Run: ``.venv/bin/python benchmarks/studies/architecture_figure.py [--width 640 --height 360 --seed 101]``.
 """
 from __future__ import annotations
 
@@ -15,8 +15,8 @@ import argparse
 import sys
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 import bench_dataset as bd  # noqa: E402  (DRJIT_LIBLLVM_PATH, _render)
 import matplotlib.pyplot as plt  # noqa: E402

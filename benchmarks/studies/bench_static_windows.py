@@ -22,7 +22,7 @@ on the grid. Errors are relative RMS over the image (band sums per pixel).
 Cost: the render time of the static groups for one frame with K bins (the same spp per bin, so equal noise per bin)
 against today's short + rest windows, and the storage: K layers instead of 2 per static group and frame.
 
-Usage: ``python benchmarks/bench_static_windows.py [--width 320 --height 180 --spp 16 --seeds 3,7] [--out docs]``
+Usage: ``python benchmarks/studies/bench_static_windows.py [--width 320 --height 180 --spp 16 --seeds 3,7] [--out docs]``
 (prints a markdown table; about a minute per scene on 2 cores).
 """
 from __future__ import annotations
@@ -35,9 +35,9 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import _llvm  # noqa: E402,F401 - sets DRJIT_LIBLLVM_PATH
 from lfmbench.fileio import atomic_write_text  # noqa: E402

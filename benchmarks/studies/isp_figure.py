@@ -1,7 +1,7 @@
 """The figure of docs/guide/isp.md: one frame of a real corpus scene through the ISP (docs/img/isp_pipeline.png).
 
     lfmbench demo                                       # renders demo_out/corpus (160x90)
-    python benchmarks/isp_figure.py --corpus demo_out/corpus --scene scene00002
+    python benchmarks/studies/isp_figure.py --corpus demo_out/corpus --scene scene00002
 
 Top row: the flicker-free ground truth of the frame as a linear mosaic (clipped at its 99th percentile), through the
 default pipeline (Reinhard 2002, global) and through the local pipeline (Durand-Dorsey 2002). Bottom row: three
@@ -13,7 +13,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def main() -> None:

@@ -1,7 +1,7 @@
 """Which capture the staggered plan's merge takes on the LEDs, and which captures drop them
 (docs/results/sensor-architectures.md, "Why staggered drops in daylight").
 
-    python benchmarks/staggered_led_captures.py --corpus v1 --scenes test_00 test_03 test_08 test_16 [--json out.json]
+    python benchmarks/studies/staggered_led_captures.py --corpus v1 --scenes test_00 test_03 test_08 test_16 [--json out.json]
 
 For each sample of the given scenes (the evaluation's frozen draws: seed 0, ``--samples-per-scene`` draws, 3 frames,
 the ``staggered`` preset with its rolling readout) and each LED region-frame (``light_index``, as the metrics take

@@ -6,7 +6,8 @@ Modules, in data-flow order: :mod:`~lfmbench.evaluation.provenance` (versions, d
 PWM, ego speed and their bins), :mod:`~lfmbench.evaluation.stats` (bootstrap CIs, paired tests),
 :mod:`~lfmbench.evaluation.results` (the result file: per-scene values, aggregates, breakdown),
 :mod:`~lfmbench.evaluation.run` (:func:`evaluate`), :mod:`~lfmbench.evaluation.leaderboard` (ranking and
-tables), :mod:`~lfmbench.evaluation.benchmark` (several methods on one corpus) and
+tables), :mod:`~lfmbench.evaluation.benchmark` (several methods on one corpus;
+:mod:`~lfmbench.evaluation.protocol_run`: the protocol leaderboards of docs/results/) and
 :mod:`~lfmbench.cli.evaluate` (the two commands). Result format: ``docs/guide/metrics.md`` ("Result files").
 """
 import importlib

@@ -3,14 +3,14 @@ docs/results/leaderboard-v1-mini.md, docs/results/leaderboard-v2-mini.md).
 
     lfmbench render --protocol lfmbench-v1-mini --out v1mini --workers 2
     lfmbench train --corpus v1mini --config lfmbench/configs/unet.yaml --out runs/unet_fusion.pt --epochs 16
-    python benchmarks/leaderboard_protocol.py --corpus v1mini --checkpoint runs/unet_fusion.pt --runs runs/v1mini
+    python -m lfmbench.evaluation.protocol_run --corpus v1mini --checkpoint runs/unet_fusion.pt --runs runs/v1mini
 
     lfmbench render --protocol lfmbench-v1 --out v1 --workers 2            # or --split test, then --split train
     lfmbench train --corpus v1 --config lfmbench/configs/unet_v1.yaml --out runs/unet_v1.pt --epochs 12
-    python benchmarks/leaderboard_protocol.py --corpus v1 --checkpoint runs/unet_v1.pt --runs runs/v1
+    python -m lfmbench.evaluation.protocol_run --corpus v1 --checkpoint runs/unet_v1.pt --runs runs/v1
 
     # a second U-Net (e.g. trained on another protocol's train split) scored on the same samples as `unet_v1trained`
-    python benchmarks/leaderboard_protocol.py --corpus v2mini --checkpoint runs/unet_v2mini.pt \\
+    python -m lfmbench.evaluation.protocol_run --corpus v2mini --checkpoint runs/unet_v2mini.pt \\
         --unet-also unet_v1trained=runs/unet_v1mini.pt --runs runs/v2mini
 
 Writes one result JSON per method, ``leaderboard.md``, ``leaderboard.json`` and ``leaderboard.png`` into ``--runs``

@@ -1,26 +1,21 @@
-"""benchmarks/leaderboard_protocol.py: a second U-Net scored on the same samples as ``unet`` (``--unet-also``), the
+"""lfmbench.evaluation.protocol_run: a second U-Net scored on the same samples as ``unet`` (``--unet-also``), the
 LED score by scene-file field (``weather``) and the paired comparison of the two networks."""
 from __future__ import annotations
 
-import importlib.util
 import json
 import os
 import sys
-from pathlib import Path
 
 import pytest
 
 from tests.data.evaluation.data import make_led_corpus, write_result
 
-SCRIPT = Path(__file__).resolve().parents[2] / "benchmarks" / "leaderboard_protocol.py"
-
 
 @pytest.fixture(scope="module")
 def lp():
-    spec = importlib.util.spec_from_file_location("leaderboard_protocol_script", SCRIPT)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    from lfmbench.evaluation import protocol_run
+
+    return protocol_run
 
 
 def test_extra_names_are_checked(lp, tmp_path):
