@@ -1,4 +1,4 @@
-"""Timing helper shared by the benchmark scripts (run as ``python benchmarks/<script>.py``)."""
+"""Timing and report writing shared by the benchmark scripts (run as ``python benchmarks/<script>.py``)."""
 from __future__ import annotations
 
 import statistics
@@ -18,15 +18,28 @@ def median_time(fn: Callable[[], object], repeat: int = 9, warmup: int = 2) -> t
     return statistics.median(ts), min(ts)
 
 
-def write_device_doc(text: str, device: str, gpu_doc, cpu_doc, root) -> None:
-    """Write a device benchmark's report: to ``gpu_doc`` when it ran on a GPU, else to ``cpu_doc`` (so that a run
-    without a GPU keeps the GPU figures of ``gpu_doc``) and say that the GPU figures were not run."""
-    from lfmbench.fileio import atomic_write_text  # noqa: PLC0415 - the timing helpers need no lfmbench
+def load_line() -> str:
+    """``"YYYY-MM-DD, 1-minute load average L"``: the date (UTC) and load a benchmark page states for its figures."""
+    import datetime  # noqa: PLC0415
+    import os  # noqa: PLC0415
 
+    day = datetime.datetime.now(datetime.timezone.utc).date().isoformat()
+    return f"{day}, 1-minute load average {os.getloadavg()[0]:.1f}"
+
+
+def write_device_doc(text: str, device: str, doc, root) -> None:
+    """Write a device benchmark's report as one section of its page ``doc``: "GPU figures" when it ran on a GPU,
+    else "CPU figures" (so that a run without a GPU keeps the page's GPU figures, and the other way round). The
+    report's title line is dropped (the page has its own header); the section states the date and load."""
     on_gpu = str(device).startswith("cuda")
-    atomic_write_text(gpu_doc if on_gpu else cpu_doc, text)
+    body = text.splitlines()
+    if body and body[0].startswith("# "):
+        body = body[1:]
+    body = [("#" + ln if ln.startswith("## ") else ln) for ln in body]
+    heading = "## GPU figures" if on_gpu else "## CPU figures"
+    replace_section(doc, heading, [heading, "", f"Run on {load_line()} at the start.", *body])
     if not on_gpu:
-        print(f"no GPU here: the GPU figures were not run; CPU figures in {cpu_doc.relative_to(root)}")
+        print(f"no GPU here: the GPU figures were not run; CPU figures in {doc.relative_to(root)}")
 
 
 def replace_section(path, heading: str, lines: list[str]) -> None:

@@ -39,7 +39,7 @@ sys.path.insert(0, str(ROOT))
 
 from lfmbench.fileio import atomic_write_text  # noqa: E402
 
-DOC = ROOT / "docs" / "dataset-benchmark.md"
+DOC = ROOT / "docs" / "benchmarks" / "dataset.md"
 BEGIN, END = "<!-- batched-capture:begin -->", "<!-- batched-capture:end -->"
 #: Target of issue 10 on 2 CPU cores: 1.5 x the per-sample path's 52 samples/s (docs/benchmarks/dataset.md).
 CPU_TARGET = 1.5 * 52.0

@@ -162,8 +162,8 @@ def main(argv=None) -> int:
           f"{100 * rows[-1]['energy_weighted']:.1f} % at pad {rows[-1]['pad']} for "
           f"{rows[-1]['seconds'] / rows[0]['seconds']:.0f}x the render time.", "",
           "![where the light goes](img/crop_pad_spill.png)", ""]
-    atomic_write_text(a.out / "crop-pad-benchmark.md", "\n".join(L))
-    print(f"wrote {a.out / 'crop-pad-benchmark.md'} and {img}")
+    atomic_write_text(a.out / "benchmarks" / "crop-pad.md", "\n".join(L))
+    print(f"wrote {a.out / 'benchmarks' / 'crop-pad.md'} and {img}")
     return 0
 
 

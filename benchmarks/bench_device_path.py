@@ -14,10 +14,9 @@ Workload: a synthetic corpus written here (``--scenes`` scenes of 640 x 360 px, 
 every output but ``rgb``; capture rows at a 256 x 256 crop, training rows at crop 128. Also reports the resident
 bytes per scene and the peak device memory per batch.
 
-Writes ``docs/benchmarks/device-path.md`` (``--no-doc``: only print; ``--json PATH``: the rows, written as they come).
-Run: ``.venv/bin/python benchmarks/bench_device_path.py`` (``--device auto``: CUDA where there is one). Without a GPU
-it measures the CPU rows into ``docs/benchmarks/device-path-cpu.md``, says that the GPU rows were not run, and
-leaves the GPU figures of ``docs/benchmarks/device-path.md`` as they are.
+Writes its section of ``docs/benchmarks/device-path.md`` (``--no-doc``: only print; ``--json PATH``: the rows,
+written as they come): "GPU figures" on a GPU, "CPU figures" without one (the other section stays as it is).
+Run: ``.venv/bin/python benchmarks/bench_device_path.py`` (``--device auto``: CUDA where there is one).
 """
 from __future__ import annotations
 
@@ -39,9 +38,7 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 from _timing import write_device_doc  # noqa: E402
 from lfmbench.fileio import atomic_write_text  # noqa: E402
-DOC = ROOT / "docs" / "device-path-benchmark.md"
-#: Where a run without a GPU writes (the GPU figures of ``DOC`` are kept: they are not re-measured there).
-DOC_CPU = ROOT / "docs" / "device-path-benchmark-cpu.md"
+DOC = ROOT / "docs" / "benchmarks" / "device-path.md"
 OUTS = ("raw", "input_referred", "saturated", "gt", "light_index", "depth")
 
 
@@ -325,7 +322,7 @@ def main(argv=None) -> int:
                   gpu)
     print(text)
     if not args.no_doc:
-        write_device_doc(text, args.device, DOC, DOC_CPU, ROOT)
+        write_device_doc(text, args.device, DOC, ROOT)
     return 0
 
 

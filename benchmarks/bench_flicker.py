@@ -155,7 +155,7 @@ def main() -> None:
     for N, err, serr, r in quad_rows:
         lines.append(f"| {N:,} | {err:.2e} | {serr:.2e} | {r / 1e6:.5f} |")
     lines += ["", "![error vs speed](img/flicker_error_vs_speed.png)", ""]
-    atomic_write_text(ROOT / "docs" / "flicker-benchmark.md", "\n".join(lines))
+    atomic_write_text(ROOT / "docs" / "benchmarks" / "flicker.md", "\n".join(lines))
 
     # ---- plot
     fig, ax = plt.subplots(figsize=(7, 4.5))

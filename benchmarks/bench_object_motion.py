@@ -161,8 +161,8 @@ def main(argv=None) -> int:
             L.append(f"| {lid} | {kind} | {sp:.1f} | {e_rel:.4f} | {e_ego:.4f} | {fl:.4f} |")
     L += ["", "The brute force carries an M-step time-sampling error of its own (a lamp crossing several pixels "
           "is sampled at M positions), so errors near the floor are upper bounds of the renderer's.", ""]
-    atomic_write_text(a.out / "object-motion-benchmark.md", "\n".join(L))
-    print(f"wrote {a.out / 'object-motion-benchmark.md'}")
+    atomic_write_text(a.out / "benchmarks" / "object-motion.md", "\n".join(L))
+    print(f"wrote {a.out / 'benchmarks' / 'object-motion.md'}")
     return 0
 
 

@@ -81,7 +81,7 @@ def main() -> None:
     if not have_ray:
         lines += ["", "Ray is not installed here (`pip install 'lfmbench[distributed]'`): its row is missing."]
     lines += ["", "One process runs Dr.Jit's kernels on every core, but part of a small new scene is single-threaded: scene generation, Mitsuba scene loading, the last frame's encoding, and the LLVM compile of a kernel class's first scene (docs/guide/rendering.md; until 2026-11-24 every new scene compiled its own kernel, and the process pool was 2.2x one process, as two workers overlapped those compiles; with the compiles gone the rendering, which already uses both cores, is most of the time). Ray pays for its start-up (a local instance, a few s) and task dispatch. On a cluster, Ray's scenes per hour scale with its nodes: each worker renders whole scenes and writes them atomically into the shared corpus folder (which every node must see).", ""]
-    out = Path(a.out) / "ray-benchmark.md"
+    out = Path(a.out) / "benchmarks" / "ray.md"
     atomic_write_text(out, "\n".join(lines))
     print(f"wrote {out}")
 

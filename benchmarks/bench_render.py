@@ -346,10 +346,10 @@ def write_report(res: dict, out: Path) -> None:
               "- Continuous blur: one render whatever the motion; M sub-frames need M renders (M kernel launches) for "
               "the same samples and add a discretisation (strobing) error that grows with the blur length.",
               ""]
-    old = (out / "render-benchmark.md").read_text() if (out / "render-benchmark.md").exists() else ""
+    old = (out / "benchmarks" / "render.md").read_text() if (out / "benchmarks" / "render.md").exists() else ""
     keep = old[old.index(V2_SECTION):] if V2_SECTION in old else ""  # bench_render_v2_error.py's section
-    atomic_write_text(out / "render-benchmark.md", "\n".join(lines) + ("\n" + keep if keep else ""))
-    atomic_write_text(out / "render-benchmark.json", json.dumps(res, indent=1) + "\n")  # the numbers behind the report
+    atomic_write_text(out / "benchmarks" / "render.md", "\n".join(lines) + ("\n" + keep if keep else ""))
+    atomic_write_text(out / "benchmarks" / "render.json", json.dumps(res, indent=1) + "\n")  # the numbers behind the report
 
 
 if __name__ == "__main__":

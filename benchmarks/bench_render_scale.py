@@ -120,7 +120,7 @@ def main() -> None:
                      f"{c['seconds']:.1f} | {c['kernels']} | {w['seconds']:.1f} | {n['seconds'] / N_NEW:.1f} | "
                      f"{n['kernels'] / N_NEW:.2f} | {c['mb']:.0f} |")
     lines += ["", "Run again with `python benchmarks/bench_render_scale.py` (7-12 minutes).", ""]
-    out = Path(a.out) / "render-scale-benchmark.md"
+    out = Path(a.out) / "benchmarks" / "render-scale.md"
     keep = "## Scene generator 2 against generator 1"  # benchmarks/bench_render_v2.py's section stays
     old = out.read_text() if out.exists() else ""
     tail = old[old.index(keep):] if keep in old else ""

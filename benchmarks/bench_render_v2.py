@@ -156,7 +156,7 @@ def main() -> None:
             f"({w2['cpu_s'] / w1['cpu_s']:.2f}) | {marg} | {c1['kernels']} / {c2['kernels']} | "
             f"{c1['mb']:.0f} / {c2['mb']:.0f} |")
     lines += ["", "Run again with `python benchmarks/bench_render_v2.py`.", ""]
-    replace_section(Path(a.out) / "render-scale-benchmark.md", SECTION, lines)
+    replace_section(Path(a.out) / "benchmarks" / "render-scale.md", SECTION, lines)
     print("\n".join(lines))
 
 

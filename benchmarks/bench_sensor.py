@@ -12,7 +12,7 @@ Measures, on this machine (CPU, float32 unless stated):
    parameters that the photon-transfer analysis of ``tests/sensor/test_emva1288.py`` recovers.
 
 Writes the tables between the ``<!-- bench_sensor:start -->`` / ``<!-- bench_sensor:end -->`` markers of
-``docs/guide/sensors.md`` (the rest of that file is hand-written) and the plots ``docs/img/sensor_*.png``.
+``docs/benchmarks/sensor.md`` (the header above them is hand-written) and the plots ``docs/img/sensor_*.png``.
 Run: ``.venv/bin/python benchmarks/bench_sensor.py``.
 """
 from __future__ import annotations
@@ -366,9 +366,9 @@ def main() -> None:
         lines.append(f"| {r['capture']} | {f('K')} | {f('sd')} | {f('sd_emva')} | {f('sat')} | "
                      f"{r['sat_expected']:.0f} / {r['clip']:.0f} |")
     lines.append("")
-    doc = ROOT / "docs" / "sensor.md"
+    doc = ROOT / "docs" / "benchmarks" / "sensor.md"
     start, end = "<!-- bench_sensor:start -->", "<!-- bench_sensor:end -->"
-    text = doc.read_text() if doc.exists() else f"# Sensor model\n\n## Benchmark\n\n{start}\n{end}\n"
+    text = doc.read_text() if doc.exists() else f"# Sensor model: speed and accuracy\n\n{start}\n{end}\n"
     if start not in text or end not in text:
         text = text.rstrip() + f"\n\n## Benchmark\n\n{start}\n{end}\n"
     head, rest = text.split(start, 1)

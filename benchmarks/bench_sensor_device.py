@@ -19,10 +19,9 @@ kernels (pixels per program, warps; :data:`lfmbench.sensor._counter_triton.COLLE
 the counts do not depend on them), takes the fastest for the rows that follow, and reports the sweep.
 
 Reports samples/s (median of ``--repeats`` timed calls after two warm-up calls; CUDA synchronised) and the peak
-device memory of a call, per batch size, and writes ``docs/benchmarks/sensor-device.md`` (``--no-doc``: only print).
-The CPU rows are always measured (on a GPU machine: on its host CPU); without a GPU they go to
-``docs/benchmarks/sensor-device-cpu.md``, which says that the GPU rows were not run, and the GPU figures of
-``docs/benchmarks/sensor-device.md`` stay as they are.
+device memory of a call, per batch size, and writes its section of ``docs/benchmarks/sensor-device.md``
+(``--no-doc``: only print). The CPU rows are always measured (on a GPU machine: on its host CPU); a run on a GPU
+writes the section "GPU figures", one without a GPU the section "CPU figures" (the other section stays as it is).
 
 Run: ``.venv/bin/python benchmarks/bench_sensor_device.py [--device cuda] [--quick]``.
 """
@@ -43,9 +42,7 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 from _timing import write_device_doc  # noqa: E402
 from lfmbench.fileio import atomic_write_text  # noqa: E402
-DOC = ROOT / "docs" / "sensor-device-benchmark.md"
-#: Where a run without a GPU writes (the GPU figures of ``DOC`` are kept: they are not re-measured there).
-DOC_CPU = ROOT / "docs" / "sensor-device-benchmark-cpu.md"
+DOC = ROOT / "docs" / "benchmarks" / "sensor-device.md"
 FRAMES, H, W = 3, 256, 256
 
 
@@ -208,7 +205,7 @@ def main(argv=None) -> int:
     text = report(rows, machine, gpu, sweep)
     print(text)
     if not args.no_doc:
-        write_device_doc(text, args.device, DOC, DOC_CPU, ROOT)
+        write_device_doc(text, args.device, DOC, ROOT)
     return 0
 
 

@@ -320,7 +320,7 @@ def main(argv=None) -> int:
     ap.add_argument("--quick", action="store_true", help="render a small scene if no --corpus; fewer options")
     ap.add_argument("--repeats", type=int, default=None, help="timing repeats (default 3, --quick 1)")
     ap.add_argument("--out", type=Path, default=ROOT / "bench_out" / "storage")
-    ap.add_argument("--doc", type=Path, default=ROOT / "docs" / "storage-benchmark.md")
+    ap.add_argument("--doc", type=Path, default=ROOT / "docs" / "benchmarks" / "storage.md")
     a = ap.parse_args(argv)
     repeats = a.repeats or (1 if a.quick else 3)
     a.out.mkdir(parents=True, exist_ok=True)

@@ -36,7 +36,7 @@ from lfmbench.corpus import validate as V  # noqa: E402
 from lfmbench.corpus import validate_cache as VC  # noqa: E402
 from lfmbench.fileio import atomic_write_text  # noqa: E402
 
-DOC = ROOT / "docs" / "validate-benchmark.md"
+DOC = ROOT / "docs" / "benchmarks" / "validate.md"
 #: The target of issue 27: this many scenes validated in under TARGET_S seconds on 2 cores.
 TARGET_SCENES, TARGET_S = 100_000, 30.0
 

@@ -315,7 +315,7 @@ def write_section(rows: list, out: Path, load0: float, load1: float, size=SIZE,
                      f"{refl} |")
     lines += ["", "Run again with `python benchmarks/studies/bench_render_v2_error.py --cache /tmp/v2err` (references "
               "are the bulk of the time).", ""]
-    replace_section(out / "render-benchmark.md", SECTION, lines)
+    replace_section(out / "benchmarks" / "render.md", SECTION, lines)
     print("\n".join(lines))
 
 
@@ -549,7 +549,7 @@ def pad_samples_main(cases, cache: Path | None, out: Path, quick: bool) -> None:
     lines += [f"| {r['case']} | {r['setting']} | {r['cpu_s']:.1f} | {r['led']:.3f} | {r['crop']:.3f} | "
               f"{r['ring_share']:.3f} |" for r in rows]
     lines += ["", "Run again with `python benchmarks/studies/bench_render_v2_error.py --pad-samples`.", ""]
-    replace_section(out / "render-benchmark.md", PAD_SECTION, lines)
+    replace_section(out / "benchmarks" / "render.md", PAD_SECTION, lines)
     print("\n".join(lines))
 
 
@@ -621,7 +621,7 @@ def write_pxs_section(rows, model, out: Path, load0: float, load1: float, size, 
               "samples, against random sampling's.", "",
               "| n | feature | strata | Sobol' |", "|---|---|---|---|"]
     lines += [f"| {n} | {name} | {a:.2f} | {b:.2f} |" for n, name, a, b in model]
-    replace_section(out / "render-benchmark.md", PXS_SECTION, lines)
+    replace_section(out / "benchmarks" / "render.md", PXS_SECTION, lines)
     print("\n".join(lines))
 
 
@@ -660,7 +660,7 @@ def write_led_section(rows, model, out: Path, load0: float, load1: float, size, 
             lines.append(f"| {name} | {meth} | {v[32]:.2f} | {v[128]:.2f} |")
     lines += ["", "Run again with `python benchmarks/studies/bench_render_v2_error.py --led --cache /tmp/v2err` "
               "(the light_spp-1024 references are the bulk of the time).", ""]
-    replace_section(out / "render-benchmark.md", LED_SECTION, lines)
+    replace_section(out / "benchmarks" / "render.md", LED_SECTION, lines)
     print("\n".join(lines))
 
 

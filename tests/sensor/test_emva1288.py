@@ -106,7 +106,7 @@ def expected_saturation_e(full_well: float, clip_e: float, read_e: float) -> flo
 
 
 # tolerances (relative): about 3 standard deviations of the estimates over seeds (K: 0.9 %, sigma_d: 1.3 %,
-# mu_e.sat: 1.5 %; 6 seeds at SIZE = 128, see docs/guide/sensors.md); the plain 1/12 DN^2 rule is biased by -4 to -8 % for
+# mu_e.sat: 1.5 %; 6 seeds at SIZE = 128, see docs/benchmarks/sensor.md); the plain 1/12 DN^2 rule is biased by -4 to -8 % for
 # the SPD (sigma_y.dark = 0.42 DN).
 TOL = {"K": 0.03, "sigma_d": 0.05, "sigma_d_emva": 0.12, "sat": 0.05, "R": 0.03}
 
