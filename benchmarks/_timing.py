@@ -37,7 +37,7 @@ def write_device_doc(text: str, device: str, doc, root) -> None:
         body = body[1:]
     body = [("#" + ln if ln.startswith("## ") else ln) for ln in body]
     heading = "## GPU figures" if on_gpu else "## CPU figures"
-    replace_section(doc, heading, [heading, "", f"Run on {load_line()} at the start.", *body])
+    replace_section(doc, heading, [heading, "", f"Run on {load_line()} at its end.", *body, ""])
     if not on_gpu:
         print(f"no GPU here: the GPU figures were not run; CPU figures in {doc.relative_to(root)}")
 
