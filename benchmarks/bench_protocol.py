@@ -6,8 +6,9 @@ Per-scene times come from the corpus itself: scene k's time is the modification 
 minus that of the scene finished before it (the first scene includes Python start, the LLVM probe and the
 first kernel compilations). ``--analyze DIR`` reports on an already rendered corpus without rendering.
 
-Usage: ``python benchmarks/bench_protocol.py [--protocol lfmbench-v1-mini] [--corpus DIR]`` (prints Markdown for
-docs/guide/protocols.md); ``python benchmarks/bench_protocol.py --analyze /tmp/v1mini``.
+Usage: ``python benchmarks/bench_protocol.py [--protocol lfmbench-v1-mini] [--corpus DIR] [--no-doc]`` (writes the
+section "Latest run: NAME" of docs/benchmarks/protocol.md); ``python benchmarks/bench_protocol.py --analyze
+/tmp/v1mini`` (prints only).
 """
 from __future__ import annotations
 
@@ -27,6 +28,9 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import _llvm  # noqa: E402,F401 - sets DRJIT_LIBLLVM_PATH
+from _timing import load_line, replace_section  # noqa: E402
+
+DOC = ROOT / "docs" / "benchmarks" / "protocol.md"
 
 
 def _load1() -> float:
@@ -68,6 +72,7 @@ def main() -> None:
     ap.add_argument("--protocol", default="lfmbench-v1-mini")
     ap.add_argument("--corpus", default=None, help="output corpus (default: a temporary folder)")
     ap.add_argument("--analyze", default=None, help="only report on this rendered corpus")
+    ap.add_argument("--no-doc", action="store_true", help="do not write docs/benchmarks/protocol.md")
     a = ap.parse_args()
     if a.analyze:
         print(report(Path(a.analyze), None, []))
@@ -89,7 +94,14 @@ def main() -> None:
         wall = time.perf_counter() - t
         stop.set()
         print(f"$ {' '.join(cmd[1:])}  (exit status {res.returncode}; {res.stdout.strip().splitlines()[-1:]})")
-        print(report(out, wall, loads))
+        text = report(out, wall, loads)
+        print(text)
+    if not a.no_doc and res.returncode == 0:
+        heading = f"## Latest run: {a.protocol}"
+        replace_section(DOC, heading, [heading, "", f"Run on {load_line()} at its end; this project's machine "
+                                       f"({os.cpu_count()} CPU cores), `HOME` a new empty folder.", "",
+                                       f"`lfmbench render --protocol {a.protocol} --out DIR`:", "",
+                                       text.split("\n", 1)[1].strip(), ""])
 
 
 if __name__ == "__main__":
