@@ -39,16 +39,31 @@ llvm:
 demo: setup
 	DRJIT_LIBLLVM_PATH=$${DRJIT_LIBLLVM_PATH:-$$(ls $(LLVM) 2>/dev/null)} $(PY) -m lfmbench.cli demo
 
-# Every benchmark behind the tables and plots in docs/ (about 25 minutes on 2 cores; each script also runs alone).
-bench: setup
+# Every performance benchmark (benchmarks/bench_*.py), each rewriting its page of docs/benchmarks/ (or its section of
+# one); one-off studies live in benchmarks/studies/ and run by hand. Takes about 3 hours on 2 quiet cores (the sum
+# of the scripts' own estimates; the renders and the 100,000-scene validate are most of it), longer under load.
+# Needs the demo's corpus and U-Net (bench_eval_sharing), so it runs `demo` first (a second demo reuses them).
+# Without a GPU the device benchmarks write their "CPU figures" sections and keep the GPU ones.
+RENDERENV = DRJIT_LIBLLVM_PATH=$${DRJIT_LIBLLVM_PATH:-$$(ls $(LLVM) 2>/dev/null)}
+bench: setup demo
 	$(PY) benchmarks/bench_flicker.py
 	$(PY) benchmarks/bench_sensor.py
-	DRJIT_LIBLLVM_PATH=$${DRJIT_LIBLLVM_PATH:-$$(ls $(LLVM) 2>/dev/null)} $(PY) benchmarks/bench_dataset.py
-	DRJIT_LIBLLVM_PATH=$${DRJIT_LIBLLVM_PATH:-$$(ls $(LLVM) 2>/dev/null)} $(PY) benchmarks/bench_render.py
-	DRJIT_LIBLLVM_PATH=$${DRJIT_LIBLLVM_PATH:-$$(ls $(LLVM) 2>/dev/null)} $(PY) benchmarks/bench_crop_pad.py
-	DRJIT_LIBLLVM_PATH=$${DRJIT_LIBLLVM_PATH:-$$(ls $(LLVM) 2>/dev/null)} $(PY) benchmarks/bench_object_motion.py
 	$(PY) benchmarks/bench_sensor_device.py
+	$(RENDERENV) $(PY) benchmarks/bench_dataset.py
+	$(RENDERENV) $(PY) benchmarks/bench_architectures.py
+	$(RENDERENV) $(PY) benchmarks/bench_batched_capture.py
 	$(PY) benchmarks/bench_device_path.py
+	$(RENDERENV) $(PY) benchmarks/bench_eval_sharing.py --corpus demo_out/corpus --checkpoint demo_out/unet_fusion.pt
+	$(RENDERENV) $(PY) benchmarks/bench_render.py
+	$(RENDERENV) $(PY) benchmarks/bench_crop_pad.py
+	$(RENDERENV) $(PY) benchmarks/bench_object_motion.py
+	$(RENDERENV) $(PY) benchmarks/bench_render_scale.py
+	$(RENDERENV) $(PY) benchmarks/bench_render_v2.py
+	$(RENDERENV) $(PY) benchmarks/bench_render_phases.py
+	$(RENDERENV) $(PY) benchmarks/bench_ray.py
+	$(RENDERENV) $(PY) benchmarks/bench_protocol.py
+	$(RENDERENV) $(PY) benchmarks/bench_storage.py --quick
+	$(PY) benchmarks/bench_validate.py
 
 clean-venv:
 	rm -rf $(VENV)
