@@ -10,7 +10,7 @@ generator-2 weather of it. Writes the section "Scene generator 2 against generat
 docs/benchmarks/render-scale.md (what is before it is :mod:`bench_render_scale`'s; later sections are kept).
 
 Warm renders are repeated (``--repeats``, default 3), generator 1 and 2 alternating, and their medians reported: one
-render's CPU seconds moved by 5-10 % from run to run on the 2-core machine (session 14).
+render's CPU seconds moved by 5-10 % from run to run on the 2-core machine (measured 2026-11-26).
 
 A one-scene command also pays the command's fixed cost (Python start, imports, the worker process, the probe: about
 5 s wall and 4-6 CPU s on the 2-core machine, the same for both generators), which a corpus of many scenes pays

@@ -37,7 +37,7 @@ def torch_threads_per_worker(environ=os.environ) -> int | None:
 
     Why: each worker's torch otherwise starts one OpenMP thread per core, so ``-n 2`` on 2 cores runs 4 busy
     threads whose spin-waits compete for 2 cores; on this suite's tiny tensors that tripled the CPU time of the
-    torch-heavy tests (session 11: tests/datasets, evaluation, sensor, baselines 187 s of CPU -> 55 s). Tests that
+    torch-heavy tests (measured 2026-11-26: tests/datasets, evaluation, sensor, baselines 187 s of CPU -> 55 s). Tests that
     need several threads ask for them (``threads=3``, ``--threads``) and still get them."""
     workers = environ.get("PYTEST_XDIST_WORKER_COUNT")
     if not workers or environ.get("OMP_NUM_THREADS"):

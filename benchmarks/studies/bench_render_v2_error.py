@@ -88,7 +88,7 @@ REF_SPP, REF_LIGHT_SPP = 4, 256
 #: spp of the reference's static full frames (the static groups rendered on their own, not denoised): at spp 64 a
 #: wet night's road still sparkled (its median per-pixel error against spp 256: 6.8 %), and so did the measured
 #: error of a denoised frame (11.9 % against it, 9.4 % against spp 256); spp 4 (before) left up to half of the
-#: measured error of the traced frames (session 13's fit).
+#: measured error of the traced frames (the fit of 2026-11-26).
 REF_STATIC_SPP = 256
 #: Share of a pixel's reference luminance above which the flickering layers' light outside the lamps' own boxes
 #: makes it a reflection pixel.

@@ -210,7 +210,7 @@ def _cuda_works() -> bool:
 @pytest.mark.slow
 @pytest.mark.skipif(not _cuda_works(), reason="no working CUDA device")
 def test_cuda_render_matches_llvm_mean():
-    if _cpu_choice() != backend.LLVM_VARIANT:  # a GPU machine whose Mitsuba has no LLVM variant (session 14)
+    if _cpu_choice() != backend.LLVM_VARIANT:  # a GPU machine whose Mitsuba has no LLVM variant (seen on an H200)
         pytest.skip("no working llvm_ad_spectral to compare the CUDA render with")
     from tests.data.render.data import wall_scene as _wall_scene
 
