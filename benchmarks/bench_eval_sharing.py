@@ -12,7 +12,8 @@ simulated once, no method), (2) ``benchmark(share_samples=False)`` (one pass ove
 path N times in the order ABBA, the fastest kept. Wall time and process CPU time are both recorded: with
 ``--threads 1`` the CPU time is what a shared machine's load hardly moves (the saving to compare with the
 simulation's share). The per-sample scores of (2) and (3) are compared (they must be
-equal). Prints a Markdown table; ``--json`` writes the numbers.
+equal). Prints a Markdown table and writes it as the section "Latest run" of docs/benchmarks/evaluation-sharing.md
+(``--no-doc``: print only); ``--json`` writes the numbers.
 """
 from __future__ import annotations
 
@@ -24,6 +25,10 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+
+
+#: The page whose section "Latest run" this script rewrites (the rest of the page is written by hand).
+DOC = Path(__file__).resolve().parents[1] / "docs" / "benchmarks" / "evaluation-sharing.md"
 
 
 def _runs(ts: list[float]) -> str:
@@ -40,6 +45,7 @@ def main() -> None:
     ap.add_argument("--isp", default="default", help="ISP pipeline of the display columns, or 'none'")
     ap.add_argument("--repeats", type=int, default=1, help="timed runs of each path, in the order ABBA (min kept)")
     ap.add_argument("--json", default=None, help="write the numbers to this JSON file")
+    ap.add_argument("--no-doc", action="store_true", help="do not write docs/benchmarks/evaluation-sharing.md")
     a = ap.parse_args()
     if not os.path.isfile(a.checkpoint):
         ap.error(f"--checkpoint {a.checkpoint}: no such file")
@@ -102,18 +108,28 @@ def main() -> None:
         "cpu_per_method_runs_s": cpu[False], "cpu_shared_runs_s": cpu[True],
         "cpu_saving": 1.0 - c_new / c_old, "cpu_simulation_share_of_per_method": k * c_data / c_old,
     }
-    print(f"| {k}-method evaluation, {n} samples | time (s) |\n|---|---|\n"
+    table = (f"| {k}-method evaluation, {n} samples | time (s) |\n|---|---|\n"
           f"| data alone (read + simulate every sample once) | {t_data:.1f} |\n"
           f"| before: one pass over the data per method | {t_old:.1f} (runs: {_runs(times[False])}) |\n"
           f"| after: each sample simulated once, shared | {t_new:.1f} (runs: {_runs(times[True])}) |\n"
           f"| ratio after / before | {t_new / t_old:.3f} |\n"
           f"| simulation share of the before run ({k} x data alone / before) | {100 * k * t_data / t_old:.1f} % |\n"
           f"| expected after (before - {k - 1} x data alone) | {t_old - (k - 1) * t_data:.1f} |\n"
-          f"| per-sample scores equal | {equal} |")
-    print(f"\n| process CPU time (s) | data alone | before | after | saving | simulation share of before |\n"
+             f"| per-sample scores equal | {equal} |")
+    table += (f"\n\n| process CPU time (s) | data alone | before | after | saving | simulation share of before |\n"
           f"|---|---|---|---|---|---|\n| {k} methods, {n} samples | {c_data:.1f} | {c_old:.1f} "
           f"({_runs(cpu[False])}) | {c_new:.1f} ({_runs(cpu[True])}) | {100 * (1 - c_new / c_old):.1f} % | "
-          f"{100 * k * c_data / c_old:.1f} % |")
+              f"{100 * k * c_data / c_old:.1f} % |")
+    print(table)
+    if not a.no_doc:
+        sys.path.insert(0, str(Path(__file__).resolve().parent))
+        from _timing import load_line, replace_section  # noqa: PLC0415
+
+        heading = "## Latest run"
+        replace_section(DOC, heading, [heading, "", f"Run on {load_line()} at its end, {res['cpu']}, {res['cpus']} "
+                                       f"CPU cores: `python benchmarks/bench_eval_sharing.py --corpus {a.corpus} "
+                                       f"--checkpoint {a.checkpoint}` (split `{a.split}`, {a.samples_per_scene} "
+                                       "samples per scene).", "", table, ""])
     if a.json:
         atomic_write_json(a.json, res)
     if not equal:

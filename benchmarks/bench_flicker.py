@@ -139,7 +139,8 @@ def main() -> None:
 
     # ---- table
     lines = ["# PWM exposure model: error against run time", "",
-             f"Measured by `make bench` (`benchmarks/bench_flicker.py`) on {platform.processor() or platform.machine()}, "
+             f"Measured by `make bench` (`benchmarks/bench_flicker.py`) on {time.strftime('%Y-%m-%d', time.gmtime())}, "
+             f"1-minute load average {os.getloadavg()[0]:.1f} at the end, on {platform.processor() or platform.machine()}, "
              f"{os.cpu_count()} cores, numpy {np.__version__}, torch {torch.__version__}; medians of 7 timed "
              "runs after a warm-up, 2,000,000 evaluations each. Error: maximum relative error against exact "
              f"rational arithmetic on {n_err} cases (3000 random over period 1 us..1 s, duty [0, 1], phase "
