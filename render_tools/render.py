@@ -135,8 +135,8 @@ class RenderOptions:
     itself), ``"spp"`` (``spp``, as the full frame: the ring holds no part of the lamp's face, only the light it
     throws on what is next to it; the lamp's own box keeps ``light_spp``; both unbiased) or ``"auto"`` (default:
     ``spp`` on scene version 2, ``light`` on version 1, whose renders are frozen). The ring held two thirds of a
-    generator-2 night's lamp-crop samples (37.9 M of a scene's 3 frames, 12.6 M without it; docs/render-scale-
-    benchmark.md). A static group's lamp refines its own box only (the ring keeps the full frame's estimate).
+    generator-2 night's lamp-crop samples (37.9 M of a scene's 3 frames, 12.6 M without it; docs/benchmarks/
+    render-scale.md). A static group's lamp refines its own box only (the ring keeps the full frame's estimate).
     static_denoise: the static groups' short and long full frames of each frame denoised after tracing, the static
     groups' lamp boxes kept as traced (:mod:`render_tools.denoise`: Intel Open Image Denoise on three broad bands,
     split back among groups and bands by their local shares): ``"oidn"``, ``"off"`` (the traced estimate,
