@@ -40,8 +40,8 @@ demo: setup
 	DRJIT_LIBLLVM_PATH=$${DRJIT_LIBLLVM_PATH:-$$(ls $(LLVM) 2>/dev/null)} $(PY) -m lfmbench.cli demo
 
 # Every performance benchmark (benchmarks/bench_*.py), each rewriting its page of docs/benchmarks/ (or its section of
-# one); one-off studies live in benchmarks/studies/ and run by hand. Takes about 3 hours on 2 quiet cores (the sum
-# of the scripts' own estimates; the renders and the 100,000-scene validate are most of it), longer under load.
+# one); one-off studies live in benchmarks/studies/ and run by hand. About 2-3 hours on 2 quiet cores (estimated
+# from the pages' own timings, not timed as a whole; the renders and the 100,000-scene validate are most of it).
 # Needs the demo's corpus and U-Net (bench_eval_sharing), so it runs `demo` first (a second demo reuses them).
 # Without a GPU the device benchmarks write their "CPU figures" sections and keep the GPU ones.
 RENDERENV = DRJIT_LIBLLVM_PATH=$${DRJIT_LIBLLVM_PATH:-$$(ls $(LLVM) 2>/dev/null)}
