@@ -154,14 +154,14 @@ def main(argv=None) -> int:
     for r_ in rows:
         L.append(f"| {r_['pad']} | {100 * r_['median']:.1f} % | {100 * r_['p90']:.1f} % | {100 * r_['max']:.1f} % | "
                  f"{100 * r_['energy_weighted']:.1f} % | {r_['area_px']} | {r_['seconds']:.2f} |")
-    L += ["", "![crop padding](img/crop_pad.png)", "",
+    L += ["", "![crop padding](../img/crop_pad.png)", "",
           "Where the light goes (the four brightest lights): an LED billboard lights the whole street, facades "
           "and road; a tail lamp lights facades and the road far from itself. It is low radiance spread over "
           "the frame, so padding the crop recovers almost nothing: "
           f"{100 * rows[0]['energy_weighted']:.1f} % lost at pad {rows[0]['pad']}, "
           f"{100 * rows[-1]['energy_weighted']:.1f} % at pad {rows[-1]['pad']} for "
           f"{rows[-1]['seconds'] / rows[0]['seconds']:.0f}x the render time.", "",
-          "![where the light goes](img/crop_pad_spill.png)", ""]
+          "![where the light goes](../img/crop_pad_spill.png)", ""]
     atomic_write_text(a.out / "benchmarks" / "crop-pad.md", "\n".join(L))
     print(f"wrote {a.out / 'benchmarks' / 'crop-pad.md'} and {img}")
     return 0

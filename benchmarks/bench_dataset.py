@@ -692,7 +692,7 @@ def report(tp: dict, bins: dict, psf: dict, rs: dict, env: dict, quick: bool, pr
          f"{env['load_start']} at the start, {env['load_end']} at the end), so every time is an upper bound and "
          f"ratios are more reliable than absolute numbers. All times are medians.", "",
          *_summary(tp, bins, psf, rs),
-         "![throughput](img/dataset_throughput.png)", "",
+         "![throughput](../img/dataset_throughput.png)", "",
          "## 1. DataLoader throughput", "",
          f"`LFMCaptureDataset(split='all', sensor='ovt', frames={TP_FRAMES}, crop={TP_CROP}, outputs=DEFAULT_OUTPUTS,"
          f" noise=True)` on a corpus of {tp['scenes']} rendered scene(s) of {TP_SIZE[1]}x{TP_SIZE[0]} px (31 bands, "
@@ -742,7 +742,7 @@ def report(tp: dict, bins: dict, psf: dict, rs: dict, env: dict, quick: bool, pr
     if prof_note:
         L += ["", prof_note]
     # bins
-    L += ["", "![approximations](img/dataset_approximations.png)", "",
+    L += ["", "![approximations](../img/dataset_approximations.png)", "",
           "## 2. Time bins K (radiance constant within a bin)", "",
           f"Scene `{bins['scene_id']}` ({bins['size'][1]}x{bins['size'][0]} px, {bins['lights']} flickering "
           f"lights, groups {', '.join(bins['groups'])} only, frame 0, ego camera moving at "

@@ -155,7 +155,7 @@ def main() -> None:
               "", "| N samples | max rel. error | max scaled error | M evaluations/s |", "|---|---|---|---|"]
     for N, err, serr, r in quad_rows:
         lines.append(f"| {N:,} | {err:.2e} | {serr:.2e} | {r / 1e6:.5f} |")
-    lines += ["", "![error vs speed](img/flicker_error_vs_speed.png)", ""]
+    lines += ["", "![error vs speed](../img/flicker_error_vs_speed.png)", ""]
     atomic_write_text(ROOT / "docs" / "benchmarks" / "flicker.md", "\n".join(lines))
 
     # ---- plot

@@ -36,6 +36,8 @@ from render_tools import preview, reference, render, scene, spectra  # noqa: E40
 
 BANDS = render.DEFAULT_BANDS_NM
 
+#: Which script (or hand) writes each section of docs/benchmarks/render.md.
+PAGE_SECTIONS = ('This page\'s sections up to "Reading the numbers": `benchmarks/bench_render.py`; "Scene generator 2", "LED dot faces", "Pixel samples" and "Pad ring samples": the study `benchmarks/studies/bench_render_v2_error.py` (options `--led`, `--pixel-samples`, `--pad-samples`); "what the numbers say" and the closing summary: by hand.')
 #: Heading of benchmarks/studies/bench_render_v2_error.py's section of docs/benchmarks/render.md (kept when this script
 #: rewrites the file).
 V2_SECTION = "## Scene generator 2 (issue 23)"
@@ -301,7 +303,9 @@ def write_report(res: dict, out: Path) -> None:
         "Errors on luminance Y: LED pixels ||Y - Yref|| / ||Yref||; all pixels per-pixel "
         "sqrt(mean (Y - Yref)^2 / (Yref^2 + eps^2)), eps = 1 % of mean Yref (see the script's docstring).",
         "",
-        "![benchmark](img/render-benchmark.png)",
+        "![benchmark](../img/render-benchmark.png)",
+        "",
+        PAGE_SECTIONS,
         "",
         "## Target: all groups, 3 frames (the `default` profile)",
         "",

@@ -72,6 +72,10 @@ def _time_of_day(out: Path) -> str:
     return json.loads(f.read_text()).get("time_of_day", "?")
 
 
+#: Which script (or hand) writes each section of docs/benchmarks/render-scale.md.
+PAGE_SECTIONS = ('This page\'s sections: this table (`benchmarks/bench_render_scale.py`), "Scene generator 2 against generator 1" (`benchmarks/bench_render_v2.py`), "Render phases" (`benchmarks/bench_render_phases.py`); the sections on a GPU and "what the numbers say" are written by hand.')
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true", help="160x90 small profile only")
@@ -120,7 +124,7 @@ def main() -> None:
         lines.append(f"| {prof} | {p['width']}x{p['height']} | {p.get('frames', 3)} | {seed} | {c['tod']} | "
                      f"{c['seconds']:.1f} | {c['kernels']} | {w['seconds']:.1f} | {n['seconds'] / N_NEW:.1f} | "
                      f"{n['kernels'] / N_NEW:.2f} | {c['mb']:.0f} |")
-    lines += ["", "Run again with `python benchmarks/bench_render_scale.py` (7-12 minutes).", ""]
+    lines += ["", "Run again with `python benchmarks/bench_render_scale.py` (7-12 minutes). " + PAGE_SECTIONS, ""]
     out = Path(a.out) / "benchmarks" / "render-scale.md"
     keep = "## Scene generator 2 against generator 1"  # benchmarks/bench_render_v2.py's section stays
     old = out.read_text() if out.exists() else ""

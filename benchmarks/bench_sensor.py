@@ -325,7 +325,7 @@ def main() -> None:
                      f"{1e3 * r['t_fft'][0]:.1f} / {1e3 * r['t_fft'][1]:.1f} |")
     lines += [
         "",
-        f"![PSF truncation]({psf_png.relative_to(ROOT / 'docs')})",
+        f"![PSF truncation](../{psf_png.relative_to(ROOT / 'docs')})",
         "",
         "### Shot noise: rounded Gaussian N(mu, mu) against exact Poisson",
         "",
@@ -346,11 +346,11 @@ def main() -> None:
                      f"{1e3 * r['t_poisson'][1]:.1f} | {1e3 * r['t_gauss'][0]:.1f} / {1e3 * r['t_gauss'][1]:.1f} |")
     lines += [
         "",
-        f"![Shot noise]({sn_png.relative_to(ROOT / 'docs')})",
+        f"![Shot noise](../{sn_png.relative_to(ROOT / 'docs')})",
         "",
         "### Photon transfer curve",
         "",
-        f"![PTC]({ptc_png.relative_to(ROOT / 'docs')})",
+        f"![PTC](../{ptc_png.relative_to(ROOT / 'docs')})",
         "",
         "### EMVA 1288 estimates over 6 seeds (tests/sensor/test_emva1288.py analysis, 128 x 128 flat fields)",
         "",

@@ -83,3 +83,12 @@ def test_the_checker_finds_a_broken_link(tmp_path):
     assert DOC_PATH.findall("see docs/guide/metrics.md, docs/img/*.png and `docs/benchmarks/render.json`") == [
         "docs/guide/metrics.md", "docs/benchmarks/render.json"]
     assert DOC_JOIN.search('ROOT / "docs" / "guide" / "x.md"').group(1) == ' / "guide" / "x.md"'
+
+
+def test_benchmark_pages_link_images_from_their_folder():
+    """Benchmark scripts write pages into docs/benchmarks/ and figures into docs/img/: an image link they write is
+    ``../img/...`` (``img/...`` would resolve to docs/benchmarks/img/, which does not exist)."""
+    bad = [f"{p.relative_to(ROOT)}:{n}" for p in sorted((ROOT / "benchmarks").rglob("*.py"))
+           for n, line in enumerate(p.read_text(encoding="utf-8").splitlines(), 1) if re.search(r"\]\((img/|\{)", line)
+           and "../" not in line]
+    assert bad == []
