@@ -45,6 +45,58 @@ class InputFileError(ValueError):
     """A JSON or YAML file that is malformed or above a limit of :mod:`lfmbench.limits`; the message names it."""
 
 
+class NotRegularFileError(InputFileError, OSError):
+    """A path given to read that is not a regular file once its symbolic links are resolved (a FIFO, a character
+    or block device, a socket, a directory): refused before anything is read, because reading a FIFO or a
+    terminal waits forever and a device never ends. Both a ``ValueError`` (bad input) and an ``OSError``
+    (``errno.EINVAL``; what callers that catch unreadable files expect); the message names the path."""
+
+    def __init__(self, msg: str):
+        OSError.__init__(self, errno.EINVAL, msg)
+
+    def __str__(self) -> str:
+        return self.strerror
+
+
+def file_kind(mode: int) -> str:
+    """``"a FIFO"``, ``"a character device"``, ... for an ``st_mode``."""
+    for test, name in ((stat.S_ISFIFO, "a FIFO (named pipe)"), (stat.S_ISCHR, "a character device"),
+                       (stat.S_ISBLK, "a block device"), (stat.S_ISSOCK, "a socket"), (stat.S_ISDIR, "a directory"),
+                       (stat.S_ISREG, "a regular file")):
+        if test(mode):
+            return name
+    return "not a regular file"
+
+
+def open_regular(path: str | os.PathLike, what: str = "file"):
+    """Open ``path`` for binary reading, refusing what is not a regular file after its links are resolved.
+
+    The file is opened with ``O_NONBLOCK`` first (opening a FIFO for reading blocks until a writer comes) and
+    checked with ``fstat`` on the open descriptor (no race between the check and the read); blocking mode is
+    restored for a regular file. ``what`` names the file's role in the message.
+
+    Raises:
+        NotRegularFileError: a FIFO, device, socket or directory (one line naming ``path`` and what it is).
+        OSError: missing or unreadable (``FileNotFoundError``, ``PermissionError``), as ``open`` raises them.
+    """
+    fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0))
+    try:
+        mode = os.fstat(fd).st_mode
+        if not stat.S_ISREG(mode):
+            raise NotRegularFileError(f"{path}: {what} is {file_kind(mode)}, not a regular file; lfmbench reads "
+                                      "only regular files (a FIFO or device would wait or never end)")
+        os.set_blocking(fd, True)
+        return os.fdopen(fd, "rb")
+    except BaseException:
+        os.close(fd)
+        raise
+
+
+def check_regular(path: str | os.PathLike, what: str = "file") -> None:
+    """:func:`open_regular` without reading: raises its errors for ``path``."""
+    open_regular(path, what).close()
+
+
 def _file_mode() -> int:
     """Permission bits of a new file under the current umask (mkstemp alone would give 0600)."""
     mask = os.umask(0)
@@ -209,10 +261,11 @@ def atomic_torch_save(obj: Any, path: str | os.PathLike) -> Path:
 def read_bytes(path: str | os.PathLike, what: str = "file", limit_name: str = "json_bytes",
                max_bytes: int | None = None) -> bytes:
     """The bytes of ``path``, refused (:class:`lfmbench.limits.LimitError`, naming it) above limit ``limit_name``
-    (or ``max_bytes``, a tighter bound the caller derives, e.g. from a manifest) before they are read.
-    ``OSError`` (missing, unreadable) propagates."""
+    (or ``max_bytes``, a tighter bound the caller derives, e.g. from a manifest) before they are read; a path
+    that is not a regular file is a :class:`NotRegularFileError` (:func:`open_regular`). ``OSError`` (missing,
+    unreadable) propagates."""
     cap = limit(limit_name) if max_bytes is None else min(max_bytes, limit(limit_name))
-    with open(path, "rb") as fh:
+    with open_regular(path, what) as fh:
         size = os.fstat(fh.fileno()).st_size
         if size > cap:
             raise LimitError(str(path), f"{what} of {size:,} bytes", size, limit_name)
