@@ -306,6 +306,7 @@ def leaderboard_rows(runs: list[dict], sort_by: str | None = None, *, ci: bool =
                "ms_per_megapixel": num(r["runtime"].get("ms_per_megapixel")),
                "params": r["method"].get("params"), "macs_per_megapixel": r["method"].get("macs_per_megapixel"),
                "scenes": agg.get("scenes", 0), "failed": agg.get("scenes_failed", 0), "status": r.get("status"),
+               "checkpoint_sha256": _checkpoint_sha(r),
                "n_scenes": len(scenes), "ci": {}, "_scenes": scenes}
         for k in REGISTRY:
             if scenes and any(k in s["metrics"] for s in scenes):
@@ -331,6 +332,14 @@ def leaderboard_rows(runs: list[dict], sort_by: str | None = None, *, ci: bool =
     if all(a in REGISTRY for a in PARETO_AXES):
         _pareto(rows, PARETO_AXES)
     return rows
+
+
+def _checkpoint_sha(run: dict) -> str | None:
+    """The content SHA-256 of the weights a run's method used (``method.checkpoint``, recorded by the evaluation
+    for checkpoint-backed methods), or None."""
+    ck = run["method"].get("checkpoint")
+    sha = ck.get("content_sha256") if isinstance(ck, dict) else None
+    return sha if isinstance(sha, str) else None
 
 
 def _compare_with_best(rows: list[dict], sort_by: str) -> None:
@@ -442,6 +451,10 @@ def leaderboard_markdown(rows: list[dict], sort_by: str | None = None) -> str:
                 lines.append(f"| `{r['method']}` | " + " | ".join(
                     f"{_fmt(c[lab]['value'], nd)} {_ci(c[lab]['ci'], nd)} ({c[lab]['n']})" if lab in c else "-"
                     for lab in labels) + " |")
+    weights = [r for r in rows if r.get("checkpoint_sha256")]
+    if weights:
+        lines += ["", "Weights (content SHA-256 of each checkpoint, verified when it was loaded): " + "; ".join(
+            f"`{r['method']}` {r['checkpoint_sha256'][:12]}" for r in weights) + "."]
     devs = sorted({str(r["device"]) for r in rows})
     lines += ["", f"Device: {'; '.join(devs)}."]
     return "\n".join(lines) + "\n"

@@ -279,6 +279,7 @@ class _MethodRun:
                 pred = fn(dict(batch))
             sync(dev)
             call_ms = (time.perf_counter() - t0) * 1e3
+            self._record_checkpoint()
             pred = check_output(pred, gt)
         except CheckpointError:  # the method's weights file is bad input, not a scene failure: stop here
             raise
@@ -301,6 +302,14 @@ class _MethodRun:
                     self._time(batch, call_ms, gt)
         self.result["aggregate"] = aggregate(self.result["scenes"])
         self.write()
+
+    def _record_checkpoint(self) -> None:
+        """``method.checkpoint``: path and SHA-256 (content, file) of the weights a checkpoint-backed method ran
+        with (verified when loaded); a result names the weights its numbers come from."""
+        prov = getattr(self.fn, "checkpoint_provenance", None)
+        rec = prov() if callable(prov) else None
+        if rec is not None:
+            self.result["method"]["checkpoint"] = rec
 
     def _time(self, batch: dict, call_ms: float, gt: torch.Tensor) -> None:
         fn, res = self.fn, self.result

@@ -1,0 +1,189 @@
+"""Hostile and unlucky input, third round (issue 42; docs/guide/fault-catalogue.md): checkpoints whose weights
+changed, sizes a file can claim, special files where a file is read, read-only corpora, two writers of one output,
+a DRJIT_LIBLLVM_PATH that does not work, errors of DataLoader workers, the leaderboard at sweep scale.
+
+Tiny generated files only; a case that could take the machine down runs in a subprocess under ``RLIMIT_AS``.
+"""
+from __future__ import annotations
+
+import json
+import os
+import random
+import socket
+import stat
+import subprocess
+import sys
+import textwrap
+import time
+import zipfile
+from pathlib import Path
+
+import pytest
+import torch
+from typer.testing import CliRunner
+
+from lfmbench import fileio
+from lfmbench.cli import app
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def _one_line(r, code=2):
+    """A refused CLI run: exit ``code``, no traceback, one error line (rich may wrap it: joined)."""
+    assert r.exit_code == code, r.output
+    assert "Traceback" not in r.output, r.output
+    return " ".join(r.output.split())
+
+
+def _flip_tensor_byte(path: Path, entry_suffix: str = "data/0", at: int = 5) -> None:
+    """Change one byte of the first stored tensor of a torch zip checkpoint in place (a bit rot on disk)."""
+    with zipfile.ZipFile(path) as z:
+        info = next(i for i in z.infolist() if i.filename.endswith(entry_suffix))
+    raw = bytearray(path.read_bytes())
+    off = info.header_offset
+    name_len, extra_len = int.from_bytes(raw[off + 26:off + 28], "little"), int.from_bytes(raw[off + 28:off + 30],
+                                                                                            "little")
+    data = off + 30 + name_len + extra_len
+    raw[data + at] ^= 0x40
+    path.write_bytes(bytes(raw))
+
+
+# ------------------------------------------------------------------------- 1. integrity of checkpoints
+def test_a_changed_weight_is_refused_naming_the_file(tmp_path, monkeypatch):
+    from lfmbench.baselines import learned
+    from lfmbench.baselines.checkpoint import CheckpointError, content_sha256
+    from tests.data.corpus.data import make_corpus
+
+    torch.manual_seed(0)
+    net = learned.LearnedFusion(4)
+    path = learned.save_checkpoint(net, tmp_path / "w.pt")
+    ck = learned.read_checkpoint(path)
+    assert ck["content_sha256"] == content_sha256(ck) and ck["_content_verified"]
+    # the same content on another device or after a round trip: the same hash; one changed value: another
+    moved = {k: (v.double().float() if isinstance(v, torch.Tensor) else v) for k, v in ck.items()}
+    assert content_sha256(moved) == ck["content_sha256"]
+    sd = {k: v.clone() for k, v in ck["state_dict"].items()}
+    first = next(iter(sd))
+    sd[first].view(-1)[0] += 1e-7
+    assert content_sha256({**ck, "state_dict": sd}) != ck["content_sha256"]
+
+    _flip_tensor_byte(path)
+    with pytest.raises(CheckpointError, match=r"w\.pt: content does not match its content_sha256"):
+        learned.load_checkpoint(path)
+    # the CLI: one line, exit 2, no result file (it scored 0.434 instead of 0.960 with exit 0)
+    monkeypatch.chdir(tmp_path)
+    root = make_corpus(tmp_path / "c", n_scenes=1)
+    monkeypatch.setenv(learned.CHECKPOINT_ENV, str(path))
+    r = CliRunner().invoke(app, ["evaluate", "--method", "learned", "--corpus", str(root), "--split", "all",
+                                 "--repeats", "1", "--warmup", "0", "--no-perceptual", "-o", str(tmp_path / "r.json")])
+    out = _one_line(r)
+    assert "w.pt" in out and "does not match" in out and not (tmp_path / "r.json").exists()
+
+
+def test_the_result_records_the_checkpoint_hash_and_the_leaderboard_shows_it(tmp_path, monkeypatch):
+    from lfmbench.baselines import learned
+    from tests.data.corpus.data import make_corpus
+
+    torch.manual_seed(0)
+    path = learned.save_checkpoint(learned.LearnedFusion(4), tmp_path / "w.pt")
+    sha = learned.read_checkpoint(path)["content_sha256"]
+    root = make_corpus(tmp_path / "c", n_scenes=1)
+    monkeypatch.setenv(learned.CHECKPOINT_ENV, str(path))
+    base = ["--corpus", str(root), "--split", "all", "--repeats", "1", "--warmup", "0", "--no-perceptual"]
+    r = CliRunner().invoke(app, ["evaluate", "--method", "learned", *base, "-o", str(tmp_path / "r.json")])
+    assert r.exit_code == 0, r.output
+    ck = json.loads((tmp_path / "r.json").read_text())["method"]["checkpoint"]
+    import hashlib
+
+    assert ck["content_sha256"] == sha and ck["verified"] is True
+    assert ck["file_sha256"] == hashlib.sha256(path.read_bytes()).hexdigest()
+    other = json.loads((tmp_path / "r.json").read_text())  # the same numbers from a method without weights
+    del other["method"]["checkpoint"]
+    other["method"]["spec"] = "lpd_only"
+    (tmp_path / "l.json").write_text(json.dumps(other))
+    lb = tmp_path / "lb.json"
+    r = CliRunner().invoke(app, ["leaderboard", str(tmp_path / "r.json"), str(tmp_path / "l.json"), "--json", str(lb),
+                                 "--markdown", str(tmp_path / "lb.md"), "--plot", str(tmp_path / "lb.png")])
+    assert r.exit_code == 0, r.output
+    rows = {row["method"]: row for row in json.loads(lb.read_text())["rows"]}
+    assert rows["learned"]["checkpoint_sha256"] == sha and rows["lpd_only"]["checkpoint_sha256"] is None
+    assert sha[:12] in (tmp_path / "lb.md").read_text()
+
+
+def test_an_old_checkpoint_without_hash_loads_with_one_warning_and_can_be_sealed(tmp_path):
+    from lfmbench.baselines import learned
+    from lfmbench.baselines.checkpoint import UnverifiedCheckpointWarning, seal
+
+    net = learned.LearnedFusion(4)
+    old = tmp_path / "old.pt"
+    torch.save({"format_version": learned.FORMAT_VERSION, "width": 4, "state_dict": net.state_dict()}, old)
+    with pytest.warns(UnverifiedCheckpointWarning, match="old.pt: no content_sha256"):
+        m = learned.load_checkpoint(old)
+    assert m.content_verified is False
+    sha = seal(old)
+    assert learned.read_checkpoint(old)["_content_verified"] and learned.read_checkpoint(old)["content_sha256"] == sha
+    _flip_tensor_byte(old)
+    with pytest.raises(ValueError, match="does not match"):  # a damaged file is never sealed
+        seal(old)
+
+
+# ------------------------------------------------------------------------ 3. no hang on special files
+def _fifo(path: Path) -> Path:
+    if path.exists():
+        path.unlink()
+    os.mkfifo(path)
+    return path
+
+
+def test_readers_refuse_a_fifo_at_once(tmp_path):
+    from lfmbench.baselines.checkpoint import CheckpointError, read_weights
+    from lfmbench.corpus.errors import CorpusFileError
+    from lfmbench.corpus.exr import read_exr
+    from lfmbench.corpus.meta import sha256_file
+
+    t0 = time.monotonic()
+    f = _fifo(tmp_path / "pipe")
+    with pytest.raises(fileio.NotRegularFileError, match="pipe: JSON file is a FIFO"):
+        fileio.load_json(f)
+    with pytest.raises(ValueError, match="pipe: YAML file is a FIFO"):
+        fileio.load_yaml(f)
+    with pytest.raises(OSError, match="is a FIFO"):
+        sha256_file(f)
+    with pytest.raises(CorpusFileError, match="pipe: EXR file is a FIFO"):
+        read_exr(f)
+    with pytest.raises(CheckpointError, match="pipe: checkpoint is a FIFO"):
+        read_weights(f)
+    with pytest.raises(fileio.NotRegularFileError, match="is a character device"):
+        fileio.read_bytes("/dev/zero")
+    with pytest.raises(fileio.NotRegularFileError, match="is a directory"):
+        fileio.read_bytes(tmp_path)
+    sock = socket.socket(socket.AF_UNIX)
+    sock.bind(str(tmp_path / "s"))
+    try:
+        with pytest.raises(OSError):  # a socket cannot even be opened; never read
+            fileio.read_bytes(tmp_path / "s")
+    finally:
+        sock.close()
+    link = tmp_path / "link.json"  # a link is resolved first: a link to a FIFO is a FIFO
+    link.symlink_to(f)
+    with pytest.raises(fileio.NotRegularFileError, match="is a FIFO"):
+        fileio.load_json(link)
+    assert time.monotonic() - t0 < 5
+
+
+def test_a_fifo_in_the_corpus_or_as_config_is_one_line_not_a_hang(tmp_path):
+    from tests.data.corpus.data import make_corpus
+
+    root = make_corpus(tmp_path / "c", n_scenes=1)
+    man = json.loads((root / "manifest.json").read_text())
+    _fifo(root / next(k for k in man["files"] if k.endswith(".exr")))
+    t0 = time.monotonic()
+    r = CliRunner().invoke(app, ["evaluate", "--method", "lpd_only", "--corpus", str(root), "--split", "all",
+                                 "--repeats", "1", "--warmup", "0", "--no-perceptual", "-o", str(tmp_path / "r.json")])
+    out = _one_line(r, 1)  # the data source failed: exit 1, partial result written
+    assert "is a FIFO" in out and ".exr" in out
+    r = CliRunner().invoke(app, ["train", "--corpus", str(root), "--config", str(_fifo(tmp_path / "cfg.yaml")),
+                                 "--out", str(tmp_path / "w.pt")])
+    out = _one_line(r)
+    assert "cfg.yaml" in out and "FIFO" in out
+    assert time.monotonic() - t0 < 30
