@@ -187,3 +187,43 @@ def test_a_fifo_in_the_corpus_or_as_config_is_one_line_not_a_hang(tmp_path):
     out = _one_line(r)
     assert "cfg.yaml" in out and "FIFO" in out
     assert time.monotonic() - t0 < 30
+
+
+# ------------------------------------------------------------------------ 5. one writer per output
+def test_a_second_writer_of_one_output_is_refused_and_a_stale_lock_taken_over(tmp_path):
+    from tests.data.corpus.data import make_corpus
+
+    root = make_corpus(tmp_path / "c", n_scenes=1)
+    out = tmp_path / "w.pt"
+    held = fileio.OutputLock(out, "--out")  # another training holds --out (flock: per open file, so also here)
+    assert (tmp_path / ".w.pt.lock").read_text().startswith(f"pid {os.getpid()} host ")
+    r = CliRunner().invoke(app, ["train", "--method", "learned", "--corpus", str(root), "--out", str(out),
+                                 "--epochs", "1"])
+    msg = _one_line(r)
+    assert "--out" in msg and "w.pt is being written by another lfmbench process" in msg and not out.exists()
+    res = tmp_path / "r.json"
+    with fileio.OutputLock(res, "--output"):
+        r = CliRunner().invoke(app, ["evaluate", "--method", "lpd_only", "--corpus", str(root), "--split", "all",
+                                     "--output", str(res)])
+        assert "--output" in _one_line(r) and not res.exists()
+    assert not (tmp_path / ".r.json.lock").exists()  # removed on release
+    held.release()
+    assert not (tmp_path / ".w.pt.lock").exists()
+    # a lock file left by a killed writer (no flock held, its pid gone) is taken over
+    (tmp_path / ".w.pt.lock").write_text("pid 999999999 host elsewhere\n")
+    with fileio.OutputLock(out, "--out") as lk:
+        assert lk.fd is not None
+    # /dev/null is written in place and never locked
+    assert fileio.OutputLock("/dev/null").lock is None
+    # the "saved" line is read back from the file: its parameters and content hash are what the file holds
+    from lfmbench.baselines import learned
+
+    cfg = tmp_path / "cfg.yaml"
+    cfg.write_text("model:\n  width: 4\ntrain:\n  epochs: 1\n  batch_size: 1\n  samples_per_scene: 1\n  crop: 8\n"
+                   "  workers: 0\n  split: all\n")
+    r = CliRunner().invoke(app, ["train", "--method", "learned", "--corpus", str(root), "--config", str(cfg),
+                                 "--out", str(out), "--no-resume"])
+    assert r.exit_code == 0, r.output
+    ck = learned.read_checkpoint(out)
+    n = sum(v.numel() for v in ck["state_dict"].values())
+    assert f"{n:,} parameters" in r.output and f"weights sha256 {ck['content_sha256'][:12]}" in r.output

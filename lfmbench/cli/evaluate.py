@@ -8,7 +8,7 @@ from pathlib import Path
 
 import typer
 
-from lfmbench.cli._common import check_minima, fail, torch_setup
+from lfmbench.cli._common import check_minima, fail, lock_output, torch_setup
 from lfmbench.vocabulary import CLASSIC_BASELINES, LEARNED_BASELINES, PLAN_BASELINES
 
 __all__ = ["register", "evaluate_cmd", "leaderboard_cmd"]
@@ -71,6 +71,7 @@ def evaluate_cmd(
     why = writable_error(out)  # an unwritable --output is found before any work is done (the writer's own rule)
     if why is not None:
         fail(f"--output {out}: cannot write the result file there ({why})")
+    lock_output(out, "--output")  # one evaluation per result file
     from lfmbench.baselines import MethodNotFoundError, get_method
     from lfmbench.baselines.checkpoint import CheckpointError
     from lfmbench.isp import load_pipeline
