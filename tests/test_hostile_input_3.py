@@ -227,3 +227,54 @@ def test_a_second_writer_of_one_output_is_refused_and_a_stale_lock_taken_over(tm
     ck = learned.read_checkpoint(out)
     n = sum(v.numel() for v in ck["state_dict"].values())
     assert f"{n:,} parameters" in r.output and f"weights sha256 {ck['content_sha256'][:12]}" in r.output
+
+
+# ------------------------------------------------------------------------ 4. read-only corpora
+def _unprivileged():
+    """How to run a command that file permissions bind: as is for a user other than root; as root, under
+    ``setpriv`` with every capability dropped (root without CAP_DAC_OVERRIDE obeys permission bits like any
+    user; a uid like 65534 cannot run the interpreter where it lives under /root). None: neither is possible."""
+    if os.getuid() != 0:
+        return []
+    import shutil
+
+    if shutil.which("setpriv") is None:
+        return None
+    probe = subprocess.run(["setpriv", "--bounding-set=-all", "--inh-caps=-all", sys.executable, "-c",
+                            "import os, sys, tempfile\nd = tempfile.mkdtemp(); os.chmod(d, 0o555)\n"
+                            "try:\n open(os.path.join(d, 'x'), 'w')\nexcept PermissionError:\n sys.exit(0)\n"
+                            "sys.exit(1)"], capture_output=True)
+    return ["setpriv", "--bounding-set=-all", "--inh-caps=-all"] if probe.returncode == 0 else None
+
+
+@pytest.mark.slow
+def test_every_command_that_reads_a_corpus_works_on_a_read_only_one(tmp_path):
+    from tests.data.corpus.data import make_corpus
+
+    wrap = _unprivileged()
+    if wrap is None:
+        pytest.skip("running as root without setpriv: permission bits do not bind here")
+    root = make_corpus(tmp_path / "c", n_scenes=1)
+    (tmp_path / "cache").mkdir()
+    before = sorted((str(p.relative_to(root)), p.stat().st_mtime_ns) for p in root.rglob("*"))
+    for p in [root, *root.rglob("*")]:
+        p.chmod(p.stat().st_mode & ~0o222)
+    env = dict(os.environ, PYTHONPATH=str(REPO), HOME=str(tmp_path / "nohome"), XDG_CACHE_HOME=str(tmp_path / "nohome"))
+
+    def run(*args):
+        return subprocess.run([*wrap, sys.executable, "-m", "lfmbench.cli", *args], env=env, capture_output=True,
+                              text=True, timeout=300, cwd=tmp_path)
+
+    try:
+        r = run("evaluate", "--method", "lpd_only", "--corpus", str(root), "--split", "test", "--cache-dir",
+                str(tmp_path / "cache"), "-o", str(tmp_path / "r.json"), "--no-perceptual", "--repeats", "1",
+                "--warmup", "0")
+        assert r.returncode == 0 and "Traceback" not in r.stderr, r.stderr[-3000:]
+        assert json.loads((tmp_path / "r.json").read_text())["corpus"]["test_draws_sha256"]
+        assert list((tmp_path / "cache" / "test_params").glob("*.json"))  # the frozen draws kept there
+        r = run("validate", str(root))
+        assert r.returncode == 0 and "Traceback" not in r.stderr, r.stdout[-2000:] + r.stderr[-2000:]
+        assert sorted((str(p.relative_to(root)), p.stat().st_mtime_ns) for p in root.rglob("*")) == before
+    finally:
+        for p in [root, *root.rglob("*")]:
+            p.chmod(p.stat().st_mode | 0o200)

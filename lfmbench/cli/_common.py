@@ -37,16 +37,14 @@ def torch_setup(device: str, threads: int | None) -> None:
         fail(str(exc))
 
 
-def lock_output(path, option: str) -> None:
+def lock_output(ctx: typer.Context, path, option: str) -> None:
     """Take the one-writer lock of the output file ``path`` (:class:`lfmbench.fileio.OutputLock`) for the rest of
-    the running command (released when its click context closes, however it ends); another process writing it:
+    the running command (released when its context ``ctx`` closes, however it ends); another process writing it:
     one line naming ``option`` and the holder, exit 2."""
-    import click  # noqa: PLC0415
-
     from lfmbench.fileio import OutputLock, OutputLockedError  # noqa: PLC0415
 
     try:
         lock = OutputLock(path, option)
     except OutputLockedError as exc:
         fail(str(exc))
-    click.get_current_context().call_on_close(lock.release)
+    ctx.call_on_close(lock.release)

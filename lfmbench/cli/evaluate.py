@@ -15,6 +15,7 @@ __all__ = ["register", "evaluate_cmd", "leaderboard_cmd"]
 
 
 def evaluate_cmd(
+    ctx: typer.Context,
     method: str = typer.Option(..., "--method", "-m",
                                help=f"a baseline ({', '.join((*CLASSIC_BASELINES, *LEARNED_BASELINES, *PLAN_BASELINES))}) or "
                                     "package.module:function"),
@@ -71,7 +72,7 @@ def evaluate_cmd(
     why = writable_error(out)  # an unwritable --output is found before any work is done (the writer's own rule)
     if why is not None:
         fail(f"--output {out}: cannot write the result file there ({why})")
-    lock_output(out, "--output")  # one evaluation per result file
+    lock_output(ctx, out, "--output")  # one evaluation per result file
     from lfmbench.baselines import MethodNotFoundError, get_method
     from lfmbench.baselines.checkpoint import CheckpointError
     from lfmbench.isp import load_pipeline
