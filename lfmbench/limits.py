@@ -16,11 +16,12 @@ Error messages quote at most :data:`QUOTE_CHARS` characters of a bad value (:fun
 from __future__ import annotations
 
 import os
+import re
 import reprlib
 from typing import Any
 
 __all__ = ["LIMITS", "LimitError", "limit", "limits_of", "set_limit", "parse_overrides", "brief", "QUOTE_CHARS", "ENV",
-           "lights_cap_message"]
+           "lights_cap_message", "one_line", "WORKER_DEATH_HINT"]
 
 #: name -> (default, what it bounds and why the default). Bytes are bytes of the file or of decoded pixels.
 LIMITS: dict[str, tuple[int, str]] = {
@@ -159,3 +160,40 @@ class _Brief(reprlib.Repr):
 _REPR = _Brief()
 _REPR.maxlevel, _REPR.maxlist, _REPR.maxtuple, _REPR.maxdict, _REPR.maxset = 3, 8, 8, 6, 8
 _REPR.maxstring, _REPR.maxlong, _REPR.maxother = QUOTE_CHARS, 40, QUOTE_CHARS
+
+
+#: What a user can do when a data-loader worker process died (appended to the one line that says so).
+WORKER_DEATH_HINT = ("a data-loader worker process died (the out-of-memory killer or a signal): use fewer --workers "
+                     "or a smaller batch or crop, or --workers 0 to see the error in this process")
+_WRAPPED = re.compile(r"^Caught (\w+) in (DataLoader worker process \d+|pin memory thread[^.]*)\.", re.M)
+_EXC_LINE = re.compile(r"^([A-Za-z_][\w.]*(?:Error|Exception|Warning|Exit|Interrupt)): ?(.*)$")
+
+
+def one_line(text: str) -> str:
+    """The one line a user sees for an error message ``text`` (the ``str`` of an exception).
+
+    - An exception re-raised by a torch ``DataLoader`` from a worker process ("Caught CorpusFileError in DataLoader
+      worker process 0. Original Traceback (most recent call last): ...") becomes its original message and where it
+      was caught: ``"<original message> (in DataLoader worker process 0)"``; the traceback is dropped (``--debug``
+      or ``LFMBENCH_DEBUG=1`` show it).
+    - A worker that died ("DataLoader worker (pid 123) is killed by signal: Killed.", "... exited unexpectedly")
+      gets :data:`WORKER_DEATH_HINT`.
+    - Any other text: its lines joined by " / ".
+
+    >>> one_line("Caught ValueError in DataLoader worker process 1.\\nOriginal Traceback (most recent call last):\\n"
+    ...          '  File "x.py", line 3, in f\\n    raise ValueError("a.exr: bad")\\nValueError: a.exr: bad\\n')
+    'a.exr: bad (in DataLoader worker process 1)'
+    """
+    m = _WRAPPED.search(text)
+    if m is not None:
+        lines = text[m.end():].splitlines()
+        for i in range(len(lines) - 1, -1, -1):
+            e = _EXC_LINE.match(lines[i])
+            if e is not None:
+                msg = " ".join([e.group(2), *[ln.strip() for ln in lines[i + 1:] if ln.strip()]]).strip()
+                return f"{one_line(msg) if msg else e.group(1)} (in {m.group(2)})"
+        return f"{m.group(1)} in {m.group(2)}"
+    if "DataLoader worker" in text and ("killed by signal" in text or "exited unexpectedly" in text):
+        first = text.strip().splitlines()[0].rstrip(". ") if text.strip() else text
+        return f"{first}: {WORKER_DEATH_HINT}"
+    return " / ".join(ln.strip() for ln in text.splitlines() if ln.strip())

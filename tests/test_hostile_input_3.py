@@ -278,3 +278,73 @@ def test_every_command_that_reads_a_corpus_works_on_a_read_only_one(tmp_path):
     finally:
         for p in [root, *root.rglob("*")]:
             p.chmod(p.stat().st_mode | 0o200)
+
+
+# ------------------------------------------------------------------------ 7. one line per failure
+class _RaisingData(torch.utils.data.Dataset):
+    def __len__(self):
+        return 4
+
+    def __getitem__(self, i):
+        from lfmbench.corpus.errors import CorpusFileError
+
+        raise CorpusFileError(f"EXR file /data/c/scenes/s{i}/f000/static.exr is truncated or corrupt")
+
+
+class _DyingData(torch.utils.data.Dataset):
+    def __len__(self):
+        return 4
+
+    def __getitem__(self, i):
+        import signal
+
+        os.kill(os.getpid(), signal.SIGKILL)  # what the out-of-memory killer does
+
+
+def _fake_train(dataset):
+    def train(*a, **k):
+        for _ in torch.utils.data.DataLoader(dataset, num_workers=1, batch_size=1):
+            pass
+    return train
+
+
+@pytest.mark.parametrize("data, code, want", [
+    (_RaisingData(), 2, "error: EXR file /data/c/scenes/s0/f000/static.exr is truncated or corrupt (in DataLoader "
+                        "worker process 0)"),
+    (_DyingData(), 1, "DataLoader worker (pid"),
+])
+def test_dataloader_worker_errors_and_deaths_are_one_line(tmp_path, monkeypatch, data, code, want):
+    import lfmbench.train as T
+    from lfmbench.limits import WORKER_DEATH_HINT
+    from tests.data.corpus.data import make_corpus
+
+    root = make_corpus(tmp_path / "c", n_scenes=1)
+    monkeypatch.setattr(T, "train", _fake_train(data))
+    args = ["train", "--method", "learned", "--corpus", str(root), "--out", str(tmp_path / "w.pt")]
+    r = CliRunner().invoke(app, args)
+    assert r.exit_code == code, r.output
+    lines = [ln for ln in r.output.splitlines() if ln.strip()]
+    assert len(" ".join(lines)) < 400 and "Traceback" not in r.output and "Original" not in r.output, r.output
+    assert want in " ".join(r.output.split()), r.output
+    if code == 1:  # (torch notices a dead worker within its 5 s status interval: not run twice)
+        assert WORKER_DEATH_HINT in " ".join(r.output.split())
+        return
+    monkeypatch.setenv("LFMBENCH_DEBUG", "1")  # the traceback behind the line, on request
+    r = CliRunner().invoke(app, args)
+    assert r.exit_code == code and "Traceback" in r.output
+
+
+def test_an_unexpected_exception_is_one_line_naming_its_type(monkeypatch, tmp_path):
+    import lfmbench.train as T
+    from tests.data.corpus.data import make_corpus
+
+    root = make_corpus(tmp_path / "c", n_scenes=1)
+
+    def boom(*a, **k):
+        raise ZeroDivisionError("division by zero\nsecond line")
+
+    monkeypatch.setattr(T, "train", boom)
+    r = CliRunner().invoke(app, ["train", "--method", "learned", "--corpus", str(root), "--out", str(tmp_path / "w")])
+    assert r.exit_code == 1 and "Traceback" not in r.output
+    out = " ".join(r.output.split())
+    assert "error: ZeroDivisionError: division by zero / second line (unexpected: `lfmbench --debug" in out

@@ -9,8 +9,11 @@ __all__ = ["fail", "check_minima", "torch_setup", "lock_output"]
 
 
 def fail(msg: str, code: int = 2) -> None:
-    """Print ``error: msg`` to stderr and end the command with ``code`` (no traceback)."""
-    typer.secho(f"error: {msg}", fg=typer.colors.RED, err=True)
+    """Print ``error: msg`` to stderr and end the command with ``code`` (no traceback). ``msg`` is made one line
+    (:func:`lfmbench.limits.one_line`: an error re-raised from a DataLoader worker is its original message)."""
+    from lfmbench.limits import one_line  # noqa: PLC0415
+
+    typer.secho(f"error: {one_line(str(msg))}", fg=typer.colors.RED, err=True)
     raise typer.Exit(code)
 
 

@@ -337,12 +337,15 @@ def _run_batches(runs: list[_MethodRun], source, dev, scene_conditions: Callable
         except StopIteration:
             break
         except Exception as exc:  # the data source failed (corrupt file ...): save what we have, then stop
+            from lfmbench.limits import one_line  # noqa: PLC0415 - a DataLoader worker's error: its own message
+
+            why = f"{type(exc).__name__}: {one_line(str(exc))}"
             for r in runs:
                 r.result["status"] = "failed"
-                r.result["notes"].append(f"data source failed after {n_batches} batches: {type(exc).__name__}: {exc}")
+                r.result["notes"].append(f"data source failed after {n_batches} batches: {why}")
                 r.result["aggregate"] = aggregate(r.result["scenes"])
                 r.write()
-            raise DataSourceError(f"reading batch {n_batches} failed: {type(exc).__name__}: {exc}") from exc
+            raise DataSourceError(f"reading batch {n_batches} failed: {why}") from exc
         n_batches += 1
         batch = _to(batch, dev)
         if "gt" not in batch:
