@@ -348,3 +348,25 @@ def test_an_unexpected_exception_is_one_line_naming_its_type(monkeypatch, tmp_pa
     assert r.exit_code == 1 and "Traceback" not in r.output
     out = " ".join(r.output.split())
     assert "error: ZeroDivisionError: division by zero / second line (unexpected: `lfmbench --debug" in out
+
+
+# ------------------------------------------------------------------------ 6. the user's DRJIT_LIBLLVM_PATH
+@pytest.mark.jit
+@pytest.mark.slow
+@pytest.mark.parametrize("bad", ["missing", "not_llvm"])
+def test_a_drjit_libllvm_path_that_does_not_work_is_named_and_the_working_one_used(tmp_path, bad):
+    """With DRJIT_LIBLLVM_PATH naming a missing file or a library that is not LLVM, a fresh process renders with
+    the libLLVM the probe finds (every scene failed with "install libllvm19 and set DRJIT_LIBLLVM_PATH"), and
+    says so in one warning line naming the variable, its value and the library used."""
+    path = tmp_path / "libLLVM.so.19.1"
+    if bad == "not_llvm":
+        path.write_bytes(b"\x7fELF" + b"\0" * 60)  # a file, not a library Dr.Jit can use
+    code = ("import warnings\nwarnings.formatwarning = lambda m, *a, **k: f'warning: {m}\\n'\n"
+            "from render_tools import backend\nprint(backend.select_variant())\n")
+    env = dict(os.environ, PYTHONPATH=str(REPO), DRJIT_LIBLLVM_PATH=str(path), LFMBENCH_VARIANT="cpu")
+    r = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert r.stdout.split()[-1] == "llvm_ad_spectral", r.stdout + r.stderr[-2000:]
+    warn = [ln for ln in r.stderr.splitlines() if ln.startswith("warning:")]
+    assert len(warn) == 1 and f"DRJIT_LIBLLVM_PATH={path} does not work" in warn[0] and "using /" in warn[0], r.stderr
+    assert ("no such file" if bad == "missing" else "probe render with it failed") in warn[0]

@@ -92,6 +92,10 @@ def _root(ctx: typer.Context, limit: Optional[List[str]] = typer.Option(
     from lfmbench import limits  # noqa: PLC0415
 
     ctx.meta[DEBUG_KEY] = debug
+    if not _debug(ctx):  # a warning is one line ("warning: ..."), not file:line and the source line
+        import warnings  # noqa: PLC0415
+
+        warnings.formatwarning = lambda message, *a, **k: f"warning: {message}\n"
 
     try:
         env = limits.parse_overrides(os.environ.get(limits.ENV, ""))
