@@ -95,7 +95,9 @@ def _root(ctx: typer.Context, limit: Optional[List[str]] = typer.Option(
     if not _debug(ctx):  # a warning is one line ("warning: ..."), not file:line and the source line
         import warnings  # noqa: PLC0415
 
+        before = warnings.formatwarning
         warnings.formatwarning = lambda message, *a, **k: f"warning: {message}\n"
+        ctx.call_on_close(lambda: setattr(warnings, "formatwarning", before))  # an embedding program keeps its own
 
     try:
         env = limits.parse_overrides(os.environ.get(limits.ENV, ""))
