@@ -370,3 +370,39 @@ def test_a_drjit_libllvm_path_that_does_not_work_is_named_and_the_working_one_us
     warn = [ln for ln in r.stderr.splitlines() if ln.startswith("warning:")]
     assert len(warn) == 1 and f"DRJIT_LIBLLVM_PATH={path} does not work" in warn[0] and "using /" in warn[0], r.stderr
     assert ("no such file" if bad == "missing" else "probe render with it failed") in warn[0]
+
+
+# ------------------------------------------------------------------------ 8. ranking at sweep scale
+def test_pareto_front_sweep_equals_the_pairwise_definition_with_ties():
+    from lfmbench.evaluation.leaderboard import PARETO_AXES, _pareto, _pareto_pairwise
+
+    rng = random.Random(42)
+    for trial in range(300):
+        n = rng.randint(0, 40)
+        levels = rng.choice([3, 5, 50])  # few levels: many ties on one axis, on both, exact duplicates
+        rows = []
+        for _ in range(n):
+            v = [rng.randint(0, levels) / levels for _ in PARETO_AXES]
+            if rng.random() < 0.1:
+                v[rng.randrange(2)] = float("nan")
+            if rng.random() < 0.05:
+                v[rng.randrange(2)] = rng.choice([float("inf"), -float("inf")])
+            rows.append({PARETO_AXES[0]: v[0], PARETO_AXES[1]: v[1],
+                         "status": "complete" if rng.random() < 0.85 else "interrupted"})
+        want = _pareto_pairwise(rows, PARETO_AXES)
+        _pareto(rows, PARETO_AXES)
+        assert [r["pareto"] for r in rows] == [want[id(r)] for r in rows], (trial, rows)
+
+
+def test_pareto_front_of_20000_rows_is_fast():
+    import time as _t
+
+    from lfmbench.evaluation.leaderboard import PARETO_AXES, _pareto
+
+    rng = random.Random(1)
+    rows = [{PARETO_AXES[0]: rng.random(), PARETO_AXES[1]: rng.random() * 40, "status": "complete"}
+            for _ in range(20_000)]
+    t0 = _t.process_time()
+    _pareto(rows, PARETO_AXES)
+    assert _t.process_time() - t0 < 1.0  # the pairwise definition took minutes here
+    assert 1 <= sum(r["pareto"] for r in rows) < 100

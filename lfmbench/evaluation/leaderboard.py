@@ -255,22 +255,57 @@ def _check_sort_by(sort_by: str) -> Any:
 
 
 def _pareto(rows: list[dict], axes: tuple[str, str]) -> None:
-    """Mark ``row["pareto"]``: no other complete row is at least as good on both axes and better on one."""
+    """Mark ``row["pareto"]``: no other complete row is at least as good on both axes and better on one (None for
+    an incomplete row or one without both values).
+
+    O(n log n) (it was pairwise, O(n^2): 33 s of a 2,000-file leaderboard): the points (both axes oriented so that
+    larger is better) sorted by the first axis, best first, and swept in groups of equal first value; a point is
+    dominated exactly when a point of a strictly better group is at least as good on the second axis, or a point
+    of its own group is strictly better on it (equal points do not dominate each other).
+    """
+    from lfmbench.metrics import REGISTRY
+
+    sign = [1.0 if REGISTRY[a].higher_is_better else -1.0 for a in axes]
+    pts = []
+    for r in rows:
+        x, y = (s * num(r.get(a, float("nan"))) for s, a in zip(sign, axes))
+        if r["status"] != COMPLETE or math.isnan(x) or math.isnan(y):
+            r["pareto"] = None
+        else:
+            pts.append((x, y, r))
+    pts.sort(key=lambda p: -p[0])
+    best_before = None  # the best second value among strictly better first values (None: no such point)
+    i = 0
+    while i < len(pts):
+        j = i
+        while j < len(pts) and pts[j][0] == pts[i][0]:
+            j += 1
+        group_best = max(p[1] for p in pts[i:j])
+        for x, y, r in pts[i:j]:
+            r["pareto"] = not ((best_before is not None and best_before >= y) or group_best > y)
+        best_before = group_best if best_before is None else max(best_before, group_best)
+        i = j
+
+
+def _pareto_pairwise(rows: list[dict], axes: tuple[str, str]) -> dict[int, bool | None]:
+    """The definition of :func:`_pareto`, pairwise (O(n^2)): ``{id(row): on the front}`` (tests compare them)."""
     from lfmbench.metrics import REGISTRY
 
     sign = [1.0 if REGISTRY[a].higher_is_better else -1.0 for a in axes]
 
     def pt(r):
-        return [s * r.get(a, float("nan")) for s, a in zip(sign, axes)]
+        return [s * num(r.get(a, float("nan"))) for s, a in zip(sign, axes)]
 
+    out: dict[int, bool | None] = {}
     for r in rows:
         p = pt(r)
         if r["status"] != COMPLETE or any(math.isnan(x) for x in p):
-            r["pareto"] = None
+            out[id(r)] = None
             continue
-        r["pareto"] = not any(
+        out[id(r)] = not any(
             o is not r and o["status"] == COMPLETE and all(a >= b for a, b in zip(pt(o), p))
             and any(a > b for a, b in zip(pt(o), p)) for o in rows if not any(math.isnan(x) for x in pt(o)))
+    return out
 
 
 def leaderboard_rows(runs: list[dict], sort_by: str | None = None, *, ci: bool = True,
