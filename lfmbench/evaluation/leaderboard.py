@@ -308,8 +308,18 @@ def _pareto_pairwise(rows: list[dict], axes: tuple[str, str]) -> dict[int, bool 
     return out
 
 
+#: Rows (best first) the quality-vs-run-time plot shows with their own marker, CI bar and legend entry; the others
+#: are small grey points (a sweep's 10,000 legend entries took minutes to draw and could not be read).
+PLOT_LABELLED = 20
+#: Rows (best first) that get the bootstrap statistics (CIs, breakdown with CIs, the paired test against the
+#: best); a sweep of 10,000 results gets them for its best rows only (about 35 bootstraps of 10,000 resamples per
+#: row: seconds per row on 2 cores), every row its values, rank and Pareto flag. Leaderboards of up to this many
+#: results are computed exactly as before.
+STATS_ROWS = 100
+
+
 def leaderboard_rows(runs: list[dict], sort_by: str | None = None, *, ci: bool = True,
-                     conditions_file: str | Path | None = None) -> list[dict]:
+                     conditions_file: str | Path | None = None, stats_rows: int | None = None) -> list[dict]:
     """One row per run, ranked by ``sort_by`` (default the LED score; direction from the metric registry; missing
     values and incomplete runs last), with statistics.
 
@@ -317,7 +327,9 @@ def leaderboard_rows(runs: list[dict], sort_by: str | None = None, *, ci: bool =
     ``ci`` (metric -> [low, high], bootstrap over scenes, for the table metrics and ``sort_by``),
     ``n_scenes``, ``vs_best`` (the paired comparison with rank 1 on ``sort_by``: ``n``, ``mean_diff``, ``ci``,
     ``p`` (Wilcoxon), ``p_holm``; None for rank 1), ``pareto`` (on the front of :data:`PARETO_AXES`) and
-    ``breakdown`` (``sort_by`` by condition).
+    ``breakdown`` (``sort_by`` by condition). The bootstrap statistics (``ci``, the breakdown's CIs,
+    ``vs_best``; Holm over the rows compared) are computed for the first ``stats_rows`` rows of the ranking
+    (default :data:`STATS_ROWS`; None values and empty ``ci`` below them, ``stats`` False in the row).
     """
     from lfmbench.metrics import PRIMARY, REGISTRY, columns
 
@@ -345,13 +357,10 @@ def leaderboard_rows(runs: list[dict], sort_by: str | None = None, *, ci: bool =
                "n_scenes": len(scenes), "ci": {}, "_scenes": scenes}
         for k in REGISTRY:
             if scenes and any(k in s["metrics"] for s in scenes):
-                m = metric_summary(scenes, k, ci=ci and k in want_ci)
-                row[k] = m["value"]
-                if ci and k in want_ci:
-                    row["ci"][k] = m["ci"]
+                row[k] = metric_summary(scenes, k, ci=False)["value"]
             else:  # a hand-made or truncated result without sample records: its stored aggregate
                 row[k] = num(agg.get(k))
-        row["breakdown"] = breakdown(records, sort_by, bins, ci=ci) if records else {}
+        row["_records"] = records
         rows.append(row)
 
     def key(row):
@@ -361,8 +370,16 @@ def leaderboard_rows(runs: list[dict], sort_by: str | None = None, *, ci: bool =
         return (0, -v if spec.higher_is_better else v)
 
     rows.sort(key=lambda row: (row["status"] != COMPLETE, *key(row)))  # incomplete runs after complete ones
+    n_stats = STATS_ROWS if stats_rows is None else stats_rows
     for i, row in enumerate(rows):
         row["rank"] = i + 1
+        row["stats"] = i < n_stats
+        records, scenes = row.pop("_records"), row["_scenes"]
+        if ci and row["stats"]:  # the bootstrap CIs: the same calls as the values' (metric_summary with ci)
+            for k in (k for k in REGISTRY if k in want_ci):
+                if scenes and any(k in s["metrics"] for s in scenes):
+                    row["ci"][k] = metric_summary(scenes, k, ci=True)["ci"]
+        row["breakdown"] = breakdown(records, sort_by, bins, ci=ci and row["stats"]) if records else {}
     _compare_with_best(rows, sort_by)
     if all(a in REGISTRY for a in PARETO_AXES):
         _pareto(rows, PARETO_AXES)
@@ -386,6 +403,8 @@ def _compare_with_best(rows: list[dict], sort_by: str) -> None:
     best = {s["scene_id"]: num(s["metrics"].get(sort_by)) for s in rows[0]["_scenes"]}
     tested = []
     for r in rows[1:]:
+        if not r.get("stats", True):
+            continue
         mine = {s["scene_id"]: num(s["metrics"].get(sort_by)) for s in r["_scenes"]}
         common = [k for k in mine if k in best]
         if not common:
@@ -541,15 +560,21 @@ def plot_quality_vs_runtime(rows: list[dict], path: str | Path, metric: str | No
     metric = metric or PRIMARY
     fig, ax = plt.subplots(figsize=(7.6, 4.4), dpi=120)
     markers = "osD^vP*Xh<>p"
+    rest = []
     for i, r in enumerate(rows):
         x, y = r["ms_per_megapixel"], r[metric]
         if math.isnan(x) or math.isnan(y) or math.isinf(y) or x <= 0:
+            continue
+        if i >= PLOT_LABELLED:  # a sweep: the rest as small grey points, one artist for all of them
+            rest.append((x, y))
             continue
         lo, hi = (num(v) for v in (r.get("ci", {}).get(metric) or (float("nan"), float("nan"))))
         err = [[max(0.0, y - lo)], [max(0.0, hi - y)]] if math.isfinite(lo) and math.isfinite(hi) else None
         # a legend rather than text labels: methods of similar cost and quality overlap
         ax.errorbar([x], [y], yerr=err, fmt=markers[i % len(markers)], ms=6, capsize=3,
                     label=f"{r.get('rank', i + 1)}. {r['method']}")
+    if rest:
+        ax.scatter(*zip(*rest), s=4, c="0.6", zorder=0, label=f"{len(rest):,} more runs (ranks > {PLOT_LABELLED})")
     ax.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5), frameon=False)
     ax.set_xscale("log")
     ax.margins(x=0.25, y=0.1)
