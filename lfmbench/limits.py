@@ -45,6 +45,18 @@ LIMITS: dict[str, tuple[int, str]] = {
                                   "from what a file declares before its arrays are read; the meshes of a generated "
                                   "lfmbench-v2 scene hold about 1,600)"),
     "mesh_file_bytes": (256 << 20, "size of one user mesh file (OBJ, PLY, glTF/GLB) a scene file references"),
+    "psf_radius_px": (256, "optics.psf_radius_px of a sensor preset: the PSF kernel is (2R+1)^2 pixels, convolved "
+                           "with every band (the shipped presets use 8)"),
+    "psf_samples": (1 << 22, "samples of one band's PSF integration grid, ((2 psf_radius_px + 1) psf_oversample)^2 "
+                             "(float64, 32 MiB per band at the limit; the shipped presets use 34,969)"),
+    "spectral_file_bytes": (4 << 20, "size of a spectral CSV a sensor preset names (spectral.filters; the shipped "
+                                     "one is 25 KB)"),
+    "model_parameters": (100_000_000, "parameters of a network a config or checkpoint asks for, counted on "
+                                      "torch's meta device before any weight is allocated (the shipped U-Nets "
+                                      "have up to about 2 M)"),
+    "mat_bytes": (64 << 20, "decoded bytes of the arrays of an imported ISET-LFM .mat file beyond the two (H, W) "
+                            "maps its scene's EXR size justifies (MATLAB compresses arrays: a 1 MB file can hold "
+                            "1 GB)"),
 }
 
 #: Environment variable of explicit overrides: ``name=value`` pairs separated by commas.

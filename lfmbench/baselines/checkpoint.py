@@ -140,11 +140,29 @@ def read_trained_weights(path: str | os.PathLike, map_location: str | torch.devi
     return read_weights(path, map_location)
 
 
+def check_model_size(build: Callable[[], torch.nn.Module], source: str) -> int:
+    """The parameter count of ``build()`` built on torch's meta device (no weight allocated); above the limit
+    ``model_parameters`` a :class:`CheckpointError` naming ``source`` (a config or checkpoint asking for a network of
+    10^12 weights is refused before the allocator is asked). A build that fails on the meta device is left to the
+    real build to report. Returns the count (-1 when unknown)."""
+    from lfmbench.limits import LimitError, limit  # noqa: PLC0415
+
+    try:
+        with torch.device("meta"):
+            n = sum(p.numel() for p in build().parameters())
+    except (KeyError, RuntimeError, TypeError, ValueError, NotImplementedError):
+        return -1
+    if n > limit("model_parameters"):
+        raise CheckpointError(str(LimitError(source, "network (field 'model') of", n, "model_parameters")))
+    return n
+
+
 def build_from_state(path: str | os.PathLike, build: Callable[[], torch.nn.Module], state_dict: object,
                      what: str) -> torch.nn.Module:
     """``build()`` with the weights ``state_dict`` of the checkpoint ``path``, in eval mode; weights that do not fit
     the network (missing or unexpected keys, wrong shapes, a config it cannot build) are a :class:`CheckpointError`
     naming ``path`` and ``what`` they do not fit."""
+    check_model_size(build, f"checkpoint {path}")
     try:
         model = build()
         model.load_state_dict(state_dict)

@@ -61,7 +61,11 @@ def train_cmd(
     torch_setup(device, threads)
     try:
         cfg = load_config(method, config)
-    except ConfigError as exc:
+        from lfmbench.baselines.checkpoint import check_model_size  # noqa: PLC0415
+
+        spec = trainable(method)  # the network a config asks for is counted before anything is allocated
+        check_model_size(lambda: spec.build_model(cfg), str(config or spec.default_config))
+    except ValueError as exc:  # ConfigError, CheckpointError (above the limit model_parameters)
         fail(str(exc))
     out = out if out is not None else trainable(method).default_checkpoint
     if out.is_dir():
