@@ -406,3 +406,94 @@ def test_pareto_front_of_20000_rows_is_fast():
     _pareto(rows, PARETO_AXES)
     assert _t.process_time() - t0 < 1.0  # the pairwise definition took minutes here
     assert 1 <= sum(r["pareto"] for r in rows) < 100
+
+
+# ------------------------------------------------------------------------ 2. memory a file can claim
+def _mat_bomb(path: Path, n_doubles: int, name: bytes = b"depthMap") -> None:
+    """A valid MATLAB v5 .mat file holding one compressed (n, 1) float64 array of zeros, written in time and memory
+    of the file's size (about n / 1,000 bytes): deflate blocks of 1 MiB of zeros, each after a full flush, are
+    identical, so one is repeated; the Adler-32 of the zeros is computed, not summed."""
+    import struct
+    import zlib
+
+    body = (struct.pack("<IIII", 6, 8, 6, 0) + struct.pack("<IIii", 5, 8, n_doubles, 1)
+            + struct.pack("<II", 1, len(name)) + name.ljust(8, b"\0") + struct.pack("<II", 9, n_doubles * 8))
+    head = struct.pack("<II", 14, len(body) + n_doubles * 8) + body
+    chunk = 1 << 20
+    c = zlib.compressobj(9)
+    first = c.compress(head) + c.flush(zlib.Z_FULL_FLUSH)
+    block = c.compress(bytes(chunk)) + c.flush(zlib.Z_FULL_FLUSH)
+    a = zlib.adler32(head)
+    lo, hi = a & 0xFFFF, ((a >> 16) + n_doubles * 8 * (a & 0xFFFF)) % 65521  # zeros: a fixed, b += a per byte
+    comp = first + block * (n_doubles * 8 // chunk) + c.flush(zlib.Z_FINISH)[:-4] + struct.pack(">I", hi << 16 | lo)
+    hdr = b"MATLAB 5.0 MAT-file, zlib bomb".ljust(116, b" ") + bytes(8) + b"\x00\x01IM"
+    path.write_bytes(hdr + struct.pack("<II", 15, len(comp)) + comp)
+
+
+def test_a_small_mat_file_claiming_a_gigabyte_is_refused_within_a_memory_bound(tmp_path):
+    """A 1 MB ``<SceneID>_lf.mat`` whose compressed array decodes to 1 GiB: the importer counts what it decodes to
+    before ``loadmat`` allocates (it peaked at 1.45 GB); the bound is enforced: the import runs under RLIMIT_AS of
+    768 MiB, where loading the array would fail with MemoryError instead of the one line."""
+    import scipy.io
+
+    from lfmbench.corpus import isetlfm as I
+    from tests.corpus.test_isetlfm import make_iset_scene
+
+    small = tmp_path / "small.mat"  # the generator writes what loadmat reads
+    _mat_bomb(small, 1 << 17)
+    assert scipy.io.loadmat(str(small))["depthMap"].shape == (1 << 17, 1)
+    assert I.mat_decoded_bytes(small, 1 << 30) >= 8 << 17
+    src = tmp_path / "iset"
+    make_iset_scene(src, "s1", groups=("skymap",), frames=1)
+    mat = src / "s1" / "s1_lf.mat"
+    _mat_bomb(mat, 1 << 27)  # 1 GiB of float64 zeros
+    assert mat.stat().st_size < 1_100_000
+    code = textwrap.dedent(f"""
+        import resource, sys
+        resource.setrlimit(resource.RLIMIT_AS, (768 << 20, 768 << 20))
+        sys.argv = ["lfmbench", "import-isetlfm", {str(src)!r}, {str(tmp_path / "c")!r}]
+        from lfmbench.cli import app
+        app()
+    """)
+    t0 = time.monotonic()
+    r = subprocess.run([sys.executable, "-c", code], env=dict(os.environ, PYTHONPATH=str(REPO)), capture_output=True,
+                       text=True, timeout=120)
+    assert r.returncode == 2, r.stdout + r.stderr[-3000:]
+    err = " ".join(r.stderr.split())
+    assert "s1_lf.mat" in err and "mat_bytes" in err and "Traceback" not in err and "MemoryError" not in err, err
+    assert time.monotonic() - t0 < 60
+
+
+def test_preset_and_config_sizes_are_refused_before_allocation(tmp_path):
+    import yaml
+
+    from lfmbench.baselines.checkpoint import CheckpointError, check_model_size
+    from lfmbench.baselines import unet as U
+    from lfmbench.limits import LimitError
+    from lfmbench.sensor.preset import PRESET_DIR, load_preset
+    from lfmbench.sensor.spectral_data import read_spectral_csv
+
+    d = yaml.safe_load((PRESET_DIR / "ovt.yaml").read_text())
+    d["spectral"]["filters"] = str(PRESET_DIR.parent.parent / "data" / d["spectral"]["filters"])
+    for optics, field in (({"psf_radius_px": 100_000}, "'optics.psf_radius_px' = 100,000"),
+                          ({"psf_radius_px": 200, "psf_oversample": 50}, "PSF grid of 402,002,500")):
+        p = tmp_path / "p.yaml"
+        p.write_text(yaml.safe_dump({**d, "optics": optics}))
+        with pytest.raises(LimitError, match=rf"p\.yaml: .*{field}.* above the limit psf_"):
+            load_preset(str(p))
+    big = tmp_path / "filters.csv"  # a spectral file of 5 MB: refused from its size
+    big.write_text("wavelength_nm,r,g,b\n" + "500,0.1,0.2,0.3\n" * 320_000)
+    p.write_text(yaml.safe_dump({**d, "spectral": {**d["spectral"], "filters": str(big)}}))
+    with pytest.raises(ValueError, match="filters.csv: spectral file of .* above the limit spectral_file_bytes"):
+        read_spectral_csv(load_preset(str(p)).filters_path)
+    cfg = U.config_from_dict({"model": {"base_channels": 100_000, "depth": 3}}, "u.yaml")
+    t0 = time.monotonic()
+    with pytest.raises(CheckpointError, match=r"u\.yaml: network \(field 'model'\) of [\d,]+ is above the limit"):
+        check_model_size(lambda: U.UNetFusion(cfg.model), "u.yaml")
+    assert time.monotonic() - t0 < 5  # counted on the meta device: nothing of 10^13 weights was allocated
+    cfgf = tmp_path / "huge.yaml"
+    cfgf.write_text("model:\n  base_channels: 100000\n")
+    r = CliRunner().invoke(app, ["train", "--corpus", str(tmp_path), "--config", str(cfgf), "--out",
+                                 str(tmp_path / "w.pt")])
+    out = _one_line(r)
+    assert "huge.yaml" in out and "model_parameters" in out
