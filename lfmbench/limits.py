@@ -52,8 +52,8 @@ LIMITS: dict[str, tuple[int, str]] = {
     "spectral_file_bytes": (4 << 20, "size of a spectral CSV a sensor preset names (spectral.filters; the shipped "
                                      "one is 25 KB)"),
     "model_parameters": (100_000_000, "parameters of a network a config or checkpoint asks for, counted on "
-                                      "torch's meta device before any weight is allocated (the shipped U-Nets "
-                                      "have up to about 2 M)"),
+                                      "torch's meta device before any weight is allocated (the largest shipped "
+                                      "U-Net has 1.1 M)"),
     "mat_bytes": (64 << 20, "decoded bytes of the arrays of an imported ISET-LFM .mat file beyond the two (H, W) "
                             "maps its scene's EXR size justifies (MATLAB compresses arrays: a 1 MB file can hold "
                             "1 GB)"),
