@@ -92,6 +92,7 @@ def _check_numbers(d: dict, p: Path) -> None:
     if not isinstance(recs, list):
         raise ValueError(f"run file {p}: field 'scenes' must be a list of sample records")
     weights = {s.weight for s in REGISTRY.values() if s.weight}
+    fast = {**{n: s.valid for n, s in REGISTRY.items()}, **{w: (0.0, math.inf) for w in weights}}
     for i, rec in enumerate(recs):
         if not isinstance(rec, dict):
             raise ValueError(f"run file {p}: field scenes[{i}] must be an object")
@@ -101,6 +102,9 @@ def _check_numbers(d: dict, p: Path) -> None:
         if not isinstance(m, dict):
             raise ValueError(f"run file {p}: field scenes[{i}].metrics must be an object")
         for k, v in m.items():
+            r = fast.get(k)  # a finite float inside the metric's range: valid, without the general checks
+            if r is not None and type(v) is float and r[0] <= v <= r[1] and v - v == 0.0:
+                continue
             (weight if k in weights else check)(v, f"scenes[{i}].metrics.{k}")
         weight(rec.get("call_ms"), f"scenes[{i}].call_ms")
     for k, v in d["aggregate"].items():
@@ -315,7 +319,7 @@ PLOT_LABELLED = 20
 #: best); a sweep of 10,000 results gets them for its best rows only (about 35 bootstraps of 10,000 resamples per
 #: row: seconds per row on 2 cores), every row its values, rank and Pareto flag. Leaderboards of up to this many
 #: results are computed exactly as before.
-STATS_ROWS = 100
+STATS_ROWS = 50
 
 
 def leaderboard_rows(runs: list[dict], sort_by: str | None = None, *, ci: bool = True,
@@ -328,8 +332,9 @@ def leaderboard_rows(runs: list[dict], sort_by: str | None = None, *, ci: bool =
     ``n_scenes``, ``vs_best`` (the paired comparison with rank 1 on ``sort_by``: ``n``, ``mean_diff``, ``ci``,
     ``p`` (Wilcoxon), ``p_holm``; None for rank 1), ``pareto`` (on the front of :data:`PARETO_AXES`) and
     ``breakdown`` (``sort_by`` by condition). The bootstrap statistics (``ci``, the breakdown's CIs,
-    ``vs_best``; Holm over the rows compared) are computed for the first ``stats_rows`` rows of the ranking
-    (default :data:`STATS_ROWS`; None values and empty ``ci`` below them, ``stats`` False in the row).
+    ``vs_best``; Holm over the rows compared) and the breakdown by condition are computed for the first
+    ``stats_rows`` rows of the ranking (default :data:`STATS_ROWS`; below them ``ci`` and ``breakdown`` are
+    empty, ``vs_best`` None and ``stats`` False).
     """
     from lfmbench.metrics import PRIMARY, REGISTRY, columns
 
@@ -379,7 +384,7 @@ def leaderboard_rows(runs: list[dict], sort_by: str | None = None, *, ci: bool =
             for k in (k for k in REGISTRY if k in want_ci):
                 if scenes and any(k in s["metrics"] for s in scenes):
                     row["ci"][k] = metric_summary(scenes, k, ci=True)["ci"]
-        row["breakdown"] = breakdown(records, sort_by, bins, ci=ci and row["stats"]) if records else {}
+        row["breakdown"] = breakdown(records, sort_by, bins, ci=ci) if records and row["stats"] else {}
     _compare_with_best(rows, sort_by)
     if all(a in REGISTRY for a in PARETO_AXES):
         _pareto(rows, PARETO_AXES)
