@@ -156,7 +156,7 @@ def main() -> None:
     load_after = open("/proc/loadavg").read().split()[:3] if os.path.exists("/proc/loadavg") else ["?"] * 3
     if args.no_doc:
         return
-    phases = list(res[-1][3]["phases"])
+    phases = list(dict.fromkeys(k for r in res for k in r[3]["phases"]))  # every phase of any run, in order
     lines = ["# Leaderboard at sweep scale", "",
              f"Measured {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())} on {platform.processor() or platform.machine()}, "
              f"{os.cpu_count()} cores shared with other jobs (load average {' '.join(load)} before, "
