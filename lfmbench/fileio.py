@@ -23,6 +23,8 @@ import io
 import json
 import math
 import os
+import re
+import socket
 import stat
 import tempfile
 import time
@@ -43,6 +45,58 @@ class AtomicWriteError(OSError):
 
 class InputFileError(ValueError):
     """A JSON or YAML file that is malformed or above a limit of :mod:`lfmbench.limits`; the message names it."""
+
+
+class NotRegularFileError(InputFileError, OSError):
+    """A path given to read that is not a regular file once its symbolic links are resolved (a FIFO, a character
+    or block device, a socket, a directory): refused before anything is read, because reading a FIFO or a
+    terminal waits forever and a device never ends. Both a ``ValueError`` (bad input) and an ``OSError``
+    (``errno.EINVAL``; what callers that catch unreadable files expect); the message names the path."""
+
+    def __init__(self, msg: str):
+        OSError.__init__(self, errno.EINVAL, msg)
+
+    def __str__(self) -> str:
+        return self.strerror
+
+
+def file_kind(mode: int) -> str:
+    """``"a FIFO"``, ``"a character device"``, ... for an ``st_mode``."""
+    for test, name in ((stat.S_ISFIFO, "a FIFO (named pipe)"), (stat.S_ISCHR, "a character device"),
+                       (stat.S_ISBLK, "a block device"), (stat.S_ISSOCK, "a socket"), (stat.S_ISDIR, "a directory"),
+                       (stat.S_ISREG, "a regular file")):
+        if test(mode):
+            return name
+    return "not a regular file"
+
+
+def open_regular(path: str | os.PathLike, what: str = "file"):
+    """Open ``path`` for binary reading, refusing what is not a regular file after its links are resolved.
+
+    The file is opened with ``O_NONBLOCK`` first (opening a FIFO for reading blocks until a writer comes) and
+    checked with ``fstat`` on the open descriptor (no race between the check and the read); blocking mode is
+    restored for a regular file. ``what`` names the file's role in the message.
+
+    Raises:
+        NotRegularFileError: a FIFO, device, socket or directory (one line naming ``path`` and what it is).
+        OSError: missing or unreadable (``FileNotFoundError``, ``PermissionError``), as ``open`` raises them.
+    """
+    fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0))
+    try:
+        mode = os.fstat(fd).st_mode
+        if not stat.S_ISREG(mode):
+            raise NotRegularFileError(f"{path}: {what} is {file_kind(mode)}, not a regular file; lfmbench reads "
+                                      "only regular files (a FIFO or device would wait or never end)")
+        os.set_blocking(fd, True)
+        return os.fdopen(fd, "rb")
+    except BaseException:
+        os.close(fd)
+        raise
+
+
+def check_regular(path: str | os.PathLike, what: str = "file") -> None:
+    """:func:`open_regular` without reading: raises its errors for ``path``."""
+    open_regular(path, what).close()
 
 
 def _file_mode() -> int:
@@ -209,10 +263,11 @@ def atomic_torch_save(obj: Any, path: str | os.PathLike) -> Path:
 def read_bytes(path: str | os.PathLike, what: str = "file", limit_name: str = "json_bytes",
                max_bytes: int | None = None) -> bytes:
     """The bytes of ``path``, refused (:class:`lfmbench.limits.LimitError`, naming it) above limit ``limit_name``
-    (or ``max_bytes``, a tighter bound the caller derives, e.g. from a manifest) before they are read.
-    ``OSError`` (missing, unreadable) propagates."""
+    (or ``max_bytes``, a tighter bound the caller derives, e.g. from a manifest) before they are read; a path
+    that is not a regular file is a :class:`NotRegularFileError` (:func:`open_regular`). ``OSError`` (missing,
+    unreadable) propagates."""
     cap = limit(limit_name) if max_bytes is None else min(max_bytes, limit(limit_name))
-    with open(path, "rb") as fh:
+    with open_regular(path, what) as fh:
         size = os.fstat(fh.fileno()).st_size
         if size > cap:
             raise LimitError(str(path), f"{what} of {size:,} bytes", size, limit_name)
@@ -390,3 +445,97 @@ def load_yaml(path: str | os.PathLike | None = None, *, text: str | None = None,
             raise
         msg = " ".join(str(exc).split())
         raise InputFileError(f"{source}: cannot read YAML: {msg[:300]}{'...' if len(msg) > 300 else ''}") from None
+
+
+# ------------------------------------------------------------------------------------------ one writer per output
+class OutputLockedError(ValueError):
+    """Another process is writing the same output file (its lock is held); the message names the file, the
+    holder and what to do."""
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+class OutputLock:
+    """One writer per output file: an exclusive ``flock`` on a hidden lock file beside the (link-resolved) target,
+    ``.<name>.lock``, holding ``pid <pid> host <host>`` of its holder, taken before any work and held until
+    :meth:`release` (or the ``with`` block's end, or process exit: the kernel releases a dead holder's lock, so a
+    lock file left by a killed run is taken over). Where the file system has no ``flock``, a holder on this host
+    whose pid is gone is stale and taken over. The lock file is removed on release (under the lock; a process that
+    opened it meanwhile sees the file replaced and takes the lock again). A path that is not a regular file
+    (``/dev/null``, a FIFO) is written in place and not locked.
+
+    Raises:
+        OutputLockedError: another process holds the lock (one line naming ``path``, the holder and ``option``).
+    """
+
+    def __init__(self, path: str | os.PathLike, option: str = "output") -> None:
+        self.path, self.option, self.fd, self.lock = Path(path), option, None, None
+        target, direct = write_target(path)
+        if direct:
+            return
+        self.lock = target.parent / f".{target.name}.lock"
+        for _ in range(10):
+            fd = os.open(self.lock, os.O_RDWR | os.O_CREAT | getattr(os, "O_CLOEXEC", 0), 0o644)
+            try:
+                self._take(fd)
+                same = os.fstat(fd).st_ino == os.stat(self.lock).st_ino
+            except FileNotFoundError:  # removed by the holder releasing it: take the new file
+                same = False
+            except BaseException:
+                os.close(fd)
+                raise
+            if same:
+                break
+            os.close(fd)
+        else:  # pragma: no cover - ten releases in a row while we tried
+            raise OutputLockedError(f"{self.option} {self.path}: its lock {self.lock} keeps changing; try again")
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, f"pid {os.getpid()} host {socket.gethostname()}\n".encode(), 0)
+        self.fd = fd
+
+    def _busy(self, holder: str) -> OutputLockedError:
+        return OutputLockedError(f"{self.option} {self.path} is being written by another lfmbench process ({holder}; "
+                                 f"lock {self.lock}): wait for it to finish, or choose another {self.option}")
+
+    def _take(self, fd: int) -> None:
+        import fcntl  # noqa: PLC0415 - POSIX only
+
+        holder = lambda: os.pread(fd, 200, 0).decode("utf-8", "replace").strip() or "unknown holder"  # noqa: E731
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise self._busy(holder()) from None
+        except OSError as exc:
+            if exc.errno not in (errno.ENOLCK, errno.EOPNOTSUPP, errno.ENOSYS):
+                raise
+            m = re.fullmatch(r"pid (\d+) host (\S+)", holder())
+            if m and int(m.group(1)) != os.getpid() and (m.group(2) != socket.gethostname()
+                                                          or _pid_alive(int(m.group(1)))):
+                raise self._busy(m.group(0)) from None
+
+    def release(self) -> None:
+        """Remove the lock file and release the lock (idempotent)."""
+        fd, self.fd = self.fd, None
+        if fd is None:
+            return
+        with contextlib.suppress(OSError):
+            if os.fstat(fd).st_ino == os.stat(self.lock).st_ino:
+                os.unlink(self.lock)
+        os.close(fd)
+
+    def __enter__(self) -> "OutputLock":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.release()
+
+    def __del__(self) -> None:
+        self.release()

@@ -16,11 +16,12 @@ Error messages quote at most :data:`QUOTE_CHARS` characters of a bad value (:fun
 from __future__ import annotations
 
 import os
+import re
 import reprlib
 from typing import Any
 
 __all__ = ["LIMITS", "LimitError", "limit", "limits_of", "set_limit", "parse_overrides", "brief", "QUOTE_CHARS", "ENV",
-           "lights_cap_message"]
+           "lights_cap_message", "one_line", "WORKER_DEATH_HINT"]
 
 #: name -> (default, what it bounds and why the default). Bytes are bytes of the file or of decoded pixels.
 LIMITS: dict[str, tuple[int, str]] = {
@@ -44,6 +45,18 @@ LIMITS: dict[str, tuple[int, str]] = {
                                   "from what a file declares before its arrays are read; the meshes of a generated "
                                   "lfmbench-v2 scene hold about 1,600)"),
     "mesh_file_bytes": (256 << 20, "size of one user mesh file (OBJ, PLY, glTF/GLB) a scene file references"),
+    "psf_radius_px": (256, "optics.psf_radius_px of a sensor preset: the PSF kernel is (2R+1)^2 pixels, convolved "
+                           "with every band (the shipped presets use 8)"),
+    "psf_samples": (1 << 22, "samples of one band's PSF integration grid, ((2 psf_radius_px + 1) psf_oversample)^2 "
+                             "(float64, 32 MiB per band at the limit; the shipped presets use 34,969)"),
+    "spectral_file_bytes": (4 << 20, "size of a spectral CSV a sensor preset names (spectral.filters; the shipped "
+                                     "one is 25 KB)"),
+    "model_parameters": (100_000_000, "parameters of a network a config or checkpoint asks for, counted on "
+                                      "torch's meta device before any weight is allocated (the largest shipped "
+                                      "U-Net has 1.1 M)"),
+    "mat_bytes": (64 << 20, "decoded bytes of the arrays of an imported ISET-LFM .mat file beyond the two (H, W) "
+                            "maps its scene's EXR size justifies (MATLAB compresses arrays: a 1 MB file can hold "
+                            "1 GB)"),
 }
 
 #: Environment variable of explicit overrides: ``name=value`` pairs separated by commas.
@@ -159,3 +172,40 @@ class _Brief(reprlib.Repr):
 _REPR = _Brief()
 _REPR.maxlevel, _REPR.maxlist, _REPR.maxtuple, _REPR.maxdict, _REPR.maxset = 3, 8, 8, 6, 8
 _REPR.maxstring, _REPR.maxlong, _REPR.maxother = QUOTE_CHARS, 40, QUOTE_CHARS
+
+
+#: What a user can do when a data-loader worker process died (appended to the one line that says so).
+WORKER_DEATH_HINT = ("a data-loader worker process died (the out-of-memory killer or a signal): use fewer --workers "
+                     "or a smaller batch or crop, or --workers 0 to see the error in this process")
+_WRAPPED = re.compile(r"^Caught (\w+) in (DataLoader worker process \d+|pin memory thread[^.]*)\.", re.M)
+_EXC_LINE = re.compile(r"^([A-Za-z_][\w.]*(?:Error|Exception|Warning|Exit|Interrupt)): ?(.*)$")
+
+
+def one_line(text: str) -> str:
+    """The one line a user sees for an error message ``text`` (the ``str`` of an exception).
+
+    - An exception re-raised by a torch ``DataLoader`` from a worker process ("Caught CorpusFileError in DataLoader
+      worker process 0. Original Traceback (most recent call last): ...") becomes its original message and where it
+      was caught: ``"<original message> (in DataLoader worker process 0)"``; the traceback is dropped (``--debug``
+      or ``LFMBENCH_DEBUG=1`` show it).
+    - A worker that died ("DataLoader worker (pid 123) is killed by signal: Killed.", "... exited unexpectedly")
+      gets :data:`WORKER_DEATH_HINT`.
+    - Any other text: its lines joined by " / ".
+
+    >>> one_line("Caught ValueError in DataLoader worker process 1.\\nOriginal Traceback (most recent call last):\\n"
+    ...          '  File "x.py", line 3, in f\\n    raise ValueError("a.exr: bad")\\nValueError: a.exr: bad\\n')
+    'a.exr: bad (in DataLoader worker process 1)'
+    """
+    m = _WRAPPED.search(text)
+    if m is not None:
+        lines = text[m.end():].splitlines()
+        for i in range(len(lines) - 1, -1, -1):
+            e = _EXC_LINE.match(lines[i])
+            if e is not None:
+                msg = " ".join([e.group(2), *[ln.strip() for ln in lines[i + 1:] if ln.strip()]]).strip()
+                return f"{one_line(msg) if msg else e.group(1)} (in {m.group(2)})"
+        return f"{m.group(1)} in {m.group(2)}"
+    if "DataLoader worker" in text and ("killed by signal" in text or "exited unexpectedly" in text):
+        first = text.strip().splitlines()[0].rstrip(". ") if text.strip() else text
+        return f"{first}: {WORKER_DEATH_HINT}"
+    return " / ".join(ln.strip() for ln in text.splitlines() if ln.strip())

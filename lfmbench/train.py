@@ -446,6 +446,9 @@ def train(method: str | Trainable, corpus: str | os.PathLike, out: str | os.Path
     graph = cuda_graph == "auto" and dev.type == "cuda"
     out = Path(out)
     torch.manual_seed(t.seed)
+    from lfmbench.baselines.checkpoint import check_model_size  # noqa: PLC0415
+
+    check_model_size(lambda: spec.build_model(cfg), f"the {spec.name} training config")  # before any allocation
     model = spec.build_model(cfg).to(dev)
     opt = make_optimizer(model, cfg, dev, graph)
     history, start, data_rng = None, 0, None

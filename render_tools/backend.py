@@ -455,10 +455,66 @@ def check_variant(variant: str | None = None) -> None:
     v = requested_variant(variant)
     if v == CUDA_VARIANT and not probe_cuda():
         raise _cuda_error()
+    if v != SCALAR_VARIANT and "drjit" not in sys.modules:
+        trust_llvm_env()  # a DRJIT_LIBLLVM_PATH that does not work: one line, and the working library used
     if v == LLVM_VARIANT and not any(probe_llvm(lib) for lib in find_libllvm()):
         raise VariantUnavailableError(f"variant: {LLVM_VARIANT} requested but no working libLLVM was found "
-                                      "(install Debian's libllvm19 and set DRJIT_LIBLLVM_PATH; see "
-                                      "docs/guide/rendering.md)")
+                                      f"({llvm_hint()})")
+
+
+#: What :func:`trust_llvm_env` found wrong with ``DRJIT_LIBLLVM_PATH`` (one line), or None.
+_llvm_env_note: str | None = None
+LLVM_ENV = "DRJIT_LIBLLVM_PATH"
+
+
+def trust_llvm_env() -> str | None:
+    """Check the user's ``DRJIT_LIBLLVM_PATH`` before Dr.Jit reads it (drjit loads the library it names once per
+    process and shuts its LLVM backend down for good when that fails, so a bad value made every scene fail even
+    where a working libLLVM was installed).
+
+    Unset, or naming a library that renders (:func:`probe_llvm`, cached): nothing to do, None. Naming a missing
+    file, something that is not a regular file, or a library that does not render: the variable is replaced by
+    the first working candidate of :func:`find_libllvm` (or removed when there is none), and one line saying so is
+    returned and warned once per process (worker processes inherit the corrected variable). Returns that line.
+    """
+    global _llvm_env_note
+    env = os.environ.get(LLVM_ENV)
+    if not env or _llvm_env_note is not None:
+        return _llvm_env_note
+    if not os.path.exists(env):
+        why = "no such file"
+    elif not os.path.isfile(env):
+        why = "not a regular file"
+    else:
+        try:
+            if probe_llvm(os.path.realpath(env)):
+                return None
+        except (OSError, ValueError):
+            pass
+        why = "a probe render with it failed: not a libLLVM Dr.Jit can use here"
+    del os.environ[LLVM_ENV]
+    working = None
+    for lib in find_libllvm():
+        try:
+            if probe_llvm(lib):
+                working = lib
+                break
+        except (OSError, ValueError):
+            continue
+    if working is not None:
+        os.environ[LLVM_ENV] = working
+        _llvm_env_note = f"{LLVM_ENV}={env} does not work ({why}); using {working}, which works here"
+    else:
+        _llvm_env_note = (f"{LLVM_ENV}={env} does not work ({why}), and no other working libLLVM was found in "
+                          f"{', '.join(LLVM_SEARCH_DIRS)}")
+    warnings.warn(_llvm_env_note, RuntimeWarning, stacklevel=2)
+    return _llvm_env_note
+
+
+def llvm_hint() -> str:
+    """What to do about a missing LLVM back end: what was wrong with ``DRJIT_LIBLLVM_PATH`` when it was set,
+    else how to install one."""
+    return _llvm_env_note or "install Debian's libllvm19 and set DRJIT_LIBLLVM_PATH; see docs/guide/rendering.md"
 
 
 def _set_llvm(mi) -> bool:
@@ -502,6 +558,8 @@ def select_variant(variant: str | None = None) -> str:
         ValueError: ``variant`` is not supported.
     """
     global _chosen
+    if requested_variant(variant) != SCALAR_VARIANT and "drjit" not in sys.modules:
+        trust_llvm_env()  # before drjit reads DRJIT_LIBLLVM_PATH (it does so once per process)
     import mitsuba as mi  # noqa: PLC0415
 
     variant = requested_variant(variant)
@@ -530,11 +588,9 @@ def select_variant(variant: str | None = None) -> str:
         return _chosen
     if variant == LLVM_VARIANT:
         raise VariantUnavailableError("variant: llvm_ad_spectral requested but no working libLLVM was found "
-                                      "(install Debian's libllvm19 and set DRJIT_LIBLLVM_PATH; see "
-                                      "docs/guide/rendering.md)")
-    warnings.warn("no working libLLVM found (LLVM 15 crashes on these CPUs; install libllvm19 and set "
-                  "DRJIT_LIBLLVM_PATH): rendering with the slow scalar_spectral variant", RuntimeWarning,
-                  stacklevel=2)
+                                      f"({llvm_hint()})")
+    warnings.warn(f"no working libLLVM found (LLVM 15 crashes on these CPUs; {llvm_hint()}): rendering with the "
+                  "slow scalar_spectral variant", RuntimeWarning, stacklevel=2)
     mi.set_variant(SCALAR_VARIANT)
     _chosen = SCALAR_VARIANT
     return _chosen

@@ -950,8 +950,7 @@ def render_frames(scene: dict, opts: RenderOptions, steady_bins: bool = False) -
     variant = backend.select_variant(opts.variant)
     if variant.startswith("scalar"):
         raise RuntimeError("variant: rendering needs a JIT variant of Mitsuba (llvm_ad_spectral or "
-                           f"cuda_ad_spectral), got {variant}: install libllvm19 and set DRJIT_LIBLLVM_PATH "
-                           "(docs/guide/rendering.md)")
+                           f"cuda_ad_spectral), got {variant}: {backend.llvm_hint()}")
     import drjit as dr  # noqa: PLC0415
     import mitsuba as mi  # noqa: PLC0415
 

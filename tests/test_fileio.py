@@ -50,6 +50,9 @@ def test_figure_and_torch_round_trip(tmp_path):
 SCRATCH_WRITES = {
     ("bench_validate.py", "make_corpus"): "the 300,000-file fixture corpus in the benchmark's own temporary "
                                           "folder (an fsync per file would be most of the run)",
+    ("bench_leaderboard.py", "make_results"): "the 10,000 generated result files in the benchmark's own temporary "
+                                              "folder",
+    ("bench_leaderboard.py", "time_cli"): "the argument list of the timed command, in the same temporary folder",
 }
 
 

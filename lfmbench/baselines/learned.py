@@ -30,11 +30,11 @@ from typing import Any
 import torch
 import torch.nn as nn
 
-from lfmbench.baselines.checkpoint import (CheckpointError, build_from_state, checkpointed_method,
+from lfmbench.baselines.checkpoint import (CONTENT_KEY, FILE_KEY, VERIFIED_KEY, CheckpointError, build_from_state,
+                                           checkpointed_method, save_checkpoint_file, verify_content,
                                            read_trained_weights)
 from lfmbench.baselines.classic import _captures, saturated_fusion
 from lfmbench.baselines.trainable import Trainable, TrainConfig, read_sections, read_yaml_config
-from lfmbench.fileio import atomic_torch_save
 from lfmbench.metrics.hdr import mu_law, normalize_hdr
 
 #: The editable default training configuration.
@@ -127,8 +127,8 @@ def fusion_loss(pred: torch.Tensor, gt: torch.Tensor) -> torch.Tensor:
 
 
 def save_checkpoint(model: LearnedFusion, path: str | Path, extra: dict | None = None) -> Path:
-    """Write ``{'format_version', 'width', 'state_dict', ...extra}`` atomically (temp file + ``os.replace``)."""
-    return atomic_torch_save({"format_version": FORMAT_VERSION, "width": model.width,
+    """Write ``{'format_version', 'width', 'state_dict', ...extra, 'content_sha256'}`` atomically (temp file + ``os.replace``)."""
+    return save_checkpoint_file({"format_version": FORMAT_VERSION, "width": model.width,
                               "state_dict": model.state_dict(), **(extra or {})}, path)
 
 
@@ -140,14 +140,18 @@ def read_checkpoint(path: str | Path, map_location: str | torch.device = "cpu") 
     if not isinstance(ck, dict) or ck.get("format_version") != FORMAT_VERSION:
         raise CheckpointError(f"checkpoint {path} is not a lfmbench learned-fusion checkpoint of format "
                               f"{FORMAT_VERSION}")
+    ck[CONTENT_KEY], ck[VERIFIED_KEY] = verify_content(ck, path)
     return ck
 
 
 def load_checkpoint(path: str | Path, map_location: str | torch.device = "cpu") -> LearnedFusion:
     """Build a :class:`LearnedFusion` from a checkpoint; clear errors for a missing or foreign file."""
     ck = read_checkpoint(path, map_location)
-    return build_from_state(path, lambda: LearnedFusion(int(ck["width"])), ck.get("state_dict"),
-                            "fit the learned-fusion network")
+    model = build_from_state(path, lambda: LearnedFusion(int(ck["width"])), ck.get("state_dict"),
+                             "fit the learned-fusion network")
+    model.content_sha256, model.content_verified, model.file_sha256 = (ck[CONTENT_KEY], ck[VERIFIED_KEY],
+                                                                        ck.get(FILE_KEY))
+    return model
 
 
 def _loss(model: LearnedFusion, batch: dict, cfg: LearnedConfig) -> tuple[torch.Tensor, dict]:

@@ -50,12 +50,12 @@ import torch.nn as nn
 import torch.nn.functional as F
 
 from lfmbench.limits import brief
-from lfmbench.baselines.checkpoint import (CheckpointError, build_from_state, checkpointed_method,
+from lfmbench.baselines.checkpoint import (CONTENT_KEY, FILE_KEY, VERIFIED_KEY, CheckpointError, build_from_state,
+                                           checkpointed_method, save_checkpoint_file, verify_content,
                                            read_trained_weights)
 from lfmbench.baselines.classic import _CAPTURES as _CAPTURE_KEYS, _captures, exposures_s, saturated_fusion
 from lfmbench.baselines.plan_merge import exposure_select, plan_captures
 from lfmbench.baselines.trainable import ConfigError, Trainable, TrainConfig, read_sections, read_yaml_config
-from lfmbench.fileio import atomic_torch_save
 from lfmbench.metrics.flicker import region_series
 from lfmbench.metrics.hdr import MU_DEFAULT, mu_law, normalize_hdr
 
@@ -356,9 +356,9 @@ def led_weighted_loss(pred: torch.Tensor, gt: torch.Tensor, light_index: torch.T
 def save_checkpoint(model: UNetFusion, path: str | os.PathLike, config: UNetConfig | None = None,
                     extra: dict | None = None) -> Path:
     """Write ``{format, format_version, model_config, config, state_dict, sensor, architecture, captures,
-    **extra}`` atomically (temp + rename); ``captures`` None: the split-pixel network (``sensor`` and
+    **extra, content_sha256}`` atomically (temp + rename; :func:`~lfmbench.baselines.checkpoint.save_checkpoint_file`); ``captures`` None: the split-pixel network (``sensor`` and
     ``architecture`` None: not recorded, as in checkpoints written before they were)."""
-    return atomic_torch_save({"format": CHECKPOINT_FORMAT, "format_version": FORMAT_VERSION,
+    return save_checkpoint_file({"format": CHECKPOINT_FORMAT, "format_version": FORMAT_VERSION,
                               "model_config": asdict(model.config),
                               "config": config.to_dict() if config is not None else None,
                               "state_dict": model.state_dict(), "sensor": model.sensor,
@@ -372,6 +372,7 @@ def read_checkpoint(path: str | os.PathLike, map_location: str | torch.device = 
                               not_found=CheckpointNotFoundError)
     if not isinstance(ck, dict) or ck.get("format") != CHECKPOINT_FORMAT or ck.get("format_version") != FORMAT_VERSION:
         raise CheckpointError(f"checkpoint {path} is not a {CHECKPOINT_FORMAT} checkpoint of format {FORMAT_VERSION}")
+    ck[CONTENT_KEY], ck[VERIFIED_KEY] = verify_content(ck, path)
     return ck
 
 
@@ -388,6 +389,8 @@ def load_checkpoint(path: str | os.PathLike, map_location: str | torch.device = 
                                  caps, sensor, arch),
         ck.get("state_dict"), "match its model config")
     model.source = str(path)
+    model.content_sha256, model.content_verified, model.file_sha256 = (ck[CONTENT_KEY], ck[VERIFIED_KEY],
+                                                                        ck.get(FILE_KEY))
     return model
 
 

@@ -21,6 +21,12 @@ from lfmbench.cli import corpus, demo, evaluate, paper, render, train
 
 #: Key of ``ctx.meta`` set by ``--debug``.
 DEBUG_KEY = "lfmbench.debug"
+#: Environment variable that has the effect of ``--debug`` (also for commands run by scripts and worker processes).
+DEBUG_ENV = "LFMBENCH_DEBUG"
+
+
+def _debug(ctx: Any) -> bool:
+    return bool(ctx.meta.get(DEBUG_KEY)) or os.environ.get(DEBUG_ENV, "") not in ("", "0")
 
 
 def debug_traceback(exc: BaseException) -> str:
@@ -38,17 +44,36 @@ def debug_traceback(exc: BaseException) -> str:
 
 
 class _Group(TyperGroup):
-    """The ``lfmbench`` group: with ``--debug``, a command that ends in a one-line error also prints the
-    traceback behind it (:func:`debug_traceback`) on stderr."""
+    """The ``lfmbench`` group: with ``--debug`` (or ``LFMBENCH_DEBUG=1``), a command that ends in a one-line error
+    also prints the traceback behind it (:func:`debug_traceback`) on stderr. An exception no command turned into
+    its one line (a DataLoader worker that died, an error re-raised from one, a bug) is one line too, exit 1
+    (:func:`lfmbench.limits.one_line`), never a wall of traceback."""
 
     def invoke(self, ctx: Any) -> Any:
+        import click  # noqa: PLC0415
+
         try:
             return super().invoke(ctx)
         except typer.Exit as exc:
-            if exc.exit_code not in (0, None) and ctx.meta.get(DEBUG_KEY):
+            if exc.exit_code not in (0, None) and _debug(ctx):
                 sys.stderr.write("--debug: the traceback behind the error above:\n" + debug_traceback(exc))
                 sys.stderr.flush()
             raise
+        except (click.exceptions.ClickException, click.exceptions.Abort, click.exceptions.Exit):
+            raise
+        except Exception as exc:  # noqa: BLE001 - the last line of defence: one line, the traceback on request
+            from lfmbench.limits import one_line  # noqa: PLC0415
+
+            text = one_line(str(exc))
+            known = text != " / ".join(ln.strip() for ln in str(exc).splitlines() if ln.strip())  # worker cases
+            line = text if known else (f"{type(exc).__name__}: {text} (unexpected: `lfmbench --debug ...` or "
+                                       f"{DEBUG_ENV}=1 prints the traceback for a bug report)")
+            typer.secho(f"error: {line}", fg=typer.colors.RED, err=True)
+            if _debug(ctx):
+                sys.stderr.write("--debug: the traceback behind the error above:\n" + "".join(
+                    traceback.format_exception(type(exc), exc, exc.__traceback__)))
+                sys.stderr.flush()
+            raise typer.Exit(1) from exc
 
 
 app = typer.Typer(cls=_Group, help="LED-flicker datasets and flicker-mitigation benchmark.", no_args_is_help=True,
@@ -67,6 +92,12 @@ def _root(ctx: typer.Context, limit: Optional[List[str]] = typer.Option(
     from lfmbench import limits  # noqa: PLC0415
 
     ctx.meta[DEBUG_KEY] = debug
+    if not _debug(ctx):  # a warning is one line ("warning: ..."), not file:line and the source line
+        import warnings  # noqa: PLC0415
+
+        before = warnings.formatwarning
+        warnings.formatwarning = lambda message, *a, **k: f"warning: {message}\n"
+        ctx.call_on_close(lambda: setattr(warnings, "formatwarning", before))  # an embedding program keeps its own
 
     try:
         env = limits.parse_overrides(os.environ.get(limits.ENV, ""))

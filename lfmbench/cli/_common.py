@@ -5,12 +5,15 @@ from collections.abc import Iterable
 
 import typer
 
-__all__ = ["fail", "check_minima", "torch_setup"]
+__all__ = ["fail", "check_minima", "torch_setup", "lock_output"]
 
 
 def fail(msg: str, code: int = 2) -> None:
-    """Print ``error: msg`` to stderr and end the command with ``code`` (no traceback)."""
-    typer.secho(f"error: {msg}", fg=typer.colors.RED, err=True)
+    """Print ``error: msg`` to stderr and end the command with ``code`` (no traceback). ``msg`` is made one line
+    (:func:`lfmbench.limits.one_line`: an error re-raised from a DataLoader worker is its original message)."""
+    from lfmbench.limits import one_line  # noqa: PLC0415
+
+    typer.secho(f"error: {one_line(str(msg))}", fg=typer.colors.RED, err=True)
     raise typer.Exit(code)
 
 
@@ -35,3 +38,16 @@ def torch_setup(device: str, threads: int | None) -> None:
         torch_device(device)
     except ValueError as exc:
         fail(str(exc))
+
+
+def lock_output(ctx: typer.Context, path, option: str) -> None:
+    """Take the one-writer lock of the output file ``path`` (:class:`lfmbench.fileio.OutputLock`) for the rest of
+    the running command (released when its context ``ctx`` closes, however it ends); another process writing it:
+    one line naming ``option`` and the holder, exit 2."""
+    from lfmbench.fileio import OutputLock, OutputLockedError  # noqa: PLC0415
+
+    try:
+        lock = OutputLock(path, option)
+    except OutputLockedError as exc:
+        fail(str(exc))
+    ctx.call_on_close(lock.release)

@@ -8,13 +8,14 @@ from pathlib import Path
 
 import typer
 
-from lfmbench.cli._common import check_minima, fail, torch_setup
+from lfmbench.cli._common import check_minima, fail, lock_output, torch_setup
 from lfmbench.vocabulary import CLASSIC_BASELINES, LEARNED_BASELINES, PLAN_BASELINES
 
 __all__ = ["register", "evaluate_cmd", "leaderboard_cmd"]
 
 
 def evaluate_cmd(
+    ctx: typer.Context,
     method: str = typer.Option(..., "--method", "-m",
                                help=f"a baseline ({', '.join((*CLASSIC_BASELINES, *LEARNED_BASELINES, *PLAN_BASELINES))}) or "
                                     "package.module:function"),
@@ -71,6 +72,7 @@ def evaluate_cmd(
     why = writable_error(out)  # an unwritable --output is found before any work is done (the writer's own rule)
     if why is not None:
         fail(f"--output {out}: cannot write the result file there ({why})")
+    lock_output(ctx, out, "--output")  # one evaluation per result file
     from lfmbench.baselines import MethodNotFoundError, get_method
     from lfmbench.baselines.checkpoint import CheckpointError
     from lfmbench.isp import load_pipeline

@@ -61,16 +61,43 @@ def train_cmd(
     torch_setup(device, threads)
     try:
         cfg = load_config(method, config)
-    except ConfigError as exc:
+        from lfmbench.baselines.checkpoint import check_model_size  # noqa: PLC0415
+
+        spec = trainable(method)  # the network a config asks for is counted before anything is allocated
+        check_model_size(lambda: spec.build_model(cfg), str(config or spec.default_config))
+    except ValueError as exc:  # ConfigError, CheckpointError (above the limit model_parameters)
         fail(str(exc))
     out = out if out is not None else trainable(method).default_checkpoint
     if out.is_dir():
         fail(f"--out {out} is a directory; give a file path such as {out / f'{method}_fusion.pt'}")
-    from lfmbench.fileio import writable_error  # noqa: PLC0415
+    from lfmbench.fileio import OutputLock, OutputLockedError, writable_error  # noqa: PLC0415
 
     why = writable_error(out)  # before any training: the writer's own rule (a symlink is written through)
     if why is not None:
         fail(f"--out {out}: cannot write the checkpoint there ({why})")
+    try:  # one training per --out: a second one is refused before any work (it said "saved" for the other's file)
+        lock = OutputLock(out, "--out")
+    except OutputLockedError as exc:
+        fail(str(exc))
+    with lock:
+        model, hist, sha = _train_locked(train, method, corpus, out, cfg, device, epochs, workers, resume, crop,
+                                         batch_size, sensor, data, resident_dtype, chunk_scenes, cuda_graph)
+    secs = hist["epoch_seconds"]
+    typer.echo(f"saved {out}: {count_parameters(model):,} parameters, {len(secs)} epochs, "
+               f"final loss {hist['epoch_loss'][-1] if hist['epoch_loss'] else float('nan'):.4f}"
+               + (f", median {statistics.median(secs):.1f} s/epoch" if secs else "") + f", weights sha256 {sha[:12]}")
+
+
+def _train_locked(train, method, corpus, out, cfg, device, epochs, workers, resume, crop, batch_size, sensor, data,
+                  resident_dtype, chunk_scenes, cuda_graph):
+    """``train(...)`` under the --out lock, then the checkpoint read back: what is reported is what the file holds
+    (its weights equal the trained model's, its content hash checked); returns (model, history, content hash)."""
+    import torch  # noqa: PLC0415
+
+    from lfmbench.baselines.checkpoint import CheckpointError  # noqa: PLC0415
+    from lfmbench.datasets.loading import EmptyDataError  # noqa: PLC0415
+    from lfmbench.train import trainable  # noqa: PLC0415
+
     try:
         model, hist = train(method, corpus, out, cfg, device=device, epochs=epochs, workers=workers, resume=resume,
                             crop=crop, batch_size=batch_size, sensor=sensor, data=data, resident_dtype=resident_dtype,
@@ -79,10 +106,16 @@ def train_cmd(
         fail(str(exc))
     except OSError as exc:  # the checkpoint could not be written (disk full, ...): the message names the file
         fail(exc.strerror or str(exc))
-    secs = hist["epoch_seconds"]
-    typer.echo(f"saved {out}: {count_parameters(model):,} parameters, {len(secs)} epochs, "
-               f"final loss {hist['epoch_loss'][-1] if hist['epoch_loss'] else float('nan'):.4f}"
-               + (f", median {statistics.median(secs):.1f} s/epoch" if secs else ""))
+    try:
+        ck = trainable(method).read_checkpoint(out, map_location="cpu")
+    except (CheckpointError, OSError) as exc:
+        fail(f"--out {out}: the checkpoint written cannot be read back ({exc})")
+    mine = {k: v.detach().cpu() for k, v in model.state_dict().items()}
+    saved = ck.get("state_dict") or {}
+    if set(saved) != set(mine) or any(not torch.equal(saved[k], mine[k]) for k in mine):
+        fail(f"--out {out}: the file no longer holds the weights this run trained (another process wrote it); "
+             "nothing of this run is there")
+    return model, hist, ck["content_sha256"]
 
 
 def register(app: typer.Typer) -> None:

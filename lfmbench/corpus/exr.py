@@ -425,7 +425,7 @@ def exr_headers(path: str | os.PathLike, head: bytes | None = None) -> ExrHeader
     buf = b""
     try:
         if head is None:
-            fh = open(path, "rb")
+            fh = _open_exr(path)
             buf = fh.read(HEAD_BYTES)
         else:
             buf = bytes(head)
@@ -436,7 +436,7 @@ def exr_headers(path: str | os.PathLike, head: bytes | None = None) -> ExrHeader
                 if len(buf) >= cap_hdr:
                     raise LimitError(str(path), "EXR header of more bytes", None, "exr_header_bytes")
                 if fh is None:
-                    fh = open(path, "rb")
+                    fh = _open_exr(path)
                     fh.seek(len(buf))
                 b = fh.read(min(max(need - len(buf), 1 << 20), cap_hdr - len(buf)))
                 if not b:
@@ -547,6 +547,17 @@ def check_exr_header(path: str | os.PathLike, head: bytes | None = None) -> dict
     return {"parts": len(h.parts), "decoded_bytes": h.decoded_bytes}
 
 
+def _open_exr(path: str):
+    """The EXR file ``path`` opened for reading (:func:`lfmbench.fileio.open_regular`); a FIFO, device or socket is
+    a :class:`CorpusFileError` naming it."""
+    from lfmbench.fileio import NotRegularFileError, open_regular  # noqa: PLC0415
+
+    try:
+        return open_regular(path, "EXR file")
+    except NotRegularFileError as exc:
+        raise CorpusFileError(str(exc)) from None
+
+
 def read_exr(path: str | os.PathLike, *, header_only: bool = False, head: bytes | None = None) -> list[ExrPart]:
     """Decode every part of an EXR file (OpenEXR 3.x reads whole files: all parts, all channels).
 
@@ -561,8 +572,10 @@ def read_exr(path: str | os.PathLike, *, header_only: bool = False, head: bytes 
     pixels cannot be read, detected by comparing with the part count of the header) or above a limit.
     """
     path = os.fspath(path)
-    if head is None and not os.path.isfile(path):
+    if head is None and not os.path.exists(path):
         raise CorpusFileError(f"EXR file is missing: {path}")
+    if head is None:
+        _open_exr(path).close()  # a FIFO or device: one line, never a read that waits
     hdrs = exr_headers(path, head)
     if header_only and hdrs.plain:
         out = []

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import logging
 import math
+import os
 import re
 import warnings
 from dataclasses import dataclass, field
@@ -124,13 +125,71 @@ def find_scenes(src: str | Path) -> list[IsetLfmScene]:
     return scenes
 
 
-def load_scene_meta_mat(path: Path | None) -> tuple[dict[str, Any], list[str]]:
+def mat_decoded_bytes(path: Path, cap: int) -> int:
+    """Bytes the data elements of a MATLAB v5 ``.mat`` file decode to, counted without keeping them: compressed
+    elements (``miCOMPRESSED``, zlib) are inflated in 1 MiB steps and counted, stopping as soon as the count
+    passes ``cap`` (returns a value > ``cap`` then); other elements count their declared size. Files of another
+    version (v4, v7.3 HDF5): their size. Memory: at most a few MiB whatever the file declares."""
+    import struct  # noqa: PLC0415
+    import zlib  # noqa: PLC0415
+
+    from lfmbench.fileio import open_regular  # noqa: PLC0415
+
+    with open_regular(path, ".mat file") as fh:
+        size = os.fstat(fh.fileno()).st_size
+        head = fh.read(128)
+        if len(head) < 128 or head[126:128] not in (b"IM", b"MI") or head[124:126] not in (b"\x00\x01", b"\x01\x00"):
+            return size
+        end = "<" if head[126:128] == b"IM" else ">"
+        total = 0
+        while total <= cap:
+            tag = fh.read(8)
+            if len(tag) < 8:
+                break
+            dtype, nbytes = struct.unpack(end + "II", tag)
+            if dtype >> 16:  # small data element: data in the tag itself
+                total += dtype >> 16
+                continue
+            if dtype != 15:  # miCOMPRESSED
+                total += nbytes
+                fh.seek(nbytes + (-nbytes % 8), 1)
+                continue
+            d, left = zlib.decompressobj(), nbytes
+            while left > 0 and total <= cap:
+                chunk = fh.read(min(left, 1 << 16))
+                if not chunk:
+                    break
+                left -= len(chunk)
+                buf = d.decompress(chunk, 1 << 20)
+                total += len(buf)
+                while d.unconsumed_tail and total <= cap:
+                    buf = d.decompress(d.unconsumed_tail, 1 << 20)
+                    total += len(buf)
+            if left > 0:
+                fh.seek(left, 1)
+        return total
+
+
+def load_scene_meta_mat(path: Path | None, shape: tuple[int, int] | None = None) -> tuple[dict[str, Any], list[str]]:
     """Read ``sceneMeta`` from ``<SceneID>_lf.mat`` with ``scipy.io.loadmat``; missing fields (or a missing /
     unreadable file, e.g. MATLAB v7.3 HDF5) take :data:`ISET_DEFAULTS`. Returns (values, warning messages).
 
     Values: lpd_exposure, spd_exposure (s), fps (1/s), cameraSpeed (m/s or None), depthMap (H, W) m or None,
     instanceMap (H, W) or None.
+
+    ``shape`` (H, W): the scene's image size from its EXR headers. The file is read only when its arrays decode to
+    at most what that size justifies, two (H, W) float64 maps plus the limit ``mat_bytes``
+    (:func:`mat_decoded_bytes`, counted before ``loadmat`` allocates anything); more is a
+    :class:`lfmbench.limits.LimitError` naming the file (a compressed .mat of 1 MB can decode to 1 GB).
     """
+    if path is not None:
+        from lfmbench.limits import LimitError, limit  # noqa: PLC0415
+
+        cap = limit("mat_bytes") + (2 * shape[0] * shape[1] * 8 if shape is not None else 0)
+        n = mat_decoded_bytes(Path(path), cap)
+        if n > cap:
+            raise LimitError(str(path), f"content decoding to more than {cap:,} bytes (two {shape} float64 maps "
+                             "plus the margin mat_bytes)", None, "mat_bytes")
     out: dict[str, Any] = {k: ISET_DEFAULTS[k] for k in ("lpd_exposure", "spd_exposure", "fps", "cameraSpeed")}
     out.update(depthMap=None, instanceMap=None)
     notes = []
@@ -210,7 +269,7 @@ def _prepare(scene: IsetLfmScene) -> _Prepared:
     if not bands:
         raise ValueError(f"{f0}: no spectral channels named like 'S0.400,000nm'")
     H, W = parts[0].window[2] - parts[0].window[0], parts[0].window[3] - parts[0].window[1]
-    mat, notes = load_scene_meta_mat(scene.mat)
+    mat, notes = load_scene_meta_mat(scene.mat, (H, W))
     return _Prepared(scene, bands, H, W, mat, notes)
 
 

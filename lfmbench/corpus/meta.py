@@ -31,9 +31,12 @@ TIMING_RTOL = 1e-6
 
 
 def sha256_file(path: str | os.PathLike, chunk: int = 1 << 20) -> str:
-    """SHA-256 hex digest (FIPS 180-4) of a file, read in 1 MiB chunks."""
+    """SHA-256 hex digest (FIPS 180-4) of a file, read in 1 MiB chunks; a path that is not a regular file is a
+    :class:`lfmbench.fileio.NotRegularFileError`."""
+    from lfmbench.fileio import open_regular  # noqa: PLC0415
+
     h = hashlib.sha256()
-    with open(path, "rb") as fh:
+    with open_regular(path, "corpus file") as fh:  # a FIFO or device is refused, never waited on
         while True:
             b = fh.read(chunk)
             if not b:

@@ -357,24 +357,48 @@ class LFMCaptureDataset(Dataset):
         :func:`lfmbench.datasets.pwm.draw_scene_pwm` as plain dicts."""
         return draw_scene_pwm(self.pwm, self.corpus.meta(sid), rng, self.groups).to_dicts()
 
+    def _frozen_copy_path(self) -> Path | None:
+        """Where the frozen draws of a corpus that cannot be written are kept: ``<cache_dir>/test_params/<first
+        16 hex of the manifest's SHA-256>.json`` (None without a cache directory)."""
+        if self.cache_dir is None:
+            return None
+        man = hashlib.sha256((self.root / "manifest.json").read_bytes()).hexdigest()[:16]
+        return self.cache_dir / "test_params" / f"{man}.json"
+
+    def _read_test_params(self, path: Path) -> dict:
+        try:
+            data = load_json(path, "test-parameter file")
+            if not isinstance(data, dict) or not isinstance(data.get("samples"), dict):
+                raise ValueError("'samples' must be an object")
+        except (OSError, ValueError) as exc:
+            why = str(exc).removeprefix(f"{path}: ")
+            raise ValueError(f"{path}: not a valid test-parameter file ({why}); delete it to re-freeze") from None
+        return data
+
     def _load_or_freeze_test_params(self) -> dict:
         """Frozen PWM draws and noise seeds of the test split (``<root>/test_params.json``).
 
         Entries are keyed ``"<scene_id>/<sample>"`` and never change once written, whatever the dataset's seed
         or the code's later draw procedure; entries a larger ``samples_per_scene`` (or a new scene) needs are
         drawn from the key alone and appended (atomic rewrite).
+
+        A corpus that cannot be written (read-only, shared): the entries it lacks are kept in the cache directory
+        (:meth:`_frozen_copy_path`, read back next time) or, without a writable one, in memory for this run with
+        one warning. They are drawn from the key alone, so every run draws the same ones.
         """
         path = self.root / TEST_PARAMS_NAME
         data = {"format": 1, "pwm": self.pwm.to_dict(), "samples": {},
                 "note": "frozen PWM draws of the test split; delete to re-draw (changes every test score)"}
-        if path.is_file():
-            try:
-                data = load_json(path, "test-parameter file")
-                if not isinstance(data, dict) or not isinstance(data.get("samples"), dict):
-                    raise ValueError("'samples' must be an object")
-            except (OSError, ValueError) as exc:
-                why = str(exc).removeprefix(f"{path}: ")
-                raise ValueError(f"{path}: not a valid test-parameter file ({why}); delete it to re-freeze") from None
+        if path.exists():
+            data = self._read_test_params(path)
+        copy = None
+        try:
+            copy = self._frozen_copy_path()
+        except OSError:
+            pass
+        if copy is not None and copy.exists():
+            for k, v in self._read_test_params(copy)["samples"].items():
+                data["samples"].setdefault(k, v)
         samples = data["samples"]
         added = False
         for sid in self.scene_ids:
@@ -392,8 +416,35 @@ class LFMCaptureDataset(Dataset):
                     samples[key]["frame_u"] = float(frozen_test_rng(sid, s, stream=1).random())
                     added = True
         if added:
-            atomic_write_json(path, data)
+            self._save_test_params(path, copy, data)
         return samples
+
+    def _save_test_params(self, path: Path, copy: Path | None, data: dict) -> None:
+        """Write the frozen draws into the corpus; where it cannot be written, into ``copy`` (the cache
+        directory), else keep them in memory with one warning."""
+        import errno  # noqa: PLC0415
+        import warnings  # noqa: PLC0415
+
+        from lfmbench.fileio import AtomicWriteError  # noqa: PLC0415
+
+        read_only = (errno.EACCES, errno.EPERM, errno.EROFS)
+        try:
+            atomic_write_json(path, data)
+            return
+        except AtomicWriteError as exc:
+            if exc.errno not in read_only:
+                raise
+        if copy is not None:
+            try:
+                atomic_write_json(copy, data)
+                return
+            except AtomicWriteError as exc:
+                if exc.errno not in read_only:
+                    raise
+        warnings.warn(f"{path}: the corpus cannot be written and there is no writable cache directory: the frozen "
+                      "test draws of this run are kept in memory only (they are drawn from the scene and sample "
+                      "alone, so the next run draws the same ones); pass --cache-dir DIR to keep them",
+                      RuntimeWarning, stacklevel=3)
 
     def draws_fingerprint(self) -> str | None:
         """What a test result's draws were: SHA-256 of the canonical JSON of the frozen entries

@@ -25,9 +25,11 @@ TEST_PARAMS_NAME = "test_params.json"
 
 
 def file_sha256(path: str | Path) -> str:
-    """Hex SHA-256 of a file's bytes (read in 1 MiB blocks)."""
+    """Hex SHA-256 of a file's bytes (read in 1 MiB blocks); not a regular file: ``NotRegularFileError``."""
+    from lfmbench.fileio import open_regular  # noqa: PLC0415
+
     h = hashlib.sha256()
-    with open(path, "rb") as f:
+    with open_regular(path) as f:
         for block in iter(lambda: f.read(1 << 20), b""):
             h.update(block)
     return h.hexdigest()

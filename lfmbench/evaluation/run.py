@@ -279,6 +279,7 @@ class _MethodRun:
                 pred = fn(dict(batch))
             sync(dev)
             call_ms = (time.perf_counter() - t0) * 1e3
+            self._record_checkpoint()
             pred = check_output(pred, gt)
         except CheckpointError:  # the method's weights file is bad input, not a scene failure: stop here
             raise
@@ -301,6 +302,14 @@ class _MethodRun:
                     self._time(batch, call_ms, gt)
         self.result["aggregate"] = aggregate(self.result["scenes"])
         self.write()
+
+    def _record_checkpoint(self) -> None:
+        """``method.checkpoint``: path and SHA-256 (content, file) of the weights a checkpoint-backed method ran
+        with (verified when loaded); a result names the weights its numbers come from."""
+        prov = getattr(self.fn, "checkpoint_provenance", None)
+        rec = prov() if callable(prov) else None
+        if rec is not None:
+            self.result["method"]["checkpoint"] = rec
 
     def _time(self, batch: dict, call_ms: float, gt: torch.Tensor) -> None:
         fn, res = self.fn, self.result
@@ -328,12 +337,15 @@ def _run_batches(runs: list[_MethodRun], source, dev, scene_conditions: Callable
         except StopIteration:
             break
         except Exception as exc:  # the data source failed (corrupt file ...): save what we have, then stop
+            from lfmbench.limits import one_line  # noqa: PLC0415 - a DataLoader worker's error: its own message
+
+            why = f"{type(exc).__name__}: {one_line(str(exc))}"
             for r in runs:
                 r.result["status"] = "failed"
-                r.result["notes"].append(f"data source failed after {n_batches} batches: {type(exc).__name__}: {exc}")
+                r.result["notes"].append(f"data source failed after {n_batches} batches: {why}")
                 r.result["aggregate"] = aggregate(r.result["scenes"])
                 r.write()
-            raise DataSourceError(f"reading batch {n_batches} failed: {type(exc).__name__}: {exc}") from exc
+            raise DataSourceError(f"reading batch {n_batches} failed: {why}") from exc
         n_batches += 1
         batch = _to(batch, dev)
         if "gt" not in batch:

@@ -115,6 +115,14 @@ class OpticsConfig:
             raise ValueError(f"{source}: field 'optics.transmittance' must be in (0, 1], got {cfg.transmittance!r}")
         if not cfg.magnification >= 0:
             raise ValueError(f"{source}: field 'optics.magnification' must be >= 0, got {cfg.magnification!r}")
+        from lfmbench.limits import LimitError, limit  # noqa: PLC0415 - sizes checked before any kernel exists
+
+        if cfg.psf_radius_px > limit("psf_radius_px"):
+            raise LimitError(source, "field 'optics.psf_radius_px' =", cfg.psf_radius_px, "psf_radius_px")
+        n = ((2 * cfg.psf_radius_px + 1) * cfg.psf_oversample) ** 2
+        if n > limit("psf_samples"):
+            raise LimitError(source, "fields 'optics.psf_radius_px' and 'optics.psf_oversample' ask for a PSF grid "
+                             "of", n, "psf_samples")
         return cfg
 
 

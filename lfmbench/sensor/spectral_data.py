@@ -32,10 +32,13 @@ DATA_DIR: Path = Path(__file__).resolve().parent.parent / "data"
 @functools.lru_cache(maxsize=16)
 def _read_csv_cached(path: str) -> tuple[np.ndarray, tuple[str, ...], np.ndarray]:
     p = Path(path)
+    from lfmbench.fileio import read_bytes  # noqa: PLC0415 - bounded, regular files only
+
     try:
-        lines = [ln.strip() for ln in p.read_text().splitlines()]
+        lines = [ln.strip() for ln in read_bytes(p, "spectral file", "spectral_file_bytes").decode(
+            "utf-8", "replace").splitlines()]
     except OSError as exc:
-        raise ValueError(f"cannot read spectral file {path}: {exc}") from exc
+        raise ValueError(f"cannot read spectral file {path}: {exc.strerror or exc}") from None
     lines = [ln for ln in lines if ln and not ln.startswith("#")]
     if len(lines) < 3:
         raise ValueError(f"spectral file {path} has no data rows")
