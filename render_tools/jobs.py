@@ -35,6 +35,7 @@ from lfmbench.corpus import (DEFAULT_STORAGE, SPLITS_NAME, CorpusWriteError, Cor
                              check_scene_id, prune_scene_dir)
 from lfmbench.fileio import atomic_write_json
 
+from . import reflections
 from .workers import WorkerDied, run_supervised
 
 __all__ = ["PROFILES_FILE", "Backend", "default_backend", "load_profile", "profile_names", "scene_seed",
@@ -226,7 +227,7 @@ def run_job(job: RenderJob | Mapping[str, Any]) -> dict:
     t0 = time.perf_counter()
     be = job.backend or default_backend()
     scene, opts, meta = _prepare(job, be)
-    notes: list[str] = []
+    notes: list[str] = reflections.untraced_note(scene)
     # frame n is encoded and written in a worker thread while frame n + 1 renders here (the main thread keeps
     # the render, so Ctrl-C reaches it as before); an error or interrupt stops and joins the worker
     with ThreadedSceneWriter(job.out, job.scene_id, scene, meta, dtype=job.dtype, notes=notes) as w:

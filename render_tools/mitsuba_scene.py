@@ -129,28 +129,44 @@ def _plane_mesh(shape: dict, offset) -> tuple[np.ndarray, np.ndarray]:
     return V, F
 
 
+def part_rotation(part: dict) -> np.ndarray:
+    """The rotation (3, 3) of a ``box`` or ``mesh`` part: ``R = Rz(yaw) Ry(pitch) Rx(roll)`` (z-y'-x'' Tait-Bryan
+    angles, the vehicle convention of ISO 8855 "Road vehicles - Vehicle dynamics and road-holding ability -
+    Vocabulary": roll about the forward x axis, then pitch about y, then yaw about the vertical z axis), from the
+    part's ``roll_deg``, ``pitch_deg``, ``yaw_deg`` (degrees, each 0 when absent). Only yaw: ``Rz(yaw)`` exactly."""
+    def rot(axis: int, deg: float) -> np.ndarray:
+        t = math.radians(deg)
+        c, s_ = math.cos(t), math.sin(t)
+        i, j = [(1, 2), (2, 0), (0, 1)][axis]
+        r = np.eye(3)
+        r[i, i], r[i, j], r[j, i], r[j, j] = c, -s_, s_, c
+        return r
+
+    R = rot(2, part.get("yaw_deg", 0.0))
+    if part.get("pitch_deg", 0.0) or part.get("roll_deg", 0.0):
+        R = R @ rot(1, part.get("pitch_deg", 0.0)) @ rot(0, part.get("roll_deg", 0.0))
+    return R
+
+
 def part_mesh(part: dict, offset=np.zeros(3), meshes: dict | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Triangle mesh (V (n, 3) m, F (m, 3) int, outward counter-clockwise) of one primitive part, moved by
     ``offset`` (3,) m. Analytic Mitsuba shapes are slow in the LLVM backend (Embree user geometry), so every
     primitive is tessellated and the parts of one object and material are merged into one mesh. ``meshes``: the
     scene's ``meshes`` (needed by a ``mesh`` part: its vertices scaled per axis, turned by ``yaw_deg`` about z and
-    moved to ``center``)."""
+    moved to ``center``); a box or mesh part turns by :func:`part_rotation`."""
     s = part["shape"]
     if s in ("rect", "disk"):
         return _plane_mesh(part, offset)
     if s == "mesh":
         m = (meshes or {})[part["mesh"]]
-        t = math.radians(part.get("yaw_deg", 0.0))
-        rz = np.array([[math.cos(t), -math.sin(t), 0], [math.sin(t), math.cos(t), 0], [0, 0, 1]])
         V = (np.asarray(m["vertices"], dtype=float) * np.asarray(part.get("scale", (1.0, 1.0, 1.0)), dtype=float))
-        return V @ rz.T + (np.asarray(part["center"], dtype=float) + offset), np.asarray(m["faces"], dtype=np.int64)
+        return (V @ part_rotation(part).T + (np.asarray(part["center"], dtype=float) + offset),
+                np.asarray(m["faces"], dtype=np.int64))
     if s == "box":
         c = np.asarray(part["center"], dtype=float) + offset
         hx, hy, hz = (x / 2 for x in part["size"])
-        t = math.radians(part.get("yaw_deg", 0.0))
-        rz = np.array([[math.cos(t), -math.sin(t), 0], [math.sin(t), math.cos(t), 0], [0, 0, 1]])
         corners = np.array([[sx * hx, sy * hy, sz * hz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
-        V = corners @ rz.T + c
+        V = corners @ part_rotation(part).T + c
         # vertex index = 4*(sx>0) + 2*(sy>0) + (sz>0); faces wound outward
         F = np.array([[0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5],      # -x, +x
                       [0, 4, 5], [0, 5, 1], [2, 3, 7], [2, 7, 6],      # -y, +y

@@ -12,27 +12,34 @@ beyond that tilt, but the light they send to the camera is spread thinly over th
 (tests/render_tools/test_reflections.py, alpha 0.06), the region holds 99.2 / 99.4 / 99.5 / 99.75 % of the
 reflection at factors 1.5 / 2 / 3 / 5, with crops of 1,508 / 1,740 / 1,972 / 3,364 px at 160x90. The rest is left
 out of the crop, as the diffuse light a lamp throws on its surroundings outside its crop always was
-(docs/guide/rendering.md). A dry scene's crops are unchanged (no reflection region).
+(docs/guide/rendering.md). A road without a glossy film (a diffuse asphalt: every generated dry scene) has no
+reflection region; a glossy road (a ``roughplastic`` road material with an ``ior``) reflects in any weather.
+Reflections of flickering lamps in other glossy surfaces (vehicle paint, glass, a mesh road) are not traced in
+their crops: :func:`untraced_glossy` names those surfaces, and a render notes them once (one line per run).
 """
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["GLOSS_TAN_FACTOR", "wet_road", "glossy_grid", "glossy_points", "glossy_cells"]
+__all__ = ["GLOSS_TAN_FACTOR", "GLOSSY_ALPHA", "wet_road", "untraced_glossy", "untraced_note", "glossy_grid",
+           "glossy_points", "glossy_cells"]
 
 #: Half-vector tilt bound of the reflection region, in units of the wet film's GGX roughness (module docstring:
 #: 99.4 % of the reflection at 2, at half the crop of 5).
 GLOSS_TAN_FACTOR = 2.0
+#: GGX roughness at or below which a non-road surface counts as glossy for :func:`untraced_glossy` (a mirror-like
+#: streak of a lamp shows in it; rougher coats spread a lamp's reflection over a wide lobe).
+GLOSSY_ALPHA = 0.3
+#: Light groups whose lights are rendered in their own crops (flickering; render_tools.render's default).
+FLICKERING_GROUPS = ("otherlights", "signals")
 #: Grid of road points searched for the reflection region: along x (towards the lamp) and y.
 GRID = (64, 32)
 
 
 def wet_road(scene: dict) -> dict | None:
-    """The wet road of a scene: ``{"alpha": roughest GGX roughness of its wet materials, "x": (x0, x1) m, "y":
-    (y0, y1) m}`` (the road surface is z = 0), or None for a dry scene (no ``weather`` or ``dry``) or one without
-    a road or without a wet (``roughplastic`` with an ``ior``) material on its road."""
-    if scene.get("weather", "dry") == "dry":
-        return None
+    """The glossy road of a scene: ``{"alpha": roughest GGX roughness of its glossy materials, "x": (x0, x1) m, "y":
+    (y0, y1) m}`` (the road surface is z = 0), or None for a scene without a road box or without a glossy film
+    (``roughplastic`` with an ``ior``: a wet road, or a user's glossy road in any weather) on its road."""
     mats = scene["materials"]
     alphas, box = [], None
     for o in scene["objects"]:
@@ -118,3 +125,34 @@ def glossy_cells(lamp_points: np.ndarray, camera: np.ndarray, road: dict, grid=F
     cell = m[:-1, :-1] | m[1:, :-1] | m[:-1, 1:] | m[1:, 1:]
     i, j = np.nonzero(cell)
     return np.stack([G[i, j], G[i + 1, j], G[i + 1, j + 1], G[i, j + 1]], axis=1)
+
+
+def untraced_glossy(scene: dict) -> list[str]:
+    """Kinds of the objects (sorted) with a glossy surface (``roughplastic`` or ``roughconductor`` of GGX alpha <=
+    :data:`GLOSSY_ALPHA`, or a road part that is not the road box :func:`wet_road` traces, e.g. a mesh road) in
+    which the reflections of flickering lamps are not traced; empty when the scene has no light of a flickering
+    group."""
+    if not any(lt.get("group") in FLICKERING_GROUPS for lt in scene.get("lights", [])):
+        return []
+    mats = scene.get("materials", {})
+    kinds = set()
+    for o in scene.get("objects", []):
+        for p in o.get("parts", []):
+            m = mats.get(p.get("material"), {})
+            glossy = m.get("type") in ("roughplastic", "roughconductor") and float(m.get("alpha", 1.0)) <= GLOSSY_ALPHA
+            if o["kind"] == "road":
+                glossy = glossy and p.get("shape") != "box"
+            if glossy:
+                kinds.add(o["kind"])
+    return sorted(kinds)
+
+
+def untraced_note(scene: dict) -> list[str]:
+    """The render note (a list of 0 or 1 line, the same text for every scene with the same kinds, so a run of
+    many scenes prints it once) naming the glossy surfaces :func:`untraced_glossy` finds."""
+    kinds = untraced_glossy(scene)
+    if not kinds:
+        return []
+    return [f"reflections of flickering lamps in glossy {', '.join(kinds)} surfaces are not traced (that light is "
+            "left out of the lamps' crops; only a glossy road box is traced: docs/guide/rendering.md, 'Wet roads "
+            "and reflections')"]

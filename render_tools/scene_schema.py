@@ -139,9 +139,10 @@ def _part_or_light_shape(p, path, extra_req, extra_opt, materials=None, meshes=N
     allowed = PART_SHAPES if materials is not None else LIGHT_SHAPES
     if shape not in allowed:
         fail(f"{path}.shape", f"{brief(shape)} not one of {allowed}")
-    geo = {"box": (("center", "size"), ("yaw_deg",)), "cylinder": (("p0", "p1", "radius"), ()),
+    turn = ("yaw_deg", "pitch_deg", "roll_deg")
+    geo = {"box": (("center", "size"), turn), "cylinder": (("p0", "p1", "radius"), ()),
            "rect": (("center", "size", "normal"), ()), "disk": (("center", "radius", "normal"), ()),
-           "sphere": (("center", "radius"), ()), "mesh": (("mesh", "center"), ("yaw_deg", "scale")),
+           "sphere": (("center", "radius"), ()), "mesh": (("mesh", "center"), turn + ("scale",)),
            "dots": (("center", "size", "normal", "grid", "dot", "cells"), ())}[shape]
     check_keys(p, path, required=("shape",) + geo[0] + extra_req, optional=geo[1] + extra_opt)
     for k in ("center", "p0", "p1"):
@@ -160,8 +161,9 @@ def _part_or_light_shape(p, path, extra_req, extra_opt, materials=None, meshes=N
         check_number(p["radius"], f"{path}.radius", lo=0.0, hi=1e3, lo_open=True)
     if "normal" in p:
         _unit(p["normal"], f"{path}.normal")
-    if "yaw_deg" in p:
-        check_number(p["yaw_deg"], f"{path}.yaw_deg", lo=-720.0, hi=720.0)
+    for k in ("yaw_deg", "pitch_deg", "roll_deg"):
+        if k in p:
+            check_number(p[k], f"{path}.{k}", lo=-720.0, hi=720.0)
     if shape == "cylinder" and np.allclose(p["p0"], p["p1"]):
         fail(f"{path}.p1", "cylinder end points coincide")
     if shape == "dots":
@@ -185,7 +187,8 @@ def validate_scene(scene: dict) -> dict:
     ``weather`` (optional, dry|wet|rain; absent = dry), ``meshes`` (optional) {name: {vertices [[x, y, z], ...] m
     in the mesh's own frame, faces [[i, j, k], ...] counter-clockwise seen from outside}},
     ``objects`` [{id (= index), kind, velocity_mps [3], parts [shape ...]}] (a ``mesh`` part: {mesh: name, center
-    [3] m: where the mesh's origin goes, yaw_deg: turn about z, scale [3]: per axis before the turn, material};
+    [3] m: where the mesh's origin goes, yaw_deg: turn about z,
+    optional pitch_deg and roll_deg (mitsuba_scene.part_rotation), scale [3]: per axis before the turn, material};
     version 2: optional ``display`` {texts [str, one per page], grid [columns, rows], scan_lines}: what an LED
     matrix on the object shows), ``lights`` [{id (= index),
     group, kind, instance (object id), shape rect|disk|dots, center, normal, size | radius | (size, grid [columns,

@@ -8,6 +8,7 @@ error (e.g. disk full), 130 interrupted (Ctrl-C; re-run the same command to resu
 """
 from __future__ import annotations
 
+from collections import Counter
 from pathlib import Path
 from typing import List, Optional
 
@@ -128,8 +129,8 @@ def render_cmd(
         except ValueError as exc:
             fail(str(exc))
     J.write_splits(writer, seed, fixed_splits)
-    for n in summary.notes:
-        console.print(f"[yellow]note[/]: {n}", highlight=False)
+    for n, k in Counter(summary.notes).items():  # a note many scenes share is printed once, with their count
+        console.print(f"[yellow]note[/]: {n}" + (f" ({k} scenes)" if k > 1 else ""), highlight=False)
     for sid, msg in summary.failed.items():
         console.print(f"[red]scene {sid} failed[/]: {msg}", highlight=False)
     secs = sum(summary.seconds.values())

@@ -130,3 +130,133 @@ def test_scene_without_assets_is_returned_as_is(tmp_path):
     sc = S.generate_scene(1, "night", generator=2)
     assert A.expand_assets(sc, tmp_path / "s.json") is sc and not A.has_assets(sc)
     assert copy.deepcopy(sc) == sc
+
+
+# --- second round (issue 40): lamps per part, node tags with timing, glTF's frame, polygon PLY counts, 3-D turns
+
+def test_lamps_sharing_a_material_are_one_light_each(tmp_path):
+    """Two tail-lamp quads of one material become two lights (one per connected part), each fitted to its own
+    quad; ``split: whole`` keeps the old single light over both; an indicator tag carries its waveform."""
+    from tests.data.assets.data import write_two_lamp_obj
+
+    write_two_lamp_obj(tmp_path)
+    blink = {"kind": "indicator", "frequency_hz": 1.5, "on_fraction": 0.5, "phase_s": 0.1}
+    ind = {"kind": "indicator", "spectrum": RED, "luminance_cd_m2": 300.0, "waveform": blink, "driver": "turn_l"}
+    out = A.expand_assets(asset_scene({"file": "pair.obj", "lamps": {"TailLamp": TAIL, "Indicator": ind}}),
+                          tmp_path / "s.json")
+    S.validate_scene(out)
+    tails = [lt for lt in out["lights"] if lt["kind"] == "tail"]
+    assert len(tails) == 2
+    ys = sorted(lt["center"][1] for lt in tails)
+    np.testing.assert_allclose(ys, [-0.7, 0.7], atol=1e-9)
+    for lt in tails:
+        assert sorted(lt["size"]) == pytest.approx([0.2, 0.3]) and "waveform" not in lt
+    (i,) = [lt for lt in out["lights"] if lt["kind"] == "indicator"]
+    assert i["waveform"] == blink and i["driver"] == "turn_l"
+    whole = A.expand_assets(asset_scene({"file": "pair.obj", "lamps": {"TailLamp": dict(TAIL, split="whole")}}),
+                            tmp_path / "s.json")
+    (bar,) = whole["lights"]
+    assert max(bar["size"]) == pytest.approx(1.7)  # the old behaviour: one bar over both lamps
+
+
+def test_gltf_car_arrives_upright_at_its_real_size_with_node_lamps(tmp_path):
+    """glTF is y-up with its front towards +z and a node scale (here cm -> m): the car stands on the road (z from
+    0 to 1.4 m), 4.4 m long along x (its front ahead, +x), 1.8 m wide; its two tail-lamp nodes (one material)
+    become two lights tagged by node name, on its rear face facing -x."""
+    from tests.data.assets.data import write_gltf_car
+
+    write_gltf_car(tmp_path)
+    tags = {"TailLamp_L": TAIL, "TailLamp_R": dict(TAIL, driver="tails")}
+    out = A.expand_assets(asset_scene({"file": "car.glb", "lamps": tags}), tmp_path / "s.json")
+    S.validate_scene(out)
+    (body,) = [m for m in out["meshes"] if m.endswith("/Paint")]
+    V = np.asarray(out["meshes"][body]["vertices"])
+    np.testing.assert_allclose(V.min(0), [-2.2, -0.9, 0.0], atol=1e-6)
+    np.testing.assert_allclose(V.max(0), [2.2, 0.9, 1.4], atol=1e-6)
+    lights = sorted(out["lights"], key=lambda lt: lt["center"][1])
+    assert len(lights) == 2 and [lt.get("driver") for lt in lights] == ["tails", None]
+    for lt, y in zip(lights, (-0.65, 0.65)):
+        np.testing.assert_allclose(lt["normal"], [-1.0, 0.0, 0.0], atol=1e-9)
+        np.testing.assert_allclose(lt["center"], [10.0 - 2.205 - 0.001, y, 1.0], atol=1e-6)
+        assert sorted(lt["size"]) == pytest.approx([0.2, 0.3])
+    # up: z keeps the file's own frame (the old reading): the car lies on its side, 4.4 m tall
+    flat = A.expand_assets(asset_scene({"file": "car.glb", "up": "z"}), tmp_path / "s.json")
+    Vz = np.asarray(flat["meshes"][body]["vertices"])
+    assert np.ptp(Vz[:, 2]) == pytest.approx(4.4)
+
+
+@pytest.mark.parametrize("binary", [True, False])
+def test_polygon_ply_is_counted_in_triangles_before_loading(tmp_path, binary):
+    """A PLY of quads declares half the triangles it makes: the header check counts 2 per quad (binary: from the
+    face block's size; ASCII: from each face line's corner count) and refuses over the limit before loading."""
+    from tests.data.assets.data import write_quad_ply
+
+    p = write_quad_ply(tmp_path, quads=50, binary=binary)
+    assert A.declared_triangles(p, "ply") == 100
+    out = A.expand_assets(asset_scene({"file": p.name}), tmp_path / "s.json")
+    assert sum(len(m["faces"]) for m in out["meshes"].values()) == 100
+    set_limit("mesh_triangles", 99)
+    try:
+        with pytest.raises(ValueError, match="scene.meshes.asset.file.*mesh_triangles"):
+            A.expand_assets(asset_scene({"file": p.name}), tmp_path / "s.json")
+    finally:
+        set_limit("mesh_triangles", None)
+
+
+def test_ply_face_block_that_lies_is_refused(tmp_path):
+    from tests.data.assets.data import write_quad_ply
+
+    p = write_quad_ply(tmp_path, quads=5)
+    p.write_bytes(p.read_bytes()[:-7])  # the last face cut short
+    with pytest.raises(ValueError, match="face block"):
+        A.declared_triangles(p, "ply")
+
+
+@pytest.mark.parametrize("case,field", [
+    ("two_scenes", "scene.meshes.asset.file"),
+    ("no_node", "scene.meshes.asset.lamps.TailLamp_X"),
+    ("bad_waveform", "scene.meshes.asset.lamps.TailLamp_L.waveform"),
+    ("bad_up", "scene.meshes.asset.up"),
+    ("bad_split", "scene.meshes.asset.lamps.TailLamp_L.split"),
+])
+def test_bad_gltf_tags_are_one_line(tmp_path, case, field):
+    from tests.data.assets.data import write_gltf_car
+
+    write_gltf_car(tmp_path, scenes=2 if case == "two_scenes" else 1)
+    entry = {"file": "car.glb", "lamps": {"TailLamp_L": TAIL}}
+    if case == "no_node":
+        entry["lamps"] = {"TailLamp_X": TAIL}
+    elif case == "bad_waveform":
+        entry["lamps"] = {"TailLamp_L": dict(TAIL, waveform={"kind": "sawtooth"})}
+    elif case == "bad_up":
+        entry["up"] = "x"
+    elif case == "bad_split":
+        entry["lamps"] = {"TailLamp_L": dict(TAIL, split="halves")}
+    with pytest.raises(ValueError) as e:
+        S.validate_scene(A.expand_assets(asset_scene(entry), tmp_path / "s.json"))
+    assert field in str(e.value) and "\n" not in str(e.value), str(e.value)
+
+
+def test_parts_turn_in_three_dimensions():
+    """Yaw alone is the old turn about z, bit for bit; roll 90 deg turns a box's y extent into z (ISO 8855 order:
+    roll, then pitch, then yaw); the rotation is orthonormal with determinant 1."""
+    from render_tools.mitsuba_scene import part_mesh, part_rotation
+
+    t = np.radians(30.0)
+    rz = np.array([[np.cos(t), -np.sin(t), 0], [np.sin(t), np.cos(t), 0], [0, 0, 1]])
+    assert np.array_equal(part_rotation({"yaw_deg": 30.0}), rz)
+    R = part_rotation({"yaw_deg": 40.0, "pitch_deg": -15.0, "roll_deg": 70.0})
+    np.testing.assert_allclose(R @ R.T, np.eye(3), atol=1e-12)
+    assert np.linalg.det(R) == pytest.approx(1.0)
+    V, _ = part_mesh({"shape": "box", "center": [0, 0, 1], "size": [4.0, 2.0, 0.5], "roll_deg": 90.0})
+    np.testing.assert_allclose(np.ptp(V, axis=0), [4.0, 0.5, 2.0], atol=1e-12)
+    V, _ = part_mesh({"shape": "box", "center": [0, 0, 1], "size": [4.0, 2.0, 0.5], "pitch_deg": 90.0})
+    np.testing.assert_allclose(np.ptp(V, axis=0), [0.5, 2.0, 4.0], atol=1e-12)
+    sc = S.empty_scene("turn")
+    sc["version"] = 2
+    sc["materials"]["m"] = {"type": "diffuse", "rgb": [0.5, 0.5, 0.5]}
+    sc["objects"].append({"id": 0, "kind": "traffic_sign", "velocity_mps": [0.0, 0.0, 0.0],
+                          "parts": [{"shape": "box", "center": [5, 0, 1], "size": [1, 1, 1], "roll_deg": 800.0,
+                                     "material": "m"}]})
+    with pytest.raises(ValueError, match=r"parts\[0\]\.roll_deg"):
+        S.validate_scene(sc)

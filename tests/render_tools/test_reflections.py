@@ -24,7 +24,7 @@ def lamp_over_road(weather: str, speed_mps: float = 0.0) -> dict:
     (diffuse asphalt) or wet (a water film: roughplastic, GGX alpha 0.06, index 1.33); no other light."""
     sc = S.empty_scene("refl", speed_mps=speed_mps, pitch_deg=-4.0)
     sc["version"] = 2
-    sc["weather"] = weather
+    sc["weather"] = "dry" if weather == "dry_glossy" else weather  # dry_glossy: a glossy road, dry weather
     sc["materials"]["road"] = ({"type": "diffuse", "rgb": [0.09, 0.09, 0.095]} if weather == "dry" else
                                {"type": "roughplastic", "rgb": [0.05, 0.05, 0.052], "alpha": 0.06, "ior": 1.33})
     sc["objects"].append({"id": 0, "kind": "road", "velocity_mps": [0, 0, 0],
@@ -56,6 +56,28 @@ def test_wet_road_region_and_dry_scene():
     assert (lw[3] - lw[1]) < 0.5 * OPTS["width"]  # not the whole width (the streak is narrow)
 
 
+def test_glossy_surfaces_not_traced_are_named():
+    """A glossy road box is traced in any weather; glossy paint and a mesh road are named in one note, the same
+    text for every scene with the same kinds (a run prints it once); nothing when no light flickers."""
+    assert RF.wet_road(lamp_over_road("dry_glossy"))["alpha"] == 0.06
+    sc = lamp_over_road("wet")
+    assert RF.untraced_glossy(sc) == [] and RF.untraced_note(sc) == []
+    sc["materials"]["paint"] = {"type": "roughplastic", "rgb": [0.5, 0.1, 0.1], "alpha": 0.15}
+    sc["materials"]["matte"] = {"type": "roughplastic", "rgb": [0.5, 0.1, 0.1], "alpha": 0.6}
+    sc["objects"].append({"id": 1, "kind": "car", "velocity_mps": [0, 0, 0],
+                          "parts": [{"shape": "box", "center": [20, 3, 0.7], "size": [4, 1.8, 1.4], "material": "paint"}]})
+    sc["objects"].append({"id": 2, "kind": "bus", "velocity_mps": [0, 0, 0],
+                          "parts": [{"shape": "box", "center": [30, 3, 1.5], "size": [10, 2.5, 3], "material": "matte"}]})
+    sc["meshes"] = {"ramp": {"vertices": [[0, 0, 0], [1, 0, 0], [0, 1, 0]], "faces": [[0, 1, 2]]}}
+    sc["objects"][0]["parts"].append({"shape": "mesh", "mesh": "ramp", "center": [60, 0, 0], "material": "road"})
+    S.validate_scene(sc)
+    assert RF.untraced_glossy(sc) == ["car", "road"]
+    (note,) = RF.untraced_note(sc)
+    assert "car, road" in note and "\n" not in note
+    sc["lights"][0]["group"] = "headlights"  # a static group: its reflections are in its full frames
+    assert RF.untraced_glossy(sc) == []
+
+
 def _traced(sc, opts, lid=0) -> np.ndarray:
     """(H, W) bool: the pixels of frame 0 that light ``lid``'s tiles trace (its crop, or its reflection bands
     and lamp box)."""
@@ -73,7 +95,7 @@ def _traced(sc, opts, lid=0) -> np.ndarray:
 
 
 @pytest.mark.jit
-@pytest.mark.parametrize("weather", ["dry", "wet"])
+@pytest.mark.parametrize("weather", ["dry", "wet", "dry_glossy"])
 def test_reflection_is_in_the_lamps_crop(weather):
     sc = lamp_over_road(weather)
     opts = R.RenderOptions(**OPTS)
@@ -89,7 +111,7 @@ def test_reflection_is_in_the_lamps_crop(weather):
     lamp_px = np.zeros_like(traced)
     lamp_px[ly0:ly1, lx0:lx1] = True
     in_crop = full[:, traced & ~lamp_px].sum()
-    if weather == "wet":
+    if weather != "dry":  # a glossy road reflects in any weather
         assert outside_lamp > 0.1 * full[:, ly0:ly1, lx0:lx1].sum()  # the reflection is a fifth of the lamp
         assert in_crop > 0.98 * outside_lamp  # measured 99.4 %: (almost) all of it is in the traced bands
         # the crop render holds the same light as the full frame there (independent estimates: 2 % noise), and

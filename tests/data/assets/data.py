@@ -45,13 +45,21 @@ def write_ply(folder: Path, name: str = "box.ply", faces_declared: int | None = 
     return p
 
 
+def to_gltf_frame(V):
+    """Scene-frame points (n, 3) (x forward, y left, z up) in glTF's frame (y up, front +z, x left)."""
+    import numpy as np
+
+    V = np.asarray(V, dtype=float)
+    return np.stack([V[:, 1], V[:, 2], V[:, 0]], axis=1)
+
+
 def write_glb(folder: Path, name: str = "box.glb") -> Path:
-    """The box as binary glTF (trimesh's exporter), one material 'Body'."""
+    """The box as binary glTF (trimesh's exporter) in glTF's own frame (y up, front +z), one material 'Body'."""
     import numpy as np
     import trimesh
 
     folder.mkdir(parents=True, exist_ok=True)
-    m = trimesh.Trimesh(np.array(_BOX_V, dtype=float), np.array(_BOX_F) - 1, process=False)
+    m = trimesh.Trimesh(to_gltf_frame(_BOX_V), np.array(_BOX_F) - 1, process=False)
     m.visual = trimesh.visual.TextureVisuals(material=trimesh.visual.material.PBRMaterial(name="Body"))
     p = folder / name
     p.write_bytes(trimesh.Scene([m]).export(file_type="glb"))
@@ -76,4 +84,85 @@ def write_scene(folder: Path, scene: dict, name: str = "scene.json") -> Path:
     folder.mkdir(parents=True, exist_ok=True)
     p = folder / name
     p.write_text(json.dumps(scene))
+    return p
+
+
+def write_two_lamp_obj(folder: Path, name: str = "pair.obj") -> Path:
+    """The box with two separate tail-lamp quads sharing one material 'TailLamp' (left y = +0.7, right y = -0.7
+    on the rear face x = -1 m, each 0.3 x 0.2 m) and one quad 'Indicator' (y = 0 m)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    lines = [f"v {x} {y} {z}" for x, y, z in _BOX_V]
+    quads = []
+    for yc in (0.7, -0.7, 0.0):
+        base = 1 + len(lines)
+        lines += [f"v -1.0 {yc - 0.15} 0.6", f"v -1.0 {yc + 0.15} 0.6", f"v -1.0 {yc + 0.15} 0.8",
+                  f"v -1.0 {yc - 0.15} 0.8"]
+        quads.append(f"f {base} {base + 3} {base + 2} {base + 1}")
+    lines += ["o Body"] + [f"f {a} {b} {c}" for a, b, c in _BOX_F]
+    lines += ["o TailLamp", "usemtl TailLamp"] + quads[:2] + ["usemtl Indicator"] + quads[2:]
+    (folder / "pair.mtl").write_text("newmtl TailLamp\nKd 1 0 0\nnewmtl Indicator\nKd 1 0.5 0\n")
+    p = folder / name
+    p.write_text("mtllib pair.mtl\n" + "\n".join(lines) + "\n")
+    return p
+
+
+def write_gltf_car(folder: Path, name: str = "car.glb", scenes: int = 1) -> Path:
+    """A 'car' as a glTF author writes one: modelled in centimetres, y up, its front towards +z, a node scale of
+    0.01 to metres: body 440 x 180 x 140 cm (length along z, height along y, wheels on y = 0), and two tail-lamp
+    nodes 'TailLamp_L' / 'TailLamp_R' (one material 'LampRed') on its rear face (z = -220 cm). ``scenes``: how
+    many glTF scenes the file declares (a second one lists the same root node)."""
+    import json as _json
+    import struct
+
+    import numpy as np
+    import trimesh
+
+    folder.mkdir(parents=True, exist_ok=True)
+    body = trimesh.creation.box(extents=(180.0, 140.0, 440.0))
+    body.apply_translation((0.0, 70.0, 0.0))
+    body.visual = trimesh.visual.TextureVisuals(material=trimesh.visual.material.PBRMaterial(name="Paint"))
+    sc = trimesh.Scene()
+    root = "CarRoot"
+    sc.graph.update(frame_to=root, frame_from=sc.graph.base_frame, matrix=np.diag([0.01, 0.01, 0.01, 1.0]))
+    sc.add_geometry(body, node_name="Body", geom_name="body", parent_node_name=root)
+    for side, x in (("L", 65.0), ("R", -65.0)):
+        quad = trimesh.Trimesh(np.array([[x - 15, 90, -220.5], [x + 15, 90, -220.5], [x + 15, 110, -220.5],
+                                         [x - 15, 110, -220.5]]), np.array([[0, 2, 1], [0, 3, 2]]), process=False)
+        quad.visual = trimesh.visual.TextureVisuals(material=trimesh.visual.material.PBRMaterial(name="LampRed"))
+        sc.add_geometry(quad, node_name=f"TailLamp_{side}", geom_name=f"lamp_{side}", parent_node_name=root)
+    data = sc.export(file_type="glb")
+    if scenes > 1:  # rewrite the JSON chunk with extra scenes
+        jlen = struct.unpack("<I", data[12:16])[0]
+        doc = _json.loads(data[20:20 + jlen])
+        doc["scenes"] = doc["scenes"] * scenes
+        js = _json.dumps(doc).encode()
+        js += b" " * (-len(js) % 4)
+        rest = data[20 + jlen:]
+        data = b"glTF" + struct.pack("<II", 2, 12 + 8 + len(js) + len(rest)) + struct.pack("<I", len(js)) + b"JSON" \
+            + js + rest
+    p = folder / name
+    p.write_bytes(data)
+    return p
+
+
+def write_quad_ply(folder: Path, name: str = "quads.ply", quads: int = 50, binary: bool = True) -> Path:
+    """A strip of ``quads`` unit quads as PLY (binary little-endian or ASCII): 2 x ``quads`` triangles."""
+    import numpy as np
+
+    folder.mkdir(parents=True, exist_ok=True)
+    n = quads + 1
+    V = np.array([(i, y, 0.0) for i in range(n) for y in (0.0, 1.0)], dtype="<f4")
+    Fq = np.array([(2 * i, 2 * i + 2, 2 * i + 3, 2 * i + 1) for i in range(quads)], dtype="<i4")
+    fmt = "binary_little_endian" if binary else "ascii"
+    head = ("ply\nformat %s 1.0\nelement vertex %d\nproperty float x\nproperty float y\nproperty float z\n"
+            "element face %d\nproperty list uchar int vertex_indices\nend_header\n" % (fmt, len(V), quads)).encode()
+    if binary:
+        rec = np.zeros(quads, dtype=[("n", "u1"), ("i", "<i4", 4)])
+        rec["n"], rec["i"] = 4, Fq
+        body = V.tobytes() + rec.tobytes()
+    else:
+        body = ("\n".join(" ".join(map(str, v)) for v in V) + "\n"
+                + "\n".join("4 " + " ".join(map(str, q)) for q in Fq) + "\n").encode()
+    p = folder / name
+    p.write_bytes(head + body)
     return p
