@@ -30,7 +30,7 @@ from lfmbench.datasets.counter_draws import (SceneEntities, counter_scene_draw, 
                                              place_uniforms, start_frame)
 from lfmbench.datasets.assembly import (NOISE_STREAMS, SENSOR_OUTPUTS, STATIC_WINDOW_RULES, assemble_sample,
                                         check_line_time, compose_frame, compose_plan_frame, light_index,
-                                        plan_exposures, static_window_source)
+                                        plan_exposures, static_window_mix, static_window_source)
 from lfmbench.datasets.pieces import capture_pieces
 from lfmbench.datasets.projection import SceneLayers, aux_channels, load_or_build, unit_projection_preset
 from lfmbench.datasets.pwm import PWMConfig, apply_light_timing, draw_scene_pwm, frozen_test_rng, load_pwm_config
@@ -173,7 +173,8 @@ class LFMCaptureDataset(Dataset):
             to be batched by :func:`~lfmbench.datasets.batched.collate_pieces` and simulated on the training
             device by :func:`~lfmbench.datasets.batched.simulate_batch` (docs/guide/datasets.md, "Captures on the GPU").
         static_windows: how a capture plan's window that the corpus does not store for its static groups (it
-            stores the short and long windows) is served: ``"nearest"`` (default: the smallest stored window
+            stores the short and long windows, and from format version 4 static time bins whose unions are exact:
+            docs/benchmarks/motion-windows.md) is served: ``"nearest"`` (default: the smallest stored window
             containing it, else the long one; error measured in docs/results/sensor-architectures.md; samples record it in
             ``meta["static_windows"]``) or ``"exact"`` (such a plan is refused, naming preset and corpus).
         noise_streams: where a sample's random numbers come from (:data:`lfmbench.datasets.assembly.NOISE_STREAMS`):
@@ -650,7 +651,7 @@ class LFMCaptureDataset(Dataset):
         the split pixel), else ``"nearest"`` (served by the measured approximation, :data:`STATIC_WINDOW_RULES`)."""
         from lfmbench.sensor.plan import resolve_windows  # noqa: PLC0415
 
-        exact = all(static_window_source(a, n, timing)[1] for c in self.preset.captures.values()
+        exact = all(static_window_mix(a, n, timing)[1] for c in self.preset.captures.values()
                     for a, n in resolve_windows(c.exposure, timing))
         return "exact" if exact else "nearest"
 
