@@ -641,10 +641,21 @@ class LFMCaptureDataset(Dataset):
                "sensor": self.sensor_name, "shutter": self.shutter, "flicker_mode": mode,
                "frame_start": int(frame_start)}
         if self.architecture != "split_pixel":  # (the split pixel's meta is unchanged: the batched paths share it)
+            out.update(miss_windows_s=self._miss_windows(tm))
             out.update(architecture=self.architecture, static_windows=self._static_window_mode(tm),
                        readout={k: self.preset.capture_readout(k).shutter or self.shutter
                                 for k in self.preset.captures})
         return out
+
+    def _miss_windows(self, timing: Mapping[str, Any]) -> torch.Tensor:
+        """(W, 2) float64 ``(start_s, length_s)`` windows of the plan's shortest capture (least integration time: the
+        one that carries the brightest lamps, and the one that misses a PWM light first), from which the condition
+        ``pwm_miss_prob`` of this sensor is computed (:func:`lfmbench.evaluation.conditions.sample_conditions`,
+        :func:`lfmbench.flicker.windows_miss_probability`): each sensor binned by its own windows."""
+        from lfmbench.sensor.plan import resolve_windows, total_length_s  # noqa: PLC0415
+
+        wins = [resolve_windows(c.exposure, timing) for c in self.preset.captures.values()]
+        return torch.tensor(min(wins, key=total_length_s), dtype=torch.float64).reshape(-1, 2)
 
     def _static_window_mode(self, timing: Mapping[str, Any]) -> str:
         """``"exact"`` when every window of the plan is one the corpus stores for its static groups (always for
