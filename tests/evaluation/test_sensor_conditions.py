@@ -44,3 +44,21 @@ def test_conditions_use_each_sensors_own_windows():
     batch["meta"]["miss_windows_s"] = torch.tensor([[[0.011, 0.0001]]], dtype=torch.float64)   # staggered short
     stag = sample_conditions(batch)[0]["pwm_miss_prob"]
     assert stag == pytest.approx(1 - 0.1 - 0.0001 * 1087.0, abs=1e-7)  # duty held as float32 and stag > 0.7 > split
+
+
+def test_gt_common_is_the_same_for_every_sensor(tmp_path):
+    """``gt_common``: one reference window through one reference projection, so datasets of different sensors give
+    the same tensor for the same draw, while each sensor's own ``gt`` (its reference exposure) differs."""
+    from lfmbench.datasets import LFMCaptureDataset
+    from tests.data.corpus.data import make_corpus
+
+    root = make_corpus(tmp_path / "c", n_scenes=1, frames=2)
+    kw = dict(split="all", frames=2, cache_dir=False, noise=False, optics=False, outputs=("gt", "gt_common"), seed=3)
+    got = {n: LFMCaptureDataset(root, sensor=n, **kw)[0] for n in ("staggered", "ovt")}
+    base = got["staggered"]["gt_common"]
+    assert base.shape == got["staggered"]["gt"].shape and float(base.min()) > 0
+    torch.testing.assert_close(got["ovt"]["gt_common"], base)
+    assert not torch.allclose(got["staggered"]["gt"], got["ovt"]["gt"], rtol=0.05)
+    assert "miss_windows_s" in got["staggered"]["meta"] and "miss_windows_s" not in got["ovt"]["meta"]
+    with pytest.raises(ValueError, match="gt_common"):
+        LFMCaptureDataset(root, sensor="ovt", pieces=True, **kw)
