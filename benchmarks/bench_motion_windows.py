@@ -256,6 +256,9 @@ def main(argv=None) -> None:
            "static storage; what would bring it down (not built): storing the short bins at the precision their "
            "captures need, or tracing bins with shared random numbers so that pixels that do not change between "
            "bins are stored once (as a flickering light's steady part is)."]
+    md += ["", "Resolution of the error column: the bias estimate is the square root of a cross term dominated by the "
+           "few brightest pixels (a night scene's lamps), so values below about one render's noise of that window "
+           "are not resolved (the exact scheme's long windows are sums of 3 bins at spp 1 each)."]
     text = "\n".join(md) + "\n"
     print(text)
     if a.out:
