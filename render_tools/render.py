@@ -35,6 +35,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from lfmbench.corpus.naming import window_bin_weights
 from lfmbench.vocabulary import GROUPS
 
 from . import camera as cam_mod
@@ -145,6 +146,16 @@ class RenderOptions:
     night, wet night) to 4 / 3 / 9.5 % for 0.8-0.9 CPU s per frame (docs/benchmarks/render.md, "Scene generator
     2"); not unbiased (a wet road's static reflections are blurred: docs/guide/rendering.md, "Static frames denoised");
     the flickering layers are never denoised.
+    static_edges_s: times (s from the frame start, inside the capture window) at which the static groups are cut
+    into time bins (:func:`static_bin_edges`): () (default) stores the short and long windows only, as every corpus
+    before; any edges store the static groups in the bins between the sorted union of these edges and the short and
+    long windows' (0, the short window's ends, T_L), each bin the time average of the scene over it with the
+    moving objects at the bin's middle (:func:`render_frames`); the short and long windows are the exact
+    length-weighted sums of their bins. Give the window edges of every capture of the sensors a corpus serves
+    (:func:`lfmbench.sensor.plan.resolve_windows`; a protocol's ``render.static_edges_s``): each capture window is
+    then an exact sum of bins, so a staggered exposure sees the scene (ego motion and moving vehicles) over its own
+    time instead of the long window's average (docs/benchmarks/motion-windows.md). A scene where nothing moves (a
+    static camera, no moving object) keeps the two windows whatever is asked (all bins would be equal).
     """
 
     width: int = 640
@@ -173,9 +184,11 @@ class RenderOptions:
     reflection_block_px: int = 2
     pad_samples: str = "auto"
     static_denoise: str = "auto"
+    static_edges_s: tuple = ()
 
     def __post_init__(self):
         self.bands_nm = tuple(float(b) for b in self.bands_nm)
+        self.static_edges_s = tuple(float(e) for e in (self.static_edges_s or ()))
         if self.groups is not None:
             self.groups = tuple(self.groups)
         self.validate()
@@ -206,6 +219,11 @@ class RenderOptions:
             raise ValueError(f"reflection_block_px: must be 1 or 2, got {self.reflection_block_px!r}")
         if self.pad_samples not in PAD_SAMPLES:
             raise ValueError(f"pad_samples: must be one of {PAD_SAMPLES}, got {self.pad_samples!r}")
+        e = np.asarray(self.static_edges_s, dtype=np.float64)
+        if e.size and (not np.all(np.isfinite(e)) or np.any(e < 0)
+                       or np.any(e > self.capture_window_s * (1 + 1e-9))):
+            raise ValueError(f"static_edges_s: every edge must lie in the capture window [0, "
+                             f"{self.capture_window_s:.6g}] s from the frame start, got {list(self.static_edges_s)}")
         if self.static_denoise not in STATIC_DENOISE:
             raise ValueError(f"static_denoise: must be one of {STATIC_DENOISE}, got {self.static_denoise!r}")
         if self.pixel_samples not in PIXEL_SAMPLES:
@@ -263,6 +281,9 @@ class RenderOptions:
         d = asdict(self)
         d["bands_nm"] = list(self.bands_nm)
         d["groups"] = None if self.groups is None else list(self.groups)
+        d["static_edges_s"] = list(self.static_edges_s)
+        if not d["static_edges_s"]:  # the options of corpora rendered before it existed stay the same
+            del d["static_edges_s"]
         return d
 
 
@@ -542,12 +563,15 @@ def refine_pad(scene: dict, opts: RenderOptions) -> int | None:
     return 0 if pad_at_spp(scene, opts) else None
 
 
-def static_lamp_boxes(scene: dict, opts: RenderOptions, n: int, geo: SceneGeometry | None = None) -> list[tuple]:
-    """Boxes (y0, x0, y1, x1) px of the static groups' lamps in frame ``n``, over the short and the long window, as
-    :func:`plan_frame` refines them: what :func:`render_tools.denoise.denoise_static` keeps as traced."""
+def static_lamp_boxes(scene: dict, opts: RenderOptions, n: int, geo: SceneGeometry | None = None,
+                      window: tuple | None = None, t_obj: float | None = None) -> list[tuple]:
+    """Boxes (y0, x0, y1, x1) px of the static groups' lamps in frame ``n``, over the short and the long window (or
+    over ``window`` (a, b) s, absolute: a time bin, objects at ``t_obj`` s), as :func:`plan_frame`
+    (:func:`plan_static_bins`) refines them: what :func:`render_tools.denoise.denoise_static` keeps as traced."""
     geo = geo or SceneGeometry(scene, opts)
     tm = frame_timing(scene, opts, n)
-    t_obj = 0.5 * (tm["window"][0] + tm["window"][1])
+    if t_obj is None:
+        t_obj = 0.5 * (tm["window"][0] + tm["window"][1])
     rpad = refine_pad(scene, opts)
     boxes = []
     for g, info in _selected_groups(scene, opts).items():
@@ -555,7 +579,7 @@ def static_lamp_boxes(scene: dict, opts: RenderOptions, n: int, geo: SceneGeomet
             continue
         for lt in scene["lights"]:
             if lt["group"] == g:
-                for a, b in (tm["short"], tm["long"]):
+                for a, b in ((tm["short"], tm["long"]) if window is None else (window,)):
                     bb = geo.light_bbox(lt, t_obj, a, b, pad=rpad)
                     if bb is not None:
                         boxes.append(tuple(int(v) for v in bb))
@@ -683,6 +707,7 @@ def scene_meta(scene: dict, opts: RenderOptions) -> dict:
     groups = _selected_groups(scene, opts)
     timings = [frame_timing(scene, opts, n) for n in range(opts.frames)]
     helper = SceneGeometry(drawn, opts)
+    static_edges = static_bin_edges(scene, opts)
     lights = []
     for lt, lt_drawn in zip(scene["lights"], drawn["lights"]):
         if lt["group"] not in groups:
@@ -702,7 +727,8 @@ def scene_meta(scene: dict, opts: RenderOptions) -> dict:
         "frames": opts.frames,
         "timing": {"short_exposure_s": float(scene["timing"]["short_exposure_s"]),
                    "long_exposure_s": opts.long_exposure_s, "alignment": "center", "line_time_s": opts.line_time_s,
-                   "readout_s": opts.readout_s, "capture_window_s": opts.capture_window_s, "bins": opts.bins},
+                   "readout_s": opts.readout_s, "capture_window_s": opts.capture_window_s, "bins": opts.bins,
+                   **({} if static_edges is None else {"static_edges_s": [float(e) for e in static_edges]})},
         "camera": {"fov_x_deg": fov, "K": K.tolist(), "convention": "opencv (x right, y down, z forward); "
                    "world ISO 8855 (x forward, y left, z up), m",
                    "poses": [[ego.pose_cv(tm["window"][0]).tolist(), ego.pose_cv(tm["window"][1]).tolist()]
@@ -779,8 +805,71 @@ def rest_spp(spp: int, frac: float) -> int:
     return max(1, math.ceil(spp * (1.0 - frac) / (1.0 + frac) - 1e-9))
 
 
+def scene_moves(scene: dict) -> bool:
+    """Whether anything in ``scene`` moves: the ego camera (speed or yaw rate) or an object (a velocity)."""
+    if cam_mod.EgoMotion.from_scene(scene).moving:
+        return True
+    return any(np.any(np.asarray(o.get("velocity_mps", (0.0, 0.0, 0.0)), float) != 0.0) for o in scene["objects"])
+
+
+def objects_move(scene: dict) -> bool:
+    """Whether an object of ``scene`` has a velocity (its static-group renders then place it per time bin)."""
+    return any(np.any(np.asarray(o.get("velocity_mps", (0.0, 0.0, 0.0)), float) != 0.0) for o in scene["objects"])
+
+
+def static_bin_edges(scene: dict, opts: RenderOptions) -> np.ndarray | None:
+    """Edges (B + 1,) s from the frame start of the static groups' time bins (:class:`RenderOptions`
+    ``static_edges_s``), the same in every frame: the sorted union of the asked edges and 0, the short window's ends
+    and T_L (edges closer than 1e-9 of the capture window merged), or None when none is asked or nothing moves
+    (:func:`scene_moves`: every bin would be the same image)."""
+    if not opts.static_edges_s or not scene_moves(scene):
+        return None
+    ts, tl = float(scene["timing"]["short_exposure_s"]), opts.long_exposure_s
+    pts = sorted({0.0, (tl - ts) / 2.0, (tl + ts) / 2.0, tl, *opts.static_edges_s})
+    tol = 1e-9 * opts.capture_window_s
+    out = [pts[0]]
+    for e in pts[1:]:
+        if e - out[-1] > tol:
+            out.append(e)
+    return np.asarray(out, dtype=np.float64)
+
+
+def plan_static_bins(scene: dict, opts: RenderOptions, n: int, sets, geo: SceneGeometry, bins, t_obj: float,
+                     qmc: bool, start: int = 0):
+    """The tiles of the static groups over time bins (:func:`static_bin_edges`) and how to assemble them (plan
+    entries as :func:`plan_frame`, window ``"bin<k>"``): per bin a full frame at ``spp`` (one union tile, or one per
+    group) and each static group's lamp refined in its box over the bin at ``light_spp``, the objects held at
+    ``t_obj`` (s). ``bins``: [(k, a, b)] absolute times, s; ``start``: index of the first tile in the launch."""
+    from .tracer import Tile  # noqa: PLC0415
+
+    full = (0, 0, opts.height, opts.width)
+    light_spp = opts.light_spp or opts.spp
+    rpad = refine_pad(scene, opts)
+    union = list(getattr(sets, "union", ()) or ())
+    tiles, plan = [], []
+    for k, a, b in bins:
+        win = f"bin{k}"
+        if union:
+            plan.append(("union", tuple(union), win, full, start + len(tiles), 1))
+            tiles.append(Tile(full, 1, a, b - a, opts.spp, sets["union:static"], slots=len(union),
+                              key=_seed("union", win), sobol=qmc))
+        for g, info in _selected_groups(scene, opts).items():
+            if info["flicker"]:
+                continue
+            lamps = [lt for lt in scene["lights"] if lt["group"] == g]
+            for kind, crop, n_s, key in [("static", full, opts.spp, None)] * (g not in union) + [
+                    ("refine", geo.light_bbox(lt, t_obj, a, b, pad=rpad), light_spp, lt["id"])
+                    for lt in (lamps if light_spp > opts.spp else ())]:
+                if crop is None:
+                    continue
+                plan.append((kind, g, win, crop, start + len(tiles), 1))
+                tiles.append(Tile(crop, 1, a, b - a, n_s, sets[f"group:{g}"],
+                                  key=_seed(kind, g, win, *(() if key is None else (key,))), sobol=qmc))
+    return tiles, plan
+
+
 def plan_frame(scene: dict, opts: RenderOptions, n: int, sets, geo: SceneGeometry | None = None,
-               filled: frozenset | set = frozenset()):
+               filled: frozenset | set = frozenset(), static: bool = True):
     """The tiles of frame ``n`` (:class:`render_tools.tracer.Tile`) and how to assemble them.
 
     Static groups: two full-frame tiles, the short window at ``spp`` and the rest of the long window (long minus
@@ -796,7 +885,8 @@ def plan_frame(scene: dict, opts: RenderOptions, n: int, sets, geo: SceneGeometr
     ``pad_px`` ring is such parts too, traced at ``spp`` in K bins (:func:`ring_boxes`), its own unpadded box at
     ``light_spp`` over them, and a static group's lamp refines its unpadded box. ``sets``: the frame's
     :class:`tracer.LightSets` (or any mapping from set name to index). ``filled``: ids of the lights :func:`dots_lod` drew as filled cells (their own
-    boxes get :func:`lamp_light_spp`). Returns (tiles, plan, visible light ids); plan entries are
+    boxes get :func:`lamp_light_spp`). ``static``: False leaves the static groups' tiles out (they are traced in
+    time bins, :func:`plan_static_bins`). Returns (tiles, plan, visible light ids); plan entries are
     (kind, group, window or light id, crop, tile index, repeat): a tile of K / repeat bins, each bin repeated
     ``repeat`` times in a row to make the K bins.
     """
@@ -818,7 +908,9 @@ def plan_frame(scene: dict, opts: RenderOptions, n: int, sets, geo: SceneGeometr
     ring_spp = pad_at_spp(scene, opts)  # a lamp's pad ring at spp, its own box at light_spp
     rpad = refine_pad(scene, opts)  # a static group's lamp refines its own box, the ring keeps the full frame
     union = list(getattr(sets, "union", ()) or ())
-    if union:  # the static groups' full frames: one tile per window records all of them (one image per slot)
+    if not static:
+        wins = []
+    if union and static:  # the static groups' full frames: one tile per window records all of them (one image per slot)
         for win, t0, dt, gap_at, gap_len, frac in wins:
             plan.append(("union", tuple(union), win, full, len(tiles), 1))
             tiles.append(Tile(full, 1, t0, dt, opts.spp if win == "short" else rest_spp(opts.spp, frac),
@@ -920,7 +1012,9 @@ def render_frames(scene: dict, opts: RenderOptions, steady_bins: bool = False) -
     """Render every frame of ``scene``; yields one dict per frame (see module docstring)::
 
         {"frame": n,
-         "static": {group: {"short": (C, H, W) float32, "long": (C, H, W) float32}},
+         "static": {group: {"short": (C, H, W) float32, "long": (C, H, W) float32,
+                            "bins": (B, C, H, W) float32 (only with static time bins)}},
+         "static_edges_s": [B + 1 edges, s from the frame start] (only with static time bins),
          "lights": {group: [(light_id, (y0, x0, y1, x1), (K, C, h, w) float32)]},
          "aux": {"depth.Z", "depth.R", "mask.instance", "mask.light": (H, W) float32}}
 
@@ -928,6 +1022,10 @@ def render_frames(scene: dict, opts: RenderOptions, steady_bins: bool = False) -
     Each frame: its Mitsuba scene is loaded once with every emitter on, and all of its tiles
     (:func:`plan_frame`) are rendered by :class:`render_tools.tracer.Tracer` in one kernel launch (more when
     it exceeds :data:`render_tools.tracer.MAX_LANES`), then the AOVs in a second, small one.
+    Static time bins (:func:`static_bin_edges`, ``opts.static_edges_s``): each bin's full frame is traced over its
+    own time with the ego camera moving continuously and the moving objects at the bin's middle (one scene load
+    per bin when an object moves, else the bins join the frame's launch); ``short`` and ``long`` are then the exact
+    length-weighted sums of their bins.
     ``steady_bins``: a wet road's grown light crops (the lamp's K bins over its reflection, the same in every bin)
     as :class:`lfmbench.corpus.SteadyBins` instead of (K, C, h, w) arrays (what the corpus writer takes: the same
     files without K copies of the reflection in memory).
@@ -957,6 +1055,8 @@ def render_frames(scene: dict, opts: RenderOptions, steady_bins: bool = False) -
     from . import tracer  # noqa: PLC0415
 
     geo = SceneGeometry(scene, opts)
+    edges = static_bin_edges(scene, opts)  # None: the two windows, as before RenderOptions.static_edges_s
+    obj_moving = edges is not None and objects_move(scene)
     for n, tm in enumerate(timings):
         t_obj = 0.5 * (tm["window"][0] + tm["window"][1])
         loaded = mi.load_dict(ms.mitsuba_dict(scene, t_obj, emit="all", cache=mcache, unit_sky=True))
@@ -965,8 +1065,25 @@ def render_frames(scene: dict, opts: RenderOptions, steady_bins: bool = False) -
         sets = tracer.LightSets(mi, dr, loaded, scene, list(groups), union=static_union(groups, opts))
         tr = tracer.Tracer(mi, dr, loaded, sets, geo.ego, geo.fov, (opts.width, opts.height), opts.bands_nm,
                            opts.band_width_nm, sky_scale=ms.sky_scale(scene))
-        tiles, plan, visible = plan_frame(scene, opts, n, sets, geo, filled)
+        tiles, plan, visible = plan_frame(scene, opts, n, sets, geo, filled, static=edges is None)
+        qmc = sobol_pixel_samples(scene, opts)
+        bins = [] if edges is None else [(k, tm["t0"] + a, tm["t0"] + b) for k, (a, b) in
+                                         enumerate(zip(edges[:-1], edges[1:]))]
+        if bins and not obj_moving:  # only the camera moves: the bins are tiles of the frame's launch
+            bt, bp = plan_static_bins(scene, opts, n, sets, geo, bins, t_obj, qmc, start=len(tiles))
+            tiles, plan = tiles + bt, plan + bp
         imgs = tr.render(tiles, _seed(opts.seed, n, "frame")) if tiles else []
+        if bins and obj_moving:  # moving objects: each bin traced with them at its middle (its own scene load)
+            for k, a, b in bins:
+                t_bin = 0.5 * (a + b)
+                lb = mi.load_dict(ms.mitsuba_dict(scene, t_bin, emit="all", cache=mcache, unit_sky=True))
+                sb = tracer.LightSets(mi, dr, lb, scene, list(groups), union=static_union(groups, opts))
+                trb = tracer.Tracer(mi, dr, lb, sb, geo.ego, geo.fov, (opts.width, opts.height), opts.bands_nm,
+                                    opts.band_width_nm, sky_scale=ms.sky_scale(scene))
+                bt, bp = plan_static_bins(scene, opts, n, sb, geo, [(k, a, b)], t_bin, qmc, start=len(imgs))
+                imgs = list(imgs) + list(trb.render(bt, _seed(opts.seed, n, "bin", k)) if bt else [])
+                plan = plan + bp
+                del trb, sb, lb
         out = {"frame": n, "static": {}, "lights": {}, "aux": {}}
         grown = {}  # (group, light id) -> [steady (C, h, w), varying parts, K] of a grown crop
         for kind, g, key, bb, ti, rep in plan:
@@ -1001,12 +1118,31 @@ def render_frames(scene: dict, opts: RenderOptions, steady_bins: bool = False) -
             for i, (lid, bb, arr) in enumerate(items):
                 if arr is None:
                     items[i] = (lid, bb, _grown_crop(*grown[g, lid], steady_bins))
-        frac = (tm["short"][1] - tm["short"][0]) / (tm["long"][1] - tm["long"][0])
-        for g, wins in out["static"].items():  # long = frac * short + (1 - frac) * rest (:func:`rest_spp`)
-            rest = wins.pop("rest", None)
-            wins["long"] = wins["short"].copy() if rest is None else \
-                (frac * wins["short"] + (1.0 - frac) * rest).astype(np.float32)
-        if out["static"] and static_denoised(scene, opts):  # render_tools.denoise; lamp boxes kept as traced
+        if bins:  # the static groups in time bins: denoised bin by bin, short and long their exact sums
+            if out["static"] and static_denoised(scene, opts):
+                from . import denoise  # noqa: PLC0415
+
+                for k, a, b in bins:
+                    boxes = static_lamp_boxes(scene, opts, n, geo, window=(a, b),
+                                              t_obj=0.5 * (a + b) if obj_moving else t_obj)
+                    done = denoise.denoise_static({g: w[f"bin{k}"] for g, w in out["static"].items()}, boxes)
+                    for g, img in done.items():
+                        out["static"][g][f"bin{k}"] = img
+            for g, wins in out["static"].items():
+                stack = np.stack([wins.pop(f"bin{k}") for k, _a, _b in bins])           # (B, C, H, W)
+                wins["bins"] = stack
+                for name in ("short", "long"):
+                    a, b = tm[name]
+                    wgt = window_bin_weights(edges, a - tm["t0"], b - a)
+                    wins[name] = np.tensordot(wgt, stack.astype(np.float64), axes=1).astype(np.float32)
+            out["static_edges_s"] = [float(e) for e in edges]
+        else:
+            frac = (tm["short"][1] - tm["short"][0]) / (tm["long"][1] - tm["long"][0])
+            for g, wins in out["static"].items():  # long = frac * short + (1 - frac) * rest (:func:`rest_spp`)
+                rest = wins.pop("rest", None)
+                wins["long"] = wins["short"].copy() if rest is None else \
+                    (frac * wins["short"] + (1.0 - frac) * rest).astype(np.float32)
+        if out["static"] and static_denoised(scene, opts) and not bins:  # render_tools.denoise; lamp boxes as traced
             from . import denoise  # noqa: PLC0415
 
             boxes = static_lamp_boxes(scene, opts, n, geo)

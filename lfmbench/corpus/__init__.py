@@ -45,7 +45,8 @@ from lfmbench.corpus.meta import (LIGHT_KINDS, SPECTRUM_MODELS, TIMING_RTOL, che
 from lfmbench.corpus.naming import (ATTR, AUX_CHANNELS, EMPTY_PART, FORMAT_NAME, FORMAT_VERSION, MANIFEST_NAME,
                                     RADIANCE_MAX, RADIANCE_UNIT, READABLE_VERSIONS, SCENES_DIR, SPLITS_NAME,
                                     STATIC_WINDOWS, STEADY_PREFIX, band_channel, bin_channels, bin_prefix, frame_dir,
-                                    group_storage, light_part_name, parse_light_part, static_channels, steady_channels)
+                                    group_storage, light_part_name, parse_light_part, static_channels, steady_channels,
+                                    STATIC_BINS_VERSION, static_edges, static_layers, window_bin_weights)
 from lfmbench.corpus.reader import Corpus
 from lfmbench.corpus.storage import (COMPRESSIONS, DEFAULT_STORAGE, EXTRA_COMPRESSIONS, HALF_MAX, HALF_MIN_NORMAL,
                                      HALF_PRECISION_RANGE_LOG2, HALF_UNDERFLOW_ERROR_FRACTION, MANTISSA_BITS,
@@ -57,7 +58,8 @@ from lfmbench.corpus.writer import (LOCK_NAME, CorpusLock, CorpusWriter, Threade
 from lfmbench.fileio import TMP_PREFIX, atomic_write_bytes, atomic_write_json
 
 __all__ = [
-    "FORMAT_NAME", "FORMAT_VERSION", "READABLE_VERSIONS", "STATIC_WINDOWS", "AUX_CHANNELS", "HALF_MAX",
+    "FORMAT_NAME", "FORMAT_VERSION", "STATIC_BINS_VERSION", "static_edges", "static_layers", "window_bin_weights",
+    "READABLE_VERSIONS", "STATIC_WINDOWS", "AUX_CHANNELS", "HALF_MAX",
     "HALF_MIN_NORMAL", "HALF_UNDERFLOW_ERROR_FRACTION", "RADIANCE_UNIT", "COMPRESSIONS", "STORAGES",
     "DEFAULT_STORAGE", "Storage", "resolve_storage", "round_mantissa", "scale_exponent", "store_layer",
     "scale_attr", "LayerStore", "StorageStats",

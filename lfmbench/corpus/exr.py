@@ -22,6 +22,7 @@ import numpy as np
 
 from lfmbench.corpus.errors import CorpusChannelError, CorpusFileError, CorpusValueError
 from lfmbench.corpus.naming import (ATTR, AUX_CHANNELS, EMPTY_PART, FORMAT_VERSION, RADIANCE_MAX, RADIANCE_UNIT,
+                                    STATIC_BINS_VERSION, bin_prefix,
                                     STATIC_WINDOWS, _check_version, bin_channels, light_part_name, static_channels,
                                     steady_channels)
 from lfmbench.limits import LimitError, limits_of
@@ -104,7 +105,9 @@ def encode_static_exr(windows: Mapping[str, np.ndarray], bands_nm: Sequence[floa
 
     Args:
         windows: ``{"short": (C, H, W), "long": (C, H, W)}`` time-averaged spectral radiance over each exposure
-            window, W sr^-1 m^-2 nm^-1, finite and >= 0.
+            window, W sr^-1 m^-2 nm^-1, finite and >= 0; or with ``"bins"``: (B, C, H, W) the time averages over
+            the scene's static time bins (format version 4: channels ``bin<k>.<wl>nm``, one layer per bin, the
+            file's ``lfmbench_format_version`` 4; ``short`` / ``long`` are then not stored: readers sum the bins).
         bands_nm: the C band centres (nm).
         dtype: storage, a name of :data:`STORAGES` (``"compact"``: HALF x 2^e with 5 mantissa bits, PIZ;
             ``"float16"``; ``"float32"``: lossless FLOAT as in format version 1) or a :class:`Storage`. Each
@@ -116,22 +119,32 @@ def encode_static_exr(windows: Mapping[str, np.ndarray], bands_nm: Sequence[floa
     """
     st = resolve_storage(dtype)
     notes = [] if notes is None else notes
-    if set(windows) != set(STATIC_WINDOWS):
-        raise ValueError(f"{what}: static windows must be exactly {STATIC_WINDOWS}, got {sorted(windows)}")
+    if "bins" in windows:  # static time bins (format version 4): the bins are stored, short and long are their sums
+        b = np.asarray(windows["bins"])
+        if b.ndim != 4 or b.shape[0] < 1:
+            raise ValueError(f"{what}: static bins must be (B, C, H, W), got shape {b.shape}")
+        windows = {bin_prefix(k, b.shape[0]): b[k] for k in range(b.shape[0])}
+        names = tuple(windows)
+    else:
+        if set(windows) != set(STATIC_WINDOWS):
+            raise ValueError(f"{what}: static windows must be exactly {STATIC_WINDOWS}, got {sorted(windows)}")
+        names = STATIC_WINDOWS
     shape = None
-    for w in STATIC_WINDOWS:
+    for w in names:
         a = _check_radiance(windows[w], f"{what} [{w}]")
         if a.ndim != 3 or a.shape[0] != len(bands_nm):
             raise ValueError(f"{what} [{w}]: expected shape (C={len(bands_nm)}, H, W), got {a.shape}")
         if shape is not None and a.shape != shape:
-            raise ValueError(f"{what}: short {shape} and long {a.shape} shapes differ")
+            raise ValueError(f"{what}: the static layers' shapes differ ({shape} and {a.shape})")
         shape = a.shape
     _, height, width = shape
     channels = {}
     stored = set()
     header = _base_header(width, height, compression=st.compression)
+    if names != STATIC_WINDOWS:
+        header[ATTR["version"]] = STATIC_BINS_VERSION
     header.update(attrs or {})
-    for w in STATIC_WINDOWS:
+    for w in names:
         ls = store_layer(windows[w], st, f"{what} [{w}]")
         _note_layer(ls, f"{what} [{w}]", notes, stats)
         stored.add(ls.pixel_type)

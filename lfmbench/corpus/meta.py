@@ -8,6 +8,7 @@ Units: times in s, wavelengths in nm, speeds in m/s, luminance in cd/m^2, boundi
 from __future__ import annotations
 
 import hashlib
+import math
 import os
 import re
 from pathlib import Path
@@ -19,7 +20,7 @@ from lfmbench.limits import brief, lights_cap_message, limit
 from lfmbench import check
 from lfmbench.check import scene_id_error
 from lfmbench.corpus.errors import CorpusFileError
-from lfmbench.corpus.naming import FORMAT_NAME, FORMAT_VERSION, SCENES_DIR, _check_version
+from lfmbench.corpus.naming import FORMAT_NAME, FORMAT_VERSION, SCENES_DIR, _check_version, window_bin_weights
 from lfmbench.vocabulary import LIGHT_KINDS, SPECTRUM_MODELS
 from lfmbench.fileio import InputFileError, load_json, loads_json
 
@@ -190,6 +191,18 @@ def validate_meta(meta: Mapping[str, Any], where: str = "meta.json") -> None:
                          f"{tl + readout} s so that the time bins cover the exposure windows")
     if "alignment" in t and t["alignment"] != "center":
         raise ValueError(f"{tw}: alignment must be 'center', got {brief(t['alignment'])}")
+    if "static_edges_s" in t:  # static time bins (format version 4): edges from 0 over both stored windows
+        e = t["static_edges_s"]
+        ok = isinstance(e, list) and 2 <= len(e) <= 4097 and all(
+            isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in e)
+        if not ok or abs(e[0]) > tol or e[-1] > cw + tol or any(b <= a for a, b in zip(e[:-1], e[1:])):
+            raise ValueError(f"{tw}: static_edges_s must be 2-4097 strictly increasing times (s) from 0 to at most "
+                             f"capture_window_s = {cw} s, got {brief(e)}")
+        sa = (tl - ts) / 2.0
+        for name, a, n in (("short", sa, ts), ("long", 0.0, tl)):
+            if window_bin_weights(e, a, n, tol=max(TIMING_RTOL * frame_time / n, 1e-9)) is None:
+                raise ValueError(f"{tw}: static_edges_s must hold the {name} window's ends "
+                                 f"({a:.6g} s, {a + n:.6g} s), got {brief(e)}")
     groups = meta["groups"]
     if not isinstance(groups, Mapping) or not groups:
         raise ValueError(f"{where}: field 'groups' must be a non-empty object")

@@ -16,7 +16,8 @@ from typing import Any, Mapping, Sequence
 from lfmbench.limits import brief
 from lfmbench.corpus.errors import CorpusFileError
 
-__all__ = ["FORMAT_NAME", "FORMAT_VERSION", "READABLE_VERSIONS", "MANIFEST_NAME", "SPLITS_NAME", "SCENES_DIR",
+__all__ = ["FORMAT_NAME", "FORMAT_VERSION", "STATIC_BINS_VERSION", "static_edges", "static_layers",
+           "window_bin_weights", "READABLE_VERSIONS", "MANIFEST_NAME", "SPLITS_NAME", "SCENES_DIR",
            "STATIC_WINDOWS", "AUX_CHANNELS", "RADIANCE_UNIT", "RADIANCE_MAX", "EMPTY_PART", "STEADY_PREFIX", "ATTR",
            "band_channel", "bin_prefix", "static_channels", "bin_channels", "steady_channels", "light_part_name",
            "parse_light_part", "box_inside", "frame_dir", "group_storage"]
@@ -27,8 +28,12 @@ __all__ = ["FORMAT_NAME", "FORMAT_VERSION", "READABLE_VERSIONS", "MANIFEST_NAME"
 #: pixels that are the same in every bin, section 6.2) reads every version-2 file unchanged.
 FORMAT_NAME = "lfmbench-corpus"
 FORMAT_VERSION = 3
+#: Format version of a scene whose static groups are stored in time bins (``meta.json``
+#: ``timing.static_edges_s``, section 6.1 of ``docs/guide/corpus-format.md``): its ``meta.json`` ``storage`` and its
+#: static EXR files say 4; every other scene is written as version 3, as before.
+STATIC_BINS_VERSION = 4
 #: Format versions this module reads.
-READABLE_VERSIONS = (1, 2, 3)
+READABLE_VERSIONS = (1, 2, 3, 4)
 MANIFEST_NAME = "manifest.json"
 SPLITS_NAME = "splits.json"
 SCENES_DIR = "scenes"
@@ -81,11 +86,48 @@ def bin_prefix(k: int, bins: int) -> str:
     return f"bin{k:0{width}d}"
 
 
+_STATIC_BIN = re.compile(r"bin\d{2,}")
+
+
 def static_channels(window: str, bands_nm: Sequence[float]) -> list[str]:
-    """Channel names of one exposure window (``short`` / ``long``) of a static group, band order."""
-    if window not in STATIC_WINDOWS:
-        raise ValueError(f"window must be one of {STATIC_WINDOWS}, got {brief(window)}")
+    """Channel names of one exposure window (``short`` / ``long``) or time bin (``bin00`` ...: format version 4) of a
+    static group, band order."""
+    if window not in STATIC_WINDOWS and not (isinstance(window, str) and _STATIC_BIN.fullmatch(window)):
+        raise ValueError(f"window must be one of {STATIC_WINDOWS} or a bin prefix, got {brief(window)}")
     return [band_channel(window, wl) for wl in bands_nm]
+
+
+def static_edges(meta: Mapping[str, Any]) -> list[float] | None:
+    """The edges (B + 1,) s from the frame start of a scene's static time bins (``meta.json``
+    ``timing.static_edges_s``, format version 4), None when its static groups are stored as the short and long
+    windows."""
+    e = (meta.get("timing") or {}).get("static_edges_s")
+    return None if e is None else [float(x) for x in e]
+
+
+def static_layers(meta: Mapping[str, Any]) -> tuple[str, ...]:
+    """The layers of a static group's file: :data:`STATIC_WINDOWS`, or the bin prefixes ``bin00`` ... of its static
+    time bins (:func:`static_edges`)."""
+    e = static_edges(meta)
+    return STATIC_WINDOWS if e is None else tuple(bin_prefix(k, len(e) - 1) for k in range(len(e) - 1))
+
+
+def window_bin_weights(edges: Sequence[float], start_s: float, length_s: float, tol: float = 1e-9):
+    """Weights (B,) of the time bins between ``edges`` (s) whose weighted sum is the time average over the window
+    [start_s, start_s + length_s) (s): ``|bin_k| / length_s`` for the bins inside it, 0 elsewhere (the exact
+    average: the bins tile it). None when an end of the window is not an edge (to ``tol`` of its length): the
+    window is not a union of bins."""
+    import numpy as np  # noqa: PLC0415
+
+    e = np.asarray(edges, dtype=np.float64)
+    t = tol * max(float(length_s), 1e-12)
+    ia = np.flatnonzero(np.abs(e - start_s) <= t)
+    ib = np.flatnonzero(np.abs(e - (start_s + length_s)) <= t)
+    if not len(ia) or not len(ib) or ib[0] <= ia[0]:
+        return None
+    w = np.zeros(len(e) - 1)
+    w[ia[0]:ib[0]] = np.diff(e)[ia[0]:ib[0]] / float(length_s)
+    return w
 
 
 def bin_channels(bins: int, bands_nm: Sequence[float]) -> list[list[str]]:
@@ -144,7 +186,7 @@ def _group_bins(meta: Mapping[str, Any], group: str) -> int:
 
 def _check_version(v: Any, where: str) -> int:
     """``v`` as a readable format version; ``CorpusFileError`` naming ``where`` (and the version) otherwise."""
-    if isinstance(v, int) and not isinstance(v, bool) and v > FORMAT_VERSION:
+    if isinstance(v, int) and not isinstance(v, bool) and v > max(READABLE_VERSIONS):
         raise CorpusFileError(f"{where}: corpus format version {v} is newer than this lfmbench reads "
                               f"(versions {', '.join(map(str, READABLE_VERSIONS))}); upgrade lfmbench")
     if v not in READABLE_VERSIONS or isinstance(v, bool):

@@ -17,7 +17,8 @@ from lfmbench.corpus.meta import (_check_manifest, _check_meta_storage, _load_js
                                   load_meta)
 from lfmbench.corpus.naming import (AUX_CHANNELS, EMPTY_PART, MANIFEST_NAME, SCENES_DIR, SPLITS_NAME, _group_bins,
                                     bin_channels, box_inside, frame_dir, group_storage, parse_light_part,
-                                    static_channels, steady_channels)
+                                    static_channels, steady_channels, STATIC_WINDOWS, static_edges, static_layers,
+                                    window_bin_weights)
 
 __all__ = ["Corpus"]
 
@@ -146,6 +147,14 @@ class Corpus:
         if group_storage(m, group) != "static":
             raise ValueError(f"group {brief(group)} of scene {brief(scene_id)} is stored per light in time bins: use "
                              "read_light_bins")
+        edges = static_edges(m)
+        if edges is not None and window in STATIC_WINDOWS:  # format version 4: the exact sum of its time bins
+            tm = m["timing"]
+            ts, tl = float(tm["short_exposure_s"]), float(tm["long_exposure_s"])
+            a, n = ((tl - ts) / 2.0, ts) if window == "short" else (0.0, tl)
+            wgt = window_bin_weights(edges, a, n, tol=1e-6)
+            _, bins = self.read_static_bins(scene_id, frame, group, bands)
+            return np.tensordot(wgt, bins.astype(np.float64), axes=1).astype(np.float32)
         names = static_channels(window, self._band_list(m, bands))
         parts = self._parts(path)
         arr = _stack(parts[0], names, path)
@@ -158,6 +167,34 @@ class Corpus:
         if self.check_values:
             _check_values(arr, path, f"[{window}]")
         return arr
+
+    def read_static_bins(self, scene_id: str, frame: int, group: str, bands: Sequence[float] | None = None
+                         ) -> tuple[np.ndarray, np.ndarray]:
+        """The static time bins of a statically stored group (format version 4, ``meta.json``
+        ``timing.static_edges_s``): ``(edges (B + 1,) s from the frame start, (B, C, H, W) float32 W sr^-1 m^-2
+        nm^-1)``, bin k the time average over [edges[k], edges[k + 1]). ``ValueError`` for a scene without them."""
+        m, path = self._frame_group(scene_id, frame, group)
+        edges = static_edges(m)
+        if edges is None:
+            raise ValueError(f"scene {brief(scene_id)} has no static time bins (meta.json timing.static_edges_s): "
+                             "read_static its short and long windows")
+        if group_storage(m, group) != "static":
+            raise ValueError(f"group {brief(group)} of scene {brief(scene_id)} is stored per light in time bins: use "
+                             "read_light_bins")
+        parts = self._parts(path)
+        out = []
+        for k, w in enumerate(static_layers(m)):
+            arr = _stack(parts[0], static_channels(w, self._band_list(m, bands)), path)
+            scale = layer_scale(parts[0], w, path)
+            if scale != 1.0:
+                arr /= np.float32(scale)
+            if arr.shape[1:] != (m["height"], m["width"]):
+                raise CorpusChannelError(f"EXR file {path}: image is {arr.shape[1:]}, meta.json says "
+                                         f"({m['height']}, {m['width']})")
+            if self.check_values:
+                _check_values(arr, path, f"[{w}]")
+            out.append(arr)
+        return np.asarray(edges, dtype=np.float64), np.stack(out)
 
     def read_light_bins(self, scene_id: str, frame: int, group: str, bands: Sequence[float] | None = None
                         ) -> list[tuple[int, tuple[int, int, int, int], np.ndarray]]:

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import logging
 import math
+import re
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -374,6 +375,6 @@ def scale_attr(window: str | None) -> str:
     windows of a static part, ``lfmbench_scale`` (``window=None``) for a light part."""
     if window is None:
         return ATTR["scale"]
-    if window not in STATIC_WINDOWS:
-        raise ValueError(f"window must be one of {STATIC_WINDOWS} or None, got {window!r}")
+    if window not in STATIC_WINDOWS and not (isinstance(window, str) and re.fullmatch(r"bin\d{2,}", window)):
+        raise ValueError(f"window must be one of {STATIC_WINDOWS}, a bin prefix or None, got {window!r}")
     return f"{ATTR['scale']}_{window}"

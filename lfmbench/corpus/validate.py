@@ -19,7 +19,8 @@ from lfmbench.corpus.meta import (_check_manifest, _check_meta_storage, _load_js
                                   inside_root, load_meta, manifest_entry_errors)
 from lfmbench.corpus.naming import (ATTR, AUX_CHANNELS, EMPTY_PART, MANIFEST_NAME, RADIANCE_MAX, RADIANCE_UNIT,
                                     SCENES_DIR, SPLITS_NAME, STATIC_WINDOWS, _group_bins, bin_channels, frame_dir,
-                                    box_inside, group_storage, parse_light_part, static_channels, steady_channels)
+                                    box_inside, group_storage, parse_light_part, static_channels, steady_channels,
+                                    static_layers)
 from lfmbench.fileio import TMP_PREFIX
 from lfmbench.limits import LIMITS, limit, set_limit
 
@@ -429,11 +430,12 @@ def _validate_scene(root: Path, sid: str, files: Mapping[str, str], rep: Validat
             if group_storage(meta, g) == "static":
                 if len(parts) != 1:
                     err(f"{p}: static group must have exactly one part, has {len(parts)}")
-                want = {c for w in STATIC_WINDOWS for c in static_channels(w, bands)}
+                layers = static_layers(meta)  # short / long, or the static time bins (format version 4)
+                want = {c for w in layers for c in static_channels(w, bands)}
                 _validate_channels(p, parts[0], want, rep)
                 if parts[0].window != (0, 0, H, W):
                     err(f"{p}: data window {parts[0].window} must cover the whole image")
-                for w in STATIC_WINDOWS:
+                for w in layers:
                     _validate_storage_attrs(p, parts[0], w, rep)
                 _validate_pixels(p, parts[0], rep, check_pixels)
             else:

@@ -24,6 +24,7 @@ from lfmbench.check import check_scene_id
 from lfmbench.corpus.exr import encode_aux_exr, encode_lights_exr, encode_static_exr
 from lfmbench.corpus.meta import _check_manifest, _empty_manifest, _load_json, make_splits, sha256_file, validate_meta
 from lfmbench.corpus.naming import (ATTR, FORMAT_VERSION, MANIFEST_NAME, SCENES_DIR, SPLITS_NAME, _group_bins,
+                                    STATIC_BINS_VERSION, static_edges,
                                     frame_dir, group_storage)
 from lfmbench.corpus.errors import CorpusError, CorpusLockedError
 from lfmbench.corpus.storage import DEFAULT_STORAGE, Storage, StorageStats, resolve_storage
@@ -453,7 +454,7 @@ def encode_scene(scene_id: str, scene: Mapping[str, Any], meta: Mapping[str, Any
 
     ``frames`` yields the renderer's frame dicts (``render_tools.render.render_frames``)::
 
-        {"frame": n, "static": {group: {"short": (C,H,W), "long": (C,H,W)}},
+        {"frame": n, "static": {group: {"short": (C,H,W), "long": (C,H,W)}},  # or {"bins": (B,C,H,W)}: static
          "lights": {group: [(light_id, (y0,x0,y1,x1), (K,C,h,w))]},
          "aux": {"depth.Z": (H,W), "depth.R": (H,W), "mask.instance": (H,W), "mask.light": (H,W)}}
     """
@@ -463,7 +464,8 @@ def encode_scene(scene_id: str, scene: Mapping[str, Any], meta: Mapping[str, Any
     if meta.get("scene_id") != scene_id:
         raise ValueError(f"meta.json scene_id {meta.get('scene_id')!r} != scene id {scene_id!r}")
     validate_meta(meta, f"meta.json of scene {scene_id}")
-    meta["storage"] = {"format_version": FORMAT_VERSION, **st.to_dict()}
+    edges = static_edges(meta)  # static time bins: the scene is format version 4
+    meta["storage"] = {"format_version": FORMAT_VERSION if edges is None else STATIC_BINS_VERSION, **st.to_dict()}
     stats = StorageStats()
     sdir = f"{SCENES_DIR}/{scene_id}"
     yield f"{sdir}/scene.json", _json_bytes(scene)
@@ -475,10 +477,19 @@ def encode_scene(scene_id: str, scene: Mapping[str, Any], meta: Mapping[str, Any
 
     def static_file(g: str, wins: Mapping[str, Any], what: str, n: int) -> tuple[bytes, StorageStats]:
         fstats = StorageStats()
+        if (edges is None) != ("bins" not in wins):
+            raise ValueError(f"{what}: static time bins given {'without' if edges is None else 'but not'} "
+                             "meta.json timing.static_edges_s")
+        if edges is not None:
+            if np.asarray(wins["bins"]).shape[0] != len(edges) - 1:
+                raise ValueError(f"{what}: {np.asarray(wins['bins']).shape[0]} static bins, meta.json "
+                                 f"timing.static_edges_s has {len(edges) - 1}")
+            wins = {"bins": wins["bins"]}
         data = encode_static_exr(wins, bands, dtype=st, what=what, notes=notes, stats=fstats,
                                  attrs=_attrs(scene_id, n, g))
-        if (H, W) != tuple(np.asarray(wins["short"]).shape[1:]):
-            raise ValueError(f"{what}: image size {np.asarray(wins['short']).shape[1:]} != meta.json ({H}, {W})")
+        size = np.asarray(wins["bins" if edges is not None else "short"]).shape[-2:]
+        if (H, W) != tuple(size):
+            raise ValueError(f"{what}: image size {tuple(size)} != meta.json ({H}, {W})")
         return data, fstats
 
     def lights_file(g: str, ls: Sequence, what: str, n: int) -> tuple[bytes, StorageStats]:

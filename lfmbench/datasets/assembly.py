@@ -28,6 +28,7 @@ from typing import Any, Mapping, NamedTuple, Sequence
 import numpy as np
 import torch
 
+from lfmbench.corpus import bin_prefix, window_bin_weights
 from lfmbench.datasets.projection import SceneLayers
 from lfmbench.datasets.pwm import gated_lights
 from lfmbench.flicker import pwm_exposure
@@ -36,7 +37,8 @@ from lfmbench.vocabulary import PHOTODIODES
 
 __all__ = ["NOISE_STREAMS", "SENSOR_OUTPUTS", "bin_edges", "window_bin_exposure", "window_starts", "row_window_starts",
            "check_line_time", "visible_lights", "compose_frame", "light_index", "add_rgb", "assemble_sample",
-           "PlanExposure", "STORED_WINDOW_LAYER", "STATIC_WINDOW_RULES", "static_window_source", "plan_exposures", "compose_plan_frame"]
+           "PlanExposure", "STORED_WINDOW_LAYER", "STATIC_WINDOW_RULES", "static_window_source",
+           "static_window_mix", "plan_exposures", "compose_plan_frame"]
 
 #: Where a sample's sensor noise comes from: ``"generator"``, ``torch.Generator().manual_seed(noise_seed)`` (the
 #: numbers of every published benchmark result); ``"counter"``, counter-based streams of the noise seed
@@ -338,6 +340,27 @@ def static_window_source(start_s: float, length_s: float, timing: Mapping[str, A
     return "long", False
 
 
+def static_window_mix(start_s: float, length_s: float, timing: Mapping[str, Any]) -> tuple[dict[str, float], bool]:
+    """The projected static layers and weights whose weighted sum is the static radiance of the window
+    ``[start_s, start_s + length_s)`` (s, from the frame start), and whether that is exact: ``({layer: weight},
+    exact)``. With static time bins (``timing["static_edges_s"]``, corpus format version 4) a window that is a union
+    of bins is their length-weighted mean (``{"bin03": 0.4, ...}``, exact: every capture window sees the scene, its
+    ego motion and moving vehicles, over its own time); another window overlaps bins partly and gets each bin by its
+    overlap (not exact). Without bins: :func:`static_window_source` (``{"lpd": 1.0}`` for the short window,
+    ``{"spd": 1.0}`` for the long one, :data:`STORED_WINDOW_LAYER`)."""
+    edges = timing.get("static_edges_s")
+    if edges is not None:
+        e = np.asarray(edges, dtype=np.float64)
+        w = window_bin_weights(e, start_s, length_s, tol=1e-6)
+        exact = w is not None
+        if w is None:  # partial bins by their overlap with the window
+            w = np.clip(np.minimum(e[1:], start_s + length_s) - np.maximum(e[:-1], start_s), 0.0, None) / length_s
+        nb = len(e) - 1
+        return {bin_prefix(k, nb): float(x) for k, x in enumerate(w) if x > 0}, exact
+    name, exact = static_window_source(start_s, length_s, timing)
+    return {STORED_WINDOW_LAYER[name]: 1.0}, exact
+
+
 #: How a plan's window that a corpus does not store for its static groups is served (``LFMCaptureDataset``
 #: ``static_windows``): ``"nearest"``, the smallest stored window containing it (:func:`static_window_source`;
 #: error measured in docs/results/sensor-architectures.md), or ``"exact"``, an error naming preset and corpus.
@@ -372,11 +395,12 @@ def plan_exposures(preset, meta: Mapping[str, Any], shutter: str, line_time_s: f
                 raise ValueError(f"{preset.source}: field 'captures.{key}.exposure' window {i} ends at "
                                  f"{(a + n + last) * 1e3:.4g} ms{' (last row)' if rolling else ''}, after the capture "
                                  f"window of {source} ({cw * 1e3:.4g} ms): the corpus has no radiance there")
-            if static_windows == "exact" and not static_window_source(a, n, tm)[1]:
+            if static_windows == "exact" and not static_window_mix(a, n, tm)[1]:
                 raise ValueError(f"{preset.source}: field 'captures.{key}.exposure' window {i} "
                                  f"[{a * 1e3:.4g}, {(a + n) * 1e3:.4g}) ms is not a window {source} stores for its "
-                                 "static groups (short or long); use static_windows='nearest' (the measured "
-                                 "approximation, docs/results/sensor-architectures.md) or a plan of stored windows")
+                                 "static groups (short, long or a union of its static time bins); use "
+                                 "static_windows='nearest' (the measured approximation, docs/benchmarks/"
+                                 "motion-windows.md) or a corpus rendered with these window edges")
         out.append(PlanExposure(key, preset.photodiodes[spec.photodiode].fill_factor, wins, rolling, lt))
     return out
 
@@ -411,8 +435,9 @@ def compose_plan_frame(layers: SceneLayers, meta: dict, frame: int, crop: tuple[
     out: dict[str, torch.Tensor] = {}
     for x in exposures:
         acc = torch.zeros(h, w)
-        for (_a, n), s_ in zip(x.windows, src[x.key]):
-            acc += layers.static[STORED_WINDOW_LAYER[s_]][frame][crop_of] * float(n)
+        for a_, n in x.windows:
+            for layer, wgt in static_window_mix(a_, n, tm)[0].items():  # static time bins, else a stored window
+                acc += layers.static[layer][frame][crop_of] * float(wgt * n)
         out[x.key] = acc
     ref = next(x for x in exposures if x.key == reference)
     out["gt"] = out[reference].clone()

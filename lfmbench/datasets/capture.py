@@ -30,7 +30,7 @@ from lfmbench.datasets.counter_draws import (SceneEntities, counter_scene_draw, 
                                              place_uniforms, start_frame)
 from lfmbench.datasets.assembly import (NOISE_STREAMS, SENSOR_OUTPUTS, STATIC_WINDOW_RULES, assemble_sample,
                                         check_line_time, compose_frame, compose_plan_frame, light_index,
-                                        plan_exposures, static_window_source)
+                                        PlanExposure, plan_exposures, static_window_mix, static_window_source)
 from lfmbench.datasets.pieces import capture_pieces
 from lfmbench.datasets.projection import SceneLayers, aux_channels, load_or_build, unit_projection_preset
 from lfmbench.datasets.pwm import PWMConfig, apply_light_timing, draw_scene_pwm, frozen_test_rng, load_pwm_config
@@ -39,7 +39,9 @@ from lfmbench.flicker import pwm_exposure
 from lfmbench.sensor.fused import warm_fused
 from lfmbench.vocabulary import PHOTODIODES
 
-OUTPUTS = ("raw", "input_referred", "saturated", "gt", "light_index", "depth", "rgb")
+OUTPUTS = ("raw", "input_referred", "saturated", "gt", "light_index", "depth", "rgb", "gt_common")
+#: The sensor behind ``gt_common`` (its CFA, QE and optics at unit fill factor), the same for every dataset sensor.
+COMMON_REFERENCE_SENSOR = "single"
 DEFAULT_OUTPUTS = ("raw", "input_referred", "saturated", "gt", "light_index", "depth")
 TEST_PARAMS_NAME = "test_params.json"
 #: Smallest default length of the padded per-light ``meta`` arrays (``LFMCaptureDataset(max_lights=None)``).
@@ -82,7 +84,7 @@ class SceneView:
         ``static[pd]`` become views of it: the rates are not held twice)."""
         def build(layers: SceneLayers) -> torch.Tensor:
             both = torch.stack([layers.static[pd] for pd in PHOTODIODES], 1)
-            layers.static = {pd: both[:, i] for i, pd in enumerate(PHOTODIODES)}
+            layers.static = {**layers.static, **{pd: both[:, i] for i, pd in enumerate(PHOTODIODES)}}
             return both
 
         return self.cached("static_both", build)
@@ -173,7 +175,8 @@ class LFMCaptureDataset(Dataset):
             to be batched by :func:`~lfmbench.datasets.batched.collate_pieces` and simulated on the training
             device by :func:`~lfmbench.datasets.batched.simulate_batch` (docs/guide/datasets.md, "Captures on the GPU").
         static_windows: how a capture plan's window that the corpus does not store for its static groups (it
-            stores the short and long windows) is served: ``"nearest"`` (default: the smallest stored window
+            stores the short and long windows, and from format version 4 static time bins whose unions are exact:
+            docs/benchmarks/motion-windows.md) is served: ``"nearest"`` (default: the smallest stored window
             containing it, else the long one; error measured in docs/results/sensor-architectures.md; samples record it in
             ``meta["static_windows"]``) or ``"exact"`` (such a plan is refused, naming preset and corpus).
         noise_streams: where a sample's random numbers come from (:data:`lfmbench.datasets.assembly.NOISE_STREAMS`):
@@ -189,11 +192,14 @@ class LFMCaptureDataset(Dataset):
         input-referred LPD-equivalent e- over the short exposure; ``saturated``: (F, 3, h, w) bool;
         ``gt``: (F, 1, h, w) e-; ``light_index``: (F, 1, h, w) int64 (index into the ``meta`` light arrays,
         -1 none); ``depth``: (F, 1, h, w) m; ``rgb`` (on request): ``lpd_lcg_rgb``, ``spd_rgb``, ``gt_rgb``
-        (F, 3, h, w) demosaiced (kornia bilinear); ``meta``: scene_id, index, epoch, num_lights, light_id,
+        (F, 3, h, w) demosaiced (kornia bilinear); ``gt_common`` (on request): (F, 1, h, w) e-, the ground truth
+        common to all sensors (the long window [0, T_L) through :data:`COMMON_REFERENCE_SENSOR`, lights at their
+        mean level; ``_gt_common``); ``meta``: scene_id, index, epoch, num_lights, light_id,
         flicker, freq_hz, duty, phase_s (L,) padded, exposure_short_s, exposure_long_s (s), crop (y0, x0, h, w),
         sensor, shutter, flicker_mode ("bins" or "per_frame_weight"), frame_start (index of the sample's first
         frame in the scene's sequence); another capture plan adds architecture, static_windows ("exact" or
-        "nearest") and readout ({capture: "global" or "rolling"}, what each capture was read with: its own or the
+        "nearest"), miss_windows_s ((W, 2) s: its shortest capture's windows, the condition ``pwm_miss_prob``) and
+        readout ({capture: "global" or "rolling"}, what each capture was read with: its own or the
         preset's readout, else ``shutter``, the dataset's argument).
         Another capture plan (``sensor="lofic"``, ...): its captures by name instead of ``lpd_hcg``, ``lpd_lcg``,
         ``spd`` (DN), ``<capture>_e`` (e-, input-referred to the plan's reference capture, the ``gt`` units),
@@ -261,6 +267,12 @@ class LFMCaptureDataset(Dataset):
         self.architecture = self.preset.architecture
         # a capture plan other than the split pixel reads layers projected at unit fill factor (its own windows)
         self._layer_preset = unit_projection_preset(self.preset)
+        # gt_common: one reference window through one fixed reference projection, whatever the sensor
+        self._common_preset = unit_projection_preset(_sensor.load_preset(COMMON_REFERENCE_SENSOR)) \
+            if "gt_common" in self.outputs else None
+        self._common_cache: OrderedDict = OrderedDict()
+        if pieces and "gt_common" in self.outputs:
+            raise ValueError("outputs: 'gt_common' is made on the per-sample path only (pieces=False)")
         if self.architecture != "split_pixel" and (pieces or noise_streams != "generator"):
             raise ValueError(f"sensor: preset {self.sensor_name!r} ({self.architecture}) runs on the per-sample path "
                              "only: pieces=True and noise_streams='counter' (simulate_batch, DeviceBatches) serve "
@@ -646,8 +658,31 @@ class LFMCaptureDataset(Dataset):
         li = view.light_index()[s0:s0 + F, :, y0:y0 + ch, x0:x0 + cw].long() if "light_index" in want else None
         depth = layers.aux["depth.Z"][s0:s0 + F, y0:y0 + ch, x0:x0 + cw][:, None] if "depth" in want else None
         sample = assemble_sample(want, cap, gt, self.preset, li, depth)
+        if "gt_common" in want:
+            sample["gt_common"] = self._gt_common(scene_id, meta, crop, params, group_params, s0)
         sample["meta"] = meta_out
         return sample
+
+    def _gt_common(self, scene_id: str, meta: dict, crop: tuple, params: dict, group_params: dict,
+                   s0: int) -> torch.Tensor:
+        """(F, 1, h, w) e-: the ground truth common to every sensor (output ``gt_common``): the scene over one fixed
+        reference window, the corpus's long window [0, T_L) of each frame (static groups exact, every light at its
+        time-averaged level, as ``gt``), projected through one reference sensor (:data:`COMMON_REFERENCE_SENSOR`, unit
+        fill factor, global readout) instead of the dataset's own. Two datasets of different sensors on the same
+        corpus, crop, draws and frames give the same tensor: the reference of cross-sensor columns, beside each
+        sensor's own ``gt`` (its reference exposure) for its LED metrics."""
+        if scene_id in self._common_cache:
+            layers = self._common_cache[scene_id]
+            self._common_cache.move_to_end(scene_id)
+        else:
+            layers = load_or_build(self.corpus, scene_id, self._common_preset, self.groups,
+                                   self._frames_to_load(scene_id), self.optics, self.cache_dir, aux=())
+            self._common_cache[scene_id] = layers
+            while len(self._common_cache) > max(1, self._cache_scenes):
+                self._common_cache.popitem(last=False)
+        ref = [PlanExposure("common", 1.0, ((0.0, float(meta["timing"]["long_exposure_s"])),), False, 0.0)]
+        return torch.stack([compose_plan_frame(layers, meta, f, crop, params, group_params, ref, "common")["gt"]
+                            for f in range(s0, s0 + self.frames)])[:, None]
 
     def scene(self, scene_id: str) -> SceneView:
         """The scene ``scene_id`` as this dataset holds it (:class:`SceneView`)."""
@@ -691,17 +726,28 @@ class LFMCaptureDataset(Dataset):
                "sensor": self.sensor_name, "shutter": self.shutter, "flicker_mode": mode,
                "frame_start": int(frame_start)}
         if self.architecture != "split_pixel":  # (the split pixel's meta is unchanged: the batched paths share it)
+            out.update(miss_windows_s=self._miss_windows(tm))
             out.update(architecture=self.architecture, static_windows=self._static_window_mode(tm),
                        readout={k: self.preset.capture_readout(k).shutter or self.shutter
                                 for k in self.preset.captures})
         return out
+
+    def _miss_windows(self, timing: Mapping[str, Any]) -> torch.Tensor:
+        """(W, 2) float64 ``(start_s, length_s)`` windows of the plan's shortest capture (least integration time: the
+        one that carries the brightest lamps, and the one that misses a PWM light first), from which the condition
+        ``pwm_miss_prob`` of this sensor is computed (:func:`lfmbench.evaluation.conditions.sample_conditions`,
+        :func:`lfmbench.flicker.windows_miss_probability`): each sensor binned by its own windows."""
+        from lfmbench.sensor.plan import resolve_windows, total_length_s  # noqa: PLC0415
+
+        wins = [resolve_windows(c.exposure, timing) for c in self.preset.captures.values()]
+        return torch.tensor(min(wins, key=total_length_s), dtype=torch.float64).reshape(-1, 2)
 
     def _static_window_mode(self, timing: Mapping[str, Any]) -> str:
         """``"exact"`` when every window of the plan is one the corpus stores for its static groups (always for
         the split pixel), else ``"nearest"`` (served by the measured approximation, :data:`STATIC_WINDOW_RULES`)."""
         from lfmbench.sensor.plan import resolve_windows  # noqa: PLC0415
 
-        exact = all(static_window_source(a, n, timing)[1] for c in self.preset.captures.values()
+        exact = all(static_window_mix(a, n, timing)[1] for c in self.preset.captures.values()
                     for a, n in resolve_windows(c.exposure, timing))
         return "exact" if exact else "nearest"
 

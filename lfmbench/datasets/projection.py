@@ -15,7 +15,8 @@ spectral sum. Per-light layers are projected in their bounding box padded by the
 outside the box, as stored).
 
 Layers of one scene: ``static[pd]`` (F, H, W) e-/s, sum of the static groups over the window that photodiode
-integrates (LPD: short, SPD: long); ``group_static[g][pd]`` (F, H, W) for flickering groups stored without time
+integrates (LPD: short, SPD: long), and where the corpus has static time bins (format version 4) ``static[bin<k>]``
+(F, H, W) the bins' rates through the LPD (a capture plan's unit photodiode); ``group_static[g][pd]`` (F, H, W) for flickering groups stored without time
 bins (imported ISET-LFM data); ``lights[f]`` list of ``(light_id, group, (y0, x0, y1, x1), {pd: (K, h, w)})``.
 """
 from __future__ import annotations
@@ -32,8 +33,8 @@ import torch
 
 from lfmbench.sensor import optics as _optics
 from lfmbench import sensor as _sensor
-from lfmbench.corpus import (MANIFEST_NAME, SCENES_DIR, Corpus, CorpusFileError, check_scene_id, frame_dir,
-                             group_storage, sha256_file)
+from lfmbench.corpus import (MANIFEST_NAME, SCENES_DIR, Corpus, CorpusFileError, bin_prefix, check_scene_id,
+                             frame_dir, group_storage, sha256_file, static_edges)
 from lfmbench.fileio import atomic_torch_save
 from lfmbench.vocabulary import PHOTODIODES
 
@@ -231,10 +232,19 @@ def build_layers(corpus: Corpus, scene_id: str, preset, groups: Sequence[str] | 
     group_static: dict = {}
     lights: list = []
     window_of = {"lpd": "short", "spd": "long"}
+    edges = static_edges(meta)  # static time bins (format version 4): projected too, one layer per bin
+    if edges is not None:
+        static.update({bin_prefix(k, len(edges) - 1): torch.zeros(frames, H, W) for k in range(len(edges) - 1)})
     for f in range(frames):
         per_frame = []
         for g in use:
             flick = bool(have[g].get("flicker", False))
+            if edges is not None and not flick and group_storage(meta, g) == "static":
+                _, bins = corpus.read_static_bins(scene_id, f, g)
+                for k in range(bins.shape[0]):
+                    rates = proj.project(bins[k][None])
+                    static[bin_prefix(k, bins.shape[0])][f] += rates["lpd"][0]   # the plans' unit photodiode
+                # the split pixel's windows: exact sums of the bins (read_static), as from a version-3 corpus
             if group_storage(meta, g) == "static":
                 for pd in PHOTODIODES:
                     L = corpus.read_static(scene_id, f, g, window_of[pd])

@@ -1,8 +1,8 @@
 """Conditions of every scored sample (time of day, PWM duty and frequency, ego speed) and their bins.
 
 - :func:`sample_conditions`: PWM duty, frequency and miss probability of each sample of a batch, from its ``meta``
-  (the dataset's per-light ``duty``, ``freq_hz`` and ``flicker`` arrays and ``exposure_short_s``): means over the
-  flickering lights.
+  (the dataset's per-light ``duty``, ``freq_hz`` and ``flicker`` arrays, and the sensor's own shortest capture's
+  windows ``miss_windows_s``, else the split pixel's ``exposure_short_s``): means over the flickering lights.
 - :func:`corpus_scene_conditions`: a ``scene_id -> {time_of_day, ego_speed_mps}`` reader of a corpus
   (``scene.json`` ``time_of_day``, ``meta.json`` ``camera.speed_mps``).
 - :func:`load_bins`, :func:`bin_label`: the breakdown bins of ``lfmbench/configs/conditions.yaml``.
@@ -101,20 +101,31 @@ def _per_sample(meta: Any, key: str, b: int) -> list:
     return [v] * b
 
 
+def _has(meta: Any, key: str) -> bool:
+    """Whether a collated ``meta`` (dict) or a list of per-sample dicts holds ``key``."""
+    if isinstance(meta, dict):
+        return key in meta
+    return isinstance(meta, (list, tuple)) and any(isinstance(m, dict) and key in m for m in meta)
+
+
 def sample_conditions(batch: dict) -> list[dict]:
     """PWM conditions of each sample of a batch, means over the sample's flickering lights (``meta`` arrays
     ``duty``, ``freq_hz``, ``flicker`` of shape (B, L)): ``pwm_duty`` (1), ``pwm_freq_hz`` (Hz) and
-    ``pwm_miss_prob`` (1; :func:`lfmbench.flicker.miss_probability` of the short exposure ``exposure_short_s``
-    (s), the light's period and duty: the expected share of frames in which the LPD sees the light dark);
+    ``pwm_miss_prob`` (1; the expected share of frames in which the sensor's shortest capture sees the light dark:
+    for a capture plan, :func:`lfmbench.flicker.windows_miss_probability` of its own windows ``miss_windows_s``
+    ((W, 2) s, the dataset's meta: a staggered sensor's 0.1 ms, a chopped sensor's union of sub-windows, a LOFIC
+    sensor's 11 ms), for the split pixel :func:`lfmbench.flicker.miss_probability` of its LPD's short exposure
+    ``exposure_short_s`` (s); the light's period and duty);
     left out when the sample has no flickering light or the meta lacks them. ``time_of_day`` and
     ``ego_speed_mps`` are taken from ``meta`` when a data source provides them."""
     import torch
 
-    from lfmbench.flicker import miss_probability
+    from lfmbench.flicker import miss_probability, windows_miss_probability
 
     b = batch["gt"].shape[0]
     meta = batch.get("meta", {})
     duty, freq, flick, t_s = (_per_sample(meta, k, b) for k in ("duty", "freq_hz", "flicker", "exposure_short_s"))
+    mw = _per_sample(meta, "miss_windows_s", b) if _has(meta, "miss_windows_s") else [None] * b
     out = []
     for i in range(b):
         rec: dict[str, Any] = {}
@@ -129,7 +140,13 @@ def sample_conditions(batch: dict) -> list[dict]:
                 if a.shape == f.shape and bool(f.any()):
                     vals[name] = a[f]
                     rec[name] = float(a[f].mean())
-        if t_s[i] is not None and {"pwm_duty", "pwm_freq_hz"} <= vals.keys() and bool((vals["pwm_freq_hz"] > 0).all()):
+        ok = {"pwm_duty", "pwm_freq_hz"} <= vals.keys() and bool((vals["pwm_freq_hz"] > 0).all())
+        if ok and mw[i] is not None:   # a capture plan: its own shortest capture's windows (a chopped union too)
+            wins = torch.as_tensor(mw[i], dtype=torch.float64).reshape(-1, 2).tolist()
+            rec["pwm_miss_prob"] = float(sum(windows_miss_probability(wins, 1.0 / float(f_), float(d_))
+                                             for f_, d_ in zip(vals["pwm_freq_hz"], vals["pwm_duty"]))
+                                         / len(vals["pwm_duty"]))
+        elif ok and t_s[i] is not None:   # the split pixel: its LPD's short window
             ts = float(torch.as_tensor(t_s[i], dtype=torch.float64).reshape(-1)[0])
             rec["pwm_miss_prob"] = float(miss_probability(ts, 1.0 / vals["pwm_freq_hz"], vals["pwm_duty"]).mean())
         for key in ("time_of_day", "ego_speed_mps"):

@@ -267,11 +267,11 @@ def test_newer_version_refused_naming_file(tmp_path):
     meta, _, _ = _write(tmp_path, "compact")
     mpath = tmp_path / "manifest.json"
     man = json.loads(mpath.read_text())
-    mpath.write_text(json.dumps(dict(man, version=4)))
-    with pytest.raises(C.CorpusFileError, match=r"manifest\.json.*version 4 is newer"):
+    mpath.write_text(json.dumps(dict(man, version=5)))
+    with pytest.raises(C.CorpusFileError, match=r"manifest\.json.*version 5 is newer"):
         C.Corpus(tmp_path)
     rep = C.validate_corpus(tmp_path)
-    assert not rep.ok and "version 4" in rep.errors[0] and "manifest.json" in rep.errors[0]
+    assert not rep.ok and "version 5" in rep.errors[0] and "manifest.json" in rep.errors[0]
     with pytest.raises(C.CorpusFileError, match="unsupported corpus format version 'x'"):
         mpath.write_text(json.dumps(dict(man, version="x")))
         C.Corpus(tmp_path)
@@ -285,9 +285,9 @@ def test_newer_version_refused_naming_file(tmp_path):
     # a meta.json announcing a newer storage format
     mp = tmp_path / "scenes/scene00000/meta.json"
     m = json.loads(mp.read_text())
-    m["storage"]["format_version"] = 5
+    m["storage"]["format_version"] = 6
     mp.write_text(json.dumps(m))
-    with pytest.raises(C.CorpusFileError, match=r"meta\.json storage\.format_version.*version 5"):
+    with pytest.raises(C.CorpusFileError, match=r"meta\.json storage\.format_version.*version 6"):
         C.Corpus(tmp_path).meta(meta["scene_id"])
 
 
