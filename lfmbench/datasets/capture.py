@@ -137,9 +137,9 @@ class LFMCaptureDataset(Dataset):
     Args:
         root: corpus directory (``lfmbench render --out DIR`` or ``lfmbench import-isetlfm``).
         split: ``"train"``, ``"val"``, ``"test"`` (PWM draws frozen in ``<root>/test_params.json``) or ``"all"``.
-        sensor: preset name (``"ovt"``, ``"imx490"``, ``"lofic"``, ``"staggered"``, ``"chopped"``, ``"single"``),
-            YAML path or :class:`lfmbench.sensor.SensorPreset`: its capture plan (docs/guide/sensors.md) names the sample's
-            capture keys. Architectures other than the split pixel run on the per-sample path (not ``pieces``).
+        sensor: preset name (one of :func:`lfmbench.sensor.available_presets`: the files of
+            ``lfmbench/configs/sensors/``), YAML path or :class:`lfmbench.sensor.SensorPreset`: its capture plan
+            (docs/guide/sensors.md) names the sample's capture keys. Architectures other than the split pixel run on the per-sample path (not ``pieces``).
         frames: number of consecutive frames F per sample (<= the corpus frames).
         frame_start: which F consecutive frames of a longer sequence a sample shows: an int s (frames
             s .. s + F - 1 of every scene; default 0, the first F; only frames < s + F are read) or
