@@ -6,7 +6,7 @@ LED brightness error, saturation flag), :mod:`~lfmbench.metrics.regions` (errors
 regions: ghosts and comets) and :mod:`~lfmbench.metrics.display` (display-referred PSNR / SSIM after the ISP:
 secondary columns, group ``display``; the primary metrics stay on linear values).
 
-Every metric is ONE entry of :data:`REGISTRY` (a :class:`MetricSpec`): name, version (bumped whenever its
+Every metric is ONE entry of :data:`REGISTRY` (a :class:`MetricSpec` given to :func:`register_metric`): name, version (bumped whenever its
 definition or defaults change, so results stay comparable), reference, unit, ranking direction, column
 header, aggregation over scenes, and how it is computed: its own function ``fn(pred, batch, options)``, a
 ``derive(values)`` of other metrics of the same sample, or (``fn`` and ``derive`` both None) a
@@ -20,9 +20,10 @@ This package face only re-exports: :mod:`~lfmbench.metrics.spec` (what a metric 
 (:func:`score_batch`).
 """
 from lfmbench.metrics import display, flicker, hdr, regions
-from lfmbench.metrics.registry import BLOCKS, PRIMARY, REGISTRY, SECONDARY_GROUPS, columns, led_score, metric_versions
+from lfmbench.metrics.registry import (BLOCKS, PRIMARY, REGISTRY, SECONDARY_GROUPS, columns, led_score,
+                                       metric_versions, register_metric)
 from lfmbench.metrics.scoring import ScoreOptions, score_batch
 from lfmbench.metrics.spec import MetricBlock, MetricSpec
 
 __all__ = ["MetricSpec", "MetricBlock", "REGISTRY", "BLOCKS", "PRIMARY", "SECONDARY_GROUPS", "metric_versions",
-           "score_batch", "ScoreOptions", "led_score", "columns", "display", "flicker", "hdr", "regions"]
+           "register_metric", "score_batch", "ScoreOptions", "led_score", "columns", "display", "flicker", "hdr", "regions"]

@@ -9,8 +9,10 @@ import torch
 
 from lfmbench.metrics import display, flicker, hdr, regions
 from lfmbench.metrics.spec import MetricBlock, MetricSpec
+from lfmbench.registry import Registry
 
-__all__ = ["REGISTRY", "BLOCKS", "PRIMARY", "SECONDARY_GROUPS", "led_score", "columns", "metric_versions"]
+__all__ = ["REGISTRY", "BLOCKS", "PRIMARY", "SECONDARY_GROUPS", "register_metric", "led_score", "columns",
+           "metric_versions"]
 
 
 _KR17 = "Kalantari & Ramamoorthi, ACM TOG 36(4) 2017"
@@ -61,11 +63,11 @@ def _display_block(pred: torch.Tensor, batch: dict, o) -> list[dict]:
 
 
 #: Multi-metric blocks, by group name (each computed once per batch).
-BLOCKS: dict[str, MetricBlock] = {b.name: b for b in [
-    MetricBlock("perceptual", _perceptual_block, on_error="record"),
-    MetricBlock("flicker", _region_block, needs=("light_index",)),
-    MetricBlock("display", _display_block, on_error="record"),
-]}
+BLOCKS: Registry[MetricBlock] = Registry("metric block")
+for _b in (MetricBlock("perceptual", _perceptual_block, on_error="record"),
+           MetricBlock("flicker", _region_block, needs=("light_index",)),
+           MetricBlock("display", _display_block, on_error="record")):
+    BLOCKS.register(_b.name, _b)
 
 #: Groups of secondary metrics, added after a protocol was published: they never enter the primary score, and a
 #: result file written before they existed lacks them (the leaderboard shows an empty cell, not a conflict).
@@ -74,8 +76,48 @@ SECONDARY_GROUPS: tuple[str, ...] = ("display",)
 #: The metric the leaderboard ranks by unless told otherwise.
 PRIMARY = "led_score"
 
-#: name -> spec of every metric :func:`score_batch` can report, in leaderboard column order.
-REGISTRY: dict[str, MetricSpec] = {s.name: s for s in [
+#: name -> spec of every metric :func:`lfmbench.metrics.score_batch` can report, in leaderboard column order;
+#: :func:`register_metric` adds one.
+REGISTRY: Registry[MetricSpec] = Registry("metric")
+
+#: Groups whose block also produces the ``region`` group's metrics (one pass over the LED regions).
+_BLOCK_OF_GROUP = {"perceptual": "perceptual", "flicker": "flicker", "region": "flicker", "display": "display"}
+
+
+def _spec_error(s: MetricSpec) -> str | None:
+    """What is wrong with a spec (inputs of ``derive`` aside), or None."""
+    kinds = (s.fn is not None) + (s.derive is not None)
+    if kinds > 1:
+        return "give fn or derive, not both"
+    if kinds == 0 and s.group not in _BLOCK_OF_GROUP:
+        return f"no fn, no derive and no block for group {s.group!r}"
+    if s.aggregate not in ("mean", "pooled") or (s.aggregate == "pooled") != (s.weight is not None):
+        return "aggregate must be 'mean', or 'pooled' with a weight"
+    if s.show not in ("console", "table", "none"):
+        return f"show must be console, table or none, got {s.show!r}"
+    if not s.header:
+        return "a column header is needed"
+    return None
+
+
+def _inputs_error(s: MetricSpec) -> str | None:
+    missing = [i for i in s.inputs if i not in REGISTRY]
+    return f"derive inputs {missing} are not registered" if missing else None
+
+
+def register_metric(spec: MetricSpec, *, check_inputs: bool = True) -> MetricSpec:
+    """Register ``spec`` under ``spec.name`` (appended to the columns), after checking it: one of ``fn`` and
+    ``derive`` (or a group computed by a block), a known aggregation and display, a header, and (``check_inputs``)
+    the metrics ``derive`` reads registered already. Raises ``ValueError`` naming the metric."""
+    if not isinstance(spec, MetricSpec):
+        raise ValueError(f"a metric must be a MetricSpec, got {type(spec).__name__}")
+    why = _spec_error(spec) or (_inputs_error(spec) if check_inputs else None)
+    if why:
+        raise ValueError(f"metric {spec.name!r}: {why}")
+    return REGISTRY.register(spec.name, spec)
+
+
+for _s in [
     MetricSpec("led_score", "1.0", _DS80 + " of 1 - dropout (ISET-LFM Fig. 5), 1 - |dFMI| (IEEE P2020) and "
                "1 - LED brightness error", "1", True, "led", "LED score",
                derive=lambda v: led_score(v["dropout_rate"], v["fmi_abs_err"], v["led_rel_err"]),
@@ -121,31 +163,11 @@ REGISTRY: dict[str, MetricSpec] = {s.name: s for s in [
     MetricSpec("ssim_srgb", "1.0", "Wang et al. IEEE TIP 2004 via kornia.metrics.ssim, per channel and frame of "
                "display sRGB after the ISP pipeline of ScoreOptions.isp", "1", True, "display", "SSIM sRGB",
                valid=(-1.0, 1.0)),
-]}
-
-#: Groups whose block also produces the ``region`` group's metrics (one pass over the LED regions).
-_BLOCK_OF_GROUP = {"perceptual": "perceptual", "flicker": "flicker", "region": "flicker", "display": "display"}
-
-
-def _check_registry() -> None:
-    for s in REGISTRY.values():
-        kinds = (s.fn is not None) + (s.derive is not None)
-        if kinds > 1:
-            raise ValueError(f"metric {s.name!r}: give fn or derive, not both")
-        if kinds == 0 and s.group not in _BLOCK_OF_GROUP:
-            raise ValueError(f"metric {s.name!r}: no fn, no derive and no block for group {s.group!r}")
-        if s.aggregate not in ("mean", "pooled") or (s.aggregate == "pooled") != (s.weight is not None):
-            raise ValueError(f"metric {s.name!r}: aggregate must be 'mean', or 'pooled' with a weight")
-        if s.show not in ("console", "table", "none"):
-            raise ValueError(f"metric {s.name!r}: show must be console, table or none, got {s.show!r}")
-        if not s.header:
-            raise ValueError(f"metric {s.name!r}: a column header is needed")
-        missing = [i for i in s.inputs if i not in REGISTRY]
-        if missing:
-            raise ValueError(f"metric {s.name!r}: derive inputs {missing} are not registered")
-
-
-_check_registry()
+]:
+    register_metric(_s, check_inputs=False)  # led_score leads the columns but derives from later entries
+for _s in REGISTRY.values():
+    if _inputs_error(_s):
+        raise ValueError(f"metric {_s.name!r}: {_inputs_error(_s)}")
 
 
 def columns(where: str = "table") -> list[MetricSpec]:
