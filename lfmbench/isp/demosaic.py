@@ -25,13 +25,13 @@ References
 from __future__ import annotations
 
 from collections.abc import Callable
-from types import MappingProxyType
 
 import torch
 import torch.nn.functional as F
 from torch import nn
 
 from lfmbench.isp.raw import _check_mosaic
+from lfmbench.registry import Registry
 from lfmbench.sensor.preset import CFAPattern
 
 __all__ = ["demosaic_bilinear", "demosaic_malvar2004", "clamp_to_neighbours", "demosaic", "DEMOSAIC", "Demosaic"]
@@ -152,10 +152,9 @@ def clamp_to_neighbours(rgb: torch.Tensor, raw: torch.Tensor, pattern: CFAPatter
 
 
 #: name -> demosaic function ``(raw (*, 1, H, W), pattern) -> (*, 3, H, W)``.
-DEMOSAIC: MappingProxyType[str, Callable[[torch.Tensor, CFAPattern | str], torch.Tensor]] = MappingProxyType({
-    "bilinear": demosaic_bilinear,
-    "malvar2004": demosaic_malvar2004,
-})
+DEMOSAIC: Registry[Callable[[torch.Tensor, CFAPattern | str], torch.Tensor]] = Registry("demosaic method")
+DEMOSAIC.register("bilinear", demosaic_bilinear)
+DEMOSAIC.register("malvar2004", demosaic_malvar2004)
 
 
 def demosaic(raw: torch.Tensor, pattern: CFAPattern | str, method: str = "malvar2004") -> torch.Tensor:

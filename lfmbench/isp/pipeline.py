@@ -38,6 +38,7 @@ from lfmbench.isp.compand import Compander, check_knees
 from lfmbench.isp.demosaic import DEMOSAIC, clamp_to_neighbours
 from lfmbench.isp.tonemap import TONEMAP
 from lfmbench.limits import brief
+from lfmbench.registry import Registry
 
 __all__ = ["STAGES", "Stage", "ISPPipeline", "ISP", "PIPELINE_DIR", "PIPELINE_FORMAT", "available_pipelines",
            "load_pipeline", "pipeline_from_dict"]
@@ -47,13 +48,13 @@ PIPELINE_DIR: Path = Path(__file__).resolve().parent.parent / "configs" / "isp"
 #: ``format`` of a pipeline file.
 PIPELINE_FORMAT = "lfmbench-isp"
 
-#: name -> stage class; filled by :func:`_register`.
-STAGES: dict[str, type["Stage"]] = {}
+#: name -> stage class (:class:`lfmbench.registry.Registry`); filled by :func:`_register`.
+STAGES: Registry[type["Stage"]] = Registry("ISP stage")
 
 
 def _register(cls: type["Stage"]) -> type["Stage"]:
-    STAGES[cls.op] = cls
-    return cls
+    """Decorator: register a :class:`Stage` subclass under its ``op``."""
+    return STAGES.register(cls.op, cls)
 
 
 class Stage:

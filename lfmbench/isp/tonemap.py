@@ -43,6 +43,7 @@ import torch
 from torch import nn
 
 from lfmbench.isp.color import luminance
+from lfmbench.registry import Registry
 
 __all__ = ["reinhard2002", "reinhard2002_stats", "durand2002", "durand2002_stats", "exposure_clip",
            "exposure_clip_stats", "ToneMapOperator", "TONEMAP", "tonemap", "ToneMap"]
@@ -253,7 +254,8 @@ class ToneMapOperator:
 
 
 #: name -> tone-mapping operator.
-TONEMAP: Mapping[str, ToneMapOperator] = MappingProxyType({op.name: op for op in [
+TONEMAP: Registry[ToneMapOperator] = Registry("tone-mapping operator")
+for _op in [
     ToneMapOperator("reinhard2002", "Reinhard et al., ACM TOG 21(3) 2002 (global, extended)", reinhard2002_stats,
                     reinhard2002, MappingProxyType({"white": "max"}), MappingProxyType({"key": 0.18})),
     ToneMapOperator("durand2002", "Durand & Dorsey, ACM TOG 21(3) 2002 (local base/detail; guided-filter base, "
@@ -262,7 +264,8 @@ TONEMAP: Mapping[str, ToneMapOperator] = MappingProxyType({op.name: op for op in
                     MappingProxyType({"contrast": 50.0, "radius": None, "eps": 0.16})),
     ToneMapOperator("clip", "linear: reference percentile -> 1, clipped", exposure_clip_stats, exposure_clip,
                     MappingProxyType({"percentile": 99.0}), MappingProxyType({})),
-]})
+]:
+    TONEMAP.register(_op.name, _op)
 
 
 def tonemap(rgb: torch.Tensor, reference: torch.Tensor | None = None, method: str = "reinhard2002",
