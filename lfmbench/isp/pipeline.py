@@ -32,7 +32,7 @@ from typing import Any, ClassVar, Mapping
 import torch
 from torch import nn
 
-from lfmbench.check import check_choice, check_keys, check_number, fail
+from lfmbench.check import check_choice, check_keys, check_number, check_tensor, fail
 from lfmbench.isp import color, raw as _raw
 from lfmbench.isp.compand import Compander, check_knees
 from lfmbench.isp.demosaic import DEMOSAIC, clamp_to_neighbours
@@ -343,7 +343,7 @@ class ISP(nn.Module):
 
     @staticmethod
     def _shape(x: torch.Tensor, name: str) -> torch.Tensor:
-        _raw._check_mosaic(x, name)
+        check_tensor(x, name, "* 1 H W", what="a Bayer mosaic", floating=True)
         n = x.shape[0] if x.ndim > 3 else 1
         return x.reshape((n, max(1, math.prod(x.shape[1:-3]) if x.ndim > 3 else 1)) + x.shape[-3:])
 
