@@ -33,7 +33,7 @@ from lfmbench.limits import brief
 __all__ = ["where", "fail", "check_number", "get_number", "check_integer", "check_vector", "check_keys",
            "check_choice", "check_array", "SCENE_ID_PATTERN", "SCENE_ID_MAX_LEN", "scene_id_error",
            "check_scene_id", "torch_device", "value_checks", "trusted_values", "check_tensor", "check_same_shape",
-           "check_batch_keys", "check_same_device"]
+           "check_batch_keys", "check_same_device", "check_int_arg", "check_flag", "check_arg_choice"]
 
 _MISSING = object()
 
@@ -198,6 +198,46 @@ def check_array(name: str, x: Any, *, lo: float | None = None, hi: float | None 
             raise ValueError(f"{name} must be {'>' if lo_open else '>='} {lo}; got {brief(v[bad].flat[0].item())}")
     if hi is not None and (v > hi).any():
         raise ValueError(f"{name} must be <= {hi}; got {brief(v[v > hi].flat[0].item())}")
+
+
+# ------------------------------------------------------------------------------------------ function arguments
+def check_int_arg(name: str, value: Any, lo: int | None = 0, hi: int | None = None) -> int:
+    """An integer argument (not a bool, not ``2.5``) within ``[lo, hi]``; ``TypeError`` for another type,
+    ``ValueError`` outside the range, each naming the argument.
+
+    >>> check_int_arg("seed", 1.5)
+    Traceback (most recent call last):
+    ...
+    TypeError: seed must be an integer, got 1.5
+    >>> check_int_arg("max_lights", 10 ** 9, 0, 4096)
+    Traceback (most recent call last):
+    ...
+    ValueError: max_lights must be an integer in [0, 4,096], got 1000000000
+    """
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise TypeError(f"{name} must be an integer, got {brief(value)}")
+    if (lo is not None and value < lo) or (hi is not None and value > hi):
+        rng = f">= {lo}" if hi is None else (f"<= {hi:,}" if lo is None else f"in [{lo}, {hi:,}]")
+        raise ValueError(f"{name} must be an integer {rng}, got {brief(value)}")
+    return int(value)
+
+
+def check_flag(name: str, value: Any) -> bool:
+    """``True`` or ``False`` (numpy's too): ``TypeError`` naming the argument otherwise (``"no"`` is not a flag)."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise TypeError(f"{name} must be True or False, got {brief(value)}")
+    return bool(value)
+
+
+def check_arg_choice(name: str, value: Any, allowed: Sequence[Any]) -> Any:
+    """``value`` is one of ``allowed``: ``ValueError("<name> must be one of (...), got <value>")`` otherwise."""
+    try:
+        ok = value in allowed
+    except TypeError:  # an unhashable value against a set-like ``allowed``
+        ok = False
+    if not ok:
+        raise ValueError(f"{name} must be one of {tuple(allowed)}, got {brief(value)}")
+    return value
 
 
 # ------------------------------------------------------------------------------------------------ tensors
