@@ -10,7 +10,7 @@ PIP    := $(PY) -m pip install -q
 LLVM   := /usr/lib/x86_64-linux-gnu/libLLVM.so.19.1
 # a DRJIT_LIBLLVM_PATH of the caller is kept; else the recipes name Debian's libLLVM 19 once `llvm` installed it
 
-.PHONY: setup test demo venv llvm bench clean-venv
+.PHONY: setup test test-fast demo venv llvm bench clean-venv
 
 venv: $(STAMP)
 
@@ -30,6 +30,16 @@ setup: $(STAMP) llvm
 
 test: setup
 	DRJIT_LIBLLVM_PATH=$${DRJIT_LIBLLVM_PATH:-$$(ls $(LLVM) 2>/dev/null)} $(PY) -m pytest -q -n 2 tests
+
+# A quick subset for the edit-test loop (under a minute on 2 cores, docs/guide/extending.md): the package
+# layout, the checks and registries, the flicker model, metrics, ISP, the rule-based baselines and the recipes of
+# extending a registry; nothing that renders, trains or builds a corpus of many scenes. `make test` runs everything.
+FAST := tests/test_layout.py tests/test_registry.py tests/test_check.py tests/test_extending.py tests/flicker \
+        tests/metrics tests/isp tests/baselines/test_baselines.py tests/baselines/test_plan_merge.py \
+        tests/sensor/test_plan.py tests/sensor/test_counter_rng.py tests/datasets/test_dataset_options.py \
+        tests/evaluation/test_evaluation_stats.py
+test-fast: setup
+	DRJIT_LIBLLVM_PATH=$${DRJIT_LIBLLVM_PATH:-$$(ls $(LLVM) 2>/dev/null)} $(PY) -m pytest -q -n 2 -m "not slow" $(FAST)
 
 # Debian's LLVM 19 for Mitsuba's llvm_* variants (the system's LLVM 15 crashes on AVX-512 CPUs; README, "System
 # dependency"). Needs root (apt-get); without it the render tests skip with one line saying why (CI never skips).

@@ -28,7 +28,7 @@ def rint(x):
 
 @triton.jit
 def two_prod(x, y):
-    """Dekker's TwoProduct (:func:`lfmbench.flicker._two_prod` with the float64 split 2^27 + 1): ``x*y == p + e``
+    """Dekker's TwoProduct (:func:`lfmbench.flicker.exact._two_prod` with the float64 split 2^27 + 1): ``x*y == p + e``
     exactly; the same operations in the same order."""
     p = x * y
     cx = _d(134217729.0) * x
@@ -43,7 +43,7 @@ def two_prod(x, y):
 
 @triton.jit
 def two_sum(x, y):
-    """Knuth's TwoSum (:func:`lfmbench.flicker._two_sum`): ``x + y == s + e`` exactly."""
+    """Knuth's TwoSum (:func:`lfmbench.flicker.exact._two_sum`): ``x + y == s + e`` exactly."""
     s = x + y
     bb = s - x
     e = (x - (s - bb)) + (y - bb)

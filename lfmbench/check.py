@@ -11,6 +11,11 @@ Used by the corpus format (:mod:`lfmbench.corpus`), sensor presets (:mod:`lfmben
 configurations (:mod:`lfmbench.datasets.pwm`), optics (:mod:`lfmbench.sensor.optics`), the flicker model
 (:mod:`lfmbench.flicker`, array arguments: :func:`check_array`) and the scene files of ``render_tools``.
 
+Tensor arguments (kornia's ``KORNIA_CHECK_SHAPE`` style): :func:`check_tensor` (type, a shape spec such as
+``"B F 1 H W"``, floating dtype, finite values), :func:`check_same_shape`, and for batch dicts
+:func:`check_batch_keys` and :func:`check_same_device`; a wrong type raises ``TypeError``, anything else
+``ValueError``, each naming the argument.
+
 The scene-id rule (:func:`check_scene_id`) lives here too, so that the corpus writer, the corpus reader and the
 scene-file validator accept exactly the same ids.
 """
@@ -27,7 +32,8 @@ from lfmbench.limits import brief
 
 __all__ = ["where", "fail", "check_number", "get_number", "check_integer", "check_vector", "check_keys",
            "check_choice", "check_array", "SCENE_ID_PATTERN", "SCENE_ID_MAX_LEN", "scene_id_error",
-           "check_scene_id", "torch_device", "value_checks", "trusted_values"]
+           "check_scene_id", "torch_device", "value_checks", "trusted_values", "check_tensor", "check_same_shape",
+           "check_batch_keys", "check_same_device", "check_int_arg", "check_flag", "check_arg_choice"]
 
 _MISSING = object()
 
@@ -192,6 +198,133 @@ def check_array(name: str, x: Any, *, lo: float | None = None, hi: float | None 
             raise ValueError(f"{name} must be {'>' if lo_open else '>='} {lo}; got {brief(v[bad].flat[0].item())}")
     if hi is not None and (v > hi).any():
         raise ValueError(f"{name} must be <= {hi}; got {brief(v[v > hi].flat[0].item())}")
+
+
+# ------------------------------------------------------------------------------------------ function arguments
+def check_int_arg(name: str, value: Any, lo: int | None = 0, hi: int | None = None) -> int:
+    """An integer argument (not a bool, not ``2.5``) within ``[lo, hi]``; ``TypeError`` for another type,
+    ``ValueError`` outside the range, each naming the argument.
+
+    >>> check_int_arg("seed", 1.5)
+    Traceback (most recent call last):
+    ...
+    TypeError: seed must be an integer, got 1.5
+    >>> check_int_arg("max_lights", 10 ** 9, 0, 4096)
+    Traceback (most recent call last):
+    ...
+    ValueError: max_lights must be an integer in [0, 4,096], got 1000000000
+    """
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise TypeError(f"{name} must be an integer, got {brief(value)}")
+    if (lo is not None and value < lo) or (hi is not None and value > hi):
+        rng = f">= {lo}" if hi is None else (f"<= {hi:,}" if lo is None else f"in [{lo}, {hi:,}]")
+        raise ValueError(f"{name} must be an integer {rng}, got {brief(value)}")
+    return int(value)
+
+
+def check_flag(name: str, value: Any) -> bool:
+    """``True`` or ``False`` (numpy's too): ``TypeError`` naming the argument otherwise (``"no"`` is not a flag)."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise TypeError(f"{name} must be True or False, got {brief(value)}")
+    return bool(value)
+
+
+def check_arg_choice(name: str, value: Any, allowed: Sequence[Any]) -> Any:
+    """``value`` is one of ``allowed``: ``ValueError("<name> must be one of (...), got <value>")`` otherwise."""
+    try:
+        ok = value in allowed
+    except TypeError:  # an unhashable value against a set-like ``allowed``
+        ok = False
+    if not ok:
+        raise ValueError(f"{name} must be one of {tuple(allowed)}, got {brief(value)}")
+    return value
+
+
+# ------------------------------------------------------------------------------------------------ tensors
+def _shape_ok(shape: tuple[int, ...], tokens: list[str]) -> bool:
+    """``shape`` matches the spec ``tokens``: an integer is that size, a name any size, ``*`` zero or more dims."""
+    if "*" in tokens:
+        k = tokens.index("*")
+        head, tail = tokens[:k], tokens[k + 1:]
+        if len(shape) < len(head) + len(tail):
+            return False
+        return _shape_ok(shape[:len(head)], head) and _shape_ok(shape[len(shape) - len(tail):], tail)
+    return len(shape) == len(tokens) and all(not t.isdigit() or int(t) == n for t, n in zip(tokens, shape))
+
+
+def check_tensor(x: Any, name: str, shape: str | None = None, *, what: str | None = None,
+                 min_dim: int | None = None, floating: bool = False, finite: bool = False) -> None:
+    """A ``torch.Tensor`` argument, checked (in the style of kornia's ``KORNIA_CHECK_SHAPE``).
+
+    Args:
+        x: the argument. name: its name, quoted in every message.
+        shape: a shape spec, dims separated by spaces: an integer is that size, a name (``B``, ``H``) any size,
+            one ``*`` any number of dims (``"* 1 H W"``: a mosaic with any leading dims).
+        what: what the tensor is, for the shape message (``"a Bayer mosaic"``: ``raw must be a Bayer mosaic of
+            shape (*, 1, H, W), got (2, 3)``).
+        min_dim: at least this many dims (``pred must have at least 3 dims (B, ..., H, W), got shape (4,)``;
+            with ``shape``, the spec is named in the message).
+        floating: the dtype must be floating point. finite: no NaN or inf (skipped inside
+            :func:`trusted_values`).
+
+    Raises:
+        TypeError: ``x`` is not a tensor. ValueError: the shape, dtype or values are wrong.
+
+    >>> import torch
+    >>> check_tensor(torch.zeros(2, 3, 1, 4, 4), "light_index", "B F 1 H W")
+    >>> check_tensor(torch.zeros(2, 3, 4, 4), "light_index", "B F 1 H W")
+    Traceback (most recent call last):
+    ...
+    ValueError: light_index must have shape (B, F, 1, H, W), got (2, 3, 4, 4)
+    """
+    import torch  # noqa: PLC0415 - torch only when a tensor is checked
+
+    if not isinstance(x, torch.Tensor):
+        raise TypeError(f"{name} must be a torch.Tensor, got {type(x).__name__}")
+    spec = f"({', '.join(shape.split())})" if shape else None
+    if min_dim is not None and x.ndim < min_dim:
+        raise ValueError(f"{name} must have at least {min_dim} dims{' ' + spec if spec else ''}, got shape "
+                         f"{tuple(x.shape)}")
+    if shape is not None and not _shape_ok(tuple(x.shape), shape.split()):
+        raise ValueError(f"{name} must be {what} of shape {spec}, got {tuple(x.shape)}" if what else
+                         f"{name} must have shape {spec}, got {tuple(x.shape)}")
+    if floating and not x.is_floating_point():
+        raise ValueError(f"{name} must be a floating-point tensor, got {x.dtype}")
+    if finite and value_checks() and x.is_floating_point() and x.numel() and not bool(torch.isfinite(x).all()):
+        raise ValueError(f"{name} must be finite; got NaN or inf")
+
+
+def check_same_shape(x: Any, y: Any, x_name: str, y_name: str) -> None:
+    """Two tensors of one shape (``TypeError`` naming the one that is not a tensor)::
+
+        pred and gt must have the same shape, got pred (1, 2) and gt (1, 3)
+    """
+    check_tensor(x, x_name)
+    check_tensor(y, y_name)
+    if x.shape != y.shape:
+        raise ValueError(f"{x_name} and {y_name} must have the same shape, got {x_name} {tuple(x.shape)} and "
+                         f"{y_name} {tuple(y.shape)}")
+
+
+def check_batch_keys(batch: Mapping[str, Any], keys: Iterable[str], name: str = "batch", hint: str = "") -> None:
+    """A batch dict holds every key of ``keys``: ``<name>: missing '<key>'; <hint>``."""
+    for k in keys:
+        if k not in batch:
+            raise ValueError(f"{name}: missing {k!r}" + (f"; {hint}" if hint else ""))
+
+
+def check_same_device(batch: Mapping[str, Any], ref: str, name: str = "batch", hint: str = ""):
+    """Every tensor of a batch dict is on the device of ``batch[ref]``; returns that device.
+
+    ``<name>[<key>] is on cuda:0 but <name>[<ref>] is on cpu; <hint>``."""
+    import torch  # noqa: PLC0415
+
+    dev = batch[ref].device
+    for k, v in batch.items():
+        if torch.is_tensor(v) and v.device != dev:
+            raise ValueError(f"{name}[{k!r}] is on {v.device} but {name}[{ref!r}] is on {dev}"
+                             + (f"; {hint}" if hint else ""))
+    return dev
 
 
 # ------------------------------------------------------------------------------------------------ scene ids

@@ -1,5 +1,6 @@
-"""The names every stage shares: light groups and kinds, object and vehicle kinds, spectrum models, photodiodes,
-captures and the learned baselines.
+"""The names every stage shares: light groups and kinds, object and vehicle kinds, spectrum models, photodiodes
+and captures (the baselines, metrics and ISP stages are registered where they are defined:
+:mod:`lfmbench.registry`).
 
 One definition each: the scene generator and the renderer (``render_tools``), the corpus format
 (:mod:`lfmbench.corpus`), the sensor (:mod:`lfmbench.sensor`) and the datasets import them from here. Adding a
@@ -12,8 +13,7 @@ from types import MappingProxyType
 from typing import Mapping
 
 __all__ = ["GROUPS", "LIGHT_GROUPS", "LIGHT_KINDS", "VEHICLE_KINDS", "OBJECT_KINDS", "WEATHERS", "SPECTRUM_MODELS",
-           "PHOTODIODES", "CAPTURES", "CLASSIC_BASELINES", "PLAN_BASELINES", "LEARNED_BASELINES",
-           "PLAN_LEARNED_BASELINES"]
+           "PHOTODIODES", "CAPTURES"]
 
 #: Light groups (upstream ISET-LFM names + traffic signals); each group is one radiance layer of a corpus.
 GROUPS: tuple[str, ...] = ("headlights", "streetlights", "otherlights", "skymap", "signals")
@@ -49,22 +49,3 @@ SPECTRUM_MODELS: Mapping[str, Mapping[str, tuple[str, ...]]] = MappingProxyType(
 PHOTODIODES: tuple[str, ...] = ("lpd", "spd")
 #: Captures of the split pixel, in the order of the ``saturated`` channels (docs/guide/contracts.md).
 CAPTURES: tuple[str, ...] = ("lpd_hcg", "lpd_lcg", "spd")
-#: Rule-based baselines, in leaderboard order: each a function of that name in :mod:`lfmbench.baselines.classic`
-#: (:data:`lfmbench.baselines.REGISTRY` is built from this list). Here, without torch, so that the command line can
-#: list them in its help.
-CLASSIC_BASELINES: tuple[str, ...] = ("lpd_only", "spd_only", "upstream_saturated", "saturated_exposure_corrected",
-                                      "flicker_aware", "flicker_aware_two_sided", "temporal")
-#: Rule-based baselines of the other capture plans (LOFIC, staggered, chopped, single exposure): each a function of
-#: that name in :mod:`lfmbench.baselines.plan_merge`; the architecture registry
-#: (:data:`lfmbench.sensor.plan.ARCHITECTURES`) names the one that is each architecture's standard HDR merge.
-PLAN_BASELINES: tuple[str, ...] = ("exposure_select", "exposure_select_bounded")
-#: Learned baselines: name -> the module that defines the registered method ``name`` (backed by a checkpoint) and
-#: ``TRAINING`` (how ``lfmbench train --method NAME`` trains it); :data:`lfmbench.baselines.LEARNED`. Here, without
-#: torch, so that the command line can list them in its help.
-LEARNED_BASELINES: Mapping[str, str] = MappingProxyType({
-    "learned": "lfmbench.baselines.learned",
-    "unet": "lfmbench.baselines.unet",
-})
-#: The learned baselines whose network takes any capture plan (trained per sensor: ``lfmbench train --method NAME
-#: --sensor PRESET``); the others read the split pixel's captures only.
-PLAN_LEARNED_BASELINES: tuple[str, ...] = ("unet",)

@@ -14,6 +14,9 @@ Seeds: scene i of a run with ``--seed K`` uses ``scene_seed(K, i)`` (a ``numpy.r
 so scene i is the same whatever ``--scenes N`` is and a run can be extended by raising N. A benchmark protocol
 (:mod:`render_tools.protocol`, :func:`protocol_jobs`) gives every scene its id, seed, pinned conditions and
 split instead; ``splits.json`` then comes from the protocol, not from :func:`lfmbench.corpus.make_splits`.
+
+Over 500 lines for now: the job list, the local pool, the Ray driver and the resume logic are kept together while
+the render orchestration is being reworked; the pool and the Ray driver are to become modules of their own.
 """
 from __future__ import annotations
 

@@ -24,6 +24,9 @@ light on a moving vehicle is rendered with its true relative motion: the camera 
 under it (they move together), while static surroundings in its crop move with it (they only occlude or
 reflect). With a static ego camera and a static lamp nothing changes inside a frame: the light is rendered
 once and its K bins are exact copies.
+
+Over 500 lines for now: the render options, the camera geometry, the lamp planning and the frame loop still share
+this module while it is being reworked; they are to be split into one module each.
 """
 from __future__ import annotations
 

@@ -34,6 +34,9 @@ samples (each dimension its own random rotation of the strata, so each is unifor
 in expectation); tiles with ``sobol`` (scene version 2) take pixel x, y, time and the first vertex's light sample
 from randomly shifted Sobol' points instead (:func:`sobol_points`), and tiles with ``block`` trace one lane per
 2 x 2 px block (wet-road reflections).
+
+Over 500 lines for now: the tile list, the light-set registry and the one Dr.Jit kernel that renders them are kept
+together until the tracer's rework settles; the kernel and the tile planning are to be split apart.
 """
 from __future__ import annotations
 

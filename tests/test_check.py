@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import copy
 import math
+import re
 
 import numpy as np
 import pytest
@@ -145,3 +146,51 @@ def test_torch_device_names_the_argument():
     if not torch.cuda.is_available():
         with pytest.raises(ValueError, match="--gpu cuda: CUDA is not available"):
             torch_device("cuda", "--gpu")
+
+
+# ------------------------------------------------------------------------------------------------ tensors
+@pytest.mark.parametrize("spec, shape, ok", [
+    ("B F 1 H W", (2, 3, 1, 4, 5), True), ("B F 1 H W", (2, 3, 2, 4, 5), False), ("B F 1 H W", (3, 1, 4, 5), False),
+    ("* 1 H W", (1, 4, 5), True), ("* 1 H W", (7, 2, 1, 4, 5), True), ("* 1 H W", (4, 5), False),
+    ("* 1 H W", (3, 4, 5), False), ("N * 3 H W", (2, 3, 4, 4), True), ("N * 3 H W", (2, 9, 9, 3, 4, 4), True),
+    ("N * 3 H W", (3, 4, 4), False), ("*", (), True),
+])
+def test_shape_spec_against_enumerated_shapes(spec, shape, ok):
+    x = torch.zeros(shape)
+    if ok:
+        check.check_tensor(x, "x", spec)
+    else:
+        want = f"x must have shape ({spec.replace(' ', ', ')}), got {tuple(shape)}"
+        with pytest.raises(ValueError, match="^" + re.escape(want) + "$"):
+            check.check_tensor(x, "x", spec)
+
+
+def test_tensor_checks_name_the_argument_and_keep_the_error_type():
+    with pytest.raises(TypeError, match="^raw must be a torch.Tensor, got list$"):
+        check.check_tensor([1.0], "raw", "* 1 H W")
+    with pytest.raises(ValueError, match=r"^raw must be a Bayer mosaic of shape \(\*, 1, H, W\), got \(2, 3\)$"):
+        check.check_tensor(torch.zeros(2, 3), "raw", "* 1 H W", what="a Bayer mosaic")
+    with pytest.raises(ValueError, match="^raw must be a floating-point tensor, got torch.int64$"):
+        check.check_tensor(torch.zeros(1, 2, 2, dtype=torch.long), "raw", "* 1 H W", floating=True)
+    with pytest.raises(ValueError, match=r"^pred must have at least 5 dims, got shape \(2, 2\)$"):
+        check.check_tensor(torch.zeros(2, 2), "pred", min_dim=5)
+    bad = torch.tensor([[[0.0, math.nan]]])
+    with pytest.raises(ValueError, match="^gt must be finite; got NaN or inf$"):
+        check.check_tensor(bad, "gt", finite=True)
+    with check.trusted_values():  # value checks off for the package's own tensors; shape checks stay
+        check.check_tensor(bad, "gt", "1 1 2", finite=True)
+        with pytest.raises(ValueError, match="gt must have shape"):
+            check.check_tensor(bad, "gt", "1 2", finite=True)
+
+
+def test_same_shape_and_batch_checks():
+    with pytest.raises(ValueError, match=r"^pred and gt must have the same shape, got pred \(1, 2\) and gt \(1, 3\)$"):
+        check.check_same_shape(torch.zeros(1, 2), torch.zeros(1, 3), "pred", "gt")
+    with pytest.raises(TypeError, match="^gt must be a torch.Tensor"):
+        check.check_same_shape(torch.zeros(1), 0.0, "pred", "gt")
+    with pytest.raises(ValueError, match="^batch: missing 'info'; pass it$"):
+        check.check_batch_keys({"static": 1}, ("static", "info"), hint="pass it")
+    b = {"static": torch.zeros(1), "t0": torch.zeros(1, device="meta"), "n": 3}
+    with pytest.raises(ValueError, match=r"^batch\['t0'\] is on meta but batch\['static'\] is on cpu; move it$"):
+        check.check_same_device(b, "static", hint="move it")
+    assert check.check_same_device({"static": torch.zeros(1), "n": 3}, "static") == torch.device("cpu")

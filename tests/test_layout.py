@@ -20,7 +20,7 @@ PACKAGES = ("lfmbench", "render_tools")
 LAYERS = (
     ("lfmbench.limits",),  # the input limits every reader checks (check and fileio quote and bound with it)
     ("lfmbench", "lfmbench.constants", "lfmbench.check", "lfmbench.fileio", "lfmbench.vocabulary",
-     "lfmbench.counter_rng", "lfmbench.triton_kernels", "lfmbench._triton_math"),
+     "lfmbench.registry", "lfmbench.counter_rng", "lfmbench.triton_kernels", "lfmbench._triton_math"),
     ("lfmbench.flicker",),
     ("lfmbench.corpus",),
     ("render_tools", "lfmbench.sensor"),

@@ -1,52 +1,62 @@
 """Fusion baselines for LED-flicker mitigation (split pixel and the other capture plans), registered by snake_case
-name (:func:`methods_for`: those of one architecture).
+name in one :class:`lfmbench.registry.Registry` (:func:`methods_for`: those of one architecture).
 
 A fusion method is any callable ``method(batch: dict) -> Tensor (B, F, 1, H, W)`` in the ``gt`` units
-(``docs/guide/contracts.md`` section 3). :data:`REGISTRY` maps the built-in names to callables;
-:func:`get_method` also resolves ``package.module:function``. See ``docs/guide/baselines.md``.
+(``docs/guide/contracts.md`` section 3). :data:`REGISTRY` maps the registered names to callables;
+:func:`get_method` also resolves ``package.module:function``. Adding one is one registration beside its
+definition: ``@REGISTRY.register("name")`` for a rule (as :mod:`~lfmbench.baselines.classic` does),
+:func:`register_learned` for a learned one (a module with the method and its ``TRAINING``). See
+``docs/guide/baselines.md`` and ``docs/guide/extending.md``.
 """
 from __future__ import annotations
 
 import importlib
-from collections.abc import Callable
 
-from lfmbench.baselines import classic, plan_merge
+from lfmbench.baselines import classic  # registers the split-pixel rules first (leaderboard order)
+from lfmbench.baselines.base import LEARNED, PLAN_LEARNED, PLAN_MERGES, REGISTRY, Method
 from lfmbench.baselines.checkpoint import lazy_method
-from lfmbench.vocabulary import CLASSIC_BASELINES, LEARNED_BASELINES, PLAN_BASELINES, PLAN_LEARNED_BASELINES
-
-Method = Callable[[dict], "object"]
 
 
-#: Learned baselines: name -> the module that defines the registered method ``name`` (backed by a checkpoint,
-#: :func:`lfmbench.baselines.checkpoint.checkpointed_method`) and ``TRAINING`` (how ``lfmbench train --method
-#: NAME`` trains it, :class:`lfmbench.baselines.trainable.Trainable`). A new learned baseline is one module and
-#: one entry of :data:`lfmbench.vocabulary.LEARNED_BASELINES`.
-LEARNED = LEARNED_BASELINES
+def register_learned(name: str, module: str, *, any_plan: bool = False) -> None:
+    """Register the learned baseline ``name``: the method ``module.name`` (imported on first use, backed by a
+    checkpoint: :func:`lfmbench.baselines.checkpoint.checkpointed_method`) and ``module.TRAINING`` (how
+    ``lfmbench train --method NAME`` trains it, :class:`lfmbench.baselines.trainable.Trainable`).
 
-#: Registered baselines, in leaderboard order: the rule-based ones of :data:`lfmbench.vocabulary.CLASSIC_BASELINES`
-#: (functions of :mod:`lfmbench.baselines.classic`), then the learned ones.
-REGISTRY: dict[str, Method] = {
-    **{name: getattr(classic, name) for name in CLASSIC_BASELINES},
-    **{name: lazy_method(module, name) for name, module in LEARNED.items()},
-    **{name: getattr(plan_merge, name) for name in PLAN_BASELINES},
-}
-globals().update({name: REGISTRY[name] for name in (*CLASSIC_BASELINES, *PLAN_BASELINES)})  # lpd_only, ...
+    Args:
+        any_plan: the network takes any capture plan (trained per sensor: ``lfmbench train --method NAME
+            --sensor PRESET``); otherwise it reads the split pixel's captures only.
+    """
+    LEARNED.register(name, module)
+    if any_plan:
+        PLAN_LEARNED.register(name, module)
+    REGISTRY.register(name, lazy_method(module, name))
+
+
+register_learned("learned", "lfmbench.baselines.learned")
+register_learned("unet", "lfmbench.baselines.unet", any_plan=True)
+
+from lfmbench.baselines import plan_merge  # noqa: E402 - the capture-plan merges after the learned baselines
+
+from lfmbench.baselines.classic import (flicker_aware, flicker_aware_two_sided, lpd_only,  # noqa: E402
+                                        saturated_exposure_corrected, spd_only, temporal, upstream_saturated)
+from lfmbench.baselines.plan_merge import exposure_select, exposure_select_bounded  # noqa: E402
 
 
 def methods_for(architecture: str) -> list[str]:
     """The registered baselines that apply to a sensor architecture, in leaderboard order: the split-pixel ones
     (rule-based and learned) for ``split_pixel``, otherwise the architecture's standard merge and its other
-    capture-plan merges (its :data:`lfmbench.sensor.plan.ARCHITECTURES` entry, of :data:`PLAN_BASELINES`) and
-    the learned baselines trained per sensor (:data:`PLAN_LEARNED_BASELINES`: the U-Net, whose checkpoint must
-    be one trained for that sensor)."""
+    capture-plan merges (its :data:`lfmbench.sensor.plan.ARCHITECTURES` entry, of :data:`PLAN_MERGES`) and
+    the learned baselines trained per sensor (:data:`PLAN_LEARNED`: the U-Net, whose checkpoint must be one
+    trained for that sensor). The split-pixel ones are every registered baseline but the capture-plan merges
+    (:data:`PLAN_MERGES`), so a rule a user registers is scored with them."""
     from lfmbench.sensor.plan import ARCHITECTURES  # noqa: PLC0415
 
     if architecture not in ARCHITECTURES:
         raise ValueError(f"architecture must be one of {list(ARCHITECTURES)}, got {architecture!r:.40}")
     if architecture == "split_pixel":
-        return [*CLASSIC_BASELINES, *LEARNED]
+        return [n for n in REGISTRY if n not in PLAN_MERGES]
     arch = ARCHITECTURES[architecture]
-    return [arch.baseline, *arch.others, *PLAN_LEARNED_BASELINES]
+    return [arch.baseline, *arch.others, *PLAN_LEARNED]
 
 
 class MethodNotFoundError(ValueError):
@@ -89,5 +99,7 @@ def get_method(spec: str | Method) -> Method:
                               "or give 'package.module:function'")
 
 
-__all__ = ["REGISTRY", "LEARNED", "get_method", "methods_for", "MethodNotFoundError", "exposure_select", "exposure_select_bounded", "lpd_only", "spd_only", "upstream_saturated",
-           "saturated_exposure_corrected", "flicker_aware", "flicker_aware_two_sided", "temporal"]
+__all__ = ["REGISTRY", "LEARNED", "PLAN_LEARNED", "PLAN_MERGES", "Method", "register_learned", "get_method",
+           "methods_for", "MethodNotFoundError", "classic", "plan_merge",
+           "lpd_only", "spd_only", "upstream_saturated", "saturated_exposure_corrected", "flicker_aware",
+           "flicker_aware_two_sided", "temporal", "exposure_select", "exposure_select_bounded"]

@@ -27,6 +27,8 @@ from dataclasses import dataclass
 
 import torch
 
+from lfmbench.baselines.base import REGISTRY
+
 #: Noise-test factor of the flicker-aware fusion: the LPD must fall k standard deviations below the SPD.
 NOISE_K = 3.0
 #: Default sensor preset when the batch names none.
@@ -196,6 +198,7 @@ def saturated_fusion(hcg: torch.Tensor, lcg: torch.Tensor, spd: torch.Tensor, sa
     return out
 
 
+@REGISTRY.register("lpd_only")
 def lpd_only(batch: dict) -> torch.Tensor:
     """LPD only: HCG where unsaturated, else LCG (clipped at its full well where that saturates too).
 
@@ -205,6 +208,7 @@ def lpd_only(batch: dict) -> torch.Tensor:
     return torch.where(sat[:, :, 0:1], lcg, hcg)
 
 
+@REGISTRY.register("spd_only")
 def spd_only(batch: dict) -> torch.Tensor:
     """SPD only: ``spd_e``, already scaled by the sensitivity ratio and T_short / T_long (input-referred).
 
@@ -214,6 +218,7 @@ def spd_only(batch: dict) -> torch.Tensor:
     return spd
 
 
+@REGISTRY.register("upstream_saturated")
 def upstream_saturated(batch: dict) -> torch.Tensor:
     """The upstream ISET-LFM 'saturated' fusion, faithful: SPD input-referred by the sensitivity ratio only.
 
@@ -227,6 +232,7 @@ def upstream_saturated(batch: dict) -> torch.Tensor:
     return saturated_fusion(hcg, lcg, spd * _bcast(tl / ts, spd), sat)
 
 
+@REGISTRY.register("saturated_exposure_corrected")
 def saturated_exposure_corrected(batch: dict) -> torch.Tensor:
     """Upstream 'saturated' fusion with the exposure-time ratio corrected (SPD input-referred as ``spd_e``).
 
@@ -257,6 +263,7 @@ def _flicker_test(batch: dict, k: float, noise: NoiseModel | None, two_sided: bo
     return fused, spd, flick
 
 
+@REGISTRY.register("flicker_aware")
 def flicker_aware(batch: dict, k: float = NOISE_K, noise: NoiseModel | None = None,
                   two_sided: bool = False) -> torch.Tensor:
     r"""Flicker-aware fusion: the exposure-corrected saturated fusion, but the SPD wherever the LPD falls
@@ -281,11 +288,13 @@ def flicker_aware(batch: dict, k: float = NOISE_K, noise: NoiseModel | None = No
     return torch.where(flick, spd, fused)
 
 
+@REGISTRY.register("flicker_aware_two_sided")
 def flicker_aware_two_sided(batch: dict) -> torch.Tensor:
     """:func:`flicker_aware` with ``two_sided=True`` (SPD wherever LPD and SPD disagree beyond the noise)."""
     return flicker_aware(batch, two_sided=True)
 
 
+@REGISTRY.register("temporal")
 def temporal(batch: dict, k: float = NOISE_K, reducer: str = "mean", noise: NoiseModel | None = None) -> torch.Tensor:
     """Temporal fusion over the F frames of the sequence.
 

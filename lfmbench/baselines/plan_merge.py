@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import torch
 
+from lfmbench.baselines.base import register_plan_merge
 from lfmbench.baselines.classic import BatchError, _get
 
 __all__ = ["plan_captures", "exposure_select", "exposure_select_bounded"]
@@ -38,6 +39,7 @@ def plan_captures(batch: dict) -> list[str]:
     return caps
 
 
+@register_plan_merge
 def exposure_select(batch: dict) -> torch.Tensor:
     """Exposure selection: per pixel, the first unsaturated capture of the plan (all saturated: the last).
 
@@ -60,6 +62,7 @@ def exposure_select(batch: dict) -> torch.Tensor:
     return out
 
 
+@register_plan_merge
 def exposure_select_bounded(batch: dict) -> torch.Tensor:
     """Exposure selection bounded below by the saturated captures: per pixel ``max(exposure_select, max over the
     saturated captures c of c_e)`` (a saturated capture's input-referred value is a lower bound of its exposure).

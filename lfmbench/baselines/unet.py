@@ -254,7 +254,9 @@ class UNetFusion(nn.Module):
             f"{', '.join(captures) or '(none)'}: evaluate it with --sensor {self.sensor or 'ovt'}, or train one for "
             f"this sensor with `lfmbench train --method unet --sensor {sensor or 'NAME'}`")
 
-    def _check_batch(self, batch: dict) -> None:
+    def _check_sensor_of(self, batch: dict) -> None:
+        """The batch comes from the sensor (and capture plan) this network was trained for (not a tensor check:
+        the shapes are checked where the captures are read)."""
         meta = batch.get("meta")
         sensor = meta.get("sensor") if isinstance(meta, dict) else None
         if isinstance(sensor, (list, tuple)):
@@ -267,7 +269,7 @@ class UNetFusion(nn.Module):
     def candidates(self, batch: dict) -> tuple[torch.Tensor, torch.Tensor]:
         """Blend candidates (B, F, K, H, W) e- (``candidate_names`` in order) and input features
         (B, F, C_in, H, W) float32."""
-        self._check_batch(batch)
+        self._check_sensor_of(batch)
         if self.captures is not None:
             return self._plan_candidates(batch)
         hcg, lcg, spd, sat = _captures(batch)

@@ -3,7 +3,7 @@
 0. print the flicker model at the paper's Fig. 3 settings (no render);
 
 1. render the small default corpus (fast Mitsuba path; resumable, so a second run reuses it);
-2. train every learned baseline of :data:`lfmbench.vocabulary.LEARNED_BASELINES` (``lfmbench train --method
+2. train every learned baseline of :data:`lfmbench.baselines.LEARNED` (``lfmbench train --method
    NAME`` with its options under ``train`` of the demo config; the U-Net with ``lfmbench/configs/unet_tiny.yaml``),
    each skipped when its checkpoint exists;
 3. evaluate every registered baseline on the test split and print the leaderboard;
@@ -21,7 +21,6 @@ import typer
 
 
 from lfmbench.paper.fig3 import FIG3_EXPOSURES_S, fig3_series
-from lfmbench.vocabulary import LEARNED_BASELINES
 
 __all__ = ["CONFIG", "run", "main", "register"]
 
@@ -73,11 +72,13 @@ def run(out: str | Path | None = None, config: str | Path = CONFIG) -> dict:
     subprocess.run(cmd, check=True)
     secs["render"] = time.perf_counter() - t
 
+    from lfmbench.baselines import LEARNED  # noqa: PLC0415
+
     opts = cfg.get("train") or {}
-    unknown = sorted(set(opts) - set(LEARNED_BASELINES))
+    unknown = sorted(set(opts) - set(LEARNED))
     if unknown:
-        raise ValueError(f"{config}: train: {unknown} are not learned baselines ({', '.join(LEARNED_BASELINES)})")
-    for name in LEARNED_BASELINES:
+        raise ValueError(f"{config}: train: {unknown} are not learned baselines ({', '.join(LEARNED)})")
+    for name in LEARNED:
         secs[f"train_{name}"] = _train(name, opts.get(name) or {}, corpus, out)
 
     from lfmbench.evaluation.benchmark import benchmark

@@ -1,7 +1,8 @@
 """The ``lfmbench evaluate`` and ``lfmbench leaderboard`` commands (thin wrappers of the library modules).
 
-The library (torch, the dataset) is imported inside the command bodies: the ``lfmbench`` CLI imports this module
-to register the commands, and ``lfmbench render`` or ``--help`` must not pay for torch."""
+The help and the choices are read from the registries (:data:`lfmbench.baselines.REGISTRY`, the preset files of
+:func:`lfmbench.sensor.available_presets`), so they name every registered baseline and shipped preset; the rest of
+the library (the dataset, the evaluation) is imported inside the command bodies."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -9,7 +10,8 @@ from pathlib import Path
 import typer
 
 from lfmbench.cli._common import check_minima, fail, lock_output, torch_setup
-from lfmbench.vocabulary import CLASSIC_BASELINES, LEARNED_BASELINES, PLAN_BASELINES
+from lfmbench.baselines import REGISTRY as BASELINES
+from lfmbench.sensor import available_presets
 
 __all__ = ["register", "evaluate_cmd", "leaderboard_cmd"]
 
@@ -17,11 +19,11 @@ __all__ = ["register", "evaluate_cmd", "leaderboard_cmd"]
 def evaluate_cmd(
     ctx: typer.Context,
     method: str = typer.Option(..., "--method", "-m",
-                               help=f"a baseline ({', '.join((*CLASSIC_BASELINES, *LEARNED_BASELINES, *PLAN_BASELINES))}) or "
+                               help=f"a baseline ({', '.join(BASELINES)}) or "
                                     "package.module:function"),
     corpus: Path = typer.Option(..., "--corpus", help="corpus root directory"),
     sensor: str = typer.Option("ovt", "--sensor",
-                               help="sensor preset (ovt, imx490, lofic, staggered, chopped, single) or a preset YAML; "
+                               help=f"sensor preset ({', '.join(available_presets())}) or a preset YAML; "
                                     "its name and architecture are recorded in the result"),
     split: str = typer.Option("test", help="corpus split"),
     output: Path = typer.Option(None, "--output", "-o", help="result JSON (default runs/<method>.json)"),

@@ -1,6 +1,6 @@
-"""The ``lfmbench train --method NAME`` command: any learned baseline of :data:`lfmbench.vocabulary.LEARNED_BASELINES`
-through the one loop of :mod:`lfmbench.train` (torch is imported only when it runs, so registering it keeps
-``lfmbench --help`` and ``lfmbench render`` fast)."""
+"""The ``lfmbench train --method NAME`` command: any learned baseline of :data:`lfmbench.baselines.LEARNED`
+through the one loop of :mod:`lfmbench.train` (imported only when it runs; the help reads the registries of the
+learned baselines and the shipped presets)."""
 from __future__ import annotations
 
 import statistics
@@ -9,7 +9,8 @@ from pathlib import Path
 import typer
 
 from lfmbench.cli._common import check_minima, fail, torch_setup
-from lfmbench.vocabulary import LEARNED_BASELINES as LEARNED
+from lfmbench.baselines import LEARNED
+from lfmbench.sensor import available_presets
 
 __all__ = ["register", "train_cmd"]
 
@@ -26,7 +27,7 @@ def train_cmd(
     crop: int = typer.Option(None, help="square training crop in px, even (overrides train.crop)"),
     batch_size: int = typer.Option(None, "--batch-size", help="batch size (overrides train.batch_size)"),
     sensor: str = typer.Option(None, "--sensor",
-                               help="sensor preset (ovt, imx490, lofic, staggered, chopped, single) or a preset YAML "
+                               help=f"sensor preset ({', '.join(available_presets())}) or a preset YAML "
                                     "to train for (overrides train.sensor); the U-Net takes any capture plan, "
                                     "the checkpoint records the sensor and serves only it"),
     threads: int = typer.Option(None, help="torch CPU threads (default: torch's choice)"),

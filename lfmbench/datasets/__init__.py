@@ -1,14 +1,15 @@
 """Torch datasets over an lfmbench corpus: split-pixel captures simulated on the fly.
 
-Modules, in data-flow order: :mod:`~lfmbench.datasets.projection` (a scene's layers projected through the
-sensor's spectral response and optics, cached), :mod:`~lfmbench.datasets.pwm` (PWM draws),
-:mod:`~lfmbench.datasets.assembly` (composition and timing rules, the sample dict: one definition for both
-paths), :mod:`~lfmbench.datasets.pieces` (a sample's unsimulated pieces), :mod:`~lfmbench.datasets.capture`
-(:class:`LFMCaptureDataset`, :class:`SceneView`), :mod:`~lfmbench.datasets.batched` (captures simulated in batches
-on the training device) and :mod:`~lfmbench.datasets.loading` (datasets and collation for training and evaluation).
+Modules, in data-flow order: :mod:`~lfmbench.datasets.projection` (a scene's layers projected through the sensor's
+spectral response and optics, cached), :mod:`~lfmbench.datasets.pwm` (PWM draws), :mod:`~lfmbench.datasets.assembly`
+(composition and timing rules, the sample dict: one definition for both paths), :mod:`~lfmbench.datasets.pieces` (a
+sample's unsimulated pieces), :mod:`~lfmbench.datasets.capture` (:class:`LFMCaptureDataset`, :class:`SceneView`; its
+options: :mod:`~lfmbench.datasets.options`), :mod:`~lfmbench.datasets.batched` (captures simulated in batches on the
+training device) and :mod:`~lfmbench.datasets.loading` (datasets and collation for training and evaluation).
 """
 from lfmbench.datasets.assembly import check_line_time, compose_frame, window_bin_exposure
-from lfmbench.datasets.capture import DEFAULT_OUTPUTS, OUTPUTS, DatasetNotFoundError, LFMCaptureDataset, SceneView
+from lfmbench.datasets.capture import DatasetNotFoundError, LFMCaptureDataset, SceneView
+from lfmbench.datasets.options import DEFAULT_OUTPUTS, OUTPUTS
 from lfmbench.datasets.batched import (BatchedCaptureSimulator, collate_pieces, compose_batch, pieces_to,
                                        simulate_batch)
 from lfmbench.datasets.loading import EmptyDataError, collate_samples, make_dataset

@@ -29,7 +29,7 @@ _EXACT = {"enable_fp_fusion": False}
 
 @triton.jit
 def _pulse(ph, te, T, D):
-    """ON time (s) of an ideal PWM pulse over ``[ph, ph + te)`` (:func:`lfmbench.flicker._pulse_core`, ideal)."""
+    """ON time (s) of an ideal PWM pulse over ``[ph, ph + te)`` (:func:`lfmbench.flicker.exact._pulse_core`, ideal)."""
     r = fmod(te, T)
     n = rint((te - r) / T)
     p, e = two_prod(D, T)

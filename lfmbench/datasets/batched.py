@@ -50,7 +50,7 @@ from torch import nn
 from torch.utils.data import default_collate
 
 from lfmbench import sensor as _sensor
-from lfmbench.check import trusted_values
+from lfmbench.check import check_batch_keys, check_same_device, trusted_values
 from lfmbench.datasets.assembly import NOISE_STREAMS, SENSOR_OUTPUTS, assemble_sample, bin_edges, window_bin_exposure, window_starts
 from lfmbench.datasets.pieces import PWM_FIELDS, capture_pieces
 from lfmbench.datasets.row_gather import gather_rows
@@ -63,6 +63,11 @@ __all__ = ["capture_pieces", "collate_pieces", "pieces_to", "prefetch", "simulat
 
 #: Consistency fields of ``info``: a batch must agree on all of them.
 _INFO_FIELDS = ("sensor", "frames", "crop_hw", "shutter", "noise", "outputs")
+#: Keys of a pieces batch (:func:`collate_pieces`), checked by every function that reads one.
+_PIECE_KEYS = ("static", "t0", "timing", "crop", "scene_hw", "noise_seed", "slot_pwm", "slot_frame", "slot_K",
+               "slot_sample", "entry_values", "entry_slot", "entry_pix", "info")
+_PIECE_HINT = "pass the output of collate_pieces (datasets built with pieces=True)"
+_DEVICE_HINT = "move the whole batch with pieces_to(batch, device)"
 
 
 # ----------------------------------------------------------------------------------------------------------
@@ -219,20 +224,6 @@ def prefetch(iterable: Iterable, depth: int = 1) -> Iterator:
 # ----------------------------------------------------------------------------------------------------------
 # simulation (any device)
 # ----------------------------------------------------------------------------------------------------------
-def _check_batch(batch: Mapping[str, Any]) -> torch.device:
-    for k in ("static", "t0", "timing", "crop", "scene_hw", "noise_seed", "slot_pwm", "slot_frame", "slot_K",
-              "slot_sample", "entry_values", "entry_slot", "entry_pix", "info"):
-        if k not in batch:
-            raise ValueError(f"batch: missing {k!r}; pass the output of collate_pieces (datasets built with "
-                             "pieces=True)")
-    dev = batch["static"].device
-    for k, v in batch.items():
-        if torch.is_tensor(v) and v.device != dev:
-            raise ValueError(f"batch[{k!r}] is on {v.device} but batch['static'] is on {dev}; move the whole batch "
-                             "with pieces_to(batch, device)")
-    return dev
-
-
 def pwm_weights(batch: Mapping[str, Any]) -> dict[str, torch.Tensor]:
     """PWM exposure (s) of every slot, row and bin in the LPD and SPD windows, and the ground-truth weights.
 
@@ -247,7 +238,8 @@ def pwm_weights(batch: Mapping[str, Any]) -> dict[str, torch.Tensor]:
         (``info["ideal_pulses"]``, ``info["group_slots"]``), one Triton kernel computes them with the same float64
         operations (:mod:`lfmbench.datasets._compose_triton`; equal, zeros up to their sign).
     """
-    dev = _check_batch(batch)
+    check_batch_keys(batch, _PIECE_KEYS, hint=_PIECE_HINT)
+    dev = check_same_device(batch, "static", hint=_DEVICE_HINT)
     info = batch["info"]
     h = int(info["crop_hw"][0])
     sb = batch["slot_sample"]
@@ -321,7 +313,8 @@ def compose_batch(batch: Mapping[str, Any], backend: str = "auto", threads: int 
     """
     if backend not in ("auto", "torch", "numba"):
         raise ValueError(f"backend must be 'auto', 'torch' or 'numba', got {backend!r}")
-    dev = _check_batch(batch)
+    check_batch_keys(batch, _PIECE_KEYS, hint=_PIECE_HINT)
+    dev = check_same_device(batch, "static", hint=_DEVICE_HINT)
     B, F, _, h, w = batch["static"].shape
     t_s, t_l = batch["timing"][:, 0], batch["timing"][:, 1]
     compiled = dev.type == "cpu" and batch["static"].dtype == torch.float32 and _numba_available()
@@ -459,7 +452,8 @@ def simulate_batch(batch: Mapping[str, Any], preset: Any, outputs: Sequence[str]
         ValueError: a tensor of the batch on another device than ``batch['static']``, a preset other than the
             batch's sensor, outputs the batch was not made for, or not a pieces batch.
     """
-    dev = _check_batch(batch)
+    check_batch_keys(batch, _PIECE_KEYS, hint=_PIECE_HINT)
+    dev = check_same_device(batch, "static", hint=_DEVICE_HINT)
     info = batch["info"]
     preset = _sensor.load_preset(preset)
     if preset.name != info["sensor"]:

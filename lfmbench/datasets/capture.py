@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import math
 
 import os
 from collections import OrderedDict
@@ -23,14 +22,17 @@ import numpy as np
 import torch
 from torch.utils.data import Dataset
 
-from lfmbench.limits import brief, limit
+from lfmbench.check import check_int_arg
+from lfmbench.limits import brief
 from lfmbench import sensor as _sensor
 from lfmbench.corpus import Corpus
 from lfmbench.datasets.counter_draws import (SceneEntities, counter_scene_draw, crop_origin, noise_seeds,
                                              place_uniforms, start_frame)
-from lfmbench.datasets.assembly import (NOISE_STREAMS, SENSOR_OUTPUTS, STATIC_WINDOW_RULES, assemble_sample,
-                                        check_line_time, compose_frame, compose_plan_frame, light_index,
-                                        PlanExposure, plan_exposures, static_window_mix, static_window_source)
+from lfmbench.datasets.assembly import (SENSOR_OUTPUTS, PlanExposure, assemble_sample, check_line_time,
+                                        compose_frame, compose_plan_frame, light_index, plan_exposures,
+                                        static_window_mix)
+from lfmbench.datasets.options import (DEFAULT_MAX_LIGHTS, DEFAULT_OUTPUTS, CacheOptions, SampleOptions,
+                                       SimulationOptions)
 from lfmbench.datasets.pieces import capture_pieces
 from lfmbench.datasets.projection import SceneLayers, aux_channels, load_or_build, unit_projection_preset
 from lfmbench.datasets.pwm import PWMConfig, apply_light_timing, draw_scene_pwm, frozen_test_rng, load_pwm_config
@@ -39,14 +41,9 @@ from lfmbench.flicker import pwm_exposure
 from lfmbench.sensor.fused import warm_fused
 from lfmbench.vocabulary import PHOTODIODES
 
-OUTPUTS = ("raw", "input_referred", "saturated", "gt", "light_index", "depth", "rgb", "gt_common")
 #: The sensor behind ``gt_common`` (its CFA, QE and optics at unit fill factor), the same for every dataset sensor.
 COMMON_REFERENCE_SENSOR = "single"
-DEFAULT_OUTPUTS = ("raw", "input_referred", "saturated", "gt", "light_index", "depth")
 TEST_PARAMS_NAME = "test_params.json"
-#: Smallest default length of the padded per-light ``meta`` arrays (``LFMCaptureDataset(max_lights=None)``).
-DEFAULT_MAX_LIGHTS = 64
-SPLITS = ("train", "val", "test", "all")
 
 
 class DatasetNotFoundError(FileNotFoundError):
@@ -123,25 +120,15 @@ def _warm_cpu_kernels(noise: bool, preset) -> None:
 # ----------------------------------------------------------------------------------------------------------
 # dataset
 # ----------------------------------------------------------------------------------------------------------
-def _int_arg(name: str, v: Any, lo: int, hi: int | None = None) -> int:
-    """An integer argument (not a bool, not 2.5) within ``[lo, hi]``: ``TypeError`` / ``ValueError`` naming it."""
-    if isinstance(v, bool) or not isinstance(v, (int, np.integer)):
-        raise TypeError(f"{name} must be an integer, got {brief(v)}")
-    if v < lo or (hi is not None and v > hi):
-        rng = f">= {lo}" if hi is None else f"in [{lo}, {hi:,}]"
-        raise ValueError(f"{name} must be an integer {rng}, got {brief(v)}")
-    return int(v)
-
-
 class LFMCaptureDataset(Dataset):
     r"""Split-pixel HDR captures of an lfmbench corpus with random LED PWM, and flicker-free ground truth.
 
     Args:
         root: corpus directory (``lfmbench render --out DIR`` or ``lfmbench import-isetlfm``).
         split: ``"train"``, ``"val"``, ``"test"`` (PWM draws frozen in ``<root>/test_params.json``) or ``"all"``.
-        sensor: preset name (``"ovt"``, ``"imx490"``, ``"lofic"``, ``"staggered"``, ``"chopped"``, ``"single"``),
-            YAML path or :class:`lfmbench.sensor.SensorPreset`: its capture plan (docs/guide/sensors.md) names the sample's
-            capture keys. Architectures other than the split pixel run on the per-sample path (not ``pieces``).
+        sensor: preset name (one of :func:`lfmbench.sensor.available_presets`: the files of
+            ``lfmbench/configs/sensors/``), YAML path or :class:`lfmbench.sensor.SensorPreset`: its capture plan
+            (docs/guide/sensors.md) names the sample's capture keys. Architectures other than the split pixel run on the per-sample path (not ``pieces``).
         frames: number of consecutive frames F per sample (<= the corpus frames).
         frame_start: which F consecutive frames of a longer sequence a sample shows: an int s (frames
             s .. s + F - 1 of every scene; default 0, the first F; only frames < s + F are read) or
@@ -216,51 +203,26 @@ class LFMCaptureDataset(Dataset):
                  frame_start: int | str = 0, pieces: bool = False, noise_streams: str = "generator",
                  static_windows: str = "nearest") -> None:
         self.root = Path(root)
-        self.pieces = bool(pieces)
-        if noise_streams not in NOISE_STREAMS:
-            raise ValueError(f"noise_streams must be one of {NOISE_STREAMS}, got {noise_streams!r:.40}")
-        self.noise_streams = noise_streams
+        sim = SimulationOptions.checked(shutter=shutter, line_time_s=line_time_s, noise=noise, optics=optics,
+                                        pieces=pieces, noise_streams=noise_streams, static_windows=static_windows)
+        opts = SampleOptions.checked(split=split, frames=frames, frame_start=frame_start, crop=crop, outputs=outputs,
+                                     groups=groups, samples_per_scene=samples_per_scene, seed=seed,
+                                     max_lights=max_lights)
+        cache = CacheOptions.checked(self.root, cache_dir=cache_dir, cache_scenes=cache_scenes)
+        #: the checked options (:mod:`lfmbench.datasets.options`); the attributes below repeat them
+        self.options, self.simulation, self.cache_options = opts, sim, cache
+        self.pieces, self.noise_streams, self.static_windows = sim.pieces, sim.noise_streams, sim.static_windows
         self._entities: dict[str, SceneEntities] = {}
-        if static_windows not in STATIC_WINDOW_RULES:
-            raise ValueError(f"static_windows must be one of {STATIC_WINDOW_RULES}, got {brief(static_windows)}")
-        self.static_windows = static_windows
         if not (self.root / "manifest.json").is_file():
             raise DatasetNotFoundError(
                 f"root: no lfmbench corpus at {self.root} (manifest.json missing). Render one with "
                 f"`lfmbench render --out {self.root}` or import ISET-LFM data with `lfmbench import-isetlfm`.")
         self.corpus = Corpus(self.root)
-        if split not in SPLITS:
-            raise ValueError(f"split must be one of {SPLITS}, got {brief(split)}")
-        if shutter not in ("global", "rolling"):
-            raise ValueError(f"shutter must be 'global' or 'rolling', got {brief(shutter)}")
-        bad = [o for o in outputs if o not in OUTPUTS]
-        if bad:
-            raise ValueError(f"outputs: unknown {bad} (known: {OUTPUTS})")
-        if isinstance(frames, bool) or not isinstance(frames, int) or frames < 1:
-            raise ValueError(f"frames must be a positive integer, got {brief(frames)}")
-        if frame_start != "random" and (isinstance(frame_start, bool) or not isinstance(frame_start, int)
-                                        or frame_start < 0):
-            raise ValueError(f"frame_start must be an integer >= 0 or 'random', got {brief(frame_start)}")
-        self.frame_start = frame_start
-        _int_arg("samples_per_scene", samples_per_scene, 1)
-        _int_arg("seed", seed, 0)
-        _int_arg("cache_scenes", cache_scenes, 0)
-        for name, v in (("noise", noise), ("optics", optics), ("pieces", pieces)):
-            if not isinstance(v, (bool, np.bool_)):
-                raise TypeError(f"{name} must be True or False, got {brief(v)}")
-        if line_time_s is not None and (isinstance(line_time_s, bool) or not isinstance(line_time_s, (int, float))
-                                        or not math.isfinite(line_time_s) or line_time_s <= 0):
-            raise ValueError(f"line_time_s must be None or a finite number > 0 (s), got {brief(line_time_s)}")
-        if max_lights is not None:
-            _int_arg("max_lights", max_lights, 0, limit("lights_per_scene"))
-        self.split, self.shutter, self.seed = split, shutter, int(seed)
-        self.frames, self.outputs = frames, tuple(outputs)
-        if isinstance(groups, str):
-            groups = [groups]
-        if groups is not None and (not all(isinstance(g, str) for g in groups)):
-            raise ValueError(f"groups must be None or a list of light-group names, got {brief(groups)}")
-        self.groups = None if groups is None else list(groups)
-        self.samples_per_scene, self.noise, self.optics = int(samples_per_scene), bool(noise), bool(optics)
+        self.frame_start = opts.frame_start
+        self.split, self.shutter, self.seed = opts.split, sim.shutter, opts.seed
+        self.frames, self.outputs = opts.frames, opts.outputs
+        self.groups = None if opts.groups is None else list(opts.groups)
+        self.samples_per_scene, self.noise, self.optics = opts.samples_per_scene, sim.noise, sim.optics
         self.transforms = transforms
         self.preset = _sensor.load_preset(sensor)
         self.sensor_name = self.preset.name
@@ -271,26 +233,14 @@ class LFMCaptureDataset(Dataset):
         self._common_preset = unit_projection_preset(_sensor.load_preset(COMMON_REFERENCE_SENSOR)) \
             if "gt_common" in self.outputs else None
         self._common_cache: OrderedDict = OrderedDict()
-        if pieces and "gt_common" in self.outputs:
+        if self.pieces and "gt_common" in self.outputs:
             raise ValueError("outputs: 'gt_common' is made on the per-sample path only (pieces=False)")
-        if self.architecture != "split_pixel" and (pieces or noise_streams != "generator"):
+        if self.architecture != "split_pixel" and (self.pieces or self.noise_streams != "generator"):
             raise ValueError(f"sensor: preset {self.sensor_name!r} ({self.architecture}) runs on the per-sample path "
                              "only: pieces=True and noise_streams='counter' (simulate_batch, DeviceBatches) serve "
                              "the split pixel")
         self.pwm: PWMConfig = load_pwm_config(pwm)
-        def _is_int(v):
-            return isinstance(v, (int, np.integer)) and not isinstance(v, bool)
-
-        if crop is None:
-            self.crop = None
-        elif _is_int(crop):
-            self.crop = (int(crop), int(crop))
-        elif isinstance(crop, (tuple, list)) and len(crop) == 2 and all(_is_int(c) for c in crop):
-            self.crop = (int(crop[0]), int(crop[1]))
-        else:
-            raise ValueError(f"crop must be None, an int or (h, w) of ints (pixels), got {brief(crop)}")
-        if self.crop is not None and min(self.crop) < 2:
-            raise ValueError(f"crop must be None, an int or (h, w) with sides >= 2, got {brief(crop)}")
+        self.crop = opts.crop
         self.scene_ids = self._split_scenes()
         if not self.scene_ids:
             raise DatasetNotFoundError(f"root: corpus {self.root} has no scenes in split {brief(split)}")
@@ -322,11 +272,9 @@ class LFMCaptureDataset(Dataset):
                 plan_exposures(self.preset, m, shutter, line_time_s, f"corpus {self.root} (scene {sid})",
                                static_windows)
         self.line_time_s = line_time_s
-        if cache_dir is None:
-            cache_dir = self.root / ".cache"
-        self.cache_dir = None if cache_dir is False else Path(cache_dir)
+        self.cache_dir = cache.cache_dir
         self._cache: OrderedDict[str, SceneLayers] = OrderedDict()
-        self._cache_scenes = int(cache_scenes)
+        self._cache_scenes = cache.cache_scenes
         self._derived: dict[str, tuple[SceneLayers, dict]] = {}
         self._fpn: dict | None = None
         # the epoch lives in shared memory: DataLoader workers (also persistent ones, which keep their copy of the
@@ -349,7 +297,7 @@ class LFMCaptureDataset(Dataset):
         """Select the epoch whose draws ``__getitem__`` makes (call before iterating, like DistributedSampler).
 
         The value is kept in shared memory, so DataLoader workers see it, also with ``persistent_workers=True``."""
-        self._epoch.fill_(_int_arg("epoch", epoch, 0))
+        self._epoch.fill_(check_int_arg("epoch", epoch, 0))
 
     @property
     def epoch(self) -> int:

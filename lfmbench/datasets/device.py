@@ -22,6 +22,10 @@ The per-sample DataLoader path builds each sample's pieces in CPU workers (4 MiB
 Memory: per pixel and frame 4 (or 2) bytes x 2 of static rates, 2 of light index, 4 of depth, plus (8 x K + 12)
 bytes (float16: 4 x K + 12) per pixel inside a lamp's box; :meth:`ResidentScenes.estimate` gives the bytes of a split
 before anything is loaded to the device (docs/guide/datasets.md, "Corpus on the device").
+
+Over 500 lines for now: the resident split (:class:`ResidentScenes`), its packing (:class:`SplitProgram`, whose
+``pieces`` alone is about 180 lines) and the batch loop live here while the device path is being reworked; the
+packing is to move to a module of its own.
 """
 from __future__ import annotations
 

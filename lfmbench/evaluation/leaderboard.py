@@ -72,7 +72,8 @@ def _check_numbers(d: dict, p: Path) -> None:
     from lfmbench.metrics import REGISTRY
 
     def check(v: Any, field: str) -> None:
-        spec = REGISTRY.get(field.rsplit(".", 1)[-1])
+        name = field.rsplit(".", 1)[-1]
+        spec = REGISTRY[name] if name in REGISTRY else None
         why = spec.value_error(v) if spec is not None else None
         if why is not None:
             raise ValueError(f"run file {p}: field {field} = {brief(v)} {why}")
@@ -584,7 +585,7 @@ def plot_quality_vs_runtime(rows: list[dict], path: str | Path, metric: str | No
     ax.set_xscale("log")
     ax.margins(x=0.25, y=0.1)
     ax.set_xlabel("run time [ms per megapixel] (log)")
-    spec = REGISTRY.get(metric)
+    spec = REGISTRY[metric] if metric in REGISTRY else None
     ax.set_ylabel(f"{spec.header if spec else metric} [{spec.unit if spec else ''}]")
     ax.set_title(f"Quality vs run time ({'higher' if spec is None or spec.higher_is_better else 'lower'} is better; "
                  f"bars: {int(stats.CONFIDENCE * 100)} % CI over scenes)", fontsize=9)

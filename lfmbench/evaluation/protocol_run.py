@@ -60,7 +60,7 @@ def register_unets(extra: dict[str, str]) -> None:
     for name, path in extra.items():
         env = f"LFMBENCH_{name.upper()}_CHECKPOINT"
         os.environ[env] = path
-        REGISTRY[name] = checkpointed_method(name, env, path, load_checkpoint)
+        REGISTRY.register(name, checkpointed_method(name, env, path, load_checkpoint))
 
 
 def _fmt(summary: dict) -> str:

@@ -102,9 +102,9 @@ def per_scene(records: Iterable[dict], metrics: Iterable[str] | None = None) -> 
         ms = [r["metrics"] for r in recs]
         vals, weights = {}, {}
         for n in names:
-            spec = REGISTRY.get(n)
-            if spec is None:
+            if n not in REGISTRY:
                 continue
+            spec = REGISTRY[n]
             vs = [_value(m.get(n)) for m in ms]
             if all(v is None for v in vs):
                 continue

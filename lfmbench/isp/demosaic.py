@@ -25,13 +25,13 @@ References
 from __future__ import annotations
 
 from collections.abc import Callable
-from types import MappingProxyType
 
 import torch
 import torch.nn.functional as F
 from torch import nn
 
-from lfmbench.isp.raw import _check_mosaic
+from lfmbench.check import check_tensor
+from lfmbench.registry import Registry
 from lfmbench.sensor.preset import CFAPattern
 
 __all__ = ["demosaic_bilinear", "demosaic_malvar2004", "clamp_to_neighbours", "demosaic", "DEMOSAIC", "Demosaic"]
@@ -69,7 +69,7 @@ def demosaic_bilinear(raw: torch.Tensor, pattern: CFAPattern | str) -> torch.Ten
     """
     from kornia.color import raw_to_rgb  # noqa: PLC0415 (kornia: a core dependency, imported where used)
 
-    _check_mosaic(raw)
+    check_tensor(raw, "raw", "* 1 H W", what="a Bayer mosaic", floating=True)
     x, h, w = _even(raw)
     return raw_to_rgb(x, _pattern(pattern).to_kornia())[..., :h, :w]
 
@@ -98,7 +98,7 @@ def demosaic_malvar2004(raw: torch.Tensor, pattern: CFAPattern | str) -> torch.T
     Returns:
         (*, 3, H, W) r, g, b in the unit of ``raw``; at a pixel the colour it measured is returned unchanged.
     """
-    _check_mosaic(raw)
+    check_tensor(raw, "raw", "* 1 H W", what="a Bayer mosaic", floating=True)
     pat = _pattern(pattern)
     x, h, w = _even(raw)
     H, W = x.shape[-2:]
@@ -128,7 +128,7 @@ def clamp_to_neighbours(rgb: torch.Tensor, raw: torch.Tensor, pattern: CFAPatter
     beyond a natural image's, e.g. a lamp 1000x brighter than the road next to it: the Laplacian term puts dark and
     coloured dots around the lamp (negative values clipped to black, or a channel pushed above its neighbours).
     The clamp keeps every estimate inside the range of the samples a bilinear estimate would average. On the smooth
-    test image of ``tests/isp/test_isp.py`` it also raises Malvar's PSNR (38.4 dB against 36.1 dB, bilinear 31.5 dB).
+    test image of ``tests/isp/test_isp_demosaic.py`` it also raises Malvar's PSNR (38.4 dB against 36.1 dB, bilinear 31.5 dB).
 
     Args:
         rgb: (*, 3, H, W) demosaicked image. raw: (*, 1, H, W) the mosaic it came from. pattern: its Bayer layout.
@@ -136,7 +136,7 @@ def clamp_to_neighbours(rgb: torch.Tensor, raw: torch.Tensor, pattern: CFAPatter
     Returns:
         (*, 3, H, W), unit of ``rgb``.
     """
-    _check_mosaic(raw)
+    check_tensor(raw, "raw", "* 1 H W", what="a Bayer mosaic", floating=True)
     h, w = raw.shape[-2:]
     if rgb.shape[-3:] != (3, h, w) or rgb.shape[:-3] != raw.shape[:-3]:
         raise ValueError(f"rgb {tuple(rgb.shape)} must be the demosaic of raw {tuple(raw.shape)}")
@@ -152,10 +152,9 @@ def clamp_to_neighbours(rgb: torch.Tensor, raw: torch.Tensor, pattern: CFAPatter
 
 
 #: name -> demosaic function ``(raw (*, 1, H, W), pattern) -> (*, 3, H, W)``.
-DEMOSAIC: MappingProxyType[str, Callable[[torch.Tensor, CFAPattern | str], torch.Tensor]] = MappingProxyType({
-    "bilinear": demosaic_bilinear,
-    "malvar2004": demosaic_malvar2004,
-})
+DEMOSAIC: Registry[Callable[[torch.Tensor, CFAPattern | str], torch.Tensor]] = Registry("demosaic method")
+DEMOSAIC.register("bilinear", demosaic_bilinear)
+DEMOSAIC.register("malvar2004", demosaic_malvar2004)
 
 
 def demosaic(raw: torch.Tensor, pattern: CFAPattern | str, method: str = "malvar2004") -> torch.Tensor:

@@ -32,12 +32,13 @@ from typing import Any, ClassVar, Mapping
 import torch
 from torch import nn
 
-from lfmbench.check import check_choice, check_keys, check_number, fail
+from lfmbench.check import check_choice, check_keys, check_number, check_tensor, fail
 from lfmbench.isp import color, raw as _raw
 from lfmbench.isp.compand import Compander, check_knees
 from lfmbench.isp.demosaic import DEMOSAIC, clamp_to_neighbours
 from lfmbench.isp.tonemap import TONEMAP
 from lfmbench.limits import brief
+from lfmbench.registry import Registry
 
 __all__ = ["STAGES", "Stage", "ISPPipeline", "ISP", "PIPELINE_DIR", "PIPELINE_FORMAT", "available_pipelines",
            "load_pipeline", "pipeline_from_dict"]
@@ -47,13 +48,13 @@ PIPELINE_DIR: Path = Path(__file__).resolve().parent.parent / "configs" / "isp"
 #: ``format`` of a pipeline file.
 PIPELINE_FORMAT = "lfmbench-isp"
 
-#: name -> stage class; filled by :func:`_register`.
-STAGES: dict[str, type["Stage"]] = {}
+#: name -> stage class (:class:`lfmbench.registry.Registry`); filled by :func:`_register`.
+STAGES: Registry[type["Stage"]] = Registry("ISP stage")
 
 
 def _register(cls: type["Stage"]) -> type["Stage"]:
-    STAGES[cls.op] = cls
-    return cls
+    """Decorator: register a :class:`Stage` subclass under its ``op``."""
+    return STAGES.register(cls.op, cls)
 
 
 class Stage:
@@ -342,7 +343,7 @@ class ISP(nn.Module):
 
     @staticmethod
     def _shape(x: torch.Tensor, name: str) -> torch.Tensor:
-        _raw._check_mosaic(x, name)
+        check_tensor(x, name, "* 1 H W", what="a Bayer mosaic", floating=True)
         n = x.shape[0] if x.ndim > 3 else 1
         return x.reshape((n, max(1, math.prod(x.shape[1:-3]) if x.ndim > 3 else 1)) + x.shape[-3:])
 

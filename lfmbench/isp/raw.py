@@ -24,19 +24,11 @@ from typing import Sequence
 import torch
 from torch import nn
 
+from lfmbench.check import check_tensor
 from lfmbench.sensor.preset import CFAPattern
 
 __all__ = ["subtract_black_level", "cfa_channel_map", "white_balance_mosaic", "gray_world_gains", "BlackLevel",
            "WhiteBalance"]
-
-
-def _check_mosaic(x: torch.Tensor, name: str = "raw") -> None:
-    if not isinstance(x, torch.Tensor):
-        raise TypeError(f"{name} must be a torch.Tensor, got {type(x).__name__}")
-    if x.ndim < 3 or x.shape[-3] != 1:
-        raise ValueError(f"{name} must be a Bayer mosaic of shape (*, 1, H, W), got {tuple(x.shape)}")
-    if not x.is_floating_point():
-        raise ValueError(f"{name} must be a floating-point tensor, got {x.dtype}")
 
 
 def subtract_black_level(raw: torch.Tensor, black_level: float, white_level: float | None = None) -> torch.Tensor:
@@ -52,7 +44,7 @@ def subtract_black_level(raw: torch.Tensor, black_level: float, white_level: flo
     Returns:
         (*, 1, H, W): DN above black, or dimensionless (fraction of the range) with ``white_level``.
     """
-    _check_mosaic(raw)
+    check_tensor(raw, "raw", "* 1 H W", what="a Bayer mosaic", floating=True)
     out = raw - float(black_level)
     if white_level is not None:
         span = float(white_level) - float(black_level)
@@ -80,7 +72,7 @@ def white_balance_mosaic(raw: torch.Tensor, gains: torch.Tensor | Sequence[float
     Returns:
         (*, 1, H, W), same unit, dtype and device.
     """
-    _check_mosaic(raw)
+    check_tensor(raw, "raw", "* 1 H W", what="a Bayer mosaic", floating=True)
     g = torch.as_tensor(gains, dtype=raw.dtype, device=raw.device)
     h, w = raw.shape[-2:]
     idx = cfa_channel_map(pattern, h, w, raw.device)
@@ -108,7 +100,7 @@ def gray_world_gains(raw: torch.Tensor, pattern: CFAPattern | str, dims: int = 3
         (N, 3) gains (dimensionless), N the product of the remaining leading dims; 1 where a channel mean is not
         positive.
     """
-    _check_mosaic(raw)
+    check_tensor(raw, "raw", "* 1 H W", what="a Bayer mosaic", floating=True)
     h, w = raw.shape[-2:]
     idx = cfa_channel_map(pattern, h, w, raw.device)
     onehot = torch.stack([(idx == c) for c in range(3)]).to(raw.dtype)  # (3, H, W)

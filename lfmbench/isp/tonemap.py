@@ -42,20 +42,15 @@ from typing import Any, Mapping
 import torch
 from torch import nn
 
+from lfmbench.check import check_tensor
 from lfmbench.isp.color import luminance
+from lfmbench.registry import Registry
 
 __all__ = ["reinhard2002", "reinhard2002_stats", "durand2002", "durand2002_stats", "exposure_clip",
            "exposure_clip_stats", "ToneMapOperator", "TONEMAP", "tonemap", "ToneMap"]
 
 #: Floor of the luminance in logarithms (Reinhard et al. 2002, eq. 1: the small delta), in the unit of the input.
 _DELTA = 1e-6
-
-
-def _check_rgb(x: torch.Tensor, name: str = "rgb") -> None:
-    if not isinstance(x, torch.Tensor):
-        raise TypeError(f"{name} must be a torch.Tensor, got {type(x).__name__}")
-    if x.ndim < 4 or x.shape[-3] != 3:
-        raise ValueError(f"{name} must have shape (N, ..., 3, H, W), got {tuple(x.shape)}")
 
 
 def _per_item(v: torch.Tensor, x: torch.Tensor) -> torch.Tensor:
@@ -86,7 +81,7 @@ def reinhard2002_stats(reference: torch.Tensor, white: str | float = "max") -> d
         ``{"log_avg": (N,), "white": (N,)}``: the log-average luminance (eq. 1, unit of the input) and the white
         luminance in key-scaled units (dimensionless).
     """
-    _check_rgb(reference, "reference")
+    check_tensor(reference, "reference", "N * 3 H W")
     lum = luminance(reference).clamp_min(0.0)
     flat = lum.reshape(lum.shape[0], -1)
     log_avg = torch.exp(torch.log(_DELTA + flat).mean(dim=1))  # eq. 1
@@ -123,7 +118,7 @@ def reinhard2002(rgb: torch.Tensor, log_avg: torch.Tensor | float, white: torch.
         >>> round(float(reinhard2002(x, 1.0, 1e9)[0, 0, 0, 0]), 6)
         0.152542
     """
-    _check_rgb(rgb)
+    check_tensor(rgb, "rgb", "N * 3 H W")
     la = torch.as_tensor(log_avg, dtype=rgb.dtype, device=rgb.device)
     lw = torch.as_tensor(white, dtype=rgb.dtype, device=rgb.device)
     la = _per_item(la.expand(rgb.shape[0]), rgb) if la.ndim == 0 else _per_item(la, rgb)
@@ -162,7 +157,7 @@ def durand2002_stats(reference: torch.Tensor, radius: int | None = None, eps: fl
     Returns:
         ``{"base_max": (N,), "base_min": (N,)}`` in log10 of the input unit.
     """
-    _check_rgb(reference, "reference")
+    check_tensor(reference, "reference", "N * 3 H W")
     base = _base_layer(torch.log10(luminance(reference).clamp_min(0.0) + _DELTA), _radius(reference, radius), eps)
     if percentile <= 0:
         flat = base.reshape(base.shape[0], -1)
@@ -196,7 +191,7 @@ def durand2002(rgb: torch.Tensor, base_max: torch.Tensor | float, base_min: torc
     Returns:
         (N, ..., 3, H, W) display-referred linear sRGB (luminance <= 1 where the detail is <= 0 at the top base).
     """
-    _check_rgb(rgb)
+    check_tensor(rgb, "rgb", "N * 3 H W")
     if not contrast > 1:
         raise ValueError(f"contrast must be > 1, got {contrast!r}")
     bmax = torch.as_tensor(base_max, dtype=rgb.dtype, device=rgb.device)
@@ -214,7 +209,7 @@ def durand2002(rgb: torch.Tensor, base_max: torch.Tensor | float, base_min: torc
 # -------------------------------------------------------------------------------------------- linear + clip
 def exposure_clip_stats(reference: torch.Tensor, percentile: float = 99.0) -> dict[str, torch.Tensor]:
     """``{"scale": (N,)}``: the reference luminance at ``percentile`` (unit of the input)."""
-    _check_rgb(reference, "reference")
+    check_tensor(reference, "reference", "N * 3 H W")
     return {"scale": _quantile_per_item(luminance(reference).clamp_min(0.0), percentile / 100.0).clamp_min(_DELTA)}
 
 
@@ -227,7 +222,7 @@ def exposure_clip(rgb: torch.Tensor, scale: torch.Tensor | float) -> torch.Tenso
     Returns:
         (N, ..., 3, H, W) display-referred linear sRGB.
     """
-    _check_rgb(rgb)
+    check_tensor(rgb, "rgb", "N * 3 H W")
     sc = torch.as_tensor(scale, dtype=rgb.dtype, device=rgb.device)
     return rgb / _per_item(sc.expand(rgb.shape[0]) if sc.ndim == 0 else sc, rgb)
 
@@ -253,7 +248,8 @@ class ToneMapOperator:
 
 
 #: name -> tone-mapping operator.
-TONEMAP: Mapping[str, ToneMapOperator] = MappingProxyType({op.name: op for op in [
+TONEMAP: Registry[ToneMapOperator] = Registry("tone-mapping operator")
+for _op in [
     ToneMapOperator("reinhard2002", "Reinhard et al., ACM TOG 21(3) 2002 (global, extended)", reinhard2002_stats,
                     reinhard2002, MappingProxyType({"white": "max"}), MappingProxyType({"key": 0.18})),
     ToneMapOperator("durand2002", "Durand & Dorsey, ACM TOG 21(3) 2002 (local base/detail; guided-filter base, "
@@ -262,7 +258,8 @@ TONEMAP: Mapping[str, ToneMapOperator] = MappingProxyType({op.name: op for op in
                     MappingProxyType({"contrast": 50.0, "radius": None, "eps": 0.16})),
     ToneMapOperator("clip", "linear: reference percentile -> 1, clipped", exposure_clip_stats, exposure_clip,
                     MappingProxyType({"percentile": 99.0}), MappingProxyType({})),
-]})
+]:
+    TONEMAP.register(_op.name, _op)
 
 
 def tonemap(rgb: torch.Tensor, reference: torch.Tensor | None = None, method: str = "reinhard2002",

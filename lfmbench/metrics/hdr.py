@@ -39,6 +39,8 @@ from typing import Literal
 import torch
 import torch.nn.functional as F
 
+from lfmbench.check import check_same_shape, check_tensor
+
 #: mu of the mu-law tone curve (Kalantari & Ramamoorthi 2017).
 MU_DEFAULT = 5000.0
 #: Display model handed to ColorVideoVDP / PU21 (metrics.md: absolute linear luminance on an HDR display).
@@ -49,17 +51,6 @@ CVVDP_DISPLAY_PEAK_CD_M2 = 1500.0
 SSIM_WINDOW = 11
 
 Normalization = Literal["max", "p99_tanh"]
-
-
-def _check_pair(pred: torch.Tensor, gt: torch.Tensor, min_dim: int = 3) -> None:
-    if not isinstance(pred, torch.Tensor):
-        raise TypeError(f"pred must be a torch.Tensor, got {type(pred).__name__}")
-    if not isinstance(gt, torch.Tensor):
-        raise TypeError(f"gt must be a torch.Tensor, got {type(gt).__name__}")
-    if pred.shape != gt.shape:
-        raise ValueError(f"pred and gt must have the same shape, got pred {tuple(pred.shape)} and gt {tuple(gt.shape)}")
-    if pred.ndim < min_dim:
-        raise ValueError(f"pred must have at least {min_dim} dims (B, ..., H, W), got shape {tuple(pred.shape)}")
 
 
 def _per_sample_amax(x: torch.Tensor) -> torch.Tensor:
@@ -97,7 +88,8 @@ def normalize_hdr(pred: torch.Tensor, gt: torch.Tensor, mode: Normalization = "m
     Returns:
         (pred_n, gt_n), dimensionless, shape (B, *), in [0, 1].
     """
-    _check_pair(pred, gt, min_dim=1)
+    check_same_shape(pred, gt, "pred", "gt")
+    check_tensor(pred, "pred", min_dim=1)
     if mode == "max":
         scale = _per_sample_amax(gt).clamp_min(eps)
         return (pred / scale).clamp(0.0, 1.0), (gt / scale).clamp(0.0, 1.0)
@@ -143,7 +135,8 @@ def psnr(pred: torch.Tensor, gt: torch.Tensor, peak: float | torch.Tensor = 1.0)
         >>> round(float(psnr(torch.full((1, 4), 0.1), torch.zeros(1, 4))[0]), 6)
         20.0
     """
-    _check_pair(pred, gt, min_dim=1)
+    check_same_shape(pred, gt, "pred", "gt")
+    check_tensor(pred, "pred", min_dim=1)
     mse = (pred - gt).double().pow(2).reshape(pred.shape[0], -1).mean(dim=1)
     peak_t = torch.as_tensor(peak, dtype=torch.float64, device=pred.device)
     return (10.0 * torch.log10(peak_t**2 / mse)).to(pred.dtype if pred.is_floating_point() else torch.float32)
@@ -197,7 +190,8 @@ def ssim_mu_map(pred: torch.Tensor, gt: torch.Tensor, mu: float = MU_DEFAULT, mo
     Returns:
         (B, N, H, W) with N the product of the dims between B and H, dimensionless in [-1, 1].
     """
-    _check_pair(pred, gt, min_dim=3)
+    check_same_shape(pred, gt, "pred", "gt")
+    check_tensor(pred, "pred", min_dim=3)
     p, g = normalize_hdr(pred, gt, mode)
     return ssim_map(mu_law(p, mu), mu_law(g, mu), window_size)
 
@@ -216,7 +210,8 @@ def ssim_map(pred: torch.Tensor, gt: torch.Tensor, window_size: int = SSIM_WINDO
     """
     import kornia
 
-    _check_pair(pred, gt, min_dim=3)
+    check_same_shape(pred, gt, "pred", "gt")
+    check_tensor(pred, "pred", min_dim=3)
     b, (h, w) = pred.shape[0], pred.shape[-2:]
     if min(h, w) <= window_size // 2:
         raise ValueError(f"pred is too small for SSIM: H, W = {h}, {w} must exceed window_size // 2 = {window_size // 2}")
@@ -423,7 +418,8 @@ def perceptual_metrics(pred: torch.Tensor, gt: torch.Tensor, cd_per_unit: float 
         name -> (B,) tensor: ``pu21_psnr`` in dB (PU21 units, peak = PU21(100 cd m^-2)), ``cvvdp_jod`` in JOD
         (10 = identical).
     """
-    _check_pair(pred, gt, min_dim=5)
+    check_same_shape(pred, gt, "pred", "gt")
+    check_tensor(pred, "pred", min_dim=5)
     unknown = [w for w in which if w not in PERCEPTUAL_METRICS]
     if unknown:
         raise ValueError(f"which: unknown perceptual metric(s) {unknown}; known: {list(PERCEPTUAL_METRICS)}")

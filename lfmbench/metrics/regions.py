@@ -23,6 +23,7 @@ from __future__ import annotations
 import torch
 import torch.nn.functional as F
 
+from lfmbench.check import check_tensor
 from lfmbench.metrics.hdr import MU_DEFAULT, mu_law, normalize_hdr
 
 #: Margin (px) added around every LED region before a pixel counts as "outside".
@@ -50,11 +51,6 @@ def dilate(mask: torch.Tensor, px: int) -> torch.Tensor:
     return (m > 0).reshape(shape)
 
 
-def _check_index(light_index: torch.Tensor) -> None:
-    if light_index.ndim != 5 or light_index.shape[2] != 1:
-        raise ValueError(f"light_index must have shape (B, F, 1, H, W), got {tuple(light_index.shape)}")
-
-
 def led_mask(light_index: torch.Tensor, margin_px: int = LED_MARGIN_PX) -> torch.Tensor:
     """LED regions (``light_index >= 0``) dilated by ``margin_px``.
 
@@ -65,7 +61,7 @@ def led_mask(light_index: torch.Tensor, margin_px: int = LED_MARGIN_PX) -> torch
     Returns:
         (B, F, 1, H, W) bool.
     """
-    _check_index(light_index)
+    check_tensor(light_index, "light_index", "B F 1 H W")
     return dilate(light_index >= 0, margin_px)
 
 
@@ -82,7 +78,7 @@ def ghost_zone(light_index: torch.Tensor, margin_px: int = LED_MARGIN_PX,
     """
     if ring_px <= margin_px:
         raise ValueError(f"ring_px must exceed margin_px, got ring_px={ring_px}, margin_px={margin_px}")
-    _check_index(light_index)
+    check_tensor(light_index, "light_index", "B F 1 H W")
     base = light_index >= 0
     return dilate(base, ring_px) & ~dilate(base, margin_px)
 

@@ -158,14 +158,18 @@ def test_learned_without_checkpoint_has_clear_error(tmp_path, monkeypatch):
 
 
 def test_registry_and_help_list_the_same_baselines():
-    """The rule-based names live once (lfmbench.vocabulary.CLASSIC_BASELINES): the registry is built from them and
-    the help of `lfmbench evaluate --method` lists every registered baseline."""
+    """Each baseline is registered once, beside its definition (lfmbench.baselines.REGISTRY, in leaderboard order:
+    split-pixel rules, learned, capture-plan merges), and the help of `lfmbench evaluate --method` lists every
+    registered baseline."""
     from typer.testing import CliRunner
 
     from lfmbench.cli import app
-    from lfmbench.vocabulary import CLASSIC_BASELINES, LEARNED_BASELINES, PLAN_BASELINES
-
-    assert list(baselines.REGISTRY) == [*CLASSIC_BASELINES, *LEARNED_BASELINES, *PLAN_BASELINES]
-    assert all(callable(getattr(baselines.classic, n)) for n in CLASSIC_BASELINES)
+    rules = ["lpd_only", "spd_only", "upstream_saturated", "saturated_exposure_corrected", "flicker_aware",
+             "flicker_aware_two_sided", "temporal"]
+    assert list(baselines.REGISTRY) == [*rules, "learned", "unet", "exposure_select", "exposure_select_bounded"]
+    assert all(baselines.REGISTRY[n] is getattr(baselines.classic, n) for n in rules)
+    assert list(baselines.LEARNED) == ["learned", "unet"] and list(baselines.PLAN_LEARNED) == ["unet"]
+    assert list(baselines.PLAN_MERGES) == ["exposure_select", "exposure_select_bounded"]
+    assert baselines.methods_for("split_pixel") == [*rules, "learned", "unet"]
     text = " ".join(CliRunner().invoke(app, ["evaluate", "--help"], env={"COLUMNS": "400"}).output.split())
     assert all(name in text for name in baselines.REGISTRY), text

@@ -281,13 +281,13 @@ def test_workers_forked_after_parent_openmp_do_not_deadlock(tmp_path):
         T.H, T.W = 96, 128   # 3 frames x 96 x 128 > torch's parallel grain size: workers would enter OpenMP
         root = T.make_corpus(Path({str(tmp_path / 'c')!r}), n_scenes=2)
         from lfmbench.datasets import LFMCaptureDataset
-        from lfmbench import flicker
+        from lfmbench.flicker import kernels as flicker_kernels
         from lfmbench.sensor._poisson_kernel import kernel
         from torch.utils.data import DataLoader
-        assert not kernel.signatures and "cpu" not in (flicker._NUMBA_KERNELS or {{}})
+        assert not kernel.signatures and "cpu" not in (flicker_kernels._NUMBA_KERNELS or {{}})
         ds = LFMCaptureDataset(root, split="all", samples_per_scene=2)
         # the serial kernels are built in the parent, so forked workers inherit them instead of compiling
-        assert kernel.signatures and "cpu" in flicker._NUMBA_KERNELS, "kernels not built by the constructor"
+        assert kernel.signatures and "cpu" in flicker_kernels._NUMBA_KERNELS, "kernels not built by the constructor"
         loader = DataLoader(ds, batch_size=2, num_workers=2)
         for epoch in range(2):
             ds.set_epoch(epoch)

@@ -52,7 +52,7 @@ def test_tiny_render_with_overlapping_capture_windows_loads_with_rolling_shutter
     if "DRJIT_LIBLLVM_PATH" not in os.environ and os.path.exists(LLVM):
         monkeypatch.setenv("DRJIT_LIBLLVM_PATH", LLVM)
     # rendered in this process like the other render tests: a worker process would import the renderer again
-    # (about 4 s of CPU); the worker isolation has its own tests (tests/render_tools/test_render_cli.py)
+    # (about 4 s of CPU); the worker isolation has its own tests (tests/cli/test_render_cli.py)
     monkeypatch.setattr(J, "ISOLATE_RENDERS", False)
     prof = tmp_path / "p.yaml"
     prof.write_text("width: 16\nheight: 8\nspp: 1\nlight_spp: 1\nbins: 2\nframes: 2\nline_time_s: 0.002\n"

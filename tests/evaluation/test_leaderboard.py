@@ -14,7 +14,7 @@ from lfmbench.cli.evaluate import register as register_evaluate
 from lfmbench.evaluation.benchmark import benchmark as run_benchmark
 from lfmbench.evaluation import leaderboard as lb
 from lfmbench.evaluation import stats
-from lfmbench.metrics import REGISTRY, MetricSpec, ScoreOptions, score_batch
+from lfmbench.metrics import REGISTRY, MetricSpec, ScoreOptions, register_metric, score_batch
 from tests.data.evaluation.data import TIMES, make_led_corpus
 from tests.data.metrics.data import make_batch
 
@@ -122,13 +122,13 @@ def test_leaderboard_refuses_other_corpus_and_metric_versions(bench, tmp_path):
     assert r.exit_code == 2 and "bins.yaml: speed.edges" in r.output
 
 
-def test_adding_a_metric_is_one_registry_entry(monkeypatch, tmp_path):
+def test_adding_a_metric_is_one_registry_entry(request, tmp_path):
     def bright(pred, batch, o):
         """Mean output / mean GT, (B,)."""
         return pred.flatten(1).mean(1) / batch["gt"].flatten(1).mean(1)
 
-    monkeypatch.setitem(REGISTRY, "brightness", MetricSpec("brightness", "1.0", "test", "1", True, "hdr",
-                                                           "BRIGHT", fn=bright, show="console"))
+    register_metric(MetricSpec("brightness", "1.0", "test", "1", True, "hdr", "BRIGHT", fn=bright, show="console"))
+    request.addfinalizer(lambda: REGISTRY.unregister("brightness"))
     b = make_batch(seed=1)
     assert score_batch(b["gt"] * 2, b)[0]["brightness"] == pytest.approx(2.0)
     for m, scale in (("a", 1.0), ("b", 0.5)):
@@ -143,7 +143,8 @@ def test_adding_a_metric_is_one_registry_entry(monkeypatch, tmp_path):
 
 
 def test_registry_is_consistent():
-    from lfmbench.metrics import BLOCKS, PRIMARY, _BLOCK_OF_GROUP
+    from lfmbench.metrics import BLOCKS, PRIMARY
+    from lfmbench.metrics.registry import _BLOCK_OF_GROUP
 
     assert PRIMARY in REGISTRY and REGISTRY[PRIMARY].higher_is_better
     for s in REGISTRY.values():

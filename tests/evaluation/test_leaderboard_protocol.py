@@ -8,6 +8,7 @@ import sys
 
 import pytest
 
+from lfmbench.registry import Registry
 from tests.data.evaluation.data import make_led_corpus, write_result
 
 
@@ -70,8 +71,11 @@ def test_a_second_copy_of_the_same_network_scores_the_same(lp, tmp_path, monkeyp
                                       f"unet_copy={ck}", "--runs", str(tmp_path / "runs"), "--samples-per-scene", "1"])
     monkeypatch.setenv(U.CHECKPOINT_ENV, str(ck))
     monkeypatch.setenv("LFMBENCH_UNET_COPY_CHECKPOINT", "")  # restored afterwards
-    # two methods instead of every registered one (time); the script registers the copy in this dict only
-    monkeypatch.setattr(baselines, "REGISTRY", {m: baselines.REGISTRY[m] for m in ("lpd_only", "unet")})
+    # two methods instead of every registered one (time); the script registers the copy in this registry only
+    few = Registry("baseline")
+    for m in ("lpd_only", "unet"):
+        few.register(m, baselines.REGISTRY[m])
+    monkeypatch.setattr(baselines, "REGISTRY", few)
     lp.main()
     assert "unet_copy" in baselines.REGISTRY and os.environ["LFMBENCH_UNET_COPY_CHECKPOINT"] == str(ck)
     a, b = (json.loads((tmp_path / "runs" / f"{m}.json").read_text()) for m in ("unet", "unet_copy"))

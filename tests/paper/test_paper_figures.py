@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import yaml
 
-from lfmbench.paper import figures as P
+from lfmbench.paper import common, figures as P
 from lfmbench.flicker import pwm_exposure
 
 FPS = 60.0
@@ -139,7 +139,7 @@ def test_dropout_light_adds_nothing_to_the_lpd_of_its_frame(tiny):
 
     ds = LFMCaptureDataset(tiny, split="all", frames=3, noise=False, outputs=("input_referred", "saturated", "gt"))
     drop_ids = set(seq.dropout[1])
-    without = P._params({k: v for k, v in seq.pwm.items() if k not in drop_ids})
+    without = common._params({k: v for k, v in seq.pwm.items() if k not in drop_ids})
     s = ds.simulate(seq.scene_id, without, crop=None, noise_seed=0)
     lpd, ref = seq.sample["lpd_lcg_e"], s["lpd_lcg_e"]
     assert seq.dropout[3] == 1
@@ -162,35 +162,10 @@ def test_fig7_phase_b_removes_the_target_light(tiny):
     assert len(st.target_ids) == 1
     tgt = st.target_ids[0]
     rest = {i: (f, d, st.phase_b) for i in st.light_ids if i != tgt}
-    s = ds.simulate(st.scene_id, P._params(rest), crop=None, noise_seed=0)
-    ref = get_method("lpd_only")(P._batch(s))[0, 0]
+    s = ds.simulate(st.scene_id, common._params(rest), crop=None, noise_seed=0)
+    ref = get_method("lpd_only")(common._batch(s))[0, 0]
     y0, y1 = st.target_rows
     assert np.array_equal(st.images["B"][:, y0:y1].numpy(), ref[:, y0:y1].numpy())
-
-
-# ------------------------------------------------------------------------------------ command line
-def _cli(*args):
-    from typer.testing import CliRunner
-
-    from lfmbench.cli import app
-
-    return CliRunner().invoke(app, ["paper-figures", *args])
-
-
-def test_cli_rejects_unknown_figure_and_missing_corpus(tmp_path):
-    r = _cli("--fig", "9", "--out", str(tmp_path))
-    assert r.exit_code == 2 and "--fig" in r.output and "9" in r.output
-    r = _cli("--fig", "5", "--corpus", str(tmp_path / "nope"), "--out", str(tmp_path))
-    assert r.exit_code == 2 and "--corpus" in r.output and "manifest.json" in r.output
-    r = _cli("--fig", "4", "--out", str(tmp_path))
-    assert r.exit_code == 2 and "--corpus" in r.output
-    assert not list(tmp_path.glob("*.png"))
-
-
-def test_cli_fig3_needs_no_corpus(tmp_path):
-    r = _cli("--fig", "3", "--out", str(tmp_path))
-    assert r.exit_code == 0, r.output
-    assert (tmp_path / "fig3_flicker.png").is_file()
 
 
 def test_module_does_not_import_torch():
