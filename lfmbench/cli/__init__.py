@@ -4,7 +4,7 @@ One module per command family, each with a ``register(app)`` that adds its comma
 pipeline: :mod:`~lfmbench.cli.render` (``render``, ``protocols``), :mod:`~lfmbench.cli.corpus` (``validate``,
 ``import-isetlfm``), :mod:`~lfmbench.cli.train` (``train``), :mod:`~lfmbench.cli.evaluate` (``evaluate``,
 ``leaderboard``), :mod:`~lfmbench.cli.paper` (``flicker-report``, ``paper-figures``) and
-:mod:`~lfmbench.cli.demo` (``demo``). Heavy dependencies (torch, Mitsuba, Ray, cvvdp) are imported inside the
+:mod:`~lfmbench.cli.plot` (``plot``), :mod:`~lfmbench.cli.configs` (``configs``) and :mod:`~lfmbench.cli.demo` (``demo``). Heavy dependencies (torch, Mitsuba, Ray, cvvdp) are imported inside the
 command bodies, so ``lfmbench --help`` stays fast.
 """
 from __future__ import annotations
@@ -17,7 +17,7 @@ from typing import Any, List, Optional
 import typer
 from typer.core import TyperGroup
 
-from lfmbench.cli import corpus, demo, evaluate, paper, render, train
+from lfmbench.cli import configs, corpus, demo, evaluate, paper, plot, render, train
 
 #: Key of ``ctx.meta`` set by ``--debug``.
 DEBUG_KEY = "lfmbench.debug"
@@ -52,6 +52,7 @@ class _Group(TyperGroup):
 
 
 app = typer.Typer(cls=_Group, help="LED-flicker datasets and flicker-mitigation benchmark.", no_args_is_help=True,
+                  rich_markup_mode=None,  # click's plain help: wrapped at any width, nothing cut off
                   add_completion=False)
 
 
@@ -79,7 +80,7 @@ def _root(ctx: typer.Context, limit: Optional[List[str]] = typer.Option(
 
 
 #: Command modules, in the order their commands appear in ``--help``.
-COMMAND_MODULES = (paper, render, corpus, train, evaluate, demo)
+COMMAND_MODULES = (paper, render, corpus, train, evaluate, plot, configs, demo)
 
 for _mod in COMMAND_MODULES:
     _mod.register(app)
