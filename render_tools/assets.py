@@ -118,7 +118,11 @@ def declared_triangles(path: Path, kind: str) -> int:
 def _load(path: Path, kind: str, folder: Path) -> list[tuple[str, np.ndarray, np.ndarray]]:
     """(material name, V (n, 3) m, F (m, 3)) per material of a mesh file, node transforms applied; files the mesh
     file names (an OBJ's MTL, a glTF's buffers and images) are read only from inside ``folder``."""
-    import trimesh  # noqa: PLC0415
+    try:
+        import trimesh  # noqa: PLC0415
+    except ImportError:  # an optional dependency: only scenes with mesh files need it
+        raise ValueError("mesh files need the optional package trimesh: pip install 'lfmbench[render]' "
+                         "(or pip install 'trimesh>=4')") from None
 
     base = folder.resolve()
 

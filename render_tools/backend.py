@@ -49,6 +49,7 @@ import warnings
 import numpy as np
 
 from lfmbench.fileio import atomic_write_json, load_json
+from lfmbench.resources import docs_url
 
 #: Preferred spectral variants, fast first.
 CUDA_VARIANT = "cuda_ad_spectral"
@@ -458,7 +459,7 @@ def check_variant(variant: str | None = None) -> None:
     if v == LLVM_VARIANT and not any(probe_llvm(lib) for lib in find_libllvm()):
         raise VariantUnavailableError(f"variant: {LLVM_VARIANT} requested but no working libLLVM was found "
                                       "(install Debian's libllvm19 and set DRJIT_LIBLLVM_PATH; see "
-                                      "docs/guide/rendering.md)")
+                                      f"{docs_url('guide/install.md#system-dependency')})")
 
 
 def _set_llvm(mi) -> bool:
@@ -531,7 +532,7 @@ def select_variant(variant: str | None = None) -> str:
     if variant == LLVM_VARIANT:
         raise VariantUnavailableError("variant: llvm_ad_spectral requested but no working libLLVM was found "
                                       "(install Debian's libllvm19 and set DRJIT_LIBLLVM_PATH; see "
-                                      "docs/guide/rendering.md)")
+                                      f"{docs_url('guide/install.md#system-dependency')})")
     warnings.warn("no working libLLVM found (LLVM 15 crashes on these CPUs; install libllvm19 and set "
                   "DRJIT_LIBLLVM_PATH): rendering with the slow scalar_spectral variant", RuntimeWarning,
                   stacklevel=2)

@@ -949,9 +949,11 @@ def render_frames(scene: dict, opts: RenderOptions, steady_bins: bool = False) -
     mcache: dict = ms.prepare_geometry(scene, {})  # BSDFs, static meshes and lamp spectra: once per scene
     variant = backend.select_variant(opts.variant)
     if variant.startswith("scalar"):
+        from lfmbench.resources import docs_url  # noqa: PLC0415
+
         raise RuntimeError("variant: rendering needs a JIT variant of Mitsuba (llvm_ad_spectral or "
                            f"cuda_ad_spectral), got {variant}: install libllvm19 and set DRJIT_LIBLLVM_PATH "
-                           "(docs/guide/rendering.md)")
+                           f"({docs_url('guide/install.md#system-dependency')})")
     import drjit as dr  # noqa: PLC0415
     import mitsuba as mi  # noqa: PLC0415
 

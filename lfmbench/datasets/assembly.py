@@ -31,6 +31,7 @@ import torch
 from lfmbench.datasets.projection import SceneLayers
 from lfmbench.datasets.pwm import gated_lights
 from lfmbench.flicker import pwm_exposure
+from lfmbench.resources import docs_url
 from lfmbench.sensor.plan import resolve_windows, total_length_s
 from lfmbench.vocabulary import PHOTODIODES
 
@@ -376,7 +377,8 @@ def plan_exposures(preset, meta: Mapping[str, Any], shutter: str, line_time_s: f
                 raise ValueError(f"{preset.source}: field 'captures.{key}.exposure' window {i} "
                                  f"[{a * 1e3:.4g}, {(a + n) * 1e3:.4g}) ms is not a window {source} stores for its "
                                  "static groups (short or long); use static_windows='nearest' (the measured "
-                                 "approximation, docs/results/sensor-architectures.md) or a plan of stored windows")
+                                 f"approximation, {docs_url('results/sensor-architectures.md')}) or a plan of "
+                                 "stored windows")
         out.append(PlanExposure(key, preset.photodiodes[spec.photodiode].fill_factor, wins, rolling, lt))
     return out
 
