@@ -72,7 +72,7 @@ class Bar:
         secs = time.perf_counter() - self._t0
         of = f"/{self.total}" if self.total else ""
         pct = f" ({100 * self.done / self.total:.0f} %" if self.total else " ("
-        plural = "" if self.done == 1 else ("es" if self.unit.endswith("h") else "s")
+        plural = "" if (self.total or self.done) == 1 else ("es" if self.unit.endswith("h") else "s")
         unit = f" {self.unit}{plural}" if self.unit else ""
         self.console.print(f"{self.description}: {self.done}{of}{unit}{pct}{', ' if self.total else ''}"
                            f"{secs:.1f} s)", highlight=False, markup=False)
