@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import resource
 import shutil
 import subprocess
@@ -27,25 +28,15 @@ ROOT = Path(__file__).resolve().parents[1]
 
 pytestmark = [pytest.mark.slow, pytest.mark.jit]
 
-#: The DataLoader loop of docs/guide/install.md ("Quick start"), run by the installed package.
-LOOP = '''
-import lfmbench, torch
-from torch.utils.data import DataLoader
-from lfmbench.datasets import LFMCaptureDataset, collate_samples
+DOC = ROOT / "docs" / "guide" / "install.md"
 
-ds = LFMCaptureDataset("corpus", split="all", crop=16, samples_per_scene=4)
-loader = DataLoader(ds, batch_size=2, shuffle=True, num_workers=0, collate_fn=collate_samples)
-net = torch.nn.Conv2d(3, 1, 3, padding=1)
-opt = torch.optim.Adam(net.parameters(), lr=1e-3)
-for step, batch in zip(range(3), loader):
-    x = torch.cat([batch["lpd_hcg_e"], batch["lpd_lcg_e"], batch["spd_e"]], dim=2)  # (B, F, 3, h, w) e-
-    b, f = x.shape[:2]
-    pred = net(torch.log1p(x.flatten(0, 1).clamp_min(0))).unflatten(0, (b, f))
-    loss = torch.nn.functional.mse_loss(pred, torch.log1p(batch["gt"]))
-    opt.zero_grad(); loss.backward(); opt.step()
-    print(f"step {step}: loss {loss.item():.4f}")
-print("lfmbench from", lfmbench.__file__)
-'''
+
+def _doc_loop() -> str:
+    """The DataLoader example of docs/guide/install.md ("Quick start"): its one ``python`` block."""
+    blocks = re.findall(r"```python\n(.*?)```", DOC.read_text(encoding="utf-8"), re.S)
+    assert len(blocks) == 1, f"{DOC}: expected one python block, found {len(blocks)}"
+    return blocks[0] + "\nimport lfmbench\nprint('lfmbench from', lfmbench.__file__)\n"
+
 
 METHOD = "def fuse(batch):\n    return batch['spd_e'].clone()  # the SPD alone, in gt units\n"
 
@@ -105,9 +96,9 @@ def test_wheel_in_a_fresh_environment_from_an_empty_folder(tmp_path):
     _run([lfm, "plot", "--corpus", "corpus", "--split", "all", "-m", "flicker_aware", "--out", "sample.png"], work,
          env, "plot")
     assert (work / "sample.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    (work / "loop.py").write_text(LOOP)
+    (work / "loop.py").write_text(_doc_loop())
     out = _run([str(py), "loop.py"], work, env, "3-step DataLoader loop")
-    assert out.count("step ") == 3
+    assert out.count("step ") == 3 and (work / "mine.png").is_file()
     where = Path(out.split("lfmbench from", 1)[1].split()[0]).resolve()
     assert where.is_relative_to(venv.resolve()), f"lfmbench was imported from {where}, not the wheel"
     out = _run([lfm, "configs", "training"], work, env, "configs")
