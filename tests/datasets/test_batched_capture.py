@@ -428,7 +428,7 @@ def test_gpu_training_example_in_docs_runs(tmp_path):
     from pathlib import Path
 
     root = make_corpus(tmp_path / "c", n_scenes=2)
-    text = (Path(__file__).resolve().parents[2] / "docs" / "datasets.md").read_text()
+    text = (Path(__file__).resolve().parents[2] / "docs" / "guide" / "datasets.md").read_text()
     section = text[text.index("## Captures on the GPU"):]
     code = re.findall(r"```python\n(.*?)```", section, re.S)[0]
     code = (code.replace('"demo_out/corpus"', repr(str(root))).replace("crop=128", "crop=8")
@@ -447,7 +447,7 @@ def test_cpu_configuration_example_in_docs_runs(tmp_path):
     from pathlib import Path
 
     root = make_corpus(tmp_path / "c", n_scenes=2)
-    text = (Path(__file__).resolve().parents[2] / "docs" / "datasets.md").read_text()
+    text = (Path(__file__).resolve().parents[2] / "docs" / "guide" / "datasets.md").read_text()
     blocks = re.findall(r"```python\n(.*?)```", text[text.index("## Captures on the GPU"):], re.S)
     setup = (blocks[0].split("net = ")[0].replace('"demo_out/corpus"', repr(str(root))).replace("crop=128", "crop=8")
              .replace("split=\"train\"", "split=\"all\"").replace("num_workers=2", "num_workers=0")

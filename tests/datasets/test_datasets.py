@@ -251,7 +251,7 @@ def test_training_example_in_docs_runs(tmp_path):
     from pathlib import Path
 
     root = make_corpus(tmp_path / "c", n_scenes=3)
-    text = (Path(__file__).resolve().parents[2] / "docs" / "datasets.md").read_text()
+    text = (Path(__file__).resolve().parents[2] / "docs" / "guide" / "datasets.md").read_text()
     code = re.findall(r"```python\n(.*?)```", text, re.S)[-1]
     code = (code.replace('"demo_out/corpus"', repr(str(root))).replace("crop=128", "crop=8")
             .replace("range(3)", "range(2)").replace("split=\"train\"", "split=\"all\""))
