@@ -108,3 +108,28 @@ def test_help_is_readable_at_80_columns(name):
         for opt in getattr(p, "opts", []) + getattr(p, "secondary_opts", []):
             if opt.startswith("-"):
                 assert re.search(rf"(^|[\s,/]){re.escape(opt)}([\s,=]|$)", r.output, re.M), opt
+
+
+def test_plot_command_and_dataset_defaults(tmp_path, monkeypatch):
+    """``lfmbench plot`` writes a PNG of a sample with a method's output; a crop larger than the scenes says what
+    fits; the train split serves 16 draws per scene by default, the others one."""
+    from lfmbench.cli import app
+    from lfmbench.datasets import LFMCaptureDataset
+    from lfmbench.datasets.capture import DEFAULT_SAMPLES_PER_SCENE
+    from tests.data.corpus.data import H, W, make_corpus
+
+    corpus = make_corpus(tmp_path / "c", n_scenes=3)
+    monkeypatch.chdir(tmp_path)
+    r = CliRunner().invoke(app, ["plot", "--corpus", str(corpus), "--split", "all", "-m", "lpd_only", "--out",
+                                 "s.png", "--frames", "2"])
+    assert r.exit_code == 0, r.output
+    assert (tmp_path / "s.png").read_bytes()[:4] == b"\x89PNG" and "lpd_only" in r.output
+    r = CliRunner().invoke(app, ["plot", "--corpus", str(corpus), "--split", "all", "--crop", "64"])
+    side = min(H, W) // 2 * 2
+    assert r.exit_code == 2 and f"at most crop={side}" in " ".join(r.output.split()) and "crop=None" in r.output
+    r = CliRunner().invoke(app, ["plot", "--corpus", str(corpus), "--split", "all", "--scene", "nope"])
+    assert r.exit_code == 2 and "scene00000" in r.output
+    train = LFMCaptureDataset(corpus, split="train", cache_dir=False)
+    assert train.samples_per_scene == DEFAULT_SAMPLES_PER_SCENE == 16
+    assert len(train) == 16 * len(train.scene_ids)
+    assert LFMCaptureDataset(corpus, split="all", cache_dir=False).samples_per_scene == 1

@@ -201,7 +201,8 @@ def leaderboard_cmd(
     json_out: Path = typer.Option(Path("runs/leaderboard.json"), "--json",
                                   help="leaderboard JSON output (rows, CIs, paired tests, breakdown)"),
     conditions: Path = typer.Option(None, "--conditions",
-                                    help="condition bins YAML (default lfmbench/configs/conditions.yaml)"),
+                                    help="condition bins: a YAML path or a shipped name (lfmbench "
+                                         "configs conditions; default conditions)"),
     include_incomplete: bool = typer.Option(False, "--include-incomplete",
                                             help="rank interrupted or failed runs too (marked in the table)"),
     cross_sensor: bool = typer.Option(False, "--cross-sensor",
