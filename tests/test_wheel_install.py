@@ -85,7 +85,7 @@ def test_wheel_in_a_fresh_environment_from_an_empty_folder(tmp_path):
                 "--height", "28", "--spp", "1", "--bins", "2"], work, env, "render 2 scenes")
     assert "2 rendered" in out and "\r" not in out  # progress in a log: plain lines
     out = _run([lfm, "evaluate", "--corpus", "corpus", "--split", "all", "-m", "lpd_only", "-m", "flicker_aware",
-                "-m", "mymethod:fuse", "--no-perceptual", "--repeats", "2", "--crop", "16"], work, env,
+                "-m", "mymethod:fuse", "--no-perceptual", "--isp", "none", "--repeats", "2", "--crop", "16"], work, env,
                "evaluate 3 methods")
     for name in ("lpd_only", "flicker_aware", "mymethod_fuse"):
         res = json.loads((work / "runs" / f"{name}.json").read_text())
