@@ -3,9 +3,10 @@
 One module per command family, each with a ``register(app)`` that adds its commands, in the order of the
 pipeline: :mod:`~lfmbench.cli.render` (``render``, ``protocols``), :mod:`~lfmbench.cli.corpus` (``validate``,
 ``import-isetlfm``), :mod:`~lfmbench.cli.train` (``train``), :mod:`~lfmbench.cli.evaluate` (``evaluate``,
-``leaderboard``), :mod:`~lfmbench.cli.paper` (``flicker-report``, ``paper-figures``) and
-:mod:`~lfmbench.cli.plot` (``plot``), :mod:`~lfmbench.cli.configs` (``configs``) and :mod:`~lfmbench.cli.demo` (``demo``). Heavy dependencies (torch, Mitsuba, Ray, cvvdp) are imported inside the
-command bodies, so ``lfmbench --help`` stays fast.
+``leaderboard``), :mod:`~lfmbench.cli.paper` (``flicker-report``, ``paper-figures``), :mod:`~lfmbench.cli.plot`
+(``plot``), :mod:`~lfmbench.cli.configs` (``configs``) and :mod:`~lfmbench.cli.demo` (``demo``). Heavy
+dependencies (torch, Mitsuba, Ray, cvvdp) are imported inside the command bodies, so ``lfmbench --help`` stays
+fast. Help is click's plain format (:class:`_Formatter`): wrapped at any terminal width, nothing cut off.
 """
 from __future__ import annotations
 
