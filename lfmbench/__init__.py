@@ -6,4 +6,6 @@ try:
 except PackageNotFoundError:  # pragma: no cover - running from a source tree without install
     __version__ = "0.0.0+unknown"
 
-__all__ = ["__version__"]
+from lfmbench.resources import docs_url  # noqa: E402 - the URL of a documentation page
+
+__all__ = ["__version__", "docs_url"]

@@ -50,7 +50,20 @@ def trainable(method: str | Trainable) -> Trainable:
 
 
 def load_config(method: str | Trainable, path: str | os.PathLike | None = None) -> Any:
-    """The training configuration of ``method`` from ``path`` (default: the method's own config file)."""
+    """The training configuration of ``method`` from ``path``: a YAML file, or the name of a shipped training config
+    (``"unet_tiny"``, :func:`lfmbench.resources.find_config`); default: the method's own config file.
+
+    Raises:
+        ConfigError: unreadable or invalid file; an unknown name (the message lists the installed configs).
+    """
+    from lfmbench.baselines.trainable import ConfigError
+    from lfmbench.resources import ConfigNotFoundError, find_config
+
+    if path is not None:
+        try:
+            path = find_config(path, "training")
+        except ConfigNotFoundError as exc:
+            raise ConfigError(str(exc)) from None
     return trainable(method).load_config(path)
 
 
@@ -313,7 +326,7 @@ def fit(model: torch.nn.Module, opt: torch.optim.Optimizer, spec: Trainable, cfg
         set_epoch: called with the epoch before it starts (fresh draws, crops, noise and order per epoch).
         checkpoint_extra: more fields for every checkpoint (e.g. the data order's generator state).
         max_steps: stop after this many optimiser steps in this call; the checkpoint is still written.
-        progress: show a tqdm bar per epoch. log: one line per epoch (None: silent).
+        progress: show a progress bar per epoch on a terminal (:mod:`lfmbench.progress`). log: one line per epoch (None: silent).
         step: ``step(batch, lr) -> (loss, terms)`` instead of the eager step (e.g. a :class:`GraphedStep`).
 
     Returns:
@@ -332,10 +345,11 @@ def fit(model: torch.nn.Module, opt: torch.optim.Optimizer, spec: Trainable, cfg
             set_epoch(ep)
         t0 = time.perf_counter()
         it = batches
-        if progress:
-            from tqdm import tqdm
+        if progress:  # a live bar on a terminal; off one, ``log``'s line per epoch says it all
+            from lfmbench.progress import track
 
-            it = tqdm(batches, desc=f"train epoch {ep + 1}/{t.epochs}", unit="batch", leave=False)
+            it = track(batches, total=len(batches) if hasattr(batches, "__len__") else None,
+                       description=f"train epoch {ep + 1}/{t.epochs}", unit="batch", log=False)
         sums: dict[str, float] = {}
         lr = cosine_lr(history["steps"], total_steps, t.lr, t.lr_min)
         n = 0
@@ -407,7 +421,7 @@ def train(method: str | Trainable, corpus: str | os.PathLike, out: str | os.Path
         workers: overrides ``cfg.train.workers``.
         resume: continue from ``out`` when it holds a checkpoint of the same model and training config.
         max_steps: stop after this many optimiser steps in this call (tests); the checkpoint is still written.
-        progress: show a tqdm bar per epoch.
+        progress: show a progress bar per epoch on a terminal.
         log: callback for one line per epoch (None: silent).
         data: where the batches come from, one of :data:`DATA_SOURCES` (``"device"``: the corpus resident on
             ``device``, sample order :func:`~lfmbench.datasets.device.epoch_order`, counter-based noise; a split

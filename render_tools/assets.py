@@ -229,7 +229,11 @@ def _load(path: Path, kind: str, folder: Path) -> list[tuple[str, str, np.ndarra
     """(node name, material name, V (n, 3), F (m, 3)) per geometry of a mesh file, node transforms applied, in
     the file's own frame and units; files the mesh file names (an OBJ's MTL, a glTF's buffers and images) are read
     only from inside ``folder``."""
-    import trimesh  # noqa: PLC0415
+    try:
+        import trimesh  # noqa: PLC0415
+    except ImportError:  # an optional dependency: only scenes with mesh files need it
+        raise ValueError("mesh files need the optional package trimesh: pip install 'lfmbench[render]' "
+                         "(or pip install 'trimesh>=4')") from None
 
     base = folder.resolve()
 

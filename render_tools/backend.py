@@ -49,6 +49,7 @@ import warnings
 import numpy as np
 
 from lfmbench.fileio import atomic_write_json, load_json
+from lfmbench.resources import docs_url
 
 #: Preferred spectral variants, fast first.
 CUDA_VARIANT = "cuda_ad_spectral"
@@ -514,7 +515,8 @@ def trust_llvm_env() -> str | None:
 def llvm_hint() -> str:
     """What to do about a missing LLVM back end: what was wrong with ``DRJIT_LIBLLVM_PATH`` when it was set,
     else how to install one."""
-    return _llvm_env_note or "install Debian's libllvm19 and set DRJIT_LIBLLVM_PATH; see docs/guide/rendering.md"
+    return _llvm_env_note or (f"install Debian's libllvm19 and set DRJIT_LIBLLVM_PATH; see "
+                              f"{docs_url('guide/install.md#system-dependency')}")
 
 
 def _set_llvm(mi) -> bool:

@@ -33,15 +33,18 @@ import threading
 from multiprocessing.connection import wait as wait_any
 from typing import Any, Callable, Sequence
 
+from lfmbench.resources import docs_url
+
 __all__ = ["SIGNAL_HINTS", "WorkerDied", "crash_site", "exit_reason", "run_supervised"]
 
 #: What a worker killed by a signal most likely met (the hint of :class:`WorkerDied`'s message).
 SIGNAL_HINTS = {
     signal.SIGFPE: "an integer division by zero in native code; on AVX-512 CPUs Dr.Jit kernels that divided by "
-                   "the 0 of masked lanes did this (docs/guide/fault-catalogue.md): report it with your CPU model "
+                   f"the 0 of masked lanes did this ({docs_url('guide/fault-catalogue.md')}): report it with your CPU "
+                   "model "
                    "(lscpu) and libLLVM version",
     signal.SIGSEGV: "a crash in native code (Mitsuba, Dr.Jit or LLVM); libLLVM 15 crashes on AVX-512 CPUs: install "
-                    "Debian's libllvm19 (README, 'System dependency')",
+                    f"Debian's libllvm19 ({docs_url('guide/install.md#system-dependency')})",
     signal.SIGBUS: "a crash in native code, or a file mapped into memory changed or the disk filled",
     signal.SIGILL: "an instruction this CPU lacks: a library built for another CPU",
     signal.SIGABRT: "a native library aborted (see its message above)",

@@ -19,8 +19,10 @@ PACKAGES = ("lfmbench", "render_tools")
 #: top-level ``lfmbench``, which names only its ``__init__``: a new module must be placed here.
 LAYERS = (
     ("lfmbench.limits",),  # the input limits every reader checks (check and fileio quote and bound with it)
-    ("lfmbench", "lfmbench.constants", "lfmbench.check", "lfmbench.fileio", "lfmbench.vocabulary",
-     "lfmbench.registry", "lfmbench.counter_rng", "lfmbench.triton_kernels", "lfmbench._triton_math"),
+    ("lfmbench.resources",),  # shipped configs by name, documentation URLs (lfmbench.docs_url)
+    ("lfmbench", "lfmbench.progress", "lfmbench.constants", "lfmbench.check", "lfmbench.fileio",
+     "lfmbench.vocabulary", "lfmbench.registry", "lfmbench.counter_rng", "lfmbench.triton_kernels",
+     "lfmbench._triton_math"),
     ("lfmbench.flicker",),
     ("lfmbench.corpus",),
     ("render_tools", "lfmbench.sensor"),

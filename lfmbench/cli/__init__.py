@@ -3,13 +3,15 @@
 One module per command family, each with a ``register(app)`` that adds its commands, in the order of the
 pipeline: :mod:`~lfmbench.cli.render` (``render``, ``protocols``), :mod:`~lfmbench.cli.corpus` (``validate``,
 ``import-isetlfm``), :mod:`~lfmbench.cli.train` (``train``), :mod:`~lfmbench.cli.evaluate` (``evaluate``,
-``leaderboard``), :mod:`~lfmbench.cli.paper` (``flicker-report``, ``paper-figures``) and
-:mod:`~lfmbench.cli.demo` (``demo``). Heavy dependencies (torch, Mitsuba, Ray, cvvdp) are imported inside the
-command bodies, so ``lfmbench --help`` stays fast.
+``leaderboard``), :mod:`~lfmbench.cli.paper` (``flicker-report``, ``paper-figures``), :mod:`~lfmbench.cli.plot`
+(``plot``), :mod:`~lfmbench.cli.configs` (``configs``) and :mod:`~lfmbench.cli.demo` (``demo``). Heavy
+dependencies (torch, Mitsuba, Ray, cvvdp) are imported inside the command bodies, so ``lfmbench --help`` stays
+fast. Help is click's plain format (:class:`_Formatter`): wrapped at any terminal width, nothing cut off.
 """
 from __future__ import annotations
 
 import os
+import re
 import sys
 import traceback
 from typing import Any, List, Optional
@@ -17,7 +19,11 @@ from typing import Any, List, Optional
 import typer
 from typer.core import TyperGroup
 
-from lfmbench.cli import corpus, demo, evaluate, paper, render, train
+from lfmbench.resources import PROJECT_URL
+from lfmbench.cli import configs, corpus, demo, evaluate, paper, plot, render, train
+
+#: Where the ``docs/...`` pages that help texts name are read (they are not installed with the package).
+DOCS_ROOT = f"{PROJECT_URL}/tree/main/docs"
 
 #: Key of ``ctx.meta`` set by ``--debug``.
 DEBUG_KEY = "lfmbench.debug"
@@ -43,11 +49,51 @@ def debug_traceback(exc: BaseException) -> str:
     return "".join(traceback.format_exception(type(shown), shown, shown.__traceback__))
 
 
+#: Stands in for the hyphen of a path while help text is wrapped (click breaks lines at hyphens).
+_NB_HYPHEN = "\u2011"
+_PATHLIKE = re.compile(r"\S*[/.]\S*")
+
+
+class _Formatter(TyperGroup.context_class.formatter_class):  # click's (typer >= 0.23 vendors its own click)
+    """click's plain help formatter (wrapped at the terminal width, nothing cut off) that never breaks a line
+    inside a path or file name such as ``docs/guide/fault-catalogue.md``."""
+
+    @staticmethod
+    def _protect(text: str) -> str:
+        return _PATHLIKE.sub(lambda m: m.group(0).replace("-", _NB_HYPHEN), text) if text else text
+
+    def _restore(self, start: int) -> None:
+        self.buffer[start:] = [s.replace(_NB_HYPHEN, "-") for s in self.buffer[start:]]
+
+    def write_text(self, text: str) -> None:
+        n = len(self.buffer)
+        super().write_text(self._protect(text))
+        self._restore(n)
+
+    def write_dl(self, rows, *args, **kwargs) -> None:
+        n = len(self.buffer)
+        super().write_dl([(a, self._protect(b)) for a, b in rows], *args, **kwargs)
+        self._restore(n)
+
+
+class _Context(TyperGroup.context_class):
+    formatter_class = _Formatter
+
+
 class _Group(TyperGroup):
     """The ``lfmbench`` group: with ``--debug`` (or ``LFMBENCH_DEBUG=1``), a command that ends in a one-line error
     also prints the traceback behind it (:func:`debug_traceback`) on stderr. An exception no command turned into
     its one line (a DataLoader worker that died, an error re-raised from one, a bug) is one line too, exit 1
-    (:func:`lfmbench.limits.one_line`), never a wall of traceback."""
+    (:func:`lfmbench.limits.one_line`), never a wall of traceback. Help of the group and of every command is
+    formatted by :class:`_Formatter`."""
+
+    context_class = _Context
+
+    def get_command(self, ctx: Any, cmd_name: str) -> Any:
+        cmd = super().get_command(ctx, cmd_name)
+        if cmd is not None:
+            cmd.context_class = _Context
+        return cmd
 
     def invoke(self, ctx: Any) -> Any:
         import click  # noqa: PLC0415
@@ -77,6 +123,8 @@ class _Group(TyperGroup):
 
 
 app = typer.Typer(cls=_Group, help="LED-flicker datasets and flicker-mitigation benchmark.", no_args_is_help=True,
+                  epilog=f"Documentation (the docs/... pages named in the help texts): {DOCS_ROOT}",
+                  rich_markup_mode=None,  # click's plain help: wrapped at any width, nothing cut off
                   add_completion=False)
 
 
@@ -110,7 +158,7 @@ def _root(ctx: typer.Context, limit: Optional[List[str]] = typer.Option(
 
 
 #: Command modules, in the order their commands appear in ``--help``.
-COMMAND_MODULES = (paper, render, corpus, train, evaluate, demo)
+COMMAND_MODULES = (paper, render, corpus, train, evaluate, plot, configs, demo)
 
 for _mod in COMMAND_MODULES:
     _mod.register(app)

@@ -36,15 +36,13 @@ def validate_cmd(
     same validator code and limits) are not hashed or checked again; --no-cache checks everything
     (docs/benchmarks/validate.md)."""
     from rich.console import Console
-    from rich.progress import Progress
 
     from lfmbench.corpus import validate_corpus
+    from lfmbench.progress import Bar
 
     console = Console(stderr=True, soft_wrap=True)
-    with Progress(console=console, transient=True, disable=as_json) as prog:
-        task = prog.add_task("validating", total=None)
-        rep = validate_corpus(corpus, check_pixels=not headers_only, workers=workers,
-                              progress=lambda d, t: prog.update(task, completed=d, total=t),
+    with Bar(None, "validating", "scene", enabled=not as_json, console=console) as prog:
+        rep = validate_corpus(corpus, check_pixels=not headers_only, workers=workers, progress=prog.update,
                               cache=False if no_cache else (cache_file or True))
     if as_json:
         typer.echo(json.dumps(rep.to_dict(), indent=1))
@@ -75,19 +73,18 @@ def import_isetlfm_cmd(
 ) -> None:
     """Import the released ISET-LFM dataset (PBRT light-group EXRs + _lf.mat) into the lfmbench corpus format."""
     from rich.console import Console
-    from rich.progress import Progress
 
     from lfmbench.corpus import CorpusError, CorpusWriteError
+    from lfmbench.progress import Bar
     from lfmbench.corpus.isetlfm import find_scenes, import_isetlfm
 
     console = Console(stderr=True, soft_wrap=True)
     try:
         n = len(scene) if scene else len(find_scenes(src))
-        with Progress(console=console) as prog:
-            task = prog.add_task("importing", total=n)
+        with Bar(n, "importing", "scene", console=console) as prog:
             rep = import_isetlfm(src, out, scenes=list(scene) if scene else None, seed=seed,
                                  dtype="float16" if half else "float32", repair=repair, resume=not no_resume,
-                                 progress=lambda sid: prog.advance(task))
+                                 progress=lambda sid: prog.advance())
     except (ValueError, CorpusError, CorpusWriteError) as exc:
         console.print(f"[red]error[/]: {exc}", highlight=False)
         raise typer.Exit(2) from None

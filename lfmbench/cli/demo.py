@@ -111,11 +111,19 @@ def main(out: str | Path | None = None, config: str | Path = CONFIG) -> dict:
 
 def demo_cmd(
     out: Path = typer.Option(None, "--out", help="output directory (default: out_dir of the config)"),
-    config: Path = typer.Option(CONFIG, "--config", help="demo settings (YAML)"),
+    config: str = typer.Option("demo", "--config", help="demo settings: a YAML path or a shipped name "
+                                                        "(lfmbench configs demo)"),
 ) -> None:
     """Render the small demo corpus, train the learned baselines, evaluate every baseline and reproduce the
     paper's figures (what ``make demo`` runs; resumable: a second run reuses the corpus and checkpoints)."""
-    main(out, config)
+    from lfmbench.resources import ConfigNotFoundError, find_config  # noqa: PLC0415
+
+    try:
+        path = find_config(config, "demo")
+    except ConfigNotFoundError as exc:
+        typer.echo(f"error: {exc}", err=True)
+        raise typer.Exit(2) from None
+    main(out, path)
 
 
 def register(app: typer.Typer) -> None:

@@ -6,6 +6,7 @@ the library (the dataset, the evaluation) is imported inside the command bodies.
 from __future__ import annotations
 
 from pathlib import Path
+from typing import List
 
 import typer
 
@@ -13,26 +14,30 @@ from lfmbench.cli._common import check_minima, fail, lock_output, torch_setup
 from lfmbench.baselines import REGISTRY as BASELINES
 from lfmbench.sensor import available_presets
 
-__all__ = ["register", "evaluate_cmd", "leaderboard_cmd"]
+__all__ = ["register", "evaluate_cmd", "leaderboard_cmd", "resolve_methods"]
 
 
 def evaluate_cmd(
     ctx: typer.Context,
-    method: str = typer.Option(..., "--method", "-m",
-                               help=f"a baseline ({', '.join(BASELINES)}) or "
-                                    "package.module:function"),
+    method: List[str] = typer.Option(..., "--method", "-m", metavar="METHOD",
+                                     help="repeatable: a baseline (listed below) or "
+                                          "module:function, a module of the current folder included; several "
+                                          "methods are scored on one simulation of each sample"),
     corpus: Path = typer.Option(..., "--corpus", help="corpus root directory"),
     sensor: str = typer.Option("ovt", "--sensor",
-                               help=f"sensor preset ({', '.join(available_presets())}) or a preset YAML; "
-                                    "its name and architecture are recorded in the result"),
+                               help="sensor preset (lfmbench configs sensors) or a preset YAML; its name and "
+                                    "architecture are recorded in the result"),
     split: str = typer.Option("test", help="corpus split"),
-    output: Path = typer.Option(None, "--output", "-o", help="result JSON (default runs/<method>.json)"),
+    output: Path = typer.Option(None, "--output", "-o", help="result JSON of a single --method (default "
+                                                            "<runs-dir>/<method>.json)"),
+    runs_dir: Path = typer.Option(Path("runs"), "--runs-dir", help="folder of the result files "
+                                                                  "<method>.json"),
     seed: int = typer.Option(0, help="dataset seed (PWM draws, noise)"),
     max_scenes: int = typer.Option(None, help="evaluate the first N scenes (all their --samples-per-scene draws)"),
     crop: int = typer.Option(None, help="square crop in px passed to the dataset"),
     frames: int = typer.Option(3, help="consecutive frames per sample (e.g. 24 or 100; <= the corpus frames)"),
     samples_per_scene: int = typer.Option(1, help="PWM draws per scene (test draws frozen in the corpus)"),
-    repeats: int = typer.Option(5, help="timed calls after warm-up"),
+    repeats: int = typer.Option(5, help="timed calls after warm-up (median and spread recorded)"),
     warmup: int = typer.Option(1, help="untimed warm-up calls"),
     perceptual: bool = typer.Option(True, help="also PU21-PSNR and ColorVideoVDP (needs cvvdp)"),
     device: str = typer.Option("cpu", help="torch device, e.g. cpu or cuda"),
@@ -46,9 +51,10 @@ def evaluate_cmd(
                                         "any writable directory for a read-only corpus)"),
     isp: str = typer.Option("default", "--isp",
                             help="ISP pipeline of the display-referred columns psnr_srgb, ssim_srgb: a shipped name "
-                                 "(default, local) or a YAML path; 'none' skips them (docs/guide/isp.md)"),
+                                 "(default, local) or a YAML path; 'none' skips them"),
 ) -> None:
-    """Score a fusion method on a corpus split; write per-scene and aggregate metrics as JSON.
+    """Score fusion methods on a corpus split; write per-scene and aggregate metrics as JSON, one file per
+    method.
 
     Exit status: 0 every scene scored, 1 some scenes failed or the data source failed (the result file
     says which), 2 bad input, 130 interrupted (the result file has status "interrupted").
@@ -57,25 +63,33 @@ def evaluate_cmd(
     from lfmbench.evaluation.benchmark import (SIMULATE, check_simulate, corpus_run_inputs,  # noqa: PLC0415
                                                run_dataset_record, safe_name, samples_to_score, score_batches)
     from lfmbench.evaluation.leaderboard import _fmt  # noqa: PLC0415
-    from lfmbench.evaluation.run import DataSourceError, EvaluationInterrupted, evaluate  # noqa: PLC0415
+    from lfmbench.evaluation.run import DataSourceError, EvaluationInterrupted, evaluate_methods  # noqa: PLC0415
 
+    methods = list(dict.fromkeys(method))  # a method named twice is scored once
     if threads is not None and threads < 1:
         fail(f"--threads must be >= 1, got {threads}")
     check_minima((("--max-scenes", max_scenes, 1), ("--samples-per-scene", samples_per_scene, 1),
                   ("--frames", frames, 1), ("--repeats", repeats, 1), ("--warmup", warmup, 0), ("--crop", crop, 2)))
+    if output is not None and len(methods) > 1:
+        fail(f"--output names the result file of one method; {len(methods)} methods write "
+             f"<runs-dir>/<method>.json (--runs-dir, default runs)")
     try:
         check_simulate(simulate)
     except ValueError as exc:
         fail(f"--{exc}")
     torch_setup(device, threads)
-    out = output or Path("runs") / f"{safe_name(method)}.json"
+    outs = [output] if output is not None else [runs_dir / f"{safe_name(m)}.json" for m in methods]
+    if len(set(outs)) != len(outs):
+        fail(f"--method: two methods map to one result file name ({', '.join(map(str, outs))})")
     from lfmbench.fileio import writable_error  # noqa: PLC0415
 
-    why = writable_error(out)  # an unwritable --output is found before any work is done (the writer's own rule)
-    if why is not None:
-        fail(f"--output {out}: cannot write the result file there ({why})")
-    lock_output(ctx, out, "--output")  # one evaluation per result file
-    from lfmbench.baselines import MethodNotFoundError, get_method
+    for out in outs:
+        why = writable_error(out)  # an unwritable --output is found before any work is done (the writer's own rule)
+        if why is not None:
+            fail(f"--output {out}: cannot write the result file there ({why})")
+    for out in outs:
+        lock_output(ctx, out, "--output")  # one evaluation per result file
+    from lfmbench.baselines import MethodNotFoundError
     from lfmbench.baselines.checkpoint import CheckpointError
     from lfmbench.isp import load_pipeline
     from lfmbench.metrics import ScoreOptions
@@ -87,7 +101,7 @@ def evaluate_cmd(
         except ValueError as exc:
             fail(f"--isp: {exc}")
     try:
-        fn = get_method(method)
+        fns = resolve_methods(methods)
         extra = {"frames": frames, "sensor": sensor, "noise_streams": SIMULATE[simulate]}
         if cache_dir is not None:
             extra["cache_dir"] = cache_dir
@@ -96,46 +110,79 @@ def evaluate_cmd(
         fail(str(exc))
     from lfmbench.baselines import REGISTRY, methods_for
 
-    if method in REGISTRY and method not in methods_for(ds.architecture):
-        fail(f"--method {method} does not apply to --sensor {sensor} ({ds.architecture}); its baselines: "
-             f"{', '.join(methods_for(ds.architecture))}")
-    check = _checkpoint_sensor_check(fn)
-    if check is not None:  # a network trained for another sensor is refused before any work
-        try:
-            check(ds.sensor_name, list(ds.preset.captures))
-        except CheckpointError as exc:
-            fail(str(exc))
+    for m, fn in zip(methods, fns):
+        if m in REGISTRY and m not in methods_for(ds.architecture):
+            fail(f"--method {m} does not apply to --sensor {sensor} ({ds.architecture}); its baselines: "
+                 f"{', '.join(methods_for(ds.architecture))}")
+        check = _checkpoint_sensor_check(fn)
+        if check is not None:  # a network trained for another sensor is refused before any work
+            try:
+                check(ds.sensor_name, list(ds.preset.captures))
+            except CheckpointError as exc:
+                fail(str(exc))
     n = samples_to_score(ds, max_scenes)
     try:
-        res = evaluate(fn, score_batches(ds, n, simulate, device), method_spec=method, output=out,
-                       options=ScoreOptions(perceptual=perceptual, isp=isp_name, sensor=ds.preset), warmup=warmup,
-                       repeats=repeats, device=device,
-                       seeds={"dataset": seed},
-                       dataset=run_dataset_record(ds, corpus, split, n, crop, samples_per_scene, frames),
-                       total=n, corpus=ident, scene_conditions=cond)
+        results = evaluate_methods(fns, score_batches(ds, n, simulate, device), method_specs=methods, outputs=outs,
+                                   options=ScoreOptions(perceptual=perceptual, isp=isp_name, sensor=ds.preset),
+                                   warmup=warmup, repeats=repeats, device=device, seeds={"dataset": seed},
+                                   dataset=run_dataset_record(ds, corpus, split, n, crop, samples_per_scene, frames),
+                                   total=n, corpus=ident, scene_conditions=cond)
     except EvaluationInterrupted as exc:
         n_done = len(exc.result["scenes"])
-        typer.secho(f"interrupted: {n_done} scene(s) scored; {out} is marked status \"interrupted\" "
-                    "(the leaderboard skips it); run the command again for a complete result",
+        typer.secho(f"interrupted: {n_done} scene(s) scored; {', '.join(map(str, outs))} marked status "
+                    "\"interrupted\" (the leaderboard skips them); run the command again for a complete result",
                     fg=typer.colors.YELLOW, err=True)
         raise typer.Exit(130) from None
     except (DataSourceError, EmptyDataError) as exc:
-        fail(f"{exc} (partial results in {out})", 1)
+        fail(f"{exc} (partial results in {', '.join(map(str, outs))})", 1)
     except CheckpointError as exc:  # a hostile or broken weights file: bad input, named
         fail(f"{exc}; nothing was scored")
     except OSError as exc:  # the result file could not be written (disk full, ...)
         fail(f"{exc.filename}: {exc.strerror or exc}" if exc.filename else (exc.strerror or str(exc)))
-    agg = res["aggregate"]
-    ci = agg.get("ci", {}).get("led_score") or [None, None]
-    typer.echo(f"{method}: {agg.get('scenes_ok', 0)}/{agg.get('scenes', 0)} scenes ok, LED score "
-               f"{_fmt(agg.get('led_score'))} [{_fmt(ci[0])}, {_fmt(ci[1])}], dropout "
-               f"{_fmt(agg.get('dropout_rate'))}, PSNR-mu {_fmt(agg.get('psnr_mu'), 2)} dB, "
-               f"{_fmt(res['runtime']['ms_per_megapixel'], 1)} ms/MP -> {out}")
-    bad = [sc for sc in res["scenes"] if sc.get("status") != "ok"]
-    if bad:
-        fail(f"{len(bad)} of {len(res['scenes'])} scenes failed (first: scene {bad[0].get('scene_id')}: "
-             f"{bad[0].get('error', bad[0].get('status'))}); see {out}", 1)
+    failed = []
+    for m, out, res in zip(methods, outs, results):
+        agg = res["aggregate"]
+        ci = agg.get("ci", {}).get("led_score") or [None, None]
+        rt = res["runtime"]
+        spread = rt.get("iqr_ms_per_megapixel")
+        typer.echo(f"{m}: {agg.get('scenes_ok', 0)}/{agg.get('scenes', 0)} scenes ok, LED score "
+                   f"{_fmt(agg.get('led_score'))} [{_fmt(ci[0])}, {_fmt(ci[1])}], dropout "
+                   f"{_fmt(agg.get('dropout_rate'))}, PSNR-mu {_fmt(agg.get('psnr_mu'), 2)} dB, "
+                   f"{_fmt(rt['ms_per_megapixel'], 1)}"
+                   + (f" (IQR {_fmt(spread[0], 1)}-{_fmt(spread[1], 1)})" if spread else "")
+                   + f" ms/MP -> {out}")
+        bad = [sc for sc in res["scenes"] if sc.get("status") != "ok"]
+        if bad:
+            failed.append(f"{m}: {len(bad)} of {len(res['scenes'])} scenes failed (first: scene "
+                          f"{bad[0].get('scene_id')}: {bad[0].get('error', bad[0].get('status'))}); see {out}")
+    if failed:
+        fail("; ".join(failed), 1)
 
+
+def resolve_methods(specs: list[str]) -> list:
+    """The callables of method specs (:func:`lfmbench.baselines.get_method`), found as ``python -m`` would: the
+    current folder is searched for a ``module:function`` module (put first on ``sys.path``, once). A module that
+    is not found gets a message saying where it was looked for and what to do."""
+    import os
+    import sys
+
+    from lfmbench.baselines import MethodNotFoundError, get_method
+
+    if "" not in sys.path and os.getcwd() not in sys.path:
+        sys.path.insert(0, os.getcwd())
+    out = []
+    for spec in specs:
+        try:
+            out.append(get_method(spec))
+        except MethodNotFoundError as exc:
+            mod = spec.partition(":")[0] if ":" in spec else None
+            if mod and isinstance(exc.__cause__, ModuleNotFoundError) and exc.__cause__.name == mod.split(".")[0]:
+                raise MethodNotFoundError(
+                    f"--method {spec!r}: no module {mod!r} in the current folder ({os.getcwd()}) or on the Python "
+                    f"path; run from the folder holding {mod.replace('.', '/')}.py, or add its folder to "
+                    "PYTHONPATH, or pip install the package that holds it") from exc
+            raise
+    return out
 
 
 def _checkpoint_sensor_check(fn):
@@ -159,7 +206,8 @@ def leaderboard_cmd(
     json_out: Path = typer.Option(Path("runs/leaderboard.json"), "--json",
                                   help="leaderboard JSON output (rows, CIs, paired tests, breakdown)"),
     conditions: Path = typer.Option(None, "--conditions",
-                                    help="condition bins YAML (default lfmbench/configs/conditions.yaml)"),
+                                    help="condition bins: a YAML path or a shipped name (lfmbench "
+                                         "configs conditions; default conditions)"),
     include_incomplete: bool = typer.Option(False, "--include-incomplete",
                                             help="rank interrupted or failed runs too (marked in the table)"),
     cross_sensor: bool = typer.Option(False, "--cross-sensor",
@@ -204,5 +252,6 @@ def leaderboard_cmd(
 
 def register(app: typer.Typer) -> None:
     """Add the ``evaluate`` and ``leaderboard`` commands to the typer ``app``."""
-    app.command("evaluate")(evaluate_cmd)
+    app.command("evaluate", epilog=f"Baselines: {', '.join(BASELINES)}. Sensor presets: "
+                                   f"{', '.join(available_presets())}.")(evaluate_cmd)
     app.command("leaderboard")(leaderboard_cmd)

@@ -14,7 +14,7 @@ __all__ = ["register"]
 
 
 def _register_fig3(app) -> None:
-    @app.command("flicker-report")
+    @app.command("flicker-report", short_help="The paper's Fig. 3: Phi[n] of a PWM LED for two exposures.")
     def flicker_report(freq_hz: float = typer.Option(95.0, help="PWM frequency (Hz)"),
                        duty: float = typer.Option(0.2, help="duty cycle (0..1)"),
                        fps: float = typer.Option(30.0, help="frame rate (1/s)"),
@@ -46,12 +46,14 @@ def _register_fig3(app) -> None:
 
 
 def _register_figures(app) -> None:
-    @app.command("paper-figures")
+    @app.command("paper-figures", short_help="Reproduce the ISET-LFM paper's Figs. 3-7.")
     def paper_figures(fig: str = typer.Option("all", "--fig", help="figure: 3, 4, 5, 6, 7 or all"),
                       corpus: Path = typer.Option(None, "--corpus",
                                                   help="paper-figure corpus (DIR with fig4_6/ and fig7/, from "
                                                        "--render) or any rendered corpus; not needed for --fig 3"),
-                      out: Path = typer.Option(Path("docs/img"), "--out", help="directory for the PNG files"),
+                      out: Path = typer.Option(Path("paper_figures"), "--out",
+                                               help="directory for the PNG files (docs/img in a source "
+                                                    "checkout re-makes the documentation's)"),
                       render: bool = typer.Option(False, "--render",
                                                   help="first render the figure scenes into --corpus (skips "
                                                        "scenes already there)"),

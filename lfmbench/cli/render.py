@@ -77,9 +77,9 @@ def render_cmd(
     # modules and generates the scene; nothing is started when the verdict is cached (render_tools.backend)
     B.start_probes(variant)
     from rich.console import Console
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
     from lfmbench.corpus import CorpusError, CorpusWriteError
+    from lfmbench.progress import Bar
 
     console = Console(stderr=True, soft_wrap=True)
 
@@ -101,19 +101,17 @@ def render_cmd(
         fail(f"--out {out}: cannot create or write the corpus there ({exc.strerror or exc})")
     job_list, writer, seed, fixed_splits = plan.jobs, plan.writer, plan.seed, plan.splits
 
-    with Progress(TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),
-                  TimeElapsedColumn(), console=console) as prog:
-        task = prog.add_task("rendering", total=len(job_list))
+    with Bar(len(job_list), "rendering", "scene", console=console) as prog:
 
         def on_start(n_todo: int, n_skip: int) -> None:
-            prog.update(task, completed=n_skip)
+            prog.set(n_skip)
             if n_skip:
-                prog.console.print(f"resuming: {n_skip} complete scene(s) skipped, {n_todo} to render")
+                prog.print(f"resuming: {n_skip} complete scene(s) skipped, {n_todo} to render")
 
         def on_done(sid: str, status: str) -> None:
-            prog.advance(task)
+            prog.advance()
             if status != "rendered":
-                prog.console.print(f"[red]scene {sid} failed[/]")
+                prog.print(f"[red]scene {sid} failed[/]")
 
         B.finish_probes()  # the scenes render in worker processes: they read the cached verdict
         try:

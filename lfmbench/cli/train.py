@@ -18,8 +18,9 @@ __all__ = ["register", "train_cmd"]
 def train_cmd(
     corpus: Path = typer.Option(..., "--corpus", help="corpus root directory (its train split is used)"),
     method: str = typer.Option("unet", "--method", "-m", help=f"learned baseline: {', '.join(LEARNED)}"),
-    config: Path = typer.Option(None, "--config", help="the method's YAML config (default lfmbench/configs/"
-                                                       "<method>.yaml; unet_tiny.yaml: the demo's U-Net)"),
+    config: str = typer.Option(None, "--config", help="the method's config: a YAML path or a shipped name "
+                                                      "(`lfmbench configs`; default <method>, unet_tiny: the "
+                                                      "demo's U-Net)"),
     out: Path = typer.Option(None, "--out", "-o", help="checkpoint path (default runs/<method>_fusion.pt)"),
     device: str = typer.Option("cpu", help="torch device: cpu, cuda, cuda:0 ..."),
     epochs: int = typer.Option(None, help="total epochs (overrides train.epochs of the config)"),

@@ -32,6 +32,7 @@ from lfmbench.corpus import bin_prefix, window_bin_weights
 from lfmbench.datasets.projection import SceneLayers
 from lfmbench.datasets.pwm import gated_lights
 from lfmbench.flicker import pwm_exposure
+from lfmbench.resources import docs_url
 from lfmbench.sensor.plan import resolve_windows, total_length_s
 from lfmbench.vocabulary import PHOTODIODES
 
@@ -399,8 +400,9 @@ def plan_exposures(preset, meta: Mapping[str, Any], shutter: str, line_time_s: f
                 raise ValueError(f"{preset.source}: field 'captures.{key}.exposure' window {i} "
                                  f"[{a * 1e3:.4g}, {(a + n) * 1e3:.4g}) ms is not a window {source} stores for its "
                                  "static groups (short, long or a union of its static time bins); use "
-                                 "static_windows='nearest' (the measured approximation, docs/benchmarks/"
-                                 "motion-windows.md) or a corpus rendered with these window edges")
+                                 "static_windows='nearest' (the measured approximation, "
+                                 f"{docs_url('benchmarks/motion-windows.md')}) or a corpus rendered with these "
+                                 "window edges")
         out.append(PlanExposure(key, preset.photodiodes[spec.photodiode].fill_factor, wins, rolling, lt))
     return out
 

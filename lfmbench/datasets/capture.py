@@ -31,8 +31,8 @@ from lfmbench.datasets.counter_draws import (SceneEntities, counter_scene_draw, 
 from lfmbench.datasets.assembly import (SENSOR_OUTPUTS, PlanExposure, assemble_sample, check_line_time,
                                         compose_frame, compose_plan_frame, light_index, plan_exposures,
                                         static_window_mix)
-from lfmbench.datasets.options import (DEFAULT_MAX_LIGHTS, DEFAULT_OUTPUTS, CacheOptions, SampleOptions,
-                                       SimulationOptions)
+from lfmbench.datasets.options import (DEFAULT_MAX_LIGHTS, DEFAULT_OUTPUTS, DEFAULT_SAMPLES_PER_SCENE,  # noqa: F401
+                                       CacheOptions, SampleOptions, SimulationOptions)
 from lfmbench.datasets.pieces import capture_pieces
 from lfmbench.datasets.projection import SceneLayers, aux_channels, load_or_build, unit_projection_preset
 from lfmbench.datasets.pwm import PWMConfig, apply_light_timing, draw_scene_pwm, frozen_test_rng, load_pwm_config
@@ -144,7 +144,11 @@ class LFMCaptureDataset(Dataset):
             on ``num_workers`` or the sampler (``DistributedSampler`` just selects indices).
         outputs: subset of :data:`OUTPUTS`; only what is asked for is read and simulated.
         groups: light groups to include (None = all the scene has); others are never read.
-        samples_per_scene: samples per scene per epoch (each its own PWM draw and crop).
+        samples_per_scene: samples per scene per epoch (each its own PWM draw and crop). Default (None):
+            :data:`DEFAULT_SAMPLES_PER_SCENE` = 16 for ``train``, so that an epoch of a small corpus is more than
+            one batch (4 training scenes at batch size 8: 8 batches of fresh draws and crops; the shipped training
+            configs use the same 16); 1 for ``val``, ``test`` and ``all`` (one draw per scene: index i is scene i;
+            the test draws frozen as ``lfmbench evaluate`` scores them by default).
         noise: simulate temporal noise (False: mean electrons through clipping and quantisation).
         optics: apply the lens PSF.
         max_lights: length of the padded per-light metadata arrays (``meta`` ``light_id``, ``flicker``, ``duty``,
@@ -197,7 +201,8 @@ class LFMCaptureDataset(Dataset):
     def __init__(self, root: str | os.PathLike, split: str = "train", sensor: Any = "ovt", frames: int = 3,
                  crop: int | tuple[int, int] | None = None, pwm: Any = None, shutter: str = "global", seed: int = 0,
                  outputs: Sequence[str] = DEFAULT_OUTPUTS, groups: Sequence[str] | None = None,
-                 samples_per_scene: int = 1, noise: bool = True, optics: bool = True, max_lights: int | None = None,
+                 samples_per_scene: int | None = None, noise: bool = True, optics: bool = True,
+                 max_lights: int | None = None,
                  cache_dir: str | os.PathLike | bool | None = None, cache_scenes: int = 8,
                  line_time_s: float | None = None, transforms: Callable[[dict], dict] | None = None,
                  frame_start: int | str = 0, pieces: bool = False, noise_streams: str = "generator",
@@ -265,7 +270,10 @@ class LFMCaptureDataset(Dataset):
                 raise ValueError(f"frames={frames}, frame_start={frame_start} but scene {brief(sid)} of {self.root} has "
                                  f"only {m['frames']} frames")
             if self.crop is not None and (self.crop[0] > m["height"] or self.crop[1] > m["width"]):
-                raise ValueError(f"crop {self.crop} is larger than scene {brief(sid)} ({m['height']}x{m['width']})")
+                side = min(m["height"], m["width"]) // 2 * 2
+                raise ValueError(f"crop {self.crop} is larger than scene {brief(sid)} ({m['height']}x{m['width']} px): "
+                                 f"pass crop=None for whole frames, or at most crop={side} (or (h, w) with h <= "
+                                 f"{m['height']}, w <= {m['width']})")
             if line_time_s is not None and shutter == "rolling":
                 check_line_time(m, line_time_s, m["height"])
             if self.architecture != "split_pixel":  # every window inside the corpus's capture window
@@ -700,36 +708,17 @@ class LFMCaptureDataset(Dataset):
         return "exact" if exact else "nearest"
 
     # -- display
-    @staticmethod
-    def plot(sample: Mapping[str, Any], prediction: torch.Tensor | None = None):
-        """Figure with one row per frame: LPD-LCG, SPD, ground truth (and ``prediction``), LED mask.
-
-        Values are input-referred e-; shown through log tone mapping with a shared scale per row.
-        ``prediction``: (F, 1, h, w) estimate in the ``gt`` units. Returns a matplotlib Figure.
+    def plot(self, sample: Mapping[str, Any], outputs: Mapping[str, torch.Tensor] | None = None,
+             isp: Any = "default", frames: int | None = None, prediction: torch.Tensor | None = None):
+        """A matplotlib Figure of ``sample`` (one of this dataset's, or a batch of one): a row per capture of the
+        sensor's plan, the ground truth and each of ``outputs`` (title -> (F, 1, h, w) estimate in ``gt`` units,
+        e.g. a method's output), a column per frame, every image through the ISP ``isp`` with the ground truth's
+        statistics, LED regions outlined (:func:`lfmbench.datasets.plot.plot_sample`). ``prediction``: one
+        estimate, shown as "prediction". Save it with ``fig.savefig("sample.png")``.
         """
-        import matplotlib.pyplot as plt
+        from lfmbench.datasets.plot import plot_sample  # noqa: PLC0415
 
-        cols = [("lpd_lcg_e", "LPD (short, LCG)"), ("spd_e", "SPD (long)"), ("gt", "ground truth")]
-        cols = [c for c in cols if c[0] in sample]
+        outs = dict(outputs or {})
         if prediction is not None:
-            cols.append(("__pred", "prediction"))
-        show_mask = "light_index" in sample
-        F = sample["gt"].shape[0] if "gt" in sample else sample[cols[0][0]].shape[0]
-        ncol = len(cols) + int(show_mask)
-        fig, axes = plt.subplots(F, ncol, figsize=(3.2 * ncol, 2.0 * F + 0.6), squeeze=False)
-        for f in range(F):
-            imgs = [(prediction if k == "__pred" else sample[k])[f, 0].float() for k, _ in cols]
-            vmax = max(float(torch.log1p(i.clamp_min(0)).max()) for i in imgs) or 1.0
-            for c, ((k, title), im) in enumerate(zip(cols, imgs)):
-                axes[f, c].imshow(torch.log1p(im.clamp_min(0)).numpy(), cmap="gray", vmin=0, vmax=vmax)
-                axes[f, c].set_title(f"{title}, frame {f}", fontsize=8)
-            if show_mask:
-                axes[f, -1].imshow(sample["light_index"][f, 0].numpy(), cmap="tab20", vmin=-1,
-                                   interpolation="nearest")
-                axes[f, -1].set_title("LED index", fontsize=8)
-        for ax in axes.flat:
-            ax.set_axis_off()
-        meta = sample.get("meta", {})
-        fig.suptitle(f"{meta.get('scene_id', '')}: log(1 + e-), sensor {meta.get('sensor', '')}", fontsize=9)
-        fig.tight_layout()
-        return fig
+            outs["prediction"] = prediction
+        return plot_sample(sample, self.preset, outs, isp=isp, frames=frames)

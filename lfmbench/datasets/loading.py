@@ -31,7 +31,8 @@ def make_dataset(corpus: str | Path, split: str = "test", seed: int = 0, crop: i
     """
     root = Path(corpus)
     if not root.is_dir():
-        raise FileNotFoundError(f"corpus directory {root} does not exist; render one first (see README)")
+        raise FileNotFoundError(f"corpus directory {root} does not exist; render one with `lfmbench render --out DIR` "
+                                "(or `lfmbench demo`)")
     from lfmbench.datasets.capture import LFMCaptureDataset
 
     if crop is not None:

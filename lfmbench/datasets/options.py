@@ -25,8 +25,8 @@ from lfmbench.datasets.assembly import NOISE_STREAMS, STATIC_WINDOW_RULES
 from lfmbench.limits import brief, limit
 from lfmbench.sensor.plan import SHUTTERS
 
-__all__ = ["OUTPUTS", "DEFAULT_OUTPUTS", "DEFAULT_MAX_LIGHTS", "SPLITS", "SampleOptions", "SimulationOptions",
-           "CacheOptions"]
+__all__ = ["OUTPUTS", "DEFAULT_OUTPUTS", "DEFAULT_MAX_LIGHTS", "DEFAULT_SAMPLES_PER_SCENE", "SPLITS", "SampleOptions",
+           "SimulationOptions", "CacheOptions"]
 
 #: Every output a sample can hold (``LFMCaptureDataset(outputs=...)``).
 OUTPUTS = ("raw", "input_referred", "saturated", "gt", "light_index", "depth", "rgb", "gt_common")
@@ -34,6 +34,8 @@ OUTPUTS = ("raw", "input_referred", "saturated", "gt", "light_index", "depth", "
 DEFAULT_OUTPUTS = ("raw", "input_referred", "saturated", "gt", "light_index", "depth")
 #: Smallest default length of the padded per-light ``meta`` arrays (``LFMCaptureDataset(max_lights=None)``).
 DEFAULT_MAX_LIGHTS = 64
+#: Samples per scene per epoch of a training split by default (``LFMCaptureDataset(samples_per_scene=None)``).
+DEFAULT_SAMPLES_PER_SCENE = 16
 #: Corpus splits a dataset reads (``all``: every complete scene).
 SPLITS = ("train", "val", "test", "all")
 
@@ -46,7 +48,8 @@ class SampleOptions:
         split: one of :data:`SPLITS`. frames: F consecutive frames (>= 1). frame_start: an int >= 0 or
             ``"random"``. crop: ``None`` or ``(h, w)`` in pixels (sides >= 2). outputs: a subset of
             :data:`OUTPUTS`. groups: light-group names or ``None`` (all). samples_per_scene: draws per scene per
-            epoch (>= 1). seed: base seed (>= 0). max_lights: ``None`` or an int in ``[0, lights_per_scene]``.
+            epoch (>= 1; ``None``: :data:`DEFAULT_SAMPLES_PER_SCENE` for ``train``, 1 for the other splits).
+            seed: base seed (>= 0). max_lights: ``None`` or an int in ``[0, lights_per_scene]``.
     """
 
     split: str
@@ -62,7 +65,7 @@ class SampleOptions:
     @classmethod
     def checked(cls, *, split: str = "train", frames: int = 3, frame_start: int | str = 0,
                 crop: int | tuple[int, int] | None = None, outputs: Sequence[str] = DEFAULT_OUTPUTS,
-                groups: Sequence[str] | str | None = None, samples_per_scene: int = 1, seed: int = 0,
+                groups: Sequence[str] | str | None = None, samples_per_scene: int | None = None, seed: int = 0,
                 max_lights: int | None = None) -> "SampleOptions":
         """The options, each checked (errors name the argument); ``crop=n`` becomes ``(n, n)``, a group name a
         one-name list."""
@@ -76,6 +79,8 @@ class SampleOptions:
         if frame_start != "random" and (isinstance(frame_start, bool) or not isinstance(frame_start, int)
                                         or frame_start < 0):
             raise ValueError(f"frame_start must be an integer >= 0 or 'random', got {brief(frame_start)}")
+        if samples_per_scene is None:  # DEFAULT_SAMPLES_PER_SCENE for train (an epoch of a small corpus is more
+            samples_per_scene = DEFAULT_SAMPLES_PER_SCENE if split == "train" else 1  # than one batch), else 1
         samples_per_scene = check_int_arg("samples_per_scene", samples_per_scene, 1)
         seed = check_int_arg("seed", seed, 0)
         if max_lights is not None:

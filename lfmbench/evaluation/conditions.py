@@ -26,10 +26,15 @@ NA = "n/a"
 def load_bins(path: str | Path | None = None) -> dict[str, dict]:
     """Condition name -> ``{"categories": [...]}`` or ``{"edges": [...], "unit": str}``, checked.
 
+    ``path``: a YAML file or the name of a shipped conditions file (:func:`lfmbench.resources.find_config`);
+    default :data:`CONDITIONS_CONFIG`.
+
     Raises:
-        ValueError: naming the file and the entry when the file is not such a mapping.
+        ValueError: naming the file and the entry when the file is not such a mapping; an unknown name.
     """
-    p = Path(path or CONDITIONS_CONFIG)
+    from lfmbench.resources import find_config
+
+    p = Path(CONDITIONS_CONFIG if not path else find_config(path, "conditions", "--conditions"))
     try:
         cfg = load_yaml(p, source=f"conditions file {p}")
     except OSError as exc:

@@ -86,3 +86,31 @@ def time_method(method: Callable, batch: dict, warmup: int = 1, repeats: int = 5
             sync(dev)
             out.append((time.perf_counter() - t0) * 1e3)
     return out
+
+
+#: A method's time "moved" when the median of its scored calls (ms per megapixel) lies more than this factor
+#: outside the range of its timed calls (:func:`time_moved`).
+TIME_MOVED_FACTOR = 2.0
+
+
+def quartiles(times: list[float]) -> tuple[float, float]:
+    """(25th, 75th) percentile of ``times`` (linear interpolation, ``numpy.percentile``'s default)."""
+    import numpy as np
+
+    q25, q75 = np.percentile(np.asarray(times, dtype=np.float64), [25, 75])
+    return float(q25), float(q75)
+
+
+def time_moved(timed: list[float], scored: list[float], factor: float = TIME_MOVED_FACTOR) -> bool:
+    """Whether a method's run time moved during an evaluation: the median of its ``scored`` calls (one per sample,
+    timed while it was scored) lies outside ``[min(timed) / factor, max(timed) * factor]``, the range of its
+    ``timed`` calls (the repeated calls after warm-up) widened by ``factor``. Both in the same unit (ms per
+    megapixel). A moved time means the machine's load or the method's cost changed between the timing and the
+    scoring: its ms/MP is not one a leaderboard can trust.
+    """
+    import statistics
+
+    if not timed or not scored:
+        return False
+    m = statistics.median(scored)
+    return bool(m < min(timed) / factor or m > max(timed) * factor)

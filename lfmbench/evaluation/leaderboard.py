@@ -357,6 +357,8 @@ def leaderboard_rows(runs: list[dict], sort_by: str | None = None, *, ci: bool =
         row = {"method": name, "sensor": run_sensor(r),
                "architecture": (r.get("dataset") or {}).get("architecture", "split_pixel"), "path": r.get("_path"), "device": r["runtime"].get("device"),
                "ms_per_megapixel": num(r["runtime"].get("ms_per_megapixel")),
+               "ms_iqr": _pair(r["runtime"].get("iqr_ms_per_megapixel")),
+               "time_moved": r["runtime"].get("time_moved") is True, "threads": r["runtime"].get("threads"),
                "params": r["method"].get("params"), "macs_per_megapixel": r["method"].get("macs_per_megapixel"),
                "scenes": agg.get("scenes", 0), "failed": agg.get("scenes_failed", 0), "status": r.get("status"),
                "checkpoint_sha256": _checkpoint_sha(r),
@@ -375,6 +377,7 @@ def leaderboard_rows(runs: list[dict], sort_by: str | None = None, *, ci: bool =
             return (1, 0.0)
         return (0, -v if spec.higher_is_better else v)
 
+    _flag_moved_times(rows)
     rows.sort(key=lambda row: (row["status"] != COMPLETE, *key(row)))  # incomplete runs after complete ones
     n_stats = STATS_ROWS if stats_rows is None else stats_rows
     for i, row in enumerate(rows):
@@ -398,6 +401,55 @@ def _checkpoint_sha(run: dict) -> str | None:
     ck = run["method"].get("checkpoint")
     sha = ck.get("content_sha256") if isinstance(ck, dict) else None
     return sha if isinstance(sha, str) else None
+#: Fewer scenes than this in the ranked runs and the leaderboard says its intervals and tests are not to be trusted
+#: (a bootstrap over 1 scene has no interval, over a few an interval far too narrow; Wilcoxon's exact test
+#: cannot reach p < 0.05 below 6 paired scenes).
+MIN_SCENES_FOR_CI = 6
+
+
+def _pair(v: Any) -> list[float] | None:
+    """A stored ``[low, high]`` as two floats, or None (a result file written before it was recorded)."""
+    if isinstance(v, (list, tuple)) and len(v) == 2:
+        lo, hi = num(v[0]), num(v[1])
+        if math.isfinite(lo) and math.isfinite(hi):
+            return [lo, hi]
+    return None
+
+
+def _flag_moved_times(rows: list[dict]) -> None:
+    """``time_moved`` of rows whose run time cannot be trusted: moved during its own run (``runtime.time_moved``),
+    or one method ranked twice (two result files) with run times outside each other's range widened by
+    :data:`lfmbench.evaluation.cost.TIME_MOVED_FACTOR` (the interquartile range, or the median alone for an
+    older file)."""
+    from lfmbench.evaluation.cost import TIME_MOVED_FACTOR as F
+
+    by_method: dict[str, list[dict]] = {}
+    for r in rows:
+        by_method.setdefault(r["method"], []).append(r)
+    for same in by_method.values():
+        for a in same:
+            for b in same:
+                if a is b or math.isnan(a["ms_per_megapixel"]) or math.isnan(b["ms_per_megapixel"]):
+                    continue
+                lo, hi = b["ms_iqr"] or [b["ms_per_megapixel"]] * 2
+                if not lo / F <= a["ms_per_megapixel"] <= hi * F:
+                    a["time_moved"] = b["time_moved"] = True
+
+
+def few_scenes(rows: list[dict]) -> str | None:
+    """A warning when a ranked run has fewer than :data:`MIN_SCENES_FOR_CI` scenes (None otherwise)."""
+    n = min((r["n_scenes"] for r in rows), default=0)
+    if not rows or n >= MIN_SCENES_FOR_CI:
+        return None
+    return (f"warning: n = {n} scene(s) per method; confidence intervals and paired tests need at least "
+            f"{MIN_SCENES_FOR_CI} scenes (a test split of more scenes: render more, e.g. a protocol)")
+
+
+def _ms(row: dict) -> str:
+    """The run-time cell: median ms/MP, its interquartile range, ``!`` when the time moved."""
+    iqr = row.get("ms_iqr")
+    return (_fmt(row["ms_per_megapixel"], 1) + (f" [{_fmt(iqr[0], 1)}, {_fmt(iqr[1], 1)}]" if iqr else "")
+            + (" !" if row.get("time_moved") else ""))
 
 
 def _compare_with_best(rows: list[dict], sort_by: str) -> None:
@@ -474,12 +526,14 @@ def leaderboard_markdown(rows: list[dict], sort_by: str | None = None) -> str:
     cols = [s for s in _columns(rows) if s.name != sort_by]
     st = stats.settings()
     head = (["#", "method", f"{spec.header} [95 % CI]", "diff vs best [95 % CI]", "p / p Holm", "n"]
-            + [s.header for s in cols] + ["Pareto", "ms/MP", "params", "MACs/MP", "failed"])
+            + [s.header for s in cols] + ["Pareto", "ms/MP [IQR]", "params", "MACs/MP", "failed"])
     lines = [f"Ranked by `{sort_by}` ({spec.direction} is better; {spec.reference}). Intervals: "
              f"{int(st['confidence'] * 100)} % {st['ci']}, {st['n_resamples']} resamples, seed {st['seed']}; "
              f"n = scenes. Each method against the best: {st['paired_test']} (`*`: p Holm < {st['alpha']}). "
              f"Pareto: not dominated on ({', '.join(PARETO_AXES)}). Run time = median ms per output megapixel "
-             "after warm-up.", "",
+             "of the repeated calls after warm-up [interquartile range]; `!`: the time moved (the scored calls' "
+             "median, or another run of the method, more than a factor 2 outside that range): not to be trusted.",
+             "",
              "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in rows:
         d, p = _vs_best(r, nd)
@@ -487,7 +541,7 @@ def leaderboard_markdown(rows: list[dict], sort_by: str | None = None) -> str:
                  f"{_fmt(r[sort_by], nd)} {_ci(r['ci'].get(sort_by), nd)}", d, p, str(r["n_scenes"])]
         cells += [_fmt(r[s.name], s.digits) for s in cols]
         cells += ["yes" if r.get("pareto") else ("no" if r.get("pareto") is False else "-"),
-                  _fmt(r["ms_per_megapixel"], 1), _fmt(r["params"]), _fmt(r["macs_per_megapixel"], 0),
+                  _ms(r), _fmt(r["params"]), _fmt(r["macs_per_megapixel"], 0),
                   f"{r['failed']}/{r['scenes']}"]
         lines.append("| " + " | ".join(cells) + " |")
     ci_cols = [s for s in _columns(rows, "console") if s.name != sort_by]
@@ -516,7 +570,12 @@ def leaderboard_markdown(rows: list[dict], sort_by: str | None = None) -> str:
         lines += ["", "Weights (content SHA-256 of each checkpoint, verified when it was loaded): " + "; ".join(
             f"`{r['method']}` {r['checkpoint_sha256'][:12]}" for r in weights) + "."]
     devs = sorted({str(r["device"]) for r in rows})
-    lines += ["", f"Device: {'; '.join(devs)}."]
+    threads = sorted({str(r["threads"]) for r in rows if r.get("threads") is not None})
+    lines += ["", f"Device: {'; '.join(devs)}" + (f"; torch CPU threads: {', '.join(threads)}" if threads else "")
+              + "."]
+    few = few_scenes(rows)
+    if few:
+        lines += ["", few[0].upper() + few[1:] + "."]
     return "\n".join(lines) + "\n"
 
 
@@ -611,7 +670,7 @@ def print_leaderboard(rows: list[dict], sort_by: str | None = None, note: str = 
         console = Console(width=180)
     table = Table(title=f"lfmbench leaderboard (ranked by {sort_by}{'; ' + note if note else ''})")
     heads = ["#", "method", f"{spec.header} [95% CI]", "p Holm vs best"] + [s.header for s in cols] + \
-        ["ms/MP", "params", "failed"]
+        ["ms/MP [IQR]", "params", "failed"]
     for h in heads:
         table.add_column(h, justify="left" if h == "method" else "right", no_wrap=h == "method")
     for r in rows:
@@ -619,5 +678,11 @@ def print_leaderboard(rows: list[dict], sort_by: str | None = None, note: str = 
         table.add_row(str(r["rank"]), r["method"] + _status_mark(r),
                       f"{_fmt(r[sort_by], spec.digits)} {_ci(r['ci'].get(sort_by), spec.digits)}", p,
                       *[_fmt(r[s.name], s.digits) for s in cols],
-                      _fmt(r["ms_per_megapixel"], 1), _fmt(r["params"]), f"{r['failed']}/{r['scenes']}")
+                      _ms(r), _fmt(r["params"]), f"{r['failed']}/{r['scenes']}")
     console.print(table)
+    if any(r.get("time_moved") for r in rows):
+        console.print("!: the run time moved (more than a factor 2 outside its timed range): not to be trusted",
+                      highlight=False)
+    few = few_scenes(rows)
+    if few:
+        console.print(few, style="yellow", highlight=False)

@@ -28,7 +28,7 @@ from lfmbench.baselines.checkpoint import CheckpointError
 from lfmbench.datasets.loading import EmptyDataError
 from lfmbench.evaluation import stats
 from lfmbench.evaluation.conditions import load_bins, sample_conditions
-from lfmbench.evaluation.cost import count_params_macs, method_module, sync, time_method
+from lfmbench.evaluation.cost import count_params_macs, method_module, quartiles, sync, time_method, time_moved
 from lfmbench.evaluation.provenance import device_name, git_revision, versions
 from lfmbench.evaluation.results import (COMPLETE, RESULT_FORMAT, RESULT_VERSION, aggregate, breakdown, per_scene,
                                          write_json_atomic)
@@ -111,11 +111,14 @@ def evaluate(method: Callable | str, batches: Iterable[dict], *, method_spec: st
         output: JSON path; rewritten atomically after every batch (partial results survive a crash).
         options: :class:`lfmbench.metrics.ScoreOptions`.
         warmup, repeats: timing protocol on the first batch the method handles (ms per output megapixel =
-            median of ``repeats`` calls / (B x F x H x W / 1e6)).
+            median of ``repeats`` calls / (B x F x H x W / 1e6); ``runtime.iqr_ms_per_megapixel`` their
+            interquartile range; ``runtime.threads`` torch's CPU threads; ``runtime.time_moved`` whether the
+            scored calls' median left that range, :func:`lfmbench.evaluation.cost.time_moved`).
         device: where the method and metrics run.
         seeds: stored as given (dataset seed, PWM seed, ...).
         dataset: description stored as given (corpus, split, ...).
-        progress: tqdm progress bar.
+        progress: a progress bar (:func:`lfmbench.progress.track`: live on a terminal, a few plain lines in a
+            log).
         total: number of batches, for the progress bar.
         corpus: the corpus identity (:func:`lfmbench.evaluation.provenance.corpus_identity`) stored as
             ``corpus``; None for a data source that is not a corpus (the leaderboard then ranks the result only
@@ -201,13 +204,10 @@ def evaluate_methods(methods: Sequence[Callable | str], batches: Iterable[dict],
         runs.append(_MethodRun(fn, spec, out, o, opts, warmup, repeats, dev, seeds, dataset, corpus, notes))
         if isp_id is not None:
             runs[-1].result["options"]["isp"] = isp_id
-    it = batches
-    if progress:
-        from tqdm import tqdm
+    from lfmbench.progress import track
 
-        desc = f"evaluate {runs[0].spec}" if len(runs) == 1 else f"evaluate {len(runs)} methods"
-        it = tqdm(batches, total=total, desc=desc, unit="batch")
-    source = iter(it)
+    desc = f"evaluate {runs[0].spec}" if len(runs) == 1 else f"evaluate {len(runs)} methods"
+    source = iter(track(batches, total=total, description=desc, unit="batch", enabled=progress))
     try:
         n_batches = _run_batches(runs, source, dev, scene_conditions)
     except KeyboardInterrupt:
@@ -230,7 +230,15 @@ def evaluate_methods(methods: Sequence[Callable | str], batches: Iterable[dict],
 
 
 def _finish(result: dict, bins: dict, metric: str) -> None:
-    """Final statistics of a result: aggregate with bootstrap CIs, per-scene values, breakdown of ``metric``."""
+    """Final statistics of a result: aggregate with bootstrap CIs, per-scene values, breakdown of ``metric``, and
+    the check of the timing against the scored calls (:func:`lfmbench.evaluation.cost.time_moved`)."""
+    rt = result["runtime"]
+    scored = [rec["call_ms"] / rec["megapixels"] for rec in result["scenes"][1:]  # the first call warmed up
+              if rec.get("status") == "ok" and rec.get("call_ms") is not None and rec.get("megapixels")]
+    if scored and rt.get("times_ms"):
+        rt["scored_ms_per_megapixel"] = statistics.median(scored)
+        mps = rt["megapixels_per_call"]
+        rt["time_moved"] = time_moved([t / mps for t in rt["times_ms"]], scored)
     result["aggregate"] = aggregate(result["scenes"], ci=True)
     result["per_scene"] = per_scene(result["scenes"])
     result["breakdown"] = {"metric": metric, "bins": bins, "by": breakdown(result["scenes"], metric, bins)}
@@ -250,7 +258,10 @@ class _MethodRun:
             "method": {"spec": spec, "params": None, "macs_per_call": None, "macs_per_megapixel": None},
             "dataset": dict(dataset or {}), "corpus": corpus, "seeds": dict(seeds or {}),
             "runtime": {"device": device_name(dev), "device_type": dev.type, "warmup": warmup, "repeats": repeats,
-                        "ms_per_megapixel": None, "median_ms": None, "times_ms": None, "megapixels_per_call": None},
+                        "ms_per_megapixel": None, "median_ms": None, "times_ms": None, "megapixels_per_call": None,
+                        "iqr_ms": None, "iqr_ms_per_megapixel": None, "threads": torch.get_num_threads(),
+                        "interop_threads": torch.get_num_interop_threads(), "scored_ms_per_megapixel": None,
+                        "time_moved": None},
             "options": {"perceptual": o.perceptual, "fps": o.fps, "cd_per_unit": o.cd_per_unit,
                         "region": vars(o.region), "margin_px": o.margin_px, "ring_px": o.ring_px},
             "versions": versions(o.perceptual, o.cd_per_unit), "git": git_revision(),
@@ -316,8 +327,10 @@ class _MethodRun:
         try:
             times = time_method(fn, batch, warmup=max(0, self.warmup - 1), repeats=self.repeats, device=self.dev)
             med = statistics.median(times) if times else call_ms
+            q25, q75 = quartiles(times) if times else (call_ms, call_ms)
             mps = gt.numel() / 1e6
-            res["runtime"].update(times_ms=times, median_ms=med, megapixels_per_call=mps, ms_per_megapixel=med / mps)
+            res["runtime"].update(times_ms=times, median_ms=med, megapixels_per_call=mps, ms_per_megapixel=med / mps,
+                                  iqr_ms=[q25, q75], iqr_ms_per_megapixel=[q25 / mps, q75 / mps])
             module = method_module(fn)
             if module is not None:
                 params, macs = count_params_macs(module, lambda: fn(dict(batch)))

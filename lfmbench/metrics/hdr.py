@@ -344,8 +344,8 @@ def load_pycvvdp():
     except ModuleNotFoundError as exc:
         if exc.name and exc.name.split(".")[0] == "pycvvdp":
             raise CvvdpUnavailableError(
-                "ColorVideoVDP / PU21 need the optional package 'cvvdp': pip install -c constraints.txt 'cvvdp>=0.5' "
-                "(or pip install -e '.[eval]')") from exc
+                "ColorVideoVDP / PU21 need the optional package 'cvvdp': pip install 'lfmbench[eval]' (in a source "
+                "checkout: pip install -c constraints.txt -e '.[eval]'), or evaluate with --no-perceptual") from exc
         if not (exc.name and exc.name.split(".")[0] == "torchvision"):
             raise CvvdpUnavailableError(f"pycvvdp could not be imported: {exc}") from exc
         _PYCVVDP = _import_with_shim()

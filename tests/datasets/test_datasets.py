@@ -238,7 +238,11 @@ def test_plot_returns_figure(corpus):
     ds = LFMCaptureDataset(corpus, split="all", frames=2, cache_dir=False)
     s = ds[0]
     fig = ds.plot(s, prediction=s["gt"])
+    rows = [ax.get_ylabel() for ax in fig.axes[::2]]  # a row per capture, gt, the prediction; a column per frame
+    assert rows == ["lpd_hcg (capture)", "lpd_lcg (capture)", "spd (capture)", "ground truth", "prediction"]
     assert len(fig.axes) == 2 * 5
+    # the prediction equals the ground truth and goes through the same ISP with the same statistics
+    assert (fig.axes[6].images[0].get_array() == fig.axes[8].images[0].get_array()).all()
 
 
 def test_training_example_in_docs_runs(tmp_path):
