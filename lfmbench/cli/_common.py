@@ -5,7 +5,7 @@ from collections.abc import Iterable
 
 import typer
 
-__all__ = ["fail", "check_minima", "torch_setup"]
+__all__ = ["fail", "check_minima", "torch_setup", "check_local_paths"]
 
 
 def fail(msg: str, code: int = 2) -> None:
@@ -35,3 +35,14 @@ def torch_setup(device: str, threads: int | None) -> None:
         torch_device(device)
     except ValueError as exc:
         fail(str(exc))
+
+
+def check_local_paths(paths: Iterable[tuple[str, object]]) -> None:
+    """``(option name, path or None)`` pairs: a URL-like path (``s3://``, ``gs://``, ``http://``, any
+    ``scheme://``) is refused with one line naming the option (:func:`lfmbench.fileio.url_error`)."""
+    from lfmbench.fileio import url_error  # noqa: PLC0415
+
+    for name, p in paths:
+        why = url_error(name, p)
+        if why is not None:
+            fail(why)
