@@ -38,7 +38,10 @@ def validate_cmd(
     from rich.console import Console
     from rich.progress import Progress
 
+    from lfmbench.cli._common import check_local_paths
     from lfmbench.corpus import validate_corpus
+
+    check_local_paths((("CORPUS", corpus), ("--cache-file", cache_file)))
 
     console = Console(stderr=True, soft_wrap=True)
     with Progress(console=console, transient=True, disable=as_json) as prog:
@@ -78,7 +81,10 @@ def import_isetlfm_cmd(
     from rich.progress import Progress
 
     from lfmbench.corpus import CorpusError, CorpusWriteError
+    from lfmbench.cli._common import check_local_paths
     from lfmbench.corpus.isetlfm import find_scenes, import_isetlfm
+
+    check_local_paths((("SRC", src), ("OUT", out)))
 
     console = Console(stderr=True, soft_wrap=True)
     try:

@@ -114,6 +114,9 @@ def demo_cmd(
 ) -> None:
     """Render the small demo corpus, train the learned baselines, evaluate every baseline and reproduce the
     paper's figures (what ``make demo`` runs; resumable: a second run reuses the corpus and checkpoints)."""
+    from lfmbench.cli._common import check_local_paths
+
+    check_local_paths((("--out", out),))
     main(out, config)
 
 

@@ -69,7 +69,13 @@ def render_cmd(
     yes: bool = typer.Option(False, "--yes", help="Confirm sizes above the sanity limits (e.g. --frames > 300, "
                                                   "--scenes > 10000)."),
 ) -> None:
-    """Render driving scenes (Mitsuba 3, spectral, light groups, time bins) into a corpus; resumable."""
+    """Render driving scenes (Mitsuba 3, spectral, light groups, time bins) into a corpus; resumable.
+
+    --out is a POSIX path (local, or a folder every Ray node mounts at the same path): a URL (s3://, gs://, ...)
+    is refused (docs/guide/distributed.md)."""
+    from lfmbench.cli._common import check_local_paths  # noqa: PLC0415
+
+    check_local_paths([("--out", out)] + [("--scene", p) for p in scene_file or []])
     from render_tools import backend as B  # noqa: PLC0415
 
     # a cold Mitsuba back-end probe (a child process, ~1.3 s of one core) runs while this process imports its

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import typer
 
-from lfmbench.cli._common import check_minima, fail, torch_setup
+from lfmbench.cli._common import check_local_paths, check_minima, fail, torch_setup
 from lfmbench.vocabulary import LEARNED_BASELINES as LEARNED
 
 __all__ = ["register", "train_cmd"]
@@ -50,6 +50,7 @@ def train_cmd(
     from lfmbench.datasets.loading import EmptyDataError  # noqa: PLC0415
     from lfmbench.train import CUDA_GRAPH_MODES, RESIDENT_DTYPES, load_config, train, trainable  # noqa: PLC0415
 
+    check_local_paths((("--corpus", corpus), ("--out", out), ("--config", config)))
     if method not in LEARNED:
         fail(f"--method {method!r} is not a trainable baseline; trainable: {', '.join(LEARNED)}")
     check_minima((("--epochs", epochs, 1), ("--workers", workers, 0), ("--crop", crop, 8),
