@@ -28,7 +28,7 @@ LAYERS = (
     ("lfmbench.datasets",),
     ("lfmbench.metrics",),
     ("lfmbench.baselines",),
-    ("lfmbench.train",),
+    ("lfmbench.train", "lfmbench.distributed"),  # distributed: the ranks of a DDP training
     ("lfmbench.evaluation",),
     ("lfmbench.paper",),
     ("lfmbench.cli",),

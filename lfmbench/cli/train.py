@@ -44,7 +44,8 @@ def train_cmd(
     """Train a learned fusion baseline; checkpoint written atomically after every epoch (resumable).
 
     Evaluate it with LFMBENCH_<METHOD>_CHECKPOINT=OUT lfmbench evaluate --method <method> --corpus DIR (with the
-    same --sensor it was trained for).
+    same --sensor it was trained for). Several processes or GPUs: torchrun --nproc_per_node N -m lfmbench.cli
+    train ... (data-parallel, one model; --batch-size is the global batch; docs/guide/distributed.md).
     """
     from lfmbench.baselines.trainable import ConfigError, count_parameters  # noqa: PLC0415
     from lfmbench.datasets.loading import EmptyDataError  # noqa: PLC0415
@@ -80,6 +81,13 @@ def train_cmd(
         fail(str(exc))
     except OSError as exc:  # the checkpoint could not be written (disk full, ...): the message names the file
         fail(exc.strerror or str(exc))
+    import torch.distributed as dist  # noqa: PLC0415
+
+    if dist.is_available() and dist.is_initialized():  # a torchrun rank (lfmbench.distributed): rank 0 reports
+        main = dist.get_rank() == 0
+        dist.destroy_process_group()
+        if not main:
+            return
     secs = hist["epoch_seconds"]
     typer.echo(f"saved {out}: {count_parameters(model):,} parameters, {len(secs)} epochs, "
                f"final loss {hist['epoch_loss'][-1] if hist['epoch_loss'] else float('nan'):.4f}"
