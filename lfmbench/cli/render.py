@@ -51,7 +51,14 @@ def render_cmd(
                                                    "first; a later run without --split adds the rest."),
     workers: int = typer.Option(1, "--workers", help="Scenes rendered in parallel (local process pool)."),
     ray_address: Optional[str] = typer.Option(None, "--ray-address",
-                                              help="Run on Ray: 'local', 'auto' or ray://host:port."),
+                                              help="Run on Ray: 'local', 'auto', HOST:PORT or ray://HOST:PORT (Ray "
+                                                   "Client). Every node must mount --out at the same path "
+                                                   "(checked before any scene starts; docs/guide/distributed.md)."),
+    ray_cpus_per_scene: float = typer.Option(1.0, "--ray-cpus-per-scene",
+                                             help="With --ray-address: CPUs each scene task asks Ray for."),
+    ray_gpus_per_scene: float = typer.Option(0.0, "--ray-gpus-per-scene",
+                                             help="With --ray-address: GPUs each scene task asks Ray for (1: each "
+                                                  "concurrent scene gets its own GPU; 0: CPU rendering)."),
     scene_file: Optional[List[Path]] = typer.Option(None, "--scene",
                                                     help="Render this scene JSON file instead of generating "
                                                          "(repeatable; overrides --scenes)."),
@@ -97,6 +104,10 @@ def render_cmd(
                           splits=_split_groups(split), workers=workers, scene_files=scene_file, variant=variant,
                           storage=storage, half=half, yes=yes)
     try:
+        ray_options = J.RayOptions(cpus_per_scene=ray_cpus_per_scene, gpus_per_scene=ray_gpus_per_scene)
+    except ValueError as exc:
+        fail(str(exc))
+    try:
         plan = J.plan_render(req)
     except (ValueError, CorpusError) as exc:
         fail(str(exc))
@@ -123,7 +134,8 @@ def render_cmd(
         B.finish_probes()  # the scenes render in worker processes: they read the cached verdict
         try:
             summary = J.run_jobs(job_list, writer, workers=workers, ray_address=ray_address, on_start=on_start,
-                                 on_done=on_done, resume=not no_resume, split_seed=seed, splits=fixed_splits)
+                                 on_done=on_done, resume=not no_resume, split_seed=seed, splits=fixed_splits,
+                                 ray_options=ray_options)
         except J.RenderInterrupted as exc:
             s = exc.summary
             console.print(f"[yellow]interrupted[/]: {len(s.rendered) + len(s.skipped)} complete scene(s) are in "
