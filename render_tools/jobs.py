@@ -415,7 +415,7 @@ def _dispatch(todo: Sequence[RenderJob], ray_address: str | None, workers: int, 
     if ray_address:
         if todo:
             run_ray(todo, ray_address, max(workers, 1), finished, Path(todo[0].out if out is None else out),
-                    ray_options)
+                    ray_options, run_job)
     elif workers == 0:
         for j in todo:
             try:

@@ -162,10 +162,9 @@ def check_visible(out: Path, res: dict) -> str | None:
     return None
 
 
-def _ray_job(job) -> dict:
-    """The scene task: :func:`render_tools.jobs.run_job`, plus the size of every file it wrote and its host."""
-    from render_tools.jobs import run_job
-
+def _ray_job(job, run_job: Callable[[Any], dict]) -> dict:
+    """The scene task: ``run_job(job)`` (:func:`render_tools.jobs.run_job`), plus the size of every file it wrote
+    and its host."""
     res = run_job(job)
     out = Path(job.out)
     res["sizes"] = {rel: (out / rel).stat().st_size for rel in res["hashes"]}
@@ -195,9 +194,10 @@ def _connect(ray, address: str, workers: int) -> None:
 
 def run_ray(todo: Sequence, address: str, workers: int, finished: Callable[[Any, dict | None, BaseException | None],
                                                                            None],
-            out: Path, options: RayOptions | None = None) -> None:
+            out: Path, options: RayOptions | None = None, run_job: Callable[[Any], dict] | None = None) -> None:
     """Run the scene jobs ``todo`` on Ray (``address``: ``local``, ``auto``, ``host:port`` or ``ray://host:port``),
-    calling ``finished(job, result, exc)`` on the driver after each; the shared-folder check first."""
+    each by ``run_job(job)`` (:func:`render_tools.jobs.run_job`) in a task, calling ``finished(job, result, exc)``
+    on the driver after each; the shared-folder check first."""
     try:
         import ray  # noqa: PLC0415
     except ImportError as exc:
@@ -221,7 +221,7 @@ def run_ray(todo: Sequence, address: str, workers: int, finished: Callable[[Any,
             j = next(queue, None)
             if j is None:
                 return
-            pending[remote.remote(j)] = j
+            pending[remote.remote(j, run_job)] = j
 
     submit()
     try:

@@ -28,7 +28,8 @@ LAYERS = (
     ("lfmbench.datasets",),
     ("lfmbench.metrics",),
     ("lfmbench.baselines",),
-    ("lfmbench.train", "lfmbench.distributed"),  # distributed: the ranks of a DDP training
+    ("lfmbench.distributed",),  # the ranks of a DDP training (their batches, step, process group)
+    ("lfmbench.train",),
     ("lfmbench.evaluation",),
     ("lfmbench.paper",),
     ("lfmbench.cli",),
