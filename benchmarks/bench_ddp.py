@@ -51,7 +51,7 @@ def _time_steps(step, batches: list[dict], warmup: int) -> list[float]:
     for i, b in enumerate(batches):
         t0 = time.perf_counter()
         loss, _ = step(b, 3e-3)
-        float(loss)
+        float(loss.detach())
         if i >= warmup:
             ts.append((time.perf_counter() - t0) * 1e3)
     return ts
@@ -100,7 +100,7 @@ def ddp(corpus: Path, batch: int, steps: int, warmup: int, world: int, tmp: Path
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
     torch.multiprocessing.start_processes(_rank, args=(world, port, corpus, batch, steps, warmup, tmp), nprocs=world,
-                                          start_method="fork")
+                                          start_method="spawn")  # fork after torch ran here can hang a child
     per = [torch.load(tmp / f"rank{r}.pt") for r in range(world)]
     return [max(ts) for ts in zip(*per)]  # a step ends when the slowest rank ends it
 
@@ -126,9 +126,11 @@ def main() -> None:
     m_plain = statistics.median(p1 + p2)
     m_ddp = statistics.median(pd)
     when = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    cpu = next((line.split(":", 1)[1].strip() for line in open("/proc/cpuinfo") if line.startswith("model name")),
+               platform.machine())
     rows = [("one process (plain step)", m_plain), (f"DDP, {a.ranks} processes (gloo), each the same batch", m_ddp)]
     text = (f"# Data-parallel training: per-step overhead\n\n"
-            f"Measured {when}; machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
+            f"Measured {when}; machine: {cpu}, {os.cpu_count()} cores, "
             f"torch {torch.__version__}; load average before {' '.join(load0)}, after {' '.join(load1)} (a shared, "
             f"loaded machine: {a.ranks} ranks compete with other work for {os.cpu_count()} cores). Rerun: "
             f"`.venv/bin/python benchmarks/bench_ddp.py`.\n\n"

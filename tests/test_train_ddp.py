@@ -80,7 +80,7 @@ def test_two_gloo_ranks_train_one_model_and_resume(corpus, tmp_path):
     cfg_path = tmp_path / "tiny.yaml"
     cfg_path.write_text(yaml.safe_dump(TINY))
     torch.multiprocessing.start_processes(_rank, args=(2, _free_port(), corpus, cfg_path, tmp_path), nprocs=2,
-                                          start_method="fork")
+                                          start_method="spawn")  # fork after torch ran here can hang a child
     r0, r1 = (torch.load(tmp_path / f"rank{r}.pt") for r in (0, 1))
     for k in r0["a"]:
         assert torch.equal(r0["a"][k], r1["a"][k])  # one model: the same weights on both ranks, bit for bit
