@@ -91,7 +91,9 @@ def _rank(rank: int, world: int, port: int, corpus: Path, batch: int, steps: int
     bs = _batches(corpus, batch, steps + warmup)
     group.barrier()
     ts = _time_steps(step, bs, warmup)
-    torch.save(ts, out / f"rank{rank}.pt")
+    from lfmbench.fileio import atomic_torch_save
+
+    atomic_torch_save(ts, out / f"rank{rank}.pt")
     dist.destroy_process_group()
 
 
