@@ -204,6 +204,14 @@ def run_ray(todo: Sequence, address: str, workers: int, finished: Callable[[Any,
         raise ImportError("--ray-address needs Ray: pip install 'lfmbench[distributed]'") from exc
     opts = options or RayOptions()
     _connect(ray, address, workers)
+    nodes = _nodes(ray)
+    if not any(n.get("Resources", {}).get("CPU", 0) >= opts.cpus_per_scene
+               and n.get("Resources", {}).get("GPU", 0) >= opts.gpus_per_scene for n in nodes):
+        have = ", ".join(f"{n.get('Resources', {}).get('CPU', 0):g} CPU {n.get('Resources', {}).get('GPU', 0):g} GPU"
+                         for n in nodes[:4])
+        raise ValueError(f"--ray-cpus-per-scene {opts.cpus_per_scene:g} --ray-gpus-per-scene "
+                         f"{opts.gpus_per_scene:g}: no Ray node has that much (nodes: {have or 'none'}); a scene "
+                         "task would wait forever")
     check_shared_storage(out)
     remote = ray.remote(num_cpus=opts.cpus_per_scene, num_gpus=opts.gpus_per_scene,
                         max_retries=opts.max_retries, retry_exceptions=False)(_ray_job)
