@@ -97,6 +97,30 @@ def open_regular(path: str | os.PathLike, what: str = "file"):
 def check_regular(path: str | os.PathLike, what: str = "file") -> None:
     """:func:`open_regular` without reading: raises its errors for ``path``."""
     open_regular(path, what).close()
+#: A URL's start (RFC 3986 scheme, 2+ characters so that a drive letter ``C:/`` is not one, then ``:/``; a
+#: ``pathlib.Path`` has already folded ``s3://`` to ``s3:/``).
+_URL = re.compile(r"^([A-Za-z][A-Za-z0-9+.-]+):/")
+
+
+def url_scheme(path: str | os.PathLike) -> str | None:
+    """The scheme of a URL-like path (``s3://bucket/corpus`` -> ``"s3"``), None for a file-system path.
+
+    lfmbench reads and writes corpora, checkpoints and results on a POSIX file system only; without this check a
+    path such as ``s3://bucket/corpus`` is a local folder named ``s3:`` (docs/guide/distributed.md, "Storage")."""
+    m = _URL.match(os.fspath(path))
+    return m.group(1).lower() if m else None
+
+
+def url_error(name: str, path: str | os.PathLike | None) -> str | None:
+    """One line refusing a URL given as the path argument ``name`` (e.g. ``--out``), None for a local path."""
+    if path is None:
+        return None
+    scheme = url_scheme(path)
+    if scheme is None:
+        return None
+    return (f"{name} {os.fspath(path)}: a {scheme}:// URL, not a file-system path; lfmbench reads and writes "
+            "POSIX paths only (mount the storage, e.g. a shared NFS folder or an s3fs / gcsfuse mount, and give "
+            "the mount point; docs/guide/distributed.md)")
 
 
 def _file_mode() -> int:

@@ -99,9 +99,11 @@ class EpochIndexed(Dataset):
 
 
 def make_loader(corpus: str | os.PathLike, spec: Trainable, cfg: Any, workers: int | None = None,
-                device: torch.device | str = "cpu") -> tuple[DataLoader, Callable[[int], None]]:
+                device: torch.device | str = "cpu", group=None) -> tuple[DataLoader, Callable[[int], None]]:
     """DataLoader of training batches over :class:`~lfmbench.datasets.LFMCaptureDataset` and the function that
-    selects an epoch's draws and order (``set_epoch(epoch)``), for ``spec.data_order``."""
+    selects an epoch's draws and order (``set_epoch(epoch)``), for ``spec.data_order``; with ``group`` (a
+    :class:`lfmbench.distributed.Group`) the rank's part of every batch of the epoch order, whatever
+    ``spec.data_order`` (:class:`lfmbench.distributed.RankBatchSampler`)."""
     from lfmbench.datasets.loading import collate_samples, make_dataset
 
     t = cfg.train
@@ -109,6 +111,14 @@ def make_loader(corpus: str | os.PathLike, spec: Trainable, cfg: Any, workers: i
     ds = make_dataset(corpus, t.split, seed=t.seed, crop=t.crop, samples_per_scene=t.samples_per_scene,
                       frames=t.frames, sensor=t.sensor, **extra)
     nw = t.workers if workers is None else int(workers)
+    if group is not None:
+        from lfmbench import distributed as D
+
+        bs = D.RankBatchSampler(len(ds), t.batch_size, t.seed, group.rank, group.world)
+        loader = DataLoader(D.RankIndexed(ds), batch_sampler=bs, num_workers=nw,
+                            collate_fn=D.RankCollate(collate_samples), persistent_workers=nw > 0,
+                            pin_memory=torch.device(device).type == "cuda")
+        return loader, bs.set_epoch
     if spec.data_order == "shuffle":
         loader = DataLoader(ds, batch_size=t.batch_size, shuffle=True, num_workers=nw, collate_fn=collate_samples,
                             generator=torch.Generator().manual_seed(t.seed))
@@ -133,7 +143,8 @@ RESIDENT_DTYPES = {"float32": torch.float32, "float16": torch.float16}
 
 def make_device_batches(corpus: str | os.PathLike, spec: Trainable, cfg: Any, device: torch.device | str,
                         resident_dtype: str = "float32",
-                        chunk_scenes: int | None = None, prefetch: bool = True) -> tuple[Any, Callable[[int], None]]:
+                        chunk_scenes: int | None = None, prefetch: bool = True,
+                        group=None) -> tuple[Any, Callable[[int], None]]:
     """:class:`~lfmbench.datasets.device.DeviceBatches` of the training split on ``device`` (epoch order
     :func:`~lfmbench.datasets.device.epoch_order` of ``(seed, epoch)``; ``resident_dtype`` a key of
     :data:`RESIDENT_DTYPES`; ``chunk_scenes``: stream the split that many scenes at a time; ``prefetch``: on CUDA
@@ -147,6 +158,13 @@ def make_device_batches(corpus: str | os.PathLike, spec: Trainable, cfg: Any, de
                       frames=t.frames, sensor=t.sensor, noise_streams="counter", **extra)
     if resident_dtype not in RESIDENT_DTYPES:
         raise ValueError(f"resident_dtype must be one of {tuple(RESIDENT_DTYPES)}, got {resident_dtype!r:.40}")
+    if group is not None:  # the rank's part of every batch (lfmbench.distributed)
+        from lfmbench.distributed import RankDeviceBatches
+
+        batches = RankDeviceBatches(ds, t.batch_size, device, rank=group.rank, world=group.world, seed=t.seed,
+                                    dtype=RESIDENT_DTYPES[resident_dtype], chunk_scenes=chunk_scenes,
+                                    prefetch=prefetch)
+        return batches, batches.set_epoch
     batches = DeviceBatches(ds, t.batch_size, device, seed=t.seed, dtype=RESIDENT_DTYPES[resident_dtype],
                             chunk_scenes=chunk_scenes, prefetch=prefetch)
     return batches, batches.set_epoch
@@ -313,7 +331,8 @@ def fit(model: torch.nn.Module, opt: torch.optim.Optimizer, spec: Trainable, cfg
         history: dict | None = None, set_epoch: Callable[[int], None] | None = None,
         checkpoint_extra: Callable[[], dict] | None = None, max_steps: int | None = None, progress: bool = True,
         log: Callable[[str], None] | None = print, corpus: str | os.PathLike | None = None,
-        step: Callable[[dict, float], tuple] | None = None) -> dict:
+        step: Callable[[dict, float], tuple] | None = None,
+        after_epoch: Callable[[int], None] | None = None) -> dict:
     """The training loop: epochs ``start .. cfg.train.epochs - 1`` over ``batches``, the checkpoint ``out`` written
     (atomically, by ``spec.save_checkpoint``) after every epoch with the optimiser state and the history.
 
@@ -328,6 +347,7 @@ def fit(model: torch.nn.Module, opt: torch.optim.Optimizer, spec: Trainable, cfg
         max_steps: stop after this many optimiser steps in this call; the checkpoint is still written.
         progress: show a progress bar per epoch on a terminal (:mod:`lfmbench.progress`). log: one line per epoch (None: silent).
         step: ``step(batch, lr) -> (loss, terms)`` instead of the eager step (e.g. a :class:`GraphedStep`).
+        after_epoch: called with the epoch after its checkpoint is written (the ranks' barrier of a DDP run).
 
     Returns:
         the history: ``epoch_loss`` and ``epoch_seconds`` per epoch, ``terms`` (mean loss terms per epoch),
@@ -393,6 +413,8 @@ def fit(model: torch.nn.Module, opt: torch.optim.Optimizer, spec: Trainable, cfg
                                                    "history": history, "parameters": count_parameters(model),
                                                    "corpus": None if corpus is None else str(corpus),
                                                    **(checkpoint_extra() if checkpoint_extra else {})})
+        if after_epoch is not None:
+            after_epoch(ep)
         if log:
             extra = ", ".join(f"{k} {v:.4f}" for k, v in means.items() if k != "loss")
             log(f"epoch {ep + 1}/{t.epochs}: loss {means.get('loss', float('nan')):.4f}"
@@ -430,6 +452,11 @@ def train(method: str | Trainable, corpus: str | os.PathLike, out: str | os.Path
             and streaming (that many scenes resident at a time; None: the whole split).
         cuda_graph: one of :data:`CUDA_GRAPH_MODES`: ``"auto"`` replays the training step as a CUDA graph on a
             CUDA device (:class:`GraphedStep`; the same training, less host time per step), ``"off"`` never.
+            Not under torchrun.
+
+    Under torchrun (``WORLD_SIZE`` > 1 in the environment) this process is one rank of a data-parallel training
+    (:mod:`lfmbench.distributed`): its part of every batch, gradients averaged by DDP, rank 0 writing ``out``,
+    ``device`` ``cuda`` meaning ``cuda:LOCAL_RANK``.
         train_overrides: other keys of the ``train`` section (``crop``, ``batch_size``, ``seed``, ...).
 
     Returns:
@@ -456,8 +483,13 @@ def train(method: str | Trainable, corpus: str | os.PathLike, out: str | os.Path
                          f"{arch} sensor; its baselines are {methods_for(arch)} (trainable: {', '.join(fits)})")
     if cuda_graph not in CUDA_GRAPH_MODES:
         raise ValueError(f"cuda_graph must be one of {CUDA_GRAPH_MODES}, got {cuda_graph!r:.40}")
-    dev = torch.device(device)
-    graph = cuda_graph == "auto" and dev.type == "cuda"
+    from lfmbench import distributed as D  # noqa: PLC0415
+
+    group = D.from_env(device)  # a torchrun launch: one rank of a DDP training (lfmbench.distributed)
+    dev = torch.device(device) if group is None else group.device
+    graph = cuda_graph == "auto" and dev.type == "cuda" and group is None
+    if group is not None and not group.main:
+        log, progress = None, False
     out = Path(out)
     torch.manual_seed(t.seed)
     from lfmbench.baselines.checkpoint import check_model_size  # noqa: PLC0415
@@ -488,16 +520,23 @@ def train(method: str | Trainable, corpus: str | os.PathLike, out: str | os.Path
     # auto: the device path on CUDA for the split pixel (the other plans run on the per-sample path only)
     on_device = data == "device" or (data == "auto" and dev.type == "cuda" and arch == "split_pixel")
     if on_device:
-        loader, set_epoch = make_device_batches(corpus, spec, cfg, dev, resident_dtype, chunk_scenes)
+        loader, set_epoch = make_device_batches(corpus, spec, cfg, dev, resident_dtype, chunk_scenes, group=group)
     else:
-        loader, set_epoch = make_loader(corpus, spec, cfg, workers, dev)
-    gen = loader.generator if spec.data_order == "shuffle" and not on_device else None
+        loader, set_epoch = make_loader(corpus, spec, cfg, workers, dev, group=group)
+    gen = loader.generator if spec.data_order == "shuffle" and not on_device and group is None else None
     if gen is not None and data_rng is not None:
         gen.set_state(data_rng)
-    history = fit(model, opt, spec, cfg, loader, device=dev, out=out, start=start, history=history,
-                  set_epoch=set_epoch, checkpoint_extra=(lambda: {"data_rng": gen.get_state()}) if gen else None,
-                  max_steps=max_steps, progress=progress, log=log, corpus=corpus,
-                  step=GraphedStep(model, opt, spec, cfg) if graph else None)
+    step = GraphedStep(model, opt, spec, cfg) if graph else None
+    if group is not None:
+        from torch.nn.parallel import DistributedDataParallel  # noqa: PLC0415
+
+        ddp = DistributedDataParallel(model, device_ids=[dev.index] if dev.type == "cuda" else None)
+        step = D.ddp_step(ddp, opt, spec, cfg, group, _set_lr)
+    history = fit(model, opt, spec, cfg, loader, device=dev, out=out if group is None or group.main else None,
+                  start=start, history=history, set_epoch=set_epoch,
+                  checkpoint_extra=(lambda: {"data_rng": gen.get_state()}) if gen else None,
+                  max_steps=max_steps, progress=progress, log=log, corpus=corpus, step=step,
+                  after_epoch=(lambda ep: group.barrier()) if group is not None else None)
     return model.eval(), history
 
 

@@ -39,13 +39,14 @@ from lfmbench.corpus import (DEFAULT_STORAGE, SPLITS_NAME, CorpusWriteError, Cor
 from lfmbench.fileio import atomic_write_json
 
 from . import reflections
+from .ray_jobs import CompleteScenes, RayOptions, run_ray
 from .workers import WorkerDied, run_supervised
 
 __all__ = ["PROFILES_FILE", "Backend", "default_backend", "load_profile", "profile_names", "scene_seed",
            "scene_id_for", "RenderRequest", "RenderRequestError", "RenderPlan", "plan_render", "CONFIRM_ABOVE",
            "MAX_SCENES", "PROTOCOL_FIXED",
            "RenderJob", "make_jobs", "protocol_jobs", "write_splits", "run_job", "RunSummary", "run_jobs",
-           "RenderInterrupted"]
+           "RenderInterrupted", "RayOptions"]
 
 log = logging.getLogger(__name__)
 
@@ -306,7 +307,7 @@ def run_jobs(jobs: Sequence[RenderJob], writer: CorpusWriter, *, workers: int = 
              on_start: Callable[[int, int], None] | None = None,
              on_done: Callable[[str, str], None] | None = None, resume: bool = True,
              split_seed: int | None = None, splits: Mapping[str, Sequence[str]] | None = None,
-             isolate: bool | None = None) -> RunSummary:
+             isolate: bool | None = None, ray_options: "RayOptions | None" = None) -> RunSummary:
     """Run the jobs not yet complete in ``writer``'s corpus; commit each finished scene to the manifest.
 
     Args:
@@ -318,7 +319,11 @@ def run_jobs(jobs: Sequence[RenderJob], writer: CorpusWriter, *, workers: int = 
         isolate: with ``workers=1``, render in one worker process (True) or in this process (False: a native
             crash then ends this process); None: :data:`ISOLATE_RENDERS` (True).
         ray_address: run on Ray instead: ``"local"`` (start or reuse a local instance with ``workers`` CPUs),
-            ``"auto"`` or ``"ray://host:port"``; the output directory must be visible to the Ray workers.
+            ``"auto"`` or ``"ray://host:port"`` (Ray Client, ``pip install 'lfmbench[distributed]'``); the output
+            directory must be one folder every Ray node mounts at the same path (:mod:`render_tools.ray_jobs`:
+            checked before any scene starts, and every scene's files are checked on this machine before it is
+            committed).
+        ray_options: per-scene resources, retries and tasks in flight on Ray (:class:`RayOptions`).
         on_start: ``on_start(n_todo, n_skipped)`` once the resume check is done.
         on_done: ``on_done(scene_id, status)`` with status ``rendered`` / ``failed`` after each job.
         resume: skip scenes complete in the manifest (files present with matching SHA-256).
@@ -345,7 +350,8 @@ def run_jobs(jobs: Sequence[RenderJob], writer: CorpusWriter, *, workers: int = 
     # splits.json follows the manifest: rewritten with it (at most O(1) amortized per scene, see CorpusWriter)
     writer.on_compact = lambda: write_splits(writer, split_seed, splits)
     try:
-        return _run_jobs(jobs, writer, workers, ray_address, on_start, on_done, resume, isolate, summary, todo)
+        return _run_jobs(jobs, writer, workers, ray_address, on_start, on_done, resume, isolate, summary, todo,
+                         ray_options)
     finally:
         try:
             writer.flush()  # the scenes committed since the last manifest rewrite (also after Ctrl-C or an error)
@@ -353,14 +359,17 @@ def run_jobs(jobs: Sequence[RenderJob], writer: CorpusWriter, *, workers: int = 
             writer.on_compact = hook
 
 
-def _run_jobs(jobs, writer, workers, ray_address, on_start, on_done, resume, isolate, summary, todo) -> RunSummary:
+def _run_jobs(jobs, writer, workers, ray_address, on_start, on_done, resume, isolate, summary, todo,
+              ray_options=None) -> RunSummary:
     """The body of :func:`run_jobs`, with ``writer.on_compact`` writing the splits."""
+    complete = CompleteScenes(writer)  # files unchanged since they were hashed are not hashed again
     for j in jobs:
-        if resume and writer.is_complete(j.scene_id):
+        if resume and complete(j.scene_id):
             summary.skipped.append(j.scene_id)
         else:
             writer.forget_scene(j.scene_id)
             todo.append(j)
+    complete.save()
     writer.write_manifest()  # the manifest and splits.json after the resume check
     if on_start is not None:
         on_start(len(todo), len(summary.skipped))
@@ -396,18 +405,21 @@ def _run_jobs(jobs, writer, workers, ray_address, on_start, on_done, resume, iso
                              "or run_jobs(..., workers=1, isolate=False) to render in this process") from None
     try:
         with _sigint_flag(hit):
-            _dispatch(todo, ray_address, 0 if in_process else workers, finished)
+            _dispatch(todo, ray_address, 0 if in_process else workers, finished, writer.root, ray_options)
     except KeyboardInterrupt:
         writer.cleanup_temp()
         raise RenderInterrupted(summary) from None
     return summary
 
 
-def _dispatch(todo: Sequence[RenderJob], ray_address: str | None, workers: int, finished: Callable) -> None:
+def _dispatch(todo: Sequence[RenderJob], ray_address: str | None, workers: int, finished: Callable,
+              out: Path | None = None, ray_options=None) -> None:
     """Run the jobs on Ray, in this process (``workers`` 0) or in worker processes; ``finished(job, result,
     exc)`` after each."""
     if ray_address:
-        _run_ray(todo, ray_address, max(workers, 1), finished)
+        if todo:
+            run_ray(todo, ray_address, max(workers, 1), finished, Path(todo[0].out if out is None else out),
+                    ray_options, run_job)
     elif workers == 0:
         for j in todo:
             try:
@@ -424,36 +436,6 @@ def _dispatch(todo: Sequence[RenderJob], ray_address: str | None, workers: int, 
 
 def _run_pool(todo: Sequence[RenderJob], workers: int, finished: Callable) -> None:
     run_supervised(todo, run_job, workers, finished, label=lambda j: f"scene {j.scene_id}")
-
-
-def _run_ray(todo: Sequence[RenderJob], address: str, workers: int, finished: Callable) -> None:
-    try:
-        import ray  # noqa: PLC0415
-    except ImportError as exc:
-        raise ImportError("--ray-address needs Ray: pip install 'lfmbench[distributed]'") from exc
-    if not ray.is_initialized():
-        if address == "local":
-            ray.init(num_cpus=workers, include_dashboard=False, log_to_driver=False)
-        else:
-            ray.init(address=address, log_to_driver=False)
-    remote = ray.remote(num_cpus=1, max_retries=0)(run_job)
-    pending = {remote.remote(j): j for j in todo}
-    try:
-        while pending:
-            done, _ = ray.wait(list(pending), num_returns=1)
-            for ref in done:
-                job = pending.pop(ref)
-                try:
-                    res = ray.get(ref)
-                except Exception as exc:  # noqa: BLE001 - RayTaskError wraps the job's exception
-                    cause = getattr(exc, "cause", None)
-                    finished(job, None, cause if isinstance(cause, BaseException) else exc)
-                else:
-                    finished(job, res, None)
-    except KeyboardInterrupt:
-        for ref in pending:
-            ray.cancel(ref, force=True)
-        raise
 
 
 def render_record(seed: int, options: Mapping[str, Any], dtype: str, scene_kw: Mapping[str, Any],

@@ -30,6 +30,7 @@ LAYERS = (
     ("lfmbench.datasets",),
     ("lfmbench.metrics",),
     ("lfmbench.baselines",),
+    ("lfmbench.distributed",),  # the ranks of a DDP training (their batches, step, process group)
     ("lfmbench.train",),
     ("lfmbench.evaluation",),
     ("lfmbench.paper",),

@@ -5,7 +5,7 @@ from collections.abc import Iterable
 
 import typer
 
-__all__ = ["fail", "check_minima", "torch_setup", "lock_output"]
+__all__ = ["fail", "check_minima", "torch_setup", "lock_output", "check_local_paths"]
 
 
 def fail(msg: str, code: int = 2) -> None:
@@ -51,3 +51,14 @@ def lock_output(ctx: typer.Context, path, option: str) -> None:
     except OutputLockedError as exc:
         fail(str(exc))
     ctx.call_on_close(lock.release)
+
+
+def check_local_paths(paths: Iterable[tuple[str, object]]) -> None:
+    """``(option name, path or None)`` pairs: a URL-like path (``s3://``, ``gs://``, ``http://``, any
+    ``scheme://``) is refused with one line naming the option (:func:`lfmbench.fileio.url_error`)."""
+    from lfmbench.fileio import url_error  # noqa: PLC0415
+
+    for name, p in paths:
+        why = url_error(name, p)
+        if why is not None:
+            fail(why)

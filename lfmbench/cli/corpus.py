@@ -37,8 +37,11 @@ def validate_cmd(
     (docs/benchmarks/validate.md)."""
     from rich.console import Console
 
+    from lfmbench.cli._common import check_local_paths
     from lfmbench.corpus import validate_corpus
     from lfmbench.progress import Bar
+
+    check_local_paths((("CORPUS", corpus), ("--cache-file", cache_file)))
 
     console = Console(stderr=True, soft_wrap=True)
     with Bar(None, "validating", "scene", enabled=not as_json, console=console) as prog:
@@ -76,7 +79,10 @@ def import_isetlfm_cmd(
 
     from lfmbench.corpus import CorpusError, CorpusWriteError
     from lfmbench.progress import Bar
+    from lfmbench.cli._common import check_local_paths
     from lfmbench.corpus.isetlfm import find_scenes, import_isetlfm
+
+    check_local_paths((("SRC", src), ("OUT", out)))
 
     console = Console(stderr=True, soft_wrap=True)
     try:

@@ -116,8 +116,10 @@ def demo_cmd(
 ) -> None:
     """Render the small demo corpus, train the learned baselines, evaluate every baseline and reproduce the
     paper's figures (what ``make demo`` runs; resumable: a second run reuses the corpus and checkpoints)."""
+    from lfmbench.cli._common import check_local_paths
     from lfmbench.resources import ConfigNotFoundError, find_config  # noqa: PLC0415
 
+    check_local_paths((("--out", out),))
     try:
         path = find_config(config, "demo")
     except ConfigNotFoundError as exc:

@@ -10,7 +10,7 @@ from typing import List
 
 import typer
 
-from lfmbench.cli._common import check_minima, fail, lock_output, torch_setup
+from lfmbench.cli._common import check_local_paths, check_minima, fail, lock_output, torch_setup
 from lfmbench.baselines import REGISTRY as BASELINES
 from lfmbench.sensor import available_presets
 
@@ -52,6 +52,10 @@ def evaluate_cmd(
     isp: str = typer.Option("default", "--isp",
                             help="ISP pipeline of the display-referred columns psnr_srgb, ssim_srgb: a shipped name "
                                  "(default, local) or a YAML path; 'none' skips them"),
+    shard: str = typer.Option(None, "--shard", metavar="INDEX/COUNT",
+                              help="score only shard INDEX of COUNT (scene s goes to shard s mod COUNT; e.g. "
+                                   "$SLURM_ARRAY_TASK_ID/$SLURM_ARRAY_TASK_COUNT or $RANK/$WORLD_SIZE); join the "
+                                   "shard files with `lfmbench merge-results` (docs/guide/distributed.md)"),
 ) -> None:
     """Score fusion methods on a corpus split; write per-scene and aggregate metrics as JSON, one file per
     method.
@@ -68,6 +72,14 @@ def evaluate_cmd(
     methods = list(dict.fromkeys(method))  # a method named twice is scored once
     if threads is not None and threads < 1:
         fail(f"--threads must be >= 1, got {threads}")
+    check_local_paths((("--corpus", corpus), ("--output", output), ("--cache-dir", cache_dir)))
+    if shard is not None:
+        from lfmbench.evaluation.shards import parse_shard  # noqa: PLC0415
+
+        try:
+            shard_at = parse_shard(shard)
+        except ValueError as exc:
+            fail(str(exc))
     check_minima((("--max-scenes", max_scenes, 1), ("--samples-per-scene", samples_per_scene, 1),
                   ("--frames", frames, 1), ("--repeats", repeats, 1), ("--warmup", warmup, 0), ("--crop", crop, 2)))
     if output is not None and len(methods) > 1:
@@ -121,12 +133,23 @@ def evaluate_cmd(
             except CheckpointError as exc:
                 fail(str(exc))
     n = samples_to_score(ds, max_scenes)
+    record = run_dataset_record(ds, corpus, split, n, crop, samples_per_scene, frames)
+    indices = None
+    if shard is not None:
+        from lfmbench.evaluation.shards import shard_record, shard_samples  # noqa: PLC0415
+
+        indices = shard_samples(n, samples_per_scene, *shard_at)
+        if not indices:
+            fail(f"--shard {shard_at[0]}/{shard_at[1]}: the split has only {-(-n // samples_per_scene)} scene(s) to "
+                 f"score; use at most that many shards")
+        record["shard"] = shard_record(*shard_at, indices, n)
     try:
-        results = evaluate_methods(fns, score_batches(ds, n, simulate, device), method_specs=methods, outputs=outs,
-                                   options=ScoreOptions(perceptual=perceptual, isp=isp_name, sensor=ds.preset),
+        results = evaluate_methods(fns, score_batches(ds, n, simulate, device, indices=indices), method_specs=methods,
+                                   outputs=outs, options=ScoreOptions(perceptual=perceptual, isp=isp_name,
+                                                                      sensor=ds.preset),
                                    warmup=warmup, repeats=repeats, device=device, seeds={"dataset": seed},
-                                   dataset=run_dataset_record(ds, corpus, split, n, crop, samples_per_scene, frames),
-                                   total=n, corpus=ident, scene_conditions=cond)
+                                   dataset=record, total=n if indices is None else len(indices), corpus=ident,
+                                   scene_conditions=cond)
     except EvaluationInterrupted as exc:
         n_done = len(exc.result["scenes"])
         typer.secho(f"interrupted: {n_done} scene(s) scored; {', '.join(map(str, outs))} marked status "
@@ -250,8 +273,37 @@ def leaderboard_cmd(
     typer.echo(f"wrote {markdown}, {json_out} and {plot}")
 
 
+def merge_results_cmd(
+    shards: list[Path] = typer.Argument(..., help="the shard result files of one evaluation (every INDEX of "
+                                                  "`lfmbench evaluate --shard INDEX/COUNT`)"),
+    output: Path = typer.Option(..., "--output", "-o", help="merged result JSON"),
+) -> None:
+    """Join the shard results of one evaluation into the result one run over the whole split writes.
+
+    The shards' sample records are put back in sample order and the aggregates, confidence intervals, per-scene
+    values and the breakdown recomputed, so every score equals the one-run file's; the run time is the shard's
+    holding the first sample. Refused (nothing written, exit 2): a shard missing or given twice, a sample in two
+    shards, a shard not finished, shards of another protocol, method or corpus.
+    """
+    from lfmbench.evaluation.shards import ShardError, merge_files  # noqa: PLC0415
+
+    check_local_paths([("--output", output)] + [("SHARDS", p) for p in shards])
+    try:
+        res = merge_files(shards, output)
+    except (ShardError, ValueError) as exc:
+        fail(str(exc))
+    except OSError as exc:
+        fail(f"{exc.filename or output}: {exc.strerror or exc}")
+    agg = res["aggregate"]
+    typer.echo(f"{res['method']['spec']}: {res['shards']['count']} shards, {agg.get('scenes_ok', 0)}/"
+               f"{agg.get('scenes', 0)} samples ok, status {res['status']} -> {output}")
+    if res["status"] != "complete":
+        raise typer.Exit(1)
+
+
 def register(app: typer.Typer) -> None:
-    """Add the ``evaluate`` and ``leaderboard`` commands to the typer ``app``."""
+    """Add the ``evaluate``, ``merge-results`` and ``leaderboard`` commands to the typer ``app``."""
     app.command("evaluate", epilog=f"Baselines: {', '.join(BASELINES)}. Sensor presets: "
                                    f"{', '.join(available_presets())}.")(evaluate_cmd)
+    app.command("merge-results")(merge_results_cmd)
     app.command("leaderboard")(leaderboard_cmd)

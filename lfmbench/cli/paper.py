@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from lfmbench.cli._common import fail
+from lfmbench.cli._common import check_local_paths, fail
 from lfmbench.paper.fig3 import FIG3_EXPOSURES_S, fig3_series, plot_fig3
 from lfmbench.paper.figures import FIGURES, FigureInputError, make_figures, render_corpus
 
@@ -59,6 +59,7 @@ def _register_figures(app) -> None:
                                                        "scenes already there)"),
                       workers: int = typer.Option(1, "--workers", help="render processes (with --render)")) -> None:
         """Reproduce the ISET-LFM paper's Figs. 3-7 (docs/guide/paper-figures.md)."""
+        check_local_paths((("--corpus", corpus), ("--out", out)))
         if fig not in FIGURES:
             fail(f"--fig must be one of {', '.join(FIGURES)}; got {fig!r}")
         if render:

@@ -52,7 +52,14 @@ def render_cmd(
                                                    "first; a later run without --split adds the rest."),
     workers: int = typer.Option(1, "--workers", help="Scenes rendered in parallel (local process pool)."),
     ray_address: Optional[str] = typer.Option(None, "--ray-address",
-                                              help="Run on Ray: 'local', 'auto' or ray://host:port."),
+                                              help="Run on Ray: 'local', 'auto', HOST:PORT or ray://HOST:PORT (Ray "
+                                                   "Client). Every node must mount --out at the same path "
+                                                   "(checked before any scene starts; docs/guide/distributed.md)."),
+    ray_cpus_per_scene: float = typer.Option(1.0, "--ray-cpus-per-scene",
+                                             help="With --ray-address: CPUs each scene task asks Ray for."),
+    ray_gpus_per_scene: float = typer.Option(0.0, "--ray-gpus-per-scene",
+                                             help="With --ray-address: GPUs each scene task asks Ray for (1: each "
+                                                  "concurrent scene gets its own GPU; 0: CPU rendering)."),
     scene_file: Optional[List[Path]] = typer.Option(None, "--scene",
                                                     help="Render this scene JSON file instead of generating "
                                                          "(repeatable; overrides --scenes)."),
@@ -70,7 +77,13 @@ def render_cmd(
     yes: bool = typer.Option(False, "--yes", help="Confirm sizes above the sanity limits (e.g. --frames > 300, "
                                                   "--scenes > 10000)."),
 ) -> None:
-    """Render driving scenes (Mitsuba 3, spectral, light groups, time bins) into a corpus; resumable."""
+    """Render driving scenes (Mitsuba 3, spectral, light groups, time bins) into a corpus; resumable.
+
+    --out is a POSIX path (local, or a folder every Ray node mounts at the same path): a URL (s3://, gs://, ...)
+    is refused (docs/guide/distributed.md)."""
+    from lfmbench.cli._common import check_local_paths  # noqa: PLC0415
+
+    check_local_paths([("--out", out)] + [("--scene", p) for p in scene_file or []])
     from render_tools import backend as B  # noqa: PLC0415
 
     # a cold Mitsuba back-end probe (a child process, ~1.3 s of one core) runs while this process imports its
@@ -91,6 +104,10 @@ def render_cmd(
                           frames=frames, groups=_split_groups(groups), profile=profile, protocol=protocol,
                           splits=_split_groups(split), workers=workers, scene_files=scene_file, variant=variant,
                           storage=storage, half=half, yes=yes)
+    try:
+        ray_options = J.RayOptions(cpus_per_scene=ray_cpus_per_scene, gpus_per_scene=ray_gpus_per_scene)
+    except ValueError as exc:
+        fail(str(exc))
     try:
         plan = J.plan_render(req)
     except (ValueError, CorpusError) as exc:
@@ -116,7 +133,8 @@ def render_cmd(
         B.finish_probes()  # the scenes render in worker processes: they read the cached verdict
         try:
             summary = J.run_jobs(job_list, writer, workers=workers, ray_address=ray_address, on_start=on_start,
-                                 on_done=on_done, resume=not no_resume, split_seed=seed, splits=fixed_splits)
+                                 on_done=on_done, resume=not no_resume, split_seed=seed, splits=fixed_splits,
+                                 ray_options=ray_options)
         except J.RenderInterrupted as exc:
             s = exc.summary
             console.print(f"[yellow]interrupted[/]: {len(s.rendered) + len(s.skipped)} complete scene(s) are in "

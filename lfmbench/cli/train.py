@@ -8,7 +8,7 @@ from pathlib import Path
 
 import typer
 
-from lfmbench.cli._common import check_minima, fail, torch_setup
+from lfmbench.cli._common import check_local_paths, check_minima, fail, torch_setup
 from lfmbench.baselines import LEARNED
 from lfmbench.sensor import available_presets
 
@@ -46,12 +46,14 @@ def train_cmd(
     """Train a learned fusion baseline; checkpoint written atomically after every epoch (resumable).
 
     Evaluate it with LFMBENCH_<METHOD>_CHECKPOINT=OUT lfmbench evaluate --method <method> --corpus DIR (with the
-    same --sensor it was trained for).
+    same --sensor it was trained for). Several processes or GPUs: torchrun --nproc_per_node N -m lfmbench.cli
+    train ... (data-parallel, one model; --batch-size is the global batch; docs/guide/distributed.md).
     """
     from lfmbench.baselines.trainable import ConfigError, count_parameters  # noqa: PLC0415
     from lfmbench.datasets.loading import EmptyDataError  # noqa: PLC0415
     from lfmbench.train import CUDA_GRAPH_MODES, RESIDENT_DTYPES, load_config, train, trainable  # noqa: PLC0415
 
+    check_local_paths((("--corpus", corpus), ("--out", out), ("--config", config)))
     if method not in LEARNED:
         fail(f"--method {method!r} is not a trainable baseline; trainable: {', '.join(LEARNED)}")
     check_minima((("--epochs", epochs, 1), ("--workers", workers, 0), ("--crop", crop, 8),
@@ -77,13 +79,22 @@ def train_cmd(
     why = writable_error(out)  # before any training: the writer's own rule (a symlink is written through)
     if why is not None:
         fail(f"--out {out}: cannot write the checkpoint there ({why})")
+    import contextlib  # noqa: PLC0415
+    import os  # noqa: PLC0415
+
+    # a torchrun launch (lfmbench.distributed): rank 0 holds the --out lock, writes and reports; the other ranks
+    # train beside it and say nothing
+    rank = int(os.environ.get("RANK", "0")) if int(os.environ.get("WORLD_SIZE", "1") or 1) > 1 else 0
     try:  # one training per --out: a second one is refused before any work (it said "saved" for the other's file)
-        lock = OutputLock(out, "--out")
+        lock = OutputLock(out, "--out") if rank == 0 else contextlib.nullcontext()
     except OutputLockedError as exc:
         fail(str(exc))
     with lock:
-        model, hist, sha = _train_locked(train, method, corpus, out, cfg, device, epochs, workers, resume, crop,
-                                         batch_size, sensor, data, resident_dtype, chunk_scenes, cuda_graph)
+        done = _train_locked(train, method, corpus, out, cfg, device, epochs, workers, resume, crop,
+                             batch_size, sensor, data, resident_dtype, chunk_scenes, cuda_graph)
+    if done is None:
+        return
+    model, hist, sha = done
     secs = hist["epoch_seconds"]
     typer.echo(f"saved {out}: {count_parameters(model):,} parameters, {len(secs)} epochs, "
                f"final loss {hist['epoch_loss'][-1] if hist['epoch_loss'] else float('nan'):.4f}"
@@ -93,7 +104,8 @@ def train_cmd(
 def _train_locked(train, method, corpus, out, cfg, device, epochs, workers, resume, crop, batch_size, sensor, data,
                   resident_dtype, chunk_scenes, cuda_graph):
     """``train(...)`` under the --out lock, then the checkpoint read back: what is reported is what the file holds
-    (its weights equal the trained model's, its content hash checked); returns (model, history, content hash)."""
+    (its weights equal the trained model's, its content hash checked); returns (model, history, content hash), or
+    None on a torchrun rank other than 0 (rank 0 wrote and reports)."""
     import torch  # noqa: PLC0415
 
     from lfmbench.baselines.checkpoint import CheckpointError  # noqa: PLC0415
@@ -108,6 +120,13 @@ def _train_locked(train, method, corpus, out, cfg, device, epochs, workers, resu
         fail(str(exc))
     except OSError as exc:  # the checkpoint could not be written (disk full, ...): the message names the file
         fail(exc.strerror or str(exc))
+    import torch.distributed as dist  # noqa: PLC0415
+
+    if dist.is_available() and dist.is_initialized():  # a torchrun rank (lfmbench.distributed): rank 0 reports
+        main = dist.get_rank() == 0
+        dist.destroy_process_group()
+        if not main:
+            return None
     try:
         ck = trainable(method).read_checkpoint(out, map_location="cpu")
     except (CheckpointError, OSError) as exc:

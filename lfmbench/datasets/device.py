@@ -47,7 +47,7 @@ from lfmbench.triton_kernels import TritonKernels
 from lfmbench.vocabulary import PHOTODIODES
 
 __all__ = ["STORAGE_DTYPES", "ResidentMemoryError", "ResidentScene", "ResidentScenes", "DeviceBatches", "epoch_order",
-           "DEFAULT_BUDGET_FRACTION"]
+           "DEFAULT_BUDGET_FRACTION", "free_device_bytes"]
 
 #: Storage types of the resident rates: float32, or float16 (scaled per scene by a power of two; half the memory,
 #: relative error at most 2^-11 of a rate; docs/guide/datasets.md, "Corpus on the device").
@@ -66,6 +66,13 @@ def epoch_order(n: int, seed: int, epoch: int) -> torch.Tensor:
     :class:`lfmbench.train.EpochSampler` uses)."""
     g = torch.Generator().manual_seed(int(seed) * 1_000_003 + int(epoch))
     return torch.randperm(int(n), generator=g)
+
+
+def free_device_bytes(device: torch.device) -> int:
+    """Bytes free on CUDA ``device`` for new tensors: the driver's free memory plus what PyTorch's caching
+    allocator holds without using (a freed tensor's memory stays reserved there, invisible to the driver)."""
+    free, _total = torch.cuda.mem_get_info(device)
+    return int(free + torch.cuda.memory_reserved(device) - torch.cuda.memory_allocated(device))
 
 
 @dataclass
@@ -114,8 +121,7 @@ class ResidentScenes:
                              "count and store every flickering group in time bins; this one does not (use float32)")
         need = self.estimate(ds, packed, dtype, sids)
         if budget_bytes is None and self.device.type == "cuda":
-            free, _total = torch.cuda.mem_get_info(self.device)
-            budget_bytes = int(DEFAULT_BUDGET_FRACTION * free)
+            budget_bytes = int(DEFAULT_BUDGET_FRACTION * free_device_bytes(self.device))
         if budget_bytes is not None and need > budget_bytes:
             per = need / max(len(sids), 1)
             raise ResidentMemoryError(
@@ -210,7 +216,11 @@ class DeviceBatches:
         batch_size: samples per batch (the last batch of an epoch may be smaller unless ``drop_last``).
         device: torch device of the layers, the simulation and the yielded tensors.
         seed: the order of an epoch's samples is :func:`epoch_order` ``(len(ds), seed, epoch)``.
-        budget_bytes: see :class:`ResidentScenes` (with ``chunk_scenes``: the budget of one chunk).
+        budget_bytes: the most the resident layers (with ``chunk_scenes``: one chunk's) and the batches in memory
+            may take together: the layers get ``budget_bytes`` less the batch's bytes (twice that with
+            ``prefetch`` on CUDA; :meth:`batch_bytes`); default: on CUDA :data:`DEFAULT_BUDGET_FRACTION` of the
+            free memory (:func:`free_device_bytes`), asked once here, so that a later chunk is not refused for
+            memory the previous chunk's layers held; no limit on the CPU.
         drop_last: drop an epoch's last incomplete batch (of each chunk, when streaming).
         dtype: storage of the resident rates, float32 or float16 (:data:`STORAGE_DTYPES`).
         chunk_scenes: stream the split ``chunk_scenes`` scenes at a time (for a split that does not fit): per epoch
@@ -244,13 +254,32 @@ class DeviceBatches:
                                          or chunk_scenes < 1):
             raise ValueError(f"chunk_scenes must be None or an integer >= 1, got {chunk_scenes!r:.40}")
         self.chunk_scenes = chunk_scenes
-        self.budget_bytes, self.dtype = budget_bytes, dtype
+        self.dtype = dtype
+        if budget_bytes is None and self.device.type == "cuda":
+            budget_bytes = int(DEFAULT_BUDGET_FRACTION * free_device_bytes(self.device))
+        self.budget_bytes = budget_bytes
+        self.layer_budget = None        # the layers' part of the budget (None: no limit)
+        if budget_bytes is not None:
+            reserve = self.batch_bytes(ds, batch_size) * (2 if self.prefetch and self.device.type == "cuda" else 1)
+            self.layer_budget = int(budget_bytes - reserve)
+            if self.layer_budget <= 0:
+                raise ResidentMemoryError(
+                    f"budget {budget_bytes / 2**20:.1f} MiB on {self.device}: the batches alone take "
+                    f"{reserve / 2**20:.1f} MiB (batch_size {batch_size}"
+                    f"{', twice for the prefetched batch' if reserve > self.batch_bytes(ds, batch_size) else ''}); "
+                    "pass a larger budget or a smaller batch")
         self._sids = list(dict.fromkeys(ds.scene_ids))
         if chunk_scenes is not None and len(self._sids) != len(ds.scene_ids):
             raise ValueError(f"ds: the split lists a scene twice ({len(ds.scene_ids)} ids, {len(self._sids)} scenes)")
         # the whole split, or (chunks) the first chunk of epoch 0, which iterating that epoch then starts from
         first = None if chunk_scenes is None else [self._sids[p] for p in self._chunks()[0]]
-        self.resident = ResidentScenes(ds, self.device, budget_bytes, dtype, first)
+        self.resident = ResidentScenes(ds, self.device, self.layer_budget, dtype, first)
+
+    @staticmethod
+    def batch_bytes(ds, batch_size: int) -> int:
+        """Bytes of one batch's tensors: ``batch_size`` times those of the dataset's sample 0 (every output, as the
+        per-sample path makes it; the batched program's temporaries are not counted)."""
+        return int(batch_size) * sum(t.numel() * t.element_size() for _p, t in tensor_leaves(ds[0]))
 
     def set_epoch(self, epoch: int) -> None:
         self.ds.set_epoch(epoch)
@@ -319,7 +348,10 @@ class DeviceBatches:
             sids = [self._sids[p] for p in chunk]
             if set(self.resident.scene_ids) != set(sids):
                 self.resident = None            # free the previous chunk before loading the next
-                self.resident = ResidentScenes(self.ds, self.device, self.budget_bytes, self.dtype, sids)
+                if self.device.type == "cuda":  # and hand its memory back from PyTorch's cache
+                    torch.cuda.synchronize(self.device)
+                    torch.cuda.empty_cache()
+                self.resident = ResidentScenes(self.ds, self.device, self.layer_budget, self.dtype, sids)
             idx = [p * sps + s for p in chunk for s in range(sps)]
             perm = epoch_order(len(idx), self.seed + 7919 * (c + 1), self.epoch).tolist()
             n = len(idx) // B if self.drop_last else -(-len(idx) // B)

@@ -43,19 +43,25 @@ def check_simulate(simulate: str) -> str:
     return simulate
 
 
-def score_batches(ds, n: int, simulate: str = "host", device: str = "cpu", chunk: int = 16) -> Iterable[dict]:
-    """The first ``n`` samples of ``ds`` as batches of one, in order: simulated on the host by a DataLoader (no
-    workers), or (``simulate="device"``; ``ds`` made with ``noise_streams="counter"``) cut and simulated on
-    ``device`` by the device program, its split loaded there once, ``chunk`` samples per program call (each
-    sample's numbers do not depend on the others of its call)."""
+def score_batches(ds, n: int, simulate: str = "host", device: str = "cpu", chunk: int = 16,
+                  indices: list[int] | None = None) -> Iterable[dict]:
+    """The first ``n`` samples of ``ds`` (or the samples ``indices``, ascending: a shard,
+    :func:`lfmbench.evaluation.shards.shard_samples`) as batches of one, in order: simulated on the host by a
+    DataLoader (no workers), or (``simulate="device"``; ``ds`` made with ``noise_streams="counter"``) cut and
+    simulated on ``device`` by the device program, its split loaded there once, ``chunk`` samples per program call
+    (each sample's numbers do not depend on the others of its call, nor on which samples are scored)."""
     from itertools import islice
 
     check_simulate(simulate)
+    order = list(range(n)) if indices is None else [int(k) for k in indices]
     if simulate == "host":
-        from torch.utils.data import DataLoader
+        from torch.utils.data import DataLoader, Subset
 
         from lfmbench.datasets.loading import collate_samples
 
+        if indices is not None:
+            return iter(DataLoader(Subset(ds, order), batch_size=1, shuffle=False, num_workers=0,
+                                   collate_fn=collate_samples))
         return islice(DataLoader(ds, batch_size=1, shuffle=False, num_workers=0, collate_fn=collate_samples), n)
     if ds.noise_streams != SIMULATE[simulate]:
         raise ValueError(f"simulate='device' needs a dataset with noise_streams='counter', got "
@@ -69,9 +75,10 @@ def score_batches(ds, n: int, simulate: str = "host", device: str = "cpu", chunk
     db = DeviceBatches(ds, chunk, device)
 
     def batches():
-        for a in range(0, n, chunk):
-            big = db.batch(list(range(a, min(n, a + chunk))))
-            for j in range(min(n, a + chunk) - a):
+        for a in range(0, len(order), chunk):
+            part = order[a:a + chunk]
+            big = db.batch(part)
+            for j in range(len(part)):
                 yield batch_item(big, j)
 
     return batches()

@@ -115,8 +115,19 @@ def _check_numbers(d: dict, p: Path) -> None:
 
 
 def incomplete_runs(runs: list[dict]) -> list[str]:
-    """``"<path>: status <status>"`` for each run that is not complete (interrupted, failed, killed)."""
-    return [f"{r.get('_path')}: status {brief(r.get('status'))}" for r in runs if r.get("status") != COMPLETE]
+    """``"<path>: status <status>"`` for each run that is not complete (interrupted, failed, killed), and
+    ``"<path>: shard i/n"`` for a shard of a split (``lfmbench evaluate --shard``: join the shards with
+    ``lfmbench merge-results`` first; a shard ranked alone would score a part of the split as the whole)."""
+    out = []
+    for r in runs:
+        sh = (r.get("dataset") or {}).get("shard") if isinstance(r.get("dataset"), dict) else None
+        if r.get("status") != COMPLETE:
+            out.append(f"{r.get('_path')}: status {brief(r.get('status'))}")
+        elif sh is not None:
+            out.append(f"{r.get('_path')}: shard {brief(sh.get('index') if isinstance(sh, dict) else sh)}/"
+                       f"{brief(sh.get('count') if isinstance(sh, dict) else '?')} of a split (join the shards with "
+                       "`lfmbench merge-results`)")
+    return out
 
 
 # ------------------------------------------------------------------------------------------- comparability

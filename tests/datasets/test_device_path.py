@@ -318,6 +318,7 @@ def test_a_split_streamed_in_chunks_serves_every_sample_once_with_the_same_numbe
     kw = dict(split="all", frames=3, crop=(12, 16), samples_per_scene=3, outputs=OUTS)
     ds = LFMCaptureDataset(long_corpus, **kw)
     one = max(ResidentScenes.estimate_scene(ds, s, kall=4) for s in ds.scene_ids)
+    one += DeviceBatches.batch_bytes(ds, 4)  # the budget holds the batch too
     with pytest.raises(ResidentMemoryError, match=r"chunk_scenes=1"):
         DeviceBatches(ds, 4, "cpu", budget_bytes=one + 1)
     whole = DeviceBatches(LFMCaptureDataset(long_corpus, **kw), batch_size=len(ds), device="cpu", seed=4)
@@ -408,3 +409,38 @@ def test_cuda_graph_mode_is_checked(tmp_path, corpus):
     with pytest.raises(ValueError, match="cuda_graph must be one of"):
         train("unet", corpus, tmp_path / "u.pt", device="cpu", cuda_graph="on", epochs=1, crop=16, batch_size=4,
               samples_per_scene=1, split="all", progress=False, log=None)
+
+
+def test_a_chunk_budget_holds_the_batches_and_the_last_chunk_is_freed_before_the_next(long_corpus, monkeypatch):
+    """An explicit budget covers one chunk's layers plus the batch (``DeviceBatches.batch_bytes``: the bytes of a
+    batch the path really yields); a chunk is loaded only after the previous one is released."""
+    import weakref
+
+    from lfmbench.datasets import device as dev
+    from lfmbench.datasets.batched import tensor_leaves
+
+    kw = dict(split="all", frames=3, crop=(12, 16), samples_per_scene=3, outputs=OUTS)
+    ds = LFMCaptureDataset(long_corpus, **kw)
+    bb = DeviceBatches.batch_bytes(ds, 3)
+    whole = DeviceBatches(LFMCaptureDataset(long_corpus, **kw), batch_size=3, device="cpu")
+    got = sum(t.numel() * t.element_size() for p, t in tensor_leaves(next(iter(whole))) if p[0] != "meta")
+    assert got <= bb <= 2 * got  # the yielded batch's tensors (meta aside), as the estimate says
+    one = max(ResidentScenes.estimate_scene(ds, s, kall=4) for s in ds.scene_ids)
+    with pytest.raises(ResidentMemoryError, match=r"the batches alone take"):
+        DeviceBatches(ds, 3, "cpu", budget_bytes=bb, chunk_scenes=1)
+    with pytest.raises(ResidentMemoryError, match=r"1 scenes need"):
+        DeviceBatches(ds, 3, "cpu", budget_bytes=one + bb - 1, chunk_scenes=1)  # layers fit, layers + batch not
+    alive: list = []
+
+    class Watched(ResidentScenes):
+        def __init__(self, *a, **k):
+            assert all(r() is None for r in alive), "the previous chunk is still held"
+            super().__init__(*a, **k)
+            alive.append(weakref.ref(self))
+
+    monkeypatch.setattr(dev, "ResidentScenes", Watched)
+    st = DeviceBatches(LFMCaptureDataset(long_corpus, **kw), batch_size=3, device="cpu", seed=2, chunk_scenes=1,
+                       budget_bytes=one + bb)
+    st.set_epoch(1)
+    seen = [i for b in st for i in b["meta"]["index"].tolist()]
+    assert sorted(seen) == list(range(len(ds))) and len(alive) >= 3  # every chunk loaded, each after the last freed
