@@ -18,7 +18,7 @@ PACKAGES = ("lfmbench", "render_tools")
 #: Each entry is a module or a package prefix (``lfmbench.sensor`` covers ``lfmbench.sensor.noise``), except the
 #: top-level ``lfmbench``, which names only its ``__init__``: a new module must be placed here.
 LAYERS = (
-    ("lfmbench.limits",),  # the input limits every reader checks (check and fileio quote and bound with it)
+    ("lfmbench.limits", "lfmbench.registry"),  # input limits every reader checks; the generic registry
     ("lfmbench", "lfmbench.constants", "lfmbench.check", "lfmbench.fileio", "lfmbench.vocabulary",
      "lfmbench.counter_rng", "lfmbench.triton_kernels", "lfmbench._triton_math"),
     ("lfmbench.flicker",),
