@@ -27,7 +27,8 @@ from lfmbench.sensor.optics import check_radiometric
 from lfmbench.sensor.preset import CAPTURES, PHOTODIODES, SensorPreset, load_preset
 from lfmbench.sensor.response import ideal_electrons
 
-__all__ = ["fixed_pattern", "photodiode_order", "shot_noise", "read_capture", "simulate_split_pixel_electrons",
+__all__ = ["fixed_pattern", "photodiode_order", "shot_noise", "read_capture", "compand", "decompand",
+           "simulate_split_pixel_electrons",
            "simulate_split_pixel", "simulate_plan_electrons", "SplitPixelSensor"]
 
 
@@ -152,9 +153,38 @@ def read_capture(electrons: torch.Tensor, preset: SensorPreset, capture: str, ge
     if offset_e is not None:
         volts.add_(offset_e)
     volts.mul_(spec.conversion_gain_v_per_e).clamp_max_(spec.voltage_swing_v)
-    dn = (volts * preset.dn_per_volt(capture)).add_(preset.black_level_dn).round_().clamp_(0.0, float(preset.max_dn))
+    dn = (volts * preset.dn_per_volt(capture)).add_(preset.black_level_dn).round_().clamp_(
+        0.0, float(preset.linear_max_dn(capture)))
+    if spec.companding is not None:
+        dn = compand(dn, spec.companding).round_().clamp_(0.0, float(preset.max_dn))
     saturated = volts >= preset.saturation_fraction * spec.voltage_swing_v
     return {"dn": dn, "volts": volts, "saturated": saturated}
+
+
+def _knee_tensors(companding, ref: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    k = torch.tensor(companding.knees, dtype=torch.float64, device=ref.device)
+    return k[:, 0], k[:, 1]
+
+
+def _piecewise_linear(x: torch.Tensor, xp: torch.Tensor, fp: torch.Tensor) -> torch.Tensor:
+    """``numpy.interp`` for increasing knots ``xp`` (clamped at the ends), in float64, back in ``x``'s dtype."""
+    x64 = x.to(torch.float64)
+    i = torch.searchsorted(xp, x64.clamp(xp[0], xp[-1]).contiguous(), right=True).clamp_(1, len(xp) - 1)
+    x0, x1, f0, f1 = xp[i - 1], xp[i], fp[i - 1], fp[i]
+    return (f0 + (x64.clamp(xp[0], xp[-1]) - x0) * (f1 - f0) / (x1 - x0)).to(x.dtype)
+
+
+def compand(dn_linear: torch.Tensor, companding) -> torch.Tensor:
+    """On-sensor companding: linear codes (*) in DN through the piecewise-linear ``companding.knees`` (linear DN ->
+    output DN), not rounded. :class:`lfmbench.sensor.preset.Companding`."""
+    xp, fp = _knee_tensors(companding, dn_linear)
+    return _piecewise_linear(dn_linear, xp, fp)
+
+
+def decompand(dn: torch.Tensor, companding) -> torch.Tensor:
+    """The inverse of :func:`compand` (output DN -> linear DN, the knees read backwards), (*) in DN."""
+    xp, fp = _knee_tensors(companding, dn)
+    return _piecewise_linear(dn, fp, xp)
 
 
 def _check_pair(lpd: torch.Tensor, spd: torch.Tensor, lpd_name: str, spd_name: str, check: bool) -> None:
@@ -384,7 +414,9 @@ def simulate_plan_electrons(mean_e: Mapping[str, torch.Tensor], preset: SensorPr
         for c in caps:
             r = read_capture(collected[key], preset, c, generator, noise, offset)
             out[c] = r["dn"]
-            e = (r["dn"] - preset.black_level_dn).div_(preset.system_gain(c)).sub_(
+            comp = preset.captures[c].companding
+            lin = decompand(r["dn"], comp) if comp is not None else r["dn"]
+            e = (lin - preset.black_level_dn).div_(preset.system_gain(c)).sub_(
                 spec.dark_current_e_per_s * float(exposure_s[key]))
             out[f"{c}_e"] = e.mul_((ff_ref / spec.fill_factor) * (t_ref / float(exposure_s[key])))
             sats.append((c, r["saturated"]))

@@ -73,7 +73,7 @@ def test_exposure_groups_share_charge_only_for_same_photodiode_and_windows():
 
 
 def test_registry_names_every_architecture():
-    assert list(ARCHITECTURES) == ["split_pixel", "lofic", "staggered", "chopped", "single"]
+    assert list(ARCHITECTURES) == ["split_pixel", "lofic", "staggered", "chopped", "single", "multi_photodiode"]
 
 
 def test_single_plan_loads(tmp_path):
