@@ -112,6 +112,6 @@ def flicker_markdown(presets: Sequence[str] | None = None) -> str:
         f0, count = first_miss_hz(wins, 0.1)
         out += ["## The chopped preset's claim", "",
                 f"At D = 0.1 the chopped exposure captures nothing at some phase from {f0} Hz up: at {count} of the "
-                "integer frequencies 90-2,999 Hz (scan by `first_miss_hz`). Its sub-window spacing only guarantees "
-                "a capture for 90-120 Hz.", ""]
+                f"integer frequencies 90-2,999 Hz (scan by `first_miss_hz`); below {f0} Hz every phase captures "
+                "some of the light.", ""]
     return "\n".join(out)
