@@ -163,7 +163,7 @@ def read_capture(electrons: torch.Tensor, preset: SensorPreset, capture: str, ge
 
 def _knee_tensors(companding, ref: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     k = torch.tensor(companding.knees, dtype=torch.float64, device=ref.device)
-    return k[:, 0], k[:, 1]
+    return k[:, 0].contiguous(), k[:, 1].contiguous()
 
 
 def _piecewise_linear(x: torch.Tensor, xp: torch.Tensor, fp: torch.Tensor) -> torch.Tensor:
