@@ -314,6 +314,13 @@ def check_plan(architecture: str, photodiodes: Mapping[str, Any], captures: Mapp
     if why:
         raise ValueError(f"{source}: field 'captures': architecture '{architecture}' {why}")
     groups = list(exposure_groups(captures).items())
+    for pd in {c.photodiode for c in captures.values()}:   # a named window's time is the scene's: not comparable
+        mine = [k for k, _ in groups if captures[k].photodiode == pd]
+        named = [k for k in mine if isinstance(captures[k].exposure, str)]
+        if len(mine) > 1 and named:
+            raise ValueError(f"{source}: field 'captures.{named[0]}.exposure': photodiode '{pd}' has {len(mine)} "
+                             "integrations; give each explicit [start_s, length_s] windows (a corpus window's time "
+                             "is the scene's, so its overlap with the others could not be checked)")
     for i, (ka, _) in enumerate(groups):
         for kb, _ in groups[i + 1:]:
             a, b = captures[ka], captures[kb]

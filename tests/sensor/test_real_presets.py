@@ -141,6 +141,26 @@ def test_bad_general_plans_name_file_and_field(tmp_path, mutate, field):
     assert "bad.yaml" in msg and f"'{field}'" in msg and "\n" not in msg, msg
 
 
+def test_split_pixel_beside_a_very_short_exposure(tmp_path):
+    """multi_photodiode: LPD at HCG/LCG over [0, 4) ms plus a 0.1 ms LPD exposure after it, SPD over the long
+    window; a named window beside another integration of the same photodiode is refused (its time is the scene's)."""
+    d = yaml.safe_load((PRESET_DIR / "ovt.yaml").read_text())
+    d["spectral"]["filters"] = str(load_preset("ovt").filters_path)
+    d["architecture"] = "multi_photodiode"
+    c = d["captures"]
+    c["lpd_hcg"]["exposure"] = c["lpd_lcg"]["exposure"] = [[0.0, 0.004]]
+    c["lpd_vs"] = dict(c["lpd_lcg"], exposure=[[0.004, 0.0001]])
+    c["spd"]["exposure"] = "long"
+    p = load_preset(_write(tmp_path, d, "vs.yaml"))
+    assert p.exposures == {"lpd_hcg": ("lpd_hcg", "lpd_lcg"), "spd": ("spd",), "lpd_vs": ("lpd_vs",)}
+    out = _flat(p, 3000.0, 9, 16)
+    # 3000 e- collected over 0.1 ms, referred to the reference (LPD over 4 ms): x 40
+    assert out["lpd_vs_e"].mean().item() == pytest.approx(3000.0 * 0.004 / 0.0001, rel=0.01)
+    c["lpd_hcg"]["exposure"] = c["lpd_lcg"]["exposure"] = "short"
+    with pytest.raises(ValueError, match=r"bad\.yaml: field 'captures\.lpd_hcg\.exposure': photodiode 'lpd'"):
+        load_preset(_write(tmp_path, d))
+
+
 def test_staggered_with_dual_gain_and_triple_gain_lofic(tmp_path):
     d = yaml.safe_load((PRESET_DIR / "staggered.yaml").read_text())
     d["spectral"]["filters"] = str(load_preset("staggered").filters_path)
