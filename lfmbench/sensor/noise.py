@@ -161,30 +161,26 @@ def read_capture(electrons: torch.Tensor, preset: SensorPreset, capture: str, ge
     return {"dn": dn, "volts": volts, "saturated": saturated}
 
 
-def _knee_tensors(companding, ref: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-    k = torch.tensor(companding.knees, dtype=torch.float64, device=ref.device)
-    return k[:, 0].contiguous(), k[:, 1].contiguous()
-
-
-def _piecewise_linear(x: torch.Tensor, xp: torch.Tensor, fp: torch.Tensor) -> torch.Tensor:
-    """``numpy.interp`` for increasing knots ``xp`` (clamped at the ends), in float64, back in ``x``'s dtype."""
-    x64 = x.to(torch.float64)
-    i = torch.searchsorted(xp, x64.clamp(xp[0], xp[-1]).contiguous(), right=True).clamp_(1, len(xp) - 1)
-    x0, x1, f0, f1 = xp[i - 1], xp[i], fp[i - 1], fp[i]
-    return (f0 + (x64.clamp(xp[0], xp[-1]) - x0) * (f1 - f0) / (x1 - x0)).to(x.dtype)
+def _piecewise_linear(x: torch.Tensor, knots: Sequence[tuple[float, float]], inverse: bool = False) -> torch.Tensor:
+    """``numpy.interp`` through increasing ``knots`` ((x, y) pairs; ``inverse``: read as (y, x)), clamped at the
+    ends, in ``x``'s dtype: f(x) = y_0 + sum_i s_i clamp(x - x_i, 0, x_{i+1} - x_i) with s_i the slope of segment i
+    (a few element-wise passes per segment; a curve has at most 32 knots)."""
+    pts = [(b, a) for a, b in knots] if inverse else list(knots)
+    out = torch.full_like(x, float(pts[0][1]))
+    for (x0, y0), (x1, y1) in zip(pts, pts[1:]):
+        out.add_((x - x0).clamp_(0.0, x1 - x0).mul_((y1 - y0) / (x1 - x0)))
+    return out
 
 
 def compand(dn_linear: torch.Tensor, companding) -> torch.Tensor:
     """On-sensor companding: linear codes (*) in DN through the piecewise-linear ``companding.knees`` (linear DN ->
     output DN), not rounded. :class:`lfmbench.sensor.preset.Companding`."""
-    xp, fp = _knee_tensors(companding, dn_linear)
-    return _piecewise_linear(dn_linear, xp, fp)
+    return _piecewise_linear(dn_linear, companding.knees)
 
 
 def decompand(dn: torch.Tensor, companding) -> torch.Tensor:
     """The inverse of :func:`compand` (output DN -> linear DN, the knees read backwards), (*) in DN."""
-    xp, fp = _knee_tensors(companding, dn)
-    return _piecewise_linear(dn, fp, xp)
+    return _piecewise_linear(dn, companding.knees, inverse=True)
 
 
 def _check_pair(lpd: torch.Tensor, spd: torch.Tensor, lpd_name: str, spd_name: str, check: bool) -> None:
