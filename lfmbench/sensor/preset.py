@@ -24,6 +24,7 @@ from typing import Any, Mapping, Sequence
 import torch
 
 from lfmbench.limits import brief
+from lfmbench.registry import Registry
 from lfmbench.check import check_keys, check_number, get_number
 from lfmbench.sensor.optics import OpticsConfig
 from lfmbench.sensor.plan import ARCHITECTURES, Readout, check_plan, exposure_groups, parse_exposure, parse_readout
@@ -31,7 +32,7 @@ from lfmbench.sensor.spectral_data import DATA_DIR, read_spectral_csv
 from lfmbench.vocabulary import CAPTURES, PHOTODIODES
 
 __all__ = ["CAPTURES", "PHOTODIODES", "PRESET_DIR", "CFAPattern", "PhotodiodeSpec", "CaptureSpec", "SensorPreset",
-           "Spectral", "Companding",
+           "Spectral", "Companding", "preset_registry",
            "available_presets", "load_preset", "preset_from_dict"]
 
 #: Shipped sensor presets (YAML).
@@ -265,9 +266,18 @@ def _rebuild_preset(state: dict[str, Any]) -> SensorPreset:
     return SensorPreset(**state)
 
 
+def preset_registry() -> Registry:
+    """The registry of shipped presets: name -> its YAML file (``lfmbench/configs/sensors/<name>.yaml``; adding a
+    preset is adding its file). Built from the directory on each call, so a file added at run time is found."""
+    reg = Registry("sensor preset")
+    for f in sorted(PRESET_DIR.glob("*.yaml")):
+        reg.register(f.stem, f)
+    return reg
+
+
 def available_presets() -> list[str]:
-    """Names of the shipped presets (files ``lfmbench/configs/sensors/<name>.yaml``)."""
-    return sorted(p.stem for p in PRESET_DIR.glob("*.yaml"))
+    """Names of the shipped presets (:func:`preset_registry`), sorted."""
+    return preset_registry().names()
 
 
 def load_preset(preset: "str | Path | SensorPreset | Mapping[str, Any]") -> SensorPreset:
@@ -286,11 +296,11 @@ def load_preset(preset: "str | Path | SensorPreset | Mapping[str, Any]") -> Sens
     text = str(preset)
     path = Path(text)
     if path.suffix.lower() not in (".yaml", ".yml", ".json") and not path.exists():
-        candidate = PRESET_DIR / f"{text}.yaml"
-        if not candidate.exists():
-            raise ValueError(f"preset: unknown sensor preset {brief(text)}; shipped presets are {available_presets()} "
+        reg = preset_registry()
+        if text not in reg:
+            raise ValueError(f"preset: unknown sensor preset {brief(text)}; shipped presets are {reg.names()} "
                              "or give a path to a YAML file")
-        path = candidate
+        path = reg.get(text)
     resolved = path.resolve()
     if not resolved.is_file():
         raise ValueError(f"preset: file {resolved} does not exist")
