@@ -77,7 +77,7 @@ from lfmbench.datasets.pwm import draw_scene_pwm, load_pwm_config  # noqa: E402
 
 
 ROOT = Path(__file__).resolve().parents[1]
-DOC = ROOT / "docs" / "dataset-benchmark.md"
+DOC = ROOT / "docs" / "benchmarks" / "dataset.md"
 IMG = ROOT / "docs" / "img"
 #: Throughput corpus: render size (px), crop (px), frames, spp, bins, render seed.
 TP_SIZE = (256, 320)          # (height, width)
