@@ -134,6 +134,11 @@ def unit_projection_preset(preset):
     import dataclasses  # noqa: PLC0415
     from types import MappingProxyType  # noqa: PLC0415
 
+    for pd, spec in preset.photodiodes.items():  # the layers carry one spectral response per plan
+        if spec.spectral is not None:
+            raise ValueError(f"{preset.source}: field 'photodiodes.{pd}.spectral': the dataset projects the corpus "
+                             "through the preset's one 'spectral' response; per-photodiode curves are simulated by "
+                             "lfmbench.sensor (ideal_electrons) only")
     if preset.architecture == "split_pixel":
         return preset
     unit = _sensor.PhotodiodeSpec(fill_factor=1.0, full_well_e=1.0)

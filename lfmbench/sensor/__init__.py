@@ -51,6 +51,8 @@ Modules, in the order the data flows through them:
 - :mod:`lfmbench.sensor.optics`: the lens (camera equation, diffraction PSF): scene radiance -> irradiance.
 - :mod:`lfmbench.sensor.spectral_data`: shipped spectral curves, band widths, the silicon QE model.
 - :mod:`lfmbench.sensor.plan`: capture plans (exposure windows, readout) and the registry of architectures.
+- :mod:`lfmbench.sensor.emva`: a preset from EMVA 1288 results (``lfmbench sensor fit``).
+- :mod:`lfmbench.sensor.flicker_table`: each preset's captured PWM fraction (``lfmbench sensor flicker-table``).
 - :mod:`lfmbench.sensor.preset`: the preset schema and its YAML files.
 - :mod:`lfmbench.sensor.response`: spectral response, radiant exposure -> mean photo-electrons, the CFA.
 - :mod:`lfmbench.sensor.noise`: the noise chain (torch) and :class:`SplitPixelSensor`.
@@ -61,10 +63,11 @@ The public names are re-exported here: ``from lfmbench.sensor import simulate_sp
 """
 from __future__ import annotations
 
-from lfmbench.sensor.noise import (SplitPixelSensor, fixed_pattern, read_capture, shot_noise, simulate_plan_electrons,
-                                   simulate_split_pixel, simulate_split_pixel_electrons)
-from lfmbench.sensor.preset import (CAPTURES, PHOTODIODES, PRESET_DIR, CaptureSpec, CFAPattern, PhotodiodeSpec,
-                                    SensorPreset, available_presets, load_preset, preset_from_dict)
+from lfmbench.sensor.noise import (SplitPixelSensor, compand, decompand, fixed_pattern, read_capture, shot_noise,
+                                   simulate_plan_electrons, simulate_split_pixel, simulate_split_pixel_electrons)
+from lfmbench.sensor.preset import (CAPTURES, PHOTODIODES, PRESET_DIR, CaptureSpec, CFAPattern, Companding,
+                                    PhotodiodeSpec, SensorPreset, Spectral, available_presets, load_preset,
+                                    preset_from_dict)
 from lfmbench.sensor.response import electron_weights, ideal_electrons, mosaic, spectral_qe
 from lfmbench.sensor.spectral_data import DATA_DIR, band_widths_nm, read_spectral_csv, silicon_qe
 
@@ -77,6 +80,10 @@ __all__ = [
     "PhotodiodeSpec",
     "CaptureSpec",
     "SensorPreset",
+    "Spectral",
+    "Companding",
+    "compand",
+    "decompand",
     "available_presets",
     "load_preset",
     "preset_from_dict",

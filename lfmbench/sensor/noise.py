@@ -27,7 +27,8 @@ from lfmbench.sensor.optics import check_radiometric
 from lfmbench.sensor.preset import CAPTURES, PHOTODIODES, SensorPreset, load_preset
 from lfmbench.sensor.response import ideal_electrons
 
-__all__ = ["fixed_pattern", "photodiode_order", "shot_noise", "read_capture", "simulate_split_pixel_electrons",
+__all__ = ["fixed_pattern", "photodiode_order", "shot_noise", "read_capture", "compand", "decompand",
+           "simulate_split_pixel_electrons",
            "simulate_split_pixel", "simulate_plan_electrons", "SplitPixelSensor"]
 
 
@@ -152,9 +153,34 @@ def read_capture(electrons: torch.Tensor, preset: SensorPreset, capture: str, ge
     if offset_e is not None:
         volts.add_(offset_e)
     volts.mul_(spec.conversion_gain_v_per_e).clamp_max_(spec.voltage_swing_v)
-    dn = (volts * preset.dn_per_volt(capture)).add_(preset.black_level_dn).round_().clamp_(0.0, float(preset.max_dn))
+    dn = (volts * preset.dn_per_volt(capture)).add_(preset.black_level_dn).round_().clamp_(
+        0.0, float(preset.linear_max_dn(capture)))
+    if spec.companding is not None:
+        dn = compand(dn, spec.companding).round_().clamp_(0.0, float(preset.max_dn))
     saturated = volts >= preset.saturation_fraction * spec.voltage_swing_v
     return {"dn": dn, "volts": volts, "saturated": saturated}
+
+
+def _piecewise_linear(x: torch.Tensor, knots: Sequence[tuple[float, float]], inverse: bool = False) -> torch.Tensor:
+    """``numpy.interp`` through increasing ``knots`` ((x, y) pairs; ``inverse``: read as (y, x)), clamped at the
+    ends, in ``x``'s dtype: f(x) = y_0 + sum_i s_i clamp(x - x_i, 0, x_{i+1} - x_i) with s_i the slope of segment i
+    (a few element-wise passes per segment; a curve has at most 32 knots)."""
+    pts = [(b, a) for a, b in knots] if inverse else list(knots)
+    out = torch.full_like(x, float(pts[0][1]))
+    for (x0, y0), (x1, y1) in zip(pts, pts[1:]):
+        out.add_((x - x0).clamp_(0.0, x1 - x0).mul_((y1 - y0) / (x1 - x0)))
+    return out
+
+
+def compand(dn_linear: torch.Tensor, companding) -> torch.Tensor:
+    """On-sensor companding: linear codes (*) in DN through the piecewise-linear ``companding.knees`` (linear DN ->
+    output DN), not rounded. :class:`lfmbench.sensor.preset.Companding`."""
+    return _piecewise_linear(dn_linear, companding.knees)
+
+
+def decompand(dn: torch.Tensor, companding) -> torch.Tensor:
+    """The inverse of :func:`compand` (output DN -> linear DN, the knees read backwards), (*) in DN."""
+    return _piecewise_linear(dn, companding.knees, inverse=True)
 
 
 def _check_pair(lpd: torch.Tensor, spd: torch.Tensor, lpd_name: str, spd_name: str, check: bool) -> None:
@@ -384,7 +410,9 @@ def simulate_plan_electrons(mean_e: Mapping[str, torch.Tensor], preset: SensorPr
         for c in caps:
             r = read_capture(collected[key], preset, c, generator, noise, offset)
             out[c] = r["dn"]
-            e = (r["dn"] - preset.black_level_dn).div_(preset.system_gain(c)).sub_(
+            comp = preset.captures[c].companding
+            lin = decompand(r["dn"], comp) if comp is not None else r["dn"]
+            e = (lin - preset.black_level_dn).div_(preset.system_gain(c)).sub_(
                 spec.dark_current_e_per_s * float(exposure_s[key]))
             out[f"{c}_e"] = e.mul_((ff_ref / spec.fill_factor) * (t_ref / float(exposure_s[key])))
             sats.append((c, r["saturated"]))

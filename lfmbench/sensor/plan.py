@@ -11,9 +11,9 @@ different windows are separate integrations, which must not overlap in time (one
 Readout: ``global`` (every row integrates the same windows) or ``rolling`` (row y's windows start
 ``y * line_time_s`` later; ``line_time_s`` of the capture, else of the preset, else the corpus's).
 
-:data:`ARCHITECTURES`: one :class:`Architecture` entry per sensor architecture (its structural rule, the capture
+The registry :data:`ARCHITECTURE_REGISTRY` (:data:`ARCHITECTURES`, its read-only mapping view): one :class:`Architecture` entry per sensor architecture (its structural rule, the capture
 used as the ground-truth reference by default, its standard HDR merge baseline). Adding an architecture is one
-entry here plus its preset YAML.
+``ARCHITECTURE_REGISTRY.register`` call plus its preset YAML.
 
 References
 ----------
@@ -28,15 +28,15 @@ from __future__ import annotations
 import math
 import re
 from dataclasses import dataclass
-from types import MappingProxyType
 from typing import Any, Callable, Mapping, Sequence
 
 from lfmbench.check import check_choice, check_keys, check_number
 from lfmbench.limits import brief
+from lfmbench.registry import Registry
 
 __all__ = ["CORPUS_WINDOWS", "SHUTTERS", "Readout", "Architecture", "ARCHITECTURES", "parse_exposure",
            "parse_readout", "resolve_windows", "exposure_groups", "check_plan", "windows_overlap",
-           "CAPTURE_NAME_PATTERN", "RESERVED_KEYS", "MAX_WINDOWS", "total_length_s"]
+           "CAPTURE_NAME_PATTERN", "RESERVED_KEYS", "MAX_WINDOWS", "total_length_s", "ARCHITECTURE_REGISTRY"]
 
 #: Windows a corpus stores for its static groups, by name (docs/guide/corpus-format.md section 4).
 CORPUS_WINDOWS = ("short", "long")
@@ -174,26 +174,50 @@ def _one_pd(pds, caps) -> str | None:
     return None
 
 
+def _gains_descending(caps) -> str | None:
+    """Captures of one charge (same photodiode, same windows) are listed highest conversion gain first."""
+    for key, names in exposure_groups(caps).items():
+        cgs = [caps[n].conversion_gain_v_per_e for n in names]
+        if any(b >= a for a, b in zip(cgs, cgs[1:])):
+            return (f"captures {list(names)} read one charge and must be listed highest conversion gain first, "
+                    f"got conversion_gain_v_per_e {cgs}")
+    return None
+
+
 def _split_pixel(pds, caps) -> str | None:
     if set(pds) != {"lpd", "spd"} or list(caps) != ["lpd_hcg", "lpd_lcg", "spd"]:
         return ("needs photodiodes lpd and spd and the captures lpd_hcg, lpd_lcg, spd in this order, got "
-                f"photodiodes {sorted(pds)} and captures {list(caps)}")
+                f"photodiodes {sorted(pds)} and captures {list(caps)} (any other photodiodes, reads or windows: "
+                "architecture 'multi_photodiode')")
     if caps["lpd_hcg"].photodiode != "lpd" or caps["lpd_lcg"].photodiode != "lpd" or caps["spd"].photodiode != "spd":
         return "lpd_hcg and lpd_lcg must read photodiode 'lpd' and spd must read photodiode 'spd'"
     if caps["lpd_hcg"].exposure != caps["lpd_lcg"].exposure:
         return "lpd_hcg and lpd_lcg read the same charge and need the same exposure"
+    # the split pixel's dataset path composes the corpus's stored windows (docs/guide/contracts.md): anything else
+    # would be accepted and not simulated, so it is refused here (architecture 'multi_photodiode' honours it)
+    for cap, want in (("lpd_hcg", "short"), ("lpd_lcg", "short"), ("spd", "long")):
+        if caps[cap].exposure != want:
+            return (f"reads the corpus's windows (lpd: 'short', spd: 'long'); capture {cap} asks for "
+                    f"{caps[cap].exposure!r:.80}: give explicit windows with architecture 'multi_photodiode'")
     return None
+
+
+def _multi_photodiode(pds, caps) -> str | None:
+    if len({c.photodiode for c in caps.values()}) != len(pds):
+        return f"reads every photodiode: photodiodes {sorted(pds)}, read {sorted({c.photodiode for c in caps.values()})}"
+    return _gains_descending(caps)
 
 
 def _lofic(pds, caps) -> str | None:
     bad = _one_pd(pds, caps)
     if bad:
         return bad
-    if len(caps) != 2 or len({c.exposure for c in caps.values()}) != 1:
-        return f"needs two captures (high and low conversion gain) of one exposure, got {list(caps)}"
-    hcg, lcg = caps.values()
-    if not hcg.conversion_gain_v_per_e > lcg.conversion_gain_v_per_e:
-        return "the first capture is the high-conversion-gain read: its conversion_gain_v_per_e must be larger"
+    if not 2 <= len(caps) <= 3 or len({c.exposure for c in caps.values()}) != 1:
+        return f"needs 2-3 captures (conversion gains, highest first) of one exposure, got {list(caps)}"
+    cgs = [c.conversion_gain_v_per_e for c in caps.values()]
+    if any(b >= a for a, b in zip(cgs, cgs[1:])):
+        return ("the captures are the reads of one charge, the high-conversion-gain read first: "
+                f"conversion_gain_v_per_e must decrease, got {cgs}")
     return None
 
 
@@ -201,12 +225,14 @@ def _staggered(pds, caps) -> str | None:
     bad = _one_pd(pds, caps)
     if bad:
         return bad
-    if not 2 <= len(caps) <= 4 or any(isinstance(c.exposure, str) or len(c.exposure) != 1 for c in caps.values()):
-        return f"needs 2-4 captures with one explicit window each, got {list(caps)}"
-    lens = [c.exposure[0][1] for c in caps.values()]
+    groups = exposure_groups(caps)
+    if not 2 <= len(groups) <= 4 or any(isinstance(c.exposure, str) or len(c.exposure) != 1 for c in caps.values()):
+        return (f"needs 2-4 exposures with one explicit window each (an exposure may be read at several conversion "
+                f"gains), got {list(caps)}")
+    lens = [caps[k].exposure[0][1] for k in groups]
     if any(b >= a for a, b in zip(lens, lens[1:])):
-        return f"captures must be listed longest exposure first, got lengths {lens} s"
-    return None
+        return f"exposures must be listed longest exposure first, got lengths {lens} s"
+    return _gains_descending(caps)
 
 
 def _chopped(pds, caps) -> str | None:
@@ -234,18 +260,46 @@ def _first(caps) -> str:
     return next(iter(caps))
 
 
-#: The sensor architectures by name (``SensorPreset.architecture``).
-ARCHITECTURES: Mapping[str, Architecture] = MappingProxyType({a.name: a for a in (
+#: The registry of sensor architectures (``SensorPreset.architecture``): adding one is one ``register`` call.
+ARCHITECTURE_REGISTRY = Registry("sensor architecture")
+for _a in (
     Architecture("split_pixel", "large (LPD) and small (SPD) photodiode, LPD read at two conversion gains",
                  _split_pixel, lambda caps: "lpd_hcg", "saturated_exposure_corrected"),
-    Architecture("lofic", "one photodiode with a lateral overflow capacitor, read at high and low conversion gain",
+    Architecture("lofic", "one photodiode with a lateral overflow capacitor, read at 2-3 conversion gains",
                  _lofic, _first, "exposure_select"),
-    Architecture("staggered", "2-4 sequential exposures of one photodiode (DOL), line-interleaved readout",
-                 _staggered, _first, "exposure_select", ("exposure_select_bounded",)),
+    Architecture("staggered", "2-4 sequential exposures of one photodiode (DOL), each read at one or more "
+                 "conversion gains, line-interleaved readout", _staggered, _first, "exposure_select",
+                 ("exposure_select_bounded",)),
     Architecture("chopped", "one photodiode integrating a union of sub-windows spread over the frame",
                  _chopped, _first, "exposure_select"),
     Architecture("single", "one conventional exposure of one photodiode", _single, _first, "exposure_select"),
-)})
+    Architecture("multi_photodiode", "any number of photodiodes (sub-pixels), each read at one or more conversion "
+                 "gains over its own windows (IMX490: two photodiodes x two gains; a split pixel beside a very "
+                 "short exposure)", _multi_photodiode, _first, "exposure_select"),
+):
+    ARCHITECTURE_REGISTRY.register(_a.name, _a)
+
+
+class _RegistryView(Mapping):
+    """Read-only mapping view of a :class:`lfmbench.registry.Registry` (``ARCHITECTURES[name]``, ``.items()``)."""
+
+    def __init__(self, registry: Registry) -> None:
+        self._r = registry
+
+    def __getitem__(self, name):
+        if name not in self._r:
+            raise KeyError(name)
+        return self._r.get(name)
+
+    def __iter__(self):
+        return iter(self._r)
+
+    def __len__(self) -> int:
+        return len(self._r.names())
+
+
+#: The sensor architectures by name (``SensorPreset.architecture``), a read-only view of the registry.
+ARCHITECTURES: Mapping[str, Architecture] = _RegistryView(ARCHITECTURE_REGISTRY)
 
 
 def check_plan(architecture: str, photodiodes: Mapping[str, Any], captures: Mapping[str, Any], source: str) -> None:
@@ -260,6 +314,13 @@ def check_plan(architecture: str, photodiodes: Mapping[str, Any], captures: Mapp
     if why:
         raise ValueError(f"{source}: field 'captures': architecture '{architecture}' {why}")
     groups = list(exposure_groups(captures).items())
+    for pd in {c.photodiode for c in captures.values()}:   # a named window's time is the scene's: not comparable
+        mine = [k for k, _ in groups if captures[k].photodiode == pd]
+        named = [k for k in mine if isinstance(captures[k].exposure, str)]
+        if len(mine) > 1 and named:
+            raise ValueError(f"{source}: field 'captures.{named[0]}.exposure': photodiode '{pd}' has {len(mine)} "
+                             "integrations; give each explicit [start_s, length_s] windows (a corpus window's time "
+                             "is the scene's, so its overlap with the others could not be checked)")
     for i, (ka, _) in enumerate(groups):
         for kb, _ in groups[i + 1:]:
             a, b = captures[ka], captures[kb]

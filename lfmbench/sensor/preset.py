@@ -24,13 +24,15 @@ from typing import Any, Mapping, Sequence
 import torch
 
 from lfmbench.limits import brief
-from lfmbench.check import check_keys, get_number
+from lfmbench.registry import Registry
+from lfmbench.check import check_keys, check_number, get_number
 from lfmbench.sensor.optics import OpticsConfig
 from lfmbench.sensor.plan import ARCHITECTURES, Readout, check_plan, exposure_groups, parse_exposure, parse_readout
 from lfmbench.sensor.spectral_data import DATA_DIR, read_spectral_csv
 from lfmbench.vocabulary import CAPTURES, PHOTODIODES
 
 __all__ = ["CAPTURES", "PHOTODIODES", "PRESET_DIR", "CFAPattern", "PhotodiodeSpec", "CaptureSpec", "SensorPreset",
+           "Spectral", "Companding", "preset_registry",
            "available_presets", "load_preset", "preset_from_dict"]
 
 #: Shipped sensor presets (YAML).
@@ -73,6 +75,8 @@ class PhotodiodeSpec:
         dark_current_e_per_s: mean dark current in e-/s.
         dsnu_e: dark-signal non-uniformity, standard deviation of a per-pixel offset in e-.
         prnu: photo-response non-uniformity, standard deviation of the per-pixel gain (fraction, 0.01 = 1 %).
+        spectral: this photodiode's own spectral response (``None``: the preset's ``spectral``), e.g. the large
+            and small photodiodes of a split pixel measured apart.
     """
 
     fill_factor: float
@@ -80,6 +84,36 @@ class PhotodiodeSpec:
     dark_current_e_per_s: float = 0.0
     dsnu_e: float = 0.0
     prnu: float = 0.0
+    spectral: "Spectral | None" = None
+
+
+@dataclass(frozen=True)
+class Spectral:
+    """A spectral response: relative r, g, b sensitivities and their peak QE.
+
+    Attributes:
+        filters_path: CSV of relative spectral sensitivities (columns wavelength_nm, r, g, b).
+        peak_qe: scale of the relative curves to absolute QE (e- per photon).
+    """
+
+    filters_path: Path
+    peak_qe: float
+
+
+@dataclass(frozen=True)
+class Companding:
+    """On-sensor companding of a capture: the ADC digitises ``linear_bits`` bits, and a piecewise-linear curve
+    (``knees``: (linear DN, output DN) points, both increasing, from (0, 0) to (2^linear_bits - 1, 2^adc_bits - 1))
+    compresses them into the preset's ``adc_bits`` (e.g. the 20/24-bit HDR output of onsemi parts companded to
+    12 bits). The black level is added before companding; ``*_e`` outputs undo it (:func:`decompand`).
+
+    Attributes:
+        linear_bits: bits of the linear ADC code.
+        knees: ((linear DN, output DN), ...) float pairs.
+    """
+
+    linear_bits: int
+    knees: tuple
 
 
 @dataclass(frozen=True)
@@ -96,6 +130,7 @@ class CaptureSpec:
             (several: a chopped exposure integrating their union); :mod:`lfmbench.sensor.plan`.
         readout: global or rolling shutter and line time (:class:`lfmbench.sensor.plan.Readout`; unset fields
             come from the preset's ``readout``, then from the dataset).
+        companding: on-sensor companding of its code (:class:`Companding`; ``None``: linear ``adc_bits``).
     """
 
     photodiode: str
@@ -104,6 +139,7 @@ class CaptureSpec:
     read_noise_e: float
     exposure: Any = "short"
     readout: Readout = field(default_factory=Readout)
+    companding: Companding | None = None
 
 
 @dataclass(frozen=True)
@@ -198,13 +234,24 @@ class SensorPreset:
         return Readout(own.shutter or top.shutter,
                        own.line_time_s if own.line_time_s is not None else top.line_time_s)
 
+    def linear_max_dn(self, capture: str) -> int:
+        """Largest linear ADC code of ``capture`` (DN): 2^bits - 1, or 2^linear_bits - 1 before its companding."""
+        comp = self.captures[capture].companding
+        return self.max_dn if comp is None else 2 ** comp.linear_bits - 1
+
     def dn_per_volt(self, capture: str) -> float:
-        """ADC gain of ``capture`` in DN/V: (2^bits - 1 - black_level) / voltage_swing."""
-        return (self.max_dn - self.black_level_dn) / self.captures[capture].voltage_swing_v
+        """ADC gain of ``capture`` in DN/V: (2^bits - 1 - black_level) / voltage_swing (linear DN before any
+        companding)."""
+        return (self.linear_max_dn(capture) - self.black_level_dn) / self.captures[capture].voltage_swing_v
 
     def system_gain(self, capture: str) -> float:
         """Overall system gain K of ``capture`` in DN/e- [EMVA1288]_ (conversion gain x ADC gain)."""
         return self.captures[capture].conversion_gain_v_per_e * self.dn_per_volt(capture)
+
+    def spectral_of(self, photodiode: str) -> Spectral:
+        """The spectral response of ``photodiode``: its own, else the preset's."""
+        own = self.photodiodes[photodiode].spectral
+        return own if own is not None else Spectral(self.filters_path, self.peak_qe)
 
     def saturation_capacity_e(self, capture: str) -> float:
         """Electrons at which ``capture`` clips: min(full well, voltage swing / conversion gain), in e-."""
@@ -219,9 +266,18 @@ def _rebuild_preset(state: dict[str, Any]) -> SensorPreset:
     return SensorPreset(**state)
 
 
+def preset_registry() -> Registry:
+    """The registry of shipped presets: name -> its YAML file (``lfmbench/configs/sensors/<name>.yaml``; adding a
+    preset is adding its file). Built from the directory on each call, so a file added at run time is found."""
+    reg = Registry("sensor preset")
+    for f in sorted(PRESET_DIR.glob("*.yaml")):
+        reg.register(f.stem, f)
+    return reg
+
+
 def available_presets() -> list[str]:
-    """Names of the shipped presets (files ``lfmbench/configs/sensors/<name>.yaml``)."""
-    return sorted(p.stem for p in PRESET_DIR.glob("*.yaml"))
+    """Names of the shipped presets (:func:`preset_registry`), sorted."""
+    return list(preset_registry().names())
 
 
 def load_preset(preset: "str | Path | SensorPreset | Mapping[str, Any]") -> SensorPreset:
@@ -240,11 +296,11 @@ def load_preset(preset: "str | Path | SensorPreset | Mapping[str, Any]") -> Sens
     text = str(preset)
     path = Path(text)
     if path.suffix.lower() not in (".yaml", ".yml", ".json") and not path.exists():
-        candidate = PRESET_DIR / f"{text}.yaml"
-        if not candidate.exists():
-            raise ValueError(f"preset: unknown sensor preset {brief(text)}; shipped presets are {available_presets()} "
+        reg = preset_registry()
+        if text not in reg:
+            raise ValueError(f"preset: unknown sensor preset {brief(text)}; shipped presets are {reg.names()} "
                              "or give a path to a YAML file")
-        path = candidate
+        path = reg.get(text)
     resolved = path.resolve()
     if not resolved.is_file():
         raise ValueError(f"preset: file {resolved} does not exist")
@@ -290,6 +346,62 @@ def _entries(data: Mapping[str, Any], section: str, names: Sequence[str] | None,
 MAX_ENTRIES = 8
 
 
+def _parse_spectral(raw: Any, field: str, source: str) -> Spectral:
+    """A ``spectral`` mapping (``filters``: a CSV in lfmbench/data or next to the preset, ``peak_qe``), checked."""
+    check_keys(raw, field, source, optional={"filters", "peak_qe"})
+    peak_qe = get_number(raw, "peak_qe", source, f"{field}.", lo=0, lo_open=True, hi=1.0)
+    filters = raw.get("filters")
+    if not isinstance(filters, str) or not filters:
+        raise ValueError(f"{source}: field '{field}.filters' must be a file name, got {brief(filters)}")
+    fpath = Path(filters)
+    if not fpath.is_absolute():
+        here = Path(source).parent if source != "<dict>" else None
+        cands = ([here / fpath] if here is not None else []) + [DATA_DIR / fpath]
+        fpath = next((c for c in cands if c.is_file()), cands[-1])
+    if not fpath.is_file():
+        raise ValueError(f"{source}: field '{field}.filters': file {brief(filters)} not found (looked next to the "
+                         f"preset and in {DATA_DIR})")
+    try:
+        _, names, vals = read_spectral_csv(fpath)
+    except ValueError as exc:
+        raise ValueError(f"{source}: field '{field}.filters': {exc}") from exc
+    if [n.lower() for n in names] != ["r", "g", "b"]:
+        raise ValueError(f"{source}: field '{field}.filters': {fpath} must have columns wavelength_nm,r,g,b, "
+                         f"got {names}")
+    if float(vals.max()) * peak_qe > 1.0 + 1e-9:
+        raise ValueError(f"{source}: field '{field}.peak_qe': peak_qe x the largest relative sensitivity "
+                         f"{float(vals.max()):.4g} = {float(vals.max()) * peak_qe:.4g} is a QE above 1")
+    return Spectral(fpath, peak_qe)
+
+
+def _parse_companding(raw: Any, field: str, source: str, bits: int, black: float) -> Companding | None:
+    """A capture's ``companding`` mapping (``linear_bits``, ``knees``), checked; ``None`` when absent."""
+    if raw is None:
+        return None
+    check_keys(raw, field, source, optional={"linear_bits", "knees"})
+    lb = get_number(raw, "linear_bits", source, f"{field}.", lo=bits, hi=32, integer=True)
+    knees = raw.get("knees")
+    if not isinstance(knees, (list, tuple)) or not 2 <= len(knees) <= 32:
+        raise ValueError(f"{source}: field '{field}.knees' must be a list of 2 to 32 [linear_dn, output_dn] "
+                         f"points, got {brief(knees)}")
+    pts = []
+    for i, k in enumerate(knees):
+        if not isinstance(k, (list, tuple)) or len(k) != 2:
+            raise ValueError(f"{source}: field '{field}.knees[{i}]' must be [linear_dn, output_dn], got {brief(k)}")
+        pts.append((float(check_number(k[0], f"{field}.knees[{i}][0]", source, lo=0, hi=2 ** lb - 1)),
+                    float(check_number(k[1], f"{field}.knees[{i}][1]", source, lo=0, hi=2 ** bits - 1))))
+    if pts[0] != (0.0, 0.0) or pts[-1] != (float(2 ** lb - 1), float(2 ** bits - 1)):
+        raise ValueError(f"{source}: field '{field}.knees' must run from [0, 0] to [{2 ** lb - 1}, {2 ** bits - 1}] "
+                         f"(the linear and the output code ranges), got {pts[0]} .. {pts[-1]}")
+    for i in range(1, len(pts)):
+        if not (pts[i][0] > pts[i - 1][0] and pts[i][1] > pts[i - 1][1]):
+            raise ValueError(f"{source}: field '{field}.knees[{i}]' must be above knee {i - 1} in both codes "
+                             "(companding is strictly increasing)")
+    if black > 0 and not pts[1][0] >= black:
+        raise ValueError(f"{source}: field '{field}.knees[1]' must lie at or above black_level_dn = {black:g}")
+    return Companding(int(lb), tuple(pts))
+
+
 def preset_from_dict(data: Mapping[str, Any], source: str = "<dict>") -> SensorPreset:
     """Validate a plain mapping (the YAML structure of ``configs/sensors/ovt.yaml``) into a :class:`SensorPreset`.
 
@@ -327,26 +439,8 @@ def preset_from_dict(data: Mapping[str, Any], source: str = "<dict>") -> SensorP
     spectral = data.get("spectral")
     if spectral is None:
         raise ValueError(f"{source}: missing field 'spectral'")
-    check_keys(spectral, "spectral", source, optional={"filters", "peak_qe"})
-    peak_qe = get_number(spectral, "peak_qe", source, "spectral.", lo=0, lo_open=True, hi=1.0)
-    filters = spectral.get("filters")
-    if not isinstance(filters, str) or not filters:
-        raise ValueError(f"{source}: field 'spectral.filters' must be a file name, got {brief(filters)}")
-    fpath = Path(filters)
-    if not fpath.is_absolute():
-        here = Path(source).parent if source != "<dict>" else None
-        cands = ([here / fpath] if here is not None else []) + [DATA_DIR / fpath]
-        fpath = next((c for c in cands if c.is_file()), cands[-1])
-    if not fpath.is_file():
-        raise ValueError(f"{source}: field 'spectral.filters': file {brief(filters)} not found (looked next to the "
-                         f"preset and in {DATA_DIR})")
-    try:
-        _, names, _ = read_spectral_csv(fpath)
-    except ValueError as exc:
-        raise ValueError(f"{source}: field 'spectral.filters': {exc}") from exc
-    if [n.lower() for n in names] != ["r", "g", "b"]:
-        raise ValueError(f"{source}: field 'spectral.filters': {fpath} must have columns wavelength_nm,r,g,b, "
-                         f"got {names}")
+    top_spectral = _parse_spectral(spectral, "spectral", source)
+    fpath, peak_qe = top_spectral.filters_path, top_spectral.peak_qe
 
     pds: dict[str, PhotodiodeSpec] = {}
     for pd, d, pre in _entries(data, "photodiodes", PHOTODIODES if split else None, PhotodiodeSpec, source):
@@ -356,6 +450,8 @@ def preset_from_dict(data: Mapping[str, Any], source: str = "<dict>") -> SensorP
             dark_current_e_per_s=get_number(d, "dark_current_e_per_s", source, pre, lo=0, default=0.0),
             dsnu_e=get_number(d, "dsnu_e", source, pre, lo=0, default=0.0),
             prnu=get_number(d, "prnu", source, pre, lo=0, hi=0.5, default=0.0),
+            spectral=_parse_spectral(d["spectral"], f"{pre}spectral", source) if d.get("spectral") is not None
+            else None,
         )
 
     caps: dict[str, CaptureSpec] = {}
@@ -376,7 +472,11 @@ def preset_from_dict(data: Mapping[str, Any], source: str = "<dict>") -> SensorP
             read_noise_e=get_number(d, "read_noise_e", source, pre, lo=0),
             exposure=exposure,
             readout=parse_readout(d.get("readout"), f"{pre}readout", source),
+            companding=_parse_companding(d.get("companding"), f"{pre}companding", source, bits, black),
         )
+        if split and caps[cap].companding is not None:
+            raise ValueError(f"{source}: field '{pre}companding': the split pixel's chain reads linear codes; a "
+                             "companded plan needs architecture 'multi_photodiode'")
     check_plan(arch, pds, caps, source)
     reference = data.get("reference", ARCHITECTURES[arch].reference(caps))
     if reference not in caps:

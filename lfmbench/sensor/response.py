@@ -23,20 +23,24 @@ from lfmbench.sensor.spectral_data import band_widths_nm, read_spectral_csv, wav
 __all__ = ["spectral_qe", "electron_weights", "mosaic", "ideal_electrons"]
 
 
-def spectral_qe(preset: SensorPreset | str, wavelengths_nm: Sequence[float] | torch.Tensor) -> np.ndarray:
+def spectral_qe(preset: SensorPreset | str, wavelengths_nm: Sequence[float] | torch.Tensor,
+                photodiode: str | None = None) -> np.ndarray:
     """Absolute spectral QE of the r, g, b pixels (e- per incident photon, colour filter included).
 
-    QE_c(lambda) = peak_qe x S_c(lambda), S_c the preset's relative sensitivity curves linearly interpolated to
-    ``wavelengths_nm`` (0 outside the measured range).
+    QE_c(lambda) = peak_qe x S_c(lambda), S_c the preset's relative sensitivity curves (``photodiode``'s own when
+    it has them, :meth:`SensorPreset.spectral_of`) linearly interpolated to ``wavelengths_nm`` (0 outside the
+    measured range).
 
     Returns:
         (3, C) float64 array, dimensionless.
     """
     preset = load_preset(preset)
     wl = wavelengths_array(wavelengths_nm)
-    fwl, _, vals = read_spectral_csv(preset.filters_path)
+    sp = preset.spectral_of(photodiode) if photodiode is not None else None
+    path, peak = (sp.filters_path, sp.peak_qe) if sp is not None else (preset.filters_path, preset.peak_qe)
+    fwl, _, vals = read_spectral_csv(path)
     rel = np.stack([np.interp(wl, fwl, vals[:, k], left=0.0, right=0.0) for k in range(3)])
-    return preset.peak_qe * np.clip(rel, 0.0, None)
+    return peak * np.clip(rel, 0.0, None)
 
 
 def electron_weights(preset: SensorPreset | str, wavelengths_nm: Sequence[float] | torch.Tensor,
@@ -64,7 +68,7 @@ def electron_weights(preset: SensorPreset | str, wavelengths_nm: Sequence[float]
             dl = np.full(wl.size, float(dl[0]))
         if dl.size != wl.size or not np.all(np.isfinite(dl)) or np.any(dl <= 0):
             raise ValueError(f"bandwidths_nm must hold {wl.size} finite values > 0 (nm)")
-    qe = spectral_qe(preset, wl)
+    qe = spectral_qe(preset, wl, photodiode)
     ff = preset.photodiodes[photodiode].fill_factor
     w = qe * (preset.pixel_area_m2 * ff) * dl[None, :] * (wl[None, :] * M_PER_NM) / PLANCK_TIMES_C_J_M
     return torch.as_tensor(w, dtype=dtype, device=device)

@@ -175,3 +175,21 @@ def test_rolling_weights_at_the_lamps_rows_are_the_full_computations():
         assert np.array_equal(part.transpose(0, 2, 1, 3)[mask], full.transpose(0, 2, 1, 3)[mask])
         assert not part.transpose(0, 2, 1, 3)[~mask].any()
         assert mask.sum() == 3 + 30 + 1 + 18
+
+
+@pytest.mark.parametrize("name, checked", [("imx490_4read", ("sp1_hcg", "sp1_lcg", "sp2_hcg", "sp2_lcg")),
+                                           ("mt9v024", ("main",)), ("ar0132at", ("t1",))])
+def test_dataset_yields_the_general_plans_of_real_presets(corpus, name, checked):
+    """Four reads of two photodiodes, a companded capture, three staggered exposures: every capture comes out, and
+    the ``checked`` ones (those whose input-referred noise the dark test corpus resolves) estimate the ground truth
+    in the reference units (decompanded where the part compands)."""
+    p = load_preset(name)
+    s = LFMCaptureDataset(corpus, split="all", sensor=name, frames=2, cache_dir=False)[0]
+    assert s["saturated"].shape == (2, len(p.captures), 16, 24) and s["meta"]["architecture"] == p.architecture
+    for i, c in enumerate(p.captures):
+        assert s[c].shape == (2, 1, 16, 24) and float(s[c].max()) <= p.max_dn
+        if c in checked:
+            ok = ~s["saturated"][:, i:i + 1] & (s["gt"] > 5 * p.captures[c].read_noise_e)
+            assert ok.sum() > 20
+            rel = ((s[f"{c}_e"] - s["gt"])[ok].mean() / s["gt"][ok].mean()).abs()
+            assert rel < 0.1, (c, float(rel))

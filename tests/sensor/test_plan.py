@@ -73,7 +73,7 @@ def test_exposure_groups_share_charge_only_for_same_photodiode_and_windows():
 
 
 def test_registry_names_every_architecture():
-    assert list(ARCHITECTURES) == ["split_pixel", "lofic", "staggered", "chopped", "single"]
+    assert list(ARCHITECTURES) == ["split_pixel", "lofic", "staggered", "chopped", "single", "multi_photodiode"]
 
 
 def test_single_plan_loads(tmp_path):
@@ -147,3 +147,25 @@ def test_staggered_needs_longest_first_and_lofic_hcg_first(tmp_path):
         load_preset(_write(tmp_path, e, "bad2.yaml"))
     e["captures"] = dict(reversed(list(e["captures"].items())))
     assert load_preset(_write(tmp_path, copy.deepcopy(e), "ok2.yaml")).exposures == {"hcg": ("hcg", "lcg")}
+
+
+def test_generic_registry_holds_architectures_and_presets():
+    from lfmbench.registry import Registry
+    from lfmbench.sensor.plan import ARCHITECTURE_REGISTRY
+    from lfmbench.sensor.preset import available_presets, preset_registry
+
+    assert isinstance(ARCHITECTURE_REGISTRY, Registry) and list(ARCHITECTURE_REGISTRY.names()) == list(ARCHITECTURES)
+    reg = preset_registry()
+    assert list(reg.names()) == available_presets() and "imx490_4read" in reg and reg.get("ovt").name == "ovt.yaml"
+    with pytest.raises(ValueError, match=r"unknown sensor preset 'nope'; valid choices: \["):
+        reg.get("nope")
+    r = Registry("thing")
+    r.register("a", 1)
+
+    @r.register("b")
+    def b():
+        return 2
+
+    assert r.get("b") is b and list(r) == ["a", "b"] and "a" in r
+    with pytest.raises(ValueError, match="already registered"):
+        r.register("a", 3)
