@@ -17,7 +17,7 @@ from typing import Any, List, Optional
 import typer
 from typer.core import TyperGroup
 
-from lfmbench.cli import corpus, demo, evaluate, paper, render, train
+from lfmbench.cli import bench, corpus, demo, evaluate, paper, render, train
 
 #: Key of ``ctx.meta`` set by ``--debug``.
 DEBUG_KEY = "lfmbench.debug"
@@ -79,7 +79,7 @@ def _root(ctx: typer.Context, limit: Optional[List[str]] = typer.Option(
 
 
 #: Command modules, in the order their commands appear in ``--help``.
-COMMAND_MODULES = (paper, render, corpus, train, evaluate, demo)
+COMMAND_MODULES = (paper, bench, render, corpus, train, evaluate, demo)
 
 for _mod in COMMAND_MODULES:
     _mod.register(app)
