@@ -398,12 +398,12 @@ def write_report(res: BenchResult, path: Path, images: Sequence[Path], image_bas
         lines += [f"![{im.stem}]({os.path.relpath(im, base)})", ""]
     cov = res.cover
     fin = np.isfinite(cov)
+    seq_text = (f"median {np.median(cov[fin]):.0f}, max {np.max(cov[fin]):.0f} over the {int(fin.sum())} frequencies "
+                "where it happens; " if fin.any() else "")
     lines += ["## Sequences", "",
               f"At {1 / m.frame_time_s:.2f} fps, frames to visit every phase within {res.options['cover_tol'] * 100:g} % "
-              f"of the period: median {np.median(cov[fin]):.0f}, max {np.max(cov[fin]):.0f} over the "
-              f"{int(fin.sum())} frequencies where it happens; never (commensurate, or > 10^6 frames) at "
-              f"{int((~fin).sum())} frequencies" + (f" (e.g. {res.grid.freqs_hz[~fin][0]:.1f} Hz)" if (~fin).any()
-                                                     else "") + ".", ""]
+              f"of the period: {seq_text}never (commensurate, or > 10^6 frames) at {int((~fin).sum())} frequencies"
+              + (f" (e.g. {res.grid.freqs_hz[~fin][0]:.1f} Hz)" if (~fin).any() else "") + ".", ""]
     if res.measured:
         lines += ["## Measured captures", "", "| ROI | panel | f [Hz] | D | FMI meas. / sim. | MMP meas. / sim. |",
                   "|---|---|---|---|---|---|"]
