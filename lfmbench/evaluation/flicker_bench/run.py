@@ -347,12 +347,12 @@ def plot_maps(res: BenchResult, out_dir: Path, stem: str = "flicker_bench", meas
             ax.set_xlabel("PWM frequency [Hz]", fontsize=8)
         for ax in axes[:, 0]:
             ax.set_ylabel("duty", fontsize=8)
-        note = (" | hatched: missed (< 0.5); bar: green = never missed at duty >= 10 %" if stem_key == "miss"
-                else "")
+        note = ("\nhatched: missed (output < 0.5 x steady at some phase); bar above a panel: green = never missed "
+                "at any duty >= 10 %" if stem_key == "miss" else "")
         fig.suptitle(f"{res.model.preset.name} ({res.model.preset.architecture}): {title}{note}\n"
                      f"star = worst cell; {res.model.frame_time_s * 1e3:.2f} ms frames, "
-                     f"luminance {res.grid.lums[0]:.3g}-{res.grid.lums[-1]:.3g} cd/m^2", fontsize=8)
-        fig.tight_layout(rect=(0, 0, 0.92, 0.95))
+                     f"luminance {res.grid.lums[0]:.3g}-{res.grid.lums[-1]:.3g} cd/m^2", fontsize=7)
+        fig.tight_layout(rect=(0, 0, 0.92, 0.93 if rows > 1 else 0.86))
         cax = fig.add_axes((0.93, 0.15, 0.015, 0.7))
         fig.colorbar(im, cax=cax).ax.tick_params(labelsize=7)
         path = out_dir / f"{stem}_{stem_key}.png"
