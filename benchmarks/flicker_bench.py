@@ -24,9 +24,9 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from lfmbench.evaluation.flicker_bench import run as fbr  # noqa: E402
-from lfmbench.evaluation.flicker_bench.exact import phase_map  # noqa: E402
-from lfmbench.evaluation.flicker_bench.model import build_model  # noqa: E402
+from lfmbench.flicker_bench import run as fbr  # noqa: E402
+from lfmbench.flicker_bench.exact import phase_map  # noqa: E402
+from lfmbench.flicker_bench.model import build_model  # noqa: E402
 from lfmbench.fileio import atomic_write_text  # noqa: E402
 from lfmbench.sensor import available_presets  # noqa: E402
 
@@ -67,7 +67,7 @@ def reports(presets: list[str], n_freq: int) -> None:
 def _dense_error(model, method, cells, lums, refine):
     """Max |error| of rel_min and of MMP of ``method`` with ``refine`` parts against 8192-point phase sampling."""
     from lfmbench.baselines import REGISTRY
-    from lfmbench.evaluation.flicker_bench.exact import capture_state, evaluate_panels
+    from lfmbench.flicker_bench.exact import capture_state, evaluate_panels
     from lfmbench.flicker import pwm_exposure
     import torch
 

@@ -30,6 +30,7 @@ LAYERS = (
     ("lfmbench.baselines",),
     ("lfmbench.train",),
     ("lfmbench.evaluation",),
+    ("lfmbench.flicker_bench",),  # the virtual P2020 flicker bench: sensor plans, merges and P2020 metrics on a target
     ("lfmbench.paper",),
     ("lfmbench.cli",),
 )

@@ -1,4 +1,4 @@
-"""``lfmbench flicker-bench``: the virtual IEEE P2020 flicker test bench (:mod:`lfmbench.evaluation.flicker_bench`,
+"""``lfmbench flicker-bench``: the virtual IEEE P2020 flicker test bench (:mod:`lfmbench.flicker_bench`,
 docs/guide/flicker-bench.md). torch, numpy and matplotlib are imported when the command runs."""
 from __future__ import annotations
 
@@ -75,8 +75,8 @@ def register(app: typer.Typer) -> None:
                                                                           "here (maps linked relative to it)")) -> None:
         """Flicker KPIs (P2020 FMI, MMP, FDI) of a sensor's captures and merges over PWM frequency, duty, luminance
         and every phase, exactly; sequences, noise and real captures beside them (docs/guide/flicker-bench.md)."""
-        from lfmbench.evaluation.flicker_bench import model as fbm
-        from lfmbench.evaluation.flicker_bench import run as fbr
+        from lfmbench.flicker_bench import model as fbm
+        from lfmbench.flicker_bench import run as fbr
         from lfmbench.fileio import AtomicWriteError
 
         if (capture_series is None) != (capture_meta is None):
@@ -93,7 +93,7 @@ def register(app: typer.Typer) -> None:
             grid = fbr.check_grid(grid)
             captures = []
             if capture_series is not None:
-                from lfmbench.evaluation.flicker_bench.realcap import read_captures
+                from lfmbench.flicker_bench.realcap import read_captures
 
                 captures = read_captures(capture_series, capture_meta)
             methods = fbr.bench_methods(model, method or ())

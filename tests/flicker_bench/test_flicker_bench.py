@@ -1,4 +1,4 @@
-"""The virtual P2020 flicker bench (lfmbench.evaluation.flicker_bench) against independent answers.
+"""The virtual P2020 flicker bench (lfmbench.flicker_bench) against independent answers.
 
 - All-phase extremes: against exact rational integration of the pulse train (``fractions.Fraction`` on the binary
   values of the float inputs, evaluated at every rational breakpoint, written here independently of the bench)
@@ -19,10 +19,10 @@ import pytest
 import torch
 
 from lfmbench.baselines import REGISTRY
-from lfmbench.evaluation.flicker_bench.exact import band_measure, phase_map
-from lfmbench.evaluation.flicker_bench.model import BenchError, build_model
-from lfmbench.evaluation.flicker_bench.run import Grid, check_grid
-from lfmbench.evaluation.flicker_bench.sequence import frames_to_cover, max_gap, sequence_kpis, sequence_series
+from lfmbench.flicker_bench.exact import band_measure, phase_map
+from lfmbench.flicker_bench.model import BenchError, build_model
+from lfmbench.flicker_bench.run import Grid, check_grid
+from lfmbench.flicker_bench.sequence import frames_to_cover, max_gap, sequence_kpis, sequence_series
 from lfmbench.flicker import pwm_exposure
 from lfmbench.metrics.flicker import fdi, fmi, mmp
 
@@ -89,7 +89,7 @@ def test_rolling_rows_shift_the_phase_only():
 
 def _dense_panel(model, method, f, d, lum, n=8001):
     """The merge output at n phases, by brute force through the same read-out."""
-    from lfmbench.evaluation.flicker_bench.exact import capture_state, evaluate_panels
+    from lfmbench.flicker_bench.exact import capture_state, evaluate_panels
 
     T = 1 / f
     ph = np.linspace(0, T, n, endpoint=False)

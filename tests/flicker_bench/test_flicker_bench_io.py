@@ -10,10 +10,10 @@ import torch
 from typer.testing import CliRunner
 
 from lfmbench.cli import app
-from lfmbench.evaluation.flicker_bench.model import BenchError, build_model
-from lfmbench.evaluation.flicker_bench.noise import noise_kpis, wilson_interval
-from lfmbench.evaluation.flicker_bench.realcap import measured_kpis, read_captures
-from lfmbench.evaluation.flicker_bench.sequence import sequence_series
+from lfmbench.flicker_bench.model import BenchError, build_model
+from lfmbench.flicker_bench.noise import noise_kpis, wilson_interval
+from lfmbench.flicker_bench.realcap import measured_kpis, read_captures
+from lfmbench.flicker_bench.sequence import sequence_series
 from lfmbench.metrics.flicker import fdi, fmi, mmp
 
 

@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from lfmbench.evaluation.flicker_bench.model import BenchError, MAX_FREQUENCY_HZ, MIN_FREQUENCY_HZ
+from lfmbench.flicker_bench.model import BenchError, MAX_FREQUENCY_HZ, MIN_FREQUENCY_HZ
 from lfmbench.metrics.flicker import fdi, fmi, mmp
 
 __all__ = ["Capture", "read_captures", "measured_kpis", "MAX_FRAMES", "MAX_ROIS"]

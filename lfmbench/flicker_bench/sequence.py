@@ -30,8 +30,8 @@ from typing import Callable, Mapping
 import numpy as np
 import torch
 
-from lfmbench.evaluation.flicker_bench.exact import capture_state, evaluate_panels, on_fraction
-from lfmbench.evaluation.flicker_bench.model import SensorModel
+from lfmbench.flicker_bench.exact import capture_state, evaluate_panels, on_fraction
+from lfmbench.flicker_bench.model import SensorModel
 from lfmbench.flicker import frame_phase
 from lfmbench.metrics.flicker import fdi, fmi, mmp
 
@@ -49,7 +49,7 @@ def sequence_phases(frame_time_s: float, period_s: np.ndarray, n_frames: int, ph
 def sequence_series(model: SensorModel, freqs_hz: np.ndarray, duties: np.ndarray, lums: np.ndarray,
                     methods: Mapping[str, Callable], n_frames: int, phase0_s: float = 0.0) -> dict[str, np.ndarray]:
     """Noise-free ROI values (reference e-) of every panel in frames 0..N-1: {panel: (C, L, N)}, cells as in
-    :func:`lfmbench.evaluation.flicker_bench.exact.phase_map`."""
+    :func:`lfmbench.flicker_bench.exact.phase_map`."""
     f = np.repeat(np.asarray(freqs_hz, np.float64), len(duties))
     d = np.tile(np.asarray(duties, np.float64), len(freqs_hz))
     T = 1.0 / f

@@ -36,7 +36,7 @@ from typing import Callable, Mapping, Sequence
 import numpy as np
 import torch
 
-from lfmbench.evaluation.flicker_bench.model import CaptureModel, SensorModel
+from lfmbench.flicker_bench.model import CaptureModel, SensorModel
 from lfmbench.flicker import pwm_exposure
 
 __all__ = ["EXACT_METHODS", "SEQUENCE_METHODS", "breakpoints", "on_fraction", "PhaseMap", "phase_map",

@@ -19,10 +19,10 @@ from typing import Any, Callable, Mapping, Sequence
 import numpy as np
 import torch
 
-from lfmbench.evaluation.flicker_bench.exact import EXACT_METHODS, SEQUENCE_METHODS, capture_state, evaluate_panels, \
+from lfmbench.flicker_bench.exact import EXACT_METHODS, SEQUENCE_METHODS, capture_state, evaluate_panels, \
     phase_map
-from lfmbench.evaluation.flicker_bench.model import BenchError, MAX_FREQUENCY_HZ, MIN_FREQUENCY_HZ, SensorModel
-from lfmbench.evaluation.flicker_bench.sequence import frames_to_cover, sequence_kpis, sequence_series
+from lfmbench.flicker_bench.model import BenchError, MAX_FREQUENCY_HZ, MIN_FREQUENCY_HZ, SensorModel
+from lfmbench.flicker_bench.sequence import frames_to_cover, sequence_kpis, sequence_series
 from lfmbench.fileio import atomic_save_figure, atomic_write_json, atomic_write_text
 
 __all__ = ["BENCH_VERSION", "Grid", "default_grid", "check_grid", "bench_methods", "BenchResult", "run_bench",
@@ -180,7 +180,7 @@ def run_bench(model: SensorModel, grid: Grid, methods: Mapping[str, Callable], *
             c["on_frac_max"] = np.repeat(pm.on_max[p][:, None], L, axis=1)
         cols[p] = c
     if noise_draws:
-        from lfmbench.evaluation.flicker_bench.noise import noise_kpis
+        from lfmbench.flicker_bench.noise import noise_kpis
 
         t0 = time.perf_counter()
         nk = noise_kpis(model, grid.freqs_hz, grid.duties, grid.lums, methods, pm.off, noise_draws, roi_px, seed,
@@ -420,7 +420,7 @@ def compare_captures(model: SensorModel, methods: Mapping[str, Callable], captur
     """Measured KPIs of real captures (:mod:`~.realcap`) beside the simulation at the same frequency, duty and
     luminance: all-phase exact FMI / MMP and the worst output over phase / steady value, and the KPIs of a
     simulated sequence of as many frames from phase 0. The measured ``rel_min`` is min / mean of the frames."""
-    from lfmbench.evaluation.flicker_bench.realcap import measured_kpis
+    from lfmbench.flicker_bench.realcap import measured_kpis
 
     std = next((m for m in methods), model.names[0])
     out = []

@@ -1,7 +1,7 @@
 r"""KPIs with the preset's noise chain: Monte Carlo over frames at uniformly drawn PWM phases.
 
 Each draw is one frame: a phase :math:`\varphi \sim U[0, T)`, the exact mean electrons of every exposure group
-(:mod:`~lfmbench.evaluation.flicker_bench.model`), then the preset's own chain
+(:mod:`~lfmbench.flicker_bench.model`), then the preset's own chain
 :func:`lfmbench.sensor.simulate_plan_electrons` (PRNU, dark signal, shot noise, full-well clip, DSNU, read noise,
 conversion gain, swing clip, ADC quantisation, saturated flags, input referral) on the ``roi_px`` pixels of the
 ROI, the fusion methods per pixel, and the ROI mean. Over ``draws`` frames per cell the P2020 KPIs are computed with
@@ -21,8 +21,8 @@ from typing import Callable, Mapping
 import numpy as np
 import torch
 
-from lfmbench.evaluation.flicker_bench.exact import on_fraction
-from lfmbench.evaluation.flicker_bench.model import SensorModel
+from lfmbench.flicker_bench.exact import on_fraction
+from lfmbench.flicker_bench.model import SensorModel
 from lfmbench.metrics.flicker import fdi, fmi, mmp
 from lfmbench.sensor import simulate_plan_electrons
 
