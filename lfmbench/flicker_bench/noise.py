@@ -10,9 +10,11 @@ interval (E. B. Wilson, "Probable inference, the law of succession, and statisti
 209-212), beside the *noise floor*: the same KPIs of a steady light of the same mean (:math:`f_c = D`), so the
 share of MMP lost to noise, not to flicker, is read off directly.
 
-Approximation: every ROI pixel gets the CFA cell's mean response (:func:`~.model.luminance_rate`); the noise of an
-ROI over whole Bayer cells differs by the spread of the channels' signals (a few % of the noise for a white
-target). Everything else is the preset's chain itself, vectorised over cells, luminances and draws.
+Approximation: every ROI pixel gets the CFA cell's mean response (:func:`~.model.luminance_rate`) instead of its
+own channel's. Below saturation this changes nothing in the ROI mean's distribution up to quantisation: the sum of
+independent Poisson counts is Poisson with the summed mean, and read noise does not depend on the signal. It does
+matter near saturation, where a real Bayer ROI's channels clip at different luminances (over a range of the
+channels' response ratio); there the noisy columns describe a grey ROI of the same mean response.
 """
 from __future__ import annotations
 
