@@ -334,7 +334,7 @@ def plot_maps(res: BenchResult, out_dir: Path, stem: str = "flicker_bench", meas
             ax.set_xscale("log")
             kind = "capture" if p in res.model.names else ("merge" if res.exact[p] else "merge, approx.")
             ax.set_title(f"{p} ({kind})\nworst {z[i, j]:.2f} at {f[i]:.0f} Hz, D={d[j]:.2f}", fontsize=8,
-                         pad=9 if stem_key == "miss" else 4)
+                         pad=13 if stem_key == "miss" else 4)
             for mrec in measured:
                 if mrec.get("panel") == p:
                     v = mrec["rel_min_measured"] if stem_key == "miss" else mrec["mmp_measured"]
