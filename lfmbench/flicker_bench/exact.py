@@ -21,8 +21,10 @@ sub-interval once the crossings of any two captures' values are added as well. S
 carry linear pieces, whose one-sided end values (the merge evaluated on the end values with the flags of the
 interior) give min, max, mean, and the phase measure inside any band, in closed form. No phase is sampled.
 
-Merges outside that class (the noise test of ``flicker_aware`` switches at a root of a quadratic) are evaluated
-on ``refine`` equal parts of every sub-interval: approximate, with the error against dense sampling stated in
+Merges outside that class (the noise test of ``flicker_aware`` switches at a root of a quadratic) are checked for
+linearity on every piece: where the value at the midpoint is not the mean of the end values (relative
+:data:`LINEAR_RTOL`), the piece is halved, up to ``max_depth`` times. A switch is thereby located to
+:math:`2^{-\text{depth}}` of its piece; the error against dense sampling and the run time per depth are in
 docs/benchmarks/flicker-bench.md.
 
 Shapes: ``cells`` = frequency x duty pairs (flattened), ``L`` luminances, per cell ``K`` breakpoint intervals.
@@ -193,6 +195,8 @@ def _crossing(yl, yr, level):
     return np.where((t > 0) & (t < 1) & np.isfinite(t), t, 1.0)
 
 
+#: Relative tolerance of the linearity test of the methods outside :data:`EXACT_METHODS`.
+LINEAR_RTOL = 1e-9
 #: Merges that take the max or min of two captures: their maps need the crossings of capture pairs as well.
 PAIRWISE_METHODS = frozenset({"exposure_select_bounded"})
 
@@ -275,14 +279,14 @@ def _reduce(model, ya, yb, keep, h, pha, phb, g, n, off, delta, contrast, out, s
 
 
 def phase_map(model: SensorModel, freqs_hz: np.ndarray, duties: np.ndarray, lums: np.ndarray,
-              methods: Mapping[str, Callable], delta: float = 0.1, contrast: float = 0.1, refine: int = 4,
+              methods: Mapping[str, Callable], delta: float = 0.1, contrast: float = 0.1, max_depth: int = 40,
               chunk_cells: int = 1000) -> PhaseMap:
     """KPIs over every phase, exact (module docstring), for cells = ``freqs_hz`` x ``duties`` (flattened with the
     duty varying fastest) and each of ``lums`` (cd/m^2).
 
     Args:
         delta: MMP band (P2020 default 0.1). contrast: FDI threshold (P2020 default 0.1).
-        refine: equal parts per sub-interval for the methods outside :data:`EXACT_METHODS`.
+        max_depth: bisection depth for the methods outside :data:`EXACT_METHODS` (module docstring).
         chunk_cells: cells processed at once (bounds the memory).
     """
     f = np.repeat(np.asarray(freqs_hz, np.float64), len(duties))
@@ -346,32 +350,51 @@ def phase_map(model: SensorModel, freqs_hz: np.ndarray, duties: np.ndarray, lums
         start = B[ci, ki]
         mlf = {k: v[ci, li, ki] for k, v in ml.items()}
         mrf = {k: v[ci, li, ki] for k, v in mr.items()}
-        for meths, parts in ((exact_methods, 1), (other_methods, refine)):
-            if parts > 1:
-                if not meths:
-                    continue
-                u = np.arange(parts) / parts
-                ta2 = (ta[:, None] + (tb - ta)[:, None] * u).reshape(-1)
-                tb2 = (ta[:, None] + (tb - ta)[:, None] * (u + 1.0 / parts)).reshape(-1)
-                rep = np.repeat(np.arange(ta.size), parts)
+        rep0 = np.arange(ta.size)
+
+        def state(t, rep):
+            v, fl = capture_state(model, {c.name: torch.from_numpy(mlf[c.name][rep] + (mrf[c.name][rep]
+                                                                                        - mlf[c.name][rep]) * t)
+                                          for c in caps})
+            return v, fl
+
+        _, flags0 = state(0.5 * (ta + tb), rep0)           # the flags are constant on every exact piece
+
+        def reduce(ya, yb, keep, ta2, tb2, rep):
+            h = (tb2 - ta2) * w[rep] / Tc[rep]                                            # share of the period
+            pha = np.mod(start[rep] + ta2 * w[rep], Tc[rep])
+            phb = np.mod(start[rep] + tb2 * w[rep], Tc[rep])
+            _reduce(model, ya, yb, keep, h, pha, phb, g[rep], nc * L, off, delta, contrast, out, sl, L)
+
+        va, _ = state(ta, rep0)
+        vb, _ = state(tb, rep0)
+        ya = evaluate_panels(model, exact_methods, va, flags0)
+        yb = evaluate_panels(model, exact_methods, vb, flags0)
+        reduce(ya, yb, list(ya), ta, tb, rep0)
+        for name, fn in other_methods.items():
+            def ev(t, rep, name=name, fn=fn):
+                v, _ = state(t, rep)
+                return evaluate_panels(model, {name: fn}, v, flags0[:, rep])[name].numpy()
+
+            ta_, tb_, rep_ = ta, tb, rep0
+            ya_, yb_ = ev(ta_, rep_), ev(tb_, rep_)
+            done = []
+            for _ in range(max_depth):
+                tm_ = 0.5 * (ta_ + tb_)
+                ym_ = ev(tm_, rep_)
+                scale = np.maximum(np.maximum(np.abs(ya_), np.abs(yb_)), np.maximum(np.abs(ym_), 1.0))
+                lin = np.abs(ym_ - 0.5 * (ya_ + yb_)) <= LINEAR_RTOL * scale
+                done.append((ta_[lin], tb_[lin], ya_[lin], yb_[lin], rep_[lin]))
+                nl = ~lin
+                if not nl.any():
+                    break
+                ta_, tb_ = np.concatenate([ta_[nl], tm_[nl]]), np.concatenate([tm_[nl], tb_[nl]])
+                ya_, yb_ = np.concatenate([ya_[nl], ym_[nl]]), np.concatenate([ym_[nl], yb_[nl]])
+                rep_ = np.concatenate([rep_[nl], rep_[nl]])
             else:
-                ta2, tb2, rep = ta, tb, np.arange(ta.size)
-            tm = 0.5 * (ta2 + tb2)
-
-            def at(t, name):
-                return torch.from_numpy(mlf[name][rep] + (mrf[name][rep] - mlf[name][rep]) * t)
-
-            _, flags = capture_state(model, {c.name: at(tm, c.name) for c in caps})
-            va, _ = capture_state(model, {c.name: at(ta2, c.name) for c in caps})
-            vb, _ = capture_state(model, {c.name: at(tb2, c.name) for c in caps})
-            ya = evaluate_panels(model, meths, va, flags)
-            yb = evaluate_panels(model, meths, vb, flags)
-            keep = list(meths) if parts > 1 else list(ya)
-            h = (tb2 - ta2) * w[rep] / Tc[rep]                            # share of the period
-            pha = start[rep] + ta2 * w[rep]
-            phb = start[rep] + tb2 * w[rep]
-            _reduce(model, ya, yb, keep, h, np.mod(pha, Tc[rep]), np.mod(phb, Tc[rep]), g[rep], nc * L, off, delta,
-                    contrast, out, sl, L)
+                done.append((ta_, tb_, ya_, yb_, rep_))
+            cat = [np.concatenate([x[k] for x in done]) for k in range(5)]
+            reduce({name: torch.from_numpy(cat[2])}, {name: torch.from_numpy(cat[3])}, [name], cat[0], cat[1], cat[4])
     gt = model.gt_rate * (lums[None, :] * d[:, None] + bg)
     return PhaseMap(gt, off, out["vmin"], out["vmax"], out["pmin"], out["pmax"], out["mean"], out["mmp"], out["fdi"],
                     on_min, on_max)

@@ -37,7 +37,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from lfmbench.sensor import load_preset
-from lfmbench.sensor.plan import resolve_windows, total_length_s
+from lfmbench.sensor.plan import resolve_windows, total_length_s, windows_overlap
 
 __all__ = ["BenchError", "CaptureModel", "SensorModel", "build_model", "luminance_rate", "preset_sha256",
            "DEFAULT_SHORT_EXPOSURE_S", "DEFAULT_LONG_EXPOSURE_S", "DEFAULT_LINE_TIME_S", "MAX_ROI_ROWS",
@@ -249,6 +249,12 @@ def build_model(sensor, *, short_exposure_s: float | None = None, long_exposure_
     for k, cs in groups.items():
         if len({wins[c] for c in cs}) > 1:
             raise BenchError(f"--exposure: captures {list(cs)} read the same charge and need the same windows")
+    keys = list(groups)
+    for i, ka in enumerate(keys):
+        for kb in keys[i + 1:]:
+            if preset.captures[ka].photodiode == preset.captures[kb].photodiode and windows_overlap(wins[ka], wins[kb]):
+                raise BenchError(f"--exposure: the windows of capture '{kb}' overlap those of '{ka}' on the same "
+                                 f"photodiode '{preset.captures[ka].photodiode}' (one photodiode holds one charge)")
     if fps is None:
         frame_time = preset.frame_time_s if preset.frame_time_s else 1.0 / 30.0
     else:

@@ -133,7 +133,7 @@ def steady_values(model: SensorModel, duties: np.ndarray, lums: np.ndarray, meth
 
 def run_bench(model: SensorModel, grid: Grid, methods: Mapping[str, Callable], *, frames: int = 100,
               phase0_s: float = 0.0, cover_tol: float = 0.01, noise_draws: int = 0, roi_px: int = 4, seed: int = 0,
-              delta: float = 0.1, contrast: float = 0.1, refine: int = 4) -> BenchResult:
+              delta: float = 0.1, contrast: float = 0.1, max_depth: int = 40) -> BenchResult:
     """Every KPI of every panel over the grid (module docstrings of ``exact``, ``sequence``, ``noise``).
 
     Args:
@@ -150,7 +150,7 @@ def run_bench(model: SensorModel, grid: Grid, methods: Mapping[str, Callable], *
         raise BenchError("--noise-draws must be >= 0 and --roi-px >= 1")
     t = {}
     t0 = time.perf_counter()
-    pm = phase_map(model, grid.freqs_hz, grid.duties, grid.lums, methods, delta, contrast, refine)
+    pm = phase_map(model, grid.freqs_hz, grid.duties, grid.lums, methods, delta, contrast, max_depth)
     t["phase_map_s"] = time.perf_counter() - t0
     panels = model.names + list(methods)
     ND, L = grid.duties.size, grid.lums.size
@@ -191,7 +191,7 @@ def run_bench(model: SensorModel, grid: Grid, methods: Mapping[str, Callable], *
                 cols[p][f"{k}_noisy" if k in ("fmi", "mmp", "fdi") else k] = v
     exact = {p: (p in model.names or p in EXACT_METHODS) for p in panels}
     opts = {"frames": frames, "phase0_s": phase0_s, "cover_tol": cover_tol, "noise_draws": noise_draws,
-            "roi_px": roi_px, "seed": seed, "delta": delta, "contrast": contrast, "refine": refine,
+            "roi_px": roi_px, "seed": seed, "delta": delta, "contrast": contrast, "max_depth": max_depth,
             "off_e": pm.off}
     del C
     return BenchResult(model, grid, panels, exact, cols, cover, t, opts)
@@ -205,7 +205,7 @@ def _header(res: BenchResult) -> dict[str, Any]:
             "options": res.options, "units": {"*_e": "e- of the reference capture (the gt units)",
                                               "frequency_hz": "Hz", "luminance_cd_m2": "cd/m^2",
                                               "*_phase_s": "s from the frame start to an LED rising edge"},
-            "panels": {p: ("exact" if res.exact[p] else f"approximate (refine={res.options['refine']})")
+            "panels": {p: ("exact" if res.exact[p] else f"bisected (max_depth={res.options['max_depth']})")
                        for p in res.panels}}
 
 

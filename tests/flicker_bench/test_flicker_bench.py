@@ -191,5 +191,7 @@ def test_frame_time_shorter_than_plan_is_refused():
         build_model("staggered", fps=120.0)
     with pytest.raises(BenchError, match="^--exposure"):
         build_model("ovt", exposures={"nope": [[0, 1e-3]]})
+    with pytest.raises(BenchError, match="^--exposure: the windows of capture 'short' overlap"):
+        build_model("staggered", exposures={"short": [[0.0105, 2e-4]]})
     with pytest.raises(BenchError, match="^--exposure: captures"):
         build_model("ovt", exposures={"lpd_hcg": [[0, 1e-3]]})
