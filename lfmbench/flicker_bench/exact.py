@@ -279,7 +279,7 @@ def _reduce(model, ya, yb, keep, h, pha, phb, g, n, off, delta, contrast, out, s
 
 
 def phase_map(model: SensorModel, freqs_hz: np.ndarray, duties: np.ndarray, lums: np.ndarray,
-              methods: Mapping[str, Callable], delta: float = 0.1, contrast: float = 0.1, max_depth: int = 40,
+              methods: Mapping[str, Callable], delta: float = 0.1, contrast: float = 0.1, max_depth: int = 24,
               chunk_cells: int = 1000) -> PhaseMap:
     """KPIs over every phase, exact (module docstring), for cells = ``freqs_hz`` x ``duties`` (flattened with the
     duty varying fastest) and each of ``lums`` (cd/m^2).

@@ -133,7 +133,7 @@ def steady_values(model: SensorModel, duties: np.ndarray, lums: np.ndarray, meth
 
 def run_bench(model: SensorModel, grid: Grid, methods: Mapping[str, Callable], *, frames: int = 100,
               phase0_s: float = 0.0, cover_tol: float = 0.01, noise_draws: int = 0, roi_px: int = 4, seed: int = 0,
-              delta: float = 0.1, contrast: float = 0.1, max_depth: int = 40) -> BenchResult:
+              delta: float = 0.1, contrast: float = 0.1, max_depth: int = 24) -> BenchResult:
     """Every KPI of every panel over the grid (module docstrings of ``exact``, ``sequence``, ``noise``).
 
     Args:
@@ -332,7 +332,7 @@ def plot_maps(res: BenchResult, out_dir: Path, stem: str = "flicker_bench", meas
             i, j = np.unravel_index(np.argmin(zz), zz.shape)
             ax.plot(f[i], d[j], marker="*", ms=11, mfc="white", mec="black")
             ax.set_xscale("log")
-            kind = "capture" if p in res.model.names else ("merge" if res.exact[p] else "merge, approx.")
+            kind = "capture" if p in res.model.names else ("merge" if res.exact[p] else "merge, bisected")
             ax.set_title(f"{p} ({kind})\nworst {z[i, j]:.2f} at {f[i]:.0f} Hz, D={d[j]:.2f}", fontsize=8,
                          pad=13 if stem_key == "miss" else 4)
             for mrec in measured:
@@ -389,7 +389,7 @@ def write_report(res: BenchResult, path: Path, images: Sequence[Path], image_bas
     for p in res.panels:
         z = panel_worst(res, p, "rel_min")
         i, j = np.unravel_index(np.nanargmin(z), z.shape)
-        kind = "capture" if p in m.names else ("merge" if res.exact[p] else "merge (approx.)")
+        kind = "capture" if p in m.names else ("merge" if res.exact[p] else "merge (bisected)")
         mm = np.nanmin(res.columns[p]["mmp_all"])
         lines.append(f"| {p} | {kind} | {freq_ranges(res.grid.freqs_hz, never_missed(res, p))} | {z[i, j]:.2f} "
                      f"({res.grid.freqs_hz[i]:.0f} Hz, D={res.grid.duties[j]:.2f}) | {mm:.2f} |")

@@ -105,7 +105,8 @@ def _dense_panel(model, method, f, d, lum, n=8001):
 
 @pytest.mark.parametrize("sensor,method,f,d", [("staggered", "exposure_select_bounded", 97.0, 0.12),
                                               ("ovt", "saturated_exposure_corrected", 151.0, 0.3),
-                                              ("lofic", "exposure_select", 60.0, 0.2)])
+                                              ("lofic", "exposure_select", 60.0, 0.2),
+                                              ("ovt", "flicker_aware", 95.0, 0.2)])
 def test_merge_map_equals_dense_sampling(sensor, method, f, d):
     model = build_model(sensor)
     sat = sorted(model.saturation_luminance().values())
