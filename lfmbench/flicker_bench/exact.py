@@ -33,7 +33,7 @@ Phases in s, measured from the frame start to an LED rising edge.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable, Mapping, Sequence
+from typing import Callable, Mapping
 
 import numpy as np
 import torch
@@ -199,13 +199,6 @@ def _crossing(yl, yr, level):
 LINEAR_RTOL = 1e-9
 #: Merges that take the max or min of two captures: their maps need the crossings of capture pairs as well.
 PAIRWISE_METHODS = frozenset({"exposure_select_bounded"})
-
-
-def _first_per_group(mask: np.ndarray, g: np.ndarray, n: int) -> np.ndarray:
-    """Index of the first True of ``mask`` in each group of ``g`` (non-decreasing group ids 0..n-1)."""
-    idx = np.flatnonzero(mask)
-    _, first = np.unique(g[idx], return_index=True)
-    return idx[first]
 
 
 def _band(yl: float, yr: float, lo: float, hi: float) -> float:

@@ -153,7 +153,7 @@ def run_bench(model: SensorModel, grid: Grid, methods: Mapping[str, Callable], *
     pm = phase_map(model, grid.freqs_hz, grid.duties, grid.lums, methods, delta, contrast, max_depth)
     t["phase_map_s"] = time.perf_counter() - t0
     panels = model.names + list(methods)
-    ND, L = grid.duties.size, grid.lums.size
+    L = grid.lums.size
     steady = steady_values(model, grid.duties, grid.lums, methods)
     t0 = time.perf_counter()
     series = sequence_series(model, grid.freqs_hz, grid.duties, grid.lums, methods, frames, phase0_s)
@@ -165,7 +165,6 @@ def run_bench(model: SensorModel, grid: Grid, methods: Mapping[str, Callable], *
                       for f in grid.freqs_hz], np.float64)
     t["cover_s"] = time.perf_counter() - t0
     cols: dict[str, dict[str, np.ndarray]] = {}
-    C = grid.freqs_hz.size * ND
     for p in panels:
         st = np.tile(steady[p], (grid.freqs_hz.size, 1))                                  # (C, L)
         with np.errstate(invalid="ignore", divide="ignore"):
@@ -193,7 +192,6 @@ def run_bench(model: SensorModel, grid: Grid, methods: Mapping[str, Callable], *
     opts = {"frames": frames, "phase0_s": phase0_s, "cover_tol": cover_tol, "noise_draws": noise_draws,
             "roi_px": roi_px, "seed": seed, "delta": delta, "contrast": contrast, "max_depth": max_depth,
             "off_e": pm.off}
-    del C
     return BenchResult(model, grid, panels, exact, cols, cover, t, opts)
 
 
