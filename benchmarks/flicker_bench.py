@@ -118,8 +118,8 @@ def approx_section() -> list[str]:
 
 def timing(out: Path, sensors: list[str], noise_cells: int) -> None:
     lines = ["# Flicker bench: speed and approximation error", "",
-             f"Measured {datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC on {_machine()} "
-             f"(the project's 2-core Xeon), 1-min load average at start {_load()}. "
+             f"Measured {datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC on {_machine()}, "
+             f"1-min load average at start {_load()}. "
              "Rerun: `python benchmarks/flicker_bench.py --timing`.", "",
              "The machine was shared with other jobs (load well above its 2 cores): absolute times are upper bounds; "
              "ratios between rows of one run are comparable.", ""]
