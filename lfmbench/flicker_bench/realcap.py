@@ -38,7 +38,7 @@ MAX_FRAMES = 1_000_000
 #: Most ROI columns of a series file.
 MAX_ROIS = 4096
 #: Most bytes of one CSV file (memory stays bounded whatever the file holds).
-MAX_BYTES = 512 * 2 ** 20
+MAX_BYTES = 64 * 2 ** 20
 
 
 @dataclass
