@@ -33,6 +33,7 @@ LAYERS = (
     ("lfmbench.distributed",),  # the ranks of a DDP training (their batches, step, process group)
     ("lfmbench.train",),
     ("lfmbench.evaluation",),
+    ("lfmbench.flicker_bench",),  # the virtual P2020 flicker bench: sensor plans, merges and P2020 metrics on a target
     ("lfmbench.paper",),
     ("lfmbench.cli",),
 )

@@ -20,7 +20,7 @@ import typer
 from typer.core import TyperGroup
 
 from lfmbench.resources import PROJECT_URL
-from lfmbench.cli import configs, corpus, demo, evaluate, paper, plot, render, sensor, train
+from lfmbench.cli import bench, configs, corpus, demo, evaluate, paper, plot, render, sensor, train
 
 #: Where the ``docs/...`` pages that help texts name are read (they are not installed with the package).
 DOCS_ROOT = f"{PROJECT_URL}/tree/main/docs"
@@ -158,7 +158,7 @@ def _root(ctx: typer.Context, limit: Optional[List[str]] = typer.Option(
 
 
 #: Command modules, in the order their commands appear in ``--help``.
-COMMAND_MODULES = (paper, render, corpus, train, evaluate, plot, configs, demo, sensor)
+COMMAND_MODULES = (paper, bench, render, corpus, train, evaluate, plot, configs, demo, sensor)
 
 for _mod in COMMAND_MODULES:
     _mod.register(app)

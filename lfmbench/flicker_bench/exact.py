@@ -1,0 +1,393 @@
+r"""Every PWM phase, exactly: the captured ON fraction and every merge as piecewise-linear functions of phase.
+
+Why it is exact. For one window :math:`[a, a + n)` the ON time :math:`g(s) = \Phi(s, n, T, D)` of the pulse train
+started at :math:`s = a - \varphi` has the derivative :math:`p(s + n) - p(s)` (:math:`p` the 0/1 pulse), which is
+piecewise constant: :math:`g`, and any weighted sum of such terms (chopped windows, rolling-shutter rows), is
+continuous and piecewise linear in :math:`\varphi`, with breakpoints only where a window edge meets a pulse edge,
+
+.. math:: \varphi \equiv a,\quad a - DT,\quad a + n,\quad a + n - DT \pmod T
+
+(4 per window). Between consecutive breakpoints every capture's mean electrons :math:`\mu_c(\varphi)` are linear;
+its clipped value changes slope, and its saturated flag flips, only where :math:`\mu_c` crosses the clip or the
+flag level (a linear equation per interval). A merge that selects, averages with fixed weights, or takes the
+max/min of the captures according to their flags (``exposure_select``, ``exposure_select_bounded``,
+``saturated_exposure_corrected``, ``lpd_only``, ``spd_only``, ``upstream_saturated``) is then linear on every
+sub-interval once the crossings of any two captures' values are added as well. So the sub-intervals between
+
+- the breakpoints of all windows,
+- the clip and flag crossings of every capture, and
+- the crossings of every pair of input-referred capture values (linear or clipped)
+
+carry linear pieces, whose one-sided end values (the merge evaluated on the end values with the flags of the
+interior) give min, max, mean, and the phase measure inside any band, in closed form. No phase is sampled.
+
+Merges outside that class (the noise test of ``flicker_aware`` switches at a root of a quadratic) are checked for
+linearity on every piece: where the value at the midpoint is not the mean of the end values (relative
+:data:`LINEAR_RTOL`), the piece is halved, up to ``max_depth`` times. A switch is thereby located to
+:math:`2^{-\text{depth}}` of its piece; the error against dense sampling and the run time per depth are in
+docs/benchmarks/flicker-bench.md.
+
+Shapes: ``cells`` = frequency x duty pairs (flattened), ``L`` luminances, per cell ``K`` breakpoint intervals.
+Phases in s, measured from the frame start to an LED rising edge.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable, Mapping
+
+import numpy as np
+import torch
+
+from lfmbench.flicker_bench.model import CaptureModel, SensorModel
+from lfmbench.flicker import pwm_exposure
+
+__all__ = ["EXACT_METHODS", "SEQUENCE_METHODS", "breakpoints", "on_fraction", "PhaseMap", "phase_map",
+           "band_measure", "evaluate_panels", "capture_state"]
+
+#: Registered merges that are piecewise linear on the sub-intervals (module docstring): their maps are exact.
+EXACT_METHODS = frozenset({"exposure_select", "exposure_select_bounded", "saturated_exposure_corrected", "lpd_only",
+                           "spd_only", "upstream_saturated"})
+#: Registered merges that need a sequence of frames (not one frame of a flat target): left out of the maps.
+SEQUENCE_METHODS = frozenset({"temporal"})
+
+
+def _group_windows(model: SensorModel) -> dict[str, CaptureModel]:
+    """One capture per exposure group (captures of a group read the same charge, over the same windows)."""
+    out: dict[str, CaptureModel] = {}
+    for c in model.captures:
+        out.setdefault(c.group, c)
+    return out
+
+
+def on_fraction(cap: CaptureModel, phase: np.ndarray, period: np.ndarray, duty: np.ndarray) -> np.ndarray:
+    r"""Captured ON fraction :math:`f_c(\varphi)` (dimensionless, 0..1) of a capture, exact.
+
+    Args:
+        cap: the capture.
+        phase: (..., K) LED rising-edge phases (s from the frame start).
+        period, duty: (..., 1) PWM period (s) and duty (1), broadcastable to ``phase``.
+
+    Returns:
+        (..., K) ON time over the windows divided by the integration time, weighted over the ROI rows.
+    """
+    s = cap.starts_s - phase[..., None]                      # (..., K, W): window start relative to an edge
+    on = pwm_exposure(s, cap.lengths_s, period[..., None], duty[..., None], check=False)
+    return (on * cap.weights).sum(axis=-1) / cap.length_s
+
+
+def breakpoints(model: SensorModel, period: np.ndarray, duty: np.ndarray) -> np.ndarray:
+    """The phases (s) where some window edge meets a pulse edge, sorted in [0, T), with phase 0 and, last, the
+    first breakpoint + T (closing the circle).
+
+    Args:
+        period, duty: (C, 1) per cell.
+
+    Returns:
+        (C, K + 1) with K = 1 + 4 x (windows of all exposure groups).
+    """
+    pts = [np.zeros_like(period)]
+    dt = duty * period
+    for cap in _group_windows(model).values():
+        a = cap.starts_s[None, :]
+        e = (cap.starts_s + cap.lengths_s)[None, :]
+        pts += [a, a - dt, e, e - dt]
+    b = np.concatenate([np.broadcast_to(p, (period.shape[0], p.shape[1])) for p in pts], axis=1)
+    b = np.mod(b, period)
+    b = np.where(b >= period, b - period, b)
+    b.sort(axis=1)
+    return np.concatenate([b, b[:, :1] + period], axis=1)
+
+
+def capture_state(model: SensorModel, mu: Mapping[str, torch.Tensor]) -> tuple[dict, torch.Tensor]:
+    """Noise-free read-out of mean electrons: ``{"<c>_e": input-referred value}`` and the saturated flags.
+
+    Args:
+        mu: per capture name, mean electrons of its photodiode over its windows (dark included), any shape S.
+
+    Returns:
+        (``{name_e: (S) reference e-}``, flags (N, *S) bool in plan order).
+    """
+    vals, flags = {}, []
+    for c in model.captures:
+        m = mu[c.name]
+        vals[f"{c.name}_e"] = (m.clamp_max(c.clip_e) - c.dark_e) * c.refer
+        flags.append(m >= c.sat_e)
+    return vals, torch.stack(flags)
+
+
+def _batch(model: SensorModel, vals: Mapping[str, torch.Tensor], flags: torch.Tensor) -> dict:
+    """A flat-target batch for the fusion methods: every element one pixel, (1, 1, 1, 1, M)."""
+    caps = model.names
+    b = {f"{c}_e": vals[f"{c}_e"].reshape(1, 1, 1, 1, -1) for c in caps}
+    b["saturated"] = flags.reshape(len(caps), -1).reshape(1, 1, len(caps), 1, -1)
+    lens = {c.name: c.length_s for c in model.captures}
+    ref = model.preset.reference
+    long_s = lens.get("spd", max(lens.values()))
+    b["meta"] = {"exposure_short_s": lens[ref], "exposure_long_s": long_s, "sensor": model.preset}
+    b["gt"] = b[f"{caps[0]}_e"]
+    return b
+
+
+def evaluate_panels(model: SensorModel, methods: Mapping[str, Callable], vals: Mapping[str, torch.Tensor],
+                    flags: torch.Tensor) -> dict[str, torch.Tensor]:
+    """Every panel's value: each capture's input-referred value, then each method's output (same shape)."""
+    shape = next(iter(vals.values())).shape
+    out = {c: vals[f"{c}_e"] for c in model.names}
+    if methods:
+        batch = _batch(model, vals, flags)
+        for name, fn in methods.items():
+            with torch.no_grad():
+                y = fn(batch)
+            out[name] = y.reshape(shape).to(torch.float64)
+    return out
+
+
+def band_measure(yl: np.ndarray, yr: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """Share of [0, 1] where the linear function from ``yl`` (at 0) to ``yr`` (at 1) lies strictly inside
+    (lo, hi); ``lo = -inf`` or ``hi = inf`` for one-sided bands. Exact up to rounding; all broadcast."""
+    d = yr - yl
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t_lo = (lo - yl) / d
+        t_hi = (hi - yl) / d
+    a = np.where(d > 0, t_lo, np.where(d < 0, t_hi, -np.inf))
+    b = np.where(d > 0, t_hi, np.where(d < 0, t_lo, np.inf))
+    a = np.nan_to_num(a, nan=-np.inf)
+    b = np.nan_to_num(b, nan=np.inf)
+    inside = np.clip(np.minimum(b, 1.0) - np.maximum(a, 0.0), 0.0, 1.0)
+    flat = (yl > lo) & (yl < hi)
+    return np.where(d == 0, flat.astype(np.float64), inside)
+
+
+@dataclass
+class PhaseMap:
+    """Per panel (capture or method), per cell and luminance, the exact functions of phase reduced to KPIs.
+
+    Arrays are (C, L) unless stated (C cells, L luminances); values in reference e- (the ``gt`` units).
+
+    Attributes:
+        gt: (C, L) flicker-free ground truth.
+        off: {panel: scalar} the value with the LED OFF (background only): the FDI's x_off.
+        vmin, vmax: {panel: (C, L)} infimum / supremum over phase.
+        phase_min, phase_max: {panel: (C, L)} phase (s) where they are reached (a one-sided limit there).
+        mean: {panel: (C, L)} mean over phase.
+        mmp, fdi: {panel: (C, L)} share of phases inside the MMP band around the mean / above the FDI threshold.
+        on_min, on_max: {capture: (C,)} captured ON fraction's min / max over phase (luminance-independent).
+    """
+
+    gt: np.ndarray
+    off: dict
+    vmin: dict
+    vmax: dict
+    phase_min: dict
+    phase_max: dict
+    mean: dict
+    mmp: dict
+    fdi: dict
+    on_min: dict
+    on_max: dict
+
+
+def _crossing(yl, yr, level):
+    """t in (0, 1) where the line yl -> yr meets ``level``; 1 where it does not (a zero-length piece)."""
+    d = yr - yl
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (level - yl) / d
+    return np.where((t > 0) & (t < 1) & np.isfinite(t), t, 1.0)
+
+
+#: Relative tolerance of the linearity test of the methods outside :data:`EXACT_METHODS`.
+LINEAR_RTOL = 1e-9
+#: Merges that take the max or min of two captures: their maps need the crossings of capture pairs as well.
+PAIRWISE_METHODS = frozenset({"exposure_select_bounded"})
+
+
+def _band(yl: float, yr: float, lo: float, hi: float) -> float:
+    """Scalar :func:`band_measure` (numba-compiled in :func:`_reduce_kernel`)."""
+    d = yr - yl
+    if d == 0.0:
+        return 1.0 if (yl > lo and yl < hi) else 0.0
+    if d > 0.0:
+        a = (lo - yl) / d
+        b = (hi - yl) / d if hi != np.inf else np.inf
+    else:
+        a = (hi - yl) / d if hi != np.inf else -np.inf
+        b = (lo - yl) / d
+    a = max(a, 0.0)
+    b = min(b, 1.0)
+    return min(max(b - a, 0.0), 1.0)
+
+
+def _reduce_loop(a, b, h, pha, phb, g, n, delta, thr, vmin, vmax, pmin, pmax, mean, mmp, fdi):
+    """One group per (cell, luminance): min/max with their phases, phase mean, MMP and FDI phase measures."""
+    for k in range(n):
+        vmin[k] = np.inf
+        vmax[k] = -np.inf
+        mean[k] = 0.0
+        mmp[k] = 0.0
+        fdi[k] = 0.0
+    for i in range(a.size):
+        k = g[i]
+        lo_v, lo_p = (a[i], pha[i]) if a[i] <= b[i] else (b[i], phb[i])
+        hi_v, hi_p = (a[i], pha[i]) if a[i] >= b[i] else (b[i], phb[i])
+        if lo_v < vmin[k]:
+            vmin[k] = lo_v
+            pmin[k] = lo_p
+        if hi_v > vmax[k]:
+            vmax[k] = hi_v
+            pmax[k] = hi_p
+        mean[k] += h[i] * 0.5 * (a[i] + b[i])
+    for i in range(a.size):
+        k = g[i]
+        m = mean[k]
+        mmp[k] += h[i] * _band_nb(a[i], b[i], m - delta * m, m + delta * m)
+        fdi[k] += h[i] * _band_nb(a[i], b[i], thr, np.inf)
+
+
+_KERNEL = None
+
+
+def _reduce_kernel():
+    global _KERNEL, _band_nb
+    if _KERNEL is None:
+        import numba
+
+        _band_nb = numba.njit(cache=True)(_band)
+        globals()["_band_nb"] = _band_nb
+        _KERNEL = numba.njit(cache=True)(_reduce_loop)
+    return _KERNEL
+
+
+def _reduce(model, ya, yb, keep, h, pha, phb, g, n, off, delta, contrast, out, sl, L):
+    """KPIs of the pieces (1-D arrays, grouped by ``g``) into ``out[...][p][sl]`` (shape (c, L))."""
+    kern = _reduce_kernel()
+    g = np.ascontiguousarray(g, dtype=np.int64)
+    for p in keep:
+        a = np.ascontiguousarray(ya[p].numpy().reshape(-1), dtype=np.float64)
+        b = np.ascontiguousarray(yb[p].numpy().reshape(-1), dtype=np.float64)
+        res = [np.empty(n) for _ in range(7)]
+        # s = (x - x_off) / x_off > c  <=>  x > x_off (1 + c) for x_off > 0; x_off = 0: x > 0 (s = inf)
+        kern(a, b, h, pha, phb, g, n, float(delta), float(off[p] * (1 + contrast)), *res)
+        for key, v in zip(("vmin", "vmax", "pmin", "pmax", "mean", "mmp", "fdi"), res):
+            out[key][p][sl] = v.reshape(-1, L)
+
+
+def phase_map(model: SensorModel, freqs_hz: np.ndarray, duties: np.ndarray, lums: np.ndarray,
+              methods: Mapping[str, Callable], delta: float = 0.1, contrast: float = 0.1, max_depth: int = 24,
+              chunk_cells: int = 1000) -> PhaseMap:
+    """KPIs over every phase, exact (module docstring), for cells = ``freqs_hz`` x ``duties`` (flattened with the
+    duty varying fastest) and each of ``lums`` (cd/m^2).
+
+    Args:
+        delta: MMP band (P2020 default 0.1). contrast: FDI threshold (P2020 default 0.1).
+        max_depth: bisection depth for the methods outside :data:`EXACT_METHODS` (module docstring).
+        chunk_cells: cells processed at once (bounds the memory).
+    """
+    f = np.repeat(np.asarray(freqs_hz, np.float64), len(duties))
+    d = np.tile(np.asarray(duties, np.float64), len(freqs_hz))
+    lums = np.asarray(lums, np.float64)
+    C, L = f.size, lums.size
+    panels = model.names + list(methods)
+    bg = model.settings["background_cd_m2"]
+    # the LED-OFF value of every panel (background only; phase-independent)
+    mu_off = {c.name: torch.tensor([c.rate * bg + c.dark_e], dtype=torch.float64) for c in model.captures}
+    v_off, fl_off = capture_state(model, mu_off)
+    off = {k: float(v) for k, v in evaluate_panels(model, methods, v_off, fl_off).items()}
+    out = {k: {p: np.empty((C, L)) for p in panels} for k in ("vmin", "vmax", "pmin", "pmax", "mean", "mmp", "fdi")}
+    on_min = {c.name: np.empty(C) for c in model.captures}
+    on_max = {c.name: np.empty(C) for c in model.captures}
+    groups = _group_windows(model)
+    caps = model.captures
+    n_caps = len(caps)
+    pairwise = any(m in PAIRWISE_METHODS for m in methods)
+    exact_methods = {k: v for k, v in methods.items() if k in EXACT_METHODS}
+    other_methods = {k: v for k, v in methods.items() if k not in EXACT_METHODS}
+    for i0 in range(0, C, chunk_cells):
+        sl = slice(i0, min(C, i0 + chunk_cells))
+        T = 1.0 / f[sl][:, None]
+        D = d[sl][:, None]
+        B = breakpoints(model, T, D)                                     # (c, K+1)
+        frac = {g: on_fraction(cap, B, T, D) for g, cap in groups.items()}
+        for c in caps:
+            fr = frac[c.group][:, :-1]
+            on_min[c.name][sl] = fr.min(axis=1)
+            on_max[c.name][sl] = fr.max(axis=1)
+        lum = lums[None, :, None]
+        mu = {c.name: c.rate * (lum * frac[c.group][:, None, :] + bg) + c.dark_e for c in caps}  # (c, L, K+1)
+        ml = {k: v[..., :-1] for k, v in mu.items()}
+        mr = {k: v[..., 1:] for k, v in mu.items()}
+        cand = []
+        for c in caps:
+            cand += [_crossing(ml[c.name], mr[c.name], c.clip_e), _crossing(ml[c.name], mr[c.name], c.sat_e)]
+        if pairwise:
+            lin_l = {c.name: (ml[c.name] - c.dark_e) * c.refer for c in caps}
+            lin_r = {c.name: (mr[c.name] - c.dark_e) * c.refer for c in caps}
+            clip = {c.name: (c.clip_e - c.dark_e) * c.refer for c in caps}
+            for i in range(n_caps):
+                for j in range(i + 1, n_caps):
+                    a, b = caps[i].name, caps[j].name
+                    cand.append(_crossing(lin_l[a] - lin_l[b], lin_r[a] - lin_r[b], 0.0))
+                    cand.append(_crossing(lin_l[a], lin_r[a], clip[b]))
+                    cand.append(_crossing(lin_l[b], lin_r[b], clip[a]))
+        shp = ml[caps[0].name].shape                                      # (c, L, K)
+        ts = np.concatenate([np.zeros(shp + (1,)), *(x[..., None] for x in cand), np.ones(shp + (1,))], axis=-1)
+        ts.sort(axis=-1)
+        ta, tb = ts[..., :-1], ts[..., 1:]
+        width = np.broadcast_to((B[:, 1:] - B[:, :-1])[:, None, :, None], ta.shape)
+        live = (tb > ta) & (width > 0)
+        ci, li, ki, _ = np.nonzero(live)                                  # pieces in (cell, lum, interval) order
+        ta, tb = ta[live], tb[live]
+        nc = B.shape[0]
+        g = ci * L + li
+        Tc = T[ci, 0]
+        w = (B[ci, ki + 1] - B[ci, ki])
+        start = B[ci, ki]
+        mlf = {k: v[ci, li, ki] for k, v in ml.items()}
+        mrf = {k: v[ci, li, ki] for k, v in mr.items()}
+        rep0 = np.arange(ta.size)
+
+        def state(t, rep):
+            v, fl = capture_state(model, {c.name: torch.from_numpy(mlf[c.name][rep] + (mrf[c.name][rep]
+                                                                                        - mlf[c.name][rep]) * t)
+                                          for c in caps})
+            return v, fl
+
+        _, flags0 = state(0.5 * (ta + tb), rep0)           # the flags are constant on every exact piece
+
+        def reduce(ya, yb, keep, ta2, tb2, rep):
+            h = (tb2 - ta2) * w[rep] / Tc[rep]                                            # share of the period
+            pha = np.mod(start[rep] + ta2 * w[rep], Tc[rep])
+            phb = np.mod(start[rep] + tb2 * w[rep], Tc[rep])
+            _reduce(model, ya, yb, keep, h, pha, phb, g[rep], nc * L, off, delta, contrast, out, sl, L)
+
+        va, _ = state(ta, rep0)
+        vb, _ = state(tb, rep0)
+        ya = evaluate_panels(model, exact_methods, va, flags0)
+        yb = evaluate_panels(model, exact_methods, vb, flags0)
+        reduce(ya, yb, list(ya), ta, tb, rep0)
+        for name, fn in other_methods.items():
+            def ev(t, rep, name=name, fn=fn):
+                v, _ = state(t, rep)
+                return evaluate_panels(model, {name: fn}, v, flags0[:, rep])[name].numpy()
+
+            ta_, tb_, rep_ = ta, tb, rep0
+            ya_, yb_ = ev(ta_, rep_), ev(tb_, rep_)
+            done = []
+            for _ in range(max_depth):
+                tm_ = 0.5 * (ta_ + tb_)
+                ym_ = ev(tm_, rep_)
+                scale = np.maximum(np.maximum(np.abs(ya_), np.abs(yb_)), np.maximum(np.abs(ym_), 1.0))
+                lin = np.abs(ym_ - 0.5 * (ya_ + yb_)) <= LINEAR_RTOL * scale
+                done.append((ta_[lin], tb_[lin], ya_[lin], yb_[lin], rep_[lin]))
+                nl = ~lin
+                if not nl.any():
+                    break
+                ta_, tb_ = np.concatenate([ta_[nl], tm_[nl]]), np.concatenate([tm_[nl], tb_[nl]])
+                ya_, yb_ = np.concatenate([ya_[nl], ym_[nl]]), np.concatenate([ym_[nl], yb_[nl]])
+                rep_ = np.concatenate([rep_[nl], rep_[nl]])
+            else:
+                done.append((ta_, tb_, ya_, yb_, rep_))
+            cat = [np.concatenate([x[k] for x in done]) for k in range(5)]
+            reduce({name: torch.from_numpy(cat[2])}, {name: torch.from_numpy(cat[3])}, [name], cat[0], cat[1], cat[4])
+    gt = model.gt_rate * (lums[None, :] * d[:, None] + bg)
+    return PhaseMap(gt, off, out["vmin"], out["vmax"], out["pmin"], out["pmax"], out["mean"], out["mmp"], out["fdi"],
+                    on_min, on_max)
