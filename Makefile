@@ -10,7 +10,7 @@ PIP    := $(PY) -m pip install -q
 LLVM   := /usr/lib/x86_64-linux-gnu/libLLVM.so.19.1
 # a DRJIT_LIBLLVM_PATH of the caller is kept; else the recipes name Debian's libLLVM 19 once `llvm` installed it
 
-.PHONY: setup test test-fast demo venv llvm bench clean-venv
+.PHONY: setup test test-fast test-integration demo venv llvm bench clean-venv
 
 venv: $(STAMP)
 
@@ -29,7 +29,12 @@ $(STAMP): pyproject.toml constraints.txt
 setup: $(STAMP) llvm
 
 test: setup
-	DRJIT_LIBLLVM_PATH=$${DRJIT_LIBLLVM_PATH:-$$(ls $(LLVM) 2>/dev/null)} $(PY) -m pytest -q -n 2 tests
+	DRJIT_LIBLLVM_PATH=$${DRJIT_LIBLLVM_PATH:-$$(ls $(LLVM) 2>/dev/null)} $(PY) -m pytest -q -n 2 -m "not integration" tests
+
+# The checks of whole installs and runtimes (CI runs them after `make test`, .ci/run): the wheel installed into a
+# fresh environment and used from an empty folder, the Triton kernels under Triton's interpreter, two DDP ranks.
+test-integration: setup
+	DRJIT_LIBLLVM_PATH=$${DRJIT_LIBLLVM_PATH:-$$(ls $(LLVM) 2>/dev/null)} $(PY) -m pytest -q -n 2 -m integration tests
 
 # A quick subset for the edit-test loop (under a minute on 2 cores, docs/guide/extending.md): the package
 # layout, the checks and registries, the flicker model, metrics, ISP, the rule-based baselines and the recipes of

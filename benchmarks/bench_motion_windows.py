@@ -30,6 +30,7 @@ Usage: ``python benchmarks/bench_motion_windows.py [--case 11:night] [--width 32
 from __future__ import annotations
 
 import argparse
+import io
 import json
 import os
 import resource
@@ -48,7 +49,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import _llvm  # noqa: E402,F401 - sets DRJIT_LIBLLVM_PATH
 
-from lfmbench.fileio import atomic_write_text  # noqa: E402
+from lfmbench.fileio import atomic_write_bytes, atomic_write_text  # noqa: E402
 
 STAGGERED = ((0.0, 0.010), (0.010, 0.001), (0.011, 0.0001))
 
@@ -101,7 +102,9 @@ def worker(args) -> None:
     if "bins" in next(iter(f0["static"].values())):
         save["bins"] = sum(w["bins"] for w in f0["static"].values())
         save["edges"] = np.asarray(f0["static_edges_s"])
-    np.savez(args.npz, **save)
+    buf = io.BytesIO()
+    np.savez(buf, **save)
+    atomic_write_bytes(args.npz, buf.getvalue())
     Path(args.json).write_text(json.dumps({
         "render_wall_s": render_wall, "render_cpu_s": render_cpu, "bytes": nbytes, "static_bytes": static_bytes,
         "moving": [o["kind"] for o in sc["objects"] if any(o["velocity_mps"])],

@@ -87,7 +87,7 @@ def installed(kind: str) -> dict[str, Path]:
 
 
 def find_config(name_or_path: str | os.PathLike, kind: str, option: str = "--config") -> Path:
-    """The file a config option names: an existing path as given, else a shipped config of ``kind`` by name
+    """The file a config option names: an existing path as given (whatever it is), else a shipped config of ``kind`` by name
     (``unet_tiny``, ``unet_tiny.yaml`` or the source-tree path ``lfmbench/configs/unet_tiny.yaml`` all find the
     installed file).
 
@@ -96,7 +96,7 @@ def find_config(name_or_path: str | os.PathLike, kind: str, option: str = "--con
             their folder.
     """
     p = Path(name_or_path)
-    if p.is_file():
+    if p.exists() or p.is_symlink():  # what is there is the user's (a FIFO or a directory: its reader refuses it)
         return p
     have = installed(kind)
     stem = p.name[: -len(p.suffix)] if p.suffix.lower() in (".yaml", ".yml") else p.name

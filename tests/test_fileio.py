@@ -52,6 +52,8 @@ SCRATCH_WRITES = {
                                           "folder (an fsync per file would be most of the run)",
     ("bench_leaderboard.py", "make_results"): "the 10,000 generated result files in the benchmark's own temporary "
                                               "folder",
+    ("bench_motion_windows.py", "worker"): "the worker process's frames and timings, handed to the driver in the "
+                                           "benchmark's own temporary folder",
     ("bench_leaderboard.py", "time_cli"): "the argument list of the timed command, in the same temporary folder",
 }
 

@@ -72,6 +72,7 @@ def _rank(rank: int, world: int, port: int, corpus, cfg_path, tmp) -> None:
 
 
 @pytest.mark.slow
+@pytest.mark.integration
 def test_two_gloo_ranks_train_one_model_and_resume(corpus, tmp_path):
     import yaml
 

@@ -15,6 +15,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 @pytest.mark.slow
+@pytest.mark.integration
 @pytest.mark.skipif(importlib.util.find_spec("triton") is None, reason="Triton is not installed (the dev extra)")
 def test_triton_kernels_under_the_interpreter_equal_the_torch_forms():
     env = {**os.environ, "TRITON_INTERPRET": "1", "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get(

@@ -26,7 +26,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 
-pytestmark = [pytest.mark.slow, pytest.mark.jit]
+pytestmark = [pytest.mark.slow, pytest.mark.jit, pytest.mark.integration]
 
 DOC = ROOT / "docs" / "guide" / "install.md"
 

@@ -93,10 +93,9 @@ def check_grid(grid: Grid) -> Grid:
 
 def bench_methods(model: SensorModel, extra: Sequence[str] = ()) -> dict[str, Callable]:
     """The applicable fusion methods (module docstring) by name, resolved through the baselines registry."""
-    from lfmbench.baselines import REGISTRY, MethodNotFoundError, get_method, methods_for
-    from lfmbench.vocabulary import CLASSIC_BASELINES, PLAN_BASELINES
+    from lfmbench.baselines import LEARNED, REGISTRY, MethodNotFoundError, get_method, methods_for
 
-    rule_based = set(CLASSIC_BASELINES) | set(PLAN_BASELINES)
+    rule_based = {m for m in REGISTRY if m not in LEARNED}  # the rules; learned ones need a checkpoint
     names = [m for m in methods_for(model.preset.architecture) if m in rule_based and m not in SEQUENCE_METHODS]
     out = {m: REGISTRY[m] for m in names}
     for spec in extra:

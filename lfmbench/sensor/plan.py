@@ -157,7 +157,7 @@ class Architecture:
         reference: the capture whose photodiode and windows define the ground truth by default.
         baseline: the registered fusion baseline that is this architecture's standard HDR merge.
         others: further registered rule-based baselines that apply (the capture-plan ones; the split pixel's are
-            all of :data:`lfmbench.vocabulary.CLASSIC_BASELINES`).
+            all of the rule baselines of :data:`lfmbench.baselines.REGISTRY`).
     """
 
     name: str

@@ -92,7 +92,11 @@ def test_merged_shards_equal_one_run(runs):
             b = [{k: v for k, v in s.items() if k != "call_ms"} for s in b]
         assert a == b, key  # scores, CIs, per-scene values, breakdown: identical, not close
     assert merged["method"]["spec"] == one["method"]["spec"]
-    assert merged["runtime"] == json.loads(files[0].read_text())["runtime"]  # the shard holding sample 0
+    # the timing of the shard holding sample 0; the scored calls' median and its check are of all merged records
+    rescored = ("scored_ms_per_megapixel", "time_moved")
+    head = json.loads(files[0].read_text())["runtime"]
+    assert {k: v for k, v in merged["runtime"].items() if k not in rescored} == \
+        {k: v for k, v in head.items() if k not in rescored}
 
 
 def test_merge_refuses_missing_twice_and_foreign_shards(runs, tmp_path):
