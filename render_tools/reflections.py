@@ -148,11 +148,13 @@ def untraced_glossy(scene: dict) -> list[str]:
 
 
 def untraced_note(scene: dict) -> list[str]:
-    """The render note (a list of 0 or 1 line, the same text for every scene with the same kinds, so a run of
-    many scenes prints it once) naming the glossy surfaces :func:`untraced_glossy` finds."""
-    kinds = untraced_glossy(scene)
-    if not kinds:
+    """The render note (a list of 0 or 1 line) when :func:`untraced_glossy` finds glossy surfaces: one text for
+    every such scene, so a run of many scenes prints it once (with their count); the kinds are the scene's own
+    (:func:`untraced_glossy`)."""
+    if not untraced_glossy(scene):
         return []
-    return [f"reflections of flickering lamps in glossy {', '.join(kinds)} surfaces are not traced (that light is "
-            "left out of the lamps' crops; only a glossy road box is traced: docs/guide/rendering.md, 'Wet roads "
-            "and reflections')"]
+    from lfmbench.resources import docs_url  # noqa: PLC0415
+
+    return [f"reflections of flickering lamps in glossy surfaces other than a road box (vehicle paint, glass, poles: "
+            f"GGX alpha <= {GLOSSY_ALPHA}) are not traced: that light is left out of the lamps' crops "
+            f"({docs_url('guide/rendering.md')}, 'Wet roads and reflections')"]

@@ -73,7 +73,11 @@ def test_glossy_surfaces_not_traced_are_named():
     S.validate_scene(sc)
     assert RF.untraced_glossy(sc) == ["car", "road"]
     (note,) = RF.untraced_note(sc)
-    assert "car, road" in note and "\n" not in note
+    assert "not traced" in note and "\n" not in note
+    sc["objects"].pop()  # other kinds, the same line: a run prints it once
+    assert RF.untraced_glossy(sc) == ["car", "road"] and RF.untraced_note(sc) == [note]
+    sc["objects"][1]["parts"][0]["material"] = "matte"
+    assert RF.untraced_glossy(sc) == ["road"] and RF.untraced_note(sc) == [note]
     sc["lights"][0]["group"] = "headlights"  # a static group: its reflections are in its full frames
     assert RF.untraced_glossy(sc) == []
 
