@@ -477,7 +477,8 @@ class OutputLockedError(ValueError):
     holder and what to do."""
 
 
-def _pid_alive(pid: int) -> bool:
+def pid_alive(pid: int) -> bool:
+    """Whether a process ``pid`` exists on this machine (one that another user owns counts)."""
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
@@ -542,7 +543,7 @@ class OutputLock:
                 raise
             m = re.fullmatch(r"pid (\d+) host (\S+)", holder())
             if m and int(m.group(1)) != os.getpid() and (m.group(2) != socket.gethostname()
-                                                          or _pid_alive(int(m.group(1)))):
+                                                          or pid_alive(int(m.group(1)))):
                 raise self._busy(m.group(0)) from None
 
     def release(self) -> None:

@@ -28,7 +28,7 @@ from lfmbench.corpus.naming import (ATTR, FORMAT_VERSION, MANIFEST_NAME, SCENES_
                                     frame_dir, group_storage)
 from lfmbench.corpus.errors import CorpusError, CorpusLockedError
 from lfmbench.corpus.storage import DEFAULT_STORAGE, Storage, StorageStats, resolve_storage
-from lfmbench.fileio import TMP_PREFIX, atomic_write_bytes, atomic_write_json, json_default
+from lfmbench.fileio import TMP_PREFIX, atomic_write_bytes, atomic_write_json, json_default, pid_alive
 
 __all__ = ["CorpusWriter", "prune_scene_dir", "encode_scene", "write_files", "ThreadedSceneWriter",
            "ENCODE_THREADS", "LOCK_NAME", "JOURNAL_NAME", "COMPACT_FRACTION", "CorpusLockedError", "CorpusLock",
@@ -53,16 +53,6 @@ COMPACT_FRACTION = 1 / 8
 #: Files of a scene directory that the corpus format owns (``docs/guide/corpus-format.md``): only these are ever
 #: deleted (when a re-render no longer writes them); anything else a user put there stays.
 _OWN_SCENE_FILE = re.compile(r"(scene\.json|meta\.json|f\d{3,}/[A-Za-z][A-Za-z0-9_]*\.exr)")
-
-
-def _pid_alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
 
 
 #: Locks this process holds: resolved lock path -> [fd, number of CorpusLock objects sharing it]. The lock is
@@ -122,7 +112,7 @@ class CorpusLock:
     def _check_pid(self, fd: int) -> None:
         m = re.fullmatch(r"pid (\d+) host (\S+)", self._holder(fd))
         if m and int(m.group(1)) != os.getpid() and (m.group(2) != socket.gethostname()
-                                                      or _pid_alive(int(m.group(1)))):
+                                                      or pid_alive(int(m.group(1)))):
             raise CorpusLockedError(self._busy(m.group(0)))
 
     def release(self) -> None:

@@ -2,7 +2,6 @@
 errors of bad input (exit 2, the option named, nothing written)."""
 from __future__ import annotations
 
-import json
 import math
 
 import torch
@@ -10,18 +9,7 @@ from typer.testing import CliRunner
 
 from lfmbench import evaluation as ev
 from lfmbench.cli.evaluate import register as register_evaluate
-from tests.data.metrics.data import make_batch
-
-
-def _batches(n=2, **kw):
-    return [make_batch(seed=i, noise=True, **kw) for i in range(n)]
-
-
-def _strict_load(path):
-    def no_const(x):
-        raise AssertionError(f"non-standard JSON constant {x}")
-
-    return json.loads(path.read_text(), parse_constant=no_const)
+from tests.data.metrics.data import make_batch, noisy_batches as _batches, strict_load as _strict_load  # noqa: F401
 
 
 def test_cli_leaderboard_and_evaluate_errors(tmp_path):

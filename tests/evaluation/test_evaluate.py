@@ -1,7 +1,6 @@
 """Tests of lfmbench.evaluation: result files, bad methods reported per scene, MAC counting, leaderboard, CLI."""
 from __future__ import annotations
 
-import json
 import math
 
 import pytest
@@ -10,18 +9,7 @@ import torch
 from lfmbench import evaluation as ev
 from lfmbench.evaluation.benchmark import benchmark as run_benchmark
 from lfmbench.metrics import ScoreOptions
-from tests.data.metrics.data import make_batch
-
-
-def _batches(n=2, **kw):
-    return [make_batch(seed=i, noise=True, **kw) for i in range(n)]
-
-
-def _strict_load(path):
-    def no_const(x):
-        raise AssertionError(f"non-standard JSON constant {x}")
-
-    return json.loads(path.read_text(), parse_constant=no_const)
+from tests.data.metrics.data import make_batch, noisy_batches as _batches, strict_load as _strict_load  # noqa: F401
 
 
 def test_evaluate_writes_complete_result(tmp_path):

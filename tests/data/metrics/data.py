@@ -67,3 +67,18 @@ def make_batch(b: int = 1, f: int = 3, h: int = 32, w: int = 32, led_level: floa
                  "exposure_long_s": torch.full((b,), T_LONG_S, dtype=torch.float64),
                  "sensor": ["ovt"] * b},
     }
+
+
+def noisy_batches(n=2, **kw):
+    """``n`` noisy batches of :func:`make_batch` (seeds 0 .. n-1)."""
+    return [make_batch(seed=i, noise=True, **kw) for i in range(n)]
+
+
+def strict_load(path):
+    """A result JSON read back refusing NaN/Infinity constants (the files must be standard JSON)."""
+    import json  # noqa: PLC0415
+
+    def no_const(x):
+        raise AssertionError(f"non-standard JSON constant {x}")
+
+    return json.loads(path.read_text(), parse_constant=no_const)
