@@ -38,7 +38,7 @@ from typing import Callable, Mapping
 import numpy as np
 import torch
 
-from lfmbench.flicker_bench.model import CaptureModel, SensorModel
+from lfmbench.flicker_bench.model import CaptureModel, SensorModel, grid_cells
 from lfmbench.flicker import pwm_exposure
 
 __all__ = ["EXACT_METHODS", "SEQUENCE_METHODS", "breakpoints", "on_fraction", "PhaseMap", "phase_map",
@@ -282,8 +282,7 @@ def phase_map(model: SensorModel, freqs_hz: np.ndarray, duties: np.ndarray, lums
         max_depth: bisection depth for the methods outside :data:`EXACT_METHODS` (module docstring).
         chunk_cells: cells processed at once (bounds the memory).
     """
-    f = np.repeat(np.asarray(freqs_hz, np.float64), len(duties))
-    d = np.tile(np.asarray(duties, np.float64), len(freqs_hz))
+    f, d = grid_cells(freqs_hz, duties)
     lums = np.asarray(lums, np.float64)
     C, L = f.size, lums.size
     panels = model.names + list(methods)

@@ -132,6 +132,15 @@ class SensorModel:
         return out
 
 
+def grid_cells(freqs_hz: Sequence[float], duties: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
+    """The cells of a frequency x duty map, frequency-major (cell ``i * len(duties) + j`` is frequency ``i``, duty
+    ``j``): their frequencies (C,) Hz and duties (C,), float64. The one cell order of the exact, noise and
+    sequence maps."""
+    f = np.repeat(np.asarray(freqs_hz, np.float64), len(duties))
+    d = np.tile(np.asarray(duties, np.float64), len(freqs_hz))
+    return f, d
+
+
 def preset_sha256(preset) -> str:
     """SHA-256 of a preset: of its file's bytes when it was read from one, else of its canonical JSON."""
     src = getattr(preset, "source", "<dict>")

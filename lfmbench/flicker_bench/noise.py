@@ -24,7 +24,7 @@ import numpy as np
 import torch
 
 from lfmbench.flicker_bench.exact import on_fraction
-from lfmbench.flicker_bench.model import SensorModel
+from lfmbench.flicker_bench.model import SensorModel, grid_cells
 from lfmbench.metrics.flicker import fdi, fmi, mmp
 from lfmbench.sensor import simulate_plan_electrons
 
@@ -87,8 +87,7 @@ def noise_kpis(model: SensorModel, freqs_hz: np.ndarray, duties: np.ndarray, lum
         seed: seed of the phases and of the noise (torch.Generator); the result depends on it only.
         chunk_draws: frames simulated at once (bounds the memory).
     """
-    f = np.repeat(np.asarray(freqs_hz, np.float64), len(duties))
-    d = np.tile(np.asarray(duties, np.float64), len(freqs_hz))
+    f, d = grid_cells(freqs_hz, duties)
     lums = np.asarray(lums, np.float64)
     C, L = f.size, lums.size
     panels = model.names + list(methods)

@@ -31,7 +31,7 @@ import numpy as np
 import torch
 
 from lfmbench.flicker_bench.exact import capture_state, evaluate_panels, on_fraction
-from lfmbench.flicker_bench.model import SensorModel
+from lfmbench.flicker_bench.model import SensorModel, grid_cells
 from lfmbench.flicker import frame_phase
 from lfmbench.metrics.flicker import fdi, fmi, mmp
 
@@ -50,8 +50,7 @@ def sequence_series(model: SensorModel, freqs_hz: np.ndarray, duties: np.ndarray
                     methods: Mapping[str, Callable], n_frames: int, phase0_s: float = 0.0) -> dict[str, np.ndarray]:
     """Noise-free ROI values (reference e-) of every panel in frames 0..N-1: {panel: (C, L, N)}, cells as in
     :func:`lfmbench.flicker_bench.exact.phase_map`."""
-    f = np.repeat(np.asarray(freqs_hz, np.float64), len(duties))
-    d = np.tile(np.asarray(duties, np.float64), len(freqs_hz))
+    f, d = grid_cells(freqs_hz, duties)
     T = 1.0 / f
     ph = sequence_phases(model.frame_time_s, T, n_frames, phase0_s)                     # (C, N)
     bg = model.settings["background_cd_m2"]
