@@ -6,7 +6,7 @@ integrates the scene over its own time). Frame 0 through the ``staggered`` prese
 its standard merge (``exposure_select``), demosaiced; the crop is centred where the merges of the two corpora
 differ most on a moving vehicle (aux ``mask.instance``), with each capture and the differences.
 
-Writes ``docs/img/staggered_ghost.png``. Run: ``python benchmarks/staggered_ghost_figure.py [--seed 8 --tod day
+Writes ``docs/img/staggered_ghost.png``. Run: ``python benchmarks/studies/staggered_ghost_figure.py [--seed 8 --tod day
 --width 320 --height 180]``.
 """
 from __future__ import annotations
@@ -15,8 +15,8 @@ import argparse
 import sys
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 import bench_dataset as bd  # noqa: E402  (DRJIT_LIBLLVM_PATH, _render)
 import matplotlib.pyplot as plt  # noqa: E402
