@@ -66,7 +66,7 @@ CUDA_SEARCH_GLOBS = ("/usr/lib/x86_64-linux-gnu/libcuda.so*", "/usr/lib/aarch64-
                      "/usr/lib/wsl/lib/libcuda.so*", "/usr/lib64/libcuda.so*", "/usr/local/nvidia/lib64/libcuda.so*")
 #: Relative tolerance of :func:`clamp_roundoff`: negatives down to -ROUNDOFF_RTOL * (layer peak) become 0.
 ROUNDOFF_RTOL = 1e-6
-#: Major LLVM versions known to crash drjit on these CPUs (environment.md).
+#: Major LLVM versions known to crash drjit on these CPUs (docs/guide/install.md: LLVM 15 crashes in code generation on AVX-512).
 BROKEN_LLVM_MAJORS = (15,)
 #: Directories searched for ``libLLVM*.so*``.
 LLVM_SEARCH_DIRS = ("/usr/lib/x86_64-linux-gnu", "/usr/lib64", "/usr/lib", "/usr/local/lib")

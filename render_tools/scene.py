@@ -21,7 +21,7 @@ Functions
 - The scene file itself (re-exported from :mod:`render_tools.scene_schema`): :func:`validate_scene`,
   :func:`scene_groups`, :func:`load_scene`, :func:`save_scene`, :func:`empty_scene`.
 
-Luminance ranges follow upstream (ISETHDR heuristic, ``upstream.md``): headlights 2e4-2e5 cd/m^2,
+Luminance ranges follow upstream (ISETHDR heuristic of the ISET-LFM code, https://github.com/AyushJam/iset-lfm): headlights 2e4-2e5 cd/m^2,
 streetlights 1e4-5e4 cd/m^2, other lights 4e-4..1e-2 of the scene's headlight peak.
 """
 from __future__ import annotations

@@ -45,13 +45,13 @@ log = logging.getLogger(__name__)
 #: Upstream light groups in upstream order, and which of them flicker (only otherlights upstream).
 ISET_GROUPS = ("headlights", "streetlights", "otherlights", "skymap")
 ISET_FLICKER = {"headlights": False, "streetlights": False, "otherlights": True, "skymap": False}
-#: Values used when the scene's ``.mat`` is missing or lacks a field (upstream.md: "Dataset generation").
+#: Values used when the scene's ``.mat`` is missing or lacks a field (ISET-LFM code, https://github.com/AyushJam/iset-lfm: dataset generation).
 ISET_DEFAULTS = {
     "lpd_exposure": 0.004,        # s, middle of upstream's U[3, 5] ms
     "spd_exposure": 1.0 / 90.0,   # s (upstream writes 0.0111)
     "fps": 60.0,                  # frames / s
     "cameraSpeed": None,          # m/s, unknown without the .mat
-    "fov_x_deg": 40.0,            # deg, ISET horizontal field of view (upstream.md "Optics and ISP")
+    "fov_x_deg": 40.0,            # deg, ISET horizontal field of view (ISET-LFM code: optics and ISP)
     "line_time_s": 10e-6,         # s, default rolling-shutter line time (docs/guide/contracts.md)
 }
 #: Channel name of one band: ``S0.400,000nm`` (PBRT / ISET3D), also ``S0.400nm``.

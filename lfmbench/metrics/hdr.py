@@ -43,7 +43,7 @@ from lfmbench.check import check_same_shape, check_tensor
 
 #: mu of the mu-law tone curve (Kalantari & Ramamoorthi 2017).
 MU_DEFAULT = 5000.0
-#: Display model handed to ColorVideoVDP / PU21 (metrics.md: absolute linear luminance on an HDR display).
+#: Display model handed to ColorVideoVDP / PU21 (ColorVideoVDP, Mantiuk et al. 2024: absolute linear luminance on an HDR display).
 CVVDP_DISPLAY = "standard_hdr_linear"
 #: Peak luminance of that display model, cd m^-2 (pycvvdp ``display_models.json``, 'standard_hdr_linear').
 CVVDP_DISPLAY_PEAK_CD_M2 = 1500.0

@@ -189,7 +189,7 @@ def test_paper_fig3_values_by_hand():
 
 
 def test_upstream_case_table_bug_is_absent():
-    # upstream.md: D = 0.7, te = 25 ms, 90 Hz gives 348.5 upstream instead of ~18.3 ms
+    # ISET-LFM code (flicker_model.py): D = 0.7, te = 25 ms, 90 Hz gives 348.5 upstream instead of ~18.3 ms
     T = 1 / 90
     for ph in np.linspace(0, T, 50, endpoint=False):
         assert rel_err(pwm_exposure(ph, 0.025, T, 0.7), exact_phi(ph, 0.025, T, 0.7)) <= REL
