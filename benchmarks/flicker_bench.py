@@ -62,6 +62,39 @@ def reports(presets: list[str], n_freq: int) -> None:
         page = ROOT / "docs" / "results" / "flicker-bench" / f"{name}.md"
         fbr.write_report(res, page, ims)
         print(f"{name}: {time.perf_counter() - t0:.1f} s, wrote {page} and {[str(i) for i in ims]}", flush=True)
+    write_index()
+
+
+def write_index() -> Path:
+    """docs/results/flicker-bench/README.md: per report page (one per preset) the architecture and, per merge, the
+    frequencies it never misses, read from the page's own table (so the index always matches the pages)."""
+    d = ROOT / "docs" / "results" / "flicker-bench"
+    rows = []
+    for page in sorted(d.glob("*.md")):
+        if page.name == "README.md":
+            continue
+        text = page.read_text(encoding="utf-8").splitlines()
+        title = text[0]                                     # "# Flicker bench: `name` (architecture)"
+        arch = title.rsplit("(", 1)[-1].rstrip(")") if "(" in title else "?"
+        merges, caps = [], []
+        for line in text:
+            cells = [c.strip() for c in line.strip().strip("|").split("|")]
+            if len(cells) == 5 and cells[1] in ("capture", "merge", "merge (bisected)"):
+                (caps if cells[1] == "capture" else merges).append(f"{cells[0]}: {cells[2]}")
+        link = "[" + page.stem + "](" + page.name + ")"      # a sibling page of the index
+        rows.append(f"| {link} | {arch} | {'; '.join(merges) or '(no merge)'} | {'; '.join(caps)} |")
+    lines = ["# Flicker bench reports of the shipped presets", "",
+             "One page per preset, made by `python benchmarks/flicker_bench.py --reports` (the command "
+             "`lfmbench flicker-bench --sensor NAME` on the default grid: 200 PWM frequencies 50 Hz-2 kHz x 20 duties "
+             "x 10 luminances, every phase exact). *Never missed*: at every phase, every luminance and every duty "
+             ">= 10 % the output stays >= 50 % of its steady-light value. Each page holds the maps (hatched where the "
+             "light is missed; a green bar above a panel marks the frequencies never missed) and the worst cells.", "",
+             "| preset | architecture | merges: frequencies never missed | captures: frequencies never missed |",
+             "|---|---|---|---|", *rows, ""]
+    out = d / "README.md"
+    atomic_write_text(out, "\n".join(lines))
+    print(f"wrote {out}")
+    return out
 
 
 def _cpu() -> float:
@@ -143,7 +176,7 @@ def _warm(model, grid, methods) -> None:
     fbr.run_bench(model, fbr.Grid(grid.freqs_hz[:60], grid.duties, grid.lums), methods, noise_draws=10)
 
 
-def timing(out: Path, sensors: list[str], noise_cells: int, repeats: int, noise_repeats: int,
+def timing(out: Path, sensors: list[str], noise_cells: int, repeats: int, noise_repeats: int, approx_repeats: int,
            approx: bool = True) -> None:
     t_start = datetime.datetime.now(datetime.timezone.utc)
     load0 = _load()
@@ -206,7 +239,7 @@ def timing(out: Path, sensors: list[str], noise_cells: int, repeats: int, noise_
               "| sensor | cells x luminances run | runs | wall [s] | CPU [s] | full grid wall [s] | full grid CPU [s] | "
               "load after each |", "|---|---|---|---|---|---|---|---|", *rows_nz]
     if approx:
-        lines += approx_section(repeats)
+        lines += approx_section(approx_repeats)
     lines.append("")
     atomic_write_text(out, "\n".join(lines))
     print(f"wrote {out}")
@@ -217,19 +250,23 @@ def main() -> None:
     ap.add_argument("--reports", action="store_true", help="write the shipped presets' report pages")
     ap.add_argument("--timing", action="store_true", help="write docs/benchmarks/flicker-bench.md")
     ap.add_argument("--approx-only", action="store_true", help="rerun only the last section of the timing page")
+    ap.add_argument("--index", action="store_true", help="rewrite only docs/results/flicker-bench/README.md")
     ap.add_argument("--presets", nargs="*", default=None, help="presets for --reports (default: all shipped)")
     ap.add_argument("--n-freq", type=int, default=200, help="frequencies of the report maps")
     ap.add_argument("--sensors", nargs="*", default=TIMED_PRESETS, help="sensors for --timing")
     ap.add_argument("--noise-cells", type=int, default=4000, help="cells of the noise timing (4000: the full grid)")
     ap.add_argument("--repeats", type=int, default=3, help="runs per noise-free timing (median)")
     ap.add_argument("--noise-repeats", type=int, default=3, help="runs per noise timing (median)")
+    ap.add_argument("--approx-repeats", type=int, default=3, help="runs per bisection depth (median)")
     ap.add_argument("--no-approx", action="store_true", help="leave out the bisection-depth section")
     a = ap.parse_args()
     if a.reports:
         reports(a.presets or available_presets(), a.n_freq)
+    elif a.index:
+        write_index()
     page = ROOT / "docs" / "benchmarks" / "flicker-bench.md"
     if a.timing:
-        timing(page, a.sensors, a.noise_cells, a.repeats, a.noise_repeats, not a.no_approx)
+        timing(page, a.sensors, a.noise_cells, a.repeats, a.noise_repeats, a.approx_repeats, not a.no_approx)
     elif a.approx_only:  # rerun the last section only, keeping the rest of the page
         text = page.read_text(encoding="utf-8")
         head = text.split("\n## Merges outside the exact class")[0].rstrip("\n")
