@@ -275,6 +275,7 @@ def main() -> None:
     ap.add_argument("--noise-repeats", type=int, default=3, help="runs per noise timing (median)")
     ap.add_argument("--approx-repeats", type=int, default=3, help="runs per bisection depth (median)")
     ap.add_argument("--no-approx", action="store_true", help="leave out the bisection-depth section")
+    ap.add_argument("--out", type=Path, default=None, help="timing page (default docs/benchmarks/flicker-bench.md)")
     a = ap.parse_args()
     if a.reports:
         reports(a.presets or available_presets(), a.n_freq)
@@ -282,7 +283,7 @@ def main() -> None:
         write_index()
     page = ROOT / "docs" / "benchmarks" / "flicker-bench.md"
     if a.timing:
-        timing(page, a.sensors, a.noise_cells, a.repeats, a.noise_repeats, a.approx_repeats, not a.no_approx)
+        timing(a.out or page, a.sensors, a.noise_cells, a.repeats, a.noise_repeats, a.approx_repeats, not a.no_approx)
     elif a.approx_only:  # rerun the last section only, keeping the rest of the page
         text = page.read_text(encoding="utf-8")
         head = text.split("\n## Merges outside the exact class")[0].rstrip("\n")
