@@ -381,7 +381,7 @@ def write_report(res: BenchResult, path: Path, images: Sequence[Path], image_bas
              "exposure-vs-phase function); each map shows the worst luminance.", ""]
     lines += ["| capture | windows (ms from frame start) |", "|---|---|"]
     for c, w in m.settings["windows_s"].items():
-        lines.append(f"| {c} | " + ", ".join(f"[{a * 1e3:.3g}, {(a + n) * 1e3:.3g})" for a, n in w) + " |")
+        lines.append(f"| {c} | " + ", ".join(f"[{a * 1e3:.6g}, {(a + n) * 1e3:.6g})" for a, n in w) + " |")
     lines += ["", "## Which frequencies are never missed", "",
               "Never missed: at every phase, luminance and duty >= 10 % the output stays >= 50 % of its steady-light "
               "value (the dropout threshold).", "",
