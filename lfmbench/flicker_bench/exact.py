@@ -298,7 +298,6 @@ def phase_map(model: SensorModel, freqs_hz: np.ndarray, duties: np.ndarray, lums
     caps = model.captures
     n_caps = len(caps)
     pairwise = any(m in PAIRWISE_METHODS for m in methods)
-    exact_methods = {k: v for k, v in methods.items() if k in EXACT_METHODS}
     other_methods = {k: v for k, v in methods.items() if k not in EXACT_METHODS}
     for i0 in range(0, C, chunk_cells):
         sl = slice(i0, min(C, i0 + chunk_cells))
@@ -360,33 +359,60 @@ def phase_map(model: SensorModel, freqs_hz: np.ndarray, duties: np.ndarray, lums
 
         va, _ = state(ta, rep0)
         vb, _ = state(tb, rep0)
-        ya = evaluate_panels(model, exact_methods, va, flags0)
-        yb = evaluate_panels(model, exact_methods, vb, flags0)
-        reduce(ya, yb, list(ya), ta, tb, rep0)
-        for name, fn in other_methods.items():
-            def ev(t, rep, name=name, fn=fn):
-                v, _ = state(t, rep)
-                return evaluate_panels(model, {name: fn}, v, flags0[:, rep])[name].numpy()
-
-            ta_, tb_, rep_ = ta, tb, rep0
-            ya_, yb_ = ev(ta_, rep_), ev(tb_, rep_)
-            done = []
-            for _ in range(max_depth):
-                tm_ = 0.5 * (ta_ + tb_)
-                ym_ = ev(tm_, rep_)
-                scale = np.maximum(np.maximum(np.abs(ya_), np.abs(yb_)), np.maximum(np.abs(ym_), 1.0))
-                lin = np.abs(ym_ - 0.5 * (ya_ + yb_)) <= LINEAR_RTOL * scale
-                done.append((ta_[lin], tb_[lin], ya_[lin], yb_[lin], rep_[lin]))
-                nl = ~lin
-                if not nl.any():
-                    break
-                ta_, tb_ = np.concatenate([ta_[nl], tm_[nl]]), np.concatenate([tm_[nl], tb_[nl]])
-                ya_, yb_ = np.concatenate([ya_[nl], ym_[nl]]), np.concatenate([ym_[nl], yb_[nl]])
-                rep_ = np.concatenate([rep_[nl], rep_[nl]])
-            else:
-                done.append((ta_, tb_, ya_, yb_, rep_))
-            cat = [np.concatenate([x[k] for x in done]) for k in range(5)]
-            reduce({name: torch.from_numpy(cat[2])}, {name: torch.from_numpy(cat[3])}, [name], cat[0], cat[1], cat[4])
+        # every panel on the end values at once; the bisected merges then share the capture states of each depth
+        ya = evaluate_panels(model, methods, va, flags0)
+        yb = evaluate_panels(model, methods, vb, flags0)
+        reduce(ya, yb, [p for p in ya if p not in other_methods], ta, tb, rep0)
+        if other_methods:
+            _bisect(model, other_methods, state, flags0, ta, tb, rep0, ya, yb, max_depth, reduce)
     gt = model.gt_rate * (lums[None, :] * d[:, None] + bg)
     return PhaseMap(gt, off, out["vmin"], out["vmax"], out["pmin"], out["pmax"], out["mean"], out["mmp"], out["fdi"],
                     on_min, on_max)
+
+
+def _bisect(model, methods, state, flags0, ta, tb, rep, ya, yb, max_depth, reduce):
+    """Pieces of the merges outside :data:`EXACT_METHODS`, halved where not linear (module docstring), reduced.
+
+    All merges are bisected together: one capture state per depth, at the midpoints of the pieces that some merge
+    still finds non-linear (their union); each merge is evaluated there and keeps only its own non-linear pieces.
+
+    Args:
+        methods: the merges to bisect. state: ``state(t, rows) -> (values, flags)`` of the chunk.
+        flags0: (N, P) saturated flags of the pieces (constant on every piece).
+        ta, tb: (P,) piece ends (share of the breakpoint interval); rep: (P,) the pieces' rows in the chunk.
+        ya, yb: {merge: (P,) tensor} the values at ``ta`` / ``tb``.
+        reduce: ``reduce(ya, yb, panels, ta, tb, rows)`` of :func:`phase_map`.
+    """
+    names = list(methods)
+    live = {m: np.arange(ta.size) for m in names}                 # per merge: its pieces among (ta, tb, rep)
+    ends = {m: (ya[m].numpy(), yb[m].numpy()) for m in names}     # and their end values
+    done = {m: [] for m in names}                                 # pieces found linear
+    for depth in range(max_depth + 1):
+        union = np.unique(np.concatenate([live[m] for m in names]))
+        if union.size == 0:
+            break
+        if depth == max_depth:
+            for m in names:
+                done[m].append((ta[live[m]], tb[live[m]], *ends[m], rep[live[m]]))
+            break
+        tm = 0.5 * (ta[union] + tb[union])
+        vm, _ = state(tm, rep[union])
+        ym_all = evaluate_panels(model, methods, vm, flags0[:, rep[union]])
+        n_u = union.size
+        for m in names:
+            idx = live[m]
+            j = np.searchsorted(union, idx)                       # the piece's place in the union
+            ym = ym_all[m].numpy()[j]
+            ya_, yb_ = ends[m]
+            scale = np.maximum(np.maximum(np.abs(ya_), np.abs(yb_)), np.maximum(np.abs(ym), 1.0))
+            lin = np.abs(ym - 0.5 * (ya_ + yb_)) <= LINEAR_RTOL * scale
+            done[m].append((ta[idx[lin]], tb[idx[lin]], ya_[lin], yb_[lin], rep[idx[lin]]))
+            nl = ~lin
+            live[m] = np.concatenate([j[nl], j[nl] + n_u])        # left halves, then right halves
+            ends[m] = (np.concatenate([ya_[nl], ym[nl]]), np.concatenate([ym[nl], yb_[nl]]))
+        ta = np.concatenate([ta[union], tm])
+        tb = np.concatenate([tm, tb[union]])
+        rep = np.concatenate([rep[union], rep[union]])
+    for m in names:
+        cat = [np.concatenate([x[k] for x in done[m]]) for k in range(5)]
+        reduce({m: torch.from_numpy(cat[2])}, {m: torch.from_numpy(cat[3])}, [m], cat[0], cat[1], cat[4])

@@ -43,23 +43,33 @@ def wilson_interval(p: np.ndarray, n: int, z: float = Z95) -> tuple[np.ndarray, 
     return centre - half, centre + half
 
 
+def _roi_mean(x: torch.Tensor, m: int, roi_px: int) -> np.ndarray:
+    """(M,) float64 ROI means of ``x`` (M x roi_px values, pixels fastest), summed in float64."""
+    return x.reshape(m, roi_px).double().mean(dim=1).numpy()
+
+
 def _readout(model: SensorModel, frac: Mapping[str, np.ndarray], lum: np.ndarray, roi_px: int,
              methods: Mapping[str, Callable], gen: torch.Generator) -> dict[str, np.ndarray]:
-    """ROI means (reference e-) of every panel for ON fractions ``frac[group]`` (M,) at luminances ``lum`` (M,)."""
+    """ROI means (reference e-) of every panel for ON fractions ``frac[group]`` (M,) at luminances ``lum`` (M,).
+
+    The chain and the merges run in float32 (about 25 % less time than float64 on a 2-core AMD EPYC, and half the
+    memory): its 24-bit significand resolves 1e-7 of a value, far below the shot noise of any pixel that is not
+    dark (a count of 1e5 e- has a relative shot noise of 3e-3) and below one ADC code of the 10-20-bit read-outs;
+    the ROI means and the KPIs are taken in float64."""
     bg = model.settings["background_cd_m2"]
     groups = {}
     for c in model.captures:
         groups.setdefault(c.group, c)
     mean_e, exp_s = {}, {}
     for g, c in groups.items():
-        e = c.rate * (lum * frac[g] + bg)
+        e = (c.rate * (lum * frac[g] + bg)).astype(np.float32)
         mean_e[g] = torch.from_numpy(np.ascontiguousarray(np.repeat(e[:, None], roi_px, axis=1))).reshape(-1, 1, 1,
                                                                                                            roi_px)
         exp_s[g] = c.length_s
     out = simulate_plan_electrons(mean_e, model.preset, exp_s, generator=gen, noise=True, check=False)
     M = lum.size
     names = model.names
-    res = {c: out[f"{c}_e"].reshape(M, roi_px).mean(dim=1).double().numpy() for c in names}
+    res = {c: _roi_mean(out[f"{c}_e"], M, roi_px) for c in names}
     if methods:
         batch = {f"{c}_e": out[f"{c}_e"].reshape(1, M, 1, 1, roi_px) for c in names}
         batch["saturated"] = out["saturated"].reshape(1, M, len(names), 1, roi_px)
@@ -69,7 +79,7 @@ def _readout(model: SensorModel, frac: Mapping[str, np.ndarray], lum: np.ndarray
         batch["gt"] = batch[f"{names[0]}_e"]
         for k, fn in methods.items():
             with torch.no_grad():
-                res[k] = fn(batch).reshape(M, roi_px).mean(dim=1).double().numpy()
+                res[k] = _roi_mean(fn(batch), M, roi_px)
     return res
 
 

@@ -181,15 +181,23 @@ def test_frames_to_cover_commensurate_never():
                                         ((np.array([2e6]), [0.5], [1.0]), "--freq"),
                                         ((np.array([100.0]), [0.0], [1.0]), "--duty"),
                                         ((np.array([100.0]), [1.2], [1.0]), "--duty"),
-                                        ((np.array([100.0]), [0.5], [-1.0]), "--luminance")])
+                                        ((np.array([100.0]), [0.5], [-1.0]), "--luminance"),
+                                        ((np.array([np.nan]), [0.5], [1.0]), "--freq"),
+                                        ((np.array([np.inf]), [0.5], [1.0]), "--freq"),
+                                        ((np.array([100.0]), [-0.2], [1.0]), "--duty"),
+                                        ((np.array([100.0]), [np.nan], [1.0]), "--duty"),
+                                        ((np.array([0.5]), [0.5], [1.0]), "--freq")])
 def test_bad_grid_names_the_option(grid, field):
-    with pytest.raises(BenchError, match=f"^{field}"):
+    with pytest.raises(BenchError, match=f"^{field}") as exc:
         check_grid(Grid(*(np.asarray(g, float) for g in grid)))
+    assert "\n" not in str(exc.value)
 
 
 def test_frame_time_shorter_than_plan_is_refused():
     with pytest.raises(BenchError, match="^--fps: the frame time .* shorter than the exposure plan"):
         build_model("staggered", fps=120.0)
+    with pytest.raises(BenchError, match="^--fps: the frame time .* shorter than the exposure plan"):
+        build_model("ovt", fps=1.0 / 0.01)  # 10 ms frames, the default 1/90 s SPD window is longer
     with pytest.raises(BenchError, match="^--exposure"):
         build_model("ovt", exposures={"nope": [[0, 1e-3]]})
     with pytest.raises(BenchError, match="^--exposure: the windows of capture 'short' overlap"):

@@ -108,3 +108,51 @@ def test_command_end_to_end_and_bad_input_writes_nothing(tmp_path):
         r = runner.invoke(app, a)
         assert r.exit_code == 2 and name in r.output and len(r.output.strip().splitlines()) == 1, r.output
     assert not out2.exists()
+
+
+@pytest.mark.parametrize("series,meta,match", [
+    ("", ["roi,frequency_hz,duty,start_index", "ROI_0,95,0.2,0"], r"series\.csv: empty file"),
+    (",ROI_0\n0,1.0\n1,inf\n", ["roi,frequency_hz,duty,start_index", "ROI_0,95,0.2,0"],
+     r"series\.csv: field 'ROI_0' row 3: not a finite number"),
+    (",ROI_0,ROI_1\n0,1.0,2.0\n1,2.0\n", ["roi,frequency_hz,duty,start_index", "ROI_1,95,0.2,0"],
+     r"series\.csv: field 'ROI_1' row 3: missing value"),
+    (",ROI_0\n0,1.0\n1,2.0\n", ["roi,duty,start_index", "ROI_0,0.2,0"], r"meta\.csv: missing column 'frequency_hz'"),
+    (",ROI_0\n0,1.0\n1,2.0\n", ["frequency_hz,duty,start_index", "95,0.2,0"], r"meta\.csv: missing column 'roi'"),
+    (",ROI_0\n0,1.0\n1,2.0\n", ["roi,frequency_hz,duty,start_index", "ROI_0,95,0.2"], r"meta\.csv: row 2 has 3 fields"),
+    (",ROI_0\n0,1.0\n1,2.0\n", ["roi,frequency_hz,duty,start_index", "ROI_0,0,0.2,0"],
+     r"meta\.csv: field 'frequency_hz' row 2: 0 Hz outside"),
+    (",ROI_0\n0,1.0\n1,2.0\n", ["roi,frequency_hz,duty,start_index", "ROI_0,2e6,0.2,0"],
+     r"meta\.csv: field 'frequency_hz' row 2: 2e\+06 Hz outside"),
+    (",ROI_0\n0,1.0\n1,2.0\n", ["roi,frequency_hz,duty,start_index", "ROI_0,95,0,0"], r"meta\.csv: field 'duty' row 2"),
+    (",ROI_0\n0,1.0\n1,2.0\n", ["roi,frequency_hz,duty,start_index", "ROI_0,95,0.2,x"],
+     r"meta\.csv: field 'start_index' row 2: not a number"),
+    (",ROI_0\n0,1.0\n1,2.0\n", ["roi,frequency_hz,duty,start_index"], r"meta\.csv: no ROI row"),
+])
+def test_more_bad_capture_files_one_line(tmp_path, series, meta, match):
+    """Empty files, non-finite and missing values, missing meta columns, short rows, frequencies outside the
+    model, zero duty: one line naming the file and the field."""
+    sp, mp = tmp_path / "series.csv", tmp_path / "meta.csv"
+    sp.write_text(series)
+    mp.write_text("\n".join(meta) + "\n")
+    with pytest.raises(BenchError, match=match) as exc:
+        read_captures(sp, mp)
+    assert "\n" not in str(exc.value)
+
+
+def test_command_bad_capture_csv_and_grid_one_line_nothing_written(tmp_path):
+    """Through the command: a CSV with a missing column or a non-numeric value, a frequency that is not a finite
+    number: exit code 2, one line naming the file / option, no output directory."""
+    sp, mp = _write(tmp_path, {"ROI_0": [1.0, 2.0, 3.0]}, ["roi,frequency_hz,start_index", "ROI_0,95,0"])
+    bad_meta = tmp_path / "bad_meta.csv"
+    bad_meta.write_text("roi,frequency_hz,duty,start_index\nROI_0,95,half,0\n")
+    out = tmp_path / "out"
+    base = ["flicker-bench", "--sensor", "single", "--n-freq", "0", "--out", str(out)]
+    cases = [(["--freq", "95", "--capture-series", str(sp), "--capture-meta", str(mp)], "missing column 'duty'"),
+             (["--freq", "95", "--capture-series", str(sp), "--capture-meta", str(bad_meta)],
+              "field 'duty' row 2: not a number"),
+             (["--freq", "nan"], "--freq")]
+    runner = CliRunner()
+    for extra, text in cases:
+        r = runner.invoke(app, base + extra)
+        assert r.exit_code == 2 and text in r.output and len(r.output.strip().splitlines()) == 1, (extra, r.output)
+    assert not out.exists()
