@@ -99,13 +99,13 @@ def _fix_caps(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     """Flip any face whose normal points into the body along x at the two ends (the caps)."""
     x0, x1 = V[:, 0].min(), V[:, 0].max()
     F = F.copy()
-    for j, (a, b, c) in enumerate(F):
-        xs = V[[a, b, c], 0]
-        if np.allclose(xs, x0) or np.allclose(xs, x1):
-            nx = np.cross(V[b] - V[a], V[c] - V[a])[0]
-            want = -1.0 if np.allclose(xs, x0) else 1.0
-            if nx * want < 0:
-                F[j] = (a, c, b)
+    xs = V[F, 0]  # (faces, 3): np.allclose per face, all faces at once (the same comparisons)
+    at0 = np.isclose(xs, x0).all(axis=1)
+    cap = at0 | np.isclose(xs, x1).all(axis=1)
+    a, b, c = F[:, 0], F[:, 1], F[:, 2]
+    nx = np.cross(V[b] - V[a], V[c] - V[a])[:, 0]
+    flip = cap & (nx * np.where(at0, -1.0, 1.0) < 0)
+    F[flip] = F[flip][:, [0, 2, 1]]
     return F
 
 

@@ -247,6 +247,22 @@ def _unprivileged():
     return ["setpriv", "--bounding-set=-all", "--inh-caps=-all"] if probe.returncode == 0 else None
 
 
+#: Runs the ``lfmbench`` commands of argv[1] (a JSON list of argument lists) in this process, one after the other;
+#: prints per command its exit code, output and the exception it let out (None for none, or a plain exit).
+_RUN_COMMANDS = textwrap.dedent("""
+    import json, sys, traceback
+    from typer.testing import CliRunner
+    from lfmbench.cli import app
+    out = []
+    for args in json.loads(sys.argv[1]):
+        r = CliRunner().invoke(app, args)
+        exc = r.exception if r.exception is not None and not isinstance(r.exception, SystemExit) else None
+        out.append({"exit_code": r.exit_code, "output": r.output[-3000:],
+                    "exception": None if exc is None else "".join(traceback.format_exception(exc))[-3000:]})
+    print(json.dumps(out))
+""")
+
+
 @pytest.mark.slow
 def test_every_command_that_reads_a_corpus_works_on_a_read_only_one(tmp_path):
     from tests.data.corpus.data import make_corpus
@@ -261,19 +277,21 @@ def test_every_command_that_reads_a_corpus_works_on_a_read_only_one(tmp_path):
         p.chmod(p.stat().st_mode & ~0o222)
     env = dict(os.environ, PYTHONPATH=str(REPO), HOME=str(tmp_path / "nohome"), XDG_CACHE_HOME=str(tmp_path / "nohome"))
 
-    def run(*args):
-        return subprocess.run([*wrap, sys.executable, "-m", "lfmbench.cli", *args], env=env, capture_output=True,
-                              text=True, timeout=300, cwd=tmp_path)
-
+    commands = [["evaluate", "--method", "lpd_only", "--corpus", str(root), "--split", "test", "--cache-dir",
+                 str(tmp_path / "cache"), "-o", str(tmp_path / "r.json"), "--no-perceptual", "--repeats", "1",
+                 "--warmup", "0"],
+                ["validate", str(root)]]
     try:
-        r = run("evaluate", "--method", "lpd_only", "--corpus", str(root), "--split", "test", "--cache-dir",
-                str(tmp_path / "cache"), "-o", str(tmp_path / "r.json"), "--no-perceptual", "--repeats", "1",
-                "--warmup", "0")
+        # both commands in one unprivileged process (each start imports torch: a few s of CPU), each as the
+        # command line runs it (typer's CliRunner: exit code, output, and any exception the command let out)
+        r = subprocess.run([*wrap, sys.executable, "-c", _RUN_COMMANDS, json.dumps(commands)], env=env,
+                           capture_output=True, text=True, timeout=300, cwd=tmp_path)
         assert r.returncode == 0 and "Traceback" not in r.stderr, r.stderr[-3000:]
+        ev, va = json.loads(r.stdout.splitlines()[-1])
+        assert ev["exit_code"] == 0 and ev["exception"] is None, ev
         assert json.loads((tmp_path / "r.json").read_text())["corpus"]["test_draws_sha256"]
         assert list((tmp_path / "cache" / "test_params").glob("*.json"))  # the frozen draws kept there
-        r = run("validate", str(root))
-        assert r.returncode == 0 and "Traceback" not in r.stderr, r.stdout[-2000:] + r.stderr[-2000:]
+        assert va["exit_code"] == 0 and va["exception"] is None, va
         assert sorted((str(p.relative_to(root)), p.stat().st_mtime_ns) for p in root.rglob("*")) == before
     finally:
         for p in [root, *root.rglob("*")]:

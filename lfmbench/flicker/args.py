@@ -1,10 +1,10 @@
 """Argument handling of the PWM model: checks (each error names the argument), broadcasting, numpy/torch promotion."""
 from __future__ import annotations
 
+import sys
 from typing import Any
 
 import numpy as np
-import torch
 
 from lfmbench.check import check_array
 
@@ -13,17 +13,20 @@ ArrayLike = Any  # float, numpy array or torch tensor
 
 
 def _is_torch(*xs: ArrayLike) -> bool:
-    return any(isinstance(x, torch.Tensor) for x in xs)
+    """Whether any of ``xs`` is a torch tensor. No tensor exists before torch is imported, so this never imports
+    it: the numpy paths (a render worker's lamp waveforms) run without torch's ~3 s import."""
+    torch = sys.modules.get("torch")
+    return torch is not None and any(isinstance(x, torch.Tensor) for x in xs)
 
 
 def _np_view(x: ArrayLike) -> np.ndarray:
-    if isinstance(x, torch.Tensor):
+    if _is_torch(x):
         return x.detach().cpu().numpy()
     return np.asarray(x)
 
 
 def _check_broadcast(names: tuple[str, ...], values: tuple[ArrayLike, ...]) -> None:
-    shapes = [tuple(np.shape(_np_view(v))) if not isinstance(v, torch.Tensor) else tuple(v.shape)
+    shapes = [tuple(np.shape(_np_view(v))) if not _is_torch(v) else tuple(v.shape)
               for v in values]
     try:
         np.broadcast_shapes(*shapes)
@@ -59,6 +62,8 @@ def _is_zero(x: ArrayLike) -> bool:
 
 def _as_tensors(*xs: ArrayLike) -> list[torch.Tensor]:
     """Promote mixed numpy/torch/float arguments to tensors of one floating dtype on one device."""
+    import torch  # noqa: PLC0415 (loaded already: a tensor is among xs)
+
     tensors = [x for x in xs if isinstance(x, torch.Tensor)]
     device = tensors[0].device
     dtype = tensors[0].dtype if tensors[0].is_floating_point() else torch.get_default_dtype()

@@ -4,12 +4,20 @@ transformations (Dekker's TwoProduct, Knuth's TwoSum), the exact period reductio
 from __future__ import annotations
 
 import numpy as np
-import torch
 
 
 # Veltkamp splitting constants 2^ceil(p/2) + 1 for TwoProduct (p = 53 for float64, 24 for float32).
-_SPLIT = {np.dtype(np.float64): 134217729.0, np.dtype(np.float32): 4097.0,
-          torch.float64: 134217729.0, torch.float32: 4097.0}
+class _SplitTable(dict):
+    """Looked up by numpy dtype or torch dtype (``torch.float64`` -> ``float64``; torch is not imported here)."""
+
+    def __missing__(self, dtype):
+        name = str(dtype)
+        if not name.startswith("torch."):
+            raise KeyError(dtype)
+        return self[np.dtype(name.removeprefix("torch."))]
+
+
+_SPLIT = _SplitTable({np.dtype(np.float64): 134217729.0, np.dtype(np.float32): 4097.0})
 
 
 class _Ops:
@@ -17,6 +25,8 @@ class _Ops:
 
     def __init__(self, torch_mode: bool):
         if torch_mode:
+            import torch  # noqa: PLC0415 (loaded already: the arguments hold a tensor)
+
             self.minimum, self.maximum, self.where = torch.minimum, torch.maximum, torch.where
             self.fmod, self.round, self.clip = torch.fmod, torch.round, torch.clamp
         else:

@@ -9,10 +9,8 @@ import os
 import signal
 
 import numpy as np
-from typer.testing import CliRunner
 
 from lfmbench import corpus as C
-from lfmbench.cli import app
 from render_tools import jobs as J
 from render_tools import scene
 
@@ -62,6 +60,13 @@ ARGS = ["--width", "24", "--height", "16", "--spp", "2", "--frames", "2", "--bin
 
 
 def run(*args):
+    """``lfmbench render ARGS`` in this process (CliRunner). The command layer (which imports torch) is imported
+    here, not at the top: spawned render workers import this module for :func:`fake_backend` and start faster
+    without it."""
+    from typer.testing import CliRunner  # noqa: PLC0415
+
+    from lfmbench.cli import app  # noqa: PLC0415
+
     return CliRunner().invoke(app, ["render", *args])
 
 
