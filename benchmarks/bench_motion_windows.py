@@ -249,7 +249,7 @@ def main(argv=None) -> None:
             err["exact", spp] = [run(a, tmp, "exact", stag, s, True, spp)[1] for s in (1, 2)]
         if "end" not in made:
             made.update(end=f"{datetime.now(timezone.utc):%Y-%m-%d %H:%M}", load_end=os.getloadavg()[0])
-            stamp.write_text(json.dumps(made))
+            atomic_write_text(stamp, json.dumps(made))
     ts, tl = float(sc["timing"]["short_exposure_s"]), 1 / 90
     wins = [("staggered long [0, 10) ms", 0.0, 0.010), ("staggered medium [10, 11) ms", 0.010, 0.001),
             ("staggered short [11, 11.1) ms", 0.011, 0.0001),
@@ -408,10 +408,10 @@ def main(argv=None) -> None:
         "No eps meets the 1.5x target at the upper CPU estimate.")]
     text = "\n".join(md) + "\n"
     print(text)
-    json.dump({"rows": rows, "cost": cost, "masked_cost": {str(k): v for k, v in masked_cost.items()},
+    print(json.dumps({"rows": rows, "cost": cost, "masked_cost": {str(k): v for k, v in masked_cost.items()},
                "motion_px_quantiles": np.quantile(np.where(np.isfinite(motion), motion, 1e9),
                                                   [0.1, 0.25, 0.5, 0.75, 0.9]).tolist()},
-              sys.stderr, indent=1, default=float)
+              indent=1, default=float), file=sys.stderr)
     if a.out:
         atomic_write_text(Path(a.out) / "benchmarks" / "motion-windows.md", text)
 
