@@ -400,7 +400,7 @@ def main(argv=None) -> None:
         "focal length in px, so it doubles at twice the width)."]
     best = [e for e in eps if masked_cost[e][1] <= 1.5 and masked_cost[e][3] <= 1.5]
     md += ["", "Masked scheme: " + "; ".join(
-        f"eps {e:g} px: {100 * masks[e].mean():.0f} % of the pixels move, tiles {100 * masked_cost[e][0]:.0f} %, "
+        f"eps {e:g} px: {100 * masks[e].mean():.0f} % of the pixels masked (motion >= eps, grown by 1 px), tiles {100 * masked_cost[e][0]:.0f} %, "
         f"storage {masked_cost[e][1]:.2f}x, CPU {masked_cost[e][2]:.2f}-{masked_cost[e][3]:.2f}x, staggered "
         f"medium / short error {rows[1][6 + i][0]:.2f} / {rows[2][6 + i][0]:.2f} %"
         for i, e in enumerate(eps)) + ". " + (
