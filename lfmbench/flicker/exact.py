@@ -4,12 +4,23 @@ transformations (Dekker's TwoProduct, Knuth's TwoSum), the exact period reductio
 from __future__ import annotations
 
 import numpy as np
-import torch
+
+
+class _Splits(dict):
+    """numpy dtypes at first; torch's float64/float32 added when first asked for (torch is not imported for the
+    numpy path, :mod:`lfmbench.flicker.args`)."""
+
+    def __missing__(self, dtype):
+        import torch  # noqa: PLC0415 - a torch dtype: torch is loaded
+
+        self.update({torch.float64: self[np.dtype(np.float64)], torch.float32: self[np.dtype(np.float32)]})
+        if dtype not in (torch.float64, torch.float32):
+            raise KeyError(dtype)
+        return self[dtype]
 
 
 # Veltkamp splitting constants 2^ceil(p/2) + 1 for TwoProduct (p = 53 for float64, 24 for float32).
-_SPLIT = {np.dtype(np.float64): 134217729.0, np.dtype(np.float32): 4097.0,
-          torch.float64: 134217729.0, torch.float32: 4097.0}
+_SPLIT = _Splits({np.dtype(np.float64): 134217729.0, np.dtype(np.float32): 4097.0})
 
 
 class _Ops:
@@ -17,6 +28,8 @@ class _Ops:
 
     def __init__(self, torch_mode: bool):
         if torch_mode:
+            import torch  # noqa: PLC0415 - torch mode: an argument is a tensor, torch is loaded
+
             self.minimum, self.maximum, self.where = torch.minimum, torch.maximum, torch.where
             self.fmod, self.round, self.clip = torch.fmod, torch.round, torch.clamp
         else:
