@@ -167,7 +167,8 @@ def main() -> None:
             "| step | ms per step (median) | rounds, ms | vs one process |\n|---|---|---|---|\n"
             + "".join(f"| {n} | {m[k]:.1f} | {', '.join(f'{x:.1f}' for x in med[k])} | {m[k] / m['plain']:.2f} |\n"
                       for n, k in rows)
-            + f"\nDDP overhead per step: {m['ddp'] - m['plain']:+.1f} ms against one process ({m['ddp'] / m['plain']:.2f}x), "
+            + f"\nDDP overhead per step: {m['ddp'] - m['plain']:+.1f} ms against one process "
+              f"({m['ddp'] / m['plain']:.2f}x), "
               f"{m['ddp'] - m['solo']:+.1f} ms ({m['ddp'] / m['solo']:.2f}x) against {a.ranks} independent processes "
               "on the same cores. The second is what DDP itself adds (the gradient all-reduce over gloo on "
               "loopback, the all-reduce of the logged loss, the ranks waiting for each other); the rest is "

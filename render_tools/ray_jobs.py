@@ -17,9 +17,9 @@ Resources and retries (:class:`RayOptions`): each scene task asks for ``cpus_per
 ``gpus_per_scene`` GPUs (Ray then sets ``CUDA_VISIBLE_DEVICES`` of the task, so concurrent scenes on a multi-GPU
 node each get their own GPU) and runs Dr.Jit's kernels on that many threads (``ceil(cpus_per_scene)``,
 :func:`task_threads`; before: every concurrent scene ran a thread per core of its node, so a node running N
-scenes ran N x cores threads, and a second node on the same cores added almost nothing); a task whose worker or node dies is run again up to ``max_retries`` times (safe:
-a scene's seed is fixed and every file is written atomically, so a re-run writes the same bytes); errors raised by
-the render itself are not retried. At most ``max_in_flight`` tasks are submitted at a time (default: twice the
+scenes ran N x cores threads, and a second node on the same cores added almost nothing); a task whose worker or
+node dies is run again up to ``max_retries`` times (safe: a scene's seed is fixed and every file is written
+atomically, so a re-run writes the same bytes); errors raised by the render itself are not retried. At most ``max_in_flight`` tasks are submitted at a time (default: twice the
 scenes the cluster can run at once), so the driver's memory does not grow with the number of scenes.
 
 Resume (:class:`CompleteScenes`): a committed scene counts as complete when each of its files matches the

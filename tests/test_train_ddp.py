@@ -152,7 +152,8 @@ def test_device_ranks_hold_disjoint_scenes_and_serve_the_split_once(corpus):
         assert counted == list(range(len(ds)))
         for k in range(len(g0)):  # weights b_r N / b of the step's global batch
             sizes = [len(g[k]) if w[k] > 0 else 0 for g, w in ((g0, w0), (g1, w1))]
-            assert w0[k] == pytest.approx(sizes[0] * 2 / sum(sizes)) and w1[k] == pytest.approx(sizes[1] * 2 / sum(sizes))
+            assert w0[k] == pytest.approx(sizes[0] * 2 / sum(sizes))
+            assert w1[k] == pytest.approx(sizes[1] * 2 / sum(sizes))
         if epoch == 0:
             first = g0
     assert g0 != first  # epoch 1: another order
