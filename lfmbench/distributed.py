@@ -23,8 +23,10 @@ What each process does (:func:`lfmbench.train.train` with a :class:`Group`):
   resume, never reads a half-written file); on resume every rank reads it (the checkpoint's folder must be shared
   by the processes: one machine, or a shared file system).
 
-The device path (``--data device``) shards the same way (:class:`RankDeviceBatches`): each rank simulates only
-its part of each batch, but holds the whole split resident (streaming by chunks is not sharded: refused).
+The device path (``--data device``) shards the split's scenes (:class:`RankDeviceBatches`): rank ``r`` loads only
+the scenes ``r, r + N, ...`` (:func:`rank_scenes`) onto its device and serves only their samples; every global
+batch of ``B`` samples takes from each rank in proportion to its samples (:func:`rank_step_sizes`), with the same
+loss weights, so the ranks again see every sample once an epoch (streaming by chunks is not sharded: refused).
 """
 from __future__ import annotations
 
@@ -39,7 +41,7 @@ from torch.utils.data import Dataset, Sampler
 from lfmbench.datasets.device import DeviceBatches, epoch_order
 
 __all__ = ["Group", "from_env", "rank_share", "RankBatchSampler", "RankIndexed", "RankCollate", "RankDeviceBatches",
-           "ddp_step", "LOSS_WEIGHT"]
+           "rank_scenes", "rank_step_sizes", "ddp_step", "LOSS_WEIGHT"]
 
 #: Key of a batch dict that carries the rank's loss weight ``w_r`` (removed by :func:`ddp_step`).
 LOSS_WEIGHT = "_rank_loss_weight"
@@ -161,24 +163,72 @@ class RankCollate:
         return {**self.collate([s for s, _ in items]), LOSS_WEIGHT: float(items[0][1])}
 
 
+def rank_scenes(scene_ids: list, rank: int, world: int) -> list:
+    """Rank ``rank``'s scenes of a split: positions ``rank, rank + world, ...`` of ``scene_ids`` (duplicates
+    dropped), as ``torch.utils.data.DistributedSampler`` strides indices; the ranks' shares are disjoint and
+    together the split.
+
+    Raises:
+        ValueError: fewer scenes than ranks (a rank would hold nothing)."""
+    sids = list(dict.fromkeys(scene_ids))
+    if len(sids) < world:
+        raise ValueError(f"the split has {len(sids)} scene(s) for {world} torchrun ranks: the device path gives "
+                         "each rank its own scenes; use fewer ranks or the DataLoader path (--data loader)")
+    return sids[rank::world]
+
+
+def rank_step_sizes(counts: list[int], batch_size: int) -> list[list[int]]:
+    """How many of each rank's samples every global batch takes: ``sizes[k][r]``.
+
+    The ranks' samples (``counts[r]`` of rank ``r``) are interleaved in proportion (rank ``r``'s ``i``-th sample at
+    the position ``(i + 1/2) / counts[r]`` of the epoch, ties by rank) and cut ``batch_size`` at a time, so that
+    every global batch but the last holds ``batch_size`` samples (as in one process) and each rank's share of it
+    is near ``batch_size * counts[r] / sum(counts)``."""
+    keys = sorted(((2 * i + 1) / (2 * n), r) for r, n in enumerate(counts) for i in range(n))
+    out = []
+    for k in range(0, len(keys), batch_size):
+        row = [0] * len(counts)
+        for _key, r in keys[k:k + batch_size]:
+            row[r] += 1
+        out.append(row)
+    return out
+
+
 class RankDeviceBatches(DeviceBatches):
-    """:class:`~lfmbench.datasets.device.DeviceBatches` of one rank: the rank's part of each global batch
-    (:func:`rank_share`), with its loss weight under :data:`LOSS_WEIGHT`. Not with ``chunk_scenes``."""
+    """:class:`~lfmbench.datasets.device.DeviceBatches` of one rank that holds only its own scenes
+    (:func:`rank_scenes`): global batch ``k`` of an epoch takes ``sizes[k][r]`` (:func:`rank_step_sizes`) of rank
+    ``r``'s samples, in an order of ``(seed, rank, epoch)`` (:func:`~lfmbench.datasets.device.epoch_order`), so
+    the ranks see every sample of the split once an epoch between them and the global batch is ``batch_size``
+    (the last one shorter). The loss weight ``b_r N / b`` goes under :data:`LOSS_WEIGHT`; a rank with no sample
+    in a step gets a copy of one of its own with weight 0. Not with ``chunk_scenes``.
+
+    The batches are not those of one process (a global batch mixes the ranks' scenes in proportion, not the
+    single-process order); each sample is drawn as in one process, from ``(seed, epoch, index)``."""
 
     def __init__(self, ds, batch_size: int, device, *, rank: int, world: int, **kw: Any) -> None:
         if kw.get("chunk_scenes") is not None:
             raise ValueError("--chunk-scenes: streaming the split by chunks is not sharded across torchrun ranks; "
-                             "leave it out (each rank holds the split) or train in one process")
-        super().__init__(ds, batch_size, device, **kw)
+                             "leave it out (each rank holds its share of the split) or train in one process")
+        kw.pop("chunk_scenes", None)
+        shares = [rank_scenes(ds.scene_ids, r, world) for r in range(world)]
+        super().__init__(ds, batch_size, device, scenes=shares[rank], **kw)
         self.rank, self.world = rank, world
+        self.sizes = rank_step_sizes([len(s) * ds.samples_per_scene for s in shares], batch_size)
 
     def __len__(self) -> int:
-        return -(-len(self.ds) // self.batch_size)
+        return len(self.sizes)
 
     def _batches(self) -> Iterator[dict]:
-        for batch in _global_batches(len(self.ds), self.batch_size, self.seed, self.epoch):
-            part, w = rank_share(batch, self.rank, self.world)
-            yield {**self.batch(part), LOSS_WEIGHT: w}
+        r, N = self.rank, self.world
+        order = [self.own[j] for j in epoch_order(len(self.own), self.seed + 104_729 * (r + 1), self.epoch).tolist()]
+        at = 0
+        for row in self.sizes:
+            n = row[r]
+            if n == 0:  # nothing of this rank in the step: one of its samples, counting nothing
+                yield {**self.batch(order[:1]), LOSS_WEIGHT: 0.0}
+                continue
+            yield {**self.batch(order[at:at + n]), LOSS_WEIGHT: n * N / sum(row)}
+            at += n
 
 
 def ddp_step(ddp_model: torch.nn.Module, opt: torch.optim.Optimizer, spec, cfg, group: Group,

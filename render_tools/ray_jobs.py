@@ -15,9 +15,11 @@ silent loss (before: a node with its own local folder "rendered" scenes whose fi
 
 Resources and retries (:class:`RayOptions`): each scene task asks for ``cpus_per_scene`` CPUs and
 ``gpus_per_scene`` GPUs (Ray then sets ``CUDA_VISIBLE_DEVICES`` of the task, so concurrent scenes on a multi-GPU
-node each get their own GPU); a task whose worker or node dies is run again up to ``max_retries`` times (safe:
-a scene's seed is fixed and every file is written atomically, so a re-run writes the same bytes); errors raised by
-the render itself are not retried. At most ``max_in_flight`` tasks are submitted at a time (default: twice the
+node each get their own GPU) and runs Dr.Jit's kernels on that many threads (``ceil(cpus_per_scene)``,
+:func:`task_threads`; before: every concurrent scene ran a thread per core of its node, so a node running N
+scenes ran N x cores threads, and a second node on the same cores added almost nothing); a task whose worker or
+node dies is run again up to ``max_retries`` times (safe: a scene's seed is fixed and every file is written
+atomically, so a re-run writes the same bytes); errors raised by the render itself are not retried. At most ``max_in_flight`` tasks are submitted at a time (default: twice the
 scenes the cluster can run at once), so the driver's memory does not grow with the number of scenes.
 
 Resume (:class:`CompleteScenes`): a committed scene counts as complete when each of its files matches the
@@ -27,6 +29,7 @@ every committed file, 0.4-0.9 TB for 10,000 scenes).
 """
 from __future__ import annotations
 
+import math
 import os
 import secrets
 import socket
@@ -36,7 +39,7 @@ from pathlib import Path
 from typing import Any
 
 __all__ = ["RayOptions", "SharedStorageError", "check_shared_storage", "check_visible", "run_ray",
-           "CompleteScenes", "TOKEN_PREFIX"]
+           "CompleteScenes", "TOKEN_PREFIX", "task_threads"]
 
 #: Name prefix of the token files of :func:`check_shared_storage` (removed after the check).
 TOKEN_PREFIX = ".lfmbench-node-"
@@ -162,9 +165,21 @@ def check_visible(out: Path, res: dict) -> str | None:
     return None
 
 
-def _ray_job(job, run_job: Callable[[Any], dict]) -> dict:
-    """The scene task: ``run_job(job)`` (:func:`render_tools.jobs.run_job`), plus the size of every file it wrote
-    and its host."""
+def task_threads(cpus: float) -> int | None:
+    """Threads of a scene task that asked Ray for ``cpus`` CPUs: ``ceil(cpus)`` (at least 1); None for a task
+    that asked for none (a GPU scene: Dr.Jit's default)."""
+    return None if cpus <= 0 else max(1, math.ceil(cpus))
+
+
+def _ray_job(job, run_job: Callable[[Any], dict], threads: int | None = None) -> dict:
+    """The scene task: ``run_job(job)`` (:func:`render_tools.jobs.run_job`) with Dr.Jit's thread pool at
+    ``threads`` (the CPUs the task asked Ray for, :func:`task_threads`; None: left as it is), plus the size of
+    every file it wrote and its host."""
+    if threads is not None:
+        import drjit as dr  # noqa: PLC0415 - the renderer's own dependency
+
+        if dr.thread_count() != threads:
+            dr.set_thread_count(threads)
     res = run_job(job)
     out = Path(job.out)
     res["sizes"] = {rel: (out / rel).stat().st_size for rel in res["hashes"]}
@@ -221,6 +236,7 @@ def run_ray(todo: Sequence, address: str, workers: int, finished: Callable[[Any,
         slots = [res.get("CPU", 0) / opts.cpus_per_scene if opts.cpus_per_scene else float("inf"),
                  res.get("GPU", 0) / opts.gpus_per_scene if opts.gpus_per_scene else float("inf")]
         limit = max(1, 2 * int(min(slots)))
+    threads = task_threads(opts.cpus_per_scene)
     queue = iter(todo)
     pending: dict = {}
 
@@ -229,7 +245,7 @@ def run_ray(todo: Sequence, address: str, workers: int, finished: Callable[[Any,
             j = next(queue, None)
             if j is None:
                 return
-            pending[remote.remote(j, run_job)] = j
+            pending[remote.remote(j, run_job, threads)] = j
 
     submit()
     try:

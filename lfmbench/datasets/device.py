@@ -230,6 +230,10 @@ class DeviceBatches:
         prefetch: on CUDA, make each batch on a side stream one batch ahead, so that its program runs on the GPU
             while the caller's work on the previous batch (a training step) runs (the same batches; one batch more
             in memory). Ignored on other devices.
+        scenes: hold and serve only these scene ids of the split (a torchrun rank's share,
+            :class:`lfmbench.distributed.RankDeviceBatches`): only their layers are loaded, an epoch is their
+            samples (dataset indices as in the whole split) in the order :func:`epoch_order` of their number.
+            Not with ``chunk_scenes``.
 
     Iterating yields the per-sample path's sample dicts with a leading B (on ``device``, ``meta`` too when the
     batched program makes them), noise from counter-based streams. ``set_epoch(e)`` selects the draws and the order
@@ -238,7 +242,7 @@ class DeviceBatches:
 
     def __init__(self, ds, batch_size: int, device: torch.device | str, seed: int = 0,
                  budget_bytes: int | None = None, drop_last: bool = False, dtype: torch.dtype = torch.float32,
-                 chunk_scenes: int | None = None, prefetch: bool = False) -> None:
+                 chunk_scenes: int | None = None, prefetch: bool = False, scenes: list | None = None) -> None:
         if isinstance(batch_size, bool) or not isinstance(batch_size, int) or batch_size < 1:
             raise ValueError(f"batch_size must be an integer >= 1, got {batch_size!r}")
         if getattr(ds, "pieces", False):
@@ -271,8 +275,22 @@ class DeviceBatches:
         self._sids = list(dict.fromkeys(ds.scene_ids))
         if chunk_scenes is not None and len(self._sids) != len(ds.scene_ids):
             raise ValueError(f"ds: the split lists a scene twice ({len(ds.scene_ids)} ids, {len(self._sids)} scenes)")
-        # the whole split, or (chunks) the first chunk of epoch 0, which iterating that epoch then starts from
-        first = None if chunk_scenes is None else [self._sids[p] for p in self._chunks()[0]]
+        #: the dataset indices served (None: every sample of the split)
+        self.own = None
+        if scenes is not None:
+            if chunk_scenes is not None:
+                raise ValueError("scenes and chunk_scenes: a share of the split is not streamed by chunks")
+            pos = {sid: p for p, sid in enumerate(ds.scene_ids)}
+            missing = [s for s in scenes if s not in pos]
+            if missing or not scenes:
+                raise ValueError(f"scenes: {missing[0] if missing else 'none given'!r:.60} is not a scene of split "
+                                 f"{ds.split!r} of {ds.root}")
+            sps = ds.samples_per_scene
+            self.own = [pos[s] * sps + k for s in dict.fromkeys(scenes) for k in range(sps)]
+        # the whole split (or the given scenes), or (chunks) the first chunk of epoch 0, which iterating that epoch
+        # then starts from
+        first = (None if scenes is None else list(dict.fromkeys(scenes))) if chunk_scenes is None else [
+            self._sids[p] for p in self._chunks()[0]]
         self.resident = ResidentScenes(ds, self.device, self.layer_budget, dtype, first)
 
     @staticmethod
@@ -286,7 +304,8 @@ class DeviceBatches:
         self.epoch = int(epoch)
 
     def __len__(self) -> int:
-        sizes = [len(self.ds)] if self.chunk_scenes is None else [
+        n = len(self.ds) if self.own is None else len(self.own)
+        sizes = [n] if self.chunk_scenes is None else [
             len(c) * self.ds.samples_per_scene for c in self._chunks()]
         return sum(n // self.batch_size if self.drop_last else -(-n // self.batch_size) for n in sizes)
 
@@ -338,7 +357,9 @@ class DeviceBatches:
     def _batches(self) -> Iterator[dict]:
         B = self.batch_size
         if self.chunk_scenes is None:
-            order = epoch_order(len(self.ds), self.seed, self.epoch).tolist()
+            order = epoch_order(len(self.ds) if self.own is None else len(self.own), self.seed, self.epoch).tolist()
+            if self.own is not None:
+                order = [self.own[j] for j in order]
             for b in range(len(self)):
                 yield self.batch(order[b * B:(b + 1) * B])
             return

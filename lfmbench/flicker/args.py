@@ -1,4 +1,8 @@
-"""Argument handling of the PWM model: checks (each error names the argument), broadcasting, numpy/torch promotion."""
+"""Argument handling of the PWM model: checks (each error names the argument), broadcasting, numpy/torch promotion.
+
+torch is not imported here: an argument can be a tensor only when the caller imported torch, so the numpy path
+(the renderer's: scene checks, light timing) runs without loading it (seconds of every render worker's start).
+"""
 from __future__ import annotations
 
 import sys
@@ -12,21 +16,24 @@ from lfmbench.check import check_array
 ArrayLike = Any  # float, numpy array or torch tensor
 
 
-def _is_torch(*xs: ArrayLike) -> bool:
-    """Whether any of ``xs`` is a torch tensor. No tensor exists before torch is imported, so this never imports
-    it: the numpy paths (a render worker's lamp waveforms) run without torch's ~3 s import."""
+def _is_tensor(x: Any) -> bool:
+    """``isinstance(x, torch.Tensor)``, without importing torch (no tensor exists before it is imported)."""
     torch = sys.modules.get("torch")
-    return torch is not None and any(isinstance(x, torch.Tensor) for x in xs)
+    return torch is not None and isinstance(x, torch.Tensor)
+
+
+def _is_torch(*xs: ArrayLike) -> bool:
+    return any(_is_tensor(x) for x in xs)
 
 
 def _np_view(x: ArrayLike) -> np.ndarray:
-    if _is_torch(x):
+    if _is_tensor(x):
         return x.detach().cpu().numpy()
     return np.asarray(x)
 
 
 def _check_broadcast(names: tuple[str, ...], values: tuple[ArrayLike, ...]) -> None:
-    shapes = [tuple(np.shape(_np_view(v))) if not _is_torch(v) else tuple(v.shape)
+    shapes = [tuple(np.shape(_np_view(v))) if not _is_tensor(v) else tuple(v.shape)
               for v in values]
     try:
         np.broadcast_shapes(*shapes)
@@ -60,9 +67,9 @@ def _is_zero(x: ArrayLike) -> bool:
     return not bool(_np_view(x).any())
 
 
-def _as_tensors(*xs: ArrayLike) -> list[torch.Tensor]:
+def _as_tensors(*xs: ArrayLike) -> list:
     """Promote mixed numpy/torch/float arguments to tensors of one floating dtype on one device."""
-    import torch  # noqa: PLC0415 (loaded already: a tensor is among xs)
+    import torch  # noqa: PLC0415 - only called with a tensor among xs: torch is loaded
 
     tensors = [x for x in xs if isinstance(x, torch.Tensor)]
     device = tensors[0].device

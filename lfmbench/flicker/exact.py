@@ -6,18 +6,21 @@ from __future__ import annotations
 import numpy as np
 
 
-# Veltkamp splitting constants 2^ceil(p/2) + 1 for TwoProduct (p = 53 for float64, 24 for float32).
-class _SplitTable(dict):
-    """Looked up by numpy dtype or torch dtype (``torch.float64`` -> ``float64``; torch is not imported here)."""
+class _Splits(dict):
+    """numpy dtypes at first; torch's float64/float32 added when first asked for (torch is not imported for the
+    numpy path, :mod:`lfmbench.flicker.args`)."""
 
     def __missing__(self, dtype):
-        name = str(dtype)
-        if not name.startswith("torch."):
+        import torch  # noqa: PLC0415 - a torch dtype: torch is loaded
+
+        self.update({torch.float64: self[np.dtype(np.float64)], torch.float32: self[np.dtype(np.float32)]})
+        if dtype not in (torch.float64, torch.float32):
             raise KeyError(dtype)
-        return self[np.dtype(name.removeprefix("torch."))]
+        return self[dtype]
 
 
-_SPLIT = _SplitTable({np.dtype(np.float64): 134217729.0, np.dtype(np.float32): 4097.0})
+# Veltkamp splitting constants 2^ceil(p/2) + 1 for TwoProduct (p = 53 for float64, 24 for float32).
+_SPLIT = _Splits({np.dtype(np.float64): 134217729.0, np.dtype(np.float32): 4097.0})
 
 
 class _Ops:
@@ -25,7 +28,7 @@ class _Ops:
 
     def __init__(self, torch_mode: bool):
         if torch_mode:
-            import torch  # noqa: PLC0415 (loaded already: the arguments hold a tensor)
+            import torch  # noqa: PLC0415 - torch mode: an argument is a tensor, torch is loaded
 
             self.minimum, self.maximum, self.where = torch.minimum, torch.maximum, torch.where
             self.fmod, self.round, self.clip = torch.fmod, torch.round, torch.clamp

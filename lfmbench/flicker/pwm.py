@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from lfmbench.check import check_array
-from lfmbench.flicker.args import ArrayLike, _as_tensors, _check_pwm_args, _is_torch, _is_zero, _np_view
+from lfmbench.flicker.args import ArrayLike, _as_tensors, _check_pwm_args, _is_tensor, _is_torch, _is_zero, _np_view
 from lfmbench.flicker.exact import _Ops, _SPLIT, _mod_period, _pulse_core
 from lfmbench.flicker.kernels import _numba_kernel
 
@@ -144,7 +144,7 @@ def bin_weights(edges: ArrayLike, period: ArrayLike, duty: ArrayLike, led_phase:
         raise ValueError("edges must be strictly increasing along the last axis")
 
     def per_row(x):  # a per-row parameter gains a trailing bin axis
-        if _is_torch(x):
+        if _is_tensor(x):
             return x.unsqueeze(-1) if x.ndim > 0 else x
         x = np.asarray(x, dtype=np.float64)
         return x[..., None] if x.ndim > 0 else x

@@ -8,7 +8,7 @@ import math
 import numpy as np
 
 from lfmbench.check import check_array
-from lfmbench.flicker.args import ArrayLike, _as_tensors, _check_pwm_args, _is_torch
+from lfmbench.flicker.args import ArrayLike, _as_tensors, _check_pwm_args, _is_tensor, _is_torch
 from lfmbench.flicker.exact import _Ops
 
 __all__ = ["flicker_severity", "miss_probability", "windows_miss_probability"]
@@ -34,8 +34,8 @@ def flicker_severity(phi: ArrayLike, dim: int = -1) -> ArrayLike:
         0.5
     """
     check_array("phi", phi, lo=0.0)
-    if _is_torch(phi):
-        import torch  # noqa: PLC0415 (loaded already: phi is a tensor)
+    if _is_tensor(phi):
+        import torch  # noqa: PLC0415 - phi is a tensor: torch is loaded
 
         hi = phi.amax(dim=dim)
         lo = phi.amin(dim=dim)
