@@ -52,7 +52,7 @@ from torch.utils.data import default_collate
 from lfmbench import sensor as _sensor
 from lfmbench.check import check_batch_keys, check_same_device, trusted_values
 from lfmbench.datasets.assembly import NOISE_STREAMS, SENSOR_OUTPUTS, assemble_sample, bin_edges, window_bin_exposure, window_starts
-from lfmbench.datasets.pieces import PWM_FIELDS, capture_pieces
+from lfmbench.datasets.pieces import PWM_FIELDS, capture_pieces, gate_table
 from lfmbench.datasets.row_gather import gather_rows
 from lfmbench.flicker import pwm_exposure
 from lfmbench.sensor.fused import PatternCrops, map_samples
@@ -86,8 +86,9 @@ def collate_pieces(samples: Sequence[Mapping[str, Any]]) -> dict:
         the fields of :func:`capture_pieces` with a leading B for the per-sample ones (``static`` (B, F, 2, h, w),
         ``t0`` (B, F), ``timing`` (B, 4), ``crop`` (B, 4), ``scene_hw`` (B, 2), ``noise_seed`` (B,),
         ``light_index``/``depth`` (B, F, 1, h, w)), the slots and entries of all samples concatenated
-        (``entry_slot`` into the batch's slots, ``slot_sample`` (S,) int64 their sample, ``entry_values`` padded
-        to the batch's Kmax), ``meta`` collated as the per-sample path's DataLoader does, and ``info``.
+        (``entry_slot`` and ``gate_slot`` into the batch's slots, ``slot_sample`` (S,) int64 their sample,
+        ``entry_values`` padded to the batch's Kmax, ``gate_table`` to its most ON intervals with empty ones),
+        ``meta`` collated as the per-sample path's DataLoader does, and ``info``.
 
     Raises:
         ValueError: ``samples`` empty, not pieces (``pieces=True`` missing), or mixing sensors, frame counts,
@@ -132,6 +133,11 @@ def collate_pieces(samples: Sequence[Mapping[str, Any]]) -> dict:
     out["entry_pix"] = cat([s["entry_pix"] for s in samples])
     for k in ("slot_pwm", "slot_frame", "slot_K"):
         out[k] = torch.cat([s[k] for s in samples])
+    if any("gate_slot" in s for s in samples):     # gated lights: their slots and gates, padded to the most intervals
+        gs = [(s["gate_slot"] + int(o), s["gate_table"]) for s, o in zip(samples, offs) if "gate_slot" in s]
+        cols = max(int(t.shape[1]) for _, t in gs)
+        out["gate_slot"] = torch.cat([g for g, _ in gs])
+        out["gate_table"] = torch.cat([torch.nn.functional.pad(t, (0, cols - int(t.shape[1]))) for _, t in gs])
     out["slot_sample"] = torch.repeat_interleave(torch.arange(len(samples)), torch.tensor(n_slots, dtype=torch.long))
     out["meta"] = default_collate([s["meta"] for s in samples])
     out["info"] = dict(info0)
@@ -234,9 +240,11 @@ def pwm_weights(batch: Mapping[str, Any]) -> dict[str, torch.Tensor]:
         ``{"lpd", "spd", "gt"}``: (S, R, Kmax) float64 s; R = h rows for a rolling shutter, 1 for a global one
         (row-independent). Bins past a slot's own K weigh 0; a ``K = 0`` slot (a group without bins) has its
         whole-window weight in bin 0. These are the per-sample path's numbers (same functions, same order of
-        operations; bit-identical on the CPU). On CUDA, for a batch of ideal pulses without group slots
-        (``info["ideal_pulses"]``, ``info["group_slots"]``), one Triton kernel computes them with the same float64
-        operations (:mod:`lfmbench.datasets._compose_triton`; equal, zeros up to their sign).
+        operations; bit-identical on the CPU). The slots of gated lights (``gate_slot``, ``gate_table``) get
+        their waveform's exposure (:meth:`lfmbench.flicker.waveforms.GateTable.exposure`, the per-sample path's
+        function, here for all of them at once). On CUDA, for a batch of ideal pulses without group slots and
+        gated lights (``info["ideal_pulses"]``, ``info["group_slots"]``), one Triton kernel computes them with the
+        same float64 operations (:mod:`lfmbench.datasets._compose_triton`; equal, zeros up to their sign).
     """
     check_batch_keys(batch, _PIECE_KEYS, hint=_PIECE_HINT)
     dev = check_same_device(batch, "static", hint=_DEVICE_HINT)
@@ -245,7 +253,9 @@ def pwm_weights(batch: Mapping[str, Any]) -> dict[str, torch.Tensor]:
     sb = batch["slot_sample"]
     S = int(sb.shape[0])
     K = batch["slot_K"]
-    if (S and info.get("ideal_pulses") and not info.get("group_slots", True)
+    gate_slot = batch.get("gate_slot")
+    G = 0 if gate_slot is None else int(gate_slot.shape[0])      # (a shape: known on the host)
+    if (S and not G and info.get("ideal_pulses") and not info.get("group_slots", True)
             and batch["slot_pwm"].dtype == torch.float64 and batch["static"].dtype == torch.float32
             and _COMPOSE_KERNELS.ready(batch["static"])):
         # CUDA: one kernel, the same numbers (lfmbench.datasets._compose_triton)
@@ -278,6 +288,15 @@ def pwm_weights(batch: Mapping[str, Any]) -> dict[str, torch.Tensor]:
     for key, pd, level in (("lpd", "lpd", "pwm"), ("spd", "spd", "pwm"), ("gt", "lpd", "mean")):
         out[key] = window_bin_exposure(edges, starts[pd], length[pd][:, None, None], pw3["period_s"], pw3["duty"],
                                        pw3["phase_s"], pw3["rise_s"], pw3["fall_s"], level, check=False)
+    if G:
+        # gated lights (indicators, strobes, countdowns, destination displays): their waveform's exposure
+        gi = gate_slot.long()
+        tab = gate_table(batch["gate_table"])                                      # fields (G, 1, 1)
+        p = {k: (v[gi] if torch.is_tensor(v) else v) for k, v in pw3.items()}
+        for key, pd, level in (("lpd", "lpd", "pwm"), ("spd", "spd", "pwm"), ("gt", "lpd", "mean")):
+            out[key][gi] = window_bin_exposure(edges[gi], starts[pd][gi], length[pd][gi, None, None], p["period_s"],
+                                               p["duty"], p["phase_s"], p["rise_s"], p["fall_s"], level,
+                                               check=False, waveform=tab)
     grp = K == 0
     # (a batch that says it has no group slots skips the test: bool() would wait for the device)
     if info.get("group_slots", True) and bool(grp.any()):
