@@ -126,11 +126,11 @@ def test_the_batched_program_gives_the_per_sample_draws_and_captures(long_corpus
 
 @pytest.fixture(scope="module")
 def v2_corpus(tmp_path_factory):
-    """3 scenes of 5 frames: 2 with every light kind of scene version 2 (tests.data.corpus.data.V2_LIGHTS:
+    """3 scenes of 4 frames: 2 with every light kind of scene version 2 (tests.data.corpus.data.V2_LIGHTS:
     indicator, strobe, countdown, destination display, message-sign rows, shared drivers), 1 plain scene."""
     from tests.data.corpus.data import make_v2_corpus
 
-    return make_v2_corpus(tmp_path_factory.mktemp("v2"), n_scenes=3, frames=5, n_plain=1)
+    return make_v2_corpus(tmp_path_factory.mktemp("v2"), n_scenes=3, frames=4, n_plain=1)
 
 
 _V2_CASES = {

@@ -152,12 +152,12 @@ V2_LIGHTS = (
 def make_v2_corpus(root, n_scenes=3, frames=6, bins=4, scale=1e-3, seed=0, n_plain=0):
     """A corpus like :func:`make_corpus` whose scenes each have the 8 lights of :data:`V2_LIGHTS` (indicator,
     strobe, countdown segment, destination-display row, two message-sign scan rows and two lamps on shared drivers;
-    boxes 3 px wide side by side, so a crop shows some of them), the gates shifted by 7 ms per scene; the last
+    boxes 3 px wide side by side, so a crop shows some of them), the gates shifted by 7 ms per scene; the first
     ``n_plain`` scenes have 8 plain PWM lights instead (scene version 1)."""
     w = C.CorpusWriter(root)
     for i in range(n_scenes):
         meta = fake_meta(f"scene{i:05d}", width=W, height=H, frames=frames, bins=bins, n_lights=len(V2_LIGHTS))
-        for lt, extra in zip(meta["lights"], V2_LIGHTS if i < n_scenes - n_plain else ()):
+        for lt, extra in zip(meta["lights"], V2_LIGHTS if i >= n_plain else ()):
             lt.update({k: (dict(v) if isinstance(v, dict) else v) for k, v in extra.items()})
             if "phase_s" in lt.get("waveform", {}):
                 lt["waveform"]["phase_s"] = round(lt["waveform"]["phase_s"] + 0.007 * i, 6)
