@@ -10,9 +10,10 @@ corpus is the same scenes, the same boxes and radiance, the lights without ``wav
 frames, the full frame, every output but ``rgb``; batches of ``--batch``; global and rolling shutter (``--shutters``:
 under a rolling shutter every slot has a weight per row, so a gate is evaluated per row).
 
-Times (median of ``--passes`` after a warm-up), per batch: the program's cut (``SplitProgram.pieces``) and the whole
-batch (cut, composition, sensor chain: ``DeviceBatches.batch``), v2 and v1 corpora alternating in one run, and
-their ratio. Writes the section "Scene version 2 light kinds: CPU figures" (or "... GPU figures" on CUDA) of
+Times (median of ``--passes`` after a warm-up; process CPU time and wall time), per batch: the program's cut
+(``SplitProgram.pieces``), the PWM weights of that cut (``batched.pwm_weights``: where the gates are evaluated)
+and the whole batch (cut, composition, sensor chain: ``DeviceBatches.batch``), v2 and v1 corpora alternating in
+one run, and their ratio. Writes the section "Scene version 2 light kinds: CPU figures" (or "... GPU figures" on CUDA) of
 ``docs/benchmarks/device-path.md`` (``--no-doc``: print only).
 Run: ``.venv/bin/python benchmarks/bench_device_v2.py [--device cpu|cuda] [--quick]``.
 """
@@ -110,6 +111,7 @@ def main(argv=None) -> int:
     if args.quick:
         args.scenes, args.passes = 4, 3
     from lfmbench.datasets import LFMCaptureDataset
+    from lfmbench.datasets.batched import pwm_weights
     from lfmbench.datasets.device import DeviceBatches
 
     dev = torch.device(args.device)
@@ -128,20 +130,24 @@ def main(argv=None) -> int:
             progs[(tag, sh)] = DeviceBatches(ds, args.batch, dev, seed=0)
             assert progs[(tag, sh)].resident.program is not None
     idx = list(range(args.batch))
-    times: dict = {(t, k): [] for t in progs for k in ("pieces", "batch")}
+    keys = ("pieces", "weights", "batch")
+    times: dict = {(t, k, c): [] for t in progs for k in keys for c in ("wall", "cpu")}
+    cut = {t: db.resident.program.pieces(idx) for t, db in progs.items()}
 
     def sync():
         if dev.type == "cuda":
             torch.cuda.synchronize(dev)
     for p in range(args.passes + 1):           # pass 0: warm-up; v2 and v1 alternate
         for tag, db in progs.items():
-            for key, fn in (("pieces", lambda: db.resident.program.pieces(idx)), ("batch", lambda: db.batch(idx))):
+            for key, fn in (("pieces", lambda: db.resident.program.pieces(idx)),
+                            ("weights", lambda: pwm_weights(cut[tag])), ("batch", lambda: db.batch(idx))):
                 sync()
-                t0 = time.perf_counter()
+                t0, c0 = time.perf_counter(), time.process_time()
                 fn()
                 sync()
                 if p:
-                    times[(tag, key)].append(time.perf_counter() - t0)
+                    times[(tag, key, "wall")].append(time.perf_counter() - t0)
+                    times[(tag, key, "cpu")].append(time.process_time() - c0)
     med = {k: statistics.median(v) for k, v in times.items()}
     gates = progs[("v2", shutters[0])].resident.program.gates
     name = torch.cuda.get_device_name(dev) if dev.type == "cuda" else _cpu_name()
@@ -154,13 +160,18 @@ def main(argv=None) -> int:
              + f"; {drivers / len(scenes):.1f} on a shared driver; gates of up to {(gates.shape[1] - 4) // 2} ON "
              f"intervals. Synthetic radiance at 160 x 90 px, 3 frames of 4 bins, full-frame samples, batch "
              f"{args.batch}; the v1 corpus has the same lights without waveform and driver. Medians of "
-             f"{args.passes} passes, v2 and v1 alternating.", "",
-             "| shutter | per batch | v1 lights (ms) | v2 lights (ms) | v2 / v1 |", "|---|---|---|---|---|"]
+             f"{args.passes} passes, v2 and v1 alternating; process CPU time (all threads) beside wall time: on a "
+             "shared machine the CPU time is the steadier of the two.", "",
+             "| shutter | per batch | v1 lights: CPU / wall (ms) | v2 lights: CPU / wall (ms) | v2 / v1 CPU | "
+             "v2 / v1 wall |", "|---|---|---|---|---|---|"]
     for sh in shutters:
         for key, what in (("pieces", "program's cut (`SplitProgram.pieces`)"),
+                          ("weights", "PWM weights of the cut (`pwm_weights`)"),
                           ("batch", "whole batch (cut, composition, sensor chain)")):
-            a, b = med[(("v1", sh), key)], med[(("v2", sh), key)]
-            lines.append(f"| {sh} | {what} | {1e3 * a:.1f} | {1e3 * b:.1f} | {b / a:.2f} |")
+            a, b = (med[((t, sh), key, "cpu")] for t in ("v1", "v2"))
+            aw, bw = (med[((t, sh), key, "wall")] for t in ("v1", "v2"))
+            lines.append(f"| {sh} | {what} | {1e3 * a:.1f} / {1e3 * aw:.1f} | {1e3 * b:.1f} / {1e3 * bw:.1f} | "
+                         f"{b / a:.2f} | {bw / aw:.2f} |")
     text = "\n".join(lines) + "\n"
     print(text)
     if not args.no_doc:
