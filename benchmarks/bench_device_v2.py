@@ -64,6 +64,9 @@ def make_corpora(root: Path, scenes, frames: int = 3, bins: int = 4, width: int 
 
     roots = {}
     for tag, timed in (("v2", True), ("v1", False)):
+        roots[tag] = root / tag
+        if (root / tag / "manifest.json").is_file():      # written by an earlier run (--corpus)
+            continue
         w = C.CorpusWriter(root / tag)
         for i, (sid, lights, groups) in enumerate(scenes):
             rng = np.random.default_rng(i)
@@ -83,7 +86,6 @@ def make_corpora(root: Path, scenes, frames: int = 3, bins: int = 4, width: int 
             fr = scale_frames(fake_frames(meta, seed=i), 1e-3, 1e-3)
             w.write_scene(meta["scene_id"], fake_scene(meta["scene_id"]), meta, fr)
         w.write_splits(0)
-        roots[tag] = root / tag
     return roots["v2"], roots["v1"]
 
 
@@ -106,6 +108,7 @@ def main(argv=None) -> int:
     ap.add_argument("--passes", type=int, default=7)
     ap.add_argument("--shutters", default="global,rolling", help="comma-separated: global, rolling")
     ap.add_argument("--quick", action="store_true", help="4 scenes, 3 passes")
+    ap.add_argument("--corpus", type=Path, default=None, help="where the two corpora are written / reused")
     ap.add_argument("--no-doc", action="store_true")
     args = ap.parse_args(argv)
     if args.quick:
@@ -119,7 +122,7 @@ def main(argv=None) -> int:
     mix = collections.Counter(lt.get("waveform", {}).get("kind", "pwm") for _s, ls, _g in scenes for lt in ls)
     drivers = sum("driver" in lt for _s, ls, _g in scenes for lt in ls)
     n_lights = sum(mix.values())
-    root = Path(tempfile.mkdtemp())
+    root = args.corpus or Path(tempfile.mkdtemp())
     v2, v1 = make_corpora(root, scenes)
     progs = {}
     shutters = args.shutters.split(",")
@@ -129,7 +132,9 @@ def main(argv=None) -> int:
                                    shutter=sh)
             progs[(tag, sh)] = DeviceBatches(ds, args.batch, dev, seed=0)
             assert progs[(tag, sh)].resident.program is not None
-    idx = list(range(args.batch))
+    # a batch of samples of every scene in turn (sample j of the batch: scene j mod n)
+    n_sc = len(scenes)
+    idx = [(j % n_sc) * args.batch + j // n_sc for j in range(args.batch)]
     keys = ("pieces", "weights", "batch")
     times: dict = {(t, k, c): [] for t in progs for k in keys for c in ("wall", "cpu")}
     cut = {t: db.resident.program.pieces(idx) for t, db in progs.items()}
@@ -159,7 +164,7 @@ def main(argv=None) -> int:
              + ", ".join(f"{k} {v / len(scenes):.1f}" for k, v in sorted(mix.items()))
              + f"; {drivers / len(scenes):.1f} on a shared driver; gates of up to {(gates.shape[1] - 4) // 2} ON "
              f"intervals. Synthetic radiance at 160 x 90 px, 3 frames of 4 bins, full-frame samples, batch "
-             f"{args.batch}; the v1 corpus has the same lights without waveform and driver. Medians of "
+             f"{args.batch} of samples of every scene in turn; the v1 corpus has the same lights without waveform and driver. Medians of "
              f"{args.passes} passes, v2 and v1 alternating; process CPU time (all threads) beside wall time: on a "
              "shared machine the CPU time is the steadier of the two.", "",
              "| shutter | per batch | v1 lights: CPU / wall (ms) | v2 lights: CPU / wall (ms) | v2 / v1 CPU | "
