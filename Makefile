@@ -68,6 +68,7 @@ bench: setup demo
 	$(RENDERENV) $(PY) benchmarks/bench_architectures.py
 	$(RENDERENV) $(PY) benchmarks/bench_batched_capture.py
 	$(PY) benchmarks/bench_device_path.py
+	$(RENDERENV) $(PY) benchmarks/bench_device_v2.py
 	$(RENDERENV) $(PY) benchmarks/bench_eval_sharing.py --corpus demo_out/corpus --checkpoint demo_out/unet_fusion.pt
 	$(RENDERENV) $(PY) benchmarks/bench_render.py
 	$(RENDERENV) $(PY) benchmarks/bench_crop_pad.py

@@ -52,7 +52,7 @@ from torch.utils.data import default_collate
 from lfmbench import sensor as _sensor
 from lfmbench.check import check_batch_keys, check_same_device, trusted_values
 from lfmbench.datasets.assembly import NOISE_STREAMS, SENSOR_OUTPUTS, assemble_sample, bin_edges, window_bin_exposure, window_starts
-from lfmbench.datasets.pieces import PWM_FIELDS, capture_pieces
+from lfmbench.datasets.pieces import PWM_FIELDS, capture_pieces, gate_table
 from lfmbench.datasets.row_gather import gather_rows
 from lfmbench.flicker import pwm_exposure
 from lfmbench.sensor.fused import PatternCrops, map_samples
@@ -86,8 +86,9 @@ def collate_pieces(samples: Sequence[Mapping[str, Any]]) -> dict:
         the fields of :func:`capture_pieces` with a leading B for the per-sample ones (``static`` (B, F, 2, h, w),
         ``t0`` (B, F), ``timing`` (B, 4), ``crop`` (B, 4), ``scene_hw`` (B, 2), ``noise_seed`` (B,),
         ``light_index``/``depth`` (B, F, 1, h, w)), the slots and entries of all samples concatenated
-        (``entry_slot`` into the batch's slots, ``slot_sample`` (S,) int64 their sample, ``entry_values`` padded
-        to the batch's Kmax), ``meta`` collated as the per-sample path's DataLoader does, and ``info``.
+        (``entry_slot`` and ``gate_slot`` into the batch's slots, ``slot_sample`` (S,) int64 their sample,
+        ``entry_values`` padded to the batch's Kmax, ``gate_table`` to its most ON intervals with empty ones),
+        ``meta`` collated as the per-sample path's DataLoader does, and ``info``.
 
     Raises:
         ValueError: ``samples`` empty, not pieces (``pieces=True`` missing), or mixing sensors, frame counts,
@@ -132,6 +133,11 @@ def collate_pieces(samples: Sequence[Mapping[str, Any]]) -> dict:
     out["entry_pix"] = cat([s["entry_pix"] for s in samples])
     for k in ("slot_pwm", "slot_frame", "slot_K"):
         out[k] = torch.cat([s[k] for s in samples])
+    if any("gate_slot" in s for s in samples):     # gated lights: their slots and gates, padded to the most intervals
+        gs = [(s["gate_slot"] + int(o), s["gate_table"]) for s, o in zip(samples, offs) if "gate_slot" in s]
+        cols = max(int(t.shape[1]) for _, t in gs)
+        out["gate_slot"] = torch.cat([g for g, _ in gs])
+        out["gate_table"] = torch.cat([torch.nn.functional.pad(t, (0, cols - int(t.shape[1]))) for _, t in gs])
     out["slot_sample"] = torch.repeat_interleave(torch.arange(len(samples)), torch.tensor(n_slots, dtype=torch.long))
     out["meta"] = default_collate([s["meta"] for s in samples])
     out["info"] = dict(info0)
@@ -234,63 +240,94 @@ def pwm_weights(batch: Mapping[str, Any]) -> dict[str, torch.Tensor]:
         ``{"lpd", "spd", "gt"}``: (S, R, Kmax) float64 s; R = h rows for a rolling shutter, 1 for a global one
         (row-independent). Bins past a slot's own K weigh 0; a ``K = 0`` slot (a group without bins) has its
         whole-window weight in bin 0. These are the per-sample path's numbers (same functions, same order of
-        operations; bit-identical on the CPU). On CUDA, for a batch of ideal pulses without group slots
+        operations; bit-identical on the CPU). The slots of gated lights (``gate_slot``, ``gate_table``) get
+        their waveform's exposure (:meth:`lfmbench.flicker.waveforms.GateTable.exposure`, the per-sample path's
+        function, here for all of them at once). On CUDA, for a batch of ideal pulses without group slots
         (``info["ideal_pulses"]``, ``info["group_slots"]``), one Triton kernel computes them with the same float64
-        operations (:mod:`lfmbench.datasets._compose_triton`; equal, zeros up to their sign).
+        operations (:mod:`lfmbench.datasets._compose_triton`; equal, zeros up to their sign); gated slots are then
+        computed again by the torch form.
     """
     check_batch_keys(batch, _PIECE_KEYS, hint=_PIECE_HINT)
     dev = check_same_device(batch, "static", hint=_DEVICE_HINT)
     info = batch["info"]
     h = int(info["crop_hw"][0])
-    sb = batch["slot_sample"]
-    S = int(sb.shape[0])
+    S = int(batch["slot_sample"].shape[0])
     K = batch["slot_K"]
+    kmax = int(batch["entry_values"].shape[1])
+    gate_slot = batch.get("gate_slot")
+    G = 0 if gate_slot is None else int(gate_slot.shape[0])      # (a shape: known on the host)
+    out = None
     if (S and info.get("ideal_pulses") and not info.get("group_slots", True)
             and batch["slot_pwm"].dtype == torch.float64 and batch["static"].dtype == torch.float32
             and _COMPOSE_KERNELS.ready(batch["static"])):
         # CUDA: one kernel, the same numbers (lfmbench.datasets._compose_triton)
         R = h if info["shutter"] == "rolling" else 1
-        out = _COMPOSE_KERNELS.call("pwm_weights", batch, R, int(batch["entry_values"].shape[1]))
-        if out is not None:
+        out = _COMPOSE_KERNELS.call("pwm_weights", batch, R, kmax)
+        if out is not None and not G:
             return out
-    tim = batch["timing"][sb]                                                     # (S, 4) s
-    t_s, t_l, td, cw = tim.unbind(-1)
-    t0 = batch["t0"][sb, batch["slot_frame"]]                                     # (S,) s
-    if info["shutter"] == "rolling":
-        rows = batch["crop"][sb, 0:1].to(torch.float64) + torch.arange(h, device=dev, dtype=torch.float64)
-        shift = rows * td[:, None]                                                # (S, h) s
-    else:
-        shift = torch.zeros(S, 1, dtype=torch.float64, device=dev)
-    starts = window_starts(t0[:, None], t_s[:, None], t_l[:, None], shift)       # pd -> (S, R) s
-    length = {"lpd": t_s, "spd": t_l}
-    pw = {k: batch["slot_pwm"][:, i] for i, k in enumerate(PWM_FIELDS)}
-    if info.get("ideal_pulses"):    # the batch says no slot has ramps: the ideal-pulse formula, decided on the host
-        pw["rise_s"] = pw["fall_s"] = 0.0
-    pw3 = {k: (v[:, None, None] if torch.is_tensor(v) else v) for k, v in pw.items()}
-    kmax = int(batch["entry_values"].shape[1])
     if S == 0:
-        z = torch.zeros(0, shift.shape[1], kmax, dtype=torch.float64, device=dev)
+        z = torch.zeros(0, h if info["shutter"] == "rolling" else 1, kmax, dtype=torch.float64, device=dev)
         return {"lpd": z, "spd": z, "gt": z}
-    edges = t0[:, None] + bin_edges(cw, K.clamp_min(1), like=shift, kmax=kmax)  # (S, Kmax+1) s
-    if edges.shape[1] < kmax + 1:
-        edges = torch.cat([edges, edges[:, -1:].expand(S, kmax + 1 - edges.shape[1])], 1)
-    out = {}
-    for key, pd, level in (("lpd", "lpd", "pwm"), ("spd", "spd", "pwm"), ("gt", "lpd", "mean")):
-        out[key] = window_bin_exposure(edges, starts[pd], length[pd][:, None, None], pw3["period_s"], pw3["duty"],
-                                       pw3["phase_s"], pw3["rise_s"], pw3["fall_s"], level, check=False)
+    levels = (("lpd", "lpd", "pwm"), ("spd", "spd", "pwm"), ("gt", "lpd", "mean"))
+    if out is None:
+        edges, starts, length, pw3 = _slot_windows(batch)
+        out = {key: window_bin_exposure(edges, starts[pd], length[pd][:, None, None], pw3["period_s"], pw3["duty"],
+                                        pw3["phase_s"], pw3["rise_s"], pw3["fall_s"], level, check=False)
+               for key, pd, level in levels}
+    if G:
+        # gated lights (indicators, strobes, countdowns, destination displays): their waveform's exposure
+        gi = gate_slot.long()
+        edges, starts, length, pw3 = _slot_windows(batch, gi)                      # of the G gated slots
+        tab = gate_table(batch["gate_table"])                                      # fields (G, 1, 1)
+        for key, pd, level in levels:
+            out[key][gi] = window_bin_exposure(edges, starts[pd], length[pd][:, None, None], pw3["period_s"],
+                                               pw3["duty"], pw3["phase_s"], pw3["rise_s"], pw3["fall_s"], level,
+                                               check=False, waveform=tab)
+    grp = K == 0
     grp = K == 0
     # (a batch that says it has no group slots skips the test: bool() would wait for the device)
     if info.get("group_slots", True) and bool(grp.any()):
         gi = grp.nonzero()[:, 0]
-        p = {k: (v[gi, None] if torch.is_tensor(v) else v) for k, v in pw.items()}
+        _edges, starts, length, pw3 = _slot_windows(batch, gi)
+        p = {k: (v[:, :, 0] if torch.is_tensor(v) else v) for k, v in pw3.items()}                # (G, 1)
         for key, pd in (("lpd", "lpd"), ("spd", "spd")):
-            wg = pwm_exposure(starts[pd][gi] - p["phase_s"], length[pd][gi, None], p["period_s"], p["duty"],
+            wg = pwm_exposure(starts[pd] - p["phase_s"], length[pd][:, None], p["period_s"], p["duty"],
                               rise_time=p["rise_s"], fall_time=p["fall_s"])                    # (G, R) s
             out[key][gi] = 0.0
             out[key][gi, :, 0] = wg
         out["gt"][gi] = 0.0
-        out["gt"][gi, :, 0] = (p["duty"] * length["lpd"][gi, None]).expand(-1, out["gt"].shape[1])
+        out["gt"][gi, :, 0] = (p["duty"] * length["lpd"][:, None]).expand(-1, out["gt"].shape[1])
     return out
+
+
+def _slot_windows(batch: Mapping[str, Any], sel: torch.Tensor | None = None) -> tuple:
+    """The windows and PWM of the slots ``sel`` ((n,) int64; None: every slot) of a batch: ``(edges, starts,
+    length, pw3)``: bin edges (n, Kmax + 1) s (past a slot's K its last edge repeats), window starts pd -> (n, R) s
+    (R = h rows for a rolling shutter, else 1), window lengths pd -> (n,) s, the PWM fields (:data:`PWM_FIELDS`)
+    -> (n, 1, 1) (ramps the number 0 when ``info["ideal_pulses"]``)."""
+    dev, info = batch["static"].device, batch["info"]
+    h = int(info["crop_hw"][0])
+    kmax = int(batch["entry_values"].shape[1])
+    sb, fr, K, pwm = batch["slot_sample"], batch["slot_frame"], batch["slot_K"], batch["slot_pwm"]
+    if sel is not None:
+        sb, fr, K, pwm = sb[sel], fr[sel], K[sel], pwm[sel]
+    n = int(sb.shape[0])
+    t_s, t_l, td, cw = batch["timing"][sb].unbind(-1)                              # (n,) s
+    t0 = batch["t0"][sb, fr]                                                       # (n,) s
+    if info["shutter"] == "rolling":
+        rows = batch["crop"][sb, 0:1].to(torch.float64) + torch.arange(h, device=dev, dtype=torch.float64)
+        shift = rows * td[:, None]                                                 # (n, h) s
+    else:
+        shift = torch.zeros(n, 1, dtype=torch.float64, device=dev)
+    starts = window_starts(t0[:, None], t_s[:, None], t_l[:, None], shift)        # pd -> (n, R) s
+    pw = {k: pwm[:, i] for i, k in enumerate(PWM_FIELDS)}
+    if info.get("ideal_pulses"):    # the batch says no slot has ramps: the ideal-pulse formula, decided on the host
+        pw["rise_s"] = pw["fall_s"] = 0.0
+    pw3 = {k: (v[:, None, None] if torch.is_tensor(v) else v) for k, v in pw.items()}
+    edges = t0[:, None] + bin_edges(cw, K.clamp_min(1), like=shift, kmax=kmax)    # (n, Kmax+1) s
+    if edges.shape[1] < kmax + 1:
+        edges = torch.cat([edges, edges[:, -1:].expand(n, kmax + 1 - edges.shape[1])], 1)
+    return edges, starts, {"lpd": t_s, "spd": t_l}, pw3
 
 
 def compose_batch(batch: Mapping[str, Any], backend: str = "auto", threads: int | None = None) -> dict[str, torch.Tensor]:

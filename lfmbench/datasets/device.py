@@ -7,13 +7,19 @@ The per-sample DataLoader path builds each sample's pieces in CPU workers (4 MiB
 1. :class:`ResidentScenes` checks the split against a memory budget (:class:`ResidentMemoryError` before anything is
    copied) and packs it (:class:`SplitProgram`): static rates (nS, Fs, 2, H, W), ``light_index``, ``depth`` and
    every lamp pixel entry of every frame in one entry-major table sorted by tile, float32 or float16 (scaled per
-   scene by a power of two). Splits that cannot be packed (scenes of several sizes, groups stored without bins,
-   lights with their own timing) keep per-scene layers and take :func:`lfmbench.datasets.pieces.capture_pieces`
-   sample by sample. ``chunk_scenes`` streams a split that does not fit.
+   scene by a power of two). Splits that cannot be packed (scenes of several sizes, groups stored without bins)
+   keep per-scene layers and take :func:`lfmbench.datasets.pieces.capture_pieces` sample by sample.
+   ``chunk_scenes`` streams a split that does not fit. Lights with their own timing (scene version 2: drivers,
+   message-sign scan rows, indicators, strobes, countdowns, destination displays) are packed like any light: their
+   rules are tables of the program (below).
 2. A batch is one program of tensor operations (:meth:`SplitProgram.pieces`): the draws of every sample from
    counter uniforms of (seed, epoch, index) (:mod:`lfmbench.datasets.counter_draws`: the numbers the per-sample
    path draws with ``noise_streams="counter"``; made on the host, a few small CPU operations, and copied with the
-   batch's indices), slots for every lamp of every frame with a visibility mask, the
+   batch's indices; a light on a shared ``driver`` gathers its driver's draw, a scan row's draw is made its row's
+   PWM by :func:`lfmbench.datasets.pwm.scan_row_record`), slots for every lamp of every frame with a visibility
+   mask, the slots of gated lights with their gates (``gate_slot``, ``gate_table``: the waveform's
+   :class:`~lfmbench.flicker.waveforms.GateTable`, whose exposure :func:`~lfmbench.datasets.batched.pwm_weights`
+   applies), the
    crop's entries as runs of tiles, one gather per layer, ``meta`` as device tensors; no Python per sample and no
    host synchronisation.
 3. The batch is composed and simulated on the device by :func:`lfmbench.datasets.batched.simulate_batch` with
@@ -40,9 +46,10 @@ from lfmbench.counter_rng import uniforms
 from lfmbench.datasets.batched import collate_pieces, pieces_to, simulate_batch, tensor_leaves
 from lfmbench.datasets.counter_draws import (PURPOSE_PWM, PWM_UNIFORMS, crop_origin, noise_seeds, place_uniforms,
                                              pwm_from_uniforms, sample_keys, start_frame)
-from lfmbench.datasets.pieces import PWM_FIELDS, _SceneEntries, capture_pieces
-from lfmbench.datasets.pwm import has_light_timing
+from lfmbench.datasets.pieces import PWM_FIELDS, _SceneEntries, capture_pieces, gate_rows
+from lfmbench.datasets.pwm import driver_sources, has_light_timing, light_waveforms, scan_row_record
 from lfmbench.datasets.row_gather import gather_rows
+from lfmbench.flicker.waveforms import GatedWaveform, ScanRow
 from lfmbench.triton_kernels import TritonKernels
 from lfmbench.vocabulary import PHOTODIODES
 
@@ -398,7 +405,9 @@ class SplitProgram:
 
     Made by :class:`ResidentScenes` when the split allows it (:meth:`supports`): every scene of one size and one
     number of loaded frames, and no flickering group stored without time bins (imported data; those take the
-    per-sample pieces path).
+    per-sample pieces path). Every light kind of scene version 2 is packed: drivers as the entity a light draws
+    from, scan rows and gates as the tables below (the rules of :func:`lfmbench.datasets.pwm.apply_light_timing`
+    and :mod:`lfmbench.flicker.waveforms`, called on the batch's tensors).
 
     Tables (on ``device``; nS scenes, Fs frames, H x W px, Lf lights per frame at most, L = ``max_lights``,
     N pixel entries of all lights of all frames, Kall bins):
@@ -408,7 +417,11 @@ class SplitProgram:
         ``lt_lpos`` (nS, Fs, Lf) the light's position in the scene's ``meta`` light arrays (-1: padding),
         ``lt_K`` (nS, Fs, Lf) bins, ``lt_box`` (nS, Fs, Lf, 4) (y0, x0, y1, x1) px half-open;
         ``ids`` (nS, L) light ids (-1: padding), ``ent`` (nS, L) the light's PWM entity
-        (:class:`lfmbench.datasets.counter_draws.SceneEntities`; -1: not flickering);
+        (:class:`lfmbench.datasets.counter_draws.SceneEntities`; the entity of its driver's first light,
+        :func:`lfmbench.datasets.pwm.driver_sources`; -1: not flickering); ``scan`` (nS, L, 2) float64 (scan
+        lines N, line) of a message-sign row (``is_scan`` (nS, L)); ``gates`` (nG, 4 + 2 M) float64 the gated
+        waveforms' rows (:func:`lfmbench.datasets.pieces.gate_rows`), ``lt_gate`` (nS, Fs, Lf) a slot's row there
+        (-1: not gated; host);
         ``timing`` (nS, 4) float64 (short, long exposure, line time, capture window; s), ``fps`` (nS,) Hz.
     """
 
@@ -418,11 +431,11 @@ class SplitProgram:
     @staticmethod
     def supports(ds, scenes: list | None = None) -> bool:
         """Whether the scenes of ``ds`` (or ``scenes`` of them) can be packed (one size, one number of frames, no
-        groups without bins, no light with its own timing)."""
+        groups without bins)."""
         shapes = set()
         for sid in dict.fromkeys(ds.scene_ids if scenes is None else scenes):
             view = ds.scene(sid)
-            if view.layers.group_static or has_light_timing(view.meta):   # v2 drivers, scan rows, gates
+            if view.layers.group_static:
                 return False
             shapes.add(tuple(view.static_rates().shape))
         return len(shapes) == 1
@@ -456,6 +469,10 @@ class SplitProgram:
         self.lt_box = np.zeros((nS, Fs, lf, 4), dtype=np.int64)
         self.ids = np.full((nS, L), -1, dtype=np.int64)
         self.ent = np.full((nS, L), -1, dtype=np.int64)
+        self.scan = np.tile(np.array([1.0, 0.0]), (nS, L, 1))         # (N, line): 1/1 scan, the carrier itself
+        self.is_scan = np.zeros((nS, L), dtype=bool)
+        l_gate = np.full((nS, L), -1, dtype=np.int64)
+        tables: list = []
         self.num_lights = np.zeros(nS, dtype=np.int64)
         self.timing = np.zeros((nS, 4), dtype=np.float64)
         self.fps = np.zeros(nS, dtype=np.float64)
@@ -477,10 +494,22 @@ class SplitProgram:
             self.num_lights[i] = len(lights)
             se = ds.entities(sid)
             self.n_entities = max(self.n_entities, se.n_entities)
-            for j, lid in enumerate(se.light_ids):
-                if lid in lpos:
-                    self.ent[i, lpos[lid]] = se.entity[j]
             meta = view.meta
+            timed = has_light_timing(meta)
+            src = driver_sources(meta, se.light_ids) if timed else {}
+            ent_of = dict(zip(se.light_ids, se.entity))
+            for lid in se.light_ids:
+                if lid in lpos:
+                    self.ent[i, lpos[lid]] = ent_of[src.get(lid, lid)]
+            for lid, wf in (light_waveforms(meta) if timed else {}).items():
+                if lid not in lpos:
+                    continue
+                if isinstance(wf, GatedWaveform):   # indicator, strobe, countdown, destination-display row
+                    l_gate[i, lpos[lid]] = len(tables)
+                    tables.append(wf.table())
+                elif isinstance(wf, ScanRow):       # a message-sign row
+                    self.scan[i, lpos[lid]] = (wf.scan_lines, wf.line)
+                    self.is_scan[i, lpos[lid]] = True
             tm = meta["timing"]
             td = float(tm.get("line_time_s", 0.0)) if ds.line_time_s is None else float(ds.line_time_s)
             self.timing[i] = (float(tm["short_exposure_s"]), float(tm["long_exposure_s"]), td,
@@ -493,6 +522,10 @@ class SplitProgram:
                     self.lt_lpos[i, fr, k] = lpos.get(lid, -1)
                     self.lt_K[i, fr, k] = K
                     self.lt_box[i, fr, k] = box
+        #: per slot of each scene's frame, its gate's row in ``gates`` (-1: not gated)
+        self.lt_gate = np.where(self.lt_lpos >= 0, np.take_along_axis(
+            l_gate, self.lt_lpos.clip(0).reshape(nS, -1), 1).reshape(self.lt_lpos.shape), -1)
+        self.gates = gate_rows(tables).numpy()
         self.off = np.zeros((nS, Fs + 1), dtype=np.int64)
         self.off[:, 1:] = np.cumsum(counts, 1)
         self.off += np.concatenate([[0], np.cumsum(counts.sum(1))[:-1]])[:, None]
@@ -524,6 +557,8 @@ class SplitProgram:
         self.t_lpos, self.t_K, self.t_box = t(self.lt_lpos), t(self.lt_K), t(self.lt_box)
         self.t_ids, self.t_ent, self.t_nl = t(self.ids), t(self.ent), t(self.num_lights)
         self.t_timing, self.t_fps, self.t_scale = t(self.timing), t(self.fps), t(self.scale)
+        self.t_scan, self.t_is_scan = t(self.scan), t(self.is_scan)
+        self.any_scan = bool(self.is_scan.any())
         self.frozen = self._freeze() if ds.split == "test" else None
         # constants made once: a tensor made from host values inside a step would wait for the device's queue
         self._pad = torch.tensor(_PAD_PWM, dtype=torch.float64, device=dev)
@@ -647,6 +682,10 @@ class SplitProgram:
             ent = self.t_ent[sc_t]                                                           # (B, L)
             valid = ent >= 0
             pwm = to_device(rec_h).gather(1, ent.clamp_min(0)[..., None].expand(-1, -1, 6))  # (B, L, 6)
+            if self.any_scan:       # message-sign rows: the row's own PWM (apply_light_timing's rule)
+                sn = self.t_scan[sc_t]                                                       # (B, L, 2)
+                row = scan_row_record(*pwm[..., :5].unbind(-1), sn[..., 0], sn[..., 1])
+                pwm = torch.where(self.t_is_scan[sc_t][..., None], torch.stack([*row, pwm[..., 5]], -1), pwm)
         pad = self._pad
         # slots: every light of every frame of a sample, shown or not (B, F, Lf)
         at = (sc_t[:, None], fr_t)
@@ -665,6 +704,12 @@ class SplitProgram:
             "slot_frame": torch.arange(F, device=dev).view(1, F, 1).expand(B, F, lf).reshape(-1),
             "slot_sample": torch.arange(B, device=dev).view(B, 1, 1).expand(B, F, lf).reshape(-1),
         }
+        # gated lights' slots (known on the host from the scene and frame tables) and their gates
+        g_of = self.lt_gate[sc[:, None], fr].reshape(-1)                               # (B * F * Lf,)
+        g_slot = np.flatnonzero(g_of >= 0)
+        if g_slot.shape[0]:
+            out["gate_slot"] = to_device(torch.from_numpy(g_slot))
+            out["gate_table"] = to_device(torch.from_numpy(self.gates[g_of[g_slot]]))
         # entries: the runs of the global table, masked to the crop and the shown lights
         run = torch.repeat_interleave(torch.arange(B * F * NR, device=dev), cnt_t, output_size=E)
         before = torch.cumsum(cnt_t, 0) - cnt_t

@@ -4,7 +4,9 @@
 :func:`capture_pieces` reads the dataset only through its public view of a scene
 (:meth:`lfmbench.datasets.LFMCaptureDataset.scene`), :meth:`~lfmbench.datasets.LFMCaptureDataset.first_frame`
 and :meth:`~lfmbench.datasets.LFMCaptureDataset.sample_meta`, and the rules of :mod:`lfmbench.datasets.assembly`
-(the lights a crop shows); it sits below the dataset module, which calls it for ``pieces=True``.
+(the lights a crop shows); it sits below the dataset module, which calls it for ``pieces=True``. A light with a
+gated waveform (:func:`lfmbench.datasets.pwm.gated_lights`) keeps its carrier's draw in ``slot_pwm`` and its gate
+in ``gate_table`` (:func:`gate_rows`), which the batched weights apply (:func:`lfmbench.datasets.batched.pwm_weights`).
 """
 from __future__ import annotations
 
@@ -17,10 +19,39 @@ from lfmbench.datasets.assembly import visible_lights
 from lfmbench.datasets.pwm import gated_lights
 from lfmbench.vocabulary import PHOTODIODES
 
-__all__ = ["PWM_FIELDS", "capture_pieces"]
+__all__ = ["PWM_FIELDS", "GATE_FIELDS", "capture_pieces", "gate_rows", "gate_table"]
 
 #: Columns of ``slot_pwm``: period (s), duty (1), phase of a rising edge after frame 0 (s), rise (s), fall (s).
 PWM_FIELDS = ("period_s", "duty", "phase_s", "rise_s", "fall_s")
+#: Leading columns of a ``gate_table`` row (:class:`lfmbench.flicker.waveforms.GateTable`): gate period (s), gate
+#: phase (s), scan lines, scan line; then the ON intervals ``s_0, e_0, s_1, e_1, ...`` (s), padded with ``[0, 0)``.
+GATE_FIELDS = ("period_s", "phase_s", "scan_lines", "line")
+
+
+def gate_rows(tables, m: int | None = None) -> torch.Tensor:
+    """(G, 4 + 2 M) float64 rows of gated waveforms' tables (:meth:`lfmbench.flicker.waveforms.GatedWaveform.table`,
+    :data:`GATE_FIELDS` then the ON intervals in s, each set padded with empty intervals to ``m``, default the most
+    any has)."""
+    tables = list(tables)
+    m = max([int(np.shape(t.on)[0]) for t in tables] + [0]) if m is None else int(m)
+    out = np.zeros((len(tables), len(GATE_FIELDS) + 2 * m), dtype=np.float64)
+    for i, t in enumerate(tables):
+        on = np.asarray(t.on, dtype=np.float64).reshape(-1)
+        out[i, :len(GATE_FIELDS)] = (t.period_s, t.phase_s, t.scan_lines, t.line)
+        out[i, len(GATE_FIELDS):len(GATE_FIELDS) + on.shape[0]] = on
+    return torch.from_numpy(out)
+
+
+def gate_table(rows: torch.Tensor, trailing: int = 2):
+    """The :class:`lfmbench.flicker.waveforms.GateTable` of (G, 4 + 2 M) ``rows`` (:func:`gate_rows`; any device):
+    each field (G, 1, ..., 1) with ``trailing`` unit axes (2: to broadcast with (G, R, K) windows), ``on``
+    (G, 1, ..., 1, M, 2) s."""
+    from lfmbench.flicker.waveforms import GateTable  # noqa: PLC0415
+
+    G, n = int(rows.shape[0]), len(GATE_FIELDS)
+    ones = (1,) * int(trailing)
+    cols = [rows[:, i].reshape(G, *ones) for i in range(n)]
+    return GateTable(*cols, rows[:, n:].reshape(G, *ones, -1, 2))
 
 
 class _FrameEntries(NamedTuple):
@@ -81,6 +112,8 @@ def capture_pieces(ds, scene_id: str, params: Mapping[int, Mapping], group_param
         ``noise_seed``: () int64.
         ``slot_pwm``: (S, 5) float64 PWM parameters (:data:`PWM_FIELDS`); ``slot_frame``: (S,) int64 frame
         within the sample; ``slot_K``: (S,) int64 bins (0: a group stored without bins, whole-window weight).
+        ``gate_slot``: (G,) int64 the slots of lights with a gated waveform (indicator, strobe, countdown,
+        destination display), ``gate_table``: (G, 4 + 2 M) float64 their gates (:func:`gate_rows`).
         ``entry_values``: (2, Kmax, E) float32 rates (LPD, SPD) per bin, e-/s (zero past the slot's K);
         ``entry_slot``: (E,) int32; ``entry_pix``: (E,) int32 flat index into (F, h, w).
         ``light_index``: (F, 1, h, w) int16 and ``depth``: (F, 1, h, w) float32 m, when requested.
@@ -89,10 +122,7 @@ def capture_pieces(ds, scene_id: str, params: Mapping[int, Mapping], group_param
     view = ds.scene(scene_id)
     meta = view.meta
     params = {int(k): v for k, v in params.items()}
-    gated = sorted(set(gated_lights(meta)) & set(params))
-    if gated:
-        raise ValueError(f"scene {scene_id}: lights {gated[:8]} have gated waveforms (indicator, strobe, countdown, "
-                         "destination display), which only the per-sample path composes (LFMCaptureDataset[i])")
+    gates = gated_lights(meta)      # indicators, strobes, countdowns, destination displays: their own waveform
     group_params = dict(group_params or {})
     F = ds.frames
     s0 = ds.first_frame(scene_id, frame_start)
@@ -128,6 +158,7 @@ def capture_pieces(ds, scene_id: str, params: Mapping[int, Mapping], group_param
     # per-light layers: the scene's entries (fixed per scene) masked to the crop and the lights with PWM draws
     ent = view.cached("pieces_entries", _SceneEntries)
     picks = []
+    gated: list = []                 # (slot, waveform)
     for f in range(F):
         fe = ent.frames[s0 + f]
         shown = {id(rates) for *_, rates in visible_lights(layers, s0 + f, (y0, x0, h, w), params)}
@@ -136,6 +167,7 @@ def capture_pieces(ds, scene_id: str, params: Mapping[int, Mapping], group_param
             continue
         rank = np.full(len(fe.lights), -1, dtype=np.int32)
         rank[vis] = np.arange(len(slots), len(slots) + len(vis), dtype=np.int32)
+        gated.extend((len(slots) + j, gates[fe.lights[i][0]]) for j, i in enumerate(vis) if fe.lights[i][0] in gates)
         slots.extend((f, fe.lights[i][1], params[fe.lights[i][0]]) for i in vis)
         keep = (fe.y >= y0) & (fe.y < y0 + h) & (fe.x >= x0) & (fe.x < x0 + w)
         if len(vis) < len(fe.lights):
@@ -149,6 +181,8 @@ def capture_pieces(ds, scene_id: str, params: Mapping[int, Mapping], group_param
                                    dtype=torch.float64).reshape(len(slots), len(PWM_FIELDS))
     out["slot_frame"] = torch.tensor([s[0] for s in slots], dtype=torch.int64)
     out["slot_K"] = torch.tensor([s[1] for s in slots], dtype=torch.int64)
+    out["gate_slot"] = torch.tensor([g[0] for g in gated], dtype=torch.int64)
+    out["gate_table"] = gate_rows(wf.table() for _, wf in gated)
     if pix and src is not None:
         # on the resident layers' device: the groups' crops and a gather of the lights' entries
         dev = src.static.device

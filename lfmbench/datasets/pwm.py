@@ -298,6 +298,31 @@ def gated_lights(meta: Mapping[str, Any]) -> dict[int, Any]:
     return {k: w for k, w in light_waveforms(meta).items() if isinstance(w, GatedWaveform)}
 
 
+def driver_sources(meta: Mapping[str, Any], light_ids) -> dict[int, int]:
+    """``{light id: the light whose draw it takes}`` for the drawn lights ``light_ids``: a light with a ``driver``
+    takes the draw of the driver's drawn light of lowest id; any other light its own (the rule of
+    :func:`apply_light_timing`, also read by the device program, :mod:`lfmbench.datasets.device`)."""
+    lights = {int(lt["id"]): lt for lt in meta.get("lights", [])}
+    first: dict[str, int] = {}
+    for lid in sorted(int(i) for i in light_ids):
+        d = lights.get(lid, {}).get("driver")
+        if d is not None:
+            first.setdefault(d, lid)
+    return {int(lid): first.get(lights.get(int(lid), {}).get("driver"), int(lid)) for lid in light_ids}
+
+
+def scan_row_record(period, duty, phase, rise, fall, scan_lines, line):
+    """The PWM record of a multiplexed display row (waveform ``scan_row``) from its sign's drawn carrier: period
+    (s), duty ``D / N``, the row's rising edge ``phase + line * T / N`` reduced to [0, T) (s), ramps (s) scaled to
+    fit the row's duty (:func:`lfmbench.flicker.waveforms.scan_row_pwm`, :func:`~lfmbench.flicker.waveforms.fit_ramps`).
+    Array-agnostic (numbers, numpy, or torch tensors on any device: the device program applies it per light)."""
+    from lfmbench.flicker.waveforms import _mod, fit_ramps, scan_row_pwm  # noqa: PLC0415
+
+    T, D, ph = scan_row_pwm(period, duty, phase, scan_lines, line)
+    rise, fall = fit_ramps(T, D, rise, fall)
+    return T, D, _mod(ph, T), rise, fall
+
+
 def apply_light_timing(draw: SceneDraw, meta: Mapping[str, Any]) -> SceneDraw:
     """The draw with the timing that ``meta.json`` states per light (identity for lights without ``driver`` and
     ``waveform``, e.g. every scene of protocol lfmbench-v1):
@@ -306,29 +331,23 @@ def apply_light_timing(draw: SceneDraw, meta: Mapping[str, Any]) -> SceneDraw:
       lamp, the rows of a message sign, the bars of a countdown display);
     - a multiplexed display row (waveform ``scan_row``) is its row's own PWM: duty ``D / N``, rising edges
       ``line * T / N`` after the sign's, ramps scaled to fit (:meth:`lfmbench.flicker.waveforms.ScanRow.row_pwm`),
-      so every composition path applies it like any PWM light;
+      so every composition path applies it like any PWM light (:func:`scan_row_record`);
     - a gated waveform keeps its carrier's draw here; the composition applies the gate (:func:`gated_lights`).
     """
-    from lfmbench.flicker.waveforms import ScanRow, fit_ramps  # noqa: PLC0415
+    from lfmbench.flicker.waveforms import ScanRow  # noqa: PLC0415
 
     if not has_light_timing(meta):
         return draw
-    lights = {int(lt["id"]): lt for lt in meta.get("lights", [])}
-    first: dict[str, int] = {}
-    for lid in sorted(draw.lights):
-        d = lights.get(lid, {}).get("driver")
-        if d is not None:
-            first.setdefault(d, lid)
+    source = driver_sources(meta, draw.lights)
     wfs = light_waveforms(meta)
     out = {}
-    for lid, p in draw.lights.items():
-        d = lights.get(lid, {}).get("driver")
-        p = draw.lights[first[d]] if d is not None else p
+    for lid in draw.lights:
+        p = draw.lights[source[lid]]
         w = wfs.get(lid)
         if isinstance(w, ScanRow):
-            T, D, ph = (float(x) for x in w.row_pwm(p.period_s, p.duty, p.phase_s))
-            rise, fall = (float(x) for x in fit_ramps(T, D, p.rise_s, p.fall_s))
-            p = PWMParams(period_s=T, duty=D, phase_s=ph % T, rise_s=rise, fall_s=fall, freq_hz=p.freq_hz)
+            T, D, ph, rise, fall = (float(x) for x in scan_row_record(p.period_s, p.duty, p.phase_s, p.rise_s,
+                                                                      p.fall_s, w.scan_lines, w.line))
+            p = PWMParams(period_s=T, duty=D, phase_s=ph, rise_s=rise, fall_s=fall, freq_hz=p.freq_hz)
         out[lid] = p
     return SceneDraw(out, dict(draw.groups))
 

@@ -10,7 +10,10 @@ Defines
   :math:`\int_{t_s}^{t_s+t_e} I(t)\,dt`, level x s), ``w.mean_exposure(start, length, duty)`` (the same with the
   carrier replaced by its mean: the flicker-free ground truth), ``w.level(t, period, duty, phase)`` (the
   instantaneous level, for plots and brute-force checks) and ``w.to_dict()``.
-- :func:`gated_pwm_exposure`: the closed form every gated kind uses.
+- :func:`gated_pwm_exposure`: the closed form every gated kind uses; :class:`GateTable`: a gated waveform as
+  numbers (:meth:`GatedWaveform.table`), whose ``exposure`` and ``mean_exposure`` are the waveform's own, for one
+  light (numpy) or for a batch of lights of different kinds (torch tensors of one row per light, any device: the
+  batched and device paths of :mod:`lfmbench.datasets`); :func:`scan_row_pwm`: a multiplexed row's PWM.
 
 Model
 -----
@@ -48,7 +51,9 @@ window's length: a window of :math:`10^6` gate periods costs what one of a milli
 exposure is the same sum with :math:`\Phi_{PWM}(\cdot, d) = D d`.
 
 All times in s, levels relative to the lamp's ON level (1 = the luminance of the scene light, cd m^-2, while
-the LED is ON). numpy float64 only.
+the LED is ON). numpy float64, or torch tensors (float64 for the dataset paths) on any device: the same
+operations in the same order (:class:`lfmbench.flicker.exact._Ops`), so a batch of lights on the CPU gets each
+light's numpy numbers up to the last bits of float64.
 
 References
 ----------
@@ -63,17 +68,20 @@ from __future__ import annotations
 
 from dataclasses import dataclass, fields
 from types import MappingProxyType
-from typing import Any, ClassVar, Mapping
+from typing import Any, ClassVar, Mapping, NamedTuple
 
 import numpy as np
+import torch
 
 from lfmbench.check import check_integer, check_keys, check_number, fail
 from lfmbench.flicker import pwm_exposure, pwm_level
+from lfmbench.flicker.args import _as_tensors, _is_torch
+from lfmbench.flicker.exact import _mod_period, _Ops
 from lfmbench.limits import brief
 
 __all__ = ["WAVEFORMS", "SEVEN_SEGMENTS", "Waveform", "PWM", "ScanRow", "GatedWaveform",
-           "Indicator", "Strobe", "CountdownSegment", "DestinationRow", "gated_pwm_exposure", "fit_ramps",
-           "waveform_from_dict"]
+           "Indicator", "Strobe", "CountdownSegment", "DestinationRow", "GateTable", "gated_pwm_exposure",
+           "fit_ramps", "scan_row_pwm", "waveform_from_dict"]
 
 #: Segments lit per decimal digit on a seven-segment display (segments a-g clockwise from the top, g the middle).
 SEVEN_SEGMENTS: Mapping[int, str] = MappingProxyType({0: "abcdef", 1: "bc", 2: "abdeg", 3: "abcdg", 4: "bcfg",
@@ -84,66 +92,120 @@ def _arrays(*xs):
     return [np.asarray(x, dtype=np.float64) for x in xs]
 
 
-def _mod(x: np.ndarray, period: float) -> np.ndarray:
-    """``x mod period`` in [0, period)."""
-    a = np.fmod(x, period)
-    a = np.where(a < 0, a + period, a)
-    return np.where(a >= period, a - period, a)
+def _floats(*xs):
+    """``(arrays, ops)``: the arguments as float64 numpy arrays, or, when any is a torch tensor, as tensors of one
+    dtype on its device (:func:`lfmbench.flicker.args._as_tensors`); ``ops`` the matching array functions."""
+    if _is_torch(*xs):
+        return _as_tensors(*xs), _Ops(True)
+    return [np.asarray(x, dtype=np.float64) for x in xs], _Ops(False)
+
+
+def _zero_number(x) -> bool:
+    return isinstance(x, (int, float)) and not isinstance(x, bool) and x == 0
+
+
+def _mod(x, period):
+    """``x mod period`` in [0, period) (numpy or torch; :func:`lfmbench.flicker.exact._mod_period`)."""
+    (x, period), ops = _floats(x, period)
+    return _mod_period(x, period, ops)
 
 
 def fit_ramps(period, duty, rise, fall):
     """Rise and fall times (s) scaled down together where their ramps would overlap in a PWM of ``period`` (s) and
     ``duty``: ``(rise + fall) / 2 <= min(duty, 1 - duty) * period`` (the rule of
-    :func:`lfmbench.datasets.pwm.pwm_record`, here for a carrier whose duty a waveform changes)."""
-    period, duty, rise, fall = _arrays(period, duty, rise, fall)
-    room = 2.0 * np.minimum(duty, 1.0 - duty) * period
+    :func:`lfmbench.datasets.pwm.pwm_record`, here for a carrier whose duty a waveform changes). numpy or torch
+    (broadcasting); with tensors, ramps given as the number 0 are returned as they are (ideal pulses: no tensor
+    is made, so :func:`lfmbench.flicker.pwm_exposure` need not read one back from the device)."""
+    if _is_torch(period, duty, rise, fall) and _zero_number(rise) and _zero_number(fall):
+        return rise, fall
+    (period, duty, rise, fall), ops = _floats(period, duty, rise, fall)
+    room = 2.0 * ops.minimum(duty, 1.0 - duty) * period
     total = rise + fall
-    scale = np.where(total > room, room / np.where(total > 0, total, 1.0), 1.0)
+    one = 1.0 + 0.0 * total
+    scale = ops.where(total > room, room / ops.where(total > 0, total, one), one)
     return rise * scale, fall * scale
 
 
-def gated_pwm_exposure(start, length, gate_period: float, on: np.ndarray, period, duty, phase, rise=0.0,
-                       fall=0.0, *, mean: bool = False) -> np.ndarray:
+def scan_row_pwm(period, duty, phase, scan_lines, line):
+    r"""The PWM of scan line ``line`` of a 1/N-scan display (``scan_lines`` N) driven by a carrier of period
+    :math:`T` (s), duty :math:`D` and rising edges at ``phase`` (s): ``(T, D / N, phase + line * T / N)`` (module
+    docstring). Array-agnostic (numbers, numpy or torch, broadcasting); N = 1, line = 0 is the carrier itself."""
+    return period, duty / scan_lines, phase + line * period / scan_lines
+
+
+def gated_pwm_exposure(start, length, gate_period, on, period, duty, phase, rise=0.0, fall=0.0, *,
+                       mean: bool = False):
     r"""Exposure of a PWM enabled by a periodic gate, restarting at each ON interval's onset (module docstring).
 
     Args:
         start: window start in gate time (s; the gate's period begins at 0), any shape broadcasting with the rest.
         length: window length :math:`t_e \ge 0` (s).
-        gate_period: :math:`T_g > 0` (s).
-        on: (M, 2) ON intervals ``[s_i, e_i)`` of one gate period (s), ``0 <= s_i < e_i <= gate_period``, sorted,
-            disjoint.
+        gate_period: :math:`T_g > 0` (s), a number or an array broadcasting with ``start`` (one per light).
+        on: (..., M, 2) ON intervals ``[s_i, e_i)`` of one gate period (s), ``0 <= s_i <= e_i <= gate_period``,
+            sorted, disjoint; leading axes, if any, broadcast with ``start`` (one set per light; empty intervals
+            ``[0, 0)`` pad a set to M and add nothing).
         period, duty, phase: the carrier PWM: period :math:`T > 0` (s), duty :math:`D \in [0, 1]`, rising edges at
             ``onset + phase + m T`` (s). rise, fall: its ramp times (s, :func:`lfmbench.flicker.pwm_exposure`;
             scaled by :func:`fit_ramps` where they would overlap).
         mean: the flicker-free exposure (carrier at its mean level :math:`D`).
 
     Returns:
-        :math:`\Phi` (level x s), the broadcast shape of the inputs, float64 numpy.
+        :math:`\Phi` (level x s), the broadcast shape of the inputs: float64 numpy, or a tensor when any input is
+        one (on its device, in its floating dtype).
     """
-    start, length, period, duty, phase = _arrays(start, length, period, duty, phase)
     rise, fall = fit_ramps(period, duty, rise, fall)
-    on = np.asarray(on, dtype=np.float64).reshape(-1, 2)
-    s, e = on[:, 0], on[:, 1]
-    Tg = float(gate_period)
-    a = _mod(start, Tg)[..., None]                     # (..., 1) s
-    r = np.fmod(length, Tg)
-    n = np.round((length - r) / Tg)                    # whole gate periods (an integer value)
+    (start, length, Tg, on, period, duty, phase), ops = _floats(start, length, gate_period, on, period, duty, phase)
+    if on.ndim < 2:
+        on = on.reshape(-1, 2)
+    s, e = on[..., 0], on[..., 1]                      # (..., M) s
+    a = _mod_period(start, Tg, ops)[..., None]         # (..., 1) s
+    r = ops.fmod(length, Tg)
+    n = ops.round((length - r) / Tg)                   # whole gate periods (an integer value)
     r = r[..., None]
-    T, D, ph, tr, tf = period[..., None], duty[..., None], phase[..., None], rise[..., None], fall[..., None]
+    T, D, ph, Tg1 = period[..., None], duty[..., None], phase[..., None], Tg[..., None]
+    tr, tf = (x if _zero_number(x) else x[..., None] for x in (rise, fall))
 
     def carrier(since, dur):                           # exposure of the restarted PWM over [since, since + dur)
         if mean:
             return D * dur
         return pwm_exposure(since - ph, dur, T, D, rise_time=tr, fall_time=tf, check=False)
 
-    whole = carrier(np.zeros_like(s), e - s).sum(-1)   # W: one gate period
+    zero = 0.0 * a
+    whole = carrier(0.0 * s, e - s).sum(-1)            # W: one gate period
     part = 0.0
-    for k in (0.0, Tg):
+    for k in (0.0, Tg1):
         # |[a, a + r) & [s + k, e + k)| from differences to a, so a window inside an interval keeps its exact r
         since = a - (s + k)
-        dur = np.maximum(np.minimum(r, (e + k) - a) - np.maximum(-since, 0.0), 0.0)
-        part = part + carrier(np.maximum(since, 0.0), dur).sum(-1)
-    return np.asarray(n * whole + part)
+        dur = ops.maximum(ops.minimum(r, (e + k) - a) - ops.maximum(-since, zero), zero)
+        part = part + carrier(ops.maximum(since, zero), dur).sum(-1)
+    out = n * whole + part
+    return out if isinstance(out, torch.Tensor) else np.asarray(out)
+
+
+class GateTable(NamedTuple):
+    """A gated waveform as numbers (:meth:`GatedWaveform.table`): what its exposure needs besides the carrier's
+    draw. For one light the fields are numbers and ``on`` an (M, 2) array; for a batch of lights each field is an
+    array with one entry per light, shaped to broadcast with the windows (e.g. (G, 1, 1)), and ``on`` (G, 1, 1, M,
+    2), numpy or torch. :meth:`exposure` and :meth:`mean_exposure` are the waveform's (its methods call them)."""
+
+    period_s: Any       #: gate period T_g (s)
+    phase_s: Any        #: the gate's ``phase_s`` (s): its periods start there
+    scan_lines: Any     #: N of a multiplexed carrier (1: the plain PWM)
+    line: Any           #: the row's scan line (0 for N = 1)
+    on: Any             #: (..., M, 2) ON intervals of one gate period (s)
+
+    def exposure(self, start, length, period, duty, phase, rise=0.0, fall=0.0):
+        """Radiant exposure (level x s) over ``[start, start + length)`` (s, waveform time) for the carrier's draw:
+        period (s), duty, phase (s, a rising edge after each ON onset), ramp times (s). Arrays broadcast."""
+        start = start if isinstance(start, torch.Tensor) else np.asarray(start, dtype=np.float64)
+        T, D, ph = scan_row_pwm(period, duty, phase, self.scan_lines, self.line)
+        return gated_pwm_exposure(start - self.phase_s, length, self.period_s, self.on, T, D, ph, rise, fall)
+
+    def mean_exposure(self, start, length, duty):
+        """Flicker-free exposure (level x s): the gate with the carrier at its mean level."""
+        start = start if isinstance(start, torch.Tensor) else np.asarray(start, dtype=np.float64)
+        T, D, ph = scan_row_pwm(1.0, duty, 0.0, self.scan_lines, self.line)
+        return gated_pwm_exposure(start - self.phase_s, length, self.period_s, self.on, T, D, ph, mean=True)
 
 
 def _gate_level(t, gate_period: float, on: np.ndarray, period, duty, phase, rise=0.0, fall=0.0, *,
@@ -277,8 +339,7 @@ class ScanRow(PWM):
 
     def row_pwm(self, period, duty, phase):
         """The row's own PWM (period s, duty 1, phase s of a rising edge) for the sign's carrier."""
-        period, duty, phase = _arrays(period, duty, phase)
-        return period, duty / self.scan_lines, phase + self.line * period / self.scan_lines
+        return scan_row_pwm(*_arrays(period, duty, phase), self.scan_lines, self.line)
 
     def exposure(self, start, length, period, duty, phase, rise=0.0, fall=0.0):
         return super().exposure(start, length, *self.row_pwm(period, duty, phase), rise, fall)
@@ -302,23 +363,28 @@ class GatedWaveform(Waveform):
         """(gate period T_g in s, (M, 2) ON intervals [s_i, e_i) in s within [0, T_g), sorted, disjoint)."""
         raise NotImplementedError
 
+    def scan(self) -> tuple[int, int]:
+        """(scan_lines N, line) of the carrier: (1, 0), the plain PWM, unless the kind multiplexes its rows."""
+        return 1, 0
+
     def carrier(self, period, duty, phase):
-        """The PWM under the gate (period s, duty 1, phase after the onset s) for the drawn carrier."""
-        return _arrays(period, duty, phase)
+        """The PWM under the gate (period s, duty 1, phase after the onset s) for the drawn carrier
+        (:func:`scan_row_pwm` of :meth:`scan`)."""
+        return scan_row_pwm(*_arrays(period, duty, phase), *self.scan())
+
+    def table(self) -> GateTable:
+        """The waveform as numbers (:class:`GateTable`); its exposures are this table's."""
+        Tg, on = self.gate()
+        return GateTable(float(Tg), float(self.phase_s), *self.scan(), on)
 
     def exposure(self, start, length, period, duty, phase, rise=0.0, fall=0.0):
         """Radiant exposure (level x s) over ``[start, start + length)`` (s, waveform time); carrier period (s),
         duty, phase (s, a rising edge after each ON onset), ramp times (s). Arrays broadcast."""
-        Tg, on = self.gate()
-        return gated_pwm_exposure(np.asarray(start, dtype=np.float64) - self.phase_s, length, Tg, on,
-                                  *self.carrier(period, duty, phase), rise, fall)
+        return self.table().exposure(start, length, period, duty, phase, rise, fall)
 
     def mean_exposure(self, start, length, duty):
         """Flicker-free exposure (level x s): the gate with the carrier at its mean level."""
-        Tg, on = self.gate()
-        T, D, ph = self.carrier(1.0, duty, 0.0)
-        return gated_pwm_exposure(np.asarray(start, dtype=np.float64) - self.phase_s, length, Tg, on, T, D, ph,
-                                  mean=True)
+        return self.table().mean_exposure(start, length, duty)
 
     def level(self, t, period, duty, phase, rise=0.0, fall=0.0):
         """Level (1) at time ``t`` (s)."""
@@ -447,8 +513,8 @@ class DestinationRow(GatedWaveform):
     def gate(self):
         return self.pages * self.page_s, np.array([[self.page * self.page_s, (self.page + 1) * self.page_s]])
 
-    def carrier(self, period, duty, phase):
-        return ScanRow(scan_lines=self.scan_lines, line=self.line).row_pwm(period, duty, phase)
+    def scan(self):
+        return self.scan_lines, self.line
 
 
 #: The waveform kinds: ``waveform.kind`` of a light -> its class (one entry per kind).

@@ -88,17 +88,13 @@ _CASES = {
 }
 
 
-@pytest.mark.parametrize("case", sorted(_CASES))
-def test_the_batched_program_gives_the_per_sample_draws_and_captures(long_corpus, case):
-    """SplitProgram (one batched program, no Python per sample) against the per-sample path with counter streams,
-    sample for sample: every meta field (the draws: PWM per light, crop, first frame, epoch, index) identical,
-    integer outputs identical but for noise draws moved by a last-bit change, floats within the summation bound."""
-    kw = dict(split="all", frames=3, crop=(12, 16), samples_per_scene=3, outputs=OUTS, seed=7)
-    kw.update(_CASES[case])
-    if kw["split"] == "test":
-        kw["samples_per_scene"] = 5
-    ref = LFMCaptureDataset(long_corpus, noise_streams="counter", **kw)
-    db = DeviceBatches(LFMCaptureDataset(long_corpus, **kw), batch_size=5, device="cpu", seed=3)
+def _program_against_the_per_sample_path(root, kw, label) -> DeviceBatches:
+    """Every batch of DeviceBatches on ``root`` (SplitProgram, epoch 4) against the per-sample path with counter
+    streams, sample for sample: every meta field (the draws: PWM per light, crop, first frame, epoch, index)
+    identical, integer outputs identical but for noise draws moved by a last-bit change, floats within the
+    summation bound. Returns the DeviceBatches."""
+    ref = LFMCaptureDataset(root, noise_streams="counter", **kw)
+    db = DeviceBatches(LFMCaptureDataset(root, **kw), batch_size=5, device="cpu", seed=3)
     assert db.resident.program is not None
     db.set_epoch(4)
     ref.set_epoch(4)
@@ -110,10 +106,63 @@ def test_the_batched_program_gives_the_per_sample_draws_and_captures(long_corpus
                 got = batch["meta"][k][j]
                 if torch.is_tensor(got):   # (default_collate makes float64 of Python floats)
                     v = v if torch.is_tensor(v) else torch.tensor(v, dtype=got.dtype)
-                    assert got.dtype == v.dtype and torch.equal(got, v), (case, i, k, got, v)
+                    assert got.dtype == v.dtype and torch.equal(got, v), (label, i, k, got, v)
                 else:
-                    assert got == v, (case, i, k)
-            _assert_outputs_match(batch, j, want, case)
+                    assert got == v, (label, i, k)
+            _assert_outputs_match(batch, j, want, label)
+    return db
+
+
+@pytest.mark.parametrize("case", sorted(_CASES))
+def test_the_batched_program_gives_the_per_sample_draws_and_captures(long_corpus, case):
+    """SplitProgram (one batched program, no Python per sample) against the per-sample path with counter streams,
+    sample for sample (:func:`_program_against_the_per_sample_path`)."""
+    kw = dict(split="all", frames=3, crop=(12, 16), samples_per_scene=3, outputs=OUTS, seed=7)
+    kw.update(_CASES[case])
+    if kw["split"] == "test":
+        kw["samples_per_scene"] = 5
+    _program_against_the_per_sample_path(long_corpus, kw, case)
+
+
+@pytest.fixture(scope="module")
+def v2_corpus(tmp_path_factory):
+    """3 scenes of 4 frames: 2 with every light kind of scene version 2 (tests.data.corpus.data.V2_LIGHTS:
+    indicator, strobe, countdown, destination display, message-sign rows, shared drivers), 1 plain scene."""
+    from tests.data.corpus.data import make_v2_corpus
+
+    return make_v2_corpus(tmp_path_factory.mktemp("v2"), n_scenes=3, frames=4, n_plain=1)
+
+
+_V2_CASES = {
+    "default": {},
+    "random-start-rolling-ramps": dict(frame_start="random", shutter="rolling", pwm={
+        "sync": "group", "rise_time_s": {"dist": "uniform", "low": 0.0, "high": 2e-4},
+        "fall_time_s": {"dist": "uniform", "low": 0.0, "high": 2e-4}}),
+    "test-split-frozen": dict(split="test", frame_start="random"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(_V2_CASES))
+def test_the_batched_program_composes_every_light_kind_of_scene_version_2(v2_corpus, case):
+    """Gated lights (indicator, strobe, countdown, destination display), message-sign scan rows and shared drivers
+    on the device program (device="cpu") against the per-sample path: draws identical, captures within the
+    float32 summation bound (the weights are the same float64 function, GateTable.exposure, on the batch's
+    tensors). The scenes' gates switch inside the frames drawn, so some gated slots are dark and others lit."""
+    from lfmbench.datasets.batched import pwm_weights
+    from lfmbench.datasets.pwm import has_light_timing
+
+    kw = dict(split="all", frames=3, crop=(12, 16), samples_per_scene=2, outputs=OUTS, seed=7)
+    kw.update(_V2_CASES[case])
+    if kw["split"] == "test":
+        kw["samples_per_scene"] = 3
+    db = _program_against_the_per_sample_path(v2_corpus, kw, case)
+    prog = db.resident.program
+    timed = sum(has_light_timing(db.ds.scene(sid).meta) for sid in prog.sids)
+    assert timed and prog.gates.shape[0] == 4 * timed and prog.any_scan      # 4 gated lights per timed scene
+    pieces = prog.pieces(range(len(db.ds)))
+    gt = pwm_weights(pieces)["gt"][pieces["gate_slot"]]                          # (G, R, K) s
+    lit = gt.sum((1, 2)) > 0
+    assert lit.any() and (~lit).any(), case
 
 
 def test_counter_draws_differ_between_epochs_seeds_and_samples(long_corpus):

@@ -119,11 +119,12 @@ def test_waveforms_in_meta_are_checked():
     assert waveform_from_dict(STROBE).gate()[1].shape == (2, 2)
 
 
-def test_corpus_with_a_strobe_per_sample_path_composes_and_batched_path_refuses(tmp_path):
-    """End to end on a tiny written corpus whose meta.json lights carry a strobe and a driver: the per-sample
-    dataset composes it; the batched (pieces) path refuses with one line naming the scene and the lights."""
+def test_corpus_with_a_strobe_composes_alike_on_the_per_sample_and_batched_paths(tmp_path):
+    """End to end on a tiny written corpus whose meta.json lights carry a strobe and a driver: the batched (pieces)
+    path carries the strobe's gate (gate_slot, gate_table) and composes what the per-sample path does (noise off:
+    the same float64 weights, float32 sums in another order: within 15 eps of float32)."""
     from lfmbench import corpus as C
-    from lfmbench.datasets import LFMCaptureDataset
+    from lfmbench.datasets import LFMCaptureDataset, collate_pieces, simulate_batch
     from tests.data.corpus.data import H, W, fake_frames, fake_meta, fake_scene, scale_frames
 
     w = C.CorpusWriter(tmp_path)
@@ -133,11 +134,17 @@ def test_corpus_with_a_strobe_per_sample_path_composes_and_batched_path_refuses(
     fr = scale_frames(fake_frames(meta, seed=0), 1e-3, 1e-3)
     w.write_scene(meta["scene_id"], fake_scene(meta["scene_id"]), meta, fr)
     w.write_splits(0)
-    kw = dict(split="all", frames=2, outputs=("input_referred", "gt"), seed=0)
-    sample = LFMCaptureDataset(tmp_path, **kw)[0]
-    assert torch.isfinite(sample["gt"]).all()
-    with pytest.raises(ValueError, match=r"scene scene00000: lights \[0\] have gated waveforms"):
-        LFMCaptureDataset(tmp_path, pieces=True, **kw)[0]
+    kw = dict(split="all", frames=2, outputs=("input_referred", "gt"), seed=0, noise=False, samples_per_scene=2)
+    ref = LFMCaptureDataset(tmp_path, **kw)
+    pieces = LFMCaptureDataset(tmp_path, pieces=True, **kw)
+    batch = collate_pieces([pieces[i] for i in range(len(pieces))])
+    assert batch["gate_slot"].shape[0] == 2 * 2 and batch["gate_table"].shape == (4, 4 + 2 * 2)   # 2 flashes
+    out = simulate_batch(batch, ref.preset)
+    for i in range(len(ref)):
+        want = ref[i]
+        assert torch.isfinite(want["gt"]).all()
+        for k in ("gt", "lpd_hcg_e", "spd_e"):
+            torch.testing.assert_close(out[k][i], want[k], rtol=15 * torch.finfo(torch.float32).eps, atol=0.0)
 
 
 @pytest.mark.parametrize("rolling", [False, True])

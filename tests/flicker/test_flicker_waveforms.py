@@ -237,6 +237,35 @@ def test_gated_core_broadcasts():
     assert out[1, 2, 1] == pytest.approx(float(one), rel=1e-15)
 
 
+def test_a_batch_of_gate_tables_in_torch_equals_each_waveform():
+    """Every gated kind in one torch batch (GateTable rows padded with empty intervals, as the dataset's batched
+    and device paths carry them) against each waveform's own numpy exposure and mean exposure, with and without
+    ramps: the same float64 operations, so equal to a few units in the last place (1e-12 relative)."""
+    import torch
+
+    from lfmbench.datasets.pieces import gate_rows, gate_table
+
+    kinds = [w for w in CASES.values() if isinstance(w, GatedWaveform)]
+    rows = gate_rows(w.table() for w in kinds)                                  # (G, 4 + 2 M)
+    assert rows.shape[1] > 4 + 2 * min(w.gate()[1].shape[0] for w in kinds)    # some tables are padded
+    tab = gate_table(rows)                                                      # fields (G, 1, 1)
+    rng = np.random.default_rng(5)
+    start = rng.uniform(0.0, 6.0, (len(kinds), 7, 4))
+    length = rng.uniform(0.0, 0.03, (len(kinds), 7, 4))
+    T, D, ph = 1 / 130.0, 0.4, 0.003
+    for rise, fall in ((0.0, 0.0), (3e-4, 5e-4)):
+        tt = lambda x: torch.full((len(kinds), 1, 1), x, dtype=torch.float64)  # noqa: E731
+        r, f = (x if x == 0.0 else tt(x) for x in (rise, fall))
+        got = tab.exposure(torch.from_numpy(start), torch.from_numpy(length), tt(T), tt(D), tt(ph), r, f)
+        mean = tab.mean_exposure(torch.from_numpy(start), torch.from_numpy(length), tt(D))
+        for g, w in enumerate(kinds):
+            want = w.exposure(start[g], length[g], T, D, ph, rise, fall)
+            assert want.max() > 0
+            np.testing.assert_allclose(got[g].numpy(), want, rtol=1e-12, atol=1e-18)
+            np.testing.assert_allclose(mean[g].numpy(), w.mean_exposure(start[g], length[g], D), rtol=1e-12,
+                                       atol=1e-18)
+
+
 @pytest.mark.parametrize("d, message", [
     ({"kind": "laser"}, "scene.json: field 'w.kind' 'laser' not one of"),
     ({"kind": "indicator", "frequency_hz": 5.0}, "field 'w.frequency_hz' must be in [1.0, 2.0]"),

@@ -129,6 +129,44 @@ def make_corpus(root, n_scenes=3, frames=3, bins=4, scale=1e-3, static_camera=Fa
     return root
 
 
+#: Scene-version-2 light timing for the lights of :func:`make_v2_corpus` (one entry per light; fps 60, so frames
+#: start every 16.7 ms): each gate switches inside the first frames, a sign's two scan rows share one driver, and
+#: two plain lamps share another.
+V2_LIGHTS = (
+    {"kind": "indicator", "waveform": {"kind": "indicator", "frequency_hz": 2.0, "on_fraction": 0.5,
+                                       "phase_s": 0.0301}},
+    {"kind": "strobe", "waveform": {"kind": "strobe", "cycle_s": 0.05, "flashes": 2, "flash_s": 0.004,
+                                    "gap_s": 0.003, "phase_s": 0.0021}},
+    {"kind": "countdown", "waveform": {"kind": "countdown", "count_from": 3, "tick_s": 0.05, "blank_s": 0.02,
+                                       "place": "units", "segment": "c", "phase_s": 0.011}},
+    {"kind": "destination_display", "driver": "bus.display",
+     "waveform": {"kind": "destination_display", "scan_lines": 4, "line": 2, "pages": 2, "page": 1, "page_s": 0.1,
+                  "phase_s": 0.04}},
+    {"kind": "message_sign", "driver": "sign", "waveform": {"kind": "scan_row", "scan_lines": 4, "line": 3}},
+    {"kind": "message_sign", "driver": "sign", "waveform": {"kind": "scan_row", "scan_lines": 4, "line": 1}},
+    {"kind": "tail", "driver": "car.tail"},
+    {"kind": "tail", "driver": "car.tail"},
+)
+
+
+def make_v2_corpus(root, n_scenes=3, frames=6, bins=4, scale=1e-3, seed=0, n_plain=0):
+    """A corpus like :func:`make_corpus` whose scenes each have the 8 lights of :data:`V2_LIGHTS` (indicator,
+    strobe, countdown segment, destination-display row, two message-sign scan rows and two lamps on shared drivers;
+    boxes 3 px wide side by side, so a crop shows some of them), the gates shifted by 7 ms per scene; the first
+    ``n_plain`` scenes have 8 plain PWM lights instead (scene version 1)."""
+    w = C.CorpusWriter(root)
+    for i in range(n_scenes):
+        meta = fake_meta(f"scene{i:05d}", width=W, height=H, frames=frames, bins=bins, n_lights=len(V2_LIGHTS))
+        for lt, extra in zip(meta["lights"], V2_LIGHTS if i >= n_plain else ()):
+            lt.update({k: (dict(v) if isinstance(v, dict) else v) for k, v in extra.items()})
+            if "phase_s" in lt.get("waveform", {}):
+                lt["waveform"]["phase_s"] = round(lt["waveform"]["phase_s"] + 0.007 * i, 6)
+        fr = scale_frames(fake_frames(meta, seed=seed + i), scale, scale)
+        w.write_scene(meta["scene_id"], fake_scene(meta["scene_id"]), meta, fr)
+    w.write_splits(0)
+    return root
+
+
 if __name__ == "__main__":  # pragma: no cover - a helper for looking at the data by hand
     import sys
     from pathlib import Path
