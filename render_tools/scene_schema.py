@@ -30,6 +30,7 @@ from lfmbench.limits import LimitError, brief, lights_cap_message, limit
 from lfmbench.vocabulary import GROUPS, LIGHT_GROUPS, LIGHT_KINDS, OBJECT_KINDS, WEATHERS
 
 from . import led_matrix, spectra
+from .textures import check_texture
 
 __all__ = ["SCENE_FORMAT", "SCENE_VERSION", "SCENE_VERSIONS", "TIMES_OF_DAY", "PART_SHAPES", "LIGHT_SHAPES",
            "MATERIAL_TYPES", "MAX_COORD_M", "KIND_WAVEFORMS", "MAX_DISPLAY_PAGES", "MAX_TEXT_CHARS", "validate_scene", "validate_meshes", "mesh_triangles", "scene_groups", "load_scene", "save_scene", "empty_scene"]
@@ -183,7 +184,8 @@ def validate_scene(scene: dict) -> dict:
     yaw_rate_rad_s}, ``sky`` {model: sunsky {sun_elevation_deg [-5, 90], sun_azimuth_deg, turbidity [1, 10],
     scale > 0} | constant {spectrum, luminance_cd_m2 >= 0}}, ``groups`` {name in GROUPS: {flicker: bool}},
     ``materials`` {name: {type: diffuse|roughplastic|roughconductor, rgb [3] in [0, 1], alpha (0, 1], ior (1, 3]
-    (roughplastic only: the coating's index of refraction, default 1.49; water 1.33)}},
+    (roughplastic only: the coating's index of refraction, default 1.49; water 1.33); version 2, diffuse and
+    roughplastic, optional: texture {kind, seed, size_m [2], ...}: a procedural albedo, :mod:`render_tools.textures`}},
     ``weather`` (optional, dry|wet|rain; absent = dry), ``meshes`` (optional) {name: {vertices [[x, y, z], ...] m
     in the mesh's own frame, faces [[i, j, k], ...] counter-clockwise seen from outside}},
     ``objects`` [{id (= index), kind, velocity_mps [3], parts [shape ...]}] (a ``mesh`` part: {mesh: name, center
@@ -262,7 +264,16 @@ def validate_scene(scene: dict) -> dict:
             fail(f"{p}.type", f"{brief(t)} not one of {MATERIAL_TYPES}")
         req = {"diffuse": ("type", "rgb"), "roughplastic": ("type", "rgb", "alpha"),
                "roughconductor": ("type", "alpha")}[t]
-        check_keys(m, p, required=req, optional=("ior",) if t == "roughplastic" else ())
+        check_keys(m, p, required=req, optional={"diffuse": ("texture",), "roughplastic": ("ior", "texture"),
+                                                  "roughconductor": ()}[t])
+        if "texture" in m:
+            if scene.get("version") != 2:
+                fail(f"{p}.texture", "procedural textures are scene version 2 content")
+            try:
+                check_texture(m["texture"], f"{p}.texture")
+            except ValueError as e:
+                field, _, msg = str(e).partition(": ")
+                fail(field, msg)
         if "ior" in m:
             check_number(m["ior"], f"{p}.ior", lo=1.0, hi=3.0, lo_open=True)
         if "rgb" in m:
