@@ -32,6 +32,7 @@ from lfmbench.vocabulary import LIGHT_GROUPS
 
 from . import led_matrix, spectra
 from .scene_schema import scene_groups
+from .scene_templates import posed_parts
 
 #: Path-tracing depth: Mitsuba ``max_depth`` 5 = 4 indirect bounces (upstream renders with 4 bounces).
 MAX_DEPTH = 5
@@ -216,15 +217,16 @@ def _moves(scene: dict, instance: int) -> bool:
 
 
 def _object_meshes(obj: dict, offset: np.ndarray, meshes: dict | None = None,
-                   materials: dict | None = None) -> list[tuple[str, np.ndarray, np.ndarray, np.ndarray | None]]:
+                   materials: dict | None = None, t: float = 0.0) -> list[tuple[str, np.ndarray, np.ndarray, np.ndarray | None]]:
     """Meshes of one object moved by ``offset`` (3,) m, one per material sorted by name (the order of
     :func:`shape_id`): ``[(material, V (n, 3) m, F (m, 3), UV (n, 2) or None)]``, parts of a material merged.
     ``meshes``: the scene's ``meshes`` (for ``mesh`` parts). ``materials``: the scene's materials; the mesh of a
     material with a ``texture`` (scene version 2) is unwelded and gets box-projected texture coordinates taken at
     offset 0 (:func:`render_tools.textures.box_uv`: the texture moves with the object); the others are as before,
-    ``UV`` None."""
+    ``UV`` None. ``t``: time, s, of a walker's pose (an object with a ``gait``, scene version 2:
+    :func:`render_tools.scene_templates.posed_parts`); other objects' parts do not depend on it."""
     by_mat: dict = {}
-    for part in obj["parts"]:
+    for part in (posed_parts(obj, t) if "gait" in obj else obj["parts"]):
         by_mat.setdefault(part["material"], []).append(part)
     out = []
     for mat, parts in sorted(by_mat.items()):
@@ -345,7 +347,7 @@ def prepare_geometry(scene: dict, cache: dict) -> dict:
     rest = cache.setdefault("rest_meshes", {})  # geometry of objects and lamps that never move (numpy arrays)
     emission = cache.setdefault("emission", {})  # per light: spectrum dicts of its face and beam (strings)
     for o in scene["objects"]:
-        if ("object", o["id"]) not in rest and not _moves(scene, o["id"]):
+        if ("object", o["id"]) not in rest and not _moves(scene, o["id"]) and "gait" not in o:
             rest[("object", o["id"])] = _object_meshes(o, np.zeros(3), scene.get("meshes"), scene["materials"])
     for lt in scene["lights"]:
         if ("light", lt["id"]) not in rest and not _moves(scene, lt["instance"]):
@@ -391,7 +393,7 @@ def mitsuba_dict(scene: dict, t: float, emit: str | None = None, lights: list[in
     for o in scene["objects"]:
         # a static object's arrays are the same every frame (offset 0, bit for bit what would be rebuilt)
         meshes = rest.get(("object", o["id"])) or _object_meshes(o, object_offset(scene, o["id"], t),
-                                                                 scene.get("meshes"), scene["materials"])
+                                                                 scene.get("meshes"), scene["materials"], t)
         for k, (mat, V, F, UV) in enumerate(meshes):
             name = shape_id(o["id"], k)
             d[name] = _mesh(mi, name, V, F, bsdfs[mat], UV=UV)

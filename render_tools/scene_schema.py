@@ -97,6 +97,21 @@ def _dots(p, path) -> None:
         seen.add(cc)
 
 
+def _gait(g, path, materials) -> None:
+    """An object's ``gait``: a walking person posed at render time (:func:`render_tools.scene_templates.gait`)."""
+    check_keys(g, path, required=("position_m", "heading_rad", "height_m", "phase_rad", "cycle_hz", "materials"))
+    check_vector(g["position_m"], f"{path}.position_m", n=2, lo=-1e5, hi=1e5)
+    check_number(g["heading_rad"], f"{path}.heading_rad", lo=-10.0, hi=10.0)
+    check_number(g["height_m"], f"{path}.height_m", lo=0.3, hi=3.0)
+    check_number(g["phase_rad"], f"{path}.phase_rad", lo=-100.0, hi=100.0)
+    check_number(g["cycle_hz"], f"{path}.cycle_hz", lo=0.0, hi=10.0)
+    m = g["materials"]
+    check_keys(m, f"{path}.materials", required=("top", "legs", "skin"))
+    for k, name in m.items():
+        if name not in materials:
+            fail(f"{path}.materials.{k}", f"{brief(name)} is not defined in scene.materials")
+
+
 def _display(d, path) -> None:
     """An object's ``display``: the texts an LED matrix shows (one per page) on its grid, and its 1/N scan."""
     check_keys(d, path, required=("texts", "grid", "scan_lines"))
@@ -285,7 +300,7 @@ def validate_scene(scene: dict) -> dict:
         fail("scene.objects", "expected a list")
     for i, o in enumerate(objs):
         p = f"scene.objects[{i}]"
-        check_keys(o, p, required=("id", "kind", "velocity_mps", "parts"), optional=("display",))
+        check_keys(o, p, required=("id", "kind", "velocity_mps", "parts"), optional=("display", "gait"))
         if check_integer(o["id"], f"{p}.id") != i:
             fail(f"{p}.id", f"must equal its index {i}, got {o['id']}")
         if o["kind"] not in OBJECT_KINDS:
@@ -299,6 +314,10 @@ def validate_scene(scene: dict) -> dict:
             if scene["version"] < 2:
                 fail(f"{p}.display", "needs scene version 2 (set scene.version to 2)")
             _display(o["display"], f"{p}.display")
+        if "gait" in o:
+            if scene["version"] < 2:
+                fail(f"{p}.gait", "needs scene version 2 (set scene.version to 2)")
+            _gait(o["gait"], f"{p}.gait", mats)
     lights = scene["lights"]
     if not isinstance(lights, list):
         fail("scene.lights", "expected a list")

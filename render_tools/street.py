@@ -18,8 +18,8 @@ import math
 import numpy as np
 
 from . import shapes
-from .scene_templates import (VEHICLE_BODIES, VEHICLE_TEMPLATES, box, cylinder, local_offset, person_parts, rect,
-                              two_wheeler_parts)
+from .scene_templates import (VEHICLE_BODIES, VEHICLE_TEMPLATES, box, cylinder, gait, local_offset, person_parts,
+                              rect, two_wheeler_parts)
 
 __all__ = ["add_street", "add_weather", "add_textures", "vehicle_parts", "person_materials", "WET_ROAD_MATERIAL", "PUDDLE_MATERIAL",
            "STREET_MATERIALS"]
@@ -286,8 +286,10 @@ def add_people(b, road, dark: bool) -> None:
             continue
         heading = 0.0 if rng.random() < 0.5 else math.pi
         v = b.u(pc["walk_speed_mps"])
-        parts = person_parts(x, y, heading, b.u(pc["height_m"]), b.u((0.0, 2 * math.pi)), person_materials(b))
-        b.obj("pedestrian", parts, (v * math.cos(heading), v * math.sin(heading), 0.0))
+        h, phase, mats = b.u(pc["height_m"]), b.u((0.0, 2 * math.pi)), person_materials(b)
+        oid = b.obj("pedestrian", person_parts(x, y, heading, h, phase, mats),
+                    (v * math.cos(heading), v * math.sin(heading), 0.0))
+        b.objects[oid]["gait"] = gait(x, y, heading, h, phase, mats, v)  # the pose changes with time (walk cycle)
     lane_edge = road.lanes * road.lane_width_m
     for _ in range(b.ui(pc["cyclists"])):
         x, y = b.u((10.0, 80.0)), -(lane_edge - 0.6)

@@ -89,7 +89,7 @@ def asphalt(desc: dict, rng: np.random.Generator, shape) -> np.ndarray:
     H, W = shape
     su, sv = desc["size_m"]
     base = _rgb(desc)
-    patches = 0.08 * _noise(rng, shape, 0.01)
+    patches = 0.15 * _noise(rng, shape, 0.01) + 0.08 * _noise(rng, shape, 0.04)
     stones = rng.random(shape)
     agg = np.where(stones > 0.93, 0.45, 0.0) + np.where(stones < 0.06, -0.35, 0.0) + 0.06 * _noise(rng, shape, 0.4)
     y = (np.arange(H) + 0.5) / H * sv - sv / 2  # metres across the road (v), 0 at the road's centre line
@@ -99,17 +99,18 @@ def asphalt(desc: dict, rng: np.random.Generator, shape) -> np.ndarray:
         for side in (1, -1):
             c = side * (k + 0.5) * lw
             for off in (-0.8, 0.8):
-                track += -0.10 * np.exp(-0.5 * ((y - c - off) / 0.25) ** 2)
-            track += -0.12 * np.exp(-0.5 * ((y - c) / 0.3) ** 2) * 1.0  # oil stain between the tracks
+                track += 0.12 * np.exp(-0.5 * ((y - c - off) / 0.25) ** 2)  # polished, lighter
+            track += -0.3 * np.exp(-0.5 * ((y - c) / 0.35) ** 2)  # oil stain between the tracks
     track = track[:, None] * (1.0 + 0.5 * _aniso_noise(rng, shape, 0.05, 0.004))
-    cracks = _cracks(rng, shape, int(rng.integers(2, 6)), 160)
+    cracks = _cracks(rng, shape, int(rng.integers(3, 8)), 220)
+    cracks = np.maximum(cracks, np.roll(cracks, 1, axis=0))  # 2 texels wide (sealed with tar)
     patch = np.zeros(shape)
     if rng.random() < 0.7:  # a repaired patch (darker, fresher asphalt)
         r0, c0 = int(rng.integers(0, H)), int(rng.integers(0, W))
         ph, pw = int(rng.integers(H // 16, H // 6)), int(rng.integers(W // 8, W // 3))
         rows, cols = (np.arange(r0, r0 + ph) % H), (np.arange(c0, c0 + pw) % W)
-        patch[np.ix_(rows, cols)] = -0.25
-    f = np.exp(patches + agg + track + patch - 0.55 * cracks)
+        patch[np.ix_(rows, cols)] = -0.35
+    f = np.exp(patches + agg + track + patch - 0.8 * cracks)
     del su
     return base[None, None, :] * f[..., None]
 
@@ -133,9 +134,9 @@ def paving(desc: dict, rng: np.random.Generator, shape) -> np.ndarray:
     u = (np.arange(W) + 0.5) / W * su
     v = (np.arange(H) + 0.5) / H * sv
     iu, iv = np.floor(u / slab).astype(int), np.floor(v / slab).astype(int)
-    tints = rng.normal(0.0, 0.06, (iv.max() + 1, iu.max() + 1))
+    tints = rng.normal(0.0, 0.1, (iv.max() + 1, iu.max() + 1))
     f = tints[iv[:, None], iu[None, :]] + 0.07 * _noise(rng, shape, 0.3) + 0.05 * _noise(rng, shape, 0.03)
-    joint_w = 0.012
+    joint_w = 0.02
     ju = np.minimum(u % slab, slab - u % slab) < joint_w
     jv = np.minimum(v % slab, slab - v % slab) < joint_w
     f = f - 0.6 * (ju[None, :] | jv[:, None])
