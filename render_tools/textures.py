@@ -73,11 +73,11 @@ def _rgb(desc: dict) -> np.ndarray:
 
 def _cracks(rng: np.random.Generator, shape, n: int, steps: int) -> np.ndarray:
     """A mask (rows, cols) in {0, 1} of ``n`` thin random-walk cracks (wrapping), each branching once: unit steps
-    whose heading wanders by N(0, 0.35 rad) per step."""
+    whose heading wanders by N(0, 0.12 rad) per step."""
     m = np.zeros(shape)
     H, W = shape
     for _ in range(2 * n):
-        ang = rng.uniform(0, 2 * math.pi) + np.cumsum(rng.normal(0.0, 0.35, steps))
+        ang = rng.uniform(0, 2 * math.pi) + np.cumsum(rng.normal(0.0, 0.12, steps))
         r = rng.uniform(0, H) + np.cumsum(np.sin(ang))
         c = rng.uniform(0, W) + np.cumsum(np.cos(ang))
         m[r.astype(int) % H, c.astype(int) % W] = 1.0
@@ -100,7 +100,7 @@ def asphalt(desc: dict, rng: np.random.Generator, shape) -> np.ndarray:
             c = side * (k + 0.5) * lw
             for off in (-0.8, 0.8):
                 track += 0.12 * np.exp(-0.5 * ((y - c - off) / 0.25) ** 2)  # polished, lighter
-            track += -0.3 * np.exp(-0.5 * ((y - c) / 0.35) ** 2)  # oil stain between the tracks
+            track += -0.45 * np.exp(-0.5 * ((y - c) / 0.3) ** 2)  # oil stain between the tracks
     track = track[:, None] * (1.0 + 0.5 * _aniso_noise(rng, shape, 0.05, 0.004))
     cracks = _cracks(rng, shape, int(rng.integers(3, 8)), 220)
     cracks = np.maximum(cracks, np.roll(cracks, 1, axis=0))  # 2 texels wide (sealed with tar)
@@ -120,7 +120,7 @@ def marking(desc: dict, rng: np.random.Generator, shape) -> np.ndarray:
     base = _rgb(desc)
     under = np.asarray(desc.get("under_rgb", [0.08, 0.08, 0.08]))
     wear = _noise(rng, shape, 0.05) + 0.5 * _noise(rng, shape, 0.3)
-    keep = 1.0 / (1.0 + np.exp(-3.0 * (wear + 1.0)))  # ~80 % of the paint left, worn in patches
+    keep = 1.0 / (1.0 + np.exp(-3.0 * (wear + 0.5)))  # ~70 % of the paint left, worn in patches
     grit = 1.0 + 0.08 * _noise(rng, shape, 0.5)
     return (keep[..., None] * base + (1 - keep[..., None]) * under) * grit[..., None]
 
