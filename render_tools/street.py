@@ -41,9 +41,12 @@ STREET_MATERIALS = {
     "wood": {"type": "diffuse", "rgb": [0.3, 0.19, 0.1]},
     "helmet": {"type": "roughplastic", "rgb": [0.7, 0.7, 0.68], "alpha": 0.1},
 }
-#: Clothing and skin colours of people (drawn per person from these).
+#: Clothing and skin colours of people (drawn per person from these; a palette, so that people wearing one colour
+#: share one material and a scene's material count stays bounded).
 CLOTHES = ([0.05, 0.05, 0.06], [0.12, 0.14, 0.3], [0.45, 0.08, 0.07], [0.5, 0.48, 0.42], [0.1, 0.25, 0.12],
-           [0.65, 0.55, 0.2], [0.2, 0.2, 0.22], [0.6, 0.6, 0.62])
+           [0.65, 0.55, 0.2], [0.2, 0.2, 0.22], [0.6, 0.6, 0.62], [0.08, 0.1, 0.16], [0.7, 0.25, 0.35],
+           [0.25, 0.45, 0.6], [0.35, 0.22, 0.12], [0.75, 0.7, 0.6], [0.15, 0.3, 0.3], [0.55, 0.3, 0.08],
+           [0.3, 0.12, 0.35])
 SKIN = ([0.55, 0.38, 0.3], [0.4, 0.26, 0.18], [0.2, 0.13, 0.09])
 
 
