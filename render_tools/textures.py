@@ -43,6 +43,8 @@ RESOLUTION = {"asphalt": (512, 256), "marking": (32, 256), "paving": (256, 256),
 #: Highest albedo a texel may take.
 ALBEDO_MAX = 0.95
 
+#: Texture kinds: ``name -> f(desc, rng, (H, W)) -> (H, W, 3)`` linear RGB albedo before clipping (``desc`` holds the
+#: material's ``rgb`` as well as its ``texture``).
 TEXTURES: Registry = Registry("texture")
 
 
@@ -86,8 +88,8 @@ def _cracks(rng: np.random.Generator, shape, n: int, steps: int) -> np.ndarray:
 
 @TEXTURES.register("asphalt")
 def asphalt(desc: dict, rng: np.random.Generator, shape) -> np.ndarray:
-    H, W = shape
-    su, sv = desc["size_m"]
+    H, _ = shape
+    sv = desc["size_m"][1]
     base = _rgb(desc)
     patches = 0.15 * _noise(rng, shape, 0.01) + 0.08 * _noise(rng, shape, 0.04)
     stones = rng.random(shape)
@@ -111,7 +113,6 @@ def asphalt(desc: dict, rng: np.random.Generator, shape) -> np.ndarray:
         rows, cols = (np.arange(r0, r0 + ph) % H), (np.arange(c0, c0 + pw) % W)
         patch[np.ix_(rows, cols)] = -0.35
     f = np.exp(patches + agg + track + patch - 0.8 * cracks)
-    del su
     return base[None, None, :] * f[..., None]
 
 
