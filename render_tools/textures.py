@@ -88,7 +88,7 @@ def _cracks(rng: np.random.Generator, shape, n: int, steps: int) -> np.ndarray:
 
 @TEXTURES.register("asphalt")
 def asphalt(desc: dict, rng: np.random.Generator, shape) -> np.ndarray:
-    H, _ = shape
+    H, W = shape
     sv = desc["size_m"][1]
     base = _rgb(desc)
     patches = 0.15 * _noise(rng, shape, 0.01) + 0.08 * _noise(rng, shape, 0.04)
