@@ -146,11 +146,12 @@ PAINTED_KINDS = ("car", "van", "truck", "bus", "motorcycle", "bicycle", "cyclist
 
 
 def add_textures(b, road) -> None:
-    """The last step: procedural albedo textures (:mod:`render_tools.textures`) on the materials already in the
-    scene: asphalt (dry and wet base), lane paint, paving slabs of the sidewalks, each building's facade (its
-    windows where its glass panes are), vehicle paint, bark and foliage. Each texture's seed is drawn here, after
-    every other draw, so the rest of the scene is what it was without textures."""
-    rng = b.rng
+    """Procedural albedo textures (:mod:`render_tools.textures`) on the materials already in the scene: asphalt
+    (dry and wet base), lane paint, paving slabs of the sidewalks, each building's facade (its windows where its
+    glass panes are), vehicle paint, bark and foliage. The texture seeds come from a child generator spawned from
+    the scene's (``numpy.random.Generator.spawn``: a new stream from the seed sequence), which leaves the scene's own
+    random stream where it was, so every later step draws what it drew without textures."""
+    rng = b.rng.spawn(1)[0]
     mats = b.materials
     half = road.half_width_m
 
