@@ -216,10 +216,7 @@ def test_reflection_bands_cover_the_region_and_threshold():
     made from lies inside the row bands (or the lamp's box), at every time sample, for every flickering light of
     a generated wet night (lfmbench-v2 generator); the bands are disjoint, inside the box and smaller than it.
     A light whose illuminance at the camera is below ``reflection_min_lux`` keeps its own box only."""
-    # the water film of protocol lfmbench-v2 version 1 (wet_alpha 0.08-0.14): its broad reflection regions are
-    # where bands save most (with version 2's smoother film the grown boxes are already tight)
-    sc = S.generate_scene(101, "night", scene_id="wet", generator=2,
-                          overrides={"weather": {"conditions": ["wet"], "wet_alpha": [0.08, 0.14]}})
+    sc = S.generate_scene(101, "night", scene_id="wet", generator=2, overrides={"weather": {"conditions": ["wet"]}})
     opts = R.RenderOptions(width=320, height=180, frames=1, reflection_min_lux=0.0)
     geo = R.SceneGeometry(sc, opts)
     tm = R.frame_timing(sc, opts, 0)
