@@ -161,3 +161,16 @@ def test_light_bar_rests_on_the_roof(kind):
     for lt in strobes:
         z = ms.plane_corners(lt)[:, 2]
         assert bottom <= z.min() < bottom + 0.01 and z.max() <= bottom + housing["size"][2]
+
+
+def test_textures_leave_the_rest_of_the_scene_as_it_was(v2_day, monkeypatch):
+    """The texture seeds come from a spawned generator: without the texture step the scene (displays, camera and
+    exposure drawn after the street included) is the same but for the materials' ``texture`` entries."""
+    from render_tools import street
+
+    monkeypatch.setattr(street, "add_textures", lambda b, road: None)
+    bare = S.generate_scene(7, "day", generator=2)
+    stripped = copy.deepcopy(v2_day)
+    for m in stripped["materials"].values():
+        m.pop("texture", None)
+    assert stripped == bare
