@@ -29,7 +29,7 @@ import numpy as np
 from lfmbench.flicker.waveforms import CountdownSegment
 
 from . import led_matrix
-from .scene_templates import VEHICLE_BODIES, local_offset
+from .scene_templates import VEHICLE_BODIES, box, local_offset, roof_mount
 
 __all__ = ["add_vehicle_lamps", "add_displays", "add_message_sign", "add_destination_display", "add_countdown",
            "led_array_signals", "segment_faces"]
@@ -162,7 +162,7 @@ def add_vehicle_lamps(b, kind: str, t: dict, oid: int, x: float, y: float, headi
                                          "normal": list(normal), "size": [w, h]}, lc["led_amber"], lum,
                    tail_spread, waveform=wf, driver=f"o{oid}.indicator")
     if kind in ("car", "van") and speed > 0 and rng.random() < kc["emergency_probability"]:
-        _light_bar(b, t, oid, x, y, heading, fwd, back)
+        _light_bar(b, t, oid, x, y, heading, fwd, back, kind)
     if kind == "bus" and speed > 0:
         texts = kc["bus_texts"][int(rng.integers(0, len(kc["bus_texts"])))]
         half = t["length"] / 2 + 0.006
@@ -174,24 +174,32 @@ def add_vehicle_lamps(b, kind: str, t: dict, oid: int, x: float, y: float, headi
                                     luminance=lum, name=name)
 
 
-def _light_bar(b, t, oid, x, y, heading, fwd, back) -> None:
-    """An emergency light bar on the roof: a red (left) and a blue (right) strobe head facing back and front, the
-    two sides half a cycle apart."""
+#: Emergency light bar: (length along the vehicle, width, height) m of its housing; height of its lamp faces, m.
+LIGHT_BAR_M = (0.26, 1.2, 0.1)
+LIGHT_BAR_FACE_H_M = 0.09
+
+
+def _light_bar(b, t, oid, x, y, heading, fwd, back, kind: str) -> None:
+    """An emergency light bar on the roof: a housing resting on the lofted body's roof
+    (:func:`render_tools.scene_templates.roof_mount`) with a red (left) and a blue (right) strobe head on its back
+    and front faces, the two sides half a cycle apart."""
     kc, lc = b.cfg["lamps"], b.cfg["lights"]
-    top = max(c[2] + s[2] / 2 for c, s, _ in t["boxes"])
+    bl, bw, bh = LIGHT_BAR_M
+    xs, roof = roof_mount(kind, bl)
+    b.objects[oid]["parts"].append(box(_at(x, y, heading, xs, 0.0, roof + bh / 2), (bl, bw, bh), "housing",
+                                       math.degrees(heading)))
     cyc = b.u(kc["strobe_cycle_s"])
     flashes = b.ui(kc["strobe_flashes"])
     flash = b.u(kc["strobe_flash_s"])
     gap = min(flash, (cyc / 2 - flashes * flash) / max(flashes - 1, 1))
     phase = float(b.rng.uniform(0.0, cyc))
     lum = b.head_peak * kc["strobe_luminance_factor"]
-    xs = max(c[0] + s[0] / 2 for c, s, m in t["boxes"] if m == "glass") - 0.3
     for side, spec, shift in ((1, kc["strobe_blue"], 0.0), (-1, lc["led_red"], cyc / 2)):
         wf = {"kind": "strobe", "cycle_s": round(cyc, 4), "flashes": flashes, "flash_s": round(flash, 4),
               "gap_s": round(max(gap, 0.0), 4), "phase_s": round((phase + shift) % cyc, 6)}
-        for end, normal in ((xs - 0.12, back), (xs + 0.12, fwd)):
-            _light(b, "strobe", oid, {"shape": "rect", "center": _at(x, y, heading, end, side * 0.35, top + 0.08),
-                                      "normal": list(normal), "size": [0.45, 0.09]}, spec, lum, 90.0,
+        for end, normal in ((xs - bl / 2 - 0.002, back), (xs + bl / 2 + 0.002, fwd)):
+            _light(b, "strobe", oid, {"shape": "rect", "center": _at(x, y, heading, end, side * 0.3, roof + bh / 2),
+                                      "normal": list(normal), "size": [0.45, LIGHT_BAR_FACE_H_M]}, spec, lum, 90.0,
                    waveform=wf, driver=f"o{oid}.strobe{side}")
 
 

@@ -32,6 +32,7 @@ from lfmbench.vocabulary import LIGHT_GROUPS
 
 from . import led_matrix, spectra
 from .scene_schema import scene_groups
+from .scene_templates import posed_parts
 
 #: Path-tracing depth: Mitsuba ``max_depth`` 5 = 4 indirect bounces (upstream renders with 4 bounces).
 MAX_DEPTH = 5
@@ -215,14 +216,29 @@ def _moves(scene: dict, instance: int) -> bool:
     return instance >= 0 and any(float(v) != 0.0 for v in scene["objects"][instance]["velocity_mps"])
 
 
-def _object_meshes(obj: dict, offset: np.ndarray, meshes: dict | None = None) -> list[tuple[str, np.ndarray, np.ndarray]]:
+def _object_meshes(obj: dict, offset: np.ndarray, meshes: dict | None = None,
+                   materials: dict | None = None, t: float = 0.0) -> list[tuple[str, np.ndarray, np.ndarray, np.ndarray | None]]:
     """Meshes of one object moved by ``offset`` (3,) m, one per material sorted by name (the order of
-    :func:`shape_id`): ``[(material, V (n, 3) m, F (m, 3))]``, parts of a material merged. ``meshes``: the scene's
-    ``meshes`` (for ``mesh`` parts)."""
+    :func:`shape_id`): ``[(material, V (n, 3) m, F (m, 3), UV (n, 2) or None)]``, parts of a material merged.
+    ``meshes``: the scene's ``meshes`` (for ``mesh`` parts). ``materials``: the scene's materials; the mesh of a
+    material with a ``texture`` (scene version 2) is unwelded and gets box-projected texture coordinates taken at
+    offset 0 (:func:`render_tools.textures.box_uv`: the texture moves with the object); the others are as before,
+    ``UV`` None. ``t``: time, s, of a walker's pose (an object with a ``gait``, scene version 2:
+    :func:`render_tools.scene_templates.posed_parts`); other objects' parts do not depend on it."""
     by_mat: dict = {}
-    for part in obj["parts"]:
-        by_mat.setdefault(part["material"], []).append(part_mesh(part, offset, meshes))
-    return [(mat, *merge_meshes(meshes)) for mat, meshes in sorted(by_mat.items())]
+    for part in (posed_parts(obj, t) if "gait" in obj else obj["parts"]):
+        by_mat.setdefault(part["material"], []).append(part)
+    out = []
+    for mat, parts in sorted(by_mat.items()):
+        tex = (materials or {}).get(mat, {}).get("texture")
+        if tex is None:
+            out.append((mat, *merge_meshes([part_mesh(p, offset, meshes) for p in parts]), None))
+            continue
+        from .textures import box_uv  # noqa: PLC0415
+        V0, F0 = merge_meshes([part_mesh(p, np.zeros(3), meshes) for p in parts])
+        V, F, UV = box_uv(V0, F0, tex)
+        out.append((mat, V + np.asarray(offset, dtype=float), F, UV))
+    return out
 
 
 def merge_meshes(meshes) -> tuple[np.ndarray, np.ndarray]:
@@ -235,26 +251,43 @@ def merge_meshes(meshes) -> tuple[np.ndarray, np.ndarray]:
     return np.vstack(Vs), np.vstack(Fs)
 
 
-def _mesh(mi, name: str, V: np.ndarray, F: np.ndarray, bsdf, emitter=None):
+def _mesh(mi, name: str, V: np.ndarray, F: np.ndarray, bsdf, emitter=None, UV: np.ndarray | None = None):
     props = mi.Properties()
     props["bsdf"] = bsdf
     if emitter is not None:
         props["emitter"] = emitter
-    m = mi.Mesh(name, len(V), len(F), props=props)
+    if UV is None:
+        m = mi.Mesh(name, len(V), len(F), props=props)
+    else:
+        m = mi.Mesh(name, len(V), len(F), props=props, has_vertex_texcoords=True)
     p = mi.traverse(m)
     p["vertex_positions"] = type(p["vertex_positions"])(np.asarray(V, dtype=np.float32).ravel())
     p["faces"] = type(p["faces"])(np.asarray(F, dtype=np.uint32).ravel())
+    if UV is not None:
+        p["vertex_texcoords"] = type(p["vertex_texcoords"])(np.asarray(UV, dtype=np.float32).ravel())
     p.update()
     return m
+
+
+def _reflectance(m: dict) -> dict:
+    """The diffuse reflectance of material ``m``: its flat ``rgb``, or (scene version 2) the bitmap of its
+    ``texture`` (:func:`render_tools.textures.texture_array`, generated here, bilinear, repeating)."""
+    if "texture" not in m:
+        return {"type": "rgb", "value": list(m["rgb"])}
+    import mitsuba as mi  # noqa: PLC0415
+
+    from .textures import texture_array  # noqa: PLC0415
+    return {"type": "bitmap", "bitmap": mi.Bitmap(texture_array(m["texture"], m["rgb"])),
+            "filter_type": "bilinear", "wrap_mode": "repeat"}
 
 
 def _bsdf(m: dict) -> dict:
     t = m["type"]
     if t == "diffuse":
-        return {"type": "diffuse", "reflectance": {"type": "rgb", "value": list(m["rgb"])}}
+        return {"type": "diffuse", "reflectance": _reflectance(m)}
     if t == "roughplastic":  # a rough dielectric coating (index ``ior``) over a diffuse base
         return {"type": "roughplastic", "distribution": "ggx", "alpha": float(m["alpha"]),
-                "diffuse_reflectance": {"type": "rgb", "value": list(m["rgb"])},
+                "diffuse_reflectance": _reflectance(m),
                 **({"int_ior": float(m["ior"])} if "ior" in m else {})}
     return {"type": "roughconductor", "material": "Al", "distribution": "ggx", "alpha": float(m["alpha"])}
 
@@ -314,8 +347,8 @@ def prepare_geometry(scene: dict, cache: dict) -> dict:
     rest = cache.setdefault("rest_meshes", {})  # geometry of objects and lamps that never move (numpy arrays)
     emission = cache.setdefault("emission", {})  # per light: spectrum dicts of its face and beam (strings)
     for o in scene["objects"]:
-        if ("object", o["id"]) not in rest and not _moves(scene, o["id"]):
-            rest[("object", o["id"])] = _object_meshes(o, np.zeros(3), scene.get("meshes"))
+        if ("object", o["id"]) not in rest and not _moves(scene, o["id"]) and "gait" not in o:
+            rest[("object", o["id"])] = _object_meshes(o, np.zeros(3), scene.get("meshes"), scene["materials"])
     for lt in scene["lights"]:
         if ("light", lt["id"]) not in rest and not _moves(scene, lt["instance"]):
             rest[("light", lt["id"])] = _plane_mesh(lt, np.zeros(3))
@@ -360,10 +393,10 @@ def mitsuba_dict(scene: dict, t: float, emit: str | None = None, lights: list[in
     for o in scene["objects"]:
         # a static object's arrays are the same every frame (offset 0, bit for bit what would be rebuilt)
         meshes = rest.get(("object", o["id"])) or _object_meshes(o, object_offset(scene, o["id"], t),
-                                                                 scene.get("meshes"))
-        for k, (mat, V, F) in enumerate(meshes):
+                                                                 scene.get("meshes"), scene["materials"], t)
+        for k, (mat, V, F, UV) in enumerate(meshes):
             name = shape_id(o["id"], k)
-            d[name] = _mesh(mi, name, V, F, bsdfs[mat])
+            d[name] = _mesh(mi, name, V, F, bsdfs[mat], UV=UV)
     wanted = None if lights is None else set(int(i) for i in lights)
     for lt in scene["lights"]:
         off = object_offset(scene, lt["instance"], t)

@@ -195,6 +195,7 @@ def closeup_scene(kind: str, view: str = "rear", seed: int = 5) -> dict:
                     indicator=True)
     street.add_trees(b, road)
     street.add_people(b, road, dark=True)
+    street.add_textures(b, road)
     sky = scn.make_sky(b)
     sky["scale"] = 0.05
     sky["sun_elevation_deg"] = 3.0

@@ -30,6 +30,7 @@ from lfmbench.limits import LimitError, brief, lights_cap_message, limit
 from lfmbench.vocabulary import GROUPS, LIGHT_GROUPS, LIGHT_KINDS, OBJECT_KINDS, WEATHERS
 
 from . import led_matrix, spectra
+from .textures import check_texture
 
 __all__ = ["SCENE_FORMAT", "SCENE_VERSION", "SCENE_VERSIONS", "TIMES_OF_DAY", "PART_SHAPES", "LIGHT_SHAPES",
            "MATERIAL_TYPES", "MAX_COORD_M", "KIND_WAVEFORMS", "MAX_DISPLAY_PAGES", "MAX_TEXT_CHARS", "validate_scene", "validate_meshes", "mesh_triangles", "scene_groups", "load_scene", "save_scene", "empty_scene"]
@@ -94,6 +95,21 @@ def _dots(p, path) -> None:
         if cc in seen:
             fail(f"{path}.cells[{k}]", f"dot {list(cc)} is listed twice")
         seen.add(cc)
+
+
+def _gait(g, path, materials) -> None:
+    """An object's ``gait``: a walking person posed at render time (:func:`render_tools.scene_templates.gait`)."""
+    check_keys(g, path, required=("position_m", "heading_rad", "height_m", "phase_rad", "cycle_hz", "materials"))
+    check_vector(g["position_m"], f"{path}.position_m", n=2, lo=-1e5, hi=1e5)
+    check_number(g["heading_rad"], f"{path}.heading_rad", lo=-10.0, hi=10.0)
+    check_number(g["height_m"], f"{path}.height_m", lo=0.3, hi=3.0)
+    check_number(g["phase_rad"], f"{path}.phase_rad", lo=-100.0, hi=100.0)
+    check_number(g["cycle_hz"], f"{path}.cycle_hz", lo=0.0, hi=10.0)
+    m = g["materials"]
+    check_keys(m, f"{path}.materials", required=("top", "legs", "skin"))
+    for k, name in m.items():
+        if name not in materials:
+            fail(f"{path}.materials.{k}", f"{brief(name)} is not defined in scene.materials")
 
 
 def _display(d, path) -> None:
@@ -184,7 +200,8 @@ def validate_scene(scene: dict) -> dict:
     yaw_rate_rad_s}, ``sky`` {model: sunsky {sun_elevation_deg [-5, 90], sun_azimuth_deg, turbidity [1, 10],
     scale > 0} | constant {spectrum, luminance_cd_m2 >= 0}}, ``groups`` {name in GROUPS: {flicker: bool}},
     ``materials`` {name: {type: diffuse|roughplastic|roughconductor, rgb [3] in [0, 1], alpha (0, 1], ior (1, 3]
-    (roughplastic only: the coating's index of refraction, default 1.49; water 1.33)}},
+    (roughplastic only: the coating's index of refraction, default 1.49; water 1.33); version 2, diffuse and
+    roughplastic, optional: texture {kind, seed, size_m [2], ...}: a procedural albedo, :mod:`render_tools.textures`}},
     ``weather`` (optional, dry|wet|rain; absent = dry), ``meshes`` (optional) {name: {vertices [[x, y, z], ...] m
     in the mesh's own frame, faces [[i, j, k], ...] counter-clockwise seen from outside}},
     ``objects`` [{id (= index), kind, velocity_mps [3], parts [shape ...]}] (a ``mesh`` part: {mesh: name, center
@@ -263,7 +280,16 @@ def validate_scene(scene: dict) -> dict:
             fail(f"{p}.type", f"{brief(t)} not one of {MATERIAL_TYPES}")
         req = {"diffuse": ("type", "rgb"), "roughplastic": ("type", "rgb", "alpha"),
                "roughconductor": ("type", "alpha")}[t]
-        check_keys(m, p, required=req, optional=("ior",) if t == "roughplastic" else ())
+        check_keys(m, p, required=req, optional={"diffuse": ("texture",), "roughplastic": ("ior", "texture"),
+                                                  "roughconductor": ()}[t])
+        if "texture" in m:
+            if scene.get("version") != 2:
+                fail(f"{p}.texture", "procedural textures are scene version 2 content")
+            try:
+                check_texture(m["texture"], f"{p}.texture")
+            except ValueError as e:
+                field, _, msg = str(e).partition(": ")
+                fail(field, msg)
         if "ior" in m:
             check_number(m["ior"], f"{p}.ior", lo=1.0, hi=3.0, lo_open=True)
         if "rgb" in m:
@@ -275,7 +301,7 @@ def validate_scene(scene: dict) -> dict:
         fail("scene.objects", "expected a list")
     for i, o in enumerate(objs):
         p = f"scene.objects[{i}]"
-        check_keys(o, p, required=("id", "kind", "velocity_mps", "parts"), optional=("display",))
+        check_keys(o, p, required=("id", "kind", "velocity_mps", "parts"), optional=("display", "gait"))
         if check_integer(o["id"], f"{p}.id") != i:
             fail(f"{p}.id", f"must equal its index {i}, got {o['id']}")
         if o["kind"] not in OBJECT_KINDS:
@@ -289,6 +315,10 @@ def validate_scene(scene: dict) -> dict:
             if scene["version"] < 2:
                 fail(f"{p}.display", "needs scene version 2 (set scene.version to 2)")
             _display(o["display"], f"{p}.display")
+        if "gait" in o:
+            if scene["version"] < 2:
+                fail(f"{p}.gait", "needs scene version 2 (set scene.version to 2)")
+            _gait(o["gait"], f"{p}.gait", mats)
     lights = scene["lights"]
     if not isinstance(lights, list):
         fail("scene.lights", "expected a list")

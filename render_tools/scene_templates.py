@@ -9,8 +9,10 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 __all__ = ["BASE_MATERIALS", "VEHICLE_TEMPLATES", "PARKED_KIND", "VEHICLE_MATERIALS", "box", "rect", "cylinder",
-           "local_offset"]
+           "local_offset", "roof_z", "roof_mount", "gait", "posed_parts", "LEG_SWING_RAD"]
 
 #: Materials every generated scene has (name -> Mitsuba-style material; rgb reflectance in [0, 1]).
 BASE_MATERIALS = {
@@ -125,17 +127,46 @@ VEHICLE_BODIES = {
             "width": 1.95, "roof_inset": 0.12, "boxes": [], "chmsl": (-2.505, 0.0, 1.84, 0.4, 0.05)},
     "bus": {"stations": [(-6.0, 0.40, 1.35, 3.0, 0.97, 0, 0), (-5.85, 0.35, 1.35, 3.1, 1.0, 1, 0),
                          (5.75, 0.35, 1.35, 3.1, 1.0, 1, 1), (6.0, 0.40, 1.30, 2.95, 0.97, 0, 0)],
-            "width": 2.55, "roof_inset": 0.1, "boxes": [],
+            "width": 2.55, "roof_inset": 0.1,
+            # window pillars across the side glass band, the two doors on the kerb side (-y), a dark skirt
+            "boxes": [((px, sy * 1.22, 2.2), (0.14, 0.12, 1.7), "chassis") for px in (-4.55, -3.1, -1.65, -0.2, 1.25,
+                                                                                       2.7, 4.15) for sy in (1, -1)]
+            + [((5.0, -1.27, 1.55), (1.1, 0.04, 2.5), "chassis"), ((0.6, -1.27, 1.55), (1.1, 0.04, 2.5), "chassis"),
+               ((0.0, 0.0, 0.47), (11.9, 2.58, 0.14), "chassis")],
             "panes": [((6.004, 0.0, 2.05), (2.2, 1.3), 1), ((-6.004, 0.0, 2.3), (2.0, 0.9), -1)]},
     "truck": {"stations": [(2.35, 0.55, 1.65, 3.0, 1.0, 0, 0), (3.40, 0.55, 1.65, 3.05, 1.0, 1, 0),
                            (4.35, 0.55, 1.65, 3.0, 1.0, 1, 1), (4.75, 0.60, 1.55, 2.7, 0.97, 0, 0)],
               "width": 2.4, "roof_inset": 0.08,
-              "boxes": [((-1.2, 0.0, 2.35), (7.1, 2.5, 3.3), "cargo"), ((0.0, 0.0, 0.62), (8.6, 1.0, 0.3), "chassis")]},
+              # cargo box on a chassis; corner posts, the rear doors' seam and lock bars, under-run guards at the rear
+              # and along the sides, a fuel tank
+              "boxes": [((-1.2, 0.0, 2.35), (7.1, 2.5, 3.3), "cargo"), ((0.0, 0.0, 0.62), (8.6, 1.0, 0.3), "chassis")]
+              + [((cx, sy * 1.235, 2.35), (0.07, 0.07, 3.32), "chassis") for cx in (-4.72, 2.32) for sy in (1, -1)]
+              + [((-4.765, 0.0, 2.35), (0.03, 0.04, 3.1), "chassis"), ((-4.765, 0.62, 2.35), (0.03, 0.05, 3.0), "chassis"),
+                 ((-4.765, -0.62, 2.35), (0.03, 0.05, 3.0), "chassis"), ((-4.62, 0.0, 0.5), (0.12, 2.3, 0.14), "chassis"),
+                 ((0.15, 1.2, 0.62), (3.5, 0.04, 0.12), "chassis"), ((0.15, -1.2, 0.62), (3.5, 0.04, 0.12), "chassis"),
+                 ((1.85, -0.95, 0.72), (0.9, 0.35, 0.45), "chassis")]},
     "motorcycle": {"stations": [(-0.85, 0.75, 0.90, 0.92, 0.6, 0, 0), (-0.35, 0.55, 0.85, 0.88, 0.8, 0, 0),
                                 (0.05, 0.45, 0.95, 1.05, 1.0, 0, 0), (0.45, 0.50, 0.95, 1.00, 0.9, 0, 0),
                                 (0.85, 0.75, 0.98, 1.00, 0.5, 0, 0)],
                    "width": 0.4, "roof_inset": 0.05, "boxes": []},
 }
+
+
+def roof_z(kind: str, x: float) -> float:
+    """Height (m) of the roof of generator 2's lofted body of ``kind`` (:data:`VEHICLE_BODIES`) at ``x`` m along
+    the vehicle frame: the loft's ``z_top``, linear between stations (the roof is flat across its width)."""
+    st = VEHICLE_BODIES[kind]["stations"]
+    return float(np.interp(x, [r[0] for r in st], [r[3] for r in st]))
+
+
+def roof_mount(kind: str, length_m: float) -> tuple[float, float]:
+    """Where a flat roof-mounted part ``length_m`` long goes on the body of ``kind``: ``(x, z)`` m in the vehicle
+    frame, x the middle of the highest stretch of roof between two stations, z the roof's highest point under the
+    part (so its base rests on the roof: no gap over ``|dz/dx| * length_m``, no overlap)."""
+    st = VEHICLE_BODIES[kind]["stations"]
+    a, b = max(zip(st, st[1:]), key=lambda ab: min(ab[0][3], ab[1][3]))
+    x = 0.5 * (a[0] + b[0])
+    return x, max(roof_z(kind, x - length_m / 2), roof_z(kind, x + length_m / 2))
 
 
 def _lift(pts, x, y, heading, z0=0.0):
@@ -157,7 +188,7 @@ def person_parts(x, y, heading, height, phase, mats, riding=None) -> list:
     tube = lambda a, b, r, m: parts.append(cylinder(a, b, r, m))  # noqa: E731
     ball = lambda c, r, m: parts.append({"shape": "sphere", "center": [float(v) for v in c], "radius": float(r),  # noqa: E731
                                          "material": m})
-    s = 0.45 * math.sin(phase)
+    s = LEG_SWING_RAD * math.sin(phase)
     if riding is None:
         hipz, shz = 0.50 * h, 0.80 * h
         hip_x, sh_x = 0.0, 0.0
@@ -219,6 +250,35 @@ def person_parts(x, y, heading, height, phase, mats, riding=None) -> list:
     tube(neck, (head[0], head[1], head[2] - 0.04 * h), 0.025 * h, mats["skin"])
     ball(head, 0.065 * h, mats["helmet"] if riding and "helmet" in mats else mats["skin"])
     return parts
+
+
+#: Half-amplitude of a walker's leg swing about the hip, rad (:func:`person_parts`: thigh at +-0.45 rad).
+LEG_SWING_RAD = 0.45
+#: Hip-to-ankle length of a straight leg as a fraction of body height (thigh 0.24 + shank 0.23, :func:`person_parts`).
+LEG_FRACTION = 0.47
+
+
+def gait(x, y, heading, height, phase, mats, speed_mps: float) -> dict:
+    """An object's ``gait`` (scene version 2): what :func:`posed_parts` needs to pose a walking person at any time.
+    The gait cycle (two steps) lasts ``2 * step / speed`` with step length ``2 * LEG_FRACTION * height *
+    sin(LEG_SWING_RAD)`` (0.41 x height: the distance the feet cover between the two extreme poses of
+    :func:`person_parts`; close to the 0.41-0.45 x height of adult walking steps, Grieve and Gear 1966), so the
+    feet do not slide over the ground at the walking speed. Lengths m, angles rad, frequency Hz."""
+    step = 2.0 * LEG_FRACTION * float(height) * math.sin(LEG_SWING_RAD)
+    return {"position_m": [float(x), float(y)], "heading_rad": float(heading), "height_m": float(height),
+            "phase_rad": float(phase), "cycle_hz": abs(float(speed_mps)) / (2.0 * step),
+            "materials": {k: mats[k] for k in ("top", "legs", "skin")}}
+
+
+def posed_parts(obj: dict, t: float) -> list:
+    """The parts of object ``obj`` at time ``t`` s, before its motion (``velocity_mps * t``) is applied: a walker
+    (``gait``) in the pose of gait phase ``phase_rad + 2 pi cycle_hz t``; any other object its ``parts``."""
+    g = obj.get("gait")
+    if g is None:
+        return obj["parts"]
+    x, y = g["position_m"]
+    return person_parts(x, y, g["heading_rad"], g["height_m"],
+                        g["phase_rad"] + 2.0 * math.pi * g["cycle_hz"] * float(t), g["materials"])
 
 
 def two_wheeler_parts(kind, x, y, heading, roles, rider_mats, phase) -> list:

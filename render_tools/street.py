@@ -5,6 +5,8 @@ order of :func:`add_street`.
 - :func:`add_weather`: the road surface of ``weather.conditions`` (dry, wet, rain): a wet road is a rough
   dielectric water film (index ``water_ior``) over a darker diffuse asphalt (Mitsuba ``roughplastic``), with
   puddles (smoother film, irregular flat meshes) so that lamps reflect in it.
+- :func:`add_textures` (last): seeded procedural albedo textures on asphalt, lane paint, sidewalks, facades, vehicle
+  paint, bark and foliage (:mod:`render_tools.textures`; generated at render time from a few numbers).
 
 The steps take the :class:`render_tools.scene.SceneBuilder` (``b``) and the :class:`render_tools.scene.Road`
 (``road``) of the scene; lengths in metres, speeds in m/s, world frame as :mod:`render_tools.scene`.
@@ -16,10 +18,10 @@ import math
 import numpy as np
 
 from . import shapes
-from .scene_templates import (VEHICLE_BODIES, VEHICLE_TEMPLATES, box, cylinder, local_offset, person_parts, rect,
-                              two_wheeler_parts)
+from .scene_templates import (VEHICLE_BODIES, VEHICLE_TEMPLATES, box, cylinder, gait, local_offset, person_parts,
+                              rect, two_wheeler_parts)
 
-__all__ = ["add_street", "add_weather", "vehicle_parts", "person_materials", "WET_ROAD_MATERIAL", "PUDDLE_MATERIAL",
+__all__ = ["add_street", "add_weather", "add_textures", "vehicle_parts", "person_materials", "WET_ROAD_MATERIAL", "PUDDLE_MATERIAL",
            "STREET_MATERIALS"]
 
 #: Material names of the wet road film and of the puddles.
@@ -39,9 +41,12 @@ STREET_MATERIALS = {
     "wood": {"type": "diffuse", "rgb": [0.3, 0.19, 0.1]},
     "helmet": {"type": "roughplastic", "rgb": [0.7, 0.7, 0.68], "alpha": 0.1},
 }
-#: Clothing and skin colours of people (drawn per person from these).
+#: Clothing and skin colours of people (drawn per person from these; a palette, so that people wearing one colour
+#: share one material and a scene's material count stays bounded).
 CLOTHES = ([0.05, 0.05, 0.06], [0.12, 0.14, 0.3], [0.45, 0.08, 0.07], [0.5, 0.48, 0.42], [0.1, 0.25, 0.12],
-           [0.65, 0.55, 0.2], [0.2, 0.2, 0.22], [0.6, 0.6, 0.62])
+           [0.65, 0.55, 0.2], [0.2, 0.2, 0.22], [0.6, 0.6, 0.62], [0.08, 0.1, 0.16], [0.7, 0.25, 0.35],
+           [0.25, 0.45, 0.6], [0.35, 0.22, 0.12], [0.75, 0.7, 0.6], [0.15, 0.3, 0.3], [0.55, 0.3, 0.08],
+           [0.3, 0.12, 0.35])
 SKIN = ([0.55, 0.38, 0.3], [0.4, 0.26, 0.18], [0.2, 0.13, 0.09])
 
 
@@ -130,7 +135,57 @@ def add_street(b, road, cam_y: float, dark: bool) -> str:
     add_trees(b, road)
     add_furniture(b, road)
     add_people(b, road, dark)
+    add_textures(b, road)
     return weather
+
+
+#: Length of the road's asphalt tile along the road, m (the tile spans the road's width).
+ASPHALT_TILE_M = 6.0
+#: Object kinds whose ``paint*`` materials get the ``paint`` texture.
+PAINTED_KINDS = ("car", "van", "truck", "bus", "motorcycle", "bicycle", "cyclist")
+
+
+def add_textures(b, road) -> None:
+    """Procedural albedo textures (:mod:`render_tools.textures`) on the materials already in the scene: asphalt
+    (dry and wet base), lane paint, paving slabs of the sidewalks, each building's facade (its windows where its
+    glass panes are), vehicle paint, bark and foliage. The texture seeds come from a child generator spawned from
+    the scene's (``numpy.random.Generator.spawn``: a new stream from the seed sequence), which leaves the scene's own
+    random stream where it was, so every later step draws what it drew without textures."""
+    rng = b.rng.spawn(1)[0]
+    mats = b.materials
+    half = road.half_width_m
+
+    def put(name: str, tex: dict) -> None:
+        if name in mats and mats[name]["type"] in ("diffuse", "roughplastic"):
+            mats[name]["texture"] = {"kind": tex.pop("kind"), "seed": int(rng.integers(0, 2 ** 31)), **tex}
+
+    road_tex = {"size_m": [ASPHALT_TILE_M, round(2 * half, 4)], "origin_m": [0.0, round(-half, 4), 0.0],
+                "lanes": int(road.lanes), "lane_width_m": float(road.lane_width_m)}
+    put("asphalt", {"kind": "asphalt", **road_tex})
+    put(WET_ROAD_MATERIAL, {"kind": "asphalt", **road_tex})
+    put("marking", {"kind": "marking", "size_m": [4.0, 0.5]})
+    put("concrete", {"kind": "paving", "size_m": [3.6, 3.6], "slab_m": 0.6})
+    for o in b.objects:
+        if o["kind"] != "building":
+            continue
+        wall = o["parts"][0]
+        (cx, cy, _), (w, d, h) = wall["center"], wall["size"]
+        panes = [p for p in o["parts"][1:] if p["shape"] == "rect" and p["material"] == "glass"]
+        zs = sorted({round(p["center"][2], 4) for p in panes})
+        bays = max(1, len(panes) // max(len(zs), 1))
+        win = panes[0]["size"] if panes else [1.0, 1.5]
+        z0 = (zs[0] if zs else 1.8) - win[1] / 2
+        put(wall["material"], {"kind": "facade", "size_m": [round(w, 4), round(h, 4)],
+                               "origin_m": [round(cx - w / 2, 4), round(cy - d / 2, 4), 0.0], "bays": bays,
+                               "floors": max(len(zs), 1), "window_m": [round(float(win[0]), 4), round(float(win[1]), 4)],
+                               "sill_z_m": round(z0, 4), "floor_m": round(zs[1] - zs[0], 4) if len(zs) > 1 else 3.2})
+    painted = sorted({p["material"] for o in b.objects if o["kind"] in PAINTED_KINDS for p in o["parts"]
+                      if p["material"].startswith("paint")})
+    for name in painted:
+        put(name, {"kind": "paint", "size_m": [4.0, 4.0]})
+    put("bark", {"kind": "bark", "size_m": [0.4, 1.2]})
+    put("foliage", {"kind": "foliage", "size_m": [1.6, 1.6]})
+    put("foliage_dark", {"kind": "foliage", "size_m": [1.6, 1.6]})
 
 
 def _clear(b, x: float, y: float, r: float) -> bool:
@@ -235,8 +290,10 @@ def add_people(b, road, dark: bool) -> None:
             continue
         heading = 0.0 if rng.random() < 0.5 else math.pi
         v = b.u(pc["walk_speed_mps"])
-        parts = person_parts(x, y, heading, b.u(pc["height_m"]), b.u((0.0, 2 * math.pi)), person_materials(b))
-        b.obj("pedestrian", parts, (v * math.cos(heading), v * math.sin(heading), 0.0))
+        h, phase, mats = b.u(pc["height_m"]), b.u((0.0, 2 * math.pi)), person_materials(b)
+        oid = b.obj("pedestrian", person_parts(x, y, heading, h, phase, mats),
+                    (v * math.cos(heading), v * math.sin(heading), 0.0))
+        b.objects[oid]["gait"] = gait(x, y, heading, h, phase, mats, v)  # the pose changes with time (walk cycle)
     lane_edge = road.lanes * road.lane_width_m
     for _ in range(b.ui(pc["cyclists"])):
         x, y = b.u((10.0, 80.0)), -(lane_edge - 0.6)
