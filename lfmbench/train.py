@@ -99,17 +99,20 @@ class EpochIndexed(Dataset):
 
 
 def make_loader(corpus: str | os.PathLike, spec: Trainable, cfg: Any, workers: int | None = None,
-                device: torch.device | str = "cpu", group=None) -> tuple[DataLoader, Callable[[int], None]]:
+                device: torch.device | str = "cpu", group=None, preset: Any = None
+                ) -> tuple[DataLoader, Callable[[int], None]]:
     """DataLoader of training batches over :class:`~lfmbench.datasets.LFMCaptureDataset` and the function that
     selects an epoch's draws and order (``set_epoch(epoch)``), for ``spec.data_order``; with ``group`` (a
     :class:`lfmbench.distributed.Group`) the rank's part of every batch of the epoch order, whatever
-    ``spec.data_order`` (:class:`lfmbench.distributed.RankBatchSampler`)."""
+    ``spec.data_order`` (:class:`lfmbench.distributed.RankBatchSampler`). ``preset``: the
+    :class:`lfmbench.sensor.SensorPreset` of ``cfg.train.sensor`` already resolved (None: the dataset resolves
+    the name)."""
     from lfmbench.datasets.loading import collate_samples, make_dataset
 
     t = cfg.train
     extra = {} if spec.outputs is None else {"outputs": spec.outputs}
     ds = make_dataset(corpus, t.split, seed=t.seed, crop=t.crop, samples_per_scene=t.samples_per_scene,
-                      frames=t.frames, sensor=t.sensor, **extra)
+                      frames=t.frames, sensor=t.sensor if preset is None else preset, **extra)
     nw = t.workers if workers is None else int(workers)
     if group is not None:
         from lfmbench import distributed as D
@@ -144,18 +147,20 @@ RESIDENT_DTYPES = {"float32": torch.float32, "float16": torch.float16}
 def make_device_batches(corpus: str | os.PathLike, spec: Trainable, cfg: Any, device: torch.device | str,
                         resident_dtype: str = "float32",
                         chunk_scenes: int | None = None, prefetch: bool = True,
-                        group=None) -> tuple[Any, Callable[[int], None]]:
+                        group=None, preset: Any = None) -> tuple[Any, Callable[[int], None]]:
     """:class:`~lfmbench.datasets.device.DeviceBatches` of the training split on ``device`` (epoch order
     :func:`~lfmbench.datasets.device.epoch_order` of ``(seed, epoch)``; ``resident_dtype`` a key of
     :data:`RESIDENT_DTYPES`; ``chunk_scenes``: stream the split that many scenes at a time; ``prefetch``: on CUDA
-    each batch is made on a side stream while the previous step runs) and its ``set_epoch``."""
+    each batch is made on a side stream while the previous step runs) and its ``set_epoch``. ``preset``: as in
+    :func:`make_loader`."""
     from lfmbench.datasets.device import DeviceBatches
     from lfmbench.datasets.loading import make_dataset
 
     t = cfg.train
     extra = {} if spec.outputs is None else {"outputs": spec.outputs}
     ds = make_dataset(corpus, t.split, seed=t.seed, crop=t.crop, samples_per_scene=t.samples_per_scene,
-                      frames=t.frames, sensor=t.sensor, noise_streams="counter", **extra)
+                      frames=t.frames, sensor=t.sensor if preset is None else preset, noise_streams="counter",
+                      **extra)
     if resident_dtype not in RESIDENT_DTYPES:
         raise ValueError(f"resident_dtype must be one of {tuple(RESIDENT_DTYPES)}, got {resident_dtype!r:.40}")
     if group is not None:  # the rank's part of every batch (lfmbench.distributed)
@@ -474,9 +479,10 @@ def train(method: str | Trainable, corpus: str | os.PathLike, out: str | os.Path
         cfg = spec.config_from_dict({**d, "train": {**d["train"], **over}}, "the command-line options")
     t = cfg.train
     from lfmbench.baselines import methods_for  # noqa: PLC0415
-    from lfmbench.sensor import load_preset  # noqa: PLC0415
+    from lfmbench.sensor import resolve  # noqa: PLC0415
 
-    arch = load_preset(t.sensor).architecture
+    preset = resolve(t.sensor)  # once: the object goes to the network and the dataset (the config keeps the name)
+    arch = preset.architecture
     if spec.name not in methods_for(arch):
         fits = [m for m in methods_for(arch) if m in LEARNED]
         raise ValueError(f"train.sensor: {spec.name} reads split-pixel captures, and sensor {t.sensor!r} is a "
@@ -494,8 +500,8 @@ def train(method: str | Trainable, corpus: str | os.PathLike, out: str | os.Path
     torch.manual_seed(t.seed)
     from lfmbench.baselines.checkpoint import check_model_size  # noqa: PLC0415
 
-    check_model_size(lambda: spec.build_model(cfg), f"the {spec.name} training config")  # before any allocation
-    model = spec.build_model(cfg).to(dev)
+    check_model_size(lambda: spec.build_model(cfg, preset), f"the {spec.name} training config")  # before allocating
+    model = spec.build_model(cfg, preset).to(dev)
     opt = make_optimizer(model, cfg, dev, graph)
     history, start, data_rng = None, 0, None
     if resume and out.exists():
@@ -520,9 +526,10 @@ def train(method: str | Trainable, corpus: str | os.PathLike, out: str | os.Path
     # auto: the device path on CUDA for the split pixel (the other plans run on the per-sample path only)
     on_device = data == "device" or (data == "auto" and dev.type == "cuda" and arch == "split_pixel")
     if on_device:
-        loader, set_epoch = make_device_batches(corpus, spec, cfg, dev, resident_dtype, chunk_scenes, group=group)
+        loader, set_epoch = make_device_batches(corpus, spec, cfg, dev, resident_dtype, chunk_scenes, group=group,
+                                                preset=preset)
     else:
-        loader, set_epoch = make_loader(corpus, spec, cfg, workers, dev, group=group)
+        loader, set_epoch = make_loader(corpus, spec, cfg, workers, dev, group=group, preset=preset)
     gen = loader.generator if spec.data_order == "shuffle" and not on_device and group is None else None
     if gen is not None and data_rng is not None:
         gen.set_state(data_rng)

@@ -112,9 +112,12 @@ def evaluate_cmd(
             load_pipeline(isp_name)  # a bad pipeline file is named before any work
         except ValueError as exc:
             fail(f"--isp: {exc}")
+    from lfmbench.sensor import resolve  # noqa: PLC0415
+
     try:
         fns = resolve_methods(methods)
-        extra = {"frames": frames, "sensor": sensor, "noise_streams": SIMULATE[simulate]}
+        preset = resolve(sensor)  # the one resolution of --sensor: the object travels to the dataset and metrics
+        extra = {"frames": frames, "sensor": preset, "noise_streams": SIMULATE[simulate]}
         if cache_dir is not None:
             extra["cache_dir"] = cache_dir
         ds, ident, cond = corpus_run_inputs(corpus, split, seed, crop, samples_per_scene, **extra)

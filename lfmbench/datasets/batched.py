@@ -455,7 +455,7 @@ def simulate_batch(batch: Mapping[str, Any], preset: Any, outputs: Sequence[str]
     check_batch_keys(batch, _PIECE_KEYS, hint=_PIECE_HINT)
     dev = check_same_device(batch, "static", hint=_DEVICE_HINT)
     info = batch["info"]
-    preset = _sensor.load_preset(preset)
+    preset = _sensor.resolve(preset)
     if preset.name != info["sensor"]:
         raise ValueError(f"preset: the batch was projected for sensor {info['sensor']!r}, not {preset.name!r}")
     want = set(info["outputs"] if outputs is None else outputs)
@@ -516,7 +516,7 @@ class BatchedCaptureSimulator(nn.Module):
     def __init__(self, preset: Any = "ovt", outputs: Sequence[str] | None = None, noise: bool | None = None,
                  threads: int | None = None) -> None:
         super().__init__()
-        self.preset = _sensor.load_preset(preset)
+        self.preset = _sensor.resolve(preset)
         self.outputs = None if outputs is None else tuple(outputs)
         self.noise = noise
         self.threads = threads

@@ -229,13 +229,13 @@ class LFMCaptureDataset(Dataset):
         self.groups = None if opts.groups is None else list(opts.groups)
         self.samples_per_scene, self.noise, self.optics = opts.samples_per_scene, sim.noise, sim.optics
         self.transforms = transforms
-        self.preset = _sensor.load_preset(sensor)
+        self.preset = _sensor.resolve(sensor)
         self.sensor_name = self.preset.name
         self.architecture = self.preset.architecture
         # a capture plan other than the split pixel reads layers projected at unit fill factor (its own windows)
         self._layer_preset = unit_projection_preset(self.preset)
         # gt_common: one reference window through one fixed reference projection, whatever the sensor
-        self._common_preset = unit_projection_preset(_sensor.load_preset(COMMON_REFERENCE_SENSOR)) \
+        self._common_preset = unit_projection_preset(_sensor.resolve(COMMON_REFERENCE_SENSOR)) \
             if "gt_common" in self.outputs else None
         self._common_cache: OrderedDict = OrderedDict()
         if self.pieces and "gt_common" in self.outputs:
