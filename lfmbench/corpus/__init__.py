@@ -15,10 +15,11 @@ This package defines the on-disk format specified in ``docs/guide/corpus-format.
   bands, groups, camera), manifest and ``splits.json`` checks, :func:`make_splits`, :func:`sha256_file`;
 * :mod:`~lfmbench.corpus.reader`: :class:`Corpus`, the reader (lazy: one file per frame and light group is
   decoded only when asked for, with a small cache so that reading ``short`` then ``long`` decodes the file once);
-* :mod:`~lfmbench.corpus.writer`: :class:`CorpusWriter`: atomic writes (temporary name in the same directory,
-  then :func:`os.replace`), a manifest that is rewritten atomically after each finished scene, resume support
-  (:meth:`CorpusWriter.is_complete`); :func:`encode_scene`, :func:`write_files`; :class:`ThreadedSceneWriter`
-  (encoding and writing in a worker thread while the next frame renders);
+* :mod:`~lfmbench.corpus.writer`: :class:`CorpusWriter`: a manifest that is rewritten atomically after each
+  finished scene, resume support (:meth:`CorpusWriter.is_complete`), the one-writer lock;
+* :mod:`~lfmbench.corpus.scene_files`: :func:`encode_scene`, :func:`write_files` (atomic writes: temporary name
+  in the same directory, then :func:`os.replace`); :class:`ThreadedSceneWriter` (encoding and writing in a worker
+  thread while the next frame renders);
 * :mod:`~lfmbench.corpus.validate`: :func:`validate_corpus`, a full check of a corpus (missing files,
   checksums, channels, NaN/inf/negative radiance, metadata consistency), used by ``lfmbench validate``.
 
@@ -53,8 +54,8 @@ from lfmbench.corpus.storage import (COMPRESSIONS, DEFAULT_STORAGE, EXTRA_COMPRE
                                      SCALE_EXP_RANGE, STORAGES, LayerStore, Storage, StorageStats, resolve_storage,
                                      float_to_half, round_mantissa, scale_attr, scale_exponent, store_layer)
 from lfmbench.corpus.validate import ValidationReport, validate_corpus
-from lfmbench.corpus.writer import (LOCK_NAME, CorpusLock, CorpusWriter, ThreadedSceneWriter, encode_scene,
-                                    prune_scene_dir, write_files)
+from lfmbench.corpus.scene_files import ThreadedSceneWriter, encode_scene, write_files
+from lfmbench.corpus.writer import LOCK_NAME, CorpusLock, CorpusWriter, prune_scene_dir
 from lfmbench.fileio import TMP_PREFIX, atomic_write_bytes, atomic_write_json
 
 __all__ = [
