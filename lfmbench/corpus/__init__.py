@@ -8,9 +8,9 @@ This package defines the on-disk format specified in ``docs/guide/corpus-format.
 * :mod:`~lfmbench.corpus.naming`: format name and versions, file names, header attributes, channel names;
 * :mod:`~lfmbench.corpus.storage`: how radiance layers are stored (:class:`Storage`: HALF x per-layer 2^e,
   mantissa rounding, codecs; :func:`store_layer`);
-* :mod:`~lfmbench.corpus.exr`: low-level EXR encoding / decoding through the OpenEXR 3.x Python API
-  (``OpenEXR.File`` / ``OpenEXR.Part``): :func:`encode_static_exr`, :func:`encode_lights_exr`,
-  :func:`encode_aux_exr`, :func:`read_exr`;
+* :mod:`~lfmbench.corpus.exr_encode`, :mod:`~lfmbench.corpus.exr`: low-level EXR encoding / decoding through the
+  OpenEXR 3.x Python API (``OpenEXR.File`` / ``OpenEXR.Part``): :func:`encode_static_exr`,
+  :func:`encode_lights_exr`, :func:`encode_aux_exr`, :func:`read_exr`;
 * :mod:`~lfmbench.corpus.meta`: :func:`validate_meta` (consistency checks of a scene's ``meta.json``: timing,
   bands, groups, camera), manifest and ``splits.json`` checks, :func:`make_splits`, :func:`sha256_file`;
 * :mod:`~lfmbench.corpus.reader`: :class:`Corpus`, the reader (lazy: one file per frame and light group is
@@ -39,8 +39,8 @@ References: OpenEXR file layout and multi-part files, https://openexr.com/en/lat
 from lfmbench.check import check_scene_id
 from lfmbench.corpus.errors import (CorpusChannelError, CorpusError, CorpusFileError, CorpusNotFoundError,
                                     CorpusLockedError, CorpusValueError, CorpusWriteError)
-from lfmbench.corpus.exr import (ExrPart, check_exr_header, encode_aux_exr, encode_lights_exr, encode_static_exr, layer_scale,
-                                 read_exr, split_steady, SteadyBins)
+from lfmbench.corpus.exr import ExrPart, check_exr_header, layer_scale, read_exr
+from lfmbench.corpus.exr_encode import SteadyBins, encode_aux_exr, encode_lights_exr, encode_static_exr, split_steady
 from lfmbench.corpus.meta import (LIGHT_KINDS, SPECTRUM_MODELS, TIMING_RTOL, check_splits, inside_root, make_splits,
                                   load_meta, manifest_entry_errors, sha256_file, validate_meta)
 from lfmbench.corpus.naming import (ATTR, AUX_CHANNELS, EMPTY_PART, FORMAT_NAME, FORMAT_VERSION, MANIFEST_NAME,

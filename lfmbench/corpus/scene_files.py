@@ -16,7 +16,7 @@ from typing import Any, Iterable, Iterator, Mapping, Sequence
 import numpy as np
 
 from lfmbench.check import check_scene_id
-from lfmbench.corpus.exr import encode_aux_exr, encode_lights_exr, encode_static_exr
+from lfmbench.corpus.exr_encode import encode_aux_exr, encode_lights_exr, encode_static_exr
 from lfmbench.corpus.meta import validate_meta
 from lfmbench.corpus.naming import (ATTR, FORMAT_VERSION, SCENES_DIR, STATIC_BINS_VERSION, _group_bins, frame_dir,
                                     group_storage, static_edges)
