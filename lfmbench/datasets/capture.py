@@ -28,12 +28,11 @@ from lfmbench import sensor as _sensor
 from lfmbench.corpus import Corpus
 from lfmbench.datasets.counter_draws import (SceneEntities, counter_scene_draw, crop_origin, noise_seeds,
                                              place_uniforms, start_frame)
-from lfmbench.datasets.assembly import (SENSOR_OUTPUTS, PlanExposure, assemble_sample, check_line_time,
-                                        compose_frame, compose_plan_frame, light_index, plan_exposures,
-                                        static_window_mix)
+from lfmbench.datasets.assembly import SENSOR_OUTPUTS, assemble_sample, check_line_time, compose_frame, light_index
 from lfmbench.datasets.options import (DEFAULT_MAX_LIGHTS, DEFAULT_OUTPUTS, DEFAULT_SAMPLES_PER_SCENE,  # noqa: F401
                                        CacheOptions, SampleOptions, SimulationOptions)
 from lfmbench.datasets.pieces import capture_pieces
+from lfmbench.datasets.plan_frames import PlanExposure, compose_plan_frame, plan_exposures, static_window_mix
 from lfmbench.datasets.projection import SceneLayers, aux_channels, load_or_build, unit_projection_preset
 from lfmbench.datasets.pwm import PWMConfig, apply_light_timing, draw_scene_pwm, frozen_test_rng, load_pwm_config
 from lfmbench.fileio import atomic_write_json, load_json
