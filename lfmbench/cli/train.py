@@ -1,7 +1,7 @@
 """The ``lfmbench train --method NAME`` command: any learned baseline of :data:`lfmbench.baselines.LEARNED`
 through the one loop of :mod:`lfmbench.train`. The help and the choices read the registries and definitions that
 own the names: the learned baselines, the shipped presets, :data:`lfmbench.train.DATA_SOURCES`,
-:data:`~lfmbench.train.RESIDENT_DTYPES` and :data:`~lfmbench.train.CUDA_GRAPH_MODES`."""
+:data:`~lfmbench.train.RESIDENT_DTYPES` and :data:`lfmbench.train_step.CUDA_GRAPH_MODES`."""
 from __future__ import annotations
 
 import statistics
@@ -12,7 +12,8 @@ import typer
 from lfmbench.cli._common import check_local_paths, check_minima, choice, fail, torch_setup
 from lfmbench.baselines import LEARNED
 from lfmbench.sensor import available_presets
-from lfmbench.train import CUDA_GRAPH_MODES, DATA_SOURCES, RESIDENT_DTYPES
+from lfmbench.train import DATA_SOURCES, RESIDENT_DTYPES
+from lfmbench.train_step import CUDA_GRAPH_MODES
 
 __all__ = ["register", "train_cmd"]
 

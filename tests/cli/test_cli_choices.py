@@ -14,7 +14,8 @@ from lfmbench.evaluation.benchmark import SIMULATE
 from lfmbench.isp import available_pipelines
 from lfmbench.metrics import REGISTRY as METRICS
 from lfmbench.paper.common import FIGURES
-from lfmbench.train import CUDA_GRAPH_MODES, DATA_SOURCES, RESIDENT_DTYPES
+from lfmbench.train import DATA_SOURCES, RESIDENT_DTYPES
+from lfmbench.train_step import CUDA_GRAPH_MODES
 
 _ANSI = re.compile(r"\x1b\[[0-9;]*m")
 #: The arguments each command requires besides the option under test.

@@ -377,7 +377,8 @@ def test_cuda_graphed_training_step_trains_as_the_eager_step(tmp_path, corpus):
     kernels (same data, same initial weights, same optimiser arithmetic)."""
     import warnings
 
-    from lfmbench.train import GraphedStep, train
+    from lfmbench.train import train
+    from lfmbench.train_step import GraphedStep
 
     kw = dict(epochs=2, crop=16, batch_size=4, samples_per_scene=5, split="all", progress=False, log=None,
               device="cuda", data="device")
