@@ -36,6 +36,9 @@ with entry e a pixel p(e) (row y(e)) of one light slot s(e) (a light in one fram
 slot's K bins and W the slot's PWM exposure (s) of bin k in that row's window. Flickering groups stored
 without bins (imported data) are slots with one full-crop "bin" whose weight is the PWM exposure of the whole
 window (the per-sample rule, ``K = 0`` in ``slot_K``).
+
+Size (about 530 lines): the two stages above, one path; its composition (:func:`pwm_weights`,
+:func:`compose_batch` and their kernels) is the part that could stand in a module of its own.
 """
 from __future__ import annotations
 

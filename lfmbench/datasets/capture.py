@@ -7,6 +7,11 @@ scene's camera-projected layers (:mod:`lfmbench.datasets.projection`) and runs t
 The composition and timing rules and the sample dict are those of :mod:`lfmbench.datasets.assembly` (shared with
 the batched path :mod:`lfmbench.datasets.batched`); :meth:`LFMCaptureDataset.scene` gives a scene as the dataset
 holds it (:class:`SceneView`: layers, lights, static rates, light index, meta) to figures and the batched path.
+
+Size (about 720 lines): one class, the dataset, whose methods are the steps of one sample (split and scenes,
+frozen test draws, the sample's draws, composition, sensor chain, ``gt_common``); the rules they apply live in
+:mod:`~lfmbench.datasets.options`, :mod:`~lfmbench.datasets.assembly`, :mod:`~lfmbench.datasets.plan_frames`,
+:mod:`~lfmbench.datasets.pieces` and :mod:`~lfmbench.datasets.counter_draws`.
 """
 from __future__ import annotations
 
