@@ -308,16 +308,9 @@ def load_preset(preset: "str | Path | SensorPreset | Mapping[str, Any]") -> Sens
 
 
 def resolve(preset: "SensorPreset | str | Path | Mapping[str, Any]") -> SensorPreset:
-    """The one place below the command line where a preset *name* becomes a :class:`SensorPreset`.
-
-    A ``SensorPreset`` is returned unchanged (no file is looked at); a name, YAML path or mapping is loaded by
-    :func:`load_preset`. The commands and top-level functions resolve ``--sensor`` once and pass the object on;
-    the functions below them call this, so a name given to the public API still works and an object given to
-    them is never read again.
-
-    Raises:
-        ValueError: as :func:`load_preset` (unknown name, unreadable file, invalid field).
-    """
+    """The one helper below the commands that turns a preset name, path or mapping into a :class:`SensorPreset`
+    (:func:`load_preset`); a ``SensorPreset`` is returned unchanged, no file looked at. The commands resolve
+    ``--sensor`` once and pass the object on. Raises ``ValueError`` as :func:`load_preset`."""
     if isinstance(preset, SensorPreset):
         return preset
     return load_preset(preset)
