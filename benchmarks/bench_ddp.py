@@ -61,19 +61,20 @@ def _time_steps(step, batches: list[dict], warmup: int) -> list[float]:
 
 def _model(batch: int):
     from lfmbench import train as T
+    from lfmbench import train_step as S
 
     spec = T.trainable("unet")
     cfg = spec.config_from_dict({**CFG, "train": {**CFG["train"], "batch_size": batch}}, "bench")
     torch.manual_seed(0)
     model = spec.build_model(cfg)
-    return spec, cfg, model, T.make_optimizer(model, cfg, torch.device("cpu"))
+    return spec, cfg, model, S.make_optimizer(model, cfg, torch.device("cpu"))
 
 
 def plain(corpus: Path, batch: int, steps: int, warmup: int) -> list[float]:
-    from lfmbench import train as T
+    from lfmbench import train_step as S
 
     spec, cfg, model, opt = _model(batch)
-    return _time_steps(lambda b, lr: T._eager_step(model, opt, spec, cfg, b, lr), _batches(corpus, batch, steps + warmup),
+    return _time_steps(lambda b, lr: S._eager_step(model, opt, spec, cfg, b, lr), _batches(corpus, batch, steps + warmup),
                        warmup)
 
 
@@ -85,11 +86,11 @@ def _rank(rank: int, world: int, port: int, corpus: Path, batch: int, steps: int
     from torch.nn.parallel import DistributedDataParallel
 
     from lfmbench import distributed as D
-    from lfmbench import train as T
+    from lfmbench import train_step as S
 
     group = D.from_env("cpu")
     spec, cfg, model, opt = _model(batch)
-    step = D.ddp_step(DistributedDataParallel(model), opt, spec, cfg, group, T._set_lr)
+    step = D.ddp_step(DistributedDataParallel(model), opt, spec, cfg, group, S._set_lr)
     bs = _batches(corpus, batch, steps + warmup)
     group.barrier()
     ts = _time_steps(step, bs, warmup)

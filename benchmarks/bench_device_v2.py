@@ -11,7 +11,7 @@ frames, the full frame, every output but ``rgb``; batches of ``--batch``; global
 under a rolling shutter every slot has a weight per row, so a gate is evaluated per row).
 
 Times (median of ``--passes`` after a warm-up; process CPU time and wall time), per batch: the program's cut
-(``SplitProgram.pieces``), the PWM weights of that cut (``batched.pwm_weights``: where the gates are evaluated)
+(``SplitProgram.pieces``), the PWM weights of that cut (``batch_compose.pwm_weights``: where the gates are evaluated)
 and the whole batch (cut, composition, sensor chain: ``DeviceBatches.batch``), v2 and v1 corpora alternating in
 one run, and their ratio. Writes the section "Scene version 2 light kinds: CPU figures" (or "... GPU figures" on CUDA) of
 ``docs/benchmarks/device-path.md`` (``--no-doc``: print only).
@@ -114,7 +114,7 @@ def main(argv=None) -> int:
     if args.quick:
         args.scenes, args.passes = 4, 3
     from lfmbench.datasets import LFMCaptureDataset
-    from lfmbench.datasets.batched import pwm_weights
+    from lfmbench.datasets.batch_compose import pwm_weights
     from lfmbench.datasets.device import DeviceBatches
 
     dev = torch.device(args.device)

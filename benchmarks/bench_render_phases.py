@@ -43,12 +43,12 @@ TIMED = [("trace", "render_tools.tracer", "Tracer.render"), ("trace", "render_to
          ("probe_wait", "render_tools.backend", "select_variant"),
          ("scene", "render_tools.scene", "generate_scene"), ("scene", "render_tools.render", "scene_meta"),
          ("mitsuba_dict", "render_tools.mitsuba_scene", "mitsuba_dict"), ("load_dict", "mitsuba", "load_dict"),
-         ("encode", "lfmbench.corpus.writer", "encode_static_exr"),
-         ("encode", "lfmbench.corpus.writer", "encode_lights_exr"),
-         ("encode", "lfmbench.corpus.writer", "encode_aux_exr"),
-         ("write", "lfmbench.corpus.writer", "atomic_write_bytes"),
-         ("writer_wait", "lfmbench.corpus.writer", "ThreadedSceneWriter.put"),
-         ("writer_wait", "lfmbench.corpus.writer", "ThreadedSceneWriter.close")]
+         ("encode", "lfmbench.corpus.scene_files", "encode_static_exr"),
+         ("encode", "lfmbench.corpus.scene_files", "encode_lights_exr"),
+         ("encode", "lfmbench.corpus.scene_files", "encode_aux_exr"),
+         ("write", "lfmbench.corpus.scene_files", "atomic_write_bytes"),
+         ("writer_wait", "lfmbench.corpus.scene_files", "ThreadedSceneWriter.put"),
+         ("writer_wait", "lfmbench.corpus.scene_files", "ThreadedSceneWriter.close")]
 
 
 def child(out: str, seed: int, profile: str) -> None:

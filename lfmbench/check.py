@@ -294,16 +294,21 @@ def check_tensor(x: Any, name: str, shape: str | None = None, *, what: str | Non
         raise ValueError(f"{name} must be finite; got NaN or inf")
 
 
-def check_same_shape(x: Any, y: Any, x_name: str, y_name: str) -> None:
-    """Two tensors of one shape (``TypeError`` naming the one that is not a tensor)::
+def check_same_shape(x: Any, y: Any, x_name: str, y_name: str, *, dtype: bool = False) -> None:
+    """Two tensors of one shape (``TypeError`` naming the one that is not a tensor), with ``dtype`` also of one
+    dtype::
 
         pred and gt must have the same shape, got pred (1, 2) and gt (1, 3)
+        pred and gt must have the same dtype, got pred torch.float32 and gt torch.float64
     """
     check_tensor(x, x_name)
     check_tensor(y, y_name)
     if x.shape != y.shape:
         raise ValueError(f"{x_name} and {y_name} must have the same shape, got {x_name} {tuple(x.shape)} and "
                          f"{y_name} {tuple(y.shape)}")
+    if dtype and x.dtype != y.dtype:
+        raise ValueError(f"{x_name} and {y_name} must have the same dtype, got {x_name} {x.dtype} and "
+                         f"{y_name} {y.dtype}")
 
 
 def check_batch_keys(batch: Mapping[str, Any], keys: Iterable[str], name: str = "batch", hint: str = "") -> None:

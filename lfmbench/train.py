@@ -12,12 +12,12 @@ depends only on ``(seed, epoch)`` (:class:`EpochSampler`; the sampler hands ``(e
 workers, so persistent workers still draw the right epoch) or a DataLoader shuffled by one generator seeded once
 whose state is kept in the checkpoint. The checkpoint is written atomically after every epoch with the optimiser
 state; running the same command again resumes after the last finished epoch (and does nothing when all epochs
-are done), so a resumed run ends with the same weights as an uninterrupted one.
+are done), so a resumed run ends with the same weights as an uninterrupted one. The optimiser step itself (Adam,
+the schedule, the CUDA-graph replay) is :mod:`lfmbench.train_step`.
 """
 from __future__ import annotations
 
 import importlib
-import math
 import os
 import time
 from collections.abc import Callable, Iterable, Iterator
@@ -28,12 +28,13 @@ import torch
 from torch.utils.data import DataLoader, Dataset, Sampler
 
 from lfmbench.baselines import LEARNED
-from lfmbench.datasets.batched import tensor_leaves
 from lfmbench.datasets.device import epoch_order
 from lfmbench.baselines.trainable import Trainable, count_parameters
+from lfmbench.train_step import (CUDA_GRAPH_MODES, GraphedStep, _eager_step, _set_lr, _stash, _unstash, cosine_lr,
+                                 make_optimizer)
 
-__all__ = ["trainable", "load_config", "make_loader", "make_optimizer", "fit", "train", "train_batches",
-           "GraphedStep", "CUDA_GRAPH_MODES", "EpochSampler", "EpochIndexed", "cosine_lr"]
+__all__ = ["trainable", "load_config", "make_loader", "make_device_batches", "fit", "train", "train_batches",
+           "EpochSampler", "EpochIndexed", "DATA_SOURCES", "RESIDENT_DTYPES"]
 
 
 def trainable(method: str | Trainable) -> Trainable:
@@ -99,17 +100,20 @@ class EpochIndexed(Dataset):
 
 
 def make_loader(corpus: str | os.PathLike, spec: Trainable, cfg: Any, workers: int | None = None,
-                device: torch.device | str = "cpu", group=None) -> tuple[DataLoader, Callable[[int], None]]:
+                device: torch.device | str = "cpu", group=None, preset: Any = None
+                ) -> tuple[DataLoader, Callable[[int], None]]:
     """DataLoader of training batches over :class:`~lfmbench.datasets.LFMCaptureDataset` and the function that
     selects an epoch's draws and order (``set_epoch(epoch)``), for ``spec.data_order``; with ``group`` (a
     :class:`lfmbench.distributed.Group`) the rank's part of every batch of the epoch order, whatever
-    ``spec.data_order`` (:class:`lfmbench.distributed.RankBatchSampler`)."""
+    ``spec.data_order`` (:class:`lfmbench.distributed.RankBatchSampler`). ``preset``: the
+    :class:`lfmbench.sensor.SensorPreset` of ``cfg.train.sensor`` already resolved (None: the dataset resolves
+    the name)."""
     from lfmbench.datasets.loading import collate_samples, make_dataset
 
     t = cfg.train
     extra = {} if spec.outputs is None else {"outputs": spec.outputs}
     ds = make_dataset(corpus, t.split, seed=t.seed, crop=t.crop, samples_per_scene=t.samples_per_scene,
-                      frames=t.frames, sensor=t.sensor, **extra)
+                      frames=t.frames, sensor=t.sensor if preset is None else preset, **extra)
     nw = t.workers if workers is None else int(workers)
     if group is not None:
         from lfmbench import distributed as D
@@ -144,18 +148,20 @@ RESIDENT_DTYPES = {"float32": torch.float32, "float16": torch.float16}
 def make_device_batches(corpus: str | os.PathLike, spec: Trainable, cfg: Any, device: torch.device | str,
                         resident_dtype: str = "float32",
                         chunk_scenes: int | None = None, prefetch: bool = True,
-                        group=None) -> tuple[Any, Callable[[int], None]]:
+                        group=None, preset: Any = None) -> tuple[Any, Callable[[int], None]]:
     """:class:`~lfmbench.datasets.device.DeviceBatches` of the training split on ``device`` (epoch order
     :func:`~lfmbench.datasets.device.epoch_order` of ``(seed, epoch)``; ``resident_dtype`` a key of
     :data:`RESIDENT_DTYPES`; ``chunk_scenes``: stream the split that many scenes at a time; ``prefetch``: on CUDA
-    each batch is made on a side stream while the previous step runs) and its ``set_epoch``."""
+    each batch is made on a side stream while the previous step runs) and its ``set_epoch``. ``preset``: as in
+    :func:`make_loader`."""
     from lfmbench.datasets.device import DeviceBatches
     from lfmbench.datasets.loading import make_dataset
 
     t = cfg.train
     extra = {} if spec.outputs is None else {"outputs": spec.outputs}
     ds = make_dataset(corpus, t.split, seed=t.seed, crop=t.crop, samples_per_scene=t.samples_per_scene,
-                      frames=t.frames, sensor=t.sensor, noise_streams="counter", **extra)
+                      frames=t.frames, sensor=t.sensor if preset is None else preset, noise_streams="counter",
+                      **extra)
     if resident_dtype not in RESIDENT_DTYPES:
         raise ValueError(f"resident_dtype must be one of {tuple(RESIDENT_DTYPES)}, got {resident_dtype!r:.40}")
     if group is not None:  # the rank's part of every batch (lfmbench.distributed)
@@ -168,158 +174,6 @@ def make_device_batches(corpus: str | os.PathLike, spec: Trainable, cfg: Any, de
     batches = DeviceBatches(ds, t.batch_size, device, seed=t.seed, dtype=RESIDENT_DTYPES[resident_dtype],
                             chunk_scenes=chunk_scenes, prefetch=prefetch)
     return batches, batches.set_epoch
-
-
-#: CUDA graphs of the training step (:class:`GraphedStep`): ``"auto"`` captures the step on CUDA devices, ``"off"``
-#: runs every step eagerly.
-CUDA_GRAPH_MODES = ("auto", "off")
-
-
-def make_optimizer(model: torch.nn.Module, cfg: Any, device: torch.device, graph: bool = False) -> torch.optim.Adam:
-    """Adam over ``model``'s parameters with ``cfg.train``'s learning rate and weight decay: on the CPU the
-    default implementation; on CUDA the fused one, or (``graph``) the capturable one with the learning rate as a
-    device tensor, so that a captured step reads the schedule's rate (:class:`GraphedStep`)."""
-    t = cfg.train
-    if device.type != "cuda":
-        return torch.optim.Adam(model.parameters(), lr=t.lr, weight_decay=t.weight_decay)
-    if graph:
-        return torch.optim.Adam(model.parameters(), lr=torch.tensor(float(t.lr), device=device),
-                                weight_decay=t.weight_decay, capturable=True)
-    return torch.optim.Adam(model.parameters(), lr=t.lr, weight_decay=t.weight_decay, fused=True)
-
-
-def _set_lr(opt: torch.optim.Optimizer, lr: float) -> None:
-    for g in opt.param_groups:
-        if isinstance(g["lr"], torch.Tensor):
-            g["lr"].fill_(lr)           # a kernel, no copy from the host: a captured step reads it
-        else:
-            g["lr"] = lr
-
-
-def _eager_step(model, opt, spec, cfg, batch: dict, lr: float):
-    """One optimiser step on ``batch``: (loss, terms), both still on the device."""
-    loss, terms = spec.loss(model, batch, cfg)
-    _set_lr(opt, lr)
-    opt.zero_grad(set_to_none=True)
-    loss.backward()
-    if cfg.train.grad_clip > 0:
-        torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.train.grad_clip)
-    opt.step()
-    # detached: a term kept for reading one step late must not keep this step's autograd graph alive
-    return loss, {k: (v.detach() if isinstance(v, torch.Tensor) else v) for k, v in terms.items()}
-
-
-def _stash(loss: torch.Tensor, terms: dict):
-    """A step's loss and terms, to be read later without waiting for more than that step: on a GPU one
-    asynchronous copy into pinned host memory and an event (``float()`` of a device value would wait for everything
-    queued after it too, so the host could never run ahead of the device)."""
-    if not loss.is_cuda:
-        return loss.detach(), terms
-    keys = [k for k, v in terms.items() if isinstance(v, torch.Tensor)]
-    vals = torch.stack([loss.detach().double().reshape(())] + [terms[k].detach().double().reshape(()) for k in keys])
-    host = torch.empty(vals.shape, dtype=torch.float64, pin_memory=True)
-    host.copy_(vals, non_blocking=True)
-    done = torch.cuda.Event()
-    done.record()
-    return (host, done, keys), terms
-
-
-def _unstash(stashed, terms: dict) -> tuple[float, dict]:
-    """(loss, {term: value}) as floats from :func:`_stash`'s record (waits for that step only)."""
-    if isinstance(stashed, torch.Tensor):
-        return float(stashed), {k: float(v) for k, v in terms.items()}
-    host, done, keys = stashed
-    done.synchronize()
-    vals = host.tolist()
-    return vals[0], {**{k: float(v) for k, v in terms.items() if k not in keys}, **dict(zip(keys, vals[1:]))}
-
-
-class GraphedStep:
-    """The training step (loss, backward, gradient clipping, Adam) captured once as a CUDA graph and replayed for
-    every batch of the same shapes: the host launches one graph instead of the step's ~1,000 kernels, so it can
-    keep ahead of the GPU while it also queues the next batch's simulation.
-
-    The first ``warmup`` steps (and every batch whose tensors differ in shape or dtype from the captured one, such
-    as an epoch's last, smaller batch) run eagerly; then the step is captured on the next batch (each batch's
-    tensors are copied into the graph's inputs before a replay). The optimiser must be capturable with a tensor
-    learning rate (:func:`make_optimizer` with ``graph=True``). Where capturing fails (an operation that cannot be
-    captured), one warning names the error and every later step runs eagerly: the same training, slower.
-
-    Call: ``step(batch, lr) -> (loss, terms)``, copies of the graph's outputs (the next replay overwrites them).
-    """
-
-    def __init__(self, model, opt, spec, cfg, warmup: int = 3) -> None:
-        self.model, self.opt, self.spec, self.cfg, self.warmup = model, opt, spec, cfg, int(warmup)
-        self.graph = None
-        self.failed = False
-        self.eager_steps = 0
-        self.replays = 0
-        self.sig = None
-        self.side = torch.cuda.Stream() if torch.cuda.is_available() else None
-
-    @staticmethod
-    def _signature(batch: dict) -> tuple:
-        return tuple((path, tuple(t.shape), t.dtype, t.device) for path, t in tensor_leaves(batch))
-
-    def _capture(self, batch: dict) -> None:
-        import warnings
-
-        def clone(d: dict) -> dict:
-            return {k: (v.clone() if isinstance(v, torch.Tensor) else clone(v) if isinstance(v, dict) else v)
-                    for k, v in d.items()}
-
-        static = clone(batch)
-        graph = torch.cuda.CUDAGraph()
-        self.opt.zero_grad(set_to_none=True)
-        try:
-            with torch.cuda.graph(graph):
-                loss, terms = self.spec.loss(self.model, static, self.cfg)
-                loss.backward()
-                if self.cfg.train.grad_clip > 0:
-                    torch.nn.utils.clip_grad_norm_(self.model.parameters(), self.cfg.train.grad_clip)
-                self.opt.step()
-        except Exception as exc:  # noqa: BLE001 - any capture error: train eagerly
-            self.failed = True
-            first = str(exc).splitlines()[0][:200] if str(exc) else ""
-            warnings.warn(f"CUDA graph of the training step: capture failed ({type(exc).__name__}: {first}); "
-                          "training without it (--cuda-graph off skips the attempt)", RuntimeWarning, stacklevel=3)
-            self.opt.zero_grad(set_to_none=True)
-            return
-        self.graph, self.static, self.out = graph, static, (loss, terms)
-        self.inputs = dict(tensor_leaves(static))
-
-    def __call__(self, batch: dict, lr: float):
-        sig = self._signature(batch)
-        if self.sig is None:
-            self.sig = sig              # the shapes of the first batch: the ones captured
-        if sig == self.sig and self.graph is None and not self.failed and self.eager_steps >= self.warmup:
-            self._capture(batch)
-        if self.graph is None and sig == self.sig and not self.failed:
-            # warm-up on a side stream, as capturing a backward pass needs (the autograd engine then runs the
-            # leaves' gradient accumulation on a stream the capture may depend on; "CUDA Graphs", PyTorch docs)
-            self.eager_steps += 1
-            main = torch.cuda.current_stream()
-            self.side.wait_stream(main)
-            with torch.cuda.stream(self.side):
-                out = _eager_step(self.model, self.opt, self.spec, self.cfg, batch, lr)
-            main.wait_stream(self.side)
-            return out
-        if self.graph is None or sig != self.sig:
-            return _eager_step(self.model, self.opt, self.spec, self.cfg, batch, lr)
-        for path, t in tensor_leaves(batch):
-            self.inputs[path].copy_(t, non_blocking=True)
-        _set_lr(self.opt, lr)
-        self.graph.replay()
-        self.replays += 1
-        loss, terms = self.out
-        return loss.detach().clone(), {k: (v.detach().clone() if isinstance(v, torch.Tensor) else v)
-                                       for k, v in terms.items()}
-
-
-def cosine_lr(step: int, total: int, lr: float, lr_min: float) -> float:
-    """Learning rate of optimiser step ``step`` of ``total``: cosine from ``lr`` to ``lr_min``."""
-    frac = min(step, total) / max(total, 1)
-    return lr_min + 0.5 * (lr - lr_min) * (1.0 + math.cos(math.pi * frac))
 
 
 def _to(batch: dict, device: torch.device) -> dict:
@@ -474,9 +328,10 @@ def train(method: str | Trainable, corpus: str | os.PathLike, out: str | os.Path
         cfg = spec.config_from_dict({**d, "train": {**d["train"], **over}}, "the command-line options")
     t = cfg.train
     from lfmbench.baselines import methods_for  # noqa: PLC0415
-    from lfmbench.sensor import load_preset  # noqa: PLC0415
+    from lfmbench.sensor import resolve  # noqa: PLC0415
 
-    arch = load_preset(t.sensor).architecture
+    preset = resolve(t.sensor)  # once: the object goes to the network and the dataset (the config keeps the name)
+    arch = preset.architecture
     if spec.name not in methods_for(arch):
         fits = [m for m in methods_for(arch) if m in LEARNED]
         raise ValueError(f"train.sensor: {spec.name} reads split-pixel captures, and sensor {t.sensor!r} is a "
@@ -494,8 +349,8 @@ def train(method: str | Trainable, corpus: str | os.PathLike, out: str | os.Path
     torch.manual_seed(t.seed)
     from lfmbench.baselines.checkpoint import check_model_size  # noqa: PLC0415
 
-    check_model_size(lambda: spec.build_model(cfg), f"the {spec.name} training config")  # before any allocation
-    model = spec.build_model(cfg).to(dev)
+    check_model_size(lambda: spec.build_model(cfg, preset), f"the {spec.name} training config")  # before allocating
+    model = spec.build_model(cfg, preset).to(dev)
     opt = make_optimizer(model, cfg, dev, graph)
     history, start, data_rng = None, 0, None
     if resume and out.exists():
@@ -520,9 +375,10 @@ def train(method: str | Trainable, corpus: str | os.PathLike, out: str | os.Path
     # auto: the device path on CUDA for the split pixel (the other plans run on the per-sample path only)
     on_device = data == "device" or (data == "auto" and dev.type == "cuda" and arch == "split_pixel")
     if on_device:
-        loader, set_epoch = make_device_batches(corpus, spec, cfg, dev, resident_dtype, chunk_scenes, group=group)
+        loader, set_epoch = make_device_batches(corpus, spec, cfg, dev, resident_dtype, chunk_scenes, group=group,
+                                                preset=preset)
     else:
-        loader, set_epoch = make_loader(corpus, spec, cfg, workers, dev, group=group)
+        loader, set_epoch = make_loader(corpus, spec, cfg, workers, dev, group=group, preset=preset)
     gen = loader.generator if spec.data_order == "shuffle" and not on_device and group is None else None
     if gen is not None and data_rng is not None:
         gen.set_state(data_rng)

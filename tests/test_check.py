@@ -188,6 +188,10 @@ def test_same_shape_and_batch_checks():
         check.check_same_shape(torch.zeros(1, 2), torch.zeros(1, 3), "pred", "gt")
     with pytest.raises(TypeError, match="^gt must be a torch.Tensor"):
         check.check_same_shape(torch.zeros(1), 0.0, "pred", "gt")
+    check.check_same_shape(torch.zeros(2), torch.zeros(2, dtype=torch.float64), "pred", "gt")  # dtype not asked
+    with pytest.raises(ValueError, match=r"^pred and gt must have the same dtype, got pred torch.float32 and gt "
+                                         r"torch.float64$"):
+        check.check_same_shape(torch.zeros(2), torch.zeros(2, dtype=torch.float64), "pred", "gt", dtype=True)
     with pytest.raises(ValueError, match="^batch: missing 'info'; pass it$"):
         check.check_batch_keys({"static": 1}, ("static", "info"), hint="pass it")
     b = {"static": torch.zeros(1), "t0": torch.zeros(1, device="meta"), "n": 3}

@@ -31,6 +31,7 @@ LAYERS = (
     ("lfmbench.metrics",),
     ("lfmbench.baselines",),
     ("lfmbench.distributed",),  # the ranks of a DDP training (their batches, step, process group)
+    ("lfmbench.train_step",),  # one optimiser step of the training loop (Adam, schedule, CUDA-graph replay)
     ("lfmbench.train",),
     ("lfmbench.evaluation",),
     ("lfmbench.flicker_bench",),  # the virtual P2020 flicker bench: sensor plans, merges and P2020 metrics on a target

@@ -9,6 +9,7 @@ from typer.testing import CliRunner
 
 from lfmbench import baselines
 from lfmbench import train as T
+from lfmbench import train_step as S
 from lfmbench.baselines import unet as U
 from lfmbench.cli import app
 from tests.data.metrics.data import make_batch
@@ -80,7 +81,7 @@ def test_epoch_sampler_depends_only_on_seed_and_epoch():
     assert list(s) == first and sorted(i for _, i in first) == list(range(10)) and {e for e, _ in first} == {3}
     s.set_epoch(4)
     assert [i for _, i in s] != [i for _, i in first]
-    assert T.cosine_lr(0, 10, 1e-2, 1e-4) == pytest.approx(1e-2) and T.cosine_lr(10, 10, 1e-2, 1e-4) == 1e-4
+    assert S.cosine_lr(0, 10, 1e-2, 1e-4) == pytest.approx(1e-2) and S.cosine_lr(10, 10, 1e-2, 1e-4) == 1e-4
 
 
 def test_train_command_trains_the_learned_baseline_and_resumes_its_shuffled_order(corpus, tmp_path, one_thread):

@@ -143,10 +143,10 @@ class NoiseModel:
     @classmethod
     def from_preset(cls, preset=DEFAULT_PRESET) -> "NoiseModel":
         """From a sensor preset (name, YAML path, mapping or ``SensorPreset``) via
-        :func:`lfmbench.sensor.load_preset`, which raises ValueError naming a bad field and file."""
-        from lfmbench.sensor import load_preset
+        :func:`lfmbench.sensor.resolve`, which raises ValueError naming a bad field and file."""
+        from lfmbench.sensor import resolve
 
-        p = load_preset(preset)
+        p = resolve(preset)
         c = p.captures
         return cls(float(c["lpd_hcg"].read_noise_e), float(c["lpd_lcg"].read_noise_e), float(c["spd"].read_noise_e),
                    float(p.sensitivity_ratio))

@@ -173,6 +173,6 @@ checkpoint_path = learned.checkpoint_path
 #: How ``lfmbench train --method learned`` trains it (:mod:`lfmbench.train`): a DataLoader shuffled by one
 #: generator seeded once (the order the published demo checkpoints were trained with).
 TRAINING = Trainable(name="learned", default_config=DEFAULT_CONFIG, load_config=load_config,
-                     config_from_dict=config_from_dict, build_model=lambda cfg: LearnedFusion(cfg.model.width),
+                     config_from_dict=config_from_dict, build_model=lambda cfg, preset=None: LearnedFusion(cfg.model.width),
                      loss=_loss, save_checkpoint=_save, read_checkpoint=read_checkpoint, default_checkpoint=DEFAULT_CHECKPOINT,
                      checkpoint_env=CHECKPOINT_ENV, data_order="shuffle")

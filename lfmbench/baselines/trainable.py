@@ -157,7 +157,9 @@ class Trainable:
         load_config: ``load_config(path or None) -> cfg``; ``cfg.train`` a :class:`TrainConfig`, ``cfg.to_dict()``
             plain data (compared on resume).
         config_from_dict: ``config_from_dict(data, source) -> cfg``.
-        build_model: ``build_model(cfg) -> nn.Module`` (called after ``torch.manual_seed(cfg.train.seed)``).
+        build_model: ``build_model(cfg, preset=None) -> nn.Module`` (called after
+            ``torch.manual_seed(cfg.train.seed)``; ``preset``: the :class:`lfmbench.sensor.SensorPreset` of
+            ``cfg.train.sensor`` already resolved by the caller, None: resolve it from the config).
         loss: ``loss(model, batch, cfg) -> (scalar tensor, {term: float})``.
         save_checkpoint: ``save_checkpoint(model, path, cfg, extra) -> Path`` (atomic).
         read_checkpoint: ``read_checkpoint(path, map_location) -> dict`` (with ``state_dict``).
@@ -171,7 +173,7 @@ class Trainable:
     default_config: Path
     load_config: Callable[[Any], Any]
     config_from_dict: Callable[[Any, str], Any]
-    build_model: Callable[[Any], Any]
+    build_model: Callable[..., Any]
     loss: Callable[[Any, dict, Any], tuple]
     save_checkpoint: Callable[..., Path]
     read_checkpoint: Callable[..., dict]

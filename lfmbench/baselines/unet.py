@@ -396,12 +396,14 @@ def load_checkpoint(path: str | os.PathLike, map_location: str | torch.device = 
     return model
 
 
-def build_for_sensor(cfg: UNetConfig) -> UNetFusion:
+def build_for_sensor(cfg: UNetConfig, preset=None) -> UNetFusion:
     """The network for ``cfg.train.sensor`` (a preset name or YAML): the split-pixel network for a split pixel,
-    else a plan network over that preset's captures; both record the preset's name and architecture."""
-    from lfmbench.sensor import load_preset  # noqa: PLC0415
+    else a plan network over that preset's captures; both record the preset's name and architecture.
+    ``preset``: that sensor's :class:`lfmbench.sensor.SensorPreset` already resolved by the caller (None: resolved
+    here from the config)."""
+    from lfmbench.sensor import resolve  # noqa: PLC0415
 
-    preset = load_preset(cfg.train.sensor)
+    preset = resolve(cfg.train.sensor if preset is None else preset)
     caps = None if preset.architecture == "split_pixel" else list(preset.captures)
     return UNetFusion(cfg.model, caps, preset.name, preset.architecture)
 

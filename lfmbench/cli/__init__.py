@@ -105,8 +105,8 @@ class _Group(TyperGroup):
                 sys.stderr.write("--debug: the traceback behind the error above:\n" + debug_traceback(exc))
                 sys.stderr.flush()
             raise
-        except (click.exceptions.ClickException, click.exceptions.Abort, click.exceptions.Exit):
-            raise
+        except (click.exceptions.ClickException, click.exceptions.Abort, click.exceptions.Exit, *_typer_click_errors()):
+            raise  # a usage error (unknown option, bad value): click prints it, exit 2
         except Exception as exc:  # noqa: BLE001 - the last line of defence: one line, the traceback on request
             from lfmbench.limits import one_line  # noqa: PLC0415
 
@@ -120,6 +120,13 @@ class _Group(TyperGroup):
                     traceback.format_exception(type(exc), exc, exc.__traceback__)))
                 sys.stderr.flush()
             raise typer.Exit(1) from exc
+
+
+def _typer_click_errors() -> tuple[type, ...]:
+    """The usage-error classes of the click that typer parses with: typer 0.2x carries its own copy of click
+    (``typer._click``), whose ``ClickException`` is not click's, so a misspelled option was reported as an
+    unexpected error (exit 1) instead of a usage error (exit 2)."""
+    return tuple(c for c in typer.BadParameter.__mro__ if c.__name__ == "ClickException") + (typer.Abort,)
 
 
 app = typer.Typer(cls=_Group, help="LED-flicker datasets and flicker-mitigation benchmark.", no_args_is_help=True,

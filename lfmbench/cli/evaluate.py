@@ -1,8 +1,11 @@
 """The ``lfmbench evaluate`` and ``lfmbench leaderboard`` commands (thin wrappers of the library modules).
 
-The help and the choices are read from the registries (:data:`lfmbench.baselines.REGISTRY`, the preset files of
-:func:`lfmbench.sensor.available_presets`), so they name every registered baseline and shipped preset; the rest of
-the library (the dataset, the evaluation) is imported inside the command bodies."""
+The help and the choices are read from the registries and definitions that own the names
+(:data:`lfmbench.baselines.REGISTRY`, the preset files of :func:`lfmbench.sensor.available_presets`, the ISP
+pipelines of :func:`lfmbench.isp.available_pipelines`, the metrics of :data:`lfmbench.metrics.REGISTRY`
+(``--sort-by``), :data:`lfmbench.datasets.options.SPLITS`, :data:`lfmbench.evaluation.benchmark.SIMULATE`), so they
+name every registered entry; the rest of the library (the dataset, the evaluation) is imported inside the command
+bodies."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -10,8 +13,12 @@ from typing import List
 
 import typer
 
-from lfmbench.cli._common import check_local_paths, check_minima, fail, lock_output, torch_setup
+from lfmbench.cli._common import check_local_paths, check_minima, choice, fail, lock_output, torch_setup
 from lfmbench.baselines import REGISTRY as BASELINES
+from lfmbench.datasets.options import SPLITS
+from lfmbench.evaluation.benchmark import SIMULATE
+from lfmbench.isp import available_pipelines
+from lfmbench.metrics import REGISTRY as METRICS
 from lfmbench.sensor import available_presets
 
 __all__ = ["register", "evaluate_cmd", "leaderboard_cmd", "resolve_methods"]
@@ -27,7 +34,7 @@ def evaluate_cmd(
     sensor: str = typer.Option("ovt", "--sensor",
                                help="sensor preset (lfmbench configs sensors) or a preset YAML; its name and "
                                     "architecture are recorded in the result"),
-    split: str = typer.Option("test", help="corpus split"),
+    split: str = typer.Option("test", help="corpus split", **choice(SPLITS)),
     output: Path = typer.Option(None, "--output", "-o", help="result JSON of a single --method (default "
                                                             "<runs-dir>/<method>.json)"),
     runs_dir: Path = typer.Option(Path("runs"), "--runs-dir", help="folder of the result files "
@@ -41,7 +48,7 @@ def evaluate_cmd(
     warmup: int = typer.Option(1, help="untimed warm-up calls"),
     perceptual: bool = typer.Option(True, help="also PU21-PSNR and ColorVideoVDP (needs cvvdp)"),
     device: str = typer.Option("cpu", help="torch device, e.g. cpu or cuda"),
-    simulate: str = typer.Option("host", "--simulate",
+    simulate: str = typer.Option("host", "--simulate", **choice(SIMULATE),
                                  help="where the captures are simulated: host (the per-sample path, generator noise: "
                                       "the published lfmbench-v1 numbers) or device (the device program on --device, "
                                       "counter noise: the same draws, other noise numbers; ranked apart)"),
@@ -51,7 +58,7 @@ def evaluate_cmd(
                                         "any writable directory for a read-only corpus)"),
     isp: str = typer.Option("default", "--isp",
                             help="ISP pipeline of the display-referred columns psnr_srgb, ssim_srgb: a shipped name "
-                                 "(default, local) or a YAML path; 'none' skips them"),
+                                 f"({', '.join(available_pipelines())}) or a YAML path; 'none' skips them"),
     shard: str = typer.Option(None, "--shard", metavar="INDEX/COUNT",
                               help="score only shard INDEX of COUNT (scene s goes to shard s mod COUNT; e.g. "
                                    "$SLURM_ARRAY_TASK_ID/$SLURM_ARRAY_TASK_COUNT or $RANK/$WORLD_SIZE); join the "
@@ -64,7 +71,7 @@ def evaluate_cmd(
     says which), 2 bad input, 130 interrupted (the result file has status "interrupted").
     """
     from lfmbench.datasets.loading import EmptyDataError  # noqa: PLC0415
-    from lfmbench.evaluation.benchmark import (SIMULATE, check_simulate, corpus_run_inputs,  # noqa: PLC0415
+    from lfmbench.evaluation.benchmark import (corpus_run_inputs,  # noqa: PLC0415
                                                run_dataset_record, safe_name, samples_to_score, score_batches)
     from lfmbench.evaluation.leaderboard import _fmt  # noqa: PLC0415
     from lfmbench.evaluation.run import DataSourceError, EvaluationInterrupted, evaluate_methods  # noqa: PLC0415
@@ -85,10 +92,6 @@ def evaluate_cmd(
     if output is not None and len(methods) > 1:
         fail(f"--output names the result file of one method; {len(methods)} methods write "
              f"<runs-dir>/<method>.json (--runs-dir, default runs)")
-    try:
-        check_simulate(simulate)
-    except ValueError as exc:
-        fail(f"--{exc}")
     torch_setup(device, threads)
     outs = [output] if output is not None else [runs_dir / f"{safe_name(m)}.json" for m in methods]
     if len(set(outs)) != len(outs):
@@ -112,9 +115,12 @@ def evaluate_cmd(
             load_pipeline(isp_name)  # a bad pipeline file is named before any work
         except ValueError as exc:
             fail(f"--isp: {exc}")
+    from lfmbench.sensor import resolve  # noqa: PLC0415
+
     try:
         fns = resolve_methods(methods)
-        extra = {"frames": frames, "sensor": sensor, "noise_streams": SIMULATE[simulate]}
+        preset = resolve(sensor)  # the one resolution of --sensor: the object travels to the dataset and metrics
+        extra = {"frames": frames, "sensor": preset, "noise_streams": SIMULATE[simulate]}
         if cache_dir is not None:
             extra["cache_dir"] = cache_dir
         ds, ident, cond = corpus_run_inputs(corpus, split, seed, crop, samples_per_scene, **extra)
@@ -222,8 +228,8 @@ def _checkpoint_sensor_check(fn):
 
 def leaderboard_cmd(
     runs: list[Path] = typer.Argument(..., help="evaluation JSON files, e.g. runs/*.json"),
-    sort_by: str = typer.Option("led_score", help="registered metric to rank by (default: the LED score, "
-                                                  "docs/guide/metrics.md)"),
+    sort_by: str = typer.Option("led_score", **choice(METRICS),
+                                help="registered metric to rank by (default: the LED score, docs/guide/metrics.md)"),
     markdown: Path = typer.Option(Path("runs/leaderboard.md"), help="Markdown table output"),
     plot: Path = typer.Option(Path("runs/leaderboard.png"), help="quality-vs-run-time PNG output"),
     json_out: Path = typer.Option(Path("runs/leaderboard.json"), "--json",

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from lfmbench.cli._common import check_local_paths, fail
+from lfmbench.cli._common import check_local_paths, choice, fail
 from lfmbench.paper.fig3 import FIG3_EXPOSURES_S, fig3_series, plot_fig3
 from lfmbench.paper.figures import FIGURES, FigureInputError, make_figures, render_corpus
 
@@ -47,7 +47,7 @@ def _register_fig3(app) -> None:
 
 def _register_figures(app) -> None:
     @app.command("paper-figures", short_help="Reproduce the ISET-LFM paper's Figs. 3-7.")
-    def paper_figures(fig: str = typer.Option("all", "--fig", help="figure: 3, 4, 5, 6, 7 or all"),
+    def paper_figures(fig: str = typer.Option("all", "--fig", help="figure", **choice(FIGURES)),
                       corpus: Path = typer.Option(None, "--corpus",
                                                   help="paper-figure corpus (DIR with fig4_6/ and fig7/, from "
                                                        "--render) or any rendered corpus; not needed for --fig 3"),
@@ -60,8 +60,6 @@ def _register_figures(app) -> None:
                       workers: int = typer.Option(1, "--workers", help="render processes (with --render)")) -> None:
         """Reproduce the ISET-LFM paper's Figs. 3-7 (docs/guide/paper-figures.md)."""
         check_local_paths((("--corpus", corpus), ("--out", out)))
-        if fig not in FIGURES:
-            fail(f"--fig must be one of {', '.join(FIGURES)}; got {fig!r}")
         if render:
             if corpus is None:
                 fail("--render needs --corpus DIR (where the figure corpus is rendered)")

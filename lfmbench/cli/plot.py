@@ -1,6 +1,7 @@
 """``lfmbench plot``: a PNG of one dataset sample: its captures, the ground truth and (``--method``, repeatable)
 methods' outputs, through the display ISP, frames side by side, LED regions outlined
-(:func:`lfmbench.datasets.plot.plot_sample`). torch and the dataset are imported when the command runs."""
+(:func:`lfmbench.datasets.plot.plot_sample`). The choices and help name the registered splits, presets and ISP
+pipelines; the dataset is imported when the command runs."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -8,7 +9,10 @@ from typing import List, Optional
 
 import typer
 
-from lfmbench.cli._common import check_minima, fail
+from lfmbench.cli._common import check_minima, choice, fail
+from lfmbench.datasets.options import SPLITS
+from lfmbench.isp import available_pipelines
+from lfmbench.sensor import available_presets
 
 __all__ = ["register", "plot_cmd"]
 
@@ -16,15 +20,17 @@ __all__ = ["register", "plot_cmd"]
 def plot_cmd(
     corpus: Path = typer.Option(..., "--corpus", help="corpus root directory"),
     out: Path = typer.Option(Path("sample.png"), "--out", "-o", help="PNG file to write"),
-    split: str = typer.Option("test", help="corpus split (train, val, test, all)"),
+    split: str = typer.Option("test", help="corpus split", **choice(SPLITS)),
     index: int = typer.Option(0, help="sample index in the split"),
     scene: Optional[str] = typer.Option(None, "--scene", help="a scene id of the split instead of --index "
                                                               "(its first sample)"),
     method: Optional[List[str]] = typer.Option(None, "--method", "-m", metavar="METHOD",
                                                help="repeatable: also show this method's output (a baseline or "
                                                     "module:function, as lfmbench evaluate)"),
-    sensor: str = typer.Option("ovt", "--sensor", help="sensor preset name or YAML (lfmbench configs sensors)"),
-    isp: str = typer.Option("default", "--isp", help="ISP pipeline name or YAML (lfmbench configs isp)"),
+    sensor: str = typer.Option("ovt", "--sensor", help=f"sensor preset: a shipped name "
+                                                        f"({', '.join(available_presets())}) or a YAML path"),
+    isp: str = typer.Option("default", "--isp", help=f"ISP pipeline: a shipped name ({', '.join(available_pipelines())}) "
+                                                      "or a YAML path"),
     frames: int = typer.Option(3, help="consecutive frames per sample"),
     crop: Optional[int] = typer.Option(None, help="square crop in px (default: the whole frame)"),
     seed: int = typer.Option(0, help="dataset seed (PWM draws, noise)"),

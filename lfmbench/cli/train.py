@@ -1,6 +1,7 @@
 """The ``lfmbench train --method NAME`` command: any learned baseline of :data:`lfmbench.baselines.LEARNED`
-through the one loop of :mod:`lfmbench.train` (imported only when it runs; the help reads the registries of the
-learned baselines and the shipped presets)."""
+through the one loop of :mod:`lfmbench.train`. The help and the choices read the registries and definitions that
+own the names: the learned baselines, the shipped presets, :data:`lfmbench.train.DATA_SOURCES`,
+:data:`~lfmbench.train.RESIDENT_DTYPES` and :data:`lfmbench.train_step.CUDA_GRAPH_MODES`."""
 from __future__ import annotations
 
 import statistics
@@ -8,9 +9,11 @@ from pathlib import Path
 
 import typer
 
-from lfmbench.cli._common import check_local_paths, check_minima, fail, torch_setup
+from lfmbench.cli._common import check_local_paths, check_minima, choice, fail, torch_setup
 from lfmbench.baselines import LEARNED
 from lfmbench.sensor import available_presets
+from lfmbench.train import DATA_SOURCES, RESIDENT_DTYPES
+from lfmbench.train_step import CUDA_GRAPH_MODES
 
 __all__ = ["register", "train_cmd"]
 
@@ -33,15 +36,18 @@ def train_cmd(
                                     "the checkpoint records the sensor and serves only it"),
     threads: int = typer.Option(None, help="torch CPU threads (default: torch's choice)"),
     resume: bool = typer.Option(True, help="continue from --out when it holds a checkpoint of this config"),
-    data: str = typer.Option("auto", help="where batches come from: loader (DataLoader workers on the CPU), "
-                                          "device (the corpus resident on --device, batches simulated there), "
-                                          "auto (device on CUDA for a split-pixel sensor, else loader)"),
-    resident_dtype: str = typer.Option("float32", help="device path: storage of the resident layers, float32 or "
-                                                       "float16 (half the memory, 2^-11 relative error)"),
+    data: str = typer.Option("auto", **choice(DATA_SOURCES),
+                             help="where batches come from: loader (DataLoader workers on the CPU), "
+                                  "device (the corpus resident on --device, batches simulated there), "
+                                  "auto (device on CUDA for a split-pixel sensor, else loader)"),
+    resident_dtype: str = typer.Option("float32", **choice(RESIDENT_DTYPES),
+                                       help="device path: storage of the resident layers (float16: half the "
+                                            "memory, 2^-11 relative error)"),
     chunk_scenes: int = typer.Option(None, help="device path: stream the split this many scenes at a time (a split "
                                                 "that does not fit the device)"),
-    cuda_graph: str = typer.Option("auto", "--cuda-graph", help="auto: replay the training step as a CUDA graph on "
-                                                               "a CUDA device; off: never"),
+    cuda_graph: str = typer.Option("auto", "--cuda-graph", **choice(CUDA_GRAPH_MODES),
+                                   help="auto: replay the training step as a CUDA graph on a CUDA device; off: "
+                                        "never"),
 ) -> None:
     """Train a learned fusion baseline; checkpoint written atomically after every epoch (resumable).
 
@@ -51,17 +57,13 @@ def train_cmd(
     """
     from lfmbench.baselines.trainable import ConfigError, count_parameters  # noqa: PLC0415
     from lfmbench.datasets.loading import EmptyDataError  # noqa: PLC0415
-    from lfmbench.train import CUDA_GRAPH_MODES, RESIDENT_DTYPES, load_config, train, trainable  # noqa: PLC0415
+    from lfmbench.train import load_config, train, trainable  # noqa: PLC0415
 
     check_local_paths((("--corpus", corpus), ("--out", out), ("--config", config)))
     if method not in LEARNED:
         fail(f"--method {method!r} is not a trainable baseline; trainable: {', '.join(LEARNED)}")
     check_minima((("--epochs", epochs, 1), ("--workers", workers, 0), ("--crop", crop, 8),
                   ("--batch-size", batch_size, 1), ("--chunk-scenes", chunk_scenes, 1)))
-    if resident_dtype not in RESIDENT_DTYPES:
-        fail(f"--resident-dtype must be {' or '.join(RESIDENT_DTYPES)}, got {resident_dtype!r:.40}")
-    if cuda_graph not in CUDA_GRAPH_MODES:
-        fail(f"--cuda-graph must be {' or '.join(CUDA_GRAPH_MODES)}, got {cuda_graph!r:.40}")
     torch_setup(device, threads)
     try:
         cfg = load_config(method, config)

@@ -8,17 +8,18 @@ This package defines the on-disk format specified in ``docs/guide/corpus-format.
 * :mod:`~lfmbench.corpus.naming`: format name and versions, file names, header attributes, channel names;
 * :mod:`~lfmbench.corpus.storage`: how radiance layers are stored (:class:`Storage`: HALF x per-layer 2^e,
   mantissa rounding, codecs; :func:`store_layer`);
-* :mod:`~lfmbench.corpus.exr`: low-level EXR encoding / decoding through the OpenEXR 3.x Python API
-  (``OpenEXR.File`` / ``OpenEXR.Part``): :func:`encode_static_exr`, :func:`encode_lights_exr`,
-  :func:`encode_aux_exr`, :func:`read_exr`;
+* :mod:`~lfmbench.corpus.exr_encode`, :mod:`~lfmbench.corpus.exr`: low-level EXR encoding / decoding through the
+  OpenEXR 3.x Python API (``OpenEXR.File`` / ``OpenEXR.Part``): :func:`encode_static_exr`,
+  :func:`encode_lights_exr`, :func:`encode_aux_exr`, :func:`read_exr`;
 * :mod:`~lfmbench.corpus.meta`: :func:`validate_meta` (consistency checks of a scene's ``meta.json``: timing,
   bands, groups, camera), manifest and ``splits.json`` checks, :func:`make_splits`, :func:`sha256_file`;
 * :mod:`~lfmbench.corpus.reader`: :class:`Corpus`, the reader (lazy: one file per frame and light group is
   decoded only when asked for, with a small cache so that reading ``short`` then ``long`` decodes the file once);
-* :mod:`~lfmbench.corpus.writer`: :class:`CorpusWriter`: atomic writes (temporary name in the same directory,
-  then :func:`os.replace`), a manifest that is rewritten atomically after each finished scene, resume support
-  (:meth:`CorpusWriter.is_complete`); :func:`encode_scene`, :func:`write_files`; :class:`ThreadedSceneWriter`
-  (encoding and writing in a worker thread while the next frame renders);
+* :mod:`~lfmbench.corpus.writer`: :class:`CorpusWriter`: a manifest that is rewritten atomically after each
+  finished scene, resume support (:meth:`CorpusWriter.is_complete`), the one-writer lock;
+* :mod:`~lfmbench.corpus.scene_files`: :func:`encode_scene`, :func:`write_files` (atomic writes: temporary name
+  in the same directory, then :func:`os.replace`); :class:`ThreadedSceneWriter` (encoding and writing in a worker
+  thread while the next frame renders);
 * :mod:`~lfmbench.corpus.validate`: :func:`validate_corpus`, a full check of a corpus (missing files,
   checksums, channels, NaN/inf/negative radiance, metadata consistency), used by ``lfmbench validate``.
 
@@ -38,8 +39,8 @@ References: OpenEXR file layout and multi-part files, https://openexr.com/en/lat
 from lfmbench.check import check_scene_id
 from lfmbench.corpus.errors import (CorpusChannelError, CorpusError, CorpusFileError, CorpusNotFoundError,
                                     CorpusLockedError, CorpusValueError, CorpusWriteError)
-from lfmbench.corpus.exr import (ExrPart, check_exr_header, encode_aux_exr, encode_lights_exr, encode_static_exr, layer_scale,
-                                 read_exr, split_steady, SteadyBins)
+from lfmbench.corpus.exr import ExrPart, check_exr_header, layer_scale, read_exr
+from lfmbench.corpus.exr_encode import SteadyBins, encode_aux_exr, encode_lights_exr, encode_static_exr, split_steady
 from lfmbench.corpus.meta import (LIGHT_KINDS, SPECTRUM_MODELS, TIMING_RTOL, check_splits, inside_root, make_splits,
                                   load_meta, manifest_entry_errors, sha256_file, validate_meta)
 from lfmbench.corpus.naming import (ATTR, AUX_CHANNELS, EMPTY_PART, FORMAT_NAME, FORMAT_VERSION, MANIFEST_NAME,
@@ -53,8 +54,8 @@ from lfmbench.corpus.storage import (COMPRESSIONS, DEFAULT_STORAGE, EXTRA_COMPRE
                                      SCALE_EXP_RANGE, STORAGES, LayerStore, Storage, StorageStats, resolve_storage,
                                      float_to_half, round_mantissa, scale_attr, scale_exponent, store_layer)
 from lfmbench.corpus.validate import ValidationReport, validate_corpus
-from lfmbench.corpus.writer import (LOCK_NAME, CorpusLock, CorpusWriter, ThreadedSceneWriter, encode_scene,
-                                    prune_scene_dir, write_files)
+from lfmbench.corpus.scene_files import ThreadedSceneWriter, encode_scene, write_files
+from lfmbench.corpus.writer import LOCK_NAME, CorpusLock, CorpusWriter, prune_scene_dir
 from lfmbench.fileio import TMP_PREFIX, atomic_write_bytes, atomic_write_json
 
 __all__ = [

@@ -1,5 +1,9 @@
 """:func:`validate_corpus`: a full check of a corpus (missing files, checksums, channels, NaN/inf/negative
 radiance, metadata consistency), used by ``lfmbench validate``.
+
+Size (about 530 lines): one job, the corpus check, in the order it runs (manifest and listing, per-scene files,
+channels, storage attributes, pixels, the parallel chunking of a large corpus); the format's own rules it applies
+are imported (:mod:`lfmbench.corpus.meta`, :mod:`lfmbench.corpus.exr`), not restated.
 """
 from __future__ import annotations
 

@@ -10,8 +10,8 @@ training device) and :mod:`~lfmbench.datasets.loading` (datasets and collation f
 from lfmbench.datasets.assembly import check_line_time, compose_frame, window_bin_exposure
 from lfmbench.datasets.capture import DatasetNotFoundError, LFMCaptureDataset, SceneView
 from lfmbench.datasets.options import DEFAULT_OUTPUTS, OUTPUTS
-from lfmbench.datasets.batched import (BatchedCaptureSimulator, collate_pieces, compose_batch, pieces_to,
-                                       simulate_batch)
+from lfmbench.datasets.batch_compose import compose_batch
+from lfmbench.datasets.batched import BatchedCaptureSimulator, collate_pieces, pieces_to, simulate_batch
 from lfmbench.datasets.loading import EmptyDataError, collate_samples, make_dataset
 from lfmbench.datasets.pwm import (TEST_SPLIT_SEED, PWMConfig, PWMParams, SceneDraw, draw_pwm, draw_scene_pwm,
                                    load_pwm_config)

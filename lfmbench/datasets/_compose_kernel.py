@@ -1,4 +1,4 @@
-"""The compiled CPU form of :func:`lfmbench.datasets.batched.compose_batch` (numba; imported lazily).
+"""The compiled CPU form of :func:`lfmbench.datasets.batch_compose.compose_batch` (numba; imported lazily).
 
 One pass over the static rates and one over the light-pixel entries instead of about fifteen torch passes
 (products, a copy for the ground truth, the transposed entry values, three gathers, products, sums and

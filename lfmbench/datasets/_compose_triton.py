@@ -1,7 +1,7 @@
 """The composition of :mod:`lfmbench.datasets.batched` on CUDA as Triton kernels (imported lazily): the PWM
 weights of every slot, row and bin (:func:`pwm_weights`), and the lamp-entry pass (:func:`compose_entries`).
 
-**Weights.** The torch form of :func:`lfmbench.datasets.batched.pwm_weights` is about 180 small element-wise
+**Weights.** The torch form of :func:`lfmbench.datasets.batch_compose.pwm_weights` is about 180 small element-wise
 launches (the window starts, the bin grid and, per window, :func:`lfmbench.flicker.pwm_exposure`'s compensated
 arithmetic). Here one kernel computes the three windows of an element from the slot's draws: the same float64
 operations in the same order (compiled without fused multiply-adds; ``fmod`` from exact operations,
@@ -94,7 +94,7 @@ def _weights_kernel(sample_ptr, frame_ptr, k_ptr, pwm_ptr, timing_ptr, t0_ptr, c
 
 
 def pwm_weights(batch: dict, R: int, kmax: int) -> dict:
-    """:func:`lfmbench.datasets.batched.pwm_weights` of a batch of ideal pulses without group slots, on CUDA.
+    """:func:`lfmbench.datasets.batch_compose.pwm_weights` of a batch of ideal pulses without group slots, on CUDA.
 
     Args:
         batch: a :func:`~lfmbench.datasets.batched.collate_pieces` batch (float64 ``slot_pwm``, ``timing``, ``t0``).
@@ -151,7 +151,7 @@ def compose_entries(comp: dict, slot_sample: torch.Tensor, entry_slot: torch.Ten
         comp: ``{"lpd", "spd", "gt"}`` (B, F, h, w) float32 e-, contiguous (the static part already in them).
         slot_sample: (S,) sample of each slot. entry_slot, entry_pix: (E,) slot and pixel ``f * h * w + y * w + x``
             of each entry. values: (2, Kmax, E) float32 e-/s (LPD, SPD rates per bin), any strides.
-        weights: ``{"lpd", "spd", "gt"}`` (S, R, Kmax) float64 s (:func:`~lfmbench.datasets.batched.pwm_weights`).
+        weights: ``{"lpd", "spd", "gt"}`` (S, R, Kmax) float64 s (:func:`~lfmbench.datasets.batch_compose.pwm_weights`).
     """
     E = int(entry_pix.shape[0])
     if E == 0:

@@ -7,6 +7,11 @@ scene's camera-projected layers (:mod:`lfmbench.datasets.projection`) and runs t
 The composition and timing rules and the sample dict are those of :mod:`lfmbench.datasets.assembly` (shared with
 the batched path :mod:`lfmbench.datasets.batched`); :meth:`LFMCaptureDataset.scene` gives a scene as the dataset
 holds it (:class:`SceneView`: layers, lights, static rates, light index, meta) to figures and the batched path.
+
+Size (about 720 lines): one class, the dataset, whose methods are the steps of one sample (split and scenes,
+frozen test draws, the sample's draws, composition, sensor chain, ``gt_common``); the rules they apply live in
+:mod:`~lfmbench.datasets.options`, :mod:`~lfmbench.datasets.assembly`, :mod:`~lfmbench.datasets.plan_frames`,
+:mod:`~lfmbench.datasets.pieces` and :mod:`~lfmbench.datasets.counter_draws`.
 """
 from __future__ import annotations
 
@@ -28,12 +33,11 @@ from lfmbench import sensor as _sensor
 from lfmbench.corpus import Corpus
 from lfmbench.datasets.counter_draws import (SceneEntities, counter_scene_draw, crop_origin, noise_seeds,
                                              place_uniforms, start_frame)
-from lfmbench.datasets.assembly import (SENSOR_OUTPUTS, PlanExposure, assemble_sample, check_line_time,
-                                        compose_frame, compose_plan_frame, light_index, plan_exposures,
-                                        static_window_mix)
+from lfmbench.datasets.assembly import SENSOR_OUTPUTS, assemble_sample, check_line_time, compose_frame, light_index
 from lfmbench.datasets.options import (DEFAULT_MAX_LIGHTS, DEFAULT_OUTPUTS, DEFAULT_SAMPLES_PER_SCENE,  # noqa: F401
                                        CacheOptions, SampleOptions, SimulationOptions)
 from lfmbench.datasets.pieces import capture_pieces
+from lfmbench.datasets.plan_frames import PlanExposure, compose_plan_frame, plan_exposures, static_window_mix
 from lfmbench.datasets.projection import SceneLayers, aux_channels, load_or_build, unit_projection_preset
 from lfmbench.datasets.pwm import PWMConfig, apply_light_timing, draw_scene_pwm, frozen_test_rng, load_pwm_config
 from lfmbench.fileio import atomic_write_json, load_json
@@ -229,13 +233,13 @@ class LFMCaptureDataset(Dataset):
         self.groups = None if opts.groups is None else list(opts.groups)
         self.samples_per_scene, self.noise, self.optics = opts.samples_per_scene, sim.noise, sim.optics
         self.transforms = transforms
-        self.preset = _sensor.load_preset(sensor)
+        self.preset = _sensor.resolve(sensor)
         self.sensor_name = self.preset.name
         self.architecture = self.preset.architecture
         # a capture plan other than the split pixel reads layers projected at unit fill factor (its own windows)
         self._layer_preset = unit_projection_preset(self.preset)
         # gt_common: one reference window through one fixed reference projection, whatever the sensor
-        self._common_preset = unit_projection_preset(_sensor.load_preset(COMMON_REFERENCE_SENSOR)) \
+        self._common_preset = unit_projection_preset(_sensor.resolve(COMMON_REFERENCE_SENSOR)) \
             if "gt_common" in self.outputs else None
         self._common_cache: OrderedDict = OrderedDict()
         if self.pieces and "gt_common" in self.outputs:

@@ -18,7 +18,7 @@ The per-sample DataLoader path builds each sample's pieces in CPU workers (4 MiB
    batch's indices; a light on a shared ``driver`` gathers its driver's draw, a scan row's draw is made its row's
    PWM by :func:`lfmbench.datasets.pwm.scan_row_record`), slots for every lamp of every frame with a visibility
    mask, the slots of gated lights with their gates (``gate_slot``, ``gate_table``: the waveform's
-   :class:`~lfmbench.flicker.waveforms.GateTable`, whose exposure :func:`~lfmbench.datasets.batched.pwm_weights`
+   :class:`~lfmbench.flicker.waveforms.GateTable`, whose exposure :func:`~lfmbench.datasets.batch_compose.pwm_weights`
    applies), the
    crop's entries as runs of tiles, one gather per layer, ``meta`` as device tensors; no Python per sample and no
    host synchronisation.

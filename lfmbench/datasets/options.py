@@ -21,7 +21,8 @@ from pathlib import Path
 from typing import Any, Sequence
 
 from lfmbench.check import check_arg_choice, check_flag, check_int_arg
-from lfmbench.datasets.assembly import NOISE_STREAMS, STATIC_WINDOW_RULES
+from lfmbench.datasets.assembly import NOISE_STREAMS
+from lfmbench.datasets.plan_frames import STATIC_WINDOW_RULES
 from lfmbench.limits import brief, limit
 from lfmbench.sensor.plan import SHUTTERS
 
@@ -120,7 +121,7 @@ class SimulationOptions:
         shutter: one of :data:`lfmbench.sensor.plan.SHUTTERS`. line_time_s: ``None`` (from the corpus) or a
             finite time > 0, s. noise, optics, pieces: flags. noise_streams: one of
             :data:`lfmbench.datasets.assembly.NOISE_STREAMS`. static_windows: one of
-            :data:`lfmbench.datasets.assembly.STATIC_WINDOW_RULES`.
+            :data:`lfmbench.datasets.plan_frames.STATIC_WINDOW_RULES`.
     """
 
     shutter: str

@@ -6,7 +6,7 @@
 and :meth:`~lfmbench.datasets.LFMCaptureDataset.sample_meta`, and the rules of :mod:`lfmbench.datasets.assembly`
 (the lights a crop shows); it sits below the dataset module, which calls it for ``pieces=True``. A light with a
 gated waveform (:func:`lfmbench.datasets.pwm.gated_lights`) keeps its carrier's draw in ``slot_pwm`` and its gate
-in ``gate_table`` (:func:`gate_rows`), which the batched weights apply (:func:`lfmbench.datasets.batched.pwm_weights`).
+in ``gate_table`` (:func:`gate_rows`), which the batched weights apply (:func:`lfmbench.datasets.batch_compose.pwm_weights`).
 """
 from __future__ import annotations
 

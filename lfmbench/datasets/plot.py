@@ -31,9 +31,9 @@ def sample_images(sample: Mapping[str, Any], preset: Any, outputs: Mapping[str, 
                   ) -> list[tuple[str, torch.Tensor]]:
     """The rows of the picture, in ``gt`` units: ``(title, (F, 1, h, w))`` for each capture of the preset's plan
     found in the sample (``<capture>_e``), the ground truth, then each of ``outputs`` (title -> estimate)."""
-    from lfmbench.sensor import load_preset
+    from lfmbench.sensor import resolve
 
-    preset = load_preset(preset)
+    preset = resolve(preset)
     if "gt" not in sample:
         raise ValueError("sample has no 'gt' (ask the dataset for outputs including 'gt')")
     rows = []

@@ -130,7 +130,7 @@ def unit_projection_preset(preset):
     """The twin of a capture plan's preset whose projected layers every architecture reads: split-pixel shaped, both
     photodiodes of fill factor 1, so ``static["lpd"]`` is the short stored window's rate and ``static["spd"]`` the
     long one's, per unit fill factor (e-/s); a plan's exposure multiplies by its photodiode's fill factor
-    (:func:`lfmbench.datasets.assembly.compose_plan_frame`). A split-pixel preset is returned unchanged."""
+    (:func:`lfmbench.datasets.plan_frames.compose_plan_frame`). A split-pixel preset is returned unchanged."""
     import dataclasses  # noqa: PLC0415
     from types import MappingProxyType  # noqa: PLC0415
 

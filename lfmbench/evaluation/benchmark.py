@@ -4,6 +4,7 @@ from __future__ import annotations
 import re
 from collections.abc import Iterable, Mapping
 from pathlib import Path
+from typing import Any
 
 from lfmbench.fileio import atomic_write_text
 
@@ -127,14 +128,14 @@ def benchmark(corpus: str | Path, methods: Iterable[str] | None = None, runs_dir
               split: str = "test", seed: int = 0, crop: int | None = None, max_scenes: int | None = None,
               perceptual: bool = True, repeats: int = 5, device: str = "cpu", sort_by: str | None = None,
               progress: bool = True, samples_per_scene: int = 1, cache_dir: str | Path | None = None,
-              frames: int = 3, sensor: str = "ovt", share_samples: bool = True, isp: str | None = "default",
+              frames: int = 3, sensor: Any = "ovt", share_samples: bool = True, isp: str | None = "default",
               simulate: str = "host") -> list[dict]:
     """Evaluate several methods on one corpus split and build the leaderboard.
 
     Writes ``runs_dir/<method>.json`` per method, ``runs_dir/leaderboard.md``, ``leaderboard.json`` and
     ``leaderboard.png``, prints the table and returns the ranked rows (default ranking: the LED score).
-    ``methods`` defaults to every registered baseline of the sensor's architecture (``sensor``: a preset name or
-    YAML, :func:`lfmbench.baselines.methods_for`). ``cache_dir``: the dataset's projection cache (default
+    ``methods`` defaults to every registered baseline of the sensor's architecture (``sensor``: a preset name,
+    YAML or an already-resolved :class:`lfmbench.sensor.SensorPreset`, :func:`lfmbench.baselines.methods_for`). ``cache_dir``: the dataset's projection cache (default
     ``<corpus>/.cache``; any writable directory for a read-only corpus). ``frames``: consecutive frames per
     sample, as ``lfmbench evaluate --frames`` (24 or more for the IEEE P2020 flicker metrics; <= the corpus's).
     ``share_samples`` (default): every sample is simulated once and scored for all methods
@@ -205,7 +206,7 @@ def benchmark_sensors(corpus: str | Path, sensors: Mapping[str, Iterable[str] | 
 
     from lfmbench.baselines import LEARNED, methods_for
     from lfmbench.evaluation.leaderboard import check_comparable, leaderboard_rows, load_runs, print_leaderboard
-    from lfmbench.sensor import load_preset
+    from lfmbench.sensor import resolve
 
     runs_dir = Path(runs_dir)
     checkpoints = checkpoints or {}
@@ -227,9 +228,10 @@ def benchmark_sensors(corpus: str | Path, sensors: Mapping[str, Iterable[str] | 
         before = {k: os.environ.get(k) for k in env}
         os.environ.update(env)
         try:
-            names = list(methods) if methods is not None else methods_for(load_preset(sensor).architecture)
+            preset = resolve(sensor)       # once per sensor: the object travels into the dataset and metrics
+            names = list(methods) if methods is not None else methods_for(preset.architecture)
             sub = runs_dir / safe_name(sensor)
-            benchmark(corpus, names, sub, sensor=sensor, sort_by=sort_by, progress=progress, **kw)
+            benchmark(corpus, names, sub, sensor=preset, sort_by=sort_by, progress=progress, **kw)
         finally:
             for k, v in before.items():
                 if v is None:

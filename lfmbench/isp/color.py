@@ -169,9 +169,9 @@ def fit_ccm(preset, illuminant: str = "D65", chart: str = "ColorChecker N Ohta")
     Returns:
         :class:`CCMFit`.
     """
-    from lfmbench.sensor.preset import load_preset  # noqa: PLC0415
+    from lfmbench.sensor.preset import resolve  # noqa: PLC0415
 
-    preset = load_preset(preset)
+    preset = resolve(preset)
     return _fit_ccm_cached(preset, illuminant, chart)
 
 

@@ -333,10 +333,10 @@ class ISP(nn.Module):
 
     def __init__(self, pipeline: "ISPPipeline | str | Path", preset) -> None:
         super().__init__()
-        from lfmbench.sensor.preset import load_preset  # noqa: PLC0415
+        from lfmbench.sensor.preset import resolve  # noqa: PLC0415
 
         self.pipeline = pipeline if isinstance(pipeline, ISPPipeline) else load_pipeline(pipeline)
-        self.preset = load_preset(preset)
+        self.preset = resolve(preset)
         self.stages = [copy.copy(st) for st in self.pipeline.stages]  # bound copies: one pipeline, many presets
         for st in self.stages:
             st.bind(self.preset)

@@ -44,9 +44,9 @@ def _isp_cached(pipeline: str, preset):
 
 def isp_for(pipeline: str | Path, preset) -> Any:
     """The :class:`lfmbench.isp.ISP` of a pipeline (name or path) bound to a preset (object or name), cached."""
-    from lfmbench.sensor.preset import load_preset  # noqa: PLC0415
+    from lfmbench.sensor.preset import resolve  # noqa: PLC0415
 
-    return _isp_cached(str(pipeline), load_preset(preset))
+    return _isp_cached(str(pipeline), resolve(preset))
 
 
 def sensor_of_batch(batch: dict) -> str:

@@ -7,7 +7,8 @@ input, no per-pixel Python loops) with a thin :class:`SplitPixelSensor` module. 
 
 - :class:`SensorPreset` (+ :class:`PhotodiodeSpec`, :class:`CaptureSpec`), loaded from YAML by
   :func:`load_preset` (``"ovt"``, ``"imx490"`` or a file path); invalid fields raise ``ValueError`` naming the
-  field and file.
+  field and file. :func:`resolve` is the one helper the rest of the package calls: a ``SensorPreset`` passes
+  unchanged, a name is loaded (the commands resolve ``--sensor`` once and pass the object on).
 - :class:`CFAPattern`: Bayer layouts by their top-left 2x2 cell (``GRBG`` default), with the kornia mapping.
 - :func:`spectral_qe`, :func:`electron_weights`, :func:`ideal_electrons`: mean photo-electrons,
   n = sum_lambda H(lambda) dlambda A FF QE_c(lambda) lambda / (h c)  [Janesick2007]_ (photon energy h c / lambda).
@@ -67,7 +68,7 @@ from lfmbench.sensor.noise import (SplitPixelSensor, compand, decompand, fixed_p
                                    simulate_plan_electrons, simulate_split_pixel, simulate_split_pixel_electrons)
 from lfmbench.sensor.preset import (CAPTURES, PHOTODIODES, PRESET_DIR, CaptureSpec, CFAPattern, Companding,
                                     PhotodiodeSpec, SensorPreset, Spectral, available_presets, load_preset,
-                                    preset_from_dict)
+                                    preset_from_dict, resolve)
 from lfmbench.sensor.response import electron_weights, ideal_electrons, mosaic, spectral_qe
 from lfmbench.sensor.spectral_data import DATA_DIR, band_widths_nm, read_spectral_csv, silicon_qe
 
@@ -86,6 +87,7 @@ __all__ = [
     "decompand",
     "available_presets",
     "load_preset",
+    "resolve",
     "preset_from_dict",
     "read_spectral_csv",
     "band_widths_nm",

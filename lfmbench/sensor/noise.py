@@ -19,7 +19,7 @@ from typing import Mapping, Sequence
 import torch
 from torch import nn
 
-from lfmbench.check import value_checks
+from lfmbench.check import check_same_shape, value_checks
 from lfmbench.sensor import counter_noise as _cn
 from lfmbench.sensor import poisson as _poisson
 from lfmbench.sensor.fused import MEAN_CAP_FULL_WELLS, PatternCrops, chain_fused, chain_triton, per_generator
@@ -184,14 +184,12 @@ def decompand(dn: torch.Tensor, companding) -> torch.Tensor:
 
 
 def _check_pair(lpd: torch.Tensor, spd: torch.Tensor, lpd_name: str, spd_name: str, check: bool) -> None:
-    """The LPD and SPD inputs of a capture set: radiometric (if ``check``), same shape, same dtype."""
+    """The LPD and SPD inputs of a capture set: radiometric (if ``check``), one shape, one dtype
+    (:func:`lfmbench.check.check_same_shape`)."""
     if check:
         check_radiometric(lpd, lpd_name)
         check_radiometric(spd, spd_name)
-    if lpd.shape != spd.shape:
-        raise ValueError(f"{spd_name} shape {tuple(spd.shape)} differs from {lpd_name} shape {tuple(lpd.shape)}")
-    if spd.dtype != lpd.dtype:
-        raise ValueError(f"{spd_name} and {lpd_name} must have the same dtype")
+    check_same_shape(lpd, spd, lpd_name, spd_name, dtype=True)
 
 
 def simulate_split_pixel_electrons(lpd_electrons: torch.Tensor, spd_electrons: torch.Tensor,

@@ -35,7 +35,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from lfmbench.check import check_integer, check_keys, check_number, value_checks
+from lfmbench.check import check_integer, check_keys, check_number, check_tensor, value_checks
 from lfmbench.constants import AIRY_FIRST_ZERO_FACTOR, M_PER_NM
 
 __all__ = [
@@ -130,19 +130,17 @@ class OpticsConfig:
 # input checks
 # ----------------------------------------------------------------------------------------------------------
 def check_radiometric(x: torch.Tensor, name: str, min_dim: int = 3) -> None:
-    """Raise ``ValueError`` naming ``name`` unless ``x`` is a floating tensor, finite and >= 0.
+    """Raise naming ``name`` unless ``x`` is a floating tensor of at least ``min_dim`` dims, finite and >= 0.
+
+    The type, dims and dtype are checked by :func:`lfmbench.check.check_tensor` (``TypeError`` for a non-tensor,
+    ``ValueError`` otherwise); the values here (``ValueError`` counting the NaN and inf, or giving the minimum).
 
     Args:
         x: tensor of shape (*, C, H, W) (at least ``min_dim`` dimensions) of a radiometric quantity.
         name: argument name quoted in the error message.
         min_dim: minimum number of dimensions.
     """
-    if not isinstance(x, torch.Tensor):
-        raise ValueError(f"{name} must be a torch.Tensor, got {type(x).__name__}")
-    if not x.is_floating_point():
-        raise ValueError(f"{name} must be a floating-point tensor, got dtype {x.dtype}")
-    if x.dim() < min_dim:
-        raise ValueError(f"{name} must have at least {min_dim} dimensions (*, C, H, W), got shape {tuple(x.shape)}")
+    check_tensor(x, name, "* C H W" if min_dim == 3 else None, min_dim=min_dim, floating=True)
     if x.numel() == 0 or not value_checks():
         return
     lo, hi = torch.aminmax(x.detach())          # one pass; NaN propagates to both

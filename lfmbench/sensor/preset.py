@@ -33,7 +33,7 @@ from lfmbench.vocabulary import CAPTURES, PHOTODIODES
 
 __all__ = ["CAPTURES", "PHOTODIODES", "PRESET_DIR", "CFAPattern", "PhotodiodeSpec", "CaptureSpec", "SensorPreset",
            "Spectral", "Companding", "preset_registry",
-           "available_presets", "load_preset", "preset_from_dict"]
+           "available_presets", "load_preset", "resolve", "preset_from_dict"]
 
 #: Shipped sensor presets (YAML).
 PRESET_DIR: Path = Path(__file__).resolve().parent.parent / "configs" / "sensors"
@@ -305,6 +305,15 @@ def load_preset(preset: "str | Path | SensorPreset | Mapping[str, Any]") -> Sens
     if not resolved.is_file():
         raise ValueError(f"preset: file {resolved} does not exist")
     return _load_preset_file(str(resolved), resolved.stat().st_mtime_ns)
+
+
+def resolve(preset: "SensorPreset | str | Path | Mapping[str, Any]") -> SensorPreset:
+    """The one helper below the commands that turns a preset name, path or mapping into a :class:`SensorPreset`
+    (:func:`load_preset`); a ``SensorPreset`` is returned unchanged, no file looked at. The commands resolve
+    ``--sensor`` once and pass the object on. Raises ``ValueError`` as :func:`load_preset`."""
+    if isinstance(preset, SensorPreset):
+        return preset
+    return load_preset(preset)
 
 
 @functools.lru_cache(maxsize=32)

@@ -216,7 +216,7 @@ def test_frame_is_encoded_while_the_next_one_renders(tmp_path, monkeypatch):
     thread); a serial loop would only render frame 1 after frame 0's files are written (here: a timeout)."""
     import threading
 
-    from lfmbench.corpus import writer as W
+    from lfmbench.corpus import scene_files as W
     from tests.data.render import data as R
 
     started_1 = threading.Event()

@@ -376,7 +376,7 @@ def test_threaded_writer_hands_over_one_frame_at_a_time(tmp_path, monkeypatch):
     """put() returns only once the worker has taken the frame, i.e. finished encoding the one before."""
     import threading
 
-    from lfmbench.corpus import writer as W
+    from lfmbench.corpus import scene_files as W
 
     meta = fake_meta(frames=3)
     frames = fake_frames(meta)

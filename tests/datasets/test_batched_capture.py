@@ -13,8 +13,8 @@ from torch.utils.data import DataLoader
 
 from lfmbench import corpus as C
 from lfmbench.datasets import LFMCaptureDataset
-from lfmbench.datasets.batched import (BatchedCaptureSimulator, collate_pieces, compose_batch, pieces_to,
-                                       prefetch, pwm_weights, simulate_batch)
+from lfmbench.datasets.batch_compose import compose_batch, pwm_weights
+from lfmbench.datasets.batched import BatchedCaptureSimulator, collate_pieces, pieces_to, prefetch, simulate_batch
 from lfmbench.datasets.assembly import bin_edges, row_window_starts, visible_lights, window_bin_exposure
 from lfmbench.datasets.projection import build_layers
 from lfmbench.flicker import pwm_exposure
@@ -396,7 +396,7 @@ def test_cuda_triton_composition_matches_the_torch_form(corpus, shutter):
     the bins and scattered in another order, so equal within float32 rounding of those sums."""
     import warnings
 
-    import lfmbench.datasets.batched as bt
+    import lfmbench.datasets.batch_compose as bt
 
     if bt._COMPOSE_KERNELS.module() is None:
         pytest.skip("Triton is not importable")

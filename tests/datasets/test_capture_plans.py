@@ -7,7 +7,7 @@ import pytest
 import torch
 
 from lfmbench.datasets import LFMCaptureDataset
-from lfmbench.datasets.assembly import PlanExposure, compose_plan_frame, static_window_source
+from lfmbench.datasets.plan_frames import PlanExposure, compose_plan_frame, static_window_source
 from lfmbench.datasets.projection import SceneLayers
 from lfmbench.sensor import load_preset
 from tests.data.corpus.data import make_corpus

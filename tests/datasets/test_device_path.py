@@ -148,7 +148,7 @@ def test_the_batched_program_composes_every_light_kind_of_scene_version_2(v2_cor
     on the device program (device="cpu") against the per-sample path: draws identical, captures within the
     float32 summation bound (the weights are the same float64 function, GateTable.exposure, on the batch's
     tensors). The scenes' gates switch inside the frames drawn, so some gated slots are dark and others lit."""
-    from lfmbench.datasets.batched import pwm_weights
+    from lfmbench.datasets.batch_compose import pwm_weights
     from lfmbench.datasets.pwm import has_light_timing
 
     kw = dict(split="all", frames=3, crop=(12, 16), samples_per_scene=2, outputs=OUTS, seed=7)
@@ -426,7 +426,8 @@ def test_cuda_graphed_training_step_trains_as_the_eager_step(tmp_path, corpus):
     kernels (same data, same initial weights, same optimiser arithmetic)."""
     import warnings
 
-    from lfmbench.train import GraphedStep, train
+    from lfmbench.train import train
+    from lfmbench.train_step import GraphedStep
 
     kw = dict(epochs=2, crop=16, batch_size=4, samples_per_scene=5, split="all", progress=False, log=None,
               device="cuda", data="device")

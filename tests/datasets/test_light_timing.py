@@ -150,8 +150,8 @@ def test_corpus_with_a_strobe_composes_alike_on_the_per_sample_and_batched_paths
 @pytest.mark.parametrize("rolling", [False, True])
 def test_capture_plan_exposures_apply_the_gate(rolling):
     """A capture plan's chopped exposure (three sub-windows) of a strobe: the waveform's exposure summed over the
-    sub-windows of each row (the plan path, assembly.compose_plan_frame)."""
-    from lfmbench.datasets.assembly import PlanExposure, compose_plan_frame
+    sub-windows of each row (the plan path, plan_frames.compose_plan_frame)."""
+    from lfmbench.datasets.plan_frames import PlanExposure, compose_plan_frame
 
     meta = _meta([{"waveform": STROBE}])
     K, H = 8, 3

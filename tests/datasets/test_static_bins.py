@@ -13,7 +13,7 @@ import pytest
 
 from lfmbench import corpus as C
 from lfmbench.datasets import LFMCaptureDataset
-from lfmbench.datasets.assembly import compose_plan_frame, plan_exposures
+from lfmbench.datasets.plan_frames import compose_plan_frame, plan_exposures
 from lfmbench.datasets.projection import build_layers, unit_projection_preset
 from lfmbench.sensor import load_preset
 from lfmbench.sensor.plan import resolve_windows

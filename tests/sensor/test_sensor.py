@@ -27,6 +27,7 @@ from lfmbench.sensor import (
     shot_noise,
     silicon_qe,
     simulate_split_pixel,
+    simulate_split_pixel_electrons,
     spectral_qe,
 )
 
@@ -483,3 +484,18 @@ def test_preset_pickles_for_dataloader_workers():
     assert hash(q) == hash(p) and len({p, q, load_preset("ovt")}) == 2
     m = pickle.loads(pickle.dumps(SplitPixelSensor("ovt", WL)))
     assert m.preset.name == "ovt"
+
+
+def test_capture_inputs_are_checked_by_the_one_tensor_check():
+    """The LPD/SPD pair and radiometric inputs go through lfmbench.check.check_tensor / check_same_shape: a
+    non-tensor is a TypeError naming the argument, a dtype or shape mismatch a ValueError naming both."""
+    p = load_preset("ovt")
+    x = torch.ones(1, 1, 4, 4)
+    with pytest.raises(ValueError, match=r"^lpd_electrons and spd_electrons must have the same dtype"):
+        simulate_split_pixel_electrons(x, x.double(), p, T_S, T_L, noise=False)
+    with pytest.raises(ValueError, match=r"^lpd_electrons and spd_electrons must have the same shape"):
+        simulate_split_pixel_electrons(x, x[..., :2], p, T_S, T_L, noise=False)
+    with pytest.raises(TypeError, match=r"^spd_electrons must be a torch.Tensor, got list$"):
+        simulate_split_pixel_electrons(x, [1.0], p, T_S, T_L, noise=False)
+    with pytest.raises(ValueError, match=r"^lpd_electrons must have at least 3 dims \(\*, C, H, W\)"):
+        simulate_split_pixel_electrons(x[0, 0], x[0, 0], p, T_S, T_L, noise=False)

@@ -26,6 +26,7 @@ def main() -> int:
 
     from lfmbench.counter_rng import derive_key
     from lfmbench.datasets import device as D
+    from lfmbench.datasets import batch_compose as BC
     from lfmbench.datasets import batched as BT
     from lfmbench.datasets import row_gather as RG
     from lfmbench.sensor import counter_noise as CN
@@ -118,9 +119,9 @@ def main() -> int:
                 assert torch.equal(a[k], b[k]), k
         print("OK device crops and entries")
         tri = BT.simulate_batch(a, ds.preset, noise_streams="counter")
-        BT._COMPOSE_KERNELS.enabled = False
+        BC._COMPOSE_KERNELS.enabled = False
         ref = BT.simulate_batch(b, ds.preset, noise_streams="counter")
-        BT._COMPOSE_KERNELS.enabled = True
+        BC._COMPOSE_KERNELS.enabled = True
         xs, ys = dict(tensor_leaves(tri)), dict(tensor_leaves(ref))
         assert xs.keys() == ys.keys()
         for k in xs:  # float32 sums in another order: within rounding; a count may move where a mean moved
