@@ -363,9 +363,22 @@ def test_a_drjit_libllvm_path_that_does_not_work_is_named_and_the_working_one_us
         path.write_bytes(b"\x7fELF" + b"\0" * 60)  # a file, not a library Dr.Jit can use
     code = ("import warnings\nwarnings.formatwarning = lambda m, *a, **k: f'warning: {m}\\n'\n"
             "from render_tools import backend\nprint(backend.select_variant())\n")
-    env = dict(os.environ, PYTHONPATH=str(REPO), DRJIT_LIBLLVM_PATH=str(path), LFMBENCH_VARIANT="cpu")
+    # the probe verdicts go to a private cache (seeded from the user's, so that the working library is not probed
+    # again): a verdict for this temporary path must not be left in the user's ~/.cache
+    from render_tools.backend import _cache_path
+
+    home_cache = Path(_cache_path())
+    before = home_cache.read_bytes() if home_cache.is_file() else None
+    cache = tmp_path / "cache"
+    (cache / "lfmbench").mkdir(parents=True)
+    if before is not None:
+        (cache / "lfmbench" / home_cache.name).write_bytes(before)
+    env = dict(os.environ, PYTHONPATH=str(REPO), DRJIT_LIBLLVM_PATH=str(path), LFMBENCH_VARIANT="cpu",
+               XDG_CACHE_HOME=str(cache))
     r = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr[-2000:]
+    assert (home_cache.read_bytes() if home_cache.is_file() else None) == before, "the user's probe cache changed"
+    assert str(path) in (cache / "lfmbench" / home_cache.name).read_text()  # the verdict went to the private one
     assert r.stdout.split()[-1] == "llvm_ad_spectral", r.stdout + r.stderr[-2000:]
     warn = [ln for ln in r.stderr.splitlines() if ln.startswith("warning:")]
     assert len(warn) == 1 and f"DRJIT_LIBLLVM_PATH={path} does not work" in warn[0] and "using /" in warn[0], r.stderr
