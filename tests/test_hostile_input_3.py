@@ -229,6 +229,61 @@ def test_a_second_writer_of_one_output_is_refused_and_a_stale_lock_taken_over(tm
     assert f"{n:,} parameters" in r.output and f"weights sha256 {ck['content_sha256'][:12]}" in r.output
 
 
+def _cache_writer(corpus, cache, barrier, q):
+    """A process that builds sample 0 through the projection cache at the same moment as its twin; an entry it
+    reads half-written would be a CacheWarning, made an error here."""
+    import warnings
+
+    import torch
+
+    from lfmbench.datasets import LFMCaptureDataset
+    from lfmbench.datasets.projection import CacheWarning
+
+    torch.set_num_threads(1)
+    warnings.simplefilter("error", CacheWarning)
+    try:
+        ds = LFMCaptureDataset(corpus, split="all", frames=2, cache_dir=cache, optics=False)
+        barrier.wait(60)
+        q.put(("ok", {k: v.sum().item() for k, v in ds[0].items() if isinstance(v, torch.Tensor)}))
+    except BaseException as exc:  # noqa: BLE001 - reported to the parent
+        q.put(("error", repr(exc)))
+
+
+def test_two_processes_writing_one_cache_entry_leave_a_whole_one(tmp_path):
+    """Two processes build the same projection-cache entry at once (a shared --cache-dir): each writes a temporary
+    file and renames it (``os.replace``), so the entry is always one writer's whole file: both get the uncached
+    sample's values, a third process reads the entry without a warning, and no temporary file is left."""
+    import multiprocessing as mp
+    import warnings
+
+    from lfmbench.datasets import LFMCaptureDataset
+    from lfmbench.datasets.projection import CacheWarning
+    from tests.data.corpus.data import make_corpus
+
+    root = make_corpus(tmp_path / "c", n_scenes=1, frames=2)
+    cache = tmp_path / "cache"
+    # the uncached values first (this also loads the preset once, for the forked processes)
+    want = {k: v.sum().item() for k, v in
+            LFMCaptureDataset(root, split="all", frames=2, cache_dir=False, optics=False)[0].items() if hasattr(v, "sum")}
+    ctx = mp.get_context("fork")
+    barrier, q = ctx.Barrier(2), ctx.Queue()
+    procs = [ctx.Process(target=_cache_writer, args=(root, cache, barrier, q)) for _ in range(2)]
+    for p in procs:
+        p.start()
+    got = [q.get(timeout=120) for _ in procs]
+    for p in procs:
+        p.join(60)
+    assert [g[0] for g in got] == ["ok", "ok"], got
+    entries = [p for p in cache.rglob("*") if p.is_file()]
+    assert len(entries) == 1 and entries[0].suffix == ".pt", entries  # one entry, no temporary file left
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", CacheWarning)
+        again = LFMCaptureDataset(root, split="all", frames=2, cache_dir=cache, optics=False)[0]
+    for k, v in want.items():
+        assert got[0][1][k] == pytest.approx(v, rel=1e-6) and got[1][1][k] == pytest.approx(v, rel=1e-6), k
+        assert again[k].sum().item() == pytest.approx(v, rel=1e-6), k
+
+
 # ------------------------------------------------------------------------ 4. read-only corpora
 def _unprivileged():
     """How to run a command that file permissions bind: as is for a user other than root; as root, under
