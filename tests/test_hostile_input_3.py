@@ -563,3 +563,25 @@ def test_preset_and_config_sizes_are_refused_before_allocation(tmp_path):
                                  str(tmp_path / "w.pt")])
     out = _one_line(r)
     assert "huge.yaml" in out and "model_parameters" in out
+
+
+def test_a_training_batch_above_the_memory_limit_is_refused_before_simulation(tmp_path, monkeypatch):
+    """min(train.batch_size, samples) x one sample's bytes is checked against batch_bytes before the first batch is
+    simulated (a large batch of large crops died in the allocator, naming nothing): one line naming the field and
+    the limit, nothing written."""
+    from lfmbench.limits import LimitError, check_batch_bytes
+    from tests.data.corpus.data import make_corpus
+
+    check_batch_bytes(4, 1 << 20, "c.yaml")  # 4 MiB: far below
+    with pytest.raises(LimitError, match=r"c\.yaml: field 'train.batch_size' = 1,000,000,000 samples of "
+                                         r"1,048,576 bytes \(crop 64\): a batch of [\d,]+ is above the limit batch_"):
+        check_batch_bytes(10**9, 1 << 20, "c.yaml", "crop 64")
+    root = make_corpus(tmp_path / "c", n_scenes=1, frames=2)
+    cfg = tmp_path / "big.yaml"
+    cfg.write_text("model:\n  width: 4\ntrain:\n  epochs: 1\n  batch_size: 64\n  samples_per_scene: 64\n"
+                   "  crop: 8\n  workers: 0\n  split: all\n  frames: 2\n")
+    # 64 samples of a few KB each: above a limit of 64 KB (the default, 16 GiB, takes a real corpus to pass)
+    r = CliRunner().invoke(app, ["--limit", "batch_bytes=65536", "train", "--method", "learned", "--corpus",
+                                 str(root), "--config", str(cfg), "--out", str(tmp_path / "w.pt")])
+    out = _one_line(r)
+    assert "train.batch_size" in out and "batch_bytes" in out and not (tmp_path / "w.pt").exists(), out
