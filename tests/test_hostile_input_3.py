@@ -7,8 +7,10 @@ Tiny generated files only; a case that could take the machine down runs in a sub
 from __future__ import annotations
 
 import json
+import math
 import os
 import random
+import re
 import socket
 import stat
 import subprocess
@@ -474,6 +476,94 @@ def test_pareto_front_of_20000_rows_is_fast():
     _pareto(rows, PARETO_AXES)
     assert _t.process_time() - t0 < 1.0  # the pairwise definition took minutes here
     assert 1 <= sum(r["pareto"] for r in rows) < 100
+
+
+def _random_records(rng: random.Random, n_scenes: int = 5) -> list[dict]:
+    """Sample records of several draws per scene with NaN, None, missing values, zero and missing weights."""
+    from lfmbench.metrics import REGISTRY
+
+    recs = []
+    for i in range(n_scenes):
+        for _ in range(rng.randint(1, 3)):
+            m = {}
+            for name, spec in REGISTRY.items():
+                u = rng.random()
+                if u < 0.1:
+                    continue
+                m[name] = None if u < 0.15 else "nan" if u < 0.2 else float("nan") if u < 0.25 else rng.uniform(0, 1)
+                if spec.weight and rng.random() < 0.9:
+                    m[spec.weight] = float(rng.choice([0, 1, 7, 30]))
+            recs.append({"scene_id": f"s{i}", "status": "ok" if rng.random() < 0.9 else "failed", "metrics": m,
+                         "conditions": {"time_of_day": "day", "pwm_duty": rng.random()}})
+    return recs
+
+
+def test_per_scene_and_row_values_equal_their_definitions():
+    """The one-pass values of a sweep's rows: each scene's value is the mean (or the pooled ratio) of its samples'
+    finite values, computed here from the definition; each row value equals metric_summary's."""
+    import statistics
+
+    from lfmbench.evaluation.results import metric_summary, per_scene, scene_means
+    from lfmbench.metrics import REGISTRY
+
+    rng = random.Random(7)
+    for _ in range(15):
+        recs = _random_records(rng)
+        scenes = per_scene(recs)
+        for sc in scenes:
+            mine = [r["metrics"] for r in recs if r["scene_id"] == sc["scene_id"] and r["status"] == "ok"]
+            for name, spec in REGISTRY.items():
+                vals = [(m.get(name), m.get(spec.weight) if spec.weight else 1.0) for m in mine]
+                vals = [(float(v), float(w) if w is not None else 0.0) for v, w in vals
+                        if isinstance(v, float) and v == v]
+                if not vals:
+                    assert name not in sc["metrics"]
+                elif spec.aggregate == "pooled":
+                    tot = sum(w for _, w in vals if w > 0)
+                    want = sum(v * w for v, w in vals if w > 0) / tot if tot else float("nan")
+                    assert sc["metrics"][name] == pytest.approx(want, nan_ok=True, rel=1e-12), name
+                else:
+                    assert sc["metrics"][name] == pytest.approx(statistics.fmean(v for v, _ in vals), rel=1e-12)
+        means = scene_means(scenes)
+        for name in REGISTRY:
+            if any(name in s["metrics"] for s in scenes):
+                want = metric_summary(scenes, name, ci=False)["value"]
+                assert means[name] == want or (math.isnan(means[name]) and math.isnan(want)), name
+            else:
+                assert name not in means
+
+
+def test_the_console_table_of_a_sweep_shows_its_best_rows_and_counts_the_rest(capsys):
+    """Drawing 10,000 rows with rich took about half of a sweep's leaderboard: the console shows PRINT_ROWS rows and
+    one line counting the others (the Markdown and JSON files hold every row)."""
+    from lfmbench.evaluation import leaderboard as L
+    from lfmbench.metrics import REGISTRY
+
+    rows = [{"method": f"run{i:03d}", "rank": i + 1, "status": "complete", "ci": {}, "vs_best": None,
+             "ms_per_megapixel": 1.0, "ms_iqr": None, "params": 10, "failed": 0, "scenes": 8, "n_scenes": 8,
+             **{k: 0.5 for k in REGISTRY}} for i in range(L.PRINT_ROWS + 7)]
+    L.print_leaderboard(rows)
+    out = capsys.readouterr().out
+    assert f"run{L.PRINT_ROWS - 1:03d}" in out and f"run{L.PRINT_ROWS:03d}" not in out
+    assert "7 more rows (ranks > 50): every row is in the Markdown and JSON files" in out
+    L.print_leaderboard(rows[:3])
+    assert "more rows" not in capsys.readouterr().out
+
+
+def test_json_numbers_that_overflow_are_refused_on_the_fast_path_too():
+    """Floats are converted by the C parser and the tree checked after: an overflowing number (inf) is refused
+    naming it, as the per-number hook did; the largest finite float and long digit strings in text are read."""
+    from lfmbench.fileio import InputFileError, loads_json
+
+    for bad, named in (("[1e999]", "1e999"), ('{"a": {"b": [0.5, -1E+400]}}', "-1E+400"),
+                       ("[" + "9" * 400 + ".0]", "9999")):
+        with pytest.raises(InputFileError, match=f"f.json: cannot read JSON: number {re.escape(named)}"):
+            loads_json(bad, "f.json")
+    assert loads_json('{"a": [1.7976931348623157e308, "1e999", "' + "0" * 64 + '"]}', "f.json")["a"][0] == 1.7976931348623157e308
+    seen = []
+    with pytest.raises(InputFileError, match="number 1e999"):  # a reader's counting hook sees the file once
+        loads_json('[{"x": 1}, {"y": 1e999}]', "f.json", object_hook=lambda d: seen.append(d) or d)
+    assert seen == [{"x": 1}]
 
 
 # ------------------------------------------------------------------------ 2. memory a file can claim
