@@ -114,7 +114,10 @@ def per_scene(records: Iterable[dict], metrics: Iterable[str] | None = None) -> 
     out = []
     for key, recs in groups.items():
         ms = [r["metrics"] for r in recs]
-        held = ms[0].keys() if len(ms) == 1 else set().union(*ms)
+        if len(ms) == 1:  # one sample: a mean is its value (fsum([v]) / 1 == v), the rest as below
+            out.append(_one_sample_scene(recs[0], specs))
+            continue
+        held = set().union(*ms)
         vals, weights = {}, {}
         for n, spec in specs:
             if n not in held:  # no sample holds it: every value None, as combine would skip it
@@ -137,6 +140,31 @@ def per_scene(records: Iterable[dict], metrics: Iterable[str] | None = None) -> 
         out.append({"scene_id": recs[0].get("scene_id"), "samples": len(recs), "metrics": vals, "weights": weights,
                     "conditions": cond})
     return out
+
+
+def _one_sample_scene(rec: dict, specs: list) -> dict:
+    """:func:`per_scene`'s entry of a scene with one ``ok`` sample record (the same values, fewer steps)."""
+    m = rec["metrics"]
+    vals, weights = {}, {}
+    for n, spec in specs:
+        if n not in m:
+            continue
+        v = m[n]
+        v = v if type(v) is float and v == v else _value(v)
+        if v is None:
+            continue
+        if spec.weight:
+            w = num(m.get(spec.weight))
+            w = w if math.isfinite(w) else 0.0
+            vals[n] = combine([v], [w], spec)
+            weights[spec.weight] = w
+        elif spec.aggregate == "pooled":
+            vals[n] = combine([v], [1.0], spec)
+        else:
+            vals[n] = v
+    cond = {k: (v if isinstance(v, str) else statistics.fmean([num(v)]))
+            for k, v in (rec.get("conditions") or {}).items()}
+    return {"scene_id": rec.get("scene_id"), "samples": 1, "metrics": vals, "weights": weights, "conditions": cond}
 
 
 def scene_values(scenes: list[dict], name: str) -> tuple[list[float], list[float] | None]:
