@@ -123,7 +123,9 @@ def time_imports(root: Path = ROOT) -> tuple[float, float]:
 
     c0 = _child_cpu()
     t0 = time.perf_counter()
-    subprocess.run([sys.executable, "-c", "import lfmbench.cli"], check=True, env=dict(os.environ, PYTHONPATH=str(root)))
+    # run in ``root``: ``python -c`` puts the current folder first on sys.path
+    subprocess.run([sys.executable, "-c", "import lfmbench.cli"], check=True, cwd=str(root),
+                   env=dict(os.environ, PYTHONPATH=str(root)))
     return time.perf_counter() - t0, _child_cpu() - c0
 
 
@@ -146,7 +148,7 @@ def time_cli(paths: list[Path], out: Path, root: Path = ROOT) -> tuple[float, fl
                               str(out / "c.png"), "--json", str(out / "c.json")]))
     c0 = _child_cpu()
     t0 = time.perf_counter()
-    r = subprocess.run(cmd, capture_output=True, text=True, env=dict(os.environ, PYTHONPATH=str(root)))
+    r = subprocess.run(cmd, capture_output=True, text=True, cwd=str(root), env=dict(os.environ, PYTHONPATH=str(root)))
     dt = time.perf_counter() - t0
     if r.returncode != 0:
         raise SystemExit(f"leaderboard failed: {r.stderr[-2000:]}")
