@@ -7,11 +7,13 @@ table, Markdown, JSON and plot written), and its phases (reading and checking th
 their statistics, the Pareto front, the outputs). The pairwise Pareto front (the definition, O(n^2)) is timed on the
 same rows for comparison, up to 2,000 files.
 
-Usage: ``python benchmarks/bench_leaderboard.py [--files 1000 2000 10000] [--scenes 8] [--work DIR] [--no-doc]``.
+Usage: ``python benchmarks/bench_leaderboard.py [--files 1000 10000] [--scenes 8] [--work DIR] [--no-doc]
+[--before DIR --before-label COMMIT]``.
 """
 from __future__ import annotations
 
 import argparse
+import contextlib
 import cProfile
 import io
 import json
@@ -101,6 +103,10 @@ def time_phases(paths: list[Path], out: Path, profile: bool = False) -> dict:
         L._pareto_pairwise(rows, L.PARETO_AXES)
         t["Pareto front (pairwise, before)"] = time.perf_counter() - t0
     t0 = time.perf_counter()
+    with contextlib.redirect_stdout(io.StringIO()):
+        L.print_leaderboard(rows, "led_score")
+    t["console table"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
     write_leaderboard(rows, runs, "led_score", out / "lb.md", out / "lb.png", out / "lb.json", None)
     t["outputs (Markdown, JSON, plot)"] = time.perf_counter() - t0
     cpu = time.process_time() - c0
@@ -111,8 +117,28 @@ def time_phases(paths: list[Path], out: Path, profile: bool = False) -> dict:
     return {"phases": t, "cpu": cpu, "profile": s.getvalue()}
 
 
-def time_cli(paths: list[Path], out: Path) -> float:
-    """Wall seconds of ``python -m lfmbench.cli leaderboard FILES ...`` (a fresh process, imports included)."""
+def time_imports(root: Path = ROOT) -> tuple[float, float]:
+    """(wall, CPU) seconds of a fresh process importing ``lfmbench.cli`` from ``root`` (the CLI's start-up)."""
+    import subprocess
+
+    c0 = _child_cpu()
+    t0 = time.perf_counter()
+    # run in ``root``: ``python -c`` puts the current folder first on sys.path
+    subprocess.run([sys.executable, "-c", "import lfmbench.cli"], check=True, cwd=str(root),
+                   env=dict(os.environ, PYTHONPATH=str(root)))
+    return time.perf_counter() - t0, _child_cpu() - c0
+
+
+def _child_cpu() -> float:
+    import resource
+
+    ru = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return ru.ru_utime + ru.ru_stime
+
+
+def time_cli(paths: list[Path], out: Path, root: Path = ROOT) -> tuple[float, float]:
+    """(wall, CPU) seconds of ``lfmbench leaderboard FILES ...`` run from the tree ``root`` (a fresh process,
+    imports included; CPU: user + system of that process)."""
     import subprocess
 
     lst = out / "files.txt"
@@ -120,36 +146,46 @@ def time_cli(paths: list[Path], out: Path) -> float:
            f"open({str(lst)!r}).read().split('\\n'); app()"]
     lst.write_text("\n".join(["leaderboard", *map(str, paths), "--markdown", str(out / "c.md"), "--plot",
                               str(out / "c.png"), "--json", str(out / "c.json")]))
+    c0 = _child_cpu()
     t0 = time.perf_counter()
-    r = subprocess.run(cmd, capture_output=True, text=True, env=dict(os.environ, PYTHONPATH=str(ROOT)))
+    r = subprocess.run(cmd, capture_output=True, text=True, cwd=str(root), env=dict(os.environ, PYTHONPATH=str(root)))
     dt = time.perf_counter() - t0
     if r.returncode != 0:
         raise SystemExit(f"leaderboard failed: {r.stderr[-2000:]}")
-    return dt
+    return dt, _child_cpu() - c0
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--files", type=int, nargs="+", default=[1000, 2000, 10000])
+    ap.add_argument("--files", type=int, nargs="+", default=[1000, 10000])
     ap.add_argument("--scenes", type=int, default=8)
     ap.add_argument("--work", type=Path, default=None)
     ap.add_argument("--no-doc", action="store_true")
     ap.add_argument("--profile", action="store_true", help="also profile the phases (slower; printed)")
+    ap.add_argument("--before", type=Path, default=None,
+                    help="a source tree of an earlier commit (`git archive COMMIT | tar -x -C DIR`): its CLI is "
+                         "timed on the same files in the same run, for a before/after comparison")
+    ap.add_argument("--before-label", default="before", help="what --before is (e.g. a commit), for the page")
     args = ap.parse_args()
     work = Path(tempfile.mkdtemp(prefix="lfm-lb-", dir=args.work))
     load = open("/proc/loadavg").read().split()[:3] if os.path.exists("/proc/loadavg") else ["?"] * 3
     res = []
+    imports = {"this tree": time_imports()}
+    if args.before:
+        imports[args.before_label] = time_imports(args.before.resolve())
     try:
         for n in args.files:
             d = work / f"n{n}"
             d.mkdir()
             paths = make_results(d, n, args.scenes)
             size = sum(p.stat().st_size for p in paths)
-            cli = time_cli(paths, d)
+            cli = {"this tree": time_cli(paths, d)}
+            if args.before:
+                cli[args.before_label] = time_cli(paths, d, args.before.resolve())
             ph = time_phases(paths, d, args.profile)
             res.append((n, size, cli, ph))
-            print(f"{n} files ({size / 1e6:.0f} MB): CLI {cli:.1f} s; phases CPU {ph['cpu']:.1f} s; " + "; ".join(
-                f"{k} {v:.2f} s" for k, v in ph["phases"].items()), flush=True)
+            print(f"{n} files ({size / 1e6:.0f} MB): CLI (wall, CPU) {cli}; phases CPU {ph['cpu']:.1f} s; " +
+                  "; ".join(f"{k} {v:.2f} s" for k, v in ph["phases"].items()), flush=True)
             print(ph["profile"][:6000], flush=True)
     finally:
         shutil.rmtree(work, ignore_errors=True)
@@ -157,25 +193,38 @@ def main() -> None:
     if args.no_doc:
         return
     phases = list(dict.fromkeys(k for r in res for k in r[3]["phases"]))  # every phase of any run, in order
+    trees = list(res[0][2])
     lines = ["# Leaderboard at sweep scale", "",
              f"Measured {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())} on {platform.processor() or platform.machine()}, "
              f"{os.cpu_count()} cores shared with other jobs (load average {' '.join(load)} before, "
-             f"{' '.join(load_after)} after): a loaded machine, so these are upper bounds. Rerun: "
-             "`python benchmarks/bench_leaderboard.py`.", "",
+             f"{' '.join(load_after)} after): a loaded machine, so wall times are upper bounds and the CPU seconds "
+             "(user + system of the process) say more. Rerun: `python benchmarks/bench_leaderboard.py` (with "
+             "`--before DIR` to time an earlier commit's tree on the same files in the same run).", "",
              f"Each file: a complete result of {args.scenes} scenes with every table metric (random values in each "
              "metric's range) and the conditions the breakdown bins; all of one corpus and protocol. "
              f"Target (issue 42): {TARGET_FILES:,} files in under {TARGET_S:g} s on 2 cores.", "",
-             "Wall seconds; the phases run again in one process after the CLI run, their total CPU seconds beside "
-             "them (on a machine shared by many jobs the CPU seconds say more than the wall time).", "",
-             "| files | MB | CLI, s (fresh process) | phases CPU, s | " + " | ".join(f"{p}, s" for p in phases) + " |",
-             "|---:|---:|---:|---:|" + "---:|" * len(phases)]
+             "`lfmbench leaderboard FILES` as a user runs it (a fresh process: imports, reading, ranking, console "
+             "table, Markdown, JSON and plot), wall and CPU seconds:", "",
+             "| files | MB | " + " | ".join(f"{t}: wall, s | {t}: CPU, s" for t in trees) + " |",
+             "|---:|---:|" + "---:|---:|" * len(trees)]
+    for n, size, cli, _ in res:
+        lines.append(f"| {n:,} | {size / 1e6:.0f} | " + " | ".join(f"{cli[t][0]:.1f} | {cli[t][1]:.1f}" for t in trees)
+                     + " |")
+    lines += ["", "Start-up (a fresh process importing `lfmbench.cli`, part of every CLI time above): " + "; ".join(
+        f"{t} {w:.1f} s wall, {c:.1f} s CPU" for t, (w, c) in imports.items()) + ".", "",
+        "The phases of this tree, run again in one process after the CLI runs (wall seconds; their total CPU "
+        "seconds beside them):", "",
+        "| files | phases CPU, s | " + " | ".join(f"{p}, s" for p in phases) + " |",
+        "|---:|---:|" + "---:|" * len(phases)]
     for n, size, cli, ph in res:
-        lines.append(f"| {n:,} | {size / 1e6:.0f} | {cli:.1f} | {ph['cpu']:.1f} | " + " | ".join(
+        lines.append(f"| {n:,} | {ph['cpu']:.1f} | " + " | ".join(
             f"{ph['phases'][p]:.2f}" if p in ph["phases"] else "-" for p in phases) + " |")
     if res[-1][3]["profile"]:
         lines += ["", "Profile of the largest run (cumulative seconds, top entries):", "", "```",
                   res[-1][3]["profile"].strip()[:5000], "```"]
     lines.append("")
+    if DOC.exists() and "\n## Reading" in DOC.read_text():  # the hand-written reading of the numbers is kept
+        lines.append("## Reading" + DOC.read_text().split("\n## Reading", 1)[1].rstrip() + "\n")
     from lfmbench.fileio import atomic_write_text
 
     atomic_write_text(DOC, "\n".join(lines))

@@ -54,6 +54,10 @@ LIMITS: dict[str, tuple[int, str]] = {
     "model_parameters": (100_000_000, "parameters of a network a config or checkpoint asks for, counted on "
                                       "torch's meta device before any weight is allocated (the largest shipped "
                                       "U-Net has 1.1 M)"),
+    "batch_bytes": (16 << 30, "bytes of the tensors of one training batch: train.batch_size times one sample's "
+                              "(its crop, or the whole frame without one, x frames x captures and targets x "
+                              "channels x 4 bytes), checked before the first batch is simulated (the shipped "
+                              "configs: under 40 MB)"),
     "mat_bytes": (64 << 20, "decoded bytes of the arrays of an imported ISET-LFM .mat file beyond the two (H, W) "
                             "maps its scene's EXR size justifies (MATLAB compresses arrays: a 1 MB file can hold "
                             "1 GB)"),
@@ -137,6 +141,16 @@ def set_limit(name: str, value: int | None) -> None:
         _overrides.pop(name, None)
         return
     _overrides.update(parse_overrides(f"{name}={value}", "set_limit"))
+
+
+def check_batch_bytes(batch_size: int, sample_bytes: int, source: str, detail: str = "") -> None:
+    """Refuse (:class:`LimitError` naming ``source`` and ``train.batch_size``) a batch of ``batch_size`` samples of
+    ``sample_bytes`` bytes each above the limit ``batch_bytes``, before any of it is allocated. ``detail``: what
+    one sample is (crop, frames), for the message."""
+    total = int(batch_size) * int(sample_bytes)
+    if total > limit("batch_bytes"):
+        raise LimitError(source, f"field 'train.batch_size' = {int(batch_size):,} samples of {int(sample_bytes):,} "
+                                 f"bytes{' (' + detail + ')' if detail else ''}: a batch of", total, "batch_bytes")
 
 
 def lights_cap_message(n: int, more: bool = False) -> str:

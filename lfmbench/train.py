@@ -99,6 +99,18 @@ class EpochIndexed(Dataset):
         return self.dataset[index]
 
 
+def _check_batch_memory(ds, t: Any, cfg: Any) -> None:
+    """:func:`lfmbench.limits.check_batch_bytes` of the config's batch: one sample's bytes from the dataset's sample
+    0 (bounded by one scene's files), times ``train.batch_size`` (or the dataset's length, when it holds fewer
+    samples: no batch is larger)."""
+    from lfmbench.limits import check_batch_bytes
+    from lfmbench.datasets.device import DeviceBatches
+
+    if len(ds):
+        check_batch_bytes(min(t.batch_size, len(ds)), DeviceBatches.batch_bytes(ds, 1), "train config (--config, --batch-size)",
+                          f"crop {t.crop}, frames {t.frames}")
+
+
 def make_loader(corpus: str | os.PathLike, spec: Trainable, cfg: Any, workers: int | None = None,
                 device: torch.device | str = "cpu", group=None, preset: Any = None
                 ) -> tuple[DataLoader, Callable[[int], None]]:
@@ -114,6 +126,7 @@ def make_loader(corpus: str | os.PathLike, spec: Trainable, cfg: Any, workers: i
     extra = {} if spec.outputs is None else {"outputs": spec.outputs}
     ds = make_dataset(corpus, t.split, seed=t.seed, crop=t.crop, samples_per_scene=t.samples_per_scene,
                       frames=t.frames, sensor=t.sensor if preset is None else preset, **extra)
+    _check_batch_memory(ds, t, cfg)
     nw = t.workers if workers is None else int(workers)
     if group is not None:
         from lfmbench import distributed as D

@@ -7,8 +7,10 @@ Tiny generated files only; a case that could take the machine down runs in a sub
 from __future__ import annotations
 
 import json
+import math
 import os
 import random
+import re
 import socket
 import stat
 import subprocess
@@ -229,6 +231,61 @@ def test_a_second_writer_of_one_output_is_refused_and_a_stale_lock_taken_over(tm
     assert f"{n:,} parameters" in r.output and f"weights sha256 {ck['content_sha256'][:12]}" in r.output
 
 
+def _cache_writer(corpus, cache, barrier, q):
+    """A process that builds sample 0 through the projection cache at the same moment as its twin; an entry it
+    reads half-written would be a CacheWarning, made an error here."""
+    import warnings
+
+    import torch
+
+    from lfmbench.datasets import LFMCaptureDataset
+    from lfmbench.datasets.projection import CacheWarning
+
+    torch.set_num_threads(1)
+    warnings.simplefilter("error", CacheWarning)
+    try:
+        ds = LFMCaptureDataset(corpus, split="all", frames=2, cache_dir=cache, optics=False)
+        barrier.wait(60)
+        q.put(("ok", {k: v.sum().item() for k, v in ds[0].items() if isinstance(v, torch.Tensor)}))
+    except BaseException as exc:  # noqa: BLE001 - reported to the parent
+        q.put(("error", repr(exc)))
+
+
+def test_two_processes_writing_one_cache_entry_leave_a_whole_one(tmp_path):
+    """Two processes build the same projection-cache entry at once (a shared --cache-dir): each writes a temporary
+    file and renames it (``os.replace``), so the entry is always one writer's whole file: both get the uncached
+    sample's values, a third process reads the entry without a warning, and no temporary file is left."""
+    import multiprocessing as mp
+    import warnings
+
+    from lfmbench.datasets import LFMCaptureDataset
+    from lfmbench.datasets.projection import CacheWarning
+    from tests.data.corpus.data import make_corpus
+
+    root = make_corpus(tmp_path / "c", n_scenes=1, frames=2)
+    cache = tmp_path / "cache"
+    # the uncached values first (this also loads the preset once, for the forked processes)
+    want = {k: v.sum().item() for k, v in
+            LFMCaptureDataset(root, split="all", frames=2, cache_dir=False, optics=False)[0].items() if hasattr(v, "sum")}
+    ctx = mp.get_context("fork")
+    barrier, q = ctx.Barrier(2), ctx.Queue()
+    procs = [ctx.Process(target=_cache_writer, args=(root, cache, barrier, q)) for _ in range(2)]
+    for p in procs:
+        p.start()
+    got = [q.get(timeout=120) for _ in procs]
+    for p in procs:
+        p.join(60)
+    assert [g[0] for g in got] == ["ok", "ok"], got
+    entries = [p for p in cache.rglob("*") if p.is_file()]
+    assert len(entries) == 1 and entries[0].suffix == ".pt", entries  # one entry, no temporary file left
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", CacheWarning)
+        again = LFMCaptureDataset(root, split="all", frames=2, cache_dir=cache, optics=False)[0]
+    for k, v in want.items():
+        assert got[0][1][k] == pytest.approx(v, rel=1e-6) and got[1][1][k] == pytest.approx(v, rel=1e-6), k
+        assert again[k].sum().item() == pytest.approx(v, rel=1e-6), k
+
+
 # ------------------------------------------------------------------------ 4. read-only corpora
 def _unprivileged():
     """How to run a command that file permissions bind: as is for a user other than root; as root, under
@@ -381,9 +438,23 @@ def test_a_drjit_libllvm_path_that_does_not_work_is_named_and_the_working_one_us
         path.write_bytes(b"\x7fELF" + b"\0" * 60)  # a file, not a library Dr.Jit can use
     code = ("import warnings\nwarnings.formatwarning = lambda m, *a, **k: f'warning: {m}\\n'\n"
             "from render_tools import backend\nprint(backend.select_variant())\n")
-    env = dict(os.environ, PYTHONPATH=str(REPO), DRJIT_LIBLLVM_PATH=str(path), LFMBENCH_VARIANT="cpu")
+    # the probe verdicts go to a private cache (seeded from the user's, so that the working library is not probed
+    # again): a verdict for this temporary path must not be left in the user's ~/.cache
+    from render_tools.backend import _cache_path
+
+    home_cache = Path(_cache_path())
+    before = home_cache.read_bytes() if home_cache.is_file() else None
+    cache = tmp_path / "cache"
+    (cache / "lfmbench").mkdir(parents=True)
+    if before is not None:
+        (cache / "lfmbench" / home_cache.name).write_bytes(before)
+    env = dict(os.environ, PYTHONPATH=str(REPO), DRJIT_LIBLLVM_PATH=str(path), LFMBENCH_VARIANT="cpu",
+               XDG_CACHE_HOME=str(cache))
     r = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr[-2000:]
+    assert (home_cache.read_bytes() if home_cache.is_file() else None) == before, "the user's probe cache changed"
+    if bad == "not_llvm":  # a file was probed: its verdict went to the private cache
+        assert str(path) in (cache / "lfmbench" / home_cache.name).read_text()
     assert r.stdout.split()[-1] == "llvm_ad_spectral", r.stdout + r.stderr[-2000:]
     warn = [ln for ln in r.stderr.splitlines() if ln.startswith("warning:")]
     assert len(warn) == 1 and f"DRJIT_LIBLLVM_PATH={path} does not work" in warn[0] and "using /" in warn[0], r.stderr
@@ -424,6 +495,94 @@ def test_pareto_front_of_20000_rows_is_fast():
     _pareto(rows, PARETO_AXES)
     assert _t.process_time() - t0 < 1.0  # the pairwise definition took minutes here
     assert 1 <= sum(r["pareto"] for r in rows) < 100
+
+
+def _random_records(rng: random.Random, n_scenes: int = 5) -> list[dict]:
+    """Sample records of several draws per scene with NaN, None, missing values, zero and missing weights."""
+    from lfmbench.metrics import REGISTRY
+
+    recs = []
+    for i in range(n_scenes):
+        for _ in range(rng.randint(1, 3)):
+            m = {}
+            for name, spec in REGISTRY.items():
+                u = rng.random()
+                if u < 0.1:
+                    continue
+                m[name] = None if u < 0.15 else "nan" if u < 0.2 else float("nan") if u < 0.25 else rng.uniform(0, 1)
+                if spec.weight and rng.random() < 0.9:
+                    m[spec.weight] = float(rng.choice([0, 1, 7, 30]))
+            recs.append({"scene_id": f"s{i}", "status": "ok" if rng.random() < 0.9 else "failed", "metrics": m,
+                         "conditions": {"time_of_day": "day", "pwm_duty": rng.random()}})
+    return recs
+
+
+def test_per_scene_and_row_values_equal_their_definitions():
+    """The one-pass values of a sweep's rows: each scene's value is the mean (or the pooled ratio) of its samples'
+    finite values, computed here from the definition; each row value equals metric_summary's."""
+    import statistics
+
+    from lfmbench.evaluation.results import metric_summary, per_scene, scene_means
+    from lfmbench.metrics import REGISTRY
+
+    rng = random.Random(7)
+    for _ in range(15):
+        recs = _random_records(rng)
+        scenes = per_scene(recs)
+        for sc in scenes:
+            mine = [r["metrics"] for r in recs if r["scene_id"] == sc["scene_id"] and r["status"] == "ok"]
+            for name, spec in REGISTRY.items():
+                vals = [(m.get(name), m.get(spec.weight) if spec.weight else 1.0) for m in mine]
+                vals = [(float(v), float(w) if w is not None else 0.0) for v, w in vals
+                        if isinstance(v, float) and v == v]
+                if not vals:
+                    assert name not in sc["metrics"]
+                elif spec.aggregate == "pooled":
+                    tot = sum(w for _, w in vals if w > 0)
+                    want = sum(v * w for v, w in vals if w > 0) / tot if tot else float("nan")
+                    assert sc["metrics"][name] == pytest.approx(want, nan_ok=True, rel=1e-12), name
+                else:
+                    assert sc["metrics"][name] == pytest.approx(statistics.fmean(v for v, _ in vals), rel=1e-12)
+        means = scene_means(scenes)
+        for name in REGISTRY:
+            if any(name in s["metrics"] for s in scenes):
+                want = metric_summary(scenes, name, ci=False)["value"]
+                assert means[name] == want or (math.isnan(means[name]) and math.isnan(want)), name
+            else:
+                assert name not in means
+
+
+def test_the_console_table_of_a_sweep_shows_its_best_rows_and_counts_the_rest(capsys):
+    """Drawing 10,000 rows with rich took about half of a sweep's leaderboard: the console shows PRINT_ROWS rows and
+    one line counting the others (the Markdown and JSON files hold every row)."""
+    from lfmbench.evaluation import leaderboard as L
+    from lfmbench.metrics import REGISTRY
+
+    rows = [{"method": f"run{i:03d}", "rank": i + 1, "status": "complete", "ci": {}, "vs_best": None,
+             "ms_per_megapixel": 1.0, "ms_iqr": None, "params": 10, "failed": 0, "scenes": 8, "n_scenes": 8,
+             **{k: 0.5 for k in REGISTRY}} for i in range(L.PRINT_ROWS + 7)]
+    L.print_leaderboard(rows)
+    out = capsys.readouterr().out
+    assert f"run{L.PRINT_ROWS - 1:03d}" in out and f"run{L.PRINT_ROWS:03d}" not in out
+    assert "7 more rows (ranks > 50): every row is in the Markdown and JSON files" in out
+    L.print_leaderboard(rows[:3])
+    assert "more rows" not in capsys.readouterr().out
+
+
+def test_json_numbers_that_overflow_are_refused_on_the_fast_path_too():
+    """Floats are converted by the C parser and the tree checked after: an overflowing number (inf) is refused
+    naming it, as the per-number hook did; the largest finite float and long digit strings in text are read."""
+    from lfmbench.fileio import InputFileError, loads_json
+
+    for bad, named in (("[1e999]", "1e999"), ('{"a": {"b": [0.5, -1E+400]}}', "-1E+400"),
+                       ("[" + "9" * 400 + ".0]", "9999")):
+        with pytest.raises(InputFileError, match=f"f.json: cannot read JSON: number {re.escape(named)}"):
+            loads_json(bad, "f.json")
+    assert loads_json('{"a": [1.7976931348623157e308, "1e999", "' + "0" * 64 + '"]}', "f.json")["a"][0] == 1.7976931348623157e308
+    seen = []
+    with pytest.raises(InputFileError, match="number 1e999"):  # a reader's counting hook sees the file once
+        loads_json('[{"x": 1}, {"y": 1e999}]', "f.json", object_hook=lambda d: seen.append(d) or d)
+    assert seen == [{"x": 1}]
 
 
 # ------------------------------------------------------------------------ 2. memory a file can claim
@@ -513,3 +672,25 @@ def test_preset_and_config_sizes_are_refused_before_allocation(tmp_path):
                                  str(tmp_path / "w.pt")])
     out = _one_line(r)
     assert "huge.yaml" in out and "model_parameters" in out
+
+
+def test_a_training_batch_above_the_memory_limit_is_refused_before_simulation(tmp_path, monkeypatch):
+    """min(train.batch_size, samples) x one sample's bytes is checked against batch_bytes before the first batch is
+    simulated (a large batch of large crops died in the allocator, naming nothing): one line naming the field and
+    the limit, nothing written."""
+    from lfmbench.limits import LimitError, check_batch_bytes
+    from tests.data.corpus.data import make_corpus
+
+    check_batch_bytes(4, 1 << 20, "c.yaml")  # 4 MiB: far below
+    with pytest.raises(LimitError, match=r"c\.yaml: field 'train.batch_size' = 1,000,000,000 samples of "
+                                         r"1,048,576 bytes \(crop 64\): a batch of [\d,]+ is above the limit batch_"):
+        check_batch_bytes(10**9, 1 << 20, "c.yaml", "crop 64")
+    root = make_corpus(tmp_path / "c", n_scenes=1, frames=2)
+    cfg = tmp_path / "big.yaml"
+    cfg.write_text("model:\n  width: 4\ntrain:\n  epochs: 1\n  batch_size: 64\n  samples_per_scene: 64\n"
+                   "  crop: 8\n  workers: 0\n  split: all\n  frames: 2\n")
+    # 64 samples of a few KB each: above a limit of 64 KB (the default, 16 GiB, takes a real corpus to pass)
+    r = CliRunner().invoke(app, ["--limit", "batch_bytes=65536", "train", "--method", "learned", "--corpus",
+                                 str(root), "--config", str(cfg), "--out", str(tmp_path / "w.pt")])
+    out = _one_line(r)
+    assert "train.batch_size" in out and "batch_bytes" in out and not (tmp_path / "w.pt").exists(), out

@@ -5,6 +5,7 @@
 from __future__ import annotations
 
 import json
+import warnings
 from pathlib import Path
 from typing import List, Optional
 
@@ -85,16 +86,22 @@ def import_isetlfm_cmd(
     check_local_paths((("SRC", src), ("OUT", out)))
 
     console = Console(stderr=True, soft_wrap=True)
-    try:
-        n = len(scene) if scene else len(find_scenes(src))
-        with Bar(n, "importing", "scene", console=console) as prog:
-            rep = import_isetlfm(src, out, scenes=list(scene) if scene else None, seed=seed,
-                                 dtype="float16" if half else "float32", repair=repair, resume=not no_resume,
-                                 progress=lambda sid: prog.advance())
-    except (ValueError, CorpusError, CorpusWriteError) as exc:
-        console.print(f"[red]error[/]: {exc}", highlight=False)
-        raise typer.Exit(2) from None
-    for w in rep.warnings:
+    # the importer's warnings are in its report, printed below: caught here so that each is printed once (Python
+    # printed them too, a second time); any other warning is printed with them
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("default")
+        try:
+            n = len(scene) if scene else len(find_scenes(src))
+            with Bar(n, "importing", "scene", console=console) as prog:
+                rep = import_isetlfm(src, out, scenes=list(scene) if scene else None, seed=seed,
+                                     dtype="float16" if half else "float32", repair=repair, resume=not no_resume,
+                                     progress=lambda sid: prog.advance())
+        except (ValueError, CorpusError, CorpusWriteError) as exc:
+            for w in dict.fromkeys(str(c.message) for c in caught):
+                console.print(f"[yellow]warning[/]: {w}", highlight=False)
+            console.print(f"[red]error[/]: {exc}", highlight=False)
+            raise typer.Exit(2) from None
+    for w in dict.fromkeys([*rep.warnings, *(str(c.message) for c in caught)]):
         console.print(f"[yellow]warning[/]: {w}", highlight=False)
     if rep.repaired:
         console.print(f"repaired {sum(rep.repaired.values())} values in {len(rep.repaired)} files")

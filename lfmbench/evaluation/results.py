@@ -38,6 +38,15 @@ def num(x: Any) -> float:
 
 def jsonable(x: Any) -> Any:
     """Floats that JSON cannot hold (NaN, +-inf) become the strings 'nan', 'inf', '-inf'; tensors become lists."""
+    t = type(x)  # the common exact types first (a sweep's leaderboard JSON holds millions of values)
+    if t is str or t is int or t is bool or x is None:
+        return x
+    if t is float:
+        return x if x - x == 0.0 else ("nan" if x != x else ("inf" if x > 0 else "-inf"))
+    if t is dict:
+        return {str(k): jsonable(v) for k, v in x.items()}
+    if t is list:
+        return [jsonable(v) for v in x]
     if isinstance(x, float):
         return x if math.isfinite(x) else ("nan" if math.isnan(x) else ("inf" if x > 0 else "-inf"))
     if isinstance(x, dict):
@@ -89,10 +98,15 @@ def per_scene(records: Iterable[dict], metrics: Iterable[str] | None = None) -> 
         metric's scene value is the mean over the scene's samples, or (``aggregate="pooled"``) the pooled
         ratio; ``conditions`` holds the scene-level conditions (time of day, ego speed) and the means of the
         sample-level ones (PWM duty, frequency).
+
+    The values are those of :func:`combine` over :func:`_value` of each sample (a metric no sample holds is
+    skipped without building its lists; a finite or infinite float is taken as it is): a leaderboard of 10,000
+    results calls this once per result.
     """
     from lfmbench.metrics import REGISTRY
 
     names = list(metrics) if metrics is not None else list(REGISTRY)
+    specs = [(n, REGISTRY[n]) for n in names if n in REGISTRY]
     groups: dict[str, list[dict]] = {}
     for r in records:
         if r.get("status") == "ok" and isinstance(r.get("metrics"), dict):
@@ -100,19 +114,24 @@ def per_scene(records: Iterable[dict], metrics: Iterable[str] | None = None) -> 
     out = []
     for key, recs in groups.items():
         ms = [r["metrics"] for r in recs]
+        if len(ms) == 1:  # one sample: a mean is its value (fsum([v]) / 1 == v), the rest as below
+            out.append(_one_sample_scene(recs[0], specs))
+            continue
+        held = set().union(*ms)
         vals, weights = {}, {}
-        for n in names:
-            if n not in REGISTRY:
+        for n, spec in specs:
+            if n not in held:  # no sample holds it: every value None, as combine would skip it
                 continue
-            spec = REGISTRY[n]
-            vs = [_value(m.get(n)) for m in ms]
+            vs = [v if type(v) is float and v == v else _value(v) for v in (m.get(n) for m in ms)]
             if all(v is None for v in vs):
                 continue
-            w = [num(m.get(spec.weight)) if spec.weight else 1.0 for m in ms]
-            w = [x if math.isfinite(x) else 0.0 for x in w]
-            vals[n] = combine(vs, w, spec)
             if spec.weight:
+                w = [num(m.get(spec.weight)) for m in ms]
+                w = [x if math.isfinite(x) else 0.0 for x in w]
+                vals[n] = combine(vs, w, spec)
                 weights[spec.weight] = sum(x for x, v in zip(w, vs) if v is not None)
+            else:
+                vals[n] = combine(vs, [1.0] * len(vs), spec)
         cond: dict[str, Any] = {}
         for r in recs:
             for k, v in (r.get("conditions") or {}).items():
@@ -121,6 +140,31 @@ def per_scene(records: Iterable[dict], metrics: Iterable[str] | None = None) -> 
         out.append({"scene_id": recs[0].get("scene_id"), "samples": len(recs), "metrics": vals, "weights": weights,
                     "conditions": cond})
     return out
+
+
+def _one_sample_scene(rec: dict, specs: list) -> dict:
+    """:func:`per_scene`'s entry of a scene with one ``ok`` sample record (the same values, fewer steps)."""
+    m = rec["metrics"]
+    vals, weights = {}, {}
+    for n, spec in specs:
+        if n not in m:
+            continue
+        v = m[n]
+        v = v if type(v) is float and v == v else _value(v)
+        if v is None:
+            continue
+        if spec.weight:
+            w = num(m.get(spec.weight))
+            w = w if math.isfinite(w) else 0.0
+            vals[n] = combine([v], [w], spec)
+            weights[spec.weight] = w
+        elif spec.aggregate == "pooled":
+            vals[n] = combine([v], [1.0], spec)
+        else:
+            vals[n] = v
+    cond = {k: (v if isinstance(v, str) else statistics.fmean([num(v)]))
+            for k, v in (rec.get("conditions") or {}).items()}
+    return {"scene_id": rec.get("scene_id"), "samples": 1, "metrics": vals, "weights": weights, "conditions": cond}
 
 
 def scene_values(scenes: list[dict], name: str) -> tuple[list[float], list[float] | None]:
@@ -143,6 +187,28 @@ def metric_summary(scenes: list[dict], name: str, ci: bool = True) -> dict:
     v = combine([None if math.isnan(x) else x for x in vals], w, REGISTRY[name])
     lo, hi = stats.bootstrap_ci(vals, w) if ci else (float("nan"), float("nan"))
     return {"value": v, "ci": [lo, hi], "n": len(vals)}
+
+
+def scene_means(scenes: list[dict]) -> dict[str, float]:
+    """``{name: value}`` of every registered metric some scene holds: ``metric_summary(scenes, name,
+    ci=False)["value"]`` of each, the scenes' lists gathered in one pass (a sweep's leaderboard computes this for
+    10,000 results)."""
+    from lfmbench.metrics import REGISTRY
+
+    weight_of = {n: REGISTRY[n].weight for n in REGISTRY if REGISTRY[n].weight}
+    vals: dict[str, list[float]] = {}
+    wts: dict[str, list[float]] = {}
+    for s in scenes:
+        for n, v in s["metrics"].items():
+            vals.setdefault(n, []).append(num(v))
+            if n in weight_of:
+                wts.setdefault(n, []).append(num(s["weights"].get(weight_of[n], 0.0)))
+    out = {}
+    for n, vs in vals.items():
+        if n in REGISTRY:
+            spec = REGISTRY[n]
+            out[n] = combine([None if math.isnan(x) else x for x in vs], wts.get(n) if spec.weight else None, spec)
+    return out
 
 
 def aggregate(records: list[dict], ci: bool = False) -> dict:

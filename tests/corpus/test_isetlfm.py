@@ -190,3 +190,21 @@ def test_cli_import(tmp_path):
     assert r.exit_code == 0, r.output
     r = CliRunner().invoke(app, ["import-isetlfm", str(tmp_path / "nope"), str(tmp_path / "c")])
     assert r.exit_code == 2 and "does not exist" in r.output
+
+
+def test_cli_prints_each_import_warning_once(tmp_path):
+    """A scene without its .mat: the defaults warning is printed once (Python's warning printed it a second time
+    beside the report's line)."""
+    import sys
+    import warnings
+
+    src = tmp_path / "iset"
+    make_iset_scene(src, "s6", groups=("skymap",), frames=2, mat=False)
+    with warnings.catch_warnings():  # as outside pytest: a warning is printed to stderr, where the CLI's output is
+        warnings.simplefilter("default")
+        warnings.showwarning = lambda m, c, f, n, file=None, line=None: sys.stderr.write(
+            warnings.formatwarning(m, c, f, n, line))
+        r = CliRunner().invoke(app, ["import-isetlfm", str(src), str(tmp_path / "c")])
+    assert r.exit_code == 0, r.output
+    out = " ".join(r.output.split())
+    assert out.count("no <SceneID>_lf.mat") == 1, r.output
