@@ -8,18 +8,19 @@ import typer
 __all__ = ["fail", "choice", "check_minima", "torch_setup", "lock_output", "check_local_paths"]
 
 
-def choice(names) -> dict:
+def choice(names, metavar: str | None = None) -> dict:
     """The keyword arguments of a ``typer.Option`` with a closed list of values owned by a registry or a definition
-    (a :class:`lfmbench.registry.Registry`, a mapping's keys or a tuple): the metavar lists them in the help, and
-    the parser refuses anything else (exit status 2, the option and the names in the message), reading ``names``
-    when the command runs, so an entry added there is listed and accepted without touching the command."""
+    (a :class:`lfmbench.registry.Registry`, a mapping's keys or a tuple): the metavar lists them in the help (a
+    long list: give a short ``metavar`` and name them in the help text, which wraps), and the parser refuses
+    anything else (exit status 2, the option and the names in the message), reading ``names`` when the command
+    runs, so an entry added there is listed and accepted without touching the command."""
     def parse(value: str) -> str:
         allowed = [str(n) for n in names]
         if value not in allowed:
             raise typer.BadParameter(f"{value[:40]!r} is not one of {', '.join(allowed)}")
         return value
 
-    return {"parser": parse, "metavar": f"[{'|'.join(str(n) for n in names)}]"}
+    return {"parser": parse, "metavar": metavar or f"[{'|'.join(str(n) for n in names)}]"}
 
 
 def fail(msg: str, code: int = 2) -> None:

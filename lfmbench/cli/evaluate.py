@@ -228,8 +228,9 @@ def _checkpoint_sensor_check(fn):
 
 def leaderboard_cmd(
     runs: list[Path] = typer.Argument(..., help="evaluation JSON files, e.g. runs/*.json"),
-    sort_by: str = typer.Option("led_score", **choice(METRICS),
-                                help="registered metric to rank by (default: the LED score, docs/guide/metrics.md)"),
+    sort_by: str = typer.Option("led_score", **choice(METRICS, "METRIC"),
+                                help=f"registered metric to rank by: {', '.join(METRICS)} (default: the LED score, "
+                                     "docs/guide/metrics.md)"),
     markdown: Path = typer.Option(Path("runs/leaderboard.md"), help="Markdown table output"),
     plot: Path = typer.Option(Path("runs/leaderboard.png"), help="quality-vs-run-time PNG output"),
     json_out: Path = typer.Option(Path("runs/leaderboard.json"), "--json",
