@@ -32,6 +32,9 @@ Functions
 - :func:`select_variant` -> the variant name, set in Mitsuba (``mi.set_variant``).
 - :func:`check_variant` -> fail early (before a render job writes anything) for an unusable explicit variant.
 - :func:`clamp_roundoff` -> radiance with tiny negative round-off of the JIT back ends set to 0.
+
+Size (about 640 lines): one job, choosing the back end a render runs on, in the order it is decided (the
+variant asked for, the libLLVM candidates and their child-process probe, the CUDA probe, the on-disk verdicts).
 """
 from __future__ import annotations
 

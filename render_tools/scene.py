@@ -23,6 +23,9 @@ Functions
 
 Luminance ranges follow upstream (ISETHDR heuristic of the ISET-LFM code, https://github.com/AyushJam/iset-lfm): headlights 2e4-2e5 cd/m^2,
 streetlights 1e4-5e4 cd/m^2, other lights 4e-4..1e-2 of the scene's headlight peak.
+
+Size (about 600 lines): one job, the generator's steps in the order they draw from the scene's random
+generator; the parts the steps build from live in :mod:`render_tools.scene_templates` and :mod:`render_tools.street`.
 """
 from __future__ import annotations
 

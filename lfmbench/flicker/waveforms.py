@@ -63,6 +63,9 @@ References
   Imaging" (the PWM model and its exposure integral, eq. 1).
 - Row-multiplexed LED matrix driving (1/N scan): e.g. Texas Instruments, "LED display multiplexing" application
   notes for the TLC59xx / TLC6C5xxx drivers; a multiplexed display is a PWM per scan line with phase offsets.
+
+Size (about 540 lines): one job, the one definition of each gated waveform (the per-sample, batched and
+device paths all call it); one class per light kind and their shared gate table.
 """
 from __future__ import annotations
 
