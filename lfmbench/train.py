@@ -385,6 +385,12 @@ def train(method: str | Trainable, corpus: str | os.PathLike, out: str | os.Path
         data_rng = ck.get("data_rng")
         if log:
             log(f"resuming {out} after epoch {start}/{t.epochs}")
+            before = int(((ck.get("config") or {}).get("train") or {}).get("epochs", t.epochs))
+            if before != t.epochs and t.lr_min != t.lr:
+                # the cosine schedule spans the total epochs: a new total reshapes the rest of it
+                log(f"note: {out} was trained for a total of {before} epochs, now {t.epochs}: the cosine learning "
+                    f"rate is recomputed over {t.epochs} epochs from here, so the weights can differ from an "
+                    "uninterrupted run of either length")
     # auto: the device path on CUDA for the split pixel (the other plans run on the per-sample path only)
     on_device = data == "device" or (data == "auto" and dev.type == "cuda" and arch == "split_pixel")
     if on_device:

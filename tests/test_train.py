@@ -51,6 +51,8 @@ def test_train_command_writes_loadable_checkpoint_and_resumes_deterministically(
                                      "--epochs", n])
         assert r.exit_code == 0, r.output
     assert "resuming" in r.output
+    # a new total of epochs reshapes the cosine schedule (lr 1e-2 -> lr_min 1e-4): said in one line
+    assert "was trained for a total of 1 epochs, now 2" in r.output and r.output.count("cosine") == 1
     sa, sb = U.read_checkpoint(a)["state_dict"], U.read_checkpoint(b)["state_dict"]
     assert all(torch.equal(sa[k], sb[k]) for k in sa)
     # another config refuses to resume from that checkpoint
