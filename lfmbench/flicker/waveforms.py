@@ -74,11 +74,10 @@ from types import MappingProxyType
 from typing import Any, ClassVar, Mapping, NamedTuple
 
 import numpy as np
-import torch
 
 from lfmbench.check import check_integer, check_keys, check_number, fail
 from lfmbench.flicker import pwm_exposure, pwm_level
-from lfmbench.flicker.args import _as_tensors, _is_torch
+from lfmbench.flicker.args import _as_tensors, _is_tensor, _is_torch
 from lfmbench.flicker.exact import _mod_period, _Ops
 from lfmbench.limits import brief
 
@@ -182,7 +181,7 @@ def gated_pwm_exposure(start, length, gate_period, on, period, duty, phase, rise
         dur = ops.maximum(ops.minimum(r, (e + k) - a) - ops.maximum(-since, zero), zero)
         part = part + carrier(ops.maximum(since, zero), dur).sum(-1)
     out = n * whole + part
-    return out if isinstance(out, torch.Tensor) else np.asarray(out)
+    return out if _is_tensor(out) else np.asarray(out)
 
 
 class GateTable(NamedTuple):
@@ -200,13 +199,13 @@ class GateTable(NamedTuple):
     def exposure(self, start, length, period, duty, phase, rise=0.0, fall=0.0):
         """Radiant exposure (level x s) over ``[start, start + length)`` (s, waveform time) for the carrier's draw:
         period (s), duty, phase (s, a rising edge after each ON onset), ramp times (s). Arrays broadcast."""
-        start = start if isinstance(start, torch.Tensor) else np.asarray(start, dtype=np.float64)
+        start = start if _is_tensor(start) else np.asarray(start, dtype=np.float64)
         T, D, ph = scan_row_pwm(period, duty, phase, self.scan_lines, self.line)
         return gated_pwm_exposure(start - self.phase_s, length, self.period_s, self.on, T, D, ph, rise, fall)
 
     def mean_exposure(self, start, length, duty):
         """Flicker-free exposure (level x s): the gate with the carrier at its mean level."""
-        start = start if isinstance(start, torch.Tensor) else np.asarray(start, dtype=np.float64)
+        start = start if _is_tensor(start) else np.asarray(start, dtype=np.float64)
         T, D, ph = scan_row_pwm(1.0, duty, 0.0, self.scan_lines, self.line)
         return gated_pwm_exposure(start - self.phase_s, length, self.period_s, self.on, T, D, ph, mean=True)
 
