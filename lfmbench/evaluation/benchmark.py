@@ -112,16 +112,65 @@ def write_leaderboard(rows: list[dict], runs: list[dict], sort_by: str | None, m
                                                  plot_quality_vs_runtime)
     from lfmbench.evaluation.results import write_json_atomic
 
+    def write_sweep_json() -> None:
+        doc = leaderboard_json(rows, runs, sort_by, conditions_file)
+        atomic_write_text(json_path, json.dumps(doc, allow_nan=False, separators=(",", ":")) + "\n")
+
+    # a sweep's JSON (seconds for 10,000 rows) is written by a forked process while this one writes the rest
+    child = _forked(write_sweep_json) if json_path is not None and len(rows) > STATS_ROWS else None
     atomic_write_text(markdown, leaderboard_markdown(rows, sort_by))
     out = [Path(markdown), plot_quality_vs_runtime(rows, plot, sort_by)]
     if json_path is not None:
-        doc = leaderboard_json(rows, runs, sort_by, conditions_file)
         if len(rows) <= STATS_ROWS:
-            out.append(write_json_atomic(doc, json_path))
+            out.append(write_json_atomic(leaderboard_json(rows, runs, sort_by, conditions_file), json_path))
         else:
-            atomic_write_text(json_path, json.dumps(doc, allow_nan=False, separators=(",", ":")) + "\n")
+            child() if child is not None else write_sweep_json()
             out.append(Path(json_path))
     return out
+
+
+def _forked(fn):
+    """Start ``fn()`` in a forked process (where fork exists and 2 or more CPUs); returns a function that waits for
+    it and raises what it raised (None: not started, the caller runs ``fn`` itself)."""
+    import multiprocessing  # noqa: PLC0415
+    import os  # noqa: PLC0415
+
+    ncpu = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    if ncpu < 2 or "fork" not in multiprocessing.get_all_start_methods():
+        return None
+    ctx = multiprocessing.get_context("fork")
+    recv, send = ctx.Pipe(duplex=False)
+
+    def run() -> None:
+        try:
+            fn()
+            send.send(None)
+        except BaseException as e:  # noqa: BLE001 - handed to the parent, which raises it
+            try:
+                send.send(e)
+            except Exception:  # noqa: BLE001 - an exception that does not pickle
+                send.send(RuntimeError(f"{type(e).__name__}: {e}"))
+
+    try:
+        proc = ctx.Process(target=run, daemon=True)
+        proc.start()
+    except (OSError, RuntimeError):
+        return None
+    send.close()    # the child's copy stays open: a child that dies without a word ends the pipe (EOFError)
+
+    def wait() -> None:
+        try:
+            err = recv.recv()
+        except EOFError:
+            err = RuntimeError("the process writing the leaderboard JSON ended without a result "
+                               "(killed?); rerun lfmbench leaderboard")
+        proc.join()
+        if err is not None:
+            raise err
+        if proc.exitcode:
+            raise RuntimeError(f"the leaderboard JSON writer exited with code {proc.exitcode}")
+
+    return wait
 
 
 def benchmark(corpus: str | Path, methods: Iterable[str] | None = None, runs_dir: str | Path = "runs",

@@ -241,3 +241,43 @@ def test_corpus_identity_follows_the_scored_scenes_not_the_whole_manifest(tmp_pa
     with pytest.raises(ValueError, match=r"no files listed for scene\(s\) \['nope'\]"):
         corpus_identity(a, ["nope"])
     assert corpus_identity(a)["scenes_sha256"] is None
+
+
+def test_forked_statistics_and_sweep_json_equal_one_process(bench, tmp_path, monkeypatch):
+    """A leaderboard of PARALLEL_STATS_ROWS or more rows computes its rows' bootstrap statistics in a forked pool
+    of 2 processes, and a sweep's JSON (more rows than STATS_ROWS) is written by a forked process while this one
+    writes the Markdown and the plot: the rows and the JSON bytes equal those of one process, and an error of the
+    JSON writer reaches the caller naming the file."""
+    import json
+
+    from lfmbench.evaluation import benchmark as BM
+    from lfmbench.evaluation import leaderboard as L
+    from lfmbench.evaluation.results import jsonable
+
+    d, _, _ = bench
+    src = [json.loads((d / "runs" / f"{m}.json").read_text()) for m in METHODS]
+    paths = []
+    for i in range(3):                       # 9 results: three copies of each, each its own method name
+        for r in src:
+            r = json.loads(json.dumps(r))
+            r["method"]["spec"] = f"{r['method']['spec']}-{i}"
+            p = tmp_path / f"{r['method']['spec']}.json"
+            p.write_text(json.dumps(r))
+            paths.append(p)
+    assert len(paths) >= L.PARALLEL_STATS_ROWS
+    forked = L.leaderboard_rows(L.load_runs(paths))
+    monkeypatch.setattr(L, "PARALLEL_STATS_ROWS", 10 ** 9)
+    one = L.leaderboard_rows(L.load_runs(paths))
+    assert json.dumps(jsonable(forked)) == json.dumps(jsonable(one)) and all(r["ci"] for r in one)
+    runs = L.load_runs(paths)
+    monkeypatch.setattr(L, "STATS_ROWS", 4)  # 9 rows: a sweep's JSON
+    BM.write_leaderboard(one, runs, None, tmp_path / "a.md", tmp_path / "a.png", tmp_path / "a.json")
+    monkeypatch.setattr(BM, "_forked", lambda fn: None)
+    BM.write_leaderboard(one, runs, None, tmp_path / "b.md", tmp_path / "b.png", tmp_path / "b.json")
+    assert (tmp_path / "a.json").read_bytes() == (tmp_path / "b.json").read_bytes()
+    monkeypatch.undo()
+    monkeypatch.setattr(L, "STATS_ROWS", 4)
+    (tmp_path / "file").write_text("a file, not a folder")
+    with pytest.raises(Exception, match="file/c.json"):
+        BM.write_leaderboard(one, runs, None, tmp_path / "c.md", tmp_path / "c.png", tmp_path / "file" / "c.json")
+    assert (tmp_path / "file").read_text() == "a file, not a folder"
