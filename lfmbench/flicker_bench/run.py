@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import csv
 import io
+import json
 import math
 import time
 from dataclasses import dataclass, field
@@ -23,7 +24,7 @@ from lfmbench.flicker_bench.exact import EXACT_METHODS, SEQUENCE_METHODS, captur
     phase_map
 from lfmbench.flicker_bench.model import BenchError, MAX_FREQUENCY_HZ, MIN_FREQUENCY_HZ, SensorModel
 from lfmbench.flicker_bench.sequence import frames_to_cover, sequence_kpis, sequence_series
-from lfmbench.fileio import atomic_save_figure, atomic_write_json, atomic_write_text
+from lfmbench.fileio import atomic_save_figure, atomic_write_text, json_default
 
 __all__ = ["BENCH_VERSION", "Grid", "default_grid", "check_grid", "bench_methods", "BenchResult", "run_bench",
            "write_tables", "plot_maps", "write_report", "DROPOUT_FRACTION"]
@@ -209,18 +210,6 @@ def _header(res: BenchResult) -> dict[str, Any]:
                        for p in res.panels}}
 
 
-def _rows(res: BenchResult):
-    f = np.repeat(res.grid.freqs_hz, res.grid.duties.size)
-    d = np.tile(res.grid.duties, res.grid.freqs_hz.size)
-    cov = np.repeat(res.cover, res.grid.duties.size)
-    keys = sorted({k for c in res.columns.values() for k in c})
-    for p in res.panels:
-        c = res.columns[p]
-        for i in range(f.size):
-            for j, lum in enumerate(res.grid.lums):
-                yield p, f[i], d[i], lum, cov[i], [c[k][i, j] if k in c else math.nan for k in keys]
-
-
 def write_tables(res: BenchResult, out_dir: Path) -> list[Path]:
     """``flicker_bench.csv`` (one row per panel, frequency, duty, luminance; the first line a comment with the
     preset's name and SHA-256) and ``flicker_bench.json`` (the header, the grid and per panel every KPI as a
@@ -231,23 +220,46 @@ def write_tables(res: BenchResult, out_dir: Path) -> list[Path]:
     buf.write(f"# lfmbench flicker-bench v{BENCH_VERSION}: preset {head['preset']} sha256 {head['preset_sha256']}\n")
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(["panel", "frequency_hz", "duty", "luminance_cd_m2", "frames_to_cover", *keys])
-    for p, f, d, lum, cov, vals in _rows(res):
-        w.writerow([p, f"{f:.9g}", f"{d:.6g}", f"{lum:.6g}", "" if math.isnan(cov) else int(cov),
-                    *("" if not math.isfinite(v) else f"{v:.7g}" for v in vals)])
+    # the KPI values of each panel formatted in one C call ("%.7g", non-finite -> empty), not one call per value
+    f_txt = [f"{v:.9g}" for v in np.repeat(res.grid.freqs_hz, res.grid.duties.size)]
+    d_txt = [f"{v:.6g}" for v in np.tile(res.grid.duties, res.grid.freqs_hz.size)]
+    c_txt = ["" if math.isnan(v) else int(v) for v in np.repeat(res.cover, res.grid.duties.size)]
+    l_txt = [f"{v:.6g}" for v in res.grid.lums]
+    n_lum = len(l_txt)
+    for p in res.panels:
+        c = res.columns[p]
+        cols = [np.asarray(c[k], np.float64).reshape(len(f_txt), n_lum) if k in c
+                else np.full((len(f_txt), n_lum), math.nan) for k in keys]
+        flat = np.stack(cols, axis=-1).ravel().tolist()                   # cell, luminance, key
+        txt = ["" if t in _NONFINITE else t for t in (("%.7g " * len(flat)) % tuple(flat)).split()]
+        nk = len(keys)
+        for i in range(len(f_txt)):
+            for j in range(n_lum):
+                o = (i * n_lum + j) * nk
+                w.writerow([p, f_txt[i], d_txt[i], l_txt[j], c_txt[i], *txt[o:o + nk]])
     out = [out_dir / "flicker_bench.csv", out_dir / "flicker_bench.json"]
     atomic_write_text(out[0], buf.getvalue())
 
-    def clean(a):
+    def clean(a):  # 7 significant digits, non-finite -> None; formatted in one C call per array, not per value
         a = np.asarray(a, np.float64)
-        return [[None if not math.isfinite(v) else float(f"{v:.7g}") for v in row] for row in a]
+        if a.ndim != 2 or not a.size:
+            return [[None if not math.isfinite(v) else float(f"{v:.7g}") for v in row] for row in a]
+        vals = [None if t in _NONFINITE else float(t) for t in (("%.7g " * a.size) % tuple(a.ravel().tolist())).split()]
+        n = a.shape[1]
+        return [vals[i:i + n] for i in range(0, len(vals), n)]
 
     doc = {**head, "grid": {"frequency_hz": res.grid.freqs_hz, "duty": res.grid.duties,
                             "luminance_cd_m2": res.grid.lums, "cells": "frequency-major, duty fastest"},
            "frames_to_cover": [None if math.isnan(v) else int(v) for v in res.cover],
            "kpis": {p: {k: clean(v) for k, v in res.columns[p].items()} for p in res.panels},
            "measured": res.measured, "timings_s": res.timings_s}
-    atomic_write_json(out[1], doc)
+    # compact, by the C encoder (the indented form took most of a full map's run time); strict: no NaN or inf
+    atomic_write_text(out[1], json.dumps(doc, allow_nan=False, separators=(",", ":"), default=json_default) + "\n")
     return out
+
+
+#: ``"%.7g"`` of the floats :func:`write_tables` writes as JSON null.
+_NONFINITE = frozenset({"nan", "-nan", "inf", "-inf"})
 
 
 # ------------------------------------------------------------------------------------------------- figures
