@@ -35,7 +35,7 @@ import numpy as np
 
 from lfmbench.registry import Registry
 
-__all__ = ["TEXTURES", "RESOLUTION", "texture_array", "box_uv", "check_texture"]
+__all__ = ["TEXTURES", "RESOLUTION", "texture_array", "box_uv", "check_texture", "untextured"]
 
 #: (rows = v, columns = u) texels of each kind.
 RESOLUTION = {"asphalt": (512, 256), "marking": (32, 256), "paving": (256, 256), "facade": (256, 256),
@@ -219,6 +219,17 @@ def foliage(desc: dict, rng: np.random.Generator, shape) -> np.ndarray:
     f = 0.35 * clumps + 0.25 * leaves
     yellow = np.clip(0.5 * _noise(rng, shape, 0.03), 0, 1)[..., None] * np.asarray([0.6, 0.3, -0.3])
     return base[None, None, :] * np.exp(f)[..., None] * (1.0 + yellow)
+
+
+def untextured(scene: dict) -> dict:
+    """A deep copy of ``scene`` whose materials carry no ``texture`` (flat colours: the comparison case of the
+    texture studies in benchmarks/studies/)."""
+    import copy  # noqa: PLC0415
+
+    flat = copy.deepcopy(scene)
+    for m in flat.get("materials", {}).values():
+        m.pop("texture", None)
+    return flat
 
 
 def check_texture(tex, path: str) -> None:

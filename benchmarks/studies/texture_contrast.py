@@ -22,7 +22,6 @@ Usage: ``python benchmarks/studies/texture_contrast.py [--seed 7] [--tod day] [-
 from __future__ import annotations
 
 import argparse
-import copy
 import datetime
 import os
 import platform
@@ -97,6 +96,7 @@ def measure(sc: dict) -> dict:
 
 def main() -> None:
     from render_tools import scene as S  # noqa: PLC0415
+    from render_tools.textures import untextured  # noqa: PLC0415
 
     ap = argparse.ArgumentParser()
     ap.add_argument("--seed", type=int, default=7)
@@ -106,9 +106,7 @@ def main() -> None:
     a = ap.parse_args()
     load0, t0 = os.getloadavg()[0], time.time()
     sc = S.generate_scene(a.seed, a.tod, generator=2, overrides={"weather": {"conditions": [a.weather]}})
-    flat = copy.deepcopy(sc)
-    for m in flat["materials"].values():
-        m.pop("texture", None)
+    flat = untextured(sc)
     res = {"textured": measure(sc), "flat": measure(flat)}
     load1 = os.getloadavg()[0]
     date = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")

@@ -15,7 +15,6 @@ Usage: ``python benchmarks/studies/texture_cost.py [--seed 101] [--tod night] [-
 from __future__ import annotations
 
 import argparse
-import copy
 import datetime
 import os
 import resource
@@ -42,6 +41,7 @@ def _cpu() -> float:
 def main() -> None:
     from render_tools import render as rnd  # noqa: PLC0415
     from render_tools import scene as S  # noqa: PLC0415
+    from render_tools.textures import untextured  # noqa: PLC0415
     from render_tools.jobs import load_profile  # noqa: PLC0415
     from render_tools.textures import texture_array  # noqa: PLC0415
 
@@ -55,9 +55,7 @@ def main() -> None:
     a = ap.parse_args()
     load0, t0 = os.getloadavg()[0], time.time()
     sc = S.generate_scene(a.seed, a.tod, generator=2, overrides={"weather": {"conditions": [a.weather]}})
-    flat = copy.deepcopy(sc)
-    for m in flat["materials"].values():
-        m.pop("texture", None)
+    flat = untextured(sc)
     c = _cpu()
     n_tex = sum(texture_array(m["texture"], m["rgb"]).size > 0 for m in sc["materials"].values() if "texture" in m)
     gen_s = _cpu() - c
