@@ -130,13 +130,13 @@ def write_leaderboard(rows: list[dict], runs: list[dict], sort_by: str | None, m
 
 
 def _forked(fn):
-    """Start ``fn()`` in a forked process (where fork exists and 2 or more CPUs); returns a function that waits for
-    it and raises what it raised (None: not started, the caller runs ``fn`` itself)."""
+    """Start ``fn()`` in a forked process (where :func:`~lfmbench.evaluation.leaderboard.can_fork`); returns a
+    function that waits for it and raises what it raised (None: not started, the caller runs ``fn`` itself)."""
     import multiprocessing  # noqa: PLC0415
-    import os  # noqa: PLC0415
 
-    ncpu = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-    if ncpu < 2 or "fork" not in multiprocessing.get_all_start_methods():
+    from lfmbench.evaluation.leaderboard import can_fork  # noqa: PLC0415
+
+    if not can_fork():
         return None
     ctx = multiprocessing.get_context("fork")
     recv, send = ctx.Pipe(duplex=False)

@@ -426,14 +426,21 @@ def _row_stats(args: tuple) -> tuple[dict, dict]:
 PARALLEL_STATS_ROWS = 8
 
 
-def _map_stats(fn, items: list) -> list:
-    """``[fn(x) for x in items]``, in a forked pool of 2 processes when there are :data:`PARALLEL_STATS_ROWS` or
-    more items and 2 or more CPUs (in order; any failure of the pool falls back to one process)."""
+def can_fork() -> bool:
+    """Whether the leaderboard's outputs may use forked processes: ``fork`` exists and 2 or more CPUs are usable."""
     import multiprocessing
     import os
 
     ncpu = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-    if len(items) < PARALLEL_STATS_ROWS or ncpu < 2 or "fork" not in multiprocessing.get_all_start_methods():
+    return ncpu >= 2 and "fork" in multiprocessing.get_all_start_methods()
+
+
+def _map_stats(fn, items: list) -> list:
+    """``[fn(x) for x in items]``, in a forked pool of 2 processes when there are :data:`PARALLEL_STATS_ROWS` or
+    more items and :func:`can_fork` (in order; any failure of the pool falls back to one process)."""
+    import multiprocessing
+
+    if len(items) < PARALLEL_STATS_ROWS or not can_fork():
         return [fn(x) for x in items]
     try:
         with multiprocessing.get_context("fork").Pool(2) as pool:
