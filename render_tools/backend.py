@@ -158,6 +158,14 @@ def _read_cache(path: str) -> dict:
     return data if isinstance(data, dict) else {}
 
 
+def _write_cache(path: str, cache: dict) -> None:
+    """Write the verdict cache ``cache`` to ``path`` atomically, without the verdicts of libraries that no longer
+    exist (keys are ``"<library path>|..."``): a test's or a removed install's temporary library would otherwise
+    stay in the file for ever."""
+    kept = {k: v for k, v in cache.items() if os.path.exists(k.split("|", 1)[0])}
+    atomic_write_json(path, kept)
+
+
 def _mitsuba_version() -> str:
     """The installed Mitsuba version, from the package metadata (no ``import mitsuba``: 0.2-0.3 s, which
     :func:`start_probes` would spend before starting its child); ``mitsuba.__version__`` if there is none."""
@@ -198,7 +206,7 @@ def probe_llvm(lib: str, use_cache: bool = True) -> bool:
     ok = res is not None and res[0] == 0 and "LLVM_PROBE_OK" in res[1]
     if use_cache:
         cache[key] = ok
-        atomic_write_json(cache_file, cache)
+        _write_cache(cache_file, cache)
     return ok
 
 
@@ -279,7 +287,7 @@ def probe_cuda(use_cache: bool = True) -> bool:
     _cuda_reason = reason
     if use_cache:
         cache[key] = {"ok": ok, "reason": reason}
-        atomic_write_json(cache_file, cache)
+        _write_cache(cache_file, cache)
     return ok
 
 

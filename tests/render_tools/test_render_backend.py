@@ -225,3 +225,15 @@ def test_cuda_render_matches_llvm_mean():
     (a1, b1), (a2, b2) = means.values()
     assert a1 > 0 and b1 > 0
     assert a1 == pytest.approx(a2, rel=0.02) and b1 == pytest.approx(b2, rel=0.02)
+
+
+def test_probe_cache_drops_verdicts_of_libraries_that_are_gone(fresh, tmp_path):
+    """A verdict for a library path that no longer exists (a test's temporary file, a removed install) is dropped
+    when the cache is next written; verdicts for existing libraries stay."""
+    lib = tmp_path / "libLLVM.so.19.1"
+    lib.write_bytes(b"")
+    gone = str(tmp_path / "removed" / "libLLVM.so.19.1")
+    path = tmp_path / "cache" / "lfmbench" / "llvm_probe.json"
+    backend._write_cache(str(path), {f"{lib}|0|1|mitsuba-x": True, f"{gone}|64|1|mitsuba-x": False})
+    kept = backend._read_cache(str(path))
+    assert list(kept) == [f"{lib}|0|1|mitsuba-x"] and kept[f"{lib}|0|1|mitsuba-x"] is True
