@@ -178,11 +178,12 @@ def test_rolling_weights_at_the_lamps_rows_are_the_full_computations():
 
 
 @pytest.mark.parametrize("name, checked", [("imx490_4read", ("sp1_hcg", "sp1_lcg", "sp2_hcg", "sp2_lcg")),
-                                           ("mt9v024", ("main",)), ("ar0132at", ("t1",))])
+                                           ("mt9v024", ("main",)), ("ar0132at", ("t1",)),
+                                           ("lofic_otani2025", ("hcg",))])
 def test_dataset_yields_the_general_plans_of_real_presets(corpus, name, checked):
-    """Four reads of two photodiodes, a companded capture, three staggered exposures: every capture comes out, and
-    the ``checked`` ones (those whose input-referred noise the dark test corpus resolves) estimate the ground truth
-    in the reference units (decompanded where the part compands)."""
+    """Four reads of two photodiodes, a companded capture, three staggered exposures, three reads of one LOFIC charge:
+    every capture comes out, and the ``checked`` ones (those whose input-referred noise the dark test corpus
+    resolves) estimate the ground truth in the reference units (decompanded where the part compands)."""
     p = load_preset(name)
     s = LFMCaptureDataset(corpus, split="all", sensor=name, frames=2, cache_dir=False)[0]
     assert s["saturated"].shape == (2, len(p.captures), 16, 24) and s["meta"]["architecture"] == p.architecture
