@@ -407,7 +407,11 @@ def plot_maps(res: BenchResult, out_dir: Path, stem: str = "flicker_bench", meas
     xt = [v for v in (1, 2, 5, 10, 20, 50, 100, 200, 500, 1000, 2000, 5000, 1e4, 2e4, 5e4, 1e5, 2e5, 5e5, 1e6)
           if fe[0] <= v <= fe[-1]] or [float(f[0])]
     for stem_key, key, title, bounds, cmap_name in specs:
-        fig, axes = plt.subplots(rows, cols, figsize=(3.6 * cols, 2.9 * rows), squeeze=False, sharex=True, sharey=True)
+        # fixed margins in inches (tight_layout measured every text of every panel: seconds per figure): 1.15 in
+        # for the titles above, 0.5 in for the axis labels below, panels 1.6 in high with gaps for their titles
+        gap = 1.0 if stem_key == "miss" else 0.8
+        height = 1.15 + 0.5 + rows * 1.6 + (rows - 1) * gap
+        fig, axes = plt.subplots(rows, cols, figsize=(3.6 * cols, height), squeeze=False, sharex=True, sharey=True)
         cmap = plt.get_cmap(cmap_name, len(bounds) - 1)
         norm = BoundaryNorm(bounds, cmap.N)
         im = None
@@ -452,10 +456,8 @@ def plot_maps(res: BenchResult, out_dir: Path, stem: str = "flicker_bench", meas
         fig.suptitle(f"{res.model.preset.name} ({res.model.preset.architecture}): {title}{note}\n"
                      f"star = worst cell; {res.model.frame_time_s * 1e3:.2f} ms frames, "
                      f"luminance {res.grid.lums[0]:.3g}-{res.grid.lums[-1]:.3g} cd/m^2", fontsize=7)
-        # fixed margins (tight_layout measured every text of every panel: seconds per figure)
-        top = 1.0 - 1.15 / (2.9 * rows)                                # 1.15 in for the titles
-        fig.subplots_adjust(left=0.07, right=0.91, bottom=0.32 / rows, top=top, wspace=0.12,
-                            hspace=0.62 if stem_key == "miss" else 0.5)
+        fig.subplots_adjust(left=0.07 if cols > 1 else 0.15, right=0.91 if cols > 1 else 0.85, bottom=0.5 / height,
+                            top=1.0 - 1.15 / height, wspace=0.12, hspace=gap / 1.6)
         cax = fig.add_axes((0.93, 0.15, 0.015, 0.7))
         fig.colorbar(im, cax=cax).ax.tick_params(labelsize=7)
         path = out_dir / f"{stem}_{stem_key}.png"
