@@ -136,3 +136,15 @@ def test_photopic_table_equals_colour_science():
     v = colour.colorimetry.SDS_LEFS_PHOTOPIC["CIE 1924 Photopic Standard Observer"]
     wl = np.arange(400.0, 701.0, 10.0)
     assert np.allclose(CIE1924_V_400_700_10NM, np.interp(wl, v.wavelengths, v.values), rtol=1e-12, atol=0)
+
+
+def test_command_tables_option_refused_in_one_line(tmp_path):
+    from typer.testing import CliRunner
+
+    from lfmbench.cli import app
+
+    out = tmp_path / "out"
+    r = CliRunner().invoke(app, ["flicker-bench", "--sensor", "single", "--n-freq", "0", "--freq", "95",
+                                 "--tables", "all", "--out", str(out)])
+    assert r.exit_code == 2 and "--tables" in r.output and len(r.output.strip().splitlines()) == 1, r.output
+    assert not out.exists()
