@@ -447,7 +447,9 @@ def plot_maps(res: BenchResult, out_dir: Path, stem: str = "flicker_bench", meas
             ax.tick_params(labelsize=7)
         for k in range(n, rows * cols):
             axes[k // cols][k % cols].axis("off")
-        for ax in axes[-1]:
+        for k in range(max(0, n - cols), n):            # the lowest panel of each column carries the frequency axis
+            ax = axes[k // cols][k % cols]
+            ax.xaxis.set_tick_params(labelbottom=True)
             ax.set_xlabel("PWM frequency [Hz]", fontsize=8)
         for ax in axes[:, 0]:
             ax.set_ylabel("duty", fontsize=8)
