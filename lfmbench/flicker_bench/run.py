@@ -5,6 +5,9 @@ Panels: every capture of the plan, then every applicable fusion method: the arch
 other registered rule-based methods of :func:`lfmbench.baselines.methods_for` that run on one frame of a flat
 target (the sequence method ``temporal`` and the learned ones, which need a trained checkpoint, are left out),
 plus any method the user names.
+
+Over 500 lines as one job: a bench run and the outputs that read its result (tables, maps, report), which share
+the result's layout (cells frequency-major, duty fastest; the worst over the luminances) and are tested together.
 """
 from __future__ import annotations
 
