@@ -71,16 +71,26 @@ def register(app: typer.Typer) -> None:
             capture_meta: Optional[Path] = typer.Option(None, "--capture-meta",
                                                         help="real captures: per-ROI frequency_hz, duty, "
                                                              "start_index CSV"),
+            tables: str = typer.Option("worst", "--tables", metavar="worst|full|none",
+                                       help="CSV/JSON tables: each KPI's worst over the luminances (one row per "
+                                            "panel, frequency, duty), every luminance (10x the rows), or none"),
             report: Optional[Path] = typer.Option(None, "--report", help="also write the one-page markdown report "
                                                                           "here (maps linked relative to it)")) -> None:
         """Flicker KPIs (P2020 FMI, MMP, FDI) of a sensor's captures and merges over PWM frequency, duty, luminance
         and every phase, exactly; sequences, noise and real captures beside them (docs/guide/flicker-bench.md)."""
+        import time
+
+        t0 = time.perf_counter()
         from lfmbench.flicker_bench import model as fbm
         from lfmbench.flicker_bench import run as fbr
         from lfmbench.fileio import AtomicWriteError
 
+        stages = {"imports_s": time.perf_counter() - t0}          # the command's wall time per stage (s)
+
         if (capture_series is None) != (capture_meta is None):
             fail("--capture-series and --capture-meta go together")
+        if tables not in fbr.TABLE_MODES:
+            fail(f"--tables must be one of {', '.join(fbr.TABLE_MODES)}, got {tables!r}")
         try:
             model = fbm.build_model(sensor, short_exposure_s=short_exposure, long_exposure_s=long_exposure,
                                     exposures=parse_exposure_option(exposure or []), fps=fps, line_time_s=line_time,
@@ -97,6 +107,7 @@ def register(app: typer.Typer) -> None:
 
                 captures = read_captures(capture_series, capture_meta)
             methods = fbr.bench_methods(model, method or ())
+            stages["model_s"] = time.perf_counter() - t0 - stages["imports_s"]
             res = fbr.run_bench(model, grid, methods, frames=frames, phase0_s=phase0, cover_tol=cover_tol,
                                 noise_draws=noise_draws, roi_px=roi_px, seed=seed)
             if captures:
@@ -105,13 +116,18 @@ def register(app: typer.Typer) -> None:
             fail(str(exc))
         out_dir = out or Path("flicker_bench") / model.preset.name
         try:
-            paths = fbr.write_tables(res, out_dir)
+            t1 = time.perf_counter()
+            paths = fbr.write_tables(res, out_dir, tables)
+            t2 = time.perf_counter()
             paths += fbr.plot_maps(res, out_dir, measured=res.measured)
+            t3 = time.perf_counter()
             if report is not None:
                 paths.append(fbr.write_report(res, report, [p for p in paths if p.suffix == ".png"]))
+            stages.update(tables_s=t2 - t1, maps_s=t3 - t2, report_s=time.perf_counter() - t3)
         except (AtomicWriteError, OSError) as exc:
             fail(exc.strerror or str(exc) if isinstance(exc, OSError) and not isinstance(exc, AtomicWriteError)
                  else str(exc))
         for p in paths:
             typer.echo(f"wrote {p}")
-        typer.echo("timings: " + ", ".join(f"{k} {v:.2f}" for k, v in res.timings_s.items()))
+        stages["command_s"] = time.perf_counter() - t0
+        typer.echo("timings: " + ", ".join(f"{k} {v:.2f}" for k, v in {**stages, **res.timings_s}.items()))

@@ -57,6 +57,15 @@ MIN_FREQUENCY_HZ = 1.0
 MAX_FREQUENCY_HZ = 1.0e6
 
 
+#: CIE 1924 photopic luminous efficiency V(lambda) at 400, 410, ..., 700 nm (1), the values of colour-science's
+#: ``SDS_LEFS_PHOTOPIC["CIE 1924 Photopic Standard Observer"]`` (CIE 018:2019 / ISO 23539:2005 table), held here
+#: because importing colour-science also imports its plotting package (about 1 s of CPU, a tenth of the bench's
+#: 10 s target); tests/flicker_bench compares them with colour-science.
+CIE1924_V_400_700_10NM = (0.000396, 0.00121, 0.004, 0.0116, 0.023, 0.038, 0.06, 0.09098, 0.13902, 0.20802, 0.323,
+                          0.503, 0.71, 0.862, 0.954, 0.9949501, 0.995, 0.952, 0.87, 0.757, 0.631, 0.503, 0.381,
+                          0.265, 0.175, 0.107, 0.061, 0.032, 0.017, 0.00821, 0.004102)
+
+
 class BenchError(ValueError):
     """Bad bench input; the message is one line naming the argument or the file and field."""
 
@@ -164,12 +173,11 @@ def luminance_rate(preset, photodiode: str) -> float:
     camera equation (:func:`lfmbench.sensor.optics.radiance_to_irradiance`), :math:`w_{c,\lambda}` the e- per
     J m^-2 nm^-1 of :func:`lfmbench.sensor.electron_weights` averaged over the 2x2 CFA cell (the ROI mean over whole
     cells), :math:`S` flat over 400-700 nm (10 nm bands), :math:`V` the CIE 1924 photopic luminous efficiency
-    (colour-science), 683 lm/W the SI luminous efficacy. The lens's PSF is left out: the target is larger than it.
+    (:data:`CIE1924_V_400_700_10NM`), 683 lm/W the SI luminous efficacy. The lens's PSF is left out: the target is larger than it.
 
     Returns:
         k in e- s^-1 per cd m^-2.
     """
-    import colour
     import torch
 
     from lfmbench.constants import LUMINOUS_EFFICACY_KCD_LM_PER_W
@@ -177,8 +185,7 @@ def luminance_rate(preset, photodiode: str) -> float:
     from lfmbench.sensor.optics import radiance_to_irradiance
 
     wl = np.arange(400.0, 701.0, 10.0)
-    v = colour.colorimetry.SDS_LEFS_PHOTOPIC["CIE 1924 Photopic Standard Observer"]
-    vl = np.interp(wl, v.wavelengths, v.values)
+    vl = np.asarray(CIE1924_V_400_700_10NM)
     lum_per_unit = LUMINOUS_EFFICACY_KCD_LM_PER_W * float(np.sum(vl * 10.0))  # cd/m^2 per W sr^-1 m^-2 nm^-1
     o = preset.optics
     irr = float(radiance_to_irradiance(torch.ones(1, 1, 1, 1, dtype=torch.float64), o.f_number, o.transmittance,

@@ -5,14 +5,16 @@ Panels: every capture of the plan, then every applicable fusion method: the arch
 other registered rule-based methods of :func:`lfmbench.baselines.methods_for` that run on one frame of a flat
 target (the sequence method ``temporal`` and the learned ones, which need a trained checkpoint, are left out),
 plus any method the user names.
+
+Over 500 lines as one job: a bench run and the outputs that read its result (tables, maps, report), which share
+the result's layout (cells frequency-major, duty fastest; the worst over the luminances) and are tested together.
 """
 from __future__ import annotations
 
-import csv
-import io
 import json
 import math
 import time
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
@@ -27,13 +29,19 @@ from lfmbench.flicker_bench.sequence import frames_to_cover, sequence_kpis, sequ
 from lfmbench.fileio import atomic_save_figure, atomic_write_text, json_default
 
 __all__ = ["BENCH_VERSION", "Grid", "default_grid", "check_grid", "bench_methods", "BenchResult", "run_bench",
-           "write_tables", "plot_maps", "write_report", "DROPOUT_FRACTION"]
+           "write_tables", "worst_columns", "format_values", "WORST_RULES", "TABLE_MODES", "plot_maps", "write_report",
+           "DROPOUT_FRACTION"]
 
-#: Version of the bench's definitions (grid defaults, KPI columns); bumped when either changes.
-BENCH_VERSION = "1"
+#: Version of the bench's definitions (grid defaults, KPI columns, table layout); bumped when any changes. v2: the
+#: default tables hold each KPI's worst over the luminances (``--tables worst``); v1's per-luminance rows are
+#: ``--tables full``.
+BENCH_VERSION = "2"
 #: A light counts as missed at a phase when the output is below this share of its steady-light value
 #: (the dropout threshold of lfmbench.metrics.flicker, ISET-LFM Fig. 5).
 DROPOUT_FRACTION = 0.5
+#: A merge whose steady-light value exceeds the ground truth by more than this factor gets a note in the report
+#: (its "missed" cells can be a drop from that too-bright value to about the truth).
+STEADY_BIAS = 1.5
 #: Most grid values per axis (bounds time and memory).
 MAX_AXIS = 2000
 
@@ -210,56 +218,130 @@ def _header(res: BenchResult) -> dict[str, Any]:
                        for p in res.panels}}
 
 
-def write_tables(res: BenchResult, out_dir: Path) -> list[Path]:
-    """``flicker_bench.csv`` (one row per panel, frequency, duty, luminance; the first line a comment with the
-    preset's name and SHA-256) and ``flicker_bench.json`` (the header, the grid and per panel every KPI as a
-    (frequencies x duties, luminances) array), both written atomically."""
-    keys = sorted({k for c in res.columns.values() for k in c})
-    head = _header(res)
-    buf = io.StringIO()
-    buf.write(f"# lfmbench flicker-bench v{BENCH_VERSION}: preset {head['preset']} sha256 {head['preset_sha256']}\n")
-    w = csv.writer(buf, lineterminator="\n")
-    w.writerow(["panel", "frequency_hz", "duty", "luminance_cd_m2", "frames_to_cover", *keys])
-    # the KPI values of each panel formatted in one C call ("%.7g", non-finite -> empty), not one call per value
-    f_txt = [f"{v:.9g}" for v in np.repeat(res.grid.freqs_hz, res.grid.duties.size)]
-    d_txt = [f"{v:.6g}" for v in np.tile(res.grid.duties, res.grid.freqs_hz.size)]
-    c_txt = ["" if math.isnan(v) else int(v) for v in np.repeat(res.cover, res.grid.duties.size)]
-    l_txt = [f"{v:.6g}" for v in res.grid.lums]
-    n_lum = len(l_txt)
-    for p in res.panels:
-        c = res.columns[p]
-        cols = [np.asarray(c[k], np.float64).reshape(len(f_txt), n_lum) if k in c
-                else np.full((len(f_txt), n_lum), math.nan) for k in keys]
-        flat = np.stack(cols, axis=-1).ravel().tolist()                   # cell, luminance, key
-        txt = ["" if t in _NONFINITE else t for t in (("%.7g " * len(flat)) % tuple(flat)).split()]
-        nk = len(keys)
-        for i in range(len(f_txt)):
-            for j in range(n_lum):
-                o = (i * n_lum + j) * nk
-                w.writerow([p, f_txt[i], d_txt[i], l_txt[j], c_txt[i], *txt[o:o + nk]])
-    out = [out_dir / "flicker_bench.csv", out_dir / "flicker_bench.json"]
-    atomic_write_text(out[0], buf.getvalue())
+def _quote(s: str) -> str:
+    """A CSV field: quoted (RFC 4180) where it holds a comma, a quote or a line break."""
+    return '"' + s.replace('"', '""') + '"' if any(ch in s for ch in ',"\n\r') else s
 
-    def clean(a):  # 7 significant digits, non-finite -> None; formatted in one C call per array, not per value
-        a = np.asarray(a, np.float64)
-        if a.ndim != 2 or not a.size:
-            return [[None if not math.isfinite(v) else float(f"{v:.7g}") for v in row] for row in a]
-        vals = [None if t in _NONFINITE else float(t) for t in (("%.7g " * a.size) % tuple(a.ravel().tolist())).split()]
-        n = a.shape[1]
-        return [vals[i:i + n] for i in range(0, len(vals), n)]
 
-    doc = {**head, "grid": {"frequency_hz": res.grid.freqs_hz, "duty": res.grid.duties,
-                            "luminance_cd_m2": res.grid.lums, "cells": "frequency-major, duty fastest"},
-           "frames_to_cover": [None if math.isnan(v) else int(v) for v in res.cover],
-           "kpis": {p: {k: clean(v) for k, v in res.columns[p].items()} for p in res.panels},
-           "measured": res.measured, "timings_s": res.timings_s}
-    # compact, by the C encoder (the indented form took most of a full map's run time); strict: no NaN or inf
-    atomic_write_text(out[1], json.dumps(doc, allow_nan=False, separators=(",", ":"), default=json_default) + "\n")
+def format_values(a: np.ndarray, sep: str = ",", nonfinite: str = "") -> list[str]:
+    """Rows of a 2-D float array as text, ``"%.7g"`` per value joined by ``sep``, non-finite values as
+    ``nonfinite``: formatted by one C-level ``%`` over the whole array (one call per value, or ``np.savetxt``, is
+    about 10x slower for the bench's millions of values). Returns one string per row."""
+    a = np.asarray(a, np.float64)
+    n, k = a.shape
+    if not n:
+        return []
+    if not k:
+        return [""] * n
+    text = ((sep.join(["%.7g"] * k) + "\n") * n) % tuple(a.ravel().tolist())
+    # "%.7g" writes NaN as "nan" and the infinities as "inf"/"-inf"; the other tokens are digits, '.', 'e', signs
+    text = text.replace("-inf", "inf").replace("inf", nonfinite).replace("nan", nonfinite)
+    return text.split("\n")[:-1]
+
+
+def _json_array(a: np.ndarray) -> str:
+    """Compact JSON text of a 1-D or 2-D float array: 7 significant digits, non-finite values as null."""
+    a = np.asarray(a, np.float64)
+    if a.ndim == 1:
+        return "[" + (format_values(a[None, :], nonfinite="null")[0] if a.size else "") + "]"
+    return "[" + ",".join("[" + r + "]" for r in format_values(a, nonfinite="null")) + "]"
+
+
+#: Worst over the luminances, per KPI of the compact table: "min" (lower is worse), "max" (higher is worse), or
+#: the name of the KPI whose worst luminance the value is taken at.
+WORST_RULES: dict[str, str] = {
+    "rel_min": "min", "rel_max": "max", "worst_phase_s": "rel_min",
+    "fmi_all": "max", "mmp_all": "min", "fdi_all": "min", "fmi_seq": "max", "mmp_seq": "min", "fdi_seq": "min",
+    "on_frac_min": "min", "on_frac_max": "max",
+    "fmi_noisy": "max", "mmp_noisy": "min", "mmp_lo": "mmp_noisy", "mmp_hi": "mmp_noisy", "mmp_floor": "mmp_noisy",
+    "fdi_noisy": "min", "fmi_floor": "max"}
+#: Output tables of ``write_tables``: ``worst`` (default), ``full`` (every luminance) or ``none``.
+TABLE_MODES = ("worst", "full", "none")
+
+
+def worst_columns(res: BenchResult, p: str) -> dict[str, np.ndarray]:
+    """Panel ``p``'s KPIs reduced over the luminances by :data:`WORST_RULES`, each (C,) (cells frequency-major,
+    duty fastest), plus ``worst_luminance_cd_m2``: the luminance (cd/m^2) of the lowest ``rel_min`` (the first
+    where several tie). NaN where a KPI is NaN at every luminance."""
+    cols = res.columns[p]
+    lums = res.grid.lums
+    out: dict[str, np.ndarray] = {}
+
+    def arg(key: str, rule: str) -> np.ndarray:
+        a = np.asarray(cols[key], np.float64)
+        fill = np.inf if rule == "min" else -np.inf
+        z = np.where(np.isfinite(a), a, fill)
+        return np.argmin(z, axis=1) if rule == "min" else np.argmax(z, axis=1)
+
+    rows = np.arange(res.grid.freqs_hz.size * res.grid.duties.size)
+    for key, rule in WORST_RULES.items():
+        if key not in cols:
+            continue
+        a = np.asarray(cols[key], np.float64)
+        if rule in ("min", "max"):
+            with np.errstate(invalid="ignore"), warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)          # all-NaN rows stay NaN, quietly
+                out[key] = np.nanmin(a, axis=1) if rule == "min" else np.nanmax(a, axis=1)
+        else:
+            out[key] = a[rows, arg(rule, WORST_RULES[rule])]
+    out["worst_luminance_cd_m2"] = lums[arg("rel_min", "min")]
     return out
 
 
-#: ``"%.7g"`` of the floats :func:`write_tables` writes as JSON null.
-_NONFINITE = frozenset({"nan", "-nan", "inf", "-inf"})
+def write_tables(res: BenchResult, out_dir: Path, mode: str = "worst") -> list[Path]:
+    """The bench's tables in ``out_dir``, written atomically (the layout: docs/guide/flicker-bench.md).
+
+    ``mode="worst"`` (default): ``flicker_bench.csv`` with one row per panel, frequency and duty, each KPI its worst
+    over the luminances (:func:`worst_columns`), and ``flicker_bench.json`` with the same as (C,) arrays per
+    panel and KPI. ``mode="full"``: one CSV row per panel, frequency, duty and luminance, and every KPI as a
+    (C, L) array in the JSON. ``mode="none"``: nothing. Both files begin with the preset's name and SHA-256 (the
+    CSV in a ``#`` comment line); values have 7 significant digits, empty (CSV) or null (JSON) where not finite.
+    """
+    if mode not in TABLE_MODES:
+        raise BenchError(f"--tables must be one of {', '.join(TABLE_MODES)}, got {mode!r}")
+    if mode == "none":
+        return []
+    full = mode == "full"
+    head = _header(res)
+    F, D, L = res.grid.freqs_hz.size, res.grid.duties.size, res.grid.lums.size
+    data = {p: (res.columns[p] if full else worst_columns(res, p)) for p in res.panels}
+    keys = sorted({k for c in data.values() for k in c})
+    f_txt = [f"{v:.9g}" for v in np.repeat(res.grid.freqs_hz, D)]
+    d_txt = [f"{v:.6g}" for v in np.tile(res.grid.duties, F)]
+    c_txt = ["" if math.isnan(v) else str(int(v)) for v in np.repeat(res.cover, D)]
+    cells = [f"{a},{b},{c}" for a, b, c in zip(f_txt, d_txt, c_txt)]          # frequency, duty, frames_to_cover
+    if full:
+        l_txt = [f"{v:.6g}" for v in res.grid.lums]
+        cells = [f"{a},{b},{lt},{c}" for a, b, c in zip(f_txt, d_txt, c_txt) for lt in l_txt]
+    n_rows = len(cells)
+    parts = [f"# lfmbench flicker-bench v{BENCH_VERSION}: preset {head['preset']} sha256 {head['preset_sha256']} "
+             f"tables {mode}\n",
+             ",".join(["panel", "frequency_hz", "duty", *(["luminance_cd_m2"] if full else []), "frames_to_cover",
+                       *keys]) + "\n"]
+    for p in res.panels:
+        c = data[p]
+        vals = np.stack([np.asarray(c[k], np.float64).reshape(n_rows) if k in c else np.full(n_rows, math.nan)
+                         for k in keys], axis=1)                                        # (rows, keys)
+        q = _quote(p)
+        parts.append("".join([f"{q},{a},{b}\n" for a, b in zip(cells, format_values(vals))]))
+    out = [out_dir / "flicker_bench.csv", out_dir / "flicker_bench.json"]
+    atomic_write_text(out[0], "".join(parts))
+    doc = {**head, "tables": mode,
+           "grid": {"frequency_hz": res.grid.freqs_hz, "duty": res.grid.duties, "luminance_cd_m2": res.grid.lums,
+                    "cells": "frequency-major, duty fastest"},
+           "frames_to_cover": [None if math.isnan(v) else int(v) for v in res.cover],
+           "measured": res.measured, "timings_s": res.timings_s}
+    if not full:
+        doc["worst_over_luminance"] = {k: ("lowest" if r == "min" else "highest" if r == "max"
+                                           else f"at the luminance of the worst {r}") for k, r in WORST_RULES.items()}
+        doc["worst_over_luminance"]["worst_luminance_cd_m2"] = "the luminance of the lowest rel_min"
+    # compact; the header by the C encoder (strict: no NaN or inf), the KPI arrays formatted in bulk
+    kpis = "{" + ",".join(json.dumps(p) + ":{" + ",".join(json.dumps(k) + ":" + _json_array(v)
+                                                           for k, v in data[p].items()) + "}"
+                          for p in res.panels) + "}"
+    text = json.dumps(doc, allow_nan=False, separators=(",", ":"), default=json_default)
+    atomic_write_text(out[1], text[:-1] + ',"kpis":' + kpis + "}\n")
+    return out
 
 
 # ------------------------------------------------------------------------------------------------- figures
@@ -306,6 +388,7 @@ def plot_maps(res: BenchResult, out_dir: Path, stem: str = "flicker_bench", meas
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from matplotlib.colors import BoundaryNorm
+    from matplotlib.ticker import FixedFormatter, FixedLocator, NullLocator
 
     f, d = res.grid.freqs_hz, res.grid.duties
     n = len(res.panels)
@@ -324,8 +407,14 @@ def plot_maps(res: BenchResult, out_dir: Path, stem: str = "flicker_bench", meas
     de = np.concatenate([[d[0] - (d[1] - d[0]) / 2 if d.size > 1 else d[0] * 0.5],
                          (d[1:] + d[:-1]) / 2, [d[-1] + (d[-1] - d[-2]) / 2 if d.size > 1 else d[0] * 1.5]])
     de = np.clip(de, 0.0, 1.0)
+    xt = [v for v in (1, 2, 5, 10, 20, 50, 100, 200, 500, 1000, 2000, 5000, 1e4, 2e4, 5e4, 1e5, 2e5, 5e5, 1e6)
+          if fe[0] <= v <= fe[-1]] or [float(f[0])]
     for stem_key, key, title, bounds, cmap_name in specs:
-        fig, axes = plt.subplots(rows, cols, figsize=(3.6 * cols, 2.9 * rows), squeeze=False, sharex=True, sharey=True)
+        # fixed margins in inches (tight_layout measured every text of every panel: seconds per figure): 1.15 in
+        # for the titles above, 0.5 in for the axis labels below, panels 1.6 in high with gaps for their titles
+        gap = 1.0 if stem_key == "miss" else 0.8
+        height = 1.15 + 0.5 + rows * 1.6 + (rows - 1) * gap
+        fig, axes = plt.subplots(rows, cols, figsize=(3.6 * cols, height), squeeze=False, sharex=True, sharey=True)
         cmap = plt.get_cmap(cmap_name, len(bounds) - 1)
         norm = BoundaryNorm(bounds, cmap.N)
         im = None
@@ -336,17 +425,23 @@ def plot_maps(res: BenchResult, out_dir: Path, stem: str = "flicker_bench", meas
             if stem_key == "miss":
                 ax.contourf(f, d, (z < DROPOUT_FRACTION).T.astype(float), levels=[0.5, 1.5], colors="none",
                             hatches=["////"])
+                # the never-missed bar: one rectangle per run of equal frequencies (not one per frequency)
                 ok = never_missed(res, p)
-                for i in range(f.size):
-                    ax.axvspan(fe[i], fe[i + 1], ymin=1.0, ymax=1.07, color="tab:green" if ok[i] else "black",
+                cut = np.flatnonzero(np.diff(ok.astype(np.int8))) + 1
+                for a, b in zip(np.r_[0, cut], np.r_[cut, ok.size]):
+                    ax.axvspan(fe[a], fe[b], ymin=1.0, ymax=1.07, color="tab:green" if ok[a] else "black",
                                clip_on=False, lw=0)
             zz = np.where(np.isfinite(z), z, np.inf if stem_key != "fmi" else -np.inf)
             i, j = np.unravel_index(np.argmin(zz), zz.shape)
             ax.plot(f[i], d[j], marker="*", ms=11, mfc="white", mec="black")
             ax.set_xscale("log")
+            # labelled frequencies, no minor ticks (matplotlib builds every log-axis minor tick of every panel)
+            ax.xaxis.set_major_locator(FixedLocator(xt))
+            ax.xaxis.set_major_formatter(FixedFormatter([f"{v:g}" for v in xt]))
+            ax.xaxis.set_minor_locator(NullLocator())
             kind = "capture" if p in res.model.names else ("merge" if res.exact[p] else "merge, bisected")
             ax.set_title(f"{p} ({kind})\nworst {z[i, j]:.2f} at {f[i]:.0f} Hz, D={d[j]:.2f}", fontsize=8,
-                         pad=13 if stem_key == "miss" else 4)
+                         y=1.08 if stem_key == "miss" else 1.0, pad=3)   # a fixed y: no automatic placement
             for mrec in measured:
                 if mrec.get("panel") == p:
                     v = mrec["rel_min_measured"] if stem_key == "miss" else mrec["mmp_measured"]
@@ -355,7 +450,9 @@ def plot_maps(res: BenchResult, out_dir: Path, stem: str = "flicker_bench", meas
             ax.tick_params(labelsize=7)
         for k in range(n, rows * cols):
             axes[k // cols][k % cols].axis("off")
-        for ax in axes[-1]:
+        for k in range(max(0, n - cols), n):            # the lowest panel of each column carries the frequency axis
+            ax = axes[k // cols][k % cols]
+            ax.xaxis.set_tick_params(labelbottom=True)
             ax.set_xlabel("PWM frequency [Hz]", fontsize=8)
         for ax in axes[:, 0]:
             ax.set_ylabel("duty", fontsize=8)
@@ -364,7 +461,8 @@ def plot_maps(res: BenchResult, out_dir: Path, stem: str = "flicker_bench", meas
         fig.suptitle(f"{res.model.preset.name} ({res.model.preset.architecture}): {title}{note}\n"
                      f"star = worst cell; {res.model.frame_time_s * 1e3:.2f} ms frames, "
                      f"luminance {res.grid.lums[0]:.3g}-{res.grid.lums[-1]:.3g} cd/m^2", fontsize=7)
-        fig.tight_layout(rect=(0, 0, 0.92, 0.93 if rows > 1 else 0.86))
+        fig.subplots_adjust(left=0.07 if cols > 1 else 0.15, right=0.91 if cols > 1 else 0.85, bottom=0.5 / height,
+                            top=1.0 - 1.15 / height, wspace=0.12, hspace=gap / 1.6)
         cax = fig.add_axes((0.93, 0.15, 0.015, 0.7))
         fig.colorbar(im, cax=cax).ax.tick_params(labelsize=7)
         path = out_dir / f"{stem}_{stem_key}.png"
@@ -406,6 +504,20 @@ def write_report(res: BenchResult, path: Path, images: Sequence[Path], image_bas
         lines.append(f"| {p} | {kind} | {freq_ranges(res.grid.freqs_hz, never_missed(res, p))} | {z[i, j]:.2f} "
                      f"({res.grid.freqs_hz[i]:.0f} Hz, D={res.grid.duties[j]:.2f}) | {mm:.2f} |")
     lines.append("")
+    biased = []
+    for p in res.panels:
+        if p in m.names:
+            continue
+        with np.errstate(invalid="ignore", divide="ignore"):
+            r = res.columns[p]["steady_e"] / res.columns[p]["gt_e"]
+        if np.any(r[np.isfinite(r)] > STEADY_BIAS):
+            biased.append(f"{p} (up to {np.nanmax(r[np.isfinite(r)]):.2f}x)")
+    if biased:
+        lines += [f"Steady value above the ground truth: {', '.join(biased)}. Where such a merge's steady light lies "
+                  "just above a capture's saturation flag, the phases that catch a little less light fall below the "
+                  "flag and the merge answers from the other branch: its output drops to about the truth, below 0.5 x "
+                  "the too-bright steady value, and the cell is marked missed though the output is not dark (a "
+                  "stripe at one duty across many frequencies; the jump is a real flicker of the output).", ""]
     for im in images:
         lines += [f"![{im.stem}]({os.path.relpath(im, base)})", ""]
     cov = res.cover
