@@ -40,8 +40,8 @@ def pwm_weights(batch: Mapping[str, Any]) -> dict[str, torch.Tensor]:
         operations; bit-identical on the CPU). The slots of gated lights (``gate_slot``, ``gate_table``) get
         their waveform's exposure (:meth:`lfmbench.flicker.waveforms.GateTable.exposure`, the per-sample path's
         function, here for all of them at once), under a rolling shutter only on the rows of their boxes
-        (:func:`_gate_rows`; 0 on the others, which no entry reads). On CUDA, for a batch of ideal pulses without group slots
-        (``info["ideal_pulses"]``, ``info["group_slots"]``), one Triton kernel computes them with the same float64
+        (:func:`_gate_rows`; 0 on the others, which no entry reads). On CUDA, for a batch of ideal pulses
+        without group slots (``info["ideal_pulses"]``, ``info["group_slots"]``), one Triton kernel computes them with the same float64
         operations (:mod:`lfmbench.datasets._compose_triton`; equal, zeros up to their sign); gated slots are then
         computed again by the torch form.
     """
