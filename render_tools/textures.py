@@ -29,6 +29,8 @@ Resolutions are fixed per kind (:data:`RESOLUTION`), so kernels compiled for one
 """
 from __future__ import annotations
 
+import functools
+import json
 import math
 
 import numpy as np
@@ -48,24 +50,37 @@ ALBEDO_MAX = 0.95
 TEXTURES: Registry = Registry("texture")
 
 
+@functools.lru_cache(maxsize=64)
+def _lowpass(shape: tuple, cut_v: float, cut_u: float, power: float) -> np.ndarray:
+    """The Fourier-domain filter (rows, cols // 2 + 1) of :func:`_noise` (``cut_v == cut_u``: isotropic,
+    ``1 / (1 + (f / cutoff)^power)``) or :func:`_aniso_noise` (``power`` 0: ``1 / (1 + (fx/cut_u)^2 +
+    (fy/cut_v)^2)``), made once per shape and cut-off (read-only: every texture of a kind shares it)."""
+    if power:
+        fy = np.fft.fftfreq(shape[0])[:, None]
+        fx = np.fft.rfftfreq(shape[1])[None, :]
+        f = np.sqrt(fx * fx + fy * fy)
+        out = 1.0 + (f / cut_u) ** power
+    else:
+        fy = np.fft.fftfreq(shape[0])[:, None] / cut_v
+        fx = np.fft.rfftfreq(shape[1])[None, :] / cut_u
+        out = 1.0 + (fx * fx + fy * fy)
+    out.setflags(write=False)
+    return out
+
+
 def _noise(rng: np.random.Generator, shape, cutoff: float, power: float = 2.0) -> np.ndarray:
     """Periodic (tileable) band-limited noise of ``shape`` (rows, cols), zero mean, unit standard deviation:
     white noise filtered in the Fourier domain by ``1 / (1 + (f / cutoff)^power)`` (f in cycles per texel), so
     the tile wraps seamlessly in both directions."""
     w = rng.standard_normal(shape)
-    fy = np.fft.fftfreq(shape[0])[:, None]
-    fx = np.fft.rfftfreq(shape[1])[None, :]
-    f = np.sqrt(fx * fx + fy * fy)
-    out = np.fft.irfft2(np.fft.rfft2(w) / (1.0 + (f / cutoff) ** power), s=shape)
+    out = np.fft.irfft2(np.fft.rfft2(w) / _lowpass(tuple(shape), cutoff, cutoff, power), s=shape)
     return (out - out.mean()) / max(float(out.std()), 1e-12)
 
 
 def _aniso_noise(rng: np.random.Generator, shape, cut_v: float, cut_u: float) -> np.ndarray:
     """Periodic noise, unit standard deviation, with different cut-offs along v (rows) and u (columns)."""
     w = rng.standard_normal(shape)
-    fy = np.fft.fftfreq(shape[0])[:, None] / cut_v
-    fx = np.fft.rfftfreq(shape[1])[None, :] / cut_u
-    out = np.fft.irfft2(np.fft.rfft2(w) / (1.0 + (fx * fx + fy * fy)), s=shape)
+    out = np.fft.irfft2(np.fft.rfft2(w) / _lowpass(tuple(shape), cut_v, cut_u, 0.0), s=shape)
     return (out - out.mean()) / max(float(out.std()), 1e-12)
 
 
@@ -146,12 +161,14 @@ def paving(desc: dict, rng: np.random.Generator, shape) -> np.ndarray:
 
 @TEXTURES.register("facade")
 def facade(desc: dict, rng: np.random.Generator, shape) -> np.ndarray:
+    # Every pattern but the noise and the bricks depends on the column (u) or the row (z) alone: computed on those
+    # axes and broadcast (the same numbers, element for element, as on the (H, W) grid; far fewer operations).
     H, W = shape
     w_m, h_m = desc["size_m"]
     base = _rgb(desc)
-    u = (np.arange(W) + 0.5) / W * w_m  # metres along the facade
-    z = (np.arange(H) + 0.5) / H * h_m  # metres above ground
-    U, Z = np.meshgrid(u, z)
+    u = (np.arange(W) + 0.5) / W * w_m  # metres along the facade (columns)
+    z = (np.arange(H) + 0.5) / H * h_m  # metres above ground (rows)
+    U, Z = u[None, :], z[:, None]
     brick = rng.random() < 0.4
     f = 0.05 * _noise(rng, shape, 0.02) + 0.04 * _noise(rng, shape, 0.3)
     if brick:  # running bond, 0.25 x 0.075 m courses with mortar joints
@@ -166,18 +183,18 @@ def facade(desc: dict, rng: np.random.Generator, shape) -> np.ndarray:
     ww, wh = desc["window_m"]
     z0, fh = float(desc["sill_z_m"]), float(desc["floor_m"])
     bay = w_m / bays
-    du = np.abs(U - (np.clip(np.floor(U / bay), 0, bays - 1) + 0.5) * bay)  # from the nearest pane's centre, m
+    du = np.abs(U - (np.clip(np.floor(U / bay), 0, bays - 1) + 0.5) * bay)  # (1, W) from the nearest pane's centre, m
     fl = np.clip(np.floor((Z - z0 + 1.2) / fh), 0, floors - 1)
-    dz = Z - (z0 + fl * fh)  # above the nearest sill below (or 1.2 m under it), m
+    dz = Z - (z0 + fl * fh)  # (H, 1) above the nearest sill below (or 1.2 m under it), m
     col[(du < ww / 2 + 0.08) & (dz > -0.08) & (dz < wh + 0.08)] = frame
     col[(du < ww / 2 + 0.12) & (dz > -0.14) & (dz < -0.06)] = ledge
     ridges = 0.5 + 0.5 * np.sin(U * rng.uniform(20, 40) + rng.uniform(0, 6))
     streak = (du < ww / 2) & (dz < -0.14) & (dz > -1.2)
     streak = streak * np.clip(1.0 - (-0.14 - dz) / 1.1, 0, 1) * ridges
     dl = Z - (z0 + wh + 0.55) - np.clip(np.floor((Z - z0 - wh - 0.55) / fh), 0, floors - 1) * fh
-    col[(dl > 0) & (dl < 0.12) & (Z < z0 + floors * fh)] = ledge  # a floor ledge between the storeys
+    col[((dl > 0) & (dl < 0.12) & (Z < z0 + floors * fh))[:, 0]] = ledge  # a floor ledge between the storeys
     col *= np.exp(-0.25 * streak)[..., None]
-    plinth = Z < 0.45
+    plinth = (Z < 0.45)[:, 0]
     col[plinth] = col[plinth] * 0.6
     door = np.asarray([0.18, 0.1, 0.06]) if rng.random() < 0.5 else np.asarray([0.06, 0.07, 0.08])
     gap = bay - ww
@@ -261,11 +278,26 @@ def check_texture(tex, path: str) -> None:
 def texture_array(desc: dict, rgb) -> np.ndarray:
     """The albedo texture of ``desc`` (a material's ``texture``) over base colour ``rgb`` (3,) in [0, 1]:
     (H, W, 3) float32 linear RGB in [0, :data:`ALBEDO_MAX`], row 0 at v = 0, H x W = :data:`RESOLUTION` of its
-    kind. Deterministic in ``desc`` (its ``seed``) and ``rgb``."""
+    kind. Deterministic in ``desc`` (its ``seed``) and ``rgb``. The last :data:`CACHED` arrays are kept in the
+    process by their descriptor and colour (a scene rendered again in one process, e.g. frame by frame or by the
+    texture studies, makes its textures once); the array returned is a copy, the caller's."""
+    return _texture_cached(json.dumps(desc, sort_keys=True), tuple(float(c) for c in rgb)).copy()
+
+
+#: Textures kept in a process by :func:`texture_array` (float32: 0.8 MB a 256 x 256 facade, 1.6 MB an asphalt tile;
+#: a wet night's 46 textures about 25 MB).
+CACHED = 64
+
+
+@functools.lru_cache(maxsize=CACHED)
+def _texture_cached(desc_json: str, rgb: tuple) -> np.ndarray:
+    desc = json.loads(desc_json)
     kind = desc["kind"]
     rng = np.random.default_rng([int(desc["seed"]), sorted(TEXTURES.names()).index(kind)])
     arr = TEXTURES.get(kind)(dict(desc, rgb=list(rgb)), rng, RESOLUTION[kind])
-    return np.clip(arr, 0.0, ALBEDO_MAX).astype(np.float32)
+    out = np.clip(arr, 0.0, ALBEDO_MAX).astype(np.float32)
+    out.setflags(write=False)
+    return out
 
 
 def box_uv(V: np.ndarray, F: np.ndarray, desc: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -43,6 +43,7 @@ def main() -> None:
     from render_tools import scene as S  # noqa: PLC0415
     from render_tools.textures import untextured  # noqa: PLC0415
     from render_tools.jobs import load_profile  # noqa: PLC0415
+    from render_tools import textures  # noqa: PLC0415
     from render_tools.textures import texture_array  # noqa: PLC0415
 
     ap = argparse.ArgumentParser()
@@ -63,6 +64,7 @@ def main() -> None:
                                     height=a.size[1]))
 
     def run(s) -> float:
+        textures._texture_cached.cache_clear()   # each render makes its scene's textures, as a corpus render does
         c = _cpu()
         next(rnd.render_frames(s, opts))
         return _cpu() - c

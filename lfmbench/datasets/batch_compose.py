@@ -39,8 +39,9 @@ def pwm_weights(batch: Mapping[str, Any]) -> dict[str, torch.Tensor]:
         whole-window weight in bin 0. These are the per-sample path's numbers (same functions, same order of
         operations; bit-identical on the CPU). The slots of gated lights (``gate_slot``, ``gate_table``) get
         their waveform's exposure (:meth:`lfmbench.flicker.waveforms.GateTable.exposure`, the per-sample path's
-        function, here for all of them at once). On CUDA, for a batch of ideal pulses without group slots
-        (``info["ideal_pulses"]``, ``info["group_slots"]``), one Triton kernel computes them with the same float64
+        function, here for all of them at once), under a rolling shutter only on the rows of their boxes
+        (:func:`_gate_rows`; 0 on the others, which no entry reads). On CUDA, for a batch of ideal pulses
+        without group slots (``info["ideal_pulses"]``, ``info["group_slots"]``), one Triton kernel computes them with the same float64
         operations (:mod:`lfmbench.datasets._compose_triton`; equal, zeros up to their sign); gated slots are then
         computed again by the torch form.
     """
@@ -76,10 +77,17 @@ def pwm_weights(batch: Mapping[str, Any]) -> dict[str, torch.Tensor]:
         gi = gate_slot.long()
         edges, starts, length, pw3 = _slot_windows(batch, gi)                      # of the G gated slots
         tab = gate_table(batch["gate_table"])                                      # fields (G, 1, 1)
+        rows = _gate_rows(batch, h)                                                # (G, hb) or None
+        if rows is not None:    # rolling: only the rows each gated box covers (the entries read no others)
+            starts = {pd: st.gather(1, rows) for pd, st in starts.items()}         # (G, hb) s
         for key, pd, level in levels:
-            out[key][gi] = window_bin_exposure(edges, starts[pd], length[pd][:, None, None], pw3["period_s"],
-                                               pw3["duty"], pw3["phase_s"], pw3["rise_s"], pw3["fall_s"], level,
-                                               check=False, waveform=tab)
+            w = window_bin_exposure(edges, starts[pd], length[pd][:, None, None], pw3["period_s"], pw3["duty"],
+                                    pw3["phase_s"], pw3["rise_s"], pw3["fall_s"], level, check=False,
+                                    waveform=tab)                                  # (G, R or hb, Kmax) s
+            if rows is not None:
+                w = torch.zeros((G, h, w.shape[-1]), dtype=w.dtype, device=w.device).scatter_(
+                    1, rows[..., None].expand(-1, -1, w.shape[-1]), w)
+            out[key][gi] = w
     grp = K == 0
     # (a batch that says it has no group slots skips the test: bool() would wait for the device)
     if info.get("group_slots", True) and bool(grp.any()):
@@ -94,6 +102,24 @@ def pwm_weights(batch: Mapping[str, Any]) -> dict[str, torch.Tensor]:
         out["gt"][gi] = 0.0
         out["gt"][gi, :, 0] = (p["duty"] * length["lpd"][:, None]).expand(-1, out["gt"].shape[1])
     return out
+
+
+def _gate_rows(batch: Mapping[str, Any], h: int) -> torch.Tensor | None:
+    """Under a rolling shutter, the crop rows (G, hb) int64 at which to evaluate the G gated slots: row
+    ``r0 + j`` of each slot's ``gate_span`` [r0, r1), j < hb (``info["gate_height"]``, the tallest span: a host
+    number), the rows past a shorter span repeating its last row (the same numbers written twice, in
+    :func:`pwm_weights`'s scatter). None (every row) for a global shutter, a batch without spans, or spans as tall
+    as the crop. The weights are an element-wise function of each row's window start, so these rows get the
+    numbers the full (G, h, K) computation gives them (what the per-sample path's ``_rolling_bin_exposure`` does
+    for plain lamps); the rows outside a span are 0, and no entry of the slot lies there."""
+    info = batch["info"]
+    span, hb = batch.get("gate_span"), info.get("gate_height")
+    if info["shutter"] != "rolling" or span is None or hb is None or not 0 < int(hb) < h:
+        return None
+    r0 = span[:, 0:1].long()
+    last = (span[:, 1:2] - span[:, 0:1] - 1).clamp_min(0).long()                # (G, 1) rows past r0
+    j = torch.arange(int(hb), device=span.device, dtype=torch.int64)[None]
+    return (r0 + torch.minimum(j, last)).clamp(0, h - 1)
 
 
 def _slot_windows(batch: Mapping[str, Any], sel: torch.Tensor | None = None) -> tuple:

@@ -134,6 +134,8 @@ def collate_pieces(samples: Sequence[Mapping[str, Any]]) -> dict:
         cols = max(int(t.shape[1]) for _, t in gs)
         out["gate_slot"] = torch.cat([g for g, _ in gs])
         out["gate_table"] = torch.cat([torch.nn.functional.pad(t, (0, cols - int(t.shape[1]))) for _, t in gs])
+        if all("gate_span" in s for s in samples if "gate_slot" in s):   # the rows of each gated box
+            out["gate_span"] = torch.cat([s["gate_span"] for s in samples if "gate_slot" in s])
     out["slot_sample"] = torch.repeat_interleave(torch.arange(len(samples)), torch.tensor(n_slots, dtype=torch.long))
     out["meta"] = default_collate([s["meta"] for s in samples])
     out["info"] = dict(info0)
@@ -141,6 +143,9 @@ def collate_pieces(samples: Sequence[Mapping[str, Any]]) -> dict:
         # decided here on the host, so that pwm_weights never has to ask a device (the same formulas either way)
         out["info"]["ideal_pulses"] = not bool(out["slot_pwm"][:, 3:5].any())
         out["info"]["group_slots"] = bool((out["slot_K"] == 0).any())
+    if "gate_span" in out and out["gate_span"].device.type == "cpu":   # rows of the tallest gated box (host)
+        sp = out["gate_span"]
+        out["info"]["gate_height"] = int((sp[:, 1] - sp[:, 0]).max()) if sp.shape[0] else 0
     return out
 
 

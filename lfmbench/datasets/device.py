@@ -707,9 +707,17 @@ class SplitProgram:
         # gated lights' slots (known on the host from the scene and frame tables) and their gates
         g_of = self.lt_gate[sc[:, None], fr].reshape(-1)                               # (B * F * Lf,)
         g_slot = np.flatnonzero(g_of >= 0)
+        gate_height = None
         if g_slot.shape[0]:
             out["gate_slot"] = to_device(torch.from_numpy(g_slot))
             out["gate_table"] = to_device(torch.from_numpy(self.gates[g_of[g_slot]]))
+            # the crop rows each gated lamp's box covers (host numbers: a rolling shutter's gates are evaluated
+            # there only, batch_compose.pwm_weights)
+            gb = self.lt_box[sc[:, None], fr].reshape(-1, 4)[g_slot]                   # (G, 4) px
+            gy0 = np.repeat(y0h, F * self.lt_box.shape[2])[g_slot]
+            span = np.stack([np.clip(gb[:, 0] - gy0, 0, h), np.clip(gb[:, 2] - gy0, 0, h)], 1).astype(np.int64)
+            out["gate_span"] = to_device(torch.from_numpy(span))
+            gate_height = int((span[:, 1] - span[:, 0]).max())
         # entries: the runs of the global table, masked to the crop and the shown lights
         run = torch.repeat_interleave(torch.arange(B * F * NR, device=dev), cnt_t, output_size=E)
         before = torch.cumsum(cnt_t, 0) - cnt_t
@@ -792,5 +800,6 @@ class SplitProgram:
         out["meta"] = meta
         out["info"] = {"sensor": ds.sensor_name, "frames": F, "crop_hw": (h, w), "shutter": ds.shutter,
                        "noise": ds.noise, "outputs": tuple(ds.outputs), "noise_streams": "counter",
-                       "group_slots": False, "scene_hw": (H, W), "ideal_pulses": self.ideal_pulses, "trusted": True}
+                       "group_slots": False, "scene_hw": (H, W), "ideal_pulses": self.ideal_pulses, "trusted": True,
+                       "gate_height": gate_height}
         return out

@@ -113,7 +113,9 @@ def capture_pieces(ds, scene_id: str, params: Mapping[int, Mapping], group_param
         ``slot_pwm``: (S, 5) float64 PWM parameters (:data:`PWM_FIELDS`); ``slot_frame``: (S,) int64 frame
         within the sample; ``slot_K``: (S,) int64 bins (0: a group stored without bins, whole-window weight).
         ``gate_slot``: (G,) int64 the slots of lights with a gated waveform (indicator, strobe, countdown,
-        destination display), ``gate_table``: (G, 4 + 2 M) float64 their gates (:func:`gate_rows`).
+        destination display), ``gate_table``: (G, 4 + 2 M) float64 their gates (:func:`gate_rows`),
+        ``gate_span``: (G, 2) int64 the crop rows [r0, r1) their boxes cover (a rolling shutter's gates are
+        evaluated on those rows only).
         ``entry_values``: (2, Kmax, E) float32 rates (LPD, SPD) per bin, e-/s (zero past the slot's K);
         ``entry_slot``: (E,) int32; ``entry_pix``: (E,) int32 flat index into (F, h, w).
         ``light_index``: (F, 1, h, w) int16 and ``depth``: (F, 1, h, w) float32 m, when requested.
@@ -167,7 +169,8 @@ def capture_pieces(ds, scene_id: str, params: Mapping[int, Mapping], group_param
             continue
         rank = np.full(len(fe.lights), -1, dtype=np.int32)
         rank[vis] = np.arange(len(slots), len(slots) + len(vis), dtype=np.int32)
-        gated.extend((len(slots) + j, gates[fe.lights[i][0]]) for j, i in enumerate(vis) if fe.lights[i][0] in gates)
+        gated.extend((len(slots) + j, gates[fe.lights[i][0]], fe.lights[i][2]) for j, i in enumerate(vis)
+                     if fe.lights[i][0] in gates)
         slots.extend((f, fe.lights[i][1], params[fe.lights[i][0]]) for i in vis)
         keep = (fe.y >= y0) & (fe.y < y0 + h) & (fe.x >= x0) & (fe.x < x0 + w)
         if len(vis) < len(fe.lights):
@@ -182,7 +185,9 @@ def capture_pieces(ds, scene_id: str, params: Mapping[int, Mapping], group_param
     out["slot_frame"] = torch.tensor([s[0] for s in slots], dtype=torch.int64)
     out["slot_K"] = torch.tensor([s[1] for s in slots], dtype=torch.int64)
     out["gate_slot"] = torch.tensor([g[0] for g in gated], dtype=torch.int64)
-    out["gate_table"] = gate_rows(wf.table() for _, wf in gated)
+    out["gate_table"] = gate_rows(wf.table() for _, wf, _ in gated)
+    out["gate_span"] = torch.tensor([[min(max(b[0] - y0, 0), h), min(max(b[2] - y0, 0), h)] for *_, b in gated],
+                                    dtype=torch.int64).reshape(len(gated), 2)
     if pix and src is not None:
         # on the resident layers' device: the groups' crops and a gather of the lights' entries
         dev = src.static.device

@@ -165,6 +165,50 @@ def test_the_batched_program_composes_every_light_kind_of_scene_version_2(v2_cor
     assert lit.any() and (~lit).any(), case
 
 
+def test_rolling_gates_evaluated_on_their_rows_only_equal_the_full_evaluation(v2_corpus):
+    """Under a rolling shutter the gated slots' weights are computed only on the rows of their boxes
+    (``gate_span``, ``info["gate_height"]``): at every row an entry of a gated slot reads they equal the
+    evaluation on every row of the crop (the same element-wise float64 function of the same row starts, so bit
+    for bit), and they are 0 on the other rows; the per-sample path's pieces carry the same spans."""
+    from lfmbench.datasets.batch_compose import pwm_weights
+
+    kw = dict(split="all", frames=3, crop=None, samples_per_scene=2, outputs=OUTS, seed=7, shutter="rolling")
+    db = DeviceBatches(LFMCaptureDataset(v2_corpus, **kw), batch_size=6, device="cpu", seed=3)
+    pieces = db.resident.program.pieces(range(len(db.ds)))
+    h = pieces["info"]["crop_hw"][0]
+    hb = pieces["info"]["gate_height"]
+    assert 0 < hb < h                                               # the restricted evaluation is taken
+    full = pwm_weights({**{k: v for k, v in pieces.items() if k != "gate_span"}})
+    part = pwm_weights(pieces)
+    is_gate, slot, row, inside = _gated_entry_rows(pieces)
+    on = is_gate[slot]
+    assert on.sum() > 0 and inside[slot[on], row[on]].all()       # every gated entry lies in its span
+    gs = pieces["gate_slot"]
+    for k in ("lpd", "spd", "gt"):
+        assert torch.equal(part[k][slot[on], row[on]], full[k][slot[on], row[on]]), k
+        assert torch.equal(part[k][~is_gate], full[k][~is_gate]), k
+        assert not part[k][gs][~inside[gs]].any(), k
+        assert full[k][gs][~inside[gs]].abs().sum() > 0, k          # the full evaluation did fill those rows
+    # the per-sample path's pieces (collated on the host): spans that hold their entries too
+    ds = db.ds
+    host = collate_pieces([capture_pieces(ds, *ds.draws(i)[:5]) for i in range(len(ds))])
+    assert 0 < host["info"]["gate_height"] < h
+    is_gate, slot, row, inside = _gated_entry_rows(host)
+    assert is_gate[slot].sum() > 0 and inside[slot[is_gate[slot]], row[is_gate[slot]]].all()
+
+
+def _gated_entry_rows(pieces):
+    """(is_gate (S,) bool, entry slot (E,), entry row (E,), inside (S, h) bool: the rows of each gated span)."""
+    h, w = pieces["info"]["crop_hw"]
+    is_gate = torch.zeros(pieces["slot_K"].shape[0], dtype=torch.bool)
+    is_gate[pieces["gate_slot"]] = True
+    slot, row = pieces["entry_slot"].long(), (pieces["entry_pix"].long() % (h * w)) // w
+    inside = torch.zeros(pieces["slot_K"].shape[0], h, dtype=torch.bool)
+    for g, (r0, r1) in zip(pieces["gate_slot"].tolist(), pieces["gate_span"].tolist()):
+        inside[g, r0:r1] = True
+    return is_gate, slot, row, inside
+
+
 def test_counter_draws_differ_between_epochs_seeds_and_samples(long_corpus):
     """The counter streams are not degenerate: other epochs, seeds and samples get other draws; the test split's
     frozen draws do not change with the epoch or the seed."""
