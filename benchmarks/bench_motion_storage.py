@@ -39,6 +39,7 @@ STAG_EDGES = [0.0, 0.010, 0.011, 0.0111]   # the staggered preset's window edges
 #: render-time parts of ``render_tools.render.render_frames`` (cProfile cumulative time of these functions)
 PARTS = (("trace (kernel launches)", "tracer.py", "render"), ("scene dicts per bin", "mitsuba_scene.py", "mitsuba_dict"),
          ("static denoising (with its first import)", "denoise.py", "denoise_static"),
+         ("of which the denoiser's import (torch; once per process)", "pyoidn/__init__.py", "<module>"),
          ("geometry preparation", "mitsuba_scene.py", "prepare_geometry"),
          ("bin plans (lamp boxes)", "render.py", "plan_static_bins"), ("frame plan", "render.py", "plan_frame"))
 
@@ -154,9 +155,10 @@ def main(argv=None) -> None:
           f"1 frame; `exact`: {cost_x['layers']} static bins (the staggered preset's edges), `nearest`: the short "
           "and long windows. Second of two runs of each (kernels cached).", "",
           "## Where the render time goes", "",
-          "cProfile cumulative wall seconds of parts of `render_frames` (one process; the parts overlap nowhere but "
-          "do not cover everything). The static denoising's first call imports its library (and torch) once per "
-          "process: in both columns.", "",
+          "cProfile cumulative wall seconds of parts of `render_frames` (one process; the parts do not cover "
+          "everything; the denoiser's import is part of the denoising row). The static denoising's first call "
+          "imports its library, and with it torch, once per process: in both columns, a fixed cost that a loaded "
+          "machine inflates most.", "",
           "| part | exact s | share % | nearest s | share % |", "|---|---|---|---|---|"]
     for label in ["render_frames"] + [p[0] for p in PARTS]:
         x, n = parts_x.get(label, 0.0), parts_n.get(label, 0.0)
