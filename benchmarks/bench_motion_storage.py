@@ -44,12 +44,20 @@ PARTS = (("trace (kernel launches)", "tracer.py", "render"), ("scene dicts per b
          ("bin plans (lamp boxes)", "render.py", "plan_static_bins"), ("frame plan", "render.py", "plan_frame"))
 
 
+#: run a script (argv[2:]) under cProfile with the CPU clock of the process, stats to argv[1]
+PROFILED = ("import cProfile, runpy, sys, time; out, path = sys.argv[1], sys.argv[2]; sys.argv = sys.argv[2:]; "
+            "p = cProfile.Profile(time.process_time); p.enable(); runpy.run_path(path, run_name='__main__'); "
+            "p.disable(); p.dump_stats(out)")
+
+
 def profile_render(a, work: Path, edges: list, tag: str) -> tuple[dict, dict]:
     """Run the motion-windows worker under cProfile (twice: the first compiles kernels); (cost json, parts s)."""
     prof, npz, js = work / f"{tag}.prof", work / f"{tag}.npz", work / f"{tag}.json"
     if not (prof.exists() and npz.exists() and js.exists()):
         for _ in range(2):
-            cmd = [sys.executable, "-m", "cProfile", "-o", str(prof), str(ROOT / "benchmarks" / "bench_motion_windows.py"),
+            # cProfile timed by the process's CPU clock (every thread): on a shared machine wall time measures the
+            # other jobs as much as this one
+            cmd = [sys.executable, "-c", PROFILED, str(prof), str(ROOT / "benchmarks" / "bench_motion_windows.py"),
                    "--worker", "--case", a.case, "--width", str(a.width), "--height", str(a.height), "--frames", "1",
                    "--seed", "4", "--edges", json.dumps(edges), "--npz", str(npz), "--json", str(js)]
             res = subprocess.run(cmd, capture_output=True, text=True, env=dict(os.environ, PYTHONPATH=str(ROOT)))
@@ -147,18 +155,17 @@ def main(argv=None) -> None:
     md = ["# Motion between captures: what the 1.5x target needs (`benchmarks/bench_motion_storage.py`)", "",
           f"Made {made['start']} to {made['end'][-5:]} UTC on the shared 2-core AMD EPYC (AVX2), load "
           f"{made['load_start']:.1f} / {made['load_end']:.1f} (1-min average at start / end; other jobs ran beside "
-          "it: the times below are wall seconds of a loaded machine, their shares are the reading, not their "
-          "values; rerun quiet for absolute figures). Rerun: `python benchmarks/bench_motion_storage.py --case "
+          "it: CPU seconds are the steadier measure, but a loaded machine slows every process's memory too; rerun "
+          "quiet for absolute figures). Rerun: `python benchmarks/bench_motion_storage.py --case "
           f"{a.case} --width {a.width} --height {a.height} --out docs`.", "",
           f"Scene: generator 2, seed {a.case.split(':')[0]}, {a.case.split(':')[1]}, moving objects "
           f"{len(cost_x['moving'])}, ego {cost_x['speed_mps']:.1f} m/s; `default` profile at {a.width}x{a.height}, "
           f"1 frame; `exact`: {cost_x['layers']} static bins (the staggered preset's edges), `nearest`: the short "
           "and long windows. Second of two runs of each (kernels cached).", "",
           "## Where the render time goes", "",
-          "cProfile cumulative wall seconds of parts of `render_frames` (one process; the parts do not cover "
-          "everything; the denoiser's import is part of the denoising row). The static denoising's first call "
-          "imports its library, and with it torch, once per process: in both columns, a fixed cost that a loaded "
-          "machine inflates most.", "",
+          "cProfile cumulative CPU seconds (the process's clock, every thread) of parts of `render_frames` (the "
+          "parts do not cover everything; the denoiser's import is part of the denoising row). The static "
+          "denoising's first call imports its library, and with it torch, once per process: in both columns.", "",
           "| part | exact s | share % | nearest s | share % |", "|---|---|---|---|---|"]
     for label in ["render_frames"] + [p[0] for p in PARTS]:
         x, n = parts_x.get(label, 0.0), parts_n.get(label, 0.0)
@@ -186,7 +193,7 @@ def main(argv=None) -> None:
     md += ["", "## Reading", "",
            f"Storage: the scene's static files are {100 * static_share:.0f} % of today's scene; at 1.5x of it the exact "
            f"scheme's static files may take {need:.2f}x of what the {cost_x['layers']} bins take at `compact` "
-           "precision. " + (f"Fewest-bit encoding that fits: {fits[0][0]} (windows' error up to "
+           "precision. " + (f"The encoding with the most bits that fits: {fits[0][0]} (windows' error up to "
                             f"{100 * max(fits[0][3].values()):.1f} %)." if fits else
                             "No bin encoding of the table fits.")
            + " Differences from the long window do not help: at spp 1 the bins differ from the long window by "
