@@ -406,6 +406,8 @@ def main(argv=None) -> None:
         for i, e in enumerate(eps)) + ". " + (
         f"eps {best[-1]:g} px would meet the 1.5x target at its upper CPU estimate." if best else
         "No eps meets the 1.5x target at the upper CPU estimate.")]
+    md += ["", "What the 1.5x target would need, measured (where the exact scheme's render time goes, and the bins' "
+           "storage against the error of fewer mantissa bits): [motion-storage.md](motion-storage.md)."]
     text = "\n".join(md) + "\n"
     print(text)
     print(json.dumps({"rows": rows, "cost": cost, "masked_cost": {str(k): v for k, v in masked_cost.items()},

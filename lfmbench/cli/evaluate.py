@@ -19,6 +19,7 @@ from lfmbench.datasets.options import SPLITS
 from lfmbench.evaluation.benchmark import SIMULATE
 from lfmbench.isp import available_pipelines
 from lfmbench.metrics import REGISTRY as METRICS
+from lfmbench.metrics.scoring import REFERENCES
 from lfmbench.sensor import available_presets
 
 __all__ = ["register", "evaluate_cmd", "leaderboard_cmd", "resolve_methods"]
@@ -59,6 +60,11 @@ def evaluate_cmd(
     isp: str = typer.Option("default", "--isp",
                             help="ISP pipeline of the display-referred columns psnr_srgb, ssim_srgb: a shipped name "
                                  f"({', '.join(available_pipelines())}) or a YAML path; 'none' skips them"),
+    reference: str = typer.Option("own", "--reference", **choice(REFERENCES),
+                                  help="truth of the full-image and ghost columns: own (the sensor's own reference "
+                                       "exposure) or common (gt_common, one window through one reference sensor, "
+                                       "the same for every sensor: needed by leaderboard --cross-sensor); the LED "
+                                       "columns always use the sensor's own"),
     shard: str = typer.Option(None, "--shard", metavar="INDEX/COUNT",
                               help="score only shard INDEX of COUNT (scene s goes to shard s mod COUNT; e.g. "
                                    "$SLURM_ARRAY_TASK_ID/$SLURM_ARRAY_TASK_COUNT or $RANK/$WORLD_SIZE); join the "
@@ -123,7 +129,7 @@ def evaluate_cmd(
         extra = {"frames": frames, "sensor": preset, "noise_streams": SIMULATE[simulate]}
         if cache_dir is not None:
             extra["cache_dir"] = cache_dir
-        ds, ident, cond = corpus_run_inputs(corpus, split, seed, crop, samples_per_scene, **extra)
+        ds, ident, cond = corpus_run_inputs(corpus, split, seed, crop, samples_per_scene, reference, **extra)
     except (MethodNotFoundError, FileNotFoundError, EmptyDataError, RuntimeError, ValueError) as exc:
         fail(str(exc))
     from lfmbench.baselines import REGISTRY, methods_for
@@ -152,7 +158,7 @@ def evaluate_cmd(
     try:
         results = evaluate_methods(fns, score_batches(ds, n, simulate, device, indices=indices), method_specs=methods,
                                    outputs=outs, options=ScoreOptions(perceptual=perceptual, isp=isp_name,
-                                                                      sensor=ds.preset),
+                                                                      sensor=ds.preset, reference=reference),
                                    warmup=warmup, repeats=repeats, device=device, seeds={"dataset": seed},
                                    dataset=record, total=n if indices is None else len(indices), corpus=ident,
                                    scene_conditions=cond)

@@ -15,9 +15,21 @@ def safe_name(spec: str) -> str:
 
 
 def corpus_run_inputs(corpus: str | Path, split: str, seed: int, crop: int | None, samples_per_scene: int,
-                      **dataset_kw):
+                      reference: str = "own", **dataset_kw):
     """(dataset, corpus identity, scene-conditions reader) of a corpus split; the identity is taken after the
-    dataset has frozen the test draws (``test_params.json``), so it covers them."""
+    dataset has frozen the test draws (``test_params.json``), so it covers them. ``reference="common"``: the samples
+    also carry ``gt_common`` (the truth of the cross-sensor columns, :data:`lfmbench.metrics.scoring.REFERENCES`;
+    made on the host path only)."""
+    from lfmbench.metrics.scoring import REFERENCES
+
+    if reference not in REFERENCES:
+        raise ValueError(f"reference must be one of {REFERENCES}, got {reference!r:.40}")
+    if reference == "common":
+        from lfmbench.datasets.options import DEFAULT_OUTPUTS
+
+        if dataset_kw.get("noise_streams", "generator") != SIMULATE["host"]:
+            raise ValueError("reference='common' needs simulate='host' (gt_common is made on the per-sample path)")
+        dataset_kw["outputs"] = tuple(dict.fromkeys((*dataset_kw.get("outputs", DEFAULT_OUTPUTS), "gt_common")))
     from lfmbench.datasets.loading import make_dataset
     from lfmbench.evaluation.conditions import corpus_scene_conditions
     from lfmbench.evaluation.provenance import corpus_identity
@@ -178,7 +190,7 @@ def benchmark(corpus: str | Path, methods: Iterable[str] | None = None, runs_dir
               perceptual: bool = True, repeats: int = 5, device: str = "cpu", sort_by: str | None = None,
               progress: bool = True, samples_per_scene: int = 1, cache_dir: str | Path | None = None,
               frames: int = 3, sensor: Any = "ovt", share_samples: bool = True, isp: str | None = "default",
-              simulate: str = "host") -> list[dict]:
+              simulate: str = "host", reference: str = "own") -> list[dict]:
     """Evaluate several methods on one corpus split and build the leaderboard.
 
     Writes ``runs_dir/<method>.json`` per method, ``runs_dir/leaderboard.md``, ``leaderboard.json`` and
@@ -194,7 +206,9 @@ def benchmark(corpus: str | Path, methods: Iterable[str] | None = None, runs_dir
     display-referred secondary columns, None for none (docs/guide/isp.md). ``max_scenes``: score only the first N scenes
     of the split, each with all its ``samples_per_scene`` draws (:func:`samples_to_score`). ``simulate``:
     ``"host"`` (the published results' generator noise) or ``"device"`` (the device program on ``device``, counter
-    noise; :data:`SIMULATE`).
+    noise; :data:`SIMULATE`). ``reference``: ``"own"`` (every column against the sensor's own ``gt``) or
+    ``"common"`` (the cross-sensor columns against ``gt_common``, the one truth of every sensor;
+    :data:`lfmbench.metrics.scoring.REFERENCES`; host only).
     """
     from lfmbench.baselines import methods_for
     from lfmbench.evaluation.leaderboard import check_comparable, leaderboard_rows, load_runs, print_leaderboard
@@ -205,11 +219,12 @@ def benchmark(corpus: str | Path, methods: Iterable[str] | None = None, runs_dir
     extra = {"frames": frames, "sensor": sensor, "noise_streams": SIMULATE[check_simulate(simulate)]}
     if cache_dir is not None:
         extra["cache_dir"] = cache_dir
-    ds, ident, cond = corpus_run_inputs(corpus, split, seed, crop, samples_per_scene, **extra)
+    ds, ident, cond = corpus_run_inputs(corpus, split, seed, crop, samples_per_scene, reference, **extra)
     n = samples_to_score(ds, max_scenes)
     names = list(methods) if methods is not None else methods_for(ds.architecture)
     paths = [runs_dir / f"{safe_name(m)}.json" for m in names]
-    common = dict(options=ScoreOptions(perceptual=perceptual, isp=isp, sensor=ds.preset), repeats=repeats,
+    common = dict(options=ScoreOptions(perceptual=perceptual, isp=isp, sensor=ds.preset, reference=reference),
+                  repeats=repeats,
                   device=device, seeds={"dataset": seed},
                   dataset=run_dataset_record(ds, corpus, split, n, crop, samples_per_scene, frames),
                   progress=progress, total=n, corpus=ident, scene_conditions=cond)
@@ -237,7 +252,10 @@ def benchmark_sensors(corpus: str | Path, sensors: Mapping[str, Iterable[str] | 
                       progress: bool = True, **kw) -> list[dict]:
     """The cross-sensor benchmark (``lfmbench leaderboard --cross-sensor`` as one call): :func:`benchmark` of every
     sensor (its methods share each simulated sample) into ``runs_dir/<sensor>/``, then one leaderboard of all
-    their runs, sensors mixed on purpose, in ``runs_dir/leaderboard.{md,json,png}``.
+    their runs, sensors mixed on purpose, in ``runs_dir/leaderboard.{md,json,png}``. The full-image and ghost
+    columns of every sensor are scored against one truth, ``gt_common`` (``reference="common"``,
+    :data:`lfmbench.metrics.scoring.CROSS_SENSOR_GROUPS`); the LED columns against each sensor's own ``gt``; the
+    condition bins from each sensor's own windows (``pwm_miss_prob``).
 
     Args:
         sensors: preset name (or YAML) -> its methods (None: every registered baseline of its architecture,
@@ -245,7 +263,7 @@ def benchmark_sensors(corpus: str | Path, sensors: Mapping[str, Iterable[str] | 
         checkpoints: preset -> {learned method: checkpoint file} for that sensor's runs (a U-Net is trained per
             sensor; each file's environment variable is set for that sensor only, then restored).
         kw: the other arguments of :func:`benchmark` (split, seed, samples_per_scene, perceptual, repeats, isp ...),
-            the same for every sensor.
+            the same for every sensor (not ``reference``: always ``"common"``).
 
     Returns:
         the ranked rows of the cross-sensor leaderboard.
@@ -280,7 +298,8 @@ def benchmark_sensors(corpus: str | Path, sensors: Mapping[str, Iterable[str] | 
             preset = resolve(sensor)       # once per sensor: the object travels into the dataset and metrics
             names = list(methods) if methods is not None else methods_for(preset.architecture)
             sub = runs_dir / safe_name(sensor)
-            benchmark(corpus, names, sub, sensor=preset, sort_by=sort_by, progress=progress, **kw)
+            benchmark(corpus, names, sub, sensor=preset, sort_by=sort_by, progress=progress, reference="common",
+                      **kw)
         finally:
             for k, v in before.items():
                 if v is None:

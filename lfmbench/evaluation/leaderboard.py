@@ -245,7 +245,19 @@ def comparability_problems(runs: list[dict], cross_sensor: bool = False) -> list
         for r, v in zip(runs, vals):
             groups2.setdefault(_show(field, v, r), []).append(r["_path"])
         problems.append(f"{field} differs: " + "; ".join(f"{k} in {_names(p)}" for k, p in groups2.items()))
+    if cross_sensor and len({run_sensor(r) for r in runs}) > 1:
+        own = [r["_path"] for r in runs if run_reference(r) != "common"]
+        if own:  # each scored against its own reference exposure: the cross-sensor columns would not compare
+            problems.append(f"scored against their own sensor's gt, not the common reference: {_names(own)} "
+                            "(rank sensors together on results of `lfmbench evaluate --reference common` or "
+                            "lfmbench.evaluation.benchmark.benchmark_sensors)")
     return problems
+
+
+def run_reference(run: dict) -> str:
+    """What a result's cross-sensor columns were scored against: ``options.reference`` (result version 3), ``"own"``
+    in files that do not record it (:data:`lfmbench.metrics.scoring.REFERENCES`)."""
+    return str((run.get("options") or {}).get("reference", "own"))
 
 
 def check_comparable(runs: list[dict], cross_sensor: bool = False) -> None:

@@ -19,8 +19,10 @@ from lfmbench.evaluation import stats
 from lfmbench.fileio import atomic_write_json
 
 RESULT_FORMAT = "lfmbench-eval"
-#: Version 2: per-scene values, confidence intervals, conditions, breakdown, corpus identity.
-RESULT_VERSION = 2
+#: Version 2: per-scene values, confidence intervals, conditions, breakdown, corpus identity. Version 3
+#: (2026-11-28): ``options.reference`` (``"common"``: the cross-sensor columns scored against ``gt_common``,
+#: :data:`lfmbench.metrics.scoring.REFERENCES`; absent: against the sensor's own ``gt``, as every version-2 file).
+RESULT_VERSION = 3
 #: ``status`` of a finished result file; anything else (``running``: killed, ``interrupted``, ``failed``) is
 #: not a result the leaderboard ranks without ``--include-incomplete``.
 COMPLETE = "complete"

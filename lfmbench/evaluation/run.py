@@ -263,7 +263,9 @@ class _MethodRun:
                         "interop_threads": torch.get_num_interop_threads(), "scored_ms_per_megapixel": None,
                         "time_moved": None},
             "options": {"perceptual": o.perceptual, "fps": o.fps, "cd_per_unit": o.cd_per_unit,
-                        "region": vars(o.region), "margin_px": o.margin_px, "ring_px": o.ring_px},
+                        "region": vars(o.region), "margin_px": o.margin_px, "ring_px": o.ring_px,
+                        # only when not the default: results scored against their own gt keep their options
+                        **({"reference": o.reference} if o.reference != "own" else {})},
             "versions": versions(o.perceptual, o.cd_per_unit), "git": git_revision(),
             "command": " ".join(sys.argv), "status": "running", "notes": list(notes), "statistics": stats.settings(),
             "aggregate": {}, "per_scene": [], "breakdown": {}, "scenes": [],

@@ -43,12 +43,15 @@ def _psnr_mu_led(pred: torch.Tensor, batch: dict, o) -> torch.Tensor:
     return regions.masked_psnr_mu(pred, batch["gt"], batch["light_index"] >= 0)
 
 
+def _flicker_block(pred: torch.Tensor, batch: dict, o) -> list[dict]:
+    return flicker.region_flicker_metrics(pred, batch["gt"], batch["light_index"], batch.get("saturated"),
+                                          batch.get("lpd_lcg_e"), o.region)
+
+
 def _region_block(pred: torch.Tensor, batch: dict, o) -> list[dict]:
-    li = batch["light_index"]
-    reg = flicker.region_flicker_metrics(pred, batch["gt"], li, batch.get("saturated"), batch.get("lpd_lcg_e"),
-                                         o.region)
-    out = regions.outside_led_metrics(pred, batch["gt"], li, o.margin_px, o.ring_px)
-    return [dict(a, **b) for a, b in zip(reg, out)]
+    """Ghost and comet errors around the LED regions and PSNR-mu outside them (group ``region``: a cross-sensor
+    column, scored against ``gt_common`` with ``ScoreOptions(reference="common")``, so a block of its own)."""
+    return regions.outside_led_metrics(pred, batch["gt"], batch["light_index"], o.margin_px, o.ring_px)
 
 
 def _perceptual_block(pred: torch.Tensor, batch: dict, o) -> list[dict]:
@@ -65,7 +68,8 @@ def _display_block(pred: torch.Tensor, batch: dict, o) -> list[dict]:
 #: Multi-metric blocks, by group name (each computed once per batch).
 BLOCKS: Registry[MetricBlock] = Registry("metric block")
 for _b in (MetricBlock("perceptual", _perceptual_block, on_error="record"),
-           MetricBlock("flicker", _region_block, needs=("light_index",)),
+           MetricBlock("flicker", _flicker_block, needs=("light_index",)),
+           MetricBlock("region", _region_block, needs=("light_index",)),
            MetricBlock("display", _display_block, on_error="record")):
     BLOCKS.register(_b.name, _b)
 
@@ -80,8 +84,8 @@ PRIMARY = "led_score"
 #: :func:`register_metric` adds one.
 REGISTRY: Registry[MetricSpec] = Registry("metric")
 
-#: Groups whose block also produces the ``region`` group's metrics (one pass over the LED regions).
-_BLOCK_OF_GROUP = {"perceptual": "perceptual", "flicker": "flicker", "region": "flicker", "display": "display"}
+#: The block that produces each block-computed group's metrics.
+_BLOCK_OF_GROUP = {"perceptual": "perceptual", "flicker": "flicker", "region": "region", "display": "display"}
 
 
 def _spec_error(s: MetricSpec) -> str | None:

@@ -10,7 +10,18 @@ import torch
 from lfmbench.metrics import display, flicker, regions
 from lfmbench.metrics.registry import _BLOCK_OF_GROUP, BLOCKS, REGISTRY
 
-__all__ = ["ScoreOptions", "score_batch"]
+__all__ = ["ScoreOptions", "score_batch", "REFERENCES", "CROSS_SENSOR_GROUPS", "to_common"]
+
+#: What the cross-sensor columns are scored against (:class:`ScoreOptions` ``reference``): ``"own"``, the sensor's
+#: own ``gt`` (its reference exposure, every published result before 2026-11-28); ``"common"``, the sample's
+#: ``gt_common`` (one fixed reference window through one reference sensor, the same for every sensor:
+#: :meth:`lfmbench.datasets.LFMCaptureDataset._gt_common`), so a cross-sensor ranking compares one truth.
+REFERENCES = ("own", "common")
+
+#: Metric groups scored against the common reference when ``reference="common"``: the full-image (``hdr``,
+#: ``perceptual``, ``display``) and ghost (``region``) columns. The LED groups (``led``, ``flicker``) stay on each
+#: sensor's own ``gt``: they score the sensor's own lamps against its own exposure.
+CROSS_SENSOR_GROUPS = ("hdr", "region", "perceptual", "display")
 
 
 @dataclass
@@ -27,6 +38,8 @@ class ScoreOptions:
     isp: str | None = display.DEFAULT_PIPELINE
     #: sensor preset (object, name or path) the samples were simulated with; None: ``meta["sensor"]`` of the batch
     sensor: Any = None
+    #: ``"own"`` or ``"common"`` (:data:`REFERENCES`): the truth of the :data:`CROSS_SENSOR_GROUPS` columns
+    reference: str = "own"
 
 
 def _f(x) -> float:
@@ -42,6 +55,57 @@ def _enabled(group: str, o: ScoreOptions) -> bool:
     return True
 
 
+def to_common(pred: torch.Tensor, gt: torch.Tensor, gt_common: torch.Tensor) -> torch.Tensor:
+    """An estimate in the sensor's own units mapped to the common reference's: per sample and 2x2 CFA phase one gain
+    k = sum(gt_common) / sum(gt) over the sample's frames and pixels of that phase (every shipped preset's mosaic is
+    GRBG, so a phase is one colour; a phase whose ``gt`` sums to 0 keeps gain 1). The gain comes from the two truths
+    only, never from the estimate: it absorbs what a linear map can (pixel size, QE, exposure length, gain) and
+    leaves every difference of the estimate from ``gt`` scaled, plus what the sensor's own reference window sees
+    differently from the common one (motion over another time, spectral mismatch), in the error.
+
+    Args:
+        pred, gt, gt_common: (B, F, 1, H, W) input-referred e- (``gt_common``: of the reference sensor).
+
+    Returns:
+        (B, F, 1, H, W) ``pred * k``, in the units of ``gt_common``.
+    """
+    B = gt.shape[0]
+    k = torch.ones(B, 1, 1, 2, 2, dtype=gt.dtype, device=gt.device)
+    num, den = gt_common.to(gt.dtype), gt
+    for i in range(2):
+        for j in range(2):
+            n = num[..., i::2, j::2].reshape(B, -1).sum(1)
+            d = den[..., i::2, j::2].reshape(B, -1).sum(1)
+            k[:, 0, 0, i, j] = torch.where(d > 0, n / torch.where(d > 0, d, torch.ones_like(d)), torch.ones_like(d))
+    H, W = gt.shape[-2:]
+    gain = k.repeat(1, 1, 1, (H + 1) // 2, (W + 1) // 2)[..., :H, :W]
+    return pred * gain
+
+
+def _common_inputs(pred: torch.Tensor, batch: dict, o: ScoreOptions) -> tuple[torch.Tensor, dict, ScoreOptions]:
+    """(pred, batch, options) the :data:`CROSS_SENSOR_GROUPS` are scored with: with ``reference="common"`` the
+    estimate mapped by :func:`to_common`, ``gt`` replaced by ``gt_common`` and the display ISP bound to the
+    reference sensor (one ISP for every sensor); else the inputs unchanged."""
+    if o.reference not in REFERENCES:
+        raise ValueError(f"ScoreOptions.reference must be one of {REFERENCES}, got {o.reference!r:.40}")
+    if o.reference == "own":
+        return pred, batch, o
+    gc = batch.get("gt_common")
+    if gc is None:
+        raise ValueError("ScoreOptions(reference='common') needs the batch's gt_common (a dataset made with "
+                         "outputs including 'gt_common', on the per-sample path)")
+    if gc.shape != batch["gt"].shape:
+        raise ValueError(f"batch['gt_common'] must have the shape of batch['gt'] {tuple(batch['gt'].shape)}, got "
+                         f"{tuple(gc.shape)}")
+    from dataclasses import replace  # noqa: PLC0415
+
+    from lfmbench.datasets.capture import COMMON_REFERENCE_SENSOR  # noqa: PLC0415
+
+    gt = batch["gt"]
+    return (to_common(pred, gt, gc), dict(batch, gt=gc.to(gt.dtype)),
+            replace(o, sensor=COMMON_REFERENCE_SENSOR))
+
+
 def score_batch(pred: torch.Tensor, batch: dict, options: ScoreOptions | None = None) -> list[dict]:
     """Every registered metric for one batch, one dict per sample (each block computed once).
 
@@ -49,7 +113,8 @@ def score_batch(pred: torch.Tensor, batch: dict, options: ScoreOptions | None = 
         pred: fused estimate, (B, F, 1, H, W), in the units of ``batch['gt']`` (input-referred e-).
         batch: sample dict (``docs/guide/contracts.md`` section 3) with ``gt`` and ``light_index``; ``saturated`` and
             ``lpd_lcg_e`` are used when present. Metrics whose ``needs`` are missing are left out.
-        options: see :class:`ScoreOptions`.
+        options: see :class:`ScoreOptions`; with ``reference="common"`` the batch needs ``gt_common`` and the
+            :data:`CROSS_SENSOR_GROUPS` columns score :func:`to_common` of ``pred`` against it.
 
     Returns:
         list of B dicts: metric name -> float, plus what the blocks add: ``lights`` (per-light records),
@@ -61,12 +126,16 @@ def score_batch(pred: torch.Tensor, batch: dict, options: ScoreOptions | None = 
     if pred.shape != gt.shape:
         raise ValueError(f"pred must have the shape of batch['gt'] {tuple(gt.shape)}, got {tuple(pred.shape)}")
     pred = pred.to(gt.dtype)
+    common = _common_inputs(pred, batch, o)
+
+    def inputs(group: str) -> tuple:
+        return common if group in CROSS_SENSOR_GROUPS else (pred, batch, o)
     res: list[dict] = [dict() for _ in range(gt.shape[0])]
     for block in BLOCKS.values():
         if not _enabled(block.name, o) or any(batch.get(k) is None for k in block.needs):
             continue
         try:
-            out = block.compute(pred, batch, o)
+            out = block.compute(*inputs(block.name))
         except Exception as exc:
             if block.on_error != "record":
                 raise
@@ -81,7 +150,7 @@ def score_batch(pred: torch.Tensor, batch: dict, options: ScoreOptions | None = 
     for s in REGISTRY.values():
         if s.fn is None or not _enabled(s.group, o) or any(batch.get(k) is None for k in s.needs):
             continue
-        v = s.fn(pred, batch, o)
+        v = s.fn(*inputs(s.group))
         for i, r in enumerate(res):
             r[s.name] = _f(v[i])
     for s in REGISTRY.values():

@@ -51,7 +51,7 @@ def test_lpd_only_does_not_rank_first_by_the_led_score(bench):
 def test_result_json_has_identity_per_scene_ci_and_breakdown(bench):
     d, corpus, _ = bench
     res = json.loads((d / "runs" / "lpd_only.json").read_text())
-    assert res["version"] == 2
+    assert res["version"] == 3 and "reference" not in res["options"]   # own gt: options as in version 2
     import hashlib
 
     assert res["corpus"]["manifest_sha256"] == hashlib.sha256((corpus / "manifest.json").read_bytes()).hexdigest()

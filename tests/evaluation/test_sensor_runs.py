@@ -28,7 +28,7 @@ def runs(tmp_path_factory):
         out[sensor] = d / f"{sensor}.json"
         r = CliRunner().invoke(_app(), ["evaluate", "--sensor", sensor, "--method", method, "--corpus", str(corpus),
                                         "--split", "all", "--output", str(out[sensor]), "--repeats", "1",
-                                        "--warmup", "0", "--no-perceptual"])
+                                        "--warmup", "0", "--no-perceptual", "--reference", "common"])
         assert r.exit_code == 0, r.output
     return d, corpus, out
 
@@ -51,6 +51,12 @@ def test_leaderboard_refuses_mixed_sensors_unless_asked(runs, tmp_path):
     assert r.exit_code == 0, r.output
     md = (tmp_path / "l.md").read_text()
     assert "`exposure_select @ lofic`" in md and "`flicker_aware @ ovt`" in md
+    own = json.loads(out["ovt"].read_text())
+    own["options"].pop("reference")          # as scored against its own gt (a result before version 3)
+    (tmp_path / "own.json").write_text(json.dumps(own))
+    r = CliRunner().invoke(_app(), ["leaderboard", str(out["lofic"]), str(tmp_path / "own.json"), *args,
+                                    "--cross-sensor"])
+    assert r.exit_code == 2 and "not the common reference: own.json" in r.output
 
 
 def test_evaluate_refuses_a_baseline_of_another_architecture(runs, tmp_path):

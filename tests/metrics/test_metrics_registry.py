@@ -29,6 +29,6 @@ def test_a_bad_spec_is_refused_and_nothing_is_registered(kw, why):
 
 
 def test_builtin_blocks_and_lookup_error():
-    assert BLOCKS.names() == ("perceptual", "flicker", "display")
+    assert BLOCKS.names() == ("perceptual", "flicker", "region", "display")
     with pytest.raises(ValueError, match=r"^unknown metric 'nope'; valid: led_score, dropout_rate, "):
         REGISTRY.get("nope")
