@@ -41,6 +41,8 @@ off`` keeps the traced (unbiased) estimate.
 """
 from __future__ import annotations
 
+import sys
+
 import numpy as np
 
 #: Channels the denoiser sees: the band list cut into this many contiguous broad bands (Open Image Denoise
@@ -72,32 +74,61 @@ def broad_bands(n_bands: int, n: int = BROAD_BANDS) -> list[slice]:
     return [slice(int(a), int(b)) for a, b in zip(e[:-1], e[1:])]
 
 
+def _window_sums(x: np.ndarray, r: int, axis: int) -> tuple[np.ndarray, np.ndarray]:
+    """Sums of ``x`` (float64) over the windows [i - r, i + r] along ``axis`` clipped to the array, and the number
+    of elements each window holds, shaped to broadcast against ``x``. From a cumulative sum: for inputs >= 0 the
+    cumulative sum never decreases, so a window of zeros sums to exactly 0 and no sum is negative."""
+    n = x.shape[axis]
+    c = np.cumsum(x, axis=axis, dtype=np.float64)
+    c = np.concatenate([np.zeros_like(np.take(c, [0], axis=axis)), c], axis=axis)
+    i = np.arange(n)
+    hi, lo = np.minimum(i + r + 1, n), np.maximum(i - r, 0)
+    count = (hi - lo).astype(np.float64)
+    shape = [1] * x.ndim
+    shape[axis] = n
+    return np.take(c, hi, axis=axis) - np.take(c, lo, axis=axis), count.reshape(shape)
+
+
 def _box_mean(x: np.ndarray, r: int) -> np.ndarray:
     """(N, H, W) -> (N, H, W) float32: the mean over the (2r+1)^2 px box of each pixel, over the pixels of the box
-    inside the image (only ratios of two such means are used, and both see the same pixels)."""
-    import torch  # noqa: PLC0415
-
-    t = torch.from_numpy(np.ascontiguousarray(x, np.float32))[None]
-    return torch.nn.functional.avg_pool2d(t, 2 * r + 1, 1, r, count_include_pad=False)[0].numpy()
+    inside the image (only ratios of two such means are used, and both see the same pixels); the same as
+    ``torch.nn.functional.avg_pool2d(x, 2r+1, 1, r, count_include_pad=False)`` (tested), summed in float64 along
+    rows, then columns."""
+    rows, n_r = _window_sums(np.asarray(x, np.float32), r, 2)
+    both, n_c = _window_sums(rows, r, 1)
+    return (both / (n_r * n_c)).astype(np.float32)
 
 
 def _block_mean(x: np.ndarray, f: int) -> np.ndarray:
     """(N, H, W) -> (N, ceil(H / f), ceil(W / f)) float32: means over f x f px blocks (a block cut by the image's
     edge: over its pixels inside)."""
-    import torch  # noqa: PLC0415
-
-    t = torch.from_numpy(np.ascontiguousarray(x, np.float32))[None]
-    return torch.nn.functional.avg_pool2d(t, f, f, ceil_mode=True)[0].numpy()
+    x = np.asarray(x, np.float32)
+    N, H, W = x.shape
+    h, w = -(-H // f), -(-W // f)
+    pad = np.zeros((N, h * f, w * f), np.float64)
+    pad[:, :H, :W] = x
+    cnt = np.zeros((h * f, w * f), np.float64)
+    cnt[:H, :W] = 1.0
+    sums = pad.reshape(N, h, f, w, f).sum(axis=(2, 4))
+    return (sums / cnt.reshape(h, f, w, f).sum(axis=(1, 3))).astype(np.float32)
 
 
 def _upsample(x: np.ndarray, f: int, shape: tuple) -> np.ndarray:
     """(N, h, w) block values -> (N, H, W) float32: bilinear between the blocks' centres (edges held), cut to
-    ``shape`` (H, W)."""
-    import torch  # noqa: PLC0415
+    ``shape`` (H, W); ``torch.nn.functional.interpolate(x, scale_factor=f, mode="bilinear",
+    align_corners=False)``'s sampling (an output pixel i reads source position (i + 0.5) / f - 0.5, clamped at 0)."""
+    x = np.asarray(x, np.float32)
 
-    t = torch.from_numpy(np.ascontiguousarray(x, np.float32))[None]
-    up = torch.nn.functional.interpolate(t, scale_factor=f, mode="bilinear", align_corners=False)[0]
-    return up[:, :shape[0], :shape[1]].numpy()
+    def taps(n_out: int, n_in: int):
+        src = np.maximum((np.arange(n_out) + 0.5) / f - 0.5, 0.0)
+        i0 = np.minimum(np.floor(src).astype(int), n_in - 1)
+        i1 = np.minimum(i0 + 1, n_in - 1)
+        return i0, i1, (src - i0).astype(np.float32)
+
+    y0, y1, ly = taps(shape[0], x.shape[1])
+    x0, x1, lx = taps(shape[1], x.shape[2])
+    rows = x[:, y0, :] * (1 - ly)[None, :, None] + x[:, y1, :] * ly[None, :, None]
+    return (rows[:, :, x0] * (1 - lx) + rows[:, :, x1] * lx).astype(np.float32)
 
 
 def keep_mask(shape: tuple, boxes) -> np.ndarray:
@@ -125,6 +156,22 @@ def _fill_boxes(b: np.ndarray, keep: np.ndarray, boxes) -> np.ndarray:
     return out
 
 
+def _import_pyoidn():
+    """The ``pyoidn`` module, imported without torch where torch is not loaded yet: its import tries ``import torch``
+    only to accept tensors as well (seconds of CPU in every render process), and numpy arrays are all this module
+    passes it. In a process that has torch already, a plain import."""
+    if "pyoidn" in sys.modules or "torch" in sys.modules:
+        import pyoidn  # noqa: PLC0415
+
+        return pyoidn
+    sys.modules["torch"] = None  # makes pyoidn's ``import torch`` raise ImportError: its numpy-only mode
+    try:
+        import pyoidn  # noqa: PLC0415
+    finally:
+        del sys.modules["torch"]
+    return pyoidn
+
+
 def oidn_rgb(img: np.ndarray) -> np.ndarray:
     """Open Image Denoise's ``RT`` filter on an HDR image (3, H, W) >= 0 (any linear unit) -> (3, H, W) float32
     >= 0. The image is divided by its mean level (channels summed) before and multiplied after: the filter's own
@@ -132,7 +179,7 @@ def oidn_rgb(img: np.ndarray) -> np.ndarray:
     (a night sky's radiance is ~1e-6 W sr^-1 m^-2 nm^-1); an all-black image is returned black. Raises
     ``RuntimeError`` when the ``pyoidn`` package is not installed."""
     try:
-        import pyoidn  # noqa: PLC0415
+        pyoidn = _import_pyoidn()
     except ImportError as e:  # pragma: no cover - pyoidn is a dependency
         raise RuntimeError("static_denoise: 'oidn' needs the pyoidn package (Intel Open Image Denoise): "
                            "pip install pyoidn, or render with static_denoise: off") from e

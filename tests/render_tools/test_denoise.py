@@ -187,3 +187,26 @@ def test_v2_render_is_denoised_and_v1_is_not():
     b = next(render.render_frames(v1, render.RenderOptions(**base, static_denoise="off")))
     for g in a["static"]:
         np.testing.assert_array_equal(a["static"][g]["short"], b["static"][g]["short"])
+
+
+@pytest.mark.parametrize("shape, r, f", [((3, 37, 53), 4, 8), ((1, 5, 7), 3, 4), ((2, 90, 160), 8, 16)])
+def test_box_block_and_upsample_equal_torch_pooling_and_bilinear(shape, r, f):
+    """The denoiser's box mean, block mean and bilinear upsampling (numpy, float64 sums: no torch in a render
+    process) equal torch's avg_pool2d (count_include_pad=False; ceil_mode blocks) and interpolate (bilinear,
+    align_corners=False) to float32 rounding; a box of zeros gives exactly 0 (the shares' `> 0` tests read it)."""
+    torch = pytest.importorskip("torch")
+    rng = np.random.default_rng(1)
+    x = (rng.random(shape) ** 8 * 1e3).astype(np.float32)
+    x[:, : shape[1] // 2, : shape[2] // 3] = 0.0
+    t = torch.from_numpy(x)[None]
+    box = torch.nn.functional.avg_pool2d(t, 2 * r + 1, 1, r, count_include_pad=False)[0].numpy()
+    ours = denoise._box_mean(x, r)
+    np.testing.assert_allclose(ours, box, rtol=2e-5, atol=2e-6 * box.max())
+    assert np.array_equal(ours == 0, box == 0) and (ours >= 0).all()
+    blk = torch.nn.functional.avg_pool2d(t, f, f, ceil_mode=True)[0].numpy()
+    ours = denoise._block_mean(x, f)
+    assert ours.shape == blk.shape
+    np.testing.assert_allclose(ours, blk, rtol=2e-5, atol=2e-6 * blk.max())
+    up = torch.nn.functional.interpolate(torch.from_numpy(blk)[None], scale_factor=f, mode="bilinear",
+                                         align_corners=False)[0][:, : shape[1], : shape[2]].numpy()
+    np.testing.assert_allclose(denoise._upsample(blk, f, shape[1:]), up, rtol=2e-5, atol=2e-6 * up.max())

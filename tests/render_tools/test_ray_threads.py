@@ -41,10 +41,14 @@ def test_the_scene_task_renders_on_its_threads(tmp_path):
 
 
 def test_the_render_path_imports_no_torch():
+    """Rendering, the closed PWM forms and the static denoiser (Open Image Denoise on a uniform frame) run without
+    torch in the process (its import costs a render worker seconds of CPU)."""
     code = ("import sys; import render_tools.jobs, render_tools.render, render_tools.ray_jobs; "
             "from lfmbench.flicker import pwm_exposure, flicker_severity; import numpy as np; "
             "x = pwm_exposure(np.array([0.001]), 0.004, 0.01, 0.3, backend='numpy'); "
             "f = flicker_severity(np.array([1.0, 3.0])); "
+            "from render_tools.denoise import denoise_static; "
+            "d = denoise_static({'a': np.ones((4, 24, 32), np.float32)}, boxes=[(2, 2, 6, 6)]); "
             "print('torch' in sys.modules, round(float(x[0]), 12), float(f))")
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=str(ROOT),
                        env={**os.environ, "PYTHONPATH": str(ROOT)})
