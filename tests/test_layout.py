@@ -95,7 +95,11 @@ def _imports(mod: str, path: Path) -> set[str]:
     return found
 
 
-GRAPH = {m: _imports(m, p) for m, p in MODULES.items()}
+@pytest.fixture(scope="module")
+def graph() -> dict[str, set[str]]:
+    """Module -> the modules of the tree it imports; read when a test asks (about 2 s of one core to parse every
+    module: not paid at collection by every pytest-xdist worker)."""
+    return {m: _imports(m, p) for m, p in MODULES.items()}
 
 
 def _layer(mod: str) -> tuple[int, str]:
@@ -121,7 +125,7 @@ def test_every_module_has_a_layer():
         _layer(m)
 
 
-def test_no_import_cycle():
+def test_no_import_cycle(graph):
     """Depth-first search for a back edge; an edge from a module to a package holding it is not followed (the
     package's ``__init__`` runs before the module whatever the module imports)."""
     state: dict[str, int] = {}
@@ -131,7 +135,7 @@ def test_no_import_cycle():
     def visit(m: str) -> None:
         state[m] = 1
         stack.append(m)
-        for n in sorted(GRAPH[m]):
+        for n in sorted(graph[m]):
             if _is_parent(m, n):
                 continue
             if state.get(n) == 1:
@@ -141,18 +145,18 @@ def test_no_import_cycle():
         stack.pop()
         state[m] = 2
 
-    for m in sorted(GRAPH):
+    for m in sorted(graph):
         if m not in state:
             visit(m)
     assert not cycles, "import cycles: " + "; ".join(" -> ".join(c) for c in cycles)
 
 
-def test_imports_point_down_the_pipeline():
+def test_imports_point_down_the_pipeline(graph):
     """Every import goes to the module's own package entry or to a lower layer: no stage imports a later stage,
     no stage of lfmbench imports render_tools (only lfmbench.cli and lfmbench.paper join them), and render_tools
     imports from lfmbench only what lies below it."""
     bad = []
-    for m, targets in GRAPH.items():
+    for m, targets in graph.items():
         lm, em = _layer(m)
         for t in targets:
             lt, et = _layer(t)
@@ -161,9 +165,9 @@ def test_imports_point_down_the_pipeline():
     assert not bad, "imports against the flow: " + ", ".join(sorted(bad))
 
 
-def test_no_library_module_of_lfmbench_imports_render_tools():
+def test_no_library_module_of_lfmbench_imports_render_tools(graph):
     joins = ("lfmbench.cli", "lfmbench.paper")
-    bad = sorted(m for m, targets in GRAPH.items()
+    bad = sorted(m for m, targets in graph.items()
                  if m.startswith("lfmbench") and not any(m == j or m.startswith(j + ".") for j in joins)
                  and any(t.split(".")[0] == "render_tools" for t in targets))
     assert not bad, f"library modules importing render_tools: {bad}"

@@ -14,10 +14,19 @@ from typing import List, Optional
 
 import typer
 
+from lfmbench.cli._common import check_local_paths, choice
+from lfmbench.corpus.storage import DEFAULT_STORAGE, STORAGES
 from render_tools import jobs as J
+from render_tools.backend import SUPPORTED_VARIANTS
 from render_tools.protocol import list_protocols
 
 __all__ = ["register", "render_cmd", "protocols_cmd"]
+
+def _storage_help() -> str:
+    """Each storage of :data:`lfmbench.corpus.storage.STORAGES` with its pixel type, mantissa bits and compression."""
+    return ", ".join(f"{n} ({'HALF x 2^e' if s.dtype == 'float16' else 'FLOAT'}, {s.bits} mantissa bits, "
+                     f"{s.compression.upper()})" for n, s in STORAGES.items())
+
 
 def _split_groups(groups: Optional[List[str]]) -> list[str] | None:
     if not groups:
@@ -63,15 +72,13 @@ def render_cmd(
     scene_file: Optional[List[Path]] = typer.Option(None, "--scene",
                                                     help="Render this scene JSON file instead of generating "
                                                          "(repeatable; overrides --scenes)."),
-    variant: Optional[str] = typer.Option(None, "--variant",
-                                          help="Mitsuba variant: cuda_ad_spectral, llvm_ad_spectral or "
-                                               "scalar_spectral (default: auto, CUDA > LLVM > scalar; "
+    variant: Optional[str] = typer.Option(None, "--variant", **choice(SUPPORTED_VARIANTS),
+                                          help="Mitsuba variant (default: auto, CUDA > LLVM > scalar; "
                                                "LFMBENCH_VARIANT=cpu skips CUDA)."),
-    storage: Optional[str] = typer.Option(None, "--storage",
-                                          help="Radiance storage: compact (HALF x 2^e, 5 mantissa bits, PIZ; "
-                                               "default for a new corpus), float16 (HALF x 2^e, ZIP) or float32 "
-                                               "(lossless FLOAT, format version 1). Default on resume: the "
-                                               "corpus's own (docs/guide/corpus-format.md, docs/benchmarks/storage.md)."),
+    storage: Optional[str] = typer.Option(None, "--storage", **choice(STORAGES),
+                                          help=f"Radiance storage: {_storage_help()}; {DEFAULT_STORAGE} for a new "
+                                               "corpus. Default on resume: the corpus's own "
+                                               "(docs/guide/corpus-format.md, docs/benchmarks/storage.md)."),
     half: bool = typer.Option(False, "--half", help="Same as --storage float16."),
     no_resume: bool = typer.Option(False, "--no-resume", help="Re-render scenes that are already complete."),
     yes: bool = typer.Option(False, "--yes", help="Confirm sizes above the sanity limits (e.g. --frames > 300, "
@@ -81,7 +88,6 @@ def render_cmd(
 
     --out is a POSIX path (local, or a folder every Ray node mounts at the same path): a URL (s3://, gs://, ...)
     is refused (docs/guide/distributed.md)."""
-    from lfmbench.cli._common import check_local_paths  # noqa: PLC0415
 
     check_local_paths([("--out", out)] + [("--scene", p) for p in scene_file or []])
     from render_tools import backend as B  # noqa: PLC0415

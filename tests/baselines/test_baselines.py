@@ -91,6 +91,32 @@ def test_noise_model_from_preset_and_batch():
     assert float(v) == pytest.approx(SPD_GAIN * 100 + (SPD_GAIN * 0.83) ** 2, rel=1e-6)
 
 
+def test_noise_model_resolves_a_named_preset_once_and_uses_a_travelling_one_as_is(monkeypatch):
+    """Batches naming ``ovt`` resolve it once per process (not per batch); a ``SensorPreset`` object in the batch
+    (as flicker_bench sends it) is used as it is, no name looked up: a preset that differs from the file only in
+    its SPD read noise gives that read noise."""
+    import dataclasses
+
+    import lfmbench.sensor as S
+
+    classic._named_noise.cache_clear()
+    calls = []
+    real = S.resolve
+    monkeypatch.setattr(S, "resolve", lambda p: calls.append(p) or real(p))
+    nms = [classic.NoiseModel.from_batch(make_batch(seed=i)) for i in range(3)]
+    assert calls == ["ovt"] and nms[0] == nms[1] == nms[2] == classic.NoiseModel.from_preset("ovt")
+    ovt = real("ovt")
+    own = dataclasses.replace(ovt, captures={**ovt.captures, "spd": dataclasses.replace(ovt.captures["spd"],
+                                                                                         read_noise_e=7.5)})
+    b = make_batch()
+    b["meta"]["sensor"] = own
+    assert classic.NoiseModel.from_batch(b) == dataclasses.replace(nms[0], read_noise_spd_e=7.5)
+    b["meta"]["sensor"] = ["no_such_sensor"]
+    for _ in range(2):  # a bad name is not remembered: every batch naming it raises
+        with pytest.raises(ValueError, match="no_such_sensor"):
+            classic.NoiseModel.from_batch(b)
+
+
 def test_bad_batches_raise_named_errors():
     b = make_batch()
     del b["meta"]["exposure_long_s"]

@@ -9,6 +9,7 @@ import pytest
 from typer.testing import CliRunner
 
 from lfmbench.cli import app
+from lfmbench.corpus import STORAGES
 from lfmbench.datasets.options import SPLITS
 from lfmbench.evaluation.benchmark import SIMULATE
 from lfmbench.isp import available_pipelines
@@ -16,11 +17,13 @@ from lfmbench.metrics import REGISTRY as METRICS
 from lfmbench.paper.common import FIGURES
 from lfmbench.train import DATA_SOURCES, RESIDENT_DTYPES
 from lfmbench.train_step import CUDA_GRAPH_MODES
+from render_tools.backend import SUPPORTED_VARIANTS
 
 _ANSI = re.compile(r"\x1b\[[0-9;]*m")
 #: The arguments each command requires besides the option under test.
 _REQUIRED = {"leaderboard": ("x.json",), "evaluate": ("--method", "lpd_only", "--corpus", "x"),
-             "plot": ("--corpus", "x"), "train": ("--corpus", "x"), "paper-figures": ()}
+             "plot": ("--corpus", "x"), "train": ("--corpus", "x"), "paper-figures": (),
+             "render": ("--out", "x")}
 
 
 def _run(*args: str):
@@ -37,6 +40,8 @@ def _run(*args: str):
     ("train", "--resident-dtype", tuple(RESIDENT_DTYPES)),
     ("train", "--cuda-graph", CUDA_GRAPH_MODES),
     ("paper-figures", "--fig", FIGURES),
+    ("render", "--storage", tuple(STORAGES)),
+    ("render", "--variant", SUPPORTED_VARIANTS),
 ])
 def test_help_lists_the_owners_names_and_other_values_are_refused(command, option, names):
     code, out = _run(command, "--help")
