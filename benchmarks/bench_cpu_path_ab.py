@@ -125,7 +125,7 @@ def _callgrind_helper(tmp: Path) -> Path:
     """Builds the client-request helper into ``tmp``; one-line error when valgrind or cc is missing."""
     if shutil.which("valgrind") is None or shutil.which("cc") is None:
         raise SystemExit("--instructions: needs valgrind (with its headers) and cc on PATH")
-    (tmp / "cg.c").write_text(CG_C)
+    atomic_write_text(tmp / "cg.c", CG_C)
     r = subprocess.run(["cc", "-O2", "-shared", "-fPIC", str(tmp / "cg.c"), "-o", str(tmp / "libcg.so")],
                        capture_output=True, text=True)
     if r.returncode != 0:
