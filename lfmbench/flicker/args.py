@@ -23,7 +23,15 @@ def _is_tensor(x: Any) -> bool:
 
 
 def _is_torch(*xs: ArrayLike) -> bool:
-    return any(_is_tensor(x) for x in xs)
+    """Whether any of ``xs`` is a tensor (one module lookup for all: called for every light of every sample)."""
+    torch = sys.modules.get("torch")
+    if torch is None:
+        return False
+    tensor = torch.Tensor
+    for x in xs:
+        if isinstance(x, tensor):
+            return True
+    return False
 
 
 def _np_view(x: ArrayLike) -> np.ndarray:
