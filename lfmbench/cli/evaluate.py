@@ -1,11 +1,12 @@
 """The ``lfmbench evaluate`` and ``lfmbench leaderboard`` commands (thin wrappers of the library modules).
 
 The help and the choices are read from the registries and definitions that own the names
-(:data:`lfmbench.baselines.REGISTRY`, the preset files of :func:`lfmbench.sensor.available_presets`, the ISP
-pipelines of :func:`lfmbench.isp.available_pipelines`, the metrics of :data:`lfmbench.metrics.REGISTRY`
-(``--sort-by``), :data:`lfmbench.datasets.options.SPLITS`, :data:`lfmbench.evaluation.benchmark.SIMULATE`), so they
-name every registered entry; the rest of the library (the dataset, the evaluation) is imported inside the command
-bodies."""
+(:data:`lfmbench.baselines.REGISTRY`, the shipped sensor presets and ISP pipelines of
+:func:`lfmbench.resources.installed`, the metrics of :data:`lfmbench.metrics.REGISTRY` (``--sort-by``),
+:data:`lfmbench.vocabulary.SPLITS`, :data:`lfmbench.evaluation.benchmark.SIMULATE`), so they name every registered
+entry; the rest of the library (the dataset, the evaluation) is imported inside the command bodies, and the
+baselines (which import torch) when the help of ``evaluate`` is shown, so that ``lfmbench leaderboard`` runs
+without torch."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -13,13 +14,11 @@ from typing import List
 
 import typer
 
-from lfmbench.cli._common import check_local_paths, check_minima, choice, fail, lock_output, torch_setup
-from lfmbench.baselines import REGISTRY as BASELINES
-from lfmbench.datasets.options import SPLITS
+from lfmbench.cli._common import check_local_paths, check_minima, choice, fail, lazy, lock_output, torch_setup
 from lfmbench.evaluation.benchmark import SIMULATE
-from lfmbench.isp import available_pipelines
 from lfmbench.metrics import REGISTRY as METRICS
-from lfmbench.sensor import available_presets
+from lfmbench.resources import installed
+from lfmbench.vocabulary import SPLITS
 
 __all__ = ["register", "evaluate_cmd", "leaderboard_cmd", "resolve_methods"]
 
@@ -58,7 +57,7 @@ def evaluate_cmd(
                                         "any writable directory for a read-only corpus)"),
     isp: str = typer.Option("default", "--isp",
                             help="ISP pipeline of the display-referred columns psnr_srgb, ssim_srgb: a shipped name "
-                                 f"({', '.join(available_pipelines())}) or a YAML path; 'none' skips them"),
+                                 f"({', '.join(installed('isp'))}) or a YAML path; 'none' skips them"),
     shard: str = typer.Option(None, "--shard", metavar="INDEX/COUNT",
                               help="score only shard INDEX of COUNT (scene s goes to shard s mod COUNT; e.g. "
                                    "$SLURM_ARRAY_TASK_ID/$SLURM_ARRAY_TASK_COUNT or $RANK/$WORLD_SIZE); join the "
@@ -308,9 +307,15 @@ def merge_results_cmd(
         raise typer.Exit(1)
 
 
+def _baselines() -> str:
+    from lfmbench.baselines import REGISTRY  # noqa: PLC0415 - imports torch: only for the help of evaluate
+
+    return ", ".join(REGISTRY)
+
+
 def register(app: typer.Typer) -> None:
     """Add the ``evaluate``, ``merge-results`` and ``leaderboard`` commands to the typer ``app``."""
-    app.command("evaluate", epilog=f"Baselines: {', '.join(BASELINES)}. Sensor presets: "
-                                   f"{', '.join(available_presets())}.")(evaluate_cmd)
+    app.command("evaluate", epilog=f"Baselines: {lazy(_baselines)}. Sensor presets: "
+                                   f"{', '.join(installed('sensors'))}.")(evaluate_cmd)
     app.command("merge-results")(merge_results_cmd)
     app.command("leaderboard")(leaderboard_cmd)
