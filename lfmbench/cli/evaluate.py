@@ -252,13 +252,14 @@ def leaderboard_cmd(
     sensor presets are refused.
     """
     from lfmbench.evaluation.benchmark import write_leaderboard  # noqa: PLC0415
-    from lfmbench.evaluation.leaderboard import (check_comparable, incomplete_runs,  # noqa: PLC0415
+    from lfmbench.evaluation.leaderboard import (check_comparable, digest_run, incomplete_runs,  # noqa: PLC0415
                                                  leaderboard_rows, load_runs, print_leaderboard)
 
     skipped: list[str] = []
     paths = [Path(p) for p in runs]  # strings from typer: its Path coercion cost 2 s of CPU for 10,000 files
     try:
-        loaded = load_runs((p for p in paths if p.suffix == ".json"), skipped)
+        # each file's per-scene work where it is read (a sweep's files in 2 processes)
+        loaded = load_runs((p for p in paths if p.suffix == ".json"), skipped, digest=digest_run)
         if skipped:
             typer.echo(f"left out {len(skipped)} leaderboard file(s), not results: {', '.join(skipped[:3])}")
         bad = incomplete_runs(loaded)

@@ -11,6 +11,7 @@ from typing import Any
 from lfmbench.evaluation import stats
 from lfmbench.evaluation.conditions import load_bins
 from lfmbench.evaluation.leaderboard.compare import _names, run_sensor
+from lfmbench.evaluation.leaderboard.read import can_fork, map_forked  # noqa: F401 - can_fork re-exported
 from lfmbench.evaluation.results import COMPLETE, breakdown, metric_summary, num, per_scene, scene_means
 from lfmbench.limits import brief
 
@@ -116,8 +117,12 @@ def leaderboard_rows(runs: list[dict], sort_by: str | None = None, *, ci: bool =
     several = len({run_sensor(r) for r in runs}) > 1   # a cross-sensor ranking names each row's sensor
     for r in runs:
         agg = r.get("aggregate", {})
-        records = r.get("scenes") if isinstance(r.get("scenes"), list) else []
-        scenes = per_scene(records)
+        dg = r.get("_digest")   # its per-scene values computed where it was read (render.digest_run), or None
+        if dg is None:
+            records = r.get("scenes") if isinstance(r.get("scenes"), list) else []
+            scenes = per_scene(records)
+        else:
+            records = scenes = None  # read again for a stats row (_reread)
         name = r["method"]["spec"] + (f" @ {run_sensor(r)}" if several else "")
         row = {"method": name, "sensor": run_sensor(r),
                "architecture": (r.get("dataset") or {}).get("architecture", "split_pixel"), "path": r.get("_path"), "device": r["runtime"].get("device"),
@@ -127,8 +132,11 @@ def leaderboard_rows(runs: list[dict], sort_by: str | None = None, *, ci: bool =
                "params": r["method"].get("params"), "macs_per_megapixel": r["method"].get("macs_per_megapixel"),
                "scenes": agg.get("scenes", 0), "failed": agg.get("scenes_failed", 0), "status": r.get("status"),
                "checkpoint_sha256": _checkpoint_sha(r),
-               "n_scenes": len(scenes), "ci": {}, "_scenes": scenes}
-        means = scene_means(scenes)  # metric_summary(scenes, k, ci=False)["value"] of each metric, one pass
+               "n_scenes": len(scenes) if dg is None else dg["n_scenes"], "ci": {}, "_scenes": scenes}
+        # metric_summary(scenes, k, ci=False)["value"] of each metric, one pass
+        means = scene_means(scenes) if dg is None else dg["means"]
+        if dg is not None:
+            row["_scenes_json"], row["_stat"] = dg["scenes_json"], dg["stat"]
         for k in REGISTRY:
             # a metric no scene holds (a hand-made or truncated result without sample records): its stored aggregate
             row[k] = means[k] if k in means else num(agg.get(k))
@@ -149,6 +157,8 @@ def leaderboard_rows(runs: list[dict], sort_by: str | None = None, *, ci: bool =
         row["rank"] = i + 1
         row["stats"] = i < n_stats
         records = row.pop("_records")
+        if row["_scenes"] is None and (row["stats"] or i == 0):   # a digested run: its records read again
+            records, row["_scenes"] = _reread(row)
         if row["stats"]:
             ks = [k for k in REGISTRY if k in want_ci] if ci else []
             jobs.append((row, (row["_scenes"], records, ks, sort_by, bins, ci)))
@@ -161,6 +171,22 @@ def leaderboard_rows(runs: list[dict], sort_by: str | None = None, *, ci: bool =
     if all(a in REGISTRY for a in PARETO_AXES):
         _pareto(rows, PARETO_AXES)
     return rows
+
+
+def _reread(row: dict) -> tuple[list, list]:
+    """(sample records, per-scene entries) of a row whose run was digested where it was read
+    (:func:`lfmbench.evaluation.leaderboard.render.digest_run` keeps neither): its file read and checked again,
+    refused when its size or modification time differs from the first read."""
+    from lfmbench.evaluation.leaderboard.read import _load_one
+
+    p = Path(row["path"])
+    st = p.stat()
+    run = _load_one(p)
+    if run is None or [st.st_size, st.st_mtime_ns] != list(row["_stat"]):
+        raise ValueError(f"run file {p}: changed while the leaderboard was computed (size or modification time); "
+                         "rerun lfmbench leaderboard")
+    records = run.get("scenes") if isinstance(run.get("scenes"), list) else []
+    return records, per_scene(records)
 
 
 def _row_stats(args: tuple) -> tuple[dict, dict]:
@@ -177,27 +203,10 @@ def _row_stats(args: tuple) -> tuple[dict, dict]:
 PARALLEL_STATS_ROWS = 8
 
 
-def can_fork() -> bool:
-    """Whether the leaderboard's outputs may use forked processes: ``fork`` exists and 2 or more CPUs are usable."""
-    import multiprocessing
-    import os
-
-    ncpu = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-    return ncpu >= 2 and "fork" in multiprocessing.get_all_start_methods()
-
-
 def _map_stats(fn, items: list) -> list:
     """``[fn(x) for x in items]``, in a forked pool of 2 processes when there are :data:`PARALLEL_STATS_ROWS` or
-    more items and :func:`can_fork` (in order; any failure of the pool falls back to one process)."""
-    import multiprocessing
-
-    if len(items) < PARALLEL_STATS_ROWS or not can_fork():
-        return [fn(x) for x in items]
-    try:
-        with multiprocessing.get_context("fork").Pool(2) as pool:
-            return pool.map(fn, items, chunksize=1)
-    except (OSError, RuntimeError):   # no process could be started (limits, sandbox): one process
-        return [fn(x) for x in items]
+    more items and :func:`can_fork` (:func:`~lfmbench.evaluation.leaderboard.read.map_forked`)."""
+    return map_forked(fn, items, PARALLEL_STATS_ROWS)
 
 
 def _checkpoint_sha(run: dict) -> str | None:

@@ -3,7 +3,9 @@
 (:func:`plot_quality_vs_runtime`). Columns, headers and directions come from the metric registry."""
 from __future__ import annotations
 
+import json
 import math
+import os
 from pathlib import Path
 from typing import Any
 
@@ -12,7 +14,7 @@ from lfmbench.evaluation.conditions import bin_labels, load_bins
 from lfmbench.evaluation.leaderboard.compare import identity
 from lfmbench.evaluation.leaderboard.rank import PARETO_AXES, _check_sort_by, few_scenes
 from lfmbench.evaluation.leaderboard.read import LEADERBOARD_FORMAT, LEADERBOARD_VERSION
-from lfmbench.evaluation.results import COMPLETE, jsonable, num
+from lfmbench.evaluation.results import COMPLETE, jsonable, num, per_scene, scene_means
 from lfmbench.fileio import atomic_save_figure
 
 
@@ -150,8 +152,9 @@ def _all_labels(cond: str, rows: list[dict]) -> list[str]:
 
 
 def leaderboard_json(rows: list[dict], runs: list[dict], sort_by: str | None = None,
-                     conditions_file: str | Path | None = None) -> dict:
-    """The leaderboard as a JSON-ready dict: settings, corpus identity, metric versions and every row."""
+                     conditions_file: str | Path | None = None, with_scenes: bool = True) -> dict:
+    """The leaderboard as a JSON-ready dict: settings, corpus identity, metric versions and every row, then
+    (``with_scenes``) each row's per-scene values (``per_scene``)."""
     from lfmbench.metrics import PRIMARY, REGISTRY
 
     sort_by = sort_by or PRIMARY
@@ -166,8 +169,48 @@ def leaderboard_json(rows: list[dict], runs: list[dict], sort_by: str | None = N
         "bins": load_bins(conditions_file),
         "rows": [{k: v for k, v in r.items() if not k.startswith("_")} for r in rows],
     })
-    doc["per_scene"] = {str(r["method"]): [_scene_jsonable(s) for s in r["_scenes"]] for r in rows}
+    if not with_scenes:
+        return doc
+    doc["per_scene"] = {str(r["method"]): (json.loads(r["_scenes_json"]) if r["_scenes"] is None else
+                                           [_scene_jsonable(s) for s in r["_scenes"]]) for r in rows}
     return doc
+
+
+#: How a sweep's leaderboard JSON is encoded: compact, by the C encoder (``json.dumps``).
+_COMPACT = {"allow_nan": False, "separators": (",", ":")}
+
+
+def leaderboard_json_text(rows: list[dict], runs: list[dict], sort_by: str | None = None,
+                          conditions_file: str | Path | None = None) -> str:
+    """``json.dumps(leaderboard_json(...), allow_nan=False, separators=(",", ":"))``, the same bytes, with each
+    row's ``per_scene`` list taken as the text :func:`digest_run` serialised where the file was read (a sweep's
+    JSON is mostly these lists: 73 MB for 10,000 files)."""
+    head = json.dumps(leaderboard_json(rows, runs, sort_by, conditions_file, with_scenes=False), **_COMPACT)
+    per: dict[str, str] = {}
+    for r in rows:
+        text = r.get("_scenes_json")
+        per[str(r["method"])] = text if text is not None else _scenes_text(r["_scenes"])
+    return head[:-1] + ',"per_scene":{' + ",".join(json.dumps(k) + ":" + v for k, v in per.items()) + "}}"
+
+
+def _scenes_text(scenes: list[dict]) -> str:
+    return json.dumps([_scene_jsonable(s) for s in scenes], **_COMPACT)
+
+
+def digest_run(run: dict) -> dict:
+    """What the leaderboard needs of one result (:func:`~lfmbench.evaluation.leaderboard.read.load_runs`'s
+    ``digest``, run where the file was read: in a sweep, in the worker processes): the run without its sample
+    records and with ``_digest``: ``means`` (each metric over scenes, as
+    :func:`~lfmbench.evaluation.results.scene_means`), ``n_scenes``, ``scenes_json`` (its ``per_scene`` entries as
+    the leaderboard JSON holds them, serialised) and ``stat`` (the file's size and modification time: a row that
+    gets statistics reads its file again, :func:`~lfmbench.evaluation.leaderboard.rank.leaderboard_rows`)."""
+    records = run.pop("scenes", None)
+    records = records if isinstance(records, list) else []
+    scenes = per_scene(records)
+    st = os.stat(run["_path"])
+    run["_digest"] = {"means": scene_means(scenes), "n_scenes": len(scenes), "scenes_json": _scenes_text(scenes),
+                      "stat": [st.st_size, st.st_mtime_ns]}
+    return run
 
 
 def _scene_jsonable(scene: dict) -> dict:
