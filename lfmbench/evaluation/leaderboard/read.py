@@ -44,7 +44,7 @@ def map_forked(fn, items: list, min_items: int, chunksize: int = 1) -> list:
     try:
         with multiprocessing.get_context("fork").Pool(2) as pool:
             return pool.map(fn, items, chunksize=chunksize)
-    except (OSError, RuntimeError):   # no process could be started (limits, sandbox): one process
+    except (OSError, RuntimeError, AssertionError):  # no process could start (limits, sandbox, a daemonic process)
         return [fn(x) for x in items]
 
 
