@@ -3,8 +3,9 @@
 Each file is a complete result of the same corpus and protocol (what a hyper-parameter sweep writes): ``--scenes``
 sample records (default 8) with every table metric (random values within each metric's range) and the conditions
 the breakdown bins, about 20 KB. Timed, in one process: the whole command (``lfmbench leaderboard`` through the CLI,
-table, Markdown, JSON and plot written), and its phases (reading and checking the files, comparability, rows with
-their statistics, the Pareto front, the outputs). The pairwise Pareto front (the definition, O(n^2)) is timed on the
+table, Markdown, JSON and plot written), and its phases (reading and checking the files and their per-scene values,
+in a forked pool of 2 processes for a sweep, as the command does; comparability, rows with their statistics, the
+Pareto front, the outputs). The pairwise Pareto front (the definition, O(n^2)) is timed on the
 same rows for comparison, up to 2,000 files.
 
 Usage: ``python benchmarks/bench_leaderboard.py [--files 1000 10000] [--scenes 8] [--work DIR] [--no-doc]
@@ -87,8 +88,8 @@ def time_phases(paths: list[Path], out: Path, profile: bool = False) -> dict:
         prof.enable()
     c0 = time.process_time()
     t0 = time.perf_counter()
-    runs = L.load_runs(paths)
-    t["read and check files"] = time.perf_counter() - t0
+    runs = L.load_runs(paths, digest=L.digest_run)  # as the command: per-scene values where each file is read
+    t["read, check, per-scene values (2 processes)"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     L.check_comparable(runs)
     t["comparability"] = time.perf_counter() - t0

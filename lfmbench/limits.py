@@ -38,6 +38,10 @@ LIMITS: dict[str, tuple[int, str]] = {
     "exr_bytes": (4 << 30, "decoded pixel bytes of one EXR file, all parts and channels, as its header declares "
                            "(a 1920x1080 static layer of 2 x 31 FLOAT bands is 514 MB)"),
     "exr_header_bytes": (64 << 20, "bytes of the headers of one EXR file"),
+    "exr_frame_bytes": (8 << 30, "decoded pixel bytes of all EXR files of one corpus frame (its groups and aux), "
+                                 "as their headers declare, checked before the first of them is decoded: each "
+                                 "file is bounded by exr_bytes, a frame of several files was not (a 1920x1080 "
+                                 "frame of five static groups of 2 x 31 FLOAT bands is 2.6 GB)"),
     "lights_per_scene": (4096, "lights of one scene (meta.json, scene files, dataset max_lights): every light is "
                                "one EXR part per frame and group, one padded entry per sample and one frozen "
                                "draw per test sample; the busiest rendered scene has 66"),

@@ -13,7 +13,7 @@ from types import MappingProxyType
 from typing import Mapping
 
 __all__ = ["GROUPS", "LIGHT_GROUPS", "LIGHT_KINDS", "VEHICLE_KINDS", "OBJECT_KINDS", "WEATHERS", "SPECTRUM_MODELS",
-           "PHOTODIODES", "CAPTURES"]
+           "PHOTODIODES", "CAPTURES", "SPLITS"]
 
 #: Light groups (upstream ISET-LFM names + traffic signals); each group is one radiance layer of a corpus.
 GROUPS: tuple[str, ...] = ("headlights", "streetlights", "otherlights", "skymap", "signals")
@@ -49,3 +49,10 @@ SPECTRUM_MODELS: Mapping[str, Mapping[str, tuple[str, ...]]] = MappingProxyType(
 PHOTODIODES: tuple[str, ...] = ("lpd", "spd")
 #: Captures of the split pixel, in the order of the ``saturated`` channels (docs/guide/contracts.md).
 CAPTURES: tuple[str, ...] = ("lpd_hcg", "lpd_lcg", "spd")
+#: Corpus splits a dataset reads (``all``: every complete scene); :data:`lfmbench.datasets.options.SPLITS`.
+SPLITS: tuple[str, ...] = ("train", "val", "test", "all")
+
+#: What the full-image and ghost columns of a result are scored against (``ScoreOptions.reference``, ``lfmbench
+#: evaluate --reference``): ``own`` (the sensor's own reference exposure, ``gt``) or ``common`` (``gt_common``: one
+#: fixed window through one reference sensor, the same for every sensor; needed to rank sensors together).
+REFERENCES = ("own", "common")

@@ -704,3 +704,38 @@ def test_a_training_batch_above_the_memory_limit_is_refused_before_simulation(tm
                                  str(root), "--config", str(cfg), "--out", str(tmp_path / "w.pt")])
     out = _one_line(r)
     assert "train.batch_size" in out and "batch_bytes" in out and not (tmp_path / "w.pt").exists(), out
+
+
+def test_an_exr_frame_of_many_files_is_bounded_before_any_is_decoded(tmp_path, monkeypatch):
+    """Each EXR file is bounded by ``exr_bytes``; a frame of several files, each below it, is bounded as a whole by
+    ``exr_frame_bytes``, summed from the headers before any file of the frame is decoded: one line naming the frame
+    folder, the file that took it over and the limit. A frame at the limit reads."""
+    from lfmbench import corpus as C
+    from lfmbench import limits
+    from lfmbench.corpus import reader
+    from lfmbench.corpus.exr import check_exr_header
+    from tests.data.corpus.data import make_corpus
+
+    root = make_corpus(tmp_path / "c", n_scenes=1)
+    fdir = root / "scenes" / "scene00000" / "f000"
+    total = sum(check_exr_header(f)["decoded_bytes"] for f in fdir.glob("*.exr"))
+    assert all(check_exr_header(f)["decoded_bytes"] < total for f in fdir.glob("*.exr"))  # no file alone is over
+    decoded = []
+    real = reader.read_exr
+    monkeypatch.setattr(reader, "read_exr", lambda p, **k: decoded.append(p) or real(p, **k))
+    limits.set_limit("exr_frame_bytes", total - 1)
+    try:
+        c = C.Corpus(root)
+        for read in (lambda: c.read_static_bins("scene00000", 0, "skymap"), lambda: c.read_aux("scene00000", 0)):
+            with pytest.raises(C.CorpusFileError, match=r"f000: EXR files of one frame declaring [\d,]+ or more "
+                                                         r"decoded pixel bytes \(counted up to \w+\.exr\).*"
+                                                         r"exr_frame_bytes=") as e:
+                read()
+            assert "\n" not in str(e.value)
+        assert decoded == []                                  # refused from the headers: nothing decoded
+        limits.set_limit("exr_frame_bytes", total)
+        c = C.Corpus(root)
+        assert c.read_aux("scene00000", 0) and decoded        # at the limit: read
+    finally:
+        limits.set_limit("exr_frame_bytes", None)
+    assert limits.limit("exr_frame_bytes") == 8 << 30

@@ -5,8 +5,9 @@ pipeline: :mod:`~lfmbench.cli.render` (``render``, ``protocols``), :mod:`~lfmben
 ``import-isetlfm``), :mod:`~lfmbench.cli.train` (``train``), :mod:`~lfmbench.cli.evaluate` (``evaluate``,
 ``leaderboard``), :mod:`~lfmbench.cli.paper` (``flicker-report``, ``paper-figures``), :mod:`~lfmbench.cli.plot`
 (``plot``), :mod:`~lfmbench.cli.configs` (``configs``) and :mod:`~lfmbench.cli.demo` (``demo``). Heavy
-dependencies (torch, Mitsuba, Ray, cvvdp) are imported inside the command bodies, so ``lfmbench --help`` stays
-fast. Help is click's plain format (:class:`_Formatter`): wrapped at any terminal width, nothing cut off.
+dependencies (torch, Mitsuba, Ray, cvvdp) are imported inside the command bodies, and help texts that list the
+names of a registry importing torch are made when that help is shown (:func:`~lfmbench.cli._common.lazy`), so
+``lfmbench --help`` and ``lfmbench leaderboard`` never import torch (tests/cli/test_cli_startup.py). Help is click's plain format (:class:`_Formatter`): wrapped at any terminal width, nothing cut off.
 """
 from __future__ import annotations
 
@@ -78,6 +79,14 @@ class _Formatter(TyperGroup.context_class.formatter_class):  # click's (typer >=
 
 class _Context(TyperGroup.context_class):
     formatter_class = _Formatter
+
+    def get_help(self) -> str:
+        """The help page, its :func:`~lfmbench.cli._common.lazy` texts made first (only help pages import what they
+        list)."""
+        from lfmbench.cli._common import resolve_lazy  # noqa: PLC0415
+
+        resolve_lazy(self.command)
+        return super().get_help()
 
 
 class _Group(TyperGroup):

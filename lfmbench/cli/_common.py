@@ -1,11 +1,43 @@
 """Checks shared by the commands that run torch (``train``, ``evaluate``): one-line errors, exit status 2."""
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 
 import typer
 
-__all__ = ["fail", "choice", "check_minima", "torch_setup", "lock_output", "check_local_paths"]
+__all__ = ["fail", "choice", "lazy", "resolve_lazy", "check_minima", "torch_setup", "lock_output", "check_local_paths"]
+
+
+#: Placeholder -> the function that makes its text (:func:`lazy`).
+_LAZY: dict[str, Callable[[], str]] = {}
+
+
+def lazy(text: Callable[[], str]) -> str:
+    """A placeholder for help text (a help string, a metavar, an epilog) made by ``text()`` only when a command's
+    help is shown (:func:`resolve_lazy`): names owned by a registry that imports torch (the baselines, the training
+    options) are listed in the help without importing torch at every command's start-up."""
+    token = f"{{lazy:{len(_LAZY)}}}"
+    _LAZY[token] = text
+    return token
+
+
+def _resolved(s):
+    if isinstance(s, str) and "{lazy:" in s:
+        for token, text in _LAZY.items():
+            if token in s:
+                s = s.replace(token, text())
+    return s
+
+
+def resolve_lazy(command) -> None:
+    """Replace the :func:`lazy` placeholders of a click ``command`` (its help, epilog, and each parameter's help and
+    metavar) by their text: called just before its help is formatted."""
+    command.help = _resolved(command.help)
+    command.epilog = _resolved(command.epilog)
+    for p in getattr(command, "params", ()):
+        if getattr(p, "help", None) is not None:
+            p.help = _resolved(p.help)
+        p.metavar = _resolved(p.metavar)
 
 
 def choice(names, metavar: str | None = None) -> dict:
@@ -13,14 +45,20 @@ def choice(names, metavar: str | None = None) -> dict:
     (a :class:`lfmbench.registry.Registry`, a mapping's keys or a tuple): the metavar lists them in the help (a
     long list: give a short ``metavar`` and name them in the help text, which wraps), and the parser refuses
     anything else (exit status 2, the option and the names in the message), reading ``names`` when the command
-    runs, so an entry added there is listed and accepted without touching the command."""
+    runs, so an entry added there is listed and accepted without touching the command. ``names`` may be a function
+    returning them (an owner that imports torch): called when the value is checked or the help shown (:func:`lazy`)."""
+    get = names if callable(names) else (lambda: names)
+
     def parse(value: str) -> str:
-        allowed = [str(n) for n in names]
+        allowed = [str(n) for n in get()]
         if value not in allowed:
             raise typer.BadParameter(f"{value[:40]!r} is not one of {', '.join(allowed)}")
         return value
 
-    return {"parser": parse, "metavar": metavar or f"[{'|'.join(str(n) for n in names)}]"}
+    def listed() -> str:
+        return f"[{'|'.join(str(n) for n in get())}]"
+
+    return {"parser": parse, "metavar": metavar or (lazy(listed) if callable(names) else listed())}
 
 
 def fail(msg: str, code: int = 2) -> None:

@@ -1,11 +1,12 @@
 """The ``lfmbench evaluate`` and ``lfmbench leaderboard`` commands (thin wrappers of the library modules).
 
 The help and the choices are read from the registries and definitions that own the names
-(:data:`lfmbench.baselines.REGISTRY`, the preset files of :func:`lfmbench.sensor.available_presets`, the ISP
-pipelines of :func:`lfmbench.isp.available_pipelines`, the metrics of :data:`lfmbench.metrics.REGISTRY`
-(``--sort-by``), :data:`lfmbench.datasets.options.SPLITS`, :data:`lfmbench.evaluation.benchmark.SIMULATE`), so they
-name every registered entry; the rest of the library (the dataset, the evaluation) is imported inside the command
-bodies."""
+(:data:`lfmbench.baselines.REGISTRY`, the shipped sensor presets and ISP pipelines of
+:func:`lfmbench.resources.installed`, the metrics of :data:`lfmbench.metrics.REGISTRY` (``--sort-by``),
+:data:`lfmbench.vocabulary.SPLITS`, :data:`lfmbench.evaluation.benchmark.SIMULATE`), so they name every registered
+entry; the rest of the library (the dataset, the evaluation) is imported inside the command bodies, and the
+baselines (which import torch) when the help of ``evaluate`` is shown, so that ``lfmbench leaderboard`` runs
+without torch."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -13,14 +14,11 @@ from typing import List
 
 import typer
 
-from lfmbench.cli._common import check_local_paths, check_minima, choice, fail, lock_output, torch_setup
-from lfmbench.baselines import REGISTRY as BASELINES
-from lfmbench.datasets.options import SPLITS
+from lfmbench.cli._common import check_local_paths, check_minima, choice, fail, lazy, lock_output, torch_setup
 from lfmbench.evaluation.benchmark import SIMULATE
-from lfmbench.isp import available_pipelines
 from lfmbench.metrics import REGISTRY as METRICS
-from lfmbench.metrics.scoring import REFERENCES
-from lfmbench.sensor import available_presets
+from lfmbench.resources import installed
+from lfmbench.vocabulary import REFERENCES, SPLITS
 
 __all__ = ["register", "evaluate_cmd", "leaderboard_cmd", "resolve_methods"]
 
@@ -59,7 +57,7 @@ def evaluate_cmd(
                                         "any writable directory for a read-only corpus)"),
     isp: str = typer.Option("default", "--isp",
                             help="ISP pipeline of the display-referred columns psnr_srgb, ssim_srgb: a shipped name "
-                                 f"({', '.join(available_pipelines())}) or a YAML path; 'none' skips them"),
+                                 f"({', '.join(installed('isp'))}) or a YAML path; 'none' skips them"),
     reference: str = typer.Option("own", "--reference", **choice(REFERENCES),
                                   help="truth of the full-image and ghost columns: own (the sensor's own reference "
                                        "exposure) or common (gt_common, one window through one reference sensor, "
@@ -233,7 +231,7 @@ def _checkpoint_sensor_check(fn):
 
 
 def leaderboard_cmd(
-    runs: list[Path] = typer.Argument(..., help="evaluation JSON files, e.g. runs/*.json"),
+    runs: list[str] = typer.Argument(..., help="evaluation JSON files, e.g. runs/*.json"),
     sort_by: str = typer.Option("led_score", **choice(METRICS, "METRIC"),
                                 help=f"registered metric to rank by: {', '.join(METRICS)} (default: the LED score, "
                                      "docs/guide/metrics.md)"),
@@ -259,12 +257,14 @@ def leaderboard_cmd(
     sensor presets are refused.
     """
     from lfmbench.evaluation.benchmark import write_leaderboard  # noqa: PLC0415
-    from lfmbench.evaluation.leaderboard import (check_comparable, incomplete_runs,  # noqa: PLC0415
+    from lfmbench.evaluation.leaderboard import (check_comparable, digest_run, incomplete_runs,  # noqa: PLC0415
                                                  leaderboard_rows, load_runs, print_leaderboard)
 
     skipped: list[str] = []
+    paths = [Path(p) for p in runs]  # strings from typer: its Path coercion cost 2 s of CPU for 10,000 files
     try:
-        loaded = load_runs((p for p in runs if p.suffix == ".json"), skipped)
+        # each file's per-scene work where it is read (a sweep's files in 2 processes)
+        loaded = load_runs((p for p in paths if p.suffix == ".json"), skipped, digest=digest_run)
         if skipped:
             typer.echo(f"left out {len(skipped)} leaderboard file(s), not results: {', '.join(skipped[:3])}")
         bad = incomplete_runs(loaded)
@@ -314,9 +314,15 @@ def merge_results_cmd(
         raise typer.Exit(1)
 
 
+def _baselines() -> str:
+    from lfmbench.baselines import REGISTRY  # noqa: PLC0415 - imports torch: only for the help of evaluate
+
+    return ", ".join(REGISTRY)
+
+
 def register(app: typer.Typer) -> None:
     """Add the ``evaluate``, ``merge-results`` and ``leaderboard`` commands to the typer ``app``."""
-    app.command("evaluate", epilog=f"Baselines: {', '.join(BASELINES)}. Sensor presets: "
-                                   f"{', '.join(available_presets())}.")(evaluate_cmd)
+    app.command("evaluate", epilog=f"Baselines: {lazy(_baselines)}. Sensor presets: "
+                                   f"{', '.join(installed('sensors'))}.")(evaluate_cmd)
     app.command("merge-results")(merge_results_cmd)
     app.command("leaderboard")(leaderboard_cmd)

@@ -10,9 +10,8 @@ from typing import List, Optional
 import typer
 
 from lfmbench.cli._common import check_minima, choice, fail
-from lfmbench.datasets.options import SPLITS
-from lfmbench.isp import available_pipelines
-from lfmbench.sensor import available_presets
+from lfmbench.resources import installed
+from lfmbench.vocabulary import SPLITS
 
 __all__ = ["register", "plot_cmd"]
 
@@ -28,8 +27,8 @@ def plot_cmd(
                                                help="repeatable: also show this method's output (a baseline or "
                                                     "module:function, as lfmbench evaluate)"),
     sensor: str = typer.Option("ovt", "--sensor", help=f"sensor preset: a shipped name "
-                                                        f"({', '.join(available_presets())}) or a YAML path"),
-    isp: str = typer.Option("default", "--isp", help=f"ISP pipeline: a shipped name ({', '.join(available_pipelines())}) "
+                                                        f"({', '.join(installed('sensors'))}) or a YAML path"),
+    isp: str = typer.Option("default", "--isp", help=f"ISP pipeline: a shipped name ({', '.join(installed('isp'))}) "
                                                       "or a YAML path"),
     frames: int = typer.Option(3, help="consecutive frames per sample"),
     crop: Optional[int] = typer.Option(None, help="square crop in px (default: the whole frame)"),

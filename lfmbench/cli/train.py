@@ -1,7 +1,8 @@
 """The ``lfmbench train --method NAME`` command: any learned baseline of :data:`lfmbench.baselines.LEARNED`
 through the one loop of :mod:`lfmbench.train`. The help and the choices read the registries and definitions that
 own the names: the learned baselines, the shipped presets, :data:`lfmbench.train.DATA_SOURCES`,
-:data:`~lfmbench.train.RESIDENT_DTYPES` and :data:`lfmbench.train_step.CUDA_GRAPH_MODES`."""
+:data:`~lfmbench.train.RESIDENT_DTYPES` and :data:`lfmbench.train_step.CUDA_GRAPH_MODES` (those three and the
+baselines import torch: read when the help is shown or the option checked, :func:`lfmbench.cli._common.lazy`)."""
 from __future__ import annotations
 
 import statistics
@@ -9,18 +10,39 @@ from pathlib import Path
 
 import typer
 
-from lfmbench.cli._common import check_local_paths, check_minima, choice, fail, torch_setup
-from lfmbench.baselines import LEARNED
-from lfmbench.sensor import available_presets
-from lfmbench.train import DATA_SOURCES, RESIDENT_DTYPES
-from lfmbench.train_step import CUDA_GRAPH_MODES
+from lfmbench.cli._common import check_local_paths, check_minima, choice, fail, lazy, torch_setup
+from lfmbench.resources import installed
 
 __all__ = ["register", "train_cmd"]
 
 
+def _learned() -> list[str]:
+    from lfmbench.baselines import LEARNED  # noqa: PLC0415 - imports torch: when the command runs or shows help
+
+    return list(LEARNED)
+
+
+def _data_sources() -> tuple[str, ...]:
+    from lfmbench.train import DATA_SOURCES  # noqa: PLC0415
+
+    return DATA_SOURCES
+
+
+def _resident_dtypes() -> tuple[str, ...]:
+    from lfmbench.train import RESIDENT_DTYPES  # noqa: PLC0415
+
+    return tuple(RESIDENT_DTYPES)
+
+
+def _cuda_graph_modes() -> tuple[str, ...]:
+    from lfmbench.train_step import CUDA_GRAPH_MODES  # noqa: PLC0415
+
+    return CUDA_GRAPH_MODES
+
+
 def train_cmd(
     corpus: Path = typer.Option(..., "--corpus", help="corpus root directory (its train split is used)"),
-    method: str = typer.Option("unet", "--method", "-m", help=f"learned baseline: {', '.join(LEARNED)}"),
+    method: str = typer.Option("unet", "--method", "-m", help=f"learned baseline: {lazy(lambda: ', '.join(_learned()))}"),
     config: str = typer.Option(None, "--config", help="the method's config: a YAML path or a shipped name "
                                                       "(`lfmbench configs`; default <method>, unet_tiny: the "
                                                       "demo's U-Net)"),
@@ -31,21 +53,21 @@ def train_cmd(
     crop: int = typer.Option(None, help="square training crop in px, even (overrides train.crop)"),
     batch_size: int = typer.Option(None, "--batch-size", help="batch size (overrides train.batch_size)"),
     sensor: str = typer.Option(None, "--sensor",
-                               help=f"sensor preset ({', '.join(available_presets())}) or a preset YAML "
+                               help=f"sensor preset ({', '.join(installed('sensors'))}) or a preset YAML "
                                     "to train for (overrides train.sensor); the U-Net takes any capture plan, "
                                     "the checkpoint records the sensor and serves only it"),
     threads: int = typer.Option(None, help="torch CPU threads (default: torch's choice)"),
     resume: bool = typer.Option(True, help="continue from --out when it holds a checkpoint of this config"),
-    data: str = typer.Option("auto", **choice(DATA_SOURCES),
+    data: str = typer.Option("auto", **choice(_data_sources),
                              help="where batches come from: loader (DataLoader workers on the CPU), "
                                   "device (the corpus resident on --device, batches simulated there), "
                                   "auto (device on CUDA for a split-pixel sensor, else loader)"),
-    resident_dtype: str = typer.Option("float32", **choice(RESIDENT_DTYPES),
+    resident_dtype: str = typer.Option("float32", **choice(_resident_dtypes),
                                        help="device path: storage of the resident layers (float16: half the "
                                             "memory, 2^-11 relative error)"),
     chunk_scenes: int = typer.Option(None, help="device path: stream the split this many scenes at a time (a split "
                                                 "that does not fit the device)"),
-    cuda_graph: str = typer.Option("auto", "--cuda-graph", **choice(CUDA_GRAPH_MODES),
+    cuda_graph: str = typer.Option("auto", "--cuda-graph", **choice(_cuda_graph_modes),
                                    help="auto: replay the training step as a CUDA graph on a CUDA device; off: "
                                         "never"),
 ) -> None:
@@ -60,8 +82,8 @@ def train_cmd(
     from lfmbench.train import load_config, train, trainable  # noqa: PLC0415
 
     check_local_paths((("--corpus", corpus), ("--out", out), ("--config", config)))
-    if method not in LEARNED:
-        fail(f"--method {method!r} is not a trainable baseline; trainable: {', '.join(LEARNED)}")
+    if method not in _learned():
+        fail(f"--method {method!r} is not a trainable baseline; trainable: {', '.join(_learned())}")
     check_minima((("--epochs", epochs, 1), ("--workers", workers, 0), ("--crop", crop, 8),
                   ("--batch-size", batch_size, 1), ("--chunk-scenes", chunk_scenes, 1)))
     torch_setup(device, threads)

@@ -10,9 +10,9 @@ from typing import Sequence
 
 import numpy as np
 
-from lfmbench.limits import brief
-from lfmbench.corpus.errors import CorpusChannelError, CorpusNotFoundError
-from lfmbench.corpus.exr import ExrPart, _check_aux, _check_values, _stack, layer_scale, read_exr
+from lfmbench.limits import LimitError, brief, limit
+from lfmbench.corpus.errors import CorpusChannelError, CorpusFileError, CorpusNotFoundError
+from lfmbench.corpus.exr import ExrPart, _check_aux, _check_values, _stack, exr_headers, layer_scale, read_exr
 from lfmbench.corpus.meta import (_check_manifest, _check_meta_storage, _load_json, check_splits, inside_root,
                                   load_meta)
 from lfmbench.corpus.naming import (AUX_CHANNELS, EMPTY_PART, MANIFEST_NAME, SCENES_DIR, SPLITS_NAME, _group_bins,
@@ -57,6 +57,7 @@ class Corpus:
         self._meta: dict[str, dict] = {}
         self._inside: set[str] = set()
         self._scene_set = set(self.manifest["scenes"])
+        self._frames_checked: set[tuple[str, int]] = set()
 
     # -- index
     @property
@@ -117,7 +118,27 @@ class Corpus:
             raise ValueError(f"frame must be an integer in [0, {m['frames']}) for scene {brief(scene_id)}, got {brief(frame)}")
         if group not in m["groups"]:
             raise ValueError(f"group {brief(group)} is not in scene {brief(scene_id)} (groups: {sorted(m['groups'])})")
+        self._check_frame(scene_id, int(frame))
         return m, self.path(scene_id, frame, group)
+
+    def _check_frame(self, scene_id: str, frame: int) -> None:
+        """Refuse a frame whose EXR files (every group of ``meta.json`` and ``aux``) together declare more decoded
+        pixel bytes than the limit ``exr_frame_bytes``, from their headers alone, before any of them is decoded
+        (each file alone is bounded by ``exr_bytes``); once per frame. ``CorpusFileError`` naming the frame
+        folder, the total and the file that took it over; a file missing here is reported when it is read."""
+        if (scene_id, frame) in self._frames_checked:
+            return
+        cap, total = limit("exr_frame_bytes"), 0
+        for g in [*self.meta(scene_id)["groups"], "aux"]:
+            f = self.path(scene_id, frame, g)
+            if not os.path.lexists(f):
+                continue
+            total += exr_headers(f).decoded_bytes
+            if total > cap:
+                raise CorpusFileError(str(LimitError(
+                    str(f.parent), f"EXR files of one frame declaring {total:,} or more decoded pixel bytes (counted "
+                    f"up to {f.name})", None, "exr_frame_bytes")))
+        self._frames_checked.add((scene_id, frame))
 
     @staticmethod
     def _band_list(m: dict, bands: Sequence[float] | None) -> list[float]:
@@ -273,6 +294,7 @@ class Corpus:
         bad = [n for n in names if n not in AUX_CHANNELS]
         if bad:
             raise ValueError(f"names: unknown aux channels {bad} (known: {AUX_CHANNELS})")
+        self._check_frame(scene_id, int(frame))
         path = self.path(scene_id, frame, "aux")
         part = self._parts(path)[0]
         arr = _stack(part, names, path)

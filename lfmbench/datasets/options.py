@@ -20,6 +20,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Sequence
 
+from lfmbench import vocabulary
 from lfmbench.check import check_arg_choice, check_flag, check_int_arg
 from lfmbench.datasets.assembly import NOISE_STREAMS
 from lfmbench.datasets.plan_frames import STATIC_WINDOW_RULES
@@ -37,8 +38,9 @@ DEFAULT_OUTPUTS = ("raw", "input_referred", "saturated", "gt", "light_index", "d
 DEFAULT_MAX_LIGHTS = 64
 #: Samples per scene per epoch of a training split by default (``LFMCaptureDataset(samples_per_scene=None)``).
 DEFAULT_SAMPLES_PER_SCENE = 16
-#: Corpus splits a dataset reads (``all``: every complete scene).
-SPLITS = ("train", "val", "test", "all")
+#: Corpus splits a dataset reads (``all``: every complete scene); defined with the other shared names (the command
+#: line lists them without importing the dataset).
+SPLITS = vocabulary.SPLITS
 
 
 @dataclass(frozen=True)

@@ -116,17 +116,15 @@ def write_leaderboard(rows: list[dict], runs: list[dict], sort_by: str | None, m
                       plot: str | Path, json_path: str | Path | None = None,
                       conditions_file: str | Path | None = None) -> list[Path]:
     """Write the Markdown table, the quality-vs-run-time plot and (``json_path``) the leaderboard JSON (indented up
-    to :data:`~lfmbench.evaluation.leaderboard.STATS_ROWS` rows; a sweep's is written compact, by the C encoder:
+    to :data:`~lfmbench.evaluation.leaderboard.rank.STATS_ROWS` rows; a sweep's is written compact, by the C encoder:
     the indented one took 70 % of a 1,000-file leaderboard's output time)."""
-    import json  # noqa: PLC0415
-
-    from lfmbench.evaluation.leaderboard import (STATS_ROWS, leaderboard_json, leaderboard_markdown,
-                                                 plot_quality_vs_runtime)
+    from lfmbench.evaluation.leaderboard.rank import STATS_ROWS
+    from lfmbench.evaluation.leaderboard.render import (leaderboard_json, leaderboard_json_text, leaderboard_markdown,
+                                                        plot_quality_vs_runtime)
     from lfmbench.evaluation.results import write_json_atomic
 
-    def write_sweep_json() -> None:
-        doc = leaderboard_json(rows, runs, sort_by, conditions_file)
-        atomic_write_text(json_path, json.dumps(doc, allow_nan=False, separators=(",", ":")) + "\n")
+    def write_sweep_json() -> None:  # json.dumps of leaderboard_json, per-scene texts spliced in
+        atomic_write_text(json_path, leaderboard_json_text(rows, runs, sort_by, conditions_file) + "\n")
 
     # a sweep's JSON (seconds for 10,000 rows) is written by a forked process while this one writes the rest
     child = _forked(write_sweep_json) if json_path is not None and len(rows) > STATS_ROWS else None
@@ -142,11 +140,11 @@ def write_leaderboard(rows: list[dict], runs: list[dict], sort_by: str | None, m
 
 
 def _forked(fn):
-    """Start ``fn()`` in a forked process (where :func:`~lfmbench.evaluation.leaderboard.can_fork`); returns a
+    """Start ``fn()`` in a forked process (where :func:`~lfmbench.evaluation.leaderboard.read.can_fork`); returns a
     function that waits for it and raises what it raised (None: not started, the caller runs ``fn`` itself)."""
     import multiprocessing  # noqa: PLC0415
 
-    from lfmbench.evaluation.leaderboard import can_fork  # noqa: PLC0415
+    from lfmbench.evaluation.leaderboard.read import can_fork  # noqa: PLC0415
 
     if not can_fork():
         return None

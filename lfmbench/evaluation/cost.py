@@ -1,16 +1,21 @@
-"""Cost of a method: wall time per output megapixel, parameters and multiply-accumulates (MACs)."""
+"""Cost of a method: wall time per output megapixel, parameters and multiply-accumulates (MACs).
+
+torch is imported by the functions that use it: the leaderboard reads :data:`TIME_MOVED_FACTOR` without it."""
 from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import torch
+if TYPE_CHECKING:
+    import torch
 
 
 def method_module(method: Callable) -> torch.nn.Module | None:
     """The ``nn.Module`` behind a method: the method itself, or its ``torch_module`` attribute (a module or a
     zero-argument callable returning one)."""
+    import torch  # noqa: PLC0415
+
     if isinstance(method, torch.nn.Module):
         return method
     mod = getattr(method, "torch_module", None)
@@ -27,6 +32,8 @@ def count_params_macs(module: torch.nn.Module, run: Callable[[], Any]) -> tuple[
     kernel-sized patch into each output channel of its group), Linear ``out.numel() * in_features`` (bias and
     activations not counted).
     """
+    import torch  # noqa: PLC0415
+
     macs = 0
 
     def conv_hook(m, inp, out):
@@ -67,6 +74,8 @@ def count_params_macs(module: torch.nn.Module, run: Callable[[], Any]) -> tuple[
 def sync(device: torch.device) -> None:
     """Wait for the device (CUDA) to finish queued work; no-op on CPU."""
     if device.type == "cuda":
+        import torch  # noqa: PLC0415
+
         torch.cuda.synchronize(device)
 
 
@@ -74,6 +83,8 @@ def time_method(method: Callable, batch: dict, warmup: int = 1, repeats: int = 5
                 device: str | torch.device = "cpu") -> list[float]:
     """Wall time (ms) of ``repeats`` calls of ``method(batch)`` (batch tensors (B, F, C, H, W)) after ``warmup``
     calls, synchronised on CUDA."""
+    import torch  # noqa: PLC0415
+
     dev = torch.device(device)
     with torch.no_grad():
         for _ in range(warmup):

@@ -9,11 +9,11 @@ from __future__ import annotations
 
 import math
 import statistics
+import sys
 from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
-import torch
 
 from lfmbench.evaluation import stats
 from lfmbench.fileio import atomic_write_json
@@ -55,7 +55,8 @@ def jsonable(x: Any) -> Any:
         return {str(k): jsonable(v) for k, v in x.items()}
     if isinstance(x, (list, tuple)):
         return [jsonable(v) for v in x]
-    if isinstance(x, torch.Tensor):
+    torch = sys.modules.get("torch")  # a tensor exists only where torch was imported: not imported here for it
+    if torch is not None and isinstance(x, torch.Tensor):
         return jsonable(x.tolist())
     if isinstance(x, Path):
         return str(x)

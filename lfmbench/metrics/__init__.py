@@ -17,13 +17,32 @@ with every result. The primary ranking score is :data:`PRIMARY` (``led_score``).
 
 This package face only re-exports: :mod:`~lfmbench.metrics.spec` (what a metric is),
 :mod:`~lfmbench.metrics.registry` (the registered metrics and blocks), :mod:`~lfmbench.metrics.scoring`
-(:func:`score_batch`).
+(:func:`score_batch`). The registry is torch-free; the modules that compute metrics (and :func:`score_batch`,
+:class:`ScoreOptions`) are imported on first access (PEP 562), so ``lfmbench leaderboard`` and the command line's
+start-up read the registry without loading torch.
 """
-from lfmbench.metrics import display, flicker, hdr, regions
+import importlib
+
 from lfmbench.metrics.registry import (BLOCKS, PRIMARY, REGISTRY, SECONDARY_GROUPS, columns, led_score,
                                        metric_versions, register_metric)
-from lfmbench.metrics.scoring import ScoreOptions, score_batch
 from lfmbench.metrics.spec import MetricBlock, MetricSpec
+
+#: Names imported on first access: the metric modules and the scoring entry points (they import torch).
+_LAZY = {"display": None, "flicker": None, "hdr": None, "regions": None, "ScoreOptions": "scoring",
+         "score_batch": "scoring"}
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        mod = importlib.import_module(f"lfmbench.metrics.{_LAZY[name] or name}")
+        value = mod if _LAZY[name] is None else getattr(mod, name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'lfmbench.metrics' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(list(globals()) + list(_LAZY))
 
 __all__ = ["MetricSpec", "MetricBlock", "REGISTRY", "BLOCKS", "PRIMARY", "SECONDARY_GROUPS", "metric_versions",
            "register_metric", "score_batch", "ScoreOptions", "led_score", "columns", "display", "flicker", "hdr", "regions"]

@@ -1,15 +1,21 @@
 """The registered metrics (:data:`REGISTRY`, one :class:`~lfmbench.metrics.spec.MetricSpec` each, in leaderboard
 column order), the multi-metric blocks (:data:`BLOCKS`), the primary score :func:`led_score` and :data:`PRIMARY`,
-and the readers of the registry that tables use (:func:`columns`, :func:`metric_versions`)."""
+and the readers of the registry that tables use (:func:`columns`, :func:`metric_versions`).
+
+Torch-free at import: the modules that compute the metrics (:mod:`~lfmbench.metrics.hdr`, ``flicker``,
+``regions``, ``display``) are imported when a metric is computed, so the leaderboard and the command line read the
+registry (names, versions, ranges, directions) without loading torch."""
 from __future__ import annotations
 
+import importlib
 import math
+from typing import TYPE_CHECKING
 
-import torch
-
-from lfmbench.metrics import display, flicker, hdr, regions
 from lfmbench.metrics.spec import MetricBlock, MetricSpec
 from lfmbench.registry import Registry
+
+if TYPE_CHECKING:
+    import torch
 
 __all__ = ["REGISTRY", "BLOCKS", "PRIMARY", "SECONDARY_GROUPS", "register_metric", "led_score", "columns",
            "metric_versions"]
@@ -38,28 +44,34 @@ def led_score(dropout_rate: float, fmi_abs_err: float, led_rel_err: float) -> fl
     return float(max(0.0, d[0]) * max(0.0, d[1]) * max(0.0, d[2])) ** (1.0 / 3.0)
 
 
+def _m(name: str):
+    """The metric module ``lfmbench.metrics.<name>`` (imported on first use: it imports torch)."""
+    return importlib.import_module(f"lfmbench.metrics.{name}")
+
+
 def _psnr_mu_led(pred: torch.Tensor, batch: dict, o) -> torch.Tensor:
     """PSNR-mu over the LED region pixels (``light_index >= 0``) of every frame, (B,) dB."""
-    return regions.masked_psnr_mu(pred, batch["gt"], batch["light_index"] >= 0)
+    return _m("regions").masked_psnr_mu(pred, batch["gt"], batch["light_index"] >= 0)
 
 
 def _flicker_block(pred: torch.Tensor, batch: dict, o) -> list[dict]:
-    return flicker.region_flicker_metrics(pred, batch["gt"], batch["light_index"], batch.get("saturated"),
-                                          batch.get("lpd_lcg_e"), o.region)
+    return _m("flicker").region_flicker_metrics(pred, batch["gt"], batch["light_index"], batch.get("saturated"),
+                                                batch.get("lpd_lcg_e"), o.region)
 
 
 def _region_block(pred: torch.Tensor, batch: dict, o) -> list[dict]:
     """Ghost and comet errors around the LED regions and PSNR-mu outside them (group ``region``: a cross-sensor
     column, scored against ``gt_common`` with ``ScoreOptions(reference="common")``, so a block of its own)."""
-    return regions.outside_led_metrics(pred, batch["gt"], batch["light_index"], o.margin_px, o.ring_px)
+    return _m("regions").outside_led_metrics(pred, batch["gt"], batch["light_index"], o.margin_px, o.ring_px)
 
 
 def _perceptual_block(pred: torch.Tensor, batch: dict, o) -> list[dict]:
-    v = hdr.perceptual_metrics(pred, batch["gt"], o.cd_per_unit, o.fps)
+    v = _m("hdr").perceptual_metrics(pred, batch["gt"], o.cd_per_unit, o.fps)
     return [{k: x[i] for k, x in v.items()} for i in range(pred.shape[0])]
 
 
 def _display_block(pred: torch.Tensor, batch: dict, o) -> list[dict]:
+    display = _m("display")
     sensor = o.sensor if o.sensor is not None else display.sensor_of_batch(batch)
     v = display.display_metrics(pred, batch["gt"], sensor, o.isp)
     return [{k: x[i] for k, x in v.items()} for i in range(pred.shape[0])]
@@ -135,11 +147,11 @@ for _s in [
     MetricSpec("psnr_mu_led", "1.0", _KR17 + " over the LED region pixels", "dB", True, "led", "PSNR-mu LED",
                fn=_psnr_mu_led, needs=("light_index",), digits=2, valid=(0.0, 1000.0), inf_ok=True),
     MetricSpec("psnr_mu", "1.0", _KR17 + " (mu = 5000)", "dB", True, "hdr", "PSNR-mu dB",
-               fn=lambda p, b, o: hdr.psnr_mu(p, b["gt"]), digits=2, show="console", valid=(0.0, 1000.0), inf_ok=True),
+               fn=lambda p, b, o: _m("hdr").psnr_mu(p, b["gt"]), digits=2, show="console", valid=(0.0, 1000.0), inf_ok=True),
     MetricSpec("psnr_l", "1.0", _KR17 + " (normalised by GT peak)", "dB", True, "hdr", "PSNR-L dB",
-               fn=lambda p, b, o: hdr.psnr_l(p, b["gt"]), digits=2, valid=(0.0, 1000.0), inf_ok=True),
+               fn=lambda p, b, o: _m("hdr").psnr_l(p, b["gt"]), digits=2, valid=(0.0, 1000.0), inf_ok=True),
     MetricSpec("ssim_mu", "1.0", "Wang et al. IEEE TIP 2004 via kornia.metrics.ssim, on mu-law images", "1", True,
-               "hdr", "SSIM-mu", fn=lambda p, b, o: hdr.ssim_mu(p, b["gt"]), valid=(-1.0, 1.0)),
+               "hdr", "SSIM-mu", fn=lambda p, b, o: _m("hdr").ssim_mu(p, b["gt"]), valid=(-1.0, 1.0)),
     MetricSpec("pu21_psnr", "1.0", "Mantiuk & Azimi PCS 2021 via pycvvdp.pu_psnr_y", "dB", True, "perceptual",
                "PU21 dB", digits=2, valid=(-1000.0, 1000.0), inf_ok=True),
     MetricSpec("cvvdp_jod", "1.0", "Mantiuk et al. ACM TOG 2024 (ColorVideoVDP) via pycvvdp", "JOD", True,

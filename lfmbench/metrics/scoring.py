@@ -9,6 +9,7 @@ import torch
 
 from lfmbench.metrics import display, flicker, regions
 from lfmbench.metrics.registry import _BLOCK_OF_GROUP, BLOCKS, REGISTRY
+from lfmbench.vocabulary import REFERENCES  # the one definition (torch-free: the command line reads it)
 
 __all__ = ["ScoreOptions", "score_batch", "REFERENCES", "CROSS_SENSOR_GROUPS", "to_common"]
 
@@ -16,7 +17,6 @@ __all__ = ["ScoreOptions", "score_batch", "REFERENCES", "CROSS_SENSOR_GROUPS", "
 #: own ``gt`` (its reference exposure, every published result before 2026-11-28); ``"common"``, the sample's
 #: ``gt_common`` (one fixed reference window through one reference sensor, the same for every sensor:
 #: :meth:`lfmbench.datasets.LFMCaptureDataset._gt_common`), so a cross-sensor ranking compares one truth.
-REFERENCES = ("own", "common")
 
 #: Metric groups scored against the common reference when ``reference="common"``: the full-image (``hdr``,
 #: ``perceptual``, ``display``) and ghost (``region``) columns. The LED groups (``led``, ``flicker``) stay on each

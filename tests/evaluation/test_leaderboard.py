@@ -252,6 +252,7 @@ def test_forked_statistics_and_sweep_json_equal_one_process(bench, tmp_path, mon
 
     from lfmbench.evaluation import benchmark as BM
     from lfmbench.evaluation import leaderboard as L
+    from lfmbench.evaluation.leaderboard import rank
     from lfmbench.evaluation.results import jsonable
 
     d, _, _ = bench
@@ -266,17 +267,17 @@ def test_forked_statistics_and_sweep_json_equal_one_process(bench, tmp_path, mon
             paths.append(p)
     assert len(paths) >= L.PARALLEL_STATS_ROWS
     forked = L.leaderboard_rows(L.load_runs(paths))
-    monkeypatch.setattr(L, "PARALLEL_STATS_ROWS", 10 ** 9)
+    monkeypatch.setattr(rank, "PARALLEL_STATS_ROWS", 10 ** 9)
     one = L.leaderboard_rows(L.load_runs(paths))
     assert json.dumps(jsonable(forked)) == json.dumps(jsonable(one)) and all(r["ci"] for r in one)
     runs = L.load_runs(paths)
-    monkeypatch.setattr(L, "STATS_ROWS", 4)  # 9 rows: a sweep's JSON
+    monkeypatch.setattr(rank, "STATS_ROWS", 4)  # 9 rows: a sweep's JSON
     BM.write_leaderboard(one, runs, None, tmp_path / "a.md", tmp_path / "a.png", tmp_path / "a.json")
     monkeypatch.setattr(BM, "_forked", lambda fn: None)
     BM.write_leaderboard(one, runs, None, tmp_path / "b.md", tmp_path / "b.png", tmp_path / "b.json")
     assert (tmp_path / "a.json").read_bytes() == (tmp_path / "b.json").read_bytes()
     monkeypatch.undo()
-    monkeypatch.setattr(L, "STATS_ROWS", 4)
+    monkeypatch.setattr(rank, "STATS_ROWS", 4)
     (tmp_path / "file").write_text("a file, not a folder")
     with pytest.raises(Exception, match="file/c.json"):
         BM.write_leaderboard(one, runs, None, tmp_path / "c.md", tmp_path / "c.png", tmp_path / "file" / "c.json")
