@@ -26,10 +26,18 @@ import time
 from pathlib import Path
 
 #: The methods of each sensor (the U-Net is added where a checkpoint is given).
+#: The generic plans first, then the presets of shipped parts (docs/guide/sensors.md): the Sony IMX490 with its four
+#: reads, the OmniVision OX03C10 split pixel, the onsemi AR0132AT (staggered), the onsemi MT9V024 (single) and the
+#: LOFIC sensor of Akahane et al. 2006.
 METHODS = {"ovt": ["saturated_exposure_corrected", "flicker_aware_two_sided", "lpd_only"],
            "lofic": ["exposure_select"], "staggered": ["exposure_select", "exposure_select_bounded"],
            "chopped": ["exposure_select"],
-           "single": ["exposure_select"]}
+           "single": ["exposure_select"],
+           "imx490_4read": ["exposure_select"],
+           "ox03c10": ["saturated_exposure_corrected", "flicker_aware_two_sided", "lpd_only"],
+           "ar0132at": ["exposure_select", "exposure_select_bounded"],
+           "mt9v024": ["exposure_select"],
+           "lofic_akahane2006": ["exposure_select"]}
 
 
 def _f(v, nd=3) -> str:
