@@ -1,16 +1,28 @@
-"""Every sensor architecture on the same test scenes, ranked together (docs/results/sensor-architectures.md): the split
-pixel (``ovt``) with three of its rule-based fusions, LOFIC, staggered, chopped and single exposure with their
-standard merge (``exposure_select``; staggered also bounded below by its saturated captures,
-``exposure_select_bounded``), and each with a U-Net trained for that sensor when its checkpoint is given.
+"""Every sensor architecture on the same test scenes, ranked together (docs/results/sensor-architectures.md): the
+generic plans (the split pixel ``ovt`` with three of its rule-based fusions, LOFIC, staggered, chopped, single
+exposure) and the presets of shipped parts (``imx490_4read``, ``ox03c10``, ``ar0132at``, ``mt9v024``,
+``lofic_akahane2006``), each with its standard merge (``exposure_select``; staggered also bounded below by its
+saturated captures, ``exposure_select_bounded``; the split pixels with the same three fusions), and each with a U-Net
+trained for that sensor when its checkpoint is given.
 
-    lfmbench render --protocol lfmbench-v1 --split test --out v1 --workers 1
-    lfmbench render --out demo --scenes 8 --profile small --seed 0          # the demo's corpus: its train split
-    for s in ovt lofic staggered chopped single; do
-      lfmbench train --method unet --sensor $s --corpus demo --config lfmbench/configs/unet_tiny.yaml --epochs 6 \
+Exact motion between captures needs a corpus whose static groups are stored in time bins at the presets' window
+edges: the protocol ``lfmbench-v1-mini-motion`` (``lfmbench-v1-mini`` plus those edges)::
+
+    lfmbench render --protocol lfmbench-v1-mini-motion --split test --out v1mm --workers 2
+    python benchmarks/studies/architecture_comparison.py --corpus v1mm --runs runs/arch_v1mm --samples-per-scene 2
+    # with a U-Net per sensor, trained with one budget on the training split:
+    lfmbench render --protocol lfmbench-v1-mini-motion --split train --out v1mm --workers 2
+    for s in ovt lofic staggered ...; do
+      lfmbench train --method unet --sensor $s --corpus v1mm --config lfmbench/configs/unet_tiny.yaml --epochs E \
           --out runs/unet_$s.pt
     done
+    python benchmarks/studies/architecture_comparison.py ... --unet ovt=runs/unet_ovt.pt --unet lofic=...
+
+The earlier comparison on the 640x360 ``lfmbench-v1`` test split (static windows served by ``nearest``)::
+
+    lfmbench render --protocol lfmbench-v1 --split test --out v1 --workers 1
     python benchmarks/studies/architecture_comparison.py --corpus v1 --runs runs/arch_v1 --samples-per-scene 2 \
-        --unet ovt=runs/unet_ovt.pt --unet lofic=runs/unet_lofic.pt ...      # [--max-scenes 24]
+        --sensor ovt --sensor lofic --sensor staggered --sensor chopped --sensor single --unet ovt=runs/unet_ovt.pt ...
 
 One :func:`lfmbench.evaluation.benchmark.benchmark_sensors` call: per sensor its methods share each simulated
 sample (runs in ``--runs/<sensor>/``), then one cross-sensor leaderboard (``--runs/leaderboard.{md,json,png}``);
@@ -41,6 +53,9 @@ METHODS = {"ovt": ["saturated_exposure_corrected", "flicker_aware_two_sided", "l
 
 
 def _f(v, nd=3) -> str:
+    """A number with ``nd`` decimals; "-" for None, NaN and the JSON's "nan" (an interval over one scene)."""
+    if isinstance(v, str):
+        v = float(v) if v.strip().lower() in ("nan", "inf", "-inf") else None
     return "-" if v is None or v != v else f"{v:.{nd}f}"
 
 
