@@ -64,6 +64,14 @@ def _ci(row: dict, key: str, nd: int = 3) -> str:
     return f"{_f(row.get(key), nd)} [{_f(lo, nd)}, {_f(hi, nd)}]"
 
 
+def _bin_low(label: str) -> float:
+    """The lower edge of a condition bin's label ``"[0.2, 0.3)"`` (its sort key; a label without one sorts last)."""
+    try:
+        return float(label.strip("[(").split(",")[0])
+    except ValueError:
+        return float("inf")
+
+
 def tables(leaderboard_json: str | Path) -> str:
     """The comparison's Markdown tables (docs/results/sensor-architectures.md) from a cross-sensor ``leaderboard.json``: the
     ranking with 95 % intervals, then the LED score by condition (time of day with its interval; PWM miss probability
@@ -84,14 +92,17 @@ def tables(leaderboard_json: str | Path) -> str:
                    f"{_ci(r, 'psnr_mu', 2)} | {_ci(r, 'ghost_mae_mu')} | {_f(r.get('ms_per_megapixel'), 1)} |")
     heads, cols = [], []
     for cond in ("time_of_day", "pwm_miss_prob", "ego_speed_mps"):
-        for b in (rows[0].get("breakdown") or {}).get(cond, {}):
+        bins: list = []  # the union over the rows: a sensor's miss-probability bins come from its own windows
+        for r in rows:
+            bins += [b for b in (r.get("breakdown") or {}).get(cond, {}) if b not in bins]
+        for b in sorted(bins, key=_bin_low) if cond != "time_of_day" else bins:
             heads.append(b if cond == "time_of_day" else f"{cond} {b}")
             cols.append((cond, b))
     out += ["", "| sensor: method | " + " | ".join(heads) + " |", "|---" * (len(heads) + 1) + "|"]
     for r in rows:
         cells = []
         for cond, b in cols:
-            x = r["breakdown"][cond].get(b)
+            x = (r.get("breakdown") or {}).get(cond, {}).get(b)
             if x is None:
                 cells.append("-")
             elif cond == "time_of_day":
