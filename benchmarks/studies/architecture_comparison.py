@@ -1,16 +1,28 @@
-"""Every sensor architecture on the same test scenes, ranked together (docs/results/sensor-architectures.md): the split
-pixel (``ovt``) with three of its rule-based fusions, LOFIC, staggered, chopped and single exposure with their
-standard merge (``exposure_select``; staggered also bounded below by its saturated captures,
-``exposure_select_bounded``), and each with a U-Net trained for that sensor when its checkpoint is given.
+"""Every sensor architecture on the same test scenes, ranked together (docs/results/sensor-architectures.md): the
+generic plans (the split pixel ``ovt`` with three of its rule-based fusions, LOFIC, staggered, chopped, single
+exposure) and the presets of shipped parts (``imx490_4read``, ``ox03c10``, ``ar0132at``, ``mt9v024``,
+``lofic_akahane2006``), each with its standard merge (``exposure_select``; staggered also bounded below by its
+saturated captures, ``exposure_select_bounded``; the split pixels with the same three fusions), and each with a U-Net
+trained for that sensor when its checkpoint is given.
 
-    lfmbench render --protocol lfmbench-v1 --split test --out v1 --workers 1
-    lfmbench render --out demo --scenes 8 --profile small --seed 0          # the demo's corpus: its train split
-    for s in ovt lofic staggered chopped single; do
-      lfmbench train --method unet --sensor $s --corpus demo --config lfmbench/configs/unet_tiny.yaml --epochs 6 \
+Exact motion between captures needs a corpus whose static groups are stored in time bins at the presets' window
+edges: the protocol ``lfmbench-v1-mini-motion`` (``lfmbench-v1-mini`` plus those edges)::
+
+    lfmbench render --protocol lfmbench-v1-mini-motion --split test --out v1mm --workers 2
+    python benchmarks/studies/architecture_comparison.py --corpus v1mm --runs runs/arch_v1mm --samples-per-scene 2
+    # with a U-Net per sensor, trained with one budget on the training split:
+    lfmbench render --protocol lfmbench-v1-mini-motion --split train --out v1mm --workers 2
+    for s in ovt lofic staggered ...; do
+      lfmbench train --method unet --sensor $s --corpus v1mm --config lfmbench/configs/unet_tiny.yaml --epochs E \
           --out runs/unet_$s.pt
     done
+    python benchmarks/studies/architecture_comparison.py ... --unet ovt=runs/unet_ovt.pt --unet lofic=...
+
+The earlier comparison on the 640x360 ``lfmbench-v1`` test split (static windows served by ``nearest``)::
+
+    lfmbench render --protocol lfmbench-v1 --split test --out v1 --workers 1
     python benchmarks/studies/architecture_comparison.py --corpus v1 --runs runs/arch_v1 --samples-per-scene 2 \
-        --unet ovt=runs/unet_ovt.pt --unet lofic=runs/unet_lofic.pt ...      # [--max-scenes 24]
+        --sensor ovt --sensor lofic --sensor staggered --sensor chopped --sensor single --unet ovt=runs/unet_ovt.pt ...
 
 One :func:`lfmbench.evaluation.benchmark.benchmark_sensors` call: per sensor its methods share each simulated
 sample (runs in ``--runs/<sensor>/``), then one cross-sensor leaderboard (``--runs/leaderboard.{md,json,png}``);
@@ -26,19 +38,38 @@ import time
 from pathlib import Path
 
 #: The methods of each sensor (the U-Net is added where a checkpoint is given).
+#: The generic plans first, then the presets of shipped parts (docs/guide/sensors.md): the Sony IMX490 with its four
+#: reads, the OmniVision OX03C10 split pixel, the onsemi AR0132AT (staggered), the onsemi MT9V024 (single) and the
+#: LOFIC sensor of Akahane et al. 2006.
 METHODS = {"ovt": ["saturated_exposure_corrected", "flicker_aware_two_sided", "lpd_only"],
            "lofic": ["exposure_select"], "staggered": ["exposure_select", "exposure_select_bounded"],
            "chopped": ["exposure_select"],
-           "single": ["exposure_select"]}
+           "single": ["exposure_select"],
+           "imx490_4read": ["exposure_select"],
+           "ox03c10": ["saturated_exposure_corrected", "flicker_aware_two_sided", "lpd_only"],
+           "ar0132at": ["exposure_select", "exposure_select_bounded"],
+           "mt9v024": ["exposure_select"],
+           "lofic_akahane2006": ["exposure_select"]}
 
 
 def _f(v, nd=3) -> str:
+    """A number with ``nd`` decimals; "-" for None, NaN and the JSON's "nan" (an interval over one scene)."""
+    if isinstance(v, str):
+        v = float(v) if v.strip().lower() in ("nan", "inf", "-inf") else None
     return "-" if v is None or v != v else f"{v:.{nd}f}"
 
 
 def _ci(row: dict, key: str, nd: int = 3) -> str:
     lo, hi = (row.get("ci") or {}).get(key) or [None, None]
     return f"{_f(row.get(key), nd)} [{_f(lo, nd)}, {_f(hi, nd)}]"
+
+
+def _bin_low(label: str) -> float:
+    """The lower edge of a condition bin's label ``"[0.2, 0.3)"`` (its sort key; a label without one sorts last)."""
+    try:
+        return float(label.strip("[(").split(",")[0])
+    except ValueError:
+        return float("inf")
 
 
 def tables(leaderboard_json: str | Path) -> str:
@@ -61,14 +92,17 @@ def tables(leaderboard_json: str | Path) -> str:
                    f"{_ci(r, 'psnr_mu', 2)} | {_ci(r, 'ghost_mae_mu')} | {_f(r.get('ms_per_megapixel'), 1)} |")
     heads, cols = [], []
     for cond in ("time_of_day", "pwm_miss_prob", "ego_speed_mps"):
-        for b in (rows[0].get("breakdown") or {}).get(cond, {}):
+        bins: list = []  # the union over the rows: a sensor's miss-probability bins come from its own windows
+        for r in rows:
+            bins += [b for b in (r.get("breakdown") or {}).get(cond, {}) if b not in bins]
+        for b in sorted(bins, key=_bin_low) if cond != "time_of_day" else bins:
             heads.append(b if cond == "time_of_day" else f"{cond} {b}")
             cols.append((cond, b))
     out += ["", "| sensor: method | " + " | ".join(heads) + " |", "|---" * (len(heads) + 1) + "|"]
     for r in rows:
         cells = []
         for cond, b in cols:
-            x = r["breakdown"][cond].get(b)
+            x = (r.get("breakdown") or {}).get(cond, {}).get(b)
             if x is None:
                 cells.append("-")
             elif cond == "time_of_day":

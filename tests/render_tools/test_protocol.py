@@ -18,7 +18,7 @@ from render_tools import scene as S
 from tests.data.protocol.data import tiny_protocol_dict, write_protocol
 from tests.data.render.data import FAIL
 
-SHIPPED = ("lfmbench-v1", "lfmbench-v1-mini", "lfmbench-v2", "lfmbench-v2-mini")
+SHIPPED = ("lfmbench-v1", "lfmbench-v1-mini", "lfmbench-v1-mini-motion", "lfmbench-v2", "lfmbench-v2-mini")
 
 
 @pytest.fixture(scope="module")
@@ -65,6 +65,30 @@ def test_mini_test_split_is_v1_subset():
         assert b == a[:len(b)]
     assert mini.render["width"] * mini.render["height"] < v1.render["width"] * v1.render["height"]
     assert mini.sha256 != v1.sha256
+
+
+def test_mini_motion_is_mini_with_static_edges():
+    """lfmbench-v1-mini-motion is lfmbench-v1-mini (scenes, storage, PWM draws, every render setting) plus static
+    time bins whose edges make every explicit window of the comparison's presets a union of bins (so their static
+    radiance is exact, lfmbench.datasets.plan_frames.static_window_mix), chopped's sub-windows excepted (stated in
+    the file); v1-mini itself has no edges."""
+    from lfmbench.datasets.plan_frames import static_window_mix
+    from lfmbench.sensor.preset import load_preset
+    from lfmbench.sensor.plan import resolve_windows
+
+    mini, mm = P.load_protocol("lfmbench-v1-mini"), P.load_protocol("lfmbench-v1-mini-motion")
+    assert mm.scenes == mini.scenes and mm.storage == mini.storage and mm.pwm == mini.pwm
+    assert {k: v for k, v in mm.render.items() if k != "static_edges_s"} == mini.render
+    assert "static_edges_s" not in mini.render and mm.sha256 != mini.sha256
+    tl, ts = 1.0 / 90.0, 0.004  # the renderer's T_L; a short window (its ends are edges whatever its length)
+    edges = sorted({0.0, (tl - ts) / 2, (tl + ts) / 2, tl, *mm.render["static_edges_s"]})
+    timing = {"short_exposure_s": ts, "long_exposure_s": tl, "static_edges_s": edges}
+    for name in ("ovt", "lofic", "staggered", "single", "imx490_4read", "ox03c10", "ar0132at", "mt9v024",
+                 "lofic_akahane2006", "chopped"):
+        pre = load_preset(name)
+        exact = [static_window_mix(a, n, timing)[1] for c in pre.captures.values()
+                 for a, n in resolve_windows(c.exposure, timing)]
+        assert all(exact) == (name != "chopped"), (name, exact)
 
 
 def _entries(names, splits):
