@@ -21,7 +21,7 @@ LAYERS = (
     ("lfmbench.limits",),  # the input limits every reader checks (check and fileio quote and bound with it)
     ("lfmbench.resources",),  # shipped configs by name, documentation URLs (lfmbench.docs_url)
     ("lfmbench", "lfmbench.progress", "lfmbench.constants", "lfmbench.check", "lfmbench.fileio",
-     "lfmbench.vocabulary", "lfmbench.registry", "lfmbench.counter_rng", "lfmbench.triton_kernels",
+     "lfmbench.parallel", "lfmbench.vocabulary", "lfmbench.registry", "lfmbench.counter_rng", "lfmbench.triton_kernels",
      "lfmbench._triton_math"),
     ("lfmbench.flicker",),
     ("lfmbench.corpus",),

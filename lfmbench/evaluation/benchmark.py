@@ -140,47 +140,10 @@ def write_leaderboard(rows: list[dict], runs: list[dict], sort_by: str | None, m
 
 
 def _forked(fn):
-    """Start ``fn()`` in a forked process (where :func:`~lfmbench.evaluation.leaderboard.read.can_fork`); returns a
-    function that waits for it and raises what it raised (None: not started, the caller runs ``fn`` itself)."""
-    import multiprocessing  # noqa: PLC0415
+    """Start ``fn()``, the sweep JSON's writer, in a forked process (:func:`lfmbench.parallel.start_forked`)."""
+    from lfmbench.parallel import start_forked  # noqa: PLC0415
 
-    from lfmbench.evaluation.leaderboard.read import can_fork  # noqa: PLC0415
-
-    if not can_fork():
-        return None
-    ctx = multiprocessing.get_context("fork")
-    recv, send = ctx.Pipe(duplex=False)
-
-    def run() -> None:
-        try:
-            fn()
-            send.send(None)
-        except BaseException as e:  # noqa: BLE001 - handed to the parent, which raises it
-            try:
-                send.send(e)
-            except Exception:  # noqa: BLE001 - an exception that does not pickle
-                send.send(RuntimeError(f"{type(e).__name__}: {e}"))
-
-    try:
-        proc = ctx.Process(target=run, daemon=True)
-        proc.start()
-    except (OSError, RuntimeError):
-        return None
-    send.close()    # the child's copy stays open: a child that dies without a word ends the pipe (EOFError)
-
-    def wait() -> None:
-        try:
-            err = recv.recv()
-        except EOFError:
-            err = RuntimeError("the process writing the leaderboard JSON ended without a result "
-                               "(killed?); rerun lfmbench leaderboard")
-        proc.join()
-        if err is not None:
-            raise err
-        if proc.exitcode:
-            raise RuntimeError(f"the leaderboard JSON writer exited with code {proc.exitcode}")
-
-    return wait
+    return start_forked(fn, "the process writing the leaderboard JSON")
 
 
 def benchmark(corpus: str | Path, methods: Iterable[str] | None = None, runs_dir: str | Path = "runs",

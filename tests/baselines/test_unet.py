@@ -106,7 +106,7 @@ def test_loss_equals_its_compacted_form_and_stays_finite_without_leds():
     reg = (torch.log1p(pm[ok].clamp_min(0) / 100.0) - torch.log1p(gm[ok].clamp_min(0) / 100.0)).abs().mean()
     want = err.mean() + 4.0 * err[led].mean() + 2.0 * reg.float()
     assert torch.isclose(total, want, rtol=1e-5), (float(total), float(want))
-    assert float(terms["led_l1"]) == pytest.approx(float(err[led].mean()), rel=1e-5)
+    assert float(terms["led_l1"].detach()) == pytest.approx(float(err[led].mean().detach()), rel=1e-5)
     more, _ = U.led_weighted_loss(pred, b["gt"], b["light_index"], cfg, num_lights=int(b["light_index"].max()) + 9)
     assert torch.isclose(more, total, rtol=1e-6)
     none = torch.full_like(b["light_index"], -1)

@@ -13,6 +13,7 @@ from typing import Any
 from lfmbench.evaluation.results import COMPLETE, RESULT_FORMAT
 from lfmbench.fileio import load_json_input
 from lfmbench.limits import brief
+from lfmbench.parallel import can_fork, map_forked  # noqa: F401 - can_fork re-exported
 
 LEADERBOARD_FORMAT = "lfmbench-leaderboard"
 LEADERBOARD_VERSION = 1
@@ -22,30 +23,6 @@ LEADERBOARD_VERSION = 1
 #: (where :func:`can_fork`): reading and checking 10,000 files took 5.4 s and their per-scene values 4 s on one
 #: core of a 2-core machine.
 PARALLEL_READ_FILES = 256
-
-
-def can_fork() -> bool:
-    """Whether the leaderboard may use forked processes: ``fork`` exists and 2 or more CPUs are usable."""
-    import multiprocessing
-    import os
-
-    ncpu = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-    return ncpu >= 2 and "fork" in multiprocessing.get_all_start_methods()
-
-
-def map_forked(fn, items: list, min_items: int, chunksize: int = 1) -> list:
-    """``[fn(x) for x in items]``, in a forked pool of 2 processes when there are ``min_items`` or more items and
-    :func:`can_fork` (in order; a pool that cannot start falls back to one process). ``fn`` and its results must
-    pickle."""
-    import multiprocessing
-
-    if len(items) < min_items or not can_fork():
-        return [fn(x) for x in items]
-    try:
-        with multiprocessing.get_context("fork").Pool(2) as pool:
-            return pool.map(fn, items, chunksize=chunksize)
-    except (OSError, RuntimeError, AssertionError):  # no process could start (limits, sandbox, a daemonic process)
-        return [fn(x) for x in items]
 
 
 def _read_one(p: Path, digest=None, quiet: bool = False) -> tuple[str, Any]:
