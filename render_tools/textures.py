@@ -88,6 +88,11 @@ def _rgb(desc: dict) -> np.ndarray:
     return np.asarray(desc["rgb"], dtype=np.float64)
 
 
+def _texel_m(n: int, size_m: float) -> np.ndarray:
+    """(n,) positions (m) of the centres of ``n`` texels spanning ``size_m`` metres."""
+    return (np.arange(n) + 0.5) / n * size_m
+
+
 def _cracks(rng: np.random.Generator, shape, n: int, steps: int) -> np.ndarray:
     """A mask (rows, cols) in {0, 1} of ``n`` thin random-walk cracks (wrapping), each branching once: unit steps
     whose heading wanders by N(0, 0.12 rad) per step."""
@@ -109,7 +114,7 @@ def asphalt(desc: dict, rng: np.random.Generator, shape) -> np.ndarray:
     patches = 0.15 * _noise(rng, shape, 0.01) + 0.08 * _noise(rng, shape, 0.04)
     stones = rng.random(shape)
     agg = np.where(stones > 0.93, 0.45, 0.0) + np.where(stones < 0.06, -0.35, 0.0) + 0.06 * _noise(rng, shape, 0.4)
-    y = (np.arange(H) + 0.5) / H * sv - sv / 2  # metres across the road (v), 0 at the road's centre line
+    y = _texel_m(H, sv) - sv / 2  # metres across the road (v), 0 at the road's centre line
     track = np.zeros(H)
     lw = float(desc.get("lane_width_m", 3.5))
     for k in range(int(desc.get("lanes", 1))):
@@ -147,8 +152,8 @@ def paving(desc: dict, rng: np.random.Generator, shape) -> np.ndarray:
     su, sv = desc["size_m"]
     slab = float(desc.get("slab_m", 0.6))
     base = _rgb(desc)
-    u = (np.arange(W) + 0.5) / W * su
-    v = (np.arange(H) + 0.5) / H * sv
+    u = _texel_m(W, su)
+    v = _texel_m(H, sv)
     iu, iv = np.floor(u / slab).astype(int), np.floor(v / slab).astype(int)
     tints = rng.normal(0.0, 0.1, (iv.max() + 1, iu.max() + 1))
     f = tints[iv[:, None], iu[None, :]] + 0.07 * _noise(rng, shape, 0.3) + 0.05 * _noise(rng, shape, 0.03)
@@ -166,8 +171,8 @@ def facade(desc: dict, rng: np.random.Generator, shape) -> np.ndarray:
     H, W = shape
     w_m, h_m = desc["size_m"]
     base = _rgb(desc)
-    u = (np.arange(W) + 0.5) / W * w_m  # metres along the facade (columns)
-    z = (np.arange(H) + 0.5) / H * h_m  # metres above ground (rows)
+    u = _texel_m(W, w_m)  # metres along the facade (columns)
+    z = _texel_m(H, h_m)  # metres above ground (rows)
     U, Z = u[None, :], z[:, None]
     brick = rng.random() < 0.4
     f = 0.05 * _noise(rng, shape, 0.02) + 0.04 * _noise(rng, shape, 0.3)
@@ -212,7 +217,7 @@ def paint(desc: dict, rng: np.random.Generator, shape) -> np.ndarray:
     H, _ = shape
     sv = desc["size_m"][1]
     base = _rgb(desc)
-    z = (np.arange(H) + 0.5) / H * sv
+    z = _texel_m(H, sv)
     dirt = np.clip(1.0 - z / 0.6, 0, 1)[:, None] * (0.6 + 0.4 * _noise(rng, shape, 0.2))
     mottle = 0.04 * _noise(rng, shape, 0.05)
     grime = np.asarray([0.12, 0.1, 0.08])
