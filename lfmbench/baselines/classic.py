@@ -23,7 +23,6 @@ References
 """
 from __future__ import annotations
 
-import functools
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -158,15 +157,15 @@ class NoiseModel:
         """The noise model of the sensor in ``batch['meta']['sensor']`` (default ``ovt``).
 
         A resolved :class:`~lfmbench.sensor.SensorPreset` there (as :mod:`lfmbench.flicker_bench` puts it) is used
-        as it is; a preset name or YAML path (as the datasets record it) is resolved the first time a batch names
-        it and that :class:`NoiseModel` serves every later batch of this process (:func:`_named_noise`), so the
-        preset directory is not listed again per batch."""
+        as it is; a preset name or YAML path (as the datasets record it) is resolved by
+        :func:`~lfmbench.sensor.load_preset`, whose per-file cache (keyed by modification time) parses it once per
+        process; a name costs one ``stat``, no directory listing."""
         meta = batch.get("meta", {})
         name = _meta_value(meta, ("sensor", "sensor_preset", "preset"), 0) if isinstance(meta, dict) else None
         if isinstance(name, dict) and "captures" not in name:
             name = name.get("name", DEFAULT_PRESET)
         if name is None or isinstance(name, (str, Path)):
-            return _named_noise(str(name or DEFAULT_PRESET))
+            return cls.from_preset(str(name or DEFAULT_PRESET))
         return cls.from_preset(name)
 
     def lpd_variance(self, lpd_e: torch.Tensor, both_unsaturated: torch.Tensor) -> torch.Tensor:
@@ -183,14 +182,6 @@ class NoiseModel:
     def spd_variance(self, spd_e: torch.Tensor, gain: torch.Tensor) -> torch.Tensor:
         """Variance (input-referred e-^2) of ``spd_e = gain x SPD electrons``: gain x spd_e + (gain x read)^2."""
         return gain * spd_e.clamp_min(0.0) + (gain * self.read_noise_spd_e) ** 2
-
-
-@functools.lru_cache(maxsize=16)
-def _named_noise(name: str) -> NoiseModel:
-    """:meth:`NoiseModel.from_preset` of a preset name or YAML path, once per process (a ValueError is not kept:
-    the next batch naming it raises again). A preset file edited while a process runs is not read again, as the
-    dataset that named it resolved it once when it was built."""
-    return NoiseModel.from_preset(name)
 
 
 def saturated_fusion(hcg: torch.Tensor, lcg: torch.Tensor, spd: torch.Tensor, saturated: torch.Tensor

@@ -296,11 +296,13 @@ def load_preset(preset: "str | Path | SensorPreset | Mapping[str, Any]") -> Sens
     text = str(preset)
     path = Path(text)
     if path.suffix.lower() not in (".yaml", ".yml", ".json") and not path.exists():
-        reg = preset_registry()
-        if text not in reg:
-            raise ValueError(f"preset: unknown sensor preset {brief(text)}; shipped presets are {reg.names()} "
-                             "or give a path to a YAML file")
-        path = reg.get(text)
+        # A shipped name is its file in PRESET_DIR (the registry's rule): looked up directly, so resolving a name
+        # per batch costs one stat, not a directory listing; the listing is made only to name the choices.
+        shipped = PRESET_DIR / f"{text}.yaml"
+        if path.name != text or not shipped.is_file():
+            raise ValueError(f"preset: unknown sensor preset {brief(text)}; shipped presets are "
+                             f"{preset_registry().names()} or give a path to a YAML file")
+        path = shipped
     resolved = path.resolve()
     if not resolved.is_file():
         raise ValueError(f"preset: file {resolved} does not exist")

@@ -91,20 +91,24 @@ def test_noise_model_from_preset_and_batch():
     assert float(v) == pytest.approx(SPD_GAIN * 100 + (SPD_GAIN * 0.83) ** 2, rel=1e-6)
 
 
-def test_noise_model_resolves_a_named_preset_once_and_uses_a_travelling_one_as_is(monkeypatch):
-    """Batches naming ``ovt`` resolve it once per process (not per batch); a ``SensorPreset`` object in the batch
-    (as flicker_bench sends it) is used as it is, no name looked up: a preset that differs from the file only in
-    its SPD read noise gives that read noise."""
+def test_noise_model_resolves_a_named_preset_without_listing_presets_and_uses_a_travelling_one_as_is(
+        monkeypatch):
+    """Batches naming ``ovt`` resolve it without listing the preset folder (one stat per batch; the file is parsed
+    once per process by ``load_preset``'s cache); a ``SensorPreset`` object in the batch (as flicker_bench sends it)
+    is used as it is, no name looked up: a preset that differs from the file only in its SPD read noise gives that
+    read noise."""
     import dataclasses
 
-    import lfmbench.sensor as S
+    import lfmbench.sensor.preset as P
 
-    classic._named_noise.cache_clear()
-    calls = []
-    real = S.resolve
-    monkeypatch.setattr(S, "resolve", lambda p: calls.append(p) or real(p))
+    listed = []
+    real_registry = P.preset_registry
+    P._load_preset_file.cache_clear()
+    monkeypatch.setattr(P, "preset_registry", lambda: listed.append(1) or real_registry())
     nms = [classic.NoiseModel.from_batch(make_batch(seed=i)) for i in range(3)]
-    assert calls == ["ovt"] and nms[0] == nms[1] == nms[2] == classic.NoiseModel.from_preset("ovt")
+    assert listed == [] and P._load_preset_file.cache_info().misses == 1
+    assert nms[0] == nms[1] == nms[2] == classic.NoiseModel.from_preset("ovt")
+    real = P.resolve
     ovt = real("ovt")
     own = dataclasses.replace(ovt, captures={**ovt.captures, "spd": dataclasses.replace(ovt.captures["spd"],
                                                                                          read_noise_e=7.5)})
