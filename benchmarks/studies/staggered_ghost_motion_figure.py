@@ -160,6 +160,17 @@ def main(argv=None) -> int:
     return 0
 
 
+def _centroid(img: torch.Tensor, x0: int, y0: int) -> tuple[float, float]:
+    """(x, y) px in the frame, continuous coordinates as :func:`render_tools.camera.project` (pixel i spans [i, i + 1)):
+    the intensity-weighted centroid of the pixels of ``img`` (3, h, w) whose channel mean exceeds half its maximum (a
+    crop whose top-left pixel is (x0, y0))."""
+    x = img.mean(0)
+    m = x > 0.5 * x.max()
+    ys, xs = torch.nonzero(m, as_tuple=True)
+    w = x[m].double()
+    return float((xs * w).sum() / w.sum()) + x0 + 0.5, float((ys * w).sum() / w.sum()) + y0 + 0.5
+
+
 def _figure(res: dict, lamps: list[dict], a, what: str) -> None:
     """The crops (exact and nearest rows: each capture, the merge, long / short overlaid), the ground truth and the
     whole frame with the crop, written to ``a.png``."""
@@ -171,6 +182,12 @@ def _figure(res: dict, lamps: list[dict], a, what: str) -> None:
     ty = int(np.clip((y0 + y1) / 2 - ch / 2, 0, a.height - ch))
     tx = int(np.clip((x0 + x1) / 2 - cw / 2, 0, a.width - cw))
     crop = (slice(None), slice(ty, ty + ch), slice(tx, tx + cw))
+    for label in ("exact", "nearest"):  # where each capture puts the lamp: its centroid over half its crop maximum
+        xy = {k: _centroid(res[label][k][crop], tx, ty) for k in ("long", "medium", "short", "merge", "gt")}
+        print(f"{label}: lamp centroid (x, y) px " + ", ".join(f"{k} ({x:.1f}, {y:.1f})" for k, (x, y) in xy.items())
+              + f"; short - long {float(np.hypot(*(np.subtract(xy['short'], xy['long'])))):.1f} px")
+    print("projected headlight centres (x, y) px: " + "; ".join(
+        ", ".join(f"{c} ({t['uv'][c][0]:.1f}, {t['uv'][c][1]:.1f})" for c in MID_S) for t in lamps))
     # one log tone curve for every panel: the ground truth's brightest crop pixels at 1, 1/300 of them at ~0.2
     peak = float(torch.quantile(res["exact"]["gt"][crop].mean(0).flatten(), 0.995)) or 1.0
     ref = peak / 300.0
