@@ -1,8 +1,8 @@
 """The staggered (DOL) motion ghost on a vehicle crossing the view (issue 38 deliverable 7): one generator-2 night
-scene with an oncoming car close to the camera, rendered twice at 640x360 with the ``default`` profile (spp 1, the
-static frames denoised), once with the static groups as the short and long windows only (corpus format 3: every
-staggered capture is served by ``nearest``, the long window's average, so it sees the car where the whole frame
-averages it) and once with static time bins at the staggered preset's window edges (format 4,
+scene with an oncoming car close to the camera, rendered twice at 640x360 with the ``default`` profile at spp 4
+(its spp 1 looks the same; the static frames denoised), once with the static groups as the short and long windows
+only (corpus format 3: every staggered capture is served by ``nearest``, the long window's average, so it sees the
+car where the whole frame averages it) and once with static time bins at the staggered preset's window edges (format 4,
 ``RenderOptions.static_edges_s``: each capture integrates the scene over its own time). Frame 0 through the
 ``staggered`` preset (10 / 1 / 0.1 ms, noise on, the same PWM draws), its standard merge (``exposure_select``) and
 the sample's ground truth (``gt``), demosaiced, with a crop on the car's headlights.
@@ -132,7 +132,7 @@ def main(argv=None) -> int:
     ap.add_argument("--height", type=int, default=360)
     ap.add_argument("--seed", type=int, default=34, help="34 (night): an oncoming car at 11 m, closing at 73 m/s")
     ap.add_argument("--tod", default="night")
-    ap.add_argument("--spp", type=int, default=1)
+    ap.add_argument("--spp", type=int, default=4)
     ap.add_argument("--find", default=None, help="search seeds A:B (night, dusk) for the largest headlight shift")
     ap.add_argument("--out", type=Path, default=bd.ROOT / "bench_out" / "ghostmotion")
     ap.add_argument("--png", type=Path, default=bd.IMG / "staggered_ghost_motion.png")
@@ -223,8 +223,8 @@ def _figure(res: dict, lamps: list[dict], a, what: str) -> None:
     for ax in axes.flat:
         ax.set_axis_off()
     fig.suptitle(f"staggered preset (10 / 1 / 0.1 ms), generator-2 scene seed {a.seed} ({a.tod}), frame 0, "
-                 f"{a.width}x{a.height}: {what}.\nRow 1: static time bins at the captures' edges (exact windows); "
-                 "row 2: nearest (every capture sees the scene over the long window). "
+                 f"{a.width}x{a.height}, spp {a.spp}: {what}.\nRow 1: static time bins at the captures' edges "
+                 "(exact windows); row 2: nearest (every capture sees the scene over the long window). "
                  f"Crop ({ty}, {tx}) {ch}x{cw} px; dashed: the headlight's centre at the long window's middle "
                  "(yellow, 5 ms) and the short's (magenta, 11.05 ms)",
                  fontsize=8.5)
