@@ -410,12 +410,8 @@ def mitsuba_dict(scene: dict, t: float, emit: str | None = None, lights: list[in
             flux = math.pi * float(lt["luminance_cd_m2"]) * plane_area(lt)
             emitter = mi.load_dict({"type": "area", "radiance": dict(face_spec), "sampling_weight": max(flux, 1e-12)})
             if lt["spread_deg"] < 90.0:
-                n = np.asarray(lt["normal"], dtype=float)
-                n /= np.linalg.norm(n)
-                pos = np.asarray(lt["center"], dtype=float) + off + BEAM_OFFSET_M * n
-                up = [0.0, 0.0, 1.0] if abs(n[2]) < 0.9 else [1.0, 0.0, 0.0]
                 d[beam_id(lt["id"])] = {
-                    "type": "spot", "to_world": mi.ScalarTransform4f().look_at(pos.tolist(), (pos + n).tolist(), up),
+                    "type": "spot", "to_world": _beam_to_world(mi, lt, off),
                     "intensity": dict(beam_spec),
                     "cutoff_angle": float(lt["spread_deg"]),
                     # flux of a cone of intensity I: ~ I * 2 pi (1 - cos cutoff)
@@ -432,6 +428,61 @@ def mitsuba_dict(scene: dict, t: float, emit: str | None = None, lights: list[in
             cache[key] = mi.load_dict(sky_dict(scene, unit_scale=unit_sky))
         d["sky"] = cache[key]
     return d
+
+
+def _beam_to_world(mi, light: dict, off: np.ndarray):
+    """Mitsuba ``ScalarTransform4f`` placing light ``light``'s beam (spot) :data:`BEAM_OFFSET_M` in front of its face,
+    the face moved by ``off`` (3,) m, looking along the face normal."""
+    n = np.asarray(light["normal"], dtype=float)
+    n /= np.linalg.norm(n)
+    pos = np.asarray(light["center"], dtype=float) + off + BEAM_OFFSET_M * n
+    up = [0.0, 0.0, 1.0] if abs(n[2]) < 0.9 else [1.0, 0.0, 0.0]
+    return mi.ScalarTransform4f().look_at(pos.tolist(), (pos + n).tolist(), up)
+
+
+def place_moving(params, scene: dict, t: float, cache: dict) -> bool:
+    """Move what moves in a scene loaded from :func:`mitsuba_dict` (``params = mi.traverse(loaded)``) to time ``t``
+    (s): the vertices (and texture coordinates) of every object and lamp face that is not in ``cache``'s static
+    meshes (:func:`prepare_geometry`: moving objects, walkers) and the beams of the moving lamps, with the same
+    float32 arrays :func:`mitsuba_dict` would build at ``t``; then ``params.update()`` (Mitsuba refreshes the
+    meshes' bounding boxes and its ray-tracing acceleration structure). The static meshes stay as loaded: a bin's
+    scene without rebuilding them (docs/benchmarks/motion-storage.md). Returns False, changing nothing, when a
+    mesh's vertex or face count at ``t`` differs from the loaded one (the caller then loads the scene anew)."""
+    import drjit as dr  # noqa: PLC0415
+    import mitsuba as mi  # noqa: PLC0415
+
+    prepare_geometry(scene, cache)
+    rest = cache["rest_meshes"]
+    sets: dict = {}
+    for o in scene["objects"]:
+        if ("object", o["id"]) in rest:
+            continue
+        meshes = _object_meshes(o, object_offset(scene, o["id"], t), scene.get("meshes"), scene["materials"], t)
+        for k, (_mat, V, F, UV) in enumerate(meshes):
+            sets[shape_id(o["id"], k)] = (V, F, UV)
+    beams = {}
+    for lt in scene["lights"]:
+        if ("light", lt["id"]) in rest:
+            continue
+        off = object_offset(scene, lt["instance"], t)
+        sets[light_shape_id(lt["id"])] = (*_plane_mesh(lt, off), None)
+        if f"{beam_id(lt['id'])}.to_world" in params:
+            beams[f"{beam_id(lt['id'])}.to_world"] = _beam_to_world(mi, lt, off)
+    for name, (V, F, UV) in sets.items():
+        key = f"{name}.vertex_positions"
+        if key not in params or dr.width(params[key]) != 3 * len(V) or dr.width(params[f"{name}.faces"]) != 3 * len(F):
+            return False
+    for name, (V, F, UV) in sets.items():
+        params[f"{name}.vertex_positions"] = type(params[f"{name}.vertex_positions"])(
+            np.asarray(V, dtype=np.float32).ravel())
+        params[f"{name}.faces"] = type(params[f"{name}.faces"])(np.asarray(F, dtype=np.uint32).ravel())
+        if UV is not None:
+            params[f"{name}.vertex_texcoords"] = type(params[f"{name}.vertex_texcoords"])(
+                np.asarray(UV, dtype=np.float32).ravel())
+    for key, tf in beams.items():
+        params[key] = type(params[key])(tf)
+    params.update()
+    return True
 
 
 def pad_emitter_dict() -> dict:
