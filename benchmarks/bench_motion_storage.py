@@ -37,7 +37,9 @@ from lfmbench.fileio import atomic_write_text  # noqa: E402
 STAG_EDGES = [0.0, 0.010, 0.011, 0.0111]   # the staggered preset's window edges, s (as bench_motion_windows.py)
 
 #: render-time parts of ``render_tools.render.render_frames`` (cProfile cumulative time of these functions)
-PARTS = (("trace (kernel launches)", "tracer.py", "render"), ("scene dicts per bin", "mitsuba_scene.py", "mitsuba_dict"),
+PARTS = (("trace (kernel launches)", "tracer.py", "render"),
+         ("scene dict (the frame's; one per bin where a mesh changes size)", "mitsuba_scene.py", "mitsuba_dict"),
+         ("moving meshes and beams placed per bin", "mitsuba_scene.py", "place_moving"),
          ("static denoising (with its first import)", "denoise.py", "denoise_static"),
          ("of which the denoiser's import (torch; once per process)", "pyoidn/__init__.py", "<module>"),
          ("geometry preparation", "mitsuba_scene.py", "prepare_geometry"),
@@ -50,7 +52,7 @@ PROFILED = ("import cProfile, runpy, sys, time; out, path = sys.argv[1], sys.arg
             "p.disable(); p.dump_stats(out)")
 
 
-def profile_render(a, work: Path, edges: list, tag: str) -> tuple[dict, dict]:
+def profile_render(a, work: Path, edges: list, tag: str, bin_samples: str = "independent") -> tuple[dict, dict]:
     """Run the motion-windows worker under cProfile (twice: the first compiles kernels); (cost json, parts s)."""
     prof, npz, js = work / f"{tag}.prof", work / f"{tag}.npz", work / f"{tag}.json"
     if not (prof.exists() and npz.exists() and js.exists()):
@@ -59,7 +61,8 @@ def profile_render(a, work: Path, edges: list, tag: str) -> tuple[dict, dict]:
             # other jobs as much as this one
             cmd = [sys.executable, "-c", PROFILED, str(prof), str(ROOT / "benchmarks" / "bench_motion_windows.py"),
                    "--worker", "--case", a.case, "--width", str(a.width), "--height", str(a.height), "--frames", "1",
-                   "--seed", "4", "--edges", json.dumps(edges), "--npz", str(npz), "--json", str(js)]
+                   "--seed", "4", "--edges", json.dumps(edges), "--npz", str(npz), "--json", str(js),
+                   "--bin-samples", bin_samples]
             res = subprocess.run(cmd, capture_output=True, text=True, env=dict(os.environ, PYTHONPATH=str(ROOT)))
             if res.returncode:
                 raise RuntimeError(res.stderr[-3000:])
@@ -80,18 +83,19 @@ def weights(edges: np.ndarray, start: float, length: float) -> np.ndarray:
     return window_bin_weights(edges, start, length)
 
 
-def storage_table(d: dict) -> list[tuple]:
-    """(variant, bytes, max per-bin error %, per-window errors %) of the bins in ``d``."""
+def storage_table(d: dict, dc: dict | None = None) -> list[tuple]:
+    """(variant, bytes, max per-bin error %, per-window errors %) of the bins in ``d`` (independent random numbers
+    per bin) and, given, ``dc`` (the same render with common random numbers, ``static_bin_samples="common"``)."""
     from lfmbench.corpus import exr_encode as X  # noqa: PLC0415
     from lfmbench.corpus.storage import Storage, store_layer  # noqa: PLC0415
 
     exr = X._exr()
-    bins = d["bins"].astype(np.float32)
     edges = d["edges"]
-    B, C, H, W = bins.shape
+    B, C, H, W = d["bins"].shape
     ts0, ts1 = edges[1], edges[2]       # the split pixel's short window is a bin (the renderer adds its ends)
     wins = {"staggered long": (0.0, 0.010), "staggered medium": (0.010, 0.001), "staggered short": (0.011, 0.0001),
             "split short": (ts0, ts1 - ts0), "long": (0.0, edges[-1])}
+    wl = weights(edges, 0.0, edges[-1])  # the long window's bin weights (bin length / T_L)
 
     def nbytes(layers: dict) -> int:
         header = X._base_header(W, H, compression="piz")
@@ -101,31 +105,47 @@ def storage_table(d: dict) -> list[tuple]:
     def rel(x, ref):
         return float(np.sqrt(np.sum((x - ref) ** 2) / np.sum(ref.astype(np.float64) ** 2)))
 
-    out = []
-    for bits in (5, 4, 3, 2):
+    def errors(back, bins):
+        we = {n: rel(np.tensordot(weights(edges, s, n_), back, 1), np.tensordot(weights(edges, s, n_), bins, 1))
+              for n, (s, n_) in wins.items()}
+        return max(rel(back[k], bins[k]) for k in range(B)), we
+
+    def plain(bins, bits):
         st = Storage("float16", "piz", bits)
         lay, back = {}, []
         for k in range(B):
             ls = store_layer(bins[k], st)
             lay[f"bin{k}"] = ls.data
             back.append(ls.data.astype(np.float64) / ls.scale)
-        back = np.stack(back)
-        we = {n: rel(np.tensordot(weights(edges, s, n_), back, 1), np.tensordot(weights(edges, s, n_), bins, 1))
-              for n, (s, n_) in wins.items()}
-        out.append((f"bins, {bits} mantissa bits" + (" (`compact`, today)" if bits == 5 else ""), nbytes(lay),
-                    max(rel(back[k], bins[k]) for k in range(B)), we))
-    # the long window (5 bits) and the other bins as differences from it (signed HALF, 5 bits, zero where below
-    # 2^-6 of the local level); bin 0 from the exact sum
-    long_ = np.tensordot(weights(edges, 0.0, edges[-1]), bins, 1).astype(np.float32)
-    ls = store_layer(long_, "compact")
-    lay = {"long": ls.data}
-    for k in range(1, B):
-        dd = (bins[k] - long_).astype(np.float64)
-        m, e = np.frexp(dd)
-        dq = np.ldexp(np.round(m * 64) / 64, e)
-        dq[np.abs(dd) < 2.0 ** -6 * np.maximum(long_, bins[k])] = 0.0
-        lay[f"d{k}"] = (dq * ls.scale).astype(np.float16)
-    out.append(("long + the other bins' differences from it (5 bits)", nbytes(lay), float("nan"), {}))
+        return nbytes(lay), *errors(np.stack(back), bins)
+
+    def differences(bins):
+        # the long window (5 bits) and bins 1..B-1 as differences from it (signed HALF, 5 mantissa bits, zero where
+        # below 2^-6 of the local level: the bins' own 5-bit step); bin 0 from the exact sum long = sum_k w_k bin_k
+        long_ = np.tensordot(wl, bins, 1).astype(np.float32)
+        ls = store_layer(long_, "compact")
+        lay = {"long": ls.data}
+        lq = ls.data.astype(np.float64) / ls.scale
+        back = np.empty(bins.shape, np.float64)
+        for k in range(1, B):
+            dd = (bins[k] - long_).astype(np.float64)
+            m, e = np.frexp(dd)
+            dq = np.ldexp(np.round(m * 64) / 64, e)
+            dq[np.abs(dd) < 2.0 ** -6 * np.maximum(long_, bins[k])] = 0.0
+            lay[f"d{k}"] = (dq * ls.scale).astype(np.float16)
+            back[k] = lq + lay[f"d{k}"].astype(np.float64) / ls.scale
+        back[0] = (lq - np.tensordot(wl[1:], back[1:], 1)) / wl[0]
+        return nbytes(lay), *errors(back, bins)
+
+    out = []
+    bins = d["bins"].astype(np.float32)
+    for bits in (5, 4, 3, 2):
+        out.append((f"bins, {bits} mantissa bits" + (" (`compact`, today)" if bits == 5 else ""), *plain(bins, bits)))
+    out.append(("long + the other bins' differences from it (5 bits)", *differences(bins)))
+    if dc is not None:
+        cb = dc["bins"].astype(np.float32)
+        out.append(("common random numbers: bins, 5 mantissa bits", *plain(cb, 5)))
+        out.append(("common random numbers: long + differences (5 bits)", *differences(cb)))
     return out
 
 
@@ -146,11 +166,13 @@ def main(argv=None) -> None:
         made = json.loads(stamp.read_text()) if stamp.exists() else {"start": start, "load_start": load0}
         cost_x, parts_x = profile_render(a, work, STAG_EDGES, "exact")
         cost_n, parts_n = profile_render(a, work, [], "nearest")
+        cost_c, parts_c = profile_render(a, work, STAG_EDGES, "common", "common")
         d = dict(np.load(work / "exact.npz"))
+        dc = dict(np.load(work / "common.npz"))
         if "end" not in made:
             made.update(end=f"{datetime.now(timezone.utc):%Y-%m-%d %H:%M}", load_end=os.getloadavg()[0])
             atomic_write_text(stamp, json.dumps(made))
-    rows = storage_table(d)
+    rows = storage_table(d, dc)
     base = rows[0][1]
     md = ["# Motion between captures: what the 1.5x target needs (`benchmarks/bench_motion_storage.py`)", "",
           f"Made {made['start']} to {made['end'][-5:]} UTC on the shared 2-core AMD EPYC (AVX2), load "
@@ -166,16 +188,19 @@ def main(argv=None) -> None:
           "cProfile cumulative CPU seconds (the process's clock, every thread) of parts of `render_frames` (the "
           "parts do not cover everything; the denoiser's import is part of the denoising row). The static "
           "denoising's first call imports its library, and with it torch, once per process: in both columns.", "",
-          "| part | exact s | share % | nearest s | share % |", "|---|---|---|---|---|"]
+          "| part | exact s | share % | exact, common random numbers s | nearest s | share % |",
+          "|---|---|---|---|---|---|"]
     for label in ["render_frames"] + [p[0] for p in PARTS]:
-        x, n = parts_x.get(label, 0.0), parts_n.get(label, 0.0)
-        md.append(f"| {label} | {x:.1f} | {100 * x / parts_x['render_frames']:.0f} | {n:.1f} | "
+        x, n, c_ = parts_x.get(label, 0.0), parts_n.get(label, 0.0), parts_c.get(label, 0.0)
+        md.append(f"| {label} | {x:.1f} | {100 * x / parts_x['render_frames']:.0f} | {c_:.1f} | {n:.1f} | "
                   f"{100 * n / parts_n['render_frames']:.0f} |")
     md += ["", f"CPU seconds of the same renders (user + system, `time.process_time` of the worker): exact "
            f"{cost_x['render_cpu_s']:.1f}, nearest {cost_n['render_cpu_s']:.1f} ({cost_x['render_cpu_s'] / cost_n['render_cpu_s']:.2f}x); "
            f"scene bytes ({'compact'}): exact {cost_x['bytes'] / 1e6:.2f} MB, nearest {cost_n['bytes'] / 1e6:.2f} MB "
            f"({cost_x['bytes'] / cost_n['bytes']:.2f}x), static files {cost_x['static_bytes'] / 1e6:.2f} / "
-           f"{cost_n['static_bytes'] / 1e6:.2f} MB.", "",
+           f"{cost_n['static_bytes'] / 1e6:.2f} MB; exact with common random numbers {cost_c['render_cpu_s']:.1f} s "
+           f"({cost_c['render_cpu_s'] / cost_n['render_cpu_s']:.2f}x), {cost_c['bytes'] / 1e6:.2f} MB "
+           f"({cost_c['bytes'] / cost_n['bytes']:.2f}x) as bins.", "",
            "## Storage of the bins against their quantisation error", "",
            "Bytes of the bins (sum of the static groups, one EXR part, PIZ) per encoding and the relative RMS error "
            "it adds: the largest of the bins, and of the windows the plans read (length-weighted sums of bins). "
@@ -200,11 +225,12 @@ def main(argv=None) -> None:
            "their own noise almost everywhere (the ego camera moves every pixel), and the signed differences "
            "compress worse than the bins.",
            ""]
-    fixed = (PARTS[3][0], PARTS[2][0])   # once per scene in both schemes: textures and geometry, the denoiser
+    # once per scene in both schemes: textures and geometry, the denoiser (its import inside it)
+    fixed = ("geometry preparation", "static denoising (with its first import)")
     fx = parts_x["render_frames"] - sum(parts_x.get(k, 0.0) for k in fixed)
     fn = parts_n["render_frames"] - sum(parts_n.get(k, 0.0) for k in fixed)
     tr = parts_x.get(PARTS[0][0], 0.0) / max(parts_n.get(PARTS[0][0], 0.0), 1e-9)
-    sd = parts_x.get(PARTS[1][0], 0.0) / max(parts_n.get(PARTS[1][0], 0.0), 1e-9)
+    sd = (parts_x.get(PARTS[1][0], 0.0) + parts_x.get(PARTS[2][0], 0.0)) / max(parts_n.get(PARTS[1][0], 0.0), 1e-9)
     md.append(f"Render CPU: {parts_x['render_frames'] / parts_n['render_frames']:.2f}x `nearest` (under cProfile), "
               f"{'within' if parts_x['render_frames'] <= 1.5 * parts_n['render_frames'] else 'above'} 1.5x at this "
               "size; a generator-2 scene's fixed costs, paid once in both schemes (geometry preparation with its "

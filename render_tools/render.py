@@ -744,9 +744,7 @@ def scene_meta(scene: dict, opts: RenderOptions) -> dict:
         "timing": {"short_exposure_s": float(scene["timing"]["short_exposure_s"]),
                    "long_exposure_s": opts.long_exposure_s, "alignment": "center", "line_time_s": opts.line_time_s,
                    "readout_s": opts.readout_s, "capture_window_s": opts.capture_window_s, "bins": opts.bins,
-                   **({} if static_edges is None else {"static_edges_s": [float(e) for e in static_edges]}),
-                   **({"static_bin_samples": "common"} if static_edges is not None
-                      and opts.static_bin_samples == "common" else {})},
+                   **({} if static_edges is None else {"static_edges_s": [float(e) for e in static_edges]})},
         "camera": {"fov_x_deg": fov, "K": K.tolist(), "convention": "opencv (x right, y down, z forward); "
                    "world ISO 8855 (x forward, y left, z up), m",
                    "poses": [[ego.pose_cv(tm["window"][0]).tolist(), ego.pose_cv(tm["window"][1]).tolist()]
@@ -756,6 +754,8 @@ def scene_meta(scene: dict, opts: RenderOptions) -> dict:
         "lights": lights,
         "render": {"spp": opts.spp, "light_spp": opts.light_spp or opts.spp, "seed": opts.seed,
                    "pad_px": opts.pad_px, "static_pass": opts.static_pass,
+                   **({"static_bin_samples": "common"} if static_edges is not None
+                      and opts.static_bin_samples == "common" else {}),
                    **({"reflection_bins": opts.reflection_bins or opts.bins,
                        "reflection_min_lux": opts.reflection_min_lux,
                        "reflection_block_px": opts.reflection_block_px} if helper.wet else {}),
