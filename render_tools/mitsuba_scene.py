@@ -23,6 +23,7 @@ exposure; the ego-motion blur is continuous, see :mod:`render_tools.camera`).
 """
 from __future__ import annotations
 
+import functools
 import json
 import math
 
@@ -149,6 +150,33 @@ def part_rotation(part: dict) -> np.ndarray:
     return R
 
 
+@functools.lru_cache(maxsize=1)
+def _unit_sphere() -> tuple[np.ndarray, np.ndarray]:
+    """The :data:`SPHERE_SEGMENTS` tessellation of the unit sphere: the ring vertices U (n, 3) (without the poles)
+    and the faces F (m, 3), pole 0 first and the other pole last (a sphere mesh of centre c, radius r is
+    [c + (0, 0, r), c + r U, c - (0, 0, r)]); computed once (thousands of sphere parts per scene)."""
+    nl, nt = SPHERE_SEGMENTS
+    U = []
+    for i in range(1, nt):
+        th = math.pi * i / nt
+        for j in range(nl):
+            ph = 2 * math.pi * j / nl
+            U.append(np.array([math.sin(th) * math.cos(ph), math.sin(th) * math.sin(ph), math.cos(th)]))
+    F = [[0, 1 + j, 1 + (j + 1) % nl] for j in range(nl)]
+    for i in range(nt - 2):
+        b0, b1 = 1 + i * nl, 1 + (i + 1) * nl
+        for j in range(nl):
+            j1 = (j + 1) % nl
+            F += [[b0 + j, b1 + j, b1 + j1], [b0 + j, b1 + j1, b0 + j1]]
+    last = len(U) + 1
+    b0 = 1 + (nt - 2) * nl
+    F += [[last, b0 + (j + 1) % nl, b0 + j] for j in range(nl)]
+    U, F = np.array(U), np.array(F)
+    U.flags.writeable = False
+    F.flags.writeable = False
+    return U, F
+
+
 def part_mesh(part: dict, offset=np.zeros(3), meshes: dict | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Triangle mesh (V (n, 3) m, F (m, 3) int, outward counter-clockwise) of one primitive part, moved by
     ``offset`` (3,) m. Analytic Mitsuba shapes are slow in the LLVM backend (Embree user geometry), so every
@@ -176,24 +204,10 @@ def part_mesh(part: dict, offset=np.zeros(3), meshes: dict | None = None) -> tup
     if s == "sphere":
         c = np.asarray(part["center"], dtype=float) + offset
         r = part["radius"]
-        nl, nt = SPHERE_SEGMENTS
-        V = [c + [0, 0, r]]
-        for i in range(1, nt):
-            th = math.pi * i / nt
-            for j in range(nl):
-                ph = 2 * math.pi * j / nl
-                V.append(c + r * np.array([math.sin(th) * math.cos(ph), math.sin(th) * math.sin(ph), math.cos(th)]))
-        V.append(c + [0, 0, -r])
-        F = [[0, 1 + j, 1 + (j + 1) % nl] for j in range(nl)]
-        for i in range(nt - 2):
-            b0, b1 = 1 + i * nl, 1 + (i + 1) * nl
-            for j in range(nl):
-                j1 = (j + 1) % nl
-                F += [[b0 + j, b1 + j, b1 + j1], [b0 + j, b1 + j1, b0 + j1]]
-        last = len(V) - 1
-        b0 = 1 + (nt - 2) * nl
-        F += [[last, b0 + (j + 1) % nl, b0 + j] for j in range(nl)]
-        return np.array(V), np.array(F)
+        U, F = _unit_sphere()
+        # elementwise as the per-vertex sum c + r * u: the same float64 values
+        V = np.vstack([(c + [0, 0, r])[None], c + r * U, (c + [0, 0, -r])[None]])
+        return V, F.copy()
     # cylinder with caps
     p0 = np.asarray(part["p0"], dtype=float) + offset
     p1 = np.asarray(part["p1"], dtype=float) + offset
