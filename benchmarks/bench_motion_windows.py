@@ -344,8 +344,8 @@ def main(argv=None) -> None:
            "mask (`tiles`: their share of the image). Storage: today's scene plus tiles x one full static layer "
            f"({layer_bytes / 1e6:.2f} MB, the exact scheme's static bytes per layer) per extra window. Render CPU: "
            f"today's plus, per extra window, one full static layer's CPU ({per_layer_cpu:.2f} s, from the two "
-           "measured rows) times tiles (lower end: tracing scales with area) or times 1 (upper end: a scene load per "
-           "window for the moving objects, as the bins have, dominates at this size).", "",
+           "measured rows) times tiles (lower end: tracing scales with area) or times 1 (upper end: a launch per "
+           "window for the moving objects, as the bins have, with its fixed costs).", "",
            "| eps px | masked pixels % | tiles % | scene MB | x nearest | render CPU x nearest |", "|---|---|---|---|---|---|"]
     masked_cost = {}
     for e in eps:
@@ -399,6 +399,16 @@ def main(argv=None) -> None:
         "estimate at this size; the crossing-car test "
         "(`tests/render_tools/test_motion_windows.py`) is the sharper check that `nearest` misplaces a moving "
         "lamp in the short captures (2-3 px) and the bins do not (< 0.15 px)."]
+    ex1, cr1 = err["exact", 1], err["common", 1]
+    nz = [(label, 100 * noise(window(ex1[0], s0, n, True), window(ex1[1], s0, n, True)),
+           100 * noise(window(cr1[0], s0, n, True), window(cr1[1], s0, n, True))) for label, s0, n in wins]
+    md += ["", "Common random numbers (`exact spp 1, common`): each window's bias " + ", ".join(
+        f"{r[0].split(' [')[0].split(' (')[0]} {r[-1][0]:.2f} ({r[-1][1]:.2f})" for r in rows)
+        + " %; the relative RMS noise of one spp-1 render (the two seeds' difference) with independent / common "
+        "bins: " + ", ".join(f"{lb.split(' [')[0].split(' (')[0]} {a_:.1f} / {c_:.1f}" for lb, a_, c_ in nz)
+        + " %. A window of one bin keeps its noise; a window summing bins loses the averaging of their independent "
+        "noise (the long window's bins are {:.0f} % of it in the largest one)."
+        .format(100 * max(np.diff(np.asarray(err["exact", 1][0]["edges"]))) / tl)]
     md += ["", "Where `nearest` goes wrong: the masked staggered medium window's error is " + " / ".join(
         f"{rows[1][6 + i][0]:.1f}" for i in range(len(eps))) + " % with eps " + " / ".join(f"{e:g}" for e in eps)
         + f" px, against `nearest`'s {near_med:.1f} %: most of it is in pixels whose surface point moves by less than "
