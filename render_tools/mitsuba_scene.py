@@ -19,7 +19,11 @@ Emitters
   by ``sky.scale``, or a ``constant`` environment with an absolute spectrum (night).
 
 Moving objects are placed at their position at the time given (object motion is not blurred inside an
-exposure; the ego-motion blur is continuous, see :mod:`render_tools.camera`).
+exposure; the ego-motion blur is continuous, see :mod:`render_tools.camera`); :func:`place_moving` moves them in a
+loaded scene to another time (static time bins).
+
+Over 500 lines: :func:`mitsuba_dict` and :func:`place_moving` must build the same arrays from the same helpers (a
+bin's images equal those of a scene loaded at its time, bit for bit), so they stay in one module.
 """
 from __future__ import annotations
 
