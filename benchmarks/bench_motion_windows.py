@@ -407,7 +407,7 @@ def main(argv=None) -> None:
         + " %; the relative RMS noise of one spp-1 render (the two seeds' difference) with independent / common "
         "bins: " + ", ".join(f"{lb.split(' [')[0].split(' (')[0]} {a_:.1f} / {c_:.1f}" for lb, a_, c_ in nz)
         + " %. A window of one bin keeps its noise; a window summing bins loses the averaging of their independent "
-        "noise (the long window's bins are {:.0f} % of it in the largest one)."
+        "noise (the largest of the long window's bins is {:.0f} % of it)."
         .format(100 * max(np.diff(np.asarray(err["exact", 1][0]["edges"]))) / tl)]
     md += ["", "Where `nearest` goes wrong: the masked staggered medium window's error is " + " / ".join(
         f"{rows[1][6 + i][0]:.1f}" for i in range(len(eps))) + " % with eps " + " / ".join(f"{e:g}" for e in eps)
