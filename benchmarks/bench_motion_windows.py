@@ -93,7 +93,8 @@ def worker(args) -> None:
     edges = tuple(json.loads(args.edges))
     opts = R.RenderOptions(width=args.width, height=args.height, spp=args.spp, light_spp=32, bins=8,
                            frames=args.frames, seed=args.seed, static_edges_s=edges, aux=args.aux,
-                           static_denoise="off" if args.no_denoise else "auto")
+                           static_denoise="off" if args.no_denoise else "auto",
+                           static_bin_samples=args.bin_samples)
     t, c = time.perf_counter(), time.process_time()
     frames = list(R.render_frames(sc, opts))
     render_wall, render_cpu = time.perf_counter() - t, time.process_time() - c
@@ -122,8 +123,9 @@ def worker(args) -> None:
 
 
 def run(a, tmp: Path, name: str, edges: tuple, seed: int, no_denoise: bool, spp: int = 1,
-        aux: bool = False) -> tuple[dict, dict]:
-    stem = f"{name.split(',')[0].split(' ')[0]}-{len(edges)}-{seed}-{int(no_denoise)}-{spp}"
+        aux: bool = False, bin_samples: str = "independent") -> tuple[dict, dict]:
+    stem = f"{name.split(',')[0].split(' ')[0]}-{len(edges)}-{seed}-{int(no_denoise)}-{spp}" + (
+        "" if bin_samples == "independent" else f"-{bin_samples}")
     npz, js = tmp / f"{stem}.npz", tmp / f"{stem}.json"
     if a.work and npz.exists() and js.exists():  # --work: a render of an earlier run with the same arguments
         d = np.load(npz)
@@ -131,7 +133,7 @@ def run(a, tmp: Path, name: str, edges: tuple, seed: int, no_denoise: bool, spp:
     cmd = [sys.executable, __file__, "--worker", "--case", a.case, "--width", str(a.width), "--height",
            str(a.height), "--frames", str(a.frames), "--seed", str(seed), "--edges", json.dumps(list(edges)),
            "--npz", str(npz), "--json", str(js), "--spp", str(spp)] + (["--no-denoise"] if no_denoise else []) + (
-           ["--aux"] if aux else [])
+           ["--aux"] if aux else []) + ["--bin-samples", bin_samples]
 
     def cpu():
         r = resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -212,6 +214,7 @@ def main(argv=None) -> None:
     ap.add_argument("--npz", help=argparse.SUPPRESS)
     ap.add_argument("--json", help=argparse.SUPPRESS)
     ap.add_argument("--no-denoise", action="store_true", help=argparse.SUPPRESS)
+    ap.add_argument("--bin-samples", default="independent", help=argparse.SUPPRESS)
     a = ap.parse_args(argv)
     if a.worker:
         worker(a)
@@ -219,10 +222,11 @@ def main(argv=None) -> None:
     load0 = os.getloadavg()
     eps = [float(x) for x in a.eps.split(",")]
     stag = tuple(sorted({x for s, n in STAGGERED for x in (s, s + n)}))
-    schemes = [("nearest (short + long windows)", ()), ("exact, staggered edges", stag)]
+    schemes = [("nearest (short + long windows)", (), "independent"), ("exact, staggered edges", stag, "independent"),
+               ("exact, staggered edges, common random numbers", stag, "common")]
     if a.all_presets:
         schemes.append(("exact, every shipped preset's edges", preset_edges(
-            ("staggered", "lofic", "chopped", "single", "ovt", "imx490"))))
+            ("staggered", "lofic", "chopped", "single", "ovt", "imx490")), "independent"))
     from render_tools import motion_bound  # noqa: PLC0415
     from render_tools import render as R  # noqa: PLC0415
     from render_tools.scene import generate_scene  # noqa: PLC0415
@@ -238,15 +242,16 @@ def main(argv=None) -> None:
         made = json.loads(stamp.read_text()) if stamp.exists() else {
             "start": f"{datetime.now(timezone.utc):%Y-%m-%d %H:%M}", "load_start": load0[0]}
         cost = {}
-        for name, edges in schemes:  # cost (profile as shipped: denoised); run twice, the first compiles kernels
-            run(a, tmp, name, edges, 3, False)
-            cost[name] = run(a, tmp, name, edges, 4, False)[0]
+        for name, edges, bs in schemes:  # cost (profile as shipped: denoised); run twice, the first compiles kernels
+            run(a, tmp, name, edges, 3, False, bin_samples=bs)
+            cost[name] = run(a, tmp, name, edges, 4, False, bin_samples=bs)[0]
         # error renders: two seeds of each, denoising off; truth = the staggered edges cut into fine pieces
         truth = [run(a, tmp, "truth", fine, s, True, aux=True)[1] for s in (1, 2)]
         err = {}
         for spp in (1, a.check_spp):
             err["nearest", spp] = [run(a, tmp, "nearest", (), s, True, spp)[1] for s in (1, 2)]
             err["exact", spp] = [run(a, tmp, "exact", stag, s, True, spp)[1] for s in (1, 2)]
+        err["common", 1] = [run(a, tmp, "exact", stag, s, True, 1, bin_samples="common")[1] for s in (1, 2)]
         if "end" not in made:
             made.update(end=f"{datetime.now(timezone.utc):%Y-%m-%d %H:%M}", load_end=os.getloadavg()[0])
             atomic_write_text(stamp, json.dumps(made))
@@ -281,6 +286,8 @@ def main(argv=None) -> None:
             m = masks[e]
             am = [np.where(m, t, window(d, 0.0, tl, True)) for t, d in zip((t1, t2), truth)]
             row.append(tuple(100 * x for x in bias(am[0], t1, am[1], t2)))
+        cr = err["common", 1]
+        row.append(tuple(100 * x for x in bias(window(cr[0], s0, n, True), t1, window(cr[1], s0, n, True), t2)))
         rows.append(row)
     base = cost[schemes[0][0]]
     info = next(iter(cost.values()))
@@ -312,11 +319,13 @@ def main(argv=None) -> None:
           "smallest bias the two renders tell apart from 0. `noise`: one truth render's relative RMS noise over "
           f"that window. `masked, eps` (evaluated on the truth renders): the window where a pixel's surface point "
           f"moves by >= eps px over the capture window (`render_tools.motion_bound`, grown by 1 px), the long "
-          "window elsewhere; short and long are stored as such (`stored`).",
+          "window elsewhere; short and long are stored as such (`stored`). `exact spp 1, common`: the bins with "
+          "common random numbers (`RenderOptions.static_bin_samples=\"common\"`: every bin of a frame draws the "
+          "same per-pixel sample sequence).",
           "",
           "| window | noise | nearest spp 1 | exact spp 1 | nearest spp " f"{a.check_spp} | exact spp {a.check_spp} | "
-          + " | ".join(f"masked, eps {e:g} px" for e in eps) + " |",
-          "|---|---|---|---|---|---|" + "---|" * len(eps)]
+          + " | ".join(f"masked, eps {e:g} px" for e in eps) + " | exact spp 1, common |",
+          "|---|---|---|---|---|---|" + "---|" * (len(eps) + 1)]
     for r in rows:
         md.append(f"| {r[0]} | {r[1]:.1f} | " + " | ".join(fmt(c) for c in r[2:]) + " |")
     md += ["", "## Cost", "",
@@ -325,7 +334,7 @@ def main(argv=None) -> None:
            "encoded scene (`compact`) and of its static group files.", "",
            "| scheme | static layers per group and frame | render CPU s | x nearest | render wall s | scene MB | "
            "x nearest | static files MB |", "|---|---|---|---|---|---|---|---|"]
-    for name, _e in schemes:
+    for name, _e, _bs in schemes:
         c = cost[name]
         md.append(f"| {name} | {c['layers']} | {c['render_cpu_s']:.1f} | {c['render_cpu_s'] / base['render_cpu_s']:.2f}"
                   f" | {c['render_wall_s']:.1f} | {c['bytes'] / 1e6:.2f} | {c['bytes'] / base['bytes']:.2f} | "
@@ -335,8 +344,8 @@ def main(argv=None) -> None:
            "mask (`tiles`: their share of the image). Storage: today's scene plus tiles x one full static layer "
            f"({layer_bytes / 1e6:.2f} MB, the exact scheme's static bytes per layer) per extra window. Render CPU: "
            f"today's plus, per extra window, one full static layer's CPU ({per_layer_cpu:.2f} s, from the two "
-           "measured rows) times tiles (lower end: tracing scales with area) or times 1 (upper end: a scene load per "
-           "window for the moving objects, as the bins have, dominates at this size).", "",
+           "measured rows) times tiles (lower end: tracing scales with area) or times 1 (upper end: a launch per "
+           "window for the moving objects, as the bins have, with its fixed costs).", "",
            "| eps px | masked pixels % | tiles % | scene MB | x nearest | render CPU x nearest |", "|---|---|---|---|---|---|"]
     masked_cost = {}
     for e in eps:
@@ -390,6 +399,16 @@ def main(argv=None) -> None:
         "estimate at this size; the crossing-car test "
         "(`tests/render_tools/test_motion_windows.py`) is the sharper check that `nearest` misplaces a moving "
         "lamp in the short captures (2-3 px) and the bins do not (< 0.15 px)."]
+    ex1, cr1 = err["exact", 1], err["common", 1]
+    nz = [(label, 100 * noise(window(ex1[0], s0, n, True), window(ex1[1], s0, n, True)),
+           100 * noise(window(cr1[0], s0, n, True), window(cr1[1], s0, n, True))) for label, s0, n in wins]
+    md += ["", "Common random numbers (`exact spp 1, common`): each window's bias " + ", ".join(
+        f"{r[0].split(' [')[0].split(' (')[0]} {r[-1][0]:.2f} ({r[-1][1]:.2f})" for r in rows)
+        + " %; the relative RMS noise of one spp-1 render (the two seeds' difference) with independent / common "
+        "bins: " + ", ".join(f"{lb.split(' [')[0].split(' (')[0]} {a_:.1f} / {c_:.1f}" for lb, a_, c_ in nz)
+        + " %. A window of one bin keeps its noise; a window summing bins loses the averaging of their independent "
+        "noise (the largest of the long window's bins is {:.0f} % of it)."
+        .format(100 * max(np.diff(np.asarray(err["exact", 1][0]["edges"]))) / tl)]
     md += ["", "Where `nearest` goes wrong: the masked staggered medium window's error is " + " / ".join(
         f"{rows[1][6 + i][0]:.1f}" for i in range(len(eps))) + " % with eps " + " / ".join(f"{e:g}" for e in eps)
         + f" px, against `nearest`'s {near_med:.1f} %: most of it is in pixels whose surface point moves by less than "

@@ -19,10 +19,15 @@ Emitters
   by ``sky.scale``, or a ``constant`` environment with an absolute spectrum (night).
 
 Moving objects are placed at their position at the time given (object motion is not blurred inside an
-exposure; the ego-motion blur is continuous, see :mod:`render_tools.camera`).
+exposure; the ego-motion blur is continuous, see :mod:`render_tools.camera`); :func:`place_moving` moves them in a
+loaded scene to another time (static time bins).
+
+Over 500 lines: :func:`mitsuba_dict` and :func:`place_moving` must build the same arrays from the same helpers (a
+bin's images equal those of a scene loaded at its time, bit for bit), so they stay in one module.
 """
 from __future__ import annotations
 
+import functools
 import json
 import math
 
@@ -149,6 +154,33 @@ def part_rotation(part: dict) -> np.ndarray:
     return R
 
 
+@functools.lru_cache(maxsize=1)
+def _unit_sphere() -> tuple[np.ndarray, np.ndarray]:
+    """The :data:`SPHERE_SEGMENTS` tessellation of the unit sphere: the ring vertices U (n, 3) (without the poles)
+    and the faces F (m, 3), pole 0 first and the other pole last (a sphere mesh of centre c, radius r is
+    [c + (0, 0, r), c + r U, c - (0, 0, r)]); computed once (thousands of sphere parts per scene)."""
+    nl, nt = SPHERE_SEGMENTS
+    U = []
+    for i in range(1, nt):
+        th = math.pi * i / nt
+        for j in range(nl):
+            ph = 2 * math.pi * j / nl
+            U.append(np.array([math.sin(th) * math.cos(ph), math.sin(th) * math.sin(ph), math.cos(th)]))
+    F = [[0, 1 + j, 1 + (j + 1) % nl] for j in range(nl)]
+    for i in range(nt - 2):
+        b0, b1 = 1 + i * nl, 1 + (i + 1) * nl
+        for j in range(nl):
+            j1 = (j + 1) % nl
+            F += [[b0 + j, b1 + j, b1 + j1], [b0 + j, b1 + j1, b0 + j1]]
+    last = len(U) + 1
+    b0 = 1 + (nt - 2) * nl
+    F += [[last, b0 + (j + 1) % nl, b0 + j] for j in range(nl)]
+    U, F = np.array(U), np.array(F)
+    U.flags.writeable = False
+    F.flags.writeable = False
+    return U, F
+
+
 def part_mesh(part: dict, offset=np.zeros(3), meshes: dict | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Triangle mesh (V (n, 3) m, F (m, 3) int, outward counter-clockwise) of one primitive part, moved by
     ``offset`` (3,) m. Analytic Mitsuba shapes are slow in the LLVM backend (Embree user geometry), so every
@@ -176,24 +208,10 @@ def part_mesh(part: dict, offset=np.zeros(3), meshes: dict | None = None) -> tup
     if s == "sphere":
         c = np.asarray(part["center"], dtype=float) + offset
         r = part["radius"]
-        nl, nt = SPHERE_SEGMENTS
-        V = [c + [0, 0, r]]
-        for i in range(1, nt):
-            th = math.pi * i / nt
-            for j in range(nl):
-                ph = 2 * math.pi * j / nl
-                V.append(c + r * np.array([math.sin(th) * math.cos(ph), math.sin(th) * math.sin(ph), math.cos(th)]))
-        V.append(c + [0, 0, -r])
-        F = [[0, 1 + j, 1 + (j + 1) % nl] for j in range(nl)]
-        for i in range(nt - 2):
-            b0, b1 = 1 + i * nl, 1 + (i + 1) * nl
-            for j in range(nl):
-                j1 = (j + 1) % nl
-                F += [[b0 + j, b1 + j, b1 + j1], [b0 + j, b1 + j1, b0 + j1]]
-        last = len(V) - 1
-        b0 = 1 + (nt - 2) * nl
-        F += [[last, b0 + (j + 1) % nl, b0 + j] for j in range(nl)]
-        return np.array(V), np.array(F)
+        U, F = _unit_sphere()
+        # elementwise as the per-vertex sum c + r * u: the same float64 values
+        V = np.vstack([(c + [0, 0, r])[None], c + r * U, (c + [0, 0, -r])[None]])
+        return V, F.copy()
     # cylinder with caps
     p0 = np.asarray(part["p0"], dtype=float) + offset
     p1 = np.asarray(part["p1"], dtype=float) + offset
@@ -410,12 +428,8 @@ def mitsuba_dict(scene: dict, t: float, emit: str | None = None, lights: list[in
             flux = math.pi * float(lt["luminance_cd_m2"]) * plane_area(lt)
             emitter = mi.load_dict({"type": "area", "radiance": dict(face_spec), "sampling_weight": max(flux, 1e-12)})
             if lt["spread_deg"] < 90.0:
-                n = np.asarray(lt["normal"], dtype=float)
-                n /= np.linalg.norm(n)
-                pos = np.asarray(lt["center"], dtype=float) + off + BEAM_OFFSET_M * n
-                up = [0.0, 0.0, 1.0] if abs(n[2]) < 0.9 else [1.0, 0.0, 0.0]
                 d[beam_id(lt["id"])] = {
-                    "type": "spot", "to_world": mi.ScalarTransform4f().look_at(pos.tolist(), (pos + n).tolist(), up),
+                    "type": "spot", "to_world": _beam_to_world(mi, lt, off),
                     "intensity": dict(beam_spec),
                     "cutoff_angle": float(lt["spread_deg"]),
                     # flux of a cone of intensity I: ~ I * 2 pi (1 - cos cutoff)
@@ -432,6 +446,61 @@ def mitsuba_dict(scene: dict, t: float, emit: str | None = None, lights: list[in
             cache[key] = mi.load_dict(sky_dict(scene, unit_scale=unit_sky))
         d["sky"] = cache[key]
     return d
+
+
+def _beam_to_world(mi, light: dict, off: np.ndarray):
+    """Mitsuba ``ScalarTransform4f`` placing light ``light``'s beam (spot) :data:`BEAM_OFFSET_M` in front of its face,
+    the face moved by ``off`` (3,) m, looking along the face normal."""
+    n = np.asarray(light["normal"], dtype=float)
+    n /= np.linalg.norm(n)
+    pos = np.asarray(light["center"], dtype=float) + off + BEAM_OFFSET_M * n
+    up = [0.0, 0.0, 1.0] if abs(n[2]) < 0.9 else [1.0, 0.0, 0.0]
+    return mi.ScalarTransform4f().look_at(pos.tolist(), (pos + n).tolist(), up)
+
+
+def place_moving(params, scene: dict, t: float, cache: dict) -> bool:
+    """Move what moves in a scene loaded from :func:`mitsuba_dict` (``params = mi.traverse(loaded)``) to time ``t``
+    (s): the vertices (and texture coordinates) of every object and lamp face that is not in ``cache``'s static
+    meshes (:func:`prepare_geometry`: moving objects, walkers) and the beams of the moving lamps, with the same
+    float32 arrays :func:`mitsuba_dict` would build at ``t``; then ``params.update()`` (Mitsuba refreshes the
+    meshes' bounding boxes and its ray-tracing acceleration structure). The static meshes stay as loaded: a bin's
+    scene without rebuilding them (docs/benchmarks/motion-storage.md). Returns False, changing nothing, when a
+    mesh's vertex or face count at ``t`` differs from the loaded one (the caller then loads the scene anew)."""
+    import drjit as dr  # noqa: PLC0415
+    import mitsuba as mi  # noqa: PLC0415
+
+    prepare_geometry(scene, cache)
+    rest = cache["rest_meshes"]
+    sets: dict = {}
+    for o in scene["objects"]:
+        if ("object", o["id"]) in rest:
+            continue
+        meshes = _object_meshes(o, object_offset(scene, o["id"], t), scene.get("meshes"), scene["materials"], t)
+        for k, (_mat, V, F, UV) in enumerate(meshes):
+            sets[shape_id(o["id"], k)] = (V, F, UV)
+    beams = {}
+    for lt in scene["lights"]:
+        if ("light", lt["id"]) in rest:
+            continue
+        off = object_offset(scene, lt["instance"], t)
+        sets[light_shape_id(lt["id"])] = (*_plane_mesh(lt, off), None)
+        if f"{beam_id(lt['id'])}.to_world" in params:
+            beams[f"{beam_id(lt['id'])}.to_world"] = _beam_to_world(mi, lt, off)
+    for name, (V, F, UV) in sets.items():
+        key = f"{name}.vertex_positions"
+        if key not in params or dr.width(params[key]) != 3 * len(V) or dr.width(params[f"{name}.faces"]) != 3 * len(F):
+            return False
+    for name, (V, F, UV) in sets.items():
+        params[f"{name}.vertex_positions"] = type(params[f"{name}.vertex_positions"])(
+            np.asarray(V, dtype=np.float32).ravel())
+        params[f"{name}.faces"] = type(params[f"{name}.faces"])(np.asarray(F, dtype=np.uint32).ravel())
+        if UV is not None:
+            params[f"{name}.vertex_texcoords"] = type(params[f"{name}.vertex_texcoords"])(
+                np.asarray(UV, dtype=np.float32).ravel())
+    for key, tf in beams.items():
+        params[key] = type(params[key])(tf)
+    params.update()
+    return True
 
 
 def pad_emitter_dict() -> dict:

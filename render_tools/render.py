@@ -71,6 +71,8 @@ PIXEL_SAMPLES = ("auto", "sobol", "strata")
 PAD_SAMPLES = ("auto", "spp", "light")
 #: ``RenderOptions.static_denoise`` values (:mod:`render_tools.denoise`).
 STATIC_DENOISE = ("auto", "oidn", "off")
+#: Values of :attr:`RenderOptions.static_bin_samples`.
+STATIC_BIN_SAMPLES = ("independent", "common")
 
 
 @dataclass
@@ -159,6 +161,11 @@ class RenderOptions:
     then an exact sum of bins, so a staggered exposure sees the scene (ego motion and moving vehicles) over its own
     time instead of the long window's average (docs/benchmarks/motion-windows.md). A scene where nothing moves (a
     static camera, no moving object) keeps the two windows whatever is asked (all bins would be equal).
+    static_bin_samples: the random numbers of the static time bins: ``"independent"`` (default; every corpus
+    rendered before it existed) draws each bin's samples anew, ``"common"`` gives every bin of a frame the same
+    per-pixel sample sequence (common random numbers: pixel position, time as a fraction of the bin, wavelengths,
+    path decisions), so two bins differ by what moves between them, not by independent Monte Carlo noise; each bin
+    stays unbiased (docs/benchmarks/motion-storage.md).
     """
 
     width: int = 640
@@ -188,6 +195,7 @@ class RenderOptions:
     pad_samples: str = "auto"
     static_denoise: str = "auto"
     static_edges_s: tuple = ()
+    static_bin_samples: str = "independent"
 
     def __post_init__(self):
         self.bands_nm = tuple(float(b) for b in self.bands_nm)
@@ -227,6 +235,9 @@ class RenderOptions:
                        or np.any(e > self.capture_window_s * (1 + 1e-9))):
             raise ValueError(f"static_edges_s: every edge must lie in the capture window [0, "
                              f"{self.capture_window_s:.6g}] s from the frame start, got {list(self.static_edges_s)}")
+        if self.static_bin_samples not in STATIC_BIN_SAMPLES:
+            raise ValueError(f"static_bin_samples: must be one of {STATIC_BIN_SAMPLES}, got "
+                             f"{self.static_bin_samples!r}")
         if self.static_denoise not in STATIC_DENOISE:
             raise ValueError(f"static_denoise: must be one of {STATIC_DENOISE}, got {self.static_denoise!r}")
         if self.pixel_samples not in PIXEL_SAMPLES:
@@ -287,6 +298,8 @@ class RenderOptions:
         d["static_edges_s"] = list(self.static_edges_s)
         if not d["static_edges_s"]:  # the options of corpora rendered before it existed stay the same
             del d["static_edges_s"]
+        if d["static_bin_samples"] == "independent":  # as before the option existed
+            del d["static_bin_samples"]
         return d
 
 
@@ -741,6 +754,8 @@ def scene_meta(scene: dict, opts: RenderOptions) -> dict:
         "lights": lights,
         "render": {"spp": opts.spp, "light_spp": opts.light_spp or opts.spp, "seed": opts.seed,
                    "pad_px": opts.pad_px, "static_pass": opts.static_pass,
+                   **({"static_bin_samples": "common"} if static_edges is not None
+                      and opts.static_bin_samples == "common" else {}),
                    **({"reflection_bins": opts.reflection_bins or opts.bins,
                        "reflection_min_lux": opts.reflection_min_lux,
                        "reflection_block_px": opts.reflection_block_px} if helper.wet else {}),
@@ -837,6 +852,12 @@ def static_bin_edges(scene: dict, opts: RenderOptions) -> np.ndarray | None:
     return np.asarray(out, dtype=np.float64)
 
 
+def bin_key(opts: RenderOptions, k: int) -> tuple:
+    """What names static time bin ``k`` in its seed and tile keys: ``(k,)``, or ``()`` for every bin with
+    ``static_bin_samples="common"`` (the same random numbers in every bin)."""
+    return () if opts.static_bin_samples == "common" else (k,)
+
+
 def plan_static_bins(scene: dict, opts: RenderOptions, n: int, sets, geo: SceneGeometry, bins, t_obj: float,
                      qmc: bool, start: int = 0):
     """The tiles of the static groups over time bins (:func:`static_bin_edges`) and how to assemble them (plan
@@ -852,10 +873,11 @@ def plan_static_bins(scene: dict, opts: RenderOptions, n: int, sets, geo: SceneG
     tiles, plan = [], []
     for k, a, b in bins:
         win = f"bin{k}"
+        kwin = "bin" + "".join(str(x) for x in bin_key(opts, k))  # the window's name in the tile keys
         if union:
             plan.append(("union", tuple(union), win, full, start + len(tiles), 1))
             tiles.append(Tile(full, 1, a, b - a, opts.spp, sets["union:static"], slots=len(union),
-                              key=_seed("union", win), sobol=qmc))
+                              key=_seed("union", kwin), sobol=qmc))
         for g, info in _selected_groups(scene, opts).items():
             if info["flicker"]:
                 continue
@@ -867,7 +889,7 @@ def plan_static_bins(scene: dict, opts: RenderOptions, n: int, sets, geo: SceneG
                     continue
                 plan.append((kind, g, win, crop, start + len(tiles), 1))
                 tiles.append(Tile(crop, 1, a, b - a, n_s, sets[f"group:{g}"],
-                                  key=_seed(kind, g, win, *(() if key is None else (key,))), sobol=qmc))
+                                  key=_seed(kind, g, kwin, *(() if key is None else (key,))), sobol=qmc))
     return tiles, plan
 
 
@@ -1076,17 +1098,26 @@ def render_frames(scene: dict, opts: RenderOptions, steady_bins: bool = False) -
             bt, bp = plan_static_bins(scene, opts, n, sets, geo, bins, t_obj, qmc, start=len(tiles))
             tiles, plan = tiles + bt, plan + bp
         imgs = tr.render(tiles, _seed(opts.seed, n, "frame")) if tiles else []
-        if bins and obj_moving:  # moving objects: each bin traced with them at its middle (its own scene load)
+        if bins and obj_moving:  # moving objects: each bin traced with them at its middle
+            # the frame's scene with only the moving meshes and beams moved (mitsuba_scene.place_moving); a scene
+            # load per bin where a mesh's size changes with time
+            params, moved = mi.traverse(loaded), False
             for k, a, b in bins:
                 t_bin = 0.5 * (a + b)
-                lb = mi.load_dict(ms.mitsuba_dict(scene, t_bin, emit="all", cache=mcache, unit_sky=True))
+                if ms.place_moving(params, scene, t_bin, mcache):
+                    lb, moved = loaded, True
+                else:
+                    lb = mi.load_dict(ms.mitsuba_dict(scene, t_bin, emit="all", cache=mcache, unit_sky=True))
                 sb = tracer.LightSets(mi, dr, lb, scene, list(groups), union=static_union(groups, opts))
                 trb = tracer.Tracer(mi, dr, lb, sb, geo.ego, geo.fov, (opts.width, opts.height), opts.bands_nm,
                                     opts.band_width_nm, sky_scale=ms.sky_scale(scene))
                 bt, bp = plan_static_bins(scene, opts, n, sb, geo, [(k, a, b)], t_bin, qmc, start=len(imgs))
-                imgs = list(imgs) + list(trb.render(bt, _seed(opts.seed, n, "bin", k)) if bt else [])
+                imgs = list(imgs) + list(trb.render(bt, _seed(opts.seed, n, "bin", *bin_key(opts, k))) if bt else [])
                 plan = plan + bp
                 del trb, sb, lb
+            if moved and not ms.place_moving(params, scene, t_obj, mcache):  # back to the frame's time (AOVs)
+                raise RuntimeError("place_moving: a moving mesh changed size between the bins and the frame time")
+            del params
         out = {"frame": n, "static": {}, "lights": {}, "aux": {}}
         grown = {}  # (group, light id) -> [steady (C, h, w), varying parts, K] of a grown crop
         for kind, g, key, bb, ti, rep in plan:
