@@ -108,6 +108,7 @@ def test_bins_of_a_window_average_to_one_render_of_that_window():
     assert np.abs(mean4 - b1[0]).sum() < 0.1 * b1[0].sum()
 
 
+@pytest.mark.jit
 def test_continuous_blur_matches_average_of_instantaneous_subframes():
     s = _lamp_scene(40.0)
     opts = render.RenderOptions(width=48, height=32, spp=16, frames=1, aux=False)
