@@ -268,11 +268,12 @@ def test_reflection_in_one_bin_is_the_time_average():
     """reflection_bins 1 (moving camera): outside the lamp's box the K bins are one image repeated, and that image
     is the time average of the exact (K-bin) reflection, summed over the road below the lamp to 3 % (independent
     renders at 16 spp: the sums of four renders spread by 2 %); the lamp's own box keeps its K bins, the very tile
-    of the exact render."""
+    of the exact render. The traced estimates (``reflection_denoise: off``): a steady reflection is denoised by
+    default and one in K bins is not (test_denoised_reflection_keeps_the_lamp_and_loses_the_block_grain)."""
     sc = lamp_over_road("wet", speed_mps=12.0)
     out = {}
     for rb in (None, 1):
-        opts = R.RenderOptions(**OPTS, reflection_bins=rb)
+        opts = R.RenderOptions(**OPTS, reflection_bins=rb, reflection_denoise="off")
         (lid, bb, arr), = next(R.render_frames(sc, opts))["lights"]["otherlights"]
         out[rb] = (bb, arr)
     (bb, exact), (bb1, one) = out[None], out[1]
