@@ -151,8 +151,9 @@ class RenderOptions:
     the flickering lamps' own boxes are never denoised (their reflections: ``reflection_denoise``).
     reflection_denoise: a flickering lamp's reflection in a wet road (the steady part of its grown crop outside
     its padded lamp box, traced at ``spp`` in ``reflection_block_px`` blocks) denoised after tracing, each light's
-    layer alone (:func:`render_tools.denoise.denoise_reflection`: the static frames' denoiser on that one image,
-    its lamp box kept out and as traced): ``"oidn"``, ``"off"`` (the traced estimate, unbiased; at spp 1 in 2 x 2
+    layer alone (:func:`render_tools.denoise.denoise_reflection`: the static frames' denoiser on that one image
+    at the resolution of its 2 x 2 px blocks, interpolated back and scaled to its traced light, its lamp box kept
+    out and as traced): ``"oidn"``, ``"off"`` (the traced estimate, unbiased; at spp 1 in 2 x 2
     px blocks it is coloured 2 x 2 px speckle: each band pass draws its own sample of a block) or ``"auto"``
     (default: ``oidn`` on scene version 2, ``off`` on version 1). No layer is mixed with another, and the layer
     still scales with its lamp's PWM (the dataset weights it as before), so the flicker-free truth and the captures
