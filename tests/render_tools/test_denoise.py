@@ -271,15 +271,3 @@ def test_reflection_denoise_removes_block_speckle_and_keeps_the_lamp():
     with pytest.raises(ValueError, match="traced"):
         denoise.denoise_reflection(noisy, traced[:-1], boxes)
 
-
-def test_reflection_denoise_option_and_meta():
-    with pytest.raises(ValueError, match="reflection_denoise"):
-        render.RenderOptions(reflection_denoise="yes")
-    opts = render.RenderOptions(width=160, height=90, frames=1)
-    wet2 = scene.generate_scene(101, time_of_day="night", generator=2, overrides={"weather": {"conditions": ["wet"]}})
-    v1 = scene.generate_scene(101, time_of_day="night")
-    assert render.reflections_denoised(wet2, opts) and not render.reflections_denoised(v1, opts)
-    assert render.scene_meta(wet2, opts)["render"]["reflection_denoise"] == "oidn"
-    assert "reflection_denoise" not in render.scene_meta(v1, opts)["render"]
-    off = render.RenderOptions(width=160, height=90, frames=1, reflection_denoise="off")
-    assert render.scene_meta(wet2, off)["render"]["reflection_denoise"] == "off"

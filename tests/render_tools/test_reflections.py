@@ -328,3 +328,19 @@ def test_denoised_reflection_keeps_the_lamp_and_loses_the_block_grain():
     assert on[m].sum() == pytest.approx(off[m].sum(), rel=0.01)
     err = lambda y: float(np.sqrt(((y - ref)[m] ** 2).mean()))  # noqa: E731
     assert err(on) < 0.7 * err(off), (err(on), err(off))
+
+
+def test_reflection_denoise_option_and_meta():
+    """``reflection_denoise``: a bad value is refused naming the option; ``auto`` is on for scene version 2 and off
+    for version 1 (whose renders are frozen); a wet version-2 scene's ``meta.json`` records it, a dry one (no
+    reflection traced) does not."""
+    with pytest.raises(ValueError, match="reflection_denoise"):
+        R.RenderOptions(reflection_denoise="yes")
+    opts = R.RenderOptions(**OPTS)
+    wet, dry = lamp_over_road("wet"), lamp_over_road("dry")
+    v1 = {**wet, "version": 1}
+    assert R.reflections_denoised(wet, opts) and not R.reflections_denoised(v1, opts)
+    assert R.reflections_denoised(v1, R.RenderOptions(**OPTS, reflection_denoise="oidn"))
+    assert R.scene_meta(wet, opts)["render"]["reflection_denoise"] == "oidn"
+    assert R.scene_meta(wet, R.RenderOptions(**OPTS, reflection_denoise="off"))["render"]["reflection_denoise"] == "off"
+    assert "reflection_denoise" not in R.scene_meta(dry, opts)["render"]
