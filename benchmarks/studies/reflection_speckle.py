@@ -167,11 +167,15 @@ def main() -> None:
             res[name] = _crops(next(rnd.render_frames(sc, opts)))
             secs[name], dn[name] = time.perf_counter() - t, spent[0]
             if cached is not None:
+                import io  # noqa: PLC0415
+
+                from lfmbench.fileio import atomic_write_bytes  # noqa: PLC0415
+
                 cached.parent.mkdir(parents=True, exist_ok=True)
-                tmp = cached.with_name(cached.stem + ".part.npz")  # written whole, then renamed
-                np.savez(tmp, secs=secs[name], dn_cpu=dn[name], **{f"a{k}": v[1] for k, v in res[name].items()},
+                buf = io.BytesIO()
+                np.savez(buf, secs=secs[name], dn_cpu=dn[name], **{f"a{k}": v[1] for k, v in res[name].items()},
                          **{f"b{k}": np.array(v[0]) for k, v in res[name].items()})
-                os.replace(tmp, cached)
+                atomic_write_bytes(cached, buf.getvalue())  # temporary name, then rename
         print(f"{name}: {secs[name]:.1f} s, {len(res[name])} crops", flush=True)
     opts = rnd.RenderOptions(**prof)
     geo = rnd.SceneGeometry(sc, opts)
