@@ -253,3 +253,62 @@ def denoise_static(images: dict, boxes=(), radius: int = SHARE_RADIUS_PX, shape_
         y[:, ~keep] = x[:, ~keep]
         out[g] = y
     return out
+
+
+
+#: Side (px) of the blocks a flickering lamp's reflection is denoised on (:func:`denoise_reflection`): the tracer's
+#: reflection blocks (``RenderOptions.reflection_block_px``, 2 by default).
+REFLECTION_BLOCK_PX = 2
+
+
+def denoise_reflection(img: np.ndarray, traced: np.ndarray, boxes=(), block: int = REFLECTION_BLOCK_PX,
+                       denoiser=oidn_rgb) -> np.ndarray:
+    """Denoise one flickering lamp's steady reflection image (``RenderOptions.reflection_denoise``).
+
+    Why: a wet road's reflection of a flickering lamp is traced at ``spp`` (1 at the ``default`` profile) in 2 x 2
+    px blocks, and each band pass draws its own sample of a block, so the traced layer is coloured 2 x 2 px speckle
+    (docs/guide/scenes.md). Open Image Denoise fed that image at full resolution leaves it (tested: the error of
+    a synthetic streak 0.47 -> 0.46; noise correlated over 2 x 2 px reads as detail to a filter trained on
+    per-pixel noise), so the image is denoised at the blocks' resolution, where each block is one pixel of
+    independent noise, and interpolated back.
+
+    What: the lamp's box(es) filled with the mean of the ring around them (:func:`_fill_boxes`: the lamp's own
+    light, 10^3-10^5 times brighter, stays out), ``block`` x ``block`` px block means (:func:`_block_mean`),
+    :func:`denoise_static` with this one image as its only group, bilinear back to full size (:func:`_upsample`);
+    the boxes keep their traced values and the pixels that were not traced (``traced`` False outside the boxes:
+    the grown crop's zeros) stay 0; then the denoised reflection is scaled to the traced one's sum over its pixels
+    and bands (the traced sum is an unbiased estimate of the reflection's light; the filter alone lost 7-8 % of it
+    on a lamp's streak at spp 1, tests/render_tools/test_reflections.py), so each light's reflected light is the
+    traced light and only its distribution over the pixels and bands is the filter's. No other layer enters, and
+    the output scales with the input (:func:`oidn_rgb` divides by the image's level and multiplies back): a PWM
+    weight applied before or after gives the same image. Not unbiased per pixel (the streak's edges are blurred
+    over the block and the filter's shape is kept; measured in docs/benchmarks/render.md, "Reflection speckle").
+
+    Args:
+        img: (C, h, w) float32 >= 0, the lamp's spectral radiance (W sr^-1 m^-2 nm^-1) over its grown crop.
+        traced: (h, w) bool, the pixels the reflection bands (and the lamp's parts) were traced in.
+        boxes: the lamp's padded box(es) (y0, x0, y1, x1) px relative to the crop, end exclusive: kept as traced.
+        block: px, the side of the blocks denoised as one pixel (1: full resolution).
+        denoiser: as :func:`denoise_static`'s.
+
+    Returns:
+        (C, h, w) float32; ``img`` itself when nothing outside the boxes was traced or lit.
+    """
+    img = np.asarray(img, np.float32)
+    traced = np.asarray(traced, bool)
+    if traced.shape != img.shape[1:]:
+        raise ValueError(f"traced: shape {traced.shape}, expected {img.shape[1:]} as the image")
+    keep = keep_mask(traced.shape, boxes)
+    refl = traced & keep
+    if not refl.any() or not img[:, refl].any():
+        return img
+    x = _fill_boxes(img, keep, boxes) if boxes else img
+    lo = _block_mean(x, block) if block > 1 else x
+    y = denoise_static({0: lo}, (), denoiser=denoiser)[0]
+    if block > 1:
+        y = _upsample(y, block, img.shape[1:])
+    y = np.where(refl, y, np.float32(0.0))
+    got, want = float(y.sum(dtype=np.float64)), float(img[:, refl].sum(dtype=np.float64))
+    if got > 0:  # the traced light of the reflection, an unbiased estimate of its total, is kept
+        y *= np.float32(want / got)
+    return np.where(keep, y, img).astype(np.float32)

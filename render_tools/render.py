@@ -150,7 +150,17 @@ class RenderOptions:
     At the ``default`` profile the median per-pixel error of a 640x360 v2 frame went from 25 / 12 / 31 % (day, dry
     night, wet night) to 4 / 3 / 9.5 % for 0.8-0.9 CPU s per frame (docs/benchmarks/render.md, "Scene generator
     2"); not unbiased (a wet road's static reflections are blurred: docs/guide/rendering.md, "Static frames denoised");
-    the flickering layers are never denoised.
+    the flickering lamps' own boxes are never denoised (their reflections: ``reflection_denoise``).
+    reflection_denoise: a flickering lamp's reflection in a wet road (the steady part of its grown crop outside
+    its padded lamp box, traced at ``spp`` in ``reflection_block_px`` blocks) denoised after tracing, each light's
+    layer alone (:func:`render_tools.denoise.denoise_reflection`: the static frames' denoiser on that one image
+    at the resolution of its 2 x 2 px blocks, interpolated back and scaled to its traced light, its lamp box kept
+    out and as traced): ``"oidn"``, ``"off"`` (the traced estimate, unbiased; at spp 1 in 2 x 2
+    px blocks it is coloured 2 x 2 px speckle: each band pass draws its own sample of a block) or ``"auto"``
+    (default: ``oidn`` on scene version 2, ``off`` on version 1). No layer is mixed with another, and the layer
+    still scales with its lamp's PWM (the dataset weights it as before), so the flicker-free truth and the captures
+    see the same reflection; not unbiased (docs/guide/rendering.md, "Wet roads"). Reflections traced in several
+    time bins (``reflection_bins`` > 1 with motion) are left as traced.
     static_edges_s: times (s from the frame start, inside the capture window) at which the static groups are cut
     into time bins (:func:`static_bin_edges`): () (default) stores the short and long windows only, as every corpus
     before; any edges store the static groups in the bins between the sorted union of these edges and the short and
@@ -194,6 +204,7 @@ class RenderOptions:
     reflection_block_px: int = 2
     pad_samples: str = "auto"
     static_denoise: str = "auto"
+    reflection_denoise: str = "auto"
     static_edges_s: tuple = ()
     static_bin_samples: str = "independent"
 
@@ -240,6 +251,8 @@ class RenderOptions:
                              f"{self.static_bin_samples!r}")
         if self.static_denoise not in STATIC_DENOISE:
             raise ValueError(f"static_denoise: must be one of {STATIC_DENOISE}, got {self.static_denoise!r}")
+        if self.reflection_denoise not in STATIC_DENOISE:
+            raise ValueError(f"reflection_denoise: must be one of {STATIC_DENOISE}, got {self.reflection_denoise!r}")
         if self.pixel_samples not in PIXEL_SAMPLES:
             raise ValueError(f"pixel_samples: must be one of {PIXEL_SAMPLES}, got {self.pixel_samples!r}")
         f = self.filled_spp_factor
@@ -572,6 +585,12 @@ def static_denoised(scene: dict, opts: RenderOptions) -> bool:
     return _on_from_version_2(opts.static_denoise, "oidn", scene)
 
 
+def reflections_denoised(scene: dict, opts: RenderOptions) -> bool:
+    """Whether the flickering lamps' steady reflections are denoised, light by light (``opts.reflection_denoise``;
+    ``auto``: scene version 2 and later)."""
+    return _on_from_version_2(opts.reflection_denoise, "oidn", scene)
+
+
 def refine_pad(scene: dict, opts: RenderOptions) -> int | None:
     """The padding (px) of the box a static group's lamp is refined in (``light_bbox`` ``pad``): 0 (its own box, the
     pad ring keeping the full frame's estimate) when the ring is traced at spp (:func:`pad_at_spp`), else None
@@ -765,7 +784,9 @@ def scene_meta(scene: dict, opts: RenderOptions) -> dict:
                    **({"lamp_pass_spp": "spectrum" if spectral_lamp_passes(scene, opts) else "uniform",
                        "pixel_samples": "sobol" if sobol_pixel_samples(scene, opts) else "strata",
                        "pad_samples": "spp" if pad_at_spp(scene, opts) else "light",
-                       "static_denoise": "oidn" if static_denoised(scene, opts) else "off"}
+                       "static_denoise": "oidn" if static_denoised(scene, opts) else "off",
+                       **({"reflection_denoise": "oidn" if reflections_denoised(scene, opts) else "off"}
+                          if helper.wet else {})}
                       if int(scene.get("version", 1)) >= 2 else {})},
     }
 
@@ -1033,6 +1054,23 @@ def _grown_crop(steady: np.ndarray, parts: list, K: int, as_steady_bins: bool):
     return arr
 
 
+def _denoise_reflections(scene: dict, geo: SceneGeometry, tm: dict, lights: dict, grown: dict, traced: dict) -> None:
+    """Denoise, light by light, the steady reflection of every grown crop (``RenderOptions.reflection_denoise``):
+    :func:`render_tools.denoise.denoise_reflection` on the crop's steady (C, h, w) image with the lamp's padded box
+    (the one :func:`plan_frame` plans, relative to the crop) kept out and as traced; in place in ``grown``."""
+    from . import denoise  # noqa: PLC0415
+
+    by_id = {lt["id"]: lt for lt in scene["lights"]}
+    t_obj = 0.5 * (tm["window"][0] + tm["window"][1])
+    for g, items in lights.items():
+        for lid, (y0, x0, _, _), arr in items:
+            if arr is not None or (g, lid) not in grown:
+                continue
+            lamp_bb = geo.light_bbox(by_id[lid], t_obj, *tm["window"], moving=True, reflection=False)
+            boxes = [] if lamp_bb is None else [(lamp_bb[0] - y0, lamp_bb[1] - x0, lamp_bb[2] - y0, lamp_bb[3] - x0)]
+            grown[g, lid][0] = denoise.denoise_reflection(grown[g, lid][0], traced[g, lid], boxes)
+
+
 def render_frames(scene: dict, opts: RenderOptions, steady_bins: bool = False) -> Iterator[dict]:
     """Render every frame of ``scene``; yields one dict per frame (see module docstring)::
 
@@ -1120,10 +1158,12 @@ def render_frames(scene: dict, opts: RenderOptions, steady_bins: bool = False) -
             del params
         out = {"frame": n, "static": {}, "lights": {}, "aux": {}}
         grown = {}  # (group, light id) -> [steady (C, h, w), varying parts, K] of a grown crop
+        traced = {}  # (group, light id) -> (h, w) bool: the pixels of a grown crop's steady image that were traced
         for kind, g, key, bb, ti, rep in plan:
             if kind == "light_box":  # a grown crop: zeros where no band of its reflection is traced
                 y0, x0, y1, x1 = bb
                 grown[g, key] = [np.zeros((len(opts.bands_nm), y1 - y0, x1 - x0), np.float32), [], rep]
+                traced[g, key] = np.zeros((y1 - y0, x1 - x0), bool)
                 out["lights"].setdefault(g, []).append((key, bb, None))  # filled in below
                 continue
             if kind == "union":  # one image per static group (slot), in the union's order
@@ -1144,10 +1184,13 @@ def render_frames(scene: dict, opts: RenderOptions, steady_bins: bool = False) -
                 rel = (y0 - by0, x0 - bx0, y1 - by0, x1 - bx0)
                 if len(img) == 1 and not parts:  # the same in every bin, under no varying part yet
                     steady[:, rel[0]:rel[2], rel[1]:rel[3]] = img[0]
+                    traced[g, lid][rel[0]:rel[2], rel[1]:rel[3]] = True
                 else:
                     parts.append((rel, np.repeat(img, rep, axis=0) if rep > 1 else img))
             else:
                 out["lights"].setdefault(g, []).append((key, bb, np.repeat(img, rep, axis=0) if rep > 1 else img))
+        if grown and geo.wet and reflections_denoised(scene, opts):  # each light's steady reflection alone
+            _denoise_reflections(scene, geo, tm, out["lights"], grown, traced)
         for g, items in out["lights"].items():
             for i, (lid, bb, arr) in enumerate(items):
                 if arr is None:

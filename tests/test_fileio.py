@@ -55,6 +55,8 @@ SCRATCH_WRITES = {
     ("bench_motion_windows.py", "worker"): "the worker process's frames and timings, handed to the driver in the "
                                            "benchmark's own temporary folder",
     ("bench_leaderboard.py", "time_cli"): "the argument list of the timed command, in the same temporary folder",
+    ("reflection_speckle.py", "main"): "np.savez into an in-memory buffer (io.BytesIO), whose bytes then go to "
+                                       "lfmbench.fileio.atomic_write_bytes",
 }
 
 
