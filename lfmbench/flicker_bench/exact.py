@@ -42,7 +42,7 @@ from lfmbench.flicker_bench.model import CaptureModel, SensorModel, grid_cells
 from lfmbench.flicker import pwm_exposure
 
 __all__ = ["EXACT_METHODS", "SEQUENCE_METHODS", "breakpoints", "on_fraction", "PhaseMap", "phase_map",
-           "band_measure", "evaluate_panels", "capture_state"]
+           "band_measure", "evaluate_panels", "capture_state", "off_values"]
 
 #: Registered merges that are piecewise linear on the sub-intervals (module docstring): their maps are exact.
 EXACT_METHODS = frozenset({"exposure_select", "exposure_select_bounded", "saturated_exposure_corrected", "lpd_only",
@@ -271,6 +271,15 @@ def _reduce(model, ya, yb, keep, h, pha, phb, g, n, off, delta, contrast, out, s
             out[key][p][sl] = v.reshape(-1, L)
 
 
+def off_values(model: SensorModel, methods: Mapping[str, Callable]) -> dict[str, float]:
+    """Every panel's value with the LED OFF (background only, phase-independent; reference e-): the FDI's
+    x_off, ``{panel: value}``."""
+    bg = model.settings["background_cd_m2"]
+    mu_off = {c.name: torch.tensor([c.rate * bg + c.dark_e], dtype=torch.float64) for c in model.captures}
+    v_off, fl_off = capture_state(model, mu_off)
+    return {k: float(v) for k, v in evaluate_panels(model, methods, v_off, fl_off).items()}
+
+
 def phase_map(model: SensorModel, freqs_hz: np.ndarray, duties: np.ndarray, lums: np.ndarray,
               methods: Mapping[str, Callable], delta: float = 0.1, contrast: float = 0.1, max_depth: int = 24,
               chunk_cells: int = 1000) -> PhaseMap:
@@ -287,10 +296,7 @@ def phase_map(model: SensorModel, freqs_hz: np.ndarray, duties: np.ndarray, lums
     C, L = f.size, lums.size
     panels = model.names + list(methods)
     bg = model.settings["background_cd_m2"]
-    # the LED-OFF value of every panel (background only; phase-independent)
-    mu_off = {c.name: torch.tensor([c.rate * bg + c.dark_e], dtype=torch.float64) for c in model.captures}
-    v_off, fl_off = capture_state(model, mu_off)
-    off = {k: float(v) for k, v in evaluate_panels(model, methods, v_off, fl_off).items()}
+    off = off_values(model, methods)
     out = {k: {p: np.empty((C, L)) for p in panels} for k in ("vmin", "vmax", "pmin", "pmax", "mean", "mmp", "fdi")}
     on_min = {c.name: np.empty(C) for c in model.captures}
     on_max = {c.name: np.empty(C) for c in model.captures}
@@ -388,7 +394,10 @@ def _bisect(model, methods, state, flags0, ta, tb, rep, ya, yb, max_depth, reduc
     ends = {m: (ya[m].numpy(), yb[m].numpy()) for m in names}     # and their end values
     done = {m: [] for m in names}                                 # pieces found linear
     for depth in range(max_depth + 1):
-        union = np.unique(np.concatenate([live[m] for m in names]))
+        mark = np.zeros(ta.size, bool)                            # the union of the sorted index sets, sorted
+        for m in names:
+            mark[live[m]] = True
+        union = np.flatnonzero(mark)
         if union.size == 0:
             break
         if depth == max_depth:
