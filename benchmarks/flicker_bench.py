@@ -59,7 +59,7 @@ def reports(presets: list[str], n_freq: int) -> None:
         methods = fbr.bench_methods(model)
         res = fbr.run_bench(model, grid, methods)
         img_dir = ROOT / "docs" / "img" / "flicker_bench"
-        ims = fbr.plot_maps(res, img_dir, stem=name)
+        ims, _ = fbr.plot_maps(res, img_dir, stem=name)
         page = ROOT / "docs" / "results" / "flicker-bench" / f"{name}.md"
         fbr.write_report(res, page, ims)
         print(f"{name}: {time.perf_counter() - t0:.1f} s, wrote {page} and {[str(i) for i in ims]}", flush=True)
@@ -268,7 +268,8 @@ COMMAND_STAGES = [("startup_s", "Python start-up and `lfmbench.cli` imports (tor
                   ("imports_s", "the bench's imports"), ("model_s", "preset, grid, methods"),
                   ("phase_map_s", "exact map, every phase"), ("sequence_s", "100-frame sequences"),
                   ("cover_s", "frames to cover"), ("noise_s", "noise Monte Carlo"),
-                  ("tables_s", "CSV + JSON tables"), ("maps_s", "the two PNG maps"), ("report_s", "report")]
+                  ("tables_s", "CSV + JSON tables, inside maps_s"),
+                  ("maps_s", "the two PNG maps, one forked, the tables written meanwhile"), ("report_s", "report")]
 
 
 def run_command(args: list[str]) -> dict[str, float]:

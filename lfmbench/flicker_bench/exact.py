@@ -150,11 +150,11 @@ def band_measure(yl: np.ndarray, yr: np.ndarray, lo: np.ndarray, hi: np.ndarray)
     with np.errstate(divide="ignore", invalid="ignore"):
         t_lo = (lo - yl) / d
         t_hi = (hi - yl) / d
-    a = np.where(d > 0, t_lo, np.where(d < 0, t_hi, -np.inf))
-    b = np.where(d > 0, t_hi, np.where(d < 0, t_lo, np.inf))
-    a = np.nan_to_num(a, nan=-np.inf)
-    b = np.nan_to_num(b, nan=np.inf)
-    inside = np.clip(np.minimum(b, 1.0) - np.maximum(a, 0.0), 0.0, 1.0)
+    up = d > 0
+    a = np.where(up, t_lo, t_hi)              # d < 0: the line enters the band at hi; d == 0 is answered below
+    b = np.where(up, t_hi, t_lo)
+    # fmax / fmin read a NaN end (0/0) as -inf / +inf, i.e. no bound
+    inside = np.minimum(np.maximum(np.fmin(b, 1.0) - np.fmax(a, 0.0), 0.0), 1.0)
     flat = (yl > lo) & (yl < hi)
     return np.where(d == 0, flat.astype(np.float64), inside)
 

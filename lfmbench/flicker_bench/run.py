@@ -414,12 +414,15 @@ def freq_ranges(freqs: np.ndarray, ok: np.ndarray) -> str:
     return (", ".join(parts) + " Hz") if parts else "none"
 
 
-def plot_maps(res: BenchResult, out_dir: Path, stem: str = "flicker_bench", measured: Sequence[dict] = ()
-              ) -> list[Path]:
+def plot_maps(res: BenchResult, out_dir: Path, stem: str = "flicker_bench", measured: Sequence[dict] = (),
+              meanwhile: Callable[[], Any] | None = None) -> tuple[list[Path], Any]:
     """Two heat-map PNGs (frequency x duty, one panel per capture or method, worst case over the luminances and
     marked): ``<stem>_miss.png`` (worst output over phase / steady value; hatched where the light is missed, a bar
     under each panel for the frequencies never missed at duty >= 10 %) and ``<stem>_mmp.png`` (noise-free MMP over
-    every phase). Measured captures are drawn as circles in their measured value's colour."""
+    every phase). Measured captures are drawn as circles in their measured value's colour.
+
+    ``meanwhile()`` runs in this process while the second figure is drawn in a forked one (the command writes its
+    tables there). Returns (the two paths, what ``meanwhile`` returned, or None)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -511,6 +514,7 @@ def plot_maps(res: BenchResult, out_dir: Path, stem: str = "flicker_bench", meas
 
     waits = [(spec, start_forked(lambda spec=spec: draw(spec), "the process drawing the flicker-bench maps"))
              for spec in specs[1:]]
+    other = meanwhile() if meanwhile is not None else None
     paths = [draw(specs[0])]
     for spec, wait in waits:
         if wait is None:
@@ -518,7 +522,7 @@ def plot_maps(res: BenchResult, out_dir: Path, stem: str = "flicker_bench", meas
         else:
             wait()
             paths.append(out_dir / f"{stem}_{spec[0]}.png")
-    return paths
+    return paths, other
 
 
 # ------------------------------------------------------------------------------------------------- report
