@@ -11,6 +11,8 @@ from lfmbench.cli._common import fail
 
 __all__ = ["register", "parse_exposure_option"]
 
+_EXIT_FREEZE: list = []    # whether gc.freeze is registered to run at exit (once per process)
+
 
 def parse_exposure_option(items: List[str]) -> dict:
     """``CAPTURE=START:LENGTH[,START:LENGTH...]`` (s) options into ``{capture: [[start, length], ...]}``."""
@@ -93,6 +95,11 @@ def register(app: typer.Typer) -> None:
         finally:
             gc.freeze()
             gc.enable()
+        if not _EXIT_FREEZE:   # the interpreter's collections at exit need not walk what is left either (about 1 s
+            import atexit      # of the command on 2 cores, more than its tables): frozen once every output is closed
+
+            atexit.register(gc.freeze)
+            _EXIT_FREEZE.append(True)
 
         stages = {"imports_s": time.perf_counter() - t0}          # the command's wall time per stage (s)
 
@@ -147,6 +154,3 @@ def register(app: typer.Typer) -> None:
             typer.echo(f"wrote {p}")
         stages["command_s"] = time.perf_counter() - t0
         typer.echo("timings: " + ", ".join(f"{k} {v:.2f}" for k, v in {**stages, **res.timings_s}.items()))
-        # every output is written and closed: the interpreter's collections at exit need not walk what is left
-        # (about 1 s of the command on 2 cores, more than the tables)
-        gc.freeze()
