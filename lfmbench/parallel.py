@@ -3,7 +3,8 @@ function over items (:func:`map_forked`) and one function run beside the caller 
 back to the caller's own process where ``fork`` is missing, only one CPU is usable or no process can start.
 
 Used by the leaderboard (reading a sweep's result files, the rows' bootstrap statistics, the sweep JSON written
-beside the Markdown) and the flicker bench (its two heat-map figures drawn at once).
+beside the Markdown) and the flicker bench (its sequences beside its phase map, its two heat-map figures drawn at
+once).
 """
 from __future__ import annotations
 
@@ -36,9 +37,10 @@ def map_forked(fn, items: list, min_items: int, chunksize: int = 1) -> list:
 
 def start_forked(fn, what: str):
     """Start ``fn()`` in a forked process (where :func:`can_fork`; the child sees the caller's memory, nothing is
-    pickled but an exception); returns a function that waits for it and raises what it raised, or None where no
-    process started (the caller runs ``fn`` itself). ``what``: what ``fn`` does, for the message of a child that
-    dies without a word (e.g. "the process writing the leaderboard JSON")."""
+    pickled but ``fn``'s return value or exception); returns a function that waits for it and returns what ``fn``
+    returned (it must pickle) or raises what it raised, or None where no process started (the caller runs ``fn``
+    itself). ``what``: what ``fn`` does, for the message of a child that dies without a word (e.g. "the process
+    writing the leaderboard JSON")."""
     import multiprocessing  # noqa: PLC0415
 
     if not can_fork():
@@ -48,13 +50,12 @@ def start_forked(fn, what: str):
 
     def run() -> None:
         try:
-            fn()
-            send.send(None)
+            send.send((True, fn()))
         except BaseException as e:  # noqa: BLE001 - handed to the parent, which raises it
             try:
-                send.send(e)
-            except Exception:  # noqa: BLE001 - an exception that does not pickle
-                send.send(RuntimeError(f"{type(e).__name__}: {e}"))
+                send.send((False, e))
+            except Exception:  # noqa: BLE001 - an exception (or a result) that does not pickle
+                send.send((False, RuntimeError(f"{type(e).__name__}: {e}")))
 
     try:
         proc = ctx.Process(target=run, daemon=True)
@@ -63,15 +64,17 @@ def start_forked(fn, what: str):
         return None
     send.close()    # the child's copy stays open: a child that dies without a word ends the pipe (EOFError)
 
-    def wait() -> None:
+    def wait():
         try:
-            err = recv.recv()
+            ok, value = recv.recv()
         except EOFError:
-            err = RuntimeError(f"{what} ended without a result (killed?); run the command again")
+            ok, value = False, RuntimeError(f"{what} ended without a result (killed?); run the command again")
+        recv.close()
         proc.join()
-        if err is not None:
-            raise err
+        if not ok:
+            raise value
         if proc.exitcode:
             raise RuntimeError(f"{what} exited with code {proc.exitcode}")
+        return value
 
     return wait

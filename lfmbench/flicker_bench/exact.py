@@ -42,7 +42,7 @@ from lfmbench.flicker_bench.model import CaptureModel, SensorModel, grid_cells
 from lfmbench.flicker import pwm_exposure
 
 __all__ = ["EXACT_METHODS", "SEQUENCE_METHODS", "breakpoints", "on_fraction", "PhaseMap", "phase_map",
-           "band_measure", "evaluate_panels", "capture_state"]
+           "band_measure", "evaluate_panels", "capture_state", "off_values"]
 
 #: Registered merges that are piecewise linear on the sub-intervals (module docstring): their maps are exact.
 EXACT_METHODS = frozenset({"exposure_select", "exposure_select_bounded", "saturated_exposure_corrected", "lpd_only",
@@ -71,7 +71,8 @@ def on_fraction(cap: CaptureModel, phase: np.ndarray, period: np.ndarray, duty: 
         (..., K) ON time over the windows divided by the integration time, weighted over the ROI rows.
     """
     s = cap.starts_s - phase[..., None]                      # (..., K, W): window start relative to an edge
-    on = pwm_exposure(s, cap.lengths_s, period[..., None], duty[..., None], check=False)
+    # numpy's formula (the compiled kernel's arithmetic): importing and starting numba costs the bench more
+    on = pwm_exposure(s, cap.lengths_s, period[..., None], duty[..., None], check=False, backend="numpy")
     return (on * cap.weights).sum(axis=-1) / cap.length_s
 
 
@@ -149,11 +150,11 @@ def band_measure(yl: np.ndarray, yr: np.ndarray, lo: np.ndarray, hi: np.ndarray)
     with np.errstate(divide="ignore", invalid="ignore"):
         t_lo = (lo - yl) / d
         t_hi = (hi - yl) / d
-    a = np.where(d > 0, t_lo, np.where(d < 0, t_hi, -np.inf))
-    b = np.where(d > 0, t_hi, np.where(d < 0, t_lo, np.inf))
-    a = np.nan_to_num(a, nan=-np.inf)
-    b = np.nan_to_num(b, nan=np.inf)
-    inside = np.clip(np.minimum(b, 1.0) - np.maximum(a, 0.0), 0.0, 1.0)
+    up = d > 0
+    a = np.where(up, t_lo, t_hi)              # d < 0: the line enters the band at hi; d == 0 is answered below
+    b = np.where(up, t_hi, t_lo)
+    # fmax / fmin read a NaN end (0/0) as -inf / +inf, i.e. no bound
+    inside = np.minimum(np.maximum(np.fmin(b, 1.0) - np.fmax(a, 0.0), 0.0), 1.0)
     flat = (yl > lo) & (yl < hi)
     return np.where(d == 0, flat.astype(np.float64), inside)
 
@@ -201,74 +202,67 @@ LINEAR_RTOL = 1e-9
 PAIRWISE_METHODS = frozenset({"exposure_select_bounded"})
 
 
-def _band(yl: float, yr: float, lo: float, hi: float) -> float:
-    """Scalar :func:`band_measure` (numba-compiled in :func:`_reduce_kernel`)."""
-    d = yr - yl
-    if d == 0.0:
-        return 1.0 if (yl > lo and yl < hi) else 0.0
-    if d > 0.0:
-        a = (lo - yl) / d
-        b = (hi - yl) / d if hi != np.inf else np.inf
-    else:
-        a = (hi - yl) / d if hi != np.inf else -np.inf
-        b = (lo - yl) / d
-    a = max(a, 0.0)
-    b = min(b, 1.0)
-    return min(max(b - a, 0.0), 1.0)
+def reduce_pieces(a: np.ndarray, b: np.ndarray, h: np.ndarray, pha: np.ndarray, phb: np.ndarray, g: np.ndarray,
+                  n: int, delta: float, thr: float) -> tuple[np.ndarray, ...]:
+    """KPIs of linear pieces grouped by (cell, luminance), in numpy (no compiled kernel: numba's import and
+    start-up cost the command more than the whole reduction).
 
+    Args:
+        a, b: (P,) a piece's values at its start / end; h: (P,) its share of the period; pha, phb: (P,) the phases
+            (s) of its ends; g: (P,) its group in [0, n); delta: MMP band; thr: FDI level (value units).
 
-def _reduce_loop(a, b, h, pha, phb, g, n, delta, thr, vmin, vmax, pmin, pmax, mean, mmp, fdi):
-    """One group per (cell, luminance): min/max with their phases, phase mean, MMP and FDI phase measures."""
-    for k in range(n):
-        vmin[k] = np.inf
-        vmax[k] = -np.inf
-        mean[k] = 0.0
-        mmp[k] = 0.0
-        fdi[k] = 0.0
-    for i in range(a.size):
-        k = g[i]
-        lo_v, lo_p = (a[i], pha[i]) if a[i] <= b[i] else (b[i], phb[i])
-        hi_v, hi_p = (a[i], pha[i]) if a[i] >= b[i] else (b[i], phb[i])
-        if lo_v < vmin[k]:
-            vmin[k] = lo_v
-            pmin[k] = lo_p
-        if hi_v > vmax[k]:
-            vmax[k] = hi_v
-            pmax[k] = hi_p
-        mean[k] += h[i] * 0.5 * (a[i] + b[i])
-    for i in range(a.size):
-        k = g[i]
-        m = mean[k]
-        mmp[k] += h[i] * _band_nb(a[i], b[i], m - delta * m, m + delta * m)
-        fdi[k] += h[i] * _band_nb(a[i], b[i], thr, np.inf)
-
-
-_KERNEL = None
-
-
-def _reduce_kernel():
-    global _KERNEL, _band_nb
-    if _KERNEL is None:
-        import numba
-
-        _band_nb = numba.njit(cache=True)(_band)
-        globals()["_band_nb"] = _band_nb
-        _KERNEL = numba.njit(cache=True)(_reduce_loop)
-    return _KERNEL
+    Returns:
+        (vmin, vmax, pmin, pmax, mean, mmp, fdi), each (n,): min / max over the pieces (the first piece's end where
+        several reach it) and their phases, the phase mean, the MMP and FDI phase measures (:func:`band_measure`
+        inside +-delta x mean and above ``thr``). A group without pieces: min inf, max -inf, measures 0, phases NaN.
+    """
+    g = np.asarray(g, np.int64)
+    if g.size > 1 and np.any(g[1:] < g[:-1]):                  # group order; the pieces keep theirs inside a group
+        o = np.argsort(g, kind="stable")
+        a, b, h, pha, phb, g = a[o], b[o], h[o], pha[o], phb[o], g[o]
+    out = [np.full(n, np.inf), np.full(n, -np.inf), np.full(n, np.nan), np.full(n, np.nan)] + [np.zeros(n)
+                                                                                            for _ in range(3)]
+    if g.size == 0:
+        return tuple(out)
+    first = np.flatnonzero(np.r_[True, g[1:] != g[:-1]])       # each group's first piece
+    grp = g[first]
+    seg = np.repeat(np.arange(first.size), np.diff(np.r_[first, g.size]))   # piece -> its segment
+    lo_a = a <= b
+    hi_a = a >= b
+    idx = np.arange(g.size)
+    for k, (v, ph, red, fill) in enumerate(((np.where(lo_a, a, b), np.where(lo_a, pha, phb), np.fmin, np.inf),
+                                            (np.where(hi_a, a, b), np.where(hi_a, pha, phb), np.fmax, -np.inf))):
+        ext = red.reduceat(v, first)                            # NaN values are skipped, as the loop's < skipped them
+        at = np.minimum.reduceat(np.where(v == ext[seg], idx, g.size), first)
+        ok = at < g.size
+        out[k][grp] = np.where(np.isnan(ext), fill, ext)
+        out[k + 2][grp[ok]] = ph[at[ok]]
+    mean = np.add.reduceat(h * (0.5 * (a + b)), first)
+    out[4][grp] = mean
+    m = mean[seg]
+    out[5][grp] = np.add.reduceat(h * band_measure(a, b, m - delta * m, m + delta * m), first)
+    out[6][grp] = np.add.reduceat(h * band_measure(a, b, np.float64(thr), np.float64(np.inf)), first)
+    return tuple(out)
 
 
 def _reduce(model, ya, yb, keep, h, pha, phb, g, n, off, delta, contrast, out, sl, L):
     """KPIs of the pieces (1-D arrays, grouped by ``g``) into ``out[...][p][sl]`` (shape (c, L))."""
-    kern = _reduce_kernel()
-    g = np.ascontiguousarray(g, dtype=np.int64)
     for p in keep:
-        a = np.ascontiguousarray(ya[p].numpy().reshape(-1), dtype=np.float64)
-        b = np.ascontiguousarray(yb[p].numpy().reshape(-1), dtype=np.float64)
-        res = [np.empty(n) for _ in range(7)]
+        a = ya[p].numpy().reshape(-1).astype(np.float64, copy=False)
+        b = yb[p].numpy().reshape(-1).astype(np.float64, copy=False)
         # s = (x - x_off) / x_off > c  <=>  x > x_off (1 + c) for x_off > 0; x_off = 0: x > 0 (s = inf)
-        kern(a, b, h, pha, phb, g, n, float(delta), float(off[p] * (1 + contrast)), *res)
+        res = reduce_pieces(a, b, h, pha, phb, g, n, float(delta), float(off[p] * (1 + contrast)))
         for key, v in zip(("vmin", "vmax", "pmin", "pmax", "mean", "mmp", "fdi"), res):
             out[key][p][sl] = v.reshape(-1, L)
+
+
+def off_values(model: SensorModel, methods: Mapping[str, Callable]) -> dict[str, float]:
+    """Every panel's value with the LED OFF (background only, phase-independent; reference e-): the FDI's
+    x_off, ``{panel: value}``."""
+    bg = model.settings["background_cd_m2"]
+    mu_off = {c.name: torch.tensor([c.rate * bg + c.dark_e], dtype=torch.float64) for c in model.captures}
+    v_off, fl_off = capture_state(model, mu_off)
+    return {k: float(v) for k, v in evaluate_panels(model, methods, v_off, fl_off).items()}
 
 
 def phase_map(model: SensorModel, freqs_hz: np.ndarray, duties: np.ndarray, lums: np.ndarray,
@@ -287,10 +281,7 @@ def phase_map(model: SensorModel, freqs_hz: np.ndarray, duties: np.ndarray, lums
     C, L = f.size, lums.size
     panels = model.names + list(methods)
     bg = model.settings["background_cd_m2"]
-    # the LED-OFF value of every panel (background only; phase-independent)
-    mu_off = {c.name: torch.tensor([c.rate * bg + c.dark_e], dtype=torch.float64) for c in model.captures}
-    v_off, fl_off = capture_state(model, mu_off)
-    off = {k: float(v) for k, v in evaluate_panels(model, methods, v_off, fl_off).items()}
+    off = off_values(model, methods)
     out = {k: {p: np.empty((C, L)) for p in panels} for k in ("vmin", "vmax", "pmin", "pmax", "mean", "mmp", "fdi")}
     on_min = {c.name: np.empty(C) for c in model.captures}
     on_max = {c.name: np.empty(C) for c in model.captures}
@@ -388,7 +379,10 @@ def _bisect(model, methods, state, flags0, ta, tb, rep, ya, yb, max_depth, reduc
     ends = {m: (ya[m].numpy(), yb[m].numpy()) for m in names}     # and their end values
     done = {m: [] for m in names}                                 # pieces found linear
     for depth in range(max_depth + 1):
-        union = np.unique(np.concatenate([live[m] for m in names]))
+        mark = np.zeros(ta.size, bool)                            # the union of the sorted index sets, sorted
+        for m in names:
+            mark[live[m]] = True
+        union = np.flatnonzero(mark)
         if union.size == 0:
             break
         if depth == max_depth:

@@ -23,7 +23,7 @@ import numpy as np
 import torch
 
 from lfmbench.flicker_bench.exact import EXACT_METHODS, SEQUENCE_METHODS, capture_state, evaluate_panels, \
-    phase_map
+    off_values, phase_map
 from lfmbench.flicker_bench.model import BenchError, MAX_FREQUENCY_HZ, MIN_FREQUENCY_HZ, SensorModel
 from lfmbench.flicker_bench.sequence import frames_to_cover, sequence_kpis, sequence_series
 from lfmbench.fileio import atomic_save_figure, atomic_write_text, json_default
@@ -142,10 +142,39 @@ def steady_values(model: SensorModel, duties: np.ndarray, lums: np.ndarray, meth
     return {k: v.numpy() for k, v in evaluate_panels(model, methods, vals, flags).items()}
 
 
+def sequences(model: SensorModel, grid: Grid, methods: Mapping[str, Callable], frames: int, phase0_s: float,
+              off: Mapping[str, float], delta: float, contrast: float) -> tuple[dict, dict[str, float]]:
+    """The sequence KPIs of every panel (``sequence_kpis`` of ``sequence_series``: {panel: {kpi: (C, L)}}) and
+    their wall and CPU time in s (``sequence_s``, ``sequence_cpu_s``; CPU of the process running them)."""
+    t0, c0 = time.perf_counter(), time.process_time()
+    series = sequence_series(model, grid.freqs_hz, grid.duties, grid.lums, methods, frames, phase0_s)
+    seq = sequence_kpis(series, off, delta, contrast)
+    return seq, {"sequence_s": time.perf_counter() - t0, "sequence_cpu_s": time.process_time() - c0}
+
+
+def start_sequences(*args):
+    """:func:`sequences` (same arguments) started in a forked process beside the caller, which meanwhile computes
+    the phase map on its other core(s) (:func:`lfmbench.parallel.start_forked`); returns the function that waits
+    for ``sequences``' result, or None where no process started.
+
+    The child computes with one torch thread: then torch enters no OpenMP parallel region in it (a forked child
+    must not where the parent has already run one: GNU OpenMP's thread pool does not survive ``fork``)."""
+    from lfmbench.parallel import start_forked  # noqa: PLC0415
+
+    def child():
+        torch.set_num_threads(1)
+        return sequences(*args)
+
+    return start_forked(child, "the process computing the flicker-bench sequences")
+
+
 def run_bench(model: SensorModel, grid: Grid, methods: Mapping[str, Callable], *, frames: int = 100,
               phase0_s: float = 0.0, cover_tol: float = 0.01, noise_draws: int = 0, roi_px: int = 4, seed: int = 0,
-              delta: float = 0.1, contrast: float = 0.1, max_depth: int = 24) -> BenchResult:
+              delta: float = 0.1, contrast: float = 0.1, max_depth: int = 24, fork: bool = True) -> BenchResult:
     """Every KPI of every panel over the grid (module docstrings of ``exact``, ``sequence``, ``noise``).
+
+    The sequences are computed in a forked process beside the phase map where two or more CPUs are usable
+    (:func:`start_sequences`; ``fork=False``: all in this process); the results are the same.
 
     Args:
         frames: N frames of the sequence KPIs (>= 2); phase0_s: the LED phase in frame 0 (s).
@@ -160,17 +189,25 @@ def run_bench(model: SensorModel, grid: Grid, methods: Mapping[str, Callable], *
     if noise_draws < 0 or roi_px < 1:
         raise BenchError("--noise-draws must be >= 0 and --roi-px >= 1")
     t = {}
-    t0, c0 = time.perf_counter(), time.process_time()
-    pm = phase_map(model, grid.freqs_hz, grid.duties, grid.lums, methods, delta, contrast, max_depth)
-    t["phase_map_s"], t["phase_map_cpu_s"] = time.perf_counter() - t0, time.process_time() - c0
-    panels = model.names + list(methods)
-    L = grid.lums.size
-    steady = steady_values(model, grid.duties, grid.lums, methods)
-    t0, c0 = time.perf_counter(), time.process_time()
-    series = sequence_series(model, grid.freqs_hz, grid.duties, grid.lums, methods, frames, phase0_s)
-    seq = sequence_kpis(series, pm.off, delta, contrast)
-    del series
-    t["sequence_s"], t["sequence_cpu_s"] = time.perf_counter() - t0, time.process_time() - c0
+    off = off_values(model, methods)
+    seq_args = (model, grid, methods, frames, phase0_s, off, delta, contrast)
+    wait = start_sequences(*seq_args) if fork else None
+    threads = torch.get_num_threads()
+    if wait is not None:                  # the child holds one core: the map's torch operations the others
+        torch.set_num_threads(max(1, threads - 1))
+    try:
+        t0, c0 = time.perf_counter(), time.process_time()
+        pm = phase_map(model, grid.freqs_hz, grid.duties, grid.lums, methods, delta, contrast, max_depth)
+        t["phase_map_s"], t["phase_map_cpu_s"] = time.perf_counter() - t0, time.process_time() - c0
+        panels = model.names + list(methods)
+        L = grid.lums.size
+        steady = steady_values(model, grid.duties, grid.lums, methods)
+        t0 = time.perf_counter()
+        seq, seq_t = wait() if wait is not None else sequences(*seq_args)
+        t["sequence_wait_s"] = time.perf_counter() - t0
+        t.update(seq_t)
+    finally:
+        torch.set_num_threads(threads)
     t0 = time.perf_counter()
     cover = np.array([np.nan if (n := frames_to_cover(model.frame_time_s, f, cover_tol)) is None else n
                       for f in grid.freqs_hz], np.float64)
@@ -377,12 +414,15 @@ def freq_ranges(freqs: np.ndarray, ok: np.ndarray) -> str:
     return (", ".join(parts) + " Hz") if parts else "none"
 
 
-def plot_maps(res: BenchResult, out_dir: Path, stem: str = "flicker_bench", measured: Sequence[dict] = ()
-              ) -> list[Path]:
+def plot_maps(res: BenchResult, out_dir: Path, stem: str = "flicker_bench", measured: Sequence[dict] = (),
+              meanwhile: Callable[[], Any] | None = None) -> tuple[list[Path], Any]:
     """Two heat-map PNGs (frequency x duty, one panel per capture or method, worst case over the luminances and
     marked): ``<stem>_miss.png`` (worst output over phase / steady value; hatched where the light is missed, a bar
     under each panel for the frequencies never missed at duty >= 10 %) and ``<stem>_mmp.png`` (noise-free MMP over
-    every phase). Measured captures are drawn as circles in their measured value's colour."""
+    every phase). Measured captures are drawn as circles in their measured value's colour.
+
+    ``meanwhile()`` runs in this process while the second figure is drawn in a forked one (the command writes its
+    tables there). Returns (the two paths, what ``meanwhile`` returned, or None)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -474,6 +514,7 @@ def plot_maps(res: BenchResult, out_dir: Path, stem: str = "flicker_bench", meas
 
     waits = [(spec, start_forked(lambda spec=spec: draw(spec), "the process drawing the flicker-bench maps"))
              for spec in specs[1:]]
+    other = meanwhile() if meanwhile is not None else None
     paths = [draw(specs[0])]
     for spec, wait in waits:
         if wait is None:
@@ -481,7 +522,7 @@ def plot_maps(res: BenchResult, out_dir: Path, stem: str = "flicker_bench", meas
         else:
             wait()
             paths.append(out_dir / f"{stem}_{spec[0]}.png")
-    return paths
+    return paths, other
 
 
 # ------------------------------------------------------------------------------------------------- report
