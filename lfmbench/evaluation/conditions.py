@@ -9,6 +9,7 @@
 """
 from __future__ import annotations
 
+import copy
 import math
 from collections.abc import Callable
 from pathlib import Path
@@ -19,6 +20,9 @@ from lfmbench.fileio import load_yaml
 
 #: The default bins (plain YAML a user can edit or replace with ``--conditions``).
 CONDITIONS_CONFIG = Path(__file__).resolve().parents[1] / "configs" / "conditions.yaml"
+#: Checked bins of each conditions file read, keyed by (resolved path, mtime in ns, size): :func:`load_bins` parses
+#: a file again when it changes; callers get copies.
+_BINS_CACHE: dict[tuple[str, int, int], dict[str, dict]] = {}
 #: Label of a sample without a value for a condition.
 NA = "n/a"
 
@@ -35,6 +39,13 @@ def load_bins(path: str | Path | None = None) -> dict[str, dict]:
     from lfmbench.resources import find_config
 
     p = Path(CONDITIONS_CONFIG if not path else find_config(path, "conditions", "--conditions"))
+    try:  # a leaderboard reads the bins once per condition and row set: parse and check a file once per version
+        st = p.stat()
+        key = (str(p.resolve()), st.st_mtime_ns, st.st_size)
+    except OSError:
+        key = None
+    if key is not None and key in _BINS_CACHE:
+        return copy.deepcopy(_BINS_CACHE[key])
     try:
         cfg = load_yaml(p, source=f"conditions file {p}")
     except OSError as exc:
@@ -51,6 +62,10 @@ def load_bins(path: str | Path | None = None) -> dict[str, dict]:
                 raise ValueError(f"conditions file {p}: {name}.edges must be >= 2 increasing numbers, got {brief(e)}")
         elif not isinstance(spec["categories"], list) or not spec["categories"]:
             raise ValueError(f"conditions file {p}: {name}.categories must be a non-empty list")
+    if key is not None:
+        if len(_BINS_CACHE) >= 8:  # bounded: a handful of conditions files per process
+            _BINS_CACHE.clear()
+        _BINS_CACHE[key] = copy.deepcopy(cfg)
     return cfg
 
 

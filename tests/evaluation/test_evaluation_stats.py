@@ -127,3 +127,20 @@ def test_condition_bins_and_sample_conditions(tmp_path):
     bad.write_text("speed: {edges: [3, 1]}\n")
     with pytest.raises(ValueError, match=r"b\.yaml: speed\.edges"):
         load_bins(bad)
+
+
+def test_load_bins_reads_a_changed_file_again_and_returns_copies(tmp_path):
+    import os
+
+    f = tmp_path / "c.yaml"
+    f.write_text("speed: {edges: [0, 5, 10]}\n")
+    first = load_bins(f)
+    first["speed"]["edges"].append(99)            # a caller's edit does not reach the next reader
+    assert load_bins(f) == {"speed": {"edges": [0, 5, 10]}}
+    f.write_text("speed: {edges: [0, 7]}\n")      # same name, new content (another size and mtime)
+    os.utime(f, ns=(1, 1))
+    assert load_bins(f) == {"speed": {"edges": [0, 7]}}
+    f.write_text("speed: {edges: [7, 0]}\n")      # a file turned bad is checked again, not served from before
+    os.utime(f, ns=(2, 2))
+    with pytest.raises(ValueError, match=r"c\.yaml: speed\.edges"):
+        load_bins(f)
