@@ -18,6 +18,7 @@ workers). Run: ``python benchmarks/studies/staggered_ghost_motion_figure.py`` (`
 from __future__ import annotations
 
 import argparse
+import io
 import os
 import sys
 import time
@@ -35,7 +36,7 @@ from matplotlib.patches import Rectangle  # noqa: E402
 from lfmbench.baselines import get_method  # noqa: E402
 from lfmbench.datasets import LFMCaptureDataset  # noqa: E402
 from lfmbench.datasets.loading import collate_samples  # noqa: E402
-from lfmbench.fileio import atomic_save_figure  # noqa: E402
+from lfmbench.fileio import atomic_save_figure, atomic_write_bytes  # noqa: E402
 from lfmbench.sensor.plan import ARCHITECTURES  # noqa: E402
 
 #: The staggered preset's window edges (s from the frame start): long [0, 10), medium [10, 11), short [11, 11.1) ms.
@@ -122,7 +123,9 @@ def _captures(root: Path, cache: Path) -> dict:
     est = get_method(ARCHITECTURES[ds.architecture].baseline)(batch)[0]          # (F, 1, H, W) e-
     out = {"merge": raw_to_rgb(est.float(), ds.preset.cfa.to_kornia())[0], "gt": s["gt_rgb"][0],
            **{c: s[f"{c}_rgb"][0] for c in ds.preset.captures}, "sw": s["meta"]["static_windows"]}
-    torch.save(out, cache)
+    buf = io.BytesIO()
+    torch.save(out, buf)
+    atomic_write_bytes(cache, buf.getvalue())
     return out
 
 
