@@ -57,6 +57,8 @@ SCRATCH_WRITES = {
     ("bench_leaderboard.py", "time_cli"): "the argument list of the timed command, in the same temporary folder",
     ("reflection_speckle.py", "main"): "np.savez into an in-memory buffer (io.BytesIO), whose bytes then go to "
                                        "lfmbench.fileio.atomic_write_bytes",
+    ("staggered_ghost_motion_figure.py", "_captures"): "torch.save into an in-memory buffer (io.BytesIO), whose "
+                                                       "bytes then go to lfmbench.fileio.atomic_write_bytes",
 }
 
 
