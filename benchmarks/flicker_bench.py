@@ -330,7 +330,7 @@ def command_section(sensors: list[str], runs: int, noise_runs: int) -> list[str]
                        f"{med['cpu_s']:.1f} s, target {target:g} s: {state}.")
     head = ["## As a user runs it (targets 10 s noise-free, 2 min with noise)", "",
             f"Measured {t_start:%Y-%m-%d %H:%M} UTC on {_machine()}, 1-min load average {load0} at the start and after "
-            "each run as listed (a loaded machine stretches every wall time: the lead's quiet rerun is the figure to "
+            "each run as listed (a loaded machine stretches every wall time: a quiet machine's run is the figure to "
             "quote). Rerun: `python benchmarks/flicker_bench.py --command` (`--command-sensors`, `--command-runs`, "
             "`--noise-runs`). Each run is a fresh process `python -m lfmbench.cli flicker-bench ARGS --out TMP` with "
             "the default grid (200 frequencies x 20 duties x 10 luminances, every phase exact), the 100-frame "
