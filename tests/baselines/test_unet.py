@@ -111,7 +111,8 @@ def test_loss_equals_its_compacted_form_and_stays_finite_without_leds():
     assert torch.isclose(more, total, rtol=1e-6)
     none = torch.full_like(b["light_index"], -1)
     alone, t2 = U.led_weighted_loss(pred, b["gt"], none, cfg)
-    assert float(alone.detach()) == float(t2["mu_l1"].detach()) and float(t2["led_l1"]) == 0.0 and float(t2["region_log"]) == 0.0
+    assert float(alone.detach()) == float(t2["mu_l1"].detach())
+    assert float(t2["led_l1"]) == 0.0 and float(t2["region_log"]) == 0.0
     alone.backward()
     assert torch.isfinite(pred.grad).all()
 
