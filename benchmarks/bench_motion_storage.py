@@ -219,9 +219,11 @@ def main(argv=None) -> None:
     base = rows[0][1]
     md = ["# Motion between captures: what the 1.5x target needs (`benchmarks/bench_motion_storage.py`)", "",
           f"Made {made['start']} to {made['end'][-5:]} UTC on the shared 2-core AMD EPYC (AVX2), load "
-          f"{made['load_start']:.1f} / {made['load_end']:.1f} (1-min average at start / end; other jobs ran beside "
-          "it: CPU seconds are the steadier measure, but a loaded machine slows every process's memory too; rerun "
-          "quiet for absolute figures). Rerun: `python benchmarks/bench_motion_storage.py --case "
+          f"{made['load_start']:.1f} / {made['load_end']:.1f} (1-min average at start / end; "
+          + ("a quiet machine" if max(made['load_start'], made['load_end']) < 2.5 else
+             "other jobs ran beside it: CPU seconds are the steadier measure, but a loaded machine slows every "
+             "process's memory too; rerun quiet for absolute figures")
+          + "). Rerun: `python benchmarks/bench_motion_storage.py --case "
           f"{a.case} --width {a.width} --height {a.height} --out docs`.", "",
           f"Scene: generator 2, seed {a.case.split(':')[0]}, {a.case.split(':')[1]}, moving objects "
           f"{len(cost_x['moving'])}, ego {cost_x['speed_mps']:.1f} m/s; `default` profile at {a.width}x{a.height}, "
