@@ -255,7 +255,6 @@ def denoise_static(images: dict, boxes=(), radius: int = SHARE_RADIUS_PX, shape_
     return out
 
 
-
 #: Side (px) of the blocks a flickering lamp's reflection is denoised on (:func:`denoise_reflection`): the tracer's
 #: reflection blocks (``RenderOptions.reflection_block_px``, 2 by default).
 REFLECTION_BLOCK_PX = 2

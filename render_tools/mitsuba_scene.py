@@ -478,6 +478,8 @@ def place_moving(params, scene: dict, t: float, cache: dict) -> bool:
         meshes = _object_meshes(o, object_offset(scene, o["id"], t), scene.get("meshes"), scene["materials"], t)
         for k, (_mat, V, F, UV) in enumerate(meshes):
             sets[shape_id(o["id"], k)] = (V, F, UV)
+        if f"{shape_id(o['id'], len(meshes))}.vertex_positions" in params:
+            return False    # the loaded scene holds more parts of this object than it has at t: load anew
     beams = {}
     for lt in scene["lights"]:
         if ("light", lt["id"]) in rest:
