@@ -10,6 +10,7 @@
 from __future__ import annotations
 
 import copy
+import functools
 import math
 from collections.abc import Callable
 from pathlib import Path
@@ -20,9 +21,6 @@ from lfmbench.fileio import load_yaml
 
 #: The default bins (plain YAML a user can edit or replace with ``--conditions``).
 CONDITIONS_CONFIG = Path(__file__).resolve().parents[1] / "configs" / "conditions.yaml"
-#: Checked bins of each conditions file read, keyed by (resolved path, mtime in ns, size): :func:`load_bins` parses
-#: a file again when it changes; callers get copies.
-_BINS_CACHE: dict[tuple[str, int, int], dict[str, dict]] = {}
 #: Label of a sample without a value for a condition.
 NA = "n/a"
 
@@ -39,13 +37,22 @@ def load_bins(path: str | Path | None = None) -> dict[str, dict]:
     from lfmbench.resources import find_config
 
     p = Path(CONDITIONS_CONFIG if not path else find_config(path, "conditions", "--conditions"))
-    try:  # a leaderboard reads the bins once per condition and row set: parse and check a file once per version
+    try:  # a leaderboard reads the bins once per condition and row set: parsed and checked once per file version
         st = p.stat()
-        key = (str(p.resolve()), st.st_mtime_ns, st.st_size)
-    except OSError:
-        key = None
-    if key is not None and key in _BINS_CACHE:
-        return copy.deepcopy(_BINS_CACHE[key])
+    except OSError:  # the read below names the file and the error
+        return _read_bins(str(p))
+    return copy.deepcopy(_read_bins_cached(str(p), str(p.resolve()), st.st_mtime_ns, st.st_size))
+
+
+@functools.lru_cache(maxsize=8)
+def _read_bins_cached(shown: str, resolved: str, mtime_ns: int, size: int) -> dict[str, dict]:
+    """:func:`_read_bins` of ``shown`` once per (resolved path, mtime, size): a changed file is read again; callers
+    get copies (:func:`load_bins`); an error is not kept."""
+    return _read_bins(shown)
+
+
+def _read_bins(p: str) -> dict[str, dict]:
+    """The checked bins of conditions file ``p`` (:func:`load_bins`)."""
     try:
         cfg = load_yaml(p, source=f"conditions file {p}")
     except OSError as exc:
@@ -62,10 +69,6 @@ def load_bins(path: str | Path | None = None) -> dict[str, dict]:
                 raise ValueError(f"conditions file {p}: {name}.edges must be >= 2 increasing numbers, got {brief(e)}")
         elif not isinstance(spec["categories"], list) or not spec["categories"]:
             raise ValueError(f"conditions file {p}: {name}.categories must be a non-empty list")
-    if key is not None:
-        if len(_BINS_CACHE) >= 8:  # bounded: a handful of conditions files per process
-            _BINS_CACHE.clear()
-        _BINS_CACHE[key] = copy.deepcopy(cfg)
     return cfg
 
 
