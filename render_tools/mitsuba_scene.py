@@ -279,12 +279,22 @@ def _mesh(mi, name: str, V: np.ndarray, F: np.ndarray, bsdf, emitter=None, UV: n
     else:
         m = mi.Mesh(name, len(V), len(F), props=props, has_vertex_texcoords=True)
     p = mi.traverse(m)
-    p["vertex_positions"] = type(p["vertex_positions"])(np.asarray(V, dtype=np.float32).ravel())
-    p["faces"] = type(p["faces"])(np.asarray(F, dtype=np.uint32).ravel())
-    if UV is not None:
-        p["vertex_texcoords"] = type(p["vertex_texcoords"])(np.asarray(UV, dtype=np.float32).ravel())
+    _write_mesh(p, "", V, F, UV)
     p.update()
     return m
+
+
+def _write_mesh(params, prefix: str, V: np.ndarray, F: np.ndarray, UV: np.ndarray | None) -> None:
+    """Write a mesh's arrays into Mitsuba parameters ``params`` under ``prefix`` ("" for a mesh's own, or
+    ``"<shape id>."`` in a scene's): vertices (n, 3) m and texture coordinates (n, 2) as float32, faces (m, 3) as
+    uint32. The one conversion :func:`_mesh` and :func:`place_moving` share, so a moved mesh holds the arrays a
+    newly loaded one would, bit for bit. The caller runs ``params.update()``."""
+    params[f"{prefix}vertex_positions"] = type(params[f"{prefix}vertex_positions"])(
+        np.asarray(V, dtype=np.float32).ravel())
+    params[f"{prefix}faces"] = type(params[f"{prefix}faces"])(np.asarray(F, dtype=np.uint32).ravel())
+    if UV is not None:
+        params[f"{prefix}vertex_texcoords"] = type(params[f"{prefix}vertex_texcoords"])(
+            np.asarray(UV, dtype=np.float32).ravel())
 
 
 def _reflectance(m: dict) -> dict:
@@ -493,12 +503,7 @@ def place_moving(params, scene: dict, t: float, cache: dict) -> bool:
         if key not in params or dr.width(params[key]) != 3 * len(V) or dr.width(params[f"{name}.faces"]) != 3 * len(F):
             return False
     for name, (V, F, UV) in sets.items():
-        params[f"{name}.vertex_positions"] = type(params[f"{name}.vertex_positions"])(
-            np.asarray(V, dtype=np.float32).ravel())
-        params[f"{name}.faces"] = type(params[f"{name}.faces"])(np.asarray(F, dtype=np.uint32).ravel())
-        if UV is not None:
-            params[f"{name}.vertex_texcoords"] = type(params[f"{name}.vertex_texcoords"])(
-                np.asarray(UV, dtype=np.float32).ravel())
+        _write_mesh(params, f"{name}.", V, F, UV)
     for key, tf in beams.items():
         params[key] = type(params[key])(tf)
     params.update()
