@@ -247,9 +247,16 @@ def reduce_pieces(a: np.ndarray, b: np.ndarray, h: np.ndarray, pha: np.ndarray, 
 
 def _reduce(model, ya, yb, keep, h, pha, phb, g, n, off, delta, contrast, out, sl, L):
     """KPIs of the pieces (1-D arrays, grouped by ``g``) into ``out[...][p][sl]`` (shape (c, L))."""
+    g = np.asarray(g, np.int64)
+    # the panels share the pieces: put them in group order once (stable, as reduce_pieces would per panel)
+    o = np.argsort(g, kind="stable") if g.size > 1 and np.any(g[1:] < g[:-1]) else None
+    if o is not None:
+        h, pha, phb, g = h[o], pha[o], phb[o], g[o]
     for p in keep:
         a = ya[p].numpy().reshape(-1).astype(np.float64, copy=False)
         b = yb[p].numpy().reshape(-1).astype(np.float64, copy=False)
+        if o is not None:
+            a, b = a[o], b[o]
         # s = (x - x_off) / x_off > c  <=>  x > x_off (1 + c) for x_off > 0; x_off = 0: x > 0 (s = inf)
         res = reduce_pieces(a, b, h, pha, phb, g, n, float(delta), float(off[p] * (1 + contrast)))
         for key, v in zip(("vmin", "vmax", "pmin", "pmax", "mean", "mmp", "fdi"), res):
