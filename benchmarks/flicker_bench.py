@@ -179,7 +179,7 @@ TIMED_PRESETS = ["ovt", "chopped", "lofic", "staggered", "imx490_4read"]
 
 
 def _warm(model, grid, methods) -> None:
-    """Compile the numba kernels (serial and threaded) and fill the caches before timing."""
+    """One short run before timing: first-call costs (imports, caches, torch's first kernels) are not timed."""
     fbr.run_bench(model, fbr.Grid(grid.freqs_hz[:60], grid.duties, grid.lums), methods, noise_draws=10)
 
 
@@ -233,12 +233,12 @@ def timing(out: Path, sensors: list[str], noise_cells: int, repeats: int, noise_
              "The machine was shared with other jobs (load far above its 2 cores), so wall times are upper bounds "
              "and vary from run to run. CPU time (user + system of the process, all its threads; Python's "
              "`time.process_time`) is the work done and barely depends on the load: on an idle 2-core machine the "
-             "wall time is at most the CPU time (less where torch's element-wise operations or the threaded numba "
-             "kernel use both cores).", ""]
+             "wall time is at most the CPU time (less where torch's element-wise operations use both "
+             "cores).", ""]
     lines += ["## Noise-free map, every phase exact (target < 10 s)", "",
               "Grid 200 log-spaced frequencies 50 Hz-2 kHz x 20 duties x 10 luminances (the default grid: through "
               "each capture's saturation), every panel (the captures, then the merges of `bench_methods`), every "
-              f"phase exact; median of {repeats} runs after one warm-up run (numba compilation excluded). Phase map: "
+              f"phase exact; median of {repeats} runs after one warm-up run (first-call costs excluded). Phase map: "
               "min, max, phases, mean, MMP and FDI over every phase; sequences: the 100-frame series at the frame "
               "rate and their P2020 KPIs.", "",
               "| sensor | cells x luminances | captures + merges | phase map wall [s] | phase map CPU [s] | "
