@@ -10,13 +10,18 @@ edges: the protocol ``lfmbench-v1-mini-motion`` (``lfmbench-v1-mini`` plus those
 
     lfmbench render --protocol lfmbench-v1-mini-motion --split test --out v1mm --workers 2
     python benchmarks/studies/architecture_comparison.py --corpus v1mm --runs runs/arch_v1mm --samples-per-scene 2
-    # with a U-Net per sensor, trained with one budget on the training split:
+    # with a U-Net per sensor, trained with one budget (unet_tiny.yaml, 20 epochs of the 32 training scenes x 8
+    # draws: 1,280 steps of batch 4) on the training split, then scored and ranked with the merges above:
     lfmbench render --protocol lfmbench-v1-mini-motion --split train --out v1mm --workers 2
-    for s in ovt lofic staggered ...; do
-      lfmbench train --method unet --sensor $s --corpus v1mm --config lfmbench/configs/unet_tiny.yaml --epochs E \
-          --out runs/unet_$s.pt
-    done
-    python benchmarks/studies/architecture_comparison.py ... --unet ovt=runs/unet_ovt.pt --unet lofic=...
+    python benchmarks/studies/architecture_comparison.py --corpus v1mm --runs runs/arch_v1mm --samples-per-scene 2 \
+        --train-epochs 20 --checkpoints runs/unet_v1mm --unet-only --sensor ovt --sensor ox03c10 ...  # two halves
+    lfmbench leaderboard runs/arch_v1mm/*/<method>.json --cross-sensor --json runs/arch_v1mm/leaderboard.json
+
+``--train-epochs E`` trains each selected sensor's U-Net first (one process, one torch thread, no DataLoader
+worker; a checkpoint already complete is kept, an unfinished one resumed) into ``--checkpoints/unet_<sensor>.pt``
+with its times in ``unet_<sensor>.json`` (wall and CPU seconds, steps, load average before and after), then
+scores them as ``--unet`` would; ``--unet-only`` scores only the U-Nets (the merges' result files already in
+``--runs`` are kept and ranked with them).
 
 The earlier comparison on the 640x360 ``lfmbench-v1`` test split (static windows served by ``nearest``)::
 
@@ -114,6 +119,52 @@ def tables(leaderboard_json: str | Path) -> str:
     return "\n".join(out) + "\n"
 
 
+#: The U-Net configuration of the comparison: one budget for every sensor (lfmbench/configs/unet_tiny.yaml: batch 4,
+#: 64 px crops, 8 draws per scene per epoch, seed 0).
+TRAIN_CONFIG = "unet_tiny"
+
+
+def _load() -> list[float]:
+    """The 1-, 5- and 15-minute load averages (Linux ``/proc/loadavg``; empty elsewhere)."""
+    try:
+        return [float(x) for x in Path("/proc/loadavg").read_text().split()[:3]]
+    except OSError:
+        return []
+
+
+def train_unet(corpus: str | Path, sensor: str, epochs: int, folder: Path) -> Path:
+    """Train the U-Net of ``sensor`` (:data:`TRAIN_CONFIG`, ``epochs`` epochs of the corpus's training split, one
+    torch thread, no DataLoader worker) into ``folder/unet_<sensor>.pt`` (resumed when unfinished, kept when
+    complete), its times into ``folder/unet_<sensor>.json`` (wall and CPU seconds of this call, steps, seconds per
+    epoch, load averages before and after). Returns the checkpoint path."""
+    import json
+
+    import torch
+
+    from lfmbench.fileio import atomic_write_text
+    from lfmbench.train import load_config, train
+
+    folder.mkdir(parents=True, exist_ok=True)
+    out, record = folder / f"unet_{sensor}.pt", folder / f"unet_{sensor}.json"
+    if out.is_file() and record.is_file() and json.loads(record.read_text()).get("epochs") == epochs:
+        print(f"[{sensor}] kept {out} (trained for {epochs} epochs: {record})", flush=True)
+        return out
+    torch.set_num_threads(1)
+    load0, t, c = _load(), time.perf_counter(), time.process_time()
+    _, hist = train("unet", corpus, out, load_config("unet", TRAIN_CONFIG), epochs=epochs, workers=0,
+                    sensor=sensor, progress=False, log=lambda m: print(f"[{sensor}] {m}", flush=True))
+    wall, cpu = time.perf_counter() - t, time.process_time() - c
+    info = {"sensor": sensor, "config": TRAIN_CONFIG, "epochs": epochs, "steps": hist["steps"],
+            "wall_s": round(wall, 1), "cpu_s": round(cpu, 1), "epoch_seconds": [round(x, 2) for x in
+                                                                                 hist["epoch_seconds"]],
+            "final_loss": hist["epoch_loss"][-1] if hist["epoch_loss"] else None,
+            "load_before": load0, "load_after": _load(),
+            "started_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime(time.time() - wall))}
+    atomic_write_text(record, json.dumps(info, indent=1) + "\n")
+    print(f"[{sensor}] trained: {hist['steps']} steps, {wall:.0f} s wall, {cpu:.0f} CPU s -> {out}", flush=True)
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--corpus", help="corpus root (a protocol's test split; required unless --tables-only)")
@@ -126,6 +177,13 @@ def main() -> None:
                          "lfmbench leaderboard RUNS/*/*.json --cross-sensor")
     ap.add_argument("--unet", action="append", default=[], metavar="SENSOR=CHECKPOINT",
                     help="a U-Net trained for SENSOR (lfmbench train --method unet --sensor SENSOR); repeatable")
+    ap.add_argument("--train-epochs", type=int, default=None, metavar="E",
+                    help="first train a U-Net per selected sensor for E epochs of the corpus's training split "
+                         f"({TRAIN_CONFIG}.yaml, the same budget for every sensor) into --checkpoints")
+    ap.add_argument("--checkpoints", default="runs/unet_checkpoints",
+                    help="with --train-epochs: the folder of the checkpoints and their timing files")
+    ap.add_argument("--unet-only", action="store_true",
+                    help="score only the U-Nets (the merges' result files already in --runs are kept)")
     a = ap.parse_args()
     unets = {}
     for item in a.unet:
@@ -138,9 +196,18 @@ def main() -> None:
         return
     if not a.corpus:
         ap.error("--corpus is required")
+    if a.train_epochs is not None and a.train_epochs < 1:
+        ap.error(f"--train-epochs must be >= 1, got {a.train_epochs}")
+    selected = [s for s in METHODS if s in (a.sensor or METHODS)]
+    if a.train_epochs is not None:
+        for s in selected:
+            unets[s] = str(train_unet(a.corpus, s, a.train_epochs, Path(a.checkpoints)))
+    if a.unet_only and not unets:
+        ap.error("--unet-only needs --unet or --train-epochs")
     from lfmbench.evaluation.benchmark import benchmark_sensors
 
-    sensors = {s: [*m, *(["unet"] if s in unets else [])] for s, m in METHODS.items() if s in (a.sensor or METHODS)}
+    sensors = {s: [*([] if a.unet_only else METHODS[s]), *(["unet"] if s in unets else [])] for s in selected}
+    sensors = {s: m for s, m in sensors.items() if m}
     t = time.perf_counter()
     try:
         benchmark_sensors(a.corpus, sensors, a.runs, checkpoints={s: {"unet": p} for s, p in unets.items()},
