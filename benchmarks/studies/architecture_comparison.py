@@ -122,6 +122,8 @@ def tables(leaderboard_json: str | Path) -> str:
 #: The U-Net configuration of the comparison: one budget for every sensor (lfmbench/configs/unet_tiny.yaml: batch 4,
 #: 64 px crops, 8 draws per scene per epoch, seed 0).
 TRAIN_CONFIG = "unet_tiny"
+#: Training scenes whose projections a training keeps in memory (160x90: about 2.4 MB each).
+TRAIN_CACHE_SCENES = 64
 
 
 def _load() -> list[float]:
@@ -139,20 +141,32 @@ def train_unet(corpus: str | Path, sensor: str, epochs: int, folder: Path) -> Pa
     epoch, load averages before and after). Returns the checkpoint path."""
     import json
 
-    import torch
-
-    from lfmbench.fileio import atomic_write_text
-    from lfmbench.train import load_config, train
-
     folder.mkdir(parents=True, exist_ok=True)
     out, record = folder / f"unet_{sensor}.pt", folder / f"unet_{sensor}.json"
     if out.is_file() and record.is_file() and json.loads(record.read_text()).get("epochs") == epochs:
         print(f"[{sensor}] kept {out} (trained for {epochs} epochs: {record})", flush=True)
         return out
+    if not Path(corpus).is_dir():
+        raise FileNotFoundError(f"corpus directory {corpus} does not exist (render its training split first)")
+    import torch
+
+    import lfmbench.datasets.loading as loading
+    from lfmbench.fileio import atomic_write_text
+    from lfmbench.train import load_config, train
+
     torch.set_num_threads(1)
+
+    def make_dataset(*args, **kw):  # every training scene's projection kept in memory (the default keeps 8 and
+        kw.setdefault("cache_scenes", TRAIN_CACHE_SCENES)  # reads the others back from the disk cache per sample,
+        return own(*args, **kw)                            # 0.035 CPU s each): the same samples, less time
+
+    own, loading.make_dataset = loading.make_dataset, make_dataset
     load0, t, c = _load(), time.perf_counter(), time.process_time()
-    _, hist = train("unet", corpus, out, load_config("unet", TRAIN_CONFIG), epochs=epochs, workers=0,
-                    sensor=sensor, progress=False, log=lambda m: print(f"[{sensor}] {m}", flush=True))
+    try:
+        _, hist = train("unet", corpus, out, load_config("unet", TRAIN_CONFIG), epochs=epochs, workers=0,
+                        sensor=sensor, progress=False, log=lambda m: print(f"[{sensor}] {m}", flush=True))
+    finally:
+        loading.make_dataset = own
     wall, cpu = time.perf_counter() - t, time.process_time() - c
     info = {"sensor": sensor, "config": TRAIN_CONFIG, "epochs": epochs, "steps": hist["steps"],
             "wall_s": round(wall, 1), "cpu_s": round(cpu, 1), "epoch_seconds": [round(x, 2) for x in
