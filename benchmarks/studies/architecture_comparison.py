@@ -80,7 +80,7 @@ def _bin_low(label: str) -> float:
 def tables(leaderboard_json: str | Path) -> str:
     """The comparison's Markdown tables (docs/results/sensor-architectures.md) from a cross-sensor ``leaderboard.json``: the
     ranking with 95 % intervals, then the LED score by condition (time of day with its interval; PWM miss probability
-    and ego speed: value and scenes)."""
+    and ego speed: value and scenes), then each U-Net against its sensor's merges (:func:`unet_table`)."""
     import json
 
     d = json.loads(Path(leaderboard_json).read_text())
@@ -116,7 +116,45 @@ def tables(leaderboard_json: str | Path) -> str:
                 cells.append(f"{_f(x['value'])} ({x['n']})")
         method, _, sensor = r["method"].partition(" @ ")
         out.append(f"| {sensor}: `{method}` | " + " | ".join(cells) + " |")
-    return "\n".join(out) + "\n"
+    return "\n".join(out + unet_table(d)) + "\n"
+
+
+def unet_table(d: dict) -> list[str]:
+    """Markdown lines: each sensor's U-Net against its standard merge (the first method of :data:`METHODS`) and
+    against its best rule-based method in this leaderboard, paired over scenes on the LED score (mean difference with
+    its 95 % bootstrap interval, Wilcoxon p Holm-adjusted over the sensors, :mod:`lfmbench.evaluation.stats`).
+    Empty without U-Net rows."""
+    from lfmbench.evaluation.stats import holm, paired_test
+
+    rows = {r["method"]: r for r in d["rows"]}
+    per = {m: {s["scene_id"]: s["metrics"].get("led_score") for s in v} for m, v in (d.get("per_scene") or {}).items()}
+    found = []
+    for sensor, methods in METHODS.items():
+        unet = f"unet @ {sensor}"
+        merges = [f"{m} @ {sensor}" for m in methods if f"{m} @ {sensor}" in rows]
+        if unet not in rows or not merges:
+            continue
+        best = max(merges, key=lambda m: rows[m]["led_score"])
+        tests = []
+        for other in (merges[0], best):
+            ids = sorted(set(per.get(unet, {})) & set(per.get(other, {})))
+            tests.append(paired_test([per[unet][i] for i in ids], [per[other][i] for i in ids]))
+        found.append((sensor, unet, merges[0], best, tests))
+    if not found:
+        return []
+    adj = [holm([f[4][k]["p"] for f in found]) for k in (0, 1)]
+
+    def diff(t: dict, p: float) -> str:
+        return (f"{_f(t['mean_diff'])} [{_f(t['ci'][0])}, {_f(t['ci'][1])}] | "
+                + ("< 0.001" if p < 1e-3 else _f(p)))
+
+    out = ["", "| sensor | U-Net LED score [95 % CI] | rank | standard merge: LED score [95 % CI] | rank | "
+           "U-Net - merge [95 % CI] | p Holm | best rule-based | U-Net - best [95 % CI] | p Holm |", "|---" * 10 + "|"]
+    for i, (sensor, unet, merge, best, tests) in enumerate(found):
+        out.append(f"| {sensor} | {_ci(rows[unet], 'led_score')} | {rows[unet]['rank']} | `{merge.partition(' @ ')[0]}` "
+                   f"{_ci(rows[merge], 'led_score')} | {rows[merge]['rank']} | {diff(tests[0], adj[0][i])} | "
+                   f"`{best.partition(' @ ')[0]}` | {diff(tests[1], adj[1][i])} |")
+    return out
 
 
 #: The U-Net configuration of the comparison: one budget for every sensor (lfmbench/configs/unet_tiny.yaml: batch 4,
