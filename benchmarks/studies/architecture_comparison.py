@@ -10,13 +10,18 @@ edges: the protocol ``lfmbench-v1-mini-motion`` (``lfmbench-v1-mini`` plus those
 
     lfmbench render --protocol lfmbench-v1-mini-motion --split test --out v1mm --workers 2
     python benchmarks/studies/architecture_comparison.py --corpus v1mm --runs runs/arch_v1mm --samples-per-scene 2
-    # with a U-Net per sensor, trained with one budget on the training split:
+    # with a U-Net per sensor, trained with one budget (unet_tiny.yaml, 20 epochs of the 32 training scenes x 8
+    # draws: 1,280 steps of batch 4) on the training split, then scored and ranked with the merges above:
     lfmbench render --protocol lfmbench-v1-mini-motion --split train --out v1mm --workers 2
-    for s in ovt lofic staggered ...; do
-      lfmbench train --method unet --sensor $s --corpus v1mm --config lfmbench/configs/unet_tiny.yaml --epochs E \
-          --out runs/unet_$s.pt
-    done
-    python benchmarks/studies/architecture_comparison.py ... --unet ovt=runs/unet_ovt.pt --unet lofic=...
+    python benchmarks/studies/architecture_comparison.py --corpus v1mm --runs runs/arch_v1mm --samples-per-scene 2 \
+        --train-epochs 20 --checkpoints runs/unet_v1mm --unet-only --sensor ovt --sensor ox03c10 ...  # two halves
+    lfmbench leaderboard runs/arch_v1mm/*/<method>.json --cross-sensor --json runs/arch_v1mm/leaderboard.json
+
+``--train-epochs E`` trains each selected sensor's U-Net first (one process, one torch thread, no DataLoader
+worker; a checkpoint already complete is kept, an unfinished one resumed) into ``--checkpoints/unet_<sensor>.pt``
+with its times in ``unet_<sensor>.json`` (wall and CPU seconds, steps, load average before and after), then
+scores them as ``--unet`` would; ``--unet-only`` scores only the U-Nets (the merges' result files already in
+``--runs`` are kept and ranked with them).
 
 The earlier comparison on the 640x360 ``lfmbench-v1`` test split (static windows served by ``nearest``)::
 
@@ -75,7 +80,7 @@ def _bin_low(label: str) -> float:
 def tables(leaderboard_json: str | Path) -> str:
     """The comparison's Markdown tables (docs/results/sensor-architectures.md) from a cross-sensor ``leaderboard.json``: the
     ranking with 95 % intervals, then the LED score by condition (time of day with its interval; PWM miss probability
-    and ego speed: value and scenes)."""
+    and ego speed: value and scenes), then each U-Net against its sensor's merges (:func:`unet_table`)."""
     import json
 
     d = json.loads(Path(leaderboard_json).read_text())
@@ -111,7 +116,105 @@ def tables(leaderboard_json: str | Path) -> str:
                 cells.append(f"{_f(x['value'])} ({x['n']})")
         method, _, sensor = r["method"].partition(" @ ")
         out.append(f"| {sensor}: `{method}` | " + " | ".join(cells) + " |")
-    return "\n".join(out) + "\n"
+    return "\n".join(out + unet_table(d)) + "\n"
+
+
+def unet_table(d: dict) -> list[str]:
+    """Markdown lines: each sensor's U-Net against its standard merge (the first method of :data:`METHODS`) and
+    against its best rule-based method in this leaderboard, paired over scenes on the LED score (mean difference with
+    its 95 % bootstrap interval, Wilcoxon p Holm-adjusted over the sensors, :mod:`lfmbench.evaluation.stats`).
+    Empty without U-Net rows."""
+    from lfmbench.evaluation.stats import holm, paired_test
+
+    rows = {r["method"]: r for r in d["rows"]}
+    per = {m: {s["scene_id"]: s["metrics"].get("led_score") for s in v} for m, v in (d.get("per_scene") or {}).items()}
+    found = []
+    for sensor, methods in METHODS.items():
+        unet = f"unet @ {sensor}"
+        merges = [f"{m} @ {sensor}" for m in methods if f"{m} @ {sensor}" in rows]
+        if unet not in rows or not merges:
+            continue
+        best = max(merges, key=lambda m: rows[m]["led_score"])
+        tests = []
+        for other in (merges[0], best):
+            ids = sorted(set(per.get(unet, {})) & set(per.get(other, {})))
+            tests.append(paired_test([per[unet][i] for i in ids], [per[other][i] for i in ids]))
+        found.append((sensor, unet, merges[0], best, tests))
+    if not found:
+        return []
+    adj = [holm([f[4][k]["p"] for f in found]) for k in (0, 1)]
+
+    def diff(t: dict, p: float) -> str:
+        return (f"{_f(t['mean_diff'])} [{_f(t['ci'][0])}, {_f(t['ci'][1])}] | "
+                + ("< 0.001" if p < 1e-3 else _f(p)))
+
+    out = ["", "| sensor | U-Net LED score [95 % CI] | rank | standard merge: LED score [95 % CI] | rank | "
+           "U-Net - merge [95 % CI] | p Holm | best rule-based | U-Net - best [95 % CI] | p Holm |", "|---" * 10 + "|"]
+    for i, (sensor, unet, merge, best, tests) in enumerate(found):
+        out.append(f"| {sensor} | {_ci(rows[unet], 'led_score')} | {rows[unet]['rank']} | `{merge.partition(' @ ')[0]}` "
+                   f"{_ci(rows[merge], 'led_score')} | {rows[merge]['rank']} | {diff(tests[0], adj[0][i])} | "
+                   f"`{best.partition(' @ ')[0]}` | {diff(tests[1], adj[1][i])} |")
+    return out
+
+
+#: The U-Net configuration of the comparison: one budget for every sensor (lfmbench/configs/unet_tiny.yaml: batch 4,
+#: 64 px crops, 8 draws per scene per epoch, seed 0).
+TRAIN_CONFIG = "unet_tiny"
+#: Training scenes whose projections a training keeps in memory (160x90: about 2.4 MB each).
+TRAIN_CACHE_SCENES = 64
+
+
+def _load() -> list[float]:
+    """The 1-, 5- and 15-minute load averages (Linux ``/proc/loadavg``; empty elsewhere)."""
+    try:
+        return [float(x) for x in Path("/proc/loadavg").read_text().split()[:3]]
+    except OSError:
+        return []
+
+
+def train_unet(corpus: str | Path, sensor: str, epochs: int, folder: Path) -> Path:
+    """Train the U-Net of ``sensor`` (:data:`TRAIN_CONFIG`, ``epochs`` epochs of the corpus's training split, one
+    torch thread, no DataLoader worker) into ``folder/unet_<sensor>.pt`` (resumed when unfinished, kept when
+    complete), its times into ``folder/unet_<sensor>.json`` (wall and CPU seconds of this call, steps, seconds per
+    epoch, load averages before and after). Returns the checkpoint path."""
+    import json
+
+    folder.mkdir(parents=True, exist_ok=True)
+    out, record = folder / f"unet_{sensor}.pt", folder / f"unet_{sensor}.json"
+    if out.is_file() and record.is_file() and json.loads(record.read_text()).get("epochs") == epochs:
+        print(f"[{sensor}] kept {out} (trained for {epochs} epochs: {record})", flush=True)
+        return out
+    if not Path(corpus).is_dir():
+        raise FileNotFoundError(f"corpus directory {corpus} does not exist (render its training split first)")
+    import torch
+
+    import lfmbench.datasets.loading as loading
+    from lfmbench.fileio import atomic_write_text
+    from lfmbench.train import load_config, train
+
+    torch.set_num_threads(1)
+
+    def make_dataset(*args, **kw):  # every training scene's projection kept in memory (the default keeps 8 and
+        kw.setdefault("cache_scenes", TRAIN_CACHE_SCENES)  # reads the others back from the disk cache per sample,
+        return own(*args, **kw)                            # 0.035 CPU s each): the same samples, less time
+
+    own, loading.make_dataset = loading.make_dataset, make_dataset
+    load0, t, c = _load(), time.perf_counter(), time.process_time()
+    try:
+        _, hist = train("unet", corpus, out, load_config("unet", TRAIN_CONFIG), epochs=epochs, workers=0,
+                        sensor=sensor, progress=False, log=lambda m: print(f"[{sensor}] {m}", flush=True))
+    finally:
+        loading.make_dataset = own
+    wall, cpu = time.perf_counter() - t, time.process_time() - c
+    info = {"sensor": sensor, "config": TRAIN_CONFIG, "epochs": epochs, "steps": hist["steps"],
+            "wall_s": round(wall, 1), "cpu_s": round(cpu, 1), "epoch_seconds": [round(x, 2) for x in
+                                                                                 hist["epoch_seconds"]],
+            "final_loss": hist["epoch_loss"][-1] if hist["epoch_loss"] else None,
+            "load_before": load0, "load_after": _load(),
+            "started_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime(time.time() - wall))}
+    atomic_write_text(record, json.dumps(info, indent=1) + "\n")
+    print(f"[{sensor}] trained: {hist['steps']} steps, {wall:.0f} s wall, {cpu:.0f} CPU s -> {out}", flush=True)
+    return out
 
 
 def main() -> None:
@@ -126,6 +229,13 @@ def main() -> None:
                          "lfmbench leaderboard RUNS/*/*.json --cross-sensor")
     ap.add_argument("--unet", action="append", default=[], metavar="SENSOR=CHECKPOINT",
                     help="a U-Net trained for SENSOR (lfmbench train --method unet --sensor SENSOR); repeatable")
+    ap.add_argument("--train-epochs", type=int, default=None, metavar="E",
+                    help="first train a U-Net per selected sensor for E epochs of the corpus's training split "
+                         f"({TRAIN_CONFIG}.yaml, the same budget for every sensor) into --checkpoints")
+    ap.add_argument("--checkpoints", default="runs/unet_checkpoints",
+                    help="with --train-epochs: the folder of the checkpoints and their timing files")
+    ap.add_argument("--unet-only", action="store_true",
+                    help="score only the U-Nets (the merges' result files already in --runs are kept)")
     a = ap.parse_args()
     unets = {}
     for item in a.unet:
@@ -138,9 +248,18 @@ def main() -> None:
         return
     if not a.corpus:
         ap.error("--corpus is required")
+    if a.train_epochs is not None and a.train_epochs < 1:
+        ap.error(f"--train-epochs must be >= 1, got {a.train_epochs}")
+    selected = [s for s in METHODS if s in (a.sensor or METHODS)]
+    if a.train_epochs is not None:
+        for s in selected:
+            unets[s] = str(train_unet(a.corpus, s, a.train_epochs, Path(a.checkpoints)))
+    if a.unet_only and not unets:
+        ap.error("--unet-only needs --unet or --train-epochs")
     from lfmbench.evaluation.benchmark import benchmark_sensors
 
-    sensors = {s: [*m, *(["unet"] if s in unets else [])] for s, m in METHODS.items() if s in (a.sensor or METHODS)}
+    sensors = {s: [*([] if a.unet_only else METHODS[s]), *(["unet"] if s in unets else [])] for s in selected}
+    sensors = {s: m for s, m in sensors.items() if m}
     t = time.perf_counter()
     try:
         benchmark_sensors(a.corpus, sensors, a.runs, checkpoints={s: {"unet": p} for s, p in unets.items()},
