@@ -131,9 +131,14 @@ def _upsample(x: np.ndarray, f: int, shape: tuple) -> np.ndarray:
 
     y0, y1, ly = taps(shape[0], x.shape[1])
     x0, x1, lx = taps(shape[1], x.shape[2])
-    rows = x[:, y0, :] * (1 - ly)[None, :, None] + x[:, y1, :] * ly[None, :, None]
-    # the same float32 products and sum as ``rows[:, :, x0] * (1 - lx) + rows[:, :, x1] * lx``, gathered with
-    # ``take`` and computed in place (a third of the time on (31, 360, 640) px: fewer full-size temporaries)
+    # the same float32 products and sums as ``x[:, y0, :] * (1 - ly)[None, :, None] + x[:, y1, :] * ly[None, :,
+    # None]`` and ``rows[:, :, x0] * (1 - lx) + rows[:, :, x1] * lx``, gathered with ``take`` and computed in
+    # place (about a third less CPU on (31, 360, 640) px: fewer full-size temporaries)
+    rows = np.take(x, y0, axis=1)
+    rows *= (1 - ly)[None, :, None]
+    below = np.take(x, y1, axis=1)
+    below *= ly[None, :, None]
+    rows += below
     out = np.take(rows, x0, axis=2)
     out *= 1 - lx
     far = np.take(rows, x1, axis=2)
