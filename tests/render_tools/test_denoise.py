@@ -201,7 +201,8 @@ def test_v2_render_is_denoised_and_v1_is_not():
             np.testing.assert_array_equal(a["static"][g][win], b["static"][g][win])
 
 
-@pytest.mark.parametrize("shape, r, f", [((3, 37, 53), 4, 8), ((1, 5, 7), 3, 4), ((2, 90, 160), 8, 16)])
+@pytest.mark.parametrize("shape, r, f", [((3, 37, 53), 4, 8), ((1, 5, 7), 3, 4), ((2, 90, 160), 8, 16),
+                                           ((2, 48, 64), 3, 4)])  # the last: whole blocks, no padding
 def test_box_block_and_upsample_equal_torch_pooling_and_bilinear(shape, r, f):
     """The denoiser's box mean, block mean and bilinear upsampling (numpy, float64 sums: no torch in a render
     process) equal torch's avg_pool2d (count_include_pad=False; ceil_mode blocks) and interpolate (bilinear,
