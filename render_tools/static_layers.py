@@ -1,0 +1,234 @@
+"""Static window layers: the static groups rendered once over a named union of capture windows.
+
+A chopped sensor integrates the scene over n short sub-windows spread across the frame (12 x 0.1 ms over 10.22 ms:
+lfmbench/configs/sensors/chopped.yaml). Static time bins (``RenderOptions.static_edges_s``) would need 2 n more edges,
+each bin a full frame. A *layer* (``RenderOptions.static_layers``: a name and the windows ``[[start_s, length_s],
+...]``, s from the frame start) is instead one full frame's samples spread over the union: each pixel takes its
+samples in one sub-window j, and the sub-windows are dealt to the pixels as a permutation of every n consecutive
+pixels (row-major) with a random rotation per group (:func:`assignment`), so each sub-window gets 1 / n of the
+pixels, spread over the whole image. Sub-window j's pixels are traced over [a_j, a_j + |w_j|) with the ego camera
+moving continuously and the moving objects at the sub-window's middle (as a static time bin), and each pixel's mean
+is weighted by n |w_j| / |U| (|U|: the union's length). Unbiased for the time average over the union: the pixel's
+sub-window is uniform over the n (a random rotation), so E[n |w_j| / |U| L_j] = sum_j |w_j| / |U| L_j, the exact
+length-weighted mean (Monte Carlo integration with a stratified discrete dimension: Owen, "Monte Carlo theory,
+methods and examples", 2013, ch. 8 and 10). What it adds to a pixel's variance is the spread of L_j over the
+sub-windows, which is zero where nothing moves on screen. The cost is that of one static frame at ``spp`` (plus
+one scene update per sub-window where an object moves); storage one (C, H, W) image per group and frame.
+
+The layers of a scene are rendered after its other files (:func:`render_layer`) and stored beside them
+(:mod:`lfmbench.corpus.layers`), so a corpus rendered without a layer gets it added without a change to a file it
+already has (``lfmbench corpus add-layers``).
+"""
+from __future__ import annotations
+
+import re
+from collections.abc import Iterator
+
+import numpy as np
+
+#: A layer's name: what its files and a capture plan's meta call it.
+LAYER_NAME = re.compile(r"[a-z][a-z0-9_]{0,31}")
+
+
+def parse_layers(value, capture_window_s: float, field: str = "static_layers") -> tuple:
+    """``value`` (a list of ``{"name": str, "windows_s": [[start_s, length_s], ...]}``, or the tuple this returns)
+    as ``((name, ((start_s, length_s), ...)), ...)``. Raises ``ValueError`` naming the field for a bad name, a
+    repeated name, a window of length <= 0, windows not in increasing order or overlapping, or one outside the
+    capture window [0, ``capture_window_s``] s."""
+    out, names = [], set()
+    for i, lay in enumerate(value or ()):
+        where = f"{field}[{i}]"
+        if isinstance(lay, dict):
+            if set(lay) != {"name", "windows_s"}:
+                raise ValueError(f"{where}: needs exactly the keys name and windows_s, got {sorted(map(str, lay))}")
+            name, wins = lay["name"], lay["windows_s"]
+        elif isinstance(lay, (tuple, list)) and len(lay) == 2:
+            name, wins = lay
+        else:
+            raise ValueError(f"{where}: must be a mapping {{name, windows_s}}, got {type(lay).__name__}")
+        if not isinstance(name, str) or not LAYER_NAME.fullmatch(name):
+            raise ValueError(f"{where}.name: must match {LAYER_NAME.pattern}, got {name!r:.40}")
+        if name in names:
+            raise ValueError(f"{where}.name: {name!r} is given twice")
+        names.add(name)
+        if not isinstance(wins, (list, tuple)) or not 1 <= len(wins) <= 4096:
+            raise ValueError(f"{where}.windows_s: must be a list of 1-4096 [start_s, length_s] pairs")
+        ws, end = [], 0.0
+        for j, w in enumerate(wins):
+            try:
+                a, n = (float(x) for x in w)
+            except (TypeError, ValueError):
+                raise ValueError(f"{where}.windows_s[{j}]: must be a pair [start_s, length_s] of numbers, got "
+                                 f"{w!r:.60}") from None
+            if not (np.isfinite(a) and np.isfinite(n) and n > 0 and a >= 0):
+                raise ValueError(f"{where}.windows_s[{j}]: needs start >= 0 s and length > 0 s, got [{a}, {n}]")
+            if a + n > capture_window_s * (1 + 1e-9):
+                raise ValueError(f"{where}.windows_s[{j}]: ends at {(a + n) * 1e3:.6g} ms, after the capture window "
+                                 f"of {capture_window_s * 1e3:.6g} ms")
+            if j and a < end - 1e-12:
+                raise ValueError(f"{where}.windows_s[{j}]: starts at {a * 1e3:.6g} ms, before the previous window "
+                                 f"ends ({end * 1e3:.6g} ms): windows must be in increasing order and not overlap")
+            ws.append((a, n))
+            end = a + n
+        out.append((name, tuple(ws)))
+    return tuple(out)
+
+
+def layers_dict(layers: tuple) -> list[dict]:
+    """The JSON form of :func:`parse_layers`'s tuple: ``[{"name", "windows_s": [[start_s, length_s], ...]}]``."""
+    return [{"name": n, "windows_s": [[float(a), float(b)] for a, b in w]} for n, w in layers]
+
+
+def assignment(height: int, width: int, n: int, seed: int) -> np.ndarray:
+    """(H, W) int: the sub-window (0 .. n - 1) of each pixel. Pixels in row-major order are cut into groups of n;
+    in group g pixel i takes sub-window (i + r_g) mod n, r_g uniform in 0 .. n - 1 drawn from ``seed``: every
+    sub-window once per group, each pixel's sub-window uniform (over the seed)."""
+    p = np.arange(height * width)
+    r = np.random.default_rng(seed).integers(0, n, size=-(-p.size // n))
+    return ((p % n + r[p // n]) % n).reshape(height, width)
+
+
+def sample_counts(j0: np.ndarray, n: int, spp: int, j: int) -> np.ndarray:
+    """Samples (same shape as ``j0``) that each pixel takes in sub-window ``j`` of ``n``: sample s of a pixel whose
+    first sub-window is ``j0`` (:func:`assignment`) lies in sub-window (j0 + floor(s n / spp)) mod n, so a pixel's
+    ``spp`` samples are spread evenly over the sub-windows (stratified in time) and each sample's sub-window is
+    uniform over the n."""
+    s = np.arange(spp)
+    js = (j0[..., None] + (s * n) // spp) % n
+    return (js == j).sum(-1)
+
+
+def plan_layer(scene: dict, opts, sets, geo, wins_abs, t_subs, qmc: bool, key: str):
+    """The layer's tiles over one frame, the same for every sub-window but the time: a list of (kind, group or
+    union groups, crop, spp, light set, key) with ``kind`` "static" / "union" (the full frame at ``spp``) or
+    "refine" (a static group's lamp in its box over every sub-window, objects at each sub-window's middle, at
+    ``light_spp``), as :func:`render_tools.render.plan_static_bins` plans a time bin."""
+    from . import render as R  # noqa: PLC0415
+
+    full = (0, 0, opts.height, opts.width)
+    light_spp = opts.light_spp or opts.spp
+    rpad = R.refine_pad(scene, opts)
+    union = list(getattr(sets, "union", ()) or ())
+    out = []
+    if union:
+        out.append(("union", tuple(union), full, opts.spp, sets["union:static"], R._seed("union", key)))
+    for g, info in R._selected_groups(scene, opts).items():
+        if info["flicker"]:
+            continue
+        if g not in union:
+            out.append(("static", g, full, opts.spp, sets[f"group:{g}"], R._seed("static", g, key)))
+        for lt in ([lt for lt in scene["lights"] if lt["group"] == g] if light_spp > opts.spp else ()):
+            boxes = [b for b in (geo.light_bbox(lt, t, a, b_, pad=rpad) for (a, b_), t in zip(wins_abs, t_subs))
+                     if b is not None]
+            if boxes:
+                crop = (min(b[0] for b in boxes), min(b[1] for b in boxes), max(b[2] for b in boxes),
+                        max(b[3] for b in boxes))
+                out.append(("refine", g, crop, light_spp, sets[f"group:{g}"], R._seed("refine", g, key, lt["id"])))
+    return out
+
+
+def _pixel_tiles(plan, j0: np.ndarray, n: int, j: int, a: float, dt: float, qmc: bool, width: int):
+    """Each entry of ``plan`` (:func:`plan_layer`) cut into 1 x 1 tiles of the pixels with samples in sub-window
+    ``j`` ([a, a + dt) s, absolute), each with its count (:func:`sample_counts`). Returns (tiles, [(y (P,), x (P,),
+    counts (P,), first tile index)] per entry)."""
+    from .tracer import Tile  # noqa: PLC0415
+
+    tiles, where = [], []
+    for kind, g, (y0, x0, y1, x1), spp, lset, key in plan:
+        c = sample_counts(j0[y0:y1, x0:x1], n, spp, j)
+        ys, xs = np.nonzero(c)
+        cs = c[ys, xs]
+        ys, xs = ys + y0, xs + x0
+        where.append((ys, xs, cs, len(tiles)))
+        slots = len(g) if kind == "union" else 1
+        # a pixel tile's key: its entry's and the pixel's index (its random numbers, whatever else is traced)
+        tiles += [Tile((y, x, y + 1, x + 1), 1, a, dt, k, lset, slots=slots, sobol=qmc,
+                       key=(key * 0x9E3779B1 + y * width + x + 1) & 0x7FFFFFFF)
+                  for y, x, k in zip(ys.tolist(), xs.tolist(), cs.tolist())]
+    return tiles, where
+
+
+def render_layer(scene: dict, opts, layer: tuple) -> Iterator[dict]:
+    """Render ``layer`` (``(name, ((start_s, length_s), ...))``, an entry of :func:`parse_layers`) of every frame of
+    ``scene``; yields ``{"frame": n, "static": {group: (C, H, W) float32}}``, the time-averaged spectral radiance
+    (W sr^-1 m^-2 nm^-1) of each static group over the layer's union of windows (module docstring). Nothing is
+    yielded for a scene where nothing moves (:func:`render_tools.render.scene_moves`: every window's average is the
+    long window's)."""
+    import gc  # noqa: PLC0415
+
+    from . import backend
+    from . import mitsuba_scene as ms
+    from . import render as R
+
+    R.validate_scene(scene)
+    opts.validate()
+    if not R.scene_moves(scene):
+        return
+    name, wins = layer
+    n_sub = len(wins)
+    union_s = float(sum(n for _, n in wins))
+    scene, _filled = R.dots_lod(scene, opts)
+    groups = R._selected_groups(scene, opts)
+    mcache: dict = ms.prepare_geometry(scene, {})
+    variant = backend.select_variant(opts.variant)
+    if variant.startswith("scalar"):
+        raise RuntimeError(f"variant: rendering needs a JIT variant of Mitsuba, got {variant}: {backend.llvm_hint()}")
+    import drjit as dr  # noqa: PLC0415
+    import mitsuba as mi  # noqa: PLC0415
+
+    from . import tracer  # noqa: PLC0415
+
+    geo = R.SceneGeometry(scene, opts)
+    obj_moving = R.objects_move(scene)
+    qmc = R.sobol_pixel_samples(scene, opts)
+    H, W, C = opts.height, opts.width, len(opts.bands_nm)
+    pad = None
+    for f in range(opts.frames):
+        tm = R.frame_timing(scene, opts, f)
+        t_obj = 0.5 * (tm["window"][0] + tm["window"][1])
+        j0 = assignment(H, W, n_sub, R._seed(opts.seed, f, "layer", name))
+        loaded = mi.load_dict(ms.mitsuba_dict(scene, t_obj, emit="all", cache=mcache, unit_sky=True))
+        if pad is None:
+            pad = tracer.pad_registry(mi, dr, loaded, mcache["off_lens"])
+        params = mi.traverse(loaded)
+        wins_abs = [(tm["t0"] + a, tm["t0"] + a + n) for a, n in wins]
+        t_subs = [0.5 * (a + b) if obj_moving else t_obj for a, b in wins_abs]
+        plan, acc = None, None
+        for j, ((ta, tb), t_sub) in enumerate(zip(wins_abs, t_subs)):
+            lb = loaded
+            if obj_moving and not ms.place_moving(params, scene, t_sub, mcache):
+                lb = mi.load_dict(ms.mitsuba_dict(scene, t_sub, emit="all", cache=mcache, unit_sky=True))
+            sets = tracer.LightSets(mi, dr, lb, scene, list(groups), union=R.static_union(groups, opts))
+            tr = tracer.Tracer(mi, dr, lb, sets, geo.ego, geo.fov, (W, H), opts.bands_nm, opts.band_width_nm,
+                               sky_scale=ms.sky_scale(scene))
+            if plan is None:  # the same entries (light sets, crops) in every sub-window
+                plan = plan_layer(scene, opts, sets, geo, wins_abs, t_subs, qmc, f"layer/{name}")
+                acc = [np.zeros((e[0] == "union" and len(e[1]) or 1, C, e[2][2] - e[2][0], e[2][3] - e[2][1]))
+                       for e in plan]
+            pt, where = _pixel_tiles(plan, j0, n_sub, j, ta, tb - ta, qmc, W)
+            out = tr.render(pt, R._seed(opts.seed, f, "layer", name, j)) if pt else []
+            wsub = n_sub * (tb - ta) / union_s  # the sub-window's weight (module docstring)
+            for e, (ys, xs, cs, i0), a_ in zip(plan, where, acc):
+                if not len(ys):
+                    continue
+                vals = np.stack(out[i0:i0 + len(ys)]).reshape(len(ys), a_.shape[0], C)   # (P, S, C) means
+                a_[:, :, ys - e[2][0], xs - e[2][1]] += (vals * (cs * wsub / e[3])[:, None, None]).transpose(1, 2, 0)
+            del tr, sets, lb
+        imgs: dict = {}
+        for (kind, g, (y0, x0, y1, x1), _spp, _set, _key), a_ in zip(plan, acc):  # refine pasted over the frame
+            for s_, gj in enumerate(g if kind == "union" else [g]):
+                imgs.setdefault(gj, np.zeros((C, H, W)))[:, y0:y1, x0:x1] = a_[s_]
+        if obj_moving and not ms.place_moving(params, scene, t_obj, mcache):
+            raise RuntimeError("place_moving: a moving mesh changed size between the sub-windows and the frame time")
+        static = {g: backend.clamp_roundoff(img[None].astype(np.float32), name=f"frame {f} {g} layer {name}")[0]
+                  for g, img in imgs.items()}
+        if static and R.static_denoised(scene, opts):
+            from . import denoise  # noqa: PLC0415
+
+            boxes = R.static_lamp_boxes(scene, opts, f, geo, window=(tm["t0"] + wins[0][0],
+                                                                      tm["t0"] + wins[-1][0] + wins[-1][1]))
+            static.update(denoise.denoise_static(static, boxes))
+        del params, loaded
+        gc.collect()
+        yield {"frame": f, "static": static}
+    del pad
