@@ -239,6 +239,10 @@ def run_job(job: RenderJob | Mapping[str, Any]) -> dict:
             w.put(frame)
             del frame  # the worker holds it now: at most one frame encoded while the next renders
         hashes = w.close()
+    if opts.static_layers:  # the static window layers, beside the scene's other files (render_tools.static_layers)
+        from .static_layers import write_layers  # noqa: PLC0415
+
+        hashes.update(write_layers(job.out, job.scene_id, scene, meta, opts, job.dtype))
     prune_scene_dir(job.out, job.scene_id, hashes)
     return {"scene_id": job.scene_id, "hashes": hashes, "notes": notes, "seconds": time.perf_counter() - t0}
 

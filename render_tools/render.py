@@ -179,7 +179,7 @@ class RenderOptions:
     static_layers: named unions of capture windows (``[{"name", "windows_s": [[start_s, length_s], ...]}]``, s from
     the frame start; in increasing order, not overlapping, inside the capture window) whose static radiance is
     rendered as such, one full frame's samples spread over the union (:mod:`render_tools.static_layers`), and stored
-    beside the scene's other files (:mod:`lfmbench.corpus.layers`): a capture whose windows are a layer's (the
+    beside the scene's other files (:mod:`lfmbench.corpus.window_layers`): a capture whose windows are a layer's (the
     chopped preset's 12 sub-windows) is served from it exactly. () (default): none.
     """
 
@@ -216,7 +216,7 @@ class RenderOptions:
 
     def __post_init__(self):
         self.bands_nm = tuple(float(b) for b in self.bands_nm)
-        from .static_layers import parse_layers  # noqa: PLC0415
+        from lfmbench.corpus.window_layers import parse_layers  # noqa: PLC0415
 
         self.static_layers = parse_layers(self.static_layers, self.capture_window_s)
         self.static_edges_s = tuple(float(e) for e in (self.static_edges_s or ()))
@@ -255,7 +255,7 @@ class RenderOptions:
                        or np.any(e > self.capture_window_s * (1 + 1e-9))):
             raise ValueError(f"static_edges_s: every edge must lie in the capture window [0, "
                              f"{self.capture_window_s:.6g}] s from the frame start, got {list(self.static_edges_s)}")
-        from .static_layers import parse_layers  # noqa: PLC0415
+        from lfmbench.corpus.window_layers import parse_layers  # noqa: PLC0415
 
         parse_layers(self.static_layers, self.capture_window_s)
         if self.static_bin_samples not in STATIC_BIN_SAMPLES:
@@ -325,7 +325,7 @@ class RenderOptions:
             del d["static_edges_s"]
         if d["static_bin_samples"] == "independent":  # as before the option existed
             del d["static_bin_samples"]
-        from .static_layers import layers_dict  # noqa: PLC0415
+        from lfmbench.corpus.window_layers import layers_dict  # noqa: PLC0415
 
         d["static_layers"] = layers_dict(self.static_layers)
         if not d["static_layers"]:

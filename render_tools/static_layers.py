@@ -16,67 +16,17 @@ sub-windows, which is zero where nothing moves on screen. The cost is that of on
 one scene update per sub-window where an object moves); storage one (C, H, W) image per group and frame.
 
 The layers of a scene are rendered after its other files (:func:`render_layer`) and stored beside them
-(:mod:`lfmbench.corpus.layers`), so a corpus rendered without a layer gets it added without a change to a file it
-already has (``lfmbench corpus add-layers``).
+(:mod:`lfmbench.corpus.window_layers`, :func:`write_layers`), so a corpus rendered without a layer gets it added
+without a change to a file it already has (:func:`render_tools.jobs.add_layers`, ``lfmbench render --add-layers``).
 """
 from __future__ import annotations
 
-import re
 from collections.abc import Iterator
+from pathlib import Path
 
 import numpy as np
 
-#: A layer's name: what its files and a capture plan's meta call it.
-LAYER_NAME = re.compile(r"[a-z][a-z0-9_]{0,31}")
-
-
-def parse_layers(value, capture_window_s: float, field: str = "static_layers") -> tuple:
-    """``value`` (a list of ``{"name": str, "windows_s": [[start_s, length_s], ...]}``, or the tuple this returns)
-    as ``((name, ((start_s, length_s), ...)), ...)``. Raises ``ValueError`` naming the field for a bad name, a
-    repeated name, a window of length <= 0, windows not in increasing order or overlapping, or one outside the
-    capture window [0, ``capture_window_s``] s."""
-    out, names = [], set()
-    for i, lay in enumerate(value or ()):
-        where = f"{field}[{i}]"
-        if isinstance(lay, dict):
-            if set(lay) != {"name", "windows_s"}:
-                raise ValueError(f"{where}: needs exactly the keys name and windows_s, got {sorted(map(str, lay))}")
-            name, wins = lay["name"], lay["windows_s"]
-        elif isinstance(lay, (tuple, list)) and len(lay) == 2:
-            name, wins = lay
-        else:
-            raise ValueError(f"{where}: must be a mapping {{name, windows_s}}, got {type(lay).__name__}")
-        if not isinstance(name, str) or not LAYER_NAME.fullmatch(name):
-            raise ValueError(f"{where}.name: must match {LAYER_NAME.pattern}, got {name!r:.40}")
-        if name in names:
-            raise ValueError(f"{where}.name: {name!r} is given twice")
-        names.add(name)
-        if not isinstance(wins, (list, tuple)) or not 1 <= len(wins) <= 4096:
-            raise ValueError(f"{where}.windows_s: must be a list of 1-4096 [start_s, length_s] pairs")
-        ws, end = [], 0.0
-        for j, w in enumerate(wins):
-            try:
-                a, n = (float(x) for x in w)
-            except (TypeError, ValueError):
-                raise ValueError(f"{where}.windows_s[{j}]: must be a pair [start_s, length_s] of numbers, got "
-                                 f"{w!r:.60}") from None
-            if not (np.isfinite(a) and np.isfinite(n) and n > 0 and a >= 0):
-                raise ValueError(f"{where}.windows_s[{j}]: needs start >= 0 s and length > 0 s, got [{a}, {n}]")
-            if a + n > capture_window_s * (1 + 1e-9):
-                raise ValueError(f"{where}.windows_s[{j}]: ends at {(a + n) * 1e3:.6g} ms, after the capture window "
-                                 f"of {capture_window_s * 1e3:.6g} ms")
-            if j and a < end - 1e-12:
-                raise ValueError(f"{where}.windows_s[{j}]: starts at {a * 1e3:.6g} ms, before the previous window "
-                                 f"ends ({end * 1e3:.6g} ms): windows must be in increasing order and not overlap")
-            ws.append((a, n))
-            end = a + n
-        out.append((name, tuple(ws)))
-    return tuple(out)
-
-
-def layers_dict(layers: tuple) -> list[dict]:
-    """The JSON form of :func:`parse_layers`'s tuple: ``[{"name", "windows_s": [[start_s, length_s], ...]}]``."""
-    return [{"name": n, "windows_s": [[float(a), float(b)] for a, b in w]} for n, w in layers]
+from lfmbench.corpus.window_layers import layers_dict, parse_layers  # noqa: F401 - the one rule, re-exported
 
 
 def assignment(height: int, width: int, n: int, seed: int) -> np.ndarray:
@@ -232,3 +182,30 @@ def render_layer(scene: dict, opts, layer: tuple) -> Iterator[dict]:
         gc.collect()
         yield {"frame": f, "static": static}
     del pad
+
+
+def write_layers(root, scene_id: str, scene: dict, meta: dict, opts, dtype) -> dict[str, str]:
+    """Render the layers of ``opts.static_layers`` that scene ``scene_id`` under corpus ``root`` does not list yet
+    (its :data:`lfmbench.corpus.window_layers.LAYERS_FILE`) and write them: each layer's files (atomically), then
+    the layers file listing old and new. A file already written is not touched. ``meta``: the scene's meta.json
+    content; ``dtype``: the corpus's storage. Returns ``{relpath: sha256}`` of the files written (empty when
+    nothing is missing)."""
+    from lfmbench.corpus import window_layers as WL  # noqa: PLC0415
+
+    from . import render as R  # noqa: PLC0415
+
+    sdir = Path(root) / "scenes" / scene_id
+    old = WL.read_layers_file(sdir / WL.LAYERS_FILE, float(meta["timing"]["capture_window_s"]))
+    have = {x["name"]: x for x in old}
+    for name, wins in opts.static_layers:
+        if name in have and tuple(map(tuple, have[name]["windows_s"])) != tuple(wins):
+            raise ValueError(f"{sdir / WL.LAYERS_FILE}: layer {name!r} is stored with other windows than "
+                             "static_layers asks for (a new layer needs a new name)")
+    rec = {"spp": opts.spp, "light_spp": opts.light_spp or opts.spp, "seed": opts.seed,
+           "static_pass": opts.static_pass}
+    hashes: dict[str, str] = {}
+    for lay in (lay for lay in opts.static_layers if lay[0] not in have):
+        hashes.update(WL.write_layer(root, scene_id, meta, lay[0], lay[1], R.scene_moves(scene),
+                                     ((fr["frame"], fr["static"]) for fr in render_layer(scene, opts, lay)),
+                                     dtype, rec))
+    return hashes
