@@ -184,12 +184,12 @@ def render_layer(scene: dict, opts, layer: tuple) -> Iterator[dict]:
     del pad
 
 
-def write_layers(root, scene_id: str, scene: dict, meta: dict, opts, dtype) -> dict[str, str]:
+def write_layers(root, scene_id: str, scene: dict, meta: dict, opts, dtype, render=None) -> dict[str, str]:
     """Render the layers of ``opts.static_layers`` that scene ``scene_id`` under corpus ``root`` does not list yet
     (its :data:`lfmbench.corpus.window_layers.LAYERS_FILE`) and write them: each layer's files (atomically), then
     the layers file listing old and new. A file already written is not touched. ``meta``: the scene's meta.json
-    content; ``dtype``: the corpus's storage. Returns ``{relpath: sha256}`` of the files written (empty when
-    nothing is missing)."""
+    content; ``dtype``: the corpus's storage; ``render``: the layer renderer (default :func:`render_layer`).
+    Returns ``{relpath: sha256}`` of the files written (empty when nothing is missing)."""
     from lfmbench.corpus import window_layers as WL  # noqa: PLC0415
 
     from . import render as R  # noqa: PLC0415
@@ -206,6 +206,6 @@ def write_layers(root, scene_id: str, scene: dict, meta: dict, opts, dtype) -> d
     hashes: dict[str, str] = {}
     for lay in (lay for lay in opts.static_layers if lay[0] not in have):
         hashes.update(WL.write_layer(root, scene_id, meta, lay[0], lay[1], R.scene_moves(scene),
-                                     ((fr["frame"], fr["static"]) for fr in render_layer(scene, opts, lay)),
+                                     ((fr["frame"], fr["static"]) for fr in (render or render_layer)(scene, opts, lay)),
                                      dtype, rec))
     return hashes

@@ -367,6 +367,23 @@ class CorpusWriter:
         self._index[scene_id] = dict(hashes)
         self._log({"commit": scene_id, "files": dict(hashes)})
 
+    def scene_files(self, scene_id: str) -> dict[str, str]:
+        """``{relpath: sha256}`` of a committed scene's files (empty for a scene not in the manifest)."""
+        return dict(self._index.get(scene_id, {}))
+
+    @property
+    def render(self) -> dict | None:
+        """The manifest's ``"render"`` record (the options the corpus was rendered with), or None."""
+        r = self._head.get("render")
+        return None if r is None else json.loads(json.dumps(r))
+
+    def set_render(self, render: Mapping[str, Any]) -> None:
+        """Replace the manifest's ``"render"`` record: only after the corpus was brought up to what ``render`` asks
+        for (static window layers added to every scene, :func:`render_tools.jobs.add_layers`); the manifest is
+        rewritten."""
+        self._head["render"] = json.loads(json.dumps(dict(render), default=json_default))
+        self.write_manifest()
+
     def forget_scene(self, scene_id: str) -> None:
         """Drop a scene from the manifest (before re-rendering it); its files stay until overwritten."""
         if scene_id in self._index:
