@@ -3,17 +3,19 @@
 A chopped sensor integrates the scene over n short sub-windows spread across the frame (12 x 0.1 ms over 10.22 ms:
 lfmbench/configs/sensors/chopped.yaml). Static time bins (``RenderOptions.static_edges_s``) would need 2 n more edges,
 each bin a full frame. A *layer* (``RenderOptions.static_layers``: a name and the windows ``[[start_s, length_s],
-...]``, s from the frame start) is instead one full frame's samples spread over the union: each pixel takes its
-samples in one sub-window j, and the sub-windows are dealt to the pixels as a permutation of every n consecutive
-pixels (row-major) with a random rotation per group (:func:`assignment`), so each sub-window gets 1 / n of the
-pixels, spread over the whole image. Sub-window j's pixels are traced over [a_j, a_j + |w_j|) with the ego camera
-moving continuously and the moving objects at the sub-window's middle (as a static time bin), and each pixel's mean
-is weighted by n |w_j| / |U| (|U|: the union's length). Unbiased for the time average over the union: the pixel's
-sub-window is uniform over the n (a random rotation), so E[n |w_j| / |U| L_j] = sum_j |w_j| / |U| L_j, the exact
-length-weighted mean (Monte Carlo integration with a stratified discrete dimension: Owen, "Monte Carlo theory,
-methods and examples", 2013, ch. 8 and 10). What it adds to a pixel's variance is the spread of L_j over the
-sub-windows, which is zero where nothing moves on screen. The cost is that of one static frame at ``spp`` (plus
-one scene update per sub-window where an object moves); storage one (C, H, W) image per group and frame.
+...]``, s from the frame start) is instead one full frame's samples spread over the union. Sample s of a pixel's
+``spp`` lies in sub-window (j0 + floor(s n / spp)) mod n (:func:`sample_counts`: a pixel's samples spread evenly
+over the sub-windows, stratified in time), where j0, the pixel's first sub-window, is dealt as a permutation of
+every n consecutive runs of :data:`RUN_PX` pixels of a row with a random rotation per group (:func:`assignment`).
+Sub-window j's samples are traced over [a_j, a_j + |w_j|) with the ego camera moving continuously and the moving
+objects at the sub-window's middle (as a static time bin), one launch per sub-window, and each sample is weighted by
+n |w_j| / |U| (|U|: the union's length). Unbiased for the time average over the union: j0 is uniform over the n (a
+random rotation), so is each sample's sub-window, and E[n |w_j| / |U| L_j] = sum_j |w_j| / |U| L_j, the exact
+length-weighted mean (Monte Carlo integration over a stratified discrete dimension: A. B. Owen, "Monte Carlo theory,
+methods and examples", 2013, chapters 8 and 10). What it adds to a pixel's variance is the spread of L_j over its
+samples' sub-windows, zero where nothing moves on screen. The cost is one static frame at ``spp`` (plus a scene
+update and a kernel launch per sub-window where an object moves); the storage one (C, H, W) image per static group
+and frame.
 
 The layers of a scene are rendered after its other files (:func:`render_layer`) and stored beside them
 (:mod:`lfmbench.corpus.window_layers`, :func:`write_layers`), so a corpus rendered without a layer gets it added
@@ -29,13 +31,21 @@ import numpy as np
 from lfmbench.corpus.window_layers import layers_dict, parse_layers  # noqa: F401 - the one rule, re-exported
 
 
-def assignment(height: int, width: int, n: int, seed: int) -> np.ndarray:
-    """(H, W) int: the sub-window (0 .. n - 1) of each pixel. Pixels in row-major order are cut into groups of n;
-    in group g pixel i takes sub-window (i + r_g) mod n, r_g uniform in 0 .. n - 1 drawn from ``seed``: every
-    sub-window once per group, each pixel's sub-window uniform (over the seed)."""
-    p = np.arange(height * width)
-    r = np.random.default_rng(seed).integers(0, n, size=-(-p.size // n))
-    return ((p % n + r[p // n]) % n).reshape(height, width)
+#: Pixels in a row that share a sub-window (:func:`assignment`): the pixels of one sub-window are traced as row
+#: segments of this length, so a 160x90 frame is about 3,600 tiles instead of 28,800 (the tracer's per-tile cost is
+#: Python: 6.7 CPU s of a 160x90 frame went to 53,600 one-pixel tiles, measured with cProfile on 2026-11-28).
+RUN_PX = 8
+
+
+def assignment(height: int, width: int, n: int, seed: int, run: int = RUN_PX) -> np.ndarray:
+    """(H, W) int: the first sub-window (0 .. n - 1) of each pixel. Each row is cut into runs of ``run`` pixels
+    (one sub-window per run), the runs in row-major order into groups of n; in group g run i takes sub-window
+    (i + r_g) mod n, r_g uniform in 0 .. n - 1 drawn from ``seed``: every sub-window once per group, each pixel's
+    sub-window uniform (over the seed)."""
+    per_row = -(-width // run)
+    q = np.arange(height)[:, None] * per_row + np.arange(width)[None, :] // run       # run index of each pixel
+    r = np.random.default_rng(seed).integers(0, n, size=-(-height * per_row // n))
+    return (q % n + r[q // n]) % n
 
 
 def sample_counts(j0: np.ndarray, n: int, spp: int, j: int) -> np.ndarray:
@@ -77,24 +87,35 @@ def plan_layer(scene: dict, opts, sets, geo, wins_abs, t_subs, qmc: bool, key: s
     return out
 
 
+def _segments(c: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Row segments of ``c`` (h, w) int where it is > 0 and constant: (y, x0, x1, value), x1 exclusive."""
+    h, w = c.shape
+    start = np.ones((h, w), bool)
+    start[:, 1:] = c[:, 1:] != c[:, :-1]
+    ys, x0 = np.nonzero(start)
+    ends = np.append(x0[1:], w)
+    ends[np.append(ys[1:] != ys[:-1], True)] = w                  # a segment ends with its row
+    v = c[ys, x0]
+    keep = v > 0
+    return ys[keep], x0[keep], ends[keep], v[keep]
+
+
 def _pixel_tiles(plan, j0: np.ndarray, n: int, j: int, a: float, dt: float, qmc: bool, width: int):
-    """Each entry of ``plan`` (:func:`plan_layer`) cut into 1 x 1 tiles of the pixels with samples in sub-window
-    ``j`` ([a, a + dt) s, absolute), each with its count (:func:`sample_counts`). Returns (tiles, [(y (P,), x (P,),
-    counts (P,), first tile index)] per entry)."""
+    """Each entry of ``plan`` (:func:`plan_layer`) cut into one-row tiles over the pixels with samples in
+    sub-window ``j`` ([a, a + dt) s, absolute), each with its count (:func:`sample_counts`). Returns (tiles,
+    [(y, x0, x1, counts) arrays (P,) per entry, first tile index])."""
     from .tracer import Tile  # noqa: PLC0415
 
     tiles, where = [], []
     for kind, g, (y0, x0, y1, x1), spp, lset, key in plan:
-        c = sample_counts(j0[y0:y1, x0:x1], n, spp, j)
-        ys, xs = np.nonzero(c)
-        cs = c[ys, xs]
-        ys, xs = ys + y0, xs + x0
-        where.append((ys, xs, cs, len(tiles)))
+        ys, xa, xb, cs = _segments(sample_counts(j0[y0:y1, x0:x1], n, spp, j))
+        ys, xa, xb = ys + y0, xa + x0, xb + x0
+        where.append(((ys, xa, xb, cs), len(tiles)))
         slots = len(g) if kind == "union" else 1
-        # a pixel tile's key: its entry's and the pixel's index (its random numbers, whatever else is traced)
-        tiles += [Tile((y, x, y + 1, x + 1), 1, a, dt, k, lset, slots=slots, sobol=qmc,
-                       key=(key * 0x9E3779B1 + y * width + x + 1) & 0x7FFFFFFF)
-                  for y, x, k in zip(ys.tolist(), xs.tolist(), cs.tolist())]
+        # a tile's key: its entry's and its first pixel's index (its random numbers, whatever else is traced)
+        tiles += [Tile((y, u, y + 1, v), 1, a, dt, k, lset, slots=slots, sobol=qmc,
+                       key=(key * 0x9E3779B1 + y * width + u + 1) & 0x7FFFFFFF)
+                  for y, u, v, k in zip(ys.tolist(), xa.tolist(), xb.tolist(), cs.tolist())]
     return tiles, where
 
 
@@ -158,11 +179,11 @@ def render_layer(scene: dict, opts, layer: tuple) -> Iterator[dict]:
             pt, where = _pixel_tiles(plan, j0, n_sub, j, ta, tb - ta, qmc, W)
             out = tr.render(pt, R._seed(opts.seed, f, "layer", name, j)) if pt else []
             wsub = n_sub * (tb - ta) / union_s  # the sub-window's weight (module docstring)
-            for e, (ys, xs, cs, i0), a_ in zip(plan, where, acc):
-                if not len(ys):
-                    continue
-                vals = np.stack(out[i0:i0 + len(ys)]).reshape(len(ys), a_.shape[0], C)   # (P, S, C) means
-                a_[:, :, ys - e[2][0], xs - e[2][1]] += (vals * (cs * wsub / e[3])[:, None, None]).transpose(1, 2, 0)
+            for e, ((ys, xa, xb, cs), i0), a_ in zip(plan, where, acc):
+                ey, ex = e[2][0], e[2][1]
+                for i, (y, u, v, k) in enumerate(zip(ys.tolist(), xa.tolist(), xb.tolist(), cs.tolist())):
+                    # the tile's mean over its k samples, (S, C, v - u), weighted (module docstring)
+                    a_[:, :, y - ey, u - ex:v - ex] += out[i0 + i].reshape(a_.shape[0], C, v - u) * (k * wsub / e[3])
             del tr, sets, lb
         imgs: dict = {}
         for (kind, g, (y0, x0, y1, x1), _spp, _set, _key), a_ in zip(plan, acc):  # refine pasted over the frame

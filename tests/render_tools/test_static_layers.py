@@ -32,9 +32,12 @@ def test_bad_layers_are_refused_naming_the_field():
     assert "static_layers" not in render.RenderOptions(width=8, height=4).to_dict()  # older corpora's options
 
 
-def test_assignment_deals_every_sub_window_once_per_group_of_pixels():
-    j0 = static_layers.assignment(6, 10, 12, seed=3)
-    assert all(sorted(g) == list(range(12)) for g in j0.ravel().reshape(5, 12))
+def test_assignment_deals_every_sub_window_once_per_group_of_runs():
+    run = static_layers.RUN_PX
+    j0 = static_layers.assignment(6, 4 * run, 12, seed=3)
+    runs = j0[:, ::run].ravel()                                  # one value per run of a row
+    assert (np.repeat(j0[:, ::run], run, axis=1) == j0).all()
+    assert all(sorted(g) == list(range(12)) for g in runs.reshape(2, 12))
     # every sample of a pixel in one sub-window, spread evenly over the sub-windows (stratified in time)
     counts = np.stack([static_layers.sample_counts(j0, 12, 16, j) for j in range(12)])
     assert (counts.sum(0) == 16).all() and set(np.unique(counts)) <= {1, 2}
