@@ -3,7 +3,10 @@
 and the error of the ``nearest`` rule (a chopped sub-window served by the bins it overlaps, by overlap) against
 the layer, over the image and over the moving objects' pixels.
 
-    nice -n 10 python benchmarks/motion_layers.py CORPUS [SCENE]   # CORPUS: a rendered lfmbench-v1-mini-motion v1
+    nice -n 10 python benchmarks/motion_layers.py CORPUS [SCENE [FRAMES]]   # CORPUS: lfmbench-v1-mini-motion v1
+
+FRAMES (default 1): the first frames of the scene, each rendered as the protocol renders it (the costs are per
+frame; the static groups only, without the AOVs).
 
 Reads CORPUS (never writes it); prints one JSON line.
 """
@@ -16,7 +19,7 @@ import time
 import numpy as np
 
 
-def main(corpus: str, scene_id: str = "test_16") -> dict:
+def main(corpus: str, scene_id: str = "test_16", frames: str = "1") -> dict:
     from lfmbench.corpus import Corpus
     from lfmbench.corpus.exr_encode import encode_static_exr
     from lfmbench.datasets.plan_frames import static_window_mix
@@ -32,8 +35,8 @@ def main(corpus: str, scene_id: str = "test_16") -> dict:
     wins = [list(w) for w in load_preset("chopped").captures["chopped"].exposure]
     layer = [{"name": "chopped", "windows_s": wins}]
     static = [g for g, i in meta["groups"].items() if not i.get("flicker")]
-    base = {k: v for k, v in proto.render.items() if k != "static_layers"}
-    out = {"scene": scene_id, "static_groups": static}
+    base = dict({k: v for k, v in proto.render.items() if k != "static_layers"}, frames=int(frames))
+    out = {"scene": scene_id, "static_groups": static, "frames": int(frames)}
     lays = []
     for seed in (ps.seed, ps.seed + 1):  # the second: the layer's own Monte Carlo noise
         opts = render.RenderOptions(**base, seed=seed, static_layers=layer)
@@ -50,7 +53,7 @@ def main(corpus: str, scene_id: str = "test_16") -> dict:
     bands = meta["bands_nm"]
     lb = bb = 0
     num = den = num_m = den_m = noise = 0.0
-    for f in range(int(meta["frames"])):
+    for f in range(int(frames)):
         ids = rd.read_aux(scene_id, f, ["mask.instance"])["mask.instance"]
         moving = [o["id"] for o in scene["objects"] if np.any(np.asarray(o.get("velocity_mps", [0, 0, 0])) != 0)]
         mask = np.isin(ids, moving)

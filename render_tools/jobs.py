@@ -485,7 +485,9 @@ def add_layers(out: str | Path, protocol, backend: Backend | None = None,
         if (old.get("protocol") or {}).get("name") != protocol.name:
             raise ValueError(f"--add-layers: corpus {out} was not rendered with protocol {protocol.name} (its "
                              f"manifest's render.protocol is {(old.get('protocol') or {}).get('name')!r})")
-        strip = lambda r: {k: v for k, v in (r.get("options") or {}).items() if k not in ("static_layers", "variant")}  # noqa: E731
+        def strip(r):
+            return {k: v for k, v in (r.get("options") or {}).items() if k not in ("static_layers", "variant")}
+
         diff = sorted(k for k in set(strip(old)) | set(strip(want)) if strip(old).get(k) != strip(want).get(k))
         diff += [k for k in ("dtype", "scene_kw") if old.get(k) != want.get(k)]
         if diff:

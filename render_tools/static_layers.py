@@ -28,9 +28,6 @@ from pathlib import Path
 
 import numpy as np
 
-from lfmbench.corpus.window_layers import layers_dict, parse_layers  # noqa: F401 - the one rule, re-exported
-
-
 #: Pixels in a row that share a sub-window (:func:`assignment`): the pixels of one sub-window are traced as row
 #: segments of this length, so a 160x90 frame is about 3,600 tiles instead of 28,800 (the tracer's per-tile cost is
 #: Python: 6.7 CPU s of a 160x90 frame went to 53,600 one-pixel tiles, measured with cProfile on 2026-11-28).

@@ -20,7 +20,8 @@ from lfmbench.resources import docs_url
 from lfmbench.sensor.plan import resolve_windows, total_length_s
 
 __all__ = ["PlanExposure", "STORED_WINDOW_LAYER", "STATIC_WINDOW_RULES", "static_window_source",
-           "static_window_mix", "exposure_static_layer", "exposure_static_exact", "layer_key", "plan_exposures", "compose_plan_frame"]
+           "static_window_mix", "exposure_static_layer", "exposure_static_exact", "layer_key", "plan_exposures",
+           "compose_plan_frame"]
 
 
 class PlanExposure(NamedTuple):

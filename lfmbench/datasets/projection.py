@@ -33,8 +33,8 @@ import torch
 
 from lfmbench.sensor import optics as _optics
 from lfmbench import sensor as _sensor
-from lfmbench.corpus import (LAYERS_FILE, MANIFEST_NAME, SCENES_DIR, Corpus, CorpusFileError, bin_prefix, check_scene_id,
-                             frame_dir, group_storage, layer_relpath, sha256_file, static_edges)
+from lfmbench.corpus import (LAYERS_FILE, MANIFEST_NAME, SCENES_DIR, Corpus, CorpusFileError, bin_prefix,
+                             check_scene_id, frame_dir, group_storage, layer_relpath, sha256_file, static_edges)
 from lfmbench.fileio import atomic_torch_save
 from lfmbench.vocabulary import PHOTODIODES
 

@@ -33,8 +33,7 @@ def _add_layer(root, meta, rng, moves=True):
     hashes = WL.write_layer(root, SID, m, "chopped", wins, moves, frames, "float32", {"spp": 2})
     assert {p: p.stat().st_mtime_ns for p in before} == before          # no file it had was touched
     w = C.CorpusWriter(root, dtype="float32")
-    w.commit_scene(SID, {**w.manifest["files"], **hashes} if False else
-                   {**{k: v for k, v in w.manifest["files"].items() if k.startswith(f"scenes/{SID}/")}, **hashes})
+    w.commit_scene(SID, {**w.scene_files(SID), **hashes})
     w.close()
     return imgs
 
