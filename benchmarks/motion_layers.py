@@ -22,6 +22,7 @@ import numpy as np
 def main(corpus: str, scene_id: str = "test_16", frames: str = "1") -> dict:
     from lfmbench.corpus import Corpus
     from lfmbench.corpus.exr_encode import encode_static_exr
+    from lfmbench.corpus.window_layers import encode_layer
     from lfmbench.datasets.plan_frames import static_window_mix
     from lfmbench.sensor.preset import load_preset
     from render_tools import render, static_layers
@@ -65,7 +66,7 @@ def main(corpus: str, scene_id: str = "test_16", frames: str = "1") -> dict:
             for a, n in wins:
                 for lay, w in static_window_mix(a, n, tm)[0].items():
                     near = near + bins[int(lay[3:])] * (w / len(wins))
-            lb += len(encode_static_exr({"short": lays[0][f]["static"][g]}, bands, dtype=proto.storage))
+            lb += len(encode_layer(lays[0][f]["static"][g], bands, proto.storage, {}, "layer"))
             bb += len(encode_static_exr({"bins": bins}, bands, dtype=proto.storage))
         d2 = ((near - exact) ** 2).sum(0)
         num, den = num + d2.sum(), den + (exact ** 2).sum()

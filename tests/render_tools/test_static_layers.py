@@ -50,6 +50,7 @@ def test_assignment_deals_every_sub_window_once_per_group_of_runs():
     assert hist.min() > 21 and hist.max() < 79     # 50 each; 4.2 sigma of the binomial (sd 6.8)
 
 
+@pytest.mark.slow
 @pytest.mark.jit
 def test_chopped_layer_equals_the_sub_windows_integrated_and_not_the_nearest_window():
     """A car crossing the view at 60 m/s (its lamp moves about 1.4 px between sub-windows): the layer (one frame's
