@@ -54,6 +54,13 @@ def main(corpus: str, scene_id: str = "test_16", frames: str = "1") -> dict:
     bands = meta["bands_nm"]
     lb = bb = 0
     num = den = num_m = den_m = noise = 0.0
+    bnum = bden = bnoise = 0.0   # the same on 8 x 8 px block means (Monte Carlo noise averaged down, motion kept)
+
+    def blocks(x):
+        """(H, W) -> (H / 8, W / 8) block means (H, W multiples of 8 cropped)."""
+        h, w = x.shape[0] // 8 * 8, x.shape[1] // 8 * 8
+        return x[:h, :w].reshape(h // 8, 8, w // 8, 8).mean((1, 3))
+
     for f in range(int(frames)):
         ids = rd.read_aux(scene_id, f, ["mask.instance"])["mask.instance"]
         moving = [o["id"] for o in scene["objects"] if np.any(np.asarray(o.get("velocity_mps", [0, 0, 0])) != 0)]
@@ -72,10 +79,14 @@ def main(corpus: str, scene_id: str = "test_16", frames: str = "1") -> dict:
         num, den = num + d2.sum(), den + (exact ** 2).sum()
         num_m, den_m = num_m + d2[mask].sum(), den_m + (exact ** 2).sum(0)[mask].sum()
         noise += (((exact - other) ** 2).sum(0)).sum() / 2.0
+        be, bo, bn = blocks(exact.sum(0)), blocks(other.sum(0)), blocks(near.sum(0))
+        bnum, bden, bnoise = bnum + ((bn - be) ** 2).sum(), bden + (be ** 2).sum(), bnoise + ((be - bo) ** 2).sum() / 2
+        np.savez_compressed(f"/tmp/motion_layers_{scene_id}_f{f}.npz", exact=exact, other=other, near=near, mask=mask)
         out.setdefault("moving_px", []).append(int(mask.sum()))
     out.update(layer_bytes=lb, bins_bytes=bb, nearest_rrmse_image=float(np.sqrt(num / den)),
                nearest_rrmse_moving=float(np.sqrt(num_m / den_m)) if den_m else None,
-               layer_noise_rrmse_image=float(np.sqrt(noise / den)))
+               layer_noise_rrmse_image=float(np.sqrt(noise / den)),
+               nearest_rrmse_blocks8=float(np.sqrt(bnum / bden)), layer_noise_rrmse_blocks8=float(np.sqrt(bnoise / bden)))
     return out
 
 
