@@ -42,7 +42,7 @@ def test_chopped_capture_is_served_exactly_from_its_layer(tmp_path):
     rng = np.random.default_rng(3)
     meta, _edges, bins, _spec = _write(tmp_path / "c", rng)
     p = load_preset("chopped")
-    ds = LFMCaptureDataset(tmp_path / "c", split="all", sensor="chopped", frames=2, cache_dir=False, outputs=("gt",))
+    ds = LFMCaptureDataset(tmp_path / "c", split="all", sensor="chopped", frames=1, cache_dir=False, outputs=("gt",))
     assert ds[0]["meta"]["static_windows"] == "nearest"      # the bins do not cut the sub-windows
     with pytest.raises(ValueError, match=r"chopped\.yaml: field 'captures\.chopped\.exposure' window 0"):
         plan_exposures(p, meta, "global", static_windows="exact")
@@ -51,7 +51,7 @@ def test_chopped_capture_is_served_exactly_from_its_layer(tmp_path):
     c = C.Corpus(tmp_path / "c")
     tm = c.meta(SID)["timing"]
     assert [x["name"] for x in tm["window_layers"]] == ["chopped"]
-    ds = LFMCaptureDataset(tmp_path / "c", split="all", sensor="chopped", frames=2, cache_dir=False,
+    ds = LFMCaptureDataset(tmp_path / "c", split="all", sensor="chopped", frames=1, cache_dir=False,
                            static_windows="exact", outputs=("gt",))
     assert ds[0]["meta"]["static_windows"] == "exact"
     exposures = plan_exposures(p, c.meta(SID), "global", static_windows="exact")
@@ -77,7 +77,7 @@ def test_layer_where_nothing_moves_is_the_long_window_and_bad_layers_write_nothi
     assert not list((tmp_path / "c/scenes").rglob("*.layer_*"))
     _add_layer(tmp_path / "c", meta, rng, moves=False)
     assert not list((tmp_path / "c/scenes").rglob("*.layer_*"))
-    ds = LFMCaptureDataset(tmp_path / "c", split="all", sensor="chopped", frames=2, cache_dir=False,
+    ds = LFMCaptureDataset(tmp_path / "c", split="all", sensor="chopped", frames=1, cache_dir=False,
                            static_windows="exact", outputs=("gt",))
     assert ds[0]["meta"]["static_windows"] == "exact"
     # a malformed layers file: one line naming the file and the field
