@@ -65,13 +65,16 @@ class Backend:
     """The renderer a job calls (``render_tools.scene`` + ``render_tools.render`` by default):
     ``generate_scene(seed, scene_id=..., **kw) -> dict``, ``RenderOptions(**fields)``,
     ``scene_meta(scene, opts) -> dict``,
-    ``render_frames(scene, opts) -> Iterator[frame dict]``; optional ``validate_scene(scene) -> dict``."""
+    ``render_frames(scene, opts) -> Iterator[frame dict]``; optional ``validate_scene(scene) -> dict`` and
+    ``render_layer(scene, opts, layer) -> Iterator[{"frame", "static"}]`` (a static window layer; default
+    :func:`render_tools.static_layers.render_layer`)."""
 
     generate_scene: Callable[..., dict]
     RenderOptions: Callable[..., Any]
     scene_meta: Callable[[dict, Any], dict]
     render_frames: Callable[[dict, Any], Any]
     validate_scene: Callable[[dict], Any] | None = None
+    render_layer: Callable[[dict, Any, tuple], Any] | None = None
 
 
 def default_backend() -> Backend:
@@ -239,6 +242,10 @@ def run_job(job: RenderJob | Mapping[str, Any]) -> dict:
             w.put(frame)
             del frame  # the worker holds it now: at most one frame encoded while the next renders
         hashes = w.close()
+    if opts.static_layers:  # the static window layers, beside the scene's other files (render_tools.static_layers)
+        from .static_layers import write_layers  # noqa: PLC0415
+
+        hashes.update(write_layers(job.out, job.scene_id, scene, meta, opts, job.dtype, be.render_layer))
     prune_scene_dir(job.out, job.scene_id, hashes)
     return {"scene_id": job.scene_id, "hashes": hashes, "notes": notes, "seconds": time.perf_counter() - t0}
 
@@ -448,6 +455,64 @@ def render_record(seed: int, options: Mapping[str, Any], dtype: str, scene_kw: M
     if protocol is not None:
         rec["protocol"] = dict(protocol)
     return json.loads(json.dumps(rec, default=str))
+
+
+def add_layers(out: str | Path, protocol, backend: Backend | None = None,
+               on_done: Callable[[str, float], None] | None = None) -> dict[str, float]:
+    """Bring a corpus rendered with an earlier version of ``protocol`` (a :class:`render_tools.protocol.Protocol`)
+    up to it when the two differ only by ``render.static_layers``: render each scene's missing static window layers
+    (:func:`render_tools.static_layers.write_layers`, from the scene's own ``scene.json`` and ``meta.json``) and
+    write them beside its files, none of which changes; then commit each scene's new files and record the
+    protocol's version in the manifest's ``render``. A scene's ``meta.json`` keeps the version it was rendered
+    with; its ``window_layers.json`` records how each layer was rendered. Returns ``{scene_id: seconds}`` of the
+    scenes that got a layer (``on_done(scene_id, seconds)`` after each).
+
+    Raises:
+        ValueError: the corpus was not rendered with this protocol's name, or with other settings than the
+            protocol's apart from ``static_layers`` (naming what differs); nothing is written then.
+    """
+    from lfmbench.corpus import CorpusWriter  # noqa: PLC0415
+    from lfmbench.fileio import load_json  # noqa: PLC0415
+
+    from .static_layers import write_layers  # noqa: PLC0415
+
+    out = Path(out)
+    be = backend or default_backend()
+    w = CorpusWriter(out, dtype=protocol.storage)
+    try:
+        old = w.render or {}
+        want = render_record(old.get("seed", 0), protocol.render, protocol.storage, {}, protocol=protocol.record())
+        if (old.get("protocol") or {}).get("name") != protocol.name:
+            raise ValueError(f"--add-layers: corpus {out} was not rendered with protocol {protocol.name} (its "
+                             f"manifest's render.protocol is {(old.get('protocol') or {}).get('name')!r})")
+        def strip(r):
+            return {k: v for k, v in (r.get("options") or {}).items() if k not in ("static_layers", "variant")}
+
+        diff = sorted(k for k in set(strip(old)) | set(strip(want)) if strip(old).get(k) != strip(want).get(k))
+        diff += [k for k in ("dtype", "scene_kw") if old.get(k) != want.get(k)]
+        if diff:
+            raise ValueError(f"--add-layers: corpus {out} was rendered with other settings than {protocol.path} "
+                             f"({', '.join(diff)}), not only other static_layers: render it anew with --out")
+        seeds = {ps.scene_id: ps.seed for ps in protocol.scenes}
+        done: dict[str, float] = {}
+        for sid in w.scenes:
+            if sid not in seeds:
+                continue
+            t0 = time.perf_counter()
+            sdir = out / "scenes" / sid
+            scene = load_json(sdir / "scene.json", "scene description")
+            meta = load_json(sdir / "meta.json", "scene metadata")
+            opts = be.RenderOptions(**protocol.render, seed=seeds[sid])
+            hashes = write_layers(out, sid, scene, meta, opts, protocol.storage, be.render_layer)
+            if hashes:
+                w.commit_scene(sid, {**w.scene_files(sid), **hashes})
+                done[sid] = time.perf_counter() - t0
+                if on_done is not None:
+                    on_done(sid, done[sid])
+        w.set_render(want)
+        return done
+    finally:
+        w.close()
 
 
 # ------------------------------------------------------------------------------------- a render request

@@ -176,6 +176,11 @@ class RenderOptions:
     per-pixel sample sequence (common random numbers: pixel position, time as a fraction of the bin, wavelengths,
     path decisions), so two bins differ by what moves between them, not by independent Monte Carlo noise; each bin
     stays unbiased (docs/benchmarks/motion-storage.md).
+    static_layers: named unions of capture windows (``[{"name", "windows_s": [[start_s, length_s], ...]}]``, s from
+    the frame start; in increasing order, not overlapping, inside the capture window) whose static radiance is
+    rendered as such, one full frame's samples spread over the union (:mod:`render_tools.static_layers`), and stored
+    beside the scene's other files (:mod:`lfmbench.corpus.window_layers`): a capture whose windows are a layer's (the
+    chopped preset's 12 sub-windows) is served from it exactly. () (default): none.
     """
 
     width: int = 640
@@ -207,9 +212,13 @@ class RenderOptions:
     reflection_denoise: str = "auto"
     static_edges_s: tuple = ()
     static_bin_samples: str = "independent"
+    static_layers: tuple = ()
 
     def __post_init__(self):
         self.bands_nm = tuple(float(b) for b in self.bands_nm)
+        from lfmbench.corpus.window_layers import parse_layers  # noqa: PLC0415
+
+        self.static_layers = parse_layers(self.static_layers, self.capture_window_s)
         self.static_edges_s = tuple(float(e) for e in (self.static_edges_s or ()))
         if self.groups is not None:
             self.groups = tuple(self.groups)
@@ -246,6 +255,9 @@ class RenderOptions:
                        or np.any(e > self.capture_window_s * (1 + 1e-9))):
             raise ValueError(f"static_edges_s: every edge must lie in the capture window [0, "
                              f"{self.capture_window_s:.6g}] s from the frame start, got {list(self.static_edges_s)}")
+        from lfmbench.corpus.window_layers import parse_layers  # noqa: PLC0415
+
+        parse_layers(self.static_layers, self.capture_window_s)
         if self.static_bin_samples not in STATIC_BIN_SAMPLES:
             raise ValueError(f"static_bin_samples: must be one of {STATIC_BIN_SAMPLES}, got "
                              f"{self.static_bin_samples!r}")
@@ -313,6 +325,11 @@ class RenderOptions:
             del d["static_edges_s"]
         if d["static_bin_samples"] == "independent":  # as before the option existed
             del d["static_bin_samples"]
+        from lfmbench.corpus.window_layers import layers_dict  # noqa: PLC0415
+
+        d["static_layers"] = layers_dict(self.static_layers)
+        if not d["static_layers"]:
+            del d["static_layers"]
         return d
 
 

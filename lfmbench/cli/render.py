@@ -83,6 +83,10 @@ def render_cmd(
     no_resume: bool = typer.Option(False, "--no-resume", help="Re-render scenes that are already complete."),
     yes: bool = typer.Option(False, "--yes", help="Confirm sizes above the sanity limits (e.g. --frames > 300, "
                                                   "--scenes > 10000)."),
+    add_layers: bool = typer.Option(False, "--add-layers",
+                                    help="With --protocol, on a corpus of an earlier version of it that differs only "
+                                         "by static window layers: render just the missing layers and add them "
+                                         "(no written file changes; docs/guide/rendering.md)."),
 ) -> None:
     """Render driving scenes (Mitsuba 3, spectral, light groups, time bins) into a corpus; resumable.
 
@@ -106,6 +110,22 @@ def render_cmd(
         console.print(f"[red]error[/]: {msg}", highlight=False)
         raise typer.Exit(code)
 
+    if add_layers:
+        if protocol is None:
+            fail("--add-layers needs --protocol (the protocol whose static window layers to add)")
+        from render_tools.protocol import load_protocol  # noqa: PLC0415
+
+        try:
+            proto = load_protocol(protocol)
+            if not (Path(out) / "manifest.json").is_file():
+                fail(f"--add-layers: no corpus at {out} (manifest.json missing)")
+            done = J.add_layers(out, proto, on_done=lambda sid, sec: console.print(
+                f"{sid}: static window layers added ({sec:.1f} s)", highlight=False))
+        except (ValueError, CorpusError) as exc:
+            fail(str(exc))
+        console.print(f"{len(done)} scene(s) got static window layers; the corpus is now {proto.name} "
+                      f"v{proto.version}", highlight=False)
+        return
     req = J.RenderRequest(out=out, scenes=scenes, width=width, height=height, spp=spp, seed=seed, bins=bins,
                           frames=frames, groups=_split_groups(groups), profile=profile, protocol=protocol,
                           splits=_split_groups(split), workers=workers, scene_files=scene_file, variant=variant,

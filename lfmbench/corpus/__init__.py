@@ -13,6 +13,9 @@ This package defines the on-disk format specified in ``docs/guide/corpus-format.
   :func:`encode_lights_exr`, :func:`encode_aux_exr`, :func:`read_exr`;
 * :mod:`~lfmbench.corpus.meta`: :func:`validate_meta` (consistency checks of a scene's ``meta.json``: timing,
   bands, groups, camera), manifest and ``splits.json`` checks, :func:`make_splits`, :func:`sha256_file`;
+* :mod:`~lfmbench.corpus.window_layers`: static window layers (a static group over a named union of capture
+  windows, e.g. a chopped sensor's sub-windows): :func:`parse_layers` (the one rule of what a layer may be), file
+  names and the scene's ``window_layers.json``;
 * :mod:`~lfmbench.corpus.reader`: :class:`Corpus`, the reader (lazy: one file per frame and light group is
   decoded only when asked for, with a small cache so that reading ``short`` then ``long`` decodes the file once);
 * :mod:`~lfmbench.corpus.writer`: :class:`CorpusWriter`: a manifest that is rewritten atomically after each
@@ -49,6 +52,7 @@ from lfmbench.corpus.naming import (ATTR, AUX_CHANNELS, EMPTY_PART, FORMAT_NAME,
                                     group_storage, light_part_name, parse_light_part, static_channels, steady_channels,
                                     STATIC_BINS_VERSION, static_edges, static_layers, window_bin_weights)
 from lfmbench.corpus.reader import Corpus
+from lfmbench.corpus.window_layers import LAYERS_FILE, layer_relpath, parse_layers, read_layers_file
 from lfmbench.corpus.storage import (COMPRESSIONS, DEFAULT_STORAGE, EXTRA_COMPRESSIONS, HALF_MAX, HALF_MIN_NORMAL,
                                      HALF_PRECISION_RANGE_LOG2, HALF_UNDERFLOW_ERROR_FRACTION, MANTISSA_BITS,
                                      SCALE_EXP_RANGE, STORAGES, LayerStore, Storage, StorageStats, resolve_storage,
@@ -59,6 +63,7 @@ from lfmbench.corpus.writer import LOCK_NAME, CorpusLock, CorpusWriter, prune_sc
 from lfmbench.fileio import TMP_PREFIX, atomic_write_bytes, atomic_write_json
 
 __all__ = [
+    "LAYERS_FILE", "layer_relpath", "parse_layers", "read_layers_file",
     "FORMAT_NAME", "FORMAT_VERSION", "STATIC_BINS_VERSION", "static_edges", "static_layers", "window_bin_weights",
     "READABLE_VERSIONS", "STATIC_WINDOWS", "AUX_CHANNELS", "HALF_MAX",
     "HALF_MIN_NORMAL", "HALF_UNDERFLOW_ERROR_FRACTION", "RADIANCE_UNIT", "COMPRESSIONS", "STORAGES",

@@ -16,9 +16,10 @@ from lfmbench.corpus.exr import ExrPart, _check_aux, _check_values, _stack, exr_
 from lfmbench.corpus.meta import (_check_manifest, _check_meta_storage, _load_json, check_splits, inside_root,
                                   load_meta)
 from lfmbench.corpus.naming import (AUX_CHANNELS, EMPTY_PART, MANIFEST_NAME, SCENES_DIR, SPLITS_NAME, _group_bins,
-                                    bin_channels, box_inside, frame_dir, group_storage, parse_light_part,
+                                    bin_channels, bin_prefix, box_inside, frame_dir, group_storage, parse_light_part,
                                     static_channels, steady_channels, STATIC_WINDOWS, static_edges, static_layers,
                                     window_bin_weights)
+from lfmbench.corpus.window_layers import LAYERS_FILE, layer_relpath, read_layers_file
 
 __all__ = ["Corpus"]
 
@@ -80,11 +81,17 @@ class Corpus:
         return self.root / SCENES_DIR / scene_id
 
     def meta(self, scene_id: str) -> dict:
-        """The scene's ``meta.json`` (camera, timing, bands, groups, lights)."""
+        """The scene's ``meta.json`` (camera, timing, bands, groups, lights); with static window layers
+        (``window_layers.json``, :mod:`lfmbench.corpus.window_layers`) ``timing["window_layers"]`` lists them:
+        ``[{"name", "windows_s": [[start_s, length_s], ...], "moves": bool}]``."""
         if scene_id not in self._meta:
             p = self._scene_dir(scene_id) / "meta.json"
             m = load_meta(p)
             _check_meta_storage(m, p)
+            layers = read_layers_file(p.parent / LAYERS_FILE, float(m["timing"]["capture_window_s"]))
+            if layers:  # static window layers (lfmbench.corpus.window_layers): what captures they serve
+                m["timing"]["window_layers"] = [{"name": x["name"], "windows_s": [list(w) for w in x["windows_s"]],
+                                                 "moves": x["moves"]} for x in layers]
             self._meta[scene_id] = m
         return self._meta[scene_id]
 
@@ -187,6 +194,34 @@ class Corpus:
                                      f"({m['height']}, {m['width']})")
         if self.check_values:
             _check_values(arr, path, f"[{window}]")
+        return arr
+
+    def read_static_layer(self, scene_id: str, frame: int, group: str, name: str,
+                          bands: Sequence[float] | None = None) -> np.ndarray:
+        """Static window layer ``name`` of a static group (:mod:`lfmbench.corpus.window_layers`): (C, H, W) float32,
+        W sr^-1 m^-2 nm^-1, the time average over the layer's windows. ``ValueError`` when the scene does not list
+        the layer with files (a scene where nothing moves has none: every window's average is the long window's)."""
+        m = self.meta(scene_id)
+        lay = next((x for x in m["timing"].get("window_layers", ()) if x["name"] == name), None)
+        if lay is None or not lay["moves"]:
+            raise ValueError(f"scene {brief(scene_id)} has no stored static window layer {brief(name)} "
+                             f"({LAYERS_FILE})")
+        if group_storage(m, group) != "static":
+            raise ValueError(f"group {brief(group)} of scene {brief(scene_id)} is stored per light in time bins")
+        path = self.root / layer_relpath(scene_id, frame, group, name)
+        if not path.is_file():
+            raise CorpusFileError(f"{path}: missing (listed in {LAYERS_FILE} of scene {scene_id})")
+        parts = self._parts(path)
+        w = bin_prefix(0, 1)
+        arr = _stack(parts[0], static_channels(w, self._band_list(m, bands)), path)
+        scale = layer_scale(parts[0], w, path)
+        if scale != 1.0:
+            arr /= np.float32(scale)
+        if arr.shape[1:] != (m["height"], m["width"]):
+            raise CorpusChannelError(f"EXR file {path}: image is {arr.shape[1:]}, meta.json says "
+                                     f"({m['height']}, {m['width']})")
+        if self.check_values:
+            _check_values(arr, path, f"[layer {name}]")
         return arr
 
     def read_static_bins(self, scene_id: str, frame: int, group: str, bands: Sequence[float] | None = None

@@ -45,7 +45,8 @@ JOURNAL_NAME = ".lfmbench.journal"
 COMPACT_FRACTION = 1 / 8
 #: Files of a scene directory that the corpus format owns (``docs/guide/corpus-format.md``): only these are ever
 #: deleted (when a re-render no longer writes them); anything else a user put there stays.
-_OWN_SCENE_FILE = re.compile(r"(scene\.json|meta\.json|f\d{3,}/[A-Za-z][A-Za-z0-9_]*\.exr)")
+_OWN_SCENE_FILE = re.compile(r"(scene\.json|meta\.json|window_layers\.json|"
+                             r"f\d{3,}/[A-Za-z][A-Za-z0-9_]*(\.layer_[a-z][a-z0-9_]*)?\.exr)")
 
 
 #: Locks this process holds: resolved lock path -> [fd, number of CorpusLock objects sharing it]. The lock is
@@ -142,7 +143,8 @@ def check_ours(root: Path) -> None:
 
 def is_own_file(rel: str, scene_id: str) -> bool:
     """True when ``rel`` (a path relative to the corpus root) is a file name the corpus format gives to files of
-    scene ``scene_id``: ``scenes/<id>/scene.json``, ``meta.json`` or ``f<NNN>/<group>.exr``."""
+    scene ``scene_id``: ``scenes/<id>/scene.json``, ``meta.json``, ``window_layers.json``, ``f<NNN>/<group>.exr`` or
+    a static window layer's ``f<NNN>/<group>.layer_<name>.exr`` (:mod:`lfmbench.corpus.window_layers`)."""
     prefix = f"{SCENES_DIR}/{scene_id}/"
     return rel.startswith(prefix) and _OWN_SCENE_FILE.fullmatch(rel[len(prefix):]) is not None
 
@@ -364,6 +366,23 @@ class CorpusWriter:
             raise ValueError(f"commit_scene: file paths must lie under {prefix}")
         self._index[scene_id] = dict(hashes)
         self._log({"commit": scene_id, "files": dict(hashes)})
+
+    def scene_files(self, scene_id: str) -> dict[str, str]:
+        """``{relpath: sha256}`` of a committed scene's files (empty for a scene not in the manifest)."""
+        return dict(self._index.get(scene_id, {}))
+
+    @property
+    def render(self) -> dict | None:
+        """The manifest's ``"render"`` record (the options the corpus was rendered with), or None."""
+        r = self._head.get("render")
+        return None if r is None else json.loads(json.dumps(r))
+
+    def set_render(self, render: Mapping[str, Any]) -> None:
+        """Replace the manifest's ``"render"`` record: only after the corpus was brought up to what ``render`` asks
+        for (static window layers added to every scene, :func:`render_tools.jobs.add_layers`); the manifest is
+        rewritten."""
+        self._head["render"] = json.loads(json.dumps(dict(render), default=json_default))
+        self.write_manifest()
 
     def forget_scene(self, scene_id: str) -> None:
         """Drop a scene from the manifest (before re-rendering it); its files stay until overwritten."""

@@ -37,7 +37,7 @@ from lfmbench.datasets.assembly import SENSOR_OUTPUTS, assemble_sample, check_li
 from lfmbench.datasets.options import (DEFAULT_MAX_LIGHTS, DEFAULT_OUTPUTS, DEFAULT_SAMPLES_PER_SCENE,  # noqa: F401
                                        CacheOptions, SampleOptions, SimulationOptions)
 from lfmbench.datasets.pieces import capture_pieces
-from lfmbench.datasets.plan_frames import PlanExposure, compose_plan_frame, plan_exposures, static_window_mix
+from lfmbench.datasets.plan_frames import PlanExposure, compose_plan_frame, exposure_static_exact, plan_exposures
 from lfmbench.datasets.projection import SceneLayers, aux_channels, load_or_build, unit_projection_preset
 from lfmbench.datasets.pwm import PWMConfig, apply_light_timing, draw_scene_pwm, frozen_test_rng, load_pwm_config
 from lfmbench.fileio import atomic_write_json, load_json
@@ -703,12 +703,12 @@ class LFMCaptureDataset(Dataset):
         return torch.tensor(min(wins, key=total_length_s), dtype=torch.float64).reshape(-1, 2)
 
     def _static_window_mode(self, timing: Mapping[str, Any]) -> str:
-        """``"exact"`` when every window of the plan is one the corpus stores for its static groups (always for
-        the split pixel), else ``"nearest"`` (served by the measured approximation, :data:`STATIC_WINDOW_RULES`)."""
+        """``"exact"`` when every capture's windows are ones the corpus stores for its static groups (always for
+        the split pixel; a chopped union where the corpus has its static window layer), else ``"nearest"`` (served by the measured approximation, :data:`STATIC_WINDOW_RULES`)."""
         from lfmbench.sensor.plan import resolve_windows  # noqa: PLC0415
 
-        exact = all(static_window_mix(a, n, timing)[1] for c in self.preset.captures.values()
-                    for a, n in resolve_windows(c.exposure, timing))
+        exact = all(exposure_static_exact(resolve_windows(c.exposure, timing), timing)
+                    for c in self.preset.captures.values())
         return "exact" if exact else "nearest"
 
     # -- display

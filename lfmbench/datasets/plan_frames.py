@@ -13,14 +13,15 @@ import torch
 
 from lfmbench.corpus import bin_prefix, window_bin_weights
 from lfmbench.datasets.assembly import _box_rows, _rolling_bin_exposure, _visible_by_bins, bin_edges, window_bin_exposure
-from lfmbench.datasets.projection import SceneLayers
+from lfmbench.datasets.projection import SceneLayers, layer_key
 from lfmbench.datasets.pwm import gated_lights
 from lfmbench.flicker import pwm_exposure
 from lfmbench.resources import docs_url
 from lfmbench.sensor.plan import resolve_windows, total_length_s
 
 __all__ = ["PlanExposure", "STORED_WINDOW_LAYER", "STATIC_WINDOW_RULES", "static_window_source",
-           "static_window_mix", "plan_exposures", "compose_plan_frame"]
+           "static_window_mix", "exposure_static_layer", "exposure_static_exact", "layer_key", "plan_exposures",
+           "compose_plan_frame"]
 
 
 class PlanExposure(NamedTuple):
@@ -86,6 +87,28 @@ def static_window_mix(start_s: float, length_s: float, timing: Mapping[str, Any]
     return {STORED_WINDOW_LAYER[name]: 1.0}, exact
 
 
+def exposure_static_layer(windows, timing: Mapping[str, Any]) -> tuple[str, bool] | None:
+    """The stored static window layer (``timing["window_layers"]``, :mod:`lfmbench.corpus.window_layers`) whose
+    windows are exactly ``windows`` ([(start_s, length_s)], s from the frame start; to 1e-6 of each length), as
+    ``(name, moves)``; None when no layer matches. ``moves`` False: nothing in the scene moves and the layer is the
+    long window (``spd``), exactly."""
+    ws = [(float(a), float(n)) for a, n in windows]
+    for lay in timing.get("window_layers") or ():
+        lw = lay["windows_s"]
+        if len(lw) == len(ws) and all(abs(a - la) <= 1e-6 * n and abs(n - ln) <= 1e-6 * n
+                                      for (a, n), (la, ln) in zip(ws, lw)):
+            return lay["name"], bool(lay["moves"])
+    return None
+
+
+def exposure_static_exact(windows, timing: Mapping[str, Any]) -> bool:
+    """Whether the static radiance of a capture with ``windows`` ([(start_s, length_s)]) is exact: a stored static
+    window layer is exactly its windows (:func:`exposure_static_layer`), or each window is a stored window or a union
+    of static time bins (:func:`static_window_mix`)."""
+    return exposure_static_layer(windows, timing) is not None or all(static_window_mix(a, n, timing)[1]
+                                                                       for a, n in windows)
+
+
 #: How a plan's window that a corpus does not store for its static groups is served (``LFMCaptureDataset``
 #: ``static_windows``): ``"nearest"``, the smallest stored window containing it (:func:`static_window_source`;
 #: error measured in docs/results/sensor-architectures.md), or ``"exact"``, an error naming preset and corpus.
@@ -120,10 +143,12 @@ def plan_exposures(preset, meta: Mapping[str, Any], shutter: str, line_time_s: f
                 raise ValueError(f"{preset.source}: field 'captures.{key}.exposure' window {i} ends at "
                                  f"{(a + n + last) * 1e3:.4g} ms{' (last row)' if rolling else ''}, after the capture "
                                  f"window of {source} ({cw * 1e3:.4g} ms): the corpus has no radiance there")
-            if static_windows == "exact" and not static_window_mix(a, n, tm)[1]:
+            if static_windows == "exact" and not static_window_mix(a, n, tm)[1] \
+                    and exposure_static_layer(wins, tm) is None:
                 raise ValueError(f"{preset.source}: field 'captures.{key}.exposure' window {i} "
                                  f"[{a * 1e3:.4g}, {(a + n) * 1e3:.4g}) ms is not a window {source} stores for its "
-                                 "static groups (short, long or a union of its static time bins); use "
+                                 "static groups (short, long, a union of its static time bins or, with its "
+                                 "capture's other windows, a static window layer); use "
                                  "static_windows='nearest' (the measured approximation, "
                                  f"{docs_url('benchmarks/motion-windows.md')}) or a corpus rendered with these "
                                  "window edges")
@@ -161,6 +186,12 @@ def compose_plan_frame(layers: SceneLayers, meta: dict, frame: int, crop: tuple[
     out: dict[str, torch.Tensor] = {}
     for x in exposures:
         acc = torch.zeros(h, w)
+        lay = exposure_static_layer(x.windows, tm)
+        if lay is not None:  # a static window layer: exactly this capture's windows (e.g. a chopped union)
+            total = float(sum(n for _, n in x.windows))
+            acc += layers.static[layer_key(lay[0]) if lay[1] else STORED_WINDOW_LAYER["long"]][frame][crop_of] * total
+            out[x.key] = acc
+            continue
         for a_, n in x.windows:
             for layer, wgt in static_window_mix(a_, n, tm)[0].items():  # static time bins, else a stored window
                 acc += layers.static[layer][frame][crop_of] * float(wgt * n)

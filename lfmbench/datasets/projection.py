@@ -33,10 +33,15 @@ import torch
 
 from lfmbench.sensor import optics as _optics
 from lfmbench import sensor as _sensor
-from lfmbench.corpus import (MANIFEST_NAME, SCENES_DIR, Corpus, CorpusFileError, bin_prefix, check_scene_id,
-                             frame_dir, group_storage, sha256_file, static_edges)
+from lfmbench.corpus import (LAYERS_FILE, MANIFEST_NAME, SCENES_DIR, Corpus, CorpusFileError, bin_prefix,
+                             check_scene_id, frame_dir, group_storage, layer_relpath, sha256_file, static_edges)
 from lfmbench.fileio import atomic_torch_save
 from lfmbench.vocabulary import PHOTODIODES
+
+
+def layer_key(name: str) -> str:
+    """The key of static window layer ``name`` among a scene's projected static layers (:class:`SceneLayers`)."""
+    return f"layer:{name}"
 
 #: Version of the cached layout; bump when the projection changes so stale caches are not reused.
 CACHE_VERSION = 2
@@ -190,7 +195,7 @@ def source_files(corpus: Corpus, scene_id: str, groups: Sequence[str], frames: i
                  aux: Sequence[str] = AUX_DEFAULT) -> dict[str, str]:
     """``{relpath: SHA-256 from the manifest}`` of the files :func:`build_layers` reads for these groups and
     the first ``frames`` frames (``meta.json``, one EXR per frame and group, and ``aux.exr`` when ``aux``
-    names channels).
+    names channels; a scene's static window layers, ``window_layers.json`` and each layer's files).
 
     Raises:
         lfmbench.corpus.CorpusFileError: a file the layers need is not in the manifest (names it), e.g.
@@ -199,8 +204,15 @@ def source_files(corpus: Corpus, scene_id: str, groups: Sequence[str], frames: i
     files = corpus.manifest["files"]
     rel0 = f"{SCENES_DIR}/{scene_id}"
     want = [f"{rel0}/meta.json"]
+    timing = corpus.meta(scene_id)["timing"]
+    if "window_layers" in timing:  # static window layers: their list and files (a new layer: a new cache key)
+        want.append(f"{rel0}/{LAYERS_FILE}")
+    wl = [x["name"] for x in timing.get("window_layers", ()) if x["moves"]]
     for f in range(int(frames)):
         want += [f"{rel0}/{frame_dir(f)}/{g}.exr" for g in groups]
+        want += [layer_relpath(scene_id, f, g, n) for n in wl for g in groups
+                 if group_storage(corpus.meta(scene_id), g) == "static"
+                 and not corpus.meta(scene_id)["groups"][g].get("flicker", False)]
         if aux:
             rel = f"{rel0}/{frame_dir(f)}/aux.exr"
             if rel not in files:
@@ -240,6 +252,10 @@ def build_layers(corpus: Corpus, scene_id: str, preset, groups: Sequence[str] | 
     edges = static_edges(meta)  # static time bins (format version 4): projected too, one layer per bin
     if edges is not None:
         static.update({bin_prefix(k, len(edges) - 1): torch.zeros(frames, H, W) for k in range(len(edges) - 1)})
+    # static window layers (lfmbench.corpus.window_layers): projected too, one layer each (a scene where nothing
+    # moves stores none: the long window stands for them)
+    wl = [x["name"] for x in meta["timing"].get("window_layers", ()) if x["moves"]]
+    static.update({layer_key(n): torch.zeros(frames, H, W) for n in wl})
     for f in range(frames):
         per_frame = []
         for g in use:
@@ -250,6 +266,9 @@ def build_layers(corpus: Corpus, scene_id: str, preset, groups: Sequence[str] | 
                     rates = proj.project(bins[k][None])
                     static[bin_prefix(k, bins.shape[0])][f] += rates["lpd"][0]   # the plans' unit photodiode
                 # the split pixel's windows: exact sums of the bins (read_static), as from a version-3 corpus
+            if wl and not flick and group_storage(meta, g) == "static":
+                for n in wl:
+                    static[layer_key(n)][f] += proj.project(corpus.read_static_layer(scene_id, f, g, n)[None])["lpd"][0]
             if group_storage(meta, g) == "static":
                 for pd in PHOTODIODES:
                     L = corpus.read_static(scene_id, f, g, window_of[pd])

@@ -68,27 +68,34 @@ def test_mini_test_split_is_v1_subset():
 
 
 def test_mini_motion_is_mini_with_static_edges():
-    """lfmbench-v1-mini-motion is lfmbench-v1-mini (scenes, storage, PWM draws, every render setting) plus static
-    time bins whose edges make every explicit window of the comparison's presets a union of bins (so their static
-    radiance is exact, lfmbench.datasets.plan_frames.static_window_mix), chopped's sub-windows excepted (stated in
-    the file); v1-mini itself has no edges."""
-    from lfmbench.datasets.plan_frames import static_window_mix
+    """lfmbench-v1-mini-motion (version 2) is lfmbench-v1-mini (scenes, storage, PWM draws, every render setting)
+    plus static time bins whose edges make every explicit window of the comparison's presets a union of bins, and
+    the static window layer ``chopped`` whose windows are exactly the chopped preset's sub-windows: every capture's
+    static radiance is exact (lfmbench.datasets.plan_frames.exposure_static_exact), chopped's through the layer
+    alone; v1-mini itself has neither."""
+    from lfmbench.datasets.plan_frames import exposure_static_exact, exposure_static_layer
     from lfmbench.sensor.preset import load_preset
     from lfmbench.sensor.plan import resolve_windows
 
     mini, mm = P.load_protocol("lfmbench-v1-mini"), P.load_protocol("lfmbench-v1-mini-motion")
+    assert mm.version == 2
     assert mm.scenes == mini.scenes and mm.storage == mini.storage and mm.pwm == mini.pwm
-    assert {k: v for k, v in mm.render.items() if k != "static_edges_s"} == mini.render
-    assert "static_edges_s" not in mini.render and mm.sha256 != mini.sha256
+    assert {k: v for k, v in mm.render.items() if k not in ("static_edges_s", "static_layers")} == mini.render
+    assert "static_edges_s" not in mini.render and "static_layers" not in mini.render and mm.sha256 != mini.sha256
     tl, ts = 1.0 / 90.0, 0.004  # the renderer's T_L; a short window (its ends are edges whatever its length)
     edges = sorted({0.0, (tl - ts) / 2, (tl + ts) / 2, tl, *mm.render["static_edges_s"]})
-    timing = {"short_exposure_s": ts, "long_exposure_s": tl, "static_edges_s": edges}
-    for name in ("ovt", "lofic", "staggered", "single", "imx490_4read", "ox03c10", "ar0132at", "mt9v024",
-                 "lofic_akahane2006", "chopped"):
-        pre = load_preset(name)
-        exact = [static_window_mix(a, n, timing)[1] for c in pre.captures.values()
-                 for a, n in resolve_windows(c.exposure, timing)]
-        assert all(exact) == (name != "chopped"), (name, exact)
+    layers = [dict(x, moves=True) for x in mm.render["static_layers"]]
+    for with_layers in (False, True):
+        timing = {"short_exposure_s": ts, "long_exposure_s": tl, "static_edges_s": edges,
+                  **({"window_layers": layers} if with_layers else {})}
+        for name in ("ovt", "lofic", "staggered", "single", "imx490_4read", "ox03c10", "ar0132at", "mt9v024",
+                     "lofic_akahane2006", "chopped"):
+            pre = load_preset(name)
+            exact = [exposure_static_exact(resolve_windows(c.exposure, timing), timing) for c in pre.captures.values()]
+            assert all(exact) == (name != "chopped" or with_layers), (name, exact, with_layers)
+            if name == "chopped" and with_layers:
+                assert exposure_static_layer(resolve_windows(pre.captures["chopped"].exposure, timing),
+                                             timing) == ("chopped", True)
 
 
 def _entries(names, splits):
@@ -329,3 +336,42 @@ def test_render_protocol_one_split_then_the_rest(tmp_path, fake):
     r = _run("render", "--out", str(tmp_path / "d"), "--split", "test")
     assert r.exit_code == 2 and "--split needs --protocol" in r.output, r.output
     assert not (tmp_path / "d").exists()
+
+
+def test_add_layers_upgrades_a_corpus_without_touching_its_files(tmp_path, fake):
+    """A corpus of version 1 of a protocol gets version 2's static window layer (render.static_layers) by
+    ``--add-layers``: only the layers are rendered, no file it had changes, the manifest then records version 2 (a
+    resume with it skips every scene), and a fresh version-2 render writes the same set of files."""
+    from tests.data.render.data import LAYER_CALLS
+
+    out = tmp_path / "c"
+    assert _run("render", "--protocol", str(write_protocol(tmp_path / "v1.yaml")), "--out", str(out)).exit_code == 0
+    before = {p: (p.stat().st_mtime_ns, p.read_bytes()) for p in (out / "scenes").rglob("*") if p.is_file()}
+    d = tiny_protocol_dict()
+    d["version"] = 2
+    d["render"]["static_layers"] = [{"name": "chopped", "windows_s": [[0.0, 0.0001], [0.00092, 0.0001]]}]
+    v2 = write_protocol(tmp_path / "v2.yaml", d)
+    bad = tiny_protocol_dict()
+    bad["version"], bad["render"]["spp"] = 2, 4
+    LAYER_CALLS.clear()
+    r = _run("render", "--protocol", str(write_protocol(tmp_path / "bad.yaml", bad)), "--out", str(out),
+             "--add-layers")
+    assert r.exit_code == 2 and "other settings than" in r.output and "spp" in r.output, r.output
+    assert not LAYER_CALLS and not list(out.rglob("*.layer_*"))
+    r = _run("render", "--protocol", str(v2), "--out", str(out), "--add-layers")
+    assert r.exit_code == 0 and "3 scene(s) got static window layers" in r.output, r.output
+    assert sorted(LAYER_CALLS) == [("te_a", "chopped"), ("tr_a", "chopped"), ("va_a", "chopped")]
+    assert {p: (p.stat().st_mtime_ns, p.read_bytes()) for p in before} == before
+    assert C.validate_corpus(out).ok
+    man = json.loads((out / "manifest.json").read_text())
+    assert man["render"]["protocol"]["version"] == 2
+    layer_files = sorted(p.relative_to(out).as_posix() for p in out.rglob("*.layer_chopped.exr"))
+    assert layer_files and all(f in man["files"] for f in layer_files)
+    assert C.Corpus(out).meta("te_a")["timing"]["window_layers"][0]["name"] == "chopped"
+    r = _run("render", "--protocol", str(v2), "--out", str(out))
+    assert r.exit_code == 0 and "3 skipped" in r.output, r.output
+    r = _run("render", "--protocol", str(v2), "--out", str(out), "--add-layers")   # nothing missing: no render
+    assert r.exit_code == 0 and "0 scene(s)" in r.output and len(LAYER_CALLS) == 3, r.output
+    fresh = tmp_path / "fresh"
+    assert _run("render", "--protocol", str(v2), "--out", str(fresh)).exit_code == 0
+    assert sorted(p.relative_to(fresh).as_posix() for p in fresh.rglob("*.layer_chopped.exr")) == layer_files

@@ -49,11 +49,27 @@ def fake_render_frames(scene, opts):
         yield {"frame": n, "static": static, "lights": lights, "aux": aux}
 
 
+LAYER_CALLS: list[tuple[str, str]] = []
+
+
+def fake_render_layer(scene, opts, layer):
+    """Static window layer frames with the shapes ``render_tools.static_layers.render_layer`` yields: seeded random
+    radiance per static group."""
+    from render_tools.render import scene_meta
+
+    LAYER_CALLS.append((scene["scene_id"], layer[0]))
+    meta = scene_meta(scene, opts)
+    rng = np.random.default_rng(opts.seed + 7)
+    for n in range(opts.frames):
+        yield {"frame": n, "static": {g: rng.random((len(opts.bands_nm), opts.height, opts.width)).astype(np.float32)
+                                      for g, v in meta["groups"].items() if not v["flicker"]}}
+
+
 def fake_backend():
     from render_tools import render, scene
 
     return J.Backend(scene.generate_scene, render.RenderOptions, render.scene_meta, fake_render_frames,
-                     scene.validate_scene)
+                     scene.validate_scene, fake_render_layer)
 
 
 ARGS = ["--width", "24", "--height", "16", "--spp", "2", "--frames", "2", "--bins", "2", "--profile", "small"]
