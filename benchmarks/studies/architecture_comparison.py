@@ -27,7 +27,8 @@ The earlier comparison on the 640x360 ``lfmbench-v1`` test split (static windows
 
     lfmbench render --protocol lfmbench-v1 --split test --out v1 --workers 1
     python benchmarks/studies/architecture_comparison.py --corpus v1 --runs runs/arch_v1 --samples-per-scene 2 \
-        --sensor ovt --sensor lofic --sensor staggered --sensor chopped --sensor single --unet ovt=runs/unet_ovt.pt ...
+        --static-windows nearest --sensor ovt --sensor lofic --sensor staggered --sensor chopped --sensor single \
+        --unet ovt=runs/unet_ovt.pt ...
 
 One :func:`lfmbench.evaluation.benchmark.benchmark_sensors` call: per sensor its methods share each simulated
 sample (runs in ``--runs/<sensor>/``), then one cross-sensor leaderboard (``--runs/leaderboard.{md,json,png}``);
@@ -224,6 +225,10 @@ def main() -> None:
     ap.add_argument("--samples-per-scene", type=int, default=2, help="frozen PWM draws per test scene")
     ap.add_argument("--max-scenes", type=int, default=None, help="score the first N scenes of the split")
     ap.add_argument("--tables-only", action="store_true", help="only rewrite --runs/tables.md from its leaderboard")
+    ap.add_argument("--static-windows", choices=["exact", "nearest"], default="exact",
+                    help="exact (default): a sensor whose windows the corpus's static bins and layers do not give "
+                         "exactly is refused before any work; nearest: the named approximation (a corpus without "
+                         "bins, e.g. lfmbench-v1)")
     ap.add_argument("--sensor", action="append", default=[], choices=list(METHODS),
                     help="only these sensors (repeatable; default all): parts run in parallel, ranked together by "
                          "lfmbench leaderboard RUNS/*/*.json --cross-sensor")
@@ -264,7 +269,8 @@ def main() -> None:
     try:
         benchmark_sensors(a.corpus, sensors, a.runs, checkpoints={s: {"unet": p} for s, p in unets.items()},
                           split="test", seed=0, perceptual=False, repeats=1, isp=None,
-                          samples_per_scene=a.samples_per_scene, max_scenes=a.max_scenes, progress=False)
+                          samples_per_scene=a.samples_per_scene, max_scenes=a.max_scenes, progress=False,
+                          static_windows=a.static_windows)
     except ValueError as exc:
         ap.error(str(exc))
     print(f"evaluation took {time.perf_counter() - t:.0f} s")

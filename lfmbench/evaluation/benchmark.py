@@ -151,7 +151,7 @@ def benchmark(corpus: str | Path, methods: Iterable[str] | None = None, runs_dir
               perceptual: bool = True, repeats: int = 5, device: str = "cpu", sort_by: str | None = None,
               progress: bool = True, samples_per_scene: int = 1, cache_dir: str | Path | None = None,
               frames: int = 3, sensor: Any = "ovt", share_samples: bool = True, isp: str | None = "default",
-              simulate: str = "host", reference: str = "own") -> list[dict]:
+              simulate: str = "host", reference: str = "own", static_windows: str = "nearest") -> list[dict]:
     """Evaluate several methods on one corpus split and build the leaderboard.
 
     Writes ``runs_dir/<method>.json`` per method, ``runs_dir/leaderboard.md``, ``leaderboard.json`` and
@@ -169,7 +169,9 @@ def benchmark(corpus: str | Path, methods: Iterable[str] | None = None, runs_dir
     ``"host"`` (the published results' generator noise) or ``"device"`` (the device program on ``device``, counter
     noise; :data:`SIMULATE`). ``reference``: ``"own"`` (every column against the sensor's own ``gt``) or
     ``"common"`` (the cross-sensor columns against ``gt_common``, the one truth of every sensor;
-    :data:`lfmbench.metrics.scoring.REFERENCES`; host only).
+    :data:`lfmbench.metrics.scoring.REFERENCES`; host only). ``static_windows``: how a capture window the corpus
+    does not store for its static groups is served (:class:`~lfmbench.datasets.LFMCaptureDataset`): ``"nearest"``
+    (the named approximation) or ``"exact"`` (such a sensor is refused before any work; a published comparison).
     """
     from lfmbench.baselines import methods_for
     from lfmbench.evaluation.leaderboard import check_comparable, leaderboard_rows, load_runs, print_leaderboard
@@ -177,7 +179,8 @@ def benchmark(corpus: str | Path, methods: Iterable[str] | None = None, runs_dir
     from lfmbench.metrics import ScoreOptions
 
     runs_dir = Path(runs_dir)
-    extra = {"frames": frames, "sensor": sensor, "noise_streams": SIMULATE[check_simulate(simulate)]}
+    extra = {"frames": frames, "sensor": sensor, "noise_streams": SIMULATE[check_simulate(simulate)],
+             "static_windows": static_windows}
     if cache_dir is not None:
         extra["cache_dir"] = cache_dir
     ds, ident, cond = corpus_run_inputs(corpus, split, seed, crop, samples_per_scene, reference, **extra)

@@ -72,3 +72,13 @@ def test_max_scenes_counts_scenes_with_all_their_draws(tmp_path):
     # more scenes than the split holds: every sample, once
     benchmark_sensors(corpus, {"ovt": ["lpd_only"]}, tmp_path / "all", samples_per_scene=2, max_scenes=9, **KW)
     assert len(json.loads((tmp_path / "all" / "ovt" / "lpd_only.json").read_text())["scenes"]) == 6
+
+
+def test_exact_static_windows_refuse_a_sensor_the_corpus_cannot_serve_before_any_work(tmp_path):
+    """A published comparison asks for ``static_windows="exact"``: a sensor whose windows the corpus's static bins
+    and layers do not give (here the staggered plan on a corpus without bins) is refused naming preset and field,
+    and no run folder is written (``nearest``, the default, scores it: the other tests of this file)."""
+    corpus = make_led_corpus(tmp_path / "corpus", n_scenes=1)
+    with pytest.raises(ValueError, match=r"staggered\.yaml: field 'captures\.long\.exposure'.*static_windows"):
+        benchmark_sensors(corpus, {"staggered": ["exposure_select"]}, tmp_path / "r", static_windows="exact", **KW)
+    assert not (tmp_path / "r" / "staggered").exists()
