@@ -21,9 +21,10 @@ by the pose at ``t``, so one render integrates the blur over the shutter interva
 averaging sub-frames. The integrator's own ray time is the *fraction* of the bin (Mitsuba shutter [0, 1], or
 [0, 0] for an instant): Mitsuba writes the shutter length into the kernel as a literal, so a shutter of
 ``bin_len`` s compiled one kernel per window length; the fraction times ``bin_len`` (an opaque value) lets
-every window length share one kernel, with the same float32 product ``u * bin_len`` as before. It renders an *atlas*: K time bins of a
-crop side by side along x and the ceil(C / 4) band passes along y; in pass p the 4 wavelengths of a sample
-lie one in each of bands p + j * ceil(C / 4) (no random band counts: see docs/guide/rendering.md).
+every window length share one kernel (the same float32 product ``u * bin_len``; images within 1 ulp of the
+literal's). It renders an *atlas*: K time bins of a crop side by side along x and the ceil(C / 4) band passes
+along y; in pass p the 4 wavelengths of a sample lie one in each of bands p + j * ceil(C / 4) (no random band
+counts: see docs/guide/rendering.md).
 """
 from __future__ import annotations
 
