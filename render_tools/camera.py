@@ -16,11 +16,15 @@ written to ``meta.json`` use the OpenCV convention (x right, y down, z forward),
 ``u ~ K R^T (X - C)``.
 
 :class:`MotionCamera` is a small ``mi.Sensor`` subclass wrapping a ``perspective`` sensor placed at the
-origin: each ray sampled at time ``t`` (drawn by the integrator uniformly in [shutter_open,
-shutter_open + shutter_open_time], s) is moved by the pose at ``t``, so one render integrates the blur over
-the shutter interval continuously instead of averaging sub-frames. It renders an *atlas*: K time bins of a
-crop side by side along x and the ceil(C / 4) band passes along y; in pass p the 4 wavelengths of a sample
-lie one in each of bands p + j * ceil(C / 4) (no random band counts: see docs/guide/rendering.md).
+origin: each ray sampled at time ``t`` (drawn by the integrator uniformly in a bin of ``bin_len`` s) is moved
+by the pose at ``t``, so one render integrates the blur over the shutter interval continuously instead of
+averaging sub-frames. The integrator's own ray time is the *fraction* of the bin (Mitsuba shutter [0, 1], or
+[0, 0] for an instant): Mitsuba writes the shutter length into the kernel as a literal, so a shutter of
+``bin_len`` s compiled one kernel per window length; the fraction times ``bin_len`` (an opaque value) lets
+every window length share one kernel (the same float32 product ``u * bin_len``; images within 1 ulp of the
+literal's). It renders an *atlas*: K time bins of a crop side by side along x and the ceil(C / 4) band passes
+along y; in pass p the 4 wavelengths of a sample lie one in each of bands p + j * ceil(C / 4) (no random band
+counts: see docs/guide/rendering.md).
 """
 from __future__ import annotations
 
@@ -178,7 +182,8 @@ def _make_class(mi):
         wavelength sampling (see module docstring).
 
         Properties: ``fov`` (deg, horizontal), ``px, py, pz`` (m), ``yaw0`` (rad), ``pitch`` (rad),
-        ``speed`` (m/s), ``yaw_rate`` (rad/s), ``shutter_open`` (s), ``shutter_close`` (s), ``film``,
+        ``speed`` (m/s), ``yaw_rate`` (rad/s), ``shutter_open`` (0), ``shutter_close`` (1, or 0 for
+        ``bin_len`` 0: the integrator's ray time is the fraction of a bin), ``film``,
         ``t_start`` (s, added to every ray time: the pose at ray time t is the pose at t_start + t),
         ``band_lo`` (comma-separated lower band edges, nm), ``band_width`` (nm), ``full_width`` /
         ``full_height`` (px), ``crop_x, crop_y, crop_w, crop_h`` (px), ``bin_len`` (s), ``tiles_x`` (bins),
@@ -218,6 +223,10 @@ def _make_class(mi):
             # Opaque JIT variables: crop, window and band pass change per render without recompiling.
             self.t_start = opaque(props.get("t_start", 0.0))
             self.bin_len = opaque(props.get("bin_len", 0.0))
+            if self.shutter_open() != 0.0 or self.shutter_open_time() not in (0.0, 1.0):
+                raise ValueError(f"shutter_open, shutter_close: must be 0 and 1 (or 0 and 0), the ray time being the "
+                                 f"fraction of a bin, got {self.shutter_open()}, "
+                                 f"{self.shutter_open() + self.shutter_open_time()}")
             self.crop = [opaque(props.get(k, d)) for k, d in (("crop_x", 0.0), ("crop_y", 0.0),
                                                                ("crop_w", float(self.full_w)),
                                                                ("crop_h", float(self.full_h)))]
@@ -286,13 +295,13 @@ def _make_class(mi):
 
         def _atlas(self, time, sample2):
             """Atlas tile (bin k along x, band pass p along y) -> position sample on the full image and the
-            absolute time t_start + k * bin_len + time."""
+            absolute time t_start + k * bin_len + time * bin_len (``time``: the fraction of the bin, in [0, 1))."""
             X = sample2.x * self.tiles_x
             Y = sample2.y * self.tiles_y
             k, p = dr.floor(X), dr.floor(Y)
             pos = mi.Point2f((self.crop[0] + (X - k) * self.crop[2]) / self.full_w,
                              (self.crop[1] + (Y - p) * self.crop[3]) / self.full_h)
-            return pos, self.t_start + k * self.bin_len + time, mi.UInt32(p)
+            return pos, self.t_start + k * self.bin_len + time * self.bin_len, mi.UInt32(p)
 
         def _moved_ray(self, inner_sample, time, sample1, sample2, sample3, active):
             """Sample the inner camera at the atlas position, set the spectral weights, and move the ray into the
@@ -368,7 +377,8 @@ def sensor_dict(ego: EgoMotion, fov_x_deg: float, film: dict, full_size: tuple[i
     d = {"type": PLUGIN_NAME, "fov": float(fov_x_deg), "px": float(ego.p0[0]), "py": float(ego.p0[1]),
          "pz": float(ego.p0[2]), "yaw0": float(ego.yaw0_rad), "pitch": float(ego.pitch_rad),
          "speed": float(ego.speed_mps), "yaw_rate": float(ego.yaw_rate_rad_s), "film": film,
-         "sampler": sampler or {"type": DEFAULT_SAMPLER}, "shutter_open": 0.0, "shutter_close": float(bin_len),
+         "sampler": sampler or {"type": DEFAULT_SAMPLER},
+         "shutter_open": 0.0, "shutter_close": 1.0 if bin_len > 0 else 0.0,  # ray time: fraction of a bin
          "t_start": float(t_start), "bin_len": float(bin_len), "full_width": W, "full_height": H,
          "crop_x": float(x0), "crop_y": float(y0), "crop_w": float(x1 - x0), "crop_h": float(y1 - y0),
          "tiles_x": int(bins), "tiles_y": 1, "obj_vx": v_obj[0], "obj_vy": v_obj[1], "obj_vz": v_obj[2],

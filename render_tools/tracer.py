@@ -112,6 +112,11 @@ def pad_registry(mi, dr, loaded, bsdf) -> list:
     bit; tests/render_tools/test_render_tracer.py). Each kind gets at least one dummy of a fixed type (a ``spot`` emitter of the
     beams' spectrum type, a one-triangle mesh with ``bsdf``, a ``diffuse`` BSDF), so the set of object types, which
     also enters the kernel, does not depend on whether a scene happens to fill its class or has beams.
+
+    The first dummy mesh has a BSDF of its own (a ``diffuse``, made before the BSDF ids are counted), the others
+    ``bsdf``: the shapes' BSDFs then never all agree. Where they did (a scene whose every shape has one BSDF, as
+    small test scenes), Dr.Jit wrote that BSDF's id into the kernel as a literal (its calls fold a value that all
+    instances share), a kernel of its own for such scenes.
     ``loaded``: the frame's ``mi.Scene``; ``bsdf``: a BSDF of the scene for the dummy meshes. Returns the dummies:
     keep them alive while the frame's kernels are traced; freeing them frees their ids.
     """
@@ -119,14 +124,21 @@ def pad_registry(mi, dr, loaded, bsdf) -> list:
         return registry_id(mi, dr, ptr_type, obj)
 
     shapes = list(loaded.shapes())
-    bsdfs = {rid(mi.BSDFPtr, b): b for b in [sh.bsdf() for sh in shapes] + [bsdf] if b is not None}
+    own = mi.load_dict({"type": "diffuse"})  # the first dummy mesh's BSDF, counted with the scene's
+    bsdfs = {rid(mi.BSDFPtr, b): b for b in [sh.bsdf() for sh in shapes] + [bsdf, own] if b is not None}
+    meshes = []
+
+    def mesh():
+        meshes.append(_dummy_mesh(mi, bsdf if meshes else own))
+        return meshes[-1]
+
     kinds = (  # emitters first: none of the later dummies registers an emitter, and meshes need no new BSDF
         ("emitter", mi.EmitterPtr, [rid(mi.EmitterPtr, e) for e in loaded.emitters()],
          lambda: mi.load_dict(ms.pad_emitter_dict())),
-        ("shape", mi.ShapePtr, [rid(mi.ShapePtr, sh) for sh in shapes], lambda: _dummy_mesh(mi, bsdf)),
+        ("shape", mi.ShapePtr, [rid(mi.ShapePtr, sh) for sh in shapes], mesh),
         ("bsdf", mi.BSDFPtr, list(bsdfs), lambda: mi.load_dict({"type": "diffuse"})),
     )
-    dummies = []
+    dummies = [own]
     for kind, ptr_type, ids, make in kinds:
         target = registry_class(max(ids, default=0) + 1, kind)
         while True:  # Dr.Jit hands out the lowest free id: the holes fill first, then the ids up to the target

@@ -46,6 +46,55 @@ def torch_threads_per_worker(environ=os.environ) -> int | None:
     return max(1, cores // max(1, int(workers)))
 
 
+def collected_test_files(config) -> list[Path]:
+    """The test modules (``python_files`` patterns) under the run's path arguments, sorted: what collection will
+    import. Arguments naming a test (``file.py::test``) count as their file."""
+    import fnmatch
+
+    pats = config.getini("python_files")
+    files = set()
+    for arg in config.args:
+        p = Path(config.invocation_params.dir, arg.split("::", 1)[0]).resolve()
+        found = p.rglob("*.py") if p.is_dir() else [p] if p.suffix == ".py" else []
+        files.update(f for f in found if any(fnmatch.fnmatch(f.name, pat) for pat in pats))
+    return sorted(files)
+
+
+def share_assert_rewriting(config, environ=os.environ) -> int:
+    """Rewrite the asserts of this pytest-xdist worker's share of the test modules into pytest's pyc cache before
+    collection; returns how many it rewrote (0 outside xdist, with ``--assert=plain``, without bytecode writing).
+
+    Why: every xdist worker collects every test module and, on a fresh clone (no cached rewritten pycs), rewrites
+    the asserts of all of them at once with the other worker: 7.1 s of CPU each for this suite's 112 modules (2,735
+    asserts; pytest's AST rewrite, measured 2026-11-28), twice over. Worker k of n rewrites modules k, k + n, ...
+    first, so by collection each finds the others' pycs written (pytest reads them as it reads its own; a module
+    not yet written is rewritten as before). The rewriting is pytest's own (``_pytest.assertion.rewrite``, the
+    steps of its import hook): assertion messages are unchanged. Its private functions may change with pytest:
+    then this does nothing and collection rewrites every module itself, as it did."""
+    worker, count = environ.get("PYTEST_XDIST_WORKER", ""), environ.get("PYTEST_XDIST_WORKER_COUNT", "")
+    if not worker.startswith("gw") or not count.isdigit() or int(count) < 2 or sys.dont_write_bytecode:
+        return 0
+    if getattr(config.option, "assertmode", "rewrite") != "rewrite":
+        return 0
+    try:
+        from _pytest.assertion import rewrite as rw
+
+        state = config.stash[rw.assertstate_key]
+        done = 0
+        for fn in collected_test_files(config)[int(worker[2:])::int(count)]:
+            cache = rw.get_cache_dir(fn)
+            pyc = cache / (fn.name[:-3] + rw.PYC_TAIL)
+            if not rw.try_makedirs(cache):
+                return done
+            if rw._read_pyc(fn, pyc, state.trace) is None:
+                source_hash, co = rw._rewrite_test(fn, config)
+                rw._write_pyc(state, co, source_hash, pyc)
+                done += 1
+        return done
+    except Exception:  # noqa: BLE001 - a cache warm-up only: collection rewrites whatever is missing
+        return 0
+
+
 def pytest_configure(config):
     config.addinivalue_line("markers", "jit: renders with Mitsuba's JIT back end (skipped, with one line saying "
                                        "why, where no libLLVM 19 works; never skipped in CI)")
@@ -54,6 +103,7 @@ def pytest_configure(config):
         import torch
 
         torch.set_num_threads(threads)
+    share_assert_rewriting(config)
 
 
 def pytest_runtest_setup(item):

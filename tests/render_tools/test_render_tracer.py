@@ -26,14 +26,24 @@ def test_static_group_matches_mitsuba_path_integrator(street):
 
     from render_tools import mitsuba_scene as ms
 
+    import drjit as dr
+
     s, opts, fr = street
     ref = reference.ReferenceRenderer(s, opts)
     tm = render.frame_timing(s, opts, 0)
     t_obj = 0.5 * (tm["window"][0] + tm["window"][1])
     sc = mi.load_dict(ms.mitsuba_dict(s, t_obj, emit="streetlights"))
+    kernels = []
     for win in ("short", "long"):
         a, b = tm[win]
-        want = ref.render(sc, a, b - a, 32, 11)[0]
+        dr.kernel_history()  # empties the history
+        dr.set_flag(dr.JitFlag.KernelHistory, True)
+        try:
+            want = ref.render(sc, a, b - a, 32, 11)[0]
+            ks = [k for k in dr.kernel_history() if k.get("type") == dr.KernelType.JIT]
+        finally:
+            dr.set_flag(dr.JitFlag.KernelHistory, False)
+        kernels.append(max(ks, key=lambda k: k["operation_count"])["hash"])
         got = fr["static"]["streetlights"][win]
         # the directly seen lamp covers a few pixels partly (its pixel sums carry a few % of coverage noise);
         # the ground and wall it lights are smooth: compare them tightly, per band (the HPS spectrum's shape)
@@ -46,6 +56,8 @@ def test_static_group_matches_mitsuba_path_integrator(street):
         big = wb > 0.05 * wb.max()
         assert np.allclose(gb[big], wb[big], rtol=0.05)
         assert got.sum() == pytest.approx(want.sum(), rel=0.1)
+    # the window length is kernel data (camera.MotionCamera), not a literal: both windows ran one kernel
+    assert kernels[0] == kernels[1], "the reference camera compiled a kernel per window length"
 
 
 @pytest.mark.jit
