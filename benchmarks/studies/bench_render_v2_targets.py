@@ -191,7 +191,8 @@ def main() -> None:
     from render_tools import render  # noqa: PLC0415
 
     ap = argparse.ArgumentParser()
-    ap.add_argument("--cases", nargs="+", default=list(CASES), help="seed:time of day:weather (generator 2)")
+    ap.add_argument("--cases", nargs="*", default=list(CASES),
+                    help="seed:time of day:weather (generator 2), rendered whole")
     ap.add_argument("--lamp-cases", nargs="*", default=list(LAMP_CASES),
                     help="cases rendered first with the flickering groups alone (LED bins only)")
     ap.add_argument("--gap-cases", nargs="*", default=list(GAP_CASES),
