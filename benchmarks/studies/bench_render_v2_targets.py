@@ -9,8 +9,9 @@ rendered with the flickering groups alone (``--lamp-cases``: the LED bins, a ten
 the cases of ``--cases`` whole (every measure below). Each case renders frame 0 of the
 generator-2 scene at 640x360 with the ``default`` profile (render_tools/configs/render_profiles.yaml; every other
 field at its :class:`render_tools.render.RenderOptions` default, seed 11) and two references of other seeds
-(:data:`REF_SEEDS`), all groups in one render: spp :data:`REF_SPP` (static full frames, a lamp's pad ring, a wet road's
-reflections; spp 1 when the flickering groups are rendered alone, whose lamp boxes alone are measured), light_spp :data:`REF_LIGHT_SPP` (every lamp's own box, static and flickering), the LED dots as they are
+(:data:`REF_SEEDS`), all groups in one render: spp :data:`REF_SPP` (static full frames, a lamp's pad ring, a wet
+road's reflections; spp 1 when the flickering groups are rendered alone, whose lamp boxes alone are measured),
+light_spp :data:`REF_LIGHT_SPP` (every lamp's own box, static and flickering), the LED dots as they are
 (``dots_lod_px`` 0), nothing denoised, a wet road's reflections traced per pixel (``reflection_block_px`` 1; their
 time bins and light-level cut-off as the default: ``reflection_bins`` 1 and ``reflection_min_lux`` 2e-3, whose own
 error was measured apart in "Scene generator 2" and "Light left out by the reflection cut-off").
@@ -132,7 +133,8 @@ def led_error_boxed(frame: dict, ref_a: dict, ref_b: dict, kinds: dict, boxes: d
     5 % of its maximum *inside the light's own box* ``boxes[id]`` (y0, x0, y1, x1 px; the crop's pad ring and a wet
     road's reflection are not LED pixels: their light, traced at spp, can exceed 5 % of an unlit face's, e.g. a
     billboard seen from behind). ``kinds``: light id -> kind. Returns {"all" or kind: (error, share of the pooled
-    squared error)}; lights without a box or a lit pixel add nothing. Crops: ``frame["lights"][group]`` = [(id, (y0, x0, y1, x1), (K, C, h, w))]."""
+    squared error)}; lights without a box or a lit pixel add nothing. Crops: ``frame["lights"][group]`` =
+    [(id, (y0, x0, y1, x1), (K, C, h, w))]."""
     T, A, B = ({lid: (bb, b) for items in f["lights"].values() for lid, bb, b in items}
                for f in (frame, ref_a, ref_b))
     acc: dict = {}
@@ -259,8 +261,8 @@ def write_section(rows: list, out: Path, load0: float, load1: float, size, ref, 
              "`(lamps)`: the flickering groups rendered alone (references at spp 1, light_spp as above; CPU: the lamp "
              "crops): LED bins only. LED bins "
              "(every flickering light's LED pixels inside its own box, all bins) and LED px (the short composite over "
-             "the references' light mask): relative RMSE corrected for the references' noise; median: all-pixel median relative "
-             "error of the short window, corrected in quadrature for the references' own median error (raw: upper "
+             "the references' light mask): relative RMSE corrected for the references' noise; median: all-pixel "
+             "median relative error of the short window, corrected in quadrature for the references' own median error (raw: upper "
              "bound; ref: the references' mean's own). Targets (issue 23): LED pixels <= 2 % (both LED columns), "
              "all-pixel median <= 10 % (`met (corrected)`: only the corrected median is under it). CPU: user + "
              "system s of the frame in the process (reference: both references).", "",
