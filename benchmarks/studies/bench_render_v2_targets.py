@@ -263,7 +263,8 @@ def write_section(rows: list, out: Path, load0: float, load1: float, size, ref, 
              "(every flickering light's LED pixels inside its own box, all bins) and LED px (the short composite over "
              "the references' light mask): relative RMSE corrected for the references' noise; median: all-pixel "
              "median relative error of the short window, corrected in quadrature for the references' own median "
-             "error (raw: upper bound; ref: the references' mean's own). Targets (issue 23): LED pixels <= 2 % (both LED columns), "
+             "error (raw: upper bound; ref: the references' mean's own). Targets (issue 23): LED pixels <= 2 % "
+             "(both LED columns), "
              "all-pixel median <= 10 % (`met (corrected)`: only the corrected median is under it). CPU: user + "
              "system s of the frame in the process (reference: both references).", "",
              "| scene (seed:time:weather) | setting | CPU s / frame (references) | LED bins | LED px (short) | "
