@@ -56,6 +56,9 @@ version 2's default), against two references of different seeds (light_spp :data
 at light_spp): the LED bins as above and the whole crops (every pixel of every light's bins, the ring included),
 both corrected for the references' noise, with the ring's share of the crops' light and the lamp crops' CPU.
 
+The error targets on every time of day and weather, against references that draw the LED dots as they are:
+:mod:`bench_render_v2_targets` (issue 40; it uses this module's helpers).
+
 Usage: ``python benchmarks/studies/bench_render_v2_error.py [--cases 202:day:dry 101:night:dry 101:night:wet]
 [--cache DIR] [--quick] [--led | --pixel-samples | --pad-samples] [--static-spp 2]``.
 """

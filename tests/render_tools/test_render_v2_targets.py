@@ -1,0 +1,61 @@
+"""The error measures of benchmarks/studies/bench_render_v2_targets.py (issue 40): noise-corrected relative RMSE
+and median against two references, the LED pixels taken inside a light's own box. Checked against the errors
+computed from the known truth the references are noisy draws of."""
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+
+BENCH = Path(__file__).resolve().parents[2] / "benchmarks"
+sys.path[:0] = [str(BENCH / "studies"), str(BENCH)]
+import bench_render_v2_targets as T  # noqa: E402
+
+
+def test_corrected_rel_rmse_removes_the_references_noise():
+    rng = np.random.default_rng(0)
+    truth = rng.uniform(1.0, 2.0, 200_000)
+    t = truth * 1.01 + 0.03 * rng.standard_normal(truth.size)  # 1 % bias and noise
+    a, b = (truth + 0.05 * rng.standard_normal(truth.size) for _ in range(2))  # noisier than t
+    true = np.sqrt(np.sum((t - truth) ** 2) / np.sum(truth ** 2))
+    naive = np.sqrt(np.sum((t - 0.5 * (a + b)) ** 2) / np.sum((0.5 * (a + b)) ** 2))
+    assert naive > 1.3 * true  # the references' noise would be counted as the setting's error
+    assert T.corrected_rel_rmse(t, a, b) == pytest.approx(true, rel=0.03)
+
+
+def test_median_corrected_matches_the_median_against_the_truth():
+    rng = np.random.default_rng(1)
+    truth = rng.uniform(0.1, 10.0, 200_000)  # errors relative to the pixel's value, as a render's
+    t = truth * (1 + 0.05 * rng.standard_normal(truth.size))
+    a, b = (truth * (1 + 0.06 * rng.standard_normal(truth.size)) for _ in range(2))
+    raw, r, corrected = T.median_corrected(t, a, b)
+    true = np.median(np.abs(t - truth) / truth)  # 0.05 x 0.674
+    assert raw > 1.15 * true
+    assert r == pytest.approx(0.06 / np.sqrt(2) * 0.6745, rel=0.03)  # the mean's own median error
+    assert corrected == pytest.approx(true, rel=0.03)
+
+
+def _frame(crop: np.ndarray) -> dict:
+    return {"lights": {"otherlights": [(7, (10, 20, 10 + crop.shape[2], 20 + crop.shape[3]), crop)]}}
+
+
+def test_led_error_boxed_counts_only_the_lights_own_box():
+    ref = np.zeros((2, 31, 4, 6))
+    ref[:, :, 0:2, 0:2] = 1.0  # the lamp's face: rows 10-11, columns 20-21 of the frame
+    ref[:, :, 3, 3:6] = 5.0  # brighter light outside the face (a reflection, a lit wall)
+    boxes, kinds = {7: (10, 20, 12, 22)}, {7: "tail"}
+    off_face = ref.copy()
+    off_face[:, :, 3, 3:6] = 0.0  # wrong outside the box only
+    err = T.led_error_boxed(_frame(off_face), _frame(ref), _frame(ref), kinds, boxes)
+    assert err["all"][0] == err["tail"][0] == 0.0
+    dim = ref.copy()
+    dim[:, :, 0:2, 0:2] = 0.9  # the face 10 % too dark
+    err = T.led_error_boxed(_frame(dim), _frame(ref), _frame(ref), kinds, boxes)
+    assert err["all"] == pytest.approx((0.1, 1.0)) and err["tail"] == pytest.approx((0.1, 1.0))
+
+
+def test_verdict():
+    assert T.verdict(0.015, 0.019, 0.08, 0.12) == "LED met, median met (corrected)"
+    assert T.verdict(0.015, 0.021, 0.11, 0.12) == "LED missed, median missed"
+    assert T.verdict(0.01, 0.01, 0.05, 0.09) == "LED met, median met"
