@@ -138,7 +138,16 @@ def check_vector(value: Any, field: str, source: str | None = None, n: int = 3, 
     """A list (or tuple) of ``n`` finite numbers within ``[lo, hi]``; each error names the element."""
     if not isinstance(value, (list, tuple)) or len(value) != n:
         fail(field, f"must be a list of {n} numbers, got {brief(value)}", source)
-    return [check_number(x, f"{field}[{i}]", source, lo=lo, hi=hi) for i, x in enumerate(value)]
+    # Fast path for the common case (plain finite floats / ints within the bounds: a scene has ~10^5 of them); any
+    # other element takes the per-element path below, which names it (the same result, the same errors).
+    lo_, hi_ = (-math.inf if lo is None else lo), (math.inf if hi is None else hi)
+    out = []
+    for x in value:
+        t = type(x)
+        if not ((t is float or t is int) and lo_ <= x <= hi_ and -math.inf < x < math.inf):
+            return [check_number(x, f"{field}[{i}]", source, lo=lo, hi=hi) for i, x in enumerate(value)]
+        out.append(float(x))
+    return out
 
 
 def check_keys(data: Any, field: str, source: str | None = None, *, required: Iterable[str] = (),

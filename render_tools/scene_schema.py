@@ -18,6 +18,8 @@ Functions
 """
 from __future__ import annotations
 
+import math
+
 import os
 from typing import Any
 
@@ -63,9 +65,10 @@ MAX_COORD_M = 1.0e4
 
 
 # ------------------------------------------------------------------------------------------- validation
-def _unit(v, path):
-    x = np.array(check_vector(v, path, n=3, lo=-1e3, hi=1e3))
-    if np.linalg.norm(x) < 1e-6:
+def _unit(v, path) -> list[float]:
+    """A non-zero direction (3 numbers in [-1e3, 1e3]); its length is not checked further (normalised on use)."""
+    x = check_vector(v, path, n=3, lo=-1e3, hi=1e3)
+    if math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2]) < 1e-6:
         fail(path, "normal must be non-zero")
     return x
 
@@ -150,16 +153,20 @@ def _light_timing(lt, path) -> None:
              f"(allowed: {[a for a in allowed if a]})")
 
 
+_TURN = ("yaw_deg", "pitch_deg", "roll_deg")
+#: Per shape: its required geometry fields and its optional ones.
+_SHAPE_FIELDS = {"box": (("center", "size"), _TURN), "cylinder": (("p0", "p1", "radius"), ()),
+                 "rect": (("center", "size", "normal"), ()), "disk": (("center", "radius", "normal"), ()),
+                 "sphere": (("center", "radius"), ()), "mesh": (("mesh", "center"), _TURN + ("scale",)),
+                 "dots": (("center", "size", "normal", "grid", "dot", "cells"), ())}
+
+
 def _part_or_light_shape(p, path, extra_req, extra_opt, materials=None, meshes=None):
     shape = p.get("shape") if isinstance(p, dict) else None
     allowed = PART_SHAPES if materials is not None else LIGHT_SHAPES
     if shape not in allowed:
         fail(f"{path}.shape", f"{brief(shape)} not one of {allowed}")
-    turn = ("yaw_deg", "pitch_deg", "roll_deg")
-    geo = {"box": (("center", "size"), turn), "cylinder": (("p0", "p1", "radius"), ()),
-           "rect": (("center", "size", "normal"), ()), "disk": (("center", "radius", "normal"), ()),
-           "sphere": (("center", "radius"), ()), "mesh": (("mesh", "center"), turn + ("scale",)),
-           "dots": (("center", "size", "normal", "grid", "dot", "cells"), ())}[shape]
+    geo = _SHAPE_FIELDS[shape]
     check_keys(p, path, required=("shape",) + geo[0] + extra_req, optional=geo[1] + extra_opt)
     for k in ("center", "p0", "p1"):
         if k in p:

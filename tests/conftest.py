@@ -95,6 +95,16 @@ def share_assert_rewriting(config, environ=os.environ) -> int:
         return 0
 
 
+def pytest_collection_modifyitems(config, items):
+    """Modules with long tests first (a test marked ``slow`` or ``jit``: renders that compile kernels), each module's
+    tests kept together and in order (module-scoped fixtures are set up once). pytest-xdist's load scheduling hands
+    tests out in collection order, and the long render tests of tests/render_tools and tests/test_hostile_input_3
+    came last, so one of the two workers ran the last of them while the other had nothing left to do."""
+    heavy = {it.module.__name__ for it in items if getattr(it, "module", None) is not None
+             and (it.get_closest_marker("slow") or it.get_closest_marker("jit"))}
+    items.sort(key=lambda it: 0 if getattr(it, "module", None) is not None and it.module.__name__ in heavy else 1)
+
+
 def pytest_configure(config):
     config.addinivalue_line("markers", "jit: renders with Mitsuba's JIT back end (skipped, with one line saying "
                                        "why, where no libLLVM 19 works; never skipped in CI)")
