@@ -211,17 +211,21 @@ class Corpus:
         path = self.root / layer_relpath(scene_id, frame, group, name)
         if not path.is_file():
             raise CorpusFileError(f"{path}: missing (listed in {LAYERS_FILE} of scene {scene_id})")
-        parts = self._parts(path)
-        w = bin_prefix(0, 1)
-        arr = _stack(parts[0], static_channels(w, self._band_list(m, bands)), path)
-        scale = layer_scale(parts[0], w, path)
+        return self._static_image(self._parts(path)[0], bin_prefix(0, 1), m, bands, path, f"[layer {name}]")
+
+    def _static_image(self, part, w: str, m: dict, bands: Sequence[float] | None, path: Path, label: str
+                      ) -> np.ndarray:
+        """One static image of an EXR part (channel prefix ``w``), its stored scale undone, checked against meta's
+        size (and its values, with ``check_values``): (C, H, W) float32 W sr^-1 m^-2 nm^-1."""
+        arr = _stack(part, static_channels(w, self._band_list(m, bands)), path)
+        scale = layer_scale(part, w, path)
         if scale != 1.0:
             arr /= np.float32(scale)
         if arr.shape[1:] != (m["height"], m["width"]):
             raise CorpusChannelError(f"EXR file {path}: image is {arr.shape[1:]}, meta.json says "
                                      f"({m['height']}, {m['width']})")
         if self.check_values:
-            _check_values(arr, path, f"[layer {name}]")
+            _check_values(arr, path, label)
         return arr
 
     def read_static_bins(self, scene_id: str, frame: int, group: str, bands: Sequence[float] | None = None
@@ -237,19 +241,8 @@ class Corpus:
         if group_storage(m, group) != "static":
             raise ValueError(f"group {brief(group)} of scene {brief(scene_id)} is stored per light in time bins: use "
                              "read_light_bins")
-        parts = self._parts(path)
-        out = []
-        for k, w in enumerate(static_layers(m)):
-            arr = _stack(parts[0], static_channels(w, self._band_list(m, bands)), path)
-            scale = layer_scale(parts[0], w, path)
-            if scale != 1.0:
-                arr /= np.float32(scale)
-            if arr.shape[1:] != (m["height"], m["width"]):
-                raise CorpusChannelError(f"EXR file {path}: image is {arr.shape[1:]}, meta.json says "
-                                         f"({m['height']}, {m['width']})")
-            if self.check_values:
-                _check_values(arr, path, f"[{w}]")
-            out.append(arr)
+        part = self._parts(path)[0]
+        out = [self._static_image(part, w, m, bands, path, f"[{w}]") for w in static_layers(m)]
         return np.asarray(edges, dtype=np.float64), np.stack(out)
 
     def read_light_bins(self, scene_id: str, frame: int, group: str, bands: Sequence[float] | None = None
