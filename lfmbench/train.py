@@ -125,7 +125,8 @@ def make_loader(corpus: str | os.PathLike, spec: Trainable, cfg: Any, workers: i
     t = cfg.train
     extra = {} if spec.outputs is None else {"outputs": spec.outputs}
     ds = make_dataset(corpus, t.split, seed=t.seed, crop=t.crop, samples_per_scene=t.samples_per_scene,
-                      frames=t.frames, sensor=t.sensor if preset is None else preset, **extra)
+                      frames=t.frames, sensor=t.sensor if preset is None else preset, cache_scenes=t.cache_scenes,
+                      **extra)
     _check_batch_memory(ds, t, cfg)
     nw = t.workers if workers is None else int(workers)
     if group is not None:
@@ -174,7 +175,7 @@ def make_device_batches(corpus: str | os.PathLike, spec: Trainable, cfg: Any, de
     extra = {} if spec.outputs is None else {"outputs": spec.outputs}
     ds = make_dataset(corpus, t.split, seed=t.seed, crop=t.crop, samples_per_scene=t.samples_per_scene,
                       frames=t.frames, sensor=t.sensor if preset is None else preset, noise_streams="counter",
-                      **extra)
+                      cache_scenes=t.cache_scenes, **extra)
     if resident_dtype not in RESIDENT_DTYPES:
         raise ValueError(f"resident_dtype must be one of {tuple(RESIDENT_DTYPES)}, got {resident_dtype!r:.40}")
     if group is not None:  # the rank's part of every batch (lfmbench.distributed)
@@ -370,8 +371,9 @@ def train(method: str | Trainable, corpus: str | os.PathLike, out: str | os.Path
         ck = spec.read_checkpoint(out, map_location=dev)
         mine = {k: v for k, v in cfg.to_dict().items() if k != "train"}
         theirs = {k: v for k, v in (ck.get("config") or {}).items() if k != "train"}
-        same = {k: v for k, v in (ck.get("config") or {}).get("train", {}).items() if k not in ("epochs", "workers")}
-        want = {k: v for k, v in cfg.to_dict()["train"].items() if k not in ("epochs", "workers")}
+        free = ("epochs", "workers", "cache_scenes")     # change how long or how fast, not what is trained
+        same = {k: v for k, v in (ck.get("config") or {}).get("train", {}).items() if k not in free}
+        want = {k: v for k, v in cfg.to_dict()["train"].items() if k not in free}
         if mine != theirs or same != want or "optimizer" not in ck:
             raise ValueError(f"checkpoint {out} was trained with another config; pass --no-resume to start again "
                              "(it is overwritten) or choose another --out")

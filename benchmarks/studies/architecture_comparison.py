@@ -189,23 +189,16 @@ def train_unet(corpus: str | Path, sensor: str, epochs: int, folder: Path) -> Pa
         raise FileNotFoundError(f"corpus directory {corpus} does not exist (render its training split first)")
     import torch
 
-    import lfmbench.datasets.loading as loading
     from lfmbench.fileio import atomic_write_text
     from lfmbench.train import load_config, train
 
     torch.set_num_threads(1)
-
-    def make_dataset(*args, **kw):  # every training scene's projection kept in memory (the default keeps 8 and
-        kw.setdefault("cache_scenes", TRAIN_CACHE_SCENES)  # reads the others back from the disk cache per sample,
-        return own(*args, **kw)                            # 0.035 CPU s each): the same samples, less time
-
-    own, loading.make_dataset = loading.make_dataset, make_dataset
     load0, t, c = _load(), time.perf_counter(), time.process_time()
-    try:
-        _, hist = train("unet", corpus, out, load_config("unet", TRAIN_CONFIG), epochs=epochs, workers=0,
-                        sensor=sensor, progress=False, log=lambda m: print(f"[{sensor}] {m}", flush=True))
-    finally:
-        loading.make_dataset = own
+    # every training scene's projection kept in memory (the default keeps 8 and reads the others back from the disk
+    # cache per sample, 0.035 CPU s each): the same samples, less time
+    _, hist = train("unet", corpus, out, load_config("unet", TRAIN_CONFIG), epochs=epochs, workers=0,
+                    cache_scenes=TRAIN_CACHE_SCENES, sensor=sensor, progress=False,
+                    log=lambda m: print(f"[{sensor}] {m}", flush=True))
     wall, cpu = time.perf_counter() - t, time.process_time() - c
     info = {"sensor": sensor, "config": TRAIN_CONFIG, "epochs": epochs, "steps": hist["steps"],
             "wall_s": round(wall, 1), "cpu_s": round(cpu, 1), "epoch_seconds": [round(x, 2) for x in

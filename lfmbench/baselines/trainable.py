@@ -44,6 +44,7 @@ class TrainConfig:
     weight_decay: float = 0.0
     grad_clip: float = 1.0         #: max gradient norm (0: off)
     workers: int = 1               #: DataLoader worker processes
+    cache_scenes: int = 8          #: scenes whose projections each loader process keeps in memory (same samples)
     seed: int = 0
     split: str = "train"
     sensor: str = "ovt"
