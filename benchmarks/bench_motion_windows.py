@@ -57,6 +57,9 @@ import _llvm  # noqa: E402,F401 - sets DRJIT_LIBLLVM_PATH
 from lfmbench.fileio import atomic_write_bytes, atomic_write_text  # noqa: E402
 
 STAGGERED = ((0.0, 0.010), (0.010, 0.001), (0.011, 0.0001))
+#: Scheme (b): the staggered windows as static window layers of their own (short and long stored as today).
+STAG_LAYERS = tuple((n, ((a, d),)) for n, (a, d) in zip(("stag_long", "stag_medium", "stag_short"), STAGGERED))
+LAYERS_ROW = "each needed window rendered as such (short + long + 3 staggered layers)"
 
 
 def preset_edges(names) -> tuple:
@@ -85,7 +88,9 @@ def fine_edges(edges, step: float) -> tuple:
 def worker(args) -> None:
     """Render one scheme in this (child) process; write the static windows / bins (npz) and cost (json)."""
     from lfmbench.corpus import encode_scene  # noqa: PLC0415
+    from lfmbench.corpus.window_layers import encode_layer  # noqa: PLC0415
     from render_tools import render as R  # noqa: PLC0415
+    from render_tools import static_layers  # noqa: PLC0415
     from render_tools.scene import generate_scene  # noqa: PLC0415
 
     seed, tod = args.case.split(":")
@@ -95,16 +100,24 @@ def worker(args) -> None:
                            frames=args.frames, seed=args.seed, static_edges_s=edges, aux=args.aux,
                            static_denoise="off" if args.no_denoise else "auto",
                            static_bin_samples=args.bin_samples)
+    layers = [(n, tuple(map(tuple, w))) for n, w in json.loads(args.layers)]
     t, c = time.perf_counter(), time.process_time()
     frames = list(R.render_frames(sc, opts))
+    # scheme (b): each needed window beyond short and long rendered as a static window layer of its own
+    lay_imgs = [list(static_layers.render_layer(sc, opts, lay)) for lay in layers]
     render_wall, render_cpu = time.perf_counter() - t, time.process_time() - c
     meta = R.scene_meta(sc, opts)
     nbytes = sum(len(b) for _, b in encode_scene(sc["scene_id"], sc, meta, frames, dtype="compact"))
     static_bytes = sum(len(b) for rel, b in encode_scene(sc["scene_id"], sc, meta, frames, dtype="compact")
                        if any(rel.endswith(f"/{g}.exr") for g in frames[0]["static"]))
+    lay_bytes = sum(len(encode_layer(img, opts.bands_nm, "compact", {}, "layer"))
+                    for fr in (fr for imgs in lay_imgs for fr in imgs) for img in fr["static"].values())
+    nbytes, static_bytes = nbytes + lay_bytes, static_bytes + lay_bytes
     f0 = frames[0]
     save = {"short": sum(w["short"] for w in f0["static"].values()),
             "long": sum(w["long"] for w in f0["static"].values())}
+    if layers:
+        save["layers"] = np.stack([sum(imgs[0]["static"].values()) for imgs in lay_imgs])
     if "bins" in next(iter(f0["static"].values())):
         save["bins"] = sum(w["bins"] for w in f0["static"].values())
         save["edges"] = np.asarray(f0["static_edges_s"])
@@ -118,14 +131,14 @@ def worker(args) -> None:
     Path(args.json).write_text(json.dumps({
         "render_wall_s": render_wall, "render_cpu_s": render_cpu, "bytes": nbytes, "static_bytes": static_bytes,
         "moving": [o["kind"] for o in sc["objects"] if any(o["velocity_mps"])],
-        "speed_mps": sc["camera"]["speed_mps"], "layers": len(f0["static_edges_s"]) - 1 if "static_edges_s" in f0
-        else 2}))
+        "speed_mps": sc["camera"]["speed_mps"], "layers": (len(f0["static_edges_s"]) - 1 if "static_edges_s" in f0
+                                                           else 2) + len(layers), "layer_bytes": lay_bytes}))
 
 
 def run(a, tmp: Path, name: str, edges: tuple, seed: int, no_denoise: bool, spp: int = 1,
-        aux: bool = False, bin_samples: str = "independent") -> tuple[dict, dict]:
+        aux: bool = False, bin_samples: str = "independent", layers: tuple = ()) -> tuple[dict, dict]:
     stem = f"{name.split(',')[0].split(' ')[0]}-{len(edges)}-{seed}-{int(no_denoise)}-{spp}" + (
-        "" if bin_samples == "independent" else f"-{bin_samples}")
+        "" if bin_samples == "independent" else f"-{bin_samples}") + (f"-L{len(layers)}" if layers else "")
     npz, js = tmp / f"{stem}.npz", tmp / f"{stem}.json"
     if a.work and npz.exists() and js.exists():  # --work: a render of an earlier run with the same arguments
         d = np.load(npz)
@@ -133,7 +146,7 @@ def run(a, tmp: Path, name: str, edges: tuple, seed: int, no_denoise: bool, spp:
     cmd = [sys.executable, __file__, "--worker", "--case", a.case, "--width", str(a.width), "--height",
            str(a.height), "--frames", str(a.frames), "--seed", str(seed), "--edges", json.dumps(list(edges)),
            "--npz", str(npz), "--json", str(js), "--spp", str(spp)] + (["--no-denoise"] if no_denoise else []) + (
-           ["--aux"] if aux else []) + ["--bin-samples", bin_samples]
+           ["--aux"] if aux else []) + ["--bin-samples", bin_samples, "--layers", json.dumps(layers)]
 
     def cpu():
         r = resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -215,6 +228,7 @@ def main(argv=None) -> None:
     ap.add_argument("--json", help=argparse.SUPPRESS)
     ap.add_argument("--no-denoise", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--bin-samples", default="independent", help=argparse.SUPPRESS)
+    ap.add_argument("--layers", default="[]", help=argparse.SUPPRESS)
     a = ap.parse_args(argv)
     if a.worker:
         worker(a)
@@ -222,11 +236,13 @@ def main(argv=None) -> None:
     load0 = os.getloadavg()
     eps = [float(x) for x in a.eps.split(",")]
     stag = tuple(sorted({x for s, n in STAGGERED for x in (s, s + n)}))
-    schemes = [("nearest (short + long windows)", (), "independent"), ("exact, staggered edges", stag, "independent"),
-               ("exact, staggered edges, common random numbers", stag, "common")]
+    schemes = [("nearest (short + long windows)", (), "independent", ()),
+               ("exact, staggered edges", stag, "independent", ()),
+               ("exact, staggered edges, common random numbers", stag, "common", ()),
+               (LAYERS_ROW, (), "independent", STAG_LAYERS)]
     if a.all_presets:
         schemes.append(("exact, every shipped preset's edges", preset_edges(
-            ("staggered", "lofic", "chopped", "single", "ovt", "imx490")), "independent"))
+            ("staggered", "lofic", "chopped", "single", "ovt", "imx490")), "independent", ()))
     from render_tools import motion_bound  # noqa: PLC0415
     from render_tools import render as R  # noqa: PLC0415
     from render_tools.scene import generate_scene  # noqa: PLC0415
@@ -242,9 +258,9 @@ def main(argv=None) -> None:
         made = json.loads(stamp.read_text()) if stamp.exists() else {
             "start": f"{datetime.now(timezone.utc):%Y-%m-%d %H:%M}", "load_start": load0[0]}
         cost = {}
-        for name, edges, bs in schemes:  # cost (profile as shipped: denoised); run twice, the first compiles kernels
-            run(a, tmp, name, edges, 3, False, bin_samples=bs)
-            cost[name] = run(a, tmp, name, edges, 4, False, bin_samples=bs)[0]
+        for name, edges, bs, lay in schemes:  # cost (profile as shipped: denoised); twice, the first compiles kernels
+            run(a, tmp, name, edges, 3, False, bin_samples=bs, layers=lay)
+            cost[name] = run(a, tmp, name, edges, 4, False, bin_samples=bs, layers=lay)[0]
         # error renders: two seeds of each, denoising off; truth = the staggered edges cut into fine pieces
         truth = [run(a, tmp, "truth", fine, s, True, aux=True)[1] for s in (1, 2)]
         err = {}
@@ -252,6 +268,7 @@ def main(argv=None) -> None:
             err["nearest", spp] = [run(a, tmp, "nearest", (), s, True, spp)[1] for s in (1, 2)]
             err["exact", spp] = [run(a, tmp, "exact", stag, s, True, spp)[1] for s in (1, 2)]
         err["common", 1] = [run(a, tmp, "exact", stag, s, True, 1, bin_samples="common")[1] for s in (1, 2)]
+        err["layers", 1] = [run(a, tmp, "layers", (), s, True, 1, layers=STAG_LAYERS)[1] for s in (1, 2)]
         if "end" not in made:
             made.update(end=f"{datetime.now(timezone.utc):%Y-%m-%d %H:%M}", load_end=os.getloadavg()[0])
             atomic_write_text(stamp, json.dumps(made))
@@ -334,7 +351,7 @@ def main(argv=None) -> None:
            "encoded scene (`compact`) and of its static group files.", "",
            "| scheme | static layers per group and frame | render CPU s | x nearest | render wall s | scene MB | "
            "x nearest | static files MB |", "|---|---|---|---|---|---|---|---|"]
-    for name, _e, _bs in schemes:
+    for name, _e, _bs, _l in schemes:
         c = cost[name]
         md.append(f"| {name} | {c['layers']} | {c['render_cpu_s']:.1f} | {c['render_cpu_s'] / base['render_cpu_s']:.2f}"
                   f" | {c['render_wall_s']:.1f} | {c['bytes'] / 1e6:.2f} | {c['bytes'] / base['bytes']:.2f} | "
