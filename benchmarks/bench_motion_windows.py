@@ -1,7 +1,7 @@
 """Motion between captures: the static groups' radiance of a staggered plan's windows, exact (static time bins aligned
 to the windows' edges, ``RenderOptions.static_edges_s``, corpus format 4) against ``nearest`` (the stored short or long
-window standing for every window), error against render cost and storage (issue 38 deliverable 4;
-docs/benchmarks/motion-windows.md).
+window standing for every window), error against render cost and storage (issue 38 deliverable 4:
+"choose the scheme by measurement", one table from one run; docs/benchmarks/motion-windows.md).
 
 Scene: one generator-2 scene with moving vehicles (seed and time of day ``--case``), the ``default`` profile at
 ``--width x --height`` (default 320x180) and ``--frames`` frames. Each render runs in a child process (its CPU seconds,
@@ -15,9 +15,15 @@ Schemes (rows):
 - ``exact, staggered edges``: the static groups in the bins between 0, the short window's ends, T_L and the staggered
   preset's window edges (10 / 1 / 0.1 ms): every staggered, split-pixel and LOFIC window is a union of bins;
 - ``exact, every shipped preset's edges`` (``--all-presets``): the chopped plan's 12 sub-windows too;
+- scheme (b), each needed window rendered as such: short and long as ``nearest`` stores them plus the three staggered
+  windows as static window layers of one window each (``render_tools.static_layers.render_layer``, the machinery of
+  the chopped layer; in the same child process, its CPU seconds and layer bytes added);
+- ``fewest exact layers`` (estimated, not built): the needed windows' pieces grouped by the windows containing them
+  (:func:`window_atoms`; also the windows' rank, the fewest full frames any exact scheme needs), its cost from the
+  measured per-layer figures of scheme (b);
 - ``masked, eps`` (evaluated on the truth renders, its cost estimated, not built): short and long stored as today,
   the other windows only where a pixel's surface point moves by >= eps px over the capture window
-  (``render_tools.motion_bound``), the long window elsewhere: "no bins where nothing moves".
+  (``render_tools.motion_bound``), the long window elsewhere: "no bins where nothing moves" (not exact).
 
 Each error cell is a bias with its resolution (jackknife over pixel blocks); a second pair of error renders at
 ``--check-spp`` (4) tells estimator scatter from bias. Error of a window's static radiance (all static groups, band
