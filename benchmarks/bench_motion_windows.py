@@ -35,8 +35,10 @@ a = the window's bins. Static denoising is off in the error renders (it is not i
 hide noise as bias) and on (the profile's ``auto``) in the cost renders.
 
 Usage: ``python benchmarks/bench_motion_windows.py [--case 11:night] [--width 320 --height 180] [--all-presets]
-[--work DIR] [--out docs]``. About 30 minutes at 160x90 on the shared 2-core machine under load 20; ``--work`` keeps
-the renders (and when they were made) so that a rerun only redoes the analysis.
+[--work DIR] [--out docs]``. About 30 minutes at 160x90 on the shared 2-core machine under load 6-16 (24 renders:
+per scheme two cost renders, two spp-1 error renders, and two spp-4 ones for nearest and the bins; two truth renders);
+``--work`` keeps the renders (and when they were made) so that a rerun only redoes the analysis. Over 500 lines: one
+script renders, analyses and writes the whole page, so that every figure on it comes from one run.
 """
 from __future__ import annotations
 
@@ -373,12 +375,15 @@ def main(argv=None) -> None:
     proto_frames = protocol_frames(sc)
     f_static = base["static_bytes"] / base["bytes"]               # static full frames' share of today's scene
     est = {}  # scheme: (render CPU s low, high, scene bytes)
-    est["fewest"] = (base["render_cpu_s"] + (k_page - 2) * per_layer_cpu,) * 2 + (
-        base["bytes"] + (k_page - 2) * per_layer_bytes,)
+    per_bin_bytes = (exb["static_bytes"] - base["static_bytes"]) / (exb["layers"] - base["layers"])
+    # an extra full frame costs between a bin's measured share (lower) and a layer's (upper)
+    est["fewest"] = (base["render_cpu_s"] + (k_page - 2) * per_bin_cpu, base["render_cpu_s"] + (k_page - 2)
+                     * per_layer_cpu, base["bytes"] + (k_page - 2) * max(per_bin_bytes, per_layer_bytes))
     for e in eps:
         tf = band_tiles(masks[e])
-        est["masked", e] = (base["render_cpu_s"] + n_extra * tf * per_layer_cpu,
-                            base["render_cpu_s"] + n_extra * per_layer_cpu, base["bytes"] + n_extra * tf * per_layer_bytes)
+        est["masked", e] = (base["render_cpu_s"] + n_extra * tf * per_bin_cpu, base["render_cpu_s"]
+                            + n_extra * per_layer_cpu, base["bytes"] + n_extra * tf * max(per_bin_bytes,
+                                                                                          per_layer_bytes))
     fmt = (lambda c: "stored" if c is None else f"{c[0]:.2f} ({c[1]:.2f})")
     short_lab = [w[0].split(" [")[0].split(" (")[0] for w in wins]
     md = ["# Motion between captures: the exact schemes against `nearest`, error, render cost and storage "
@@ -407,8 +412,9 @@ def main(argv=None) -> None:
           "(second of two runs, kernels cached): render CPU seconds of the child process (user + system of every "
           "thread) and the encoded scene's bytes (`compact`, layers included); `frames`: static full frames per "
           "group and frame. Rows marked *estimated* are not rendered as such: their cost is built from the measured "
-          "per-layer figures of the layers row (one window's layer: "
-          f"{per_layer_cpu:.2f} CPU s, {per_layer_bytes / 1e6:.2f} MB).",
+          "cost of one more full frame, from a bin's (the bins row less nearest, per extra bin: "
+          f"{per_bin_cpu:.2f} CPU s, {per_bin_bytes / 1e6:.2f} MB) to a layer's (the layers row less nearest, per "
+          f"layer: {per_layer_cpu:.2f} CPU s, {per_layer_bytes / 1e6:.2f} MB; the larger bytes taken).",
           "",
           "| scheme | " + " | ".join(w[0] for w in wins) + " | frames | render CPU s | x nearest | scene MB | "
           "x nearest |",
@@ -445,8 +451,9 @@ def main(argv=None) -> None:
            "pixel's surface point moves by >= eps px over the capture window (grown by 1 px), the long window "
            "elsewhere; short and long stored as today. Its cost: today's plus the 3 staggered windows traced and "
            "stored only in row-band tiles of 8 rows over the mask (`frames`: 2 + 3 x the tiles' share of the image), "
-           "storage tiles x one layer's bytes per window, CPU from tiles x one layer's CPU (tracing scales with "
-           "area) to 1 x (a launch per window for the moving objects, with its fixed costs). Masked pixels: "
+           "storage tiles x one frame's bytes per window, CPU from tiles x one bin's CPU (tracing scales with "
+           "area) to 1 x one layer's (a launch per window for the moving objects, with its fixed costs). "
+           "Masked pixels: "
            + ", ".join(f"{100 * masks[e].mean():.0f} % at eps {e:g} px" for e in eps) + "."]
     # the fewest exact layers: time points grouped by the needed windows that contain them
     md += ["", "Fewest exact layers: cut the capture window at every needed window's edges and group the pieces by "
@@ -471,7 +478,17 @@ def main(argv=None) -> None:
            "window the corpus does not hold as a union of bins (the chopped preset's 12 sub-windows: 24 more edges) "
            "the implemented corpus adds a layer of that union (protocol `lfmbench-v1-mini-motion` version 2). "
            "`nearest` stays a named option for corpora without bins (format 3), recorded in every sample's "
-           "`meta[\"static_windows\"]`."]
+           "`meta[\"static_windows\"]`.",
+           "",
+           f"**Choice, by this table:** the bins (a). No exact row's bias is told apart from 0 at this resolution, "
+           f"so the exact schemes differ in cost: the bins cost {exb['render_cpu_s'] / base['render_cpu_s']:.2f}x "
+           f"the CPU seconds and {exb['bytes'] / base['bytes']:.2f}x the storage of `nearest`, the layers (b) "
+           f"{lay['render_cpu_s'] / base['render_cpu_s']:.2f}x and {lay['bytes'] / base['bytes']:.2f}x: one frame "
+           f"fewer, but a layer of one window costs {per_layer_cpu / per_bin_cpu:.1f}x a bin's CPU (its own scene "
+           "load, tracer set-up and denoising per layer), and the bins serve every later plan whose edges are among "
+           "theirs, a layer only its own window. Common random numbers change neither bias nor storage; the "
+           "masked scheme is not exact. Windows that would need many more edges (the chopped sub-windows) get a "
+           "layer of their union."]
     rc, rs = exb["render_cpu_s"] / base["render_cpu_s"], exb["bytes"] / base["bytes"]
     lc, ls = lay["render_cpu_s"] / base["render_cpu_s"], lay["bytes"] / base["bytes"]
     s_min = 1 + (r_page - 2) / 2 * f_static
@@ -488,9 +505,10 @@ def main(argv=None) -> None:
            f"today's scene holds 2 such frames (short, long), which are {100 * f_static:.0f} % of its bytes, and "
            f"these {len(wins)} windows need {r_page}, so storage is at least 1 + {r_page - 2} x "
            f"{100 * f_static / 2:.0f} % = {s_min:.2f}x whatever the scheme (the comparison's {len(comp[0])} "
-           f"windows: {r_comp} frames, {s_comp:.1f}x), and the render time grows by the same frames "
-           f"({per_layer_cpu:.2f} CPU s each against {base['render_cpu_s']:.1f} s for today's scene at this size, "
-           "a larger share at 640x360). What would reach it: storage within 1.5x allows "
+           f"windows: {r_comp} frames, {s_comp:.1f}x at this scene's static share), and the render time grows by the "
+           f"same frames ({per_bin_cpu:.2f} CPU s as a bin, {per_layer_cpu:.2f} s as a layer, against "
+           f"{base['render_cpu_s']:.1f} s for today's scene at this size; at 640x360 a frame's share is larger, "
+           "which is why the bins' ratio rises there). What would reach it: storage within 1.5x allows "
            f"{2 + 1 / f_static:.1f} frames at today's precision, or the {r_page - 2} extra frames at <= "
            f"{x_bytes:.2f}x their bytes (2 mantissa bits, 0.51x, adds up to 5.7 % quantisation error, "
            "motion-storage.md); CPU within 1.5x allows "
@@ -506,6 +524,11 @@ def main(argv=None) -> None:
     ntop = max(1, tt.size // 1000)
     top1 = float(np.sort(tt)[::-1][:ntop].sum() / tt.sum())
     e1, e4 = lw["exact", 1], lw["exact", a.check_spp]
+    dd = ((window(truth[0], 0.0, tl, True) - window(truth[1], 0.0, tl, True)).sum(0) ** 2).ravel()
+    top_d = float(np.sort(dd)[::-1][:10].sum() / dd.sum())
+    px_d = np.argsort(dd)[::-1][:10]
+    inst = [int(truth[0]["instance"].ravel()[i]) for i in px_d]
+    kinds = sorted({o["kind"] for o in sc["objects"] if int(o.get("id", -1)) in inst})
     md += ["", f"Long window, exact bins: {e1[0]:.2f} % (resolution {e1[1]:.2f} %) at spp 1, {e4[0]:.2f} % "
            f"(resolution {e4[1]:.2f} %) at spp {a.check_spp}; nearest {fmt(lw['nearest', 1])} and "
            f"{fmt(lw['nearest', a.check_spp])}. "
@@ -516,15 +539,19 @@ def main(argv=None) -> None:
            + f" Raising the schemes' spp from 1 to {a.check_spp} does not lower the resolution ({e1[1]:.2f} -> "
            f"{e4[1]:.2f} %): it is set by what both share, the truth renders (spp 1 per piece), and by the few "
            f"bright pixels that dominate the sums (the brightest 0.1 % of the pixels, {ntop}, hold "
-           f"{100 * top1:.1f} % of sum t1 t2 over the long window: a night scene's lamps); resolving a smaller bias "
-           "needs a truth at higher spp, not the schemes."]
+           f"{100 * top1:.1f} % of sum t1 t2 over the long window: a night scene's lamps), while the two truth "
+           f"renders' difference sits in a few other pixels (10 pixels, surface {', '.join(kinds) or 'unknown'}, "
+           f"hold {100 * top_d:.0f} % of its square over the long window: lamps reflected by the road, sampled at "
+           "spp 1 per piece without the static denoising); resolving a smaller bias needs a truth at higher spp, "
+           "not the schemes."]
     resolved = {k: ", ".join(r["label"] for r in rows if r[k] is not None and r[k][0] > r[k][1]) or "none"
                 for k in (("nearest", 1), ("exact", 1), ("common", 1), ("layers", 1))}
     md += ["", f"Resolved cells (bias above its resolution), spp 1: `nearest` {resolved['nearest', 1]}; bins "
            f"{resolved['exact', 1]}; bins with common random numbers {resolved['common', 1]}; layers "
            f"{resolved['layers', 1]}. The other cells are within the scatter of this estimate at this size; the "
-           "crossing-car tests (`tests/render_tools/test_motion_windows.py`, `tests/render_tools/test_static_layers.py`) "
-           "are the sharper checks that `nearest` misplaces a moving lamp in the short captures and the bins and "
+           "crossing-car tests (`tests/render_tools/test_motion_windows.py`, "
+           "`tests/render_tools/test_static_layers.py`) are the sharper checks that `nearest` misplaces a moving "
+           "lamp in the short captures and the bins and "
            "layers do not."]
     ex1, cr1, ly1 = err["exact", 1], err["common", 1], err["layers", 1]
     nz = [(sl, 100 * noise(window(ex1[0], s0, n, True), window(ex1[1], s0, n, True)),
