@@ -563,7 +563,9 @@ def main(argv=None) -> None:
            "change no storage (PIZ compresses each bin on its own, motion-storage.md) and no bias."]
     md += ["", "Where `nearest` goes wrong: the masked staggered medium window's error is " + " / ".join(
         f"{rows[1]['masked', e][0]:.1f}" for e in eps) + " % with eps " + " / ".join(f"{e:g}" for e in eps)
-        + f" px, against `nearest`'s {rows[1]['nearest', 1][0]:.1f} %: most of it is in pixels whose surface point "
+        + f" px, against `nearest`'s {rows[1]['nearest', 1][0]:.1f} % (resolution {rows[1]['nearest', 1][1]:.1f} %"
+        + ("" if rows[1]["nearest", 1][0] > rows[1]["nearest", 1][1] else ": not resolved in this run")
+        + "): most of it is in pixels whose surface point "
         "moves by less than a pixel over the capture window (sub-pixel lamps of the static world sliding across "
         "pixel borders under the ego motion), and at "
         f"{info['speed_mps']:.0f} m/s only the sky and the far middle of the road stay within 0.05 px (median "
