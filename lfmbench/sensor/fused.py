@@ -398,10 +398,14 @@ def chain_triton(lpd_e: torch.Tensor, spd_e: torch.Tensor, preset: SensorPreset,
 
 def warm_fused(preset: SensorPreset | str, noise: bool) -> None:
     """Compile (or load from numba's cache) the compiled CPU chain's kernels for float32 inputs, in this process
-    (what a DataLoader's parent does before forking its workers)."""
+    (what a DataLoader's parent does before forking its workers), through the chain of ``preset``'s plan."""
     if not _poisson.available():  # pragma: no cover - numba is a dependency
         return
     preset = load_preset(preset)
     z = torch.zeros(1, 1, 2, 2, device="cpu")
+    g = torch.Generator().manual_seed(0) if noise else None
+    if preset.architecture != "split_pixel":
+        chain_plan_fused({k: z for k in preset.exposures}, preset, {k: 1e-3 for k in preset.exposures}, g, noise, None)
+        return
     t = torch.full((1, 1, 1), 1e-3, device="cpu")
-    chain_fused(z, z, preset, t, 10 * t, torch.Generator().manual_seed(0) if noise else None, noise, None)
+    chain_fused(z, z, preset, t, 10 * t, g, noise, None)

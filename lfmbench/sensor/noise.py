@@ -3,7 +3,10 @@
 Functional core in torch (batched over any leading dimensions, CPU or CUDA, float32/float64 following the
 input, no per-pixel Python loops) with a thin :class:`SplitPixelSensor` module:
 :func:`shot_noise`, :func:`fixed_pattern`, :func:`read_capture`, :func:`simulate_split_pixel_electrons`,
-:func:`simulate_split_pixel` (the signal chain is listed in :mod:`lfmbench.sensor`).
+:func:`simulate_split_pixel` (the signal chain is listed in :mod:`lfmbench.sensor`), and
+:func:`simulate_plan_electrons` for any capture plan. On the CPU both chains run compiled
+(:mod:`lfmbench.sensor.fused`, bit-identical); the torch operations here are their reference and the path of every
+other device. Size (about 520 lines): the two chains' torch reference with their argument checks and backends.
 
 References
 ----------
