@@ -117,8 +117,7 @@ def _warm_cpu_kernels(noise: bool, preset) -> None:
     pwm_exposure(np.zeros(1), 1e-3, 1e-2, 0.5, check=False)
     if noise:
         _sensor.shot_noise(torch.zeros(1), torch.Generator().manual_seed(0))
-    if preset.architecture == "split_pixel":
-        warm_fused(preset, noise)     # the sensor chain's compiled passes (float32, the dataset's dtype)
+    warm_fused(preset, noise)         # the sensor chain's compiled passes (float32, the dataset's dtype), any plan
 
 
 # ----------------------------------------------------------------------------------------------------------

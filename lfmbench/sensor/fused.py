@@ -2,7 +2,9 @@
 
 :func:`chain_fused` is :func:`lfmbench.sensor.noise.simulate_split_pixel_electrons` (backend ``"numba"``) as one
 compiled pass per photodiode (:func:`lfmbench.sensor._poisson_kernel.collect`) and one per capture
-(:func:`lfmbench.sensor._readout_kernel.readout`); :func:`chain_triton` is the same two kinds of pass as Triton
+(:func:`lfmbench.sensor._readout_kernel.readout`); :func:`chain_plan_fused` is the same two kinds of pass for any
+capture plan (:func:`lfmbench.sensor.noise.simulate_plan_electrons`: one pass per exposure, one per capture);
+:func:`chain_triton` is the same two kinds of pass as Triton
 kernels for a batch on a GPU with counter-based noise (:func:`lfmbench.sensor._counter_triton.collect` and
 ``readout``: no float64 noise tensors, no fixed-pattern crops cut, ~5 passes over the batch instead of ~40);
 :func:`map_samples` runs ``fn(b)`` for every sample by a pool of threads (the kernels and torch's samplers release
@@ -22,8 +24,8 @@ from lfmbench.sensor import poisson as _poisson
 from lfmbench.sensor import counter_noise as _cn
 from lfmbench.sensor.preset import CAPTURES, PHOTODIODES, SensorPreset, load_preset
 
-__all__ = ["MEAN_CAP_FULL_WELLS", "PatternCrops", "map_samples", "per_generator", "chain_fused", "chain_triton",
-           "warm_fused"]
+__all__ = ["MEAN_CAP_FULL_WELLS", "PatternCrops", "map_samples", "per_generator", "chain_fused", "chain_plan_fused",
+           "chain_triton", "warm_fused"]
 
 #: Mean electrons are capped at this multiple of the full well before noise: everything above the full well
 #: clips anyway, and the cap keeps sun-in-view inputs finite in float32 (both backends of the chain).
@@ -206,6 +208,90 @@ def chain_fused(lpd_e: torch.Tensor, spd_e: torch.Tensor, preset: SensorPreset, 
     return out
 
 
+def chain_plan_fused(mean_e: Mapping[str, torch.Tensor], preset: SensorPreset, exposure_s: Mapping[str, float],
+                     generator: torch.Generator | None, noise: bool,
+                     fpn: Mapping[str, torch.Tensor] | None) -> tuple[dict, dict]:
+    """The CPU chain of :func:`lfmbench.sensor.noise.simulate_plan_electrons` (any capture plan) in compiled passes:
+    one :func:`lfmbench.sensor._poisson_kernel.collect` per exposure (clipping, PRNU, dark signal, shot noise, full
+    well) and one :func:`lfmbench.sensor._readout_kernel.readout` per capture (DSNU offset, read noise, conversion
+    gain, swing, ADC, saturation flag, input referral).
+
+    The generator is drawn in the torch chain's order (one shot-noise seed per exposure in plan order, then the read
+    noise of each exposure's captures), and every scalar is the torch chain's Python float cast to the inputs'
+    dtype, as the torch operations cast it, so the outputs are bit-identical to the torch chain
+    (tests/sensor/test_plan_fused.py).
+
+    Args: ``mean_e`` ``{exposure key: (*, 1, H, W)}`` mean e- (float32/float64, CPU, one shape), in the order of
+    ``preset.exposures``; ``exposure_s`` ``{exposure key: s}``; ``generator`` a CPU generator (when ``noise``);
+    ``fpn`` maps (..., H, W) of :func:`lfmbench.sensor.fixed_pattern` broadcastable to the inputs, on their dtype,
+    or None.
+
+    Returns: ``(out, linear)``: ``out`` as the torch chain's result, except that a companded capture's entries
+    hold its *linear* code (DN) and nothing meaningful in ``f"{capture}_e"``; ``linear`` ``{capture: True}`` for
+    those captures (the caller companding them with the torch chain's own operations).
+    """
+    from lfmbench.sensor._poisson_kernel import collect
+    from lfmbench.sensor._readout_kernel import readout
+
+    groups = preset.exposures
+    first = mean_e[next(iter(groups))]
+    lead, (H, W) = first.shape[:-3], first.shape[-2:]
+    P = H * W
+    L = int(np.prod(lead, dtype=np.int64)) if len(lead) else 1
+    dtype, dev = first.dtype, first.device
+    nt = np.float32 if dtype == torch.float32 else np.float64
+    order = list(preset.captures)
+    empty = np.zeros((0, P), dtype=nt)
+    none_row = np.zeros(L, dtype=np.int64)
+    use_fpn = noise and fpn is not None
+    ref_key = next(k for k, caps in groups.items() if preset.reference in caps)
+    ff_ref = preset.photodiodes[preset.captures[preset.reference].photodiode].fill_factor
+    t_ref = float(exposure_s[ref_key])
+    out = {k: torch.empty(*lead, 1, H, W, dtype=dtype, device=dev) for k in (*order, *(f"{c}_e" for c in order))}
+    sat = torch.empty(*lead, len(order), H, W, dtype=torch.bool, device=dev)
+    sat_np = sat.view(L, len(order), P).numpy()
+    gsw = float(preset.shot_noise_gaussian_above_e)
+    collected = {}
+    for i, key in enumerate(groups):                                     # shot seeds first, in plan order
+        pd = preset.captures[key].photodiode
+        spec = preset.photodiodes[pd]
+        gain, grow = (_map_rows(fpn[f"{pd}_gain"], lead, H, W) if use_fpn and spec.prnu > 0 else (empty, none_row))
+        dark = np.full(L, spec.dark_current_e_per_s * float(exposure_s[key]), dtype=nt)     # e-
+        seed = _poisson.draw_seed(generator) if noise else np.uint64(0)
+        collected[key] = _scratch(f"plan{i}", L, P, nt)
+        bad = collect(mean_e[key].detach().reshape(L, P).contiguous().numpy(), gain, grow, dark,
+                      nt(MEAN_CAP_FULL_WELLS * spec.full_well_e), nt(spec.full_well_e), seed, gsw, noise,
+                      collected[key])
+        if bad >= 0:  # pragma: no cover - the clipped means are finite and >= 0
+            raise ValueError(f"shot noise: invalid mean at flat index {bad} of exposure {key!r}")
+    z = _scratch("z", L, P, nt)
+    linear = {}
+    for key, caps in groups.items():
+        pd = preset.captures[key].photodiode
+        spec = preset.photodiodes[pd]
+        off, orow = (_map_rows(fpn[f"{pd}_offset_e"], lead, H, W) if use_fpn and spec.dsnu_e > 0
+                     else (empty, none_row))
+        t = float(exposure_s[key])
+        dark = np.full(L, spec.dark_current_e_per_s * t, dtype=nt)                          # e-
+        mul = np.full(L, (ff_ref / spec.fill_factor) * (t_ref / t), dtype=nt)                # 1
+        for c in caps:
+            cs = preset.captures[c]
+            zc = empty
+            if noise and cs.read_noise_e > 0:    # into a reused buffer: the same draws as a new tensor
+                torch.randn(first.shape, generator=generator, dtype=dtype, device=dev,
+                            out=torch.from_numpy(z).view(first.shape))
+                zc = z
+            if cs.companding is not None:
+                linear[c] = True
+            readout(collected[key], zc, nt(cs.read_noise_e), off, orow, nt(cs.conversion_gain_v_per_e),
+                    nt(cs.voltage_swing_v), nt(preset.dn_per_volt(c)), nt(preset.black_level_dn),
+                    nt(preset.linear_max_dn(c)), nt(preset.saturation_fraction * cs.voltage_swing_v),
+                    nt(preset.system_gain(c)), dark, mul, out[c].view(L, P).numpy(),
+                    out[f"{c}_e"].view(L, P).numpy(), sat_np, order.index(c))
+    out["saturated"] = sat
+    return out, linear
+
+
 class PatternCrops(Mapping):
     """Per-sample crops of whole-frame fixed-pattern maps, cut only when a map is read.
 
@@ -312,10 +398,14 @@ def chain_triton(lpd_e: torch.Tensor, spd_e: torch.Tensor, preset: SensorPreset,
 
 def warm_fused(preset: SensorPreset | str, noise: bool) -> None:
     """Compile (or load from numba's cache) the compiled CPU chain's kernels for float32 inputs, in this process
-    (what a DataLoader's parent does before forking its workers)."""
+    (what a DataLoader's parent does before forking its workers), through the chain of ``preset``'s plan."""
     if not _poisson.available():  # pragma: no cover - numba is a dependency
         return
     preset = load_preset(preset)
     z = torch.zeros(1, 1, 2, 2, device="cpu")
+    g = torch.Generator().manual_seed(0) if noise else None
+    if preset.architecture != "split_pixel":
+        chain_plan_fused({k: z for k in preset.exposures}, preset, {k: 1e-3 for k in preset.exposures}, g, noise, None)
+        return
     t = torch.full((1, 1, 1), 1e-3, device="cpu")
-    chain_fused(z, z, preset, t, 10 * t, torch.Generator().manual_seed(0) if noise else None, noise, None)
+    chain_fused(z, z, preset, t, 10 * t, g, noise, None)

@@ -3,7 +3,10 @@
 Functional core in torch (batched over any leading dimensions, CPU or CUDA, float32/float64 following the
 input, no per-pixel Python loops) with a thin :class:`SplitPixelSensor` module:
 :func:`shot_noise`, :func:`fixed_pattern`, :func:`read_capture`, :func:`simulate_split_pixel_electrons`,
-:func:`simulate_split_pixel` (the signal chain is listed in :mod:`lfmbench.sensor`).
+:func:`simulate_split_pixel` (the signal chain is listed in :mod:`lfmbench.sensor`), and
+:func:`simulate_plan_electrons` for any capture plan. On the CPU both chains run compiled
+(:mod:`lfmbench.sensor.fused`, bit-identical); the torch operations here are their reference and the path of every
+other device. Size (about 520 lines): the two chains' torch reference with their argument checks and backends.
 
 References
 ----------
@@ -22,7 +25,8 @@ from torch import nn
 from lfmbench.check import check_same_shape, value_checks
 from lfmbench.sensor import counter_noise as _cn
 from lfmbench.sensor import poisson as _poisson
-from lfmbench.sensor.fused import MEAN_CAP_FULL_WELLS, PatternCrops, chain_fused, chain_triton, per_generator
+from lfmbench.sensor.fused import (MEAN_CAP_FULL_WELLS, PatternCrops, chain_fused, chain_plan_fused, chain_triton,
+                                   per_generator)
 from lfmbench.sensor.optics import check_radiometric
 from lfmbench.sensor.preset import CAPTURES, PHOTODIODES, SensorPreset, load_preset
 from lfmbench.sensor.response import ideal_electrons
@@ -334,10 +338,25 @@ def simulate_split_pixel_electrons(lpd_electrons: torch.Tensor, spd_electrons: t
     return out
 
 
+def _refer(dn: torch.Tensor, preset: SensorPreset, capture: str, key: str,
+           exposure_s: Mapping[str, float]) -> torch.Tensor:
+    """Input referral of one capture of a plan: (*, 1, H, W) DN (companded where the capture is) -> e- of the
+    reference capture's photodiode over its windows, (decompand(DN) - black) / K - dark_current x T, then
+    x (FF_ref / FF_pd) x (T_ref / T) (:func:`simulate_plan_electrons`)."""
+    spec = preset.photodiodes[preset.captures[capture].photodiode]
+    ref_key = next(k for k, caps in preset.exposures.items() if preset.reference in caps)
+    ff_ref = preset.photodiodes[preset.captures[preset.reference].photodiode].fill_factor
+    t, t_ref = float(exposure_s[key]), float(exposure_s[ref_key])
+    comp = preset.captures[capture].companding
+    lin = decompand(dn, comp) if comp is not None else dn
+    e = (lin - preset.black_level_dn).div_(preset.system_gain(capture)).sub_(spec.dark_current_e_per_s * t)
+    return e.mul_((ff_ref / spec.fill_factor) * (t_ref / t))
+
+
 def simulate_plan_electrons(mean_e: Mapping[str, torch.Tensor], preset: SensorPreset | str,
                             exposure_s: Mapping[str, float], generator: torch.Generator | None = None,
                             noise: bool = True, fpn: Mapping[str, torch.Tensor] | None = None,
-                            check: bool = True) -> dict[str, torch.Tensor]:
+                            check: bool = True, backend: str = "auto") -> dict[str, torch.Tensor]:
     """Every capture of a preset's plan from the mean photo-electrons of its exposures (any architecture).
 
     An *exposure* is one integration of one photodiode over its windows (:attr:`SensorPreset.exposures`: the
@@ -360,6 +379,13 @@ def simulate_plan_electrons(mean_e: Mapping[str, torch.Tensor], preset: SensorPr
         noise: ``False``: noise-free chain (dark mean kept, no FPN, clipping and quantisation kept).
         fpn: maps of :func:`fixed_pattern` (default: built for (H, W) from the preset when it has PRNU or DSNU).
         check: validate the inputs (finite, >= 0, same shape).
+        backend: ``"torch"``: the chain as torch element-wise operations (the reference; shot noise by
+            :func:`shot_noise`'s ``"auto"`` backend); ``"numba"`` (float32/float64 CPU inputs, needs numba): the same
+            operations compiled into one pass per exposure and one per capture
+            (:func:`lfmbench.sensor.fused.chain_plan_fused`; on-sensor companding then in torch), bit-identical to
+            ``"torch"`` with a fraction of its passes over the image (docs/benchmarks/dataset.md); ``"auto"``:
+            ``"numba"`` where it applies, else ``"torch"``. A split pixel takes
+            :func:`simulate_split_pixel_electrons` with this backend.
 
     Returns:
         ``{capture: (*, 1, H, W) DN, f"{capture}_e": (*, 1, H, W) input-referred e-, "saturated": (*, N, H, W)
@@ -377,14 +403,31 @@ def simulate_plan_electrons(mean_e: Mapping[str, torch.Tensor], preset: SensorPr
         if x.shape != first.shape or x.dtype != first.dtype or x.shape[-3] != 1:
             raise ValueError(f"mean_e[{k!r}] must have the shape (*, 1, H, W) and dtype of the others, got "
                              f"{tuple(x.shape)} {x.dtype}")
+    if backend not in ("auto", "numba", "torch"):
+        raise ValueError(f"backend must be 'auto', 'numba' or 'torch', got {backend!r}")
     if preset.architecture == "split_pixel":
         return simulate_split_pixel_electrons(mean_e["lpd_hcg"], mean_e["spd"], preset, exposure_s["lpd_hcg"],
-                                              exposure_s["spd"], generator, noise, fpn, check=False)
+                                              exposure_s["spd"], generator, noise, fpn, check=False, backend=backend)
     if noise and not isinstance(generator, torch.Generator):
         raise ValueError("generator must be a torch.Generator when noise=True (no hidden global randomness)")
     H, W = first.shape[-2:]
     if fpn is None and noise and any(p.prnu > 0 or p.dsnu_e > 0 for p in preset.photodiodes.values()):
         fpn = fixed_pattern(preset, H, W, device=first.device, dtype=first.dtype)
+    # the compiled chain reads the maps in the inputs' dtype (the torch chain would multiply in a wider one)
+    fused = (first.device.type == "cpu" and first.dtype in (torch.float32, torch.float64) and _poisson.available()
+             and (not noise or generator.device.type == "cpu")
+             and (fpn is None or not noise or all(v.dtype == first.dtype and v.device == first.device
+                                                  for v in fpn.values())))
+    if backend == "numba" and not fused:
+        raise ValueError(f"backend='numba' needs float32/float64 CPU inputs, a CPU generator, fixed-pattern maps in "
+                         f"the inputs' dtype and numba (got {first.dtype} on {first.device})")
+    if fused and backend != "torch":
+        out, linear = chain_plan_fused({k: mean_e[k] for k in groups}, preset, exposure_s, generator, noise, fpn)
+        for c in linear:   # on-sensor companding of the linear codes: the torch chain's operations
+            key = next(k for k, caps in groups.items() if c in caps)
+            out[c] = compand(out[c], preset.captures[c].companding).round_().clamp_(0.0, float(preset.max_dn))
+            out[f"{c}_e"] = _refer(out[c], preset, c, key, exposure_s)
+        return out
     collected: dict[str, torch.Tensor] = {}
     for key in groups:
         pd = preset.captures[key].photodiode
@@ -396,9 +439,6 @@ def simulate_plan_electrons(mean_e: Mapping[str, torch.Tensor], preset: SensorPr
         mu.add_(spec.dark_current_e_per_s * float(exposure_s[key]))
         n = shot_noise(mu, generator, preset.shot_noise_gaussian_above_e) if noise else mu
         collected[key] = n.clamp_(0.0, spec.full_well_e)
-    ref = preset.captures[preset.reference]
-    ref_key = next(k for k, caps in groups.items() if preset.reference in caps)
-    ff_ref, t_ref = preset.photodiodes[ref.photodiode].fill_factor, float(exposure_s[ref_key])
     out: dict[str, torch.Tensor] = {}
     sats = []
     for key, caps in groups.items():
@@ -408,11 +448,7 @@ def simulate_plan_electrons(mean_e: Mapping[str, torch.Tensor], preset: SensorPr
         for c in caps:
             r = read_capture(collected[key], preset, c, generator, noise, offset)
             out[c] = r["dn"]
-            comp = preset.captures[c].companding
-            lin = decompand(r["dn"], comp) if comp is not None else r["dn"]
-            e = (lin - preset.black_level_dn).div_(preset.system_gain(c)).sub_(
-                spec.dark_current_e_per_s * float(exposure_s[key]))
-            out[f"{c}_e"] = e.mul_((ff_ref / spec.fill_factor) * (t_ref / float(exposure_s[key])))
+            out[f"{c}_e"] = _refer(r["dn"], preset, c, key, exposure_s)
             sats.append((c, r["saturated"]))
     order = list(preset.captures)
     sats.sort(key=lambda cs: order.index(cs[0]))

@@ -180,12 +180,26 @@ def test_rolling_weights_at_the_lamps_rows_are_the_full_computations():
 @pytest.mark.parametrize("name, checked", [("imx490_4read", ("sp1_hcg", "sp1_lcg", "sp2_hcg", "sp2_lcg")),
                                            ("mt9v024", ("main",)), ("ar0132at", ("t1",)),
                                            ("lofic_otani2025", ("hcg",))])
-def test_dataset_yields_the_general_plans_of_real_presets(corpus, name, checked):
+def test_dataset_yields_the_general_plans_of_real_presets(corpus, monkeypatch, name, checked):
     """Four reads of two photodiodes, a companded capture, three staggered exposures, three reads of one LOFIC charge:
     every capture comes out, and the ``checked`` ones (those whose input-referred noise the dark test corpus
-    resolves) estimate the ground truth in the reference units (decompanded where the part compands)."""
+    resolves) estimate the ground truth in the reference units (decompanded where the part compands). The sample is
+    the same, bit for bit, when the sensor chain runs as the torch chain instead of compiled (the CPU default): the
+    compiled chain changes no sample a user gets."""
+    from functools import partial
+
+    from lfmbench.datasets import capture as _capture
+
     p = load_preset(name)
-    s = LFMCaptureDataset(corpus, split="all", sensor=name, frames=2, cache_dir=False)[0]
+    ds = LFMCaptureDataset(corpus, split="all", sensor=name, frames=2, cache_dir=False)
+    s = ds[0]
+    monkeypatch.setattr(_capture._sensor, "simulate_plan_electrons",
+                        partial(_capture._sensor.simulate_plan_electrons, backend="torch"))
+    ref = ds[0]
+    keys = [k for k, v in ref.items() if isinstance(v, torch.Tensor)]
+    assert {*p.captures, *(f"{c}_e" for c in p.captures), "saturated", "gt"} <= set(keys)
+    for k in keys:
+        assert s[k].dtype == ref[k].dtype and torch.equal(s[k], ref[k]), k
     assert s["saturated"].shape == (2, len(p.captures), 16, 24) and s["meta"]["architecture"] == p.architecture
     for i, c in enumerate(p.captures):
         assert s[c].shape == (2, 1, 16, 24) and float(s[c].max()) <= p.max_dn
@@ -194,3 +208,4 @@ def test_dataset_yields_the_general_plans_of_real_presets(corpus, name, checked)
             assert ok.sum() > 20
             rel = ((s[f"{c}_e"] - s["gt"])[ok].mean() / s["gt"][ok].mean()).abs()
             assert rel < 0.1, (c, float(rel))
+
