@@ -71,6 +71,8 @@ PIXEL_SAMPLES = ("auto", "sobol", "strata")
 PAD_SAMPLES = ("auto", "spp", "light")
 #: ``RenderOptions.static_denoise`` values (:mod:`render_tools.denoise`).
 STATIC_DENOISE = ("auto", "oidn", "off")
+#: ``RenderOptions.static_split`` values (:data:`render_tools.denoise.SPLITS` and ``auto``).
+STATIC_SPLIT = ("auto", "oidn", "box")
 #: Values of :attr:`RenderOptions.static_bin_samples`.
 STATIC_BIN_SAMPLES = ("independent", "common")
 
@@ -151,6 +153,13 @@ class RenderOptions:
     night, wet night) to 4 / 3 / 9.5 % for 0.8-0.9 CPU s per frame (docs/benchmarks/render.md, "Scene generator
     2"); not unbiased (a wet road's static reflections are blurred: docs/guide/rendering.md, "Static frames denoised");
     the flickering lamps' own boxes are never denoised (their reflections: ``reflection_denoise``).
+    static_split: how the denoised static frames are split back among the static groups
+    (:func:`render_tools.denoise.denoise_static` ``split``): ``"box"`` (each group's share of a broad band in a 5 x 5
+    px box of its spp-1 image: on a wet road, where the static lamps' reflections are sparse bright samples, it
+    coloured 4-6 px squares magenta and green), ``"oidn"`` (by each group's light denoised on 2 x 2 px blocks, three
+    groups per filter call, and the group's colour over 33 px; the broad bands, so the frame's light, are the same)
+    or ``"auto"`` (default: ``oidn`` on scene version 2, ``box`` on version 1). Content: it changes the static
+    groups' images of every version-2 frame with two or more static groups (docs/guide/scenes.md).
     reflection_denoise: a flickering lamp's reflection in a wet road (the steady part of its grown crop outside
     its padded lamp box, traced at ``spp`` in ``reflection_block_px`` blocks) denoised after tracing, each light's
     layer alone (:func:`render_tools.denoise.denoise_reflection`: the static frames' denoiser on that one image
@@ -210,6 +219,7 @@ class RenderOptions:
     pad_samples: str = "auto"
     static_denoise: str = "auto"
     reflection_denoise: str = "auto"
+    static_split: str = "auto"
     static_edges_s: tuple = ()
     static_bin_samples: str = "independent"
     static_layers: tuple = ()
@@ -263,6 +273,8 @@ class RenderOptions:
                              f"{self.static_bin_samples!r}")
         if self.static_denoise not in STATIC_DENOISE:
             raise ValueError(f"static_denoise: must be one of {STATIC_DENOISE}, got {self.static_denoise!r}")
+        if self.static_split not in STATIC_SPLIT:
+            raise ValueError(f"static_split: must be one of {STATIC_SPLIT}, got {self.static_split!r}")
         if self.reflection_denoise not in STATIC_DENOISE:
             raise ValueError(f"reflection_denoise: must be one of {STATIC_DENOISE}, got {self.reflection_denoise!r}")
         if self.pixel_samples not in PIXEL_SAMPLES:
@@ -602,6 +614,12 @@ def static_denoised(scene: dict, opts: RenderOptions) -> bool:
     return _on_from_version_2(opts.static_denoise, "oidn", scene)
 
 
+def static_split(scene: dict, opts: RenderOptions) -> str:
+    """How the denoised static frames are split among the groups (``opts.static_split``; ``auto``: ``oidn`` on scene
+    version 2 and later, ``box`` on version 1)."""
+    return "oidn" if _on_from_version_2(opts.static_split, "oidn", scene) else "box"
+
+
 def reflections_denoised(scene: dict, opts: RenderOptions) -> bool:
     """Whether the flickering lamps' steady reflections are denoised, light by light (``opts.reflection_denoise``;
     ``auto``: scene version 2 and later)."""
@@ -802,6 +820,7 @@ def scene_meta(scene: dict, opts: RenderOptions) -> dict:
                        "pixel_samples": "sobol" if sobol_pixel_samples(scene, opts) else "strata",
                        "pad_samples": "spp" if pad_at_spp(scene, opts) else "light",
                        "static_denoise": "oidn" if static_denoised(scene, opts) else "off",
+                       **({"static_split": static_split(scene, opts)} if static_denoised(scene, opts) else {}),
                        **({"reflection_denoise": "oidn" if reflections_denoised(scene, opts) else "off"}
                           if helper.wet else {})}
                       if int(scene.get("version", 1)) >= 2 else {})},
@@ -1219,7 +1238,8 @@ def render_frames(scene: dict, opts: RenderOptions, steady_bins: bool = False) -
                 for k, a, b in bins:
                     boxes = static_lamp_boxes(scene, opts, n, geo, window=(a, b),
                                               t_obj=0.5 * (a + b) if obj_moving else t_obj)
-                    done = denoise.denoise_static({g: w[f"bin{k}"] for g, w in out["static"].items()}, boxes)
+                    done = denoise.denoise_static({g: w[f"bin{k}"] for g, w in out["static"].items()}, boxes,
+                                                  split=static_split(scene, opts))
                     for g, img in done.items():
                         out["static"][g][f"bin{k}"] = img
             for g, wins in out["static"].items():
@@ -1241,7 +1261,8 @@ def render_frames(scene: dict, opts: RenderOptions, steady_bins: bool = False) -
 
             boxes = static_lamp_boxes(scene, opts, n, geo)
             for win in ("short", "long"):
-                done = denoise.denoise_static({g: w[win] for g, w in out["static"].items()}, boxes)
+                done = denoise.denoise_static({g: w[win] for g, w in out["static"].items()}, boxes,
+                                              split=static_split(scene, opts))
                 for g, img in done.items():
                     out["static"][g][win] = img
         for g, info in groups.items():

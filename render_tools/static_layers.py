@@ -195,7 +195,7 @@ def render_layer(scene: dict, opts, layer: tuple) -> Iterator[dict]:
 
             boxes = R.static_lamp_boxes(scene, opts, f, geo, window=(tm["t0"] + wins[0][0],
                                                                       tm["t0"] + wins[-1][0] + wins[-1][1]))
-            static.update(denoise.denoise_static(static, boxes))
+            static.update(denoise.denoise_static(static, boxes, split=R.static_split(scene, opts)))
         del params, loaded
         gc.collect()
         yield {"frame": f, "static": static}
