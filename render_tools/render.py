@@ -160,8 +160,8 @@ class RenderOptions:
     px box of its spp-1 image: on a wet road, where the static lamps' reflections are sparse bright samples, it
     coloured 4-6 px squares magenta and green), ``"oidn"`` (by each group's light denoised on 2 x 2 px blocks, three
     groups per filter call, and the group's colour over 33 px; the broad bands, so the frame's light, are the same)
-    or ``"auto"`` (default: ``oidn`` on scene version 2, ``box`` on version 1). Content: it changes the static
-    groups' images of every version-2 frame with two or more static groups (docs/guide/scenes.md).
+    or ``"auto"`` (default: ``oidn`` on a version-2 scene with a glossy road, a wet one, else ``box``: dry frames
+    unchanged). Content: it changes the static groups' images of a wet version-2 frame (docs/guide/scenes.md).
     glossy_light_choice: how next-event estimation draws a lamp at a point of a glossy coat (a wet road's water
     film and puddles: ``roughplastic`` with an ``ior``): ``"lobe"`` (the lamp's weight times the coat's specular
     lobe towards it, :meth:`render_tools.tracer.Tracer._lamp_weights`: the lamp a point reflects gets its samples),
@@ -629,9 +629,12 @@ def static_denoised(scene: dict, opts: RenderOptions) -> bool:
 
 
 def static_split(scene: dict, opts: RenderOptions) -> str:
-    """How the denoised static frames are split among the groups (``opts.static_split``; ``auto``: ``oidn`` on scene
-    version 2 and later, ``box`` on version 1)."""
-    return "oidn" if _on_from_version_2(opts.static_split, "oidn", scene) else "box"
+    """How the denoised static frames are split among the groups (``opts.static_split``; ``auto``: ``oidn`` on a scene
+    of version 2 and later with a glossy road, :func:`render_tools.reflections.wet_road`, where the static lamps'
+    reflections are sparse samples; else ``box``, as before)."""
+    if opts.static_split == "auto":
+        return "oidn" if int(scene.get("version", 1)) >= 2 and reflections.wet_road(scene) is not None else "box"
+    return opts.static_split
 
 
 def glossy_choice(mi, dr, scene: dict, opts: RenderOptions, cache: dict) -> dict | None:

@@ -187,9 +187,13 @@ def test_option_values_and_meta():
     assert "static_denoise" not in render.scene_meta(v1, opts)["render"]
     off = render.RenderOptions(width=160, height=90, frames=1, static_denoise="off")
     assert render.scene_meta(v2, off)["render"]["static_denoise"] == "off"
-    assert render.scene_meta(v2, opts)["render"]["static_split"] == "oidn"
-    assert render.static_split(v1, opts) == "box" and "static_split" not in render.scene_meta(v2, off)["render"]
-    assert render.static_split(v2, render.RenderOptions(static_split="box")) == "box"
+    wet, dry = (scene.generate_scene(101, time_of_day="night", generator=2, overrides={"weather": {"conditions": [c]}})
+                for c in ("wet", "dry"))
+    assert render.scene_meta(wet, opts)["render"]["static_split"] == "oidn"
+    assert render.scene_meta(dry, opts)["render"]["static_split"] == "box"
+    assert render.static_split(v1, opts) == "box" and "static_split" not in render.scene_meta(wet, off)["render"]
+    assert render.static_split(wet, render.RenderOptions(static_split="box")) == "box"
+    assert render.static_split(dry, render.RenderOptions(static_split="oidn")) == "oidn"
     with pytest.raises(ValueError, match="static_split"):
         render.RenderOptions(static_split="yes")
     boxes = render.static_lamp_boxes(v2, opts, 0)
