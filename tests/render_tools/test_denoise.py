@@ -4,6 +4,7 @@ broad band, leaves the lamp boxes as traced; Open Image Denoise lowers the error
 scene and stays finite on extreme ranges; scene version 2 renders denoised, version 1 as before."""
 from __future__ import annotations
 
+import copy
 import sys
 
 import numpy as np
@@ -180,15 +181,21 @@ def test_option_values_and_meta():
     with pytest.raises(ValueError, match="static_denoise"):
         render.RenderOptions(static_denoise="yes")
     opts = render.RenderOptions(width=160, height=90, frames=1)
-    v2 = scene.generate_scene(101, time_of_day="night", generator=2)
+    v2 = scene.generate_scene(101, time_of_day="night", generator=2, overrides={"weather": {"conditions": ["wet"]}})
     v1 = scene.generate_scene(101, time_of_day="night")
     assert render.static_denoised(v2, opts) and not render.static_denoised(v1, opts)
     assert render.scene_meta(v2, opts)["render"]["static_denoise"] == "oidn"
     assert "static_denoise" not in render.scene_meta(v1, opts)["render"]
     off = render.RenderOptions(width=160, height=90, frames=1, static_denoise="off")
     assert render.scene_meta(v2, off)["render"]["static_denoise"] == "off"
-    wet, dry = (scene.generate_scene(101, time_of_day="night", generator=2, overrides={"weather": {"conditions": [c]}})
-                for c in ("wet", "dry"))
+    wet, dry = v2, copy.deepcopy(v2)
+    for m in ("asphalt_wet", "puddle"):  # no glossy film: a dry road
+        dry["materials"][m] = {"type": "diffuse", "rgb": [0.09, 0.09, 0.095]}
+    assert render.scene_meta(wet, opts)["render"]["glossy_light_choice"] == "lobe"
+    assert render.scene_meta(wet, render.RenderOptions(glossy_light_choice="plain"))["render"][
+        "glossy_light_choice"] == "plain"
+    with pytest.raises(ValueError, match="glossy_light_choice"):
+        render.RenderOptions(glossy_light_choice="yes")
     assert render.scene_meta(wet, opts)["render"]["static_split"] == "oidn"
     assert render.scene_meta(dry, opts)["render"]["static_split"] == "box"
     assert render.static_split(v1, opts) == "box" and "static_split" not in render.scene_meta(wet, off)["render"]
