@@ -13,8 +13,9 @@ Light sets replace per-group and per-light Mitsuba scenes. The scene is loaded o
 emitter on; a lane of set ``k`` counts only emission of the emitters in ``k`` (a light group, or one light's
 lamp face plus its beam) and samples next-event estimation only from them: at each path vertex one emitter of the
 set, drawn in proportion to an estimate of the light it brings to that point (intensity, beam cone or face
-cosine, receiver cosine, inverse square distance: :meth:`Tracer._lamp_weights`), so that of 40 streetlights the
-few near the point get the samples (uniform or flux-proportional choice spent most of them on far lamps). By linearity of light transport in the emission this is exactly the image
+cosine, receiver cosine, inverse square distance; on a glossy coat such as a wet road's water film, times the
+coat's specular lobe towards the lamp: :meth:`Tracer._lamp_weights`), so that of 40 streetlights the few near the
+point (or the one it reflects) get the samples (uniform or flux-proportional choice spent most of them on far lamps). By linearity of light transport in the emission this is exactly the image
 of the scene in which only set ``k`` emits (the previous per-group scenes; checked against Mitsuba's own
 ``path`` integrator in tests/render_tools/test_render_tracer.py).
 
