@@ -46,10 +46,11 @@ day, but a wet road's glossy reflections of the static lamps are sparse bright s
 blurs them: their brightest tenth loses about a quarter of its light, the rest of the road gains 7 %, the frame's
 light outside the lamp boxes -15 % (short window; long -8 %). Smaller frames lose more (the same scenes, short
 window, all static groups' light outside the lamp boxes: 320x180 at spp 1 dry night -3.6 %, wet -18 %, day -0.2 %;
-160x90 at spp 2, the mini protocols' size, -4.1 / -18 / -0.5 %). These wet figures are with ``glossy_light_choice: plain``; with
-``lobe`` (the default on scene version 2, :class:`render_tools.render.RenderOptions`) the reflections are no longer
-sparse samples and a 320x180 wet night's denoised static light is 0.986 of a spp-32 reference (plain: 0.558). Scaling the output back to the traced light (over
-the frame, or in boxes of 8-64 px) was tried and not taken: over the frame it brightened everything else by 12 %
+160x90 at spp 2, the mini protocols' size, -4.1 / -18 / -0.5 %). These wet figures are with
+``glossy_light_choice: plain``; with ``lobe`` (the default on scene version 2,
+:class:`render_tools.render.RenderOptions`) the reflections are no longer sparse samples and a 320x180 wet night's
+denoised static light is 0.986 of a spp-32 reference (plain: 0.558). Scaling the output back to the traced light
+(over the frame, or in boxes of 8-64 px) was tried and not taken: over the frame it brightened everything else by 12 %
 (median error 9.4 -> 16.4 %), in boxes it left square blotches where a single bright sample sat. ``static_denoise:
 off`` keeps the traced (unbiased) estimate.
 """
