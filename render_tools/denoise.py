@@ -26,6 +26,18 @@ What (one capture window of one frame; ``S[g, c]``: group g's spectral radiance 
    so the groups and bands of a pixel add up to the denoised broad band; within the boxes the split between
    groups and the spectral shape inside a broad band are averaged (an edge between differently coloured
    surfaces, or between what two groups light, is blurred over r or R px in those ratios only).
+   With ``split="oidn"`` (:data:`SPLITS`; ``RenderOptions.static_split``) the groups' shares come from denoised
+   images instead: each group's light summed over all its bands, ``T[g]``, in :data:`SPLIT_BLOCK_PX` px blocks,
+   up to three groups per call of the same filter (as colour channels), bilinear back (``T'[g]``); the group's
+   colour, its broad band's part of its light ``col[g, k] = box_R(S[g, k]) / box_R(T[g])``, from the box of the
+   spectral shape; ``S'[g, c] = B'[k] * T'[g] col[g, k] / sum_h T'[h] col[h, k] * box_R(S[g, c]) / box_R(S[g,
+   k])``. Why: on a wet road the static lamps' glossy reflections are sparse bright samples at spp 1; one of
+   them in a 5 x 5 px box took that broad band's share for its group there, so the spectral shape inside the broad
+   band flipped from one group's (HPS streetlights: most light at 589 nm) to the other's (white headlights) box by
+   box: 4-6 px magenta and green squares in the denoised reflection streaks (docs/guide/scenes.md). Denoised
+   shares are smooth, and each group's colour is its own over R px; the broad bands (so luminance and colour at
+   their resolution) are the same filter output as with ``box``. Cost: one call of the filter on a quarter of
+   the pixels per three groups (measured in docs/guide/scenes.md).
 
 Not unbiased: the filter's output is its own estimate; edges and texture finer than the noise are smoothed, and
 light it takes for outliers is removed. Measured on 640x360 frames of the ``default`` profile against spp-64/256
@@ -34,8 +46,11 @@ day, but a wet road's glossy reflections of the static lamps are sparse bright s
 blurs them: their brightest tenth loses about a quarter of its light, the rest of the road gains 7 %, the frame's
 light outside the lamp boxes -15 % (short window; long -8 %). Smaller frames lose more (the same scenes, short
 window, all static groups' light outside the lamp boxes: 320x180 at spp 1 dry night -3.6 %, wet -18 %, day -0.2 %;
-160x90 at spp 2, the mini protocols' size, -4.1 / -18 / -0.5 %). Scaling the output back to the traced light (over
-the frame, or in boxes of 8-64 px) was tried and not taken: over the frame it brightened everything else by 12 %
+160x90 at spp 2, the mini protocols' size, -4.1 / -18 / -0.5 %). These wet figures are with
+``glossy_light_choice: plain``; with ``lobe`` (the default on scene version 2,
+:class:`render_tools.render.RenderOptions`) the reflections are no longer sparse samples and a 320x180 wet night's
+denoised static light is 0.986 of a spp-32 reference (plain: 0.558). Scaling the output back to the traced light
+(over the frame, or in boxes of 8-64 px) was tried and not taken: over the frame it brightened everything else by 12 %
 (median error 9.4 -> 16.4 %), in boxes it left square blotches where a single bright sample sat. ``static_denoise:
 off`` keeps the traced (unbiased) estimate.
 """
@@ -54,6 +69,11 @@ SHARE_RADIUS_PX = 2
 #: measured: at 2 px the sparse samples of a wet road's reflections left colour blotches (hue of 5 x 5 px squares);
 #: at 16 px none were seen, and the median error was the same (docs/benchmarks/render.md).
 SHAPE_RADIUS_PX = 16
+#: Ways of splitting a denoised broad band among the static groups (``denoise_static`` ``split``; module docstring
+#: step 3): by the groups' shares in a box of :data:`SHARE_RADIUS_PX`, or by their denoised light.
+SPLITS = ("box", "oidn")
+#: Side (px) of the blocks the groups' light is denoised on for ``split="oidn"`` (a quarter of the pixels at 2).
+SPLIT_BLOCK_PX = 2
 #: Side (px) of the blocks on which the spectral shape's box means are taken (they vary over SHAPE_RADIUS_PX, so a
 #: block grid 4 px apart holds them; interpolated back bilinearly): 16x fewer pixels for the C bands' box means.
 SHAPE_BLOCK_PX = 4
@@ -208,8 +228,30 @@ def oidn_rgb(img: np.ndarray) -> np.ndarray:
     return np.maximum(np.moveaxis(np.asarray(y, np.float32), -1, 0), 0.0) * np.float32(level)
 
 
+def _denoised_group_light(tot: np.ndarray, keep: np.ndarray, boxes, denoiser) -> np.ndarray:
+    """The groups' light ``tot`` (G, H, W) >= 0 (lamp boxes zeroed) denoised for ``split="oidn"``: boxes filled
+    from their rings, :data:`SPLIT_BLOCK_PX` px block means, each group divided by its mean (the filter treats its
+    channels as colour: the night sky's light, 1e-3 of the streetlights', came out +23 % unscaled, dry night
+    320x180), ``denoiser`` on three groups at a time (zero channels pad the last call), multiplied back, bilinear
+    back to (G, H, W) float32 >= 0."""
+    G, H, W = tot.shape
+    f = SPLIT_BLOCK_PX
+    lo = _block_mean(_fill_boxes(tot, keep, boxes), f)
+    out = np.empty_like(lo)
+    level = lo.mean(axis=(1, 2), dtype=np.float64)  # each group scaled to a mean of 1: a faint group (the night
+    level = np.where(level > 0, level, 1.0).astype(np.float32)[:, None, None]  # sky) is not a bright one's residue
+    lo = lo / level
+    for i in range(0, G, 3):
+        chunk = np.zeros((3,) + lo.shape[1:], np.float32)
+        n = min(3, G - i)
+        chunk[:n] = lo[i:i + n]
+        out[i:i + n] = np.maximum(np.asarray(denoiser(chunk), np.float32)[:n], 0.0)
+    out *= level
+    return _upsample(out, f, (H, W))
+
+
 def denoise_static(images: dict, boxes=(), radius: int = SHARE_RADIUS_PX, shape_radius: int | None = None,
-                   denoiser=oidn_rgb) -> dict:
+                   denoiser=oidn_rgb, split: str = "box") -> dict:
     """Denoise the static groups' images of one window (module docstring).
 
     Args:
@@ -218,12 +260,16 @@ def denoise_static(images: dict, boxes=(), radius: int = SHARE_RADIUS_PX, shape_
         radius: px, the box radius of the groups' shares (:data:`SHARE_RADIUS_PX`).
         shape_radius: px, the box radius of the spectral shape inside a broad band (None: :data:`SHAPE_RADIUS_PX`).
         denoiser: (k, H, W) -> (k, H, W), k = :data:`BROAD_BANDS` (:func:`oidn_rgb`; tests pass others).
+        split: how a broad band is split among the groups (:data:`SPLITS`, module docstring): ``"box"`` (their
+            shares in a box of ``radius``) or ``"oidn"`` (their light denoised, ``radius`` unused).
 
     Returns:
         group -> (C, H, W) float32: per pixel and broad band, the groups' bands sum to the denoised broad band
         outside the boxes; inside them the input values.
     """
     shape_radius = SHAPE_RADIUS_PX if shape_radius is None else shape_radius
+    if split not in SPLITS:
+        raise ValueError(f"split: must be one of {SPLITS}, got {split!r}")
     groups = list(images)
     if not groups:
         return {}
@@ -244,21 +290,36 @@ def denoise_static(images: dict, boxes=(), radius: int = SHARE_RADIUS_PX, shape_
     filled = _fill_boxes(B, keep, boxes)
     Bd = np.asarray(denoiser(filled), np.float32)[:k]
     kf = keep.astype(np.float32)
-    den = _box_mean(B[:k] * kf, radius)  # (k, H, W): box means of the broad bands, all groups
-    ok = den > 0
-    scale = np.where(ok, Bd / np.where(ok, den, 1.0), 0.0)  # B'[k] / box_r(B[k])
     even = Bd / G  # no kept light near: B' split evenly among the groups (B' is ~0 there)
     f = SHAPE_BLOCK_PX
+    rb = max(1, round(shape_radius / f))
+    by_box = split == "box" or G == 1
+    if by_box:
+        den = _box_mean(B[:k] * kf, radius)  # (k, H, W): box means of the broad bands, all groups
+        ok = den > 0
+        scale = np.where(ok, Bd / np.where(ok, den, 1.0), 0.0)  # B'[k] / box_r(B[k])
+    else:  # the groups' denoised light T'[g] times their colour col[g, k], normalised over the groups
+        light = _denoised_group_light(np.stack([(xk * kf).sum(0) for xk in per_group]), keep, boxes, denoiser)
+        est, kbox = [], []
+        for xk, t in zip(per_group, light):
+            klo = _box_mean(_block_mean(xk * kf, f), rb)  # box_R(S[g, k]) on the blocks
+            kbox.append(klo)
+            tlo = klo.sum(0)
+            col = np.where(tlo > 0, klo / np.where(tlo > 0, tlo, 1.0), 1.0 / k)
+            est.append(_upsample(col, f, (H, W)) * t[None])  # (k, H, W): T'[g] col[g, k]
+        den = np.sum(est, axis=0)
+        ok = den > 0
+        scale = np.where(ok, Bd / np.where(ok, den, 1.0), 0.0)
     out = {}
-    for g, xk in zip(groups, per_group):
+    for i, (g, xk) in enumerate(zip(groups, per_group)):
         x = np.asarray(images[g], np.float32)
         xk = xk * kf
-        share = np.where(ok, _box_mean(xk, radius) * scale, even)  # (k, H, W): the group's part of B'[k]
+        # (k, H, W): the group's part of B'[k]
+        share = np.where(ok, (_box_mean(xk, radius) if by_box else est[i]) * scale, even)
         # band c's share of the group's broad band, box_R(S[g, c]) / box_R(S[g, k]): smooth over R px, so
         # measured on f x f px blocks (box radius R / f) and interpolated back
-        lo, klo = _block_mean(x * kf, f), _block_mean(xk, f)
-        rb = max(1, round(shape_radius / f))
-        lo, klo = _box_mean(lo, rb), _box_mean(klo, rb)
+        lo = _box_mean(_block_mean(x * kf, f), rb)
+        klo = _box_mean(_block_mean(xk, f), rb) if by_box else kbox[i]
         shape_lo = np.empty_like(lo)
         for j, p in enumerate(parts):
             d = klo[j]

@@ -128,11 +128,12 @@ GALLERY = (("v2_day", "day", "dry"), ("v2_dusk", "dusk", "dry"), ("v2_night", "n
 
 
 def render_gallery(out_dir: str | os.PathLike, seed: int = 7, profile: str = "default",
-                   closeup_size=(320, 180), closeup_spp: int = 4) -> list[Path]:
+                   closeup_size=(320, 180), closeup_spp: int = 4, only=None) -> list[Path]:
     """docs/guide/scenes.md's pictures: frame 0 (short exposure, every LED on) of scene generator 2's street at
     ``seed`` for each entry of :data:`GALLERY`, rendered with the render ``profile``'s options (frames and AOVs
     aside), and ``v2_vehicles.png``, a sheet of :func:`closeup_scene` renders (every vehicle kind, rear then
-    front, lamps lit; ``closeup_size`` px each at ``closeup_spp``). Returns the PNG paths; prints seconds."""
+    front, lamps lit; ``closeup_size`` px each at ``closeup_spp``). ``only``: the file stems to render (None: all;
+    ``v2_vehicles`` for the sheet). Returns the PNG paths; prints seconds."""
     import time  # noqa: PLC0415
 
     from . import render as rnd  # noqa: PLC0415
@@ -153,11 +154,19 @@ def render_gallery(out_dir: str | os.PathLike, seed: int = 7, profile: str = "de
         print(f"{path.name}: {time.perf_counter() - t:.1f} s", flush=True)
         return tonemap_srgb(img, opts.bands_nm, opts.band_width_nm)
 
+    stems = [g[0] for g in GALLERY] + ["v2_vehicles"]
+    bad = sorted(set(only or ()) - set(stems))
+    if bad:
+        raise ValueError(f"only: unknown gallery picture(s) {bad}; known: {stems}")
     for stem, tod, weather in GALLERY:
+        if only is not None and stem not in only:
+            continue
         sc = scn.generate_scene(seed, tod, generator=2, overrides={"weather": {"conditions": [weather]}})
         p = out / f"{stem}.png"
         write_png(shot(sc, rnd.RenderOptions(**prof), p), p)
         paths.append(p)
+    if only is not None and "v2_vehicles" not in only:
+        return paths
     w, h = closeup_size
     opts = rnd.RenderOptions(width=w, height=h, spp=closeup_spp, light_spp=max(16, closeup_spp), frames=1, bins=4,
                              aux=False, seed=seed)
@@ -218,7 +227,8 @@ if __name__ == "__main__":  # pragma: no cover - documentation helper
     ap.add_argument("--height", type=int, default=360)
     ap.add_argument("--spp", type=int, default=8)
     ap.add_argument("--gallery", action="store_true", help="docs/guide/scenes.md's scene generator 2 gallery instead")
+    ap.add_argument("--only", nargs="+", default=None, help="with --gallery: these pictures only (file stems)")
     a = ap.parse_args()
-    for path in (render_gallery(a.out, a.seed) if a.gallery else
+    for path in (render_gallery(a.out, a.seed, only=a.only) if a.gallery else
                  render_previews(a.out, a.seed, a.width, a.height, a.spp)):
         print(path)

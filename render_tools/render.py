@@ -71,6 +71,10 @@ PIXEL_SAMPLES = ("auto", "sobol", "strata")
 PAD_SAMPLES = ("auto", "spp", "light")
 #: ``RenderOptions.static_denoise`` values (:mod:`render_tools.denoise`).
 STATIC_DENOISE = ("auto", "oidn", "off")
+#: ``RenderOptions.static_split`` values (:data:`render_tools.denoise.SPLITS` and ``auto``).
+STATIC_SPLIT = ("auto", "oidn", "box")
+#: ``RenderOptions.glossy_light_choice`` values.
+GLOSSY_LIGHT_CHOICE = ("auto", "lobe", "plain")
 #: Values of :attr:`RenderOptions.static_bin_samples`.
 STATIC_BIN_SAMPLES = ("independent", "common")
 
@@ -151,6 +155,21 @@ class RenderOptions:
     night, wet night) to 4 / 3 / 9.5 % for 0.8-0.9 CPU s per frame (docs/benchmarks/render.md, "Scene generator
     2"); not unbiased (a wet road's static reflections are blurred: docs/guide/rendering.md, "Static frames denoised");
     the flickering lamps' own boxes are never denoised (their reflections: ``reflection_denoise``).
+    static_split: how the denoised static frames are split back among the static groups
+    (:func:`render_tools.denoise.denoise_static` ``split``): ``"box"`` (each group's share of a broad band in a 5 x 5
+    px box of its spp-1 image: on a wet road, where the static lamps' reflections are sparse bright samples, it
+    coloured 4-6 px squares magenta and green), ``"oidn"`` (by each group's light denoised on 2 x 2 px blocks, three
+    groups per filter call, and the group's colour over 33 px; the broad bands, so the frame's light, are the same)
+    or ``"auto"`` (default: ``oidn`` on a version-2 scene with a glossy road, a wet one, else ``box``: dry frames
+    unchanged). Content: it changes the static groups' images of a wet version-2 frame (docs/guide/scenes.md).
+    glossy_light_choice: how next-event estimation draws a lamp at a point of a glossy coat (a wet road's water
+    film and puddles: ``roughplastic`` with an ``ior``): ``"lobe"`` (the lamp's weight times the coat's specular
+    lobe towards it, :meth:`render_tools.tracer.Tracer._lamp_weights`: the lamp a point reflects gets its samples),
+    ``"plain"`` (intensity, cosines and distance only: at spp 1 a wet road's reflections of the static lamps were
+    sparse bright samples, which the static denoiser smeared into an orange sheet and split into coloured squares)
+    or ``"auto"`` (default: ``lobe`` on scene version 2, ``plain`` on version 1). Unbiased either way (every lamp
+    keeps a positive probability; the hit's MIS weight uses the same choice); content: a version-2 wet frame's
+    noise and its denoised static frames change (docs/guide/scenes.md).
     reflection_denoise: a flickering lamp's reflection in a wet road (the steady part of its grown crop outside
     its padded lamp box, traced at ``spp`` in ``reflection_block_px`` blocks) denoised after tracing, each light's
     layer alone (:func:`render_tools.denoise.denoise_reflection`: the static frames' denoiser on that one image
@@ -210,6 +229,8 @@ class RenderOptions:
     pad_samples: str = "auto"
     static_denoise: str = "auto"
     reflection_denoise: str = "auto"
+    static_split: str = "auto"
+    glossy_light_choice: str = "auto"
     static_edges_s: tuple = ()
     static_bin_samples: str = "independent"
     static_layers: tuple = ()
@@ -263,6 +284,11 @@ class RenderOptions:
                              f"{self.static_bin_samples!r}")
         if self.static_denoise not in STATIC_DENOISE:
             raise ValueError(f"static_denoise: must be one of {STATIC_DENOISE}, got {self.static_denoise!r}")
+        if self.glossy_light_choice not in GLOSSY_LIGHT_CHOICE:
+            raise ValueError(f"glossy_light_choice: must be one of {GLOSSY_LIGHT_CHOICE}, got "
+                             f"{self.glossy_light_choice!r}")
+        if self.static_split not in STATIC_SPLIT:
+            raise ValueError(f"static_split: must be one of {STATIC_SPLIT}, got {self.static_split!r}")
         if self.reflection_denoise not in STATIC_DENOISE:
             raise ValueError(f"reflection_denoise: must be one of {STATIC_DENOISE}, got {self.reflection_denoise!r}")
         if self.pixel_samples not in PIXEL_SAMPLES:
@@ -602,6 +628,26 @@ def static_denoised(scene: dict, opts: RenderOptions) -> bool:
     return _on_from_version_2(opts.static_denoise, "oidn", scene)
 
 
+def static_split(scene: dict, opts: RenderOptions) -> str:
+    """How the denoised static frames are split among the groups (``opts.static_split``; ``auto``: ``oidn`` on a scene
+    of version 2 and later with a glossy road, :func:`render_tools.reflections.wet_road`, where the static lamps'
+    reflections are sparse samples; else ``box``, as before)."""
+    if opts.static_split == "auto":
+        return "oidn" if int(scene.get("version", 1)) >= 2 and reflections.wet_road(scene) is not None else "box"
+    return opts.static_split
+
+
+def glossy_choice(mi, dr, scene: dict, opts: RenderOptions, cache: dict) -> dict | None:
+    """The ``gloss`` table of :class:`render_tools.tracer.Tracer` (``opts.glossy_light_choice``; ``auto``: ``lobe`` on
+    scene version 2 and later): None for ``plain``. ``cache``: the frame's :func:`render_tools.mitsuba_scene.
+    mitsuba_dict` cache (its loaded BSDFs)."""
+    if not _on_from_version_2(opts.glossy_light_choice, "lobe", scene):
+        return None
+    from . import tracer  # noqa: PLC0415
+
+    return tracer.glossy_choice_table(mi, dr, cache["bsdfs"], scene["materials"]) or None
+
+
 def reflections_denoised(scene: dict, opts: RenderOptions) -> bool:
     """Whether the flickering lamps' steady reflections are denoised, light by light (``opts.reflection_denoise``;
     ``auto``: scene version 2 and later)."""
@@ -802,6 +848,9 @@ def scene_meta(scene: dict, opts: RenderOptions) -> dict:
                        "pixel_samples": "sobol" if sobol_pixel_samples(scene, opts) else "strata",
                        "pad_samples": "spp" if pad_at_spp(scene, opts) else "light",
                        "static_denoise": "oidn" if static_denoised(scene, opts) else "off",
+                       **({"glossy_light_choice": "lobe" if _on_from_version_2(opts.glossy_light_choice, "lobe", scene)
+                           else "plain"} if helper.wet else {}),
+                       **({"static_split": static_split(scene, opts)} if static_denoised(scene, opts) else {}),
                        **({"reflection_denoise": "oidn" if reflections_denoised(scene, opts) else "off"}
                           if helper.wet else {})}
                       if int(scene.get("version", 1)) >= 2 else {})},
@@ -1143,8 +1192,9 @@ def render_frames(scene: dict, opts: RenderOptions, steady_bins: bool = False) -
         if n == 0:  # scenes of a size class share kernels; the next frames' objects take this frame's ids
             pad = tracer.pad_registry(mi, dr, loaded, mcache["off_lens"])
         sets = tracer.LightSets(mi, dr, loaded, scene, list(groups), union=static_union(groups, opts))
+        gloss = glossy_choice(mi, dr, scene, opts, mcache)
         tr = tracer.Tracer(mi, dr, loaded, sets, geo.ego, geo.fov, (opts.width, opts.height), opts.bands_nm,
-                           opts.band_width_nm, sky_scale=ms.sky_scale(scene))
+                           opts.band_width_nm, sky_scale=ms.sky_scale(scene), gloss=gloss)
         tiles, plan, visible = plan_frame(scene, opts, n, sets, geo, filled, static=edges is None)
         qmc = sobol_pixel_samples(scene, opts)
         bins = [] if edges is None else [(k, tm["t0"] + a, tm["t0"] + b) for k, (a, b) in
@@ -1165,7 +1215,7 @@ def render_frames(scene: dict, opts: RenderOptions, steady_bins: bool = False) -
                     lb = mi.load_dict(ms.mitsuba_dict(scene, t_bin, emit="all", cache=mcache, unit_sky=True))
                 sb = tracer.LightSets(mi, dr, lb, scene, list(groups), union=static_union(groups, opts))
                 trb = tracer.Tracer(mi, dr, lb, sb, geo.ego, geo.fov, (opts.width, opts.height), opts.bands_nm,
-                                    opts.band_width_nm, sky_scale=ms.sky_scale(scene))
+                                    opts.band_width_nm, sky_scale=ms.sky_scale(scene), gloss=gloss)
                 bt, bp = plan_static_bins(scene, opts, n, sb, geo, [(k, a, b)], t_bin, qmc, start=len(imgs))
                 imgs = list(imgs) + list(trb.render(bt, _seed(opts.seed, n, "bin", *bin_key(opts, k))) if bt else [])
                 plan = plan + bp
@@ -1219,7 +1269,8 @@ def render_frames(scene: dict, opts: RenderOptions, steady_bins: bool = False) -
                 for k, a, b in bins:
                     boxes = static_lamp_boxes(scene, opts, n, geo, window=(a, b),
                                               t_obj=0.5 * (a + b) if obj_moving else t_obj)
-                    done = denoise.denoise_static({g: w[f"bin{k}"] for g, w in out["static"].items()}, boxes)
+                    done = denoise.denoise_static({g: w[f"bin{k}"] for g, w in out["static"].items()}, boxes,
+                                                  split=static_split(scene, opts))
                     for g, img in done.items():
                         out["static"][g][f"bin{k}"] = img
             for g, wins in out["static"].items():
@@ -1241,7 +1292,8 @@ def render_frames(scene: dict, opts: RenderOptions, steady_bins: bool = False) -
 
             boxes = static_lamp_boxes(scene, opts, n, geo)
             for win in ("short", "long"):
-                done = denoise.denoise_static({g: w[win] for g, w in out["static"].items()}, boxes)
+                done = denoise.denoise_static({g: w[win] for g, w in out["static"].items()}, boxes,
+                                              split=static_split(scene, opts))
                 for g, img in done.items():
                     out["static"][g][win] = img
         for g, info in groups.items():

@@ -168,7 +168,7 @@ def render_layer(scene: dict, opts, layer: tuple) -> Iterator[dict]:
                 lb = mi.load_dict(ms.mitsuba_dict(scene, t_sub, emit="all", cache=mcache, unit_sky=True))
             sets = tracer.LightSets(mi, dr, lb, scene, list(groups), union=R.static_union(groups, opts))
             tr = tracer.Tracer(mi, dr, lb, sets, geo.ego, geo.fov, (W, H), opts.bands_nm, opts.band_width_nm,
-                               sky_scale=ms.sky_scale(scene))
+                               sky_scale=ms.sky_scale(scene), gloss=R.glossy_choice(mi, dr, scene, opts, mcache))
             if plan is None:  # the same entries (light sets, crops) in every sub-window
                 plan = plan_layer(scene, opts, sets, geo, wins_abs, t_subs, qmc, f"layer/{name}")
                 acc = [np.zeros((e[0] == "union" and len(e[1]) or 1, C, e[2][2] - e[2][0], e[2][3] - e[2][1]))
@@ -195,7 +195,7 @@ def render_layer(scene: dict, opts, layer: tuple) -> Iterator[dict]:
 
             boxes = R.static_lamp_boxes(scene, opts, f, geo, window=(tm["t0"] + wins[0][0],
                                                                       tm["t0"] + wins[-1][0] + wins[-1][1]))
-            static.update(denoise.denoise_static(static, boxes))
+            static.update(denoise.denoise_static(static, boxes, split=R.static_split(scene, opts)))
         del params, loaded
         gc.collect()
         yield {"frame": f, "static": static}

@@ -13,8 +13,9 @@ Light sets replace per-group and per-light Mitsuba scenes. The scene is loaded o
 emitter on; a lane of set ``k`` counts only emission of the emitters in ``k`` (a light group, or one light's
 lamp face plus its beam) and samples next-event estimation only from them: at each path vertex one emitter of the
 set, drawn in proportion to an estimate of the light it brings to that point (intensity, beam cone or face
-cosine, receiver cosine, inverse square distance: :meth:`Tracer._lamp_weights`), so that of 40 streetlights the
-few near the point get the samples (uniform or flux-proportional choice spent most of them on far lamps). By linearity of light transport in the emission this is exactly the image
+cosine, receiver cosine, inverse square distance; on a glossy coat such as a wet road's water film, times the
+coat's specular lobe towards the lamp: :meth:`Tracer._lamp_weights`), so that of 40 streetlights the few near the
+point (or the one it reflects) get the samples (uniform or flux-proportional choice spent most of them on far lamps). By linearity of light transport in the emission this is exactly the image
 of the scene in which only set ``k`` emits (the previous per-group scenes; checked against Mitsuba's own
 ``path`` integrator in tests/render_tools/test_render_tracer.py).
 
@@ -78,6 +79,8 @@ WEIGHT_FLOOR = 1e-3
 EMISSION_FLOOR = 0.0
 #: Floor of the receiver cosine in the selection weight.
 RECEIVER_FLOOR = 0.1
+#: Floor of the cosine product in a glossy coat's factor of the selection weight (:meth:`Tracer._lamp_weights`).
+GLOSS_COS_FLOOR = 1e-2
 
 
 #: Smallest registry size class per kind of Mitsuba object (:func:`registry_class`): above what a generated scene
@@ -97,6 +100,23 @@ def registry_id(mi, dr, ptr_type, obj) -> int:
     """Dr.Jit registry id of Mitsuba object ``obj`` (``ptr_type``: ``mi.EmitterPtr``, ``mi.ShapePtr``,
     ``mi.BSDFPtr``): what a kernel's pointer arrays hold (0 = none)."""
     return int(dr.reinterpret_array(mi.UInt32, ptr_type(obj))[0])
+
+
+def glossy_choice_table(mi, dr, bsdfs: dict, materials: dict) -> dict:
+    """BSDF registry id -> (GGX alpha, c) of the scene's glossy coats for :class:`Tracer` ``gloss``: every material
+    of ``materials`` (name -> scene material) that is a ``roughplastic`` with an ``ior`` (a wet road's water film
+    and its puddles, :func:`render_tools.reflections.wet_road`'s criterion), ``bsdfs`` (name -> its loaded Mitsuba
+    BSDF, shared by its shapes). ``c = F0 pi eta^2 / (4 rho)`` with F0 = ((eta - 1) / (eta + 1))^2 at normal
+    incidence and rho the mean of the material's ``rgb`` (its texture's base colour)."""
+    out = {}
+    for name, m in materials.items():
+        if m.get("type") != "roughplastic" or "ior" not in m or name not in bsdfs:
+            continue
+        eta = float(m["ior"])
+        f0 = ((eta - 1.0) / (eta + 1.0)) ** 2
+        rho = max(float(np.mean(m["rgb"])), 1e-3)
+        out[registry_id(mi, dr, mi.BSDFPtr, bsdfs[name])] = (float(m["alpha"]), f0 * math.pi * eta * eta / (4.0 * rho))
+    return out
 
 
 def pad_registry(mi, dr, loaded, bsdf) -> list:
@@ -438,10 +458,13 @@ class Tracer:
         sky_scale: factor on the environment emitter's radiance, for a scene loaded with a unit-scale ``sunsky``
             (``mitsuba_dict(unit_sky=True)``; :func:`render_tools.mitsuba_scene.sky_scale`): kernel data here,
             where Mitsuba's ``sky_scale`` is a literal (a new kernel per scene).
+        gloss: BSDF registry id -> (GGX alpha, specular-to-diffuse factor ``c``) of the glossy coats whose lobe the
+            light choice follows (:func:`glossy_choice_table`, :meth:`_lamp_weights`); None or empty: none (every
+            weight as without it, bit for bit).
     """
 
     def __init__(self, mi, dr, loaded, sets: LightSets, ego, fov_x_deg: float, size, bands_nm, band_width_nm: float,
-                 max_depth: int = ms.MAX_DEPTH, sky_scale: float = 1.0):
+                 max_depth: int = ms.MAX_DEPTH, sky_scale: float = 1.0, gloss: dict | None = None):
         self.mi, self.dr, self.scene, self.sets = mi, dr, loaded, sets
         self.W, self.H = int(size[0]), int(size[1])
         self.C = len(bands_nm)
@@ -468,6 +491,13 @@ class Tracer:
         self.env = mi.EmitterPtr([env, env])  # two entries: a size-1 array would be loaded as a scalar
         self.env_id = dr.opaque(mi.UInt32, registry_id(mi, dr, mi.EmitterPtr, env) if env is not None else NO_SET)
         self.sky_scale = o(sky_scale)
+        gl = dict(gloss or {})
+        n_g = max([int(k) for k in gl] + [1]) + 1  # at least 2 entries: a size-1 array would load as a scalar
+        ga, gc = np.zeros(n_g, np.float32), np.zeros(n_g, np.float32)
+        for k, (al, c) in gl.items():
+            ga[int(k)], gc[int(k)] = al, c
+        self.gloss_a, self.gloss_c = mi.Float(ga), mi.Float(gc)
+        self.n_gloss = dr.opaque(mi.UInt32, n_g)
 
     # ------------------------------------------------------------------ camera
     def _pose(self, t):
@@ -727,7 +757,7 @@ class Tracer:
             s += 1
         return acc
 
-    def _lamp_weights(self, row, p, n):
+    def _lamp_weights(self, row, p, n, wi=None, gloss=None):
         """Selection weights of lamp ``row`` (UInt32, a row of :class:`LightSets`) at a shading point ``p``
         (Point3f, m) with normal ``n`` (Vector3f): (face, beam), each an estimate of the light that emitter
         brings there: intensity (cd) x emission factor (the face's Lambertian cosine; the beam: 1 inside its cone,
@@ -735,7 +765,17 @@ class Tracer:
         the point-light estimate behind power- and distance-aware light samplers (M. Pharr, W. Jakob,
         G. Humphreys, Physically Based Rendering, 4th ed., 2023, section 12.6). The environment: (1, 0).
         Angular factors are floored at :data:`WEIGHT_FLOOR`, so no emitter's probability is ever 0: the estimate
-        stays unbiased whatever the weights get wrong, they only steer the samples."""
+        stays unbiased whatever the weights get wrong, they only steer the samples.
+
+        ``wi`` (Vector3f, unit, towards the viewer) and ``gloss`` = (alpha, c) (Float; alpha 0: none) at a point on
+        a glossy coat (a wet road's water film, :func:`glossy_choice_table`): the weight is multiplied by the coat's
+        specular-to-diffuse ratio towards the lamp's centre, ``1 + c D(h) / max(cos_i cos_o, GLOSS_COS_FLOOR)``
+        (GGX D of the half vector h, B. Walter, S. R. Marschner, H. Li, K. E. Torrance, "Microfacet models for
+        refraction through rough surfaces", EGSR 2007, eq. 33; ``c = F0 pi eta^2 / (4 rho)``: the specular
+        lobe F D G / (4 cos_i cos_o) over a diffuse base rho / (pi eta^2), shadowing and Fresnel's rise at grazing
+        left out), so the lamp whose reflection the point shows gets the samples: without it, the streetlight in
+        a wet road's mirror direction (30-60 m away) was drawn with a few % probability against the lamps overhead
+        and its streak was sparse bright samples at spp 1 (docs/guide/scenes.md)."""
         mi, dr = self.mi, self.dr
         G = [dr.gather(mi.Float, c, row) for c in self.sets.geo]
         d = mi.Vector3f(p[0] - G[0], p[1] - G[1], p[2] - G[2])  # from the lamp to the point
@@ -744,13 +784,22 @@ class Tracer:
         cos_e = (d[0] * G[3] + d[1] * G[4] + d[2] * G[5]) * inv
         rec = dr.maximum(dr.abs(dr.dot(n, d)) * inv, RECEIVER_FLOOR)
         base = G[7] * rec / dr.maximum(d2, LIGHT_R2_M2)
+        if gloss is not None:
+            alpha, c = gloss
+            h = wi - d * inv  # wi + the unit direction to the lamp
+            ch = dr.abs(dr.dot(h, n)) * dr.rsqrt(dr.maximum(dr.squared_norm(h), 1e-12))
+            a2 = alpha * alpha
+            q = ch * ch * (a2 - 1.0) + 1.0
+            D = a2 / (math.pi * q * q)
+            cc = dr.maximum(dr.abs(dr.dot(n, wi)) * dr.abs(dr.dot(n, d)) * inv, GLOSS_COS_FLOOR)
+            base = base * dr.select(alpha > 0, 1.0 + c * D / cc, 1.0)
         env = G[6] == ENV_ROW
         w_face = dr.select(env, 1.0, base * dr.maximum(cos_e, WEIGHT_FLOOR))
         w_beam = dr.select(G[6] > NO_BEAM, base * dr.select(cos_e >= G[6] - 1e-2, 1.0, WEIGHT_FLOOR), 0.0)
         return w_face, w_beam
 
     @dr.syntax
-    def _choose_light(self, sampler, start, cnt, p, n, active):
+    def _choose_light(self, sampler, start, cnt, p, n, active, wi=None, gloss=None):
         """Draw one emitter of a lane's set (lamp rows ``start`` .. ``start + cnt - 1``, each a face and maybe a
         beam) with probability in proportion to its weight (:meth:`_lamp_weights`) at (``p``, ``n``): a lamp by
         weighted reservoir sampling over the rows (one pass, one uniform per row: row r replaces the choice with
@@ -765,7 +814,7 @@ class Tracer:
         wb_row = mi.Float(0.0)
         while dr.hint(active & (i < cnt), label="lfm light choice"):
             r = start + i
-            wf, wb = self._lamp_weights(r, p, n)
+            wf, wb = self._lamp_weights(r, p, n, wi, gloss)
             w = wf + wb
             wsum += w
             take = sampler.next_float32() * wsum < w
@@ -820,11 +869,20 @@ class Tracer:
         pdf_prev = mi.Float(1.0)
         delta_prev = mi.Bool(True)
         wsum_prev = mi.Float(0.0)
+        wi_prev = mi.Vector3f(0.0, 0.0, 1.0)
+        ga_prev = mi.Float(0.0)
+        gc_prev = mi.Float(0.0)
         cnt = dr.gather(mi.UInt32, S.count, lset)
         start = dr.gather(mi.UInt32, S.start, lset)
         while dr.hint(active, max_iterations=self.max_depth, label="lfm light-set path"):
             si = self.scene.ray_intersect(ray, ray_flags=mi.RayFlags.All, coherent=depth == 0, active=active)
             bsdf = si.bsdf(ray)
+            # the glossy coat at this vertex (alpha 0: none), for the light choice (:meth:`_lamp_weights`)
+            bid = dr.reinterpret_array(mi.UInt32, bsdf)
+            in_t = active & si.is_valid() & (bid < self.n_gloss)
+            ga = dr.gather(mi.Float, self.gloss_a, bid, in_t)
+            gc = dr.gather(mi.Float, self.gloss_c, bid, in_t)
+            wi_w = -ray.d
             # emission hit by the camera ray or by BSDF sampling, if the emitter is in this lane's set; its MIS
             # weight needs the probability with which the previous vertex's next-event estimation picks it
             ds = mi.DirectionSample3f(self.scene, si=si, ref=si_prev)
@@ -833,7 +891,7 @@ class Tracer:
             ds.emitter = dr.select(si.is_valid(), si.shape.emitter(),
                                    dr.gather(mi.EmitterPtr, self.env, 0, active))
             row_hit, beam_hit, in_set, slot_hit = self._set_row(ds.emitter, lset)
-            wf_hit, wb_hit = self._lamp_weights(row_hit, si_prev.p, si_prev.n)
+            wf_hit, wb_hit = self._lamp_weights(row_hit, si_prev.p, si_prev.n, wi_prev, (ga_prev, gc_prev))
             pmf_hit = dr.select(in_set & ~delta_prev, dr.select(beam_hit, wb_hit, wf_hit), 0.0) \
                 / dr.select(wsum_prev > 0, wsum_prev, 1.0)
             em_pdf = dr.select(delta_prev, 0.0, pmf_hit * ds.emitter.pdf_direction(si_prev, ds, active & ~delta_prev))
@@ -848,7 +906,7 @@ class Tracer:
             # next-event estimation: one emitter of this lane's set, chosen in proportion to its estimated light
             # at this point (:meth:`_choose_light`)
             active_em = active_next & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
-            em, pmf_em, wsum, slot_em = self._choose_light(sampler, start, cnt, si.p, si.n, active_em)
+            em, pmf_em, wsum, slot_em = self._choose_light(sampler, start, cnt, si.p, si.n, active_em, wi_w, (ga, gc))
             u_em = mi.Point2f(sampler.next_float32(), sampler.next_float32())
             if u_light is not None:
                 u_em = dr.select(sobol & (depth == 0), u_light, u_em)
@@ -882,6 +940,9 @@ class Tracer:
             pdf_prev = bs.pdf
             delta_prev = mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)
             wsum_prev = wsum
+            wi_prev = wi_w
+            ga_prev = ga
+            gc_prev = gc
             active = active_next & (dr.max(beta) != 0)
             depth += 1
         return L

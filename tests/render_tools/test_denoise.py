@@ -4,6 +4,7 @@ broad band, leaves the lamp boxes as traced; Open Image Denoise lowers the error
 scene and stays finite on extreme ranges; scene version 2 renders denoised, version 1 as before."""
 from __future__ import annotations
 
+import copy
 import sys
 
 import numpy as np
@@ -58,6 +59,40 @@ def test_split_is_exact_for_a_uniform_shape_and_conserves_the_broad_bands():
         assert out[g].dtype == np.float32 and out[g].shape == imgs[g].shape
     # next to the lamp the shares hold no trace of its spectrum or level (the box is left out of them)
     assert np.abs(out["streetlights"][:, 3:14, 16:19] - imgs["streetlights"][:, 3:14, 16:19]).max() < 1e-3 * 1e4
+
+
+def _channel_means(x):
+    """A perfect denoiser for a scene whose light is uniform: every channel its mean."""
+    return np.broadcast_to(x.mean(axis=(1, 2), keepdims=True), x.shape).astype(np.float32)
+
+
+def test_oidn_split_follows_the_groups_denoised_light_not_a_sparse_sample():
+    """``split="oidn"``: two groups of uniform light with different spectra inside a broad band (an HPS-like line and
+    a flat white), one sparse bright sample of the white group (a glossy reflection at spp 1). With a denoiser that
+    is exact for uniform light, the band ratio inside the broad band is the same at every pixel and each group keeps
+    its light; ``"box"`` gives the sample's group the 5 x 5 px box around it (the coloured squares of a wet road:
+    the ratio off by more than 20 % there). The broad bands are the denoiser's output either way."""
+    C, H, W = 31, 32, 48
+    s_hps, s_white = np.full(C, 0.05, np.float32), np.ones(C, np.float32)
+    s_hps[18] = 3.0  # 580-590 nm, in the second broad band (bands 10-20)
+    hps = np.broadcast_to(s_hps[:, None, None], (C, H, W)).astype(np.float32).copy()
+    white = np.broadcast_to(0.02 * s_white[:, None, None], (C, H, W)).astype(np.float32).copy()
+    white[:, 16, 24] += 40.0
+    imgs = {"streetlights": hps, "headlights": white}
+    ratio = {}
+    for split in ("box", "oidn"):
+        out = denoise.denoise_static(imgs, (), denoiser=_channel_means, split=split)
+        tot = sum(out.values())
+        r = tot[18] / tot[12]
+        ratio[split] = float(np.abs(r / r[0, 0] - 1).max())
+        for p in denoise.broad_bands(C):
+            np.testing.assert_allclose(tot[p].sum(0), sum(x[p].sum(0) for x in imgs.values()).mean(), rtol=1e-5)
+        if split == "oidn":
+            for g in imgs:
+                np.testing.assert_allclose(out[g].sum(), imgs[g].sum(), rtol=1e-4)
+    assert ratio["oidn"] < 1e-4 < 0.2 < ratio["box"]
+    with pytest.raises(ValueError, match="split"):
+        denoise.denoise_static(imgs, (), denoiser=_channel_means, split="median")
 
 
 def test_the_lamp_box_is_filled_from_its_ring():
@@ -146,13 +181,25 @@ def test_option_values_and_meta():
     with pytest.raises(ValueError, match="static_denoise"):
         render.RenderOptions(static_denoise="yes")
     opts = render.RenderOptions(width=160, height=90, frames=1)
-    v2 = scene.generate_scene(101, time_of_day="night", generator=2)
+    v2 = scene.generate_scene(101, time_of_day="night", generator=2, overrides={"weather": {"conditions": ["wet"]}})
     v1 = scene.generate_scene(101, time_of_day="night")
     assert render.static_denoised(v2, opts) and not render.static_denoised(v1, opts)
-    assert render.scene_meta(v2, opts)["render"]["static_denoise"] == "oidn"
+    meta = render.scene_meta(v2, opts)["render"]
+    assert (meta["static_denoise"], meta["static_split"], meta["glossy_light_choice"]) == ("oidn", "oidn", "lobe")
     assert "static_denoise" not in render.scene_meta(v1, opts)["render"]
     off = render.RenderOptions(width=160, height=90, frames=1, static_denoise="off")
-    assert render.scene_meta(v2, off)["render"]["static_denoise"] == "off"
+    meta = render.scene_meta(v2, off)["render"]
+    assert meta["static_denoise"] == "off" and "static_split" not in meta
+    wet, dry = v2, copy.deepcopy(v2)
+    for m in ("asphalt_wet", "puddle"):  # no glossy film: a dry road
+        dry["materials"][m] = {"type": "diffuse", "rgb": [0.09, 0.09, 0.095]}
+    with pytest.raises(ValueError, match="glossy_light_choice"):
+        render.RenderOptions(glossy_light_choice="yes")
+    assert render.static_split(dry, opts) == "box" and render.static_split(v1, opts) == "box"
+    assert render.static_split(wet, render.RenderOptions(static_split="box")) == "box"
+    assert render.static_split(dry, render.RenderOptions(static_split="oidn")) == "oidn"
+    with pytest.raises(ValueError, match="static_split"):
+        render.RenderOptions(static_split="yes")
     boxes = render.static_lamp_boxes(v2, opts, 0)
     assert boxes and all(0 <= y0 < y1 <= 90 and 0 <= x0 < x1 <= 160 for y0, x0, y1, x1 in boxes)
 

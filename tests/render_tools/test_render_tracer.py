@@ -293,3 +293,45 @@ def test_registry_padding_changes_no_pixel_and_a_new_scene_reuses_the_kernel(mon
     assert _same_arrays(plain_a, fr_a) and plain_a["aux"] and plain_a["lights"]["otherlights"]
     _, k_plain_b = _frame_and_main_kernel(b, opts)
     assert k_plain_b["hash"] != k_plain_a["hash"]
+
+
+@pytest.mark.jit
+def test_glossy_light_choice_weights_follow_the_coat_lobe():
+    """``glossy_light_choice``: at a point of a wet road's water film, a lamp's selection weight is multiplied by
+    the coat's specular-to-diffuse ratio towards it, ``1 + c D(h) / (cos_i cos_o)`` with GGX D (Walter et al. 2007,
+    eq. 33, written out here) and ``c = F0 pi eta^2 / (4 rho)``; a lamp far from the mirror direction keeps its
+    weight (D ~ 0), and a point without a coat (alpha 0) gets the plain weights bit for bit."""
+    from types import SimpleNamespace
+
+    from render_tools import backend
+
+    backend.select_variant()
+    import drjit as dr
+    import mitsuba as mi
+
+    cam, p = np.array([0.0, 0.0, 1.5]), np.array([10.0, 0.0, 0.0])
+    mirror = p + (p - cam) * np.array([1, 1, -1]) * 3.0  # on the mirror ray of the camera about the road
+    aside = mirror + np.array([0.0, 25.0, 0.0])
+    # rows of LightSets.geo: position, face normal (towards the point), beam cut-off (none), intensity
+    rows = []
+    for q in (mirror, aside):
+        nrm = (p - q) / np.linalg.norm(p - q)
+        rows.append([*q, *nrm, tracer.NO_BEAM, 1000.0])
+    geo = np.asarray(rows, np.float32).T
+    fake = SimpleNamespace(mi=mi, dr=dr, sets=SimpleNamespace(geo=[mi.Float(c) for c in geo]))
+    wi = (cam - p) / np.linalg.norm(cam - p)
+    P, N, WI = mi.Point3f(*[[v, v] for v in p]), mi.Vector3f([0, 0], [0, 0], [1, 1]), mi.Vector3f(*[[v, v] for v in wi])
+    row = mi.UInt32([0, 1])
+    plain = np.asarray(tracer.Tracer._lamp_weights(fake, row, P, N)[0])
+    alpha, eta, rho = 0.05, 1.33, 0.05
+    c = ((eta - 1) / (eta + 1)) ** 2 * np.pi * eta ** 2 / (4 * rho)
+    got = np.asarray(tracer.Tracer._lamp_weights(fake, row, P, N, WI, (mi.Float(alpha), mi.Float(c)))[0])
+    off = np.asarray(tracer.Tracer._lamp_weights(fake, row, P, N, WI, (mi.Float(0.0), mi.Float(c)))[0])
+    np.testing.assert_array_equal(off, plain)
+    for i, q in enumerate((mirror, aside)):
+        wl = (q - p) / np.linalg.norm(q - p)
+        h = (wi + wl) / np.linalg.norm(wi + wl)
+        D = alpha ** 2 / (np.pi * (h[2] ** 2 * (alpha ** 2 - 1) + 1) ** 2)
+        want = plain[i] * (1 + c * D / max(wi[2] * wl[2], tracer.GLOSS_COS_FLOOR))
+        assert got[i] == pytest.approx(want, rel=1e-4)
+    assert got[0] / plain[0] > 1e3 and got[1] / plain[1] < 1.1
