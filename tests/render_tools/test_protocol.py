@@ -424,12 +424,3 @@ def test_add_layers_upgrades_a_corpus_without_touching_its_files(tmp_path, fake)
     assert pool == [2] and sorted(c[0] for c in LAYER_CALLS[n0 + 2:]) == sorted(set(C.Corpus(out).scenes) - {first})
     assert json.loads((out / "manifest.json").read_text())["render"]["protocol"]["version"] == 3
 
-
-def _mitsuba_sigint(msg):
-    """What Mitsuba does with Ctrl-C: the SIGINT handler raises KeyboardInterrupt inside the render, and the
-    render loop turns it into a RuntimeError whose message does not say so."""
-    try:
-        signal.raise_signal(signal.SIGINT)
-    except KeyboardInterrupt:
-        return RuntimeError("drjit: render loop aborted")
-    raise AssertionError("SIGINT did not raise")
