@@ -548,6 +548,13 @@ def add_layers(out: str | Path, protocol, backend: Backend | None = None,
                     on_done(job.scene_id, done[job.scene_id])
 
         in_process = workers == 1 and not (ISOLATE_RENDERS if isolate is None else isolate)
+        if todo and not in_process:
+            try:
+                pickle.dumps(todo[0])
+            except Exception as exc:  # noqa: BLE001 - as in run_jobs: a backend of local functions
+                raise ValueError(f"jobs: the layers of {todo[0].scene_id} do not pickle, so they cannot render in a "
+                                 f"worker process ({type(exc).__name__}: {exc}); use module-level functions in the "
+                                 "backend, or add_layers(..., workers=1, isolate=False)") from None
         try:
             with _sigint_flag(hit):
                 _dispatch(todo, None, 0 if in_process else workers, finished, fn=run_layer_job)
