@@ -160,14 +160,16 @@ def check_keys(data: Any, field: str, source: str | None = None, *, required: It
     ...
     ValueError: x.json: unknown field 'timing.b' (allowed: ['a'])
     """
-    if not isinstance(data, Mapping):
+    if type(data) is not dict and not isinstance(data, Mapping):  # (a dict first: typing's isinstance is slow)
         fail(field or "(top level)", f"must be an object (mapping), got {type(data).__name__}", source)
     required = tuple(required)
     pre = f"{field}." if field else ""
     if optional is not None:
-        allowed = set(required) | set(optional)
-        unknown = sorted(str(k) for k in data if k not in allowed)
+        allowed = set(required)
+        allowed.update(optional)
+        unknown = [k for k in data if k not in allowed]
         if unknown:
+            unknown = sorted(str(k) for k in unknown)
             names = ", ".join(f"'{pre}{u}'" for u in unknown)
             raise ValueError(f"{source + ': ' if source else ''}unknown field{'s' if len(unknown) > 1 else ''} "
                              f"{names} (allowed: {sorted(allowed)})")

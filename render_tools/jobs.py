@@ -46,7 +46,7 @@ __all__ = ["PROFILES_FILE", "Backend", "default_backend", "load_profile", "profi
            "scene_id_for", "RenderRequest", "RenderRequestError", "RenderPlan", "plan_render", "CONFIRM_ABOVE",
            "MAX_SCENES", "PROTOCOL_FIXED",
            "RenderJob", "make_jobs", "protocol_jobs", "write_splits", "run_job", "RunSummary", "run_jobs",
-           "RenderInterrupted", "RayOptions"]
+           "RenderInterrupted", "RayOptions", "LayerJob", "run_layer_job", "add_layers"]
 
 log = logging.getLogger(__name__)
 
@@ -420,9 +420,10 @@ def _run_jobs(jobs, writer, workers, ray_address, on_start, on_done, resume, iso
 
 
 def _dispatch(todo: Sequence[RenderJob], ray_address: str | None, workers: int, finished: Callable,
-              out: Path | None = None, ray_options=None) -> None:
+              out: Path | None = None, ray_options=None, fn: Callable[[Any], dict] | None = None) -> None:
     """Run the jobs on Ray, in this process (``workers`` 0) or in worker processes; ``finished(job, result,
-    exc)`` after each."""
+    exc)`` after each. ``fn``: what runs one job (default :func:`run_job`; not on Ray)."""
+    fn = fn or run_job
     if ray_address:
         if todo:
             run_ray(todo, ray_address, max(workers, 1), finished, Path(todo[0].out if out is None else out),
@@ -430,7 +431,7 @@ def _dispatch(todo: Sequence[RenderJob], ray_address: str | None, workers: int, 
     elif workers == 0:
         for j in todo:
             try:
-                res = run_job(j)
+                res = fn(j)
             except (KeyboardInterrupt, CorpusWriteError):
                 raise
             except Exception as exc:  # noqa: BLE001 - one bad scene must not stop the others
@@ -438,11 +439,11 @@ def _dispatch(todo: Sequence[RenderJob], ray_address: str | None, workers: int, 
             else:
                 finished(j, res, None)
     else:
-        _run_pool(todo, workers, finished)
+        _run_pool(todo, workers, finished, fn)
 
 
-def _run_pool(todo: Sequence[RenderJob], workers: int, finished: Callable) -> None:
-    run_supervised(todo, run_job, workers, finished, label=lambda j: f"scene {j.scene_id}")
+def _run_pool(todo: Sequence[RenderJob], workers: int, finished: Callable, fn: Callable = run_job) -> None:
+    run_supervised(todo, fn, workers, finished, label=lambda j: f"scene {j.scene_id}")
 
 
 def render_record(seed: int, options: Mapping[str, Any], dtype: str, scene_kw: Mapping[str, Any],
@@ -457,27 +458,63 @@ def render_record(seed: int, options: Mapping[str, Any], dtype: str, scene_kw: M
     return json.loads(json.dumps(rec, default=str))
 
 
-def add_layers(out: str | Path, protocol, backend: Backend | None = None,
-               on_done: Callable[[str, float], None] | None = None) -> dict[str, float]:
-    """Bring a corpus rendered with an earlier version of ``protocol`` (a :class:`render_tools.protocol.Protocol`)
-    up to it when the two differ only by ``render.static_layers``: render each scene's missing static window layers
-    (:func:`render_tools.static_layers.write_layers`, from the scene's own ``scene.json`` and ``meta.json``) and
-    write them beside its files, none of which changes; then commit each scene's new files and record the
-    protocol's version in the manifest's ``render``. A scene's ``meta.json`` keeps the version it was rendered
-    with; its ``window_layers.json`` records how each layer was rendered. Returns ``{scene_id: seconds}`` of the
-    scenes that got a layer (``on_done(scene_id, seconds)`` after each).
+@dataclass
+class LayerJob:
+    """The missing static window layers of one scene of a corpus (:func:`add_layers`): the corpus ``out``, the
+    scene's id and seed, the protocol's RenderOptions fields (without ``seed``) and storage."""
 
-    Raises:
-        ValueError: the corpus was not rendered with this protocol's name, or with other settings than the
-            protocol's apart from ``static_layers`` (naming what differs); nothing is written then.
-    """
-    from lfmbench.corpus import CorpusWriter  # noqa: PLC0415
+    out: str
+    scene_id: str
+    seed: int
+    options: dict
+    dtype: str = DEFAULT_STORAGE
+    backend: Backend | None = None
+
+
+def run_layer_job(job: LayerJob) -> dict:
+    """Render and write the static window layers scene ``job.scene_id`` does not have yet, from its own
+    ``scene.json`` and ``meta.json`` (:func:`render_tools.static_layers.write_layers`); returns ``{"scene_id",
+    "hashes": {relpath: sha256} (empty: nothing was missing), "seconds"}``. Does not touch the manifest."""
     from lfmbench.fileio import load_json  # noqa: PLC0415
 
     from .static_layers import write_layers  # noqa: PLC0415
 
+    t0 = time.perf_counter()
+    be = job.backend or default_backend()
+    sdir = Path(job.out) / "scenes" / job.scene_id
+    scene = load_json(sdir / "scene.json", "scene description")
+    meta = load_json(sdir / "meta.json", "scene metadata")
+    opts = be.RenderOptions(**job.options, seed=job.seed)
+    hashes = write_layers(job.out, job.scene_id, scene, meta, opts, job.dtype, be.render_layer)
+    return {"scene_id": job.scene_id, "hashes": hashes, "seconds": time.perf_counter() - t0}
+
+
+def add_layers(out: str | Path, protocol, backend: Backend | None = None,
+               on_done: Callable[[str, float], None] | None = None, *, workers: int = 1,
+               isolate: bool | None = None) -> dict[str, float]:
+    """Bring a corpus rendered with an earlier version of ``protocol`` (a :class:`render_tools.protocol.Protocol`)
+    up to it when the two differ only by ``render.static_layers``: render each scene's missing static window layers
+    (:func:`run_layer_job`, from the scene's own ``scene.json`` and ``meta.json``) and write them beside its files,
+    none of which changes; then commit each scene's new files and record the protocol's version in the manifest's
+    ``render``. A scene's ``meta.json`` keeps the version it was rendered with; its ``window_layers.json`` records
+    how each layer was rendered. Returns ``{scene_id: seconds}`` of the scenes that got a layer
+    (``on_done(scene_id, seconds)`` after each, in the order they finish).
+
+    ``workers`` and ``isolate`` as in :func:`run_jobs`: scenes in parallel worker processes, and with ``workers=1``
+    one worker process unless ``isolate`` is False (default :data:`ISOLATE_RENDERS`).
+
+    Raises:
+        ValueError: the corpus was not rendered with this protocol's name, or with other settings than the
+            protocol's apart from ``static_layers`` (naming what differs); nothing is written then. A scene's
+            error stops the run (the scenes committed before it keep their layers; a rerun renders the rest).
+        RenderInterrupted: Ctrl-C (also when the renderer turned it into another exception); every scene whose
+            layers were committed keeps them, no partial file is kept, and a rerun adds the missing ones.
+    """
+    from lfmbench.corpus import CorpusWriter  # noqa: PLC0415
+
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+        raise ValueError(f"workers must be an integer >= 1, got {workers!r}")
     out = Path(out)
-    be = backend or default_backend()
     w = CorpusWriter(out, dtype=protocol.storage)
     try:
         old = w.render or {}
@@ -494,21 +531,36 @@ def add_layers(out: str | Path, protocol, backend: Backend | None = None,
             raise ValueError(f"--add-layers: corpus {out} was rendered with other settings than {protocol.path} "
                              f"({', '.join(diff)}), not only other static_layers: render it anew with --out")
         seeds = {ps.scene_id: ps.seed for ps in protocol.scenes}
+        todo = [LayerJob(str(out.resolve()), sid, seeds[sid], dict(protocol.render), protocol.storage, backend)
+                for sid in w.scenes if sid in seeds]
         done: dict[str, float] = {}
-        for sid in w.scenes:
-            if sid not in seeds:
-                continue
-            t0 = time.perf_counter()
-            sdir = out / "scenes" / sid
-            scene = load_json(sdir / "scene.json", "scene description")
-            meta = load_json(sdir / "meta.json", "scene metadata")
-            opts = be.RenderOptions(**protocol.render, seed=seeds[sid])
-            hashes = write_layers(out, sid, scene, meta, opts, protocol.storage, be.render_layer)
-            if hashes:
-                w.commit_scene(sid, {**w.scene_files(sid), **hashes})
-                done[sid] = time.perf_counter() - t0
+        hit: list[bool] = []
+
+        def finished(job: LayerJob, res: dict | None, exc: BaseException | None) -> None:
+            if exc is not None:
+                if hit or _is_interrupt(exc):
+                    raise KeyboardInterrupt from exc
+                raise exc
+            if res["hashes"]:
+                w.commit_scene(job.scene_id, {**w.scene_files(job.scene_id), **res["hashes"]})
+                done[job.scene_id] = float(res["seconds"])
                 if on_done is not None:
-                    on_done(sid, done[sid])
+                    on_done(job.scene_id, done[job.scene_id])
+
+        in_process = workers == 1 and not (ISOLATE_RENDERS if isolate is None else isolate)
+        if todo and not in_process:
+            try:
+                pickle.dumps(todo[0])
+            except Exception as exc:  # noqa: BLE001 - as in run_jobs: a backend of local functions
+                raise ValueError(f"jobs: the layers of {todo[0].scene_id} do not pickle, so they cannot render in a "
+                                 f"worker process ({type(exc).__name__}: {exc}); use module-level functions in the "
+                                 "backend, or add_layers(..., workers=1, isolate=False)") from None
+        try:
+            with _sigint_flag(hit):
+                _dispatch(todo, None, 0 if in_process else workers, finished, fn=run_layer_job)
+        except KeyboardInterrupt:
+            w.cleanup_temp()
+            raise RenderInterrupted(RunSummary(rendered=list(done), seconds=dict(done))) from None
         w.set_render(want)
         return done
     finally:

@@ -30,7 +30,6 @@ generator; the parts the steps build from live in :mod:`render_tools.scene_templ
 from __future__ import annotations
 
 import copy
-import json
 import math
 import os
 from dataclasses import dataclass
@@ -42,7 +41,7 @@ import numpy as np
 from lfmbench.limits import brief
 from lfmbench.vocabulary import GROUPS, LIGHT_KINDS, VEHICLE_KINDS, WEATHERS
 
-from .scene_schema import (SCENE_FORMAT, SCENE_VERSION, TIMES_OF_DAY, empty_scene, load_scene, save_scene,
+from .scene_schema import (SCENE_FORMAT, SCENE_VERSION, TIMES_OF_DAY, empty_scene, load_scene, plain_json, save_scene,
                            scene_groups, validate_scene)
 from .scene_templates import (BASE_MATERIALS, PARKED_KIND, VEHICLE_MATERIALS, VEHICLE_TEMPLATES, box, cylinder,
                               local_offset, rect)
@@ -602,4 +601,5 @@ def generate_scene(seed: int, time_of_day: str | None = None, config: dict | str
         scene["weather"] = weather
         if b.meshes:  # a scene leaves out what it does not need
             scene["meshes"] = b.meshes
-    return validate_scene(json.loads(json.dumps(scene)))
+    return validate_scene(plain_json(scene))
+

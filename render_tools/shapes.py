@@ -13,6 +13,7 @@ same mesh on every machine. Coordinates are rounded to 0.1 mm (:data:`ROUND_DIGI
 """
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -139,7 +140,14 @@ def torso_mesh(segments: int = 12) -> dict:
 
 
 def icosphere(subdivisions: int = 1) -> tuple[np.ndarray, np.ndarray]:
-    """Unit icosphere: vertices (n, 3) on the unit sphere, faces (m, 3) outward."""
+    """Unit icosphere: vertices (n, 3) on the unit sphere, faces (m, 3) outward (new arrays each call, built once
+    per process: each generator-2 scene's three tree crowns ask for it)."""
+    V, F = _icosphere(int(subdivisions))
+    return V.copy(), F.copy()
+
+
+@functools.lru_cache(maxsize=4)
+def _icosphere(subdivisions: int) -> tuple[np.ndarray, np.ndarray]:
     t = (1 + 5 ** 0.5) / 2
     V = [(-1, t, 0), (1, t, 0), (-1, -t, 0), (1, -t, 0), (0, -1, t), (0, 1, t), (0, -1, -t), (0, 1, -t),
          (t, 0, -1), (t, 0, 1), (-t, 0, -1), (-t, 0, 1)]

@@ -16,8 +16,11 @@ reflections, so that the error of the approximations (``reflection_block_px``; `
 
 Errors, on luminance Y as :mod:`bench_render` computes them (the same functions):
 
-- LED bins: relative RMSE over the LED pixels of every flickering light's bins, pooled (a pixel of a light's crop
-  whose reference bin-mean exceeds 5 % of the crop maximum), the reference cut to the default's crop;
+- LED bins: relative RMSE over the LED pixels of every flickering light's bins, pooled (a pixel of a light's own
+  screen box, :func:`lamp_boxes`, whose reference bin-mean exceeds 5 % of the box's maximum), the reference cut to
+  the default's crop. Until 2026-11-28 the rule ran over the whole crop: its pad ring and a wet road's reflection
+  counted as LED pixels where their light exceeded 5 % of the crop maximum, which around an unlit or back-facing
+  lamp (a crop maximum of stray light alone) is most of the crop; the tables written before may include them;
 - short-window composite (static groups + every flickering light at its nominal level): relative RMSE over the
   reference's light mask (LED px), the all-pixel relMSE^0.5 and the median per-pixel relative error; the long
   window's median too (``reflection_bins`` 1 holds one noise draw over all bins, which the long window sums);
@@ -97,6 +100,10 @@ REF_STATIC_SPP = 256
 #: makes it a reflection pixel.
 REFLECTION_SHARE = 0.05
 SIZE = (640, 360)
+#: The LED-pixel rule as each section this script writes states it.
+LED_PX_RULE = ("LED pixels: a light's pixels inside its own screen box (no pad ring, no reflection) whose reference "
+               "bin-mean exceeds 5 % of the box's maximum (since 2026-11-28; tables written before took them over "
+               "the whole crop, and may include light around unlit or back-facing lamps).")
 #: ``--led``: cases, reference light_spp and seeds, and the section written.
 LED_CASES = ("202:day:dry", "101:night:dry")
 LED_REF_LIGHT_SPP, LED_REF_SEEDS = 1024, (1001, 1002)
@@ -134,16 +141,43 @@ def _frame(sc, opts, cache: Path | None, tag: str):
     return out
 
 
-def bins_error_cut(frame: dict, ref: dict) -> float:
+def lamp_boxes(sc, opts) -> dict:
+    """{light id: (y0, x0, y1, x1)} px: each light's own screen box over frame 0's capture window (its face as it
+    moves, no pad ring, no reflection: :meth:`render_tools.render.SceneGeometry.light_bbox`); lights off screen
+    are left out."""
+    from render_tools import render  # noqa: PLC0415
+
+    tm = render.frame_timing(sc, opts, 0)
+    geo = render.SceneGeometry(sc, opts)
+    t_obj = 0.5 * (tm["window"][0] + tm["window"][1])
+    boxes = {lt["id"]: geo.light_bbox(lt, t_obj, *tm["window"], moving=True, reflection=False)
+             for lt in sc["lights"]}
+    return {k: tuple(int(v) for v in b) for k, b in boxes.items() if b is not None}
+
+
+def in_box(shape, origin, box) -> np.ndarray:
+    """(h, w) bool: the pixels of a crop of ``shape`` (h, w) at frame pixel ``origin`` (y0, x0) that lie inside
+    ``box`` (y0, x0, y1, x1 px, frame coordinates)."""
+    out = np.zeros(shape, bool)
+    y0, x0, y1, x1 = (int(v) for v in box)
+    out[max(y0 - origin[0], 0):max(y1 - origin[0], 0), max(x0 - origin[1], 0):max(x1 - origin[1], 0)] = True
+    return out
+
+
+def bins_error_cut(frame: dict, ref: dict, boxes: dict) -> float:
     """Relative RMSE of luminance over the LED pixels of every light's bins, pooled; the reference's crop (which may
-    hold a reflection the frame left out) is cut to the frame's crop. Same K in both."""
+    hold a reflection the frame left out) is cut to the frame's crop. Same K in both. LED pixels: inside the light's
+    own box ``boxes[id]`` (:func:`lamp_boxes`), the reference's bin-mean over 5 % of its maximum there
+    (bench_render.led_sel); a light without a box adds nothing."""
     num = den = 0.0
     for g, items in frame["lights"].items():
         refs = {lid: (bb, b) for lid, bb, b in ref["lights"][g]}
         for lid, (y0, x0, y1, x1), b in items:
+            if lid not in boxes:
+                continue
             (ry0, rx0, _, _), rb = refs[lid]
             rb = rb[:, :, y0 - ry0:y1 - ry0, x0 - rx0:x1 - rx0]
-            sel = led_sel(rb)
+            sel = led_sel(np.where(in_box(rb.shape[2:], (y0, x0), boxes[lid]), rb, 0.0))
             num += float(np.sum((lum(b) - lum(rb))[:, sel].astype(np.float64) ** 2))
             den += float(np.sum(lum(rb)[:, sel].astype(np.float64) ** 2))
     return float(np.sqrt(num / den)) if den > 0 else float("nan")
@@ -178,7 +212,7 @@ def evaluate(sc, frame: dict, ref: dict, opts, refl_px: np.ndarray | None) -> di
 
     tm = render.frame_timing(sc, opts, 0)
     shape = (len(opts.bands_nm), opts.height, opts.width)
-    out = {"led_bins": bins_error_cut(frame, ref)}
+    out = {"led_bins": bins_error_cut(frame, ref, lamp_boxes(sc, opts))}
     for win in ("short", "long"):
         img, rimg = (preview.compose_window(f, tm, win, shape) for f in (frame, ref))
         out[f"median_{win}"] = median_rel_error(img, rimg)
@@ -305,7 +339,7 @@ def write_section(rows: list, out: Path, load0: float, load1: float, size=SIZE,
              "`default, spp N`: the same with spp N in the static full frames (`--static-spp`), denoised. "
              "Targets (issue 23): LED pixels <= 2 % relative RMSE, all-pixel "
              "median <= 10 %. Reflection px: where the reference's flickering layers outside the lamps' own boxes "
-             f"bring more than {REFLECTION_SHARE:.0%} of the pixel's luminance.", "",
+             f"bring more than {REFLECTION_SHARE:.0%} of the pixel's luminance. " + LED_PX_RULE, "",
              "| scene (seed:time:weather or v1) | setting | CPU s / frame (reference) | rel. RMSE LED bins | rel. RMSE LED px "
              "(short composite) | all px relMSE^0.5 | all px median rel. error (short) | (long) | reflection px: "
              "median rel. error (count) |",
@@ -332,33 +366,36 @@ def _led_canvas(items: dict, lid: int, box) -> np.ndarray:
     return out
 
 
-def _light_canvases(frame: dict, ref_a: dict, ref_b: dict):
-    """Per light of the references: (id, t, a, b, m, sel): the (K, h, w) luminance of ``frame``, the two references
-    and their mean on the union of the light's three boxes (a filled face's box may be a pixel larger; zeros where a
-    crop does not reach), and its LED pixels (h, w) (the mean's bin-mean over 5 % of its maximum,
-    bench_render.led_sel)."""
+def _light_canvases(frame: dict, ref_a: dict, ref_b: dict, own: dict):
+    """Per light of the references with an own box ``own[id]`` (:func:`lamp_boxes`): (id, t, a, b, m, sel): the
+    (K, h, w) luminance of ``frame``, the two references and their mean on the union of the light's three crops (a
+    filled face's crop may be a pixel larger; zeros where a crop does not reach), and its LED pixels (h, w): inside
+    its own box, the mean's bin-mean over 5 % of its maximum there (bench_render.led_sel's rule)."""
     T, A, B = ({lid: (bb, b) for items in f["lights"].values() for lid, bb, b in items} for f in (frame, ref_a, ref_b))
     for lid in A:
+        if lid not in own:
+            continue
         boxes = [X[lid][0] for X in (T, A, B) if lid in X]
         box = (min(b[0] for b in boxes), min(b[1] for b in boxes), max(b[2] for b in boxes), max(b[3] for b in boxes))
         a, b = _led_canvas(A, lid, box), _led_canvas(B, lid, box)
         t = _led_canvas(T, lid, box) if lid in T else np.zeros_like(a)
         m = 0.5 * (a + b)
-        e = m.mean(0)
+        e = np.where(in_box(m.shape[1:], box[:2], own[lid]), m.mean(0), 0.0)
         yield lid, t, a, b, m, (e > 0.05 * e.max() if e.max() > 0 else np.zeros(e.shape, bool))
 
 
-def led_error(frame: dict, ref_a: dict, ref_b: dict, sc: dict) -> dict:
+def led_error(frame: dict, ref_a: dict, ref_b: dict, sc: dict, own: dict) -> dict:
     """Relative RMSE of the LED bins of ``frame`` against the mean of two references of different seeds,
     corrected for the references' noise (module docstring), pooled over every light (``all``) and per light kind:
     {kind: (error, share of the squared error)}. Each light's crops are compared on the union of its three
-    boxes (a filled face's box may be a pixel larger)."""
+    crops (a filled face's crop may be a pixel larger), over its LED pixels inside its own box ``own[id]``
+    (:func:`lamp_boxes`; :func:`_light_canvases`)."""
     acc: dict = {}
-    for lid, t, a, b, m, sel in _light_canvases(frame, ref_a, ref_b):
+    for lid, t, a, b, m, sel in _light_canvases(frame, ref_a, ref_b, own):
         num, noise, den = (float(np.sum(x[:, sel] ** 2)) for x in (t - m, 0.5 * (a - b), m))
         for k in ("all", sc["lights"][lid]["kind"]):
             acc[k] = acc.get(k, np.zeros(3)) + (num, noise, den)
-    tot = acc["all"][0] - acc["all"][1]
+    tot = acc["all"][0] - acc["all"][1] if acc else 0.0
     return {k: (float(np.sqrt(max(n - z, 0.0) / d)), float((n - z) / tot) if tot > 0 else float("nan"))
             for k, (n, z, d) in acc.items()}
 
@@ -439,6 +476,7 @@ def led_main(cache: Path | None, out: Path, quick: bool) -> None:
         refs = {lod: [_frame(sc, opts(ref_spp, lod, s), cache, f"led_ref{lod:g}_{ref_spp}_{s}_{W}_{tag}")[0]
                       for s in LED_REF_SEEDS] for lod in (0.0, 1.0)}
         n_lod = len(render.dots_lod(sc, opts(32, 1.0, 0))[1])
+        own = lamp_boxes(sc, opts(32, 1.0, 0))
         next(render.render_frames(sc, opts(1, 1.0, 0)))  # warm-up: the timed settings find their kernels compiled
         settings = [(n, o, lod, ps, 11) for n, o, lod, ps in LED_SETTINGS] + \
             [("filled cells, reference", ref_spp, 1.0, "auto", 0)]
@@ -449,8 +487,8 @@ def led_main(cache: Path | None, out: Path, quick: bool) -> None:
                 fr, cpu = _frame(sc, opts(light_spp, lod, s, passes), cache,
                                  f"led_{lod:g}_{light_spp}_{passes}_{W}_{tag}")
             r = {"case": c, "setting": name, "light_spp": light_spp, "cpu_s": cpu, "n_lod": n_lod,
-                 "vs_dots": led_error(fr, *refs[0.0], sc),
-                 "vs_fill": led_error(fr, *refs[1.0], sc) if lod and s else None}
+                 "vs_dots": led_error(fr, *refs[0.0], sc, own),
+                 "vs_fill": led_error(fr, *refs[1.0], sc, own) if lod and s else None}
             rows.append(r)
             print(c, name, {k: v for k, v in r.items() if k in ("cpu_s",)}, r["vs_dots"]["all"],
                   r["vs_fill"]["all"] if r["vs_fill"] else "", flush=True)
@@ -487,9 +525,10 @@ def pixel_samples_main(cases, cache: Path | None, out: Path, quick: bool) -> Non
         tag = c.replace(":", "_")
         refs = [_frame(sc, opts(ref_spp, s), cache, f"led_ref1_{ref_spp}_{s}_{W}_{tag}")[0] for s in LED_REF_SEEDS]
         next(render.render_frames(sc, opts(1, 0, "sobol")))  # warm-up: both placements' kernel compiled
+        own = lamp_boxes(sc, opts(32, 11))
         for name, mode, factor in PXS_SETTINGS:
             fr, cpu = _frame(sc, opts(32, 11, mode, factor), cache, f"pxs_{mode}_{factor}_{W}_{tag}")
-            rows.append({"case": c, "setting": name, "cpu_s": cpu, "err": led_error(fr, *refs, sc)})
+            rows.append({"case": c, "setting": name, "cpu_s": cpu, "err": led_error(fr, *refs, sc, own)})
             print(c, name, f"{cpu:.1f} s", rows[-1]["err"]["all"], flush=True)
     write_pxs_section(rows, edge_model(), out, load0, os.getloadavg()[0], (W, H), ref_spp)
 
@@ -499,12 +538,13 @@ PAD_SECTION = "## Pad ring samples (issue 23)"
 PAD_REF_LIGHT_SPP, PAD_REF_SEEDS = 256, (2001, 2002)
 
 
-def crop_error(frame: dict, ref_a: dict, ref_b: dict) -> tuple[float, float]:
-    """Relative RMSE of every pixel of every light's bins (the whole crops, pooled) against the mean of two
-    references, corrected for their noise as :func:`led_error`; and the share of the references' crop light
-    (luminance summed over bins and pixels) outside the LED pixels (:func:`led_error`'s selection)."""
+def crop_error(frame: dict, ref_a: dict, ref_b: dict, own: dict) -> tuple[float, float]:
+    """Relative RMSE of every pixel of every light's bins (the whole crops, pooled; lights with an own box
+    ``own[id]``) against the mean of two references, corrected for their noise as :func:`led_error`; and the share
+    of the references' crop light (luminance summed over bins and pixels) outside the LED pixels (:func:`led_error`'s
+    selection)."""
     num = noise = den = led_light = light = 0.0
-    for _, t, a, b, m, sel in _light_canvases(frame, ref_a, ref_b):
+    for _, t, a, b, m, sel in _light_canvases(frame, ref_a, ref_b, own):
         num += float(np.sum((t - m) ** 2))
         noise += float(np.sum((0.5 * (a - b)) ** 2))
         den += float(np.sum(m ** 2))
@@ -531,10 +571,11 @@ def pad_samples_main(cases, cache: Path | None, out: Path, quick: bool) -> None:
         refs = [_frame(sc, opts(ref_spp, s, "light"), cache, f"pad_ref_{ref_spp}_{s}_{W}_{tag}")[0]
                 for s in PAD_REF_SEEDS]
         next(render.render_frames(sc, opts(1, 0)))  # warm-up: the timed settings find their kernels compiled
+        own = lamp_boxes(sc, opts(32, 11))
         for name, pad in (("ring at light_spp (before)", "light"), ("ring at spp (default)", "spp")):
             fr, cpu = _frame(sc, opts(32, 11, pad), cache, f"pad_{pad}_{W}_{tag}")
-            crop, ring_share = crop_error(fr, *refs)
-            rows.append({"case": c, "setting": name, "cpu_s": cpu, "led": led_error(fr, *refs, sc)["all"][0],
+            crop, ring_share = crop_error(fr, *refs, own)
+            rows.append({"case": c, "setting": name, "cpu_s": cpu, "led": led_error(fr, *refs, sc, own)["all"][0],
                          "crop": crop, "ring_share": ring_share})
             print(rows[-1], flush=True)
     lines = [PAD_SECTION, "",
@@ -546,8 +587,8 @@ def pad_samples_main(cases, cache: Path | None, out: Path, quick: bool) -> None:
              f"{ref_spp}, ring at light_spp). LED bins: relative RMSE of the LED pixels' bins, pooled; whole crops: "
              "the same over every pixel of the crops (the ring included); both corrected for the references' noise "
              "(module docstring). Light outside the LED pixels: its share of the crops' light in the references. "
-             "CPU: the lamp crops of the frame, user + system s, one process after a warm-up render.", "",
-             "| scene | setting | CPU s (lamp crops) | LED bins | whole crops | light outside the LED pixels |",
+             "CPU: the lamp crops of the frame, user + system s, one process after a warm-up render. " + LED_PX_RULE,
+             "", "| scene | setting | CPU s (lamp crops) | LED bins | whole crops | light outside the LED pixels |",
              "|---|---|---|---|---|---|"]
     lines += [f"| {r['case']} | {r['setting']} | {r['cpu_s']:.1f} | {r['led']:.3f} | {r['crop']:.3f} | "
               f"{r['ring_share']:.3f} |" for r in rows]
@@ -614,7 +655,7 @@ def write_pxs_section(rows, model, out: Path, load0: float, load1: float, size, 
              "`render_tools.tracer.sobol_points`); `filled xF`: light_spp x F for the lights drawn as filled cells "
              "(`filled_spp_factor`). LED bins: relative RMSE over every light's LED pixels and bins, pooled; per "
              "kind: error (share of the squared error). CPU: the lamp crops of the frame, user + system s, one "
-             "process after a warm-up render.", "",
+             "process after a warm-up render. " + LED_PX_RULE, "",
              "| scene | setting | CPU s (lamp crops) | LED bins | " + " | ".join(kinds) + " |",
              "|---|---|---|---|" + "---|" * len(kinds)]
     for r in rows:
@@ -643,7 +684,7 @@ def write_led_section(rows, model, out: Path, load0: float, load1: float, size, 
              "`uniform` (light_spp in each). LED bins: relative RMSE of luminance over "
              "the LED pixels of every light's bins, pooled; per kind: the lights of one kind pooled. CPU: the "
              "lamp crops of the frame (user + system s, in one process after a warm-up render of the scene, so no "
-             "kernel compilation is in them).", "",
+             "kernel compilation is in them). " + LED_PX_RULE, "",
              "| scene | setting | light_spp | CPU s (lamp crops) | LED bins vs the dots | signals | message signs "
              "| LED bins vs the filled cells | signals | message signs |",
              "|---|---|---|---|---|---|---|---|---|---|"]

@@ -59,7 +59,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import _llvm  # noqa: E402,F401 - sets DRJIT_LIBLLVM_PATH
 from _timing import replace_section  # noqa: E402
 from bench_render import lum  # noqa: E402
-from bench_render_v2_error import _frame, _led_canvas, _v2_scene  # noqa: E402
+from bench_render_v2_error import _frame, _led_canvas, _v2_scene, lamp_boxes  # noqa: E402
 
 from lfmbench.fileio import load_yaml  # noqa: E402
 
@@ -111,20 +111,6 @@ def median_corrected(t: np.ndarray, a: np.ndarray, b: np.ndarray) -> tuple[float
     raw = float(np.median(np.abs(np.asarray(t, np.float64)[ok] - m[ok]) / m[ok]))
     r = float(np.median(np.abs(np.asarray(a, np.float64)[ok] - b[ok]) / 2.0 / m[ok]))
     return raw, r, float(np.sqrt(max(raw * raw - r * r, 0.0)))
-
-
-def lamp_boxes(sc, opts) -> dict:
-    """{light id: (y0, x0, y1, x1)} px: each light's own screen box over frame 0's capture window (its face as it
-    moves, no pad ring, no reflection: :meth:`render_tools.render.SceneGeometry.light_bbox`); lights off screen
-    are left out."""
-    from render_tools import render  # noqa: PLC0415
-
-    tm = render.frame_timing(sc, opts, 0)
-    geo = render.SceneGeometry(sc, opts)
-    t_obj = 0.5 * (tm["window"][0] + tm["window"][1])
-    boxes = {lt["id"]: geo.light_bbox(lt, t_obj, *tm["window"], moving=True, reflection=False)
-             for lt in sc["lights"]}
-    return {k: tuple(int(v) for v in b) for k, b in boxes.items() if b is not None}
 
 
 def led_error_boxed(frame: dict, ref_a: dict, ref_b: dict, kinds: dict, boxes: dict) -> dict:

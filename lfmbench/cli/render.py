@@ -119,9 +119,17 @@ def render_cmd(
             proto = load_protocol(protocol)
             if not (Path(out) / "manifest.json").is_file():
                 fail(f"--add-layers: no corpus at {out} (manifest.json missing)")
-            done = J.add_layers(out, proto, on_done=lambda sid, sec: console.print(
+            B.finish_probes()  # the layers render in worker processes (--workers): they read the cached verdict
+            done = J.add_layers(out, proto, workers=workers, on_done=lambda sid, sec: console.print(
                 f"{sid}: static window layers added ({sec:.1f} s)", highlight=False))
-        except (ValueError, CorpusError) as exc:
+        except J.RenderInterrupted as exc:
+            console.print(f"[yellow]interrupted[/]: {len(exc.summary.rendered)} scene(s) got their static window "
+                          f"layers in {out}/manifest.json; no partial file was kept. Run the same command again to "
+                          "add the rest.")
+            raise typer.Exit(130) from None
+        except CorpusWriteError as exc:
+            fail(f"{exc.strerror or exc}; the corpus still holds only complete scenes (re-run to resume)")
+        except (ValueError, CorpusError, J.WorkerDied) as exc:
             fail(str(exc))
         console.print(f"{len(done)} scene(s) got static window layers; the corpus is now {proto.name} "
                       f"v{proto.version}", highlight=False)

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import copy
 import json
+import signal
 
 import pytest
 from typer.testing import CliRunner
@@ -338,10 +339,21 @@ def test_render_protocol_one_split_then_the_rest(tmp_path, fake):
     assert not (tmp_path / "d").exists()
 
 
+def _mitsuba_sigint(msg):
+    """What Mitsuba does with Ctrl-C: the SIGINT handler raises KeyboardInterrupt inside the render, and the
+    render loop turns it into a RuntimeError whose message does not say so."""
+    try:
+        signal.raise_signal(signal.SIGINT)
+    except KeyboardInterrupt:
+        return RuntimeError("drjit: render loop aborted")
+    raise AssertionError("SIGINT did not raise")
+
+
 def test_add_layers_upgrades_a_corpus_without_touching_its_files(tmp_path, fake):
     """A corpus of version 1 of a protocol gets version 2's static window layer (render.static_layers) by
     ``--add-layers``: only the layers are rendered, no file it had changes, the manifest then records version 2 (a
-    resume with it skips every scene), and a fresh version-2 render writes the same set of files."""
+    resume with it skips every scene), and a fresh version-2 render writes the same set of files; Ctrl-C while a
+    version 3 adds a layer stops as a render stops, and the rerun uses ``--workers``."""
     from tests.data.render.data import LAYER_CALLS
 
     out = tmp_path / "c"
@@ -375,3 +387,40 @@ def test_add_layers_upgrades_a_corpus_without_touching_its_files(tmp_path, fake)
     fresh = tmp_path / "fresh"
     assert _run("render", "--protocol", str(v2), "--out", str(fresh)).exit_code == 0
     assert sorted(p.relative_to(fresh).as_posix() for p in fresh.rglob("*.layer_chopped.exr")) == layer_files
+    # version 3 adds a layer. Ctrl-C inside a scene's layer render (Mitsuba reports it as a RuntimeError) ends
+    # --add-layers as it ends a render: exit 130 and a message, no traceback, the scenes before it committed, the
+    # version not recorded; the rerun adds the rest and hands --workers to the process pool
+    from render_tools import jobs as J
+
+    d["version"] = 3
+    d["render"]["static_layers"].append({"name": "second", "windows_s": [[0.0, 0.0001]]})
+    v3 = write_protocol(tmp_path / "v3.yaml", d)
+    first, second = C.Corpus(out).scenes[:2]
+    n0 = len(LAYER_CALLS)
+    FAIL[second] = _mitsuba_sigint
+    prev = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        r = _run("render", "--protocol", str(v3), "--out", str(out), "--add-layers")
+    finally:
+        signal.signal(signal.SIGINT, prev)
+        FAIL.clear()
+    assert r.exit_code == 130 and "interrupted: 1 scene(s)" in r.output and "Traceback" not in r.output, r.output
+    assert [c[0] for c in LAYER_CALLS[n0:]] == [first, second]  # no further scene started
+    man = json.loads((out / "manifest.json").read_text())
+    assert man["render"]["protocol"]["version"] == 2 and C.validate_corpus(out).ok
+    assert {f.split("/")[1] for f in man["files"] if f.endswith(".layer_second.exr")} == {first}
+    assert not list(out.rglob(C.TMP_PREFIX + "*"))  # nothing half-written left behind
+    pool = []
+
+    def serial_pool(tasks, fn, workers, finished, label=str):  # run_supervised's contract, in this process
+        pool.append(workers)
+        for t in tasks:
+            finished(t, fn(t), None)
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(J, "run_supervised", serial_pool)
+        r = _run("render", "--protocol", str(v3), "--out", str(out), "--add-layers", "--workers", "2")
+    assert r.exit_code == 0 and "2 scene(s) got static window layers" in r.output, r.output
+    assert pool == [2] and sorted(c[0] for c in LAYER_CALLS[n0 + 2:]) == sorted(set(C.Corpus(out).scenes) - {first})
+    assert json.loads((out / "manifest.json").read_text())["render"]["protocol"]["version"] == 3
+

@@ -10,6 +10,7 @@ import pytest
 
 BENCH = Path(__file__).resolve().parents[2] / "benchmarks"
 sys.path[:0] = [str(BENCH / "studies"), str(BENCH)]
+import bench_render_v2_error as E  # noqa: E402
 import bench_render_v2_targets as T  # noqa: E402
 
 
@@ -53,6 +54,25 @@ def test_led_error_boxed_counts_only_the_lights_own_box():
     dim[:, :, 0:2, 0:2] = 0.9  # the face 10 % too dark
     err = T.led_error_boxed(_frame(dim), _frame(ref), _frame(ref), kinds, boxes)
     assert err["all"] == pytest.approx((0.1, 1.0)) and err["tail"] == pytest.approx((0.1, 1.0))
+
+
+def test_led_pixels_of_the_v2_error_study_stay_inside_the_lights_own_box():
+    """An unlit lamp (its face at 1 % of the light around it) whose crop holds brighter stray light outside its
+    face (a reflection, a lit wall): the LED pixels of bench_render_v2_error are the face's, so an error outside
+    the face counts for nothing and one of the face counts in full (both selections: bins_error_cut, led_error)."""
+    ref = np.zeros((2, 31, 4, 6))
+    ref[:, :, 0:2, 0:2] = 0.01  # the unlit face: rows 10-11, columns 20-21 of the frame
+    ref[:, :, 3, 3:6] = 5.0  # stray light outside it, 500 x brighter
+    boxes, sc = {7: (10, 20, 12, 22)}, {"lights": [{"kind": "tail"}] * 8}
+    off_face = ref.copy()
+    off_face[:, :, 3, 3:6] = 0.0
+    assert E.bins_error_cut(_frame(off_face), _frame(ref), boxes) == 0.0
+    assert E.led_error(_frame(off_face), _frame(ref), _frame(ref), sc, boxes)["all"][0] == 0.0
+    dim = ref.copy()
+    dim[:, :, 0:2, 0:2] *= 0.9  # the face 10 % too dark
+    assert E.bins_error_cut(_frame(dim), _frame(ref), boxes) == pytest.approx(0.1)
+    assert E.led_error(_frame(dim), _frame(ref), _frame(ref), sc, boxes)["tail"][0] == pytest.approx(0.1)
+    assert np.isnan(E.bins_error_cut(_frame(dim), _frame(ref), {}))  # a light without a box adds nothing
 
 
 def test_verdict():

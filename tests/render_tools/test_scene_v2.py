@@ -7,6 +7,7 @@ import copy
 import hashlib
 import json
 
+import numpy as np
 import pytest
 
 from lfmbench.limits import set_limit
@@ -52,6 +53,31 @@ def test_v1_protocol_scenes_unchanged(v1, sid, want):
 def test_v1_plain_scenes_unchanged(seed, tod, want):
     assert scene_hash(S.generate_scene(seed, time_of_day=tod)) == want
     assert scene_hash(S.generate_scene(seed, time_of_day=tod, generator=1)) == want
+
+
+def _typed(x):
+    """``x`` with every leaf as (type name, repr): 1, 1.0 and True, or 0.0 and -0.0, do not pass for each other."""
+    if isinstance(x, dict):
+        return {(type(k).__name__, k): _typed(v) for k, v in x.items()}
+    if isinstance(x, list):
+        return [_typed(v) for v in x]
+    return type(x).__name__, repr(x)
+
+
+def test_plain_json_is_the_json_round_trip():
+    """scene_schema.plain_json (generate_scene's last step) gives what json.loads(json.dumps(x)) gives, to the type
+    and bit of every value, in new containers; what it does not handle takes the round trip, result or error."""
+    from render_tools.scene_schema import plain_json
+
+    obj = {"a": (1, 2.5, np.float64(0.1) + np.float64(0.2), True, None, "s"), "b": [[np.float64(-0.0), 1e308, -3]],
+           "c": {"d": (), "e": [{"f": float("inf"), "g": False}]}, "h": list(np.random.default_rng(0).random(4))}
+    assert _typed(plain_json(obj)) == _typed(json.loads(json.dumps(obj)))
+    sc = S.generate_scene(3, "night", generator=2)
+    out = plain_json(sc)
+    assert _typed(out) == _typed(json.loads(json.dumps(sc))) and out["objects"][0] is not sc["objects"][0]
+    assert _typed(plain_json({1: (2.0,)})) == _typed({"1": [2.0]})  # a key that is not a str: JSON's answer
+    with pytest.raises(TypeError, match="float32"):
+        plain_json({"x": [np.float32(1.0)]})  # and JSON's error
 
 
 def test_v2_protocols_use_generator_2():

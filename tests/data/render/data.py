@@ -54,10 +54,12 @@ LAYER_CALLS: list[tuple[str, str]] = []
 
 def fake_render_layer(scene, opts, layer):
     """Static window layer frames with the shapes ``render_tools.static_layers.render_layer`` yields: seeded random
-    radiance per static group."""
+    radiance per static group; a scene in :data:`FAIL` raises before its first frame."""
     from render_tools.render import scene_meta
 
     LAYER_CALLS.append((scene["scene_id"], layer[0]))
+    if scene["scene_id"] in FAIL:
+        raise FAIL[scene["scene_id"]]("simulated failure")
     meta = scene_meta(scene, opts)
     rng = np.random.default_rng(opts.seed + 7)
     for n in range(opts.frames):
