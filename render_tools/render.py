@@ -55,6 +55,9 @@ BBOX_TIME_SAMPLES = 17
 #: Light crops are grown to a multiple of this many px. 1: tight crops (the tracer's kernel does not depend
 #: on crop sizes; with one ``mi.render`` per crop, 8 kept the number of compiled film sizes down).
 CROP_QUANTUM_PX = 1
+#: Dot pitch (px) under which a ``dots`` face drawn as it is gets ``RenderOptions.dots_spp_factor`` (its dots are
+#: smaller than a pixel: their covered share of a pixel is what the lamp samples estimate).
+DOTS_SPP_PX = 1.0
 #: Minimum depth of a projected point treated as in front of the camera, m.
 MIN_DEPTH_M = 0.05
 #: Height of the row bands a reflection crop is traced in, px (:meth:`SceneGeometry.reflection_tiles`): each band
@@ -126,6 +129,13 @@ class RenderOptions:
     thirds of a night scene's LED-bin error for a fifth of its lamp samples (docs/benchmarks/render.md, "Pixel
     samples"). 1: as other lights.
     Scenes without dot faces (every lfmbench-v1 scene) render the same whatever it is.
+    dots_spp_factor: light_spp multiplier (a power of two) of the flickering lights whose ``dots`` faces have a dot
+    pitch under :data:`DOTS_SPP_PX` (1 px, over every frame's capture window) and are drawn as they are (not as
+    filled cells: ``dots_lod_px`` 0 or under their pitch; :func:`dense_dots`): a pixel's share covered by
+    sub-pixel dots is what their lamp samples estimate, and these lights (message signs, signals' LED arrays,
+    countdowns, destination displays) carried the LED bins' error over 2 % against the real dot pattern; the
+    other lamps were at 1.2 % with light_spp 32 (docs/benchmarks/render.md, "LED dot faces against the real
+    dots"). 1 (default): as other lights. Scenes without dot faces render the same whatever it is.
     pixel_samples: where a pixel's samples lie in x, y and time (:class:`render_tools.tracer.Tile` ``sobol``):
     ``"strata"`` (each dimension stratified on its own, the strata of the dimensions paired at random),
     ``"sobol"`` (a randomly shifted Sobol' sequence: also stratified jointly, which an edge moving across the
@@ -205,6 +215,7 @@ class RenderOptions:
     dots_lod_px: float = 1.0
     lamp_pass_spp: str = "auto"
     filled_spp_factor: int = 2
+    dots_spp_factor: int = 1
     pixel_samples: str = "auto"
     reflection_block_px: int = 2
     pad_samples: str = "auto"
@@ -267,9 +278,10 @@ class RenderOptions:
             raise ValueError(f"reflection_denoise: must be one of {STATIC_DENOISE}, got {self.reflection_denoise!r}")
         if self.pixel_samples not in PIXEL_SAMPLES:
             raise ValueError(f"pixel_samples: must be one of {PIXEL_SAMPLES}, got {self.pixel_samples!r}")
-        f = self.filled_spp_factor
-        if isinstance(f, bool) or not isinstance(f, (int, np.integer)) or f < 1 or f & (f - 1):
-            raise ValueError(f"filled_spp_factor: must be a power of two >= 1, got {f!r}")
+        for name in ("filled_spp_factor", "dots_spp_factor"):
+            f = getattr(self, name)
+            if isinstance(f, bool) or not isinstance(f, (int, np.integer)) or f < 1 or f & (f - 1):
+                raise ValueError(f"{name}: must be a power of two >= 1, got {f!r}")
         if self.static_pass not in STATIC_PASSES:
             raise ValueError(f"static_pass: must be one of {STATIC_PASSES}, got {self.static_pass!r}")
         if not isinstance(self.pad_px, (int, np.integer)) or self.pad_px < 0:
@@ -694,11 +706,36 @@ def lamp_pass_spp(light: dict, opts: RenderOptions, light_spp: int | None = None
     return tuple(int(v) for v in n)
 
 
-def lamp_light_spp(light: dict, opts: RenderOptions, filled: frozenset | set = frozenset()) -> int:
+def lamp_light_spp(light: dict, opts: RenderOptions, filled: frozenset | set = frozenset(),
+                   dense: frozenset | set = frozenset()) -> int:
     """Samples per pixel, bin and band pass of a flickering light's own box: ``light_spp`` (else ``spp``), times
-    ``opts.filled_spp_factor`` for the lights drawn as filled cells (ids ``filled``, from :func:`dots_lod`)."""
+    ``opts.filled_spp_factor`` for the lights drawn as filled cells (ids ``filled``, from :func:`dots_lod`) and
+    ``opts.dots_spp_factor`` for those whose sub-pixel dots are drawn as they are (ids ``dense``, from
+    :func:`dense_dots`)."""
     n = opts.light_spp or opts.spp
-    return n * opts.filled_spp_factor if light["id"] in filled else n
+    if light["id"] in filled:
+        return n * opts.filled_spp_factor
+    return n * opts.dots_spp_factor if light["id"] in dense else n
+
+
+def _subpixel_dots(scene: dict, opts: RenderOptions, px: float) -> list[int]:
+    """Ids of the ``dots`` lights whose dot pitch stays under ``px`` px over every frame's capture window
+    (:meth:`SceneGeometry.dots_pitch_px`, sampled at :data:`BBOX_TIME_SAMPLES` times); [] when ``px`` is 0."""
+    if not px or not any(lt["shape"] == "dots" for lt in scene["lights"]):
+        return []
+    geo = SceneGeometry(scene, opts)
+    times = np.concatenate([np.linspace(*frame_timing(scene, opts, n)["window"], BBOX_TIME_SAMPLES)
+                            for n in range(opts.frames)])
+    return [lt["id"] for lt in scene["lights"] if lt["shape"] == "dots" and geo.dots_pitch_px(lt, times) < px]
+
+
+def dense_dots(scene: dict, opts: RenderOptions, filled=()) -> list[int]:
+    """Ids of the lights whose sub-pixel dots are drawn as they are (:data:`DOTS_SPP_PX`, not among ``filled``,
+    the ids :func:`dots_lod` drew as filled cells), whose own boxes get ``opts.dots_spp_factor`` times light_spp
+    (:func:`lamp_light_spp`); [] when that factor is 1 (nothing to find)."""
+    if opts.dots_spp_factor == 1:
+        return []
+    return [i for i in _subpixel_dots(scene, opts, DOTS_SPP_PX) if i not in set(filled)]
 
 
 def dots_lod(scene: dict, opts: RenderOptions) -> tuple[dict, list[int]]:
@@ -709,13 +746,7 @@ def dots_lod(scene: dict, opts: RenderOptions) -> tuple[dict, list[int]]:
     is. One decision per light for the whole sequence, so a light never switches form between frames."""
     from . import led_matrix  # noqa: PLC0415
 
-    if not opts.dots_lod_px or not any(lt["shape"] == "dots" for lt in scene["lights"]):
-        return scene, []
-    geo = SceneGeometry(scene, opts)
-    times = np.concatenate([np.linspace(*frame_timing(scene, opts, n)["window"], BBOX_TIME_SAMPLES)
-                            for n in range(opts.frames)])
-    ids = [lt["id"] for lt in scene["lights"]
-           if lt["shape"] == "dots" and geo.dots_pitch_px(lt, times) < opts.dots_lod_px]
+    ids = _subpixel_dots(scene, opts, opts.dots_lod_px)
     if not ids:
         return scene, []
     out = dict(scene)
@@ -796,7 +827,9 @@ def scene_meta(scene: dict, opts: RenderOptions) -> dict:
                        "reflection_min_lux": opts.reflection_min_lux,
                        "reflection_block_px": opts.reflection_block_px} if helper.wet else {}),
                    **({"dots_lod_px": opts.dots_lod_px, "dots_lod": lod_ids,
-                       "filled_spp_factor": opts.filled_spp_factor}
+                       "filled_spp_factor": opts.filled_spp_factor,
+                       **({"dots_spp_factor": opts.dots_spp_factor, "dots_spp": dense_dots(scene, opts, lod_ids)}
+                          if opts.dots_spp_factor != 1 else {})}
                       if any(lt["shape"] == "dots" for lt in scene["lights"]) else {}),
                    **({"lamp_pass_spp": "spectrum" if spectral_lamp_passes(scene, opts) else "uniform",
                        "pixel_samples": "sobol" if sobol_pixel_samples(scene, opts) else "strata",
@@ -932,7 +965,7 @@ def plan_static_bins(scene: dict, opts: RenderOptions, n: int, sets, geo: SceneG
 
 
 def plan_frame(scene: dict, opts: RenderOptions, n: int, sets, geo: SceneGeometry | None = None,
-               filled: frozenset | set = frozenset(), static: bool = True):
+               filled: frozenset | set = frozenset(), static: bool = True, dense: frozenset | set = frozenset()):
     """The tiles of frame ``n`` (:class:`render_tools.tracer.Tile`) and how to assemble them.
 
     Static groups: two full-frame tiles, the short window at ``spp`` and the rest of the long window (long minus
@@ -948,7 +981,8 @@ def plan_frame(scene: dict, opts: RenderOptions, n: int, sets, geo: SceneGeometr
     ``pad_px`` ring is such parts too, traced at ``spp`` in K bins (:func:`ring_boxes`), its own unpadded box at
     ``light_spp`` over them, and a static group's lamp refines its unpadded box. ``sets``: the frame's
     :class:`tracer.LightSets` (or any mapping from set name to index). ``filled``: ids of the lights :func:`dots_lod` drew as filled cells (their own
-    boxes get :func:`lamp_light_spp`). ``static``: False leaves the static groups' tiles out (they are traced in
+    boxes get :func:`lamp_light_spp`). ``dense``: ids of the lights whose sub-pixel dots are drawn as they
+    are (:func:`dense_dots`; their boxes get :func:`lamp_light_spp` too). ``static``: False leaves the static groups' tiles out (they are traced in
     time bins, :func:`plan_static_bins`). Returns (tiles, plan, visible light ids); plan entries are
     (kind, group, window or light id, crop, tile index, repeat): a tile of K / repeat bins, each bin repeated
     ``repeat`` times in a row to make the K bins.
@@ -1004,7 +1038,7 @@ def plan_frame(scene: dict, opts: RenderOptions, n: int, sets, geo: SceneGeometr
             bb = geo.light_bbox(lt, t_obj, *tm["window"], moving=True)
             if bb is None:
                 continue
-            own_spp = lamp_light_spp(lt, opts, filled)
+            own_spp = lamp_light_spp(lt, opts, filled, dense)
             ps = lamp_pass_spp(lt, opts, own_spp) if spectral else None  # the lamp's own box: samples by spectrum
             visible.add(lt["id"])
             k = sets[f"light:{lt['id']}"]
@@ -1119,6 +1153,7 @@ def render_frames(scene: dict, opts: RenderOptions, steady_bins: bool = False) -
     timings = [frame_timing(scene, opts, n) for n in range(opts.frames)]  # validates exposures up front
     scene, filled = dots_lod(scene, opts)  # sub-pixel LED dots as filled cells (RenderOptions.dots_lod_px)
     filled = frozenset(filled)
+    dense = frozenset(dense_dots(scene, opts, filled))  # sub-pixel dots drawn as they are (dots_spp_factor)
     groups = _selected_groups(scene, opts)
     from . import backend  # noqa: PLC0415
 
@@ -1145,7 +1180,8 @@ def render_frames(scene: dict, opts: RenderOptions, steady_bins: bool = False) -
         sets = tracer.LightSets(mi, dr, loaded, scene, list(groups), union=static_union(groups, opts))
         tr = tracer.Tracer(mi, dr, loaded, sets, geo.ego, geo.fov, (opts.width, opts.height), opts.bands_nm,
                            opts.band_width_nm, sky_scale=ms.sky_scale(scene))
-        tiles, plan, visible = plan_frame(scene, opts, n, sets, geo, filled, static=edges is None)
+        tiles, plan, visible = plan_frame(scene, opts, n, sets, geo, filled, static=edges is None,
+                                            dense=dense)
         qmc = sobol_pixel_samples(scene, opts)
         bins = [] if edges is None else [(k, tm["t0"] + a, tm["t0"] + b) for k, (a, b) in
                                          enumerate(zip(edges[:-1], edges[1:]))]
