@@ -86,6 +86,9 @@ GAP_SETTINGS = {
     "dots as they are, light_spp 32": {"dots_lod_px": 0.0},
     "dots as they are, light_spp 128": {"dots_lod_px": 0.0, "light_spp": 128},
     "filled cells x8": {"filled_spp_factor": 8},
+    "sub-pixel dots as they are x4": {"dots_lod_px": 0.0, "dots_spp_factor": 4},
+    "sub-pixel dots as they are x8": {"dots_lod_px": 0.0, "dots_spp_factor": 8},
+    "dot faces exact": {"dots_coverage": "exact"},
     "static spp 2": {"spp": 2},
 }
 TARGET_LED, TARGET_MEDIAN = 0.02, 0.10
@@ -199,6 +202,8 @@ def main() -> None:
                     help="cases rendered first with the flickering groups alone (LED bins only)")
     ap.add_argument("--gap-cases", nargs="*", default=list(GAP_CASES),
                     help="cases that also render the --gap settings (what closes a missed target)")
+    ap.add_argument("--gap-settings", nargs="*", default=list(GAP_SETTINGS),
+                    help="names of the --gap settings rendered (GAP_SETTINGS)")
     ap.add_argument("--cache", default=None, help="folder for the rendered frames (pickles), reused when there")
     ap.add_argument("--out", default=str(ROOT / "docs"))
     ap.add_argument("--quick", action="store_true", help="160x90, references spp 2 / light_spp 32 (smoke run)")
@@ -229,11 +234,12 @@ def main() -> None:
             refs.append(fr)
             ref_cpu += cpu
         print(c, f"references {ref_cpu:.0f} CPU s", flush=True)
-        settings = {"default": {}, **{n: kw for n, kw in GAP_SETTINGS.items()
-                                      if c in a.gap_cases and ("spp" in kw) == (groups is None)}}
+        settings = {"default": {}, **{n: kw for n, kw in GAP_SETTINGS.items() if n in a.gap_settings
+                                      and c in a.gap_cases and ("spp" in kw) == (groups is None)}}
         for name, kw in settings.items():
             opts = render.RenderOptions(**{**base, "seed": 11, "groups": groups, **kw})
-            key = "_".join(f"{k}{v:g}" for k, v in sorted(kw.items())) or "default"
+            key = "_".join(f"{k}{v}" if isinstance(v, str) else f"{k}{v:g}" for k, v in sorted(kw.items())) \
+                or "default"
             fr, cpu = _frame(sc, opts, cache, f"tgt_{key}_{tag}")
             r = {"case": c, "setting": name, "cpu_s": cpu, "ref_cpu_s": ref_cpu, **scores(sc, fr, *refs, opts)}
             rows.append(r)
