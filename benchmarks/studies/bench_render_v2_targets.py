@@ -316,15 +316,22 @@ def figure(case: str, cache: Path, size, out: Path, kind: str = "message_sign") 
     y0, x0 = min(b[0] for b in boxes) - 2, min(b[1] for b in boxes) - 2
     y1, x1 = max(b[2] for b in boxes) + 2, max(b[3] for b in boxes) + 2
     top = max(p[y0:y1, x0:x1].max() for _, p in panels)
-    fig, axs = plt.subplots(len(panels), 1, figsize=(8, 1.6 * len(panels)))
-    for ax, (name, p) in zip(axs, panels):
+    ref = panels[-1][1][y0:y1, x0:x1]
+    fig, axs = plt.subplots(len(panels), 2, figsize=(11, 1.5 * len(panels)), squeeze=False)
+    for (ax, dx), (name, p) in zip(axs, panels):
         ax.imshow(np.log10(np.maximum(p[y0:y1, x0:x1], top * 1e-3)), cmap="inferno", vmin=np.log10(top) - 3,
                   vmax=np.log10(top), interpolation="nearest")
-        ax.set_title(name, fontsize=9)
-        ax.set_xticks([])
-        ax.set_yticks([])
-    fig.suptitle(f"{kind.replace('_', ' ')}s, {case}, frame 0 at {size[0]}x{size[1]}, mean of 8 bins "
-                 f"(log luminance, 3 decades; px {x0}-{x1} x {y0}-{y1})", fontsize=9)
+        ax.set_title(name, fontsize=8)
+        lit = ref > 1e-2 * ref.max()  # relative difference where the reference is lit
+        d = np.where(lit, (p[y0:y1, x0:x1] - ref) / np.where(lit, ref, 1.0), 0.0)
+        dx.imshow(d, cmap="RdBu_r", vmin=-0.3, vmax=0.3, interpolation="nearest")
+        dx.set_title("(this - reference) / reference, lit pixels (+-30 %)" if p is not panels[-1][1] else
+                     "(the reference)", fontsize=8)
+        for a_ in (ax, dx):
+            a_.set_xticks([])
+            a_.set_yticks([])
+    fig.suptitle(f"{kind.replace('_', ' ')}s, {case}, frame 0 at {size[0]}x{size[1]}, mean of 8 bins: log luminance "
+                 f"(3 decades; px {x0}-{x1} x {y0}-{y1}) and the difference to the reference", fontsize=9)
     fig.tight_layout()
     tmp = out.with_suffix(".tmp.png")
     fig.savefig(tmp, dpi=110)
