@@ -58,6 +58,9 @@ CROP_QUANTUM_PX = 1
 #: Dot pitch (px) under which a ``dots`` face drawn as it is gets ``RenderOptions.dots_spp_factor`` (its dots are
 #: smaller than a pixel: their covered share of a pixel is what the lamp samples estimate).
 DOTS_SPP_PX = 1.0
+#: Largest projected side (px) of a flickering ``rect`` face drawn by its exact coverage (``dots_coverage`` exact:
+#: a countdown's segments, whose thin bars carried a dusk scene's remaining LED-bin error when traced).
+EXACT_RECT_PX = 4.0
 #: Minimum depth of a projected point treated as in front of the camera, m.
 MIN_DEPTH_M = 0.05
 #: Height of the row bands a reflection crop is traced in, px (:meth:`SceneGeometry.reflection_tiles`): each band
@@ -138,9 +141,9 @@ class RenderOptions:
     countdowns, destination displays) carried the LED bins' error over 2 % against the real dot pattern; the
     other lamps were at 1.2 % with light_spp 32 (docs/benchmarks/render.md, "LED dot faces against the real
     dots"). 1 (default): as other lights. Scenes without dot faces render the same whatever it is.
-    dots_coverage: how the own box of a flickering light with a ``dots`` face of sub-pixel pitch (under
-    :data:`DOTS_SPP_PX`) and no beam (``spread_deg`` 90: message signs, signals' LED arrays, destination displays,
-    far tail lamps; :func:`exact_faces`) is made: ``"traced"`` (default: camera samples, as
+    dots_coverage: how the own box of a flickering light without a beam (``spread_deg`` 90) whose face is ``dots``
+    of sub-pixel pitch (under :data:`DOTS_SPP_PX`: message signs, signals' LED arrays, destination displays, far
+    tail lamps) or a ``rect`` under :data:`EXACT_RECT_PX` (countdown segments; :func:`exact_faces`) is made: ``"traced"`` (default: camera samples, as
     every other light) or ``"exact"`` (:func:`exact_face`: the face's band radiance times the exact share of each
     pixel its lit dots cover, averaged over each bin, :mod:`render_tools.dot_coverage`; occluders found by
     visibility rays; no camera sample, no Monte Carlo noise, and no ``dots_lod_px`` stand-in for these lights).
@@ -744,22 +747,38 @@ def _subpixel_dots(scene: dict, opts: RenderOptions, px: float) -> list[int]:
 
 
 def exact_faces(scene: dict, opts: RenderOptions) -> list[int]:
-    """Ids of the lights whose own box is made by :func:`exact_face` (``opts.dots_coverage`` ``exact``): a ``dots``
-    face without a beam (``spread_deg`` 90) in a flickering group whose dot pitch stays under :data:`DOTS_SPP_PX`
-    over every frame (:func:`_subpixel_dots`); [] otherwise. Larger dots (tail and brake lamps near the camera,
+    """Ids of the lights whose own box is made by :func:`exact_face` (``opts.dots_coverage`` ``exact``): a face
+    without a beam (``spread_deg`` 90) in a flickering group, either ``dots`` whose dot pitch stays under
+    :data:`DOTS_SPP_PX` over every frame (:func:`_subpixel_dots`) or a ``rect`` whose sides stay under
+    :data:`EXACT_RECT_PX` (a countdown's segments; its visibility parts then under a quarter of a pixel); []
+    otherwise. Larger dots (tail and brake lamps near the camera,
     1.2 % LED-bin error traced at light_spp 32) are left to the tracer, which also draws the light a face throws
     on what is next to it inside its box (a tail lamp's on its bumper: 2.3 % of its box's light at dusk)."""
     if opts.dots_coverage != "exact":
         return []
     flick = {g for g, info in scene_groups(scene).items() if info["flicker"]}
     sub = set(_subpixel_dots(scene, opts, DOTS_SPP_PX))
+    rects = [lt for lt in scene["lights"] if lt["shape"] == "rect" and lt["group"] in flick]
+    if rects:
+        geo = SceneGeometry(scene, opts)
+        times = np.concatenate([np.linspace(*frame_timing(scene, opts, n)["window"], BBOX_TIME_SAMPLES)
+                                for n in range(opts.frames)])
+        sub |= {lt["id"] for lt in rects if geo.dots_pitch_px(_as_dots(lt), times) < EXACT_RECT_PX}
     return [lt["id"] for lt in scene["lights"] if lt["id"] in sub and lt["group"] in flick
             and float(lt["spread_deg"]) >= 90.0]
 
 
+def _as_dots(light: dict) -> dict:
+    """A ``rect`` light as the ``dots`` face of one dot filling its one cell (the same rectangle); other shapes
+    as they are."""
+    if light["shape"] != "rect":
+        return light
+    return {**light, "shape": "dots", "grid": [1, 1], "dot": 1.0, "cells": [[0, 0]]}
+
+
 def exact_face(scene: dict, light: dict, opts: RenderOptions, geo: "SceneGeometry", edges, crop, mi=None,
                loaded=None, t_obj: float = 0.0) -> np.ndarray:
-    """The (K, C, h, w) float32 bins (W sr^-1 m^-2 nm^-1) of a ``dots`` light's face over ``crop`` (y0, x0, y1, x1)
+    """The (K, C, h, w) float32 bins (W sr^-1 m^-2 nm^-1) of a ``dots`` (or ``rect``: one dot) light's face over ``crop`` (y0, x0, y1, x1)
     px in the K bins between ``edges`` (K + 1,) s: its band radiance (:func:`render_tools.spectra.band_means` of
     :func:`render_tools.mitsuba_scene.light_spectrum`, what the tracer's band samples average to) times the share
     of each pixel its lit dots cover (:func:`render_tools.dot_coverage.dots_coverage`), what the tracer's camera
@@ -772,7 +791,7 @@ def exact_face(scene: dict, light: dict, opts: RenderOptions, geo: "SceneGeometr
     if loaded is not None:
         vel = geo.object_velocity(light)
         vis = dot_coverage.ray_visibility(mi, loaded, lambda t: np.outer(np.asarray(t) - t_obj, vel))
-    cov = dot_coverage.dots_coverage(scene, light, geo.K, geo.pose_cv, crop, edges, vis)
+    cov = dot_coverage.dots_coverage(scene, _as_dots(light), geo.K, geo.pose_cv, crop, edges, vis)
     L = spectra.band_means(ms.light_spectrum(light), opts.bands_nm, opts.band_width_nm)
     return (cov[:, None] * np.asarray(L)[None, :, None, None]).astype(np.float32)
 
