@@ -58,6 +58,10 @@ CROP_QUANTUM_PX = 1
 #: Dot pitch (px) under which a ``dots`` face drawn as it is gets ``RenderOptions.dots_spp_factor`` (its dots are
 #: smaller than a pixel: their covered share of a pixel is what the lamp samples estimate).
 DOTS_SPP_PX = 1.0
+#: Dot pitch (px) under which a flickering ``dots`` face is drawn by its exact coverage (``dots_coverage`` exact): a
+#: night scene's message sign 1.06 px apart, traced at light_spp 32, kept 5 % error and the scene's LED bins at
+#: 2.0 %; 0.7 % drawn exact (docs/benchmarks/render.md, "LED dot faces against the real dots").
+EXACT_DOTS_PX = 2.0
 #: Largest projected side (px) of a flickering ``rect`` face drawn by its exact coverage (``dots_coverage`` exact:
 #: a countdown's segments, whose thin bars carried a dusk scene's remaining LED-bin error when traced).
 EXACT_RECT_PX = 4.0
@@ -142,8 +146,8 @@ class RenderOptions:
     other lamps were at 1.2 % with light_spp 32 (docs/benchmarks/render.md, "LED dot faces against the real
     dots"). 1 (default): as other lights. Scenes without dot faces render the same whatever it is.
     dots_coverage: how the own box of a flickering light without a beam (``spread_deg`` 90) whose face is ``dots``
-    of sub-pixel pitch (under :data:`DOTS_SPP_PX`: message signs, signals' LED arrays, destination displays, far
-    tail lamps) or a ``rect`` under :data:`EXACT_RECT_PX` (countdown segments; :func:`exact_faces`) is made: ``"traced"`` (default: camera samples, as
+    of pitch under :data:`EXACT_DOTS_PX` (message signs, signals' LED arrays, destination displays, far tail
+    lamps) or a ``rect`` under :data:`EXACT_RECT_PX` (countdown segments; :func:`exact_faces`) is made: ``"traced"`` (default: camera samples, as
     every other light) or ``"exact"`` (:func:`exact_face`: the face's band radiance times the exact share of each
     pixel its lit dots cover, averaged over each bin, :mod:`render_tools.dot_coverage`; occluders found by
     visibility rays; no camera sample, no Monte Carlo noise, and no ``dots_lod_px`` stand-in for these lights).
@@ -749,7 +753,7 @@ def _subpixel_dots(scene: dict, opts: RenderOptions, px: float) -> list[int]:
 def exact_faces(scene: dict, opts: RenderOptions) -> list[int]:
     """Ids of the lights whose own box is made by :func:`exact_face` (``opts.dots_coverage`` ``exact``): a face
     without a beam (``spread_deg`` 90) in a flickering group, either ``dots`` whose dot pitch stays under
-    :data:`DOTS_SPP_PX` over every frame (:func:`_subpixel_dots`) or a ``rect`` whose sides stay under
+    :data:`EXACT_DOTS_PX` over every frame (:func:`_subpixel_dots`) or a ``rect`` whose sides stay under
     :data:`EXACT_RECT_PX` (a countdown's segments; its visibility parts then under a quarter of a pixel); []
     otherwise. Larger dots (tail and brake lamps near the camera,
     1.2 % LED-bin error traced at light_spp 32) are left to the tracer, which also draws the light a face throws
@@ -757,7 +761,7 @@ def exact_faces(scene: dict, opts: RenderOptions) -> list[int]:
     if opts.dots_coverage != "exact":
         return []
     flick = {g for g, info in scene_groups(scene).items() if info["flicker"]}
-    sub = set(_subpixel_dots(scene, opts, DOTS_SPP_PX))
+    sub = set(_subpixel_dots(scene, opts, EXACT_DOTS_PX))
     rects = [lt for lt in scene["lights"] if lt["shape"] == "rect" and lt["group"] in flick]
     if rects:
         geo = SceneGeometry(scene, opts)
