@@ -394,8 +394,8 @@ def write_section(rows: list, out: Path, load0: float, load1: float, size, ref, 
     if dots:
         lines[0] = DOTS_SECTION
         lines += ["", f"Run again with `{DOTS_RERUN}` (the references are the bulk of the time; add `--gap-cases "
-                  "202:dusk:dry 101:night:dry --gap-settings \"sub-pixel dots as they are x8\" \"dots as they are, "
-                  "light_spp 32\"` for the other rows, and `--cached-only` to score what the cache holds).", ""]
+                  "202:dusk:dry 101:night:dry --gap-settings \"sub-pixel dots as they are x8\"` for the x8 rows, and "
+                  "`--cached-only` to score what the cache holds).", ""]
     else:
         lines += ["", "Run again with `nice -n 10 python benchmarks/studies/bench_render_v2_targets.py --cache "
                   "/tmp/v2tgt` (the references are the bulk of the time; `--cases` and `--gap-cases` choose the "
