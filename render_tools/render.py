@@ -55,6 +55,16 @@ BBOX_TIME_SAMPLES = 17
 #: Light crops are grown to a multiple of this many px. 1: tight crops (the tracer's kernel does not depend
 #: on crop sizes; with one ``mi.render`` per crop, 8 kept the number of compiled film sizes down).
 CROP_QUANTUM_PX = 1
+#: Dot pitch (px) under which a ``dots`` face drawn as it is gets ``RenderOptions.dots_spp_factor`` (its dots are
+#: smaller than a pixel: their covered share of a pixel is what the lamp samples estimate).
+DOTS_SPP_PX = 1.0
+#: Dot pitch (px) under which a flickering ``dots`` face is drawn by its exact coverage (``dots_coverage`` exact): a
+#: night scene's message sign 1.06 px apart, traced at light_spp 32, kept 5 % error and the scene's LED bins at
+#: 2.0 %; 0.7 % drawn exact (docs/benchmarks/render.md, "LED dot faces against the real dots").
+EXACT_DOTS_PX = 2.0
+#: Largest projected side (px) of a flickering ``rect`` face drawn by its exact coverage (``dots_coverage`` exact:
+#: a countdown's segments, whose thin bars carried a dusk scene's remaining LED-bin error when traced).
+EXACT_RECT_PX = 4.0
 #: Minimum depth of a projected point treated as in front of the camera, m.
 MIN_DEPTH_M = 0.05
 #: Height of the row bands a reflection crop is traced in, px (:meth:`SceneGeometry.reflection_tiles`): each band
@@ -77,6 +87,8 @@ STATIC_SPLIT = ("auto", "oidn", "box")
 GLOSSY_LIGHT_CHOICE = ("auto", "lobe", "plain")
 #: Values of :attr:`RenderOptions.static_bin_samples`.
 STATIC_BIN_SAMPLES = ("independent", "common")
+#: How a flickering dot face's own box is made (RenderOptions.dots_coverage).
+DOTS_COVERAGE = ("traced", "exact")
 
 
 @dataclass
@@ -130,6 +142,22 @@ class RenderOptions:
     thirds of a night scene's LED-bin error for a fifth of its lamp samples (docs/benchmarks/render.md, "Pixel
     samples"). 1: as other lights.
     Scenes without dot faces (every lfmbench-v1 scene) render the same whatever it is.
+    dots_spp_factor: light_spp multiplier (a power of two) of the flickering lights whose ``dots`` faces have a dot
+    pitch under :data:`DOTS_SPP_PX` (1 px, over every frame's capture window) and are drawn as they are (not as
+    filled cells: ``dots_lod_px`` 0 or under their pitch; :func:`dense_dots`): a pixel's share covered by
+    sub-pixel dots is what their lamp samples estimate, and these lights (message signs, signals' LED arrays,
+    countdowns, destination displays) carried the LED bins' error over 2 % against the real dot pattern; the
+    other lamps were at 1.2 % with light_spp 32 (docs/benchmarks/render.md, "LED dot faces against the real
+    dots"). 1 (default): as other lights. Scenes without dot faces render the same whatever it is.
+    dots_coverage: how the own box of a flickering light without a beam (``spread_deg`` 90) whose face is ``dots``
+    of pitch under :data:`EXACT_DOTS_PX` (message signs, signals' LED arrays, destination displays, far tail
+    lamps) or a ``rect`` under :data:`EXACT_RECT_PX` (countdown segments; :func:`exact_faces`) is made: ``"traced"`` (default: camera samples, as
+    every other light) or ``"exact"`` (:func:`exact_face`: the face's band radiance times the exact share of each
+    pixel its lit dots cover, averaged over each bin, :mod:`render_tools.dot_coverage`; occluders found by
+    visibility rays; no camera sample, no Monte Carlo noise, and no ``dots_lod_px`` stand-in for these lights).
+    What it leaves out: light of that face reflected by what lies inside its own box (none: the dots emit to the
+    front of their plane). LED bins of the lamp crops against the real dots on 9 times of day x weathers 3.5-8.2 %
+    -> 0.0-0.9 % for 0.84-1.25x their CPU (docs/benchmarks/render.md, "LED dot faces against the real dots").
     pixel_samples: where a pixel's samples lie in x, y and time (:class:`render_tools.tracer.Tile` ``sobol``):
     ``"strata"`` (each dimension stratified on its own, the strata of the dimensions paired at random),
     ``"sobol"`` (a randomly shifted Sobol' sequence: also stratified jointly, which an edge moving across the
@@ -224,6 +252,8 @@ class RenderOptions:
     dots_lod_px: float = 1.0
     lamp_pass_spp: str = "auto"
     filled_spp_factor: int = 2
+    dots_spp_factor: int = 1
+    dots_coverage: str = "traced"
     pixel_samples: str = "auto"
     reflection_block_px: int = 2
     pad_samples: str = "auto"
@@ -291,11 +321,14 @@ class RenderOptions:
             raise ValueError(f"static_split: must be one of {STATIC_SPLIT}, got {self.static_split!r}")
         if self.reflection_denoise not in STATIC_DENOISE:
             raise ValueError(f"reflection_denoise: must be one of {STATIC_DENOISE}, got {self.reflection_denoise!r}")
+        if self.dots_coverage not in DOTS_COVERAGE:
+            raise ValueError(f"dots_coverage: must be one of {DOTS_COVERAGE}, got {self.dots_coverage!r}")
         if self.pixel_samples not in PIXEL_SAMPLES:
             raise ValueError(f"pixel_samples: must be one of {PIXEL_SAMPLES}, got {self.pixel_samples!r}")
-        f = self.filled_spp_factor
-        if isinstance(f, bool) or not isinstance(f, (int, np.integer)) or f < 1 or f & (f - 1):
-            raise ValueError(f"filled_spp_factor: must be a power of two >= 1, got {f!r}")
+        for name in ("filled_spp_factor", "dots_spp_factor"):
+            f = getattr(self, name)
+            if isinstance(f, bool) or not isinstance(f, (int, np.integer)) or f < 1 or f & (f - 1):
+                raise ValueError(f"{name}: must be a power of two >= 1, got {f!r}")
         if self.static_pass not in STATIC_PASSES:
             raise ValueError(f"static_pass: must be one of {STATIC_PASSES}, got {self.static_pass!r}")
         if not isinstance(self.pad_px, (int, np.integer)) or self.pad_px < 0:
@@ -740,11 +773,87 @@ def lamp_pass_spp(light: dict, opts: RenderOptions, light_spp: int | None = None
     return tuple(int(v) for v in n)
 
 
-def lamp_light_spp(light: dict, opts: RenderOptions, filled: frozenset | set = frozenset()) -> int:
+def lamp_light_spp(light: dict, opts: RenderOptions, filled: frozenset | set = frozenset(),
+                   dense: frozenset | set = frozenset()) -> int:
     """Samples per pixel, bin and band pass of a flickering light's own box: ``light_spp`` (else ``spp``), times
-    ``opts.filled_spp_factor`` for the lights drawn as filled cells (ids ``filled``, from :func:`dots_lod`)."""
+    ``opts.filled_spp_factor`` for the lights drawn as filled cells (ids ``filled``, from :func:`dots_lod`) and
+    ``opts.dots_spp_factor`` for those whose sub-pixel dots are drawn as they are (ids ``dense``, from
+    :func:`dense_dots`)."""
     n = opts.light_spp or opts.spp
-    return n * opts.filled_spp_factor if light["id"] in filled else n
+    if light["id"] in filled:
+        return n * opts.filled_spp_factor
+    return n * opts.dots_spp_factor if light["id"] in dense else n
+
+
+def _subpixel_dots(scene: dict, opts: RenderOptions, px: float) -> list[int]:
+    """Ids of the ``dots`` lights whose dot pitch stays under ``px`` px over every frame's capture window
+    (:meth:`SceneGeometry.dots_pitch_px`, sampled at :data:`BBOX_TIME_SAMPLES` times); [] when ``px`` is 0."""
+    if not px or not any(lt["shape"] == "dots" for lt in scene["lights"]):
+        return []
+    geo = SceneGeometry(scene, opts)
+    times = np.concatenate([np.linspace(*frame_timing(scene, opts, n)["window"], BBOX_TIME_SAMPLES)
+                            for n in range(opts.frames)])
+    return [lt["id"] for lt in scene["lights"] if lt["shape"] == "dots" and geo.dots_pitch_px(lt, times) < px]
+
+
+def exact_faces(scene: dict, opts: RenderOptions) -> list[int]:
+    """Ids of the lights whose own box is made by :func:`exact_face` (``opts.dots_coverage`` ``exact``): a face
+    without a beam (``spread_deg`` 90) in a flickering group, either ``dots`` whose dot pitch stays under
+    :data:`EXACT_DOTS_PX` over every frame (:func:`_subpixel_dots`) or a ``rect`` whose sides stay under
+    :data:`EXACT_RECT_PX` (a countdown's segments; its visibility parts then under a quarter of a pixel); []
+    otherwise. Larger dots (tail and brake lamps near the camera,
+    1.2 % LED-bin error traced at light_spp 32) are left to the tracer, which also draws the light a face throws
+    on what is next to it inside its box (a tail lamp's on its bumper: 2.3 % of its box's light at dusk)."""
+    if opts.dots_coverage != "exact":
+        return []
+    flick = {g for g, info in scene_groups(scene).items() if info["flicker"]}
+    sub = set(_subpixel_dots(scene, opts, EXACT_DOTS_PX))
+    rects = [lt for lt in scene["lights"] if lt["shape"] == "rect" and lt["group"] in flick]
+    if rects:
+        geo = SceneGeometry(scene, opts)
+        times = np.concatenate([np.linspace(*frame_timing(scene, opts, n)["window"], BBOX_TIME_SAMPLES)
+                                for n in range(opts.frames)])
+        sub |= {lt["id"] for lt in rects if geo.dots_pitch_px(_as_dots(lt), times) < EXACT_RECT_PX}
+    return [lt["id"] for lt in scene["lights"] if lt["id"] in sub and lt["group"] in flick
+            and float(lt["spread_deg"]) >= 90.0]
+
+
+def _as_dots(light: dict) -> dict:
+    """A ``rect`` light as the ``dots`` face of one dot filling its one cell (the same rectangle); other shapes
+    as they are."""
+    if light["shape"] != "rect":
+        return light
+    return {**light, "shape": "dots", "grid": [1, 1], "dot": 1.0, "cells": [[0, 0]]}
+
+
+def exact_face(scene: dict, light: dict, opts: RenderOptions, geo: "SceneGeometry", edges, crop, mi=None,
+               loaded=None, t_obj: float = 0.0) -> np.ndarray:
+    """The (K, C, h, w) float32 bins (W sr^-1 m^-2 nm^-1) of a ``dots`` (or ``rect``: one dot) light's face over ``crop`` (y0, x0, y1, x1)
+    px in the K bins between ``edges`` (K + 1,) s: its band radiance (:func:`render_tools.spectra.band_means` of
+    :func:`render_tools.mitsuba_scene.light_spectrum`, what the tracer's band samples average to) times the share
+    of each pixel its lit dots cover (:func:`render_tools.dot_coverage.dots_coverage`), what the tracer's camera
+    samples estimate for a face alone in its light set. ``loaded``: the frame's Mitsuba scene (objects at
+    ``t_obj`` s; ``mi`` the module), whose surfaces hide dots (:func:`render_tools.dot_coverage.ray_visibility`);
+    None: nothing in front of the face."""
+    from . import dot_coverage, spectra  # noqa: PLC0415
+
+    vis = None
+    if loaded is not None:
+        vel = geo.object_velocity(light)
+        vis = dot_coverage.ray_visibility(mi, loaded, lambda t: np.outer(np.asarray(t) - t_obj, vel))
+    cov = dot_coverage.dots_coverage(scene, _as_dots(light), geo.K, geo.pose_cv, crop, edges, vis)
+    L = spectra.band_means(ms.light_spectrum(light), opts.bands_nm, opts.band_width_nm)
+    return (cov[:, None] * np.asarray(L)[None, :, None, None]).astype(np.float32)
+
+
+def dense_dots(scene: dict, opts: RenderOptions, filled=()) -> list[int]:
+    """Ids of the lights whose sub-pixel dots are drawn as they are (:data:`DOTS_SPP_PX`, not among ``filled``,
+    the ids :func:`dots_lod` drew as filled cells), whose own boxes get ``opts.dots_spp_factor`` times light_spp
+    (:func:`lamp_light_spp`); [] when that factor is 1 (nothing to find)."""
+    if opts.dots_spp_factor == 1:
+        return []
+    skip = set(filled) | set(exact_faces(scene, opts))
+    return [i for i in _subpixel_dots(scene, opts, DOTS_SPP_PX) if i not in skip]
 
 
 def dots_lod(scene: dict, opts: RenderOptions) -> tuple[dict, list[int]]:
@@ -755,13 +864,8 @@ def dots_lod(scene: dict, opts: RenderOptions) -> tuple[dict, list[int]]:
     is. One decision per light for the whole sequence, so a light never switches form between frames."""
     from . import led_matrix  # noqa: PLC0415
 
-    if not opts.dots_lod_px or not any(lt["shape"] == "dots" for lt in scene["lights"]):
-        return scene, []
-    geo = SceneGeometry(scene, opts)
-    times = np.concatenate([np.linspace(*frame_timing(scene, opts, n)["window"], BBOX_TIME_SAMPLES)
-                            for n in range(opts.frames)])
-    ids = [lt["id"] for lt in scene["lights"]
-           if lt["shape"] == "dots" and geo.dots_pitch_px(lt, times) < opts.dots_lod_px]
+    exact = set(exact_faces(scene, opts))  # drawn by their exact coverage: no stand-in
+    ids = [i for i in _subpixel_dots(scene, opts, opts.dots_lod_px) if i not in exact]
     if not ids:
         return scene, []
     out = dict(scene)
@@ -841,8 +945,12 @@ def scene_meta(scene: dict, opts: RenderOptions) -> dict:
                    **({"reflection_bins": opts.reflection_bins or opts.bins,
                        "reflection_min_lux": opts.reflection_min_lux,
                        "reflection_block_px": opts.reflection_block_px} if helper.wet else {}),
+                   **({"dots_coverage": "exact", "dots_exact": exact_faces(scene, opts)}
+                      if opts.dots_coverage != "traced" else {}),
                    **({"dots_lod_px": opts.dots_lod_px, "dots_lod": lod_ids,
-                       "filled_spp_factor": opts.filled_spp_factor}
+                       "filled_spp_factor": opts.filled_spp_factor,
+                       **({"dots_spp_factor": opts.dots_spp_factor, "dots_spp": dense_dots(scene, opts, lod_ids)}
+                          if opts.dots_spp_factor != 1 else {})}
                       if any(lt["shape"] == "dots" for lt in scene["lights"]) else {}),
                    **({"lamp_pass_spp": "spectrum" if spectral_lamp_passes(scene, opts) else "uniform",
                        "pixel_samples": "sobol" if sobol_pixel_samples(scene, opts) else "strata",
@@ -981,7 +1089,8 @@ def plan_static_bins(scene: dict, opts: RenderOptions, n: int, sets, geo: SceneG
 
 
 def plan_frame(scene: dict, opts: RenderOptions, n: int, sets, geo: SceneGeometry | None = None,
-               filled: frozenset | set = frozenset(), static: bool = True):
+               filled: frozenset | set = frozenset(), static: bool = True, dense: frozenset | set = frozenset(),
+               exact: frozenset | set = frozenset()):
     """The tiles of frame ``n`` (:class:`render_tools.tracer.Tile`) and how to assemble them.
 
     Static groups: two full-frame tiles, the short window at ``spp`` and the rest of the long window (long minus
@@ -997,7 +1106,10 @@ def plan_frame(scene: dict, opts: RenderOptions, n: int, sets, geo: SceneGeometr
     ``pad_px`` ring is such parts too, traced at ``spp`` in K bins (:func:`ring_boxes`), its own unpadded box at
     ``light_spp`` over them, and a static group's lamp refines its unpadded box. ``sets``: the frame's
     :class:`tracer.LightSets` (or any mapping from set name to index). ``filled``: ids of the lights :func:`dots_lod` drew as filled cells (their own
-    boxes get :func:`lamp_light_spp`). ``static``: False leaves the static groups' tiles out (they are traced in
+    boxes get :func:`lamp_light_spp`). ``dense``: ids of the lights whose sub-pixel dots are drawn as they
+    are (:func:`dense_dots`; their boxes get :func:`lamp_light_spp` too). ``exact``: ids of the lights whose
+    own box is made by :func:`exact_face` instead of a tile (:func:`exact_faces`; its plan entry's tile index is
+    ``("exact", light id)``, all K bins, repeat 1). ``static``: False leaves the static groups' tiles out (they are traced in
     time bins, :func:`plan_static_bins`). Returns (tiles, plan, visible light ids); plan entries are
     (kind, group, window or light id, crop, tile index, repeat): a tile of K / repeat bins, each bin repeated
     ``repeat`` times in a row to make the K bins.
@@ -1053,7 +1165,7 @@ def plan_frame(scene: dict, opts: RenderOptions, n: int, sets, geo: SceneGeometr
             bb = geo.light_bbox(lt, t_obj, *tm["window"], moving=True)
             if bb is None:
                 continue
-            own_spp = lamp_light_spp(lt, opts, filled)
+            own_spp = lamp_light_spp(lt, opts, filled, dense)
             ps = lamp_pass_spp(lt, opts, own_spp) if spectral else None  # the lamp's own box: samples by spectrum
             visible.add(lt["id"])
             k = sets[f"light:{lt['id']}"]
@@ -1077,6 +1189,9 @@ def plan_frame(scene: dict, opts: RenderOptions, n: int, sets, geo: SceneGeometr
                 if inner is not None:
                     crops.append(("light_part", inner, own_spp, opts.bins, ("lamp",)))
             for kind, crop, n_s, nb, extra in crops:
+                if lt["id"] in exact and (kind == "light" or extra == ("lamp",)):  # no samples: exact_face
+                    plan.append((kind, g, lt["id"], crop, ("exact", lt["id"]), 1))
+                    continue
                 key = _seed("light", lt["id"], *extra)
                 refl = extra[:1] == ("reflection",)
                 own, blk = (None, opts.reflection_block_px) if refl else ((None, 1) if extra[:1] == ("ring",) else
@@ -1168,6 +1283,9 @@ def render_frames(scene: dict, opts: RenderOptions, steady_bins: bool = False) -
     timings = [frame_timing(scene, opts, n) for n in range(opts.frames)]  # validates exposures up front
     scene, filled = dots_lod(scene, opts)  # sub-pixel LED dots as filled cells (RenderOptions.dots_lod_px)
     filled = frozenset(filled)
+    dense = frozenset(dense_dots(scene, opts, filled))  # sub-pixel dots drawn as they are (dots_spp_factor)
+    exact = frozenset(exact_faces(scene, opts))  # dot faces by their exact coverage (dots_coverage)
+    by_id = {lt["id"]: lt for lt in scene["lights"]}
     groups = _selected_groups(scene, opts)
     from . import backend  # noqa: PLC0415
 
@@ -1195,7 +1313,8 @@ def render_frames(scene: dict, opts: RenderOptions, steady_bins: bool = False) -
         gloss = glossy_choice(mi, dr, scene, opts, mcache)
         tr = tracer.Tracer(mi, dr, loaded, sets, geo.ego, geo.fov, (opts.width, opts.height), opts.bands_nm,
                            opts.band_width_nm, sky_scale=ms.sky_scale(scene), gloss=gloss)
-        tiles, plan, visible = plan_frame(scene, opts, n, sets, geo, filled, static=edges is None)
+        tiles, plan, visible = plan_frame(scene, opts, n, sets, geo, filled, static=edges is None,
+                                            dense=dense, exact=exact)
         qmc = sobol_pixel_samples(scene, opts)
         bins = [] if edges is None else [(k, tm["t0"] + a, tm["t0"] + b) for k, (a, b) in
                                          enumerate(zip(edges[:-1], edges[1:]))]
@@ -1238,7 +1357,8 @@ def render_frames(scene: dict, opts: RenderOptions, steady_bins: bool = False) -
                     out["static"].setdefault(gj, {})[key] = backend.clamp_roundoff(
                         imgs[ti][j], name=f"frame {n} {gj} static {key}")[0]
                 continue
-            img = backend.clamp_roundoff(imgs[ti], name=f"frame {n} {g} {kind} {key}")
+            img = exact_face(scene, by_id[ti[1]], opts, geo, tm["bin_edges"], bb, mi, loaded, t_obj) \
+                if isinstance(ti, tuple) else backend.clamp_roundoff(imgs[ti], name=f"frame {n} {g} {kind} {key}")
             if kind == "static":
                 out["static"].setdefault(g, {})[key] = img[0]
             elif kind == "refine":

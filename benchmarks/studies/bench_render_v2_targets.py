@@ -30,9 +30,12 @@ Errors, on luminance Y (:mod:`bench_render`'s functions), with ``a``, ``b`` the 
   (the median error of m itself; exact when every pixel's errors scale alike, an estimate otherwise:
   :func:`median_corrected`); the long window's raw median too.
 
-Where a target is missed, ``--gap`` settings (:data:`GAP_SETTINGS`: the dots as they are at light_spp 32-256,
-filled cells at ``filled_spp_factor`` 8, static spp 2) are rendered as whole frames of the cases given by
-``--gap-cases`` and scored the same way, with their CPU seconds: error against run time.
+Where a target is missed, ``--gap`` settings (:data:`GAP_SETTINGS`: the dots as they are at light_spp 32-128,
+filled cells at ``filled_spp_factor`` 8, the sub-pixel dots as they are at ``dots_spp_factor`` 4 or 8, the dot
+faces by their exact coverage, ``dots_coverage`` exact; static spp 2) are rendered for the cases given by
+``--gap-cases`` (``--gap-settings`` chooses them by name) and scored the same way, with their CPU seconds: error
+against run time. ``--section dots`` writes them as :data:`DOTS_SECTION` instead of the targets' section;
+``--figure CASE`` draws the message signs of a case close up from the cached frames (docs/img/led-dot-faces.png).
 
 CPU: user + system seconds of the frame in the process (after the references, which compile the kernels; frames
 are rendered one at a time). References and frames are kept in ``--cache`` (pickles) so a re-run renders only
@@ -64,6 +67,13 @@ from bench_render_v2_error import _frame, _led_canvas, _v2_scene, lamp_boxes  # 
 from lfmbench.fileio import load_yaml  # noqa: E402
 
 SECTION = "## Error targets on every time of day and weather (issue 40)"
+#: The section ``--section dots`` writes instead: the LED dot-face settings (``--gap-settings``) on every case.
+DOTS_SECTION = "## LED dot faces against the real dots: the measurements (issue 40)"
+#: The command that rewrites :data:`DOTS_SECTION` (frames not in the cache are rendered; the references first).
+DOTS_RERUN = ("nice -n 10 python benchmarks/studies/bench_render_v2_targets.py --section dots --warmup --cases "
+              "--gap-cases 202:dusk:dry 101:night:dry 202:day:dry 202:dusk:wet 202:dusk:rain 101:night:rain "
+              "202:day:wet 202:day:rain 101:night:wet --gap-settings \"dot faces exact\" \"sub-pixel dots as they are "
+              "x4\" --cache /tmp/v2tgt")
 #: Cases, in the order rendered: those never measured first (dusk, rain, a wet day), then those issue 23 measured
 #: against filled-cell references.
 #: Cases rendered whole (every measure), in the order rendered: those never measured (dusk, rain, a wet day);
@@ -86,6 +96,9 @@ GAP_SETTINGS = {
     "dots as they are, light_spp 32": {"dots_lod_px": 0.0},
     "dots as they are, light_spp 128": {"dots_lod_px": 0.0, "light_spp": 128},
     "filled cells x8": {"filled_spp_factor": 8},
+    "sub-pixel dots as they are x4": {"dots_lod_px": 0.0, "dots_spp_factor": 4},
+    "sub-pixel dots as they are x8": {"dots_lod_px": 0.0, "dots_spp_factor": 8},
+    "dot faces exact": {"dots_coverage": "exact"},
     "static spp 2": {"spp": 2},
 }
 TARGET_LED, TARGET_MEDIAN = 0.02, 0.10
@@ -185,6 +198,18 @@ def main() -> None:
                     help="cases rendered first with the flickering groups alone (LED bins only)")
     ap.add_argument("--gap-cases", nargs="*", default=list(GAP_CASES),
                     help="cases that also render the --gap settings (what closes a missed target)")
+    ap.add_argument("--gap-settings", nargs="*", default=list(GAP_SETTINGS),
+                    help="names of the --gap settings rendered (GAP_SETTINGS)")
+    ap.add_argument("--warmup", action="store_true",
+                    help="first render the first case's flickering groups once, uncached and unscored, so that no "
+                         "timed frame compiles the kernels (when the references and the default come from --cache)")
+    ap.add_argument("--figure", default=None, metavar="CASE",
+                    help="only write docs/img/led-dot-faces.png: the message signs of CASE from the frames in --cache")
+    ap.add_argument("--section", choices=("targets", "dots"), default="targets",
+                    help="the section of docs/benchmarks/render.md written: the error targets, or the LED dot-face "
+                         "settings (DOTS_SECTION)")
+    ap.add_argument("--cached-only", action="store_true",
+                    help="score only the --gap settings whose frames are in --cache (render none of them)")
     ap.add_argument("--cache", default=None, help="folder for the rendered frames (pickles), reused when there")
     ap.add_argument("--out", default=str(ROOT / "docs"))
     ap.add_argument("--quick", action="store_true", help="160x90, references spp 2 / light_spp 32 (smoke run)")
@@ -203,6 +228,12 @@ def main() -> None:
                                        "dots_lod_px": 0.0, "static_denoise": "off", "reflection_denoise": "off",
                                        "reflection_block_px": 1, "groups": groups})
 
+    if a.warmup and (a.lamp_cases or a.cases):
+        c0 = (a.lamp_cases or a.cases)[0]
+        _frame(_v2_scene(c0), render.RenderOptions(**{**base, "seed": 11, "groups": LAMP_GROUPS}), None, "")
+    if a.figure:
+        figure(a.figure, cache, (W, H), ROOT / "docs" / "img" / "led-dot-faces.png")
+        return
     load0, t0 = os.getloadavg()[0], time.time()
     rows = []
     for c, groups in [(c, LAMP_GROUPS) for c in a.lamp_cases] + [(c, None) for c in a.cases]:
@@ -215,11 +246,14 @@ def main() -> None:
             refs.append(fr)
             ref_cpu += cpu
         print(c, f"references {ref_cpu:.0f} CPU s", flush=True)
-        settings = {"default": {}, **{n: kw for n, kw in GAP_SETTINGS.items()
-                                      if c in a.gap_cases and ("spp" in kw) == (groups is None)}}
+        settings = {"default": {}, **{n: kw for n, kw in GAP_SETTINGS.items() if n in a.gap_settings
+                                      and c in a.gap_cases and ("spp" in kw) == (groups is None)}}
         for name, kw in settings.items():
             opts = render.RenderOptions(**{**base, "seed": 11, "groups": groups, **kw})
-            key = "_".join(f"{k}{v:g}" for k, v in sorted(kw.items())) or "default"
+            key = "_".join(f"{k}{v}" if isinstance(v, str) else f"{k}{v:g}" for k, v in sorted(kw.items())) \
+                or "default"
+            if a.cached_only and kw and not (cache / f"tgt_{key}_{tag}.pkl").exists():
+                continue
             fr, cpu = _frame(sc, opts, cache, f"tgt_{key}_{tag}")
             r = {"case": c, "setting": name, "cpu_s": cpu, "ref_cpu_s": ref_cpu, **scores(sc, fr, *refs, opts)}
             rows.append(r)
@@ -229,10 +263,79 @@ def main() -> None:
         del refs
         # after every case, so that a run stopped early leaves what it measured
         write_section(rows, Path(a.out), load0, os.getloadavg()[0], (W, H), (ref_spp, ref_light_spp),
-                      (time.time() - t0) / 60)
+                      (time.time() - t0) / 60, dots=a.section == "dots")
 
 
-def write_section(rows: list, out: Path, load0: float, load1: float, size, ref, minutes: float) -> None:
+def figure(case: str, cache: Path, size, out: Path, kind: str = "message_sign") -> None:
+    """Close-up PNG of the lights of ``kind`` in ``case``'s flickering groups (frame 0, mean over the bins, every
+    light's crop summed; luminance, log scale, one colour scale for all panels, each pixel drawn as a block): the
+    ``default`` profile (filled cells), the dots as they are at light_spp x 4, their exact coverage
+    (``dots_coverage`` exact) and the references' mean, from the frames in ``cache``."""
+    import pickle  # noqa: PLC0415
+
+    import matplotlib  # noqa: PLC0415
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt  # noqa: PLC0415
+
+    sc = _v2_scene(case)
+    tag = f"{case.replace(':', '_')}_{size[0]}_lamps"
+    ids = {lt["id"] for lt in sc["lights"] if lt["kind"] == kind}
+
+    def load(name):
+        with open(cache / f"{name}_{tag}.pkl", "rb") as fh:
+            return pickle.load(fh)[0]
+
+    def canvas(fr):
+        img = np.zeros((size[1], size[0]))
+        for items in fr["lights"].values():
+            for lid, (y0, x0, y1, x1), b in items:
+                img[y0:y1, x0:x1] += lum(np.asarray(b)).mean(0)
+        return img
+
+    refs = [canvas(load(f"tgt_ref_1_{REF_LIGHT_SPP}_{s}")) for s in REF_SEEDS]
+    panels = [("default (filled cells)", canvas(load("tgt_default"))),
+              ("dots as they are, light_spp x 4", canvas(load("tgt_dots_lod_px0_dots_spp_factor4"))),
+              ("exact coverage (dots_coverage: exact)", canvas(load("tgt_dots_coverageexact"))),
+              (f"reference (dots as they are, light_spp {REF_LIGHT_SPP}, 2 seeds)", 0.5 * (refs[0] + refs[1]))]
+    boxes = [b for lid, b in lamp_boxes(sc, render_opts(size)).items() if lid in ids]
+    y0, x0 = min(b[0] for b in boxes) - 2, min(b[1] for b in boxes) - 2
+    y1, x1 = max(b[2] for b in boxes) + 2, max(b[3] for b in boxes) + 2
+    top = max(p[y0:y1, x0:x1].max() for _, p in panels)
+    ref = panels[-1][1][y0:y1, x0:x1]
+    fig, axs = plt.subplots(len(panels), 2, figsize=(11, 1.5 * len(panels)), squeeze=False)
+    for (ax, dx), (name, p) in zip(axs, panels):
+        ax.imshow(np.log10(np.maximum(p[y0:y1, x0:x1], top * 1e-3)), cmap="inferno", vmin=np.log10(top) - 3,
+                  vmax=np.log10(top), interpolation="nearest")
+        ax.set_title(name, fontsize=8)
+        lit = ref > 1e-2 * ref.max()  # relative difference where the reference is lit
+        d = np.where(lit, (p[y0:y1, x0:x1] - ref) / np.where(lit, ref, 1.0), 0.0)
+        dx.imshow(d, cmap="RdBu_r", vmin=-0.3, vmax=0.3, interpolation="nearest")
+        dx.set_title("(this - reference) / reference, lit pixels (+-30 %)" if p is not panels[-1][1] else
+                     "(the reference)", fontsize=8)
+        for a_ in (ax, dx):
+            a_.set_xticks([])
+            a_.set_yticks([])
+    fig.suptitle(f"{kind.replace('_', ' ')}s, {case}, frame 0 at {size[0]}x{size[1]}, mean of 8 bins: log luminance "
+                 f"(3 decades; px {x0}-{x1} x {y0}-{y1}) and the difference to the reference", fontsize=9)
+    fig.tight_layout()
+    tmp = out.with_suffix(".tmp.png")
+    fig.savefig(tmp, dpi=110)
+    plt.close(fig)
+    os.replace(tmp, out)
+
+
+def render_opts(size):
+    """RenderOptions of the cases' geometry (``default`` profile's, the flickering groups) at ``size``."""
+    from render_tools import render  # noqa: PLC0415
+
+    return render.RenderOptions(width=size[0], height=size[1], frames=1, groups=LAMP_GROUPS)
+
+
+def write_section(rows: list, out: Path, load0: float, load1: float, size, ref, minutes: float,
+                  dots: bool = False) -> None:
+    """Write the rows as :data:`SECTION` of docs/benchmarks/render.md under ``out`` (``dots``: as
+    :data:`DOTS_SECTION`, with its rerun command)."""
     import datetime  # noqa: PLC0415
 
     day = datetime.datetime.now(datetime.timezone.utc).date().isoformat()
@@ -274,10 +377,16 @@ def write_section(rows: list, out: Path, load0: float, load1: float, size, ref, 
         lines.append(f"| {r['case']} | {r['setting']} | "
                      + " | ".join(f"{r['kinds'][k][0]:.3f} ({r['kinds'][k][1]:.2f})" if k in r["kinds"] else "-"
                                   for k in kinds) + " |")
-    lines += ["", "Run again with `nice -n 10 python benchmarks/studies/bench_render_v2_targets.py --cache "
-              "/tmp/v2tgt` (the references are the bulk of the time; `--cases` and `--gap-cases` choose the "
-              "cases).", ""]
-    replace_section(out / "benchmarks" / "render.md", SECTION, lines)
+    if dots:
+        lines[0] = DOTS_SECTION
+        lines += ["", f"Run again with `{DOTS_RERUN}` (the references are the bulk of the time; add `--gap-cases "
+                  "202:dusk:dry 101:night:dry --gap-settings \"sub-pixel dots as they are x8\"` for the x8 rows, and "
+                  "`--cached-only` to score what the cache holds).", ""]
+    else:
+        lines += ["", "Run again with `nice -n 10 python benchmarks/studies/bench_render_v2_targets.py --cache "
+                  "/tmp/v2tgt` (the references are the bulk of the time; `--cases` and `--gap-cases` choose the "
+                  "cases).", ""]
+    replace_section(out / "benchmarks" / "render.md", lines[0], lines)
     print("\n".join(lines))
 
 

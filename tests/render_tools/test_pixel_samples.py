@@ -200,3 +200,46 @@ def test_block_tile_is_the_box_average_of_the_pixels():
             if want > 0.2 * per_px.max():
                 assert blk.flat[0] == pytest.approx(want, rel=0.10), (y, x)
     assert blocks.sum() == pytest.approx(per_px.sum(), rel=0.02)
+
+
+
+def test_dots_spp_factor_multiplies_only_sub_pixel_dots_drawn_as_they_are():
+    """``dots_spp_factor`` gives light_spp x that factor to the own boxes of the lights whose dots are under a pixel
+    and drawn as they are; lamps with larger dots (or no dots) keep light_spp, and meta.json records the factor
+    only when it is not 1 (today's bytes)."""
+    sc = scene.generate_scene(101, time_of_day="night", generator=2)
+    keep = {"message_sign", "signal", "tail", "indicator"}  # sub-pixel dots, larger dots, no dots (a rectangle)
+    sc["lights"] = [{**lt, "id": i} for i, lt in enumerate(lt for lt in sc["lights"] if lt["kind"] in keep)]
+    sets = type("Sets", (dict,), {"__missing__": lambda self, k: 0, "union": []})()
+    kw = dict(width=160, height=90, spp=1, light_spp=16, frames=1, groups=("signals", "otherlights"),
+              pad_samples="light", dots_lod_px=0.0)
+    base, more = render.RenderOptions(**kw), render.RenderOptions(**kw, dots_spp_factor=4)
+    dense = frozenset(render.dense_dots(sc, more))
+    assert render.dense_dots(sc, base) == []
+    geo = render.SceneGeometry(sc, more)
+    times = np.linspace(*render.frame_timing(sc, more, 0)["window"], render.BBOX_TIME_SAMPLES)
+    pitch = {lt["id"]: geo.dots_pitch_px(lt, times) for lt in sc["lights"] if lt["shape"] == "dots"}
+    assert dense == {i for i, p in pitch.items() if p < 1.0}
+    own = []
+    for o, d in ((base, frozenset()), (more, dense)):
+        tiles, plan, _ = render.plan_frame(sc, o, 0, sets, dense=d)
+        own.append({p[2]: tiles[p[4]].spp for p in plan if p[0] == "light"})
+    assert own[0].keys() == own[1].keys() and all(v == 16 for v in own[0].values())
+    assert {i for i, v in own[1].items() if v == 64} == dense & own[1].keys() != set()
+    assert set(own[1].values()) == {16, 64}  # lamps with dots over a pixel, or no dots, keep 16
+    assert not {"dots_spp_factor", "dots_coverage"} & render.scene_meta(sc, base)["render"].keys()
+    with pytest.raises(ValueError, match="dots_spp_factor"):
+        render.RenderOptions(dots_spp_factor=3)
+    # dots_coverage exact: the same sub-pixel dot faces get no tile (exact_face makes their own box), the others
+    # keep theirs, and no light is both exact and drawn with more samples
+    ex = render.RenderOptions(**kw, dots_coverage="exact", dots_spp_factor=4)
+    exact = frozenset(render.exact_faces(sc, ex))
+    assert exact >= dense and render.dense_dots(sc, ex) == []
+    tiles, plan, _ = render.plan_frame(sc, ex, 0, sets, exact=exact)
+    marked = {p[2] for p in plan if isinstance(p[4], tuple)}
+    assert marked == exact & own[1].keys() and all(p[4] == ("exact", p[2]) for p in plan if p[2] in marked)
+    assert len(tiles) == len(plan) - len(marked)
+    meta = render.scene_meta(sc, ex)["render"]
+    assert meta["dots_coverage"] == "exact" and meta["dots_exact"] == sorted(exact) and meta["dots_spp_factor"] == 4
+    with pytest.raises(ValueError, match="dots_coverage"):
+        render.RenderOptions(dots_coverage="analytic")
