@@ -5,8 +5,8 @@ against generator 1's scene of the same seed and time of day (issue 40, the 1.5x
 Each render is ``lfmbench render --scene FILE --profile P --workers 1`` in a child process
 (:func:`bench_render_scale.run_case`), P the ``default`` profile at ``--size`` with ``texture_filter`` set: cold with
 ``HOME`` a new empty folder (empty Dr.Jit kernel cache), then warm with that ``HOME`` again. One round renders
-generator 1, generator 2 bilinear and generator 2 nearest (each cold, then warm), the order of the three rotated from
-round to round so that a change of the machine's load hits them alike; ``--rounds`` rounds. CPU seconds of the child
+generator 1, generator 2 bilinear and generator 2 nearest cold, then the three warm, the order of the three rotated
+from round to round so that a change of the machine's load hits them alike; ``--rounds`` rounds. CPU seconds of the child
 (user + system) are reported, medians over rounds, and the ratios render by render within a round (v2 / v1, nearest
 / bilinear), their medians: the ratios are what a loaded machine can still compare.
 
@@ -70,10 +70,10 @@ def main() -> None:
             profiles[name] = p
         for r in range(a.rounds):
             order = VARIANTS[r % 3:] + VARIANTS[:r % 3]
-            for name, gen, _ in order:
-                home = tmp / f"home_{r}_{name.replace(' ', '_')}"
-                home.mkdir()
-                for kind in ("cold", "warm"):
+            for kind in ("cold", "warm"):
+                for name, gen, _ in order:
+                    home = tmp / f"home_{r}_{name.replace(' ', '_')}"
+                    home.mkdir(exist_ok=True)
                     out = tmp / "out"
                     c = run_case(home, out, str(profiles[name]), a.seed, extra=("--scene", str(files[gen])))
                     shutil.rmtree(out)
