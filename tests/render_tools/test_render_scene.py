@@ -386,12 +386,15 @@ def test_scene_parts_a_vehicle_kind_is_a_template_entry():
 
 def test_texture_filter_option_reaches_the_bitmaps():
     """``RenderOptions.texture_filter``: checked, left out of the stored options when ``auto`` (as before it
-    existed), ``auto`` resolves to bilinear, and the chosen filter is the textured BSDF's bitmap filter."""
+    existed), ``auto`` resolves to nearest on scene version 2 only, and the chosen filter is the textured BSDF's bitmap
+    filter."""
     with pytest.raises(ValueError, match="texture_filter"):
         render.RenderOptions(texture_filter="cubic")
     assert "texture_filter" not in render.RenderOptions().to_dict()
     assert render.RenderOptions(texture_filter="nearest").to_dict()["texture_filter"] == "nearest"
-    assert render.texture_filter({}, render.RenderOptions()) == "bilinear"
+    assert render.texture_filter({}, render.RenderOptions()) == "bilinear"  # scene version 1: no textures anyway
+    assert render.texture_filter({"version": 2}, render.RenderOptions()) == "nearest"
+    assert render.texture_filter({"version": 2}, render.RenderOptions(texture_filter="bilinear")) == "bilinear"
     m = {"type": "roughplastic", "alpha": 0.1, "ior": 1.33, "rgb": [0.1, 0.1, 0.1],
          "texture": {"kind": "asphalt", "seed": 1, "size_m": [6.0, 18.4], "origin_m": [0.0, -9.2, 0.0], "lanes": 2,
                      "lane_width_m": 3.5}}
