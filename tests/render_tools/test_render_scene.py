@@ -403,6 +403,10 @@ def test_texture_filter_option_reaches_the_bitmaps():
     assert mitsuba_scene._bsdf({"type": "diffuse", "rgb": [0.2, 0.2, 0.2]}, "nearest")["reflectance"]["type"] == "rgb"
     with pytest.raises(ValueError, match="texture_filter"):
         mitsuba_scene.mitsuba_dict(scene.empty_scene(), 0.0, texture_filter="cubic")
+    small = render.RenderOptions(width=32, height=18, frames=1)
+    v2 = dict(scene.empty_scene(), version=2)
+    assert render.scene_meta(v2, small)["render"]["texture_filter"] == "nearest"  # what the corpus was rendered with
+    assert "texture_filter" not in render.scene_meta(scene.empty_scene(), small)["render"]
 
 
 def test_scene_meta_and_render_share_the_geometry_of_equal_scenes_only(night):
