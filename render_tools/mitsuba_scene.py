@@ -297,25 +297,26 @@ def _write_mesh(params, prefix: str, V: np.ndarray, F: np.ndarray, UV: np.ndarra
             np.asarray(UV, dtype=np.float32).ravel())
 
 
-def _reflectance(m: dict) -> dict:
+def _reflectance(m: dict, texture_filter: str = "bilinear") -> dict:
     """The diffuse reflectance of material ``m``: its flat ``rgb``, or (scene version 2) the bitmap of its
-    ``texture`` (:func:`render_tools.textures.texture_array`, generated here, bilinear, repeating)."""
+    ``texture`` (:func:`render_tools.textures.texture_array`, generated here, repeating), looked up with Mitsuba's
+    ``texture_filter`` (``bilinear``: four texels each upsampled to the path's wavelengths; ``nearest``: one)."""
     if "texture" not in m:
         return {"type": "rgb", "value": list(m["rgb"])}
     import mitsuba as mi  # noqa: PLC0415
 
     from .textures import texture_array  # noqa: PLC0415
     return {"type": "bitmap", "bitmap": mi.Bitmap(texture_array(m["texture"], m["rgb"])),
-            "filter_type": "bilinear", "wrap_mode": "repeat"}
+            "filter_type": texture_filter, "wrap_mode": "repeat"}
 
 
-def _bsdf(m: dict) -> dict:
+def _bsdf(m: dict, texture_filter: str = "bilinear") -> dict:
     t = m["type"]
     if t == "diffuse":
-        return {"type": "diffuse", "reflectance": _reflectance(m)}
+        return {"type": "diffuse", "reflectance": _reflectance(m, texture_filter)}
     if t == "roughplastic":  # a rough dielectric coating (index ``ior``) over a diffuse base
         return {"type": "roughplastic", "distribution": "ggx", "alpha": float(m["alpha"]),
-                "diffuse_reflectance": _reflectance(m),
+                "diffuse_reflectance": _reflectance(m, texture_filter),
                 **({"int_ior": float(m["ior"])} if "ior" in m else {})}
     return {"type": "roughconductor", "material": "Al", "distribution": "ggx", "alpha": float(m["alpha"])}
 
@@ -385,7 +386,8 @@ def prepare_geometry(scene: dict, cache: dict) -> dict:
 
 
 def mitsuba_dict(scene: dict, t: float, emit: str | None = None, lights: list[int] | None = None,
-                 integrator: dict | None = None, cache: dict | None = None, unit_sky: bool = False) -> dict:
+                 integrator: dict | None = None, cache: dict | None = None, unit_sky: bool = False,
+                 texture_filter: str = "bilinear") -> dict:
     """Mitsuba scene dict (no sensor) of ``scene`` at time ``t`` (s, places moving objects).
 
     Args:
@@ -398,6 +400,8 @@ def mitsuba_dict(scene: dict, t: float, emit: str | None = None, lights: list[in
             dicts, so the frames after the first rebuild only what moves (the result is the same).
         unit_sky: the sky without its :func:`sky_scale` (``sky_dict(unit_scale=True)``), for a renderer that
             applies the scale itself.
+        texture_filter: ``filter_type`` of the texture bitmaps, ``bilinear`` or ``nearest``
+            (``RenderOptions.texture_filter``).
     Returns:
         dict for ``mi.load_dict`` holding instantiated meshes (one per object and material, one per lamp
         face); shape ids follow :func:`shape_id`, :func:`light_shape_id`, :func:`beam_id`.
@@ -409,11 +413,14 @@ def mitsuba_dict(scene: dict, t: float, emit: str | None = None, lights: list[in
     d: dict = {"type": "scene",
                "integrator": integrator or {"type": "path", "max_depth": MAX_DEPTH, "hide_emitters": False}}
     cache = {} if cache is None else cache
-    if cache.get("variant") != mi.variant():  # Mitsuba objects belong to a variant; numpy arrays do not
+    if texture_filter not in ("bilinear", "nearest"):
+        raise ValueError(f"texture_filter: {texture_filter!r} not 'bilinear' or 'nearest'")
+    # Mitsuba objects belong to a variant (numpy arrays do not); the BSDFs also to the texture filter
+    if cache.get("variant") != mi.variant() or cache.get("texture_filter", "bilinear") != texture_filter:
         for k in ("bsdfs", "off_lens", "sky", "sky_unit"):
             cache.pop(k, None)
-        cache["variant"] = mi.variant()
-        cache["bsdfs"] = {name: mi.load_dict(_bsdf(m)) for name, m in scene["materials"].items()}
+        cache["variant"], cache["texture_filter"] = mi.variant(), texture_filter
+        cache["bsdfs"] = {name: mi.load_dict(_bsdf(m, texture_filter)) for name, m in scene["materials"].items()}
         cache["off_lens"] = mi.load_dict(OFF_LENS)
     bsdfs, off_lens = cache["bsdfs"], cache["off_lens"]
     prepare_geometry(scene, cache)

@@ -89,6 +89,8 @@ GLOSSY_LIGHT_CHOICE = ("auto", "lobe", "plain")
 STATIC_BIN_SAMPLES = ("independent", "common")
 #: How a flickering dot face's own box is made (RenderOptions.dots_coverage).
 DOTS_COVERAGE = ("traced", "exact")
+#: Values of :attr:`RenderOptions.texture_filter` (Mitsuba's ``bitmap`` ``filter_type`` of the textures).
+TEXTURE_FILTERS = ("auto", "bilinear", "nearest")
 
 
 @dataclass
@@ -223,6 +225,12 @@ class RenderOptions:
     per-pixel sample sequence (common random numbers: pixel position, time as a fraction of the bin, wavelengths,
     path decisions), so two bins differ by what moves between them, not by independent Monte Carlo noise; each bin
     stays unbiased (docs/benchmarks/motion-storage.md).
+    texture_filter: how the textures of scene version 2 (``texture`` of a material) are looked up: ``"bilinear"``
+    (Mitsuba's ``bitmap`` default: four texels, each upsampled to the path's wavelengths, at every BSDF evaluation),
+    ``"nearest"`` (one texel) or ``"auto"`` (default: ``nearest`` on scene version 2). Nearest costs 0.86 / 0.89 of
+    a bilinear wet-night render's CPU cold / warm (320x180) and keeps the texture contrast (road 31.8 against 31.6 %
+    RMS local contrast, 88 against 89 % of it kept by the denoiser; no texel blocks seen near the camera at 640x360:
+    docs/benchmarks/textures.md). Scenes without textures render the same whatever it is.
     static_layers: named unions of capture windows (``[{"name", "windows_s": [[start_s, length_s], ...]}]``, s from
     the frame start; in increasing order, not overlapping, inside the capture window) whose static radiance is
     rendered as such, one full frame's samples spread over the union (:mod:`render_tools.static_layers`), and stored
@@ -264,6 +272,7 @@ class RenderOptions:
     static_edges_s: tuple = ()
     static_bin_samples: str = "independent"
     static_layers: tuple = ()
+    texture_filter: str = "auto"
 
     def __post_init__(self):
         self.bands_nm = tuple(float(b) for b in self.bands_nm)
@@ -312,6 +321,8 @@ class RenderOptions:
         if self.static_bin_samples not in STATIC_BIN_SAMPLES:
             raise ValueError(f"static_bin_samples: must be one of {STATIC_BIN_SAMPLES}, got "
                              f"{self.static_bin_samples!r}")
+        if self.texture_filter not in TEXTURE_FILTERS:
+            raise ValueError(f"texture_filter: must be one of {TEXTURE_FILTERS}, got {self.texture_filter!r}")
         if self.static_denoise not in STATIC_DENOISE:
             raise ValueError(f"static_denoise: must be one of {STATIC_DENOISE}, got {self.static_denoise!r}")
         if self.glossy_light_choice not in GLOSSY_LIGHT_CHOICE:
@@ -386,6 +397,8 @@ class RenderOptions:
             del d["static_bin_samples"]
         from lfmbench.corpus.window_layers import layers_dict  # noqa: PLC0415
 
+        if d["texture_filter"] == "auto":  # as before the option existed
+            del d["texture_filter"]
         d["static_layers"] = layers_dict(self.static_layers)
         if not d["static_layers"]:
             del d["static_layers"]
@@ -687,6 +700,13 @@ def reflections_denoised(scene: dict, opts: RenderOptions) -> bool:
     return _on_from_version_2(opts.reflection_denoise, "oidn", scene)
 
 
+def texture_filter(scene: dict, opts: RenderOptions) -> str:
+    """Mitsuba's ``filter_type`` of the scene's texture bitmaps (``opts.texture_filter``; ``auto``: ``nearest`` on
+    scene version 2 and later, ``bilinear`` on version 1). Scenes without textures (every lfmbench-v1 scene) render
+    the same whatever it is."""
+    return "nearest" if _on_from_version_2(opts.texture_filter, "nearest", scene) else "bilinear"
+
+
 def refine_pad(scene: dict, opts: RenderOptions) -> int | None:
     """The padding (px) of the box a static group's lamp is refined in (``light_bbox`` ``pad``): 0 (its own box, the
     pad ring keeping the full frame's estimate) when the ring is traced at spp (:func:`pad_at_spp`), else None
@@ -873,6 +893,32 @@ def dots_lod(scene: dict, opts: RenderOptions) -> tuple[dict, list[int]]:
     return out, ids
 
 
+#: The last scene's drawn form and screen geometry (:func:`drawn_geometry`): ``[key, (drawn, lod ids, geometry)]``.
+_DRAWN: list = []
+
+
+def drawn_geometry(scene: dict, opts: RenderOptions) -> tuple[dict, list[int], SceneGeometry]:
+    """:func:`dots_lod` of ``scene`` and the :class:`SceneGeometry` of the scene it returns, made once for a scene
+    and options: :func:`scene_meta` and :func:`render_frames` of one render ask for the same (on a wet generator-2
+    night the lamps' boxes, their reflections' extents and the dot faces' pitches cost 1.4 CPU s per scene, 0.3 s on
+    its generator-1 night: measured 2026-11-28). The last scene's are kept (one scene's arrays), keyed by the
+    scene's content (canonical JSON, 20 ms for a generator-2 scene) and the options, so an equal scene gets the
+    same results and a changed one new ones; the geometry's caches are functions of their arguments."""
+    import json  # noqa: PLC0415
+
+    try:
+        key = (json.dumps(scene, sort_keys=True, default=lambda o: o.tolist() if hasattr(o, "tolist") else repr(o)),
+               repr(opts))
+    except (TypeError, ValueError):  # not JSON-like (keys of mixed types): computed anew, not kept
+        key = None
+    if key is not None and _DRAWN and _DRAWN[0] == key:
+        return _DRAWN[1]
+    drawn, ids = dots_lod(scene, opts)
+    out = (drawn, ids, SceneGeometry(drawn, opts))
+    _DRAWN[:] = [key, out] if key is not None else []
+    return out
+
+
 def _round_span(a: int, b: int, n: int) -> tuple[int, int]:
     """Grow [a, b) to a multiple of :data:`CROP_QUANTUM_PX`, kept inside [0, n)."""
     a, b = max(a, 0), min(b, n)
@@ -902,13 +948,12 @@ def scene_meta(scene: dict, opts: RenderOptions) -> dict:
     """
     validate_scene(scene)
     opts.validate()
-    drawn, lod_ids = dots_lod(scene, opts)  # crops as render_frames draws the lights
+    drawn, lod_ids, helper = drawn_geometry(scene, opts)  # crops as render_frames draws the lights
     ego = cam_mod.EgoMotion.from_scene(scene)
     fov = float(scene["camera"]["fov_x_deg"])
     K = cam_mod.intrinsics(opts.width, opts.height, fov)
     groups = _selected_groups(scene, opts)
     timings = [frame_timing(scene, opts, n) for n in range(opts.frames)]
-    helper = SceneGeometry(drawn, opts)
     static_edges = static_bin_edges(scene, opts)
     lights = []
     for lt, lt_drawn in zip(scene["lights"], drawn["lights"]):
@@ -959,6 +1004,7 @@ def scene_meta(scene: dict, opts: RenderOptions) -> dict:
                        **({"glossy_light_choice": "lobe" if _on_from_version_2(opts.glossy_light_choice, "lobe", scene)
                            else "plain"} if helper.wet else {}),
                        **({"static_split": static_split(scene, opts)} if static_denoised(scene, opts) else {}),
+                       "texture_filter": texture_filter(scene, opts),
                        **({"reflection_denoise": "oidn" if reflections_denoised(scene, opts) else "off"}
                           if helper.wet else {})}
                       if int(scene.get("version", 1)) >= 2 else {})},
@@ -1281,7 +1327,8 @@ def render_frames(scene: dict, opts: RenderOptions, steady_bins: bool = False) -
     validate_scene(scene)
     opts.validate()
     timings = [frame_timing(scene, opts, n) for n in range(opts.frames)]  # validates exposures up front
-    scene, filled = dots_lod(scene, opts)  # sub-pixel LED dots as filled cells (RenderOptions.dots_lod_px)
+    # sub-pixel LED dots as filled cells (RenderOptions.dots_lod_px), and where the lamps are on screen
+    scene, filled, geo = drawn_geometry(scene, opts)
     filled = frozenset(filled)
     dense = frozenset(dense_dots(scene, opts, filled))  # sub-pixel dots drawn as they are (dots_spp_factor)
     exact = frozenset(exact_faces(scene, opts))  # dot faces by their exact coverage (dots_coverage)
@@ -1301,12 +1348,13 @@ def render_frames(scene: dict, opts: RenderOptions, steady_bins: bool = False) -
 
     from . import tracer  # noqa: PLC0415
 
-    geo = SceneGeometry(scene, opts)
     edges = static_bin_edges(scene, opts)  # None: the two windows, as before RenderOptions.static_edges_s
     obj_moving = edges is not None and objects_move(scene)
+    tex_filter = texture_filter(scene, opts)
     for n, tm in enumerate(timings):
         t_obj = 0.5 * (tm["window"][0] + tm["window"][1])
-        loaded = mi.load_dict(ms.mitsuba_dict(scene, t_obj, emit="all", cache=mcache, unit_sky=True))
+        loaded = mi.load_dict(ms.mitsuba_dict(scene, t_obj, emit="all", cache=mcache, unit_sky=True,
+                                              texture_filter=tex_filter))
         if n == 0:  # scenes of a size class share kernels; the next frames' objects take this frame's ids
             pad = tracer.pad_registry(mi, dr, loaded, mcache["off_lens"])
         sets = tracer.LightSets(mi, dr, loaded, scene, list(groups), union=static_union(groups, opts))
@@ -1331,7 +1379,8 @@ def render_frames(scene: dict, opts: RenderOptions, steady_bins: bool = False) -
                 if ms.place_moving(params, scene, t_bin, mcache):
                     lb, moved = loaded, True
                 else:
-                    lb = mi.load_dict(ms.mitsuba_dict(scene, t_bin, emit="all", cache=mcache, unit_sky=True))
+                    lb = mi.load_dict(ms.mitsuba_dict(scene, t_bin, emit="all", cache=mcache, unit_sky=True,
+                                                      texture_filter=tex_filter))
                 sb = tracer.LightSets(mi, dr, lb, scene, list(groups), union=static_union(groups, opts))
                 trb = tracer.Tracer(mi, dr, lb, sb, geo.ego, geo.fov, (opts.width, opts.height), opts.bands_nm,
                                     opts.band_width_nm, sky_scale=ms.sky_scale(scene), gloss=gloss)

@@ -155,7 +155,8 @@ def render_layer(scene: dict, opts, layer: tuple) -> Iterator[dict]:
         tm = R.frame_timing(scene, opts, f)
         t_obj = 0.5 * (tm["window"][0] + tm["window"][1])
         j0 = assignment(H, W, n_sub, R._seed(opts.seed, f, "layer", name))
-        loaded = mi.load_dict(ms.mitsuba_dict(scene, t_obj, emit="all", cache=mcache, unit_sky=True))
+        loaded = mi.load_dict(ms.mitsuba_dict(scene, t_obj, emit="all", cache=mcache, unit_sky=True,
+                                              texture_filter=R.texture_filter(scene, opts)))
         if pad is None:
             pad = tracer.pad_registry(mi, dr, loaded, mcache["off_lens"])
         params = mi.traverse(loaded)
@@ -165,7 +166,8 @@ def render_layer(scene: dict, opts, layer: tuple) -> Iterator[dict]:
         for j, ((ta, tb), t_sub) in enumerate(zip(wins_abs, t_subs)):
             lb = loaded
             if obj_moving and not ms.place_moving(params, scene, t_sub, mcache):
-                lb = mi.load_dict(ms.mitsuba_dict(scene, t_sub, emit="all", cache=mcache, unit_sky=True))
+                lb = mi.load_dict(ms.mitsuba_dict(scene, t_sub, emit="all", cache=mcache, unit_sky=True,
+                                              texture_filter=R.texture_filter(scene, opts)))
             sets = tracer.LightSets(mi, dr, lb, scene, list(groups), union=R.static_union(groups, opts))
             tr = tracer.Tracer(mi, dr, lb, sets, geo.ego, geo.fov, (W, H), opts.bands_nm, opts.band_width_nm,
                                sky_scale=ms.sky_scale(scene), gloss=R.glossy_choice(mi, dr, scene, opts, mcache))

@@ -16,8 +16,15 @@ The RMS local contrast of the expectation is ``sqrt(cov(hp A, hp B)) / mean(A)``
 edges' alone. Regions: the road (rows below the horizon, 62-100 % of the height, the middle 60 % of the columns) and
 the upper frame (rows 0-45 %: facades, windows, trees, sky).
 
-Usage: ``python benchmarks/studies/texture_contrast.py [--seed 7] [--tod day] [--weather dry] [--out docs]``
-(26 minutes on the shared 2-core machine at load 20-25).
+With ``--texture-filter nearest`` (``RenderOptions.texture_filter``) the textured scene is measured with
+nearest-texel lookups instead (the flat scene has no textures: not rendered again), written to its own section
+("Nearest-texel lookups: ..."), and docs/img/texture_filter_near_camera.png shows the road nearest the camera
+(rows 62-100 % of the height, the middle half of the columns, 3x enlarged), denoised, bilinear (top: the textured
+scene measured again with bilinear lookups, the same seeds) and nearest (bottom), tone-mapped alike
+(:func:`render_tools.preview.tonemap_srgb` of the pair).
+
+Usage: ``python benchmarks/studies/texture_contrast.py [--seed 7] [--tod day] [--weather dry] [--texture-filter
+bilinear|nearest] [--out docs]`` (26 minutes on the shared 2-core machine at load 20-25).
 """
 from __future__ import annotations
 
@@ -62,8 +69,9 @@ def _cov(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.mean((a - a.mean()) * (b - b.mean())))
 
 
-def _render(sc: dict, **kw) -> tuple[np.ndarray, float]:
-    """Luminance (H, W) cd/m^2 of frame 0's short composite at the default profile with ``kw``; CPU seconds."""
+def _render(sc: dict, spectral: bool = False, **kw) -> tuple[np.ndarray, float]:
+    """Luminance (H, W) cd/m^2 of frame 0's short composite at the default profile with ``kw`` (``spectral``: the
+    composite (C, H, W) W sr^-1 m^-2 nm^-1 instead); CPU seconds."""
     import resource  # noqa: PLC0415
 
     from render_tools import render as rnd  # noqa: PLC0415
@@ -75,14 +83,17 @@ def _render(sc: dict, **kw) -> tuple[np.ndarray, float]:
     c = cpu()
     fr = next(rnd.render_frames(sc, opts))
     img = compose_window(fr, rnd.frame_timing(sc, opts, 0), "short", shape=(len(opts.bands_nm), opts.height, opts.width))
-    return lum(np.asarray(img, dtype=np.float64)), cpu() - c
+    img = np.asarray(img, dtype=np.float64)
+    return (img if spectral else lum(img)), cpu() - c
 
 
-def measure(sc: dict) -> dict:
-    """{region: (rms contrast of the expectation, kept share)} and the CPU seconds of the three renders."""
-    D, c0 = _render(sc, seed=11)
-    A, c1 = _render(sc, seed=11, static_denoise="off")
-    B, c2 = _render(sc, seed=12, static_denoise="off")
+def measure(sc: dict, **kw) -> dict:
+    """{region: (rms contrast of the expectation, kept share)} and the CPU seconds of the three renders; ``kw``:
+    more RenderOptions. ``"D"``: the denoised render's spectral composite (C, H, W)."""
+    Ds, c0 = _render(sc, spectral=True, seed=11, **kw)
+    D = lum(Ds)
+    A, c1 = _render(sc, seed=11, static_denoise="off", **kw)
+    B, c2 = _render(sc, seed=12, static_denoise="off", **kw)
     H, W = A.shape
     out = {}
     for name, (r0, r1), (q0, q1) in REGIONS:
@@ -91,7 +102,32 @@ def measure(sc: dict) -> dict:
         sig = _cov(ha, hb)
         out[name] = (float(np.sqrt(max(sig, 0.0)) / A[s].mean()), _cov(hd, ha) / sig if sig > 0 else float("nan"))
     out["cpu_s"] = (c0, c1, c2)
+    out["D"] = Ds
     return out
+
+
+def near_camera_figure(bilinear: np.ndarray, nearest: np.ndarray, path: Path) -> None:
+    """docs/img/texture_filter_near_camera.png (module docstring) of two spectral composites (C, H, W)."""
+    from render_tools import render as rnd  # noqa: PLC0415
+    from render_tools.preview import tonemap_srgb, write_png  # noqa: PLC0415
+
+    C, H, W = bilinear.shape
+    r0, q0, q1 = int(0.62 * H), W // 4, 3 * W // 4
+    pair = np.concatenate([bilinear[:, r0:, q0:q1], np.zeros((C, 4, q1 - q0)), nearest[:, r0:, q0:q1]], axis=1)
+    rgb = tonemap_srgb(pair, rnd.DEFAULT_BANDS_NM, 10.0)
+    write_png(np.repeat(np.repeat(rgb, 3, axis=0), 3, axis=1), path)
+
+
+def tonemap_pair(bilinear: np.ndarray, nearest: np.ndarray) -> np.ndarray:
+    """The difference (nearest - bilinear) of the figure's two halves, 8-bit sRGB levels (h, w, 3)."""
+    from render_tools import render as rnd  # noqa: PLC0415
+    from render_tools.preview import tonemap_srgb  # noqa: PLC0415
+
+    C, H, W = bilinear.shape
+    r0, q0, q1 = int(0.62 * H), W // 4, 3 * W // 4
+    rgb = tonemap_srgb(np.concatenate([bilinear[:, r0:, q0:q1], nearest[:, r0:, q0:q1]], axis=1),
+                       rnd.DEFAULT_BANDS_NM, 10.0).astype(float)
+    return rgb[H - r0:] - rgb[:H - r0]
 
 
 def main() -> None:
@@ -102,12 +138,16 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=7)
     ap.add_argument("--tod", default="day")
     ap.add_argument("--weather", default="dry")
+    ap.add_argument("--texture-filter", default="bilinear", choices=("bilinear", "nearest"))
     ap.add_argument("--out", default=str(ROOT / "docs"))
     a = ap.parse_args()
     load0, t0 = os.getloadavg()[0], time.time()
     sc = S.generate_scene(a.seed, a.tod, generator=2, overrides={"weather": {"conditions": [a.weather]}})
+    if a.texture_filter == "nearest":
+        return _nearest(a, sc, load0, t0)
     flat = untextured(sc)
-    res = {"textured": measure(sc), "flat": measure(flat)}
+    # bilinear lookups, as measured before `auto` became nearest (--texture-filter nearest: both)
+    res = {"textured": measure(sc, texture_filter="bilinear"), "flat": measure(flat)}
     load1 = os.getloadavg()[0]
     date = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     lines = [SECTION, "",
@@ -134,6 +174,40 @@ def main() -> None:
     if not path.exists():
         atomic_write_text(path, PAGE_HEAD)
     replace_section(path, SECTION, lines)
+    print("\n".join(lines))
+
+
+def _nearest(a, sc: dict, load0: float, t0: float) -> None:
+    """``--texture-filter nearest``: the textured scene measured with nearest-texel lookups, its own section, and
+    the figure of the road near the camera (module docstring)."""
+    res = measure(sc, texture_filter="nearest")
+    bil = measure(sc, texture_filter="bilinear")  # the same scene and seeds: the figures compare like with like
+    near_camera_figure(bil["D"], res["D"], Path(a.out) / "img" / "texture_filter_near_camera.png")
+    load1 = os.getloadavg()[0]
+    date = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    section = "## Nearest-texel lookups: texture contrast kept, the road near the camera"
+    lines = [section, "",
+             f"Generated by `benchmarks/studies/texture_contrast.py --texture-filter nearest` on {date}, the "
+             f"project's shared 2-core AMD EPYC (AVX2), 1-minute load average {load0:.1f} at the start and "
+             f"{load1:.1f} at the end ({(time.time() - t0) / 60:.0f} min): as \"Texture contrast kept by the "
+             "denoiser\", the textured scene rendered with `texture_filter: nearest` and again with `bilinear` (seed "
+             f"{a.seed}, {a.tod}, {a.weather}, frame 0, 640x360).", "",
+             "| materials | region | RMS local contrast of the expectation | kept by the denoiser |",
+             "|---|---|---|---|"]
+    for kind, r in (("nearest", res), ("bilinear", bil)):
+        for name, *_ in REGIONS:
+            c, k = r[name]
+            lines.append(f"| textured, {kind} | {name} | {100 * c:.1f} % | {100 * k:.0f} % |")
+    d = np.abs(tonemap_pair(bil["D"], res["D"]))
+    lines += ["", "CPU seconds of one frame (this process, loaded machine): " + "; ".join(
+        f"{kind} {r['cpu_s'][0]:.1f} denoised / {r['cpu_s'][1]:.1f} and {r['cpu_s'][2]:.1f} traced"
+        for kind, r in (("nearest", res), ("bilinear", bil))) + " (the first render of a kind also compiles its "
+              f"kernels). The figure's two halves (8-bit sRGB) differ by {d.mean():.2f} on average, "
+              f"{np.percentile(d, 99):.0f} at the 99th percentile.", "",
+              "![The road nearest the camera, denoised: bilinear (top) and nearest-texel (bottom) lookups]"
+              "(../img/texture_filter_near_camera.png)", "",
+              "Run again with `python benchmarks/studies/texture_contrast.py --texture-filter nearest`.", ""]
+    replace_section(Path(a.out) / "benchmarks" / "textures.md", section, lines)
     print("\n".join(lines))
 
 

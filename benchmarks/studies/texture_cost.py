@@ -61,7 +61,7 @@ def main() -> None:
     n_tex = sum(texture_array(m["texture"], m["rgb"]).size > 0 for m in sc["materials"].values() if "texture" in m)
     gen_s = _cpu() - c
     opts = rnd.RenderOptions(**dict(load_profile("default"), frames=1, aux=False, seed=11, width=a.size[0],
-                                    height=a.size[1]))
+                                    height=a.size[1], texture_filter="bilinear"))  # as before `auto` was nearest
 
     def run(s) -> float:
         textures._texture_cached.cache_clear()   # each render makes its scene's textures, as a corpus render does

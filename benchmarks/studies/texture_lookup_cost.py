@@ -63,14 +63,14 @@ def main() -> None:
     sc = S.generate_scene(a.seed, a.tod, generator=2, overrides={"weather": {"conditions": [a.weather]}})
     flat = textures.untextured(sc)
     opts = rnd.RenderOptions(**dict(load_profile("default"), frames=1, aux=False, seed=11, width=a.size[0],
-                                    height=a.size[1]))
+                                    height=a.size[1], texture_filter="bilinear"))  # the variants replace it
     bitmap = ms._reflectance
 
-    def nearest(m: dict) -> dict:
+    def nearest(m: dict, *_) -> dict:
         d = bitmap(m)
         return dict(d, filter_type="nearest") if d["type"] == "bitmap" else d
 
-    setups = {"flat": (flat, bitmap), "uv": (sc, lambda m: {"type": "rgb", "value": list(m["rgb"])}),
+    setups = {"flat": (flat, bitmap), "uv": (sc, lambda m, *_: {"type": "rgb", "value": list(m["rgb"])}),
               "nearest": (sc, nearest), "bilinear": (sc, bitmap)}
     spent = [0.0]
     render = tracer.Tracer.render

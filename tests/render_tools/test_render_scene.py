@@ -382,3 +382,47 @@ def test_scene_parts_a_vehicle_kind_is_a_template_entry():
         assert kinds.count("indicator") == (1 if t["ind"] else 0)
     sc = scene.generate_scene(2, "night", overrides={"vehicles": {"require_kinds": list(VEHICLE_KINDS)}})
     assert set(VEHICLE_KINDS) <= {o["kind"] for o in sc["objects"]}
+
+
+def test_texture_filter_option_reaches_the_bitmaps():
+    """``RenderOptions.texture_filter``: checked, left out of the stored options when ``auto`` (as before it
+    existed), ``auto`` resolves to nearest on scene version 2 only, and the chosen filter is the textured BSDF's bitmap
+    filter."""
+    with pytest.raises(ValueError, match="texture_filter"):
+        render.RenderOptions(texture_filter="cubic")
+    assert "texture_filter" not in render.RenderOptions().to_dict()
+    assert render.RenderOptions(texture_filter="nearest").to_dict()["texture_filter"] == "nearest"
+    assert render.texture_filter({}, render.RenderOptions()) == "bilinear"  # scene version 1: no textures anyway
+    assert render.texture_filter({"version": 2}, render.RenderOptions()) == "nearest"
+    assert render.texture_filter({"version": 2}, render.RenderOptions(texture_filter="bilinear")) == "bilinear"
+    m = {"type": "roughplastic", "alpha": 0.1, "ior": 1.33, "rgb": [0.1, 0.1, 0.1],
+         "texture": {"kind": "asphalt", "seed": 1, "size_m": [6.0, 18.4], "origin_m": [0.0, -9.2, 0.0], "lanes": 2,
+                     "lane_width_m": 3.5}}
+    for f in ("bilinear", "nearest"):
+        assert mitsuba_scene._bsdf(m, f)["diffuse_reflectance"]["filter_type"] == f
+    assert mitsuba_scene._bsdf({"type": "diffuse", "rgb": [0.2, 0.2, 0.2]}, "nearest")["reflectance"]["type"] == "rgb"
+    with pytest.raises(ValueError, match="texture_filter"):
+        mitsuba_scene.mitsuba_dict(scene.empty_scene(), 0.0, texture_filter="cubic")
+    small = render.RenderOptions(width=32, height=18, frames=1)
+    v2 = dict(scene.empty_scene(), version=2)
+    assert render.scene_meta(v2, small)["render"]["texture_filter"] == "nearest"  # what the corpus was rendered with
+    assert "texture_filter" not in render.scene_meta(scene.empty_scene(), small)["render"]
+
+
+def test_scene_meta_and_render_share_the_geometry_of_equal_scenes_only(night):
+    """:func:`render.drawn_geometry` is made once for equal scenes and options (scene_meta and render_frames of a
+    render), and anew when the scene's content changes in place: the moved lamp's boxes then equal a fresh
+    computation's, not the kept ones."""
+    opts = render.RenderOptions(width=160, height=90, groups=("signals",))  # a few lamps: 0.04 CPU s a scene_meta
+    s = copy.deepcopy(night)
+    a = render.drawn_geometry(s, opts)
+    assert render.drawn_geometry(copy.deepcopy(s), opts)[2] is a[2]
+    assert render.drawn_geometry(s, render.RenderOptions(width=160, height=90, pad_px=3))[2] is not a[2]
+    before = render.scene_meta(s, opts)["lights"]
+    i = next(k for k, b in enumerate(before) if b["bbox"][0] is not None)
+    lt = next(x for x in s["lights"] if x["id"] == before[i]["id"])
+    lt["center"] = [c + d for c, d in zip(lt["center"], (0.0, 1.5, 0.5))]
+    after = render.scene_meta(s, opts)["lights"]
+    render._DRAWN.clear()
+    fresh = render.scene_meta(s, opts)["lights"]
+    assert after == fresh and after[i]["bbox"] != before[i]["bbox"]
