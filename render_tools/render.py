@@ -88,7 +88,7 @@ GLOSSY_LIGHT_CHOICE = ("auto", "lobe", "plain")
 #: Values of :attr:`RenderOptions.static_bin_samples`.
 STATIC_BIN_SAMPLES = ("independent", "common")
 #: How a flickering dot face's own box is made (RenderOptions.dots_coverage).
-DOTS_COVERAGE = ("traced", "exact")
+DOTS_COVERAGE = ("auto", "traced", "exact")
 #: Values of :attr:`RenderOptions.texture_filter` (Mitsuba's ``bitmap`` ``filter_type`` of the textures).
 TEXTURE_FILTERS = ("auto", "bilinear", "nearest")
 
@@ -153,10 +153,12 @@ class RenderOptions:
     dots"). 1 (default): as other lights. Scenes without dot faces render the same whatever it is.
     dots_coverage: how the own box of a flickering light without a beam (``spread_deg`` 90) whose face is ``dots``
     of pitch under :data:`EXACT_DOTS_PX` (message signs, signals' LED arrays, destination displays, far tail
-    lamps) or a ``rect`` under :data:`EXACT_RECT_PX` (countdown segments; :func:`exact_faces`) is made: ``"traced"`` (default: camera samples, as
-    every other light) or ``"exact"`` (:func:`exact_face`: the face's band radiance times the exact share of each
+    lamps) or a ``rect`` under :data:`EXACT_RECT_PX` (countdown segments; :func:`exact_faces`) is made: ``"traced"`` (camera samples, as
+    every other light), ``"exact"`` (:func:`exact_face`: the face's band radiance times the exact share of each
     pixel its lit dots cover, averaged over each bin, :mod:`render_tools.dot_coverage`; occluders found by
     visibility rays; no camera sample, no Monte Carlo noise, and no ``dots_lod_px`` stand-in for these lights).
+    ``"auto"`` (default): ``exact`` on scene version 2 (protocol version 4 of ``lfmbench-v2`` and its mini),
+    ``traced`` on version 1, whose renders are frozen.
     What it leaves out: light of that face reflected by what lies inside its own box (none: the dots emit to the
     front of their plane). LED bins of the lamp crops against the real dots on 9 times of day x weathers 3.5-8.2 %
     -> 0.0-0.9 % for 0.84-1.25x their CPU (docs/benchmarks/render.md, "LED dot faces against the real dots").
@@ -261,7 +263,7 @@ class RenderOptions:
     lamp_pass_spp: str = "auto"
     filled_spp_factor: int = 2
     dots_spp_factor: int = 1
-    dots_coverage: str = "traced"
+    dots_coverage: str = "auto"
     pixel_samples: str = "auto"
     reflection_block_px: int = 2
     pad_samples: str = "auto"
@@ -816,6 +818,12 @@ def _subpixel_dots(scene: dict, opts: RenderOptions, px: float) -> list[int]:
     return [lt["id"] for lt in scene["lights"] if lt["shape"] == "dots" and geo.dots_pitch_px(lt, times) < px]
 
 
+def exact_coverage(scene: dict, opts: RenderOptions) -> bool:
+    """Whether the small flickering dot and rect faces are made by their exact coverage (``opts.dots_coverage``;
+    ``auto``: scene version 2 and later)."""
+    return _on_from_version_2(opts.dots_coverage, "exact", scene)
+
+
 def exact_faces(scene: dict, opts: RenderOptions) -> list[int]:
     """Ids of the lights whose own box is made by :func:`exact_face` (``opts.dots_coverage`` ``exact``): a face
     without a beam (``spread_deg`` 90) in a flickering group, either ``dots`` whose dot pitch stays under
@@ -824,7 +832,7 @@ def exact_faces(scene: dict, opts: RenderOptions) -> list[int]:
     otherwise. Larger dots (tail and brake lamps near the camera,
     1.2 % LED-bin error traced at light_spp 32) are left to the tracer, which also draws the light a face throws
     on what is next to it inside its box (a tail lamp's on its bumper: 2.3 % of its box's light at dusk)."""
-    if opts.dots_coverage != "exact":
+    if not exact_coverage(scene, opts):
         return []
     flick = {g for g, info in scene_groups(scene).items() if info["flicker"]}
     sub = set(_subpixel_dots(scene, opts, EXACT_DOTS_PX))
@@ -991,7 +999,7 @@ def scene_meta(scene: dict, opts: RenderOptions) -> dict:
                        "reflection_min_lux": opts.reflection_min_lux,
                        "reflection_block_px": opts.reflection_block_px} if helper.wet else {}),
                    **({"dots_coverage": "exact", "dots_exact": exact_faces(scene, opts)}
-                      if opts.dots_coverage != "traced" else {}),
+                      if exact_coverage(scene, opts) else {}),
                    **({"dots_lod_px": opts.dots_lod_px, "dots_lod": lod_ids,
                        "filled_spp_factor": opts.filled_spp_factor,
                        **({"dots_spp_factor": opts.dots_spp_factor, "dots_spp": dense_dots(scene, opts, lod_ids)}

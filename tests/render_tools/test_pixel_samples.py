@@ -212,7 +212,7 @@ def test_dots_spp_factor_multiplies_only_sub_pixel_dots_drawn_as_they_are():
     sc["lights"] = [{**lt, "id": i} for i, lt in enumerate(lt for lt in sc["lights"] if lt["kind"] in keep)]
     sets = type("Sets", (dict,), {"__missing__": lambda self, k: 0, "union": []})()
     kw = dict(width=160, height=90, spp=1, light_spp=16, frames=1, groups=("signals", "otherlights"),
-              pad_samples="light", dots_lod_px=0.0)
+              pad_samples="light", dots_lod_px=0.0, dots_coverage="traced")
     base, more = render.RenderOptions(**kw), render.RenderOptions(**kw, dots_spp_factor=4)
     dense = frozenset(render.dense_dots(sc, more))
     assert render.dense_dots(sc, base) == []
@@ -232,7 +232,7 @@ def test_dots_spp_factor_multiplies_only_sub_pixel_dots_drawn_as_they_are():
         render.RenderOptions(dots_spp_factor=3)
     # dots_coverage exact: the same sub-pixel dot faces get no tile (exact_face makes their own box), the others
     # keep theirs, and no light is both exact and drawn with more samples
-    ex = render.RenderOptions(**kw, dots_coverage="exact", dots_spp_factor=4)
+    ex = render.RenderOptions(**{**kw, "dots_coverage": "exact"}, dots_spp_factor=4)
     exact = frozenset(render.exact_faces(sc, ex))
     assert exact >= dense and render.dense_dots(sc, ex) == []
     tiles, plan, _ = render.plan_frame(sc, ex, 0, sets, exact=exact)
@@ -241,5 +241,9 @@ def test_dots_spp_factor_multiplies_only_sub_pixel_dots_drawn_as_they_are():
     assert len(tiles) == len(plan) - len(marked)
     meta = render.scene_meta(sc, ex)["render"]
     assert meta["dots_coverage"] == "exact" and meta["dots_exact"] == sorted(exact) and meta["dots_spp_factor"] == 4
+    # auto (the default): exact on scene version 2, traced on version 1 (its renders are frozen)
+    auto = render.RenderOptions(**{**kw, "dots_coverage": "auto"})
+    assert render.exact_faces(sc, auto) == sorted(exact) and render.RenderOptions().dots_coverage == "auto"
+    assert not render.exact_coverage({**sc, "version": 1}, auto)
     with pytest.raises(ValueError, match="dots_coverage"):
         render.RenderOptions(dots_coverage="analytic")
