@@ -65,9 +65,9 @@ def test_filled_cells_keep_each_lamps_intensity():
 
 def _signs_far(width: int):
     """The close-up scene's sign and the options of a ``width`` x width*9/16 px render (its pitch: 0.05 m at 11 m,
-    fov 40 deg: 0.00625 x width px)."""
+    fov 40 deg: 0.00625 x width px); the dots traced (the stand-in is for traced faces; exact coverage has none)."""
     return closeup_scene(), R.RenderOptions(width=width, height=width * 9 // 16, spp=1, light_spp=16, frames=2,
-                                             groups=("otherlights",), aux=False)
+                                             groups=("otherlights",), aux=False, dots_coverage="traced")
 
 
 def test_only_sub_pixel_dot_faces_are_filled():
