@@ -319,10 +319,10 @@ def figure(case: str, cache: Path, size, out: Path, kind: str = "message_sign") 
     fig.suptitle(f"{kind.replace('_', ' ')}s, {case}, frame 0 at {size[0]}x{size[1]}, mean of 8 bins: log luminance "
                  f"(3 decades; px {x0}-{x1} x {y0}-{y1}) and the difference to the reference", fontsize=9)
     fig.tight_layout()
-    tmp = out.with_suffix(".tmp.png")
-    fig.savefig(tmp, dpi=110)
+    from lfmbench.fileio import atomic_save_figure  # noqa: PLC0415
+
+    atomic_save_figure(fig, out, dpi=110)
     plt.close(fig)
-    os.replace(tmp, out)
 
 
 def render_opts(size):

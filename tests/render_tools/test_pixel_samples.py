@@ -132,7 +132,8 @@ def test_moving_edge_same_light_less_spread():
         px = []
         for seed in range(6):
             o = render.RenderOptions(width=64, height=36, spp=1, light_spp=16, bins=4, frames=1, seed=seed,
-                                     groups=("otherlights",), aux=False, pixel_samples=mode)
+                                     groups=("otherlights",), aux=False, pixel_samples=mode,
+                                     dots_coverage="traced")  # a small rect: its exact coverage takes no sample
             fr = next(render.render_frames(sc, o))
             [(i, _, b)] = [x for x in fr["lights"]["otherlights"] if x[0] == lid]
             px.append(b.sum(axis=1))  # (K, h, w): each bin's pixels, bands summed
