@@ -73,7 +73,7 @@ DOTS_SECTION = "## LED dot faces against the real dots: the measurements (issue 
 DOTS_RERUN = ("nice -n 10 python benchmarks/studies/bench_render_v2_targets.py --section dots --warmup --cases "
               "--gap-cases 202:dusk:dry 101:night:dry 202:day:dry 202:dusk:wet 202:dusk:rain 101:night:rain "
               "202:day:wet 202:day:rain 101:night:wet --gap-settings \"dot faces exact\" \"sub-pixel dots as they are "
-              "x4\" --cache /tmp/v2tgt")
+              "x4\" --cache bench_out/v2tgt")
 #: Cases, in the order rendered: those never measured first (dusk, rain, a wet day), then those issue 23 measured
 #: against filled-cell references.
 #: Cases rendered whole (every measure), in the order rendered: those never measured (dusk, rain, a wet day);
@@ -384,7 +384,7 @@ def write_section(rows: list, out: Path, load0: float, load1: float, size, ref, 
                   "`--cached-only` to score what the cache holds).", ""]
     else:
         lines += ["", "Run again with `nice -n 10 python benchmarks/studies/bench_render_v2_targets.py --cache "
-                  "/tmp/v2tgt` (the references are the bulk of the time; `--cases` and `--gap-cases` choose the "
+                  "bench_out/v2tgt` (the references are the bulk of the time; `--cases` and `--gap-cases` choose the "
                   "cases).", ""]
     replace_section(out / "benchmarks" / "render.md", lines[0], lines)
     print("\n".join(lines))
