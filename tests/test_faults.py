@@ -21,7 +21,7 @@ from lfmbench.datasets import LFMCaptureDataset
 from lfmbench.datasets import projection as P
 from render_tools import jobs as J
 from tests.data.corpus.data import make_corpus
-from tests.data.render.data import ARGS, FAIL, run
+from tests.data.render.data import ARGS, FAIL, mitsuba_sigint, run
 
 
 @pytest.fixture
@@ -172,21 +172,9 @@ def test_meta_scene_id_is_checked_on_read(one):
 # ------------------------------------------------------------------ 3, 5. Ctrl-C in a render, killed runs
 
 
-def _mitsuba_sigint(msg):
-    """What Mitsuba does with Ctrl-C: the SIGINT handler raises KeyboardInterrupt inside the render, and the
-    render loop turns it into a RuntimeError whose message does not say so."""
-    import signal
-
-    try:
-        signal.raise_signal(signal.SIGINT)
-    except KeyboardInterrupt:
-        return RuntimeError("drjit: render loop aborted")
-    raise AssertionError("SIGINT did not raise")
-
-
 def test_ctrl_c_inside_mitsuba_render_stops_with_130(tmp_path, fake):
     out = tmp_path / "c"
-    FAIL["scene00001"] = _mitsuba_sigint
+    FAIL["scene00001"] = mitsuba_sigint
     # an interactive start (Python's own SIGINT handler), also when the test run itself was started with SIGINT
     # ignored (``nohup make test &``), which the render keeps (test_sigint_ignored_at_start_stays_ignored)
     prev = signal.signal(signal.SIGINT, signal.default_int_handler)

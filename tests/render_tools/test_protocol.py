@@ -17,7 +17,7 @@ from render_tools import protocol as P
 from render_tools import scene as S
 
 from tests.data.protocol.data import tiny_protocol_dict, write_protocol
-from tests.data.render.data import FAIL
+from tests.data.render.data import FAIL, mitsuba_sigint
 
 SHIPPED = ("lfmbench-v1", "lfmbench-v1-mini", "lfmbench-v1-mini-motion", "lfmbench-v2", "lfmbench-v2-mini")
 
@@ -339,15 +339,6 @@ def test_render_protocol_one_split_then_the_rest(tmp_path, fake):
     assert not (tmp_path / "d").exists()
 
 
-def _mitsuba_sigint(msg):
-    """What Mitsuba does with Ctrl-C: the SIGINT handler raises KeyboardInterrupt inside the render, and the
-    render loop turns it into a RuntimeError whose message does not say so."""
-    try:
-        signal.raise_signal(signal.SIGINT)
-    except KeyboardInterrupt:
-        return RuntimeError("drjit: render loop aborted")
-    raise AssertionError("SIGINT did not raise")
-
 
 def test_add_layers_upgrades_a_corpus_without_touching_its_files(tmp_path, fake):
     """A corpus of version 1 of a protocol gets version 2's static window layer (render.static_layers) by
@@ -397,7 +388,7 @@ def test_add_layers_upgrades_a_corpus_without_touching_its_files(tmp_path, fake)
     v3 = write_protocol(tmp_path / "v3.yaml", d)
     first, second = C.Corpus(out).scenes[:2]
     n0 = len(LAYER_CALLS)
-    FAIL[second] = _mitsuba_sigint
+    FAIL[second] = mitsuba_sigint
     prev = signal.signal(signal.SIGINT, signal.default_int_handler)
     try:
         r = _run("render", "--protocol", str(v3), "--out", str(out), "--add-layers")

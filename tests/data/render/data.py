@@ -16,6 +16,16 @@ from render_tools import scene
 
 CALLS: list[str] = []
 FAIL: dict[str, type] = {}  # scene_id -> exception type raised after its first frame
+
+def mitsuba_sigint(msg):
+    """What Mitsuba does with Ctrl-C, for :data:`FAIL`: the SIGINT handler raises KeyboardInterrupt inside the
+    render, and the render loop turns it into a RuntimeError whose message does not say so."""
+    try:
+        signal.raise_signal(signal.SIGINT)
+    except KeyboardInterrupt:
+        return RuntimeError("drjit: render loop aborted")
+    raise AssertionError("SIGINT did not raise")
+
 #: Environment variable ``scene_id:SIGNAME[,scene_id:SIGNAME...]``: the fake render of each named scene kills its
 #: process with that signal after the first frame (a native crash, as Dr.Jit's SIGFPE; reaches spawned worker
 #: processes too).
