@@ -390,8 +390,8 @@ def main(argv=None) -> None:
           "(`benchmarks/bench_motion_windows.py`)",
           "",
           f"Renders made {made['start']} to {made['end'][-5:]} UTC on the shared 2-core AMD EPYC (AVX2), load "
-          f"{made['load_start']:.1f} / {made['load_end']:.1f} (1-min average at start / end: other jobs ran beside "
-          "it under `nice`; wall seconds are upper bounds, so cost is quoted in CPU seconds). Every figure on this "
+          f"{made['load_start']:.1f} / {made['load_end']:.1f} (1-min average at start / end; above ~2 other jobs "
+          "share the 2 cores and wall seconds are upper bounds, so cost is quoted in CPU seconds). Every figure on this "
           "page is from this one run. Rerun: "
           f"`python benchmarks/bench_motion_windows.py --case {a.case} --width {a.width} --height {a.height}"
           f"{' --all-presets' if a.all_presets else ''} --out docs`.",
