@@ -373,7 +373,7 @@ def _light_canvases(frame: dict, ref_a: dict, ref_b: dict, own: dict):
     its own box, the mean's bin-mean over 5 % of its maximum there (bench_render.led_sel's rule)."""
     T, A, B = ({lid: (bb, b) for items in f["lights"].values() for lid, bb, b in items} for f in (frame, ref_a, ref_b))
     for lid in A:
-        if lid not in own:
+        if lid not in own or lid not in B:
             continue
         boxes = [X[lid][0] for X in (T, A, B) if lid in X]
         box = (min(b[0] for b in boxes), min(b[1] for b in boxes), max(b[2] for b in boxes), max(b[3] for b in boxes))

@@ -62,7 +62,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import _llvm  # noqa: E402,F401 - sets DRJIT_LIBLLVM_PATH
 from _timing import replace_section  # noqa: E402
 from bench_render import lum  # noqa: E402
-from bench_render_v2_error import _frame, _led_canvas, _v2_scene, lamp_boxes  # noqa: E402
+from bench_render_v2_error import _frame, _light_canvases, _v2_scene, lamp_boxes  # noqa: E402
 
 from lfmbench.fileio import load_yaml  # noqa: E402
 
@@ -134,24 +134,10 @@ def led_error_boxed(frame: dict, ref_a: dict, ref_b: dict, kinds: dict, boxes: d
     billboard seen from behind). ``kinds``: light id -> kind. Returns {"all" or kind: (error, share of the pooled
     squared error)}; lights without a box or a lit pixel add nothing. Crops: ``frame["lights"][group]`` =
     [(id, (y0, x0, y1, x1), (K, C, h, w))]."""
-    T, A, B = ({lid: (bb, b) for items in f["lights"].values() for lid, bb, b in items}
-               for f in (frame, ref_a, ref_b))
     acc: dict = {}
-    for lid in A:
-        if lid not in B or lid not in boxes:
+    for lid, t, a, b, m, sel in _light_canvases(frame, ref_a, ref_b, boxes):
+        if not sel.any():  # no lit pixel inside its own box
             continue
-        bx = [X[lid][0] for X in (T, A, B) if lid in X]
-        box = (min(b[0] for b in bx), min(b[1] for b in bx), max(b[2] for b in bx), max(b[3] for b in bx))
-        a, b = _led_canvas(A, lid, box), _led_canvas(B, lid, box)
-        t = _led_canvas(T, lid, box) if lid in T else np.zeros_like(a)
-        m = 0.5 * (a + b)
-        inside = np.zeros(m.shape[1:], bool)
-        y0, x0, y1, x1 = boxes[lid]
-        inside[max(y0 - box[0], 0):max(y1 - box[0], 0), max(x0 - box[1], 0):max(x1 - box[1], 0)] = True
-        e = np.where(inside, m.mean(0), 0.0)
-        if e.max() <= 0:
-            continue
-        sel = e > 0.05 * e.max()
         sums = np.array([np.sum((t - m)[:, sel] ** 2), np.sum((a - b)[:, sel] ** 2) / 4.0, np.sum(m[:, sel] ** 2)])
         for k in ("all", kinds[lid]):
             acc[k] = acc.get(k, np.zeros(3)) + sums
