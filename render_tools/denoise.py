@@ -296,8 +296,6 @@ def denoise_static(images: dict, boxes=(), radius: int = SHARE_RADIUS_PX, shape_
     by_box = split == "box" or G == 1
     if by_box:
         den = _box_mean(B[:k] * kf, radius)  # (k, H, W): box means of the broad bands, all groups
-        ok = den > 0
-        scale = np.where(ok, Bd / np.where(ok, den, 1.0), 0.0)  # B'[k] / box_r(B[k])
     else:  # the groups' denoised light T'[g] times their colour col[g, k], normalised over the groups
         light = _denoised_group_light(np.stack([(xk * kf).sum(0) for xk in per_group]), keep, boxes, denoiser)
         est, kbox = [], []
@@ -308,8 +306,8 @@ def denoise_static(images: dict, boxes=(), radius: int = SHARE_RADIUS_PX, shape_
             col = np.where(tlo > 0, klo / np.where(tlo > 0, tlo, 1.0), 1.0 / k)
             est.append(_upsample(col, f, (H, W)) * t[None])  # (k, H, W): T'[g] col[g, k]
         den = np.sum(est, axis=0)
-        ok = den > 0
-        scale = np.where(ok, Bd / np.where(ok, den, 1.0), 0.0)
+    ok = den > 0
+    scale = np.where(ok, Bd / np.where(ok, den, 1.0), 0.0)  # B'[k] / den: box_r(B[k]), or sum_g T'[g] col[g, k]
     out = {}
     for i, (g, xk) in enumerate(zip(groups, per_group)):
         x = np.asarray(images[g], np.float32)
