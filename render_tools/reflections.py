@@ -112,17 +112,23 @@ def glossy_points(lamp_points: np.ndarray, camera: np.ndarray, road: dict, grid=
     return G[grown]
 
 
-def glossy_cells(lamp_points: np.ndarray, camera: np.ndarray, road: dict, grid=False) -> np.ndarray:
-    """The grid cells (M, 4, 3) m (their corners, z = 0) that make up the reflection region of
-    :func:`glossy_points`: every cell of the :data:`GRID` with a corner in it. Together they cover the region
-    without gaps (the points alone are samples of it, up to metres apart near the camera), so the screen
-    rows a reflection covers can be bounded cell by cell (:meth:`render_tools.render.SceneGeometry.reflection_tiles`).
-    Empty (0, 4, 3) when there is no region. ``grid``: as for :func:`glossy_points`."""
+def glossy_cells(lamp_points: np.ndarray, camera: np.ndarray, road: dict, grid=False,
+                 whole: bool = False) -> np.ndarray:
+    """The grid cells (M, 4, 3) m (their corners, z = 0; axis-aligned rectangles, corners in the order (x0, y0),
+    (x1, y0), (x1, y1), (x0, y1)) that make up the reflection region of :func:`glossy_points`: every cell of the
+    :data:`GRID` with a corner in it. Together they cover the region without gaps (the points alone are samples
+    of it, up to metres apart near the camera), so the screen rows a reflection covers can be bounded cell by
+    cell (:meth:`render_tools.render.SceneGeometry.reflection_tiles`). ``whole``: only the cells with all four
+    corners in it (every grown point is a corner of one: each lies next to a kept point, whose eight neighbours
+    are all grown), whose footprint bounds the grown box where the region leaves the image
+    (:meth:`render_tools.render.SceneGeometry.light_bbox`). Empty (0, 4, 3) when there is no region. ``grid``: as
+    for :func:`glossy_points`."""
     g = glossy_grid(lamp_points, camera, road) if grid is False else grid
     if g is None:
         return np.zeros((0, 4, 3))
     G, m = g
-    cell = m[:-1, :-1] | m[1:, :-1] | m[:-1, 1:] | m[1:, 1:]
+    cell = (m[:-1, :-1] & m[1:, :-1] & m[:-1, 1:] & m[1:, 1:]) if whole else \
+        (m[:-1, :-1] | m[1:, :-1] | m[:-1, 1:] | m[1:, 1:])
     i, j = np.nonzero(cell)
     return np.stack([G[i, j], G[i + 1, j], G[i + 1, j + 1], G[i, j + 1]], axis=1)
 

@@ -91,6 +91,8 @@ STATIC_BIN_SAMPLES = ("independent", "common")
 DOTS_COVERAGE = ("auto", "traced", "exact")
 #: Values of :attr:`RenderOptions.texture_filter` (Mitsuba's ``bitmap`` ``filter_type`` of the textures).
 TEXTURE_FILTERS = ("auto", "bilinear", "nearest")
+#: Values of :attr:`RenderOptions.reflection_edges`.
+REFLECTION_EDGES = ("auto", "clip", "drop")
 
 
 @dataclass
@@ -212,6 +214,13 @@ class RenderOptions:
     still scales with its lamp's PWM (the dataset weights it as before), so the flicker-free truth and the captures
     see the same reflection; not unbiased (docs/guide/rendering.md, "Wet roads"). Reflections traced in several
     time bins (``reflection_bins`` > 1 with motion) are left as traced.
+    reflection_edges: where a flickering lamp's reflection region leaves the image (a streak running on below
+    the bottom row or out at a side), its grown box (:meth:`SceneGeometry.light_bbox`) is bounded by ``"clip"``
+    (each region cell's footprint clipped to the padded image in front of the camera: the box reaches the edge),
+    ``"drop"`` (the region's grid points that project into the padded image only: the box stopped at the last
+    point inside, up to one grid cell short of the edge; on a wet 640x360 night the bottom 12-13 rows held no
+    flickering reflection, docs/guide/scenes.md) or ``"auto"`` (default: ``clip`` on scene version 2, ``drop``
+    on version 1, whose renders are frozen). No effect on dry scenes.
     static_edges_s: times (s from the frame start, inside the capture window) at which the static groups are cut
     into time bins (:func:`static_bin_edges`): () (default) stores the short and long windows only, as every corpus
     before; any edges store the static groups in the bins between the sorted union of these edges and the short and
@@ -275,6 +284,7 @@ class RenderOptions:
     static_bin_samples: str = "independent"
     static_layers: tuple = ()
     texture_filter: str = "auto"
+    reflection_edges: str = "auto"
 
     def __post_init__(self):
         self.bands_nm = tuple(float(b) for b in self.bands_nm)
@@ -325,6 +335,8 @@ class RenderOptions:
                              f"{self.static_bin_samples!r}")
         if self.texture_filter not in TEXTURE_FILTERS:
             raise ValueError(f"texture_filter: must be one of {TEXTURE_FILTERS}, got {self.texture_filter!r}")
+        if self.reflection_edges not in REFLECTION_EDGES:
+            raise ValueError(f"reflection_edges: must be one of {REFLECTION_EDGES}, got {self.reflection_edges!r}")
         if self.static_denoise not in STATIC_DENOISE:
             raise ValueError(f"static_denoise: must be one of {STATIC_DENOISE}, got {self.static_denoise!r}")
         if self.glossy_light_choice not in GLOSSY_LIGHT_CHOICE:
@@ -401,6 +413,8 @@ class RenderOptions:
 
         if d["texture_filter"] == "auto":  # as before the option existed
             del d["texture_filter"]
+        if d["reflection_edges"] == "auto":  # as before the option existed
+            del d["reflection_edges"]
         d["static_layers"] = layers_dict(self.static_layers)
         if not d["static_layers"]:
             del d["static_layers"]
@@ -449,6 +463,7 @@ class SceneGeometry:
         self.fov = float(scene["camera"]["fov_x_deg"])
         self.K = cam_mod.intrinsics(opts.width, opts.height, self.fov)
         self.wet = reflections.wet_road(scene)  # None: dry, no reflection region in any crop
+        self.clip_edges = _on_from_version_2(opts.reflection_edges, "clip", scene)  # RenderOptions.reflection_edges
         self._grids: dict = {}  # (light id, t_obj) -> reflections.glossy_grid: a light's bbox and bands share it
         self._poses: dict = {}  # t -> camera pose: every light of a frame is projected at the same time samples
         self._extents: dict = {}  # light_bbox's screen extents (:meth:`_extent`)
@@ -504,6 +519,82 @@ class SceneGeometry:
         ok = (rz > MIN_DEPTH_M) & (ruv[:, 0] >= -p) & (ruv[:, 0] <= self.opts.width + p) & \
             (ruv[:, 1] >= -p) & (ruv[:, 1] <= self.opts.height + p)
         return ruv[ok]
+
+    def _edge_uv(self, light: dict, t_obj: float, times, cells: np.ndarray) -> np.ndarray:
+        """Screen points (N, 2) px at ``times`` (T,) s that, with the cells' corners :meth:`_reflection_uv` keeps,
+        bound the footprint of road ``cells`` (M, 4, 3) m (axis-aligned rectangles on z = 0,
+        :func:`render_tools.reflections.glossy_cells`; moving with the light's object from its ``t_obj``
+        position) clipped to the padded image in front of the camera (depth > :data:`MIN_DEPTH_M`), for the
+        cells that cross its edge. In the road plane each bound is a half-plane ``a x + b y + c >= 0`` (the
+        camera-space constraints ``z >= MIN_DEPTH_M``, ``-pad <= u <= W + pad``, ``-pad <= v <= H + pad``, linear
+        where z > 0); the clipped cell is a convex polygon whose vertices are among the cell corners inside all
+        five (kept by :meth:`_reflection_uv`), the crossings of its four sides with the five lines, and the ten
+        crossings of two lines inside it (returned here): the box of their projections is the box of the
+        footprint's part in the image, so a cell reaching behind the camera or past the image's edge bounds the
+        box up to that edge instead of being dropped."""
+        times = np.asarray(times, dtype=np.float64).reshape(-1)
+        if not len(cells) or not len(times):
+            return np.zeros((0, 2))
+        off = np.outer(times - t_obj, self.object_velocity(light))  # (T, 3) m
+        poses = np.stack([self.pose_cv(t) for t in times])
+        r, c = poses[:, :3, :3], poses[:, :3, 3]  # camera coords of X: (X - c) @ r (render_tools.camera.project)
+        K, p, W, H = self.K, self.opts.pad_px, self.opts.width, self.opts.height
+        e3 = np.array([0.0, 0.0, 1.0])
+        A = np.stack([e3, K[0] + p * e3, (W + p) * e3 - K[0], K[1] + p * e3, (H + p) * e3 - K[1]])  # (5, 3)
+        al, be = r[:, 0] @ A.T, r[:, 1] @ A.T  # (T, 5): (x, y, 0) + off -> x r[0] + y r[1] + (off - c) @ r
+        ga = np.einsum("tk,tkj->tj", off - c, r) @ A.T + np.array([-MIN_DEPTH_M, 0.0, 0.0, 0.0, 0.0])
+
+        def inside(x, y, k):  # x, y, k (...,) -> (...,): in all five half-planes of time k, round-off margin
+            ax, by, g = x[..., None] * al[k], y[..., None] * be[k], ga[k]
+            return np.all(ax + by + g >= -1e-9 * (np.abs(ax) + np.abs(by) + np.abs(g) + 1.0), axis=-1)
+
+        F = cells[None, :, :, 0, None] * al[:, None, None] + cells[None, :, :, 1, None] * be[:, None, None] \
+            + ga[:, None, None]  # (T, M, 4, 5)
+        cross = ~np.all(F >= 0, axis=(2, 3)) & ~np.any(np.all(F < 0, axis=2), axis=-1)  # (T, M)
+        ti, mi = np.nonzero(cross)
+        if not len(ti):
+            return np.zeros((0, 2))
+        cl = cells[mi]
+        x0, x1 = cl[:, :, 0].min(1), cl[:, :, 0].max(1)
+        y0, y1 = cl[:, :, 1].min(1), cl[:, :, 1].max(1)
+        a_, b_, g_ = al[ti][:, None], be[ti][:, None], ga[ti][:, None]  # (n, 1, 5)
+        k = np.broadcast_to(ti[:, None, None], (len(ti), 2, 5))
+        pts, tk = [], []
+        with np.errstate(divide="ignore", invalid="ignore"):
+            xs = np.stack([x0, x1], 1)[..., None]  # (n, 2, 1): the sides x = x0, x1 against each line
+            ys = -(xs * a_ + g_) / b_  # (n, 2, 5)
+            xs = np.broadcast_to(xs, ys.shape)
+            ok = np.isfinite(ys) & (ys >= y0[:, None, None]) & (ys <= y1[:, None, None])
+            ok &= inside(xs, ys, k)
+            pts.append(np.stack([xs[ok], ys[ok]], -1))
+            tk.append(k[ok])
+            ys = np.stack([y0, y1], 1)[..., None]  # the sides y = y0, y1
+            xs = -(ys * b_ + g_) / a_
+            ys = np.broadcast_to(ys, xs.shape)
+            ok = np.isfinite(xs) & (xs >= x0[:, None, None]) & (xs <= x1[:, None, None])
+            ok &= inside(xs, ys, k)
+            pts.append(np.stack([xs[ok], ys[ok]], -1))
+            tk.append(k[ok])
+            i, j = np.triu_indices(5, 1)  # two lines crossing inside a cell (a corner of the visible road)
+            det = al[:, i] * be[:, j] - al[:, j] * be[:, i]  # (T, 10)
+            px = (be[:, i] * ga[:, j] - be[:, j] * ga[:, i]) / det
+            py = (al[:, j] * ga[:, i] - al[:, i] * ga[:, j]) / det
+            kk = np.broadcast_to(np.arange(len(times))[:, None], px.shape)
+            q = np.isfinite(px) & np.isfinite(py)
+            q[q] = inside(px[q], py[q], kk[q])
+            hit = np.zeros(px.shape, dtype=bool)  # inside a cell crossing the edge at that time
+            np.logical_or.at(hit, ti, (px[ti] >= x0[:, None]) & (px[ti] <= x1[:, None]) & (py[ti] >= y0[:, None])
+                             & (py[ti] <= y1[:, None]))
+            q &= hit
+            pts.append(np.stack([px[q], py[q]], -1))
+            tk.append(kk[q])
+        xy, tk = np.concatenate(pts), np.concatenate(tk)
+        if not len(xy):
+            return np.zeros((0, 2))
+        pc = np.einsum("nk,nkj->nj", np.concatenate([xy, np.zeros((len(xy), 1))], 1) + off[tk] - c[tk], r[tk])
+        with np.errstate(divide="ignore", invalid="ignore"):
+            uv = (pc @ K.T)[:, :2] / pc[:, 2:]
+        return uv[(pc[:, 2] > 0) & np.all(np.isfinite(uv), axis=1)]
 
     def reflection_tiles(self, light: dict, t_obj: float, t_a: float, t_b: float, bbox) -> list[tuple]:
         """The crops (y0, x0, y1, x1) px that hold a flickering light's reflection inside its grown ``bbox``
@@ -610,7 +701,10 @@ class SceneGeometry:
         # a flickering light's crop also holds its reflection in a wet road (render_tools.reflections)
         refl = reflections.glossy_points(None, None, self.wet, grid=self._glossy_grid(light, t_obj)) \
             if moving and reflection and self.reflected(light, t_obj) else None
-        uvs = []
+        # where the region leaves the image, its cells' footprints clipped to it (RenderOptions.reflection_edges)
+        cells = reflections.glossy_cells(None, None, self.wet, grid=self._glossy_grid(light, t_obj), whole=True) \
+            if refl is not None and len(refl) and self.clip_edges else None
+        uvs = [] if cells is None else [self._edge_uv(light, t_obj, times, cells)]
         for t in times:
             pose = self.pose_cv(t)
             pw = pts + v * (t - t_obj)
@@ -1013,7 +1107,8 @@ def scene_meta(scene: dict, opts: RenderOptions) -> dict:
                            else "plain"} if helper.wet else {}),
                        **({"static_split": static_split(scene, opts)} if static_denoised(scene, opts) else {}),
                        "texture_filter": texture_filter(scene, opts),
-                       **({"reflection_denoise": "oidn" if reflections_denoised(scene, opts) else "off"}
+                       **({"reflection_denoise": "oidn" if reflections_denoised(scene, opts) else "off",
+                           "reflection_edges": "clip" if helper.clip_edges else "drop"}
                           if helper.wet else {})}
                       if int(scene.get("version", 1)) >= 2 else {})},
     }
