@@ -104,7 +104,8 @@ def glossy_points(lamp_points: np.ndarray, camera: np.ndarray, road: dict, grid=
     on a :data:`GRID` of road points, grown by one grid cell (so the points' screen box holds the streak; a
     caller keeps the points that project into the image: the streak runs under the camera, where its projection
     would span the whole width; where the region leaves the image, the cells of :func:`glossy_cells` clipped to
-    it carry the box to the image's edge, :meth:`render_tools.render.SceneGeometry.light_bbox`). Empty (0, 3) when the lamps are below the road or nothing qualifies. ``grid``:
+    it carry the box to the image's edge, :meth:`render_tools.render.SceneGeometry.light_bbox`). Empty (0, 3) when
+    the lamps are below the road or nothing qualifies. ``grid``:
     :func:`glossy_grid` of the same arguments when the caller has it already (None included)."""
     g = glossy_grid(lamp_points, camera, road) if grid is False else grid
     if g is None:
