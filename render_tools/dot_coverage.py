@@ -47,12 +47,13 @@ def _clip(poly: np.ndarray, axis: int, bound: np.ndarray, keep_below: bool) -> n
     pts = np.stack([p, cross], axis=2).reshape(N, 2 * V, 2)
     ok = np.stack([inside_p, inside_p != inside_q], axis=2).reshape(N, 2 * V)
     order = np.argsort(~ok, axis=1, kind="stable")  # the kept points first, in order
-    pts = np.take_along_axis(pts, order[..., None], axis=1)
     cnt = ok.sum(1)
-    idx = np.minimum(np.arange(2 * V)[None, :], np.maximum(cnt - 1, 0)[:, None])
-    out = np.take_along_axis(pts, idx[..., None], axis=1)
+    # the first V + 1 kept points, the last repeated: one gather of the points through both index arrays (the
+    # same values as gathering the sorted points, then those)
+    idx = np.minimum(np.arange(V + 1)[None, :], np.maximum(cnt - 1, 0)[:, None])
+    out = np.take_along_axis(pts, np.take_along_axis(order, idx, axis=1)[..., None], axis=1)
     out[cnt == 0] = 0.0  # nothing left: a point (zero area)
-    return out[:, :V + 1]
+    return out
 
 
 def clip_area(quads: np.ndarray, boxes: np.ndarray) -> np.ndarray:
