@@ -119,6 +119,26 @@ def _box_mean(x: np.ndarray, r: int) -> np.ndarray:
     return (both / (n_r * n_c)).astype(np.float32)
 
 
+def _block_sums(x: np.ndarray, f: int) -> np.ndarray:
+    """(N, h f, w f) -> (N, h, w) float64: sums over f x f px blocks, the same numbers as
+    ``x.astype(np.float64).reshape(N, h, f, w, f).sum(axis=(2, 4))`` (each block row summed in order, then the
+    rows in order, from +0: numpy's order for blocks under 8 px, tested bit for bit), without the float64 copy of
+    ``x`` and numpy's strided two-axis reduction (a quarter of the static denoising's CPU time on a wet
+    generator-2 night at 640x360). Blocks of 8 px or more: numpy's sum itself (its pairwise order)."""
+    N, Hf, Wf = x.shape
+    h, w = Hf // f, Wf // f
+    if f >= 8:
+        return np.asarray(x, np.float64).reshape(N, h, f, w, f).sum(axis=(2, 4))
+    y = x.reshape(N, h, f, w, f)
+    out = np.zeros((N, h, w), np.float64)
+    for a in range(f):
+        row = y[:, :, a, :, 0].astype(np.float64)
+        for b in range(1, f):
+            row += y[:, :, a, :, b]
+        out += row
+    return out
+
+
 def _block_mean(x: np.ndarray, f: int) -> np.ndarray:
     """(N, H, W) -> (N, ceil(H / f), ceil(W / f)) float32: means over f x f px blocks (a block cut by the image's
     edge: over its pixels inside)."""
@@ -126,14 +146,14 @@ def _block_mean(x: np.ndarray, f: int) -> np.ndarray:
     N, H, W = x.shape
     h, w = -(-H // f), -(-W // f)
     if H == h * f and W == w * f:  # whole blocks: no padding, every block holds f * f pixels (the same sums)
-        sums = x.astype(np.float64).reshape(N, h, f, w, f).sum(axis=(2, 4))
+        sums = _block_sums(x, f)
         sums /= float(f * f)
         return sums.astype(np.float32)
     pad = np.zeros((N, h * f, w * f), np.float64)
     pad[:, :H, :W] = x
     cnt = np.zeros((h * f, w * f), np.float64)
     cnt[:H, :W] = 1.0
-    sums = pad.reshape(N, h, f, w, f).sum(axis=(2, 4))
+    sums = _block_sums(pad, f)
     return (sums / cnt.reshape(h, f, w, f).sum(axis=(1, 3))).astype(np.float32)
 
 

@@ -852,6 +852,33 @@ def _inside(box: tuple | None, outer: tuple) -> tuple | None:
     return b if b[2] > b[0] and b[3] > b[1] else None
 
 
+#: Band means of lamp spectra (:func:`light_bands`): key -> read-only (C,) array; at most :data:`_BANDS_KEPT` kept.
+_BANDS: dict = {}
+_BANDS_KEPT = 4096
+
+
+def light_bands(light: dict, opts: RenderOptions) -> np.ndarray:
+    """(C,) W sr^-1 m^-2 nm^-1, read-only: :func:`render_tools.spectra.band_means` of the light's
+    :func:`render_tools.mitsuba_scene.light_spectrum` in ``opts``' bands, computed once per spectrum, luminance and
+    bands (a 0.05 nm interpolation, 5 ms: :func:`lamp_pass_spp` and :func:`exact_face` asked for each lamp's in
+    every frame, 1 CPU s per wet generator-2 night at 640x360). Keyed by the spectrum's canonical JSON, so an
+    equal light gets the same array."""
+    import json  # noqa: PLC0415
+
+    from . import spectra  # noqa: PLC0415
+
+    key = (json.dumps(light["spectrum"], sort_keys=True, default=repr), repr(light["luminance_cd_m2"]),
+           tuple(float(b) for b in opts.bands_nm), float(opts.band_width_nm))
+    out = _BANDS.get(key)
+    if out is None:
+        out = np.asarray(spectra.band_means(ms.light_spectrum(light), opts.bands_nm, opts.band_width_nm))
+        out.flags.writeable = False
+        if len(_BANDS) >= _BANDS_KEPT:
+            _BANDS.clear()
+        _BANDS[key] = out
+    return out
+
+
 def lamp_pass_spp(light: dict, opts: RenderOptions, light_spp: int | None = None) -> tuple | None:
     """Samples per pixel and bin of each band pass (P counts, powers of two) for ``light``'s own crop: its
     light_spp x P samples shared in proportion to the light's spectral radiance in each pass's bands (the sum
@@ -866,13 +893,11 @@ def lamp_pass_spp(light: dict, opts: RenderOptions, light_spp: int | None = None
     got a quarter of the lamp's samples. Measured on a night scene (docs/benchmarks/render.md, "LED dot faces"):
     the LED bins' error 4.5 % -> 3.2 % for the same or fewer samples. ``light_spp``: the lamp's own count
     (:func:`lamp_light_spp`; default ``opts.light_spp``)."""
-    from . import spectra  # noqa: PLC0415
-
     n0 = light_spp or opts.light_spp or opts.spp
     if n0 & (n0 - 1):
         return None
     P = cam_mod.n_passes(len(opts.bands_nm))
-    bands = spectra.band_means(ms.light_spectrum(light), opts.bands_nm, opts.band_width_nm)
+    bands = light_bands(light, opts)
     share = np.array([bands[p::P].sum() for p in range(P)], dtype=np.float64)
     if not share.sum() > 0:
         return None
@@ -901,15 +926,26 @@ def lamp_light_spp(light: dict, opts: RenderOptions, filled: frozenset | set = f
     return n * opts.dots_spp_factor if light["id"] in dense else n
 
 
-def _subpixel_dots(scene: dict, opts: RenderOptions, px: float) -> list[int]:
-    """Ids of the ``dots`` lights whose dot pitch stays under ``px`` px over every frame's capture window
-    (:meth:`SceneGeometry.dots_pitch_px`, sampled at :data:`BBOX_TIME_SAMPLES` times); [] when ``px`` is 0."""
-    if not px or not any(lt["shape"] == "dots" for lt in scene["lights"]):
-        return []
+def dots_pitches(scene: dict, opts: RenderOptions) -> dict:
+    """Light id -> the largest dot pitch (px) of each ``dots`` light over every frame's capture window
+    (:meth:`SceneGeometry.dots_pitch_px`, sampled at :data:`BBOX_TIME_SAMPLES` times): what :func:`_subpixel_dots`
+    compares with its threshold, computed once for the thresholds of one render (:func:`drawn_geometry`)."""
+    if not any(lt["shape"] == "dots" for lt in scene["lights"]):
+        return {}
     geo = SceneGeometry(scene, opts)
     times = np.concatenate([np.linspace(*frame_timing(scene, opts, n)["window"], BBOX_TIME_SAMPLES)
                             for n in range(opts.frames)])
-    return [lt["id"] for lt in scene["lights"] if lt["shape"] == "dots" and geo.dots_pitch_px(lt, times) < px]
+    return {lt["id"]: geo.dots_pitch_px(lt, times) for lt in scene["lights"] if lt["shape"] == "dots"}
+
+
+def _subpixel_dots(scene: dict, opts: RenderOptions, px: float, pitches: dict | None = None) -> list[int]:
+    """Ids of the ``dots`` lights whose dot pitch stays under ``px`` px over every frame's capture window
+    (:func:`dots_pitches`; ``pitches``: its result for this scene and options, else computed); [] when ``px`` is
+    0."""
+    if not px or not any(lt["shape"] == "dots" for lt in scene["lights"]):
+        return []
+    pitches = dots_pitches(scene, opts) if pitches is None else pitches
+    return [lt["id"] for lt in scene["lights"] if lt["shape"] == "dots" and pitches[lt["id"]] < px]
 
 
 def exact_coverage(scene: dict, opts: RenderOptions) -> bool:
@@ -918,18 +954,19 @@ def exact_coverage(scene: dict, opts: RenderOptions) -> bool:
     return _on_from_version_2(opts.dots_coverage, "exact", scene)
 
 
-def exact_faces(scene: dict, opts: RenderOptions) -> list[int]:
+def exact_faces(scene: dict, opts: RenderOptions, pitches: dict | None = None) -> list[int]:
     """Ids of the lights whose own box is made by :func:`exact_face` (``opts.dots_coverage`` ``exact``): a face
     without a beam (``spread_deg`` 90) in a flickering group, either ``dots`` whose dot pitch stays under
     :data:`EXACT_DOTS_PX` over every frame (:func:`_subpixel_dots`) or a ``rect`` whose sides stay under
     :data:`EXACT_RECT_PX` (a countdown's segments; its visibility parts then under a quarter of a pixel); []
     otherwise. Larger dots (tail and brake lamps near the camera,
     1.2 % LED-bin error traced at light_spp 32) are left to the tracer, which also draws the light a face throws
-    on what is next to it inside its box (a tail lamp's on its bumper: 2.3 % of its box's light at dusk)."""
+    on what is next to it inside its box (a tail lamp's on its bumper: 2.3 % of its box's light at dusk).
+    ``pitches``: :func:`dots_pitches` of this scene and options (None: computed)."""
     if not exact_coverage(scene, opts):
         return []
     flick = {g for g, info in scene_groups(scene).items() if info["flicker"]}
-    sub = set(_subpixel_dots(scene, opts, EXACT_DOTS_PX))
+    sub = set(_subpixel_dots(scene, opts, EXACT_DOTS_PX, pitches))
     rects = [lt for lt in scene["lights"] if lt["shape"] == "rect" and lt["group"] in flick]
     if rects:
         geo = SceneGeometry(scene, opts)
@@ -957,37 +994,41 @@ def exact_face(scene: dict, light: dict, opts: RenderOptions, geo: "SceneGeometr
     samples estimate for a face alone in its light set. ``loaded``: the frame's Mitsuba scene (objects at
     ``t_obj`` s; ``mi`` the module), whose surfaces hide dots (:func:`render_tools.dot_coverage.ray_visibility`);
     None: nothing in front of the face."""
-    from . import dot_coverage, spectra  # noqa: PLC0415
+    from . import dot_coverage  # noqa: PLC0415
 
     vis = None
     if loaded is not None:
         vel = geo.object_velocity(light)
         vis = dot_coverage.ray_visibility(mi, loaded, lambda t: np.outer(np.asarray(t) - t_obj, vel))
     cov = dot_coverage.dots_coverage(scene, _as_dots(light), geo.K, geo.pose_cv, crop, edges, vis)
-    L = spectra.band_means(ms.light_spectrum(light), opts.bands_nm, opts.band_width_nm)
-    return (cov[:, None] * np.asarray(L)[None, :, None, None]).astype(np.float32)
+    L = light_bands(light, opts)
+    return (cov[:, None] * L[None, :, None, None]).astype(np.float32)
 
 
-def dense_dots(scene: dict, opts: RenderOptions, filled=()) -> list[int]:
+def dense_dots(scene: dict, opts: RenderOptions, filled=(), exact=None, pitches: dict | None = None) -> list[int]:
     """Ids of the lights whose sub-pixel dots are drawn as they are (:data:`DOTS_SPP_PX`, not among ``filled``,
     the ids :func:`dots_lod` drew as filled cells), whose own boxes get ``opts.dots_spp_factor`` times light_spp
-    (:func:`lamp_light_spp`); [] when that factor is 1 (nothing to find)."""
+    (:func:`lamp_light_spp`); [] when that factor is 1 (nothing to find). ``exact``, ``pitches``:
+    :func:`exact_faces` and :func:`dots_pitches` of this scene and options (None: computed)."""
     if opts.dots_spp_factor == 1:
         return []
-    skip = set(filled) | set(exact_faces(scene, opts))
-    return [i for i in _subpixel_dots(scene, opts, DOTS_SPP_PX) if i not in skip]
+    skip = set(filled) | set(exact_faces(scene, opts, pitches) if exact is None else exact)
+    return [i for i in _subpixel_dots(scene, opts, DOTS_SPP_PX, pitches) if i not in skip]
 
 
-def dots_lod(scene: dict, opts: RenderOptions) -> tuple[dict, list[int]]:
+def dots_lod(scene: dict, opts: RenderOptions, exact=None, pitches: dict | None = None) -> tuple[dict, list[int]]:
     """The scene as the renderer draws it with ``opts``: each ``dots`` light whose dot pitch stays under
     ``opts.dots_lod_px`` px over every frame's capture window (:meth:`SceneGeometry.dots_pitch_px`, sampled at
     :data:`BBOX_TIME_SAMPLES` times) replaced by :func:`render_tools.led_matrix.filled_cells` (same id, group,
     waveform and driver). Returns (scene, ids of the lights replaced); ``scene`` itself (not a copy) when none
-    is. One decision per light for the whole sequence, so a light never switches form between frames."""
+    is. One decision per light for the whole sequence, so a light never switches form between frames.
+    ``exact``, ``pitches``: :func:`exact_faces` and :func:`dots_pitches` of this scene and options (None:
+    computed)."""
     from . import led_matrix  # noqa: PLC0415
 
-    exact = set(exact_faces(scene, opts))  # drawn by their exact coverage: no stand-in
-    ids = [i for i in _subpixel_dots(scene, opts, opts.dots_lod_px) if i not in exact]
+    # drawn by their exact coverage: no stand-in
+    exact = set(exact_faces(scene, opts, pitches) if exact is None else exact)
+    ids = [i for i in _subpixel_dots(scene, opts, opts.dots_lod_px, pitches) if i not in exact]
     if not ids:
         return scene, []
     out = dict(scene)
@@ -995,7 +1036,8 @@ def dots_lod(scene: dict, opts: RenderOptions) -> tuple[dict, list[int]]:
     return out, ids
 
 
-#: The last scene's drawn form and screen geometry (:func:`drawn_geometry`): ``[key, (drawn, lod ids, geometry)]``.
+#: The last scene's drawn form and screen geometry (:func:`drawn_faces`): ``[key, (drawn, lod ids, geometry),
+#: exact ids]``.
 _DRAWN: list = []
 
 
@@ -1006,6 +1048,15 @@ def drawn_geometry(scene: dict, opts: RenderOptions) -> tuple[dict, list[int], S
     its generator-1 night: measured 2026-11-28). The last scene's are kept (one scene's arrays), keyed by the
     scene's content (canonical JSON, 20 ms for a generator-2 scene) and the options, so an equal scene gets the
     same results and a changed one new ones; the geometry's caches are functions of their arguments."""
+    return drawn_faces(scene, opts)[:3]
+
+
+def drawn_faces(scene: dict, opts: RenderOptions) -> tuple[dict, list[int], SceneGeometry, list[int]]:
+    """:func:`drawn_geometry` and :func:`exact_faces` of ``scene`` (the same ids for the drawn scene: a filled
+    stand-in keeps its grid, size, group and beam), kept with it: one render computed the exact faces three times
+    before (dots_lod, scene_meta, render_frames; and the dot pitches behind them four times, 0.3 CPU s each on a
+    wet generator-2 night at 640x360), now once, with the pitches shared by both thresholds (:func:`dots_pitches`).
+    Returns (drawn scene, lod ids, geometry, exact ids); do not modify them."""
     import json  # noqa: PLC0415
 
     try:
@@ -1014,11 +1065,13 @@ def drawn_geometry(scene: dict, opts: RenderOptions) -> tuple[dict, list[int], S
     except (TypeError, ValueError):  # not JSON-like (keys of mixed types): computed anew, not kept
         key = None
     if key is not None and _DRAWN and _DRAWN[0] == key:
-        return _DRAWN[1]
-    drawn, ids = dots_lod(scene, opts)
+        return (*_DRAWN[1], _DRAWN[2])
+    pitches = dots_pitches(scene, opts) if opts.dots_lod_px or exact_coverage(scene, opts) else {}
+    exact = exact_faces(scene, opts, pitches)
+    drawn, ids = dots_lod(scene, opts, exact, pitches)
     out = (drawn, ids, SceneGeometry(drawn, opts))
-    _DRAWN[:] = [key, out] if key is not None else []
-    return out
+    _DRAWN[:] = [key, out, exact] if key is not None else []
+    return (*out, exact)
 
 
 def _round_span(a: int, b: int, n: int) -> tuple[int, int]:
@@ -1050,7 +1103,7 @@ def scene_meta(scene: dict, opts: RenderOptions) -> dict:
     """
     validate_scene(scene)
     opts.validate()
-    drawn, lod_ids, helper = drawn_geometry(scene, opts)  # crops as render_frames draws the lights
+    drawn, lod_ids, helper, exact = drawn_faces(scene, opts)  # crops as render_frames draws the lights
     ego = cam_mod.EgoMotion.from_scene(scene)
     fov = float(scene["camera"]["fov_x_deg"])
     K = cam_mod.intrinsics(opts.width, opts.height, fov)
@@ -1092,11 +1145,11 @@ def scene_meta(scene: dict, opts: RenderOptions) -> dict:
                    **({"reflection_bins": opts.reflection_bins or opts.bins,
                        "reflection_min_lux": opts.reflection_min_lux,
                        "reflection_block_px": opts.reflection_block_px} if helper.wet else {}),
-                   **({"dots_coverage": "exact", "dots_exact": exact_faces(scene, opts)}
+                   **({"dots_coverage": "exact", "dots_exact": list(exact)}
                       if exact_coverage(scene, opts) else {}),
                    **({"dots_lod_px": opts.dots_lod_px, "dots_lod": lod_ids,
                        "filled_spp_factor": opts.filled_spp_factor,
-                       **({"dots_spp_factor": opts.dots_spp_factor, "dots_spp": dense_dots(scene, opts, lod_ids)}
+                       **({"dots_spp_factor": opts.dots_spp_factor, "dots_spp": dense_dots(scene, opts, lod_ids, exact)}
                           if opts.dots_spp_factor != 1 else {})}
                       if any(lt["shape"] == "dots" for lt in scene["lights"]) else {}),
                    **({"lamp_pass_spp": "spectrum" if spectral_lamp_passes(scene, opts) else "uniform",
@@ -1431,10 +1484,11 @@ def render_frames(scene: dict, opts: RenderOptions, steady_bins: bool = False) -
     opts.validate()
     timings = [frame_timing(scene, opts, n) for n in range(opts.frames)]  # validates exposures up front
     # sub-pixel LED dots as filled cells (RenderOptions.dots_lod_px), and where the lamps are on screen
-    scene, filled, geo = drawn_geometry(scene, opts)
+    # (and the dot faces made by their exact coverage, dots_coverage: exact_faces, the same for the drawn scene)
+    scene, filled, geo, exact = drawn_faces(scene, opts)
     filled = frozenset(filled)
-    dense = frozenset(dense_dots(scene, opts, filled))  # sub-pixel dots drawn as they are (dots_spp_factor)
-    exact = frozenset(exact_faces(scene, opts))  # dot faces by their exact coverage (dots_coverage)
+    exact = frozenset(exact)
+    dense = frozenset(dense_dots(scene, opts, filled, exact))  # sub-pixel dots drawn as they are (dots_spp_factor)
     by_id = {lt["id"]: lt for lt in scene["lights"]}
     groups = _selected_groups(scene, opts)
     from . import backend  # noqa: PLC0415

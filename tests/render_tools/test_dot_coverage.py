@@ -66,3 +66,45 @@ def test_fronto_parallel_face_covers_its_projected_area_and_a_hidden_half_is_lef
     # a face with its back to the camera emits nothing towards it
     back = dict(face, normal=[0.0, 0.0, 1.0])
     assert dot_coverage.dots_coverage({}, back, K, lambda t: pose, crop, [0.0, 1e-3]).sum() == 0.0
+
+
+def _clip_two_gathers(poly, axis, bound, keep_below):
+    """The clip step as written before its gathers were joined: the sorted points gathered, then those (the
+    reference of :func:`test_joined_gathers_and_part_centres_equal_the_plain_computation_bit_for_bit`)."""
+    N, V, _ = poly.shape
+    p, q = poly, np.roll(poly, -1, axis=1)
+    s = 1.0 if keep_below else -1.0
+    dp, dq = s * (p[..., axis] - bound[:, None]), s * (q[..., axis] - bound[:, None])
+    inside_p, inside_q = dp <= 0, dq <= 0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        f = np.where(dp != dq, dp / (dp - dq), 0.0)
+    pts = np.stack([p, p + f[..., None] * (q - p)], axis=2).reshape(N, 2 * V, 2)
+    ok = np.stack([inside_p, inside_p != inside_q], axis=2).reshape(N, 2 * V)
+    pts = np.take_along_axis(pts, np.argsort(~ok, axis=1, kind="stable")[..., None], axis=1)
+    cnt = ok.sum(1)
+    idx = np.minimum(np.arange(2 * V)[None, :], np.maximum(cnt - 1, 0)[:, None])
+    out = np.take_along_axis(pts, idx[..., None], axis=1)
+    out[cnt == 0] = 0.0
+    return out[:, :V + 1]
+
+
+def test_joined_gathers_and_part_centres_equal_the_plain_computation_bit_for_bit():
+    """The render's shortcuts give the very same numbers (corpus files byte-identical): the clip step with one
+    gather equals the two-gather version, and the visibility test's part centres (:func:`dot_coverage._sub_centres`)
+    equal the mean of the parts' corners (:func:`dot_coverage._sub_quads`), zeros' signs included."""
+    rng = np.random.default_rng(11)
+    for t in range(8):
+        poly = rng.uniform(-2.0, 3.0, (300, int(rng.integers(3, 8)), 2))
+        if t % 2:
+            poly = np.round(poly)  # vertices on the clip lines
+        bound = rng.uniform(-1.0, 2.0, 300)
+        for axis in (0, 1):
+            for below in (True, False):
+                assert dot_coverage._clip(poly, axis, bound, below).tobytes() == \
+                    _clip_two_gathers(poly, axis, bound, below).tobytes()
+        corners = rng.normal(size=(50, 4, 3)) * 10.0 ** rng.uniform(-3, 3)
+        corners[:, :2, t % 3] = -0.0 if t % 2 else 0.0
+        for n in (8, 16):
+            want = dot_coverage._sub_quads(corners, n).mean(2)
+            got = dot_coverage._sub_centres(corners, n)
+            assert got.shape == want.shape and got.tobytes() == want.tobytes()

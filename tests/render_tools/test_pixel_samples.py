@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from scipy.stats import qmc
 
-from render_tools import render, scene, tracer
+from render_tools import mitsuba_scene, render, scene, spectra, tracer
 
 
 def test_sobol_points_are_scipys_sequence():
@@ -248,3 +248,32 @@ def test_dots_spp_factor_multiplies_only_sub_pixel_dots_drawn_as_they_are():
     assert not render.exact_coverage({**sc, "version": 1}, auto)
     with pytest.raises(ValueError, match="dots_coverage"):
         render.RenderOptions(dots_coverage="analytic")
+
+
+def test_shared_exact_faces_pitches_and_band_means_equal_recomputation():
+    """What one render now computes once (:func:`render.drawn_faces`: the exact faces with the dot pitches shared
+    by both thresholds; :func:`render.light_bands`: a lamp's band means) equals computing it anew, and the
+    drawn (filled) scene has the same exact faces as the scene."""
+    sc = scene.generate_scene(101, time_of_day="night", generator=2)
+    kinds: dict = {}  # at most 3 lamps of each kind: sub-pixel dots, larger dots, rectangles
+    sc["lights"] = [{**lt, "id": i} for i, lt in enumerate(
+        lt for lt in sc["lights"] if lt["kind"] in {"message_sign", "signal", "tail", "indicator", "countdown"}
+        and kinds.setdefault(lt["kind"], []).append(1) is None and len(kinds[lt["kind"]]) <= 3)]
+    opts = render.RenderOptions(width=160, height=90, frames=1, groups=("signals", "otherlights"))
+    drawn, lod, _geo, exact = render.drawn_faces(sc, opts)
+    assert exact == render.exact_faces(sc, opts) == render.exact_faces(drawn, opts) != []
+    assert (drawn, lod) == render.dots_lod(sc, opts)
+    assert render.dots_pitches(sc, opts) == render.dots_pitches(drawn, opts)
+    assert render.scene_meta(sc, opts)["render"]["dots_exact"] == exact
+    traced = render.RenderOptions(width=160, height=90, frames=1, dots_coverage="traced")  # sub-pixel dots filled
+    d1, lod1, _g, ex1 = render.drawn_faces(sc, traced)
+    assert (d1, lod1) == render.dots_lod(sc, traced) and lod1 != [] and ex1 == []
+    more = render.RenderOptions(width=160, height=90, frames=1, dots_spp_factor=4, dots_lod_px=0.0,
+                                dots_coverage="traced")
+    d2, lod2, _g, ex2 = render.drawn_faces(sc, more)
+    assert render.dense_dots(d2, more, lod2, ex2) == render.dense_dots(d2, more, lod2) != []
+    for lt in sc["lights"][:6]:
+        want = spectra.band_means(mitsuba_scene.light_spectrum(lt), opts.bands_nm, opts.band_width_nm)
+        got = render.light_bands(lt, opts)
+        assert got.tobytes() == np.asarray(want).tobytes() and render.light_bands(dict(lt), opts) is got
+        assert not got.flags.writeable
