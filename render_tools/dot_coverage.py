@@ -18,6 +18,7 @@ import numpy as np
 from . import camera as cam_mod
 from . import led_matrix
 from . import mitsuba_scene as ms
+from .kernel_rules import kernel_input
 
 __all__ = ["clip_area", "quad_coverage", "dots_coverage", "TIME_SAMPLES"]
 
@@ -168,21 +169,6 @@ def _sub_centres(corners: np.ndarray, n: int) -> np.ndarray:
     return c.reshape(len(corners), n * n, 3)
 
 
-def _kernel_input(x: np.ndarray) -> np.ndarray:
-    """``x`` as float32 in a buffer aligned to 64 bytes, at least 2 entries long (the tail repeats the last). Dr.Jit
-    reads a numpy array where it lies and compiles its load with the alignment it finds there (and a 1-entry array
-    as a scalar), so arrays placed wherever the allocator puts them give a new kernel hash per process: a disk-cache
-    miss on every render (measured: 41 of 57 kernels compiled again in a second process before this)."""
-    x = np.asarray(x, np.float32).ravel()
-    if x.size < 2:
-        x = np.concatenate([x, np.repeat(x[-1:] if x.size else np.zeros(1, np.float32), 2 - x.size)])
-    buf = np.empty(x.nbytes + 64, np.uint8)
-    off = (-buf.ctypes.data) % 64
-    out = buf[off:off + x.nbytes].view(np.float32)
-    out[:] = x
-    return out
-
-
 def ray_visibility(mi, loaded, shift=None, eps_m: float = 1e-3):
     """A ``visible`` function for :func:`dots_coverage`: for each time, dot (corners (T, P, 4, 3) m) and each of
     its n x n parts (:func:`_sub_quads`), whether the segment from the camera centre (T, 3) m to the part's centre,
@@ -204,8 +190,8 @@ def ray_visibility(mi, loaded, shift=None, eps_m: float = 1e-3):
         dist = np.linalg.norm(d, axis=1)
         d = d / dist[:, None]
         m = len(dist)
-        ray = mi.Ray3f(mi.Point3f(*[_kernel_input(o[:, j]) for j in range(3)]),
-                       mi.Vector3f(*[_kernel_input(d[:, j]) for j in range(3)]))
-        ray.maxt = mi.Float(_kernel_input(dist - eps_m))
+        ray = mi.Ray3f(mi.Point3f(*[kernel_input(o[:, j]) for j in range(3)]),
+                       mi.Vector3f(*[kernel_input(d[:, j]) for j in range(3)]))
+        ray.maxt = mi.Float(kernel_input(dist - eps_m))
         return ~np.asarray(loaded.ray_test(ray), dtype=bool)[:m].reshape(T, P, n * n)
     return visible

@@ -7,6 +7,7 @@ import ast
 import textwrap
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from render_tools.kernel_rules import DIVISOR_HELPER, HOST_INT_CALLS, lane_divisor
@@ -198,3 +199,21 @@ def test_render_whose_lane_count_is_no_multiple_of_the_packet_width(tmp_path):
                        timeout=300, cwd=tmp_path)
     assert p.returncode == 0, f"render died (return code {p.returncode}): {p.stderr[-2000:]}"
     assert p.stdout.startswith("ok")
+
+
+@pytest.mark.parametrize("n", [0, 1, 2, 3, 17, 1000])
+@pytest.mark.parametrize("dtype", [None, np.uint32, np.float64])
+def test_kernel_input_is_aligned_padded_and_keeps_the_values(n, dtype):
+    """kernel_rules.kernel_input: 64-byte aligned whatever the source's address (a view at an odd offset), at
+    least 2 entries (the tail repeats the last, 0 for none), the values cast to the dtype (float32 by default)."""
+    from render_tools.kernel_rules import KERNEL_INPUT_ALIGN, kernel_input
+
+    raw = np.arange(n + 1, dtype=np.float64)[1:] * 3  # a view 8 bytes into its buffer: not 64-byte aligned
+    for _ in range(3):  # fresh buffers each call: alignment holds for each
+        a = kernel_input(raw, dtype)
+        assert a.ctypes.data % KERNEL_INPUT_ALIGN == 0
+        assert a.dtype == np.dtype(np.float32 if dtype is None else dtype)
+        assert a.shape == (max(n, 2),)
+        np.testing.assert_array_equal(a[:n], raw.astype(a.dtype))
+        if n < 2:
+            assert (a[n:] == (raw[-1] if n else 0)).all()
