@@ -79,3 +79,17 @@ def test_verdict():
     assert T.verdict(0.015, 0.019, 0.08, 0.12) == "LED met, median met (corrected)"
     assert T.verdict(0.015, 0.021, 0.11, 0.12) == "LED missed, median missed"
     assert T.verdict(0.01, 0.01, 0.05, 0.09) == "LED met, median met"
+
+
+def test_rel_error_percentiles_bound_the_median_when_a_few_pixels_change():
+    rng = np.random.default_rng(2)
+    m = rng.uniform(0.5, 2.0, (90, 160))
+    t = m * (1 + rng.uniform(-0.2, 0.2, m.shape))  # |relative error| uniform on [0, 0.2]
+    p46, p54 = T.rel_error_percentiles(t, m, m)
+    assert p46 == pytest.approx(0.092, abs=0.003) and p54 == pytest.approx(0.108, abs=0.003)
+    raw, _, _ = T.median_corrected(t, m, m)
+    assert p46 < raw < p54
+    for v in (0.0, 1e3):  # the bottom 3 of 90 rows (3.3 %) re-rendered: far off, or exact
+        t2 = t.copy()
+        t2[-3:] = m[-3:] * (1 + v)
+        assert p46 <= T.median_corrected(t2, m, m)[0] <= p54
