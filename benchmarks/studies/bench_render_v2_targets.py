@@ -136,6 +136,34 @@ def rel_error_percentiles(t: np.ndarray, a: np.ndarray, b: np.ndarray, qs=(46.0,
     return tuple(float(v) for v in np.percentile(e, qs))
 
 
+#: What a pixel shows, for :func:`median_by_region`: region -> object kinds of scene generator 2 (``objects[i]
+#: ["kind"]`` of the first camera hit, ``mask.instance``); no hit is ``sky``, a light's face (``mask.light``) ``lamps``,
+#: a kind not listed ``other``.
+REGIONS = {"road": ("road", "marking"), "sidewalk, ground": ("sidewalk", "ground"), "buildings": ("building",),
+           "vehicles": ("car", "bus", "truck", "van", "bicycle"), "people": ("pedestrian", "cyclist"),
+           "trees": ("tree",), "poles, signs": ("streetlight_pole", "signal_pole", "traffic_sign", "bollard")}
+
+
+def median_by_region(t: np.ndarray, a: np.ndarray, b: np.ndarray, instance: np.ndarray, light: np.ndarray,
+                     kinds: list) -> dict:
+    """:func:`median_corrected` per region of the frame (:data:`REGIONS`, ``sky``, ``lamps``, ``other``): ``t``,
+    ``a``, ``b`` (H, W) luminance, ``instance`` (H, W) object index of the first hit (-1: none), ``light`` (H, W)
+    light id of a lamp face (-1: none), ``kinds`` the objects' kinds. Returns {region: (share of the pixels with
+    m > 0, raw, r, corrected)}, regions without such a pixel left out."""
+    of_kind = {k: reg for reg, ks in REGIONS.items() for k in ks}
+    names = np.array([of_kind.get(k, "other") for k in kinds] + ["sky"], dtype=object)
+    inst = np.asarray(instance).astype(np.int64)
+    reg = names[np.where(inst < 0, len(kinds), np.minimum(inst, len(kinds)))]
+    reg[np.asarray(light) >= 0] = "lamps"
+    ok = 0.5 * (np.asarray(a, np.float64) + b) > 0
+    out = {}
+    for r in [*REGIONS, "sky", "lamps", "other"]:
+        sel = (reg == r) & ok
+        if sel.any():
+            out[r] = (float(sel.sum() / ok.sum()), *median_corrected(t[sel], a[sel], b[sel]))
+    return out
+
+
 def led_error_boxed(frame: dict, ref_a: dict, ref_b: dict, kinds: dict, boxes: dict) -> dict:
     """Relative RMSE of the LED bins of ``frame`` against the mean of two references, corrected for their noise
     (:func:`corrected_rel_rmse`'s sums pooled), over each light's LED pixels: the references' mean bin-mean above
@@ -181,6 +209,8 @@ def scores(sc, fr: dict, ra: dict, rb: dict, opts) -> dict:
         out[f"p46_{win}_raw"], out[f"p54_{win}_raw"] = rel_error_percentiles(t, a, b)
         if win == "short":
             mask = (ra["aux"]["mask.light"] >= 0) | (rb["aux"]["mask.light"] >= 0)
+            out["regions"] = median_by_region(t, a, b, ra["aux"]["mask.instance"], np.where(mask, 0, -1),
+                                              [o["kind"] for o in sc["objects"]])
             out["led_px"] = corrected_rel_rmse(t[mask], a[mask], b[mask])
     return out
 
@@ -379,6 +409,18 @@ def write_section(rows: list, out: Path, load0: float, load1: float, size, ref, 
         lines.append(f"| {r['case']} | {r['setting']} | "
                      + " | ".join(f"{r['kinds'][k][0]:.3f} ({r['kinds'][k][1]:.2f})" if k in r["kinds"] else "-"
                                   for k in kinds) + " |")
+    regs = [r for r in [*REGIONS, "sky", "lamps", "other"] if any(r in x.get("regions", {}) for x in rows)]
+    if regs:
+        lines += ["", "All-pixel median of the short window by what a pixel shows (:data:`REGIONS` of the script: the "
+                  "first camera hit's object kind; no hit: sky; the references' light mask: lamps): share of the "
+                  "frame's pixels, median relative error raw / corrected for the references' noise (%).", "",
+                  "| scene | setting | " + " | ".join(regs) + " |", "|---|---|" + "---|" * len(regs)]
+        for r in rows:
+            if "regions" in r:
+                g = r["regions"]
+                lines.append(f"| {r['case']} | {r['setting']} | " + " | ".join(
+                    f"{100 * g[k][0]:.0f} %: {100 * g[k][1]:.1f} / {100 * g[k][3]:.1f}" if k in g else "-"
+                    for k in regs) + " |")
     if dots:
         lines[0] = DOTS_SECTION
         lines += ["", f"Run again with `{DOTS_RERUN}` (the references are the bulk of the time; add `--gap-cases "

@@ -93,3 +93,20 @@ def test_rel_error_percentiles_bound_the_median_when_a_few_pixels_change():
         t2 = t.copy()
         t2[-3:] = m[-3:] * (1 + v)
         assert p46 <= T.median_corrected(t2, m, m)[0] <= p54
+
+
+def test_median_by_region_splits_the_frame_by_what_it_shows():
+    rng = np.random.default_rng(3)
+    m = rng.uniform(0.5, 2.0, (40, 50))
+    inst = np.full(m.shape, -1)  # sky above
+    inst[20:, :25], inst[20:, 25:] = 0, 1  # road, a building
+    light = np.full(m.shape, -1)
+    light[30:32, 30:34] = 4  # a lamp's face on the building
+    err = np.where(inst == 0, 0.3, np.where(inst == 1, 0.02, 0.1))
+    t = m * (1 + err * rng.choice([-1, 1], m.shape))
+    out = T.median_by_region(t, m, m, inst, light, ["road", "building"])
+    assert set(out) == {"road", "buildings", "sky", "lamps"}
+    assert out["road"][0] == pytest.approx(0.25) and out["road"][1] == pytest.approx(0.3)
+    assert out["buildings"][1] == pytest.approx(0.02) and out["sky"][1] == pytest.approx(0.1)
+    assert out["lamps"][0] == pytest.approx(8 / 2000)
+    assert sum(v[0] for v in out.values()) == pytest.approx(1.0)
