@@ -30,6 +30,9 @@ Errors, on luminance Y (:mod:`bench_render`'s functions), with ``a``, ``b`` the 
   (the median error of m itself; exact when every pixel's errors scale alike, an estimate otherwise:
   :func:`median_corrected`); the long window's raw median too.
 
+``--ref4-cases``: cases scored again against four references (:data:`MORE_REF_SEEDS` too), a and b each the mean
+of two (:func:`mean_frames`): the references' own median error / sqrt 2, so the raw median is a tighter bound.
+
 Where a target is missed, ``--gap`` settings (:data:`GAP_SETTINGS`: the dots as they are at light_spp 32-128,
 filled cells at ``filled_spp_factor`` 8, the sub-pixel dots as they are at ``dots_spp_factor`` 4 or 8, the dot
 faces by their exact coverage, ``dots_coverage`` exact; static spp 2) are rendered for the cases given by
@@ -89,6 +92,9 @@ LAMP_GROUPS = ("otherlights", "signals")
 GAP_CASES = ("202:dusk:dry", "101:night:dry")
 #: References: spp (static frames, pad rings, reflections), light_spp (lamp boxes), seeds.
 REF_SPP, REF_LIGHT_SPP, REF_SEEDS = 8, 128, (3001, 3002)
+#: Two more references for ``--ref4-cases``: those cases are also scored against a = mean of :data:`REF_SEEDS`' two,
+#: b = mean of these two (each half the noise variance of one reference: the references' own median error / sqrt 2).
+MORE_REF_SEEDS = (3003, 3004)
 #: ``--gap`` settings: name -> RenderOptions fields over the ``default`` profile's.
 GAP_SETTINGS = {
     "dots as they are, light_spp 32": {"dots_lod_px": 0.0},
@@ -192,6 +198,26 @@ def verdict(led_bins: float, led_px: float, med: float, med_raw: float) -> str:
     return f"LED {led}, median {mm}"
 
 
+def mean_frames(frames: list) -> dict:
+    """The mean of frames of one scene and options but other seeds (dicts of
+    :func:`render_tools.render.render_frames`): every static window image (C, H, W) and light crop (K, C, h, w)
+    averaged, ``aux`` and ``frame`` taken from the first. The lights' ids and crop boxes must agree (a
+    ``ValueError`` naming the light otherwise)."""
+    f0 = frames[0]
+    out = {"frame": f0["frame"], "aux": f0["aux"],
+           "static": {g: {w: np.mean([f["static"][g][w] for f in frames], axis=0, dtype=np.float64).astype(
+               np.float32) for w in v} for g, v in f0["static"].items()}, "lights": {}}
+    for g, items in f0["lights"].items():
+        out["lights"][g] = []
+        for i, (lid, box, _) in enumerate(items):
+            other = [f["lights"][g][i] for f in frames]
+            if any(o[0] != lid or tuple(o[1]) != tuple(box) for o in other):
+                raise ValueError(f"frames: light {lid} of group {g} has other crops in another frame")
+            out["lights"][g].append((lid, box, np.mean([o[2] for o in other], axis=0, dtype=np.float64).astype(
+                np.float32)))
+    return out
+
+
 def scores(sc, fr: dict, ra: dict, rb: dict, opts) -> dict:
     """The errors of frame ``fr`` against references ``ra``, ``rb`` (module docstring)."""
     from render_tools import preview, render  # noqa: PLC0415
@@ -223,6 +249,8 @@ def main() -> None:
                     help="seed:time of day:weather (generator 2), rendered whole")
     ap.add_argument("--lamp-cases", nargs="*", default=list(LAMP_CASES),
                     help="cases rendered first with the flickering groups alone (LED bins only)")
+    ap.add_argument("--ref4-cases", nargs="*", default=[],
+                    help="cases (of --cases) also scored against four references (MORE_REF_SEEDS), two per half")
     ap.add_argument("--gap-cases", nargs="*", default=list(GAP_CASES),
                     help="cases that also render the --gap settings (what closes a missed target)")
     ap.add_argument("--gap-settings", nargs="*", default=list(GAP_SETTINGS),
@@ -263,15 +291,18 @@ def main() -> None:
         return
     load0, t0 = os.getloadavg()[0], time.time()
     rows = []
-    for c, groups in [(c, LAMP_GROUPS) for c in a.lamp_cases] + [(c, None) for c in a.cases]:
+    for c, groups, seeds in ([(c, LAMP_GROUPS, REF_SEEDS) for c in a.lamp_cases] + [(c, None, REF_SEEDS)
+                             for c in a.cases] + [(c, None, REF_SEEDS + MORE_REF_SEEDS) for c in a.ref4_cases]):
         sc = _v2_scene(c)
         tag = f"{c.replace(':', '_')}_{W}" + ("" if groups is None else "_lamps")
         refs, ref_cpu = [], 0.0
-        for s in REF_SEEDS:
+        for s in seeds:
             o = ref_opts(s, groups)
             fr, cpu = _frame(sc, o, cache, f"tgt_ref_{o.spp}_{ref_light_spp}_{s}_{tag}")
             refs.append(fr)
             ref_cpu += cpu
+        if len(refs) == 4:  # two halves, each the mean of two references
+            refs = [mean_frames(refs[:2]), mean_frames(refs[2:])]
         print(c, f"references {ref_cpu:.0f} CPU s", flush=True)
         settings = {"default": {}, **{n: kw for n, kw in GAP_SETTINGS.items() if n in a.gap_settings
                                       and c in a.gap_cases and ("spp" in kw) == (groups is None)}}
@@ -282,7 +313,8 @@ def main() -> None:
             if a.cached_only and kw and not (cache / f"tgt_{key}_{tag}.pkl").exists():
                 continue
             fr, cpu = _frame(sc, opts, cache, f"tgt_{key}_{tag}")
-            r = {"case": c, "setting": name, "cpu_s": cpu, "ref_cpu_s": ref_cpu, **scores(sc, fr, *refs, opts)}
+            r = {"case": c, "setting": name + (f", {len(seeds)} references" if len(seeds) != 2 else ""),
+                 "cpu_s": cpu, "ref_cpu_s": ref_cpu, **scores(sc, fr, *refs, opts)}
             rows.append(r)
             print({k: (round(v, 4) if isinstance(v, float) else v) for k, v in r.items() if k != "kinds"},
                   flush=True)

@@ -110,3 +110,17 @@ def test_median_by_region_splits_the_frame_by_what_it_shows():
     assert out["buildings"][1] == pytest.approx(0.02) and out["sky"][1] == pytest.approx(0.1)
     assert out["lamps"][0] == pytest.approx(8 / 2000)
     assert sum(v[0] for v in out.values()) == pytest.approx(1.0)
+
+
+def test_mean_frames_averages_images_and_crops_and_refuses_other_crops():
+    def fr(v, box=(1, 2, 3, 4)):
+        return {"frame": 0, "aux": {"mask.light": np.full((4, 5), -1.0)},
+                "static": {"sky": {"short": np.full((2, 4, 5), v, np.float32), "long": np.full((2, 4, 5), 2 * v)}},
+                "lights": {"signals": [(3, box, np.full((8, 2, 2, 2), v, np.float32))]}}
+    m = T.mean_frames([fr(1.0), fr(2.0)])
+    assert m["static"]["sky"]["short"] == pytest.approx(np.full((2, 4, 5), 1.5))
+    assert m["static"]["sky"]["long"] == pytest.approx(np.full((2, 4, 5), 3.0))
+    lid, box, crop = m["lights"]["signals"][0]
+    assert (lid, box) == (3, (1, 2, 3, 4)) and crop == pytest.approx(np.full((8, 2, 2, 2), 1.5))
+    with pytest.raises(ValueError, match="light 3 of group signals"):
+        T.mean_frames([fr(1.0), fr(2.0, box=(1, 2, 3, 5))])
