@@ -170,6 +170,18 @@ def median_by_region(t: np.ndarray, a: np.ndarray, b: np.ndarray, instance: np.n
     return out
 
 
+def median_extrapolated(raw2: float, r2: float, raw4: float, r4: float) -> float:
+    """The raw median a frame would measure against noiseless references, from its raw medians ``raw2``, ``raw4``
+    against two reference sets whose means have the median errors ``r2`` > ``r4`` (fractions): the two points fix
+    raw^2 = c^2 + k r^2 (issue 23's fit of the median against spp, "Scene generator 2"; k = 1 is
+    :func:`median_corrected`'s quadrature, k > 1 when the references' noise weighs more in the median than its own
+    median says), and c is returned (nan when r2 <= r4; 0 when c^2 < 0)."""
+    if r2 <= r4:
+        return float("nan")
+    c2 = (raw4 ** 2 * r2 ** 2 - raw2 ** 2 * r4 ** 2) / (r2 ** 2 - r4 ** 2)
+    return float(np.sqrt(max(c2, 0.0)))
+
+
 def led_error_boxed(frame: dict, ref_a: dict, ref_b: dict, kinds: dict, boxes: dict) -> dict:
     """Relative RMSE of the LED bins of ``frame`` against the mean of two references, corrected for their noise
     (:func:`corrected_rel_rmse`'s sums pooled), over each light's LED pixels: the references' mean bin-mean above
@@ -453,6 +465,19 @@ def write_section(rows: list, out: Path, load0: float, load1: float, size, ref, 
                 lines.append(f"| {r['case']} | {r['setting']} | " + " | ".join(
                     f"{100 * g[k][0]:.0f} %: {100 * g[k][1]:.1f} / {100 * g[k][3]:.1f}" if k in g else "-"
                     for k in regs) + " |")
+    pairs = [(r, x) for r in rows for x in rows if "median_short_raw" in r and x["case"] == r["case"]
+             and x["setting"] == r["setting"] + ", 4 references"]
+    if pairs:
+        lines += ["", "The median against noiseless references, extrapolated (:func:`median_extrapolated`: raw^2 = c^2 + "
+                  "k r^2 through the raw medians against two and four references, r their means' own median error): "
+                  "c and k (k 1: the quadrature correction's assumption).", "",
+                  "| scene | setting | raw, 2 / 4 references | r, 2 / 4 | c (short) | k |", "|---|---|---|---|---|---|"]
+        for r, x in pairs:
+            c = median_extrapolated(r["median_short_raw"], r["median_short_ref"], x["median_short_raw"],
+                                    x["median_short_ref"])
+            k = (r["median_short_raw"] ** 2 - c * c) / r["median_short_ref"] ** 2
+            lines.append(f"| {r['case']} | {r['setting']} | {r['median_short_raw']:.3f} / {x['median_short_raw']:.3f} "
+                         f"| {r['median_short_ref']:.3f} / {x['median_short_ref']:.3f} | {c:.3f} | {k:.2f} |")
     if dots:
         lines[0] = DOTS_SECTION
         lines += ["", f"Run again with `{DOTS_RERUN}` (the references are the bulk of the time; add `--gap-cases "

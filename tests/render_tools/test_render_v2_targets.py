@@ -124,3 +124,12 @@ def test_mean_frames_averages_images_and_crops_and_refuses_other_crops():
     assert (lid, box) == (3, (1, 2, 3, 4)) and crop == pytest.approx(np.full((8, 2, 2, 2), 1.5))
     with pytest.raises(ValueError, match="light 3 of group signals"):
         T.mean_frames([fr(1.0), fr(2.0, box=(1, 2, 3, 5))])
+
+
+def test_median_extrapolated_recovers_the_frames_own_median():
+    c, k = 0.08, 1.9  # raw^2 = c^2 + k r^2 at two reference noises
+    raw = lambda r: np.sqrt(c * c + k * r * r)  # noqa: E731
+    assert T.median_extrapolated(raw(0.065), 0.065, raw(0.05), 0.05) == pytest.approx(c)
+    assert np.isnan(T.median_extrapolated(0.1, 0.05, 0.09, 0.05))
+    # the quadrature case (k = 1): the same as median_corrected's correction at either noise
+    assert T.median_extrapolated(np.hypot(0.07, 0.06), 0.06, np.hypot(0.07, 0.04), 0.04) == pytest.approx(0.07)
