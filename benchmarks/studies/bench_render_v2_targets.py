@@ -28,7 +28,11 @@ Errors, on luminance Y (:mod:`bench_render`'s functions), with ``a``, ``b`` the 
 - all-pixel median: median over pixels of |t - m| / m on the short composite (``raw``: an upper bound, the
   references' noise is in it) and that corrected in quadrature, sqrt(raw^2 - r^2), r = median |a - b| / 2 / m
   (the median error of m itself; exact when every pixel's errors scale alike, an estimate otherwise:
-  :func:`median_corrected`); the long window's raw median too.
+  :func:`median_corrected`); the long window's raw median too; beside it the 46th and 54th percentiles of the raw
+  per-pixel error (:func:`rel_error_percentiles`: the raw median stays between them when under 4 % of the pixels
+  change) and the median by what a pixel shows (:func:`median_by_region`: road, buildings, trees, sky, lamps ...);
+  for a case scored against two and four references, the median extrapolated to noiseless references
+  (:func:`median_extrapolated`).
 
 ``--ref4-cases``: cases scored again against four references (:data:`MORE_REF_SEEDS` too), a and b each the mean
 of two (:func:`mean_frames`): the references' own median error / sqrt 2, so the raw median is a tighter bound.
@@ -77,6 +81,11 @@ DOTS_RERUN = ("nice -n 10 python benchmarks/studies/bench_render_v2_targets.py -
               "--gap-cases 202:dusk:dry 101:night:dry 202:day:dry 202:dusk:wet 202:dusk:rain 101:night:rain "
               "202:day:wet 202:day:rain 101:night:wet --gap-settings \"dot faces exact\" \"sub-pixel dots as they are "
               "x4\" --cache bench_out/v2tgt")
+#: The command that rewrites :data:`SECTION` as published (frames not in the cache are rendered; the references
+#: first).
+TARGETS_RERUN = ("nice -n 10 python benchmarks/studies/bench_render_v2_targets.py --lamp-cases --ref4-cases "
+                 "202:dusk:dry 202:day:wet 202:day:dry 101:night:wet 101:night:rain --gap-cases 202:dusk:dry "
+                 "101:night:wet 101:night:rain --gap-settings \"static spp 2\" --cache bench_out/v2tgt")
 #: Cases rendered whole (every measure), in the order rendered: those never measured whole first (dusk wet and rain,
 #: day wet and rain, night rain), then day dry, night dry and wet, dusk dry (issue 23's three measured against
 #: filled-cell references in "Scene generator 2"; dusk dry whole before protocol version 4).
@@ -484,9 +493,9 @@ def write_section(rows: list, out: Path, load0: float, load1: float, size, ref, 
                   "202:dusk:dry 101:night:dry --gap-settings \"sub-pixel dots as they are x8\"` for the x8 rows, and "
                   "`--cached-only` to score what the cache holds).", ""]
     else:
-        lines += ["", "Run again with `nice -n 10 python benchmarks/studies/bench_render_v2_targets.py --lamp-cases "
-                  "--gap-cases --cache bench_out/v2tgt` (the whole frames of the 9 cases; the references are the bulk "
-                  "of the time; `--cases`, `--lamp-cases` and `--gap-cases` choose the cases).", ""]
+        lines += ["", f"Run again with `{TARGETS_RERUN}` (the whole frames of the 9 cases, four references and "
+                  "`static spp 2` where the tables have them; the references are the bulk of the time; `--cases`, "
+                  "`--ref4-cases`, `--lamp-cases` and `--gap-cases` choose the cases).", ""]
     replace_section(out / "benchmarks" / "render.md", lines[0], lines)
     print("\n".join(lines))
 
