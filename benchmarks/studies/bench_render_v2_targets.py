@@ -28,7 +28,14 @@ Errors, on luminance Y (:mod:`bench_render`'s functions), with ``a``, ``b`` the 
 - all-pixel median: median over pixels of |t - m| / m on the short composite (``raw``: an upper bound, the
   references' noise is in it) and that corrected in quadrature, sqrt(raw^2 - r^2), r = median |a - b| / 2 / m
   (the median error of m itself; exact when every pixel's errors scale alike, an estimate otherwise:
-  :func:`median_corrected`); the long window's raw median too.
+  :func:`median_corrected`); the long window's raw median too; beside it the 46th and 54th percentiles of the raw
+  per-pixel error (:func:`rel_error_percentiles`: the raw median stays between them when under 4 % of the pixels
+  change) and the median by what a pixel shows (:func:`median_by_region`: road, buildings, trees, sky, lamps ...);
+  for a case scored against two and four references, the median extrapolated to noiseless references
+  (:func:`median_extrapolated`).
+
+``--ref4-cases``: cases scored again against four references (:data:`MORE_REF_SEEDS` too), a and b each the mean
+of two (:func:`mean_frames`): the references' own median error / sqrt 2, so the raw median is a tighter bound.
 
 Where a target is missed, ``--gap`` settings (:data:`GAP_SETTINGS`: the dots as they are at light_spp 32-128,
 filled cells at ``filled_spp_factor`` 8, the sub-pixel dots as they are at ``dots_spp_factor`` 4 or 8, the dot
@@ -74,13 +81,16 @@ DOTS_RERUN = ("nice -n 10 python benchmarks/studies/bench_render_v2_targets.py -
               "--gap-cases 202:dusk:dry 101:night:dry 202:day:dry 202:dusk:wet 202:dusk:rain 101:night:rain "
               "202:day:wet 202:day:rain 101:night:wet --gap-settings \"dot faces exact\" \"sub-pixel dots as they are "
               "x4\" --cache bench_out/v2tgt")
-#: Cases, in the order rendered: those never measured first (dusk, rain, a wet day), then those issue 23 measured
-#: against filled-cell references.
-#: Cases rendered whole (every measure), in the order rendered: those never measured (dusk, rain, a wet day);
-#: issue 23's three (day dry, night dry and wet) had their all-pixel median measured against spp-256 static
-#: references in "Scene generator 2" (the LED dots are under 1 % of the pixels, so the dots' pattern does not move
-#: it).
-CASES = ("202:dusk:dry", "202:dusk:wet", "202:dusk:rain", "101:night:rain", "202:day:wet", "202:day:rain")
+#: The command that rewrites :data:`SECTION` as published (frames not in the cache are rendered; the references
+#: first).
+TARGETS_RERUN = ("nice -n 10 python benchmarks/studies/bench_render_v2_targets.py --lamp-cases --ref4-cases "
+                 "202:dusk:dry 202:day:wet 202:day:dry 101:night:wet 101:night:rain --gap-cases 202:dusk:dry "
+                 "101:night:wet 101:night:rain --gap-settings \"static spp 2\" --cache bench_out/v2tgt")
+#: Cases rendered whole (every measure), in the order rendered: those never measured whole first (dusk wet and rain,
+#: day wet and rain, night rain), then day dry, night dry and wet, dusk dry (issue 23's three measured against
+#: filled-cell references in "Scene generator 2"; dusk dry whole before protocol version 4).
+CASES = ("202:dusk:wet", "202:dusk:rain", "202:day:wet", "202:day:rain", "101:night:rain", "202:day:dry",
+         "101:night:dry", "101:night:wet", "202:dusk:dry")
 #: Cases rendered first with the flickering groups alone (LED bins only, a tenth of a whole frame's cost): every
 #: time of day x weather.
 LAMP_CASES = ("202:dusk:dry", "202:dusk:wet", "202:dusk:rain", "101:night:rain", "202:day:wet", "202:day:rain",
@@ -91,6 +101,9 @@ LAMP_GROUPS = ("otherlights", "signals")
 GAP_CASES = ("202:dusk:dry", "101:night:dry")
 #: References: spp (static frames, pad rings, reflections), light_spp (lamp boxes), seeds.
 REF_SPP, REF_LIGHT_SPP, REF_SEEDS = 8, 128, (3001, 3002)
+#: Two more references for ``--ref4-cases``: those cases are also scored against a = mean of :data:`REF_SEEDS`' two,
+#: b = mean of these two (each half the noise variance of one reference: the references' own median error / sqrt 2).
+MORE_REF_SEEDS = (3003, 3004)
 #: ``--gap`` settings: name -> RenderOptions fields over the ``default`` profile's.
 GAP_SETTINGS = {
     "dots as they are, light_spp 32": {"dots_lod_px": 0.0},
@@ -126,6 +139,58 @@ def median_corrected(t: np.ndarray, a: np.ndarray, b: np.ndarray) -> tuple[float
     return raw, r, float(np.sqrt(max(raw * raw - r * r, 0.0)))
 
 
+def rel_error_percentiles(t: np.ndarray, a: np.ndarray, b: np.ndarray, qs=(46.0, 54.0)) -> tuple[float, ...]:
+    """Percentiles ``qs`` (in %) of the per-pixel relative error |t - m| / m of ``t`` (H, W luminance) against
+    m = (a + b) / 2 over the pixels with m > 0, raw (the references' noise in it, as :func:`median_corrected`'s
+    raw). When a share f of the pixels changes arbitrarily (a later render of some rows), the new raw median stays
+    between the percentiles 50 - 100 f and 50 + 100 f of these errors (its rank among the pixels left as they
+    were moves by at most f n): (46, 54) bound it for f <= 4 %. Returns one float per ``qs``."""
+    m = 0.5 * (np.asarray(a, np.float64) + b)
+    ok = m > 0
+    e = np.abs(np.asarray(t, np.float64)[ok] - m[ok]) / m[ok]
+    return tuple(float(v) for v in np.percentile(e, qs))
+
+
+#: What a pixel shows, for :func:`median_by_region`: region -> object kinds of scene generator 2 (``objects[i]
+#: ["kind"]`` of the first camera hit, ``mask.instance``); no hit is ``sky``, a light's face (``mask.light``) ``lamps``,
+#: a kind not listed ``other``.
+REGIONS = {"road": ("road", "marking"), "sidewalk, ground": ("sidewalk", "ground"), "buildings": ("building",),
+           "vehicles": ("car", "bus", "truck", "van", "bicycle"), "people": ("pedestrian", "cyclist"),
+           "trees": ("tree",), "poles, signs": ("streetlight_pole", "signal_pole", "traffic_sign", "bollard")}
+
+
+def median_by_region(t: np.ndarray, a: np.ndarray, b: np.ndarray, instance: np.ndarray, light: np.ndarray,
+                     kinds: list) -> dict:
+    """:func:`median_corrected` per region of the frame (:data:`REGIONS`, ``sky``, ``lamps``, ``other``): ``t``,
+    ``a``, ``b`` (H, W) luminance, ``instance`` (H, W) object index of the first hit (-1: none), ``light`` (H, W)
+    light id of a lamp face (-1: none), ``kinds`` the objects' kinds. Returns {region: (share of the pixels with
+    m > 0, raw, r, corrected)}, regions without such a pixel left out."""
+    of_kind = {k: reg for reg, ks in REGIONS.items() for k in ks}
+    names = np.array([of_kind.get(k, "other") for k in kinds] + ["sky"], dtype=object)
+    inst = np.asarray(instance).astype(np.int64)
+    reg = names[np.where(inst < 0, len(kinds), np.minimum(inst, len(kinds)))]
+    reg[np.asarray(light) >= 0] = "lamps"
+    ok = 0.5 * (np.asarray(a, np.float64) + b) > 0
+    out = {}
+    for r in [*REGIONS, "sky", "lamps", "other"]:
+        sel = (reg == r) & ok
+        if sel.any():
+            out[r] = (float(sel.sum() / ok.sum()), *median_corrected(t[sel], a[sel], b[sel]))
+    return out
+
+
+def median_extrapolated(raw2: float, r2: float, raw4: float, r4: float) -> float:
+    """The raw median a frame would measure against noiseless references, from its raw medians ``raw2``, ``raw4``
+    against two reference sets whose means have the median errors ``r2`` > ``r4`` (fractions): the two points fix
+    raw^2 = c^2 + k r^2 (issue 23's fit of the median against spp, "Scene generator 2"; k = 1 is
+    :func:`median_corrected`'s quadrature, k > 1 when the references' noise weighs more in the median than its own
+    median says), and c is returned (nan when r2 <= r4; 0 when c^2 < 0)."""
+    if r2 <= r4:
+        return float("nan")
+    c2 = (raw4 ** 2 * r2 ** 2 - raw2 ** 2 * r4 ** 2) / (r2 ** 2 - r4 ** 2)
+    return float(np.sqrt(max(c2, 0.0)))
+
+
 def led_error_boxed(frame: dict, ref_a: dict, ref_b: dict, kinds: dict, boxes: dict) -> dict:
     """Relative RMSE of the LED bins of ``frame`` against the mean of two references, corrected for their noise
     (:func:`corrected_rel_rmse`'s sums pooled), over each light's LED pixels: the references' mean bin-mean above
@@ -154,6 +219,26 @@ def verdict(led_bins: float, led_px: float, med: float, med_raw: float) -> str:
     return f"LED {led}, median {mm}"
 
 
+def mean_frames(frames: list) -> dict:
+    """The mean of frames of one scene and options but other seeds (dicts of
+    :func:`render_tools.render.render_frames`): every static window image (C, H, W) and light crop (K, C, h, w)
+    averaged, ``aux`` and ``frame`` taken from the first. The lights' ids and crop boxes must agree (a
+    ``ValueError`` naming the light otherwise)."""
+    f0 = frames[0]
+    out = {"frame": f0["frame"], "aux": f0["aux"],
+           "static": {g: {w: np.mean([f["static"][g][w] for f in frames], axis=0, dtype=np.float64).astype(
+               np.float32) for w in v} for g, v in f0["static"].items()}, "lights": {}}
+    for g, items in f0["lights"].items():
+        out["lights"][g] = []
+        for i, (lid, box, _) in enumerate(items):
+            other = [f["lights"][g][i] for f in frames]
+            if any(o[0] != lid or tuple(o[1]) != tuple(box) for o in other):
+                raise ValueError(f"frames: light {lid} of group {g} has other crops in another frame")
+            out["lights"][g].append((lid, box, np.mean([o[2] for o in other], axis=0, dtype=np.float64).astype(
+                np.float32)))
+    return out
+
+
 def scores(sc, fr: dict, ra: dict, rb: dict, opts) -> dict:
     """The errors of frame ``fr`` against references ``ra``, ``rb`` (module docstring)."""
     from render_tools import preview, render  # noqa: PLC0415
@@ -168,8 +253,11 @@ def scores(sc, fr: dict, ra: dict, rb: dict, opts) -> dict:
         t, a, b = (lum(preview.compose_window(f, tm, win, shape)) for f in (fr, ra, rb))
         raw, r, med = median_corrected(t, a, b)
         out[f"median_{win}"], out[f"median_{win}_raw"], out[f"median_{win}_ref"] = med, raw, r
+        out[f"p46_{win}_raw"], out[f"p54_{win}_raw"] = rel_error_percentiles(t, a, b)
         if win == "short":
             mask = (ra["aux"]["mask.light"] >= 0) | (rb["aux"]["mask.light"] >= 0)
+            out["regions"] = median_by_region(t, a, b, ra["aux"]["mask.instance"], np.where(mask, 0, -1),
+                                              [o["kind"] for o in sc["objects"]])
             out["led_px"] = corrected_rel_rmse(t[mask], a[mask], b[mask])
     return out
 
@@ -182,6 +270,8 @@ def main() -> None:
                     help="seed:time of day:weather (generator 2), rendered whole")
     ap.add_argument("--lamp-cases", nargs="*", default=list(LAMP_CASES),
                     help="cases rendered first with the flickering groups alone (LED bins only)")
+    ap.add_argument("--ref4-cases", nargs="*", default=[],
+                    help="cases (of --cases) also scored against four references (MORE_REF_SEEDS), two per half")
     ap.add_argument("--gap-cases", nargs="*", default=list(GAP_CASES),
                     help="cases that also render the --gap settings (what closes a missed target)")
     ap.add_argument("--gap-settings", nargs="*", default=list(GAP_SETTINGS),
@@ -222,15 +312,18 @@ def main() -> None:
         return
     load0, t0 = os.getloadavg()[0], time.time()
     rows = []
-    for c, groups in [(c, LAMP_GROUPS) for c in a.lamp_cases] + [(c, None) for c in a.cases]:
+    for c, groups, seeds in ([(c, LAMP_GROUPS, REF_SEEDS) for c in a.lamp_cases] + [(c, None, REF_SEEDS)
+                             for c in a.cases] + [(c, None, REF_SEEDS + MORE_REF_SEEDS) for c in a.ref4_cases]):
         sc = _v2_scene(c)
         tag = f"{c.replace(':', '_')}_{W}" + ("" if groups is None else "_lamps")
         refs, ref_cpu = [], 0.0
-        for s in REF_SEEDS:
+        for s in seeds:
             o = ref_opts(s, groups)
             fr, cpu = _frame(sc, o, cache, f"tgt_ref_{o.spp}_{ref_light_spp}_{s}_{tag}")
             refs.append(fr)
             ref_cpu += cpu
+        if len(refs) == 4:  # two halves, each the mean of two references
+            refs = [mean_frames(refs[:2]), mean_frames(refs[2:])]
         print(c, f"references {ref_cpu:.0f} CPU s", flush=True)
         settings = {"default": {}, **{n: kw for n, kw in GAP_SETTINGS.items() if n in a.gap_settings
                                       and c in a.gap_cases and ("spp" in kw) == (groups is None)}}
@@ -241,7 +334,8 @@ def main() -> None:
             if a.cached_only and kw and not (cache / f"tgt_{key}_{tag}.pkl").exists():
                 continue
             fr, cpu = _frame(sc, opts, cache, f"tgt_{key}_{tag}")
-            r = {"case": c, "setting": name, "cpu_s": cpu, "ref_cpu_s": ref_cpu, **scores(sc, fr, *refs, opts)}
+            r = {"case": c, "setting": name + (f", {len(seeds)} references" if len(seeds) != 2 else ""),
+                 "cpu_s": cpu, "ref_cpu_s": ref_cpu, **scores(sc, fr, *refs, opts)}
             rows.append(r)
             print({k: (round(v, 4) if isinstance(v, float) else v) for k, v in r.items() if k != "kinds"},
                   flush=True)
@@ -329,8 +423,10 @@ def write_section(rows: list, out: Path, load0: float, load1: float, size, ref, 
              f"Generated by `benchmarks/studies/bench_render_v2_targets.py` on {day}, the project's shared 2-core AMD "
              f"EPYC (AVX2), 1-minute load average {load0:.1f} at the start and {load1:.1f} at the end "
              f"({minutes:.0f} min; other jobs shared the cores: CPU seconds are upper bounds). Frame 0 of scene "
-             f"generator 2 scenes at {size[0]}x{size[1]}, the `default` profile (spp 1, light_spp 32, K 8; sub-pixel "
-             "dot faces as filled cells, `dots_lod_px` 1; static frames denoised), against two references of seeds "
+             f"generator 2 scenes at {size[0]}x{size[1]}, the `default` profile (spp 1, light_spp 32, K 8) with every "
+             "other field at its default, on scene version 2 those of protocol version 4 (nearest texels, small "
+             "flickering dot and rect faces by their exact coverage, the wet film's lobe in the static light choice, "
+             "static frames denoised, a wet frame's split by oidn), against two references of seeds "
              f"{REF_SEEDS[0]}, {REF_SEEDS[1]} that draw the LED dots as they are (`dots_lod_px` 0): spp {ref[0]}, "
              f"light_spp {ref[1]}, nothing denoised, a wet road's reflections per pixel (module docstring). Rows "
              "`(lamps)`: the flickering groups rendered alone (references at spp 1, light_spp as above; CPU: the lamp "
@@ -338,20 +434,23 @@ def write_section(rows: list, out: Path, load0: float, load1: float, size, ref, 
              "(every flickering light's LED pixels inside its own box, all bins) and LED px (the short composite over "
              "the references' light mask): relative RMSE corrected for the references' noise; median: all-pixel "
              "median relative error of the short window, corrected in quadrature for the references' own median "
-             "error (raw: upper bound; ref: the references' mean's own). Targets (issue 23): LED pixels <= 2 % "
+             "error (raw: upper bound; ref: the references' mean's own; p46-p54: the 46th and 54th percentiles of the "
+             "raw per-pixel error, between which the raw median stays when under 4 % of the pixels change). "
+             "Targets (issue 23): LED pixels <= 2 % "
              "(both LED columns), "
              "all-pixel median <= 10 % (`met (corrected)`: only the corrected median is under it). CPU: user + "
              "system s of the frame in the process (reference: both references).", "",
              "| scene (seed:time:weather) | setting | CPU s / frame (references) | LED bins | LED px (short) | "
-             "median (short) | raw | ref | median long, raw | targets |",
-             "|---|---|---|---|---|---|---|---|---|---|"]
+             "median (short) | raw | p46-p54 raw | ref | median long, raw | targets |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         if "led_px" in r:
             rest = (f"{r['led_px']:.3f} | {r['median_short']:.3f} | {r['median_short_raw']:.3f} | "
-                    f"{r['median_short_ref']:.3f} | {r['median_long_raw']:.3f} | "
+                    f"{r['p46_short_raw']:.3f}-{r['p54_short_raw']:.3f} | {r['median_short_ref']:.3f} | "
+                    f"{r['median_long_raw']:.3f} | "
                     f"{verdict(r['led_bins'], r['led_px'], r['median_short'], r['median_short_raw'])} |")
         else:
-            rest = f"- | - | - | - | - | LED {'met' if r['led_bins'] <= TARGET_LED else 'missed'} (LED bins) |"
+            rest = f"- | - | - | - | - | - | LED {'met' if r['led_bins'] <= TARGET_LED else 'missed'} (LED bins) |"
         lines.append(f"| {r['case']}{'' if 'led_px' in r else ' (lamps)'} | {r['setting']} | {r['cpu_s']:.1f} "
                      f"({r['ref_cpu_s']:.0f}) | {r['led_bins']:.3f} | " + rest)
     kinds = sorted({k for r in rows for k in r["kinds"]})
@@ -363,15 +462,40 @@ def write_section(rows: list, out: Path, load0: float, load1: float, size, ref, 
         lines.append(f"| {r['case']} | {r['setting']} | "
                      + " | ".join(f"{r['kinds'][k][0]:.3f} ({r['kinds'][k][1]:.2f})" if k in r["kinds"] else "-"
                                   for k in kinds) + " |")
+    regs = [r for r in [*REGIONS, "sky", "lamps", "other"] if any(r in x.get("regions", {}) for x in rows)]
+    if regs:
+        lines += ["", "All-pixel median of the short window by what a pixel shows (:data:`REGIONS` of the script: the "
+                  "first camera hit's object kind; no hit: sky; the references' light mask: lamps): share of the "
+                  "frame's pixels, median relative error raw / corrected for the references' noise (%).", "",
+                  "| scene | setting | " + " | ".join(regs) + " |", "|---|---|" + "---|" * len(regs)]
+        for r in rows:
+            if "regions" in r:
+                g = r["regions"]
+                lines.append(f"| {r['case']} | {r['setting']} | " + " | ".join(
+                    f"{100 * g[k][0]:.0f} %: {100 * g[k][1]:.1f} / {100 * g[k][3]:.1f}" if k in g else "-"
+                    for k in regs) + " |")
+    pairs = [(r, x) for r in rows for x in rows if "median_short_raw" in r and x["case"] == r["case"]
+             and x["setting"] == r["setting"] + ", 4 references"]
+    if pairs:
+        lines += ["", "The median against noiseless references, extrapolated (:func:`median_extrapolated`: raw^2 = c^2 + "
+                  "k r^2 through the raw medians against two and four references, r their means' own median error): "
+                  "c and k (k 1: the quadrature correction's assumption).", "",
+                  "| scene | setting | raw, 2 / 4 references | r, 2 / 4 | c (short) | k |", "|---|---|---|---|---|---|"]
+        for r, x in pairs:
+            c = median_extrapolated(r["median_short_raw"], r["median_short_ref"], x["median_short_raw"],
+                                    x["median_short_ref"])
+            k = (r["median_short_raw"] ** 2 - c * c) / r["median_short_ref"] ** 2
+            lines.append(f"| {r['case']} | {r['setting']} | {r['median_short_raw']:.3f} / {x['median_short_raw']:.3f} "
+                         f"| {r['median_short_ref']:.3f} / {x['median_short_ref']:.3f} | {c:.3f} | {k:.2f} |")
     if dots:
         lines[0] = DOTS_SECTION
         lines += ["", f"Run again with `{DOTS_RERUN}` (the references are the bulk of the time; add `--gap-cases "
                   "202:dusk:dry 101:night:dry --gap-settings \"sub-pixel dots as they are x8\"` for the x8 rows, and "
                   "`--cached-only` to score what the cache holds).", ""]
     else:
-        lines += ["", "Run again with `nice -n 10 python benchmarks/studies/bench_render_v2_targets.py --cache "
-                  "bench_out/v2tgt` (the references are the bulk of the time; `--cases` and `--gap-cases` choose the "
-                  "cases).", ""]
+        lines += ["", f"Run again with `{TARGETS_RERUN}` (the whole frames of the 9 cases, four references and "
+                  "`static spp 2` where the tables have them; the references are the bulk of the time; `--cases`, "
+                  "`--ref4-cases`, `--lamp-cases` and `--gap-cases` choose the cases).", ""]
     replace_section(out / "benchmarks" / "render.md", lines[0], lines)
     print("\n".join(lines))
 

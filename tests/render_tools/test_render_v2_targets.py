@@ -79,3 +79,57 @@ def test_verdict():
     assert T.verdict(0.015, 0.019, 0.08, 0.12) == "LED met, median met (corrected)"
     assert T.verdict(0.015, 0.021, 0.11, 0.12) == "LED missed, median missed"
     assert T.verdict(0.01, 0.01, 0.05, 0.09) == "LED met, median met"
+
+
+def test_rel_error_percentiles_bound_the_median_when_a_few_pixels_change():
+    rng = np.random.default_rng(2)
+    m = rng.uniform(0.5, 2.0, (90, 160))
+    t = m * (1 + rng.uniform(-0.2, 0.2, m.shape))  # |relative error| uniform on [0, 0.2]
+    p46, p54 = T.rel_error_percentiles(t, m, m)
+    assert p46 == pytest.approx(0.092, abs=0.003) and p54 == pytest.approx(0.108, abs=0.003)
+    raw, _, _ = T.median_corrected(t, m, m)
+    assert p46 < raw < p54
+    for v in (0.0, 1e3):  # the bottom 3 of 90 rows (3.3 %) re-rendered: far off, or exact
+        t2 = t.copy()
+        t2[-3:] = m[-3:] * (1 + v)
+        assert p46 <= T.median_corrected(t2, m, m)[0] <= p54
+
+
+def test_median_by_region_splits_the_frame_by_what_it_shows():
+    rng = np.random.default_rng(3)
+    m = rng.uniform(0.5, 2.0, (40, 50))
+    inst = np.full(m.shape, -1)  # sky above
+    inst[20:, :25], inst[20:, 25:] = 0, 1  # road, a building
+    light = np.full(m.shape, -1)
+    light[30:32, 30:34] = 4  # a lamp's face on the building
+    err = np.where(inst == 0, 0.3, np.where(inst == 1, 0.02, 0.1))
+    t = m * (1 + err * rng.choice([-1, 1], m.shape))
+    out = T.median_by_region(t, m, m, inst, light, ["road", "building"])
+    assert set(out) == {"road", "buildings", "sky", "lamps"}
+    assert out["road"][0] == pytest.approx(0.25) and out["road"][1] == pytest.approx(0.3)
+    assert out["buildings"][1] == pytest.approx(0.02) and out["sky"][1] == pytest.approx(0.1)
+    assert out["lamps"][0] == pytest.approx(8 / 2000)
+    assert sum(v[0] for v in out.values()) == pytest.approx(1.0)
+
+
+def test_mean_frames_averages_images_and_crops_and_refuses_other_crops():
+    def fr(v, box=(1, 2, 3, 4)):
+        return {"frame": 0, "aux": {"mask.light": np.full((4, 5), -1.0)},
+                "static": {"sky": {"short": np.full((2, 4, 5), v, np.float32), "long": np.full((2, 4, 5), 2 * v)}},
+                "lights": {"signals": [(3, box, np.full((8, 2, 2, 2), v, np.float32))]}}
+    m = T.mean_frames([fr(1.0), fr(2.0)])
+    assert m["static"]["sky"]["short"] == pytest.approx(np.full((2, 4, 5), 1.5))
+    assert m["static"]["sky"]["long"] == pytest.approx(np.full((2, 4, 5), 3.0))
+    lid, box, crop = m["lights"]["signals"][0]
+    assert (lid, box) == (3, (1, 2, 3, 4)) and crop == pytest.approx(np.full((8, 2, 2, 2), 1.5))
+    with pytest.raises(ValueError, match="light 3 of group signals"):
+        T.mean_frames([fr(1.0), fr(2.0, box=(1, 2, 3, 5))])
+
+
+def test_median_extrapolated_recovers_the_frames_own_median():
+    c, k = 0.08, 1.9  # raw^2 = c^2 + k r^2 at two reference noises
+    raw = lambda r: np.sqrt(c * c + k * r * r)  # noqa: E731
+    assert T.median_extrapolated(raw(0.065), 0.065, raw(0.05), 0.05) == pytest.approx(c)
+    assert np.isnan(T.median_extrapolated(0.1, 0.05, 0.09, 0.05))
+    # the quadrature case (k = 1): the same as median_corrected's correction at either noise
+    assert T.median_extrapolated(np.hypot(0.07, 0.06), 0.06, np.hypot(0.07, 0.04), 0.04) == pytest.approx(0.07)
