@@ -1,0 +1,99 @@
+"""Host-side rewrites of the renderer's planning and denoising arithmetic (issue 40: v2 render cost) give what the
+plain forms they replaced give: the polygon clip's kept points gathered without a sort (the same points, a gather
+has no rounding), the glossy reflection test per component (the same products and sums per value, so the same
+mask), the bilinear upsampling's column gather from a 2-D view (the same values)."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from render_tools import denoise, dot_coverage, reflections
+
+
+def _clip_plain(poly, axis, bound, keep_below):
+    """The polygon clip as it was: the kept points ordered by a stable argsort of ``~ok``, then two gathers."""
+    N, V, _ = poly.shape
+    p, q = poly, np.roll(poly, -1, axis=1)
+    s = 1.0 if keep_below else -1.0
+    dp = s * (p[..., axis] - bound[:, None])
+    dq = s * (q[..., axis] - bound[:, None])
+    inside_p, inside_q = dp <= 0, dq <= 0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        f = np.where(dp != dq, dp / (dp - dq), 0.0)
+    cross = p + f[..., None] * (q - p)
+    pts = np.stack([p, cross], axis=2).reshape(N, 2 * V, 2)
+    ok = np.stack([inside_p, inside_p != inside_q], axis=2).reshape(N, 2 * V)
+    order = np.argsort(~ok, axis=1, kind="stable")
+    cnt = ok.sum(1)
+    idx = np.minimum(np.arange(V + 1)[None, :], np.maximum(cnt - 1, 0)[:, None])
+    out = np.take_along_axis(pts, np.take_along_axis(order, idx, axis=1)[..., None], axis=1)
+    out[cnt == 0] = 0.0
+    return out
+
+
+@pytest.mark.parametrize("n,v", [(0, 4), (1, 4), (300, 4), (300, 7)])
+def test_clip_gathers_the_points_the_sorted_form_kept(n, v):
+    rng = np.random.default_rng(n + v)
+    poly = rng.uniform(0.0, 4.0, (n, v, 2))
+    poly[: n // 5] += 10.0  # wholly outside every bound below: rows with nothing kept
+    bound = rng.uniform(0.0, 4.0, n)
+    for axis in (0, 1):
+        for below in (False, True):
+            got = dot_coverage._clip(poly, axis, bound, below)
+            want = _clip_plain(poly, axis, bound, below)
+            assert got.shape == want.shape == (n, v + 1, 2)
+            assert np.array_equal(got, want)  # a gather of the same points: no rounding involved
+    # and the area through the whole clip against an analytic case: a unit square shifted by 0.25 px in x and y
+    sq = np.array([[[0.25, 0.25], [1.25, 0.25], [1.25, 1.25], [0.25, 1.25]]])
+    assert dot_coverage.clip_area(sq, np.array([[0.0, 0.0, 1.0, 1.0]]))[0] == pytest.approx(0.5625, abs=1e-12)
+
+
+def _glossy_keep_plain(L, R, wo, k):
+    """The reflection test as it was, on (P, N, 3) arrays."""
+    wi = L[:, None, :] - R[None]
+    wi /= np.sqrt(np.add.reduce(wi * wi, axis=-1))[..., None]
+    h = wi + wo
+    return (np.hypot(h[..., 0], h[..., 1]) <= k * h[..., 2]).any(axis=0)
+
+
+def test_glossy_grid_marks_the_points_of_the_plain_half_vector_test():
+    rng = np.random.default_rng(7)
+    road = {"alpha": 0.08, "x": (-50.0, 200.0), "y": (-10.0, 10.0)}
+    seen = 0
+    for _ in range(6):
+        L = rng.uniform([5.0, -6.0, 0.3], [120.0, 6.0, 6.0], (int(rng.integers(1, 80)), 3))
+        C = np.array([0.0, rng.uniform(-2.0, 2.0), 1.5])
+        g = reflections.glossy_grid(L, C, road)
+        assert g is not None
+        G, grown = g
+        R = G.reshape(-1, 3)
+        wo = C - R
+        wo /= np.linalg.norm(wo, axis=1, keepdims=True)
+        k2 = _glossy_keep_plain(L, R, wo, reflections.GLOSS_TAN_FACTOR * road["alpha"]).reshape(reflections.GRID)
+        want = k2.copy()
+        want[1:] |= k2[:-1]
+        want[:-1] |= k2[1:]
+        want[:, 1:] |= want[:, :-1].copy()
+        want[:, :-1] |= want[:, 1:].copy()
+        assert np.array_equal(grown, want)
+        seen += int(k2.sum())
+    assert seen > 0  # the test saw kept points, not only empty masks
+
+
+@pytest.mark.parametrize("shape,f", [((3, 13, 21), 4), ((2, 8, 8), 2)])
+def test_upsample_column_gather_equals_the_3d_take(shape, f):
+    rng = np.random.default_rng(3)
+    h, w = -(-shape[1] // f), -(-shape[2] // f)
+    x = rng.random((shape[0], h, w)).astype(np.float32)
+    got = denoise._upsample(x, f, shape[1:])
+    # the plain form: the same taps, columns taken along the 3-D array's last axis
+    sy = np.maximum((np.arange(shape[1]) + 0.5) / f - 0.5, 0.0)
+    sx = np.maximum((np.arange(shape[2]) + 0.5) / f - 0.5, 0.0)
+    y0 = np.minimum(np.floor(sy).astype(int), h - 1)
+    x0 = np.minimum(np.floor(sx).astype(int), w - 1)
+    y1, x1 = np.minimum(y0 + 1, h - 1), np.minimum(x0 + 1, w - 1)
+    ly, lx = (sy - y0).astype(np.float32), (sx - x0).astype(np.float32)
+    rows = np.take(x, y0, axis=1) * (1 - ly)[None, :, None] + np.take(x, y1, axis=1) * ly[None, :, None]
+    want = np.take(rows, x0, axis=2) * (1 - lx) + np.take(rows, x1, axis=2) * lx
+    assert got.shape == shape and got.dtype == np.float32
+    assert np.array_equal(got, want)
