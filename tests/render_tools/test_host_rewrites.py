@@ -97,3 +97,67 @@ def test_upsample_column_gather_equals_the_3d_take(shape, f):
     want = np.take(rows, x0, axis=2) * (1 - lx) + np.take(rows, x1, axis=2) * lx
     assert got.shape == shape and got.dtype == np.float32
     assert np.array_equal(got, want)
+
+
+def _reflection_tiles_plain(geo, light, t_obj, t_a, t_b, bbox):
+    """:meth:`SceneGeometry.reflection_tiles` as it was: the bands' extents updated once per time sample."""
+    import math  # noqa: PLC0415
+
+    from render_tools import camera as cam_mod  # noqa: PLC0415
+    from render_tools import render as R  # noqa: PLC0415
+
+    if not geo.reflected(light, t_obj):
+        return []
+    cells = reflections.glossy_cells(None, None, geo.wet, grid=geo._glossy_grid(light, t_obj))
+    if not len(cells):
+        return []
+    y0, x0, y1, x1 = bbox
+    B, p = R.REFLECTION_BAND_PX, geo.opts.pad_px
+    nb = -(-(y1 - y0) // B)
+    lo, hi = np.full(nb, np.inf), np.full(nb, -np.inf)
+    v = geo.object_velocity(light)
+    flat = cells.reshape(-1, 3)
+    band = np.arange(nb)
+    for t in np.linspace(t_a, t_b, R.BBOX_TIME_SAMPLES):
+        uv, z = cam_mod.project(flat + v * (t - t_obj), geo.pose_cv(t), geo.K)
+        uv, z = uv.reshape(-1, 4, 2), z.reshape(-1, 4)
+        front = z > R.MIN_DEPTH_M
+        some, every = front.any(1), front.all(1)
+        u, w = np.where(front, uv[..., 0], np.nan), np.where(front, uv[..., 1], np.nan)
+        with np.errstate(invalid="ignore"):
+            ya, yb = np.nanmin(w[some], 1), np.nanmax(w[some], 1)
+            xa, xb = np.nanmin(u[some], 1), np.nanmax(u[some], 1)
+        part = ~every[some]
+        yb[part], xa[part], xb[part] = math.inf, -math.inf, math.inf
+        ba = np.maximum(np.floor((ya - y0) / B) - 1, 0)
+        bz = np.where(np.isfinite(yb), np.floor((yb - y0) / B) + 1, nb - 1)
+        hit = (ba[None, :] <= band[:, None]) & (band[:, None] <= bz[None, :])
+        lo = np.minimum(lo, np.where(hit, xa[None, :], np.inf).min(1, initial=np.inf))
+        hi = np.maximum(hi, np.where(hit, xb[None, :], -np.inf).max(1, initial=-np.inf))
+    out = []
+    for i in range(nb):
+        if not hi[i] >= lo[i]:
+            continue
+        a = max(x0, int(math.floor(lo[i])) - p) if math.isfinite(lo[i]) else x0
+        b = min(x1, int(math.ceil(hi[i])) + p) if math.isfinite(hi[i]) else x1
+        if b > a:
+            out.append((y0 + i * B, a, min(y1, y0 + (i + 1) * B), b))
+    return out
+
+
+@pytest.mark.parametrize("lamp_m,speed", [((30.0, 0.0, 1.0), 10.0), ((12.0, 5.0, 4.0), 0.0), ((8.0, -1.0, 0.8), 15.0)])
+def test_reflection_tiles_equal_the_per_time_sample_form(lamp_m, speed):
+    from render_tools import render as R  # noqa: PLC0415
+    from tests.render_tools.test_reflection_edges import H, W, wet_scene  # noqa: PLC0415
+
+    sc = wet_scene(lamp_m, speed_mps=speed)
+    lt = sc["lights"][0]
+    geo = R.SceneGeometry(sc, R.RenderOptions(width=W, height=H, frames=1))
+    tm = R.frame_timing(sc, geo.opts, 0)
+    t_obj = 0.5 * (tm["window"][0] + tm["window"][1])
+    bb = geo.light_bbox(lt, t_obj, *tm["window"], moving=True)
+    got = geo.reflection_tiles(lt, t_obj, *tm["window"], bb)
+    assert got and got == _reflection_tiles_plain(geo, lt, t_obj, *tm["window"], bb)
+    whole = (0, 0, H, W)  # a box the region does not fill: bands it misses are left out by both
+    assert geo.reflection_tiles(lt, t_obj, *tm["window"], whole) == _reflection_tiles_plain(geo, lt, t_obj,
+                                                                                            *tm["window"], whole)
