@@ -179,15 +179,12 @@ def _upsample(x: np.ndarray, f: int, shape: tuple) -> np.ndarray:
     below = np.take(x, y1, axis=1)
     below *= ly[None, :, None]
     rows += below
-    # the columns gathered from rows of the (N * H, w) view (the same values; numpy's take along the last axis of a
-    # 3-D array copies element by element, along a 2-D array's second axis 1.5-2x faster)
-    flat = rows.reshape(-1, rows.shape[2])
-    out = np.take(flat, x0, axis=1)
+    out = np.take(rows, x0, axis=2)
     out *= 1 - lx
-    far = np.take(flat, x1, axis=1)
+    far = np.take(rows, x1, axis=2)
     far *= lx
     out += far
-    return out.reshape(rows.shape[0], rows.shape[1], len(x0))
+    return out
 
 
 def keep_mask(shape: tuple, boxes) -> np.ndarray:

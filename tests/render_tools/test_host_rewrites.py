@@ -1,13 +1,13 @@
-"""Host-side rewrites of the renderer's planning and denoising arithmetic (issue 40: v2 render cost) give what the
-plain forms they replaced give: the polygon clip's kept points gathered without a sort (the same points, a gather
-has no rounding), the glossy reflection test per component (the same products and sums per value, so the same
-mask), the bilinear upsampling's column gather from a 2-D view (the same values)."""
+"""Host-side rewrites of the renderer's planning arithmetic (issue 40: v2 render cost) give what the plain forms
+they replaced give: the polygon clip's kept points gathered without a sort (the same points, a gather has no
+rounding), the glossy reflection test per component (the same products and sums per value, so the same mask), a
+wet lamp's reflection bands from all time samples at once (minima and maxima, so the same crops)."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from render_tools import denoise, dot_coverage, reflections
+from render_tools import dot_coverage, reflections
 
 
 def _clip_plain(poly, axis, bound, keep_below):
@@ -79,24 +79,6 @@ def test_glossy_grid_marks_the_points_of_the_plain_half_vector_test():
         seen += int(k2.sum())
     assert seen > 0  # the test saw kept points, not only empty masks
 
-
-@pytest.mark.parametrize("shape,f", [((3, 13, 21), 4), ((2, 8, 8), 2)])
-def test_upsample_column_gather_equals_the_3d_take(shape, f):
-    rng = np.random.default_rng(3)
-    h, w = -(-shape[1] // f), -(-shape[2] // f)
-    x = rng.random((shape[0], h, w)).astype(np.float32)
-    got = denoise._upsample(x, f, shape[1:])
-    # the plain form: the same taps, columns taken along the 3-D array's last axis
-    sy = np.maximum((np.arange(shape[1]) + 0.5) / f - 0.5, 0.0)
-    sx = np.maximum((np.arange(shape[2]) + 0.5) / f - 0.5, 0.0)
-    y0 = np.minimum(np.floor(sy).astype(int), h - 1)
-    x0 = np.minimum(np.floor(sx).astype(int), w - 1)
-    y1, x1 = np.minimum(y0 + 1, h - 1), np.minimum(x0 + 1, w - 1)
-    ly, lx = (sy - y0).astype(np.float32), (sx - x0).astype(np.float32)
-    rows = np.take(x, y0, axis=1) * (1 - ly)[None, :, None] + np.take(x, y1, axis=1) * ly[None, :, None]
-    want = np.take(rows, x0, axis=2) * (1 - lx) + np.take(rows, x1, axis=2) * lx
-    assert got.shape == shape and got.dtype == np.float32
-    assert np.array_equal(got, want)
 
 
 def _reflection_tiles_plain(geo, light, t_obj, t_a, t_b, bbox):
