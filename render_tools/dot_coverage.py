@@ -47,12 +47,15 @@ def _clip(poly: np.ndarray, axis: int, bound: np.ndarray, keep_below: bool) -> n
     # per edge: p (if inside), then the crossing (if the edge crosses the line)
     pts = np.stack([p, cross], axis=2).reshape(N, 2 * V, 2)
     ok = np.stack([inside_p, inside_p != inside_q], axis=2).reshape(N, 2 * V)
-    order = np.argsort(~ok, axis=1, kind="stable")  # the kept points first, in order
+    # the first V + 1 kept points in order, the last repeated: the kept points' flat indices (row by row, in
+    # order), each row's m-th one read at its row's start + min(m, cnt - 1); one gather of the points (the same
+    # values as a stable argsort of ~ok and two gathers, tests/render_tools/test_host_rewrites.py, without the sort)
     cnt = ok.sum(1)
-    # the first V + 1 kept points, the last repeated: one gather of the points through both index arrays (the
-    # same values as gathering the sorted points, then those)
-    idx = np.minimum(np.arange(V + 1)[None, :], np.maximum(cnt - 1, 0)[:, None])
-    out = np.take_along_axis(pts, np.take_along_axis(order, idx, axis=1)[..., None], axis=1)
+    flat = np.flatnonzero(ok)  # (sum cnt,) indices into the (N * 2V) points
+    start = np.cumsum(cnt) - cnt
+    idx = np.minimum(np.arange(V + 1)[None, :], np.maximum(cnt - 1, 0)[:, None]) + start[:, None]
+    out = pts.reshape(N * 2 * V, 2)[flat[np.minimum(idx, max(len(flat) - 1, 0))]] if len(flat) else \
+        np.zeros((N, V + 1, 2))
     out[cnt == 0] = 0.0  # nothing left: a point (zero area)
     return out
 

@@ -82,11 +82,29 @@ def glossy_grid(lamp_points: np.ndarray, camera: np.ndarray, road: dict):
     wo = C - R
     wo /= np.linalg.norm(wo, axis=1, keepdims=True)
     keep = np.zeros(len(R), dtype=bool)
-    for i in range(0, len(L), 32):  # 32 lamp points at a time: (32, N, 3) arrays, the same arithmetic per value
-        wi = L[i:i + 32, None, :] - R[None]
-        wi /= np.sqrt(np.add.reduce(wi * wi, axis=-1))[..., None]  # = np.linalg.norm(wi, axis=-1)
-        h = wi + wo
-        keep |= (np.hypot(h[..., 0], h[..., 1]) <= k * h[..., 2]).any(axis=0)
+    # the half vector h = wi / |wi| + wo of every (lamp point, road point) pair, one component at a time: the same
+    # arithmetic per value as on (P, N, 3) arrays (|wi|^2 summed x, y, then z, numpy's order for a length-3 axis;
+    # the road points' z is +0, so wi's z is the lamp point's), without the strided length-3 reductions (half
+    # the CPU; tests/render_tools/test_host_rewrites.py)
+    Rx, Ry = R[:, 0], R[:, 1]
+    wox, woy, woz = wo[:, 0], wo[:, 1], wo[:, 2]
+    for i in range(0, len(L), 32):  # 32 lamp points at a time
+        Lc = L[i:i + 32]
+        dx = Lc[:, 0, None] - Rx
+        dy = Lc[:, 1, None] - Ry
+        dz = Lc[:, 2, None] - 0.0
+        n = dx * dx
+        n += dy * dy
+        n += dz * dz
+        np.sqrt(n, out=n)
+        dx /= n
+        dx += wox
+        dy /= n
+        dy += woy
+        hz = dz / n
+        hz += woz
+        hz *= k
+        keep |= (np.hypot(dx, dy) <= hz).any(axis=0)
     if not keep.any():
         return None
     k2 = keep.reshape(GRID)

@@ -612,28 +612,31 @@ class SceneGeometry:
         y0, x0, y1, x1 = bbox
         B, p = REFLECTION_BAND_PX, self.opts.pad_px
         nb = -(-(y1 - y0) // B)
-        lo = np.full(nb, np.inf)
-        hi = np.full(nb, -np.inf)
         v = self.object_velocity(light)
         flat = cells.reshape(-1, 3)
         band = np.arange(nb)
+        # every time sample's cells (their corners in front of the camera) first, then the bands' extents over all
+        # of them at once: minima and maxima, whatever the order they are taken in (one (bands, cells) pass
+        # instead of one per time sample)
+        uvs, fronts = [], []
         for t in np.linspace(t_a, t_b, BBOX_TIME_SAMPLES):
             uv, z = cam_mod.project(flat + v * (t - t_obj), self.pose_cv(t), self.K)
-            uv, z = uv.reshape(-1, 4, 2), z.reshape(-1, 4)
-            front = z > MIN_DEPTH_M
-            some, every = front.any(1), front.all(1)
-            u, w = np.where(front, uv[..., 0], np.nan), np.where(front, uv[..., 1], np.nan)
-            with np.errstate(invalid="ignore"):
-                ya, yb = np.nanmin(w[some], 1), np.nanmax(w[some], 1)
-                xa, xb = np.nanmin(u[some], 1), np.nanmax(u[some], 1)
-            # a cell reaching behind the camera: its rows down to the image's bottom, the box's full width
-            part = ~every[some]
-            yb[part], xa[part], xb[part] = math.inf, -math.inf, math.inf
-            ba = np.maximum(np.floor((ya - y0) / B) - 1, 0)
-            bz = np.where(np.isfinite(yb), np.floor((yb - y0) / B) + 1, nb - 1)
-            hit = (ba[None, :] <= band[:, None]) & (band[:, None] <= bz[None, :])  # (bands, cells)
-            lo = np.minimum(lo, np.where(hit, xa[None, :], np.inf).min(1, initial=np.inf))
-            hi = np.maximum(hi, np.where(hit, xb[None, :], -np.inf).max(1, initial=-np.inf))
+            uvs.append(uv.reshape(-1, 4, 2))
+            fronts.append(z.reshape(-1, 4) > MIN_DEPTH_M)
+        uv, front = np.concatenate(uvs), np.concatenate(fronts)
+        some, every = front.any(1), front.all(1)
+        uv, front, every = uv[some], front[some], every[some]
+        u, w = np.where(front, uv[..., 0], np.nan), np.where(front, uv[..., 1], np.nan)
+        ya, yb = np.fmin.reduce(w, axis=1), np.fmax.reduce(w, axis=1)  # the corners in front (NaN: behind)
+        xa, xb = np.fmin.reduce(u, axis=1), np.fmax.reduce(u, axis=1)
+        # a cell reaching behind the camera: its rows down to the image's bottom, the box's full width
+        part = ~every
+        yb[part], xa[part], xb[part] = math.inf, -math.inf, math.inf
+        ba = np.maximum(np.floor((ya - y0) / B) - 1, 0)
+        bz = np.where(np.isfinite(yb), np.floor((yb - y0) / B) + 1, nb - 1)
+        hit = (ba[None, :] <= band[:, None]) & (band[:, None] <= bz[None, :])  # (bands, cells)
+        lo = np.where(hit, xa[None, :], np.inf).min(1, initial=np.inf)
+        hi = np.where(hit, xb[None, :], -np.inf).max(1, initial=-np.inf)
         out = []
         for i in range(nb):
             if not hi[i] >= lo[i]:
