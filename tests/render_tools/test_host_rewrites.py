@@ -130,7 +130,9 @@ def _reflection_tiles_plain(geo, light, t_obj, t_a, t_b, bbox):
 @pytest.mark.parametrize("lamp_m,speed", [((30.0, 0.0, 1.0), 10.0), ((12.0, 5.0, 4.0), 0.0), ((8.0, -1.0, 0.8), 15.0)])
 def test_reflection_tiles_equal_the_per_time_sample_form(lamp_m, speed):
     from render_tools import render as R  # noqa: PLC0415
-    from tests.render_tools.test_reflection_edges import H, W, wet_scene  # noqa: PLC0415
+    from tests.data.render.data import WET_SIZE, wet_scene  # noqa: PLC0415
+
+    W, H = WET_SIZE
 
     sc = wet_scene(lamp_m, speed_mps=speed)
     lt = sc["lights"][0]

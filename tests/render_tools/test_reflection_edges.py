@@ -16,27 +16,9 @@ import pytest
 
 from render_tools import reflections as RF
 from render_tools import render as R
-from render_tools import scene as S
+from tests.data.render.data import WET_SIZE, wet_scene
 
-W, H = 160, 90
-
-
-def wet_scene(lamp_m, version: int = 2, speed_mps: float = 0.0) -> dict:
-    """A 0.4 x 0.4 m lamp (otherlights, 2000 cd/m^2) at ``lamp_m``, facing the camera (x = 0, 1.4 m high,
-    pitch -4 deg, 40 deg wide), over a wet road (water film: GGX alpha 0.06, index 1.33), 200 x 40 m."""
-    sc = S.empty_scene("edges", speed_mps=speed_mps, pitch_deg=-4.0)
-    sc["version"] = version
-    if version >= 2:
-        sc["weather"] = "wet"
-    sc["materials"]["road"] = {"type": "roughplastic", "rgb": [0.05, 0.05, 0.052], "alpha": 0.06, "ior": 1.33}
-    sc["objects"].append({"id": 0, "kind": "road", "velocity_mps": [0, 0, 0],
-                          "parts": [{"shape": "box", "center": [90, 0, -0.05], "size": [200, 40, 0.1],
-                                     "material": "road"}]})
-    sc["lights"].append({"id": 0, "group": "otherlights", "kind": "tail", "instance": -1, "shape": "rect",
-                         "center": [float(v) for v in lamp_m], "normal": [-1, 0, 0], "size": [0.4, 0.4],
-                         "spread_deg": 90.0, "spectrum": {"model": "led", "peak_nm": 630.0, "fwhm_nm": 18.0},
-                         "luminance_cd_m2": 2000.0})
-    return S.validate_scene(sc)
+W, H = WET_SIZE
 
 
 def _pixels(geo, lt, t_obj, window, pts):
