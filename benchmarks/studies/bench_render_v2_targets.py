@@ -496,7 +496,8 @@ def write_section(rows: list, out: Path, load0: float, load1: float, size, ref, 
              "Targets (issue 23): LED pixels <= 2 % "
              "(both LED columns), "
              "all-pixel median <= 10 % (`met (corrected)`: only the corrected median is under it). CPU: user + "
-             "system s of the frame in the process (reference: both references).", "",
+             "system s of the frame in the process (references: all the row's references; rows `N references`: scored "
+             "against N, each side the mean of N / 2).", "",
              "| scene (seed:time:weather) | setting | CPU s / frame (references) | LED bins | LED px (short) | "
              "median (short) | raw | p46-p54 raw | ref | median long, raw | targets |",
              "|---|---|---|---|---|---|---|---|---|---|---|"]
