@@ -357,7 +357,10 @@ def main() -> None:
         return
     load0, t0 = os.getloadavg()[0], time.time()
     rows = []
-    more = ref_seeds(a.ref_count) if a.ref_cases else ()
+    try:
+        more = ref_seeds(a.ref_count) if a.ref_cases else ()
+    except ValueError as e:
+        ap.error(str(e))  # one line naming --ref-count, exit status 2
     for c, groups, seeds in ([(c, LAMP_GROUPS, REF_SEEDS) for c in a.lamp_cases] + [(c, None, REF_SEEDS)
                              for c in a.cases] + [(c, None, REF_SEEDS + MORE_REF_SEEDS) for c in a.ref4_cases]
                              + [(c, None, more) for c in a.ref_cases]):
