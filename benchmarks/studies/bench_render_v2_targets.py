@@ -31,11 +31,13 @@ Errors, on luminance Y (:mod:`bench_render`'s functions), with ``a``, ``b`` the 
   :func:`median_corrected`); the long window's raw median too; beside it the 46th and 54th percentiles of the raw
   per-pixel error (:func:`rel_error_percentiles`: the raw median stays between them when under 4 % of the pixels
   change) and the median by what a pixel shows (:func:`median_by_region`: road, buildings, trees, sky, lamps ...);
-  for a case scored against two and four references, the median extrapolated to noiseless references
-  (:func:`median_extrapolated`).
+  for a case scored against two, four (and eight) references, the median extrapolated to noiseless references
+  (:func:`median_extrapolated`, :func:`fit_extrapolated`: three points also check the model).
 
 ``--ref4-cases``: cases scored again against four references (:data:`MORE_REF_SEEDS` too), a and b each the mean
 of two (:func:`mean_frames`): the references' own median error / sqrt 2, so the raw median is a tighter bound.
+``--ref-cases`` with ``--ref-count 2N``: the same against 2N references (:func:`ref_seeds`: 3001 .. 3000 + 2N), a
+and b each the mean of N (:func:`ref_halves`): the references' own median error / sqrt N.
 
 Where a target is missed, ``--gap`` settings (:data:`GAP_SETTINGS`: the dots as they are at light_spp 32-128,
 filled cells at ``filled_spp_factor`` 8, the sub-pixel dots as they are at ``dots_spp_factor`` 4 or 8, the dot
@@ -47,6 +49,8 @@ against run time. ``--section dots`` writes them as :data:`DOTS_SECTION` instead
 CPU: user + system seconds of the frame in the process (after the references, which compile the kernels; frames
 are rendered one at a time). References and frames are kept in ``--cache`` (pickles) so a re-run renders only
 what changed.
+
+Over 500 lines: the study's measures, its run loop, its tables and its figure kept in one rerunnable file.
 
 Usage: ``python benchmarks/studies/bench_render_v2_targets.py [--cases 202:dusk:dry ...] [--gap-cases ...]
 [--cache DIR] [--quick]``.
@@ -84,7 +88,8 @@ DOTS_RERUN = ("nice -n 10 python benchmarks/studies/bench_render_v2_targets.py -
 #: The command that rewrites :data:`SECTION` as published (frames not in the cache are rendered; the references
 #: first).
 TARGETS_RERUN = ("nice -n 10 python benchmarks/studies/bench_render_v2_targets.py --lamp-cases --ref4-cases "
-                 "202:dusk:dry 202:day:wet 202:day:dry 101:night:wet 101:night:rain --gap-cases 202:dusk:dry "
+                 "202:dusk:dry 202:day:wet 202:day:dry 101:night:wet 101:night:rain --ref-count 8 --ref-cases "
+                 "101:night:wet 101:night:rain --gap-cases 202:dusk:dry "
                  "101:night:wet 101:night:rain --gap-settings \"static spp 2\" --cache bench_out/v2tgt")
 #: Cases rendered whole (every measure), in the order rendered: those never measured whole first (dusk wet and rain,
 #: day wet and rain, night rain), then day dry, night dry and wet, dusk dry (issue 23's three measured against
@@ -104,6 +109,15 @@ REF_SPP, REF_LIGHT_SPP, REF_SEEDS = 8, 128, (3001, 3002)
 #: Two more references for ``--ref4-cases``: those cases are also scored against a = mean of :data:`REF_SEEDS`' two,
 #: b = mean of these two (each half the noise variance of one reference: the references' own median error / sqrt 2).
 MORE_REF_SEEDS = (3003, 3004)
+
+
+def ref_seeds(count: int) -> tuple:
+    """The seeds of ``count`` references (``--ref-count``): 3001 .. 3000 + ``count`` (:data:`REF_SEEDS` and
+    :data:`MORE_REF_SEEDS` their first four); ``count`` even and >= 2 (a ``ValueError`` naming ``--ref-count``
+    otherwise)."""
+    if count < 2 or count % 2:
+        raise ValueError(f"--ref-count: {count} references; an even number >= 2 (two halves) is needed")
+    return tuple(range(REF_SEEDS[0], REF_SEEDS[0] + count))
 #: ``--gap`` settings: name -> RenderOptions fields over the ``default`` profile's.
 GAP_SETTINGS = {
     "dots as they are, light_spp 32": {"dots_lod_px": 0.0},
@@ -239,6 +253,33 @@ def mean_frames(frames: list) -> dict:
     return out
 
 
+def ref_halves(load, seeds) -> list:
+    """The two references a case is scored against, from the references of ``seeds`` (2N of them, N >= 1):
+    a = the mean of the first N, b = the mean of the last N (:func:`mean_frames`; each has 1/N of one reference's
+    noise variance, so the references' own median error falls as 1/sqrt N). ``load(seed)`` returns one reference
+    frame; one half is held at a time (a whole 640x360 frame of a wet night is ~0.7 GB). Returns [a, b]."""
+    n = len(seeds) // 2
+    if n < 1 or len(seeds) != 2 * n:
+        raise ValueError(f"references: {len(seeds)} seeds; an even number >= 2 (two halves) is needed")
+    if n == 1:
+        return [load(seeds[0]), load(seeds[1])]
+    return [mean_frames([load(s) for s in half]) for half in (seeds[:n], seeds[n:])]
+
+
+def fit_extrapolated(raws, rs) -> tuple[float, float, float]:
+    """Least-squares fit of raw^2 = c^2 + k r^2 (:func:`median_extrapolated`'s model) through the raw medians
+    ``raws`` of one frame against reference sets whose means have the median errors ``rs`` (fractions, >= 2
+    points, at least two distinct r). Returns (c, k, residual): c (0 when the fitted c^2 < 0), k, and the largest
+    |sqrt(c^2 + k r^2) - raw| over the points (fraction; 0 up to rounding for two points: a check of the model
+    needs three)."""
+    x, y = np.asarray(rs, np.float64) ** 2, np.asarray(raws, np.float64) ** 2
+    if x.size < 2 or np.ptp(x) <= 0:
+        return float("nan"), float("nan"), float("nan")
+    k, c2 = np.polyfit(x, y, 1)
+    fit = np.sqrt(np.maximum(c2 + k * x, 0.0))
+    return float(np.sqrt(max(c2, 0.0))), float(k), float(np.max(np.abs(fit - np.sqrt(y))))
+
+
 def scores(sc, fr: dict, ra: dict, rb: dict, opts) -> dict:
     """The errors of frame ``fr`` against references ``ra``, ``rb`` (module docstring)."""
     from render_tools import preview, render  # noqa: PLC0415
@@ -272,6 +313,10 @@ def main() -> None:
                     help="cases rendered first with the flickering groups alone (LED bins only)")
     ap.add_argument("--ref4-cases", nargs="*", default=[],
                     help="cases (of --cases) also scored against four references (MORE_REF_SEEDS), two per half")
+    ap.add_argument("--ref-cases", nargs="*", default=[],
+                    help="cases (of --cases) also scored against --ref-count references (ref_seeds), half per side")
+    ap.add_argument("--ref-count", type=int, default=8,
+                    help="references of --ref-cases: 2N (seeds 3001 .. 3000 + 2N), a and b each the mean of N")
     ap.add_argument("--gap-cases", nargs="*", default=list(GAP_CASES),
                     help="cases that also render the --gap settings (what closes a missed target)")
     ap.add_argument("--gap-settings", nargs="*", default=list(GAP_SETTINGS),
@@ -312,18 +357,25 @@ def main() -> None:
         return
     load0, t0 = os.getloadavg()[0], time.time()
     rows = []
+    try:
+        more = ref_seeds(a.ref_count) if a.ref_cases else ()
+    except ValueError as e:
+        ap.error(str(e))  # one line naming --ref-count, exit status 2
     for c, groups, seeds in ([(c, LAMP_GROUPS, REF_SEEDS) for c in a.lamp_cases] + [(c, None, REF_SEEDS)
-                             for c in a.cases] + [(c, None, REF_SEEDS + MORE_REF_SEEDS) for c in a.ref4_cases]):
+                             for c in a.cases] + [(c, None, REF_SEEDS + MORE_REF_SEEDS) for c in a.ref4_cases]
+                             + [(c, None, more) for c in a.ref_cases]):
         sc = _v2_scene(c)
         tag = f"{c.replace(':', '_')}_{W}" + ("" if groups is None else "_lamps")
-        refs, ref_cpu = [], 0.0
-        for s in seeds:
+        ref_cpu = 0.0
+
+        def load(s):
+            nonlocal ref_cpu
             o = ref_opts(s, groups)
             fr, cpu = _frame(sc, o, cache, f"tgt_ref_{o.spp}_{ref_light_spp}_{s}_{tag}")
-            refs.append(fr)
             ref_cpu += cpu
-        if len(refs) == 4:  # two halves, each the mean of two references
-            refs = [mean_frames(refs[:2]), mean_frames(refs[2:])]
+            return fr
+
+        refs = ref_halves(load, seeds)  # 2N references: two halves, each the mean of N
         print(c, f"references {ref_cpu:.0f} CPU s", flush=True)
         settings = {"default": {}, **{n: kw for n, kw in GAP_SETTINGS.items() if n in a.gap_settings
                                       and c in a.gap_cases and ("spp" in kw) == (groups is None)}}
@@ -412,6 +464,14 @@ def render_opts(size):
     return render.RenderOptions(width=size[0], height=size[1], frames=1, groups=LAMP_GROUPS)
 
 
+def ref_count_of(setting: str) -> tuple[str, int]:
+    """(name, references) of a row's setting: ``"default, 8 references"`` -> ("default", 8); no such suffix: 2."""
+    head, _, tail = setting.rpartition(", ")
+    if head and tail.endswith(" references") and tail.split()[0].isdigit():
+        return head, int(tail.split()[0])
+    return setting, 2
+
+
 def write_section(rows: list, out: Path, load0: float, load1: float, size, ref, minutes: float,
                   dots: bool = False) -> None:
     """Write the rows as :data:`SECTION` of docs/benchmarks/render.md under ``out`` (``dots``: as
@@ -439,7 +499,8 @@ def write_section(rows: list, out: Path, load0: float, load1: float, size, ref, 
              "Targets (issue 23): LED pixels <= 2 % "
              "(both LED columns), "
              "all-pixel median <= 10 % (`met (corrected)`: only the corrected median is under it). CPU: user + "
-             "system s of the frame in the process (reference: both references).", "",
+             "system s of the frame in the process (references: all the row's references; rows `N references`: scored "
+             "against N, each side the mean of N / 2).", "",
              "| scene (seed:time:weather) | setting | CPU s / frame (references) | LED bins | LED px (short) | "
              "median (short) | raw | p46-p54 raw | ref | median long, raw | targets |",
              "|---|---|---|---|---|---|---|---|---|---|---|"]
@@ -474,28 +535,36 @@ def write_section(rows: list, out: Path, load0: float, load1: float, size, ref, 
                 lines.append(f"| {r['case']} | {r['setting']} | " + " | ".join(
                     f"{100 * g[k][0]:.0f} %: {100 * g[k][1]:.1f} / {100 * g[k][3]:.1f}" if k in g else "-"
                     for k in regs) + " |")
-    pairs = [(r, x) for r in rows for x in rows if "median_short_raw" in r and x["case"] == r["case"]
-             and x["setting"] == r["setting"] + ", 4 references"]
-    if pairs:
-        lines += ["", "The median against noiseless references, extrapolated (:func:`median_extrapolated`: raw^2 = c^2 + "
-                  "k r^2 through the raw medians against two and four references, r their means' own median error): "
-                  "c and k (k 1: the quadrature correction's assumption).", "",
-                  "| scene | setting | raw, 2 / 4 references | r, 2 / 4 | c (short) | k |", "|---|---|---|---|---|---|"]
-        for r, x in pairs:
-            c = median_extrapolated(r["median_short_raw"], r["median_short_ref"], x["median_short_raw"],
-                                    x["median_short_ref"])
-            k = (r["median_short_raw"] ** 2 - c * c) / r["median_short_ref"] ** 2
-            lines.append(f"| {r['case']} | {r['setting']} | {r['median_short_raw']:.3f} / {x['median_short_raw']:.3f} "
-                         f"| {r['median_short_ref']:.3f} / {x['median_short_ref']:.3f} | {c:.3f} | {k:.2f} |")
+    sets = {}  # (case, setting) -> [row against 2, 2N ... references], fewest first
+    for r in rows:
+        if "median_short_raw" in r:
+            name, n = ref_count_of(r["setting"])
+            sets.setdefault((r["case"], name), []).append((n, r))
+    sets = {k: sorted(v, key=lambda x: x[0]) for k, v in sets.items() if len(v) > 1}
+    if sets:
+        lines += ["", "The median against noiseless references, extrapolated (:func:`fit_extrapolated`: raw^2 = c^2 + "
+                  "k r^2 fitted by least squares through the raw medians against two, four and eight references, r "
+                  "their means' own median error): c, k (k 1: the quadrature correction's assumption) and, with three "
+                  "points, the fit's largest residual (|fitted - measured raw|; two points fit exactly).", "",
+                  "| scene | setting | references | raw | r | median corrected | c (short) | k | residual |",
+                  "|---|---|---|---|---|---|---|---|---|"]
+        for (case, name), rs in sets.items():
+            n, rs = [x[0] for x in rs], [x[1] for x in rs]
+            c, k, res = fit_extrapolated([x["median_short_raw"] for x in rs], [x["median_short_ref"] for x in rs])
+            lines.append(f"| {case} | {name} | {' / '.join(map(str, n))} | "
+                         + " | ".join(" / ".join(f"{x[f]:.3f}" for x in rs) for f in
+                                      ("median_short_raw", "median_short_ref", "median_short"))
+                         + f" | {c:.3f} | {k:.2f} | " + (f"{res:.4f}" if len(rs) > 2 else "-") + " |")
     if dots:
         lines[0] = DOTS_SECTION
         lines += ["", f"Run again with `{DOTS_RERUN}` (the references are the bulk of the time; add `--gap-cases "
                   "202:dusk:dry 101:night:dry --gap-settings \"sub-pixel dots as they are x8\"` for the x8 rows, and "
                   "`--cached-only` to score what the cache holds).", ""]
     else:
-        lines += ["", f"Run again with `{TARGETS_RERUN}` (the whole frames of the 9 cases, four references and "
-                  "`static spp 2` where the tables have them; the references are the bulk of the time; `--cases`, "
-                  "`--ref4-cases`, `--lamp-cases` and `--gap-cases` choose the cases).", ""]
+        lines += ["", f"Run again with `{TARGETS_RERUN}` (the whole frames of the 9 cases, four and eight "
+                  "references and `static spp 2` where the tables have them; the references are the bulk of the "
+                  "time; `--cases`, `--ref4-cases`, `--ref-cases`, `--lamp-cases` and `--gap-cases` choose the "
+                  "cases).", ""]
     replace_section(out / "benchmarks" / "render.md", lines[0], lines)
     print("\n".join(lines))
 

@@ -133,3 +133,43 @@ def test_median_extrapolated_recovers_the_frames_own_median():
     assert np.isnan(T.median_extrapolated(0.1, 0.05, 0.09, 0.05))
     # the quadrature case (k = 1): the same as median_corrected's correction at either noise
     assert T.median_extrapolated(np.hypot(0.07, 0.06), 0.06, np.hypot(0.07, 0.04), 0.04) == pytest.approx(0.07)
+
+
+def test_ref_seeds_and_halves_generalise_the_four_references():
+    assert T.ref_seeds(4) == T.REF_SEEDS + T.MORE_REF_SEEDS  # --ref4-cases is the N = 2 case
+    assert T.ref_seeds(8) == tuple(range(3001, 3009))
+    with pytest.raises(ValueError, match="--ref-count"):
+        T.ref_seeds(3)
+    rng = np.random.default_rng(2)
+    truth = rng.uniform(1.0, 2.0, (1, 120, 120))
+    noisy = {s: truth * (1 + 0.02 * rng.standard_normal(truth.shape)) for s in T.ref_seeds(8)}
+
+    def load(s):
+        return {"frame": 0, "aux": {}, "static": {"g": {"short": noisy[s].astype(np.float32)}}, "lights": {}}
+
+    a, b = (h["static"]["g"]["short"] for h in T.ref_halves(load, T.ref_seeds(8)))
+    assert a == pytest.approx(np.mean([noisy[s] for s in (3001, 3002, 3003, 3004)], axis=0), rel=1e-5)
+    assert b == pytest.approx(np.mean([noisy[s] for s in (3005, 3006, 3007, 3008)], axis=0), rel=1e-5)
+    _, r8, _ = T.median_corrected(truth[0], a[0], b[0])  # each half 1/4 of one reference's noise variance
+    _, r2, _ = T.median_corrected(truth[0], noisy[3001][0], noisy[3002][0])
+    assert r8 == pytest.approx(r2 / 2, rel=0.05)
+    one = T.ref_halves(load, (3001, 3002))  # N = 1: the references themselves
+    assert one[0]["static"]["g"]["short"] is not None and np.array_equal(one[1]["static"]["g"]["short"],
+                                                                          noisy[3002].astype(np.float32))
+
+
+def test_fit_extrapolated_checks_the_model_on_three_points():
+    c, k = 0.08, 1.9
+    rs = np.array([0.065, 0.046, 0.0325])
+    raws = np.sqrt(c * c + k * rs ** 2)
+    fc, fk, res = T.fit_extrapolated(raws, rs)
+    assert (fc, fk) == pytest.approx((c, k)) and res < 1e-9
+    # two points: the same c as median_extrapolated's
+    assert T.fit_extrapolated(raws[:2], rs[:2])[0] == pytest.approx(T.median_extrapolated(raws[0], rs[0], raws[1],
+                                                                                           rs[1]))
+    off = raws.copy()
+    off[1] += 0.004  # a middle point off the model
+    assert T.fit_extrapolated(off, rs)[2] > 0.001
+    assert np.isnan(T.fit_extrapolated([0.1, 0.09], [0.05, 0.05])[0])
+    assert T.ref_count_of("dots as they are, light_spp 32, 8 references") == ("dots as they are, light_spp 32", 8)
+    assert T.ref_count_of("dots as they are, light_spp 32") == ("dots as they are, light_spp 32", 2)
