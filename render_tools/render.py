@@ -561,20 +561,17 @@ class SceneGeometry:
         k = np.broadcast_to(ti[:, None, None], (len(ti), 2, 5))
         pts, tk = [], []
         with np.errstate(divide="ignore", invalid="ignore"):
-            xs = np.stack([x0, x1], 1)[..., None]  # (n, 2, 1): the sides x = x0, x1 against each line
-            ys = -(xs * a_ + g_) / b_  # (n, 2, 5)
-            xs = np.broadcast_to(xs, ys.shape)
-            ok = np.isfinite(ys) & (ys >= y0[:, None, None]) & (ys <= y1[:, None, None])
-            ok &= inside(xs, ys, k)
-            pts.append(np.stack([xs[ok], ys[ok]], -1))
-            tk.append(k[ok])
-            ys = np.stack([y0, y1], 1)[..., None]  # the sides y = y0, y1
-            xs = -(ys * b_ + g_) / a_
-            ys = np.broadcast_to(ys, xs.shape)
-            ok = np.isfinite(xs) & (xs >= x0[:, None, None]) & (xs <= x1[:, None, None])
-            ok &= inside(xs, ys, k)
-            pts.append(np.stack([xs[ok], ys[ok]], -1))
-            tk.append(k[ok])
+            # the sides x = x0, x1 (then y = y0, y1) against each line: the other coordinate (n, 2, 5) solved
+            for side, lo, hi, c_side, c_other, is_y in ((np.stack([x0, x1], 1), y0, y1, a_, b_, False),
+                                                         (np.stack([y0, y1], 1), x0, x1, b_, a_, True)):
+                f = side[..., None]  # (n, 2, 1)
+                o = -(f * c_side + g_) / c_other
+                f = np.broadcast_to(f, o.shape)
+                ok = np.isfinite(o) & (o >= lo[:, None, None]) & (o <= hi[:, None, None])
+                xs, ys = (o, f) if is_y else (f, o)
+                ok &= inside(xs, ys, k)
+                pts.append(np.stack([xs[ok], ys[ok]], -1))
+                tk.append(k[ok])
             i, j = np.triu_indices(5, 1)  # two lines crossing inside a cell (a corner of the visible road)
             det = al[:, i] * be[:, j] - al[:, j] * be[:, i]  # (T, 10)
             px = (be[:, i] * ga[:, j] - be[:, j] * ga[:, i]) / det
