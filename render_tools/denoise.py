@@ -88,13 +88,13 @@ QUALITY = "fast"
 #: bottom and right with zeros (its input stage: the U-Net's pooling levels need it; OIDN 2.x ``InputProcess``,
 #: https://github.com/RenderKit/oidn). A noisy image was darkened at those edges: the mean of a flat field of
 #: exponential noise through the filter, bottom row against the interior, 0.85 at 45 x 32 px and 0.92 at 90 x 160
-#: (the bottom row of a wet 160 x 90 night's flickering reflections -15 %; docs/guide/rendering.md, "Denoiser at
+#: (a wet 160 x 90 night's composed last row 0.85 of a reference; docs/guide/rendering.md, "Denoiser at
 #: the image edge").
 OIDN_ALIGN_PX = 16
 #: Width (px) of the mirrored margin the filter sees beyond every edge of an image (:func:`_mirror_pad`): its
 #: convolutions pad with zeros too (a flat field's first and last columns 0.94-0.97 of the interior). Measured on
 #: flat fields of exponential and of sparse (1 in 10, x10) noise, 60 draws each, edge rows and columns against the
-#: interior: 0.72-1.21 with no margin, 0.99-1.16 at 8 px, 0.99-1.09 at 16 px, 0.98-1.02 at 32 px.
+#: interior: 0.72-1.21 with no margin, 1.01-1.16 at 8 px, 0.99-1.09 at 16 px, 0.98-1.02 at 32 px.
 OIDN_MARGIN_PX = 32
 
 
