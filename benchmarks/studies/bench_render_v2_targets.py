@@ -243,26 +243,23 @@ def mean_frames(frames) -> dict:
     The lights' ids and crop boxes must agree (a ``ValueError`` naming the light otherwise)."""
     out, n = None, 0
     for f in frames:
-        if out is None:
-            out = {"frame": f["frame"], "aux": f["aux"], "static": {g: {w: np.asarray(x, np.float64).copy() for w, x
-                                                                      in v.items()} for g, v in f["static"].items()},
-                   "lights": {g: [(lid, box, np.asarray(b, np.float64).copy()) for lid, box, b in items]
+        if out is None:  # float64 sums shaped as the first frame's
+            out = {"frame": f["frame"], "aux": f["aux"], "static": {g: {w: np.zeros(np.shape(x)) for w, x in v.items()}
+                                                                   for g, v in f["static"].items()},
+                   "lights": {g: [(lid, box, np.zeros(np.shape(b))) for lid, box, b in items]
                               for g, items in f["lights"].items()}}
-        else:
-            for g, v in out["static"].items():
-                for w in v:
-                    v[w] += f["static"][g][w]
-            for g, items in out["lights"].items():
-                if len(f["lights"].get(g, ())) != len(items):
-                    raise ValueError(f"frames: group {g} has other lights in another frame")
-                for (lid, box, acc), o in zip(items, f["lights"][g]):
-                    if o[0] != lid or tuple(o[1]) != tuple(box):
-                        raise ValueError(f"frames: light {lid} of group {g} has other crops in another frame")
-                    acc += o[2]
+        for g, v in out["static"].items():
+            for w in v:
+                v[w] += f["static"][g][w]
+        for g, items in out["lights"].items():
+            if len(f["lights"].get(g, ())) != len(items):
+                raise ValueError(f"frames: group {g} has other lights in another frame")
+            for (lid, box, acc), o in zip(items, f["lights"][g]):
+                if o[0] != lid or tuple(o[1]) != tuple(box):
+                    raise ValueError(f"frames: light {lid} of group {g} has other crops in another frame")
+                acc += o[2]
         n += 1
-    for v in out["static"].values():
-        for w in v:
-            v[w] = (v[w] / n).astype(np.float32)
+    out["static"] = {g: {w: (x / n).astype(np.float32) for w, x in v.items()} for g, v in out["static"].items()}
     out["lights"] = {g: [(lid, box, (acc / n).astype(np.float32)) for lid, box, acc in items]
                      for g, items in out["lights"].items()}
     return out
