@@ -31,13 +31,16 @@ Errors, on luminance Y (:mod:`bench_render`'s functions), with ``a``, ``b`` the 
   :func:`median_corrected`); the long window's raw median too; beside it the 46th and 54th percentiles of the raw
   per-pixel error (:func:`rel_error_percentiles`: the raw median stays between them when under 4 % of the pixels
   change) and the median by what a pixel shows (:func:`median_by_region`: road, buildings, trees, sky, lamps ...);
-  for a case scored against two, four (and eight) references, the median extrapolated to noiseless references
-  (:func:`median_extrapolated`, :func:`fit_extrapolated`: three points also check the model).
+  for a case scored against two, four (and eight, sixteen) references, the median extrapolated to noiseless
+  references (:func:`median_extrapolated`, :func:`fit_extrapolated` through every count: three or more points also
+  check the model, by the fit's residual).
 
 ``--ref4-cases``: cases scored again against four references (:data:`MORE_REF_SEEDS` too), a and b each the mean
 of two (:func:`mean_frames`): the references' own median error / sqrt 2, so the raw median is a tighter bound.
-``--ref-cases`` with ``--ref-count 2N``: the same against 2N references (:func:`ref_seeds`: 3001 .. 3000 + 2N), a
-and b each the mean of N (:func:`ref_halves`): the references' own median error / sqrt N.
+``--ref-cases`` with ``--ref-count 2N [2M ...]``: the same against 2N references (:func:`ref_seeds`: 3001 .. 3000 +
+2N), a and b each the mean of N (:func:`ref_halves`): the references' own median error / sqrt N; each count scored
+in turn (rows ``default, 2N references``). With ``--cached-only`` a count whose references are not all in
+``--cache`` is skipped, as a ``--gap`` setting whose frame is not.
 
 Where a target is missed, ``--gap`` settings (:data:`GAP_SETTINGS`: the dots as they are at light_spp 32-128,
 filled cells at ``filled_spp_factor`` 8, the sub-pixel dots as they are at ``dots_spp_factor`` 4 or 8, the dot
@@ -88,7 +91,7 @@ DOTS_RERUN = ("nice -n 10 python benchmarks/studies/bench_render_v2_targets.py -
 #: The command that rewrites :data:`SECTION` as published (frames not in the cache are rendered; the references
 #: first).
 TARGETS_RERUN = ("nice -n 10 python benchmarks/studies/bench_render_v2_targets.py --lamp-cases --ref4-cases "
-                 "202:dusk:dry 202:day:wet 202:day:dry 101:night:wet 101:night:rain --ref-count 8 --ref-cases "
+                 "202:dusk:dry 202:day:wet 202:day:dry 101:night:wet 101:night:rain --ref-count 8 16 --ref-cases "
                  "101:night:wet 101:night:rain --gap-cases 202:dusk:dry "
                  "101:night:wet 101:night:rain --gap-settings \"static spp 2\" --cache bench_out/v2tgt")
 #: Cases rendered whole (every measure), in the order rendered: those never measured whole first (dusk wet and rain,
@@ -233,37 +236,58 @@ def verdict(led_bins: float, led_px: float, med: float, med_raw: float) -> str:
     return f"LED {led}, median {mm}"
 
 
-def mean_frames(frames: list) -> dict:
+def mean_frames(frames) -> dict:
     """The mean of frames of one scene and options but other seeds (dicts of
-    :func:`render_tools.render.render_frames`): every static window image (C, H, W) and light crop (K, C, h, w)
-    averaged, ``aux`` and ``frame`` taken from the first. The lights' ids and crop boxes must agree (a
-    ``ValueError`` naming the light otherwise)."""
-    f0 = frames[0]
-    out = {"frame": f0["frame"], "aux": f0["aux"],
-           "static": {g: {w: np.mean([f["static"][g][w] for f in frames], axis=0, dtype=np.float64).astype(
-               np.float32) for w in v} for g, v in f0["static"].items()}, "lights": {}}
-    for g, items in f0["lights"].items():
-        out["lights"][g] = []
-        for i, (lid, box, _) in enumerate(items):
-            other = [f["lights"][g][i] for f in frames]
-            if any(o[0] != lid or tuple(o[1]) != tuple(box) for o in other):
-                raise ValueError(f"frames: light {lid} of group {g} has other crops in another frame")
-            out["lights"][g].append((lid, box, np.mean([o[2] for o in other], axis=0, dtype=np.float64).astype(
-                np.float32)))
+    :func:`render_tools.render.render_frames`, any iterable: one frame held at a time beside float64 sums): every
+    static window image (C, H, W) and light crop (K, C, h, w) averaged, ``aux`` and ``frame`` taken from the first.
+    The lights' ids and crop boxes must agree (a ``ValueError`` naming the light otherwise)."""
+    out, n = None, 0
+    for f in frames:
+        if out is None:  # float64 sums shaped as the first frame's
+            out = {"frame": f["frame"], "aux": f["aux"], "static": {g: {w: np.zeros(np.shape(x)) for w, x in v.items()}
+                                                                   for g, v in f["static"].items()},
+                   "lights": {g: [(lid, box, np.zeros(np.shape(b))) for lid, box, b in items]
+                              for g, items in f["lights"].items()}}
+        for g, v in out["static"].items():
+            for w in v:
+                v[w] += f["static"][g][w]
+        for g, items in out["lights"].items():
+            if len(f["lights"].get(g, ())) != len(items):
+                raise ValueError(f"frames: group {g} has other lights in another frame")
+            for (lid, box, acc), o in zip(items, f["lights"][g]):
+                if o[0] != lid or tuple(o[1]) != tuple(box):
+                    raise ValueError(f"frames: light {lid} of group {g} has other crops in another frame")
+                acc += o[2]
+        n += 1
+    out["static"] = {g: {w: (x / n).astype(np.float32) for w, x in v.items()} for g, v in out["static"].items()}
+    out["lights"] = {g: [(lid, box, (acc / n).astype(np.float32)) for lid, box, acc in items]
+                     for g, items in out["lights"].items()}
     return out
+
+
+def run_plan(lamp_cases, cases, ref4_cases, ref_cases, ref_counts) -> list:
+    """What a run scores, in order: [(case, groups (None: whole frames), reference seeds)]: the flickering groups
+    of ``lamp_cases``, then ``cases``, ``ref4_cases`` against four references and ``ref_cases`` against each count of
+    ``ref_counts`` in turn (:func:`ref_seeds`: a ``ValueError`` naming ``--ref-count`` for an odd count or one under
+    2; a count given twice is scored once; none when ``ref_cases`` is empty)."""
+    more = [ref_seeds(n) for n in dict.fromkeys(ref_counts)] if ref_cases else []
+    return ([(c, LAMP_GROUPS, REF_SEEDS) for c in lamp_cases] + [(c, None, REF_SEEDS) for c in cases]
+            + [(c, None, REF_SEEDS + MORE_REF_SEEDS) for c in ref4_cases]
+            + [(c, None, s) for s in more for c in ref_cases])
 
 
 def ref_halves(load, seeds) -> list:
     """The two references a case is scored against, from the references of ``seeds`` (2N of them, N >= 1):
     a = the mean of the first N, b = the mean of the last N (:func:`mean_frames`; each has 1/N of one reference's
     noise variance, so the references' own median error falls as 1/sqrt N). ``load(seed)`` returns one reference
-    frame; one half is held at a time (a whole 640x360 frame of a wet night is ~0.7 GB). Returns [a, b]."""
+    frame; one frame is held at a time beside a half's sums (a whole 640x360 frame of a wet night is ~0.7 GB).
+    Returns [a, b]."""
     n = len(seeds) // 2
     if n < 1 or len(seeds) != 2 * n:
         raise ValueError(f"references: {len(seeds)} seeds; an even number >= 2 (two halves) is needed")
     if n == 1:
         return [load(seeds[0]), load(seeds[1])]
-    return [mean_frames([load(s) for s in half]) for half in (seeds[:n], seeds[n:])]
+    return [mean_frames(load(s) for s in half) for half in (seeds[:n], seeds[n:])]
 
 
 def fit_extrapolated(raws, rs) -> tuple[float, float, float]:
@@ -315,8 +339,9 @@ def main() -> None:
                     help="cases (of --cases) also scored against four references (MORE_REF_SEEDS), two per half")
     ap.add_argument("--ref-cases", nargs="*", default=[],
                     help="cases (of --cases) also scored against --ref-count references (ref_seeds), half per side")
-    ap.add_argument("--ref-count", type=int, default=8,
-                    help="references of --ref-cases: 2N (seeds 3001 .. 3000 + 2N), a and b each the mean of N")
+    ap.add_argument("--ref-count", type=int, nargs="+", default=[8],
+                    help="reference counts of --ref-cases, each scored: 2N (seeds 3001 .. 3000 + 2N), a and b each "
+                         "the mean of N")
     ap.add_argument("--gap-cases", nargs="*", default=list(GAP_CASES),
                     help="cases that also render the --gap settings (what closes a missed target)")
     ap.add_argument("--gap-settings", nargs="*", default=list(GAP_SETTINGS),
@@ -330,7 +355,8 @@ def main() -> None:
                     help="the section of docs/benchmarks/render.md written: the error targets, or the LED dot-face "
                          "settings (DOTS_SECTION)")
     ap.add_argument("--cached-only", action="store_true",
-                    help="score only the --gap settings whose frames are in --cache (render none of them)")
+                    help="score only the --gap settings whose frames are in --cache and the --ref-count sets whose "
+                         "references all are (render none of them)")
     ap.add_argument("--cache", default=None, help="folder for the rendered frames (pickles), reused when there")
     ap.add_argument("--out", default=str(ROOT / "docs"))
     ap.add_argument("--quick", action="store_true", help="160x90, references spp 2 / light_spp 32 (smoke run)")
@@ -358,15 +384,17 @@ def main() -> None:
     load0, t0 = os.getloadavg()[0], time.time()
     rows = []
     try:
-        more = ref_seeds(a.ref_count) if a.ref_cases else ()
+        todo = run_plan(a.lamp_cases, a.cases, a.ref4_cases, a.ref_cases, a.ref_count)
     except ValueError as e:
         ap.error(str(e))  # one line naming --ref-count, exit status 2
-    for c, groups, seeds in ([(c, LAMP_GROUPS, REF_SEEDS) for c in a.lamp_cases] + [(c, None, REF_SEEDS)
-                             for c in a.cases] + [(c, None, REF_SEEDS + MORE_REF_SEEDS) for c in a.ref4_cases]
-                             + [(c, None, more) for c in a.ref_cases]):
+    for c, groups, seeds in todo:
         sc = _v2_scene(c)
         tag = f"{c.replace(':', '_')}_{W}" + ("" if groups is None else "_lamps")
         ref_cpu = 0.0
+        if a.cached_only and cache is not None and not all(
+                (cache / f"tgt_ref_{ref_opts(s, groups).spp}_{ref_light_spp}_{s}_{tag}.pkl").exists() for s in seeds):
+            print(c, f"{len(seeds)} references not all in --cache: skipped", flush=True)
+            continue
 
         def load(s):
             nonlocal ref_cpu
@@ -486,7 +514,9 @@ def write_section(rows: list, out: Path, load0: float, load1: float, size, ref, 
              f"generator 2 scenes at {size[0]}x{size[1]}, the `default` profile (spp 1, light_spp 32, K 8) with every "
              "other field at its default, on scene version 2 those of protocol version 4 (nearest texels, small "
              "flickering dot and rect faces by their exact coverage, the wet film's lobe in the static light choice, "
-             "static frames denoised, a wet frame's split by oidn), against two references of seeds "
+             "static frames denoised, a wet frame's split by oidn) or 5 (as 4, a wet road's reflection crops clipped "
+             "at the image edge: a case's frames and references are of the version they were rendered with, named in "
+             "\"what the numbers say\" below), against two references of seeds "
              f"{REF_SEEDS[0]}, {REF_SEEDS[1]} that draw the LED dots as they are (`dots_lod_px` 0): spp {ref[0]}, "
              f"light_spp {ref[1]}, nothing denoised, a wet road's reflections per pixel (module docstring). Rows "
              "`(lamps)`: the flickering groups rendered alone (references at spp 1, light_spp as above; CPU: the lamp "
@@ -543,9 +573,10 @@ def write_section(rows: list, out: Path, load0: float, load1: float, size, ref, 
     sets = {k: sorted(v, key=lambda x: x[0]) for k, v in sets.items() if len(v) > 1}
     if sets:
         lines += ["", "The median against noiseless references, extrapolated (:func:`fit_extrapolated`: raw^2 = c^2 + "
-                  "k r^2 fitted by least squares through the raw medians against two, four and eight references, r "
-                  "their means' own median error): c, k (k 1: the quadrature correction's assumption) and, with three "
-                  "points, the fit's largest residual (|fitted - measured raw|; two points fit exactly).", "",
+                  "k r^2 fitted by least squares through the raw medians against every reference count measured (2, "
+                  "4, 8, 16), r their means' own median error): c, k (k 1: the quadrature correction's assumption) "
+                  "and, with three or more points, the fit's largest residual (|fitted - measured raw|; two points fit "
+                  "exactly).", "",
                   "| scene | setting | references | raw | r | median corrected | c (short) | k | residual |",
                   "|---|---|---|---|---|---|---|---|---|"]
         for (case, name), rs in sets.items():
@@ -561,7 +592,7 @@ def write_section(rows: list, out: Path, load0: float, load1: float, size, ref, 
                   "202:dusk:dry 101:night:dry --gap-settings \"sub-pixel dots as they are x8\"` for the x8 rows, and "
                   "`--cached-only` to score what the cache holds).", ""]
     else:
-        lines += ["", f"Run again with `{TARGETS_RERUN}` (the whole frames of the 9 cases, four and eight "
+        lines += ["", f"Run again with `{TARGETS_RERUN}` (the whole frames of the 9 cases, four, eight and sixteen "
                   "references and `static spp 2` where the tables have them; the references are the bulk of the "
                   "time; `--cases`, `--ref4-cases`, `--ref-cases`, `--lamp-cases` and `--gap-cases` choose the "
                   "cases).", ""]

@@ -124,6 +124,14 @@ def test_mean_frames_averages_images_and_crops_and_refuses_other_crops():
     assert (lid, box) == (3, (1, 2, 3, 4)) and crop == pytest.approx(np.full((8, 2, 2, 2), 1.5))
     with pytest.raises(ValueError, match="light 3 of group signals"):
         T.mean_frames([fr(1.0), fr(2.0, box=(1, 2, 3, 5))])
+    fewer = fr(2.0)
+    fewer["lights"]["signals"] = []
+    with pytest.raises(ValueError, match="group signals has other lights"):
+        T.mean_frames([fr(1.0), fewer])
+    held = []  # frames from a generator, summed one at a time: the mean of 1, 2, 6
+    m = T.mean_frames(held.append(v) or fr(v) for v in (1.0, 2.0, 6.0))
+    assert held == [1.0, 2.0, 6.0] and m["static"]["sky"]["short"] == pytest.approx(np.full((2, 4, 5), 3.0))
+    assert m["static"]["sky"]["short"].dtype == np.float32 and m["lights"]["signals"][0][2] == pytest.approx(3.0)
 
 
 def test_median_extrapolated_recovers_the_frames_own_median():
@@ -158,12 +166,17 @@ def test_ref_seeds_and_halves_generalise_the_four_references():
                                                                           noisy[3002].astype(np.float32))
 
 
-def test_fit_extrapolated_checks_the_model_on_three_points():
+def test_fit_extrapolated_checks_the_model_on_three_or_more_points():
     c, k = 0.08, 1.9
-    rs = np.array([0.065, 0.046, 0.0325])
+    rs = np.array([0.065, 0.046, 0.0325, 0.023])  # 2, 4, 8, 16 references
     raws = np.sqrt(c * c + k * rs ** 2)
-    fc, fk, res = T.fit_extrapolated(raws, rs)
-    assert (fc, fk) == pytest.approx((c, k)) and res < 1e-9
+    for n in (3, 4):
+        fc, fk, res = T.fit_extrapolated(raws[:n], rs[:n])
+        assert (fc, fk) == pytest.approx((c, k)) and res < 1e-9
+    bent = raws.copy()
+    bent[3] -= 0.003  # the fourth point off the line the first three lie on
+    assert T.fit_extrapolated(bent, rs)[2] > 0.0005 and T.fit_extrapolated(bent[:3], rs[:3])[2] < 1e-9
+    raws, rs = raws[:3], rs[:3]
     # two points: the same c as median_extrapolated's
     assert T.fit_extrapolated(raws[:2], rs[:2])[0] == pytest.approx(T.median_extrapolated(raws[0], rs[0], raws[1],
                                                                                            rs[1]))
@@ -173,3 +186,21 @@ def test_fit_extrapolated_checks_the_model_on_three_points():
     assert np.isnan(T.fit_extrapolated([0.1, 0.09], [0.05, 0.05])[0])
     assert T.ref_count_of("dots as they are, light_spp 32, 8 references") == ("dots as they are, light_spp 32", 8)
     assert T.ref_count_of("dots as they are, light_spp 32") == ("dots as they are, light_spp 32", 2)
+
+
+def test_run_plan_scores_every_reference_count_in_turn(tmp_path, monkeypatch, capsys):
+    s8, s16 = T.ref_seeds(8), T.ref_seeds(16)
+    assert s16 == tuple(range(3001, 3017)) and s16[:8] == s8
+    plan = T.run_plan(["101:night:dry"], ["x"], ["x"], ["x", "y"], [8, 16, 8])
+    assert plan == [("101:night:dry", T.LAMP_GROUPS, T.REF_SEEDS), ("x", None, T.REF_SEEDS),
+                    ("x", None, T.REF_SEEDS + T.MORE_REF_SEEDS), ("x", None, s8), ("y", None, s8), ("x", None, s16),
+                    ("y", None, s16)]
+    assert T.run_plan([], [], [], [], [3]) == []  # no --ref-cases: the counts are not used
+    monkeypatch.setattr(sys, "argv", ["bench", "--cases", "--lamp-cases", "--ref-cases", "x", "--ref-count", "8",
+                                      "6", "3", "--out", str(tmp_path)])
+    with pytest.raises(SystemExit) as e:
+        T.main()
+    err = capsys.readouterr().err.strip().splitlines()
+    assert e.value.code == 2 and err[-1].endswith("error: --ref-count: 3 references; an even number >= 2 (two "
+                                                  "halves) is needed")
+    assert not any(tmp_path.iterdir())  # nothing written
