@@ -123,13 +123,28 @@ def _v2_scene(case: str) -> dict:
                                 overrides={"weather": {"conditions": [weather]}})
 
 
+def rules_version() -> int:
+    """The render rules a cached frame was made with: ``lfmbench-v2``'s protocol version (it changes whenever a
+    render rule changes a generator-2 scene's radiance, render_tools/configs/protocols/lfmbench-v2.yaml)."""
+    from render_tools.protocol import load_protocol  # noqa: PLC0415
+
+    return int(load_protocol("lfmbench-v2").version)
+
+
+def frame_path(cache: Path, tag: str) -> Path:
+    """The cached frame ``tag`` of today's render rules: ``cache``/``tag``_p<:func:`rules_version`>.pkl."""
+    return cache / f"{tag}_p{rules_version()}.pkl"
+
+
 def _frame(sc, opts, cache: Path | None, tag: str):
-    """Frame 0 of ``sc`` rendered with ``opts`` (from ``cache``/``tag``.pkl when there); returns (frame, CPU s)."""
+    """Frame 0 of ``sc`` rendered with ``opts`` (from ``cache``/``tag``_p<version>.pkl when there: the file name
+    carries :func:`rules_version`, so a frame of older rules is never scored beside newer ones); returns (frame,
+    CPU s)."""
     import resource  # noqa: PLC0415
 
     from render_tools import render  # noqa: PLC0415
 
-    f = cache / f"{tag}.pkl" if cache is not None else None
+    f = frame_path(cache, tag) if cache is not None else None
     if f is not None and f.exists():
         with open(f, "rb") as fh:
             return pickle.load(fh)

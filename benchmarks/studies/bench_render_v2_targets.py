@@ -50,8 +50,8 @@ against run time. ``--section dots`` writes them as :data:`DOTS_SECTION` instead
 ``--figure CASE`` draws the message signs of a case close up from the cached frames (docs/img/led-dot-faces.png).
 
 CPU: user + system seconds of the frame in the process (after the references, which compile the kernels; frames
-are rendered one at a time). References and frames are kept in ``--cache`` (pickles) so a re-run renders only
-what changed.
+are rendered one at a time). References and frames are kept in ``--cache`` (pickles named with the render rules'
+version, :func:`bench_render_v2_error.frame_path`) so a re-run renders only what changed.
 
 Over 500 lines: the study's measures, its run loop, its tables and its figure kept in one rerunnable file.
 
@@ -76,7 +76,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import _llvm  # noqa: E402,F401 - sets DRJIT_LIBLLVM_PATH
 from _timing import replace_section  # noqa: E402
 from bench_render import lum  # noqa: E402
-from bench_render_v2_error import _frame, _light_canvases, _v2_scene, lamp_boxes  # noqa: E402
+from bench_render_v2_error import _frame, _light_canvases, _v2_scene, frame_path, lamp_boxes  # noqa: E402
 
 from lfmbench.fileio import load_yaml  # noqa: E402
 
@@ -392,7 +392,8 @@ def main() -> None:
         tag = f"{c.replace(':', '_')}_{W}" + ("" if groups is None else "_lamps")
         ref_cpu = 0.0
         if a.cached_only and cache is not None and not all(
-                (cache / f"tgt_ref_{ref_opts(s, groups).spp}_{ref_light_spp}_{s}_{tag}.pkl").exists() for s in seeds):
+                frame_path(cache, f"tgt_ref_{ref_opts(s, groups).spp}_{ref_light_spp}_{s}_{tag}").exists()
+                for s in seeds):
             print(c, f"{len(seeds)} references not all in --cache: skipped", flush=True)
             continue
 
@@ -411,7 +412,7 @@ def main() -> None:
             opts = render.RenderOptions(**{**base, "seed": 11, "groups": groups, **kw})
             key = "_".join(f"{k}{v}" if isinstance(v, str) else f"{k}{v:g}" for k, v in sorted(kw.items())) \
                 or "default"
-            if a.cached_only and kw and not (cache / f"tgt_{key}_{tag}.pkl").exists():
+            if a.cached_only and kw and not frame_path(cache, f"tgt_{key}_{tag}").exists():
                 continue
             fr, cpu = _frame(sc, opts, cache, f"tgt_{key}_{tag}")
             r = {"case": c, "setting": name + (f", {len(seeds)} references" if len(seeds) != 2 else ""),
@@ -443,7 +444,7 @@ def figure(case: str, cache: Path, size, out: Path, kind: str = "message_sign") 
     ids = {lt["id"] for lt in sc["lights"] if lt["kind"] == kind}
 
     def load(name):
-        with open(cache / f"{name}_{tag}.pkl", "rb") as fh:
+        with open(frame_path(cache, f"{name}_{tag}"), "rb") as fh:
             return pickle.load(fh)[0]
 
     def canvas(fr):

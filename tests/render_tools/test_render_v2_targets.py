@@ -204,3 +204,32 @@ def test_run_plan_scores_every_reference_count_in_turn(tmp_path, monkeypatch, ca
     assert e.value.code == 2 and err[-1].endswith("error: --ref-count: 3 references; an even number >= 2 (two "
                                                   "halves) is needed")
     assert not any(tmp_path.iterdir())  # nothing written
+
+
+def test_cached_frames_of_other_render_rules_are_not_reused(tmp_path, monkeypatch):
+    """A frame cached under one protocol version of lfmbench-v2 (the render rules) is rendered again, not read, once
+    the version changes: the night cases' published rows once mixed frames of versions 4 and 5."""
+    from render_tools import render
+
+    calls = []
+
+    def fake_frames(sc, opts):
+        calls.append(opts)
+        yield {"n": len(calls)}
+
+    monkeypatch.setattr(render, "render_frames", fake_frames)
+    monkeypatch.setattr(E, "rules_version", lambda: 5)
+    first, _ = E._frame({}, "opts", tmp_path, "tgt_default_x")
+    again, _ = E._frame({}, "opts", tmp_path, "tgt_default_x")
+    assert first == again == {"n": 1} and len(calls) == 1  # read back under the same rules
+    assert E.frame_path(tmp_path, "tgt_default_x").name == "tgt_default_x_p5.pkl"
+    monkeypatch.setattr(E, "rules_version", lambda: 6)
+    newer, _ = E._frame({}, "opts", tmp_path, "tgt_default_x")
+    assert newer == {"n": 2} and len(calls) == 2  # other rules: rendered again, the old file kept
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["tgt_default_x_p5.pkl", "tgt_default_x_p6.pkl"]
+
+
+def test_rules_version_is_the_v2_protocols():
+    from render_tools.protocol import load_protocol
+
+    assert E.rules_version() == load_protocol("lfmbench-v2").version >= 5
