@@ -102,17 +102,29 @@ def registry_id(mi, dr, ptr_type, obj) -> int:
     return int(dr.reinterpret_array(mi.UInt32, ptr_type(obj))[0])
 
 
+#: Index of refraction of a ``roughplastic`` coat whose scene material gives no ``ior``: Mitsuba 3's default
+#: ``int_ior`` of its ``roughplastic`` plugin ("polypropylene", 1.49; Mitsuba 3 plugin reference, "Rough plastic
+#: material", https://mitsuba.readthedocs.io/en/stable/src/generated/plugins_bsdfs.html), which
+#: :mod:`render_tools.mitsuba_scene` leaves in place for such a material.
+ROUGHPLASTIC_IOR = 1.49
+
+
 def glossy_choice_table(mi, dr, bsdfs: dict, materials: dict) -> dict:
     """BSDF registry id -> (GGX alpha, c) of the scene's glossy coats for :class:`Tracer` ``gloss``: every material
-    of ``materials`` (name -> scene material) that is a ``roughplastic`` with an ``ior`` (a wet road's water film
-    and its puddles, :func:`render_tools.reflections.wet_road`'s criterion), ``bsdfs`` (name -> its loaded Mitsuba
-    BSDF, shared by its shapes). ``c = F0 pi eta^2 / (4 rho)`` with F0 = ((eta - 1) / (eta + 1))^2 at normal
-    incidence and rho the mean of the material's ``rgb`` (its texture's base colour)."""
+    of ``materials`` (name -> scene material) that is a ``roughplastic`` (a wet road's water film and its puddles,
+    glass, car paint, lamp lenses, signs; a missing ``ior`` is Mitsuba's, :data:`ROUGHPLASTIC_IOR`), ``bsdfs``
+    (name -> its loaded Mitsuba BSDF, shared by its shapes). ``c = F0 pi eta^2 / (4 rho)`` with F0 = ((eta - 1) /
+    (eta + 1))^2 at normal incidence and rho the mean of the material's ``rgb`` (its texture's base colour).
+
+    Every coat, not only the water film's (protocol version 6 of lfmbench-v2): a shop window mirroring an oncoming
+    car's headlights got the plain choice before, so its reflection was a few spp-1 samples ~5x their mean, which
+    the denoiser removed (0.29 of an undenoised reference's light kept at 160x90, 0.79 at 640x360; 1.05 with the
+    lobe's choice; docs/guide/rendering.md, "A lit window at the left edge")."""
     out = {}
     for name, m in materials.items():
-        if m.get("type") != "roughplastic" or "ior" not in m or name not in bsdfs:
+        if m.get("type") != "roughplastic" or name not in bsdfs:
             continue
-        eta = float(m["ior"])
+        eta = float(m.get("ior", ROUGHPLASTIC_IOR))
         f0 = ((eta - 1.0) / (eta + 1.0)) ** 2
         rho = max(float(np.mean(m["rgb"])), 1e-3)
         out[registry_id(mi, dr, mi.BSDFPtr, bsdfs[name])] = (float(m["alpha"]), f0 * math.pi * eta * eta / (4.0 * rho))

@@ -335,3 +335,31 @@ def test_glossy_light_choice_weights_follow_the_coat_lobe():
         want = plain[i] * (1 + c * D / max(wi[2] * wl[2], tracer.GLOSS_COS_FLOOR))
         assert got[i] == pytest.approx(want, rel=1e-4)
     assert got[0] / plain[0] > 1e3 and got[1] / plain[1] < 1.1
+
+
+@pytest.mark.jit
+def test_glossy_choice_table_holds_every_coat_with_mitsubas_index_where_none_is_given():
+    """Every ``roughplastic`` coat steers the light choice (glass, paint, lenses, not only a water film): a coat
+    without ``ior`` gets Mitsuba's own default index (the loaded BSDF's eta, read back), one with ``ior`` its own;
+    ``c = F0 pi eta^2 / (4 rho)``; diffuse materials are left out."""
+    from render_tools import backend
+
+    backend.select_variant()
+    import drjit as dr
+    import mitsuba as mi
+
+    mats = {"glass": {"type": "roughplastic", "alpha": 0.05, "rgb": [0.02, 0.02, 0.02]},
+            "film": {"type": "roughplastic", "alpha": 0.04, "ior": 1.33, "rgb": [0.1, 0.1, 0.1]},
+            "wall": {"type": "diffuse", "rgb": [0.5, 0.5, 0.5]}}
+    bsdfs = {"glass": mi.load_dict({"type": "roughplastic", "distribution": "ggx", "alpha": 0.05}),
+             "film": mi.load_dict({"type": "roughplastic", "distribution": "ggx", "alpha": 0.04, "int_ior": 1.33}),
+             "wall": mi.load_dict({"type": "diffuse"})}
+    table = tracer.glossy_choice_table(mi, dr, bsdfs, mats)
+    assert len(table) == 2  # both coats, not the wall
+    eta_default = float(mi.traverse(bsdfs["glass"])["eta"][0])  # the plugin's int_ior / ext_ior
+    for name, eta in (("glass", tracer.ROUGHPLASTIC_IOR), ("film", 1.33)):
+        alpha, c = table[tracer.registry_id(mi, dr, mi.BSDFPtr, bsdfs[name])]
+        rho = float(np.mean(mats[name]["rgb"]))
+        assert alpha == mats[name]["alpha"]
+        assert c == pytest.approx(((eta - 1) / (eta + 1)) ** 2 * np.pi * eta ** 2 / (4 * rho), rel=1e-6)
+    assert eta_default == pytest.approx(tracer.ROUGHPLASTIC_IOR, rel=1e-3)  # 1.49 over air's 1.000277
