@@ -76,7 +76,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import _llvm  # noqa: E402,F401 - sets DRJIT_LIBLLVM_PATH
 from _timing import replace_section  # noqa: E402
 from bench_render import lum  # noqa: E402
-from bench_render_v2_error import _frame, _light_canvases, _v2_scene, frame_path, lamp_boxes  # noqa: E402
+from bench_render_v2_error import (_frame, _light_canvases, _v2_scene, frame_path, lamp_boxes,  # noqa: E402
+                                   rules_version)
 
 from lfmbench.fileio import load_yaml  # noqa: E402
 
@@ -513,11 +514,9 @@ def write_section(rows: list, out: Path, load0: float, load1: float, size, ref, 
              f"EPYC (AVX2), 1-minute load average {load0:.1f} at the start and {load1:.1f} at the end "
              f"({minutes:.0f} min; other jobs shared the cores: CPU seconds are upper bounds). Frame 0 of scene "
              f"generator 2 scenes at {size[0]}x{size[1]}, the `default` profile (spp 1, light_spp 32, K 8) with every "
-             "other field at its default, on scene version 2 those of protocol version 4 (nearest texels, small "
-             "flickering dot and rect faces by their exact coverage, the wet film's lobe in the static light choice, "
-             "static frames denoised, a wet frame's split by oidn) or 5 (as 4, a wet road's reflection crops clipped "
-             "at the image edge: a case's frames and references are of the version they were rendered with, named in "
-             "\"what the numbers say\" below), against two references of seeds "
+             "other field at its default, on scene version 2 the render rules of `lfmbench-v2` protocol version "
+             f"{rules_version()} (the cache's file names carry it; docs/guide/protocols.md), against two references "
+             "of seeds "
              f"{REF_SEEDS[0]}, {REF_SEEDS[1]} that draw the LED dots as they are (`dots_lod_px` 0): spp {ref[0]}, "
              f"light_spp {ref[1]}, nothing denoised, a wet road's reflections per pixel (module docstring). Rows "
              "`(lamps)`: the flickering groups rendered alone (references at spp 1, light_spp as above; CPU: the lamp "
