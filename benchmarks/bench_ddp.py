@@ -7,9 +7,12 @@ by itself). The three cases alternate ``--rounds`` times in one run.
 Workload: batches of the real training path (``lfmbench.train.make_loader`` over a synthetic corpus written here:
 ``tests/data/corpus`` scenes, 16 x 24 px, crop 16, 3 frames), the ``unet_tiny`` network; ``--batch`` samples per
 process; torch with one thread per process. Timed: ``--steps`` steps after ``--warmup`` steps, median ms per step.
-Backend: gloo on the CPU (``--device cpu``), NCCL with one GPU per rank on CUDA (not run here: no GPU).
+Backend: gloo on the CPU (``--device cpu``). ``--device cuda`` (one GPU): the plain step against the DDP step of
+a one-rank NCCL group (NCCL takes one rank per GPU), ``unet_v1`` on a device-path batch of ``--batch`` (64)
+samples at crop 128: what DDP's machinery (gradient buckets, their all-reduce, the loss all-reduce) adds per step.
 
-Writes ``docs/benchmarks/distributed.md`` (``--no-doc``: only print). Run: ``.venv/bin/python benchmarks/bench_ddp.py``.
+Writes its section of ``docs/benchmarks/distributed.md`` ("CPU processes (gloo)" or "One GPU (NCCL)"; ``--no-doc``:
+only print). Run: ``.venv/bin/python benchmarks/bench_ddp.py [--device cuda]``.
 """
 from __future__ import annotations
 
@@ -28,6 +31,7 @@ import torch
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
 
 CFG = {"model": {"base_channels": 8, "depth": 2, "context_frames": 1},
        "train": {"epochs": 1, "crop": 16, "samples_per_scene": 8, "workers": 0, "lr": 3e-3}}
@@ -127,59 +131,164 @@ def solo(corpus: Path, batch: int, steps: int, warmup: int, world: int, tmp: Pat
     return [max(ts) for ts in zip(*per)]
 
 
+def _gpu_batch(batch: int, crop: int, tmp: Path, device: str = "cuda:0") -> tuple:
+    """(spec, cfg, one training batch on cuda:0): ``unet_v1`` and a device-path batch of ``batch`` samples at
+    ``crop`` px from :func:`bench_device_path.make_corpus` (2 synthetic 640 x 360 scenes), as that page's step rows."""
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    from bench_device_path import _dataset, make_corpus
+
+    from lfmbench.datasets.device import DeviceBatches
+    from lfmbench.train import load_config, trainable
+
+    spec = trainable("unet")
+    cfg = load_config("unet", ROOT / "lfmbench" / "configs" / "unet_v1.yaml")
+    root = make_corpus(tmp / "gpu_corpus", 2)
+    kw = {} if spec.outputs is None else {"outputs": spec.outputs}
+    ds = _dataset(root, crop, noise_streams="counter", **kw)
+    return spec, cfg, next(iter(DeviceBatches(ds, batch, device, seed=0)))
+
+
+def _gpu_steps(step, batch: dict, steps: int, warmup: int, dev: torch.device) -> float:
+    """ms per step over ``steps`` steps queued back to back (one synchronisation at the end, as ``train()`` runs
+    them: it reads each loss later without waiting), after ``warmup`` steps."""
+    for _ in range(warmup):
+        step(batch, 1e-3)
+    if dev.type == "cuda":
+        torch.cuda.synchronize(dev)
+    t0 = time.perf_counter()
+    for _ in range(steps):
+        step(batch, 1e-3)
+    if dev.type == "cuda":
+        torch.cuda.synchronize(dev)
+    return (time.perf_counter() - t0) * 1e3 / steps
+
+
+def gpu_rounds(batch: int, crop: int, steps: int, warmup: int, rounds: int, device: str = "cuda"
+               ) -> dict[str, list[float]]:
+    """One GPU: the plain step (``train_step._eager_step``) against the DDP step of a one-rank NCCL group
+    (``lfmbench.distributed.ddp_step`` through ``DistributedDataParallel``: gradient buckets, their all-reduce and
+    the loss all-reduce), each its own model from the same seed, alternating ``rounds`` times. ``device="cpu"``:
+    the same with gloo (a check of this code without a GPU)."""
+    import torch.distributed as dist
+    from torch.nn.parallel import DistributedDataParallel
+
+    from lfmbench import distributed as D
+    from lfmbench import train_step as S
+
+    with socket.socket() as sk:
+        sk.bind(("127.0.0.1", 0))
+        port = sk.getsockname()[1]
+    dev = torch.device("cuda", 0) if device == "cuda" else torch.device("cpu")
+    if dev.type == "cuda":
+        torch.cuda.set_device(dev)
+    dist.init_process_group("nccl" if dev.type == "cuda" else "gloo", init_method=f"tcp://127.0.0.1:{port}", rank=0,
+                            world_size=1)
+    try:
+        with tempfile.TemporaryDirectory() as d:
+            spec, cfg, b = _gpu_batch(batch, crop, Path(d), str(dev))
+        models = {}
+        for name in ("plain", "ddp"):
+            torch.manual_seed(0)
+            m = spec.build_model(cfg).to(dev)
+            models[name] = (m, S.make_optimizer(m, cfg, dev))
+        m, opt = models["plain"]
+        plain_step = lambda bb, lr: S._eager_step(m, opt, spec, cfg, bb, lr)  # noqa: E731
+        dm, dopt = models["ddp"]
+        group = D.Group(rank=0, world=1, local_rank=0, device=dev)
+        wrapped = DistributedDataParallel(dm, device_ids=[0] if dev.type == "cuda" else None)
+        ddp = D.ddp_step(wrapped, dopt, spec, cfg, group, S._set_lr)
+        out: dict[str, list[float]] = {"plain": [], "ddp": []}
+        for r in range(rounds):
+            out["plain"].append(_gpu_steps(plain_step, b, steps, warmup, dev))
+            out["ddp"].append(_gpu_steps(ddp, b, steps, warmup, dev))
+            print(f"round {r + 1}: plain {out['plain'][-1]:.2f} ms, ddp {out['ddp'][-1]:.2f} ms", flush=True)
+        return out
+    finally:
+        dist.destroy_process_group()
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
+    ap.add_argument("--device", default="cpu", help="cpu (gloo, --ranks processes) or cuda (one GPU: a one-rank "
+                                                  "NCCL group against the plain step)")
     ap.add_argument("--ranks", type=int, default=2)
-    ap.add_argument("--batch", type=int, default=4)
+    ap.add_argument("--batch", type=int, default=None, help="samples per process per step (default 4; cuda: 64)")
     ap.add_argument("--steps", type=int, default=30)
     ap.add_argument("--warmup", type=int, default=5)
     ap.add_argument("--rounds", type=int, default=3, help="rounds of (plain, DDP, independent processes)")
     ap.add_argument("--no-doc", action="store_true")
     a = ap.parse_args()
+    from _timing import replace_section
+
     from tests.data.corpus.data import make_corpus
 
-    torch.set_num_threads(1)
-    load0 = open("/proc/loadavg").read().split()[:3]
-    med: dict[str, list[float]] = {"plain": [], "ddp": [], "solo": []}
-    with tempfile.TemporaryDirectory() as d:
-        corpus = make_corpus(Path(d) / "c", n_scenes=5)
-        for r in range(a.rounds):  # alternating, so that the machine's drifting load meets every case
-            med["plain"].append(statistics.median(plain(corpus, a.batch, a.steps, a.warmup)))
-            med["ddp"].append(statistics.median(ddp(corpus, a.batch, a.steps, a.warmup, a.ranks, Path(d))))
-            med["solo"].append(statistics.median(solo(corpus, a.batch, a.steps, a.warmup, a.ranks, Path(d))))
-            print(f"round {r + 1}: " + ", ".join(f"{k} {v[-1]:.1f} ms" for k, v in med.items()), flush=True)
-    load1 = open("/proc/loadavg").read().split()[:3]
-    m = {k: statistics.median(v) for k, v in med.items()}
     when = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     cpu = next((line.split(":", 1)[1].strip() for line in open("/proc/cpuinfo") if line.startswith("model name")),
                platform.machine())
-    rows = [("one process (plain step)", "plain"),
-            (f"{a.ranks} plain processes at once, no DDP (each its own model and batch)", "solo"),
-            (f"DDP, {a.ranks} processes (gloo), each the same batch", "ddp")]
-    text = (f"# Data-parallel training: per-step overhead\n\n"
-            f"Measured {when}; machine: {cpu}, {os.cpu_count()} cores, "
-            f"torch {torch.__version__}; load average before {' '.join(load0)}, after {' '.join(load1)} (a shared, "
-            f"loaded machine: {a.ranks} ranks compete with other work for {os.cpu_count()} cores). Rerun: "
-            f"`.venv/bin/python benchmarks/bench_ddp.py`.\n\n"
-            f"U-Net (`unet_tiny` widths), {a.batch} samples of 16 x 16 px (3 frames) per process per step, one torch "
-            f"thread per process; each case the median of {a.steps} steps after {a.warmup} warm-up steps (with "
-            f"several processes, step k lasts until the slowest process ends its k-th step); {a.rounds} rounds of "
-            "the three cases in turn (plain, DDP, independent processes), the median of the rounds' medians.\n\n"
-            "| step | ms per step (median) | rounds, ms | vs one process |\n|---|---|---|---|\n"
-            + "".join(f"| {n} | {m[k]:.1f} | {', '.join(f'{x:.1f}' for x in med[k])} | {m[k] / m['plain']:.2f} |\n"
-                      for n, k in rows)
-            + f"\nDDP overhead per step: {m['ddp'] - m['plain']:+.1f} ms against one process "
-              f"({m['ddp'] / m['plain']:.2f}x), "
-              f"{m['ddp'] - m['solo']:+.1f} ms ({m['ddp'] / m['solo']:.2f}x) against {a.ranks} independent processes "
-              "on the same cores. The second is what DDP itself adds (the gradient all-reduce over gloo on "
-              "loopback, the all-reduce of the logged loss, the ranks waiting for each other); the rest is "
-              f"{a.ranks} processes sharing {os.cpu_count()} cores with the machine's other work. The GPU figure "
-              "(NCCL, one GPU per rank) is open: no GPU here.\n")
-    print(text)
+    load0 = open("/proc/loadavg").read().split()[:3]
+    if a.device.startswith("cuda"):
+        if not torch.cuda.is_available():
+            print("error: --device cuda: no CUDA device here", file=sys.stderr)
+            sys.exit(2)
+        batch = a.batch or 64
+        med = gpu_rounds(batch, 128, a.steps, a.warmup, a.rounds)
+        load1 = open("/proc/loadavg").read().split()[:3]
+        m = {k: statistics.median(v) for k, v in med.items()}
+        heading = "## One GPU (NCCL)"
+        lines = [heading, "",
+                 f"Measured {when}; machine: {torch.cuda.get_device_name(0)}, host {cpu}, {os.cpu_count()} cores, "
+                 f"torch {torch.__version__}; load average before {' '.join(load0)}, after {' '.join(load1)}. Rerun: "
+                 "`.venv/bin/python benchmarks/bench_ddp.py --device cuda`.", "",
+                 f"U-Net `unet_v1`, {batch} samples of 128 x 128 px (3 frames) per step from the device path (one "
+                 f"batch, resident); {a.steps} steps queued back to back after {a.warmup} warm-up steps, one "
+                 "synchronisation at the end (as `train()` runs them); the DDP step is `lfmbench.distributed."
+                 "ddp_step` through `DistributedDataParallel` in a one-rank NCCL group (one GPU: NCCL takes one "
+                 f"rank per GPU), so the difference is what DDP's machinery adds per step; {a.rounds} rounds "
+                 "alternating, the median of the rounds.", "",
+                 "| step | ms per step (median) | rounds, ms | vs plain |", "|---|---|---|---|",
+                 *(f"| {n} | {m[k]:.2f} | {', '.join(f'{x:.2f}' for x in med[k])} | {m[k] / m['plain']:.3f} |"
+                   for n, k in (("plain step (`train()` on one GPU)", "plain"), ("DDP step, one rank (NCCL)", "ddp"))),
+                 "", f"DDP overhead per step on one GPU: {m['ddp'] - m['plain']:+.2f} ms "
+                     f"({100 * (m['ddp'] / m['plain'] - 1):+.1f} %).", ""]
+    else:
+        batch = a.batch or 4
+        torch.set_num_threads(1)
+        med = {"plain": [], "ddp": [], "solo": []}
+        with tempfile.TemporaryDirectory() as d:
+            corpus = make_corpus(Path(d) / "c", n_scenes=5)
+            for r in range(a.rounds):  # alternating, so that the machine's drifting load meets every case
+                med["plain"].append(statistics.median(plain(corpus, batch, a.steps, a.warmup)))
+                med["ddp"].append(statistics.median(ddp(corpus, batch, a.steps, a.warmup, a.ranks, Path(d))))
+                med["solo"].append(statistics.median(solo(corpus, batch, a.steps, a.warmup, a.ranks, Path(d))))
+                print(f"round {r + 1}: " + ", ".join(f"{k} {v[-1]:.1f} ms" for k, v in med.items()), flush=True)
+        load1 = open("/proc/loadavg").read().split()[:3]
+        m = {k: statistics.median(v) for k, v in med.items()}
+        rows = [("one process (plain step)", "plain"),
+                (f"{a.ranks} plain processes at once, no DDP (each its own model and batch)", "solo"),
+                (f"DDP, {a.ranks} processes (gloo), each the same batch", "ddp")]
+        heading = "## CPU processes (gloo)"
+        lines = [heading, "",
+                 f"Measured {when}; machine: {cpu}, {os.cpu_count()} cores, torch {torch.__version__}; load average "
+                 f"before {' '.join(load0)}, after {' '.join(load1)} (a shared, loaded machine: {a.ranks} ranks "
+                 f"compete with other work for {os.cpu_count()} cores). Rerun: `.venv/bin/python "
+                 "benchmarks/bench_ddp.py`.", "",
+                 f"U-Net (`unet_tiny` widths), {batch} samples of 16 x 16 px (3 frames) per process per step, one "
+                 f"torch thread per process; each case the median of {a.steps} steps after {a.warmup} warm-up steps "
+                 "(with several processes, step k lasts until the slowest process ends its k-th step); "
+                 f"{a.rounds} rounds of the three cases in turn (plain, DDP, independent processes), the median of "
+                 "the rounds' medians.", "",
+                 "| step | ms per step (median) | rounds, ms | vs one process |", "|---|---|---|---|",
+                 *(f"| {n} | {m[k]:.1f} | {', '.join(f'{x:.1f}' for x in med[k])} | {m[k] / m['plain']:.2f} |"
+                   for n, k in rows),
+                 "", f"DDP overhead per step: {m['ddp'] - m['plain']:+.1f} ms against one process "
+                     f"({m['ddp'] / m['plain']:.2f}x), {m['ddp'] - m['solo']:+.1f} ms ({m['ddp'] / m['solo']:.2f}x) "
+                     f"against {a.ranks} independent processes on the same cores. The second is what DDP itself adds "
+                     "(the gradient all-reduce over gloo on loopback, the all-reduce of the logged loss, the ranks "
+                     f"waiting for each other); the rest is {a.ranks} processes sharing {os.cpu_count()} cores with "
+                     "the machine's other work.", ""]
+    print("\n".join(lines))
     if not a.no_doc:
-        from lfmbench.fileio import atomic_write_text
-
-        atomic_write_text(ROOT / "docs" / "benchmarks" / "distributed.md", text)
+        replace_section(ROOT / "docs" / "benchmarks" / "distributed.md", heading, lines)
 
 
 if __name__ == "__main__":

@@ -9,10 +9,21 @@ Times, in samples/s (median of timed passes after a warm-up pass; CUDA synchroni
 - ``step``: the U-Net (``unet_v1``) training step alone on a batch already on the device (the ceiling);
 - ``train``: ``lfmbench.train.train`` end to end for ``--steps`` optimiser steps, per data source.
 
-Workload: a synthetic corpus written here (``--scenes`` scenes of 640 x 360 px, 4 frames, 8 time bins, 24 lamps of
-24 x 40 px each, 4 bands; random radiance: the throughput does not depend on the values), 3 frames per sample,
-every output but ``rgb``; capture rows at a 256 x 256 crop, training rows at crop 128. Also reports the resident
-bytes per scene and the peak device memory per batch.
+Workload: a corpus written here (``--scenes`` scenes, 4 frames, 4 bands), 3 frames per sample, every output but
+``rgb``; capture rows at a 256 x 256 crop, training rows at crop 128. Its radiance: ``--levels`` the radiance of
+rendered scenes (an npz of :func:`extract_levels`, made by ``--levels CORPUS --save-levels FILE`` from a rendered
+31-band corpus, e.g. ``lfmbench render --protocol lfmbench-v1 --split test``: templates taken in turn from each time
+of day, their 31 bands summed into 4 with the wavelength integral kept, their lights' boxes and bins; scene i is
+template i mod T at its size, 640 x 360 for the protocols), so that the electron levels, on which the Poisson
+sampler's cost depends (search under ~10 e-, rejection to ~1,000 e-, Gaussian above), are a real corpus's; without
+it random radiance (640 x 360, 8 time bins, 24 lamps of 24 x 40 px, levels all within 10-1,000 e-). Use at least 64
+scenes on a GPU (21 / 11 MiB resident per scene: far beyond the 50-60 MB L2 cache of an H100 / H200).
+
+Rows ``split``: the device path's halves on the same batches, ``pieces`` (draws, crops, composition) and the sensor
+chain alone, with the distribution of the chain's electron levels; ``--profile``: the GPU kernel time of one batch
+of 256, to set against the end-to-end ms per batch. Every scene's layers are projected into the corpus's cache
+before the first timed row (:func:`prewarm`). Also reports the resident bytes per scene and the peak device memory
+per batch.
 
 Writes its section of ``docs/benchmarks/device-path.md`` (``--no-doc``: only print; ``--json PATH``: the rows,
 written as they come): "GPU figures" on a GPU, "CPU figures" without one (the other section stays as it is).
@@ -42,24 +53,131 @@ DOC = ROOT / "docs" / "benchmarks" / "device-path.md"
 OUTS = ("raw", "input_referred", "saturated", "gt", "light_index", "depth")
 
 
+#: The synthetic corpus's four bands (nm): centres of the 31 rendered 10-nm bands (400-700 nm) taken in groups
+#: of 8, 8, 8 and 7 (:func:`extract_levels`).
+LEVEL_BANDS = (435.0, 515.0, 595.0, 670.0)
+#: Each grouped band's width (nm): 310 nm / 4, so that sum(band radiance x width) equals the rendered bands' sum
+#: (radiance x 10 nm) exactly.
+LEVEL_BAND_WIDTH = 77.5
+
+
+def _group_bands(arr: np.ndarray, bands: list[float]) -> np.ndarray:
+    """(..., 31, H, W) radiance at 10-nm bands 400-700 nm -> (..., 4, H, W) at :data:`LEVEL_BANDS`: each group's
+    sum of radiance x 10 nm over :data:`LEVEL_BAND_WIDTH` (the integral over wavelength kept exactly; the
+    sensor's QE is then taken at the group's centre)."""
+    b = np.asarray(bands)
+    if len(b) != 31 or abs(b[0] - 400) > 1e-6 or abs(b[-1] - 700) > 1e-6:
+        raise ValueError(f"levels: want a corpus of 31 bands 400-700 nm, this one has {len(b)} "
+                         f"({b[0]:g}-{b[-1]:g} nm)")
+    groups = (slice(0, 8), slice(8, 16), slice(16, 24), slice(24, 31))
+    a = arr.astype(np.float64)
+    return np.stack([a[..., g, :, :].sum(-3) * 10.0 / LEVEL_BAND_WIDTH for g in groups], -3).astype(np.float32)
+
+
+def extract_levels(corpus: Path, n: int, out: Path) -> Path:
+    """The radiance of ``n`` rendered scenes (frame 0; complete scenes of ``corpus`` taken in turn from each time of
+    day, ``scene.json`` ``time_of_day``; ``corpus`` a rendered
+    lfmbench corpus of 31 bands, e.g. ``lfmbench render --protocol lfmbench-v1 --split test``) in the four bands of
+    :data:`LEVEL_BANDS`, written to ``out`` (npz, float16): per template t ``s{t}_short`` / ``s{t}_long`` (4, H, W)
+    the static groups' sum over the short / long window, ``s{t}_boxes`` (L, 4) the visible flickering lights' boxes
+    (y0, x0, y1, x1) px and ``s{t}_l{j}`` (K, 4, h, w) their bins, all W sr^-1 m^-2 nm^-1. A few MiB, small enough
+    to carry to a GPU machine."""
+    from lfmbench.corpus import Corpus
+    from lfmbench.fileio import atomic_write_bytes
+
+    c = Corpus(corpus)
+    by_time: dict[str, list[str]] = {}
+    for sid in sorted(c.scenes):
+        by_time.setdefault(str(c.scene(sid).get("time_of_day", "?")), []).append(sid)
+    # round robin over the times of day (day, dusk, night ...): the templates mix the corpus's light levels
+    picked = [q[k] for k in range(max(map(len, by_time.values()), default=0)) for q in by_time.values() if k < len(q)]
+    arrays: dict[str, np.ndarray] = {}
+    t = 0
+    for sid in picked[:n]:
+        m = c.meta(sid)
+        groups = c.groups(sid)
+        stat = {w: sum(c.read_static(sid, 0, g, w) for g, v in groups.items() if not v["flicker"])
+                for w in ("short", "long")}
+        lights = [x for g, v in groups.items() if v["flicker"] for x in c.read_light_bins(sid, 0, g)]
+        for w, a in stat.items():
+            arrays[f"s{t}_{w}"] = _group_bands(a, m["bands_nm"]).astype(np.float16)
+        arrays[f"s{t}_boxes"] = np.array([box for _i, box, _a in lights], np.int32).reshape(-1, 4)
+        for j, (_i, _box, a) in enumerate(lights):
+            arrays[f"s{t}_l{j}"] = _group_bands(a, m["bands_nm"]).astype(np.float16)
+        arrays[f"s{t}_time"] = np.array(str(c.scene(sid).get("time_of_day", "?")))
+        t += 1
+    if t == 0:
+        raise ValueError(f"--levels-from {corpus}: no scenes")
+    import io
+
+    buf = io.BytesIO()
+    np.savez_compressed(buf, templates=np.int64(t), **arrays)
+    atomic_write_bytes(out, buf.getvalue())
+    return out
+
+
+def _level_frames(meta: dict, lv, t: int, seed: int) -> list[dict]:
+    """Frames of ``meta`` holding template ``t``'s radiance of :func:`extract_levels` (every frame the same) and
+    the synthetic aux of :func:`tests.data.corpus.data.fake_frames`."""
+    from tests.data.corpus.data import fake_frames
+
+    frames = fake_frames(meta, seed=seed)
+    short, long_ = (lv[f"s{t}_{w}"].astype(np.float32) for w in ("short", "long"))
+    boxes = lv[f"s{t}_boxes"]
+    for f in frames:
+        f["static"] = {"skymap": {"short": short.copy(), "long": long_.copy()}}
+        f["lights"] = {"otherlights": [(j, tuple(int(v) for v in boxes[j]), lv[f"s{t}_l{j}"].astype(np.float32))
+                                       for j in range(len(boxes))]}
+    return frames
+
+
 def make_corpus(root: Path, scenes: int, width: int = 640, height: int = 360, frames: int = 4, bins: int = 8,
-                lamps: int = 24) -> Path:
-    """The synthetic throughput corpus (fake radiance in the corpus format; see module docstring)."""
+                lamps: int = 24, levels: Path | None = None) -> Path:
+    """The throughput corpus (see module docstring): random radiance, or (``levels``: an npz of
+    :func:`extract_levels`) scene i the rendered radiance of template i mod T at its size, its lights' boxes and
+    bins, in every frame. Scenes are encoded in threads (OpenEXR and numpy release the GIL), written in order."""
+    from concurrent.futures import ThreadPoolExecutor
+
     from lfmbench import corpus as C
+    from lfmbench.corpus.scene_files import encode_scene
+    from lfmbench.corpus.writer import prune_scene_dir
     from tests.data.corpus.data import fake_frames, fake_meta, fake_scene, scale_frames
 
     if (root / "manifest.json").is_file():
         return root
     w = C.CorpusWriter(root)
     rng = np.random.default_rng(0)
-    for i in range(scenes):
-        meta = fake_meta(f"scene{i:05d}", width=width, height=height, frames=frames, bins=bins,
-                         bands=[450.0, 530.0, 610.0, 690.0], n_lights=lamps)
-        for lt in meta["lights"]:
-            y0, x0 = int(rng.integers(0, height - 24)), int(rng.integers(0, width - 40))
-            lt["bbox"] = [[y0, x0, y0 + 24, x0 + 40] for _ in range(frames)]
-        fr = scale_frames(fake_frames(meta, seed=i), 1e-3, 1e-3, False)
-        w.write_scene(meta["scene_id"], fake_scene(meta["scene_id"]), meta, fr)
+    lv = dict(np.load(levels)) if levels is not None else None
+    boxes_r = [[(int(rng.integers(0, height - 24)), int(rng.integers(0, width - 40))) for _ in range(lamps)]
+               for _ in range(scenes)]
+
+    def one(i: int) -> tuple[str, list]:
+        if lv is not None:
+            t = i % int(lv["templates"])
+            boxes = lv[f"s{t}_boxes"]
+            K = lv[f"s{t}_l0"].shape[0] if len(boxes) else bins
+            _c, h, wd = lv[f"s{t}_long"].shape
+            meta = fake_meta(f"scene{i:05d}", width=wd, height=h, frames=frames, bins=K, bands=list(LEVEL_BANDS),
+                             groups={"skymap": {"flicker": False}, "otherlights": {"flicker": True}},
+                             n_lights=len(boxes))
+            meta["band_width_nm"] = LEVEL_BAND_WIDTH
+            for lt, box in zip(meta["lights"], boxes):
+                lt["bbox"] = [[int(v) for v in box] for _ in range(frames)]
+            fr = _level_frames(meta, lv, t, i)
+        else:
+            meta = fake_meta(f"scene{i:05d}", width=width, height=height, frames=frames, bins=bins,
+                             bands=[450.0, 530.0, 610.0, 690.0], n_lights=lamps)
+            for lt, (y0, x0) in zip(meta["lights"], boxes_r[i]):
+                lt["bbox"] = [[y0, x0, y0 + 24, x0 + 40] for _ in range(frames)]
+            fr = scale_frames(fake_frames(meta, seed=i), 1e-3, 1e-3, False)
+        sid = meta["scene_id"]
+        return sid, list(encode_scene(sid, fake_scene(sid), meta, fr, dtype=w.storage))
+
+    with ThreadPoolExecutor(max(1, min(16, os.cpu_count() or 1))) as ex:
+        for sid, files in ex.map(one, range(scenes)):
+            hashes = w.write_files(files)
+            prune_scene_dir(w.root, sid, hashes)
+            w.commit_scene(sid, hashes)
     w.write_splits(0)
     return root
 
@@ -78,6 +196,29 @@ def _dataset(root: Path, crop: int, samples: int = 128, **kw):
     scenes = len(Corpus(root).scenes)
     return LFMCaptureDataset(root, split="all", frames=3, crop=crop, samples_per_scene=max(64, -(-samples // scenes)),
                              **kw)
+
+
+def prewarm(root: Path, crops=(256, 128)) -> float:
+    """Build every scene's projected layers into the corpus's on-disk cache (:func:`lfmbench.datasets.projection.
+    load_or_build`) in threads, for the datasets of the capture rows and of the training rows, so that no timed row
+    and no "layers loaded" figure includes the first projection of a scene. Returns the seconds it took."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from lfmbench.datasets.projection import aux_channels, load_or_build
+    from lfmbench.train import trainable
+
+    spec = trainable("unet")
+    t0 = time.perf_counter()
+    for crop, kw in ((crops[0], {}), (crops[1], {"noise_streams": "counter",
+                                               **({} if spec.outputs is None else {"outputs": spec.outputs})})):
+        ds = _dataset(root, crop, **kw)
+
+        def one(sid, ds=ds):
+            load_or_build(ds.corpus, sid, ds._layer_preset, ds.groups, ds._frames_to_load(sid), ds.optics,
+                          ds.cache_dir, aux=aux_channels(ds.outputs))
+        with ThreadPoolExecutor(max(1, min(16, os.cpu_count() or 1))) as ex:
+            list(ex.map(one, dict.fromkeys(ds.scene_ids)))
+    return time.perf_counter() - t0
 
 
 def _timed(fn, passes: int, dev: torch.device) -> tuple[float, float]:
@@ -134,6 +275,41 @@ def time_device(root, dev, batch, batches, passes, program=True):
     peak = (torch.cuda.max_memory_allocated(dev) - base) if dev.type == "cuda" else None
     scenes = len(dict.fromkeys(db.ds.scene_ids))
     return batch * batches / med, load_s, db.resident.bytes / scenes, peak, count_syncs(db, dev)
+
+
+def time_split(root, dev, batch, batches, passes) -> dict:
+    """The device path's two halves at ``batch`` on the same batches: ``pieces`` (the counter draws, the crops and
+    the composition of the mean electron rates: :meth:`DeviceBatches.pieces`) and ``chain`` (the sensor chain alone,
+    :func:`lfmbench.datasets.batched.simulate_batch`, on pieces made beforehand), in samples/s and ms per batch;
+    and the electron levels the chain sees (``gt``: LPD-equivalent mean e- over the short exposure, noise-free)
+    as fractions under 10 e- (the Poisson sampler's search), 10-1,000 e- (rejection) and above (Gaussian)."""
+    from lfmbench.datasets.batched import simulate_batch
+    from lfmbench.datasets.device import DeviceBatches
+
+    from lfmbench.datasets.device import epoch_order
+
+    db = DeviceBatches(_dataset(root, 256, batch * batches), batch, dev, seed=0)
+    order = epoch_order(len(db.ds), 0, 0).tolist()  # as the device rows: each batch mixes the scenes
+    idx = [order[k * batch:(k + 1) * batch] for k in range(batches)]
+
+    def run_pieces():
+        for i in idx:
+            db.pieces(i)
+    med_p, _ = _timed(run_pieces, passes, dev)
+    made = [db.pieces(i) for i in idx]
+
+    def run_chain():
+        for p in made:
+            simulate_batch(p, db.ds.preset, noise_streams="counter")
+    med_c, _ = _timed(run_chain, passes, dev)
+    gt = torch.cat([simulate_batch(p, db.ds.preset, noise_streams="counter")["gt"].double().flatten()
+                    for p in made])
+    qs = torch.quantile(gt[torch.randperm(gt.numel(), generator=torch.Generator().manual_seed(0))[:1 << 20]
+                           .to(gt.device)], torch.tensor([0.5, 0.99], dtype=torch.float64, device=gt.device))
+    return {"pieces_sps": batch * batches / med_p, "pieces_ms": 1e3 * med_p / batches,
+            "chain_sps": batch * batches / med_c, "chain_ms": 1e3 * med_c / batches,
+            "e_under_10": float((gt < 10).double().mean()), "e_10_1000": float(((gt >= 10) & (gt < 1000)).double().mean()),
+            "e_over_1000": float((gt >= 1000).double().mean()), "e_median": float(qs[0]), "e_p99": float(qs[1])}
 
 
 def count_syncs(db, dev) -> list | None:
@@ -210,8 +386,9 @@ def measure_fp16(root, dev, batch: int) -> dict:
     return out
 
 
-def profile_device(root, dev, batch: int, out: Path | None) -> None:
-    """Where the device path's GPU time goes: torch.profiler over one batch (after a warm-up), the top kernels."""
+def profile_device(root, dev, batch: int, out: Path | None) -> dict:
+    """Where the device path's GPU time goes: torch.profiler over one batch (after a warm-up), the top kernels;
+    returns the batch's summed GPU kernel time (ms) and its wall time under the profiler (ms)."""
     from torch.profiler import ProfilerActivity, profile
 
     from lfmbench.datasets.device import DeviceBatches
@@ -219,13 +396,23 @@ def profile_device(root, dev, batch: int, out: Path | None) -> None:
     db = DeviceBatches(_dataset(root, 256, batch), batch, dev, seed=0)
     db.batch(range(batch))
     _sync(dev)
-    with profile(activities=[ProfilerActivity.CPU, ProfilerActivity.CUDA]) as prof:
+    acts = [ProfilerActivity.CPU] + ([ProfilerActivity.CUDA] if dev.type == "cuda" else [])
+    with profile(activities=acts) as prof:
+        t0 = time.perf_counter()
         db.batch(range(batch))
         _sync(dev)
-    table = prof.key_averages().table(sort_by="cuda_time_total", row_limit=25, max_name_column_width=60)
+        wall = time.perf_counter() - t0
+    table = prof.key_averages().table(sort_by="cuda_time_total" if dev.type == "cuda" else "cpu_time_total",
+                                      row_limit=25, max_name_column_width=60)
     print(table)
+    kernel_us = sum(getattr(e, "self_device_time_total", getattr(e, "self_cuda_time_total", 0.0))
+                    for e in prof.key_averages())
+    kernels = sum(e.count for e in prof.key_averages()
+                  if getattr(e, "self_device_time_total", getattr(e, "self_cuda_time_total", 0.0)) > 0)
     if out is not None:
-        atomic_write_text(out, table)
+        atomic_write_text(out, table + f"\nGPU kernel time of the batch: {kernel_us / 1e3:.2f} ms in {kernels} "
+                               f"kernel launches; wall time under the profiler {1e3 * wall:.2f} ms\n")
+    return {"kernel_ms": kernel_us / 1e3, "kernels": kernels, "profiled_wall_ms": 1e3 * wall}
 
 
 def time_train(root, dev, data, steps, batch, crop, workers, cuda_graph: str = "auto") -> tuple[float, float]:
@@ -255,14 +442,34 @@ def main(argv=None) -> int:
     ap.add_argument("--scenes", type=int, default=2)
     ap.add_argument("--workers", type=int, default=None, help="DataLoader workers (default: cores - 2, at least 1)")
     ap.add_argument("--corpus", type=Path, default=None, help="where the synthetic corpus is written / reused")
-    ap.add_argument("--rows", default="loader,device,device-samplewise,fp16,step,step-graph,train-loader,train-device,"
-                                      "train-device-eager",
+    ap.add_argument("--levels", type=Path, default=None,
+                    help="radiance of rendered scenes for the corpus: an npz written by --save-levels, or a rendered "
+                         "corpus of 31 bands (its first --templates scenes); default: random radiance")
+    ap.add_argument("--templates", type=int, default=4, help="rendered scenes taken from a --levels corpus")
+    ap.add_argument("--save-levels", type=Path, default=None,
+                    help="write the --levels corpus's templates to this npz (a few MiB) and stop")
+    ap.add_argument("--rows", default="loader,device,split,device-samplewise,fp16,step,step-graph,train-loader,"
+                                      "train-device,train-device-eager",
                     help="comma-separated rows to measure (default: all)")
     ap.add_argument("--no-doc", action="store_true")
     ap.add_argument("--json", type=Path)
     ap.add_argument("--profile", type=Path, default=None,
                     help="also profile one batch of 256 on the device and write the kernel table here")
+    ap.add_argument("--batches", default=None, help="comma-separated batch sizes of the capture rows (default: "
+                                                   "64,256,1024 on a GPU, 8,64 on the CPU)")
     args = ap.parse_args(argv)
+    if args.levels is not None and args.levels.is_dir():
+        out = args.save_levels or Path(tempfile.mkdtemp()) / "levels.npz"
+        args.levels = extract_levels(args.levels, args.templates, out)
+        if args.save_levels is not None:
+            print(f"wrote {out} ({out.stat().st_size / 2**20:.1f} MiB)")
+            return 0
+    elif args.save_levels is not None:
+        print("error: --save-levels needs --levels CORPUS (a rendered corpus folder)", file=sys.stderr)
+        return 2
+    if args.levels is not None and not args.levels.is_file():
+        print(f"error: --levels {args.levels}: no such file or corpus folder", file=sys.stderr)
+        return 2
     if args.device == "auto":
         args.device = "cuda" if torch.cuda.is_available() else "cpu"
     dev = torch.device(args.device)
@@ -270,9 +477,14 @@ def main(argv=None) -> int:
         print("error: --device cuda: no CUDA device here", file=sys.stderr)
         return 2
     workers = args.workers if args.workers is not None else max(1, (os.cpu_count() or 2) - 2)
-    root = make_corpus(args.corpus or Path(tempfile.mkdtemp()) / "corpus", args.scenes)
+    t0 = time.perf_counter()
+    root = make_corpus(args.corpus or Path(tempfile.mkdtemp()) / "corpus", args.scenes, levels=args.levels)
+    print(f"corpus {root}: {args.scenes} scenes in {time.perf_counter() - t0:.1f} s", flush=True)
+    print(f"layers projected into the corpus's cache in {prewarm(root):.1f} s", flush=True)
     gpu = dev.type == "cuda"
     batches = (64, 256, 1024) if gpu else (8, 64)
+    if args.batches:
+        batches = tuple(int(b) for b in args.batches.split(","))
     n_b, passes = (2, 2) if args.quick else (4, 3)
     rows: list[dict] = []
 
@@ -291,6 +503,8 @@ def main(argv=None) -> int:
             sps, load_s, per_scene, peak, syncs = time_device(root, dev, b, n_b, passes)
             add(path="device", batch=b, samples_per_s=sps, load_s=load_s, resident_bytes_per_scene=per_scene,
                 peak_bytes=peak, syncs=syncs)
+        if "split" in wanted:
+            add(path="split", batch=b, samples_per_s=float("nan"), **time_split(root, dev, b, n_b, passes))
         if "device-samplewise" in wanted:
             sps, load_s, per_scene, peak, syncs = time_device(root, dev, b, n_b, passes, program=False)
             add(path="device (pieces per sample)", batch=b, samples_per_s=sps, load_s=load_s,
@@ -298,7 +512,8 @@ def main(argv=None) -> int:
     if "fp16" in wanted:
         add(path="fp16", batch=64 if gpu else 8, samples_per_s=float("nan"), **measure_fp16(root, dev, 64 if gpu else 8))
     if args.profile is not None:
-        profile_device(root, dev, 256 if gpu else 8, args.profile)
+        pb = 256 if gpu else 8
+        add(path="profile", batch=pb, samples_per_s=float("nan"), **profile_device(root, dev, pb, args.profile))
     step_b = 64 if gpu else 4
     if "step" in wanted:
         sps, syncs = time_step(root, dev, step_b, 128, passes)
@@ -318,20 +533,28 @@ def main(argv=None) -> int:
         add(path="train(device, no CUDA graph)", batch=step_b, crop=128, steps=steps, samples_per_s=steady,
             with_startup=first)
     name = torch.cuda.get_device_name(dev) if gpu else (platform.processor() or platform.machine())
+    from lfmbench.corpus import Corpus
+
+    nbytes = sum(f.stat().st_size for f in root.rglob("*") if f.is_file())
+    workload = (f"{len(Corpus(root).scenes)} scenes of {Corpus(root).meta(Corpus(root).scenes[0])['width']} x "
+                f"{Corpus(root).meta(Corpus(root).scenes[0])['height']} px, 4 frames, {nbytes / 2**20:.0f} MiB on disk, "
+                + (f"radiance of {int(np.load(args.levels)['templates'])} rendered scenes (`--levels`: "
+                   + ", ".join(str(np.load(args.levels)[f"s{t}_time"]) for t in range(int(np.load(args.levels)['templates'])))
+                   + ")"
+                   if args.levels is not None else "random radiance"))
     text = report(rows, f"{name}, torch {torch.__version__}, {os.cpu_count()} CPU cores, {workers} loader workers",
-                  gpu)
+                  gpu, workload)
     print(text)
     if not args.no_doc:
         write_device_doc(text, args.device, DOC, ROOT)
     return 0
 
 
-def report(rows, machine, gpu) -> str:
+def report(rows, machine, gpu, workload: str = "") -> str:
     lines = ["# The training data path: DataLoader workers against the corpus resident on the device", "",
              "Written by `benchmarks/bench_device_path.py` (rerun: `.venv/bin/python benchmarks/bench_device_path.py "
-             "--device cuda`). Synthetic corpus (640 x 360, 4 frames, 8 bins, 24 lamps of 24 x 40 px), 3 frames "
-             "per sample, every output but `rgb`; capture rows at crop 256, training rows at crop 128. Medians of "
-             "timed passes after a warm-up pass.", "", f"Machine: {machine}", ""]
+             "--device cuda`). A corpus written by the script (below), 3 frames per sample, every output but `rgb`; "
+             "capture rows at crop 256, training rows at crop 128. Medians of timed passes after a warm-up pass.", "", f"Machine: {machine}", "", f"Corpus: {workload}", ""]
     if not gpu:
         lines += ["**GPU rows not run**: no CUDA device on the machine that wrote this file.", ""]
     lines += ["| path | batch | samples/s | notes |", "|---|---|---|---|"]
@@ -349,6 +572,19 @@ def report(rows, machine, gpu) -> str:
         if "steps" in r:
             notes.append(f"steady state (median of epochs 2-3 of {r['steps']} steps); the whole call of 3 epochs "
                          f"with its start-up: {r['with_startup']:.0f} samples/s")
+        if r["path"] == "split":
+            lines.append(f"| pieces (draws, crops, composition) | {r['batch']} | {r['pieces_sps']:.0f} | "
+                         f"{r['pieces_ms']:.2f} ms per batch |")
+            lines.append(f"| sensor chain alone | {r['batch']} | {r['chain_sps']:.0f} | {r['chain_ms']:.2f} ms per "
+                         f"batch; electron levels (`gt`, LPD-equivalent mean e- over the short exposure): "
+                         f"{100 * r['e_under_10']:.1f} % < 10 e-, {100 * r['e_10_1000']:.1f} % 10-1,000 e-, "
+                         f"{100 * r['e_over_1000']:.1f} % >= 1,000 e-; median {r['e_median']:.3g}, "
+                         f"p99 {r['e_p99']:.3g} e- |")
+            continue
+        if r["path"] == "profile":
+            lines.append(f"| profile (one batch) | {r['batch']} | - | GPU kernel time {r['kernel_ms']:.2f} ms in "
+                         f"{r['kernels']} launches; wall time under the profiler {r['profiled_wall_ms']:.2f} ms |")
+            continue
         if r["path"] == "fp16":
             notes.append(f"float16 residency against float32: ground truth relative error max {r['gt_rel_max']:.2e}, "
                          f"rms {r['gt_rel_rms']:.2e}; LPD-LCG DN moved in {100 * r['lcg_dn_moved']:.3f} % of pixels "
