@@ -405,10 +405,12 @@ def profile_device(root, dev, batch: int, out: Path | None) -> dict:
     table = prof.key_averages().table(sort_by="cuda_time_total" if dev.type == "cuda" else "cpu_time_total",
                                       row_limit=25, max_name_column_width=60)
     print(table)
-    kernel_us = sum(getattr(e, "self_device_time_total", getattr(e, "self_cuda_time_total", 0.0))
-                    for e in prof.key_averages())
-    kernels = sum(e.count for e in prof.key_averages()
-                  if getattr(e, "self_device_time_total", getattr(e, "self_cuda_time_total", 0.0)) > 0)
+    # the table's "Self CUDA time total": the device-side events only (a CPU event that launches a kernel carries
+    # the same time again), as torch.autograd.profiler_util._build_table sums them
+    dev_events = [e for e in prof.key_averages() if getattr(e, "device_type", None) == torch.autograd.DeviceType.CUDA
+                  and not getattr(e, "is_user_annotation", False)]
+    kernel_us = sum(e.self_device_time_total for e in dev_events)
+    kernels = sum(e.count for e in dev_events)
     if out is not None:
         atomic_write_text(out, table + f"\nGPU kernel time of the batch: {kernel_us / 1e3:.2f} ms in {kernels} "
                                f"kernel launches; wall time under the profiler {1e3 * wall:.2f} ms\n")
