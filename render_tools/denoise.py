@@ -91,8 +91,9 @@ QUALITY = "fast"
 #: (a wet 160 x 90 night's composed last row 0.85 of a reference; docs/guide/rendering.md, "Denoiser at
 #: the image edge").
 OIDN_ALIGN_PX = 16
-#: Width (px) of the mirrored margin the filter sees beyond every edge of an image (:func:`_mirror_pad`): its
-#: convolutions pad with zeros too (a flat field's first and last columns 0.94-0.97 of the interior). Measured on
+#: Width (px) of the mirrored margin the filter sees beyond every edge of an image where the image ends
+#: (:func:`_mirror_pad`; a crop's sides inside the image get none, :func:`crop_edges`): its convolutions pad with
+#: zeros too (a flat field's first and last columns 0.94-0.97 of the interior). Measured on
 #: flat fields of exponential and of sparse (1 in 10, x10) noise, 60 draws each, edge rows and columns against the
 #: interior: 0.72-1.21 with no margin, 1.01-1.16 at 8 px, 0.99-1.09 at 16 px, 0.98-1.02 at 32 px.
 OIDN_MARGIN_PX = 32
@@ -240,40 +241,74 @@ def _import_pyoidn():
     return pyoidn
 
 
-def _mirror_pad(img: np.ndarray, margin: int | None = None, align: int | None = None) -> np.ndarray:
-    """(C, H, W) -> (C, H + 2 m + a, W + 2 m + b): the image mirrored ``margin`` px (m, default
-    :data:`OIDN_MARGIN_PX`) beyond each edge, its edge pixels repeated (numpy's ``symmetric`` mode: any size, a
-    margin larger than the image mirrors it again), and a, b < ``align`` (default :data:`OIDN_ALIGN_PX`) more
-    mirrored rows and columns at the bottom and right so that both sides are multiples of ``align``. The image's own
-    pixels are ``[:, m:m + H, m:m + W]`` of the result."""
+def crop_edges(box, shape) -> tuple[bool, bool, bool, bool]:
+    """Which sides (top, bottom, left, right) of the crop ``box`` (y0, x0, y1, x1) px, end exclusive, of an image
+    of ``shape`` (H, W) px meet the image's own edge (y0 <= 0, y1 >= H, x0 <= 0, x1 >= W)."""
+    y0, x0, y1, x1 = (int(v) for v in box)
+    H, W = (int(v) for v in shape)
+    return y0 <= 0, y1 >= H, x0 <= 0, x1 >= W
+
+
+def edge_margins(edges=(True, True, True, True), margin: int | None = None) -> tuple[int, int, int, int]:
+    """(top, bottom, left, right) px of mirrored margin for an image whose sides ``edges`` (top, bottom, left,
+    right; :func:`crop_edges`) are the image's own edge: ``margin`` (default :data:`OIDN_MARGIN_PX`) there, 0 on a
+    crop's sides inside the image."""
     m = OIDN_MARGIN_PX if margin is None else int(margin)
+    if len(edges) != 4:
+        raise ValueError(f"edges: (top, bottom, left, right) expected, got {edges!r}")
+    return tuple(m if bool(e) else 0 for e in edges)
+
+
+def _sides(margin) -> tuple[int, int, int, int]:
+    """``margin`` as (top, bottom, left, right) px >= 0: None (:data:`OIDN_MARGIN_PX` on every side), one int for
+    every side, or four ints."""
+    if margin is None:
+        margin = OIDN_MARGIN_PX
+    if np.ndim(margin) == 0:
+        margin = (int(margin),) * 4
+    t = tuple(int(v) for v in margin)
+    if len(t) != 4 or min(t) < 0:
+        raise ValueError(f"margin: an int or (top, bottom, left, right) px >= 0 expected, got {margin!r}")
+    return t
+
+
+def _mirror_pad(img: np.ndarray, margin=None, align: int | None = None) -> np.ndarray:
+    """(C, H, W) -> (C, H + t + b + a, W + l + r + c): the image mirrored beyond its edges by ``margin`` px (one int
+    for every side or (top, bottom, left, right) = (t, b, l, r); default :data:`OIDN_MARGIN_PX` on every side), its
+    edge pixels repeated (numpy's ``symmetric`` mode: any size, a margin larger than the image mirrors it again),
+    and a, c < ``align`` (default :data:`OIDN_ALIGN_PX`) more mirrored rows and columns at the bottom and right so
+    that both sides are multiples of ``align`` (mirrored there even where the margin is 0: never zeros). The
+    image's own pixels are ``[:, t:t + H, l:l + W]`` of the result."""
+    t, b, l_, r = _sides(margin)
     f = OIDN_ALIGN_PX if align is None else int(align)
     _, H, W = img.shape
-    return np.pad(img, ((0, 0), (m, m + (-(H + 2 * m)) % f), (m, m + (-(W + 2 * m)) % f)), mode="symmetric")
+    return np.pad(img, ((0, 0), (t, b + (-(H + t + b)) % f), (l_, r + (-(W + l_ + r)) % f)), mode="symmetric")
 
 
-def oidn_rgb(img: np.ndarray) -> np.ndarray:
+def oidn_rgb(img: np.ndarray, margin=None) -> np.ndarray:
     """Open Image Denoise's ``RT`` filter on an HDR image (3, H, W) >= 0 (any linear unit) -> (3, H, W) float32
     >= 0. The image is divided by its mean level (channels summed) before and multiplied after: the filter's own
     exposure estimate ignores values under about 1e-8 and returned noise of that absolute size for darker images
     (a night sky's radiance is ~1e-6 W sr^-1 m^-2 nm^-1); an all-black image is returned black. The filter sees the
-    image mirrored :data:`OIDN_MARGIN_PX` px beyond each edge and grown to a multiple of :data:`OIDN_ALIGN_PX`
-    (:func:`_mirror_pad`), and the image's own pixels are cut back out. Raises ``RuntimeError`` when the ``pyoidn``
+    image mirrored ``margin`` px beyond its edges (None: :data:`OIDN_MARGIN_PX` on every side, for a whole image; one
+    int, or (top, bottom, left, right) px: :func:`edge_margins`, for a crop whose sides inside a larger image get
+    none) and grown to a multiple of :data:`OIDN_ALIGN_PX` with mirrored rows and columns (:func:`_mirror_pad`),
+    and the image's own pixels are cut back out. Raises ``RuntimeError`` when the ``pyoidn``
     package is not installed."""
     try:
         pyoidn = _import_pyoidn()
     except ImportError as e:  # pragma: no cover - pyoidn is a dependency
         raise RuntimeError("static_denoise: 'oidn' needs the pyoidn package (Intel Open Image Denoise): "
                            "pip install pyoidn, or render with static_denoise: off") from e
+    t, b, l_, r = _sides(margin)
     img = np.asarray(img, np.float32)
     level = float(img.sum(0).mean())  # the filter's exposure estimate ignores values under ~1e-8: scale to ~1
     if not (level > 0 and np.isfinite(level)):
         return np.zeros_like(img) if level == 0 else img.copy()
     H, W = img.shape[1:]
-    x = np.ascontiguousarray(np.moveaxis(_mirror_pad(img * np.float32(1.0 / level)), 0, -1))
+    x = np.ascontiguousarray(np.moveaxis(_mirror_pad(img * np.float32(1.0 / level), (t, b, l_, r)), 0, -1))
     y = pyoidn.denoise(x, hdr=True, quality=QUALITY)
-    m = OIDN_MARGIN_PX
-    y = np.moveaxis(np.asarray(y, np.float32), -1, 0)[:, m:m + H, m:m + W]
+    y = np.moveaxis(np.asarray(y, np.float32), -1, 0)[:, t:t + H, l_:l_ + W]
     return np.maximum(y, 0.0) * np.float32(level)
 
 
@@ -385,7 +420,7 @@ REFLECTION_BLOCK_PX = 2
 
 
 def denoise_reflection(img: np.ndarray, traced: np.ndarray, boxes=(), block: int = REFLECTION_BLOCK_PX,
-                       denoiser=oidn_rgb) -> np.ndarray:
+                       denoiser=None, edges=(True, True, True, True)) -> np.ndarray:
     """Denoise one flickering lamp's steady reflection image (``RenderOptions.reflection_denoise``).
 
     Why: a wet road's reflection of a flickering lamp is traced at ``spp`` (1 at the ``default`` profile) in 2 x 2
@@ -412,7 +447,19 @@ def denoise_reflection(img: np.ndarray, traced: np.ndarray, boxes=(), block: int
         traced: (h, w) bool, the pixels the reflection bands (and the lamp's parts) were traced in.
         boxes: the lamp's padded box(es) (y0, x0, y1, x1) px relative to the crop, end exclusive: kept as traced.
         block: px, the side of the blocks denoised as one pixel (1: full resolution).
-        denoiser: as :func:`denoise_static`'s.
+        denoiser: as :func:`denoise_static`'s; None: :func:`oidn_rgb` with its mirrored margin on the sides in
+            ``edges`` only.
+        edges: which sides (top, bottom, left, right) of the crop are the image's own edge (:func:`crop_edges`;
+            default: all, a whole image). Only there does the filter see the mirrored margin (where the image ends);
+            a side inside the image gets none (only the mirrored alignment rows or columns): the grown crop holds
+            the lamp's reflection region and a pad, so its sides inside the image are dim (their outer 4 px held
+            0.11 % of the crops' light on a wet 640x360 night). Against 32 px on every side (protocol version 6),
+            over that frame's 41 crops: the denoised reflections differ by 0.07 of their mean (RMS), against 0.81
+            between two Monte Carlo seeds; the crops' denoising 1.57 -> 1.06 CPU s a frame (a 16 x 24 px block
+            image 17 -> 3 ms). The layer's real neighbours beyond such a side are zeros (nothing of this light is
+            traced or composed outside its crop), but as context they darken a crop's lit edge (a flat field's
+            edges 0.74-0.82 of a whole image's, tests/render_tools/test_denoise.py) and cost as much as the
+            margin: not taken (docs/benchmarks/render-scale.md, "Denoiser margin by crop").
 
     Returns:
         (C, h, w) float32; ``img`` itself when nothing outside the boxes was traced or lit.
@@ -427,6 +474,9 @@ def denoise_reflection(img: np.ndarray, traced: np.ndarray, boxes=(), block: int
         return img
     x = _fill_boxes(img, keep, boxes) if boxes else img
     lo = _block_mean(x, block) if block > 1 else x
+    if denoiser is None:
+        margins = edge_margins(edges)
+        denoiser = lambda b: oidn_rgb(b, margins)  # noqa: E731
     y = denoise_static({0: lo}, (), denoiser=denoiser)[0]
     if block > 1:
         y = _upsample(y, block, img.shape[1:])

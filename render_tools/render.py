@@ -1440,18 +1440,22 @@ def _grown_crop(steady: np.ndarray, parts: list, K: int, as_steady_bins: bool):
 def _denoise_reflections(scene: dict, geo: SceneGeometry, tm: dict, lights: dict, grown: dict, traced: dict) -> None:
     """Denoise, light by light, the steady reflection of every grown crop (``RenderOptions.reflection_denoise``):
     :func:`render_tools.denoise.denoise_reflection` on the crop's steady (C, h, w) image with the lamp's padded box
-    (the one :func:`plan_frame` plans, relative to the crop) kept out and as traced; in place in ``grown``."""
+    (the one :func:`plan_frame` plans, relative to the crop) kept out and as traced, the filter's mirrored margin on
+    the crop's sides at the image's edge only (:func:`render_tools.denoise.crop_edges`); in place in ``grown``."""
     from . import denoise  # noqa: PLC0415
 
     by_id = {lt["id"]: lt for lt in scene["lights"]}
     t_obj = 0.5 * (tm["window"][0] + tm["window"][1])
     for g, items in lights.items():
-        for lid, (y0, x0, _, _), arr in items:
+        for lid, bb, arr in items:
             if arr is not None or (g, lid) not in grown:
                 continue
+            y0, x0 = bb[0], bb[1]
             lamp_bb = geo.light_bbox(by_id[lid], t_obj, *tm["window"], moving=True, reflection=False)
             boxes = [] if lamp_bb is None else [(lamp_bb[0] - y0, lamp_bb[1] - x0, lamp_bb[2] - y0, lamp_bb[3] - x0)]
-            grown[g, lid][0] = denoise.denoise_reflection(grown[g, lid][0], traced[g, lid], boxes)
+            grown[g, lid][0] = denoise.denoise_reflection(grown[g, lid][0], traced[g, lid], boxes,
+                                                          edges=denoise.crop_edges(bb, (geo.opts.height,
+                                                                                        geo.opts.width)))
 
 
 def render_frames(scene: dict, opts: RenderOptions, steady_bins: bool = False) -> Iterator[dict]:
