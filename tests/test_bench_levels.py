@@ -1,5 +1,6 @@
-"""The device-path benchmark's corpus from rendered electron levels (``benchmarks/bench_device_path.py --levels``):
-the band grouping keeps the wavelength integral, and a scene built from a template reads back as the template."""
+"""The device-path benchmark's corpus from rendered electron levels (``benchmarks/bench_device_path.py --levels``,
+``benchmarks/_device_corpus.py``): the band grouping keeps the wavelength integral, and a scene built from a
+template reads back as the template."""
 import sys
 from pathlib import Path
 
@@ -8,7 +9,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))
-import bench_device_path as B  # noqa: E402
+import _device_corpus as B  # noqa: E402
 
 from lfmbench.corpus import Corpus, CorpusWriter  # noqa: E402
 from tests.data.corpus.data import fake_frames, fake_meta, fake_scene  # noqa: E402
