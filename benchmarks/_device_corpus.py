@@ -94,7 +94,8 @@ def make_corpus(root: Path, scenes: int, width: int = 640, height: int = 360, fr
                 lamps: int = 24, levels: Path | None = None) -> Path:
     """The throughput corpus (see module docstring): random radiance, or (``levels``: an npz of
     :func:`extract_levels`) scene i the rendered radiance of template i mod T at its size, its lights' boxes and
-    bins, in every frame. Scenes are encoded in threads (OpenEXR and numpy release the GIL), written in order."""
+    bins, in every frame. Scenes are encoded in threads (OpenEXR and numpy release the GIL), at most twice as many
+    scenes as threads at a time, and written in order."""
     from concurrent.futures import ThreadPoolExecutor
 
     from lfmbench import corpus as C
@@ -132,10 +133,12 @@ def make_corpus(root: Path, scenes: int, width: int = 640, height: int = 360, fr
         sid = meta["scene_id"]
         return sid, list(encode_scene(sid, fake_scene(sid), meta, fr, dtype=w.storage))
 
-    with ThreadPoolExecutor(max(1, min(16, os.cpu_count() or 1))) as ex:
-        for sid, files in ex.map(one, range(scenes)):
-            hashes = w.write_files(files)
-            prune_scene_dir(w.root, sid, hashes)
-            w.commit_scene(sid, hashes)
+    threads = max(1, min(16, os.cpu_count() or 1))
+    with ThreadPoolExecutor(threads) as ex:
+        for lo in range(0, scenes, 2 * threads):  # at most 2 x threads scenes' bytes in memory at once
+            for sid, files in ex.map(one, range(lo, min(scenes, lo + 2 * threads))):
+                hashes = w.write_files(files)
+                prune_scene_dir(w.root, sid, hashes)
+                w.commit_scene(sid, hashes)
     w.write_splits(0)
     return root
