@@ -133,9 +133,9 @@ def solo(corpus: Path, batch: int, steps: int, warmup: int, world: int, tmp: Pat
 
 def _gpu_batch(batch: int, crop: int, tmp: Path, device: str = "cuda:0") -> tuple:
     """(spec, cfg, one training batch on cuda:0): ``unet_v1`` and a device-path batch of ``batch`` samples at
-    ``crop`` px from :func:`bench_device_path.make_corpus` (2 synthetic 640 x 360 scenes), as that page's step rows."""
-    sys.path.insert(0, str(ROOT / "benchmarks"))
-    from bench_device_path import _dataset, make_corpus
+    ``crop`` px from :func:`_device_corpus.make_corpus` (2 synthetic 640 x 360 scenes), as that page's step rows."""
+    from _device_corpus import make_corpus
+    from bench_device_path import _dataset
 
     from lfmbench.datasets.device import DeviceBatches
     from lfmbench.train import load_config, trainable
