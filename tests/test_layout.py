@@ -211,3 +211,22 @@ def test_xdist_workers_share_the_cores_as_torch_threads():
     assert torch_threads_per_worker({"PYTEST_XDIST_WORKER_COUNT": "2"}) == max(1, cores // 2)
     assert torch_threads_per_worker({"PYTEST_XDIST_WORKER_COUNT": "1"}) == cores
     assert torch_threads_per_worker({"PYTEST_XDIST_WORKER_COUNT": str(cores + 5)}) == 1
+
+
+def test_xdist_workers_steal_work_unless_told_how_to_share_it():
+    """tests/conftest.py: ``-n N`` alone schedules with pytest-xdist's ``worksteal`` (a worker that runs dry takes
+    half of the other's queue); a ``--dist`` given on the command line, or a run without workers, is left alone."""
+    from types import SimpleNamespace as NS
+
+    from conftest import work_stealing
+
+    def config(args, dist, tx):
+        return NS(invocation_params=NS(args=tuple(args)), option=NS(dist=dist, tx=tx))
+
+    c = config(["-q", "-n", "2", "tests"], "load", ["popen"] * 2)
+    assert work_stealing(c) and c.option.dist == "worksteal"
+    for args in (["-n", "2", "--dist", "load"], ["-n", "2", "--dist=load"], ["-n", "2", "-d"]):
+        c = config(args, "load", ["popen"] * 2)
+        assert not work_stealing(c) and c.option.dist == "load"
+    c = config(["tests"], "no", [])
+    assert not work_stealing(c) and c.option.dist == "no"
