@@ -60,6 +60,36 @@ def collected_test_files(config) -> list[Path]:
     return sorted(files)
 
 
+#: The folder where pytest-xdist workers share their rewritten test modules in a run that writes no bytecode
+#: (``PYTHONDONTWRITEBYTECODE``): made by the controller (:func:`rewrite_dir_for_workers`), removed at its end.
+REWRITE_DIR_ENV = "LFMBENCH_TEST_REWRITE_DIR"
+
+
+def _shared_cache_dir(root: Path, tail: str, file_path: Path) -> Path:
+    """pytest's ``get_cache_dir`` for :data:`REWRITE_DIR_ENV`: the usual ``__pycache__`` where it holds a rewritten
+    pyc of the module (``tail``: pytest's ``PYC_TAIL``), else one subfolder of ``root`` per test folder."""
+    import hashlib
+
+    classic = file_path.parent / "__pycache__"
+    if (classic / (file_path.name[:-3] + tail)).is_file():
+        return classic
+    return root / hashlib.sha256(str(file_path.parent).encode()).hexdigest()[:16]
+
+
+def rewrite_dir_for_workers(config, environ=os.environ) -> str | None:
+    """On the pytest-xdist controller of a run that writes no bytecode: a new temporary folder, named in
+    ``environ[REWRITE_DIR_ENV]`` for the workers it starts (they inherit its environment), where
+    :func:`share_assert_rewriting` puts the rewritten test modules; None elsewhere (a worker, no ``-n``, bytecode
+    written next to the sources as usual). :func:`pytest_unconfigure` removes it."""
+    if not sys.dont_write_bytecode or environ.get("PYTEST_XDIST_WORKER") or not getattr(config.option, "tx", None) \
+            or getattr(config.option, "dist", "no") == "no":
+        return None
+    import tempfile
+
+    environ[REWRITE_DIR_ENV] = tempfile.mkdtemp(prefix="lfmbench-rewritten-tests-")
+    return environ[REWRITE_DIR_ENV]
+
+
 def share_assert_rewriting(config, environ=os.environ) -> int:
     """Rewrite the asserts of this pytest-xdist worker's share of the test modules into pytest's pyc cache before
     collection; returns how many it rewrote (0 outside xdist, with ``--assert=plain``, without bytecode writing).
@@ -70,15 +100,24 @@ def share_assert_rewriting(config, environ=os.environ) -> int:
     first, so by collection each finds the others' pycs written (pytest reads them as it reads its own; a module
     not yet written is rewritten as before). The rewriting is pytest's own (``_pytest.assertion.rewrite``, the
     steps of its import hook): assertion messages are unchanged. Its private functions may change with pytest:
-    then this does nothing and collection rewrites every module itself, as it did."""
+    then this does nothing and collection rewrites every module itself, as it did.
+
+    Where bytecode is not written (``PYTHONDONTWRITEBYTECODE=1``) pytest writes no pyc
+    and each worker rewrote all modules on every run: then the pycs go to the controller's temporary folder
+    (:data:`REWRITE_DIR_ENV`; pytest reads a cached pyc even when it writes none), nothing next to the sources."""
     worker, count = environ.get("PYTEST_XDIST_WORKER", ""), environ.get("PYTEST_XDIST_WORKER_COUNT", "")
-    if not worker.startswith("gw") or not count.isdigit() or int(count) < 2 or sys.dont_write_bytecode:
+    if not worker.startswith("gw") or not count.isdigit() or int(count) < 2:
         return 0
     if getattr(config.option, "assertmode", "rewrite") != "rewrite":
+        return 0
+    shared = environ.get(REWRITE_DIR_ENV, "")
+    if sys.dont_write_bytecode and not (shared and os.path.isdir(shared)):
         return 0
     try:
         from _pytest.assertion import rewrite as rw
 
+        if sys.dont_write_bytecode:  # nothing next to the sources: the pycs go to the controller's folder
+            rw.get_cache_dir = functools.partial(_shared_cache_dir, Path(shared), rw.PYC_TAIL)
         state = config.stash[rw.assertstate_key]
         done = 0
         for fn in collected_test_files(config)[int(worker[2:])::int(count)]:
@@ -97,23 +136,52 @@ def share_assert_rewriting(config, environ=os.environ) -> int:
 
 def pytest_collection_modifyitems(config, items):
     """Modules with long tests first (a test marked ``slow`` or ``jit``: renders that compile kernels), each module's
-    tests kept together and in order (module-scoped fixtures are set up once). pytest-xdist's load scheduling hands
-    tests out in collection order, and the long render tests of tests/render_tools and tests/test_hostile_input_3
-    came last, so one of the two workers ran the last of them while the other had nothing left to do."""
+    tests kept together and in order (module-scoped fixtures are set up once). pytest-xdist hands tests out in
+    collection order (``worksteal``, :func:`work_stealing`: the first half to one worker, and a worker that runs dry
+    takes the tail of the other's queue), so the long render tests of tests/render_tools and
+    tests/test_hostile_input_3 run first and what is left to share at the end is short."""
     heavy = {it.module.__name__ for it in items if getattr(it, "module", None) is not None
              and (it.get_closest_marker("slow") or it.get_closest_marker("jit"))}
     items.sort(key=lambda it: 0 if getattr(it, "module", None) is not None and it.module.__name__ in heavy else 1)
 
 
+def work_stealing(config) -> bool:
+    """Under ``-n N`` with no ``--dist`` given, schedule with pytest-xdist's ``worksteal`` instead of its default
+    ``load``; returns whether it did. Another ``--dist`` on the command line is kept.
+
+    Why: ``load`` queues up to a quarter of the remaining tests on each worker, in alternation, and a queued test
+    cannot move, so the worker that drew the longer tests ran on alone: 60 s at the end of a 355 s cold run
+    (measured 2026-11-28, 2-core AMD EPYC, load ~5: one worker busy 331 s, the other 271 s). ``worksteal`` gives
+    each worker one contiguous half of the collection (the modules stay together, so a module's fixtures and
+    first imports are paid once) and a worker that runs dry takes half of the other's queue."""
+    args = config.invocation_params.args
+    explicit = any(a == "-d" or a.startswith("--dist") for a in args)
+    if explicit or getattr(config.option, "dist", "no") != "load" or not getattr(config.option, "tx", None):
+        return False
+    config.option.dist = "worksteal"
+    return True
+
+
 def pytest_configure(config):
     config.addinivalue_line("markers", "jit: renders with Mitsuba's JIT back end (skipped, with one line saying "
                                        "why, where no libLLVM 19 works; never skipped in CI)")
+    work_stealing(config)
+    rewrite_dir_for_workers(config)
     threads = torch_threads_per_worker()
     if threads is not None:
         import torch
 
         torch.set_num_threads(threads)
     share_assert_rewriting(config)
+
+
+def pytest_unconfigure(config):
+    shared = os.environ.get(REWRITE_DIR_ENV)
+    if shared and not os.environ.get("PYTEST_XDIST_WORKER"):  # the controller made it: the workers are done
+        import shutil
+
+        shutil.rmtree(shared, ignore_errors=True)
+        os.environ.pop(REWRITE_DIR_ENV, None)
 
 
 def pytest_runtest_setup(item):

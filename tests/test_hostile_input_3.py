@@ -378,8 +378,15 @@ class _DyingData(torch.utils.data.Dataset):
 
 def _fake_train(dataset):
     def train(*a, **k):
-        for _ in torch.utils.data.DataLoader(dataset, num_workers=1, batch_size=1):
-            pass
+        it = iter(torch.utils.data.DataLoader(dataset, num_workers=1, batch_size=1))
+        try:
+            for _ in it:
+                pass
+        finally:
+            # the error's traceback holds the iterator (its frames' ``self``): shut its worker down here, not in
+            # whichever later test a garbage collection frees it, where torch's join waited 2 x 5 s for a
+            # worker of the raising case (2026-11-28: 10 s charged to a random test of the suite)
+            it._shutdown_workers()
     return train
 
 

@@ -211,3 +211,52 @@ def test_xdist_workers_share_the_cores_as_torch_threads():
     assert torch_threads_per_worker({"PYTEST_XDIST_WORKER_COUNT": "2"}) == max(1, cores // 2)
     assert torch_threads_per_worker({"PYTEST_XDIST_WORKER_COUNT": "1"}) == cores
     assert torch_threads_per_worker({"PYTEST_XDIST_WORKER_COUNT": str(cores + 5)}) == 1
+
+
+def test_xdist_workers_steal_work_unless_told_how_to_share_it():
+    """tests/conftest.py: ``-n N`` alone schedules with pytest-xdist's ``worksteal`` (a worker that runs dry takes
+    half of the other's queue); a ``--dist`` given on the command line, or a run without workers, is left alone."""
+    from types import SimpleNamespace as NS
+
+    from conftest import work_stealing
+
+    def config(args, dist, tx):
+        return NS(invocation_params=NS(args=tuple(args)), option=NS(dist=dist, tx=tx))
+
+    c = config(["-q", "-n", "2", "tests"], "load", ["popen"] * 2)
+    assert work_stealing(c) and c.option.dist == "worksteal"
+    for args in (["-n", "2", "--dist", "load"], ["-n", "2", "--dist=load"], ["-n", "2", "-d"]):
+        c = config(args, "load", ["popen"] * 2)
+        assert not work_stealing(c) and c.option.dist == "load"
+    c = config(["tests"], "no", [])
+    assert not work_stealing(c) and c.option.dist == "no"
+
+
+def test_xdist_workers_share_rewritten_test_modules_in_a_temporary_folder_without_bytecode(tmp_path, monkeypatch):
+    """tests/conftest.py: where no bytecode is written (``PYTHONDONTWRITEBYTECODE=1``) the xdist controller, and
+    only it, makes one temporary folder for the workers' rewritten test modules; a module keeps the pyc of its own
+    ``__pycache__`` where one is there, else gets the folder's subfolder of its test folder."""
+    import shutil
+    import sys
+    from types import SimpleNamespace as NS
+
+    from conftest import REWRITE_DIR_ENV, _shared_cache_dir, rewrite_dir_for_workers
+
+    cfg = NS(option=NS(dist="worksteal", tx=["popen"] * 2))
+    monkeypatch.setattr(sys, "dont_write_bytecode", True)
+    env = {}
+    made = rewrite_dir_for_workers(cfg, env)
+    try:
+        assert made and env[REWRITE_DIR_ENV] == made and Path(made).is_dir() and not any(Path(made).iterdir())
+    finally:
+        shutil.rmtree(made, ignore_errors=True)
+    assert rewrite_dir_for_workers(cfg, {"PYTEST_XDIST_WORKER": "gw0"}) is None  # a worker uses the controller's
+    assert rewrite_dir_for_workers(NS(option=NS(dist="no", tx=[])), {}) is None  # no workers
+    monkeypatch.setattr(sys, "dont_write_bytecode", False)
+    assert rewrite_dir_for_workers(cfg, {}) is None  # bytecode next to the sources, as usual
+    root, a, b = tmp_path / "shared", tmp_path / "t" / "a" / "test_x.py", tmp_path / "t" / "b" / "test_x.py"
+    assert _shared_cache_dir(root, "-t.pyc", a).parent == root
+    assert _shared_cache_dir(root, "-t.pyc", a) != _shared_cache_dir(root, "-t.pyc", b)  # same name, two folders
+    (a.parent / "__pycache__").mkdir(parents=True)
+    (a.parent / "__pycache__" / "test_x-t.pyc").write_bytes(b"")
+    assert _shared_cache_dir(root, "-t.pyc", a) == a.parent / "__pycache__"
