@@ -353,13 +353,14 @@ def test_each_bin_of_a_crossing_lamp_is_the_streak_of_its_own_time_interval(pixe
             (ua, va), (ub, _) = u(a), u(b)
             w, L = abs(u(a, (0.0, 0.1, 0.0))[0] - u(a, (0.0, -0.1, 0.0))[0]), ub - ua
             assert abs(L) >= 3.0 and w < 5.0                          # a streak in every bin
+            where = f"frame {n} bin {k} ({pixel_samples})"
+            assert bins[k].sum() > 0, f"{where}: no light in the lamp's crop"
             mx, my, var = _x_moments(bins[k])
             mx, my, want = mx + x0, my + y0, (L * L + w * w + 1.0) / 12.0
             # Monte Carlo spread over 8 seeds (spp 16; strata / sobol): centroid x std <= 0.045 / 0.023 px, y <=
             # 0.026 / 0.014 px, second moment std <= 0.094 / 0.055 px^2 about a mean 0.00-0.05 px^2 under the
             # analytic 2.84 px^2; largest deviations of 64 bins 0.071 px, 0.046 px, 0.17 px^2. Tolerances ~4.5 std,
             # against 1.9 px (half-bin shift) and 1.15 px^2 (times at the bin middle) for the errors they catch
-            where = f"frame {n} bin {k} ({pixel_samples})"
             assert abs(mx - 0.5 * (ua + ub)) < 0.2, f"{where}: centroid x {mx:.2f} px, path midpoint " \
                                                     f"{0.5 * (ua + ub):.2f} px (from {ua:.2f} to {ub:.2f} px)"
             assert abs(my - va) < 0.12, f"{where}: centroid y {my:.2f} px, lamp at {va:.2f} px"
