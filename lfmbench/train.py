@@ -99,6 +99,23 @@ class EpochIndexed(Dataset):
         return self.dataset[index]
 
 
+def start_line(batches: Any, corpus: str | os.PathLike, t: Any, start: int) -> str:
+    """The first line of a training's log, before its first batch: what it trains on (scenes, steps per epoch,
+    epochs) and, on the loader path, where the first pass over each scene caches that scene's radiance projected
+    for the sensor (built once per scene and sensor; on a CPU at 640x360 it is most of the first epoch, which
+    otherwise runs silent until its end-of-epoch line). ``t``: the config's ``train`` section."""
+    ds = getattr(batches, "dataset", None)
+    ds = getattr(ds, "dataset", ds)         # EpochIndexed / RankIndexed hold the dataset
+    n = len(getattr(ds, "scene_ids", None) or getattr(batches, "scene_ids", None) or ())
+    steps = f"{len(batches)} steps of batch {t.batch_size}" if hasattr(batches, "__len__") else f"batch {t.batch_size}"
+    line = (f"training on {n} scenes of {corpus} (split {t.split}, sensor {t.sensor}): {steps} per epoch, "
+            f"epochs {start + 1}-{t.epochs}")
+    cache = getattr(ds, "cache_dir", None)
+    if cache:
+        line += f"; a scene's first pass also projects its radiance for the sensor into {cache} (once)"
+    return line
+
+
 def _check_batch_memory(ds, t: Any, cfg: Any) -> None:
     """:func:`lfmbench.limits.check_batch_bytes` of the config's batch: one sample's bytes from the dataset's sample
     0 (bounded by one scene's files), times ``train.batch_size`` (or the dataset's length, when it holds fewer
@@ -400,6 +417,8 @@ def train(method: str | Trainable, corpus: str | os.PathLike, out: str | os.Path
                                                 preset=preset)
     else:
         loader, set_epoch = make_loader(corpus, spec, cfg, workers, dev, group=group, preset=preset)
+    if log and start < t.epochs:
+        log(start_line(loader, corpus, t, start))
     gen = loader.generator if spec.data_order == "shuffle" and not on_device and group is None else None
     if gen is not None and data_rng is not None:
         gen.set_state(data_rng)

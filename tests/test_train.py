@@ -40,6 +40,14 @@ def test_train_command_writes_loadable_checkpoint_and_resumes_deterministically(
                                  "--epochs", "2"])
     assert r.exit_code == 0, r.output
     assert "saved" in r.output and a.is_file()
+    # its first line, before the first epoch's, says what it trains on and where the projections go
+    from lfmbench.datasets.loading import make_dataset
+
+    n = len(make_dataset(corpus, "train", samples_per_scene=2).scene_ids)
+    steps = -(-n * 2 // 2)  # samples_per_scene 2, batch 2, last batch kept
+    first = r.output.index(f"training on {n} scenes of {corpus} (split train, sensor ovt): {steps} steps of batch 2 "
+                           "per epoch, epochs 1-2; a scene's first pass also projects")
+    assert first < r.output.index("epoch 1/2") and str(corpus / ".cache") in r.output
     ck = U.read_checkpoint(a)
     assert ck["epochs_done"] == 2 and len(ck["history"]["epoch_loss"]) == 2 and ck["parameters"] > 0
     model = U.load_checkpoint(a)
@@ -50,9 +58,13 @@ def test_train_command_writes_loadable_checkpoint_and_resumes_deterministically(
         r = CliRunner().invoke(app, ["train", "--corpus", str(corpus), "--config", str(cfg), "--out", str(b),
                                      "--epochs", n])
         assert r.exit_code == 0, r.output
-    assert "resuming" in r.output
+    assert "resuming" in r.output and "epochs 2-2" in r.output
     # a new total of epochs reshapes the cosine schedule (lr 1e-2 -> lr_min 1e-4): said in one line
     assert "was trained for a total of 1 epochs, now 2" in r.output and r.output.count("cosine") == 1
+    # all epochs done: nothing trained, no start line
+    r = CliRunner().invoke(app, ["train", "--corpus", str(corpus), "--config", str(cfg), "--out", str(a),
+                                 "--epochs", "2"])
+    assert r.exit_code == 0 and "resuming" in r.output and "training on" not in r.output, r.output
     sa, sb = U.read_checkpoint(a)["state_dict"], U.read_checkpoint(b)["state_dict"]
     assert all(torch.equal(sa[k], sb[k]) for k in sa)
     # another config refuses to resume from that checkpoint
