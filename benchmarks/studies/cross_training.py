@@ -1,0 +1,212 @@
+"""Cross-training: the U-Net trained on each of two protocols' train splits, each network scored on both test splits.
+
+    python benchmarks/studies/cross_training.py --out xt                                   # v1-mini x v2-mini
+    python benchmarks/studies/cross_training.py --out xt --seeds 0 1                       # a second training seed
+    python benchmarks/studies/cross_training.py --out xt --protocols lfmbench-v1 lfmbench-v2 --config unet_v1 --epochs 12
+
+Does the content of a corpus matter for what a network learns? For protocols ``A`` and ``B`` (default
+``lfmbench-v1-mini`` and ``lfmbench-v2-mini``, whose scenes share ids, times of day, speeds and signals) it renders
+each protocol's test and train splits (``lfmbench render``), trains the U-Net on each train split (``lfmbench
+train``, one network per protocol and seed) and scores, on each test split, every rule-based method and every
+network on the same frozen PWM draws (:mod:`lfmbench.evaluation.protocol_run`; the network trained on the test
+protocol's own train split is ``unet``, the others ``unet_<name>trained``, further seeds ``..._seed<k>``). It writes
+``cross_training.md`` / ``.json`` into ``--out``: the 2 x 2 table (training protocol x test protocol) of the LED
+score and PSNR-mu with 95 % bootstrap CIs over scenes, and on each test split every network paired against the
+split's own network over scenes (mean difference, its CI, Wilcoxon p; :func:`lfmbench.evaluation.stats.
+paired_test`); with several seeds also each seed's own network against seed 0's, the scale of training noise the
+cross-training differences are to be read against. ``steps.json`` holds every step's wall time.
+
+Every step is resumable and skipped when done: the renderer and the training resume by themselves, a scoring is
+skipped when its result files are complete. Run it again after a kill. Used to report numbers
+(docs/results/leaderboard-v2-mini.md), not a timed test.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import re
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+#: Metrics of the tables (registered metric names): the primary score and the image-quality one.
+METRICS = ("led_score", "psnr_mu")
+
+
+def short(protocol: str) -> str:
+    """``lfmbench-v2-mini`` -> ``v2mini`` (the corpus folder and method-name part of a protocol)."""
+    s = re.sub(r"[^a-z0-9]+", "", Path(protocol).stem.lower().removeprefix("lfmbench-"))
+    if not s:
+        raise ValueError(f"protocol {protocol!r:.60}: no usable name")
+    return s
+
+
+def net_name(train_short: str, test_short: str, seed: int, seed0: int) -> str:
+    """Method name of the network trained on ``train_short`` (seed ``seed``) when scored on ``test_short``."""
+    base = "unet" if train_short == test_short else f"unet_{train_short}trained"
+    return base if seed == seed0 else f"{base}_seed{seed}"
+
+
+def _log(msg: str) -> None:
+    print(f"{time.strftime('%H:%M:%S')} {msg}", flush=True)
+
+
+class Steps:
+    """Runs commands, each once: its wall time and return code go to ``steps.json`` (appended across reruns)."""
+
+    def __init__(self, out: Path):
+        self.path = out / "steps.json"
+        self.rows = json.loads(self.path.read_text()) if self.path.is_file() else []
+
+    def run(self, name: str, cmd: list[str]) -> None:
+        _log(f"{name}: {' '.join(cmd)}")
+        t = time.time()
+        rc = subprocess.call(cmd)
+        self.rows.append({"step": name, "cmd": cmd, "wall_s": round(time.time() - t, 1), "rc": rc,
+                          "ended_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())})
+        tmp = self.path.with_suffix(".json.tmp")
+        tmp.write_text(json.dumps(self.rows, indent=1) + "\n")
+        os.replace(tmp, self.path)
+        if rc != 0:
+            raise SystemExit(f"{name} failed (exit {rc}): {' '.join(cmd)}")
+
+
+def seed_config(config: str, seed: int, out: Path) -> str:
+    """The training config ``config`` (a shipped name or a path) with ``train.seed = seed``, as a file in ``out``."""
+    import yaml  # noqa: PLC0415
+
+    from lfmbench.resources import find_config  # noqa: PLC0415
+
+    data = yaml.safe_load(find_config(config, "training").read_text())
+    if (data.get("train") or {}).get("seed", 0) == seed:
+        return config
+    data.setdefault("train", {})["seed"] = seed
+    path = out / f"{Path(config).stem}_seed{seed}.yaml"
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    return str(path)
+
+
+def scores_complete(runs: Path, methods: list[str]) -> bool:
+    """Whether every method's result file in ``runs`` exists and says ``complete``."""
+    from lfmbench.evaluation.benchmark import safe_name  # noqa: PLC0415
+    from lfmbench.evaluation.results import COMPLETE  # noqa: PLC0415
+
+    for m in methods:
+        p = runs / f"{safe_name(m)}.json"
+        try:
+            if json.loads(p.read_text()).get("status") != COMPLETE:
+                return False
+        except (OSError, ValueError):
+            return False
+    return True
+
+
+def summary(out: Path, shorts: list[str], seeds: list[int]) -> str:
+    """Markdown of the 2 x 2 table and the paired tests, from the result files under ``out/scores``."""
+    from lfmbench.evaluation import stats  # noqa: PLC0415
+    from lfmbench.evaluation.results import metric_summary, per_scene  # noqa: PLC0415
+
+    def load(test: str, name: str) -> list[dict]:
+        r = json.loads((out / "scores" / test / f"{name}.json").read_text())
+        return per_scene(r.get("scenes") or [], METRICS)
+
+    def cell(rows: list[dict], metric: str) -> str:
+        s = metric_summary(rows, metric)
+        (lo, hi), d = s["ci"], (3 if metric == "led_score" else 2)
+        return f"{s['value']:.{d}f} [{lo:.{d}f}, {hi:.{d}f}]"
+
+    lines = ["LED score and PSNR-mu (dB) [95 % CI over scenes]; rows: the network's training split and seed, "
+             "columns: the test split", "", "| trained on | seed | " + " | ".join(f"{t}: LED score | {t}: PSNR-mu dB" for t in shorts) + " |",
+              "|---|---|" + "---|---|" * len(shorts)]
+    table = {}
+    for tr in shorts:
+        for seed in seeds:
+            cells = []
+            for te in shorts:
+                rows = load(te, net_name(tr, te, seed, seeds[0]))
+                table[(tr, seed, te)] = rows
+                cells += [cell(rows, "led_score"), cell(rows, "psnr_mu")]
+            lines.append(f"| {tr} | {seed} | " + " | ".join(cells) + " |")
+    lines += ["", "Paired over the test split's scenes, network minus the split's own network of seed "
+              f"{seeds[0]} (mean diff [95 % CI], Wilcoxon p, n scenes):", "",
+              "| test split | network | " + " | ".join(f"{m}: diff [CI] | p" for m in METRICS) + " | n |",
+              "|---|---|" + "---|---|" * len(METRICS) + "---|"]
+    for te in shorts:
+        ref = table[(te, seeds[0], te)]
+        for tr in shorts:
+            for seed in seeds:
+                if (tr, seed) == (te, seeds[0]):
+                    continue
+                mine = {s["scene_id"]: s["metrics"] for s in table[(tr, seed, te)]}
+                cells, n = [], 0
+                for m in METRICS:
+                    pairs = [(mine[s["scene_id"]].get(m), s["metrics"].get(m)) for s in ref if s["scene_id"] in mine]
+                    pairs = [(a, b) for a, b in pairs if a is not None and b is not None]
+                    t = stats.paired_test([a for a, _ in pairs], [b for _, b in pairs])
+                    (lo, hi), d, n = t["ci"], (3 if m == "led_score" else 2), t["n"]
+                    cells.append(f"{t['mean_diff']:+.{d}f} [{lo:+.{d}f}, {hi:+.{d}f}] | {t['p']:.4f}")
+                lines.append(f"| {te} | trained on {tr}, seed {seed} | " + " | ".join(cells) + f" | {n} |")
+    return "\n".join(lines) + "\n"
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", type=Path, required=True, help="work folder: corpora, networks, scores, summary")
+    ap.add_argument("--protocols", nargs=2, default=["lfmbench-v1-mini", "lfmbench-v2-mini"],
+                    help="two protocols (names or YAML paths) with test and train splits")
+    ap.add_argument("--config", default="unet", help="training config (shipped name or YAML path)")
+    ap.add_argument("--epochs", type=int, default=16)
+    ap.add_argument("--seeds", type=int, nargs="+", default=[0], help="training seeds (one network each)")
+    ap.add_argument("--samples-per-scene", type=int, default=8, help="frozen PWM draws scored per test scene")
+    ap.add_argument("--threads", type=int, default=None, help="torch CPU threads of the trainings")
+    ap.add_argument("--workers", type=int, default=1, help="render and DataLoader workers")
+    a = ap.parse_args(argv)
+    shorts = [short(p) for p in a.protocols]
+    if shorts[0] == shorts[1]:
+        ap.error(f"--protocols: two different protocols needed, got {a.protocols}")
+    if len(set(a.seeds)) != len(a.seeds):
+        ap.error(f"--seeds: each seed once, got {a.seeds}")
+    out = a.out
+    out.mkdir(parents=True, exist_ok=True)
+    steps = Steps(out)
+    cli = [sys.executable, "-m", "lfmbench.cli"]
+    corpus = {s: out / "corpus" / s for s in shorts}
+    for p, s in zip(a.protocols, shorts):
+        for split in ("test", "train"):
+            steps.run(f"render {s} {split}", [*cli, "render", "--protocol", p, "--split", split, "--out",
+                                              str(corpus[s]), "--workers", str(a.workers)])
+    nets = {}
+    for s in shorts:
+        for seed in a.seeds:
+            nets[(s, seed)] = out / "nets" / f"unet_{s}_seed{seed}.pt"
+            nets[(s, seed)].parent.mkdir(parents=True, exist_ok=True)
+            cmd = [*cli, "train", "--corpus", str(corpus[s]), "--config", seed_config(a.config, seed, out),
+                   "--out", str(nets[(s, seed)]), "--epochs", str(a.epochs), "--workers", str(a.workers)]
+            steps.run(f"train {s} seed {seed}", cmd + (["--threads", str(a.threads)] if a.threads else []))
+    for te in shorts:
+        runs = out / "scores" / te
+        extra = {net_name(tr, te, seed, a.seeds[0]): nets[(tr, seed)]
+                 for tr in shorts for seed in a.seeds if (tr, seed) != (te, a.seeds[0])}
+        from lfmbench.baselines import REGISTRY  # noqa: PLC0415
+
+        methods = [m for m in REGISTRY if m != "learned"] + list(extra)
+        if scores_complete(runs, methods):
+            _log(f"score {te}: complete, skipped")
+            continue
+        cmd = [sys.executable, "-m", "lfmbench.evaluation.protocol_run", "--corpus", str(corpus[te]),
+               "--checkpoint", str(nets[(te, a.seeds[0])]), "--runs", str(runs),
+               "--samples-per-scene", str(a.samples_per_scene)]
+        for name, path in extra.items():
+            cmd += ["--unet-also", f"{name}={path}"]
+        steps.run(f"score {te}", cmd)
+    text = summary(out, shorts, a.seeds)
+    from lfmbench.fileio import atomic_write_text  # noqa: PLC0415
+
+    atomic_write_text(out / "cross_training.md", text)
+    print(text)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,98 @@
+"""benchmarks/studies/cross_training.py: the 2 x 2 table and the paired tests read the right result files and agree
+with an independent computation; a scoring counts as done only when every result file is complete; a failed step
+stops the study naming it and is recorded; bad options are refused before any work."""
+from __future__ import annotations
+
+import importlib.util
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+SCRIPT = Path(__file__).resolve().parents[2] / "benchmarks" / "studies" / "cross_training.py"
+
+
+@pytest.fixture(scope="module")
+def study():
+    spec = importlib.util.spec_from_file_location("cross_training_study", SCRIPT)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def _result(path: Path, led: list[float], psnr: list[float], status: str = "complete") -> None:
+    """A result file with one sample per scene ``s00``, ``s01``, ... holding both metrics."""
+    recs = [{"scene_id": f"s{i:02d}", "index": i, "status": "ok", "metrics": {"led_score": a, "psnr_mu": b},
+             "conditions": {}} for i, (a, b) in enumerate(zip(led, psnr))]
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps({"format": "lfmbench-eval", "version": 2, "method": {"spec": path.stem},
+                                "status": status, "scenes": recs}))
+
+
+def test_names_and_short_protocol_names(study):
+    assert study.short("lfmbench-v2-mini") == "v2mini" and study.short("configs/my-proto.yaml") == "myproto"
+    assert study.net_name("v1mini", "v1mini", 0, 0) == "unet"
+    assert study.net_name("v1mini", "v2mini", 0, 0) == "unet_v1minitrained"
+    assert study.net_name("v2mini", "v2mini", 1, 0) == "unet_seed1"
+    assert study.net_name("v1mini", "v2mini", 1, 0) == "unet_v1minitrained_seed1"
+
+
+def test_table_and_paired_tests_agree_with_an_independent_computation(study, tmp_path):
+    rng = np.random.default_rng(3)
+    n = 9
+    files = {}
+    for te in ("a", "b"):
+        for name in ("unet", f"unet_{'b' if te == 'a' else 'a'}trained"):
+            led, psnr = rng.uniform(0.6, 0.95, n).round(4), rng.uniform(25, 40, n).round(2)
+            _result(tmp_path / "scores" / te / f"{name}.json", led.tolist(), psnr.tolist())
+            files[(te, name)] = (led, psnr)
+    text = study.summary(tmp_path, ["a", "b"], [0])
+    # the cell "trained on a, tested on b" is the mean over scenes of unet_atrained's file on b
+    led, psnr = files[("b", "unet_atrained")]
+    row = next(ln for ln in text.splitlines() if ln.startswith("| a | 0 |"))
+    assert f"{led.mean():.3f} [" in row.split("|")[5] and f"{psnr.mean():.2f} [" in row.split("|")[6]
+    # paired on test split b: unet_atrained - unet, per scene, against numpy and scipy
+    from scipy.stats import wilcoxon
+
+    ref_led = files[("b", "unet")][0]
+    d = led - ref_led
+    line = next(ln for ln in text.splitlines() if ln.startswith("| b | trained on a, seed 0 |"))
+    cells = [c.strip() for c in line.split("|")]
+    assert cells[3].startswith(f"{d.mean():+.3f} [") and cells[-2] == str(n)
+    assert float(cells[4]) == pytest.approx(wilcoxon(led, ref_led).pvalue, abs=1e-4)
+    # the split's own network is never paired against itself
+    assert "| a | trained on a, seed 0 |" not in text
+
+
+def test_scores_complete_needs_every_file_complete(study, tmp_path):
+    _result(tmp_path / "unet.json", [0.5], [30.0])
+    assert study.scores_complete(tmp_path, ["unet"])
+    assert not study.scores_complete(tmp_path, ["unet", "lpd_only"])          # missing
+    _result(tmp_path / "lpd_only.json", [0.5], [30.0], status="running")         # killed
+    assert not study.scores_complete(tmp_path, ["unet", "lpd_only"])
+    (tmp_path / "lpd_only.json").write_text("{")                                 # half-written
+    assert not study.scores_complete(tmp_path, ["lpd_only"])
+
+
+def test_a_failed_step_stops_naming_it_and_is_recorded(study, tmp_path):
+    import sys
+
+    steps = study.Steps(tmp_path)
+    steps.run("ok step", [sys.executable, "-c", "pass"])
+    with pytest.raises(SystemExit, match="train x seed 0 failed \\(exit 3\\)"):
+        steps.run("train x seed 0", [sys.executable, "-c", "raise SystemExit(3)"])
+    rows = json.loads((tmp_path / "steps.json").read_text())
+    assert [(r["step"], r["rc"]) for r in rows] == [("ok step", 0), ("train x seed 0", 3)]
+    assert study.Steps(tmp_path).rows == rows                                    # a rerun appends to them
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--protocols", "lfmbench-v1-mini", "lfmbench-v1-mini"], "two different protocols"),
+    (["--seeds", "0", "0"], "each seed once"),
+])
+def test_bad_options_are_refused_before_any_work(study, tmp_path, capsys, args, message):
+    out = tmp_path / "xt"
+    with pytest.raises(SystemExit):
+        study.main(["--out", str(out), *args])
+    assert message in capsys.readouterr().err and not out.exists()
