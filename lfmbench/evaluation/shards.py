@@ -70,12 +70,14 @@ def _strip(d: dict) -> dict:
 
 
 def differing_field(result: dict, other: dict, shard: bool = True) -> str | None:
-    """The first field in which two results are not of one evaluation, None when they are: ``"dataset"`` (corpus
+    """The first field in which two results are not of one evaluation, None when they are: ``dataset`` (corpus
     path, split, samples, crop, samples per scene, frames, sensor, noise; with ``shard`` also ``dataset.shard``, which
     part of the split), then those of :data:`SAME_FIELDS` (``method`` by its spec: parameters and MACs are
-    measured). Values are compared as a result file holds them (:func:`lfmbench.evaluation.results.jsonable`), so
-    a result in memory and one read back compare equal. Used by :func:`merge_results` (``shard=False``: shards of
-    one split differ there) and by a resumed evaluation (:func:`lfmbench.evaluation.run.evaluate_methods`)."""
+    measured); in a field that holds a dict, its first differing key (``"dataset.samples_per_scene"``,
+    ``"seeds.dataset"``). Values are compared as a result file holds them
+    (:func:`lfmbench.evaluation.results.jsonable`), so a result in memory and one read back compare equal. Used by
+    :func:`merge_results` (``shard=False``: shards of one split differ there) and by a resumed evaluation
+    (:func:`lfmbench.evaluation.run.evaluate_methods`)."""
     from lfmbench.evaluation.results import jsonable
 
     for f in ("dataset", *SAME_FIELDS):
@@ -84,7 +86,11 @@ def differing_field(result: dict, other: dict, shard: bool = True) -> str | None
             a, b = _strip(a or {}), _strip(b or {})
         elif f == "method":  # parameters and MACs are measured; the method is its spec
             a, b = (a or {}).get("spec"), (b or {}).get("spec")
-        if jsonable(a) != jsonable(b):
+        a, b = jsonable(a), jsonable(b)
+        if a != b:
+            if isinstance(a, dict) and isinstance(b, dict):
+                return f + "." + next(k for k in [*a, *(k for k in b if k not in a)]
+                                      if k not in a or k not in b or a[k] != b[k])
             return f
     return None
 
@@ -125,7 +131,7 @@ def merge_results(results: Sequence[dict]) -> dict:
         f = differing_field(r, first, shard=False)
         if f is not None:
             raise ShardError(f"{_name(r, k)}: field {f!r} differs from {_name(first, 0)}"
-                             + (" (another split, seed, crop or sensor)" if f == "dataset" else ""))
+                             + (" (another split, seed, crop or sensor)" if f.startswith("dataset") else ""))
         if r.get("status") not in (COMPLETE, "failed") or len(r.get("scenes") or []) != len(sh["samples"]):
             raise ShardError(f"{_name(r, k)}: shard {sh['index']}/{count} is not finished (status "
                              f"{r.get('status')!r}, {len(r.get('scenes') or [])} of {len(sh['samples'])} samples "
