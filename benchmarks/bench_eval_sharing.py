@@ -74,7 +74,7 @@ def main() -> None:
     data_pass()  # warm-up: fills the projection cache, loads the sensor kernels
     t_data, c_data = data_pass()
     kw = dict(split=a.split, perceptual=False, repeats=1, progress=False, samples_per_scene=a.samples_per_scene,
-              isp=None if a.isp == "none" else a.isp)
+              isp=None if a.isp == "none" else a.isp, resume=False)  # every repeat scores again
     times: dict[bool, list[float]] = {False: [], True: []}
     cpu: dict[bool, list[float]] = {False: [], True: []}   # process CPU time: what the machine's load hardly moves
     equal = True

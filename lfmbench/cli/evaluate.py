@@ -67,18 +67,23 @@ def evaluate_cmd(
                               help="score only shard INDEX of COUNT (scene s goes to shard s mod COUNT; e.g. "
                                    "$SLURM_ARRAY_TASK_ID/$SLURM_ARRAY_TASK_COUNT or $RANK/$WORLD_SIZE); join the "
                                    "shard files with `lfmbench merge-results` (docs/guide/distributed.md)"),
+    resume: bool = typer.Option(True, help="continue the result files (--output or <runs-dir>/<method>.json) when "
+                                           "they hold a killed or interrupted run of this evaluation: only the "
+                                           "missing samples are scored, a complete one is skipped"),
 ) -> None:
     """Score fusion methods on a corpus split; write per-scene and aggregate metrics as JSON, one file per
     method.
 
     Exit status: 0 every scene scored, 1 some scenes failed or the data source failed (the result file
-    says which), 2 bad input, 130 interrupted (the result file has status "interrupted").
+    says which), 2 bad input, 130 interrupted (the result file has status "interrupted"; run the same command
+    again to resume: only the missing samples are scored).
     """
     from lfmbench.datasets.loading import EmptyDataError  # noqa: PLC0415
     from lfmbench.evaluation.benchmark import (corpus_run_inputs,  # noqa: PLC0415
                                                run_dataset_record, safe_name, samples_to_score, score_batches)
     from lfmbench.evaluation.leaderboard import _fmt  # noqa: PLC0415
-    from lfmbench.evaluation.run import DataSourceError, EvaluationInterrupted, evaluate_methods  # noqa: PLC0415
+    from lfmbench.evaluation.run import (DataSourceError, EvaluationInterrupted, ResumeError,  # noqa: PLC0415
+                                         evaluate_methods)
 
     methods = list(dict.fromkeys(method))  # a method named twice is scored once
     if threads is not None and threads < 1:
@@ -153,19 +158,25 @@ def evaluate_cmd(
             fail(f"--shard {shard_at[0]}/{shard_at[1]}: the split has only {-(-n // samples_per_scene)} scene(s) to "
                  f"score; use at most that many shards")
         record["shard"] = shard_record(*shard_at, indices, n)
+
+    def source(start: int):  # the samples from position start on: a resumed run reads only those it misses
+        return score_batches(ds, n, simulate, device, indices=indices, start=start)
+
     try:
-        results = evaluate_methods(fns, score_batches(ds, n, simulate, device, indices=indices), method_specs=methods,
-                                   outputs=outs, options=ScoreOptions(perceptual=perceptual, isp=isp_name,
-                                                                      sensor=ds.preset, reference=reference),
+        results = evaluate_methods(fns, source, method_specs=methods, outputs=outs,
+                                   options=ScoreOptions(perceptual=perceptual, isp=isp_name, sensor=ds.preset,
+                                                        reference=reference),
                                    warmup=warmup, repeats=repeats, device=device, seeds={"dataset": seed},
                                    dataset=record, total=n if indices is None else len(indices), corpus=ident,
-                                   scene_conditions=cond)
+                                   scene_conditions=cond, resume=resume, log=typer.echo)
     except EvaluationInterrupted as exc:
         n_done = len(exc.result["scenes"])
         typer.secho(f"interrupted: {n_done} scene(s) scored; {', '.join(map(str, outs))} marked status "
-                    "\"interrupted\" (the leaderboard skips them); run the command again for a complete result",
+                    "\"interrupted\" (the leaderboard skips them); run the same command again to resume",
                     fg=typer.colors.YELLOW, err=True)
         raise typer.Exit(130) from None
+    except ResumeError as exc:  # another evaluation's file where this one writes: nothing written
+        fail(str(exc))
     except (DataSourceError, EmptyDataError) as exc:
         fail(f"{exc} (partial results in {', '.join(map(str, outs))})", 1)
     except CheckpointError as exc:  # a hostile or broken weights file: bad input, named

@@ -57,22 +57,23 @@ def check_simulate(simulate: str) -> str:
 
 
 def score_batches(ds, n: int, simulate: str = "host", device: str = "cpu", chunk: int = 16,
-                  indices: list[int] | None = None) -> Iterable[dict]:
+                  indices: list[int] | None = None, start: int = 0) -> Iterable[dict]:
     """The first ``n`` samples of ``ds`` (or the samples ``indices``, ascending: a shard,
-    :func:`lfmbench.evaluation.shards.shard_samples`) as batches of one, in order: simulated on the host by a
+    :func:`lfmbench.evaluation.shards.shard_samples`) from position ``start`` of that order on (a resumed
+    evaluation, :data:`lfmbench.evaluation.run.Batches`) as batches of one, in order: simulated on the host by a
     DataLoader (no workers), or (``simulate="device"``; ``ds`` made with ``noise_streams="counter"``) cut and
     simulated on ``device`` by the device program, its split loaded there once, ``chunk`` samples per program call
     (each sample's numbers do not depend on the others of its call, nor on which samples are scored)."""
     from itertools import islice
 
     check_simulate(simulate)
-    order = list(range(n)) if indices is None else [int(k) for k in indices]
+    order = (list(range(n)) if indices is None else [int(k) for k in indices])[start:]
     if simulate == "host":
         from torch.utils.data import DataLoader, Subset
 
         from lfmbench.datasets.loading import collate_samples
 
-        if indices is not None:
+        if indices is not None or start:
             return iter(DataLoader(Subset(ds, order), batch_size=1, shuffle=False, num_workers=0,
                                    collate_fn=collate_samples))
         return islice(DataLoader(ds, batch_size=1, shuffle=False, num_workers=0, collate_fn=collate_samples), n)
@@ -151,7 +152,8 @@ def benchmark(corpus: str | Path, methods: Iterable[str] | None = None, runs_dir
               perceptual: bool = True, repeats: int = 5, device: str = "cpu", sort_by: str | None = None,
               progress: bool = True, samples_per_scene: int = 1, cache_dir: str | Path | None = None,
               frames: int = 3, sensor: Any = "ovt", share_samples: bool = True, isp: str | None = "default",
-              simulate: str = "host", reference: str = "own", static_windows: str = "nearest") -> list[dict]:
+              simulate: str = "host", reference: str = "own", static_windows: str = "nearest",
+              resume: bool = True) -> list[dict]:
     """Evaluate several methods on one corpus split and build the leaderboard.
 
     Writes ``runs_dir/<method>.json`` per method, ``runs_dir/leaderboard.md``, ``leaderboard.json`` and
@@ -172,6 +174,9 @@ def benchmark(corpus: str | Path, methods: Iterable[str] | None = None, runs_dir
     :data:`lfmbench.metrics.scoring.REFERENCES`; host only). ``static_windows``: how a capture window the corpus
     does not store for its static groups is served (:class:`~lfmbench.datasets.LFMCaptureDataset`): ``"nearest"``
     (the named approximation) or ``"exact"`` (such a sensor is refused before any work; a published comparison).
+    ``resume`` (default): a ``runs_dir/<method>.json`` of this evaluation that a killed run left is continued (only
+    its missing samples are simulated and scored), a complete one is kept and its method skipped, another
+    evaluation's is refused (:class:`lfmbench.evaluation.run.ResumeError`); False: every method scored again.
     """
     from lfmbench.baselines import methods_for
     from lfmbench.evaluation.leaderboard import check_comparable, leaderboard_rows, load_runs, print_leaderboard
@@ -191,16 +196,16 @@ def benchmark(corpus: str | Path, methods: Iterable[str] | None = None, runs_dir
                   repeats=repeats,
                   device=device, seeds={"dataset": seed},
                   dataset=run_dataset_record(ds, corpus, split, n, crop, samples_per_scene, frames),
-                  progress=progress, total=n, corpus=ident, scene_conditions=cond)
+                  progress=progress, total=n, corpus=ident, scene_conditions=cond, resume=resume)
 
-    def loader():
-        return score_batches(ds, n, simulate, device)
+    def loader(start: int = 0):
+        return score_batches(ds, n, simulate, device, start=start)
 
     if share_samples:
-        evaluate_methods(names, loader(), method_specs=names, outputs=paths, **common)
+        evaluate_methods(names, loader, method_specs=names, outputs=paths, **common)
     else:
         for m, out in zip(names, paths):
-            evaluate(m, loader(), method_spec=m, output=out, **common)
+            evaluate(m, loader, method_spec=m, output=out, **common)
     runs = load_runs(paths)
     check_comparable(runs)
     rows = leaderboard_rows(runs, sort_by)

@@ -18,7 +18,8 @@ Writes one result JSON per method, ``leaderboard.md``, ``leaderboard.json`` and 
 The tiny ``learned`` baseline is left out (its checkpoint is the demo's). ``scene_fields.md`` adds what the
 condition bins of ``lfmbench/configs/conditions.yaml`` do not hold: the LED score by a scene-file field
 (``weather`` of scene generator 2: dry, wet, rain), and every ``--unet-also`` network paired against ``unet``
-(overall and per field value).
+(overall and per field value). A killed run is continued by the same command (only the missing samples are scored;
+``--no-resume`` scores everything again).
 """
 from __future__ import annotations
 
@@ -133,6 +134,9 @@ def main() -> None:
                     help="another U-Net checkpoint, scored on the same samples as method NAME; repeatable")
     ap.add_argument("--runs", default="runs/protocol", help="output directory")
     ap.add_argument("--samples-per-scene", type=int, default=8)
+    ap.add_argument("--no-resume", action="store_true",
+                    help="score every method again (default: continue the result files in --runs of this "
+                         "evaluation that a killed run left, scoring only the missing samples; skip complete ones)")
     ap.add_argument("--only-unets", action="store_true",
                     help="score only the U-Nets (--checkpoint as `unet`, and --unet-also), not the rule-based methods "
                          "(e.g. a second training seed on draws the rules were scored on already)")
@@ -143,6 +147,7 @@ def main() -> None:
     from lfmbench.baselines import REGISTRY
     from lfmbench.evaluation.benchmark import benchmark, safe_name  # the module, not the package's lazy name
     from lfmbench.evaluation.leaderboard import load_runs
+    from lfmbench.evaluation.run import ResumeError
     from lfmbench.fileio import atomic_write_text
 
     try:
@@ -152,8 +157,12 @@ def main() -> None:
     methods = ["unet"] if a.only_unets else [m for m in REGISTRY if m != "learned"]
     register_unets(extra)
     t = time.perf_counter()
-    benchmark(a.corpus, methods=[*methods, *extra], runs_dir=a.runs, split="test", seed=0,
-              perceptual=False, repeats=1, samples_per_scene=a.samples_per_scene, progress=False)
+    try:
+        benchmark(a.corpus, methods=[*methods, *extra], runs_dir=a.runs, split="test", seed=0,
+                  perceptual=False, repeats=1, samples_per_scene=a.samples_per_scene, progress=False,
+                  resume=not a.no_resume)
+    except ResumeError as exc:
+        ap.error(str(exc))
     print(f"evaluation took {time.perf_counter() - t:.0f} s")
     runs = load_runs([Path(a.runs) / f"{safe_name(m)}.json" for m in [*methods, *extra]])
     ids = {s.get("scene_id") for r in runs for s in (r.get("scenes") or []) if s.get("scene_id") is not None}

@@ -9,6 +9,11 @@ repeated synchronised calls, in ms per output megapixel) and its parameters and 
 written atomically after every batch. A method that raises, returns a wrong shape, NaN or inf is recorded per
 scene (``status``) and the run goes on. At the end the result gets per-scene values, bootstrap confidence
 intervals over scenes and the breakdown of the primary score by condition (``docs/guide/metrics.md``).
+
+Resume (``resume=True``): a result file of the same evaluation (:func:`lfmbench.evaluation.shards.differing_field`)
+that a killed, interrupted or failed run left keeps its sample records, and only the samples after them are scored.
+Every statistic is a function of the ordered sample records and every sample's numbers depend only on (dataset
+seed, sample index), so the finished file equals an uninterrupted run's in every score (as merged shards do).
 """
 from __future__ import annotations
 
@@ -34,7 +39,11 @@ from lfmbench.evaluation.results import (COMPLETE, RESULT_FORMAT, RESULT_VERSION
                                          write_json_atomic)
 
 __all__ = ["evaluate", "evaluate_methods", "check_output", "MethodOutputError", "EmptyDataError", "DataSourceError",
-           "EvaluationInterrupted"]
+           "EvaluationInterrupted", "ResumeError"]
+
+#: A data source: batches, or ``start -> batches`` from sample ``start`` of the evaluation's order on (a resumed
+#: run then reads only the samples it misses).
+Batches = Iterable[dict] | Callable[[int], Iterable[dict]]
 
 
 class MethodOutputError(ValueError):
@@ -43,6 +52,11 @@ class MethodOutputError(ValueError):
 
 class DataSourceError(RuntimeError):
     """Reading a batch failed; the partial result (``status: failed``) has been written."""
+
+
+class ResumeError(ValueError):
+    """A result file where a resumed evaluation would write that is not a run of this evaluation (another corpus,
+    seed, method, options ...; not a result); the message names the file and the field. Nothing was written."""
 
 
 class EvaluationInterrupted(KeyboardInterrupt):
@@ -96,17 +110,19 @@ def _to(batch: dict, device: torch.device) -> dict:
     return {k: (v.to(device) if isinstance(v, torch.Tensor) else v) for k, v in batch.items()}
 
 
-def evaluate(method: Callable | str, batches: Iterable[dict], *, method_spec: str | None = None,
+def evaluate(method: Callable | str, batches: Batches, *, method_spec: str | None = None,
              output: str | Path | None = None, options=None, warmup: int = 1, repeats: int = 5,
              device: str | torch.device = "cpu", seeds: dict | None = None, dataset: dict | None = None,
              progress: bool = True, total: int | None = None, corpus: dict | None = None,
-             scene_conditions: Callable[[str], dict] | None = None, conditions_file: str | Path | None = None
-             ) -> dict:
+             scene_conditions: Callable[[str], dict] | None = None, conditions_file: str | Path | None = None,
+             resume: bool = False, log: Callable[[str], None] | None = print) -> dict:
     """Evaluate one fusion method over a stream of batches.
 
     Args:
         method: callable ``batch -> (B, F, 1, H, W)`` or a spec (registered name / ``package.module:function``).
-        batches: iterable of sample-dict batches (leading B); tensors are moved to ``device``.
+        batches: iterable of sample-dict batches (leading B); tensors are moved to ``device``. Or a callable
+            ``start -> batches`` yielding the samples from position ``start`` of the evaluation's order on
+            (:data:`Batches`; ``start`` > 0 only when resuming).
         method_spec: the spec string stored in the result (default: ``method`` if it is a string).
         output: JSON path; rewritten atomically after every batch (partial results survive a crash).
         options: :class:`lfmbench.metrics.ScoreOptions`.
@@ -127,6 +143,12 @@ def evaluate(method: Callable | str, batches: Iterable[dict], *, method_spec: st
             (:func:`lfmbench.evaluation.conditions.corpus_scene_conditions`); PWM duty and frequency come from
             the batch ``meta``.
         conditions_file: bins of the breakdown by condition (default ``lfmbench/configs/conditions.yaml``).
+        resume: continue ``output`` when it holds a result of this evaluation (same ``dataset``, shard included,
+            and :data:`lfmbench.evaluation.shards.SAME_FIELDS`; the same checkpoint file): its sample records are
+            kept and only the samples after them scored; a ``complete`` one is returned as it is, unscored. A
+            batch must not hold both recorded and missing samples (batches of one never do). False: start
+            again, overwriting ``output``.
+        log: one line when a file is resumed or skipped (None: silent).
 
     Returns:
         The result dict (also written to ``output``).
@@ -137,37 +159,43 @@ def evaluate(method: Callable | str, batches: Iterable[dict], *, method_spec: st
     killed. A method that calls ``sys.exit`` is recorded per scene like one that raises.
 
     Raises:
-        EmptyDataError: if ``batches`` yields nothing.
+        EmptyDataError: if ``batches`` yields nothing (and nothing was recorded before a resume).
         EvaluationInterrupted: on Ctrl-C (a ``KeyboardInterrupt``).
+        ResumeError: ``resume`` and ``output`` holds a result of another evaluation, or no result.
         lfmbench.baselines.MethodNotFoundError: for an unknown spec.
     """
     return evaluate_methods([method], batches, method_specs=[method_spec], outputs=[output], options=options,
                             warmup=warmup, repeats=repeats, device=device, seeds=seeds, dataset=dataset,
                             progress=progress, total=total, corpus=corpus, scene_conditions=scene_conditions,
-                            conditions_file=conditions_file)[0]
+                            conditions_file=conditions_file, resume=resume, log=log)[0]
 
 
-def evaluate_methods(methods: Sequence[Callable | str], batches: Iterable[dict], *,
+def evaluate_methods(methods: Sequence[Callable | str], batches: Batches, *,
                      method_specs: Sequence[str | None] | None = None,
                      outputs: Sequence[str | Path | None] | None = None, options=None, warmup: int = 1,
                      repeats: int = 5, device: str | torch.device = "cpu", seeds: dict | None = None,
                      dataset: dict | None = None, progress: bool = True, total: int | None = None,
                      corpus: dict | None = None, scene_conditions: Callable[[str], dict] | None = None,
-                     conditions_file: str | Path | None = None) -> list[dict]:
+                     conditions_file: str | Path | None = None, resume: bool = False,
+                     log: Callable[[str], None] | None = print) -> list[dict]:
     """Evaluate several fusion methods on ONE pass over the batches: each batch is read (simulated) once and
     scored for every method, one batch in memory at a time.
 
     Every method gets its own copy of the batch (``copy.deepcopy``, the last method the original), so a method that
     edits its input cannot change what the next one sees; the scores are those of :func:`evaluate` run once per
     method over the same data (a test compares them sample by sample). Arguments as :func:`evaluate`, per method
-    in ``method_specs`` and ``outputs`` (one result file each, rewritten after every batch).
+    in ``method_specs`` and ``outputs`` (one result file each, rewritten after every batch). With ``resume``, every
+    file is checked before any is written; a method with a complete file is skipped, and only the samples missing
+    for at least one method are read (a callable ``batches`` from the first of them on), each method scoring those
+    it misses.
 
     Returns:
         The result dicts, in the order of ``methods``.
 
     Raises:
         EmptyDataError, EvaluationInterrupted (its ``results`` holds every method's partial result),
-        DataSourceError (every method's partial result written first), MethodNotFoundError: as :func:`evaluate`.
+        DataSourceError (every method's partial result written first), ResumeError, MethodNotFoundError: as
+        :func:`evaluate`.
     """
     from lfmbench.baselines import get_method
     from lfmbench.metrics import PRIMARY, ScoreOptions, hdr
@@ -204,23 +232,32 @@ def evaluate_methods(methods: Sequence[Callable | str], batches: Iterable[dict],
         runs.append(_MethodRun(fn, spec, out, o, opts, warmup, repeats, dev, seeds, dataset, corpus, notes))
         if isp_id is not None:
             runs[-1].result["options"]["isp"] = isp_id
+    done = [r.resume(fn, log) for r, fn in zip(runs, fns)] if resume else [False] * len(runs)  # all checked first
+    todo = [r for r, d in zip(runs, done) if not d]
+    if not todo:
+        return [r.result for r in runs]
     from lfmbench.progress import track
 
-    desc = f"evaluate {runs[0].spec}" if len(runs) == 1 else f"evaluate {len(runs)} methods"
-    source = iter(track(batches, total=total, description=desc, unit="batch", enabled=progress))
+    start = min(r.kept for r in todo) if callable(batches) else 0
+    desc = f"evaluate {todo[0].spec}" if len(todo) == 1 else f"evaluate {len(todo)} methods"
+    tracked = track(batches(start) if callable(batches) else batches, total=total, description=desc, unit="batch",
+                    enabled=progress)
+    if start:
+        tracked.bar.set(start)  # batches of one: the samples kept are the batches done
+    source = iter(tracked)
     try:
-        n_batches = _run_batches(runs, source, dev, scene_conditions)
+        n_batches = _run_batches(todo, source, dev, scene_conditions, start)
     except KeyboardInterrupt:
-        for r in runs:
+        for r in todo:
             r.result["status"] = "interrupted"
             r.result["notes"].append(f"interrupted (Ctrl-C) after {len(r.result['scenes'])} scenes; not a complete "
                                      "result")
             _finish(r.result, bins, PRIMARY)
             r.write()
-        raise EvaluationInterrupted(runs[0].result, [r.result for r in runs]) from None
-    if n_batches == 0:
+        raise EvaluationInterrupted(todo[0].result, [r.result for r in runs]) from None
+    if n_batches == 0 and not any(r.kept for r in todo):
         raise EmptyDataError("the data source yielded no batch (empty corpus split?)")
-    for r in runs:
+    for r in todo:
         _finish(r.result, bins, PRIMARY)
         r.result["status"] = COMPLETE if r.result["aggregate"]["scenes_ok"] else "failed"
         if r.result["status"] == "failed":
@@ -252,6 +289,7 @@ class _MethodRun:
                  seeds: dict | None, dataset: dict | None, corpus: dict | None, notes: list[str]) -> None:
         self.fn, self.spec, self.output, self.opts = fn, spec, output, opts
         self.warmup, self.repeats, self.dev, self.timed = warmup, repeats, dev, False
+        self.kept = 0  # sample records taken over from a resumed file: the first ``kept`` samples are not scored
         self.result: dict[str, Any] = {
             "format": RESULT_FORMAT, "version": RESULT_VERSION,
             "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
@@ -274,6 +312,55 @@ class _MethodRun:
     def write(self) -> None:
         if self.output is not None:
             write_json_atomic(self.result, self.output)
+
+    def resume(self, fn, log: Callable[[str], None] | None) -> bool:
+        """Take over the sample records (``self.kept``), timing and costs of the result file ``output`` when it
+        holds a run of this evaluation; True when that run is complete (its result becomes ``self.result``, the
+        file is left as it is). No file: False, nothing kept.
+
+        Raises:
+            ResumeError: the file is not a result, is another evaluation's (the field named), its method's
+                checkpoint file has changed since, or its records are not in sample order.
+        """
+        from lfmbench.evaluation.provenance import file_sha256
+        from lfmbench.evaluation.shards import differing_field
+        from lfmbench.fileio import load_json_input
+
+        if self.output is None or not Path(self.output).exists():
+            return False
+        again = "; pass --no-resume to start again (the file is overwritten) or choose another output file"
+        try:
+            old = load_json_input(self.output, "result file")
+        except ValueError as exc:
+            raise ResumeError(f"{exc}{again}") from None
+        if not isinstance(old, dict) or old.get("format") != RESULT_FORMAT or not isinstance(old.get("scenes"), list):
+            raise ResumeError(f"result file {self.output}: not an {RESULT_FORMAT} result{again}")
+        field = differing_field(self.result, old)
+        ck = (old.get("method") or {}).get("checkpoint") or {}
+        path = getattr(fn, "checkpoint_path", None)
+        if field is None and ck.get("file_sha256") and callable(path) and Path(path()).is_file() \
+                and file_sha256(path()) != ck["file_sha256"]:
+            field = "method.checkpoint"  # the same method name with other weights: another evaluation
+        if field is not None:
+            raise ResumeError(f"result file {self.output} holds another evaluation (field {field!r} differs){again}")
+        if any(not isinstance(rec, dict) or rec.get("index") != i for i, rec in enumerate(old["scenes"])):
+            raise ResumeError(f"result file {self.output}: its sample records are not in sample order{again}")
+        if old.get("status") == COMPLETE:
+            self.result = old
+            if log:
+                log(f"{self.output}: complete result of this evaluation; {self.spec} skipped (--no-resume scores "
+                    "it again)")
+            return True
+        self.kept = len(old["scenes"])
+        self.result["scenes"] = old["scenes"]
+        self.result["created"] = old.get("created", self.result["created"])
+        if (old.get("runtime") or {}).get("times_ms"):  # timed on its first scored batch, as an uninterrupted run
+            self.result["runtime"], self.result["method"], self.timed = old["runtime"], old["method"], True
+        self.result["notes"].append(f"resumed: {self.kept} sample record(s) kept from a run with status "
+                                    f"{old.get('status')!r}")
+        if log:
+            log(f"resuming {self.output} ({old.get('status')}): {self.kept} sample(s) recorded, scoring the rest")
+        return False
 
     def _record(self, ids: list, conds: list[dict], **fields) -> None:
         for sid, c in zip(ids, conds):
@@ -341,11 +428,12 @@ class _MethodRun:
             res["notes"].append(f"timing failed: {_describe(exc)}")
 
 
-def _run_batches(runs: list[_MethodRun], source, dev, scene_conditions: Callable[[str], dict] | None) -> int:
-    """The loop of :func:`evaluate_methods`: read each batch once, score it for every method (each result
-    rewritten after each batch, without the bootstrap, which runs once at the end); returns the number of
-    batches."""
-    n_batches = 0
+def _run_batches(runs: list[_MethodRun], source, dev, scene_conditions: Callable[[str], dict] | None,
+                 start: int = 0) -> int:
+    """The loop of :func:`evaluate_methods`: read each batch once, score it for every method that has not recorded
+    its samples (:attr:`_MethodRun.kept`; the source begins at sample ``start``), each result rewritten after each
+    batch, without the bootstrap, which runs once at the end; returns the number of batches."""
+    n_batches, at = 0, start
     while True:
         try:
             batch = next(source)
@@ -370,7 +458,14 @@ def _run_batches(runs: list[_MethodRun], source, dev, scene_conditions: Callable
         for sid, c in zip(ids, conds):
             if scene_conditions is not None and sid is not None:
                 c.update(scene_conditions(sid))
-        for i, r in enumerate(runs):
+        first, at = at, at + len(ids)
+        scoring = [r for r in runs if r.kept < at]  # a resumed method scores only the samples it misses
+        for r in scoring:
+            if r.kept > first:
+                raise ValueError(f"resume: batch {n_batches - 1} holds samples {first}..{at - 1}, of which "
+                                 f"{r.output} has recorded the first {r.kept - first}; resume needs batches that "
+                                 "begin where a file's records end (batches of one do)")
+        for i, r in enumerate(scoring):
             # each method its own copy (the last one the original): an in-place edit cannot reach the next method
-            r.score(batch if i == len(runs) - 1 else copy.deepcopy(batch), ids, conds)
+            r.score(batch if i == len(scoring) - 1 else copy.deepcopy(batch), ids, conds)
     return n_batches

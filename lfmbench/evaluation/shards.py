@@ -22,9 +22,11 @@ import re
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 
-__all__ = ["ShardError", "parse_shard", "shard_samples", "shard_record", "merge_results", "merge_files"]
+__all__ = ["ShardError", "parse_shard", "shard_samples", "shard_record", "merge_results", "merge_files",
+           "differing_field"]
 
-#: Fields that must be equal in every shard of one evaluation (what a single run writes once).
+#: Fields that must be equal in every shard of one evaluation (what a single run writes once); with ``dataset``,
+#: what makes two result files parts of one evaluation (:func:`differing_field`).
 SAME_FIELDS = ("format", "version", "method", "corpus", "seeds", "options", "versions", "statistics")
 
 
@@ -67,6 +69,32 @@ def _strip(d: dict) -> dict:
     return {k: v for k, v in d.items() if k != "shard"}
 
 
+def differing_field(result: dict, other: dict, shard: bool = True) -> str | None:
+    """The first field in which two results are not of one evaluation, None when they are: ``dataset`` (corpus
+    path, split, samples, crop, samples per scene, frames, sensor, noise; with ``shard`` also ``dataset.shard``, which
+    part of the split), then those of :data:`SAME_FIELDS` (``method`` by its spec: parameters and MACs are
+    measured); in a field that holds a dict, its first differing key (``"dataset.samples_per_scene"``,
+    ``"seeds.dataset"``). Values are compared as a result file holds them
+    (:func:`lfmbench.evaluation.results.jsonable`), so a result in memory and one read back compare equal. Used by
+    :func:`merge_results` (``shard=False``: shards of one split differ there) and by a resumed evaluation
+    (:func:`lfmbench.evaluation.run.evaluate_methods`)."""
+    from lfmbench.evaluation.results import jsonable
+
+    for f in ("dataset", *SAME_FIELDS):
+        a, b = result.get(f), other.get(f)
+        if f == "dataset" and not shard:
+            a, b = _strip(a or {}), _strip(b or {})
+        elif f == "method":  # parameters and MACs are measured; the method is its spec
+            a, b = (a or {}).get("spec"), (b or {}).get("spec")
+        a, b = jsonable(a), jsonable(b)
+        if a != b:
+            if isinstance(a, dict) and isinstance(b, dict):
+                return f + "." + next(k for k in [*a, *(k for k in b if k not in a)]
+                                      if k not in a or k not in b or a[k] != b[k])
+            return f
+    return None
+
+
 def merge_results(results: Sequence[dict]) -> dict:
     """Join the result dicts of the shards of one evaluation into the result of one run over the whole split.
 
@@ -100,15 +128,10 @@ def merge_results(results: Sequence[dict]) -> dict:
         for f in ("count", "total"):
             if sh[f] != h0[f]:
                 raise ShardError(f"{_name(r, k)}: dataset.shard.{f} = {sh[f]}, but {_name(first, 0)} has {h0[f]}")
-        if _strip(r.get("dataset") or {}) != _strip(first.get("dataset") or {}):
-            raise ShardError(f"{_name(r, k)}: field 'dataset' differs from {_name(first, 0)} (another split, "
-                             "seed, crop or sensor)")
-        for f in SAME_FIELDS:
-            a, b = r.get(f), first.get(f)
-            if f == "method":  # parameters and MACs are measured; the method is its spec
-                a, b = (a or {}).get("spec"), (b or {}).get("spec")
-            if a != b:
-                raise ShardError(f"{_name(r, k)}: field {f!r} differs from {_name(first, 0)}")
+        f = differing_field(r, first, shard=False)
+        if f is not None:
+            raise ShardError(f"{_name(r, k)}: field {f!r} differs from {_name(first, 0)}"
+                             + (" (another split, seed, crop or sensor)" if f.startswith("dataset") else ""))
         if r.get("status") not in (COMPLETE, "failed") or len(r.get("scenes") or []) != len(sh["samples"]):
             raise ShardError(f"{_name(r, k)}: shard {sh['index']}/{count} is not finished (status "
                              f"{r.get('status')!r}, {len(r.get('scenes') or [])} of {len(sh['samples'])} samples "

@@ -117,7 +117,7 @@ def test_merge_refuses_missing_twice_and_foreign_shards(runs, tmp_path):
     other["seeds"] = {"dataset": 1}
     (tmp_path / "other.json").write_text(json.dumps(other))
     r = CliRunner().invoke(app, ["merge-results", str(files[0]), str(tmp_path / "other.json"), "-o", str(out)])
-    assert r.exit_code == 2 and "other.json" in r.output and "'seeds'" in r.output
+    assert r.exit_code == 2 and "other.json" in r.output and "'seeds.dataset'" in r.output
     cut = copy.deepcopy(sh1)
     cut["status"], cut["scenes"] = "interrupted", cut["scenes"][:1]
     (tmp_path / "cut.json").write_text(json.dumps(cut))
