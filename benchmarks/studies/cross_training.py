@@ -16,8 +16,9 @@ split's own network over scenes (mean difference, its CI, Wilcoxon p; :func:`lfm
 paired_test`); with several seeds also each seed's own network against seed 0's, the scale of training noise the
 cross-training differences are to be read against. ``steps.json`` holds every step's wall time.
 
-Every step is resumable and skipped when done: the renderer and the training resume by themselves, a scoring is
-skipped when its result files are complete. Run it again after a kill. Used to report numbers
+Every step is resumable and skipped when done: the renderer, the training and the scoring resume by themselves (a
+killed scoring keeps the samples it scored), and a scoring whose result files are all complete is not started. Run
+it again after a kill. Used to report numbers
 (docs/results/leaderboard-v2-mini.md), not a timed test.
 """
 from __future__ import annotations
