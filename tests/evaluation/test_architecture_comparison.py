@@ -2,22 +2,16 @@
 complete checkpoint and trains a missing one; its options are checked before any work."""
 from __future__ import annotations
 
-import importlib.util
 import json
 import sys
-from pathlib import Path
 
 import pytest
 
-SCRIPT = Path(__file__).resolve().parents[2] / "benchmarks" / "studies" / "architecture_comparison.py"
-
+from tests.evaluation.conftest import load_study
 
 @pytest.fixture(scope="module")
-def study():
-    spec = importlib.util.spec_from_file_location("architecture_comparison_study", SCRIPT)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+def study(load_study):
+    return load_study("architecture_comparison")
 
 
 def test_complete_checkpoint_is_kept_and_a_missing_one_trained(study, tmp_path):

@@ -3,22 +3,17 @@ with an independent computation; a scoring counts as done only when every result
 stops the study naming it and is recorded; bad options are refused before any work."""
 from __future__ import annotations
 
-import importlib.util
 import json
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-SCRIPT = Path(__file__).resolve().parents[2] / "benchmarks" / "studies" / "cross_training.py"
-
+from tests.evaluation.conftest import load_study
 
 @pytest.fixture(scope="module")
-def study():
-    spec = importlib.util.spec_from_file_location("cross_training_study", SCRIPT)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+def study(load_study):
+    return load_study("cross_training")
 
 
 def _result(path: Path, led: list[float], psnr: list[float], status: str = "complete") -> None:
