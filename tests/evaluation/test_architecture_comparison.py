@@ -7,7 +7,6 @@ import sys
 
 import pytest
 
-from tests.evaluation.conftest import load_study
 
 @pytest.fixture(scope="module")
 def study(load_study):

@@ -9,7 +9,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tests.evaluation.conftest import load_study
 
 @pytest.fixture(scope="module")
 def study(load_study):
