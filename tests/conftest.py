@@ -216,3 +216,19 @@ def corpus(tmp_path_factory):
     from tests.data.corpus.data import make_corpus
 
     return make_corpus(tmp_path_factory.mktemp("corpus"))
+
+
+@pytest.fixture(scope="session")
+def load_study():
+    """``load_study(name)`` -> ``benchmarks/studies/<name>.py`` as a module (that folder is no package), under a
+    module name of its own."""
+    import importlib.util
+
+    def load(name: str):
+        path = Path(__file__).resolve().parents[1] / "benchmarks" / "studies" / f"{name}.py"
+        spec = importlib.util.spec_from_file_location(f"{name}_study", path)
+        mod = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(mod)
+        return mod
+
+    return load

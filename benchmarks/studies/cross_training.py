@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import re
 import subprocess
 import sys
@@ -67,9 +66,9 @@ class Steps:
         rc = subprocess.call(cmd)
         self.rows.append({"step": name, "cmd": cmd, "wall_s": round(time.time() - t, 1), "rc": rc,
                           "ended_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())})
-        tmp = self.path.with_suffix(".json.tmp")
-        tmp.write_text(json.dumps(self.rows, indent=1) + "\n")
-        os.replace(tmp, self.path)
+        from lfmbench.fileio import atomic_write_text  # noqa: PLC0415
+
+        atomic_write_text(self.path, json.dumps(self.rows, indent=1) + "\n")
         if rc != 0:
             raise SystemExit(f"{name} failed (exit {rc}): {' '.join(cmd)}")
 
@@ -84,8 +83,10 @@ def seed_config(config: str, seed: int, out: Path) -> str:
     if (data.get("train") or {}).get("seed", 0) == seed:
         return config
     data.setdefault("train", {})["seed"] = seed
+    from lfmbench.fileio import atomic_write_text  # noqa: PLC0415
+
     path = out / f"{Path(config).stem}_seed{seed}.yaml"
-    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    atomic_write_text(path, yaml.safe_dump(data, sort_keys=False))
     return str(path)
 
 

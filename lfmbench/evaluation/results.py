@@ -63,6 +63,40 @@ def jsonable(x: Any) -> Any:
     return x
 
 
+#: Fields that must be equal in every shard of one evaluation (what a single run writes once); with ``dataset``,
+#: what makes two result files parts of one evaluation (:func:`differing_field`).
+SAME_FIELDS = ("format", "version", "method", "corpus", "seeds", "options", "versions", "statistics")
+
+
+def without_shard(dataset: dict) -> dict:
+    """A result's ``dataset`` record without its ``shard`` (which part of the split a shard scored)."""
+    return {k: v for k, v in dataset.items() if k != "shard"}
+
+
+def differing_field(result: dict, other: dict, shard: bool = True) -> str | None:
+    """The first field in which two results are not of one evaluation, None when they are: ``dataset`` (corpus
+    path, split, samples, crop, samples per scene, frames, sensor, noise; with ``shard`` also ``dataset.shard``, which
+    part of the split), then those of :data:`SAME_FIELDS` (``method`` by its spec: parameters and MACs are
+    measured); in a field that holds a dict, its first differing key (``"dataset.samples_per_scene"``,
+    ``"seeds.dataset"``). Values are compared as a result file holds them (:func:`jsonable`), so a result in memory
+    and one read back compare equal. Used by :func:`lfmbench.evaluation.shards.merge_results` (``shard=False``:
+    shards of one split differ there) and by a resumed evaluation (:func:`lfmbench.evaluation.run.evaluate_methods`).
+    """
+    for f in ("dataset", *SAME_FIELDS):
+        a, b = result.get(f), other.get(f)
+        if f == "dataset" and not shard:
+            a, b = without_shard(a or {}), without_shard(b or {})
+        elif f == "method":  # parameters and MACs are measured; the method is its spec
+            a, b = (a or {}).get("spec"), (b or {}).get("spec")
+        a, b = jsonable(a), jsonable(b)
+        if a != b:
+            if isinstance(a, dict) and isinstance(b, dict):
+                return f + "." + next(k for k in [*a, *(k for k in b if k not in a)]
+                                      if k not in a or k not in b or a[k] != b[k])
+            return f
+    return None
+
+
 def write_json_atomic(obj: dict, path: str | Path) -> Path:
     """Write JSON to ``path`` atomically (temporary file in the same directory, then ``os.replace``)."""
     path = Path(path)

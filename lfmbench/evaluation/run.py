@@ -10,7 +10,7 @@ written atomically after every batch. A method that raises, returns a wrong shap
 scene (``status``) and the run goes on. At the end the result gets per-scene values, bootstrap confidence
 intervals over scenes and the breakdown of the primary score by condition (``docs/guide/metrics.md``).
 
-Resume (``resume=True``): a result file of the same evaluation (:func:`lfmbench.evaluation.shards.differing_field`)
+Resume (``resume=True``): a result file of the same evaluation (:func:`lfmbench.evaluation.results.differing_field`)
 that a killed, interrupted or failed run left keeps its sample records, and only the samples after them are scored.
 Every statistic is a function of the ordered sample records and every sample's numbers depend only on (dataset
 seed, sample index), so the finished file equals an uninterrupted run's in every score (as merged shards do).
@@ -144,7 +144,7 @@ def evaluate(method: Callable | str, batches: Batches, *, method_spec: str | Non
             the batch ``meta``.
         conditions_file: bins of the breakdown by condition (default ``lfmbench/configs/conditions.yaml``).
         resume: continue ``output`` when it holds a result of this evaluation (same ``dataset``, shard included,
-            and :data:`lfmbench.evaluation.shards.SAME_FIELDS`; the same checkpoint file): its sample records are
+            and :data:`lfmbench.evaluation.results.SAME_FIELDS`; the same checkpoint file): its sample records are
             kept and only the samples after them scored; a ``complete`` one is returned as it is, unscored. A
             batch must not hold both recorded and missing samples (batches of one never do). False: start
             again, overwriting ``output``.
@@ -323,11 +323,11 @@ class _MethodRun:
                 checkpoint file has changed since, or its records are not in sample order.
         """
         from lfmbench.evaluation.provenance import file_sha256
-        from lfmbench.evaluation.shards import differing_field
+        from lfmbench.evaluation.results import differing_field
         from lfmbench.fileio import load_json_input
 
-        if self.output is None or not Path(self.output).exists():
-            return False
+        if self.output is None or not Path(self.output).is_file():
+            return False  # nothing to continue; a device, FIFO or folder is left to the writer, which names it
         again = "; pass --no-resume to start again (the file is overwritten) or choose another output file"
         try:
             old = load_json_input(self.output, "result file")

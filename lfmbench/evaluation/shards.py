@@ -22,13 +22,10 @@ import re
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 
+from lfmbench.evaluation.results import SAME_FIELDS, differing_field, without_shard  # noqa: F401 - one definition
+
 __all__ = ["ShardError", "parse_shard", "shard_samples", "shard_record", "merge_results", "merge_files",
            "differing_field"]
-
-#: Fields that must be equal in every shard of one evaluation (what a single run writes once); with ``dataset``,
-#: what makes two result files parts of one evaluation (:func:`differing_field`).
-SAME_FIELDS = ("format", "version", "method", "corpus", "seeds", "options", "versions", "statistics")
-
 
 class ShardError(ValueError):
     """Shard files that do not make one evaluation (another protocol, a sample twice or missing, a shard not
@@ -63,36 +60,6 @@ def shard_record(index: int, count: int, samples: Sequence[int], total: int) -> 
 
 def _name(res: dict, k: int) -> str:
     return str(res.get("_path") or f"shard file {k}")
-
-
-def _strip(d: dict) -> dict:
-    return {k: v for k, v in d.items() if k != "shard"}
-
-
-def differing_field(result: dict, other: dict, shard: bool = True) -> str | None:
-    """The first field in which two results are not of one evaluation, None when they are: ``dataset`` (corpus
-    path, split, samples, crop, samples per scene, frames, sensor, noise; with ``shard`` also ``dataset.shard``, which
-    part of the split), then those of :data:`SAME_FIELDS` (``method`` by its spec: parameters and MACs are
-    measured); in a field that holds a dict, its first differing key (``"dataset.samples_per_scene"``,
-    ``"seeds.dataset"``). Values are compared as a result file holds them
-    (:func:`lfmbench.evaluation.results.jsonable`), so a result in memory and one read back compare equal. Used by
-    :func:`merge_results` (``shard=False``: shards of one split differ there) and by a resumed evaluation
-    (:func:`lfmbench.evaluation.run.evaluate_methods`)."""
-    from lfmbench.evaluation.results import jsonable
-
-    for f in ("dataset", *SAME_FIELDS):
-        a, b = result.get(f), other.get(f)
-        if f == "dataset" and not shard:
-            a, b = _strip(a or {}), _strip(b or {})
-        elif f == "method":  # parameters and MACs are measured; the method is its spec
-            a, b = (a or {}).get("spec"), (b or {}).get("spec")
-        a, b = jsonable(a), jsonable(b)
-        if a != b:
-            if isinstance(a, dict) and isinstance(b, dict):
-                return f + "." + next(k for k in [*a, *(k for k in b if k not in a)]
-                                      if k not in a or k not in b or a[k] != b[k])
-            return f
-    return None
 
 
 def merge_results(results: Sequence[dict]) -> dict:
@@ -163,7 +130,7 @@ def merge_results(results: Sequence[dict]) -> dict:
         raise ShardError(f"samples {gap[:5]} of {total} are in no shard file")
     base_k = seen[0] if total else 0
     out = copy.deepcopy({k: v for k, v in results[base_k].items() if k != "_path"})
-    out["dataset"] = _strip(out["dataset"])
+    out["dataset"] = without_shard(out["dataset"])
     out["created"] = min(str(r.get("created", "")) for r in results)
     scenes = []
     for i, (_, rec) in enumerate(sorted(records, key=lambda t: t[0])):
