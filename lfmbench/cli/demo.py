@@ -85,7 +85,8 @@ def run(out: str | Path | None = None, config: str | Path = CONFIG) -> dict:
     ev = cfg["evaluate"]
     t = _step(f"3. evaluate every baseline on the {ev['split']} split -> {runs}")
     rows = benchmark(corpus, runs_dir=runs, split=ev["split"], seed=ev["seed"], repeats=ev["repeats"],
-                     perceptual=ev["perceptual"], samples_per_scene=ev["samples_per_scene"])
+                     perceptual=ev["perceptual"], samples_per_scene=ev["samples_per_scene"],
+                     resume=False)  # scored afresh: a retrained network or an edited config must not stop the demo
     secs["evaluate"] = time.perf_counter() - t
 
     from lfmbench.paper.figures import make_all
