@@ -13,8 +13,9 @@ protocol's own train split is ``unet``, the others ``unet_<name>trained``, furth
 ``cross_training.md`` / ``.json`` into ``--out``: the 2 x 2 table (training protocol x test protocol) of the LED
 score and PSNR-mu with 95 % bootstrap CIs over scenes, and on each test split every network paired against the
 split's own network over scenes (mean difference, its CI, Wilcoxon p; :func:`lfmbench.evaluation.stats.
-paired_test`); with several seeds also each seed's own network against seed 0's, the scale of training noise the
-cross-training differences are to be read against. ``steps.json`` holds every step's wall time.
+paired_test`); with several seeds also each seed's own network against seed 0's (the scale of training noise the
+cross-training differences are to be read against), and the two corpora's networks paired seed by seed and as the
+mean of each corpus's networks. ``steps.json`` holds every step's wall time.
 
 Every step is resumable and skipped when done: the renderer, the training and the scoring resume by themselves (a
 killed scoring keeps the samples it scored), and a scoring whose result files are all complete is not started. Run
@@ -105,6 +106,11 @@ def scores_complete(runs: Path, methods: list[str]) -> bool:
     return True
 
 
+def _mean(values: list) -> float | None:
+    """The mean of ``values``, None when one of them is missing (a scene one network did not score)."""
+    return None if any(v is None for v in values) else sum(values) / len(values)
+
+
 def summary(out: Path, shorts: list[str], seeds: list[int]) -> str:
     """Markdown of the 2 x 2 table and the paired tests, from the result files under ``out/scores``."""
     from lfmbench.evaluation import stats  # noqa: PLC0415
@@ -131,25 +137,42 @@ def summary(out: Path, shorts: list[str], seeds: list[int]) -> str:
                 table[(tr, seed, te)] = rows
                 cells += [cell(rows, "led_score"), cell(rows, "psnr_mu")]
             lines.append(f"| {tr} | {seed} | " + " | ".join(cells) + " |")
+    def paired(mine: dict, ref: dict) -> str:
+        """Cells "diff [CI] | p" per metric and n: per-scene values ``mine`` minus ``ref`` ({scene: metrics})."""
+        cells, n = [], 0
+        for m in METRICS:
+            pairs = [(mine[sid].get(m), ref[sid].get(m)) for sid in ref if sid in mine]
+            pairs = [(x, y) for x, y in pairs if x is not None and y is not None]
+            t = stats.paired_test([x for x, _ in pairs], [y for _, y in pairs])
+            (lo, hi), d, n = t["ci"], (3 if m == "led_score" else 2), t["n"]
+            cells.append(f"{t['mean_diff']:+.{d}f} [{lo:+.{d}f}, {hi:+.{d}f}] | {t['p']:.4f}")
+        return " | ".join(cells) + f" | {n} |"
+
+    def scenes(tr: str, seed: int, te: str) -> dict:
+        return {s["scene_id"]: s["metrics"] for s in table[(tr, seed, te)]}
+
+    head = ["| test split | network | " + " | ".join(f"{m}: diff [CI] | p" for m in METRICS) + " | n |",
+            "|---|---|" + "---|---|" * len(METRICS) + "---|"]
     lines += ["", "Paired over the test split's scenes, network minus the split's own network of seed "
-              f"{seeds[0]} (mean diff [95 % CI], Wilcoxon p, n scenes):", "",
-              "| test split | network | " + " | ".join(f"{m}: diff [CI] | p" for m in METRICS) + " | n |",
-              "|---|---|" + "---|---|" * len(METRICS) + "---|"]
+              f"{seeds[0]} (mean diff [95 % CI], Wilcoxon p, n scenes):", "", *head]
     for te in shorts:
-        ref = table[(te, seeds[0], te)]
         for tr in shorts:
             for seed in seeds:
-                if (tr, seed) == (te, seeds[0]):
-                    continue
-                mine = {s["scene_id"]: s["metrics"] for s in table[(tr, seed, te)]}
-                cells, n = [], 0
-                for m in METRICS:
-                    pairs = [(mine[s["scene_id"]].get(m), s["metrics"].get(m)) for s in ref if s["scene_id"] in mine]
-                    pairs = [(a, b) for a, b in pairs if a is not None and b is not None]
-                    t = stats.paired_test([a for a, _ in pairs], [b for _, b in pairs])
-                    (lo, hi), d, n = t["ci"], (3 if m == "led_score" else 2), t["n"]
-                    cells.append(f"{t['mean_diff']:+.{d}f} [{lo:+.{d}f}, {hi:+.{d}f}] | {t['p']:.4f}")
-                lines.append(f"| {te} | trained on {tr}, seed {seed} | " + " | ".join(cells) + f" | {n} |")
+                if (tr, seed) != (te, seeds[0]):
+                    lines.append(f"| {te} | trained on {tr}, seed {seed} | "
+                                 + paired(scenes(tr, seed, te), scenes(te, seeds[0], te)))
+    if len(seeds) > 1:  # the training corpus's effect seed by seed, and on the mean of each corpus's networks
+        lines += ["", "Paired over the test split's scenes, the network trained on the other protocol minus the one "
+                  "trained on the test split's, of the same seed and (`mean`) the mean of the seeds' networks:", "",
+                  *head]
+        for te in shorts:
+            for tr in (t for t in shorts if t != te):
+                for seed in seeds:
+                    lines.append(f"| {te} | {tr} - {te}, seed {seed} | "
+                                 + paired(scenes(tr, seed, te), scenes(te, seed, te)))
+                mean = [{sid: {m: _mean([scenes(t, k, te).get(sid, {}).get(m) for k in seeds]) for m in METRICS}
+                         for sid in scenes(t, seeds[0], te)} for t in (tr, te)]
+                lines.append(f"| {te} | {tr} - {te}, mean | " + paired(*mean))
     return "\n".join(lines) + "\n"
 
 

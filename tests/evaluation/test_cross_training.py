@@ -59,6 +59,28 @@ def test_table_and_paired_tests_agree_with_an_independent_computation(study, tmp
     assert "| a | trained on a, seed 0 |" not in text
 
 
+def test_with_two_seeds_the_corpora_are_paired_seed_by_seed_and_as_the_mean_of_their_networks(study, tmp_path):
+    rng = np.random.default_rng(5)
+    n, files = 7, {}
+    for te in ("a", "b"):
+        for tr in ("a", "b"):
+            for seed in (0, 1):
+                name = study.net_name(tr, te, seed, 0)
+                led, psnr = rng.uniform(0.6, 0.95, n).round(4), rng.uniform(25, 40, n).round(2)
+                _result(tmp_path / "scores" / te / f"{name}.json", led.tolist(), psnr.tolist())
+                files[(tr, seed, te)] = (led, psnr)
+    text = study.summary(tmp_path, ["a", "b"], [0, 1])
+    for seed, label in ((1, "seed 1"), (None, "mean")):
+        line = next(ln for ln in text.splitlines() if ln.startswith(f"| b | a - b, {label} |"))
+        cells = [c.strip() for c in line.split("|")]
+        k = [0, 1] if seed is None else [seed]
+        mine = np.mean([files[("a", s, "b")][1] for s in k], axis=0)
+        ref = np.mean([files[("b", s, "b")][1] for s in k], axis=0)
+        assert cells[5].startswith(f"{(mine - ref).mean():+.2f} ["), line      # PSNR-mu column
+    # the seed-1 network paired against its own corpus's seed-0 network (training noise)
+    assert "| a | trained on a, seed 1 |" in text and "| b | trained on b, seed 1 |" in text
+
+
 def test_scores_complete_needs_every_file_complete(study, tmp_path):
     _result(tmp_path / "unet.json", [0.5], [30.0])
     assert study.scores_complete(tmp_path, ["unet"])
