@@ -10,16 +10,16 @@ each protocol's test and train splits (``lfmbench render``), trains the U-Net on
 train``, one network per protocol and seed) and scores, on each test split, every rule-based method and every
 network on the same frozen PWM draws (:mod:`lfmbench.evaluation.protocol_run`; the network trained on the test
 protocol's own train split is ``unet``, the others ``unet_<name>trained``, further seeds ``..._seed<k>``). It writes
-``cross_training.md`` / ``.json`` into ``--out``: the 2 x 2 table (training protocol x test protocol) of the LED
-score and PSNR-mu with 95 % bootstrap CIs over scenes, and on each test split every network paired against the
-split's own network over scenes (mean difference, its CI, Wilcoxon p; :func:`lfmbench.evaluation.stats.
-paired_test`); with several seeds also each seed's own network against seed 0's (the scale of training noise the
-cross-training differences are to be read against), and the two corpora's networks paired seed by seed and as the
-mean of each corpus's networks. ``steps.json`` holds every step's wall time.
+``cross_training.md`` into ``--out``: the 2 x 2 table (training protocol x test protocol) of the LED score and
+PSNR-mu with 95 % bootstrap CIs over scenes, and on each test split the network trained on the other protocol
+paired against the one trained on the split's own, seed by seed and (several seeds) as the mean of each corpus's
+networks (mean difference, its CI, Wilcoxon p; :func:`lfmbench.evaluation.stats.paired_test`); with several seeds
+also each network against its corpus's first seed, the training noise the corpora's differences are to be read
+against. ``steps.json`` holds every step's wall time.
 
 Every step is resumable and skipped when done: the renderer, the training and the scoring resume by themselves (a
-killed scoring keeps the samples it scored), and a scoring whose result files are all complete is not started. Run
-it again after a kill. Used to report numbers
+killed scoring keeps the samples it scored; networks added later are scored alone), and a scoring whose result
+files are all complete is not started. Run it again after a kill. Used to report numbers
 (docs/results/leaderboard-v2-mini.md), not a timed test.
 """
 from __future__ import annotations
@@ -126,8 +126,9 @@ def summary(out: Path, shorts: list[str], seeds: list[int]) -> str:
         return f"{s['value']:.{d}f} [{lo:.{d}f}, {hi:.{d}f}]"
 
     lines = ["LED score and PSNR-mu (dB) [95 % CI over scenes]; rows: the network's training split and seed, "
-             "columns: the test split", "", "| trained on | seed | " + " | ".join(f"{t}: LED score | {t}: PSNR-mu dB" for t in shorts) + " |",
-              "|---|---|" + "---|---|" * len(shorts)]
+             "columns: the test split", "",
+             "| trained on | seed | " + " | ".join(f"{t}: LED score | {t}: PSNR-mu dB" for t in shorts) + " |",
+             "|---|---|" + "---|---|" * len(shorts)]
     table = {}
     for tr in shorts:
         for seed in seeds:
@@ -137,6 +138,7 @@ def summary(out: Path, shorts: list[str], seeds: list[int]) -> str:
                 table[(tr, seed, te)] = rows
                 cells += [cell(rows, "led_score"), cell(rows, "psnr_mu")]
             lines.append(f"| {tr} | {seed} | " + " | ".join(cells) + " |")
+
     def paired(mine: dict, ref: dict) -> str:
         """Cells "diff [CI] | p" per metric and n: per-scene values ``mine`` minus ``ref`` ({scene: metrics})."""
         cells, n = [], 0
@@ -153,26 +155,27 @@ def summary(out: Path, shorts: list[str], seeds: list[int]) -> str:
 
     head = ["| test split | network | " + " | ".join(f"{m}: diff [CI] | p" for m in METRICS) + " | n |",
             "|---|---|" + "---|---|" * len(METRICS) + "---|"]
-    lines += ["", "Paired over the test split's scenes, network minus the split's own network of seed "
-              f"{seeds[0]} (mean diff [95 % CI], Wilcoxon p, n scenes):", "", *head]
+    lines += ["", "Paired over the test split's scenes, the network trained on the other protocol minus the one "
+              "trained on the test split's, of the same seed" + (" and (`mean`) the mean of each corpus's networks"
+                                                                 if len(seeds) > 1 else "")
+              + " (mean diff [95 % CI], Wilcoxon p, n scenes):", "", *head]
     for te in shorts:
-        for tr in shorts:
+        for tr in (t for t in shorts if t != te):
             for seed in seeds:
-                if (tr, seed) != (te, seeds[0]):
-                    lines.append(f"| {te} | trained on {tr}, seed {seed} | "
-                                 + paired(scenes(tr, seed, te), scenes(te, seeds[0], te)))
-    if len(seeds) > 1:  # the training corpus's effect seed by seed, and on the mean of each corpus's networks
-        lines += ["", "Paired over the test split's scenes, the network trained on the other protocol minus the one "
-                  "trained on the test split's, of the same seed and (`mean`) the mean of the seeds' networks:", "",
-                  *head]
-        for te in shorts:
-            for tr in (t for t in shorts if t != te):
-                for seed in seeds:
-                    lines.append(f"| {te} | {tr} - {te}, seed {seed} | "
-                                 + paired(scenes(tr, seed, te), scenes(te, seed, te)))
+                lines.append(f"| {te} | {tr} - {te}, seed {seed} | "
+                             + paired(scenes(tr, seed, te), scenes(te, seed, te)))
+            if len(seeds) > 1:
                 mean = [{sid: {m: _mean([scenes(t, k, te).get(sid, {}).get(m) for k in seeds]) for m in METRICS}
                          for sid in scenes(t, seeds[0], te)} for t in (tr, te)]
                 lines.append(f"| {te} | {tr} - {te}, mean | " + paired(*mean))
+    if len(seeds) > 1:  # training noise: the scale the corpora's differences are to be read against
+        lines += ["", f"Training noise: each network minus the network of seed {seeds[0]} trained on the same "
+                  "protocol, on each test split (mean diff [95 % CI], Wilcoxon p, n scenes):", "", *head]
+        for te in shorts:
+            for tr in shorts:
+                for seed in seeds[1:]:
+                    lines.append(f"| {te} | {tr}, seed {seed} - seed {seeds[0]} | "
+                                 + paired(scenes(tr, seed, te), scenes(tr, seeds[0], te)))
     return "\n".join(lines) + "\n"
 
 
