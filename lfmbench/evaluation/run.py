@@ -148,7 +148,7 @@ def evaluate(method: Callable | str, batches: Batches, *, method_spec: str | Non
             kept and only the samples after them scored; a ``complete`` one is returned as it is, unscored. A
             batch must not hold both recorded and missing samples (batches of one never do). False: start
             again, overwriting ``output``.
-        log: one line when a file is resumed or skipped (None: silent).
+        log: one line per file resumed, one line for all the methods skipped (None: silent).
 
     Returns:
         The result dict (also written to ``output``).
@@ -234,6 +234,12 @@ def evaluate_methods(methods: Sequence[Callable | str], batches: Batches, *,
             runs[-1].result["options"]["isp"] = isp_id
     done = [r.resume(fn, log) for r, fn in zip(runs, fns)] if resume else [False] * len(runs)  # all checked first
     todo = [r for r, d in zip(runs, done) if not d]
+    skipped = [r for r, d in zip(runs, done) if d]
+    if skipped and log:  # one line, however many methods
+        where = {str(Path(r.output).parent) for r in skipped}
+        log(f"{', '.join(r.spec for r in skipped)} skipped: complete result(s) of this evaluation in "
+            f"{where.pop() if len(where) == 1 else ', '.join(str(r.output) for r in skipped)} (--no-resume scores "
+            "them again)")
     if not todo:
         return [r.result for r in runs]
     from lfmbench.progress import track
@@ -345,11 +351,8 @@ class _MethodRun:
             raise ResumeError(f"result file {self.output} holds another evaluation (field {field!r} differs){again}")
         if any(not isinstance(rec, dict) or rec.get("index") != i for i, rec in enumerate(old["scenes"])):
             raise ResumeError(f"result file {self.output}: its sample records are not in sample order{again}")
-        if old.get("status") == COMPLETE:
+        if old.get("status") == COMPLETE:  # skipped: evaluate_methods says so once for all such methods
             self.result = old
-            if log:
-                log(f"{self.output}: complete result of this evaluation; {self.spec} skipped (--no-resume scores "
-                    "it again)")
             return True
         self.kept = len(old["scenes"])
         self.result["scenes"] = old["scenes"]
