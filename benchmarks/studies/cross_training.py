@@ -150,8 +150,10 @@ def summary(out: Path, shorts: list[str], seeds: list[int]) -> str:
             cells.append(f"{t['mean_diff']:+.{d}f} [{lo:+.{d}f}, {hi:+.{d}f}] | {t['p']:.4f}")
         return " | ".join(cells) + f" | {n} |"
 
+    by_scene = {key: {s["scene_id"]: s["metrics"] for s in rows} for key, rows in table.items()}
+
     def scenes(tr: str, seed: int, te: str) -> dict:
-        return {s["scene_id"]: s["metrics"] for s in table[(tr, seed, te)]}
+        return by_scene[(tr, seed, te)]
 
     head = ["| test split | network | " + " | ".join(f"{m}: diff [CI] | p" for m in METRICS) + " | n |",
             "|---|---|" + "---|---|" * len(METRICS) + "---|"]
