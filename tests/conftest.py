@@ -218,7 +218,7 @@ def corpus(tmp_path_factory):
     return make_corpus(tmp_path_factory.mktemp("corpus"))
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture(scope="module")
 def load_study():
     """``load_study(name)`` -> ``benchmarks/studies/<name>.py`` as a module (that folder is no package), under a
     module name of its own."""
