@@ -5,10 +5,11 @@
     python benchmarks/studies/cross_training.py --out xt --protocols lfmbench-v1 lfmbench-v2 --config unet_v1 --epochs 12
 
 Does the content of a corpus matter for what a network learns? For protocols ``A`` and ``B`` (default
-``lfmbench-v1-mini`` and ``lfmbench-v2-mini``, whose scenes share ids, times of day, speeds and signals) it renders
-each protocol's test and train splits (``lfmbench render``), trains the U-Net on each train split (``lfmbench
-train``, one network per protocol and seed) and scores, on each test split, every rule-based method and every
-network on the same frozen PWM draws (:mod:`lfmbench.evaluation.protocol_run`; the network trained on the test
+``lfmbench-v1-mini`` and ``lfmbench-v2-mini``, whose scenes share ids, times of day, speeds and signals) protocol by
+protocol it renders the test and train splits (``lfmbench render``), trains the U-Net on the train split (``lfmbench
+train``, one network per seed) and scores, on the test split, every rule-based method and every
+network trained so far on the same frozen PWM draws (the earlier test splits are scored again for the later
+networks; :mod:`lfmbench.evaluation.protocol_run`; the network trained on the test
 protocol's own train split is ``unet``, the others ``unet_<name>trained``, further seeds ``..._seed<k>``). It writes
 ``cross_training.md`` into ``--out``: the 2 x 2 table (training protocol x test protocol) of the LED score and
 PSNR-mu with 95 % bootstrap CIs over scenes, and on each test split the network trained on the other protocol
@@ -203,34 +204,41 @@ def main(argv: list[str] | None = None) -> None:
     steps = Steps(out)
     cli = [sys.executable, "-m", "lfmbench.cli"]
     corpus = {s: out / "corpus" / s for s in shorts}
-    for p, s in zip(a.protocols, shorts):
-        for split in ("test", "train"):
-            steps.run(f"render {s} {split}", [*cli, "render", "--protocol", p, "--split", split, "--out",
-                                              str(corpus[s]), "--workers", str(a.workers)])
-    nets = {}
-    for s in shorts:
-        for seed in a.seeds:
-            nets[(s, seed)] = out / "nets" / f"unet_{s}_seed{seed}.pt"
-            nets[(s, seed)].parent.mkdir(parents=True, exist_ok=True)
-            cmd = [*cli, "train", "--corpus", str(corpus[s]), "--config", seed_config(a.config, seed, out),
-                   "--out", str(nets[(s, seed)]), "--epochs", str(a.epochs), "--workers", str(a.workers)]
-            steps.run(f"train {s} seed {seed}", cmd + (["--threads", str(a.threads)] if a.threads else []))
-    for te in shorts:
+    nets = {(s, seed): out / "nets" / f"unet_{s}_seed{seed}.pt" for s in shorts for seed in a.seeds}
+
+    def score(te: str, trained: list[str]) -> None:
+        """Score test split ``te``: every rule-based method, and the networks of the protocols in ``trained``."""
         runs = out / "scores" / te
         extra = {net_name(tr, te, seed, a.seeds[0]): nets[(tr, seed)]
-                 for tr in shorts for seed in a.seeds if (tr, seed) != (te, a.seeds[0])}
+                 for tr in trained for seed in a.seeds if (tr, seed) != (te, a.seeds[0])}
         from lfmbench.baselines import REGISTRY  # noqa: PLC0415
 
         methods = [m for m in REGISTRY if m != "learned"] + list(extra)
         if scores_complete(runs, methods):
             _log(f"score {te}: complete, skipped")
-            continue
+            return
         cmd = [sys.executable, "-m", "lfmbench.evaluation.protocol_run", "--corpus", str(corpus[te]),
                "--checkpoint", str(nets[(te, a.seeds[0])]), "--runs", str(runs),
                "--samples-per-scene", str(a.samples_per_scene)]
         for name, path in extra.items():
             cmd += ["--unet-also", f"{name}={path}"]
         steps.run(f"score {te}", cmd)
+
+    # Protocol by protocol (render, train, score with the networks trained so far), then each earlier test split
+    # again for the later networks (a resumed scoring scores only those): every step's result is usable as soon
+    # as it ends, and a long run stopped half-way leaves whole results of the first protocol.
+    for i, (p, s) in enumerate(zip(a.protocols, shorts)):
+        for split in ("test", "train"):
+            steps.run(f"render {s} {split}", [*cli, "render", "--protocol", p, "--split", split, "--out",
+                                              str(corpus[s]), "--workers", str(a.workers)])
+        for seed in a.seeds:
+            nets[(s, seed)].parent.mkdir(parents=True, exist_ok=True)
+            cmd = [*cli, "train", "--corpus", str(corpus[s]), "--config", seed_config(a.config, seed, out),
+                   "--out", str(nets[(s, seed)]), "--epochs", str(a.epochs), "--workers", str(a.workers)]
+            steps.run(f"train {s} seed {seed}", cmd + (["--threads", str(a.threads)] if a.threads else []))
+        score(s, shorts[:i + 1])
+    for te in shorts[:-1]:
+        score(te, shorts)
     text = summary(out, shorts, a.seeds)
     from lfmbench.fileio import atomic_write_text  # noqa: PLC0415
 

@@ -1,6 +1,7 @@
 """benchmarks/studies/cross_training.py: the 2 x 2 table and the paired tests read the right result files and agree
 with an independent computation; a scoring counts as done only when every result file is complete; a failed step
-stops the study naming it and is recorded; bad options are refused before any work."""
+stops the study naming it and is recorded; bad options are refused before any work; the steps run protocol by
+protocol."""
 from __future__ import annotations
 
 import json
@@ -114,3 +115,28 @@ def test_bad_options_are_refused_before_any_work(study, tmp_path, capsys, args, 
     with pytest.raises(SystemExit):
         study.main(["--out", str(out), *args])
     assert message in capsys.readouterr().err and not out.exists()
+
+
+def test_protocol_by_protocol_each_test_split_scored_with_the_networks_trained_so_far(study, tmp_path, monkeypatch):
+    """The steps run protocol by protocol (a run stopped half-way leaves the first protocol's whole results), and
+    the first test split is scored again once the second protocol's networks exist."""
+    ran = []
+    monkeypatch.setattr(study.Steps, "run", lambda self, name, cmd: ran.append((name, cmd)))
+    monkeypatch.setattr(study, "summary", lambda out, shorts, seeds: "table\n")
+    out = tmp_path / "xt"
+    study.main(["--out", str(out), "--seeds", "0", "1"])
+    assert [n for n, _ in ran] == ["render v1mini test", "render v1mini train", "train v1mini seed 0",
+                                   "train v1mini seed 1", "score v1mini", "render v2mini test",
+                                   "render v2mini train", "train v2mini seed 0", "train v2mini seed 1",
+                                   "score v2mini", "score v1mini"]
+
+    def extra(cmd):
+        return [cmd[i + 1].split("=")[0] for i, c in enumerate(cmd) if c == "--unet-also"]
+
+    scores = [(n, cmd) for n, cmd in ran if n.startswith("score")]
+    assert extra(scores[0][1]) == ["unet_seed1"]
+    assert extra(scores[1][1]) == ["unet_v1minitrained", "unet_v1minitrained_seed1", "unet_seed1"]
+    assert extra(scores[2][1]) == ["unet_seed1", "unet_v2minitrained", "unet_v2minitrained_seed1"]
+    for (_, cmd), own in zip(scores, ("v1mini", "v2mini", "v1mini")):
+        assert cmd[cmd.index("--checkpoint") + 1] == str(out / "nets" / f"unet_{own}_seed0.pt")
+    assert (out / "cross_training.md").read_text() == "table\n"
