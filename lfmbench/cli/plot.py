@@ -61,7 +61,7 @@ def plot_cmd(
         fail(f"--isp: {exc}")
     methods = list(dict.fromkeys(method or []))
     try:
-        nets = parse_named_checkpoints(unet or [], {*REGISTRY, *methods}, "--unet")
+        nets = parse_named_checkpoints(unet or [], REGISTRY, "--unet")  # a --method is registered
     except ValueError as exc:
         fail(str(exc))
     try:
