@@ -1,7 +1,7 @@
-"""``lfmbench plot``: a PNG of one dataset sample: its captures, the ground truth and (``--method``, repeatable)
-methods' outputs and (``--unet NAME=CHECKPOINT``, repeatable) trained U-Nets' outputs, through the display ISP, frames side by side, LED regions outlined
-(:func:`lfmbench.datasets.plot.plot_sample`). The choices and help name the registered splits, presets and ISP
-pipelines; the dataset is imported when the command runs."""
+"""``lfmbench plot``: a PNG of one dataset sample: its captures, the ground truth, (``--method``, repeatable)
+methods' outputs and (``--unet NAME=CHECKPOINT``, repeatable) trained U-Nets' outputs, through the display ISP,
+frames side by side, LED regions outlined (:func:`lfmbench.datasets.plot.plot_sample`). The choices and help name
+the registered splits, presets and ISP pipelines; the dataset is imported when the command runs."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -101,7 +101,7 @@ def plot_cmd(
     finally:
         plt.close(fig)
     typer.echo(f"wrote {out}: {sample['meta']['scene_id']} (sample {index} of split {split}), "
-               f"{len(ds.preset.captures)} captures, ground truth" + (f", {', '.join([*methods, *nets])}" if outputs else ""))
+               f"{len(ds.preset.captures)} captures, ground truth" + "".join(f", {name}" for name in outputs))
 
 
 def register(app: typer.Typer) -> None:
