@@ -18,19 +18,29 @@ networks (mean difference, its CI, Wilcoxon p; :func:`lfmbench.evaluation.stats.
 also each network against its corpus's first seed, the training noise the corpora's differences are to be read
 against. ``steps.json`` holds every step's wall time.
 
+It also draws ``fig_<split>.png`` per test split (``lfmbench plot``, run in this process: :func:`figure_step`): one
+test scene through the display ISP, frames side by side: the captures, the ground truth, the seed-``--seeds[0]``
+network of each training corpus (labelled ``unet_<name>trained``) and the rule-based method with the best mean LED
+score on that split. The scene is the one where those two networks' PSNR-mu (mean over the scene's scored draws)
+differ most, the first in scene-id order on a tie (:func:`figure_choice`); the plot shows its first sample (dataset
+seed 0).
+
 Every step is resumable and skipped when done: the renderer, the training and the scoring resume by themselves (a
 killed scoring keeps the samples it scored; networks added later are scored alone), and a scoring whose result
-files are all complete is not started. Run it again after a kill. Used to report numbers
+files are all complete is not started, and a figure newer than its split's result files and networks is not drawn
+again. Run it again after a kill. Used to report numbers
 (docs/results/leaderboard-v2-mini.md), not a timed test.
 """
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import re
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 #: Metrics of the tables (registered metric names): the primary score and the image-quality one.
@@ -62,10 +72,12 @@ class Steps:
         self.path = out / "steps.json"
         self.rows = json.loads(self.path.read_text()) if self.path.is_file() else []
 
-    def run(self, name: str, cmd: list[str]) -> None:
+    def run(self, name: str, cmd: list[str], call: Callable[[list[str]], int] | None = None) -> None:
+        """Run ``cmd`` as a subprocess, or (``call``) as ``call(cmd)`` in this process, which returns the exit code;
+        a non-zero code stops the study naming the step."""
         _log(f"{name}: {' '.join(cmd)}")
         t = time.time()
-        rc = subprocess.call(cmd)
+        rc = subprocess.call(cmd) if call is None else call(cmd)
         self.rows.append({"step": name, "cmd": cmd, "wall_s": round(time.time() - t, 1), "rc": rc,
                           "ended_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())})
         from lfmbench.fileio import atomic_write_text  # noqa: PLC0415
@@ -73,6 +85,18 @@ class Steps:
         atomic_write_text(self.path, json.dumps(self.rows, indent=1) + "\n")
         if rc != 0:
             raise SystemExit(f"{name} failed (exit {rc}): {' '.join(cmd)}")
+
+
+def cli_in_process(cmd: list[str]) -> int:
+    """The exit code of ``cmd`` (``[python, -m, lfmbench.cli, *ARGS]``) run as ``lfmbench ARGS`` in this process
+    (the same parsing and one-line errors as the command, without a second start of Python and torch)."""
+    from lfmbench.cli import app  # noqa: PLC0415
+
+    try:
+        app(cmd[3:], prog_name="lfmbench")
+    except SystemExit as exc:
+        return exc.code if isinstance(exc.code, int) else int(exc.code is not None)
+    return 0
 
 
 def seed_config(config: str, seed: int, out: Path) -> str:
@@ -182,6 +206,53 @@ def summary(out: Path, shorts: list[str], seeds: list[int]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def figure_choice(runs: Path, shorts: list[str], test: str, seed0: int) -> tuple[str, str]:
+    """``(scene id, rule-based method)`` of the figure of test split ``test`` from its result files in ``runs``: the
+    scene where the seed-``seed0`` networks of the two training corpora differ most in PSNR-mu (dB, the mean over
+    the scene's scored draws; on a tie the first in scene-id order), and the registered rule-based method (not a
+    learned one) with the highest mean LED score over the split's scenes (on a tie the first in registry order).
+
+    Raises:
+        SystemExit: naming the split when no scene has both networks' PSNR-mu or no rule-based method was scored.
+    """
+    from lfmbench.baselines import LEARNED, REGISTRY  # noqa: PLC0415
+    from lfmbench.evaluation.benchmark import safe_name  # noqa: PLC0415
+    from lfmbench.evaluation.results import metric_summary, per_scene  # noqa: PLC0415
+
+    def scenes(name: str) -> list[dict]:
+        return per_scene(json.loads((runs / f"{safe_name(name)}.json").read_text()).get("scenes") or [], METRICS)
+
+    a, b = ({s["scene_id"]: s["metrics"].get("psnr_mu") for s in scenes(net_name(tr, test, seed0, seed0))}
+            for tr in shorts)
+    gaps = {sid: abs(a[sid] - b[sid]) for sid in sorted(a)
+            if a[sid] is not None and b.get(sid) is not None and math.isfinite(a[sid] - b[sid])}
+    rules = [m for m in REGISTRY if m not in LEARNED and (runs / f"{safe_name(m)}.json").is_file()]
+    if not gaps or not rules:
+        why = "no scene with the PSNR-mu of both networks" if not gaps else "no rule-based method scored"
+        raise SystemExit(f"figure {test}: {why} in {runs}")
+    led = {m: metric_summary(scenes(m), "led_score", ci=False)["value"] for m in rules}
+    return max(gaps, key=gaps.__getitem__), max(rules, key=lambda m: -math.inf if led[m] is None else led[m])
+
+
+def figure_step(steps: Steps, cli: list[str], out: Path, corpus: Path, test: str, shorts: list[str], seed0: int,
+                nets: dict[tuple[str, int], Path]) -> Path:
+    """Write ``out/fig_<test>.png`` (:func:`figure_choice`'s scene and rule, the seed-``seed0`` network of each
+    training corpus as ``unet_<name>trained``) with ``lfmbench plot`` run in this process, recorded in ``steps``;
+    skipped when the PNG is newer than the split's result files and those networks."""
+    png = out / f"fig_{test}.png"
+    runs = out / "scores" / test
+    inputs = [*runs.glob("*.json"), *(nets[(tr, seed0)] for tr in shorts)]
+    if png.is_file() and png.stat().st_mtime >= max(p.stat().st_mtime for p in inputs):
+        _log(f"figure {test}: up to date, skipped")
+        return png
+    scene, rule = figure_choice(runs, shorts, test, seed0)
+    cmd = [*cli, "plot", "--corpus", str(corpus), "--split", "test", "--scene", scene, "--method", rule]
+    for tr in shorts:
+        cmd += ["--unet", f"unet_{tr}trained={nets[(tr, seed0)]}"]
+    steps.run(f"figure {test}", cmd + ["--out", str(png)], call=cli_in_process)
+    return png
+
+
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, required=True, help="work folder: corpora, networks, scores, summary")
@@ -244,6 +315,8 @@ def main(argv: list[str] | None = None) -> None:
 
     atomic_write_text(out / "cross_training.md", text)
     print(text)
+    for te in shorts:
+        figure_step(steps, cli, out, corpus[te], te, shorts, a.seeds[0], nets)
 
 
 if __name__ == "__main__":

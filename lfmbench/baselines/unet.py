@@ -41,6 +41,8 @@ from __future__ import annotations
 
 import math
 import os
+import re
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -420,6 +422,49 @@ def _loss(model: UNetFusion, batch: dict, cfg: UNetConfig) -> tuple[torch.Tensor
 #: :data:`DEFAULT_CHECKPOINT` (B, F, 1, H, W) e-; :class:`CheckpointNotFoundError` when there are none.
 unet = checkpointed_method("unet", CHECKPOINT_ENV, DEFAULT_CHECKPOINT, load_checkpoint)
 checkpoint_path = unet.checkpoint_path
+
+
+# ------------------------------------------------------------------------------- further networks by name
+def parse_named_checkpoints(items: list[str], taken, option: str) -> dict[str, str]:
+    """``NAME=CHECKPOINT`` items (the values of the caller's repeatable option ``option``, e.g. ``--unet``) ->
+    {name: path}, in the order given.
+
+    Raises:
+        ValueError: one line naming ``option`` and the item, when NAME is not a snake_case method name new to
+            ``taken`` (names in use: a registry, the other methods of the caller) and to the earlier items, or
+            CHECKPOINT is no file.
+    """
+    out: dict[str, str] = {}
+    for item in items:
+        name, sep, path = item.partition("=")
+        if not sep or not re.fullmatch(r"[a-z][a-z0-9_]{0,63}", name) or name in taken or name in out:
+            raise ValueError(f"{option} {item!r:.80}: give NAME=CHECKPOINT with NAME a new snake_case method name")
+        if not os.path.isfile(path):
+            raise ValueError(f"{option} {item!r:.80}: {path!r:.80}: no such file (make it with lfmbench train)")
+        out[name] = path
+    return out
+
+
+def named_unets(named: dict[str, str]) -> dict[str, Callable[[dict], torch.Tensor]]:
+    """Each checkpoint of ``named`` ({name: path}, :func:`parse_named_checkpoints`) as a U-Net method of its own
+    name, (B, F, 1, H, W) e-, weights read at first use: :func:`~lfmbench.baselines.checkpoint.checkpointed_method`
+    with the environment variable ``LFMBENCH_<NAME>_CHECKPOINT`` set to the path (so a variable inherited by that
+    name does not swap the weights). Nothing is registered."""
+    out = {}
+    for name, path in named.items():
+        env = f"LFMBENCH_{name.upper()}_CHECKPOINT"
+        os.environ[env] = path
+        out[name] = checkpointed_method(name, env, path, load_checkpoint)
+    return out
+
+
+def register_unets(named: dict[str, str]) -> None:
+    """Register each checkpoint of ``named`` ({name: path}) as a U-Net method of its own name
+    (:func:`named_unets`) in :data:`lfmbench.baselines.REGISTRY`, so an evaluation scores it by that name."""
+    from lfmbench import baselines  # noqa: PLC0415 - the registry as it is now (a test may swap it)
+
+    for name, method in named_unets(named).items():
+        baselines.REGISTRY.register(name, method)
 
 #: How ``lfmbench train --method unet`` trains it (:mod:`lfmbench.train`).
 TRAINING = Trainable(name="unet", default_config=DEFAULT_CONFIG, load_config=load_config,

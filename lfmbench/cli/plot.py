@@ -1,7 +1,7 @@
-"""``lfmbench plot``: a PNG of one dataset sample: its captures, the ground truth and (``--method``, repeatable)
-methods' outputs, through the display ISP, frames side by side, LED regions outlined
-(:func:`lfmbench.datasets.plot.plot_sample`). The choices and help name the registered splits, presets and ISP
-pipelines; the dataset is imported when the command runs."""
+"""``lfmbench plot``: a PNG of one dataset sample: its captures, the ground truth, (``--method``, repeatable)
+methods' outputs and (``--unet NAME=CHECKPOINT``, repeatable) trained U-Nets' outputs, through the display ISP,
+frames side by side, LED regions outlined (:func:`lfmbench.datasets.plot.plot_sample`). The choices and help name
+the registered splits, presets and ISP pipelines; the dataset is imported when the command runs."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -26,6 +26,10 @@ def plot_cmd(
     method: Optional[List[str]] = typer.Option(None, "--method", "-m", metavar="METHOD",
                                                help="repeatable: also show this method's output (a baseline or "
                                                     "module:function, as lfmbench evaluate)"),
+    unet: Optional[List[str]] = typer.Option(None, "--unet", metavar="NAME=CHECKPOINT",
+                                             help="repeatable: also show the output of the U-Net with the weights "
+                                                  "CHECKPOINT (lfmbench train --out), labelled NAME (snake_case), "
+                                                  "after the --method ones"),
     sensor: str = typer.Option("ovt", "--sensor", help=f"sensor preset: a shipped name "
                                                         f"({', '.join(installed('sensors'))}) or a YAML path"),
     isp: str = typer.Option("default", "--isp", help=f"ISP pipeline: a shipped name ({', '.join(installed('isp'))}) "
@@ -35,12 +39,14 @@ def plot_cmd(
     seed: int = typer.Option(0, help="dataset seed (PWM draws, noise)"),
     dpi: int = typer.Option(150, help="resolution of the PNG"),
 ) -> None:
-    """Write a PNG of one sample: captures, ground truth and methods' outputs through the ISP, frames side by
-    side, LED regions outlined."""
+    """Write a PNG of one sample: captures, ground truth and methods' outputs (``--method``, then each ``--unet``
+    network in the order given) through the ISP, frames side by side, LED regions outlined."""
     check_minima((("--index", index, 0), ("--frames", frames, 1), ("--crop", crop, 2), ("--dpi", dpi, 10)))
     import torch  # noqa: PLC0415
 
-    from lfmbench.baselines import MethodNotFoundError  # noqa: PLC0415
+    from lfmbench.baselines import REGISTRY, MethodNotFoundError  # noqa: PLC0415
+    from lfmbench.baselines.checkpoint import CheckpointError  # noqa: PLC0415
+    from lfmbench.baselines.unet import named_unets, parse_named_checkpoints  # noqa: PLC0415
     from lfmbench.cli.evaluate import resolve_methods  # noqa: PLC0415
     from lfmbench.datasets.loading import EmptyDataError, collate_samples, make_dataset  # noqa: PLC0415
     from lfmbench.fileio import atomic_save_figure, writable_error  # noqa: PLC0415
@@ -55,7 +61,11 @@ def plot_cmd(
         fail(f"--isp: {exc}")
     methods = list(dict.fromkeys(method or []))
     try:
-        fns = resolve_methods(methods)
+        nets = parse_named_checkpoints(unet or [], REGISTRY, "--unet")  # a --method is registered
+    except ValueError as exc:
+        fail(str(exc))
+    try:
+        fns = resolve_methods(methods) + list(named_unets(nets).values())
         ds = make_dataset(corpus, split, seed=seed, crop=crop, samples_per_scene=1, frames=frames, sensor=sensor)
     except (MethodNotFoundError, FileNotFoundError, EmptyDataError, RuntimeError, ValueError) as exc:
         fail(str(exc))
@@ -71,11 +81,13 @@ def plot_cmd(
     if fns:
         batch = collate_samples([sample])
         with torch.no_grad():
-            for name, fn in zip(methods, fns):
+            for name, fn in zip([*methods, *nets], fns):
                 try:
                     outputs[name] = fn(dict(batch))[0]
+                except CheckpointError as exc:  # weights that cannot be used: bad input
+                    fail(f"--unet {name}={nets[name]}: {exc}" if name in nets else f"--method {name}: {exc}")
                 except Exception as exc:  # noqa: BLE001 - the user's method failing is named, not a traceback
-                    fail(f"--method {name}: {type(exc).__name__}: {exc}", 1)
+                    fail(f"{'--unet' if name in nets else '--method'} {name}: {type(exc).__name__}: {exc}", 1)
     try:
         fig = ds.plot(sample, outputs, isp=isp)
     except ValueError as exc:
@@ -89,7 +101,7 @@ def plot_cmd(
     finally:
         plt.close(fig)
     typer.echo(f"wrote {out}: {sample['meta']['scene_id']} (sample {index} of split {split}), "
-               f"{len(ds.preset.captures)} captures, ground truth" + (f", {', '.join(methods)}" if methods else ""))
+               f"{len(ds.preset.captures)} captures, ground truth" + "".join(f", {name}" for name in outputs))
 
 
 def register(app: typer.Typer) -> None:

@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import re
 import time
 from pathlib import Path
 
@@ -33,35 +32,6 @@ from pathlib import Path
 SCENE_FIELDS = ("weather",)
 #: Metrics of the ``scene_fields.md`` tables (registered metric names).
 FIELD_METRICS = ("led_score", "psnr_mu")
-
-
-def parse_extra(items: list[str], taken) -> dict[str, str]:
-    """``NAME=CHECKPOINT`` items -> {name: path}.
-
-    Raises:
-        ValueError: naming the item when NAME is not a new snake_case method name or CHECKPOINT is no file.
-    """
-    out: dict[str, str] = {}
-    for item in items:
-        name, sep, path = item.partition("=")
-        if not sep or not re.fullmatch(r"[a-z][a-z0-9_]{0,63}", name) or name in taken or name in out:
-            raise ValueError(f"--unet-also {item!r:.80}: give NAME=CHECKPOINT with NAME a new snake_case method name")
-        if not os.path.isfile(path):
-            raise ValueError(f"--unet-also {item!r:.80}: {path!r:.80}: no such file (make it with lfmbench train)")
-        out[name] = path
-    return out
-
-
-def register_unets(extra: dict[str, str]) -> None:
-    """Register each extra checkpoint as a U-Net method of its own name (weights read at first use)."""
-    from lfmbench.baselines import REGISTRY
-    from lfmbench.baselines.checkpoint import checkpointed_method
-    from lfmbench.baselines.unet import load_checkpoint
-
-    for name, path in extra.items():
-        env = f"LFMBENCH_{name.upper()}_CHECKPOINT"
-        os.environ[env] = path
-        REGISTRY.register(name, checkpointed_method(name, env, path, load_checkpoint))
 
 
 def _fmt(summary: dict) -> str:
@@ -145,13 +115,14 @@ def main() -> None:
         ap.error(f"--checkpoint {a.checkpoint}: no such file (make it with lfmbench train)")
     os.environ["LFMBENCH_UNET_CHECKPOINT"] = a.checkpoint
     from lfmbench.baselines import REGISTRY
+    from lfmbench.baselines.unet import parse_named_checkpoints, register_unets
     from lfmbench.evaluation.benchmark import benchmark, safe_name  # the module, not the package's lazy name
     from lfmbench.evaluation.leaderboard import load_runs
     from lfmbench.evaluation.run import ResumeError
     from lfmbench.fileio import atomic_write_text
 
     try:
-        extra = parse_extra(a.unet_also, REGISTRY)
+        extra = parse_named_checkpoints(a.unet_also, REGISTRY, "--unet-also")
     except ValueError as exc:
         ap.error(str(exc))
     methods = ["unet"] if a.only_unets else [m for m in REGISTRY if m != "learned"]

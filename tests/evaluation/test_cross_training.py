@@ -123,6 +123,8 @@ def test_protocol_by_protocol_each_test_split_scored_with_the_networks_trained_s
     ran = []
     monkeypatch.setattr(study.Steps, "run", lambda self, name, cmd: ran.append((name, cmd)))
     monkeypatch.setattr(study, "summary", lambda out, shorts, seeds: "table\n")
+    figures = []
+    monkeypatch.setattr(study, "figure_step", lambda steps, cli, out, corpus, test, *rest: figures.append(test))
     out = tmp_path / "xt"
     study.main(["--out", str(out), "--seeds", "0", "1"])
     assert [n for n, _ in ran] == ["render v1mini test", "render v1mini train", "train v1mini seed 0",
@@ -139,4 +141,67 @@ def test_protocol_by_protocol_each_test_split_scored_with_the_networks_trained_s
     assert extra(scores[2][1]) == ["unet_seed1", "unet_v2minitrained", "unet_v2minitrained_seed1"]
     for (_, cmd), own in zip(scores, ("v1mini", "v2mini", "v1mini")):
         assert cmd[cmd.index("--checkpoint") + 1] == str(out / "nets" / f"unet_{own}_seed0.pt")
-    assert (out / "cross_training.md").read_text() == "table\n"
+    assert (out / "cross_training.md").read_text() == "table\n" and figures == ["v1mini", "v2mini"]
+
+
+def test_the_figure_shows_the_scene_where_the_networks_differ_most_and_the_best_rule(study, tmp_path):
+    runs = tmp_path / "scores" / "b"
+    _result(runs / "unet.json", [0.9, 0.9, 0.9, 0.9], [30.0, 31.0, 28.0, 33.0])           # trained on b
+    _result(runs / "unet_atrained.json", [0.8, 0.8, 0.8, 0.8], [30.5, 35.0, 24.0, 29.0])  # gaps 0.5, 4, 4, 4
+    _result(runs / "lpd_only.json", [0.5, 0.6, 0.7, 0.8], [20.0] * 4)                     # mean 0.65
+    _result(runs / "spd_only.json", [0.7, 0.7, 0.6, 0.8], [20.0] * 4)                     # mean 0.70: the best
+    _result(runs / "leaderboard.json", [0.99] * 4, [50.0] * 4)                             # no method
+    assert study.figure_choice(runs, ["a", "b"], "b", 0) == ("s01", "spd_only")           # a tie: the first id
+    (runs / "spd_only.json").unlink()
+    assert study.figure_choice(runs, ["a", "b"], "b", 0) == ("s01", "lpd_only")
+    (runs / "lpd_only.json").unlink()
+    with pytest.raises(SystemExit, match="figure b: no rule-based method scored"):
+        study.figure_choice(runs, ["a", "b"], "b", 0)
+
+
+def test_the_figure_step_plots_the_networks_of_both_corpora_once(study, tmp_path, monkeypatch):
+    """The figure of a test split is ``lfmbench plot`` of the chosen scene and rule with the seed-0 network of each
+    corpus by name (run in this process and recorded in steps.json); drawn again only when its inputs change."""
+    import os
+
+    import torch
+
+    from lfmbench.baselines import unet as U
+    from tests.data.evaluation.data import make_led_corpus
+
+    corpus = make_led_corpus(tmp_path / "corpus", n_scenes=3)
+    test_ids = json.loads((corpus / "splits.json").read_text())["test"]
+    cfg = U.config_from_dict({"model": {"base_channels": 2, "depth": 1}})
+    nets = {}
+    for seed, tr in enumerate(("a", "b")):
+        torch.manual_seed(seed)
+        nets[(tr, 0)] = U.save_checkpoint(U.build_for_sensor(cfg), tmp_path / f"unet_{tr}.pt", cfg)
+    runs = tmp_path / "scores" / "b"
+    n = len(test_ids)
+    for name, psnr in (("unet", [30.0] * n), ("unet_atrained", [30.0] * (n - 1) + [20.0]),
+                       ("lpd_only", [20.0] * n)):
+        _result(runs / f"{name}.json", [0.5] * n, psnr)
+        recs = json.loads((runs / f"{name}.json").read_text())               # the corpus's test scene ids
+        for r, sid in zip(recs["scenes"], test_ids):
+            r["scene_id"] = sid
+        (runs / f"{name}.json").write_text(json.dumps(recs))
+    for env in ("LFMBENCH_UNET_ATRAINED_CHECKPOINT", "LFMBENCH_UNET_BTRAINED_CHECKPOINT"):
+        monkeypatch.setenv(env, "")                                           # set by the plot; restored afterwards
+    steps = study.Steps(tmp_path)
+    cli = ["python", "-m", "lfmbench.cli"]
+    png = study.figure_step(steps, cli, tmp_path, corpus, "b", ["a", "b"], 0, nets)
+    assert png == tmp_path / "fig_b.png" and png.read_bytes()[:4] == b"\x89PNG"
+    (row,) = json.loads((tmp_path / "steps.json").read_text())
+    cmd = row["cmd"]
+    assert row["step"] == "figure b" and row["rc"] == 0 and cmd[:4] == [*cli, "plot"]
+    assert cmd[cmd.index("--scene") + 1] == test_ids[-1] and cmd[cmd.index("--method") + 1] == "lpd_only"
+    assert [cmd[i + 1] for i, c in enumerate(cmd) if c == "--unet"] == [f"unet_atrained={nets[('a', 0)]}",
+                                                                         f"unet_btrained={nets[('b', 0)]}"]
+    calls = []
+    monkeypatch.setattr(study, "cli_in_process", lambda c: calls.append(c) or 0)
+    study.figure_step(steps, cli, tmp_path, corpus, "b", ["a", "b"], 0, nets)
+    assert calls == []                                                        # up to date: not drawn again
+    t = png.stat().st_mtime + 10
+    os.utime(runs / "lpd_only.json", (t, t))                                  # a rescored rule: drawn again
+    study.figure_step(steps, cli, tmp_path, corpus, "b", ["a", "b"], 0, nets)
+    assert len(calls) == 1 and calls[0] == cmd

@@ -19,15 +19,18 @@ def lp():
     return protocol_run
 
 
-def test_extra_names_are_checked(lp, tmp_path):
+def test_extra_names_are_checked(tmp_path):
+    from lfmbench.baselines.unet import parse_named_checkpoints
+
     ck = tmp_path / "u.pt"
     ck.write_bytes(b"x")
-    assert lp.parse_extra([f"unet_v1trained={ck}"], {"unet": None}) == {"unet_v1trained": str(ck)}
+    assert parse_named_checkpoints([f"unet_v1trained={ck}"], {"unet": None}, "--unet-also") == \
+        {"unet_v1trained": str(ck)}
     for bad in (f"unet={ck}", f"Bad-Name={ck}", str(ck), "unet_b=" + str(tmp_path / "missing.pt")):
         with pytest.raises(ValueError, match="--unet-also"):
-            lp.parse_extra([bad], {"unet": None})
-    with pytest.raises(ValueError, match="new snake_case"):
-        lp.parse_extra([f"a={ck}", f"a={ck}"], {})
+            parse_named_checkpoints([bad], {"unet": None}, "--unet-also")
+    with pytest.raises(ValueError, match="^--unet 'a=.*new snake_case"):
+        parse_named_checkpoints([f"a={ck}", f"a={ck}"], {}, "--unet")
 
 
 def test_field_tables_and_paired_difference(lp, tmp_path):
