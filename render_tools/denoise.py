@@ -34,10 +34,10 @@ What (one capture window of one frame; ``S[g, c]``: group g's spectral radiance 
    k])``. Why: on a wet road the static lamps' glossy reflections are sparse bright samples at spp 1; one of
    them in a 5 x 5 px box took that broad band's share for its group there, so the spectral shape inside the broad
    band flipped from one group's (HPS streetlights: most light at 589 nm) to the other's (white headlights) box by
-   box: 4-6 px magenta and green squares in the denoised reflection streaks (docs/guide/scenes.md). Denoised
+   box: 4-6 px magenta and green squares in the denoised reflection streaks (docs/benchmarks/gallery.md). Denoised
    shares are smooth, and each group's colour is its own over R px; the broad bands (so luminance and colour at
    their resolution) are the same filter output as with ``box``. Cost: one call of the filter on a quarter of
-   the pixels per three groups (measured in docs/guide/scenes.md).
+   the pixels per three groups (measured in docs/benchmarks/gallery.md).
 
 Not unbiased: the filter's output is its own estimate; edges and texture finer than the noise are smoothed, and
 light it takes for outliers is removed. Measured on 640x360 frames of the ``default`` profile against spp-64/256
@@ -425,7 +425,7 @@ def denoise_reflection(img: np.ndarray, traced: np.ndarray, boxes=(), block: int
 
     Why: a wet road's reflection of a flickering lamp is traced at ``spp`` (1 at the ``default`` profile) in 2 x 2
     px blocks, and each band pass draws its own sample of a block, so the traced layer is coloured 2 x 2 px speckle
-    (docs/guide/scenes.md). Open Image Denoise fed that image at full resolution leaves it (tested: the error of
+    (docs/benchmarks/gallery.md). Open Image Denoise fed that image at full resolution leaves it (tested: the error of
     a synthetic streak 0.47 -> 0.46; noise correlated over 2 x 2 px reads as detail to a filter trained on
     per-pixel noise), so the image is denoised at the blocks' resolution, where each block is one pixel of
     independent noise, and interpolated back.

@@ -195,7 +195,7 @@ class RenderOptions:
     coloured 4-6 px squares magenta and green), ``"oidn"`` (by each group's light denoised on 2 x 2 px blocks, three
     groups per filter call, and the group's colour over 33 px; the broad bands, so the frame's light, are the same)
     or ``"auto"`` (default: ``oidn`` on a version-2 scene with a glossy road, a wet one, else ``box``: dry frames
-    unchanged). Content: it changes the static groups' images of a wet version-2 frame (docs/guide/scenes.md).
+    unchanged). Content: it changes the static groups' images of a wet version-2 frame (docs/benchmarks/gallery.md).
     glossy_light_choice: how next-event estimation draws a lamp at a point of a glossy coat (a wet road's water
     film and puddles: ``roughplastic`` with an ``ior``): ``"lobe"`` (the lamp's weight times the coat's specular
     lobe towards it, :meth:`render_tools.tracer.Tracer._lamp_weights`: the lamp a point reflects gets its samples),
@@ -203,7 +203,7 @@ class RenderOptions:
     sparse bright samples, which the static denoiser smeared into an orange sheet and split into coloured squares)
     or ``"auto"`` (default: ``lobe`` on scene version 2, ``plain`` on version 1). Unbiased either way (every lamp
     keeps a positive probability; the hit's MIS weight uses the same choice); content: a version-2 wet frame's
-    noise and its denoised static frames change (docs/guide/scenes.md).
+    noise and its denoised static frames change (docs/benchmarks/gallery.md).
     reflection_denoise: a flickering lamp's reflection in a wet road (the steady part of its grown crop outside
     its padded lamp box, traced at ``spp`` in ``reflection_block_px`` blocks) denoised after tracing, each light's
     layer alone (:func:`render_tools.denoise.denoise_reflection`: the static frames' denoiser on that one image

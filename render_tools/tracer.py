@@ -787,7 +787,7 @@ class Tracer:
         lobe F D G / (4 cos_i cos_o) over a diffuse base rho / (pi eta^2), shadowing and Fresnel's rise at grazing
         left out), so the lamp whose reflection the point shows gets the samples: without it, the streetlight in
         a wet road's mirror direction (30-60 m away) was drawn with a few % probability against the lamps overhead
-        and its streak was sparse bright samples at spp 1 (docs/guide/scenes.md)."""
+        and its streak was sparse bright samples at spp 1 (docs/benchmarks/gallery.md)."""
         mi, dr = self.mi, self.dr
         G = [dr.gather(mi.Float, c, row) for c in self.sets.geo]
         d = mi.Vector3f(p[0] - G[0], p[1] - G[1], p[2] - G[2])  # from the lamp to the point
