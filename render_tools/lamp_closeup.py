@@ -1,6 +1,6 @@
 """A close-up of a lamp cluster and an LED message sign, rendered and composed twice: flicker-free (every light at
 its time-averaged level) and as one short exposure with each light's drawn PWM and waveform applied, where the
-rows of the multiplexed sign differ (docs/img/lamp_closeup.png, docs/guide/scenes.md).
+rows of the multiplexed sign differ (docs/img/lamp_closeup.png, docs/guide/rendering.md).
 
 :func:`closeup_scene` is a hand-made scene version 2 (night, static camera): a car seen from behind at 5 m with
 its rear cluster lit (segmented tail lamps on separate drivers, brake lamps, CHMSL strip, a blinking
