@@ -1,7 +1,8 @@
 """Static window layers against static time bins on one scene of lfmbench-v1-mini-motion (docs/guide/rendering.md,
-"Static window layers"): render CPU seconds and storage of the chopped layer against the protocol's 9 static bins,
-and the error of the ``nearest`` rule (a chopped sub-window served by the bins it overlaps, by overlap) against
-the layer, over the image and over the moving objects' pixels.
+"Static window layers"; its figures: docs/benchmarks/rendering-measurements.md, "Static window layers"): render CPU
+seconds and storage of the chopped layer against the protocol's 9 static bins, and the error of the ``nearest``
+rule (a chopped sub-window served by the bins it overlaps, by overlap) against the layer, over the image and over
+the moving objects' pixels.
 
     nice -n 10 python benchmarks/motion_layers.py CORPUS [SCENE [FRAMES]]   # CORPUS: lfmbench-v1-mini-motion v1
 

@@ -88,8 +88,8 @@ QUALITY = "fast"
 #: bottom and right with zeros (its input stage: the U-Net's pooling levels need it; OIDN 2.x ``InputProcess``,
 #: https://github.com/RenderKit/oidn). A noisy image was darkened at those edges: the mean of a flat field of
 #: exponential noise through the filter, bottom row against the interior, 0.85 at 45 x 32 px and 0.92 at 90 x 160
-#: (a wet 160 x 90 night's composed last row 0.85 of a reference; docs/guide/rendering.md, "Denoiser at
-#: the image edge").
+#: (a wet 160 x 90 night's composed last row 0.85 of a reference; docs/benchmarks/rendering-measurements.md,
+#: "Denoiser at the image edge").
 OIDN_ALIGN_PX = 16
 #: Width (px) of the mirrored margin the filter sees beyond every edge of an image where the image ends
 #: (:func:`_mirror_pad`; a crop's sides inside the image get none, :func:`crop_edges`): its convolutions pad with

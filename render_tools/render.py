@@ -124,8 +124,8 @@ class RenderOptions:
     sends to the camera, E = I / d^2 lux (I: its luminance x face area, cd; d: lamp to camera, m, at mid capture
     window), is at least this; a dimmer light keeps only its own box (its reflection left out, as the light it
     throws on its surroundings outside its crop always was). 0: every light's reflection. Measured on a wet night:
-    below 2e-3 lux a reflection averaged under 2 % of the lit road's luminance over its crop (docs/guide/rendering.md,
-    "Wet roads").
+    below 2e-3 lux a reflection averaged under 2 % of the lit road's luminance over its crop
+    (docs/benchmarks/rendering-measurements.md, "Light left out by the reflection cut-off").
     dots_lod_px: a ``dots`` face (an LED matrix, a segmented lamp, scene version 2) whose dot pitch projects under
     this many px (in both directions, at every frame's capture window: :meth:`SceneGeometry.dots_pitch_px`) is
     rendered with its lit dots filling their cells at ``dot``^2 of the luminance

@@ -119,7 +119,7 @@ def glossy_choice_table(mi, dr, bsdfs: dict, materials: dict) -> dict:
     Every coat, not only the water film's (protocol version 6 of lfmbench-v2): a shop window mirroring an oncoming
     car's headlights got the plain choice before, so its reflection was a few spp-1 samples ~5x their mean, which
     the denoiser removed (0.29 of an undenoised reference's light kept at 160x90, 0.79 at 640x360; 1.05 with the
-    lobe's choice; docs/guide/rendering.md, "A lit window at the left edge")."""
+    lobe's choice; docs/benchmarks/rendering-measurements.md, "A lit window at the left edge")."""
     out = {}
     for name, m in materials.items():
         if m.get("type") != "roughplastic" or name not in bsdfs:

@@ -27,7 +27,7 @@ Three parts, each printed and (``--write``) written:
   ``--edge-size`` (160x90), ``default`` profile's sample counts, denoised with version 6's margins and version 7's
   (the same samples: one process, the same seed), and a reference without any denoising (reflections traced per
   pixel, spp ``--ref-spp``, 32): each edge row and column's mean over all bands over the reference's (the table of
-  docs/guide/rendering.md, "Denoiser at the image edge").
+  docs/benchmarks/rendering-measurements.md, "Denoiser at the image edge").
 
 Usage: ``python benchmarks/studies/denoise_margin.py [--parts cost crops edges] [--repeats 5] [--seed 101]
 [--size 640 360] [--edge-size 160 90] [--ref-spp 32] [--write]`` (about 10 minutes on the 2-core machine, loaded).

@@ -57,7 +57,8 @@ HALF_UNDERFLOW_ERROR_FRACTION = 0.25
 #: Explicit mantissa bits of the EXR pixel types.
 MANTISSA_BITS = {"float16": 10, "float32": 23}
 #: Values per chunk of :func:`store_layer`'s HALF encoding (256 Ki float32 = 1 MiB): its dozen temporaries stay
-#: in the CPU cache instead of making a dozen passes over a 28 MB layer (measured in docs/guide/rendering.md).
+#: in the CPU cache instead of making a dozen passes over a 28 MB layer (measured in
+#: docs/benchmarks/rendering-measurements.md, "Serial work around the tracer").
 ENCODE_CHUNK = 1 << 18
 
 

@@ -378,7 +378,7 @@ def test_oidn_keeps_a_flat_fields_level_at_every_edge():
     over draws of every edge row and column stays at the interior's. Open Image Denoise grows an image to a multiple
     of 16 px with zeros at the bottom and right and its convolutions pad with zeros: fed as it is, a 45 x 32 image's
     bottom row came out 0.82-0.88 of the interior, its side columns 0.94-0.98 (4 seeds of 16 draws), the cause of
-    a wet night's dark last row (docs/guide/rendering.md, "Denoiser at the image edge"). With the mirrored margin
+    a wet night's dark last row (docs/benchmarks/rendering-measurements.md, "Denoiser at the image edge"). With the mirrored margin
     the edges were within 0.96-1.04 (the 16 draws' own scatter): 6 % allowed."""
     rng = np.random.default_rng(3)
     y = np.mean([denoise.oidn_rgb(rng.exponential(1.0, (3, 45, 32)).astype(np.float32)).mean(0)
