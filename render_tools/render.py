@@ -196,8 +196,9 @@ class RenderOptions:
     groups per filter call, and the group's colour over 33 px; the broad bands, so the frame's light, are the same)
     or ``"auto"`` (default: ``oidn`` on a version-2 scene with a glossy road, a wet one, else ``box``: dry frames
     unchanged). Content: it changes the static groups' images of a wet version-2 frame (docs/benchmarks/gallery.md).
-    glossy_light_choice: how next-event estimation draws a lamp at a point of a glossy coat (a wet road's water
-    film and puddles: ``roughplastic`` with an ``ior``): ``"lobe"`` (the lamp's weight times the coat's specular
+    glossy_light_choice: how next-event estimation draws a lamp at a point of a glossy coat (every
+    ``roughplastic``: a wet road's water film and puddles, glass, car paint, lamp lenses, signs;
+    :func:`render_tools.tracer.glossy_choice_table`): ``"lobe"`` (the lamp's weight times the coat's specular
     lobe towards it, :meth:`render_tools.tracer.Tracer._lamp_weights`: the lamp a point reflects gets its samples),
     ``"plain"`` (intensity, cosines and distance only: at spp 1 a wet road's reflections of the static lamps were
     sparse bright samples, which the static denoiser smeared into an orange sheet and split into coloured squares)
