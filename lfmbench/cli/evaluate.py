@@ -10,7 +10,7 @@ without torch."""
 from __future__ import annotations
 
 from pathlib import Path
-from typing import List
+from typing import List, Optional
 
 import typer
 
@@ -25,17 +25,21 @@ __all__ = ["register", "evaluate_cmd", "leaderboard_cmd", "resolve_methods"]
 
 def evaluate_cmd(
     ctx: typer.Context,
-    method: List[str] = typer.Option(..., "--method", "-m", metavar="METHOD",
-                                     help="repeatable: a baseline (listed below) or "
-                                          "module:function, a module of the current folder included; several "
-                                          "methods are scored on one simulation of each sample"),
+    method: Optional[List[str]] = typer.Option(None, "--method", "-m", metavar="METHOD",
+                                               help="repeatable: a baseline (listed below) or "
+                                                    "module:function, a module of the current folder included; "
+                                                    "several methods are scored on one simulation of each sample"),
+    unet: Optional[List[str]] = typer.Option(None, "--unet", metavar="NAME=CHECKPOINT",
+                                             help="repeatable: also score the U-Net with the weights CHECKPOINT "
+                                                  "(lfmbench train --out) as method NAME (snake_case), written to "
+                                                  "<runs-dir>/NAME.json, after the --method ones"),
     corpus: Path = typer.Option(..., "--corpus", help="corpus root directory"),
     sensor: str = typer.Option("ovt", "--sensor",
                                help="sensor preset (lfmbench configs sensors) or a preset YAML; its name and "
                                     "architecture are recorded in the result"),
     split: str = typer.Option("test", help="corpus split", **choice(SPLITS)),
-    output: Path = typer.Option(None, "--output", "-o", help="result JSON of a single --method (default "
-                                                            "<runs-dir>/<method>.json)"),
+    output: Path = typer.Option(None, "--output", "-o", help="result JSON of a single --method or --unet "
+                                                            "(default <runs-dir>/<method>.json)"),
     runs_dir: Path = typer.Option(Path("runs"), "--runs-dir", help="folder of the result files "
                                                                   "<method>.json"),
     seed: int = typer.Option(0, help="dataset seed (PWM draws, noise)"),
@@ -71,8 +75,8 @@ def evaluate_cmd(
                                            "they hold a killed or interrupted run of this evaluation: only the "
                                            "missing samples are scored, a complete one is skipped"),
 ) -> None:
-    """Score fusion methods on a corpus split; write per-scene and aggregate metrics as JSON, one file per
-    method.
+    """Score fusion methods (``--method``, then each ``--unet`` network in the order given) on a corpus split;
+    write per-scene and aggregate metrics as JSON, one file per method.
 
     Exit status: 0 every scene scored, 1 some scenes failed or the data source failed (the result file
     says which), 2 bad input, 130 interrupted (the result file has status "interrupted"; run the same command
@@ -85,7 +89,7 @@ def evaluate_cmd(
     from lfmbench.evaluation.run import (DataSourceError, EvaluationInterrupted, ResumeError,  # noqa: PLC0415
                                          evaluate_methods)
 
-    methods = list(dict.fromkeys(method))  # a method named twice is scored once
+    methods = list(dict.fromkeys(method or []))  # a method named twice is scored once
     if threads is not None and threads < 1:
         fail(f"--threads must be >= 1, got {threads}")
     check_local_paths((("--corpus", corpus), ("--output", output), ("--cache-dir", cache_dir)))
@@ -98,13 +102,17 @@ def evaluate_cmd(
             fail(str(exc))
     check_minima((("--max-scenes", max_scenes, 1), ("--samples-per-scene", samples_per_scene, 1),
                   ("--frames", frames, 1), ("--repeats", repeats, 1), ("--warmup", warmup, 0), ("--crop", crop, 2)))
-    if output is not None and len(methods) > 1:
-        fail(f"--output names the result file of one method; {len(methods)} methods write "
+    nets = _named_unets(methods, unet or [])  # before anything is written: a bad item writes nothing
+    specs = [*methods, *nets]
+    if not specs:
+        fail("give at least one --method METHOD or --unet NAME=CHECKPOINT")
+    if output is not None and len(specs) > 1:
+        fail(f"--output names the result file of one method; {len(specs)} methods write "
              f"<runs-dir>/<method>.json (--runs-dir, default runs)")
     torch_setup(device, threads)
-    outs = [output] if output is not None else [runs_dir / f"{safe_name(m)}.json" for m in methods]
+    outs = [output] if output is not None else [runs_dir / f"{safe_name(m)}.json" for m in specs]
     if len(set(outs)) != len(outs):
-        fail(f"--method: two methods map to one result file name ({', '.join(map(str, outs))})")
+        fail(f"--method, --unet: two methods map to one result file name ({', '.join(map(str, outs))})")
     from lfmbench.fileio import writable_error  # noqa: PLC0415
 
     for out in outs:
@@ -127,7 +135,7 @@ def evaluate_cmd(
     from lfmbench.sensor import resolve  # noqa: PLC0415
 
     try:
-        fns = resolve_methods(methods)
+        fns = resolve_methods(methods) + list(nets.values())
         preset = resolve(sensor)  # the one resolution of --sensor: the object travels to the dataset and metrics
         extra = {"frames": frames, "sensor": preset, "noise_streams": SIMULATE[simulate]}
         if cache_dir is not None:
@@ -137,7 +145,7 @@ def evaluate_cmd(
         fail(str(exc))
     from lfmbench.baselines import REGISTRY, methods_for
 
-    for m, fn in zip(methods, fns):
+    for m, fn in zip(specs, fns):
         if m in REGISTRY and m not in methods_for(ds.architecture):
             fail(f"--method {m} does not apply to --sensor {sensor} ({ds.architecture}); its baselines: "
                  f"{', '.join(methods_for(ds.architecture))}")
@@ -163,7 +171,7 @@ def evaluate_cmd(
         return score_batches(ds, n, simulate, device, indices=indices, start=start)
 
     try:
-        results = evaluate_methods(fns, source, method_specs=methods, outputs=outs,
+        results = evaluate_methods(fns, source, method_specs=specs, outputs=outs,
                                    options=ScoreOptions(perceptual=perceptual, isp=isp_name, sensor=ds.preset,
                                                         reference=reference),
                                    warmup=warmup, repeats=repeats, device=device, seeds={"dataset": seed},
@@ -184,7 +192,7 @@ def evaluate_cmd(
     except OSError as exc:  # the result file could not be written (disk full, ...)
         fail(f"{exc.filename}: {exc.strerror or exc}" if exc.filename else (exc.strerror or str(exc)))
     failed = []
-    for m, out, res in zip(methods, outs, results):
+    for m, out, res in zip(specs, outs, results):
         agg = res["aggregate"]
         ci = agg.get("ci", {}).get("led_score") or [None, None]
         rt = res["runtime"]
@@ -227,6 +235,33 @@ def resolve_methods(specs: list[str]) -> list:
                     "PYTHONPATH, or pip install the package that holds it") from exc
             raise
     return out
+
+
+def _named_unets(methods: list[str], items: list[str]) -> dict:
+    """The ``--unet NAME=CHECKPOINT`` items as U-Net methods of their own names ({name: method}, in the order given,
+    :func:`lfmbench.baselines.unet.named_unets`: the result records each one's checkpoint path and SHA-256 as for
+    ``unet``), their weights read now. A NAME that is not snake_case, is registered, names the result file of a
+    ``--method`` (``-m mod:fn`` writes ``mod_fn.json``) or is an earlier item, a CHECKPOINT that is no file or
+    cannot be read as U-Net weights: one line naming ``--unet`` and the item, exit 2."""
+    if not items:
+        return {}
+    from lfmbench.baselines import REGISTRY  # noqa: PLC0415
+    from lfmbench.baselines.checkpoint import CheckpointError  # noqa: PLC0415
+    from lfmbench.baselines.unet import named_unets, parse_named_checkpoints  # noqa: PLC0415
+    from lfmbench.evaluation.benchmark import safe_name  # noqa: PLC0415
+
+    try:
+        # a --method is registered or module:function: its result file's name is taken too
+        paths = parse_named_checkpoints(items, {*REGISTRY, *map(safe_name, methods)}, "--unet")
+    except ValueError as exc:
+        fail(str(exc))
+    nets = named_unets(paths)
+    for name, fn in nets.items():
+        try:
+            fn.torch_module()
+        except (CheckpointError, OSError) as exc:
+            fail(f"--unet {name}={paths[name]}: {exc}")
+    return nets
 
 
 def _checkpoint_sensor_check(fn):
