@@ -3,7 +3,7 @@
 Pipeline: spectral radiance (C, H, W) W sr^-1 m^-2 nm^-1 -> CIE XYZ (Y in cd/m^2, 1931 2-degree observer,
 :func:`render_tools.spectra.spectral_to_xyz`) -> global photographic tone mapping on Y (Reinhard, Stark,
 Shirley, Ferwerda, "Photographic tone reproduction for digital images", SIGGRAPH 2002, eqs. 1-4 with white
-point) -> linear sRGB (IEC 61966-2-1, D65, ``colour.XYZ_to_sRGB`` without chromatic adaptation) -> clip ->
+point; the key value by time of day, :data:`KEY_BY_TIME_OF_DAY`) -> linear sRGB (IEC 61966-2-1, D65, ``colour.XYZ_to_sRGB`` without chromatic adaptation) -> clip ->
 sRGB transfer function -> 8-bit PNG, written atomically.
 """
 from __future__ import annotations
@@ -20,8 +20,20 @@ from lfmbench.fileio import atomic_write_bytes
 
 from . import spectra
 
-#: Reinhard key value (middle grey) of the tone mapping.
+#: Reinhard key value (middle grey) of the tone mapping: an average-key scene.
 KEY_VALUE = 0.18
+#: Key value by the scene's time of day. Reinhard et al. 2002 (section 3.1, figure 4) map the log-average luminance
+#: of an average-key scene to 0.18 and of a low-key (subjectively dark) one to 0.09 or 0.045. A night street is
+#: low-key: lamps in a dark field. At 0.18 a night frame's log-average (about 0.9 cd/m^2 on the wet night of seed
+#: 7, half of it sky at 0.004 cd/m^2) became mid-grey and the lit road (median 1.7 cd/m^2) a bright sheet; at
+#: 0.045 it is dark with the lamps and their reflections standing out, as a night street looks.
+KEY_BY_TIME_OF_DAY = {"day": KEY_VALUE, "dusk": KEY_VALUE, "night": 0.045}
+
+
+def key_for(scene: dict) -> float:
+    """The tone mapping's key value for a scene file's ``time_of_day`` (:data:`KEY_BY_TIME_OF_DAY`; a scene
+    without one: :data:`KEY_VALUE`)."""
+    return KEY_BY_TIME_OF_DAY.get(scene.get("time_of_day"), KEY_VALUE)
 #: Small luminance floor for the log-average, cd/m^2.
 LUM_EPS = 1e-6
 
@@ -116,7 +128,7 @@ def render_previews(out_dir: str | os.PathLike, seed: int = 7, width: int = 640,
         frame = next(rnd.render_frames(sc, opts))
         img = compose_window(frame, rnd.frame_timing(sc, opts, 0), "short", shape=(len(opts.bands_nm), height, width))
         p = out / f"preview_{tod}.png"
-        preview_png(img, opts.bands_nm, opts.band_width_nm, p)
+        preview_png(img, opts.bands_nm, opts.band_width_nm, p, key=key_for(sc))
         scn.save_scene(sc, out / f"preview_{tod}_scene.json")
         paths.append(p)
     return paths
@@ -152,7 +164,7 @@ def render_gallery(out_dir: str | os.PathLike, seed: int = 7, profile: str = "de
         img = compose_window(frame, rnd.frame_timing(sc, opts, 0), "short",
                              shape=(len(opts.bands_nm), opts.height, opts.width))
         print(f"{path.name}: {time.perf_counter() - t:.1f} s", flush=True)
-        return tonemap_srgb(img, opts.bands_nm, opts.band_width_nm)
+        return tonemap_srgb(img, opts.bands_nm, opts.band_width_nm, key=key_for(sc))
 
     stems = [g[0] for g in GALLERY] + ["v2_vehicles"]
     bad = sorted(set(only or ()) - set(stems))
