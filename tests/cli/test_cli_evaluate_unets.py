@@ -38,21 +38,12 @@ def _metrics(d: dict) -> list:
 def two_nets(tmp_path_factory):
     """A 2-scene corpus, two untrained U-Nets (2 channels, depth 1) with different random weights, and the result
     folder of one ``--unet net_b=B --unet net_a=A`` run."""
-    from lfmbench.baselines import unet as U
+    from tests.data.baselines.data import random_unets
     from tests.data.corpus.data import make_corpus
 
     root = tmp_path_factory.mktemp("evaluate_unets")
     corpus = make_corpus(root / "c", n_scenes=2)
-    cfg = U.config_from_dict({"model": {"base_channels": 2, "depth": 1}})
-    nets = []
-    for seed in (0, 1):
-        torch.manual_seed(seed)
-        model = U.build_for_sensor(cfg)
-        with torch.no_grad():                     # an untrained head is zero: random weights tell the two apart
-            for p in model.parameters():
-                p.normal_(0.0, 0.1)
-        nets.append(U.save_checkpoint(model, root / f"u{seed}.pt", cfg))
-    a, b = nets
+    a, b = random_unets(root)
     runs = root / "runs"
     with pytest.MonkeyPatch.context() as mp:
         for env in ENVS:

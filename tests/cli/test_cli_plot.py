@@ -9,23 +9,11 @@ from typer.testing import CliRunner
 @pytest.fixture(scope="module")
 def corpus_and_nets(tmp_path_factory):
     """A tiny corpus and two untrained U-Nets (2 channels, depth 1) with different random weights."""
-    import torch
-
-    from lfmbench.baselines import unet as U
+    from tests.data.baselines.data import random_unets
     from tests.data.corpus.data import make_corpus
 
     root = tmp_path_factory.mktemp("plot_unets")
-    corpus = make_corpus(root / "c", n_scenes=1)
-    cfg = U.config_from_dict({"model": {"base_channels": 2, "depth": 1}})
-    nets = []
-    for seed in (0, 1):
-        torch.manual_seed(seed)
-        model = U.build_for_sensor(cfg)
-        with torch.no_grad():                     # an untrained head is zero: random weights tell the two apart
-            for p in model.parameters():
-                p.normal_(0.0, 0.1)
-        nets.append(U.save_checkpoint(model, root / f"u{seed}.pt", cfg))
-    return corpus, nets
+    return make_corpus(root / "c", n_scenes=1), random_unets(root)
 
 
 def _plot(args, monkeypatch, rows, shown=None):
