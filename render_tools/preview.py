@@ -134,22 +134,37 @@ def render_previews(out_dir: str | os.PathLike, seed: int = 7, width: int = 640,
     return paths
 
 
-#: The gallery of docs/guide/scenes.md: (file stem, time of day, weather) of the street scenes.
-GALLERY = (("v2_day", "day", "dry"), ("v2_dusk", "dusk", "dry"), ("v2_night", "night", "dry"),
-           ("v2_wet_night", "night", "wet"))
+#: The gallery of docs/guide/scenes.md: (file stem, time of day, weather, streetlight spectrum or None) of the street
+#: scenes. A spectrum replaces every kind the generator draws streetlights from (the same draws: the same street).
+GALLERY = (("v2_day", "day", "dry", None), ("v2_dusk", "dusk", "dry", None), ("v2_night", "night", "dry", None),
+           ("v2_wet_night", "night", "wet", None),
+           ("v2_wet_night_led", "night", "wet", {"model": "illuminant", "name": "LED-B3"}))
+
+
+def gallery_scene(entry: tuple, seed: int) -> dict:
+    """The generator-2 scene of a :data:`GALLERY` entry at ``seed``: its time of day and weather, and (a spectrum
+    given) every streetlight kind the generator draws from replaced by that spectrum, so the draws, and with them
+    the street, stay those of the entry without one."""
+    from . import scene as scn  # noqa: PLC0415
+
+    _, tod, weather, streetlight = entry
+    over = {"weather": {"conditions": [weather]}}
+    if streetlight is not None:
+        kinds = len(scn.load_config(generator=2)["lights"]["streetlight_spectra"])
+        over["lights"] = {"streetlight_spectra": [streetlight] * kinds}
+    return scn.generate_scene(seed, tod, generator=2, overrides=over)
 
 
 def render_gallery(out_dir: str | os.PathLike, seed: int = 7, profile: str = "default",
                    closeup_size=(320, 180), closeup_spp: int = 4, only=None) -> list[Path]:
     """docs/guide/scenes.md's pictures: frame 0 (short exposure, every LED on) of scene generator 2's street at
-    ``seed`` for each entry of :data:`GALLERY`, rendered with the render ``profile``'s options (frames and AOVs
+    ``seed`` for each entry of :data:`GALLERY` (:func:`gallery_scene`), rendered with the render ``profile``'s options (frames and AOVs
     aside), and ``v2_vehicles.png``, a sheet of :func:`closeup_scene` renders (every vehicle kind, rear then
     front, lamps lit; ``closeup_size`` px each at ``closeup_spp``). ``only``: the file stems to render (None: all;
     ``v2_vehicles`` for the sheet). Returns the PNG paths; prints seconds."""
     import time  # noqa: PLC0415
 
     from . import render as rnd  # noqa: PLC0415
-    from . import scene as scn  # noqa: PLC0415
     from .jobs import load_profile  # noqa: PLC0415
     from lfmbench.vocabulary import VEHICLE_KINDS  # noqa: PLC0415
 
@@ -170,10 +185,11 @@ def render_gallery(out_dir: str | os.PathLike, seed: int = 7, profile: str = "de
     bad = sorted(set(only or ()) - set(stems))
     if bad:
         raise ValueError(f"only: unknown gallery picture(s) {bad}; known: {stems}")
-    for stem, tod, weather in GALLERY:
+    for entry in GALLERY:
+        stem = entry[0]
         if only is not None and stem not in only:
             continue
-        sc = scn.generate_scene(seed, tod, generator=2, overrides={"weather": {"conditions": [weather]}})
+        sc = gallery_scene(entry, seed)
         p = out / f"{stem}.png"
         write_png(shot(sc, rnd.RenderOptions(**prof), p), p)
         paths.append(p)

@@ -48,3 +48,14 @@ def test_a_low_key_darkens_the_mid_tones():
     night = pv.tonemap_srgb(img, BANDS, 10.0, key=pv.key_for({"time_of_day": "night"}))[0, :, 1]
     mid = slice(400, 600)
     assert np.all(night[mid] < day[mid]) and np.median(day[mid]) - np.median(night[mid]) > 30
+
+
+def test_the_led_lit_wet_night_is_the_same_street_with_white_streetlights():
+    entries = {e[0]: e for e in pv.GALLERY}
+    sodium = pv.gallery_scene(entries["v2_wet_night"], 7)
+    led = pv.gallery_scene(entries["v2_wet_night_led"], 7)
+    assert led["objects"] == sodium["objects"] and len(led["lights"]) == len(sodium["lights"])
+    changed = [(a, b) for a, b in zip(sodium["lights"], led["lights"]) if a != b]
+    assert changed and all(a["group"] == "streetlights" and dict(a, spectrum=None) == dict(b, spectrum=None)
+                           for a, b in changed)
+    assert {str(b["spectrum"]) for _, b in changed} == {str({"model": "illuminant", "name": "LED-B3"})}
