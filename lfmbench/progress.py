@@ -1,24 +1,36 @@
 """One progress style for every command (rich), readable in a log file.
 
 On a terminal a rich progress bar redraws itself in place. When stderr is not a terminal (a log file, a pipe, a
-CI job) nothing is redrawn: a plain line ``description: done/total (percent, elapsed)`` is printed when a step
-crosses each tenth of the total (at most :data:`LOG_LINES` + 1 lines per bar) and at the end, so a log holds a few
-readable lines and no carriage-return flood. Used by ``render``, ``evaluate`` and ``train``
+CI job) nothing is redrawn: a plain line ``description: done/total (percent, elapsed, about T left)`` is printed
+when a step crosses each tenth of the total (at most :data:`LOG_LINES` + 1 lines per bar) and at the end, so a log
+holds a few readable lines and no carriage-return flood. The time left (:func:`time_left`) extrapolates the steps
+done in this run (a resumed job's skipped steps do not count) at their mean rate. Used by ``render``, ``evaluate`` and ``train``
 (:func:`track` for an iterable, :class:`Bar` where the steps come from callbacks).
 """
 from __future__ import annotations
 
-import sys
 import time
 from collections.abc import Iterable, Iterator
 from typing import Any, Generic, TypeVar
 
-__all__ = ["Bar", "Tracked", "track", "LOG_LINES"]
+__all__ = ["Bar", "Tracked", "track", "time_left", "LOG_LINES"]
 
 T = TypeVar("T")
 
 #: Progress lines a bar writes to a log (one per tenth of the total), plus the final one.
 LOG_LINES = 10
+
+
+def time_left(elapsed_s: float, done: int, total: int) -> str:
+    """``"about 12 min left"``: the ``total - done`` steps still to do at the mean rate of the ``done`` steps taken in
+    ``elapsed_s`` seconds; ``""`` when nothing is done yet or nothing is left. Seconds under 2 minutes, minutes under
+    2 hours, hours above."""
+    if done <= 0 or total <= done:
+        return ""
+    s = elapsed_s / done * (total - done)
+    if s < 120:
+        return f"about {s:.0f} s left"
+    return f"about {s / 60:.0f} min left" if s < 7200 else f"about {s / 3600:.1f} h left"
 
 
 class Bar:
@@ -41,6 +53,7 @@ class Bar:
         self.console = console if console is not None else Console(stderr=True, soft_wrap=True)
         self.enabled = enabled and (log or self.console.is_terminal)
         self.done, self._logged, self._t0 = 0, -1, time.perf_counter()
+        self._skipped = 0                   # steps done before this run (resumed), left out of the rate
         self._live = None
         self._task = None
 
@@ -52,12 +65,13 @@ class Bar:
     def __enter__(self) -> "Bar":
         self._t0 = time.perf_counter()
         if self.live:
-            from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+            from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn,
+                                       TimeRemainingColumn)
 
             self._live = Progress(TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),
-                                  TimeElapsedColumn(), console=self.console)
+                                  TimeElapsedColumn(), TimeRemainingColumn(), console=self.console)
             self._live.__enter__()
-            self._task = self._live.add_task(self.description, total=self.total)
+            self._task = self._live.add_task(self.description, total=self.total, completed=self.done)
         return self
 
     def __exit__(self, *exc: Any) -> None:
@@ -74,8 +88,9 @@ class Bar:
         pct = f" ({100 * self.done / self.total:.0f} %" if self.total else " ("
         plural = "" if (self.total or self.done) == 1 else ("es" if self.unit.endswith("h") else "s")
         unit = f" {self.unit}{plural}" if self.unit else ""
+        left = time_left(secs, self.done - self._skipped, self.total - self._skipped) if self.total else ""
         self.console.print(f"{self.description}: {self.done}{of}{unit}{pct}{', ' if self.total else ''}"
-                           f"{secs:.1f} s)", highlight=False, markup=False)
+                           f"{secs:.1f} s{', ' + left if left else ''})", highlight=False, markup=False)
 
     def advance(self, n: int = 1) -> None:
         """``n`` more steps done."""
@@ -101,10 +116,11 @@ class Bar:
         self.advance(done - self.done)
 
     def set(self, done: int) -> None:
-        """Set the steps done (a resumed job's skipped steps), without a log line."""
-        self.done = self._logged = done
-        if self._live is not None:
-            self._live.update(self._task, completed=done)
+        """Set the steps done (a resumed job's skipped steps), without a log line; they do not count towards the
+        rate of the time left."""
+        self.done = self._logged = self._skipped = done
+        if self._live is not None:  # a reset: the jump is no progress of the bar's speed (its time left)
+            self._live.reset(self._task, completed=done)
 
     def print(self, message: str) -> None:
         """Print a line above the bar (a plain line in a log)."""

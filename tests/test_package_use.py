@@ -85,6 +85,29 @@ def test_progress_in_a_log_is_a_few_plain_lines():
     assert list(track(range(3), enabled=False)) == [0, 1, 2]
 
 
+def test_progress_lines_say_the_time_left_from_this_runs_rate(monkeypatch):
+    """The time left extrapolates the steps done in this run (a resumed job's skipped steps do not count)."""
+    from rich.console import Console
+
+    import lfmbench.progress as P
+
+    now = [0.0]
+    monkeypatch.setattr(P.time, "perf_counter", lambda: now[0])
+    buf = io.StringIO()
+    with P.Bar(40, "rendering", "scene", console=Console(file=buf, force_terminal=False)) as bar:
+        bar.set(10)                                            # resumed: 10 scenes skipped, 30 to render
+        for _ in range(30):
+            now[0] += 10.0                                     # every scene takes 10 s
+            bar.advance()
+    lines = buf.getvalue().splitlines()
+    # 12 of 40 after 2 rendered in 20 s: 28 left at 10 s each
+    assert lines[0] == "rendering: 12/40 scenes (30 %, 20.0 s, about 5 min left)"
+    assert lines[-2] == "rendering: 36/40 scenes (90 %, 260.0 s, about 40 s left)"
+    assert lines[-1] == "rendering: 40/40 scenes (100 %, 300.0 s)"
+    assert P.time_left(600.0, 10, 40) == "about 30 min left" and P.time_left(3600.0, 1, 4) == "about 3.0 h left"
+    assert P.time_left(5.0, 0, 40) == "" == P.time_left(5.0, 4, 4)
+
+
 def _commands():
     from lfmbench.cli import app
 
