@@ -168,9 +168,8 @@ def summary(out: Path, shorts: list[str], seeds: list[int]) -> str:
         """Cells "diff [CI] | p" per metric and n: per-scene values ``mine`` minus ``ref`` ({scene: metrics})."""
         cells, n = [], 0
         for m in METRICS:
-            pairs = [(mine[sid].get(m), ref[sid].get(m)) for sid in ref if sid in mine]
-            pairs = [(x, y) for x, y in pairs if x is not None and y is not None]
-            t = stats.paired_test([x for x, _ in pairs], [y for _, y in pairs])
+            t = stats.paired_by_scene({sid: v.get(m) for sid, v in mine.items()},
+                                      {sid: v.get(m) for sid, v in ref.items()})
             (lo, hi), d, n = t["ci"], (3 if m == "led_score" else 2), t["n"]
             cells.append(f"{t['mean_diff']:+.{d}f} [{lo:+.{d}f}, {hi:+.{d}f}] | {t['p']:.4f}")
         return " | ".join(cells) + f" | {n} |"

@@ -75,9 +75,7 @@ def scene_field_tables(runs: list[dict], field_of: dict[str, dict], extra: list[
                 ref = {s["scene_id"]: s["metrics"].get(metric) for s in scenes[reference]}
                 for label, sel in groups:
                     mine = [s for s in scenes[m] if sel is None or field_of.get(s["scene_id"], {}).get(sel[0]) == sel[1]]
-                    pairs = [(s["metrics"].get(metric), ref.get(s["scene_id"])) for s in mine]
-                    pairs = [(a, b) for a, b in pairs if a is not None and b is not None]
-                    t = stats.paired_test([a for a, _ in pairs], [b for _, b in pairs])
+                    t = stats.paired_by_scene({s["scene_id"]: s["metrics"].get(metric) for s in mine}, ref)
                     lo, hi = t["ci"]
                     lines.append(f"| {label} | {t['mean_diff']:+.3f} [{lo:+.3f}, {hi:+.3f}] | {t['n']} | {t['p']:.4f} |")
                 lines.append("")

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import math
 import warnings
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 
@@ -159,6 +159,17 @@ def paired_test(values: Sequence[float], best: Sequence[float], **ci_kw) -> dict
     lo, hi = bootstrap_ci(d, **ci_kw)
     return {"n": int(d.size), "mean_diff": float(d.mean()) if d.size else float("nan"), "ci": [lo, hi],
             "p": wilcoxon_p(d)}
+
+
+def paired_by_scene(values: Mapping[str, float | None], best: Mapping[str, float | None], **ci_kw) -> dict:
+    """:func:`paired_test` over the scenes both scored: ``values`` and ``best`` map scene id -> that scene's value of
+    one metric (None or non-finite: not scored, the pair dropped); scenes of only one side are left out.
+
+    >>> paired_by_scene({"a": 1.0, "b": 3.0, "c": None}, {"a": 0.5, "b": 2.5, "d": 9.0})["mean_diff"]
+    0.5
+    """
+    ids = [s for s in best if s in values]
+    return paired_test([values[s] for s in ids], [best[s] for s in ids], **ci_kw)
 
 
 def holm(pvalues: Sequence[float]) -> list[float]:
