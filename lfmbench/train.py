@@ -4,7 +4,7 @@ baseline, :data:`lfmbench.baselines.LEARNED`; settings: its YAML config, e.g. ``
 Data flow: :class:`~lfmbench.datasets.LFMCaptureDataset` (random crops, PWM draws and noise per sample) ->
 ``torch.utils.data.DataLoader`` (``workers`` processes) -> the baseline's network -> its loss
 (:class:`lfmbench.baselines.trainable.Trainable`) -> Adam with a cosine learning-rate schedule (constant when
-``lr_min = lr``) and optional gradient clipping.
+``lr_min = lr``) after an optional linear warm-up (``train.warmup_steps``) and optional gradient clipping.
 
 Deterministic given the seed: a sample depends only on ``(seed, epoch, index)`` (docs/guide/datasets.md), the weights are
 initialised after ``torch.manual_seed(seed)``, and the order of an epoch's samples is either a permutation that
@@ -256,7 +256,7 @@ def fit(model: torch.nn.Module, opt: torch.optim.Optimizer, spec: Trainable, cfg
             it = track(batches, total=len(batches) if hasattr(batches, "__len__") else None,
                        description=f"train epoch {ep + 1}/{t.epochs}", unit="batch", log=False)
         sums: dict[str, float] = {}
-        lr = cosine_lr(history["steps"], total_steps, t.lr, t.lr_min)
+        lr = cosine_lr(history["steps"], total_steps, t.lr, t.lr_min, t.warmup_steps)
         n = 0
         pending: list = []      # losses of steps not read yet: read one step late, each from its own copy and
         #                         event (_stash), so that reading never waits for the step just queued on a GPU
@@ -275,7 +275,7 @@ def fit(model: torch.nn.Module, opt: torch.optim.Optimizer, spec: Trainable, cfg
 
         for batch in it:
             batch = _to(batch, dev)
-            lr = cosine_lr(history["steps"], total_steps, t.lr, t.lr_min)
+            lr = cosine_lr(history["steps"], total_steps, t.lr, t.lr_min, t.warmup_steps)
             loss, terms = (step(batch, lr) if step is not None
                            else _eager_step(model, opt, spec, cfg, batch, lr))
             history["steps"] += 1

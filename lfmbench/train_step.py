@@ -161,7 +161,16 @@ class GraphedStep:
                                        for k, v in terms.items()}
 
 
-def cosine_lr(step: int, total: int, lr: float, lr_min: float) -> float:
-    """Learning rate of optimiser step ``step`` of ``total``: cosine from ``lr`` to ``lr_min``."""
+def cosine_lr(step: int, total: int, lr: float, lr_min: float, warmup: int = 0) -> float:
+    """Learning rate of optimiser step ``step`` (0-based) of ``total``: cosine from ``lr`` to ``lr_min``
+    (Loshchilov & Hutter, "SGDR: Stochastic Gradient Descent with Warm Restarts", ICLR 2017, one cycle), times a
+    linear warm-up ``(step + 1) / warmup`` over the first ``warmup`` steps (Goyal et al., "Accurate, Large
+    Minibatch SGD: Training ImageNet in 1 Hour", arXiv:1706.02677, 2017, section 2.2).
+
+    Why a warm-up: Adam's per-parameter step is about ``lr`` whatever the gradient's size, while its estimate of the
+    gradient's variance still rests on few steps (Liu et al., "On the Variance of the Adaptive Learning Rate and
+    Beyond", ICLR 2020); one such step at the full rate can push the U-Net's blend logits and gain into saturation,
+    where every gradient is 0 and the network never recovers (docs/guide/baselines.md, "Training collapse")."""
     frac = min(step, total) / max(total, 1)
-    return lr_min + 0.5 * (lr - lr_min) * (1.0 + math.cos(math.pi * frac))
+    cos = lr_min + 0.5 * (lr - lr_min) * (1.0 + math.cos(math.pi * frac))
+    return cos * min(1.0, (step + 1) / warmup) if warmup > 0 else cos

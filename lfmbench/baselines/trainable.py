@@ -41,6 +41,7 @@ class TrainConfig:
     frames: int = 3                #: frames per sample
     lr: float = 2.0e-3             #: Adam learning rate (cosine-annealed to lr_min over the run)
     lr_min: float = 1.0e-4
+    warmup_steps: int = 0          #: optimiser steps of linear learning-rate warm-up before the cosine (0: none)
     weight_decay: float = 0.0
     grad_clip: float = 1.0         #: max gradient norm (0: off)
     workers: int = 1               #: DataLoader worker processes
@@ -52,7 +53,7 @@ class TrainConfig:
 
 #: Smallest values of integer keys (any section); keys that must be > 0 or >= 0 (floats).
 MINIMA = {"base_channels": 1, "depth": 0, "context_frames": 0, "epochs": 1, "batch_size": 1, "crop": 8,
-          "samples_per_scene": 1, "frames": 1, "workers": 0, "width": 1}
+          "samples_per_scene": 1, "frames": 1, "workers": 0, "width": 1, "warmup_steps": 0}
 POSITIVE = {"gain_range", "feature_scale_e", "feature_max_e", "mu", "lr"}
 NONNEG = {"led_weight", "region_weight", "lr_min", "weight_decay", "grad_clip"}
 
