@@ -247,15 +247,15 @@ def ddp_step(ddp_model: torch.nn.Module, opt: torch.optim.Optimizer, spec, cfg, 
         set_lr(opt, lr)
         opt.zero_grad(set_to_none=True)
         (loss * w).backward()
-        if cfg.train.grad_clip > 0:
-            torch.nn.utils.clip_grad_norm_(ddp_model.parameters(), cfg.train.grad_clip)
-        opt.step()
+        clip = cfg.train.grad_clip if cfg.train.grad_clip > 0 else float("inf")   # inf: the norm only
+        norm = torch.nn.utils.clip_grad_norm_(ddp_model.parameters(), clip)     # of the averaged gradient: equal on
+        opt.step()                                                               # every rank
         keys = [k for k, v in terms.items() if isinstance(v, (torch.Tensor, float, int))]
         vals = torch.stack([loss.detach().double().reshape(())]
                            + [torch.as_tensor(terms[k], dtype=torch.float64, device=loss.device).detach().reshape(())
                               for k in keys]) * w
         dist.all_reduce(vals)
         vals = vals / group.world
-        return vals[0], {k: vals[1 + j] for j, k in enumerate(keys)}
+        return vals[0], {**{k: vals[1 + j] for j, k in enumerate(keys)}, "grad_norm": norm.detach()}
 
     return step

@@ -30,7 +30,7 @@ from torch.utils.data import DataLoader, Dataset, Sampler
 from lfmbench.baselines import LEARNED
 from lfmbench.datasets.device import epoch_order
 from lfmbench.baselines.trainable import Trainable, count_parameters
-from lfmbench.train_step import (CUDA_GRAPH_MODES, GraphedStep, _eager_step, _set_lr, _stash, _unstash, cosine_lr,
+from lfmbench.train_step import (CUDA_GRAPH_MODES, GraphedStep, _eager_step, _set_lr, _stash, _unstash, collapse_warning, cosine_lr,
                                  make_optimizer)
 
 __all__ = ["trainable", "load_config", "make_loader", "make_device_batches", "fit", "train", "train_batches",
@@ -263,6 +263,7 @@ def fit(model: torch.nn.Module, opt: torch.optim.Optimizer, spec: Trainable, cfg
         #                         (the host goes on to make the next batch)
 
         done = [0]
+        zero = [0]              # steps whose gradient was exactly 0 (collapse_warning)
 
         def read(loss_t, terms) -> None:
             value, terms = _unstash(loss_t, terms)
@@ -270,6 +271,7 @@ def fit(model: torch.nn.Module, opt: torch.optim.Optimizer, spec: Trainable, cfg
             for k, v in {"loss": value, **terms}.items():
                 sums[k] = sums.get(k, 0.0) + float(v)
             done[0] += 1
+            zero[0] += terms.get("grad_norm", 1.0) == 0.0
             if progress:
                 it.set_postfix(loss=f"{sums['loss'] / done[0]:.4f}")
 
@@ -305,6 +307,9 @@ def fit(model: torch.nn.Module, opt: torch.optim.Optimizer, spec: Trainable, cfg
             log(f"epoch {ep + 1}/{t.epochs}: loss {means.get('loss', float('nan')):.4f}"
                 + (f" ({extra})" if extra else "") + f", {n} steps, {secs:.1f} s, lr {lr:.2e}"
                 + (f" -> {out}" if out is not None else ""))
+        warn = collapse_warning(zero[0], done[0], ep + 1)
+        if warn and log:
+            log(warn)
         if max_steps is not None and steps_this_call >= max_steps:
             break
     return history

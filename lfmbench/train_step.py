@@ -12,7 +12,7 @@ import torch
 
 from lfmbench.datasets.batched import tensor_leaves
 
-__all__ = ["CUDA_GRAPH_MODES", "make_optimizer", "GraphedStep", "cosine_lr"]
+__all__ = ["CUDA_GRAPH_MODES", "DEAD_FRACTION", "make_optimizer", "GraphedStep", "collapse_warning", "cosine_lr"]
 
 
 #: CUDA graphs of the training step (:class:`GraphedStep`): ``"auto"`` captures the step on CUDA devices, ``"off"``
@@ -42,16 +42,34 @@ def _set_lr(opt: torch.optim.Optimizer, lr: float) -> None:
 
 
 def _eager_step(model, opt, spec, cfg, batch: dict, lr: float):
-    """One optimiser step on ``batch``: (loss, terms), both still on the device."""
+    """One optimiser step on ``batch``: (loss, terms), both still on the device; the terms also hold
+    ``grad_norm``, the gradient's 2-norm before clipping (0 when the network has saturated: :data:`DEAD_FRACTION`)."""
     loss, terms = spec.loss(model, batch, cfg)
     _set_lr(opt, lr)
     opt.zero_grad(set_to_none=True)
     loss.backward()
-    if cfg.train.grad_clip > 0:
-        torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.train.grad_clip)
+    clip = cfg.train.grad_clip if cfg.train.grad_clip > 0 else float("inf")   # inf: the norm only, no scaling
+    norm = torch.nn.utils.clip_grad_norm_(model.parameters(), clip)
     opt.step()
     # detached: a term kept for reading one step late must not keep this step's autograd graph alive
-    return loss, {k: (v.detach() if isinstance(v, torch.Tensor) else v) for k, v in terms.items()}
+    return loss, {**{k: (v.detach() if isinstance(v, torch.Tensor) else v) for k, v in terms.items()},
+                  "grad_norm": norm.detach()}
+
+
+#: An epoch in which more than this fraction of the steps had a gradient of exactly 0 gets a warning: the network
+#: has saturated (blend logits or gain beyond float range) and cannot learn any more (docs/guide/baselines.md,
+#: "Training collapse").
+DEAD_FRACTION = 0.5
+
+
+def collapse_warning(zero_steps: int, steps: int, epoch: int) -> str | None:
+    """The one-line warning for an epoch (1-based ``epoch``) with ``zero_steps`` of ``steps`` optimiser steps whose
+    gradient norm was 0, or None when at most :data:`DEAD_FRACTION` of them were."""
+    if steps <= 0 or zero_steps <= DEAD_FRACTION * steps:
+        return None
+    return (f"warning: epoch {epoch}: the gradient was 0 on {zero_steps} of {steps} steps: the network has "
+            "saturated and no longer learns (a training collapse); train again with --no-resume and a larger "
+            "train.warmup_steps or a smaller train.lr (docs/guide/baselines.md, 'Training collapse')")
 
 
 def _stash(loss: torch.Tensor, terms: dict):
@@ -120,8 +138,8 @@ class GraphedStep:
             with torch.cuda.graph(graph):
                 loss, terms = self.spec.loss(self.model, static, self.cfg)
                 loss.backward()
-                if self.cfg.train.grad_clip > 0:
-                    torch.nn.utils.clip_grad_norm_(self.model.parameters(), self.cfg.train.grad_clip)
+                clip = self.cfg.train.grad_clip if self.cfg.train.grad_clip > 0 else float("inf")
+                terms = {**terms, "grad_norm": torch.nn.utils.clip_grad_norm_(self.model.parameters(), clip)}
                 self.opt.step()
         except Exception as exc:  # noqa: BLE001 - any capture error: train eagerly
             self.failed = True
