@@ -30,8 +30,8 @@ from torch.utils.data import DataLoader, Dataset, Sampler
 from lfmbench.baselines import LEARNED
 from lfmbench.datasets.device import epoch_order
 from lfmbench.baselines.trainable import Trainable, count_parameters
-from lfmbench.train_step import (CUDA_GRAPH_MODES, GraphedStep, _eager_step, _set_lr, _stash, _unstash, collapse_warning, cosine_lr,
-                                 make_optimizer)
+from lfmbench.train_step import (CUDA_GRAPH_MODES, GraphedStep, _eager_step, _set_lr, _stash, _unstash,
+                                 collapse_warning, cosine_lr, make_optimizer)
 
 __all__ = ["trainable", "load_config", "make_loader", "make_device_batches", "fit", "train", "train_batches",
            "EpochSampler", "EpochIndexed", "DATA_SOURCES", "RESIDENT_DTYPES"]
