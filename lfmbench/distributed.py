@@ -232,8 +232,11 @@ class RankDeviceBatches(DeviceBatches):
 
 
 def ddp_step(ddp_model: torch.nn.Module, opt: torch.optim.Optimizer, spec, cfg, group: Group,
-             set_lr: Callable[[torch.optim.Optimizer, float], None]) -> Callable[[dict, float], tuple]:
+             set_lr: Callable[[torch.optim.Optimizer, float], None],
+             clip_gradients: Callable[[Any, float], torch.Tensor]) -> Callable[[dict, float], tuple]:
     """The training step of one rank: ``step(batch, lr) -> (loss, terms)`` as :func:`lfmbench.train.fit` takes.
+    ``set_lr`` and ``clip_gradients`` are the training loop's (:mod:`lfmbench.train_step`, a stage above this one);
+    ``terms["grad_norm"]`` is the norm of the averaged gradient before clipping, equal on every rank.
 
     The loss of the rank's part (``spec.loss`` through the DDP wrapper, whose backward all-reduces the gradients)
     is weighted by the batch's :data:`LOSS_WEIGHT`; the returned loss and terms are the weighted means over the
@@ -247,9 +250,8 @@ def ddp_step(ddp_model: torch.nn.Module, opt: torch.optim.Optimizer, spec, cfg, 
         set_lr(opt, lr)
         opt.zero_grad(set_to_none=True)
         (loss * w).backward()
-        clip = cfg.train.grad_clip if cfg.train.grad_clip > 0 else float("inf")   # inf: the norm only
-        norm = torch.nn.utils.clip_grad_norm_(ddp_model.parameters(), clip)     # of the averaged gradient: equal on
-        opt.step()                                                               # every rank
+        norm = clip_gradients(ddp_model.parameters(), cfg.train.grad_clip)
+        opt.step()
         keys = [k for k, v in terms.items() if isinstance(v, (torch.Tensor, float, int))]
         vals = torch.stack([loss.detach().double().reshape(())]
                            + [torch.as_tensor(terms[k], dtype=torch.float64, device=loss.device).detach().reshape(())

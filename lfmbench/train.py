@@ -31,7 +31,7 @@ from lfmbench.baselines import LEARNED
 from lfmbench.datasets.device import epoch_order
 from lfmbench.baselines.trainable import Trainable, count_parameters
 from lfmbench.train_step import (CUDA_GRAPH_MODES, GraphedStep, _eager_step, _set_lr, _stash, _unstash,
-                                 collapse_warning, cosine_lr, make_optimizer)
+                                 clip_gradients, collapse_warning, cosine_lr, make_optimizer)
 
 __all__ = ["trainable", "load_config", "make_loader", "make_device_batches", "fit", "train", "train_batches",
            "EpochSampler", "EpochIndexed", "DATA_SOURCES", "RESIDENT_DTYPES"]
@@ -432,7 +432,7 @@ def train(method: str | Trainable, corpus: str | os.PathLike, out: str | os.Path
         from torch.nn.parallel import DistributedDataParallel  # noqa: PLC0415
 
         ddp = DistributedDataParallel(model, device_ids=[dev.index] if dev.type == "cuda" else None)
-        step = D.ddp_step(ddp, opt, spec, cfg, group, _set_lr)
+        step = D.ddp_step(ddp, opt, spec, cfg, group, _set_lr, clip_gradients)
     history = fit(model, opt, spec, cfg, loader, device=dev, out=out if group is None or group.main else None,
                   start=start, history=history, set_epoch=set_epoch,
                   checkpoint_extra=(lambda: {"data_rng": gen.get_state()}) if gen else None,

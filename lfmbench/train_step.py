@@ -12,7 +12,7 @@ import torch
 
 from lfmbench.datasets.batched import tensor_leaves
 
-__all__ = ["CUDA_GRAPH_MODES", "DEAD_FRACTION", "make_optimizer", "GraphedStep", "collapse_warning", "cosine_lr"]
+__all__ = ["CUDA_GRAPH_MODES", "DEAD_FRACTION", "make_optimizer", "GraphedStep", "clip_gradients", "collapse_warning", "cosine_lr"]
 
 
 #: CUDA graphs of the training step (:class:`GraphedStep`): ``"auto"`` captures the step on CUDA devices, ``"off"``
@@ -41,6 +41,13 @@ def _set_lr(opt: torch.optim.Optimizer, lr: float) -> None:
             g["lr"] = lr
 
 
+def clip_gradients(parameters, grad_clip: float) -> torch.Tensor:
+    """Clip the gradients of ``parameters`` to the 2-norm ``grad_clip`` (0: not clipped) and return their 2-norm
+    before clipping (a 0-d tensor on their device, not read: no host synchronisation). Unclipped, the gradients
+    are scaled by exactly 1 (``clip_grad_norm_`` with an infinite bound)."""
+    return torch.nn.utils.clip_grad_norm_(parameters, grad_clip if grad_clip > 0 else float("inf"))
+
+
 def _eager_step(model, opt, spec, cfg, batch: dict, lr: float):
     """One optimiser step on ``batch``: (loss, terms), both still on the device; the terms also hold
     ``grad_norm``, the gradient's 2-norm before clipping (0 when the network has saturated: :data:`DEAD_FRACTION`)."""
@@ -48,8 +55,7 @@ def _eager_step(model, opt, spec, cfg, batch: dict, lr: float):
     _set_lr(opt, lr)
     opt.zero_grad(set_to_none=True)
     loss.backward()
-    clip = cfg.train.grad_clip if cfg.train.grad_clip > 0 else float("inf")   # inf: the norm only, no scaling
-    norm = torch.nn.utils.clip_grad_norm_(model.parameters(), clip)
+    norm = clip_gradients(model.parameters(), cfg.train.grad_clip)
     opt.step()
     # detached: a term kept for reading one step late must not keep this step's autograd graph alive
     return loss, {**{k: (v.detach() if isinstance(v, torch.Tensor) else v) for k, v in terms.items()},
@@ -138,8 +144,7 @@ class GraphedStep:
             with torch.cuda.graph(graph):
                 loss, terms = self.spec.loss(self.model, static, self.cfg)
                 loss.backward()
-                clip = self.cfg.train.grad_clip if self.cfg.train.grad_clip > 0 else float("inf")
-                terms = {**terms, "grad_norm": torch.nn.utils.clip_grad_norm_(self.model.parameters(), clip)}
+                terms = {**terms, "grad_norm": clip_gradients(self.model.parameters(), self.cfg.train.grad_clip)}
                 self.opt.step()
         except Exception as exc:  # noqa: BLE001 - any capture error: train eagerly
             self.failed = True
